@@ -1,0 +1,28 @@
+#!/bin/sh
+# Installs the Debian packages eddy needs, if any are missing. Prints what it
+# installs; does nothing when all are present. Needs root (or sudo) only then.
+set -eu
+
+PKGS="make gcc pkg-config liblua5.4-dev lua5.4 libsuitesparse-dev libopenblas-dev libosmesa6-dev libstb-dev graphviz"
+
+missing=""
+for p in $PKGS; do
+	if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+		missing="$missing $p"
+	fi
+done
+[ -z "$missing" ] && exit 0
+
+echo "eddy: installing missing Debian packages:$missing"
+if [ "$(id -u)" = 0 ]; then
+	SUDO=""
+elif command -v sudo >/dev/null 2>&1; then
+	SUDO="sudo"
+else
+	echo "eddy: cannot install packages without root; run as root: apt-get install$missing" >&2
+	exit 1
+fi
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+# shellcheck disable=SC2086
+$SUDO apt-get install -y -qq --no-install-recommends $missing

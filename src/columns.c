@@ -1,0 +1,340 @@
+/* Column storage: the particle table (one array per channel, swap-remove,
+ * doubling growth) and the MAC grid (cell and face arrays).
+ *
+ * A column's memory exists exactly while its user count is above zero; the
+ * pipeline raises and lowers the counts as systems come and go. The grid's
+ * dimensions come from the world bounds and cell_size and are fixed once the
+ * first grid column is in use. */
+#define _POSIX_C_SOURCE 200809L
+#include "core.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+static const struct {
+	const char *name;
+	eddy_domain domain;
+	eddy_type type;
+	eddy_lifetime lifetime;
+	const char *unit;
+} builtin[COL_BUILTIN_COUNT] = {
+#define EDDY_COL_ROW(ident, nm, dom, ty, life, un) {nm, dom, ty, life, un},
+	EDDY_COMPONENTS(EDDY_COL_ROW)
+#undef EDDY_COL_ROW
+};
+
+void eddy__columns_init(eddy_world *w)
+{
+	for (int i = 0; i < COL_BUILTIN_COUNT; ++i) {
+		eddy_column *c = &w->columns[i];
+		snprintf(c->name, sizeof c->name, "%s", builtin[i].name);
+		snprintf(c->unit, sizeof c->unit, "%s", builtin[i].unit);
+		c->domain = builtin[i].domain;
+		c->type = builtin[i].type;
+		c->lifetime = builtin[i].lifetime;
+	}
+	w->column_count = COL_BUILTIN_COUNT;
+}
+
+void eddy__columns_free(eddy_world *w)
+{
+	for (int i = 0; i < w->column_count; ++i) {
+		free(w->columns[i].data);
+		w->columns[i].data = NULL;
+	}
+}
+
+static size_t elem_size(eddy_type t) { return t == EDDY_U8 ? 1 : sizeof(float); }
+
+size_t eddy__column_elems(const eddy_world *w, const eddy_column *c)
+{
+	const size_t nx = (size_t)w->nx, ny = (size_t)w->ny, nz = (size_t)w->nz;
+	switch (c->domain) {
+	case EDDY_DOMAIN_PARTICLE: return w->n;
+	case EDDY_DOMAIN_CELL: return nx * ny * nz;
+	case EDDY_DOMAIN_FACE_X: return (nx + 1) * ny * nz;
+	case EDDY_DOMAIN_FACE_Y: return nx * (ny + 1) * nz;
+	case EDDY_DOMAIN_FACE_Z: return nx * ny * (nz + 1);
+	}
+	return 0;
+}
+
+static size_t column_capacity(const eddy_world *w, const eddy_column *c)
+{
+	return c->domain == EDDY_DOMAIN_PARTICLE ? w->capacity : eddy__column_elems(w, c);
+}
+
+size_t eddy__column_bytes(const eddy_world *w, const eddy_column *c)
+{
+	return eddy__column_elems(w, c) * elem_size(c->type);
+}
+
+static eddy_status grid_setup(eddy_world *w, const eddy_column *c)
+{
+	if (w->grid_allocated)
+		return EDDY_OK;
+	const double h = w->def.cell_size;
+	if (!(h > 0))
+		return eddy__fail(w, EDDY_ERR_INVALID,
+		                  "column '%s' lives on the MAC grid, but the world has no grid: set world 'cell_size' > 0 m",
+		                  c->name);
+	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
+	const double nx = ceil((hi.x - lo.x) / h - 1e-6), ny = ceil((hi.y - lo.y) / h - 1e-6),
+	             nz = ceil((hi.z - lo.z) / h - 1e-6);
+	if (nx * ny * nz > 2e9)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "grid of %.0f x %.0f x %.0f cells is too large; use a larger cell_size", nx, ny, nz);
+	w->nx = nx < 1 ? 1 : (int)nx;
+	w->ny = ny < 1 ? 1 : (int)ny;
+	w->nz = nz < 1 ? 1 : (int)nz;
+	w->grid_allocated = true;
+	return EDDY_OK;
+}
+
+eddy_status eddy__column_acquire(eddy_world *w, int id)
+{
+	eddy_column *c = &w->columns[id];
+	if (c->users++ > 0)
+		return EDDY_OK;
+	if (c->domain != EDDY_DOMAIN_PARTICLE) {
+		eddy_status st = grid_setup(w, c);
+		if (st != EDDY_OK) {
+			c->users--;
+			return st;
+		}
+	}
+	size_t cap = column_capacity(w, c);
+	/* calloc(0) may return NULL; keep a real block so "allocated" stays visible. */
+	c->data = calloc(cap ? cap : 1, elem_size(c->type));
+	if (!c->data) {
+		c->users--;
+		return eddy__fail(w, EDDY_ERR_NOMEM, "out of memory for column '%s' (%zu elements)", c->name, cap);
+	}
+	return EDDY_OK;
+}
+
+void eddy__column_release(eddy_world *w, int id)
+{
+	eddy_column *c = &w->columns[id];
+	if (c->users <= 0 || --c->users > 0)
+		return;
+	free(c->data);
+	c->data = NULL;
+	bool grid_in_use = false;
+	for (int i = 0; i < w->column_count; ++i)
+		grid_in_use |= w->columns[i].domain != EDDY_DOMAIN_PARTICLE && w->columns[i].data;
+	if (!grid_in_use) {
+		w->grid_allocated = false;
+		w->nx = w->ny = w->nz = 0;
+	}
+}
+
+eddy_status eddy__reserve_particles(eddy_world *w, size_t count)
+{
+	if (count <= w->capacity)
+		return EDDY_OK;
+	size_t cap = w->capacity ? w->capacity : 256;
+	while (cap < count) {
+		if (cap > SIZE_MAX / 2 / sizeof(float))
+			return eddy__fail(w, EDDY_ERR_NOMEM, "particle table cannot hold %zu particles", count);
+		cap *= 2;
+	}
+	/* Refuse what cannot fit: with overcommit a huge realloc succeeds and the
+	 * process is killed later, when the memory is first touched. */
+	size_t per_particle = 0;
+	for (int i = 0; i < w->column_count; ++i)
+		if (w->columns[i].data && w->columns[i].domain == EDDY_DOMAIN_PARTICLE)
+			per_particle += elem_size(w->columns[i].type);
+	long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+	double phys = pages > 0 && page > 0 ? (double)pages * (double)page : 0;
+	if (phys > 0 && (double)cap * (double)per_particle > 0.8 * phys)
+		return eddy__fail(w, EDDY_ERR_NOMEM,
+		                  "%zu particles need %.1f GB of particle columns, more than this machine's %.1f GB; use a larger spacing",
+		                  count, (double)cap * (double)per_particle / 1e9, phys / 1e9);
+	for (int i = 0; i < w->column_count; ++i) {
+		eddy_column *c = &w->columns[i];
+		if (!c->data || c->domain != EDDY_DOMAIN_PARTICLE)
+			continue;
+		size_t es = elem_size(c->type);
+		void *p = realloc(c->data, cap * es);
+		if (!p)
+			return eddy__fail(w, EDDY_ERR_NOMEM, "out of memory growing the particle table to %zu particles", cap);
+		memset((char *)p + w->capacity * es, 0, (cap - w->capacity) * es);
+		c->data = p;
+	}
+	w->capacity = cap;
+	return EDDY_OK;
+}
+
+eddy_status eddy__append_particles(eddy_world *w, size_t count, size_t *first)
+{
+	eddy_status st = eddy__reserve_particles(w, w->n + count);
+	if (st != EDDY_OK)
+		return st;
+	for (int i = 0; i < w->column_count; ++i) {
+		eddy_column *c = &w->columns[i];
+		if (c->data && c->domain == EDDY_DOMAIN_PARTICLE)
+			memset((char *)c->data + w->n * elem_size(c->type), 0, count * elem_size(c->type));
+	}
+	*first = w->n;
+	w->n += count;
+	return EDDY_OK;
+}
+
+void eddy__clear_derived(eddy_world *w)
+{
+	for (int i = 0; i < w->column_count; ++i) {
+		eddy_column *c = &w->columns[i];
+		if (c->data && c->lifetime == EDDY_DERIVED)
+			memset(c->data, 0, eddy__column_bytes(w, c));
+	}
+}
+
+/* ---- public access ------------------------------------------------------- */
+
+int eddy_world_column_count(const eddy_world *w) { return w->column_count; }
+
+eddy_column_id eddy_world_find_column(const eddy_world *w, const char *name)
+{
+	if (!w || !name)
+		return -1;
+	for (int i = 0; i < w->column_count; ++i)
+		if (strcmp(w->columns[i].name, name) == 0)
+			return i;
+	return -1;
+}
+
+eddy_status eddy_world_column_info(const eddy_world *w, eddy_column_id id, eddy_column_info *out)
+{
+	if (id < 0 || id >= w->column_count || !out)
+		return EDDY_ERR_INVALID;
+	const eddy_column *c = &w->columns[id];
+	out->name = c->name;
+	out->domain = c->domain;
+	out->type = c->type;
+	out->lifetime = c->lifetime;
+	out->unit = c->unit;
+	out->allocated = c->data != NULL;
+	out->bytes = c->data ? column_capacity(w, c) * elem_size(c->type) : 0;
+	return EDDY_OK;
+}
+
+eddy_column_id eddy_world_declare_column(eddy_world *w, const char *name, eddy_domain domain,
+                                         eddy_type type, eddy_lifetime lifetime, const char *unit)
+{
+	if (!name || !name[0] || strlen(name) >= EDDY_NAME_MAX) {
+		eddy__fail(w, EDDY_ERR_INVALID, "column name must be 1 to %d characters", EDDY_NAME_MAX - 1);
+		return -1;
+	}
+	if (eddy_world_find_column(w, name) >= 0) {
+		eddy__fail(w, EDDY_ERR_INVALID, "column '%s' already exists", name);
+		return -1;
+	}
+	if (w->column_count == EDDY_MAX_COLUMNS) {
+		eddy__fail(w, EDDY_ERR_INVALID, "too many columns (%d)", EDDY_MAX_COLUMNS);
+		return -1;
+	}
+	if ((int)domain < EDDY_DOMAIN_PARTICLE || domain > EDDY_DOMAIN_FACE_Z || (type != EDDY_F32 && type != EDDY_U8) ||
+	    (lifetime != EDDY_STATE && lifetime != EDDY_DERIVED)) {
+		eddy__fail(w, EDDY_ERR_INVALID, "column '%s': unknown domain, type or lifetime", name);
+		return -1;
+	}
+	eddy_column *c = &w->columns[w->column_count];
+	memset(c, 0, sizeof *c);
+	snprintf(c->name, sizeof c->name, "%s", name);
+	snprintf(c->unit, sizeof c->unit, "%s", unit ? unit : "");
+	c->domain = domain;
+	c->type = type;
+	c->lifetime = lifetime;
+	return w->column_count++;
+}
+
+static void *channel(const eddy_world *w, const char *name, size_t *count, eddy_type type)
+{
+	int id = eddy_world_find_column(w, name);
+	if (count)
+		*count = 0;
+	if (id < 0 || !w->columns[id].data || w->columns[id].type != type)
+		return NULL;
+	if (count)
+		*count = eddy__column_elems(w, &w->columns[id]);
+	return w->columns[id].data;
+}
+
+const float *eddy_world_channel(const eddy_world *w, const char *name, size_t *count)
+{
+	return channel(w, name, count, EDDY_F32);
+}
+
+float *eddy_world_channel_mut(eddy_world *w, const char *name, size_t *count)
+{
+	return channel(w, name, count, EDDY_F32);
+}
+
+const uint8_t *eddy_world_channel_u8(const eddy_world *w, const char *name, size_t *count)
+{
+	return channel(w, name, count, EDDY_U8);
+}
+
+size_t eddy_world_particle_count(const eddy_world *w) { return w->n; }
+
+eddy_status eddy_world_add_particles(eddy_world *w, size_t count, const eddy_vec3 *pos, const eddy_vec3 *vel)
+{
+	if (!w || (count && !pos))
+		return eddy__fail(w, EDDY_ERR_INVALID, "add_particles: positions are NULL");
+	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
+	for (size_t i = 0; i < count; ++i) {
+		eddy_vec3 p = pos[i];
+		if (!(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z))
+			return eddy__fail(w, EDDY_ERR_INVALID, "add_particles: particle %zu at (%g, %g, %g) is outside the world bounds",
+			                  i, (double)p.x, (double)p.y, (double)p.z);
+		if (vel && !(isfinite(vel[i].x) && isfinite(vel[i].y) && isfinite(vel[i].z)))
+			return eddy__fail(w, EDDY_ERR_INVALID, "add_particles: velocity of particle %zu is not finite", i);
+	}
+	size_t first;
+	eddy_status st = eddy__append_particles(w, count, &first);
+	if (st != EDDY_OK)
+		return st;
+	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	for (size_t i = 0; i < count; ++i) {
+		if (x) x[first + i] = pos[i].x;
+		if (y) y[first + i] = pos[i].y;
+		if (z) z[first + i] = pos[i].z;
+		if (vel) {
+			if (vx) vx[first + i] = vel[i].x;
+			if (vy) vy[first + i] = vel[i].y;
+			if (vz) vz[first + i] = vel[i].z;
+		}
+	}
+	return EDDY_OK;
+}
+
+eddy_status eddy_world_remove_particle(eddy_world *w, size_t i)
+{
+	if (i >= w->n)
+		return eddy__fail(w, EDDY_ERR_INVALID, "remove_particle: index %zu out of range (%zu particles)", i, w->n);
+	const size_t last = w->n - 1;
+	for (int c = 0; c < w->column_count; ++c) {
+		eddy_column *col = &w->columns[c];
+		if (!col->data || col->domain != EDDY_DOMAIN_PARTICLE)
+			continue;
+		size_t es = elem_size(col->type);
+		memcpy((char *)col->data + i * es, (char *)col->data + last * es, es);
+	}
+	w->n = last;
+	return EDDY_OK;
+}
+
+eddy_grid_info eddy_world_grid(const eddy_world *w)
+{
+	eddy_grid_info g = {0};
+	g.allocated = w->grid_allocated;
+	g.nx = w->nx;
+	g.ny = w->ny;
+	g.nz = w->nz;
+	g.cell_size = w->grid_allocated ? w->def.cell_size : 0;
+	g.origin = w->def.bounds_min;
+	return g;
+}

@@ -1,0 +1,39 @@
+/* The component table: every column the engine knows, declared once.
+ * X(ident, name, domain, type, lifetime, unit)
+ *
+ * A column is allocated only while some system in the pipeline reads or writes
+ * it. Derived columns are cleared at the start of every step, so force systems
+ * accumulate into them and nothing reads a stale value from the last step.
+ * Custom columns are appended at run time with eddy_world_declare_column(). */
+#ifndef EDDY_COMPONENTS_H
+#define EDDY_COMPONENTS_H
+
+#define EDDY_COMPONENTS(X) \
+	/* particle state */ \
+	X(X_,        "x",        EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE,   "m") \
+	X(Y_,        "y",        EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE,   "m") \
+	X(Z_,        "z",        EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE,   "m") \
+	X(VX,        "vx",       EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE,   "m/s") \
+	X(VY,        "vy",       EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE,   "m/s") \
+	X(VZ,        "vz",       EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE,   "m/s") \
+	/* particle, recomputed each step */ \
+	X(AX,        "ax",       EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_DERIVED, "m/s^2") \
+	X(AY,        "ay",       EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_DERIVED, "m/s^2") \
+	X(AZ,        "az",       EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_DERIVED, "m/s^2") \
+	X(DENSITY,   "density",  EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_DERIVED, "kg/m^3") \
+	X(PRESSURE,  "pressure", EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_DERIVED, "Pa") \
+	/* MAC grid */ \
+	X(CELL_TYPE, "cell_type",     EDDY_DOMAIN_CELL,   EDDY_U8,  EDDY_DERIVED, "") \
+	X(CELL_PRESSURE, "cell_pressure", EDDY_DOMAIN_CELL, EDDY_F32, EDDY_DERIVED, "Pa") \
+	X(FACE_U,    "u",        EDDY_DOMAIN_FACE_X,  EDDY_F32, EDDY_DERIVED, "m/s") \
+	X(FACE_V,    "v",        EDDY_DOMAIN_FACE_Y,  EDDY_F32, EDDY_DERIVED, "m/s") \
+	X(FACE_W,    "w",        EDDY_DOMAIN_FACE_Z,  EDDY_F32, EDDY_DERIVED, "m/s")
+
+enum eddy_builtin_column {
+#define EDDY_COL_ENUM(ident, name, domain, type, lifetime, unit) COL_##ident,
+	EDDY_COMPONENTS(EDDY_COL_ENUM)
+#undef EDDY_COL_ENUM
+	COL_BUILTIN_COUNT
+};
+
+#endif

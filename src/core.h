@@ -1,0 +1,231 @@
+/* Internal structures shared by the engine's source files. Not installed: hosts
+ * see only eddy.h. */
+#ifndef EDDY_CORE_H
+#define EDDY_CORE_H
+
+#include "eddy.h"
+#include "components.h"
+
+#include <math.h>
+#include <stdarg.h>
+
+#define EDDY_MAX_COLUMNS 128
+#define EDDY_MAX_SYSTEMS 256
+#define EDDY_MAX_IO 24
+#define EDDY_NAME_MAX 32
+#define EDDY_ERROR_MAX 512
+
+typedef struct eddy_system eddy_system;
+
+/* What a system kind can do. step is required except for frame-only systems. */
+typedef struct eddy_system_vtable {
+	const char *name;
+	eddy_status (*step)(eddy_world *w, eddy_system *s, const eddy_step_context *ctx);
+	eddy_status (*frame)(eddy_world *w, eddy_system *s, int frame);
+	double (*limit)(eddy_world *w, eddy_system *s, const char **reason);
+	void (*destroy)(eddy_system *s);
+	/* emitters: particles the system will create over a run, -1 if unbounded */
+	int64_t (*expected_particles)(const eddy_world *w, const eddy_system *s);
+	/* emitters: positions of the first emission, for preflight; returns the count
+	 * written (up to cap) */
+	size_t (*sample)(const eddy_world *w, const eddy_system *s, eddy_vec3 *out, size_t cap);
+	/* colliders: signed distance to the solid, < 0 inside it */
+	float (*distance)(const eddy_system *s, eddy_vec3 p);
+	/* columns the kind writes, ending in -1; names the fix in order errors */
+	const int *default_writes;
+} eddy_system_vtable;
+
+struct eddy_system {
+	const eddy_system_vtable *vt;
+	char label[EDDY_NAME_MAX + 8];
+	char name[EDDY_NAME_MAX];
+	uint16_t generation;
+	bool live;
+	int reads[EDDY_MAX_IO], read_count;
+	int writes[EDDY_MAX_IO], write_count;
+	const char *read_names[EDDY_MAX_IO];
+	const char *write_names[EDDY_MAX_IO];
+	double ms_total, ms_frame;
+	int64_t calls;
+	void *data; /* the system's def and private state, owned */
+};
+
+typedef struct eddy_column {
+	char name[EDDY_NAME_MAX];
+	char unit[16];
+	eddy_domain domain;
+	eddy_type type;
+	eddy_lifetime lifetime;
+	int users;   /* systems in the pipeline that read or write it */
+	void *data;  /* NULL unless users > 0 */
+} eddy_column;
+
+/* A bump allocator reset at the start of every step: scratch that lives for one
+ * step costs no free() and cannot leak. Grows by chaining blocks. */
+typedef struct eddy_arena_block eddy_arena_block;
+typedef struct eddy_arena {
+	eddy_arena_block *head;
+	size_t high_water;
+} eddy_arena;
+
+void *eddy__arena_alloc(eddy_arena *a, size_t bytes);
+void eddy__arena_reset(eddy_arena *a);
+void eddy__arena_free(eddy_arena *a);
+
+typedef struct eddy_extra_stat {
+	char name[EDDY_NAME_MAX];
+	double value;
+	char text[64];
+	bool is_text;
+} eddy_extra_stat;
+
+struct eddy_world {
+	eddy_world_def def;
+	char error[EDDY_ERROR_MAX];
+
+	/* clock */
+	double time;
+	int frame;
+	int64_t step;
+	double last_dt;
+	const char *last_limit; /* static string or a system label */
+	char last_limit_buf[96];
+
+	/* columns */
+	eddy_column columns[EDDY_MAX_COLUMNS];
+	int column_count;
+	size_t n, capacity; /* particles */
+
+	/* MAC grid, present while some grid column is in use */
+	int nx, ny, nz;
+	bool grid_allocated;
+
+	/* pipeline: slots hold systems, order lists live slots in step order */
+	eddy_system slots[EDDY_MAX_SYSTEMS];
+	int slot_count;
+	int order[EDDY_MAX_SYSTEMS];
+	int order_count;
+
+	eddy_arena arena;
+	uint64_t rng;
+	float length_scale; /* m, smallest emitter spacing; 0 if none */
+	float rest_density; /* kg/m^3, 0 if no density system */
+
+	/* per-frame accumulators, and the snapshot of the last completed frame */
+	int64_t frame_steps;
+	double frame_dt_min, frame_dt_max;
+	double frame_wall_ms;
+	eddy_extra_stat extras[EDDY_MAX_EXTRA_STATS];
+	int extra_count;
+	struct {
+		int64_t steps;
+		double dt_min, dt_max, wall_ms;
+		double system_ms[EDDY_MAX_STAT_SYSTEMS];
+		eddy_extra_stat extras[EDDY_MAX_EXTRA_STATS];
+		int extra_count;
+		const char *dt_limit;
+	} last_frame;
+};
+
+/* errors */
+eddy_status eddy__fail(eddy_world *w, eddy_status s, const char *fmt, ...)
+#if defined(__GNUC__)
+	__attribute__((format(printf, 3, 4)))
+#endif
+	;
+
+/* columns (columns.c) */
+void eddy__columns_init(eddy_world *w);
+void eddy__columns_free(eddy_world *w);
+size_t eddy__column_elems(const eddy_world *w, const eddy_column *c);
+size_t eddy__column_bytes(const eddy_world *w, const eddy_column *c);
+eddy_status eddy__column_acquire(eddy_world *w, int id);
+void eddy__column_release(eddy_world *w, int id);
+eddy_status eddy__reserve_particles(eddy_world *w, size_t count);
+/* Appends count zero-filled rows; returns the index of the first. */
+eddy_status eddy__append_particles(eddy_world *w, size_t count, size_t *first);
+void eddy__clear_derived(eddy_world *w);
+
+static inline float *eddy__col(eddy_world *w, int id) { return (float *)w->columns[id].data; }
+
+/* systems (pipeline.c) */
+eddy_system *eddy__system_get(eddy_world *w, eddy_system_id id);
+const eddy_system *eddy__system_peek(const eddy_world *w, eddy_system_id id);
+/* Adds a system of kind vt; data is the system's heap block (taken over, freed
+ * by eddy_free on failure too). */
+eddy_system_id eddy__add_system(eddy_world *w, const eddy_system_vtable *vt, void *data,
+                                const int *reads, int read_count, const int *writes,
+                                int write_count);
+void eddy__system_free(eddy_world *w, eddy_system *s);
+
+/* random numbers: splitmix64, deterministic per world seed */
+static inline uint64_t eddy__rand_u64(uint64_t *state)
+{
+	uint64_t z = (*state += 0x9E3779B97F4A7C15ull);
+	z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+	z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+	return z ^ (z >> 31);
+}
+static inline double eddy__rand01(uint64_t *state)
+{
+	return (double)(eddy__rand_u64(state) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+/* def validation: each returns false and sets the world error when the field is
+ * out of range; messages read "<system>: '<field>' must be <allowed> (got <v>)". */
+bool eddy__check_positive(eddy_world *w, const char *sys, const char *field, double v);
+bool eddy__check_nonneg(eddy_world *w, const char *sys, const char *field, double v);
+bool eddy__check_range(eddy_world *w, const char *sys, const char *field, double v, double lo, double hi);
+bool eddy__check_finite(eddy_world *w, const char *sys, const char *field, double v);
+bool eddy__check_vec3(eddy_world *w, const char *sys, const char *field, eddy_vec3 v);
+bool eddy__check_box(eddy_world *w, const char *sys, eddy_vec3 lo, eddy_vec3 hi);
+bool eddy__check_unit(eddy_world *w, const char *sys, const char *field, eddy_vec3 *v);
+
+void eddy__note_length_scale(eddy_world *w, float h);
+double eddy__now_ms(void);
+
+/* collider helpers (collider.c) */
+typedef struct eddy_collider_motion {
+	eddy_vec3 offset;      /* m, current displacement from the def pose */
+	eddy_vec3 last_offset; /* m, displacement at the collider's last step */
+} eddy_collider_motion;
+
+/* Every collider's data block starts with this, so offset setting is shared. */
+typedef struct eddy_collider_base {
+	eddy_collider_motion motion;
+	eddy_collider_response response;
+} eddy_collider_base;
+
+bool eddy__is_collider(const eddy_system *s);
+bool eddy__check_response(eddy_world *w, const char *sys, eddy_collider_response r);
+/* Projects particle i to p_surface and applies the velocity response against
+ * the surface normal n (unit, pointing out of the solid) and wall velocity vw. */
+static inline void eddy__collide_response(float *vx, float *vy, float *vz, size_t i, eddy_vec3 n,
+                                          eddy_vec3 vw, eddy_collider_response r)
+{
+	float rx = vx[i] - vw.x, ry = vy[i] - vw.y, rz = vz[i] - vw.z;
+	float vn = rx * n.x + ry * n.y + rz * n.z;
+	if (vn >= 0.0f)
+		return; /* already separating */
+	float tx = rx - vn * n.x, ty = ry - vn * n.y, tz = rz - vn * n.z;
+	float vt = sqrtf(tx * tx + ty * ty + tz * tz);
+	float dvn = (1.0f + r.restitution) * -vn;
+	float keep = 1.0f;
+	if (vt > 0.0f) {
+		keep = 1.0f - r.friction * dvn / vt;
+		if (keep < 0.0f)
+			keep = 0.0f;
+	}
+	float vn_new = -r.restitution * vn;
+	vx[i] = vw.x + tx * keep + vn_new * n.x;
+	vy[i] = vw.y + ty * keep + vn_new * n.y;
+	vz[i] = vw.z + tz * keep + vn_new * n.z;
+}
+
+/* Wall velocity of a collider over a step of dt, then marks the offset as used. */
+eddy_vec3 eddy__collider_step_velocity(eddy_collider_base *b, double dt);
+
+static inline eddy_vec3 eddy__v3(float x, float y, float z) { return (eddy_vec3){x, y, z}; }
+static inline eddy_vec3 eddy__add3(eddy_vec3 a, eddy_vec3 b) { return (eddy_vec3){a.x + b.x, a.y + b.y, a.z + b.z}; }
+
+#endif

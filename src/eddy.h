@@ -1,0 +1,396 @@
+/* eddy — a headless fluid engine.
+ *
+ * This is the one public header. A host creates a world from a def, adds systems
+ * (each from its own def), and steps the world; the systems it added are the only
+ * physics that runs, and the columns they use are the only memory allocated.
+ *
+ * Conventions: every def is filled by its eddy_default_*_def() function, the only
+ * place a default lives; SI units on every field; handles carry a generation so a
+ * stale one is detected. Functions that can fail return an eddy_status and leave
+ * a one-line message in eddy_world_error(). The library never exits or aborts on
+ * user input.
+ */
+#ifndef EDDY_H
+#define EDDY_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define EDDY_VERSION_MAJOR 0
+#define EDDY_VERSION_MINOR 1
+#define EDDY_VERSION_PATCH 0
+#define EDDY_VERSION_STRING "0.1.0"
+
+/* ---- status ------------------------------------------------------------ */
+
+typedef enum eddy_status {
+	EDDY_OK = 0,
+	EDDY_ERR_INVALID,   /* a def field or argument is out of range */
+	EDDY_ERR_ORDER,     /* the pipeline reads a column before anything writes it */
+	EDDY_ERR_STALE,     /* a handle refers to something that no longer exists */
+	EDDY_ERR_NOMEM,     /* an allocation failed or would not fit */
+	EDDY_ERR_IO,        /* a file could not be read or written */
+	EDDY_ERR_NUMERIC,   /* a non-finite value, an escaped particle, a collapsed step */
+	EDDY_ERR_SOLVER,    /* a linear solve failed */
+	EDDY_ERR_EXTERNAL   /* a host callback or an external library reported failure */
+} eddy_status;
+
+const char *eddy_status_name(eddy_status s);
+
+/* ---- small value types ------------------------------------------------- */
+
+typedef struct eddy_vec3 {
+	float x, y, z;
+} eddy_vec3;
+
+typedef struct eddy_world eddy_world;
+
+/* A system in a world's pipeline. index is the slot, generation changes when the
+ * slot is reused, so a handle kept past eddy_world_remove_system() is rejected. */
+typedef struct eddy_system_id {
+	uint16_t index;
+	uint16_t generation;
+} eddy_system_id;
+
+#define EDDY_NULL_SYSTEM ((eddy_system_id){0, 0})
+
+/* ---- world ------------------------------------------------------------- */
+
+typedef enum eddy_escape_policy {
+	EDDY_ESCAPE_ERROR = 0, /* a particle leaving the bounds stops the run */
+	EDDY_ESCAPE_REMOVE     /* particles leaving the bounds are removed (e.g. open outflow) */
+} eddy_escape_policy;
+
+typedef struct eddy_world_def {
+	eddy_vec3 bounds_min;       /* m, lower corner of the domain */
+	eddy_vec3 bounds_max;       /* m, upper corner of the domain */
+	eddy_vec3 gravity;          /* m/s^2, applied by the gravity system */
+	double fps;                 /* 1/s, frames per simulated second */
+	double duration;            /* s, default length of a run */
+	double cfl;                 /* 1, multiplies every time-step limit systems report */
+	double dt_max;              /* s, upper bound on the step */
+	double dt_min;              /* s, a step limit below this stops the run */
+	int max_steps_per_frame;    /* 1, a frame needing more steps stops the run */
+	double cell_size;           /* m, MAC grid spacing; 0 = no grid may be used */
+	uint64_t seed;              /* 1, seed of the world's random stream (jitter) */
+	int threads;                /* 1, worker threads for systems that parallelise */
+	eddy_escape_policy escape;  /* what a particle leaving the bounds means */
+	bool check_finite;          /* scan written columns after each system */
+} eddy_world_def;
+
+eddy_world_def eddy_default_world_def(void);
+
+/* NULL only when def is invalid or memory is short; the reason is written to
+ * err (if err_size > 0). */
+eddy_world *eddy_create_world(const eddy_world_def *def, char *err, size_t err_size);
+void eddy_destroy_world(eddy_world *w);
+
+/* The last error message of this world ("" if none). */
+const char *eddy_world_error(const eddy_world *w);
+/* Sets the world's error message (printf style) and returns status; for custom
+ * systems that fail. */
+eddy_status eddy_world_fail(eddy_world *w, eddy_status status, const char *fmt, ...)
+#if defined(__GNUC__)
+	__attribute__((format(printf, 3, 4)))
+#endif
+	;
+
+const eddy_world_def *eddy_world_get_def(const eddy_world *w);
+eddy_status eddy_world_set_threads(eddy_world *w, int threads);
+
+double eddy_world_time(const eddy_world *w);   /* s */
+double eddy_world_frame_time(const eddy_world *w); /* s, 1/fps */
+int eddy_world_frame(const eddy_world *w);     /* frames completed */
+int64_t eddy_world_steps(const eddy_world *w); /* steps taken */
+double eddy_world_last_dt(const eddy_world *w);/* s, 0 before the first step */
+
+/* One adaptive step, never past the next frame time. */
+eddy_status eddy_world_step(eddy_world *w);
+/* Steps up to the next frame time, then runs the frame hooks. */
+eddy_status eddy_world_step_frame(eddy_world *w);
+/* Advances by seconds (frame hooks run at every frame time crossed). */
+eddy_status eddy_world_advance(eddy_world *w, double seconds);
+
+/* ---- columns ----------------------------------------------------------- */
+
+typedef enum eddy_domain {
+	EDDY_DOMAIN_PARTICLE = 0, /* one value per particle */
+	EDDY_DOMAIN_CELL,         /* one value per grid cell, nx*ny*nz */
+	EDDY_DOMAIN_FACE_X,       /* one value per x-face, (nx+1)*ny*nz */
+	EDDY_DOMAIN_FACE_Y,       /* one value per y-face, nx*(ny+1)*nz */
+	EDDY_DOMAIN_FACE_Z        /* one value per z-face, nx*ny*(nz+1) */
+} eddy_domain;
+
+typedef enum eddy_type {
+	EDDY_F32 = 0,
+	EDDY_U8
+} eddy_type;
+
+typedef enum eddy_lifetime {
+	EDDY_STATE = 0, /* persists across steps; part of the state hash */
+	EDDY_DERIVED    /* cleared at the start of each step, then recomputed */
+} eddy_lifetime;
+
+typedef int eddy_column_id; /* < 0 means "no such column" */
+
+typedef struct eddy_column_info {
+	const char *name;
+	eddy_domain domain;
+	eddy_type type;
+	eddy_lifetime lifetime;
+	const char *unit;        /* SI unit, "" for dimensionless */
+	bool allocated;          /* some system in the pipeline uses it */
+	size_t bytes;            /* bytes currently allocated */
+} eddy_column_info;
+
+int eddy_world_column_count(const eddy_world *w);
+eddy_column_id eddy_world_find_column(const eddy_world *w, const char *name);
+eddy_status eddy_world_column_info(const eddy_world *w, eddy_column_id id, eddy_column_info *out);
+/* Declares a new column for custom systems (e.g. "temperature"). Returns its id,
+ * or < 0 with the world error set if the name is taken or invalid. */
+eddy_column_id eddy_world_declare_column(eddy_world *w, const char *name, eddy_domain domain,
+                                         eddy_type type, eddy_lifetime lifetime, const char *unit);
+
+/* Read access by name: NULL if the column is unknown or not allocated. *count gets
+ * the number of elements (particles, cells or faces). */
+const float *eddy_world_channel(const eddy_world *w, const char *name, size_t *count);
+/* Writable access for custom systems and hosts (same rules). */
+float *eddy_world_channel_mut(eddy_world *w, const char *name, size_t *count);
+const uint8_t *eddy_world_channel_u8(const eddy_world *w, const char *name, size_t *count);
+
+size_t eddy_world_particle_count(const eddy_world *w);
+
+/* Appends count particles; each allocated particle column is zero-filled except
+ * positions and velocities taken from the arrays (vel may be NULL). Positions
+ * outside the bounds are rejected. */
+eddy_status eddy_world_add_particles(eddy_world *w, size_t count, const eddy_vec3 *pos,
+                                     const eddy_vec3 *vel);
+/* Swap-remove: the last particle moves into slot i. Iterate backwards. */
+eddy_status eddy_world_remove_particle(eddy_world *w, size_t i);
+
+typedef struct eddy_grid_info {
+	bool allocated;
+	int nx, ny, nz;      /* cells along each axis */
+	double cell_size;    /* m */
+	eddy_vec3 origin;    /* m, corner of cell (0,0,0) */
+} eddy_grid_info;
+
+eddy_grid_info eddy_world_grid(const eddy_world *w);
+
+/* 64-bit FNV-1a over the state columns, particle count and clock: equal states
+ * give equal hashes, so determinism and resume can be checked. */
+uint64_t eddy_world_state_hash(const eddy_world *w);
+
+/* ---- pipeline ---------------------------------------------------------- */
+
+typedef struct eddy_step_context {
+	double dt;       /* s, this step's size */
+	double time;     /* s, time at the start of the step */
+	int64_t step;    /* index of this step, from 0 */
+	int threads;     /* worker threads the system may use */
+} eddy_step_context;
+
+typedef struct eddy_system_info {
+	const char *name;        /* the system kind, e.g. "emit_box" */
+	const char *label;       /* kind plus slot, e.g. "emit_box#1" */
+	const char *const *reads;  int read_count;
+	const char *const *writes; int write_count;
+	double profile_ms;       /* total wall time spent in step, ms */
+	int64_t calls;           /* steps run */
+	int64_t expected_particles; /* emitters: particles it will create, -1 unbounded, 0 others */
+} eddy_system_info;
+
+int eddy_world_system_count(const eddy_world *w);
+/* i-th system in pipeline order. */
+eddy_system_id eddy_world_system_at(const eddy_world *w, int i);
+eddy_status eddy_world_system_info(const eddy_world *w, eddy_system_id id, eddy_system_info *out);
+bool eddy_system_valid(const eddy_world *w, eddy_system_id id);
+eddy_status eddy_world_remove_system(eddy_world *w, eddy_system_id id);
+
+/* The validated pipeline as text (systems in order, reads/writes, columns and
+ * bytes) or as a Graphviz digraph. Returns the length that the full text needs,
+ * like snprintf; buf may be NULL when cap is 0. */
+size_t eddy_world_plan(const eddy_world *w, char *buf, size_t cap);
+size_t eddy_world_plan_dot(const eddy_world *w, char *buf, size_t cap);
+
+/* ---- custom systems: the public door for hosts and the renderer -------- */
+
+typedef eddy_status (*eddy_step_fn)(eddy_world *w, const eddy_step_context *ctx, void *user);
+typedef eddy_status (*eddy_frame_fn)(eddy_world *w, int frame, void *user);
+/* Largest stable step (s) before the world's CFL factor; write a short reason. */
+typedef double (*eddy_limit_fn)(eddy_world *w, void *user, const char **reason);
+
+typedef struct eddy_custom_system_def {
+	const char *name;               /* shown in plans and errors; copied */
+	const char *const *reads;       /* column names the step reads */
+	int read_count;
+	const char *const *writes;      /* column names the step writes */
+	int write_count;
+	eddy_step_fn step;              /* may be NULL for a frame-only system */
+	eddy_frame_fn frame;            /* called at each frame time; may be NULL */
+	eddy_limit_fn limit;            /* may be NULL */
+	void (*destroy)(void *user);    /* called when the system is removed */
+	void *user;
+} eddy_custom_system_def;
+
+eddy_custom_system_def eddy_default_custom_system_def(void);
+eddy_system_id eddy_add_custom_system(eddy_world *w, const eddy_custom_system_def *def);
+
+/* ---- built-in systems --------------------------------------------------- *
+ * Each eddy_add_* returns EDDY_NULL_SYSTEM on failure with the reason in
+ * eddy_world_error(): "<system>: '<field>' must be <what is allowed> (got <v>)".
+ */
+
+/* emit_box: a block of particles on a cubic lattice, once, at time `start`. */
+typedef struct eddy_emit_box_def {
+	eddy_vec3 min;       /* m, lower corner of the block */
+	eddy_vec3 max;       /* m, upper corner of the block */
+	float spacing;       /* m, lattice spacing; > 0 */
+	float jitter;        /* 1, random offset as a fraction of spacing, [0, 0.5] */
+	eddy_vec3 velocity;  /* m/s, initial velocity */
+	double start;        /* s, emission time */
+} eddy_emit_box_def;
+eddy_emit_box_def eddy_default_emit_box_def(void);
+eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def);
+
+/* emit_nozzle: a continuous round jet. Discs of particles on a square lattice
+ * leave the nozzle every spacing/speed seconds, so the jet has the lattice
+ * density; rate = speed * pi r^2 / spacing^3 particles per second. */
+typedef struct eddy_emit_nozzle_def {
+	eddy_vec3 center;    /* m, centre of the nozzle opening */
+	float radius;        /* m, > 0 */
+	eddy_vec3 direction; /* 1, jet direction (normalised on add) */
+	float speed;         /* m/s, > 0 */
+	float spacing;       /* m, > 0 */
+	double start;        /* s, time the pour begins */
+	double duration;     /* s, length of the pour; infinity = no end */
+	int64_t max_particles; /* 1, stop after this many; 0 = no limit */
+} eddy_emit_nozzle_def;
+eddy_emit_nozzle_def eddy_default_emit_nozzle_def(void);
+eddy_system_id eddy_add_emit_nozzle(eddy_world *w, const eddy_emit_nozzle_def *def);
+
+/* gravity: adds the world's gravity times scale to the particle acceleration. */
+typedef struct eddy_gravity_def {
+	float scale; /* 1, multiplies eddy_world_def.gravity */
+} eddy_gravity_def;
+eddy_gravity_def eddy_default_gravity_def(void);
+eddy_system_id eddy_add_gravity(eddy_world *w, const eddy_gravity_def *def);
+
+/* integrate: symplectic Euler, v += a dt, x += v dt. Reports the advection limit
+ * dt <= length / max_speed, length being the smallest emitter spacing. */
+typedef struct eddy_integrate_def {
+	float max_speed; /* m/s, speeds are clamped to this (a safety valve); > 0 */
+} eddy_integrate_def;
+eddy_integrate_def eddy_default_integrate_def(void);
+eddy_system_id eddy_add_integrate(eddy_world *w, const eddy_integrate_def *def);
+
+/* Shared by the colliders: a particle found in the solid is projected to its
+ * surface; its velocity relative to the collider loses the inward normal part,
+ * which comes back as restitution times the impact speed, and its tangential
+ * part loses friction times the normal speed change (Coulomb), never reversing. */
+typedef struct eddy_collider_response {
+	float restitution; /* 1, [0, 1] */
+	float friction;    /* 1, >= 0 */
+} eddy_collider_response;
+
+/* collide_box: an axis-aligned box; inside = the particles live inside it (a
+ * tank), otherwise the box is a solid block they stay out of. */
+typedef struct eddy_collide_box_def {
+	eddy_vec3 min;      /* m */
+	eddy_vec3 max;      /* m */
+	bool inside;        /* particles are kept inside (true) or outside (false) */
+	eddy_collider_response response;
+} eddy_collide_box_def;
+eddy_collide_box_def eddy_default_collide_box_def(void);
+eddy_system_id eddy_add_collide_box(eddy_world *w, const eddy_collide_box_def *def);
+
+/* collide_sphere: a solid ball (inside = false) or a spherical bowl (inside = true). */
+typedef struct eddy_collide_sphere_def {
+	eddy_vec3 center; /* m */
+	float radius;     /* m, > 0 */
+	bool inside;
+	eddy_collider_response response;
+} eddy_collide_sphere_def;
+eddy_collide_sphere_def eddy_default_collide_sphere_def(void);
+eddy_system_id eddy_add_collide_sphere(eddy_world *w, const eddy_collide_sphere_def *def);
+
+/* collide_plane: a half-space; particles stay on the side the normal points to. */
+typedef struct eddy_collide_plane_def {
+	eddy_vec3 point;  /* m, a point on the plane */
+	eddy_vec3 normal; /* 1, normalised on add */
+	eddy_collider_response response;
+} eddy_collide_plane_def;
+eddy_collide_plane_def eddy_default_collide_plane_def(void);
+eddy_system_id eddy_add_collide_plane(eddy_world *w, const eddy_collide_plane_def *def);
+
+/* Moves a collider by an offset from its def pose. The collider's velocity over
+ * the next step is (new offset - offset at the last step) / dt, so animating the
+ * offset every step gives moving walls that push particles. */
+eddy_status eddy_collider_set_offset(eddy_world *w, eddy_system_id id, eddy_vec3 offset);
+eddy_status eddy_collider_get_offset(const eddy_world *w, eddy_system_id id, eddy_vec3 *offset);
+/* Signed distance from p to the collider's solid (< 0 inside the solid). */
+eddy_status eddy_collider_distance(const eddy_world *w, eddy_system_id id, eddy_vec3 p, float *dist);
+
+/* ---- per-frame statistics ---------------------------------------------- */
+
+#define EDDY_MAX_STAT_SYSTEMS 64
+#define EDDY_MAX_EXTRA_STATS 16
+
+typedef struct eddy_stat_value {
+	const char *name;  /* e.g. "iterations" */
+	double value;      /* NAN when text is used */
+	const char *text;  /* NULL for a number */
+} eddy_stat_value;
+
+typedef struct eddy_frame_stats {
+	int frame;              /* frames completed */
+	double time;            /* s */
+	int64_t steps;          /* steps in this frame */
+	double dt_min, dt_max;  /* s, over this frame's steps */
+	const char *dt_limit;   /* what limited the last step, e.g. "integrate: advection" */
+	size_t particles;
+	double max_speed;       /* m/s */
+	double cfl;             /* 1, max_speed * dt / length; NAN without a length */
+	double density_err_avg; /* 1, |rho - rho0| / rho0; NAN without a density */
+	double density_err_max; /* 1 */
+	double volume;          /* m^3, fluid volume on the grid; NAN without a grid */
+	size_t leaked;          /* particles outside the bounds or inside a collider */
+	size_t nonfinite;       /* non-finite values in particle state columns */
+	double wall_ms;         /* ms of wall time this frame */
+	uint64_t state_hash;
+	int system_count;
+	const char *system_names[EDDY_MAX_STAT_SYSTEMS]; /* labels, pipeline order */
+	double system_ms[EDDY_MAX_STAT_SYSTEMS];         /* ms this frame */
+	int extra_count;        /* values systems published this frame */
+	eddy_stat_value extra[EDDY_MAX_EXTRA_STATS];
+} eddy_frame_stats;
+
+/* Statistics of the frame completed last (call after eddy_world_step_frame). */
+eddy_status eddy_world_frame_stats(eddy_world *w, eddy_frame_stats *out);
+
+/* Systems publish a frame value (solver iterations, residual, ...); a name
+ * published twice in a frame keeps the last value. */
+void eddy_world_publish(eddy_world *w, const char *name, double value);
+void eddy_world_publish_text(eddy_world *w, const char *name, const char *text);
+
+/* Rest density the world compares densities against (set by density systems). */
+void eddy_world_set_rest_density(eddy_world *w, float rho0);
+
+/* ---- preflight --------------------------------------------------------- */
+
+typedef enum eddy_check_level { EDDY_CHECK_INFO, EDDY_CHECK_WARNING, EDDY_CHECK_ERROR } eddy_check_level;
+typedef void (*eddy_check_fn)(eddy_check_level level, const char *message, void *user);
+
+/* Reports time-step limits, particles starting inside colliders and a memory
+ * estimate; returns the number of EDDY_CHECK_ERROR findings. */
+int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

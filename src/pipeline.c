@@ -1,0 +1,584 @@
+/* The pipeline: systems in the order the scene added them, each with the
+ * columns it reads and writes.
+ *
+ * Validation rule: a derived column (cleared every step) may be read only after
+ * an earlier system in the same step wrote it; otherwise the reader would see
+ * zeros. The error names the systems that could fix it. State columns carry
+ * over between steps, so any order is valid for them. Adding a system acquires
+ * its columns; removing it releases them; nothing else allocates columns. */
+#include "core.h"
+#include "systems.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Every built-in kind, for the "add X before it" hint. */
+static const eddy_system_vtable *const kinds[] = {
+#define EDDY_KIND_PTR(ident) &eddy__kind_##ident,
+	EDDY_BUILTIN_SYSTEMS(EDDY_KIND_PTR)
+#undef EDDY_KIND_PTR
+};
+
+const eddy_system *eddy__system_peek(const eddy_world *w, eddy_system_id id)
+{
+	if (!w || id.index >= w->slot_count)
+		return NULL;
+	const eddy_system *s = &w->slots[id.index];
+	if (!s->live || s->generation != id.generation)
+		return NULL;
+	return s;
+}
+
+eddy_system *eddy__system_get(eddy_world *w, eddy_system_id id)
+{
+	return eddy__system_peek(w, id) ? &w->slots[id.index] : NULL;
+}
+
+bool eddy_system_valid(const eddy_world *w, eddy_system_id id) { return eddy__system_peek(w, id) != NULL; }
+
+void eddy__system_free(eddy_world *w, eddy_system *s)
+{
+	(void)w;
+	if (s->vt && s->vt->destroy)
+		s->vt->destroy(s);
+	free(s->data);
+	s->data = NULL;
+	s->live = false;
+}
+
+/* Names of the built-in kinds that write column col, as "a, b or c". */
+static void writers_hint(const eddy_world *w, int col, char *buf, size_t cap)
+{
+	const char *names[16];
+	int n = 0;
+	for (size_t k = 0; k < sizeof kinds / sizeof kinds[0] && n < 16; ++k)
+		for (int j = 0; kinds[k]->default_writes && kinds[k]->default_writes[j] >= 0; ++j)
+			if (kinds[k]->default_writes[j] == col) {
+				names[n++] = kinds[k]->name;
+				break;
+			}
+	if (n == 0) {
+		snprintf(buf, cap, "add a system that writes '%s' before it", w->columns[col].name);
+		return;
+	}
+	size_t len = (size_t)snprintf(buf, cap, "add %s", names[0]);
+	for (int i = 1; i < n && len < cap; ++i)
+		len += (size_t)snprintf(buf + len, cap - len, "%s%s", i == n - 1 ? " or " : ", ", names[i]);
+	if (len < cap)
+		snprintf(buf + len, cap - len, " before it");
+}
+
+/* Checks the system at pipeline position pos against the systems before it. */
+static eddy_status validate_at(eddy_world *w, int pos)
+{
+	const eddy_system *s = &w->slots[w->order[pos]];
+	for (int r = 0; r < s->read_count; ++r) {
+		int col = s->reads[r];
+		if (w->columns[col].lifetime != EDDY_DERIVED)
+			continue;
+		bool written = false;
+		for (int k = 0; k < pos && !written; ++k) {
+			const eddy_system *e = &w->slots[w->order[k]];
+			for (int j = 0; j < e->write_count && !written; ++j)
+				written = e->writes[j] == col;
+		}
+		if (!written) {
+			char hint[256];
+			writers_hint(w, col, hint, sizeof hint);
+			return eddy__fail(w, EDDY_ERR_ORDER, "%s reads '%s' but no earlier system writes it: %s", s->label,
+			                  w->columns[col].name, hint);
+		}
+	}
+	return EDDY_OK;
+}
+
+static void make_label(eddy_world *w, eddy_system *s)
+{
+	int same = 0;
+	for (int k = 0; k < w->order_count; ++k)
+		same += strcmp(w->slots[w->order[k]].name, s->name) == 0;
+	char name[EDDY_NAME_MAX];
+	memcpy(name, s->name, sizeof name);
+	if (same == 0)
+		snprintf(s->label, sizeof s->label, "%s", name);
+	else
+		snprintf(s->label, sizeof s->label, "%s#%d", name, same + 1);
+}
+
+static eddy_system_id add_system_named(eddy_world *w, const eddy_system_vtable *vt, const char *name, void *data,
+                                       const int *reads, int read_count, const int *writes, int write_count)
+{
+	int slot = -1;
+	for (int i = 0; i < w->slot_count; ++i)
+		if (!w->slots[i].live) {
+			slot = i;
+			break;
+		}
+	if (slot < 0) {
+		if (w->slot_count == EDDY_MAX_SYSTEMS) {
+			free(data);
+			eddy__fail(w, EDDY_ERR_INVALID, "%s: the pipeline is full (%d systems)", name, EDDY_MAX_SYSTEMS);
+			return EDDY_NULL_SYSTEM;
+		}
+		slot = w->slot_count++;
+	}
+	if (read_count > EDDY_MAX_IO || write_count > EDDY_MAX_IO) {
+		free(data);
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: a system may read and write at most %d columns each", name, EDDY_MAX_IO);
+		return EDDY_NULL_SYSTEM;
+	}
+	eddy_system *s = &w->slots[slot];
+	uint16_t gen = (uint16_t)(s->generation + 1);
+	if (gen == 0)
+		gen = 1; /* generation 0 is reserved for EDDY_NULL_SYSTEM */
+	memset(s, 0, sizeof *s);
+	s->generation = gen;
+	s->vt = vt;
+	s->data = data;
+	snprintf(s->name, sizeof s->name, "%s", name);
+	make_label(w, s);
+	s->read_count = read_count;
+	s->write_count = write_count;
+	for (int i = 0; i < read_count; ++i) {
+		s->reads[i] = reads[i];
+		s->read_names[i] = w->columns[reads[i]].name;
+	}
+	for (int i = 0; i < write_count; ++i) {
+		s->writes[i] = writes[i];
+		s->write_names[i] = w->columns[writes[i]].name;
+	}
+
+	w->order[w->order_count] = slot;
+	eddy_status st = validate_at(w, w->order_count);
+	int acquired_r = 0, acquired_w = 0;
+	for (; st == EDDY_OK && acquired_r < read_count; ++acquired_r)
+		st = eddy__column_acquire(w, reads[acquired_r]);
+	if (st != EDDY_OK && acquired_r > 0)
+		acquired_r--; /* the failed acquire undid itself */
+	for (; st == EDDY_OK && acquired_w < write_count; ++acquired_w)
+		st = eddy__column_acquire(w, writes[acquired_w]);
+	if (st != EDDY_OK && acquired_w > 0)
+		acquired_w--;
+	if (st != EDDY_OK) {
+		for (int i = 0; i < acquired_r; ++i)
+			eddy__column_release(w, reads[i]);
+		for (int i = 0; i < acquired_w; ++i)
+			eddy__column_release(w, writes[i]);
+		s->vt = NULL; /* destroy is for systems that ran their create */
+		eddy__system_free(w, s);
+		return EDDY_NULL_SYSTEM;
+	}
+	s->live = true;
+	w->order_count++;
+	return (eddy_system_id){(uint16_t)slot, gen};
+}
+
+eddy_system_id eddy__add_system(eddy_world *w, const eddy_system_vtable *vt, void *data, const int *reads,
+                                int read_count, const int *writes, int write_count)
+{
+	if (!data) {
+		eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", vt->name);
+		return EDDY_NULL_SYSTEM;
+	}
+	return add_system_named(w, vt, vt->name, data, reads, read_count, writes, write_count);
+}
+
+eddy_status eddy_world_remove_system(eddy_world *w, eddy_system_id id)
+{
+	eddy_system *s = eddy__system_get(w, id);
+	if (!s)
+		return eddy__fail(w, EDDY_ERR_STALE, "remove_system: stale or invalid system handle");
+	int pos = 0;
+	while (w->order[pos] != id.index)
+		++pos;
+	/* Refuse if a later system depends on what this one writes. */
+	memmove(&w->order[pos], &w->order[pos + 1], (size_t)(w->order_count - pos - 1) * sizeof w->order[0]);
+	w->order_count--;
+	for (int k = pos; k < w->order_count; ++k) {
+		if (validate_at(w, k) != EDDY_OK) {
+			char msg[EDDY_ERROR_MAX];
+			snprintf(msg, sizeof msg, "%s", w->error);
+			memmove(&w->order[pos + 1], &w->order[pos], (size_t)(w->order_count - pos) * sizeof w->order[0]);
+			w->order[pos] = id.index;
+			w->order_count++;
+			return eddy__fail(w, EDDY_ERR_ORDER, "cannot remove %s: %s", s->label, msg);
+		}
+	}
+	for (int i = 0; i < s->read_count; ++i)
+		eddy__column_release(w, s->reads[i]);
+	for (int i = 0; i < s->write_count; ++i)
+		eddy__column_release(w, s->writes[i]);
+	eddy__system_free(w, s);
+	return EDDY_OK;
+}
+
+int eddy_world_system_count(const eddy_world *w) { return w->order_count; }
+
+eddy_system_id eddy_world_system_at(const eddy_world *w, int i)
+{
+	if (i < 0 || i >= w->order_count)
+		return EDDY_NULL_SYSTEM;
+	int slot = w->order[i];
+	return (eddy_system_id){(uint16_t)slot, w->slots[slot].generation};
+}
+
+eddy_status eddy_world_system_info(const eddy_world *w, eddy_system_id id, eddy_system_info *out)
+{
+	const eddy_system *s = eddy__system_peek(w, id);
+	if (!s || !out)
+		return EDDY_ERR_STALE;
+	out->name = s->name;
+	out->label = s->label;
+	out->reads = s->read_names;
+	out->read_count = s->read_count;
+	out->writes = s->write_names;
+	out->write_count = s->write_count;
+	out->profile_ms = s->ms_total;
+	out->calls = s->calls;
+	out->expected_particles = s->vt->expected_particles ? s->vt->expected_particles(w, s) : 0;
+	return EDDY_OK;
+}
+
+/* ---- custom systems ------------------------------------------------------ */
+
+typedef struct custom_data {
+	eddy_custom_system_def def;
+} custom_data;
+
+static eddy_status custom_step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	custom_data *d = s->data;
+	return d->def.step(w, ctx, d->def.user);
+}
+
+static eddy_status custom_frame(eddy_world *w, eddy_system *s, int frame)
+{
+	custom_data *d = s->data;
+	return d->def.frame(w, frame, d->def.user);
+}
+
+static double custom_limit(eddy_world *w, eddy_system *s, const char **reason)
+{
+	custom_data *d = s->data;
+	return d->def.limit(w, d->def.user, reason);
+}
+
+static void custom_destroy(eddy_system *s)
+{
+	custom_data *d = s->data;
+	if (d->def.destroy)
+		d->def.destroy(d->def.user);
+}
+
+/* One vtable per feature set, so the world skips the hooks a custom system lacks
+ * (a frame-only system is not timed as a step). Index: step + 2*frame + 4*limit. */
+#define CUSTOM_KIND(st, f, l) {.name = "custom", .step = (st), .frame = (f), .limit = (l), .destroy = custom_destroy}
+static const eddy_system_vtable custom_kinds[8] = {
+	CUSTOM_KIND(NULL, NULL, NULL),         CUSTOM_KIND(custom_step, NULL, NULL),
+	CUSTOM_KIND(NULL, custom_frame, NULL), CUSTOM_KIND(custom_step, custom_frame, NULL),
+	CUSTOM_KIND(NULL, NULL, custom_limit), CUSTOM_KIND(custom_step, NULL, custom_limit),
+	CUSTOM_KIND(NULL, custom_frame, custom_limit), CUSTOM_KIND(custom_step, custom_frame, custom_limit),
+};
+#undef CUSTOM_KIND
+
+eddy_custom_system_def eddy_default_custom_system_def(void)
+{
+	eddy_custom_system_def d;
+	memset(&d, 0, sizeof d);
+	d.name = "custom";
+	return d;
+}
+
+static bool resolve_names(eddy_world *w, const char *sys, const char *const *names, int count, int *ids)
+{
+	if (count < 0 || count > EDDY_MAX_IO || (count > 0 && !names)) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: column lists must hold 0 to %d names", sys, EDDY_MAX_IO);
+		return false;
+	}
+	for (int i = 0; i < count; ++i) {
+		ids[i] = eddy_world_find_column(w, names[i]);
+		if (ids[i] < 0) {
+			eddy__fail(w, EDDY_ERR_INVALID, "%s: unknown column '%s' (declare it with eddy_world_declare_column)", sys,
+			           names[i] ? names[i] : "(null)");
+			return false;
+		}
+	}
+	return true;
+}
+
+eddy_system_id eddy_add_custom_system(eddy_world *w, const eddy_custom_system_def *def)
+{
+	if (!w || !def) {
+		if (w)
+			eddy__fail(w, EDDY_ERR_INVALID, "custom system: def is NULL");
+		return EDDY_NULL_SYSTEM;
+	}
+	const char *name = def->name ? def->name : "";
+	if (!name[0] || strlen(name) >= EDDY_NAME_MAX) {
+		eddy__fail(w, EDDY_ERR_INVALID, "custom system: 'name' must be 1 to %d characters", EDDY_NAME_MAX - 1);
+		return EDDY_NULL_SYSTEM;
+	}
+	if (!def->step && !def->frame) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: needs a step or a frame callback", name);
+		return EDDY_NULL_SYSTEM;
+	}
+	int reads[EDDY_MAX_IO], writes[EDDY_MAX_IO];
+	if (!resolve_names(w, name, def->reads, def->read_count, reads) ||
+	    !resolve_names(w, name, def->writes, def->write_count, writes))
+		return EDDY_NULL_SYSTEM;
+	custom_data *d = calloc(1, sizeof *d);
+	if (!d) {
+		eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", name);
+		return EDDY_NULL_SYSTEM;
+	}
+	d->def = *def;
+	const eddy_system_vtable *vt = &custom_kinds[(def->step ? 1 : 0) + (def->frame ? 2 : 0) + (def->limit ? 4 : 0)];
+	return add_system_named(w, vt, name, d, reads, def->read_count, writes, def->write_count);
+}
+
+/* ---- plan ---------------------------------------------------------------- */
+
+typedef struct sbuf {
+	char *buf;
+	size_t cap, len;
+} sbuf;
+
+static void sb_printf(sbuf *b, const char *fmt, ...)
+#if defined(__GNUC__)
+	__attribute__((format(printf, 2, 3)))
+#endif
+	;
+static void sb_printf(sbuf *b, const char *fmt, ...)
+{
+	va_list ap;
+	va_start(ap, fmt);
+	char *dst = b->len < b->cap ? b->buf + b->len : NULL;
+	size_t room = b->len < b->cap ? b->cap - b->len : 0;
+	int n = vsnprintf(dst, room, fmt, ap);
+	va_end(ap);
+	if (n > 0)
+		b->len += (size_t)n;
+}
+
+static const char *domain_name(eddy_domain d)
+{
+	static const char *names[] = {"particle", "cell", "face_x", "face_y", "face_z"};
+	return names[d];
+}
+
+static void human_bytes(double b, char *out, size_t cap)
+{
+	if (b < 1024)
+		snprintf(out, cap, "%.0f B", b);
+	else if (b < 1024 * 1024)
+		snprintf(out, cap, "%.1f KiB", b / 1024);
+	else if (b < 1024.0 * 1024 * 1024)
+		snprintf(out, cap, "%.1f MiB", b / (1024 * 1024));
+	else
+		snprintf(out, cap, "%.2f GiB", b / (1024.0 * 1024 * 1024));
+}
+
+size_t eddy_world_plan(const eddy_world *w, char *buf, size_t cap)
+{
+	sbuf b = {buf, cap, 0};
+	if (cap)
+		buf[0] = '\0';
+	sb_printf(&b, "pipeline: %d system%s, run in this order every step\n", w->order_count, w->order_count == 1 ? "" : "s");
+	int64_t expected = 0;
+	bool unbounded = false;
+	for (int k = 0; k < w->order_count; ++k) {
+		const eddy_system *s = &w->slots[w->order[k]];
+		sb_printf(&b, "  %2d  %-20s", k + 1, s->label);
+		if (s->read_count) {
+			sb_printf(&b, " reads");
+			for (int i = 0; i < s->read_count; ++i)
+				sb_printf(&b, " %s", s->read_names[i]);
+			sb_printf(&b, ";");
+		}
+		if (s->write_count) {
+			sb_printf(&b, " writes");
+			for (int i = 0; i < s->write_count; ++i)
+				sb_printf(&b, " %s", s->write_names[i]);
+		}
+		if (!s->read_count && !s->write_count)
+			sb_printf(&b, " (no columns)");
+		if (!s->vt->step && s->vt->frame)
+			sb_printf(&b, " [at frame times]");
+		sb_printf(&b, "\n");
+		if (s->vt->expected_particles) {
+			int64_t e = s->vt->expected_particles(w, s);
+			if (e < 0)
+				unbounded = true;
+			else
+				expected += e;
+		}
+	}
+	size_t total = 0, per_particle = 0;
+	int allocated = 0;
+	for (int c = 0; c < w->column_count; ++c) {
+		eddy_column_info info;
+		eddy_world_column_info(w, c, &info);
+		if (!info.allocated)
+			continue;
+		allocated++;
+		total += info.bytes;
+		if (info.domain == EDDY_DOMAIN_PARTICLE)
+			per_particle += info.type == EDDY_U8 ? 1 : 4;
+	}
+	sb_printf(&b, "particles: %zu now", w->n);
+	if (unbounded)
+		sb_printf(&b, ", emitters without an end (memory grows with the run)");
+	else if (expected)
+		sb_printf(&b, ", %lld more from emitters", (long long)expected);
+	sb_printf(&b, "; %zu bytes per particle\n", per_particle);
+	char hb[32];
+	human_bytes((double)total, hb, sizeof hb);
+	sb_printf(&b, "columns: %d allocated, %s now\n", allocated, hb);
+	for (int c = 0; c < w->column_count; ++c) {
+		eddy_column_info info;
+		eddy_world_column_info(w, c, &info);
+		if (!info.allocated)
+			continue;
+		human_bytes((double)info.bytes, hb, sizeof hb);
+		sb_printf(&b, "  %-14s %-8s %-3s %-7s %-7s %10s\n", info.name, domain_name(info.domain),
+		          info.type == EDDY_U8 ? "u8" : "f32", info.lifetime == EDDY_STATE ? "state" : "derived",
+		          info.unit[0] ? info.unit : "1", hb);
+	}
+	if (w->grid_allocated)
+		sb_printf(&b, "grid: %d x %d x %d cells of %g m\n", w->nx, w->ny, w->nz, w->def.cell_size);
+	else
+		sb_printf(&b, "grid: none (no system uses a grid column)\n");
+	sb_printf(&b, "not allocated:");
+	int none = 1;
+	for (int c = 0; c < w->column_count; ++c)
+		if (!w->columns[c].data) {
+			sb_printf(&b, " %s", w->columns[c].name);
+			none = 0;
+		}
+	sb_printf(&b, "%s\n", none ? " (nothing)" : "");
+	return b.len;
+}
+
+/* The system that produced column col for the reader at position pos: the
+ * nearest earlier writer in this step, else the last writer of the previous
+ * step (state carried over). -1 if nothing writes it. */
+static int producer_of(const eddy_world *w, int col, int pos, bool *previous_step)
+{
+	for (int pass = 0; pass < 2; ++pass) {
+		int from = pass == 0 ? pos - 1 : w->order_count - 1;
+		int to = pass == 0 ? 0 : pos;
+		for (int k = from; k >= to; --k) {
+			const eddy_system *e = &w->slots[w->order[k]];
+			for (int j = 0; j < e->write_count; ++j)
+				if (e->writes[j] == col) {
+					*previous_step = pass == 1;
+					return k;
+				}
+		}
+	}
+	return -1;
+}
+
+size_t eddy_world_plan_dot(const eddy_world *w, char *buf, size_t cap)
+{
+	sbuf b = {buf, cap, 0};
+	if (cap)
+		buf[0] = '\0';
+	sb_printf(&b, "digraph eddy {\n  rankdir=LR;\n  node [shape=box, style=\"rounded,filled\", fillcolor=\"#eef4fb\", fontname=\"Helvetica\"];\n");
+	sb_printf(&b, "  edge [fontname=\"Helvetica\", fontsize=10];\n");
+	for (int k = 0; k < w->order_count; ++k)
+		sb_printf(&b, "  s%d [label=\"%d. %s\"];\n", k, k + 1, w->slots[w->order[k]].label);
+	/* One edge per (producer, reader, same-or-previous step), labelled with columns. */
+	for (int r = 0; r < w->order_count; ++r) {
+		const eddy_system *s = &w->slots[w->order[r]];
+		for (int p = 0; p < w->order_count; ++p) {
+			for (int prev = 0; prev < 2; ++prev) {
+				char label[256];
+				size_t len = 0;
+				label[0] = '\0';
+				for (int i = 0; i < s->read_count; ++i) {
+					bool was_prev = false;
+					if (producer_of(w, s->reads[i], r, &was_prev) == p && was_prev == (prev == 1) && len < sizeof label)
+						len += (size_t)snprintf(label + len, sizeof label - len, "%s%s", len ? " " : "",
+						                        s->read_names[i]);
+				}
+				if (len)
+					sb_printf(&b, "  s%d -> s%d [label=\"%s\"%s];\n", p, r, label,
+					          prev ? ", style=dashed, color=\"#888888\"" : "");
+			}
+		}
+	}
+	sb_printf(&b, "  label=\"eddy pipeline: solid edges carry columns within a step, dashed ones into the next step\";\n");
+	sb_printf(&b, "  fontname=\"Helvetica\";\n}\n");
+	return b.len;
+}
+
+/* ---- def checks ---------------------------------------------------------- */
+
+bool eddy__check_finite(eddy_world *w, const char *sys, const char *field, double v)
+{
+	if (isfinite(v))
+		return true;
+	eddy__fail(w, EDDY_ERR_INVALID, "%s: '%s' must be finite (got %g)", sys, field, v);
+	return false;
+}
+
+bool eddy__check_positive(eddy_world *w, const char *sys, const char *field, double v)
+{
+	if (v > 0 && isfinite(v))
+		return true;
+	eddy__fail(w, EDDY_ERR_INVALID, "%s: '%s' must be > 0 (got %g)", sys, field, v);
+	return false;
+}
+
+bool eddy__check_nonneg(eddy_world *w, const char *sys, const char *field, double v)
+{
+	if (v >= 0 && isfinite(v))
+		return true;
+	eddy__fail(w, EDDY_ERR_INVALID, "%s: '%s' must be >= 0 (got %g)", sys, field, v);
+	return false;
+}
+
+bool eddy__check_range(eddy_world *w, const char *sys, const char *field, double v, double lo, double hi)
+{
+	if (v >= lo && v <= hi)
+		return true;
+	eddy__fail(w, EDDY_ERR_INVALID, "%s: '%s' must be in [%g, %g] (got %g)", sys, field, lo, hi, v);
+	return false;
+}
+
+bool eddy__check_vec3(eddy_world *w, const char *sys, const char *field, eddy_vec3 v)
+{
+	if (isfinite(v.x) && isfinite(v.y) && isfinite(v.z))
+		return true;
+	eddy__fail(w, EDDY_ERR_INVALID, "%s: '%s' must be finite (got {%g, %g, %g})", sys, field, (double)v.x, (double)v.y,
+	           (double)v.z);
+	return false;
+}
+
+bool eddy__check_box(eddy_world *w, const char *sys, eddy_vec3 lo, eddy_vec3 hi)
+{
+	if (!eddy__check_vec3(w, sys, "min", lo) || !eddy__check_vec3(w, sys, "max", hi))
+		return false;
+	if (hi.x > lo.x && hi.y > lo.y && hi.z > lo.z)
+		return true;
+	eddy__fail(w, EDDY_ERR_INVALID, "%s: 'max' must exceed 'min' on every axis (got min {%g, %g, %g}, max {%g, %g, %g})",
+	           sys, (double)lo.x, (double)lo.y, (double)lo.z, (double)hi.x, (double)hi.y, (double)hi.z);
+	return false;
+}
+
+bool eddy__check_unit(eddy_world *w, const char *sys, const char *field, eddy_vec3 *v)
+{
+	if (!eddy__check_vec3(w, sys, field, *v))
+		return false;
+	double len = sqrt((double)v->x * v->x + (double)v->y * v->y + (double)v->z * v->z);
+	if (!(len > 1e-12)) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: '%s' must be a non-zero vector", sys, field);
+		return false;
+	}
+	v->x = (float)(v->x / len);
+	v->y = (float)(v->y / len);
+	v->z = (float)(v->z / len);
+	return true;
+}

@@ -1,0 +1,127 @@
+/* collide_box: an axis-aligned box, as a tank (inside = true: particles stay
+ * in it) or as a solid block (inside = false: particles stay out of it).
+ *
+ * Reads: x y z vx vy vz. Writes: x y z vx vy vz.
+ * Tank: each coordinate is clamped to [min, max] (+ offset); a clamped axis
+ * gets the contact response with that wall's inward normal. Block: a particle
+ * inside is moved to the nearest face and responds with its outward normal.
+ * The response (core.h) works on velocity relative to the moving wall. */
+#include "systems.h"
+
+#include <stdlib.h>
+
+typedef struct collide_box {
+	eddy_collider_base base; /* first: shared offset handling */
+	eddy_collide_box_def def;
+} collide_box;
+
+static const int box_io[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, -1};
+
+eddy_collide_box_def eddy_default_collide_box_def(void)
+{
+	eddy_collide_box_def d;
+	d.min = eddy__v3(0, 0, 0);
+	d.max = eddy__v3(1, 1, 1);
+	d.inside = true;
+	d.response.restitution = 0.0f;
+	d.response.friction = 0.0f;
+	return d;
+}
+
+static void bounds(const collide_box *b, eddy_vec3 *lo, eddy_vec3 *hi)
+{
+	*lo = eddy__add3(b->def.min, b->base.motion.offset);
+	*hi = eddy__add3(b->def.max, b->base.motion.offset);
+}
+
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	collide_box *b = s->data;
+	const eddy_vec3 vw = eddy__collider_step_velocity(&b->base, ctx->dt);
+	eddy_vec3 lo, hi;
+	bounds(b, &lo, &hi);
+	const float l[3] = {lo.x, lo.y, lo.z}, h[3] = {hi.x, hi.y, hi.z};
+	float *p[3] = {eddy__col(w, COL_X_), eddy__col(w, COL_Y_), eddy__col(w, COL_Z_)};
+	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	const eddy_collider_response r = b->def.response;
+	const long n = (long)w->n;
+	if (b->def.inside) {
+#pragma omp parallel for num_threads(ctx->threads) if (n > 32768) schedule(static)
+		for (long i = 0; i < n; ++i) {
+			for (int a = 0; a < 3; ++a) {
+				float q = p[a][i];
+				if (q >= l[a] && q <= h[a])
+					continue;
+				eddy_vec3 nrm = {0, 0, 0};
+				float *c = a == 0 ? &nrm.x : a == 1 ? &nrm.y : &nrm.z;
+				*c = q < l[a] ? 1.0f : -1.0f;
+				p[a][i] = q < l[a] ? l[a] : h[a];
+				eddy__collide_response(vx, vy, vz, (size_t)i, nrm, vw, r);
+			}
+		}
+		return EDDY_OK;
+	}
+#pragma omp parallel for num_threads(ctx->threads) if (n > 32768) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		int best = -1;
+		float depth = INFINITY, sign = 0;
+		for (int a = 0; a < 3; ++a) {
+			const float q = p[a][i];
+			if (!(q > l[a] && q < h[a])) {
+				best = -1;
+				break;
+			}
+			if (q - l[a] < depth) {
+				depth = q - l[a];
+				best = a;
+				sign = -1;
+			}
+			if (h[a] - q < depth) {
+				depth = h[a] - q;
+				best = a;
+				sign = 1;
+			}
+		}
+		if (best < 0)
+			continue;
+		eddy_vec3 nrm = {0, 0, 0};
+		float *c = best == 0 ? &nrm.x : best == 1 ? &nrm.y : &nrm.z;
+		*c = sign;
+		p[best][i] = sign > 0 ? h[best] : l[best];
+		eddy__collide_response(vx, vy, vz, (size_t)i, nrm, vw, r);
+	}
+	return EDDY_OK;
+}
+
+static float distance(const eddy_system *s, eddy_vec3 q)
+{
+	const collide_box *b = s->data;
+	eddy_vec3 lo, hi;
+	bounds(b, &lo, &hi);
+	/* distance to the box surface, negative inside the box */
+	const float dx = fmaxf(lo.x - q.x, q.x - hi.x), dy = fmaxf(lo.y - q.y, q.y - hi.y), dz = fmaxf(lo.z - q.z, q.z - hi.z);
+	const float ox = fmaxf(dx, 0), oy = fmaxf(dy, 0), oz = fmaxf(dz, 0);
+	const float box_sd = sqrtf(ox * ox + oy * oy + oz * oz) + fminf(fmaxf(dx, fmaxf(dy, dz)), 0);
+	/* a tank's solid is everything outside the box */
+	return b->def.inside ? -box_sd : box_sd;
+}
+
+const eddy_system_vtable eddy__kind_collide_box = {
+	.name = "collide_box",
+	.step = step,
+	.distance = distance,
+	.default_writes = box_io,
+};
+
+eddy_system_id eddy_add_collide_box(eddy_world *w, const eddy_collide_box_def *def)
+{
+	const char *sys = "collide_box";
+	if (!def)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__check_box(w, sys, def->min, def->max) || !eddy__check_response(w, sys, def->response))
+		return EDDY_NULL_SYSTEM;
+	collide_box *b = calloc(1, sizeof *b);
+	if (b)
+		b->def = *def;
+	return eddy__add_system(w, &eddy__kind_collide_box, b, box_io, 6, box_io, 6);
+}

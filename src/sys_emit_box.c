@@ -1,0 +1,151 @@
+/* emit_box: a block of particles on a simple cubic lattice, emitted once.
+ *
+ * Reads: nothing. Writes: x y z vx vy vz.
+ * Lattice points sit at min + (i + 1/2) * spacing on each axis, so a block
+ * fills [min, max] with cells of size spacing; the count per axis is
+ * floor((max - min) / spacing). Jitter moves each point by a uniform offset in
+ * [-jitter, jitter] * spacing per axis, from the world's seeded stream.
+ * The spacing becomes the world's length scale for the advection limit. */
+#include "systems.h"
+
+#include <stdlib.h>
+
+typedef struct emit_box {
+	eddy_emit_box_def def;
+	int nx, ny, nz;
+	bool done;
+} emit_box;
+
+static const int box_writes[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, -1};
+
+eddy_emit_box_def eddy_default_emit_box_def(void)
+{
+	eddy_emit_box_def d = {0};
+	d.min = eddy__v3(0, 0, 0);
+	d.max = eddy__v3(0.1f, 0.1f, 0.1f);
+	d.spacing = 0.01f;
+	d.jitter = 0;
+	d.velocity = eddy__v3(0, 0, 0);
+	d.start = 0;
+	return d;
+}
+
+static int axis_count(float lo, float hi, float h)
+{
+	/* a hair of tolerance so a box of exactly k spacings gives k, not k - 1 */
+	double n = floor(((double)hi - lo) / h + 1e-6);
+	return n > 0 ? (int)n : 0;
+}
+
+/* Lattice point k (x fastest), jittered when rng is given. */
+static eddy_vec3 lattice_point(const emit_box *e, size_t k, uint64_t *rng)
+{
+	const eddy_emit_box_def *d = &e->def;
+	const size_t ix = k % (size_t)e->nx, iy = k / (size_t)e->nx % (size_t)e->ny, iz = k / ((size_t)e->nx * (size_t)e->ny);
+	eddy_vec3 p = {d->min.x + ((float)ix + 0.5f) * d->spacing, d->min.y + ((float)iy + 0.5f) * d->spacing,
+	               d->min.z + ((float)iz + 0.5f) * d->spacing};
+	if (rng && d->jitter > 0) {
+		p.x += (float)((2 * eddy__rand01(rng) - 1) * d->jitter * d->spacing);
+		p.y += (float)((2 * eddy__rand01(rng) - 1) * d->jitter * d->spacing);
+		p.z += (float)((2 * eddy__rand01(rng) - 1) * d->jitter * d->spacing);
+	}
+	return p;
+}
+
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	emit_box *e = s->data;
+	if (e->done || ctx->time + 1e-12 < e->def.start)
+		return EDDY_OK;
+	e->done = true;
+	const size_t count = (size_t)e->nx * (size_t)e->ny * (size_t)e->nz;
+	size_t first;
+	eddy_status st = eddy__append_particles(w, count, &first);
+	if (st != EDDY_OK)
+		return st;
+	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
+	for (size_t k = 0; k < count; ++k) {
+		const eddy_vec3 p = lattice_point(e, k, &w->rng);
+		/* jitter must not push a particle out of the world */
+		x[first + k] = fminf(fmaxf(p.x, lo.x), hi.x);
+		y[first + k] = fminf(fmaxf(p.y, lo.y), hi.y);
+		z[first + k] = fminf(fmaxf(p.z, lo.z), hi.z);
+		vx[first + k] = e->def.velocity.x;
+		vy[first + k] = e->def.velocity.y;
+		vz[first + k] = e->def.velocity.z;
+	}
+	return EDDY_OK;
+}
+
+static int64_t expected(const eddy_world *w, const eddy_system *s)
+{
+	(void)w;
+	const emit_box *e = s->data;
+	return e->done ? 0 : (int64_t)e->nx * e->ny * e->nz;
+}
+
+static size_t sample(const eddy_world *w, const eddy_system *s, eddy_vec3 *out, size_t cap)
+{
+	(void)w;
+	const emit_box *e = s->data;
+	const size_t count = (size_t)e->nx * (size_t)e->ny * (size_t)e->nz;
+	if (!out)
+		return count;
+	size_t k = 0;
+	for (; k < count && k < cap; ++k)
+		out[k] = lattice_point(e, k, NULL);
+	return k;
+}
+
+const eddy_system_vtable eddy__kind_emit_box = {
+	.name = "emit_box",
+	.step = step,
+	.expected_particles = expected,
+	.sample = sample,
+	.default_writes = box_writes,
+};
+
+eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def)
+{
+	const char *sys = "emit_box";
+	if (!def)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__check_box(w, sys, def->min, def->max) || !eddy__check_positive(w, sys, "spacing", def->spacing) ||
+	    !eddy__check_range(w, sys, "jitter", def->jitter, 0, 0.5) ||
+	    !eddy__check_vec3(w, sys, "velocity", def->velocity) || !eddy__check_nonneg(w, sys, "start", def->start))
+		return EDDY_NULL_SYSTEM;
+	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
+	if (def->min.x < lo.x || def->min.y < lo.y || def->min.z < lo.z || def->max.x > hi.x || def->max.y > hi.y ||
+	    def->max.z > hi.z) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: the block {%g, %g, %g}..{%g, %g, %g} must lie inside the world bounds", sys,
+		           (double)def->min.x, (double)def->min.y, (double)def->min.z, (double)def->max.x, (double)def->max.y,
+		           (double)def->max.z);
+		return EDDY_NULL_SYSTEM;
+	}
+	emit_box *e = calloc(1, sizeof *e);
+	if (!e)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
+	e->def = *def;
+	e->nx = axis_count(def->min.x, def->max.x, def->spacing);
+	e->ny = axis_count(def->min.y, def->max.y, def->spacing);
+	e->nz = axis_count(def->min.z, def->max.z, def->spacing);
+	if ((int64_t)e->nx * e->ny * e->nz == 0) {
+		free(e);
+		eddy__fail(w, EDDY_ERR_INVALID,
+		           "%s: the block emits no particles: every side must be at least 'spacing' = %g m long", sys,
+		           (double)def->spacing);
+		return EDDY_NULL_SYSTEM;
+	}
+	const long long count = (long long)e->nx * e->ny * e->nz;
+	if (count > (1ll << 31)) {
+		free(e);
+		eddy__fail(w, EDDY_ERR_NOMEM, "%s: %lld particles is more than eddy can hold; use a larger spacing", sys, count);
+		return EDDY_NULL_SYSTEM;
+	}
+	eddy_system_id id = eddy__add_system(w, &eddy__kind_emit_box, e, NULL, 0, box_writes, 6);
+	if (eddy_system_valid(w, id))
+		eddy__note_length_scale(w, def->spacing);
+	return id;
+}

@@ -1,0 +1,200 @@
+/* emit_nozzle: a continuous round jet ("pouring water into a box").
+ *
+ * Reads: nothing. Writes: x y z vx vy vz.
+ * The opening is a disc of the given radius normal to the direction. Every
+ * time the jet has advanced one spacing (speed * t), a disc of particles on a
+ * square lattice of that spacing leaves the nozzle with velocity
+ * speed * direction, placed as far downstream as it travelled since it left;
+ * so the jet has the lattice density and the rate is speed * pi r^2 / h^3.
+ * The pour runs over [start, start + duration] and stops early at
+ * max_particles (the last disc is cut to hit the total exactly). */
+#include "systems.h"
+
+#include <stdlib.h>
+
+typedef struct emit_nozzle {
+	eddy_emit_nozzle_def def;
+	eddy_vec3 u, v;       /* unit vectors spanning the opening */
+	int disc;             /* particles per disc */
+	int half;             /* lattice extent: offsets in [-half, half] */
+	double travelled;     /* m the jet moved since the last disc left */
+	int64_t emitted;
+	bool started;
+} emit_nozzle;
+
+static const int nozzle_writes[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, -1};
+
+eddy_emit_nozzle_def eddy_default_emit_nozzle_def(void)
+{
+	eddy_emit_nozzle_def d = {0};
+	d.center = eddy__v3(0.5f, 0.9f, 0.5f);
+	d.radius = 0.03f;
+	d.direction = eddy__v3(0, -1, 0);
+	d.speed = 1.0f;
+	d.spacing = 0.01f;
+	d.start = 0;
+	d.duration = INFINITY;
+	d.max_particles = 0;
+	return d;
+}
+
+static bool in_disc(const emit_nozzle *e, int i, int j)
+{
+	const double r = e->def.radius / e->def.spacing;
+	return (double)i * i + (double)j * j <= r * r + 1e-9;
+}
+
+/* Writes the disc's points (at most cap); returns the number of points. */
+static int disc_points(const emit_nozzle *e, double downstream, eddy_vec3 *out, int cap)
+{
+	const eddy_emit_nozzle_def *d = &e->def;
+	int k = 0;
+	for (int j = -e->half; j <= e->half; ++j)
+		for (int i = -e->half; i <= e->half; ++i) {
+			if (!in_disc(e, i, j))
+				continue;
+			if (k < cap) {
+				const float a = (float)i * d->spacing, b = (float)j * d->spacing, c = (float)downstream;
+				out[k] = (eddy_vec3){d->center.x + a * e->u.x + b * e->v.x + c * d->direction.x,
+				                     d->center.y + a * e->u.y + b * e->v.y + c * d->direction.y,
+				                     d->center.z + a * e->u.z + b * e->v.z + c * d->direction.z};
+			}
+			++k;
+		}
+	return k;
+}
+
+static eddy_status emit_disc(eddy_world *w, emit_nozzle *e, double downstream)
+{
+	int count = e->disc;
+	if (e->def.max_particles > 0 && e->emitted + count > e->def.max_particles)
+		count = (int)(e->def.max_particles - e->emitted);
+	if (count <= 0)
+		return EDDY_OK;
+	eddy_vec3 *pts = eddy__arena_alloc(&w->arena, (size_t)e->disc * sizeof *pts);
+	if (!pts)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "emit_nozzle: out of scratch memory");
+	disc_points(e, downstream, pts, e->disc);
+	size_t first;
+	eddy_status st = eddy__append_particles(w, (size_t)count, &first);
+	if (st != EDDY_OK)
+		return st;
+	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
+	const eddy_vec3 vel = {e->def.direction.x * e->def.speed, e->def.direction.y * e->def.speed,
+	                       e->def.direction.z * e->def.speed};
+	for (int k = 0; k < count; ++k) {
+		const size_t i = first + (size_t)k;
+		x[i] = fminf(fmaxf(pts[k].x, lo.x), hi.x);
+		y[i] = fminf(fmaxf(pts[k].y, lo.y), hi.y);
+		z[i] = fminf(fmaxf(pts[k].z, lo.z), hi.z);
+		vx[i] = vel.x;
+		vy[i] = vel.y;
+		vz[i] = vel.z;
+	}
+	e->emitted += count;
+	return EDDY_OK;
+}
+
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	emit_nozzle *e = s->data;
+	const double t0 = fmax(ctx->time, e->def.start);
+	const double t1 = fmin(ctx->time + ctx->dt, e->def.start + e->def.duration);
+	if (t1 <= t0 || (e->def.max_particles > 0 && e->emitted >= e->def.max_particles))
+		return EDDY_OK;
+	if (!e->started) {
+		e->started = true;
+		e->travelled = e->def.spacing; /* the first disc leaves as the pour starts */
+	}
+	e->travelled += e->def.speed * (t1 - t0);
+	while (e->travelled >= e->def.spacing) {
+		e->travelled -= e->def.spacing;
+		eddy_status st = emit_disc(w, e, e->travelled);
+		if (st != EDDY_OK)
+			return st;
+	}
+	return EDDY_OK;
+}
+
+static int64_t expected(const eddy_world *w, const eddy_system *s)
+{
+	(void)w;
+	const emit_nozzle *e = s->data;
+	int64_t by_time = -1;
+	if (isfinite(e->def.duration))
+		by_time = ((int64_t)floor(e->def.duration * e->def.speed / e->def.spacing) + 1) * e->disc;
+	if (e->def.max_particles > 0 && (by_time < 0 || e->def.max_particles < by_time))
+		by_time = e->def.max_particles;
+	return by_time < 0 ? -1 : by_time - e->emitted;
+}
+
+static size_t sample(const eddy_world *w, const eddy_system *s, eddy_vec3 *out, size_t cap)
+{
+	(void)w;
+	const emit_nozzle *e = s->data;
+	if (!out)
+		return (size_t)e->disc;
+	int n = disc_points(e, 0, out, (int)(cap < (size_t)e->disc ? cap : (size_t)e->disc));
+	return (size_t)n < cap ? (size_t)n : cap;
+}
+
+const eddy_system_vtable eddy__kind_emit_nozzle = {
+	.name = "emit_nozzle",
+	.step = step,
+	.expected_particles = expected,
+	.sample = sample,
+	.default_writes = nozzle_writes,
+};
+
+eddy_system_id eddy_add_emit_nozzle(eddy_world *w, const eddy_emit_nozzle_def *def)
+{
+	const char *sys = "emit_nozzle";
+	if (!def)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	eddy_vec3 dir = def->direction;
+	if (!eddy__check_vec3(w, sys, "center", def->center) || !eddy__check_positive(w, sys, "radius", def->radius) ||
+	    !eddy__check_unit(w, sys, "direction", &dir) || !eddy__check_positive(w, sys, "speed", def->speed) ||
+	    !eddy__check_positive(w, sys, "spacing", def->spacing) || !eddy__check_nonneg(w, sys, "start", def->start) ||
+	    !eddy__check_finite(w, sys, "start", def->start))
+		return EDDY_NULL_SYSTEM;
+	if (!(def->duration > 0)) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'duration' must be > 0 s, or infinite for no end (got %g)", sys, def->duration);
+		return EDDY_NULL_SYSTEM;
+	}
+	if (def->max_particles < 0) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'max_particles' must be >= 0, 0 for no limit (got %lld)", sys,
+		           (long long)def->max_particles);
+		return EDDY_NULL_SYSTEM;
+	}
+	if (def->radius / def->spacing > 1000) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'radius' must be at most 1000 spacings (got %g m at spacing %g m)", sys,
+		           (double)def->radius, (double)def->spacing);
+		return EDDY_NULL_SYSTEM;
+	}
+	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max, c = def->center;
+	const float r = def->radius;
+	if (c.x - r < lo.x || c.y - r < lo.y || c.z - r < lo.z || c.x + r > hi.x || c.y + r > hi.y || c.z + r > hi.z) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: the opening (centre {%g, %g, %g}, radius %g m) must lie inside the world bounds",
+		           sys, (double)c.x, (double)c.y, (double)c.z, (double)r);
+		return EDDY_NULL_SYSTEM;
+	}
+	emit_nozzle *e = calloc(1, sizeof *e);
+	if (!e)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
+	e->def = *def;
+	e->def.direction = dir;
+	/* u: any unit vector normal to dir; v completes the frame */
+	eddy_vec3 a = fabsf(dir.x) < 0.9f ? eddy__v3(1, 0, 0) : eddy__v3(0, 1, 0);
+	eddy_vec3 u = {dir.y * a.z - dir.z * a.y, dir.z * a.x - dir.x * a.z, dir.x * a.y - dir.y * a.x};
+	eddy__check_unit(w, sys, "direction", &u);
+	e->u = u;
+	e->v = (eddy_vec3){dir.y * u.z - dir.z * u.y, dir.z * u.x - dir.x * u.z, dir.x * u.y - dir.y * u.x};
+	e->half = (int)floor(def->radius / def->spacing + 1e-6);
+	e->disc = disc_points(e, 0, NULL, 0);
+	eddy_system_id id = eddy__add_system(w, &eddy__kind_emit_nozzle, e, NULL, 0, nozzle_writes, 6);
+	if (eddy_system_valid(w, id))
+		eddy__note_length_scale(w, def->spacing);
+	return id;
+}

@@ -1,0 +1,55 @@
+/* gravity: the world's gravity as a body acceleration.
+ *
+ * Reads: nothing. Writes: ax ay az (accumulated; the world clears them each step).
+ * a += scale * g. */
+#include "systems.h"
+
+#include <stdlib.h>
+
+typedef struct gravity {
+	eddy_gravity_def def;
+} gravity;
+
+static const int gravity_writes[] = {COL_AX, COL_AY, COL_AZ, -1};
+
+eddy_gravity_def eddy_default_gravity_def(void)
+{
+	eddy_gravity_def d;
+	d.scale = 1.0f;
+	return d;
+}
+
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	(void)ctx;
+	const gravity *g = s->data;
+	const float gx = w->def.gravity.x * g->def.scale, gy = w->def.gravity.y * g->def.scale,
+	            gz = w->def.gravity.z * g->def.scale;
+	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
+	const size_t n = w->n;
+	for (size_t i = 0; i < n; ++i) {
+		ax[i] += gx;
+		ay[i] += gy;
+		az[i] += gz;
+	}
+	return EDDY_OK;
+}
+
+const eddy_system_vtable eddy__kind_gravity = {
+	.name = "gravity",
+	.step = step,
+	.default_writes = gravity_writes,
+};
+
+eddy_system_id eddy_add_gravity(eddy_world *w, const eddy_gravity_def *def)
+{
+	const char *sys = "gravity";
+	if (!def)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__check_finite(w, sys, "scale", def->scale))
+		return EDDY_NULL_SYSTEM;
+	gravity *g = malloc(sizeof *g);
+	if (g)
+		g->def = *def;
+	return eddy__add_system(w, &eddy__kind_gravity, g, NULL, 0, gravity_writes, 3);
+}

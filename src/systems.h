@@ -1,0 +1,22 @@
+/* The built-in system kinds. Each lives in its own sys_*.c file and defines
+ * eddy__kind_<name>; this list lets the pipeline name the systems that would
+ * fix an order error. */
+#ifndef EDDY_SYSTEMS_H
+#define EDDY_SYSTEMS_H
+
+#include "core.h"
+
+#define EDDY_BUILTIN_SYSTEMS(X) \
+	X(emit_box) \
+	X(emit_nozzle) \
+	X(gravity) \
+	X(integrate) \
+	X(collide_box) \
+	X(collide_sphere) \
+	X(collide_plane)
+
+#define EDDY_KIND_DECL(ident) extern const eddy_system_vtable eddy__kind_##ident;
+EDDY_BUILTIN_SYSTEMS(EDDY_KIND_DECL)
+#undef EDDY_KIND_DECL
+
+#endif

@@ -1,0 +1,681 @@
+/* The world: clock, adaptive step, frames, errors, statistics and the state hash.
+ *
+ * A step: pick dt = min(dt_max, cfl * min over systems of their limit), shortened
+ * so steps land exactly on frame times; clear derived columns; run the systems in
+ * pipeline order, timing each and scanning what it wrote for non-finite values;
+ * then check that no particle left the bounds. */
+#define _POSIX_C_SOURCE 200809L
+#include "core.h"
+
+#include <float.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+const char *eddy_status_name(eddy_status s)
+{
+	switch (s) {
+	case EDDY_OK: return "ok";
+	case EDDY_ERR_INVALID: return "invalid argument";
+	case EDDY_ERR_ORDER: return "pipeline order";
+	case EDDY_ERR_STALE: return "stale handle";
+	case EDDY_ERR_NOMEM: return "out of memory";
+	case EDDY_ERR_IO: return "i/o error";
+	case EDDY_ERR_NUMERIC: return "numerical failure";
+	case EDDY_ERR_SOLVER: return "solver failure";
+	case EDDY_ERR_EXTERNAL: return "external failure";
+	}
+	return "unknown status";
+}
+
+double eddy__now_ms(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
+static eddy_status vfail(eddy_world *w, eddy_status s, const char *fmt, va_list ap)
+{
+	if (w)
+		vsnprintf(w->error, sizeof w->error, fmt, ap);
+	return s;
+}
+
+eddy_status eddy__fail(eddy_world *w, eddy_status s, const char *fmt, ...)
+{
+	va_list ap;
+	va_start(ap, fmt);
+	vfail(w, s, fmt, ap);
+	va_end(ap);
+	return s;
+}
+
+eddy_status eddy_world_fail(eddy_world *w, eddy_status status, const char *fmt, ...)
+{
+	va_list ap;
+	va_start(ap, fmt);
+	vfail(w, status, fmt, ap);
+	va_end(ap);
+	return status;
+}
+
+const char *eddy_world_error(const eddy_world *w) { return w ? w->error : "no world"; }
+
+eddy_world_def eddy_default_world_def(void)
+{
+	eddy_world_def d;
+	memset(&d, 0, sizeof d);
+	d.bounds_min = eddy__v3(0, 0, 0);
+	d.bounds_max = eddy__v3(1, 1, 1);
+	d.gravity = eddy__v3(0, -9.81f, 0);
+	d.fps = 30;
+	d.duration = 2;
+	d.cfl = 0.4;
+	d.dt_max = 1.0 / 120.0;
+	d.dt_min = 1e-7;
+	d.max_steps_per_frame = 100000;
+	d.cell_size = 0;
+	d.seed = 1;
+	d.threads = 1;
+	d.escape = EDDY_ESCAPE_ERROR;
+	d.check_finite = true;
+	return d;
+}
+
+static bool world_def_valid(const eddy_world_def *d, char *err, size_t n)
+{
+	const eddy_vec3 lo = d->bounds_min, hi = d->bounds_max;
+	const char *bad = NULL;
+	char buf[160];
+	if (!(isfinite(lo.x) && isfinite(lo.y) && isfinite(lo.z) && isfinite(hi.x) && isfinite(hi.y) && isfinite(hi.z)))
+		bad = "world: 'bounds' must be finite";
+	else if (!(hi.x > lo.x && hi.y > lo.y && hi.z > lo.z))
+		bad = "world: 'bounds' must have max > min on every axis";
+	else if (!(isfinite(d->gravity.x) && isfinite(d->gravity.y) && isfinite(d->gravity.z)))
+		bad = "world: 'gravity' must be finite";
+	else if (!(d->fps > 0 && d->fps <= 1e6)) {
+		snprintf(buf, sizeof buf, "world: 'fps' must be in (0, 1e6] (got %g)", d->fps);
+		bad = buf;
+	} else if (!(d->duration >= 0 && isfinite(d->duration))) {
+		snprintf(buf, sizeof buf, "world: 'duration' must be >= 0 s (got %g)", d->duration);
+		bad = buf;
+	} else if (!(d->cfl > 0 && d->cfl <= 10)) {
+		snprintf(buf, sizeof buf, "world: 'cfl' must be in (0, 10] (got %g)", d->cfl);
+		bad = buf;
+	} else if (!(d->dt_max > 0 && isfinite(d->dt_max))) {
+		snprintf(buf, sizeof buf, "world: 'dt_max' must be > 0 s (got %g)", d->dt_max);
+		bad = buf;
+	} else if (!(d->dt_min > 0 && d->dt_min <= d->dt_max)) {
+		snprintf(buf, sizeof buf, "world: 'dt_min' must be in (0, dt_max] (got %g)", d->dt_min);
+		bad = buf;
+	} else if (d->max_steps_per_frame < 1) {
+		snprintf(buf, sizeof buf, "world: 'max_steps_per_frame' must be >= 1 (got %d)", d->max_steps_per_frame);
+		bad = buf;
+	} else if (!(d->cell_size >= 0 && isfinite(d->cell_size))) {
+		snprintf(buf, sizeof buf, "world: 'cell_size' must be >= 0 m (got %g)", d->cell_size);
+		bad = buf;
+	} else if (d->threads < 1 || d->threads > 256) {
+		snprintf(buf, sizeof buf, "world: 'threads' must be in [1, 256] (got %d)", d->threads);
+		bad = buf;
+	} else if (d->escape != EDDY_ESCAPE_ERROR && d->escape != EDDY_ESCAPE_REMOVE)
+		bad = "world: 'escape' must be EDDY_ESCAPE_ERROR or EDDY_ESCAPE_REMOVE";
+	if (bad && err && n)
+		snprintf(err, n, "%s", bad);
+	return bad == NULL;
+}
+
+eddy_world *eddy_create_world(const eddy_world_def *def, char *err, size_t err_size)
+{
+	if (!def) {
+		if (err && err_size)
+			snprintf(err, err_size, "world: def is NULL");
+		return NULL;
+	}
+	if (!world_def_valid(def, err, err_size))
+		return NULL;
+	eddy_world *w = calloc(1, sizeof *w);
+	if (!w) {
+		if (err && err_size)
+			snprintf(err, err_size, "world: out of memory");
+		return NULL;
+	}
+	w->def = *def;
+	w->rng = def->seed;
+	w->last_limit = "none";
+	w->frame_dt_min = INFINITY;
+	eddy__columns_init(w);
+	return w;
+}
+
+void eddy_destroy_world(eddy_world *w)
+{
+	if (!w)
+		return;
+	for (int i = w->order_count - 1; i >= 0; --i)
+		eddy__system_free(w, &w->slots[w->order[i]]);
+	eddy__columns_free(w);
+	eddy__arena_free(&w->arena);
+	free(w);
+}
+
+const eddy_world_def *eddy_world_get_def(const eddy_world *w) { return &w->def; }
+
+eddy_status eddy_world_set_threads(eddy_world *w, int threads)
+{
+	if (threads < 1 || threads > 256)
+		return eddy__fail(w, EDDY_ERR_INVALID, "world: 'threads' must be in [1, 256] (got %d)", threads);
+	w->def.threads = threads;
+	return EDDY_OK;
+}
+
+double eddy_world_time(const eddy_world *w) { return w->time; }
+double eddy_world_frame_time(const eddy_world *w) { return 1.0 / w->def.fps; }
+int eddy_world_frame(const eddy_world *w) { return w->frame; }
+int64_t eddy_world_steps(const eddy_world *w) { return w->step; }
+double eddy_world_last_dt(const eddy_world *w) { return w->last_dt; }
+
+void eddy__note_length_scale(eddy_world *w, float h)
+{
+	if (h > 0 && (w->length_scale == 0 || h < w->length_scale))
+		w->length_scale = h;
+}
+
+void eddy_world_set_rest_density(eddy_world *w, float rho0) { w->rest_density = rho0; }
+
+/* ---- stepping ----------------------------------------------------------- */
+
+/* The smallest limit any system reports, times the CFL factor, capped by dt_max. */
+static double step_limit(eddy_world *w, const char **reason)
+{
+	double lim = w->def.dt_max;
+	*reason = "dt_max";
+	for (int k = 0; k < w->order_count; ++k) {
+		eddy_system *s = &w->slots[w->order[k]];
+		if (!s->vt->limit)
+			continue;
+		const char *why = "limit";
+		double l = s->vt->limit(w, s, &why) * w->def.cfl;
+		if (l < lim) {
+			lim = l;
+			snprintf(w->last_limit_buf, sizeof w->last_limit_buf, "%s: %s", s->label, why);
+			*reason = w->last_limit_buf;
+		}
+	}
+	return lim;
+}
+
+/* Scans the particle columns system s writes; the first non-finite value names
+ * the system, step and particle. */
+static eddy_status check_written(eddy_world *w, const eddy_system *s)
+{
+	for (int k = 0; k < s->write_count; ++k) {
+		const eddy_column *c = &w->columns[s->writes[k]];
+		if (c->domain != EDDY_DOMAIN_PARTICLE || c->type != EDDY_F32 || !c->data)
+			continue;
+		const float *v = c->data;
+		size_t n = w->n;
+		size_t bad = n;
+		for (size_t i = 0; i < n; ++i) {
+			if (!isfinite(v[i])) {
+				bad = i;
+				break;
+			}
+		}
+		if (bad < n)
+			return eddy__fail(w, EDDY_ERR_NUMERIC,
+			                  "%s: non-finite %s = %g of particle %zu at step %lld (t = %.6g s)",
+			                  s->label, c->name, (double)v[bad], bad, (long long)w->step, w->time);
+	}
+	return EDDY_OK;
+}
+
+/* After the pipeline ran: particles outside the bounds stop the run or are
+ * removed, as the world def says. */
+static eddy_status check_bounds(eddy_world *w)
+{
+	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	if (!x || !y || !z)
+		return EDDY_OK;
+	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
+	for (size_t i = w->n; i-- > 0;) {
+		bool out = !(x[i] >= lo.x && x[i] <= hi.x && y[i] >= lo.y && y[i] <= hi.y && z[i] >= lo.z && z[i] <= hi.z);
+		if (!out)
+			continue;
+		if (w->def.escape == EDDY_ESCAPE_REMOVE) {
+			eddy_world_remove_particle(w, i);
+			continue;
+		}
+		return eddy__fail(w, EDDY_ERR_NUMERIC,
+		                  "particle %zu left the domain at step %lld (t = %.6g s): (%g, %g, %g) outside [%g, %g]x[%g, %g]x[%g, %g]; "
+		                  "add collide_box{min = bounds min, max = bounds max, inside = true} or set escape = \"remove\"",
+		                  i, (long long)w->step, w->time, (double)x[i], (double)y[i], (double)z[i],
+		                  (double)lo.x, (double)hi.x, (double)lo.y, (double)hi.y, (double)lo.z, (double)hi.z);
+	}
+	return EDDY_OK;
+}
+
+/* One step toward time stop (never past it). *reached says whether it got there. */
+static eddy_status step_toward(eddy_world *w, double stop, bool *reached)
+{
+	const double remaining = stop - w->time;
+	const char *reason;
+	double lim = step_limit(w, &reason);
+	if (!(lim >= w->def.dt_min))
+		return eddy__fail(w, EDDY_ERR_NUMERIC,
+		                  "time step collapsed at step %lld (t = %.6g s): %s allows %.3g s, below dt_min = %.3g s",
+		                  (long long)w->step, w->time, reason, lim, w->def.dt_min);
+	/* Equal steps to the stop, so the last one is not a sliver. */
+	double nsteps = ceil(remaining / lim - 1e-9);
+	if (nsteps < 1)
+		nsteps = 1;
+	if (w->frame_steps + nsteps > (double)w->def.max_steps_per_frame)
+		return eddy__fail(w, EDDY_ERR_NUMERIC,
+		                  "frame %d needs more than max_steps_per_frame = %d steps: %s limits dt to %.3g s",
+		                  w->frame + 1, w->def.max_steps_per_frame, reason, lim);
+	const double dt = remaining / nsteps;
+	w->last_limit = reason;
+
+	const double t0 = eddy__now_ms();
+	eddy__arena_reset(&w->arena);
+	eddy__clear_derived(w);
+	const eddy_step_context ctx = {dt, w->time, w->step, w->def.threads};
+	for (int k = 0; k < w->order_count; ++k) {
+		eddy_system *s = &w->slots[w->order[k]];
+		if (!s->vt->step)
+			continue;
+		const double a = eddy__now_ms();
+		eddy_status st = s->vt->step(w, s, &ctx);
+		const double ms = eddy__now_ms() - a;
+		s->ms_total += ms;
+		s->ms_frame += ms;
+		s->calls++;
+		if (st != EDDY_OK) {
+			if (strncmp(w->error, s->label, strlen(s->label)) != 0) {
+				char msg[EDDY_ERROR_MAX];
+				snprintf(msg, sizeof msg, "%s", w->error);
+				eddy__fail(w, st, "%s: step %lld (t = %.6g s): %s", s->label, (long long)w->step, w->time, msg);
+			}
+			return st;
+		}
+		if (w->def.check_finite) {
+			st = check_written(w, s);
+			if (st != EDDY_OK)
+				return st;
+		}
+	}
+	if (nsteps <= 1.0) {
+		w->time = stop; /* land exactly, so frame times do not drift */
+		*reached = true;
+	} else {
+		w->time += dt;
+		*reached = false;
+	}
+	w->step++;
+	w->last_dt = dt;
+	w->frame_steps++;
+	if (dt < w->frame_dt_min)
+		w->frame_dt_min = dt;
+	if (dt > w->frame_dt_max)
+		w->frame_dt_max = dt;
+	eddy_status st = check_bounds(w);
+	w->frame_wall_ms += eddy__now_ms() - t0;
+	return st;
+}
+
+static double next_frame_time(const eddy_world *w) { return (double)(w->frame + 1) / w->def.fps; }
+
+static void frame_reset(eddy_world *w)
+{
+	w->frame_steps = 0;
+	w->frame_dt_min = INFINITY;
+	w->frame_dt_max = 0;
+	w->frame_wall_ms = 0;
+	w->extra_count = 0;
+	for (int k = 0; k < w->order_count; ++k)
+		w->slots[w->order[k]].ms_frame = 0;
+}
+
+/* At a frame time: the systems' frame hooks (renderers, host callbacks), then
+ * the snapshot that eddy_world_frame_stats() reports. */
+static eddy_status finish_frame(eddy_world *w)
+{
+	w->frame++;
+	for (int k = 0; k < w->order_count; ++k) {
+		eddy_system *s = &w->slots[w->order[k]];
+		if (!s->vt->frame)
+			continue;
+		const double a = eddy__now_ms();
+		eddy_status st = s->vt->frame(w, s, w->frame);
+		const double ms = eddy__now_ms() - a;
+		s->ms_total += ms;
+		s->ms_frame += ms;
+		w->frame_wall_ms += ms;
+		if (st != EDDY_OK) {
+			if (strncmp(w->error, s->label, strlen(s->label)) != 0) {
+				char msg[EDDY_ERROR_MAX];
+				snprintf(msg, sizeof msg, "%s", w->error);
+				eddy__fail(w, st, "%s: frame %d: %s", s->label, w->frame, msg);
+			}
+			return st;
+		}
+	}
+	w->last_frame.steps = w->frame_steps;
+	w->last_frame.dt_min = w->frame_steps ? w->frame_dt_min : 0;
+	w->last_frame.dt_max = w->frame_dt_max;
+	w->last_frame.wall_ms = w->frame_wall_ms;
+	w->last_frame.dt_limit = w->last_limit;
+	for (int k = 0; k < w->order_count && k < EDDY_MAX_STAT_SYSTEMS; ++k)
+		w->last_frame.system_ms[k] = w->slots[w->order[k]].ms_frame;
+	memcpy(w->last_frame.extras, w->extras, sizeof w->extras);
+	w->last_frame.extra_count = w->extra_count;
+	frame_reset(w);
+	return EDDY_OK;
+}
+
+eddy_status eddy_world_step(eddy_world *w)
+{
+	if (!w)
+		return EDDY_ERR_INVALID;
+	bool reached;
+	eddy_status st = step_toward(w, next_frame_time(w), &reached);
+	if (st == EDDY_OK && reached)
+		st = finish_frame(w);
+	return st;
+}
+
+eddy_status eddy_world_step_frame(eddy_world *w)
+{
+	if (!w)
+		return EDDY_ERR_INVALID;
+	const int target = w->frame + 1;
+	while (w->frame < target) {
+		eddy_status st = eddy_world_step(w);
+		if (st != EDDY_OK)
+			return st;
+	}
+	return EDDY_OK;
+}
+
+eddy_status eddy_world_advance(eddy_world *w, double seconds)
+{
+	if (!w)
+		return EDDY_ERR_INVALID;
+	if (!(seconds >= 0 && isfinite(seconds)))
+		return eddy__fail(w, EDDY_ERR_INVALID, "advance: 'seconds' must be >= 0 and finite (got %g)", seconds);
+	const double end = w->time + seconds;
+	const double eps = 1e-9 / w->def.fps;
+	while (w->time < end - eps) {
+		double frame_end = next_frame_time(w);
+		bool reached;
+		eddy_status st;
+		if (frame_end <= end + eps) {
+			st = step_toward(w, frame_end, &reached);
+			if (st == EDDY_OK && reached)
+				st = finish_frame(w);
+		} else {
+			st = step_toward(w, end, &reached);
+		}
+		if (st != EDDY_OK)
+			return st;
+	}
+	return EDDY_OK;
+}
+
+/* ---- statistics ---------------------------------------------------------- */
+
+void eddy_world_publish(eddy_world *w, const char *name, double value)
+{
+	int k = 0;
+	while (k < w->extra_count && strcmp(w->extras[k].name, name) != 0)
+		++k;
+	if (k == EDDY_MAX_EXTRA_STATS)
+		return;
+	if (k == w->extra_count)
+		w->extra_count++;
+	snprintf(w->extras[k].name, sizeof w->extras[k].name, "%s", name);
+	w->extras[k].value = value;
+	w->extras[k].is_text = false;
+}
+
+void eddy_world_publish_text(eddy_world *w, const char *name, const char *text)
+{
+	eddy_world_publish(w, name, NAN);
+	for (int k = 0; k < w->extra_count; ++k) {
+		if (strcmp(w->extras[k].name, name) == 0) {
+			snprintf(w->extras[k].text, sizeof w->extras[k].text, "%s", text);
+			w->extras[k].is_text = true;
+		}
+	}
+}
+
+static bool inside_any_collider(const eddy_world *w, eddy_vec3 p)
+{
+	for (int k = 0; k < w->order_count; ++k) {
+		const eddy_system *s = &w->slots[w->order[k]];
+		/* A small tolerance: projection lands on the surface up to rounding. */
+		if (s->vt->distance && s->vt->distance(s, p) < -1e-5f * (w->length_scale > 0 ? w->length_scale : 1.0f))
+			return true;
+	}
+	return false;
+}
+
+eddy_status eddy_world_frame_stats(eddy_world *w, eddy_frame_stats *out)
+{
+	if (!w || !out)
+		return EDDY_ERR_INVALID;
+	memset(out, 0, sizeof *out);
+	out->frame = w->frame;
+	out->time = w->time;
+	out->steps = w->last_frame.steps;
+	out->dt_min = w->last_frame.dt_min;
+	out->dt_max = w->last_frame.dt_max;
+	out->dt_limit = w->last_frame.dt_limit ? w->last_frame.dt_limit : "none";
+	out->particles = w->n;
+	out->wall_ms = w->last_frame.wall_ms;
+
+	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	double vmax2 = 0;
+	size_t leaked = 0, nonfinite = 0;
+	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
+	for (size_t i = 0; i < w->n; ++i) {
+		if (vx && vy && vz) {
+			double v2 = (double)vx[i] * vx[i] + (double)vy[i] * vy[i] + (double)vz[i] * vz[i];
+			if (v2 > vmax2)
+				vmax2 = v2;
+		}
+		if (x && y && z) {
+			eddy_vec3 p = {x[i], y[i], z[i]};
+			bool out_of_bounds = !(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z);
+			if (out_of_bounds || inside_any_collider(w, p))
+				leaked++;
+		}
+	}
+	for (int c = 0; c < w->column_count; ++c) {
+		const eddy_column *col = &w->columns[c];
+		if (!col->data || col->domain != EDDY_DOMAIN_PARTICLE || col->type != EDDY_F32 || col->lifetime != EDDY_STATE)
+			continue;
+		const float *v = col->data;
+		for (size_t i = 0; i < w->n; ++i)
+			nonfinite += !isfinite(v[i]);
+	}
+	out->max_speed = sqrt(vmax2);
+	out->leaked = leaked;
+	out->nonfinite = nonfinite;
+	out->cfl = w->length_scale > 0 ? out->max_speed * w->last_dt / w->length_scale : NAN;
+
+	const float *rho = eddy__col(w, COL_DENSITY);
+	if (rho && w->rest_density > 0 && w->n > 0) {
+		double sum = 0, mx = 0;
+		for (size_t i = 0; i < w->n; ++i) {
+			double e = fabs((double)rho[i] - w->rest_density) / w->rest_density;
+			sum += e;
+			if (e > mx)
+				mx = e;
+		}
+		out->density_err_avg = sum / (double)w->n;
+		out->density_err_max = mx;
+	} else {
+		out->density_err_avg = NAN;
+		out->density_err_max = NAN;
+	}
+	out->volume = NAN; /* a grid system publishes "volume" when a grid exists */
+
+	out->state_hash = eddy_world_state_hash(w);
+	out->system_count = w->order_count < EDDY_MAX_STAT_SYSTEMS ? w->order_count : EDDY_MAX_STAT_SYSTEMS;
+	for (int k = 0; k < out->system_count; ++k) {
+		out->system_names[k] = w->slots[w->order[k]].label;
+		out->system_ms[k] = w->last_frame.system_ms[k];
+	}
+	out->extra_count = w->last_frame.extra_count;
+	for (int k = 0; k < out->extra_count; ++k) {
+		const eddy_extra_stat *e = &w->last_frame.extras[k];
+		out->extra[k].name = e->name;
+		out->extra[k].value = e->value;
+		out->extra[k].text = e->is_text ? e->text : NULL;
+		if (strcmp(e->name, "volume") == 0 && !e->is_text)
+			out->volume = e->value;
+	}
+	return EDDY_OK;
+}
+
+static uint64_t fnv1a(uint64_t h, const void *data, size_t n)
+{
+	const unsigned char *p = data;
+	for (size_t i = 0; i < n; ++i) {
+		h ^= p[i];
+		h *= 0x100000001b3ull;
+	}
+	return h;
+}
+
+uint64_t eddy_world_state_hash(const eddy_world *w)
+{
+	uint64_t h = 0xcbf29ce484222325ull;
+	uint64_t n = w->n;
+	h = fnv1a(h, &n, sizeof n);
+	h = fnv1a(h, &w->time, sizeof w->time);
+	for (int c = 0; c < w->column_count; ++c) {
+		const eddy_column *col = &w->columns[c];
+		if (!col->data || col->lifetime != EDDY_STATE)
+			continue;
+		h = fnv1a(h, col->name, strlen(col->name));
+		h = fnv1a(h, col->data, eddy__column_bytes(w, col));
+	}
+	return h;
+}
+
+/* ---- preflight ---------------------------------------------------------- */
+
+static void reportf(eddy_check_fn report, void *user, eddy_check_level level, const char *fmt, ...)
+#if defined(__GNUC__)
+	__attribute__((format(printf, 4, 5)))
+#endif
+	;
+static void reportf(eddy_check_fn report, void *user, eddy_check_level level, const char *fmt, ...)
+{
+	char msg[512];
+	va_list ap;
+	va_start(ap, fmt);
+	vsnprintf(msg, sizeof msg, fmt, ap);
+	va_end(ap);
+	report(level, msg, user);
+}
+
+int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
+{
+	int errors = 0;
+	/* memory: particle columns in use times the particles the emitters will make */
+	int64_t expected = 0;
+	bool unbounded = false;
+	size_t per_particle = 0;
+	for (int c = 0; c < w->column_count; ++c)
+		if (w->columns[c].users > 0 && w->columns[c].domain == EDDY_DOMAIN_PARTICLE)
+			per_particle += w->columns[c].type == EDDY_U8 ? 1 : sizeof(float);
+	for (int k = 0; k < w->order_count; ++k) {
+		const eddy_system *s = &w->slots[w->order[k]];
+		if (!s->vt->expected_particles)
+			continue;
+		int64_t e = s->vt->expected_particles(w, s);
+		if (e < 0)
+			unbounded = true;
+		else
+			expected += e;
+	}
+	expected += (int64_t)w->n;
+	double bytes = (double)expected * (double)per_particle * 2.0; /* growth doubles capacity */
+	for (int c = 0; c < w->column_count; ++c)
+		if (w->columns[c].users > 0 && w->columns[c].domain != EDDY_DOMAIN_PARTICLE)
+			bytes += (double)eddy__column_bytes(w, &w->columns[c]);
+	long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+	double avail = pages > 0 && page > 0 ? (double)pages * (double)page : 0;
+	if (unbounded)
+		reportf(report, user, EDDY_CHECK_WARNING,
+		        "memory: an emitter has no end (set duration or max_particles); %lld particles known, %zu bytes each",
+		        (long long)expected, per_particle);
+	else
+		reportf(report, user, EDDY_CHECK_INFO, "memory: %lld particles x %zu bytes, about %.1f MB with the grid",
+		        (long long)expected, per_particle, bytes / 1e6);
+	if (avail > 0 && bytes > 0.8 * avail) {
+		reportf(report, user, EDDY_CHECK_ERROR,
+		        "memory: the scene needs about %.1f GB but the machine has %.1f GB; use a coarser spacing",
+		        bytes / 1e9, avail / 1e9);
+		errors++;
+	}
+
+	/* time step at the start */
+	const char *reason;
+	double lim = step_limit(w, &reason);
+	double frame_dt = 1.0 / w->def.fps;
+	reportf(report, user, EDDY_CHECK_INFO, "time step: %.3g s at the start, limited by %s (%.0f steps per frame)",
+	        lim, reason, ceil(frame_dt / lim - 1e-9));
+	if (lim < w->def.dt_min) {
+		reportf(report, user, EDDY_CHECK_ERROR, "time step: %s allows %.3g s, below dt_min = %.3g s", reason, lim, w->def.dt_min);
+		errors++;
+	}
+
+	/* emitters whose first particles start inside a collider or outside the bounds */
+	for (int k = 0; k < w->order_count; ++k) {
+		const eddy_system *e = &w->slots[w->order[k]];
+		if (!e->vt->sample)
+			continue;
+		size_t cap = e->vt->sample(w, e, NULL, 0);
+		if (cap > ((size_t)1 << 20))
+			cap = (size_t)1 << 20; /* a sample is enough to find overlaps */
+		eddy_vec3 *pts = cap ? malloc(cap * sizeof *pts) : NULL;
+		if (cap && !pts)
+			continue;
+		size_t np = e->vt->sample(w, e, pts, cap);
+		if (np == 0) {
+			reportf(report, user, EDDY_CHECK_ERROR, "%s: emits no particles; make its region larger than its spacing", e->label);
+			errors++;
+		}
+		for (int j = 0; j < w->order_count; ++j) {
+			const eddy_system *c = &w->slots[w->order[j]];
+			if (!c->vt->distance)
+				continue;
+			size_t inside = 0;
+			for (size_t i = 0; i < np; ++i)
+				inside += c->vt->distance(c, pts[i]) < 0;
+			if (inside)
+				reportf(report, user, EDDY_CHECK_WARNING,
+				        "%s: %zu of %zu particles start inside %s; they will be pushed out in the first step",
+				        e->label, inside, np, c->label);
+		}
+		size_t outside = 0;
+		const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
+		for (size_t i = 0; i < np; ++i) {
+			eddy_vec3 p = pts[i];
+			outside += !(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z);
+		}
+		if (outside) {
+			reportf(report, user, EDDY_CHECK_ERROR, "%s: %zu of %zu particles start outside the world bounds", e->label, outside, np);
+			errors++;
+		}
+		free(pts);
+	}
+	return errors;
+}
