@@ -432,9 +432,14 @@ size_t eddy_world_plan(const eddy_world *w, char *buf, size_t cap)
 	else if (expected)
 		sb_printf(&b, ", %lld more from emitters", (long long)expected);
 	sb_printf(&b, "; %zu bytes per particle\n", per_particle);
-	char hb[32];
+	char hb[32], he[32];
 	human_bytes((double)total, hb, sizeof hb);
-	sb_printf(&b, "columns: %d allocated, %s now\n", allocated, hb);
+	human_bytes((double)((size_t)expected + w->n) * (double)per_particle, he, sizeof he);
+	if (expected && !unbounded)
+		sb_printf(&b, "columns: %d allocated, %s now, %s of particle columns once the emitters are done\n", allocated,
+		          hb, he);
+	else
+		sb_printf(&b, "columns: %d allocated, %s now\n", allocated, hb);
 	for (int c = 0; c < w->column_count; ++c) {
 		eddy_column_info info;
 		eddy_world_column_info(w, c, &info);
@@ -460,22 +465,28 @@ size_t eddy_world_plan(const eddy_world *w, char *buf, size_t cap)
 	return b.len;
 }
 
-/* The system that produced column col for the reader at position pos: the
- * nearest earlier writer in this step, else the last writer of the previous
- * step (state carried over). -1 if nothing writes it. */
-static int producer_of(const eddy_world *w, int col, int pos, bool *previous_step)
+/* The system that feeds column col to the reader at position pos: within the
+ * step (previous_step false), the nearest earlier writer; across steps (true,
+ * state columns only), the last writer at or after the reader, whose values
+ * the reader sees in the next step. -1 if there is none. */
+static int producer_of(const eddy_world *w, int col, int pos, bool previous_step)
 {
-	for (int pass = 0; pass < 2; ++pass) {
-		int from = pass == 0 ? pos - 1 : w->order_count - 1;
-		int to = pass == 0 ? 0 : pos;
-		for (int k = from; k >= to; --k) {
-			const eddy_system *e = &w->slots[w->order[k]];
-			for (int j = 0; j < e->write_count; ++j)
-				if (e->writes[j] == col) {
-					*previous_step = pass == 1;
-					return k;
-				}
-		}
+	if (previous_step && w->columns[col].lifetime != EDDY_STATE)
+		return -1;
+	/* across steps, only the first reader is drawn: later ones get the values
+	 * through the systems in between */
+	for (int k = 0; previous_step && k < pos; ++k) {
+		const eddy_system *e = &w->slots[w->order[k]];
+		for (int j = 0; j < e->read_count; ++j)
+			if (e->reads[j] == col)
+				return -1;
+	}
+	const int from = previous_step ? w->order_count - 1 : pos - 1, to = previous_step ? pos : 0;
+	for (int k = from; k >= to; --k) {
+		const eddy_system *e = &w->slots[w->order[k]];
+		for (int j = 0; j < e->write_count; ++j)
+			if (e->writes[j] == col)
+				return k;
 	}
 	return -1;
 }
@@ -498,8 +509,7 @@ size_t eddy_world_plan_dot(const eddy_world *w, char *buf, size_t cap)
 				size_t len = 0;
 				label[0] = '\0';
 				for (int i = 0; i < s->read_count; ++i) {
-					bool was_prev = false;
-					if (producer_of(w, s->reads[i], r, &was_prev) == p && was_prev == (prev == 1) && len < sizeof label)
+					if (producer_of(w, s->reads[i], r, prev == 1) == p && len < sizeof label)
 						len += (size_t)snprintf(label + len, sizeof label - len, "%s%s", len ? " " : "",
 						                        s->read_names[i]);
 				}

@@ -617,7 +617,7 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 		        "memory: an emitter has no end (set duration or max_particles); %lld particles known, %zu bytes each",
 		        (long long)expected, per_particle);
 	else
-		reportf(report, user, EDDY_CHECK_INFO, "memory: %lld particles x %zu bytes, about %.1f MB with the grid",
+		reportf(report, user, EDDY_CHECK_INFO, "memory: %lld particles x %zu bytes, about %.1f MB in all",
 		        (long long)expected, per_particle, bytes / 1e6);
 	if (avail > 0 && bytes > 0.8 * avail) {
 		reportf(report, user, EDDY_CHECK_ERROR,

@@ -1,0 +1,1018 @@
+/* The Lua binding: `local eddy = require "eddy"`.
+ *
+ * Every def starts from the C default function, so defaults live only in C;
+ * this file knows each def's field names and types (to reject unknown fields
+ * and wrong types where the scene wrote them), and the C add functions judge
+ * ranges. Errors are raised with luaL_error so they carry the scene's file and
+ * line.
+ *
+ * Userdata: eddy.world (owns an eddy_world), eddy.def (a filled def not yet
+ * added), eddy.system (a handle: world + id), eddy.channel (a live view of a
+ * column). Host callbacks (on_frame, animated collider offsets) are custom
+ * systems, so they show in the plan like any other system. */
+#include "eddy_lua.h"
+
+#include <lauxlib.h>
+#include <lualib.h>
+
+#include <math.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define WORLD_MT "eddy.world"
+#define DEF_MT "eddy.def"
+#define SYSTEM_MT "eddy.system"
+#define CHANNEL_MT "eddy.channel"
+#define PARAMS_KEY "eddy.params"
+#define PARAMS_USED_KEY "eddy.params_used"
+#define WORLDS_KEY "eddy.worlds" /* weak: eddy_world* -> its userdata */
+#define OUT_DIR_KEY "eddy.out_dir"
+
+/* ---- def descriptions ---------------------------------------------------- */
+
+typedef enum field_type { F_FLOAT, F_DOUBLE, F_INT, F_INT64, F_U64, F_BOOL, F_VEC3, F_BOUNDS, F_ESCAPE, F_OFFSET } field_type;
+
+typedef struct field {
+	const char *name;
+	field_type type;
+	size_t offset;
+} field;
+
+typedef union any_def {
+	eddy_world_def world;
+	eddy_emit_box_def emit_box;
+	eddy_emit_nozzle_def emit_nozzle;
+	eddy_gravity_def gravity;
+	eddy_integrate_def integrate;
+	eddy_collide_box_def collide_box;
+	eddy_collide_sphere_def collide_sphere;
+	eddy_collide_plane_def collide_plane;
+} any_def;
+
+typedef struct kind {
+	const char *name;
+	void (*defaults)(any_def *d);
+	eddy_system_id (*add)(eddy_world *w, const any_def *d);
+	const field *fields;
+} kind;
+
+#define FLD(T, f, type) {#f, type, offsetof(T, f)}
+#define RESPONSE_FIELDS(T) \
+	{"restitution", F_FLOAT, offsetof(T, response) + offsetof(eddy_collider_response, restitution)}, \
+	{"friction", F_FLOAT, offsetof(T, response) + offsetof(eddy_collider_response, friction)}, \
+	{"offset", F_OFFSET, 0}
+
+static const field world_fields[] = {
+	{"bounds", F_BOUNDS, offsetof(eddy_world_def, bounds_min)},
+	FLD(eddy_world_def, gravity, F_VEC3),
+	FLD(eddy_world_def, fps, F_DOUBLE),
+	FLD(eddy_world_def, duration, F_DOUBLE),
+	FLD(eddy_world_def, cfl, F_DOUBLE),
+	FLD(eddy_world_def, dt_max, F_DOUBLE),
+	FLD(eddy_world_def, dt_min, F_DOUBLE),
+	FLD(eddy_world_def, max_steps_per_frame, F_INT),
+	FLD(eddy_world_def, cell_size, F_DOUBLE),
+	FLD(eddy_world_def, seed, F_U64),
+	FLD(eddy_world_def, threads, F_INT),
+	FLD(eddy_world_def, escape, F_ESCAPE),
+	FLD(eddy_world_def, check_finite, F_BOOL),
+	{NULL, F_FLOAT, 0},
+};
+static const field emit_box_fields[] = {
+	FLD(eddy_emit_box_def, min, F_VEC3),      FLD(eddy_emit_box_def, max, F_VEC3),
+	FLD(eddy_emit_box_def, spacing, F_FLOAT), FLD(eddy_emit_box_def, jitter, F_FLOAT),
+	FLD(eddy_emit_box_def, velocity, F_VEC3), FLD(eddy_emit_box_def, start, F_DOUBLE),
+	{NULL, F_FLOAT, 0},
+};
+static const field emit_nozzle_fields[] = {
+	FLD(eddy_emit_nozzle_def, center, F_VEC3),     FLD(eddy_emit_nozzle_def, radius, F_FLOAT),
+	FLD(eddy_emit_nozzle_def, direction, F_VEC3),  FLD(eddy_emit_nozzle_def, speed, F_FLOAT),
+	FLD(eddy_emit_nozzle_def, spacing, F_FLOAT),   FLD(eddy_emit_nozzle_def, start, F_DOUBLE),
+	FLD(eddy_emit_nozzle_def, duration, F_DOUBLE), FLD(eddy_emit_nozzle_def, max_particles, F_INT64),
+	{NULL, F_FLOAT, 0},
+};
+static const field gravity_fields[] = {FLD(eddy_gravity_def, scale, F_FLOAT), {NULL, F_FLOAT, 0}};
+static const field integrate_fields[] = {FLD(eddy_integrate_def, max_speed, F_FLOAT), {NULL, F_FLOAT, 0}};
+static const field collide_box_fields[] = {
+	FLD(eddy_collide_box_def, min, F_VEC3), FLD(eddy_collide_box_def, max, F_VEC3),
+	FLD(eddy_collide_box_def, inside, F_BOOL), RESPONSE_FIELDS(eddy_collide_box_def), {NULL, F_FLOAT, 0},
+};
+static const field collide_sphere_fields[] = {
+	FLD(eddy_collide_sphere_def, center, F_VEC3), FLD(eddy_collide_sphere_def, radius, F_FLOAT),
+	FLD(eddy_collide_sphere_def, inside, F_BOOL), RESPONSE_FIELDS(eddy_collide_sphere_def), {NULL, F_FLOAT, 0},
+};
+static const field collide_plane_fields[] = {
+	FLD(eddy_collide_plane_def, point, F_VEC3), FLD(eddy_collide_plane_def, normal, F_VEC3),
+	RESPONSE_FIELDS(eddy_collide_plane_def), {NULL, F_FLOAT, 0},
+};
+
+#define KIND_FUNCS(k) \
+	static void k##_defaults(any_def *d) { d->k = eddy_default_##k##_def(); } \
+	static eddy_system_id k##_add(eddy_world *w, const any_def *d) { return eddy_add_##k(w, &d->k); }
+KIND_FUNCS(emit_box)
+KIND_FUNCS(emit_nozzle)
+KIND_FUNCS(gravity)
+KIND_FUNCS(integrate)
+KIND_FUNCS(collide_box)
+KIND_FUNCS(collide_sphere)
+KIND_FUNCS(collide_plane)
+static void world_defaults(any_def *d) { d->world = eddy_default_world_def(); }
+
+static const kind world_kind = {"world", world_defaults, NULL, world_fields};
+static const kind kinds[] = {
+#define KIND(k) {#k, k##_defaults, k##_add, k##_fields}
+	KIND(emit_box),    KIND(emit_nozzle),    KIND(gravity),       KIND(integrate),
+	KIND(collide_box), KIND(collide_sphere), KIND(collide_plane),
+#undef KIND
+};
+
+/* ---- reading fields ------------------------------------------------------ */
+
+static size_t edit_distance(const char *a, const char *b)
+{
+	size_t la = strlen(a), lb = strlen(b);
+	if (la > 31 || lb > 31)
+		return 99;
+	size_t d[32][32];
+	for (size_t i = 0; i <= la; ++i)
+		d[i][0] = i;
+	for (size_t j = 0; j <= lb; ++j)
+		d[0][j] = j;
+	for (size_t i = 1; i <= la; ++i)
+		for (size_t j = 1; j <= lb; ++j) {
+			size_t sub = d[i - 1][j - 1] + (a[i - 1] != b[j - 1]);
+			size_t del = d[i - 1][j] + 1, ins = d[i][j - 1] + 1;
+			d[i][j] = sub < del ? (sub < ins ? sub : ins) : (del < ins ? del : ins);
+		}
+	return d[la][lb];
+}
+
+static int unknown_field(lua_State *L, const kind *k, const char *name)
+{
+	luaL_Buffer b;
+	luaL_buffinit(L, &b);
+	const char *best = NULL;
+	size_t best_d = 3;
+	for (const field *f = k->fields; f->name; ++f) {
+		luaL_addstring(&b, f == k->fields ? "" : ", ");
+		luaL_addstring(&b, f->name);
+		size_t dist = edit_distance(name, f->name);
+		if (dist < best_d) {
+			best_d = dist;
+			best = f->name;
+		}
+	}
+	luaL_pushresult(&b);
+	if (best)
+		return luaL_error(L, "%s: unknown field '%s' (did you mean '%s'? fields: %s)", k->name, name, best,
+		                  lua_tostring(L, -1));
+	return luaL_error(L, "%s: unknown field '%s' (fields: %s)", k->name, name, lua_tostring(L, -1));
+}
+
+static double number_field(lua_State *L, const kind *k, const char *name, int idx, const char *what)
+{
+	if (lua_type(L, idx) != LUA_TNUMBER)
+		return luaL_error(L, "%s: '%s' must be %s (got %s)", k->name, name, what, luaL_typename(L, idx));
+	return lua_tonumber(L, idx);
+}
+
+static eddy_vec3 vec3_field(lua_State *L, const kind *k, const char *name, int idx)
+{
+	idx = lua_absindex(L, idx);
+	if (!lua_istable(L, idx) || lua_rawlen(L, idx) != 3)
+		luaL_error(L, "%s: '%s' must be a table of 3 numbers {x, y, z} (got %s)", k->name, name,
+		           lua_istable(L, idx) ? "a table of another length" : luaL_typename(L, idx));
+	float v[3];
+	for (int i = 0; i < 3; ++i) {
+		lua_rawgeti(L, idx, i + 1);
+		if (lua_type(L, -1) != LUA_TNUMBER)
+			luaL_error(L, "%s: '%s' must be a table of 3 numbers {x, y, z} (element %d is %s)", k->name, name, i + 1,
+			           luaL_typename(L, -1));
+		v[i] = (float)lua_tonumber(L, -1);
+		lua_pop(L, 1);
+	}
+	return (eddy_vec3){v[0], v[1], v[2]};
+}
+
+static lua_Integer integer_field(lua_State *L, const kind *k, const char *name, int idx, lua_Integer lo, lua_Integer hi)
+{
+	int ok = 0;
+	lua_Integer v = lua_tointegerx(L, idx, &ok);
+	if (!ok || v < lo || v > hi)
+		return luaL_error(L, "%s: '%s' must be an integer in [%lld, %lld] (got %s)", k->name, name, (long long)lo,
+		                  (long long)hi, lua_type(L, idx) == LUA_TNUMBER ? lua_tostring(L, idx) : luaL_typename(L, idx));
+	return v;
+}
+
+typedef struct lua_def {
+	const kind *k;
+	any_def d;
+	bool has_offset;    /* a constant offset in `offset` */
+	eddy_vec3 offset;
+	/* an offset function, if any, is the userdata's user value 1 */
+} lua_def;
+
+/* Fills d from the table at idx; an `offset` function is left on user value 1
+ * of the def userdata at ud (0 when reading a world def). */
+static void read_fields(lua_State *L, const kind *k, int idx, lua_def *ld, int ud)
+{
+	idx = lua_absindex(L, idx);
+	luaL_checktype(L, idx, LUA_TTABLE);
+	char *base = (char *)&ld->d;
+	lua_pushnil(L);
+	while (lua_next(L, idx)) {
+		if (lua_type(L, -2) != LUA_TSTRING)
+			luaL_error(L, "%s: fields must be named (found a %s key)", k->name, luaL_typename(L, -2));
+		const char *name = lua_tostring(L, -2);
+		const field *f = k->fields;
+		while (f->name && strcmp(f->name, name) != 0)
+			++f;
+		if (!f->name)
+			unknown_field(L, k, name);
+		void *p = base + f->offset;
+		switch (f->type) {
+		case F_FLOAT: *(float *)p = (float)number_field(L, k, name, -1, "a number"); break;
+		case F_DOUBLE: *(double *)p = number_field(L, k, name, -1, "a number"); break;
+		case F_INT: *(int *)p = (int)integer_field(L, k, name, -1, -1000000000, 1000000000); break;
+		case F_INT64: *(int64_t *)p = (int64_t)integer_field(L, k, name, -1, 0, LUA_MAXINTEGER); break;
+		case F_U64: *(uint64_t *)p = (uint64_t)integer_field(L, k, name, -1, 0, LUA_MAXINTEGER); break;
+		case F_BOOL:
+			if (!lua_isboolean(L, -1))
+				luaL_error(L, "%s: '%s' must be true or false (got %s)", k->name, name, luaL_typename(L, -1));
+			*(bool *)p = lua_toboolean(L, -1);
+			break;
+		case F_VEC3: *(eddy_vec3 *)p = vec3_field(L, k, name, -1); break;
+		case F_BOUNDS: {
+			if (!lua_istable(L, -1) || lua_rawlen(L, -1) != 2)
+				luaL_error(L, "%s: 'bounds' must be {{xmin, ymin, zmin}, {xmax, ymax, zmax}} (got %s)", k->name,
+				           luaL_typename(L, -1));
+			lua_rawgeti(L, -1, 1);
+			ld->d.world.bounds_min = vec3_field(L, k, "bounds[1]", -1);
+			lua_rawgeti(L, -2, 2);
+			ld->d.world.bounds_max = vec3_field(L, k, "bounds[2]", -1);
+			lua_pop(L, 2);
+			break;
+		}
+		case F_ESCAPE: {
+			const char *s = lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "";
+			if (strcmp(s, "error") == 0)
+				*(eddy_escape_policy *)p = EDDY_ESCAPE_ERROR;
+			else if (strcmp(s, "remove") == 0)
+				*(eddy_escape_policy *)p = EDDY_ESCAPE_REMOVE;
+			else
+				luaL_error(L, "%s: 'escape' must be \"error\" or \"remove\" (got %s)", k->name,
+				           lua_type(L, -1) == LUA_TSTRING ? s : luaL_typename(L, -1));
+			break;
+		}
+		case F_OFFSET:
+			if (lua_isfunction(L, -1) && ud) {
+				lua_pushvalue(L, -1);
+				lua_setiuservalue(L, ud, 1);
+			} else {
+				ld->offset = vec3_field(L, k, name, -1);
+				ld->has_offset = true;
+			}
+			break;
+		}
+		lua_pop(L, 1);
+	}
+}
+
+/* eddy.<system>{...}: a def for world:add, checked for names and types here. */
+static int l_make_def(lua_State *L)
+{
+	const kind *k = lua_touserdata(L, lua_upvalueindex(1));
+	if (lua_isnoneornil(L, 1))
+		lua_newtable(L);
+	lua_settop(L, 1);
+	if (!lua_istable(L, 1))
+		return luaL_error(L, "%s: expects a table of fields, e.g. eddy.%s{...} (got %s)", k->name, k->name,
+		                  luaL_typename(L, 1));
+	lua_def *ld = lua_newuserdatauv(L, sizeof *ld, 1);
+	memset(ld, 0, sizeof *ld);
+	ld->k = k;
+	k->defaults(&ld->d);
+	luaL_setmetatable(L, DEF_MT);
+	read_fields(L, k, 1, ld, 2);
+	return 1;
+}
+
+/* ---- the world userdata -------------------------------------------------- */
+
+typedef struct lua_world {
+	eddy_world *w;
+	lua_State *L; /* main thread, for callbacks */
+	int busy;     /* inside a step: the world may not be stepped again */
+} lua_world;
+
+eddy_world *eddy_lua_toworld(lua_State *L, int idx)
+{
+	lua_world *lw = luaL_testudata(L, idx, WORLD_MT);
+	return lw ? lw->w : NULL;
+}
+
+static lua_world *check_world(lua_State *L, int idx)
+{
+	lua_world *lw = luaL_checkudata(L, idx, WORLD_MT);
+	if (!lw->w)
+		luaL_error(L, "world is closed");
+	return lw;
+}
+
+/* Pushes the userdata of world w (from the weak registry map). */
+static void push_world(lua_State *L, const eddy_world *w)
+{
+	lua_getfield(L, LUA_REGISTRYINDEX, WORLDS_KEY);
+	lua_rawgetp(L, -1, w);
+	lua_remove(L, -2);
+}
+
+static int l_world(lua_State *L)
+{
+	if (lua_isnoneornil(L, 1))
+		lua_newtable(L);
+	lua_settop(L, 1);
+	if (!lua_istable(L, 1))
+		return luaL_error(L, "world: expects a table of fields, e.g. eddy.world{bounds = ...} (got %s)",
+		                  luaL_typename(L, 1));
+	lua_def ld;
+	memset(&ld, 0, sizeof ld);
+	world_kind.defaults(&ld.d);
+	read_fields(L, &world_kind, 1, &ld, 0);
+	lua_world *lw = lua_newuserdatauv(L, sizeof *lw, 1);
+	memset(lw, 0, sizeof *lw);
+	luaL_setmetatable(L, WORLD_MT);
+	char err[256];
+	lw->w = eddy_create_world(&ld.d.world, err, sizeof err);
+	if (!lw->w)
+		return luaL_error(L, "%s", err);
+	/* LUA_RIDX_MAINTHREAD: callbacks run on the main thread even if the world
+	 * was made inside a coroutine. */
+	lua_rawgeti(L, LUA_REGISTRYINDEX, LUA_RIDX_MAINTHREAD);
+	lw->L = lua_tothread(L, -1);
+	lua_pop(L, 1);
+	lua_newtable(L); /* user value: frame fields and callbacks */
+	lua_setiuservalue(L, -2, 1);
+	lua_getfield(L, LUA_REGISTRYINDEX, WORLDS_KEY);
+	lua_pushvalue(L, -2);
+	lua_rawsetp(L, -2, lw->w);
+	lua_pop(L, 1);
+	return 1;
+}
+
+static int l_world_gc(lua_State *L)
+{
+	lua_world *lw = luaL_checkudata(L, 1, WORLD_MT);
+	if (lw->w) {
+		eddy_destroy_world(lw->w);
+		lw->w = NULL;
+	}
+	return 0;
+}
+
+/* Runs a host callback with a traceback-free error message; on error returns
+ * EDDY_ERR_EXTERNAL with the Lua message in the world error. */
+static eddy_status call_lua(lua_State *L, eddy_world *w, int nargs, int nresults, const char *what)
+{
+	if (lua_pcall(L, nargs, nresults, 0) == LUA_OK)
+		return EDDY_OK;
+	const char *msg = lua_tostring(L, -1);
+	eddy_world_fail(w, EDDY_ERR_EXTERNAL, "%s: %s", what, msg ? msg : "(error object is not a string)");
+	lua_pop(L, 1);
+	return EDDY_ERR_EXTERNAL;
+}
+
+typedef struct callback {
+	lua_State *L;
+	int fn;                 /* registry reference */
+	eddy_system_id target;  /* animate: the collider */
+	char what[64];
+} callback;
+
+static void callback_destroy(void *user)
+{
+	callback *cb = user;
+	luaL_unref(cb->L, LUA_REGISTRYINDEX, cb->fn);
+	free(cb);
+}
+
+/* on_frame: fn(world, frame) may return a table of stats fields. */
+static eddy_status on_frame_hook(eddy_world *w, int frame, void *user)
+{
+	callback *cb = user;
+	lua_State *L = cb->L;
+	int top = lua_gettop(L);
+	lua_rawgeti(L, LUA_REGISTRYINDEX, cb->fn);
+	push_world(L, w);
+	lua_pushinteger(L, frame);
+	eddy_status st = call_lua(L, w, 2, 1, "on_frame");
+	if (st != EDDY_OK) {
+		lua_settop(L, top);
+		return st;
+	}
+	if (lua_istable(L, -1)) {
+		/* merge into the world's frame fields */
+		push_world(L, w);
+		lua_getiuservalue(L, -1, 1);
+		lua_getfield(L, -1, "frame_fields");
+		if (!lua_istable(L, -1)) {
+			lua_pop(L, 1);
+			lua_newtable(L);
+			lua_pushvalue(L, -1);
+			lua_setfield(L, -3, "frame_fields");
+		}
+		int dst = lua_gettop(L);
+		lua_pushnil(L);
+		while (lua_next(L, top + 1)) {
+			if (lua_type(L, -2) != LUA_TSTRING) {
+				lua_settop(L, top);
+				return eddy_world_fail(w, EDDY_ERR_EXTERNAL, "on_frame: the returned table must have string keys");
+			}
+			lua_pushvalue(L, -2);
+			lua_insert(L, -2);
+			lua_rawset(L, dst);
+		}
+	} else if (!lua_isnil(L, -1)) {
+		const char *tn = luaL_typename(L, -1);
+		lua_settop(L, top);
+		return eddy_world_fail(w, EDDY_ERR_EXTERNAL, "on_frame: must return a table of stats fields or nothing (got %s)", tn);
+	}
+	lua_settop(L, top);
+	return EDDY_OK;
+}
+
+/* animate: offset = fn(t) at the end of each step, before the collider runs. */
+static eddy_status animate_step(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	callback *cb = user;
+	lua_State *L = cb->L;
+	int top = lua_gettop(L);
+	lua_rawgeti(L, LUA_REGISTRYINDEX, cb->fn);
+	lua_pushnumber(L, ctx->time + ctx->dt);
+	eddy_status st = call_lua(L, w, 1, 1, cb->what);
+	if (st != EDDY_OK)
+		return st;
+	float v[3];
+	bool ok = lua_istable(L, -1) && lua_rawlen(L, -1) == 3;
+	for (int i = 0; ok && i < 3; ++i) {
+		lua_rawgeti(L, -1, i + 1);
+		ok = lua_type(L, -1) == LUA_TNUMBER;
+		v[i] = (float)lua_tonumber(L, -1);
+		lua_pop(L, 1);
+	}
+	lua_settop(L, top);
+	if (!ok)
+		return eddy_world_fail(w, EDDY_ERR_EXTERNAL, "%s: the offset function must return {x, y, z}", cb->what);
+	return eddy_collider_set_offset(w, cb->target, (eddy_vec3){v[0], v[1], v[2]});
+}
+
+typedef struct lua_system {
+	eddy_system_id id;
+	/* user value 1: the world userdata, kept alive by the handle */
+} lua_system;
+
+static void push_system(lua_State *L, int world_idx, eddy_system_id id)
+{
+	world_idx = lua_absindex(L, world_idx);
+	lua_system *ls = lua_newuserdatauv(L, sizeof *ls, 1);
+	ls->id = id;
+	luaL_setmetatable(L, SYSTEM_MT);
+	lua_pushvalue(L, world_idx);
+	lua_setiuservalue(L, -2, 1);
+}
+
+static int l_world_add(lua_State *L)
+{
+	lua_world *lw = check_world(L, 1);
+	lua_def *ld = luaL_testudata(L, 2, DEF_MT);
+	if (!ld)
+		return luaL_error(L, "add: expects a system made by eddy.<system>{...}, e.g. world:add(eddy.gravity{}) (got %s)",
+		                  luaL_typename(L, 2));
+	eddy_world *w = lw->w;
+	callback *cb = NULL;
+	eddy_system_id anim = EDDY_NULL_SYSTEM;
+	lua_getiuservalue(L, 2, 1);
+	if (lua_isfunction(L, -1)) {
+		/* The animator must run before its collider, so it goes in first. */
+		cb = calloc(1, sizeof *cb);
+		if (!cb)
+			return luaL_error(L, "add: out of memory");
+		cb->L = lw->L;
+		lua_pushvalue(L, -1);
+		cb->fn = luaL_ref(L, LUA_REGISTRYINDEX);
+		snprintf(cb->what, sizeof cb->what, "animate %s offset", ld->k->name);
+		eddy_custom_system_def cd = eddy_default_custom_system_def();
+		cd.name = "animate";
+		cd.step = animate_step;
+		cd.destroy = callback_destroy;
+		cd.user = cb;
+		anim = eddy_add_custom_system(w, &cd);
+		if (!eddy_system_valid(w, anim)) {
+			callback_destroy(cb);
+			return luaL_error(L, "%s", eddy_world_error(w));
+		}
+	}
+	lua_pop(L, 1);
+	eddy_system_id id = ld->k->add(w, &ld->d);
+	if (!eddy_system_valid(w, id)) {
+		if (cb)
+			eddy_world_remove_system(w, anim);
+		return luaL_error(L, "%s", eddy_world_error(w));
+	}
+	if (cb) {
+		cb->target = id;
+		/* place the collider where the function puts it at t = now */
+		lua_getiuservalue(L, 2, 1);
+		lua_pushnumber(L, eddy_world_time(w));
+		lua_call(L, 1, 1);
+		eddy_vec3 v = vec3_field(L, ld->k, "offset (returned by the function)", -1);
+		lua_pop(L, 1);
+		if (eddy_collider_set_offset(w, id, v) != EDDY_OK)
+			return luaL_error(L, "%s", eddy_world_error(w));
+	} else if (ld->has_offset && eddy_collider_set_offset(w, id, ld->offset) != EDDY_OK) {
+		return luaL_error(L, "%s", eddy_world_error(w));
+	}
+	push_system(L, 1, id);
+	return 1;
+}
+
+static int l_world_on_frame(lua_State *L)
+{
+	lua_world *lw = check_world(L, 1);
+	luaL_checktype(L, 2, LUA_TFUNCTION);
+	callback *cb = calloc(1, sizeof *cb);
+	if (!cb)
+		return luaL_error(L, "on_frame: out of memory");
+	cb->L = lw->L;
+	lua_pushvalue(L, 2);
+	cb->fn = luaL_ref(L, LUA_REGISTRYINDEX);
+	eddy_custom_system_def cd = eddy_default_custom_system_def();
+	cd.name = "on_frame";
+	cd.frame = on_frame_hook;
+	cd.destroy = callback_destroy;
+	cd.user = cb;
+	eddy_system_id id = eddy_add_custom_system(lw->w, &cd);
+	if (!eddy_system_valid(lw->w, id)) {
+		callback_destroy(cb);
+		return luaL_error(L, "%s", eddy_world_error(lw->w));
+	}
+	push_system(L, 1, id);
+	return 1;
+}
+
+static int stepping(lua_State *L, lua_world *lw, eddy_status (*fn)(eddy_world *, double), double arg)
+{
+	if (lw->busy)
+		return luaL_error(L, "the world cannot be stepped from inside its own callbacks");
+	lw->busy = 1;
+	eddy_status st = fn(lw->w, arg);
+	lw->busy = 0;
+	if (st != EDDY_OK)
+		return luaL_error(L, "%s", eddy_world_error(lw->w));
+	return 0;
+}
+
+static eddy_status step_once(eddy_world *w, double unused)
+{
+	(void)unused;
+	return eddy_world_step(w);
+}
+
+static int l_world_advance(lua_State *L)
+{
+	lua_world *lw = check_world(L, 1);
+	double s = luaL_checknumber(L, 2);
+	if (!(s >= 0 && isfinite(s)))
+		return luaL_error(L, "advance: 'seconds' must be >= 0 and finite (got %f)", s);
+	stepping(L, lw, eddy_world_advance, s);
+	lua_settop(L, 1);
+	return 1;
+}
+
+static int l_world_step(lua_State *L)
+{
+	lua_world *lw = check_world(L, 1);
+	stepping(L, lw, step_once, 0);
+	lua_pushnumber(L, eddy_world_last_dt(lw->w));
+	return 1;
+}
+
+static int l_world_time(lua_State *L)
+{
+	lua_pushnumber(L, eddy_world_time(check_world(L, 1)->w));
+	return 1;
+}
+
+static int l_world_frame(lua_State *L)
+{
+	lua_pushinteger(L, eddy_world_frame(check_world(L, 1)->w));
+	return 1;
+}
+
+static int l_world_steps(lua_State *L)
+{
+	lua_pushinteger(L, (lua_Integer)eddy_world_steps(check_world(L, 1)->w));
+	return 1;
+}
+
+static int l_world_count(lua_State *L)
+{
+	lua_pushinteger(L, (lua_Integer)eddy_world_particle_count(check_world(L, 1)->w));
+	return 1;
+}
+
+static int push_text(lua_State *L, size_t (*fn)(const eddy_world *, char *, size_t), const eddy_world *w)
+{
+	size_t n = fn(w, NULL, 0);
+	char *buf = malloc(n + 1);
+	if (!buf)
+		return luaL_error(L, "out of memory");
+	fn(w, buf, n + 1);
+	lua_pushlstring(L, buf, n);
+	free(buf);
+	return 1;
+}
+
+/* world:plan() -> text; world:plan{dot = true} -> Graphviz */
+static int l_world_plan(lua_State *L)
+{
+	lua_world *lw = check_world(L, 1);
+	bool dot = false;
+	if (lua_istable(L, 2)) {
+		lua_getfield(L, 2, "dot");
+		dot = lua_toboolean(L, -1);
+		lua_pop(L, 1);
+	}
+	return push_text(L, dot ? eddy_world_plan_dot : eddy_world_plan, lw->w);
+}
+
+static int l_world_remove(lua_State *L)
+{
+	lua_world *lw = check_world(L, 1);
+	lua_system *ls = luaL_checkudata(L, 2, SYSTEM_MT);
+	if (eddy_world_remove_system(lw->w, ls->id) != EDDY_OK)
+		return luaL_error(L, "%s", eddy_world_error(lw->w));
+	return 0;
+}
+
+static int l_world_gravity(lua_State *L)
+{
+	const eddy_world_def *d = eddy_world_get_def(check_world(L, 1)->w);
+	lua_createtable(L, 3, 0);
+	lua_pushnumber(L, d->gravity.x);
+	lua_rawseti(L, -2, 1);
+	lua_pushnumber(L, d->gravity.y);
+	lua_rawseti(L, -2, 2);
+	lua_pushnumber(L, d->gravity.z);
+	lua_rawseti(L, -2, 3);
+	return 1;
+}
+
+/* world:stats(): the last completed frame's statistics as a table. */
+static int l_world_stats(lua_State *L)
+{
+	lua_world *lw = check_world(L, 1);
+	eddy_frame_stats s;
+	eddy_world_frame_stats(lw->w, &s);
+	lua_newtable(L);
+	lua_pushinteger(L, s.frame); lua_setfield(L, -2, "frame");
+	lua_pushnumber(L, s.time); lua_setfield(L, -2, "time");
+	lua_pushinteger(L, (lua_Integer)s.steps); lua_setfield(L, -2, "steps");
+	lua_pushnumber(L, s.dt_min); lua_setfield(L, -2, "dt_min");
+	lua_pushnumber(L, s.dt_max); lua_setfield(L, -2, "dt_max");
+	lua_pushstring(L, s.dt_limit); lua_setfield(L, -2, "dt_limit");
+	lua_pushinteger(L, (lua_Integer)s.particles); lua_setfield(L, -2, "particles");
+	lua_pushnumber(L, s.max_speed); lua_setfield(L, -2, "max_speed");
+	lua_pushinteger(L, (lua_Integer)s.leaked); lua_setfield(L, -2, "leaked");
+	lua_pushinteger(L, (lua_Integer)s.nonfinite); lua_setfield(L, -2, "nonfinite");
+	char hash[24];
+	snprintf(hash, sizeof hash, "%016llx", (unsigned long long)s.state_hash);
+	lua_pushstring(L, hash); lua_setfield(L, -2, "state_hash");
+	return 1;
+}
+
+static int l_world_close(lua_State *L)
+{
+	lua_world *lw = luaL_checkudata(L, 1, WORLD_MT);
+	if (lw->busy)
+		return luaL_error(L, "the world cannot be closed from inside its own callbacks");
+	return l_world_gc(L);
+}
+
+/* ---- channels ------------------------------------------------------------ */
+
+typedef struct lua_channel {
+	char name[32];
+	/* user value 1: the world userdata */
+} lua_channel;
+
+static const float *channel_data(lua_State *L, int idx, size_t *n)
+{
+	lua_channel *c = luaL_checkudata(L, idx, CHANNEL_MT);
+	lua_getiuservalue(L, idx, 1);
+	eddy_world *w = eddy_lua_toworld(L, -1);
+	lua_pop(L, 1);
+	*n = 0;
+	return w ? eddy_world_channel(w, c->name, n) : NULL;
+}
+
+static int l_channel_len(lua_State *L)
+{
+	size_t n;
+	channel_data(L, 1, &n);
+	lua_pushinteger(L, (lua_Integer)n);
+	return 1;
+}
+
+static int l_channel_index(lua_State *L)
+{
+	size_t n;
+	const float *v = channel_data(L, 1, &n);
+	lua_Integer i = lua_tointeger(L, 2);
+	if (!v || i < 1 || (size_t)i > n)
+		lua_pushnil(L);
+	else
+		lua_pushnumber(L, v[i - 1]);
+	return 1;
+}
+
+static int l_world_channel(lua_State *L)
+{
+	lua_world *lw = check_world(L, 1);
+	const char *name = luaL_checkstring(L, 2);
+	eddy_column_id id = eddy_world_find_column(lw->w, name);
+	if (id < 0)
+		return luaL_error(L, "channel: no column named '%s'", name);
+	eddy_column_info info;
+	eddy_world_column_info(lw->w, id, &info);
+	if (!info.allocated)
+		return luaL_error(L, "channel: column '%s' is not allocated: no system in this scene reads or writes it", name);
+	if (info.type != EDDY_F32)
+		return luaL_error(L, "channel: column '%s' holds bytes, not numbers", name);
+	lua_channel *c = lua_newuserdatauv(L, sizeof *c, 1);
+	snprintf(c->name, sizeof c->name, "%s", name);
+	luaL_setmetatable(L, CHANNEL_MT);
+	lua_pushvalue(L, 1);
+	lua_setiuservalue(L, -2, 1);
+	return 1;
+}
+
+/* ---- system handles ------------------------------------------------------ */
+
+static eddy_world *system_world(lua_State *L, int idx, lua_system **out)
+{
+	*out = luaL_checkudata(L, idx, SYSTEM_MT);
+	lua_getiuservalue(L, idx, 1);
+	eddy_world *w = eddy_lua_toworld(L, -1);
+	lua_pop(L, 1);
+	if (!w)
+		luaL_error(L, "system handle: its world is closed");
+	return w;
+}
+
+static int l_system_valid(lua_State *L)
+{
+	lua_system *ls;
+	eddy_world *w = system_world(L, 1, &ls);
+	lua_pushboolean(L, eddy_system_valid(w, ls->id));
+	return 1;
+}
+
+static int l_system_name(lua_State *L)
+{
+	lua_system *ls;
+	eddy_world *w = system_world(L, 1, &ls);
+	eddy_system_info info;
+	if (eddy_world_system_info(w, ls->id, &info) != EDDY_OK)
+		return luaL_error(L, "stale system handle: the system was removed from the world");
+	lua_pushstring(L, info.label);
+	return 1;
+}
+
+static int l_system_set_offset(lua_State *L)
+{
+	lua_system *ls;
+	eddy_world *w = system_world(L, 1, &ls);
+	static const kind k = {"set_offset", NULL, NULL, NULL};
+	eddy_vec3 v = vec3_field(L, &k, "offset", 2);
+	if (!eddy_system_valid(w, ls->id))
+		return luaL_error(L, "stale system handle: the system was removed from the world");
+	if (eddy_collider_set_offset(w, ls->id, v) != EDDY_OK)
+		return luaL_error(L, "%s", eddy_world_error(w));
+	return 0;
+}
+
+static int l_system_offset(lua_State *L)
+{
+	lua_system *ls;
+	eddy_world *w = system_world(L, 1, &ls);
+	eddy_vec3 v;
+	if (!eddy_system_valid(w, ls->id))
+		return luaL_error(L, "stale system handle: the system was removed from the world");
+	if (eddy_collider_get_offset(w, ls->id, &v) != EDDY_OK)
+		return luaL_error(L, "offset: this system is not a collider");
+	lua_createtable(L, 3, 0);
+	lua_pushnumber(L, v.x);
+	lua_rawseti(L, -2, 1);
+	lua_pushnumber(L, v.y);
+	lua_rawseti(L, -2, 2);
+	lua_pushnumber(L, v.z);
+	lua_rawseti(L, -2, 3);
+	return 1;
+}
+
+/* ---- module functions ---------------------------------------------------- */
+
+void eddy_lua_set_param(lua_State *L, const char *key, const char *value)
+{
+	lua_getfield(L, LUA_REGISTRYINDEX, PARAMS_KEY);
+	lua_pushstring(L, value);
+	lua_setfield(L, -2, key);
+	lua_pop(L, 1);
+}
+
+void eddy_lua_push_unused_params(lua_State *L)
+{
+	lua_newtable(L);
+	int out = lua_gettop(L);
+	lua_getfield(L, LUA_REGISTRYINDEX, PARAMS_KEY);
+	lua_getfield(L, LUA_REGISTRYINDEX, PARAMS_USED_KEY);
+	lua_pushnil(L);
+	while (lua_next(L, -3)) {
+		lua_pop(L, 1);
+		lua_pushvalue(L, -1);
+		lua_rawget(L, -3);
+		bool used = lua_toboolean(L, -1);
+		lua_pop(L, 1);
+		if (!used) {
+			lua_pushvalue(L, -1);
+			lua_pushboolean(L, 1);
+			lua_rawset(L, out);
+		}
+	}
+	lua_pop(L, 2);
+}
+
+void eddy_lua_set_out_dir(lua_State *L, const char *dir)
+{
+	lua_pushstring(L, dir);
+	lua_setfield(L, LUA_REGISTRYINDEX, OUT_DIR_KEY);
+}
+
+void eddy_lua_take_frame_fields(lua_State *L, int world_idx)
+{
+	world_idx = lua_absindex(L, world_idx);
+	lua_getiuservalue(L, world_idx, 1);
+	lua_getfield(L, -1, "frame_fields");
+	lua_pushnil(L);
+	lua_setfield(L, -3, "frame_fields");
+	lua_remove(L, -2);
+}
+
+/* eddy.param(name, default): the --set value converted to default's type. */
+static int l_param(lua_State *L)
+{
+	const char *name = luaL_checkstring(L, 1);
+	if (lua_isnone(L, 2))
+		return luaL_error(L, "param: '%s' needs a default value, e.g. eddy.param(\"%s\", 0.02)", name, name);
+	lua_getfield(L, LUA_REGISTRYINDEX, PARAMS_USED_KEY);
+	lua_pushboolean(L, 1);
+	lua_setfield(L, -2, name);
+	lua_pop(L, 1);
+	lua_getfield(L, LUA_REGISTRYINDEX, PARAMS_KEY);
+	lua_getfield(L, -1, name);
+	if (lua_isnil(L, -1)) {
+		lua_pushvalue(L, 2);
+		return 1;
+	}
+	const char *v = lua_tostring(L, -1);
+	switch (lua_type(L, 2)) {
+	case LUA_TNUMBER:
+		if (!lua_stringtonumber(L, v))
+			return luaL_error(L, "--set %s=%s: '%s' must be a number", name, v, name);
+		return 1;
+	case LUA_TBOOLEAN:
+		if (strcmp(v, "true") == 0 || strcmp(v, "1") == 0)
+			lua_pushboolean(L, 1);
+		else if (strcmp(v, "false") == 0 || strcmp(v, "0") == 0)
+			lua_pushboolean(L, 0);
+		else
+			return luaL_error(L, "--set %s=%s: '%s' must be true or false", name, v, name);
+		return 1;
+	default:
+		return 1; /* strings (and nil defaults) take the text as given */
+	}
+}
+
+/* eddy.out_dir(default): the --out directory, or default. */
+static int l_out_dir(lua_State *L)
+{
+	lua_getfield(L, LUA_REGISTRYINDEX, OUT_DIR_KEY);
+	if (lua_isnil(L, -1))
+		lua_pushvalue(L, 1);
+	return 1;
+}
+
+static const luaL_Reg world_methods[] = {
+	{"add", l_world_add},       {"advance", l_world_advance}, {"step", l_world_step},
+	{"time", l_world_time},     {"frame", l_world_frame},     {"steps", l_world_steps},
+	{"count", l_world_count},   {"channel", l_world_channel}, {"plan", l_world_plan},
+	{"on_frame", l_world_on_frame}, {"remove", l_world_remove}, {"stats", l_world_stats},
+	{"gravity", l_world_gravity}, {"close", l_world_close},   {NULL, NULL},
+};
+
+static const luaL_Reg system_methods[] = {
+	{"valid", l_system_valid},
+	{"name", l_system_name},
+	{"set_offset", l_system_set_offset},
+	{"offset", l_system_offset},
+	{NULL, NULL},
+};
+
+static int l_def_tostring(lua_State *L)
+{
+	lua_def *ld = luaL_checkudata(L, 1, DEF_MT);
+	lua_pushfstring(L, "eddy.%s def", ld->k->name);
+	return 1;
+}
+
+static int l_world_tostring(lua_State *L)
+{
+	lua_world *lw = luaL_checkudata(L, 1, WORLD_MT);
+	if (!lw->w)
+		lua_pushliteral(L, "eddy world (closed)");
+	else
+		lua_pushfstring(L, "eddy world (%d systems, %d particles, t = %f s)", eddy_world_system_count(lw->w),
+		                (int)eddy_world_particle_count(lw->w), eddy_world_time(lw->w));
+	return 1;
+}
+
+static void new_metatable(lua_State *L, const char *name, const luaL_Reg *methods)
+{
+	luaL_newmetatable(L, name);
+	if (methods) {
+		lua_newtable(L);
+		luaL_setfuncs(L, methods, 0);
+		lua_setfield(L, -2, "__index");
+	}
+}
+
+int luaopen_eddy(lua_State *L)
+{
+	new_metatable(L, WORLD_MT, world_methods);
+	lua_pushcfunction(L, l_world_gc);
+	lua_setfield(L, -2, "__gc");
+	lua_pushcfunction(L, l_world_gc);
+	lua_setfield(L, -2, "__close");
+	lua_pushcfunction(L, l_world_tostring);
+	lua_setfield(L, -2, "__tostring");
+	lua_pop(L, 1);
+
+	new_metatable(L, DEF_MT, NULL);
+	lua_pushcfunction(L, l_def_tostring);
+	lua_setfield(L, -2, "__tostring");
+	lua_pop(L, 1);
+
+	new_metatable(L, SYSTEM_MT, system_methods);
+	lua_pop(L, 1);
+
+	new_metatable(L, CHANNEL_MT, NULL);
+	lua_pushcfunction(L, l_channel_len);
+	lua_setfield(L, -2, "__len");
+	lua_pushcfunction(L, l_channel_index);
+	lua_setfield(L, -2, "__index");
+	lua_pop(L, 1);
+
+	/* registry tables: params (--set), params read, worlds by pointer (weak) */
+	if (lua_getfield(L, LUA_REGISTRYINDEX, PARAMS_KEY) != LUA_TTABLE) {
+		lua_newtable(L);
+		lua_setfield(L, LUA_REGISTRYINDEX, PARAMS_KEY);
+		lua_newtable(L);
+		lua_setfield(L, LUA_REGISTRYINDEX, PARAMS_USED_KEY);
+	}
+	lua_pop(L, 1);
+	lua_newtable(L);
+	lua_newtable(L);
+	lua_pushliteral(L, "v");
+	lua_setfield(L, -2, "__mode");
+	lua_setmetatable(L, -2);
+	lua_setfield(L, LUA_REGISTRYINDEX, WORLDS_KEY);
+
+	lua_newtable(L);
+	lua_pushcfunction(L, l_world);
+	lua_setfield(L, -2, "world");
+	lua_pushcfunction(L, l_param);
+	lua_setfield(L, -2, "param");
+	lua_pushcfunction(L, l_out_dir);
+	lua_setfield(L, -2, "out_dir");
+	for (size_t i = 0; i < sizeof kinds / sizeof kinds[0]; ++i) {
+		lua_pushlightuserdata(L, (void *)(uintptr_t)&kinds[i]);
+		lua_pushcclosure(L, l_make_def, 1);
+		lua_setfield(L, -2, kinds[i].name);
+	}
+	lua_pushliteral(L, EDDY_VERSION_STRING);
+	lua_setfield(L, -2, "version");
+	return 1;
+}
