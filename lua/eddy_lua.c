@@ -201,8 +201,7 @@ static lua_Integer integer_field(lua_State *L, const kind *k, const char *name, 
 	int ok = 0;
 	lua_Integer v = lua_tointegerx(L, idx, &ok);
 	if (!ok || v < lo || v > hi)
-		return luaL_error(L, "%s: '%s' must be an integer in [%lld, %lld] (got %s)", k->name, name, (long long)lo,
-		                  (long long)hi, lua_type(L, idx) == LUA_TNUMBER ? lua_tostring(L, idx) : luaL_typename(L, idx));
+		return luaL_error(L, "%s: '%s' must be an integer in [%I, %I] (got %s)", k->name, name, lo, hi, lua_type(L, idx) == LUA_TNUMBER ? lua_tostring(L, idx) : luaL_typename(L, idx));
 	return v;
 }
 

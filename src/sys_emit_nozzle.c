@@ -4,8 +4,8 @@
  * The opening is a disc of the given radius normal to the direction. Every
  * time the jet has advanced one spacing (speed * t), a disc of particles on a
  * square lattice of that spacing leaves the nozzle with velocity
- * speed * direction, placed as far downstream as it travelled since it left;
- * so the jet has the lattice density and the rate is speed * pi r^2 / h^3.
+ * speed * direction, placed where it is at the end of the step after the
+ * integrator moved it; so the jet has the lattice density and the rate is speed * pi r^2 / h^3.
  * The pour runs over [start, start + duration] and stops early at
  * max_particles (the last disc is cut to hit the total exactly). */
 #include "systems.h"
@@ -109,9 +109,13 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		e->travelled = e->def.spacing; /* the first disc leaves as the pour starts */
 	}
 	e->travelled += e->def.speed * (t1 - t0);
+	/* integrate moves every particle by speed * dt after this; a disc that
+	 * left at t_k must end the step speed * (t + dt - t_k) downstream, so it
+	 * starts that much minus speed * dt, i.e. up to one step inside the pipe */
+	const double lead = e->def.speed * (t1 - ctx->time);
 	while (e->travelled >= e->def.spacing) {
 		e->travelled -= e->def.spacing;
-		eddy_status st = emit_disc(w, e, e->travelled);
+		eddy_status st = emit_disc(w, e, e->travelled - lead);
 		if (st != EDDY_OK)
 			return st;
 	}

@@ -268,7 +268,8 @@ static eddy_status step_toward(eddy_world *w, double stop, bool *reached)
 		                  "time step collapsed at step %lld (t = %.6g s): %s allows %.3g s, below dt_min = %.3g s",
 		                  (long long)w->step, w->time, reason, lim, w->def.dt_min);
 	/* Equal steps to the stop, so the last one is not a sliver. */
-	double nsteps = ceil(remaining / lim - 1e-9);
+	/* a limit a hair under an even split (float speeds) must not add a step */
+	double nsteps = ceil(remaining / lim - 1e-6);
 	if (nsteps < 1)
 		nsteps = 1;
 	if (w->frame_steps + nsteps > (double)w->def.max_steps_per_frame)

@@ -1,0 +1,64 @@
+/* Runs every suite and ends with the summary line "N passed, N failed". */
+#include "test.h"
+
+#include <stdarg.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+static int failures_in_test;
+static int passed, failed;
+
+void test_fail(const char *file, int line, const char *fmt, ...)
+{
+	va_list ap;
+	va_start(ap, fmt);
+	fprintf(stdout, "    %s:%d: ", file, line);
+	vfprintf(stdout, fmt, ap);
+	fputc('\n', stdout);
+	va_end(ap);
+	failures_in_test++;
+}
+
+void test_run(const char *name, void (*fn)(void))
+{
+	struct timespec a, b;
+	failures_in_test = 0;
+	clock_gettime(CLOCK_MONOTONIC, &a);
+	fn();
+	clock_gettime(CLOCK_MONOTONIC, &b);
+	double ms = (double)(b.tv_sec - a.tv_sec) * 1e3 + (double)(b.tv_nsec - a.tv_nsec) * 1e-6;
+	if (failures_in_test) {
+		failed++;
+		printf("FAIL  %s (%.0f ms)\n", name, ms);
+	} else {
+		passed++;
+		printf("ok    %s (%.0f ms)\n", name, ms);
+	}
+	fflush(stdout);
+}
+
+const char *test_build_dir(void)
+{
+	const char *b = getenv("EDDY_BUILD");
+	return b && b[0] ? b : "build";
+}
+
+int main(int argc, char **argv)
+{
+	const char *only = argc > 1 ? argv[1] : NULL;
+	static const struct {
+		const char *name;
+		void (*fn)(void);
+	} suites[] = {
+		{"core", suite_core}, {"physics", suite_physics}, {"lua", suite_lua}, {"cli", suite_cli},
+	};
+	for (size_t i = 0; i < sizeof suites / sizeof suites[0]; ++i) {
+		if (only && strcmp(only, suites[i].name) != 0)
+			continue;
+		printf("# %s\n", suites[i].name);
+		suites[i].fn();
+	}
+	printf("%d passed, %d failed\n", passed, failed);
+	return failed ? 1 : 0;
+}

@@ -1,0 +1,54 @@
+/* A plain test runner: TEST functions register in suites, CHECK records a
+ * failure (file, line, message) and carries on, so one run lists every broken
+ * assertion. The runner prints "N passed, N failed". */
+#ifndef EDDY_TEST_H
+#define EDDY_TEST_H
+
+#include <math.h>
+#include <stdbool.h>
+#include <stdio.h>
+
+void test_fail(const char *file, int line, const char *fmt, ...)
+#if defined(__GNUC__)
+	__attribute__((format(printf, 3, 4)))
+#endif
+	;
+void test_run(const char *name, void (*fn)(void));
+/* Directory of the build under test (build/ or build/asan/). */
+const char *test_build_dir(void);
+
+#define CHECK(cond) \
+	do { \
+		if (!(cond)) \
+			test_fail(__FILE__, __LINE__, "%s", #cond); \
+	} while (0)
+
+#define CHECKF(cond, ...) \
+	do { \
+		if (!(cond)) \
+			test_fail(__FILE__, __LINE__, __VA_ARGS__); \
+	} while (0)
+
+#define CHECK_NEAR(a, b, tol) \
+	do { \
+		double a_ = (double)(a), b_ = (double)(b), t_ = (double)(tol); \
+		if (!(fabs(a_ - b_) <= t_)) \
+			test_fail(__FILE__, __LINE__, "%s = %.9g, expected %s = %.9g within %.3g", #a, a_, #b, b_, t_); \
+	} while (0)
+
+/* Substring check with the haystack shown on failure. */
+#define CHECK_HAS(hay, needle) \
+	do { \
+		const char *h_ = (hay); \
+		if (!h_ || !strstr(h_, (needle))) \
+			test_fail(__FILE__, __LINE__, "expected \"%s\" in: %s", (needle), h_ ? h_ : "(null)"); \
+	} while (0)
+
+#define RUN(fn) test_run(#fn, fn)
+
+void suite_core(void);
+void suite_physics(void);
+void suite_lua(void);
+void suite_cli(void);
+
+#endif

@@ -1,0 +1,362 @@
+/* The engine core through the public API: worlds, columns, the pipeline rule,
+ * handles, errors. */
+#include "test.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#include "eddy.h"
+
+static eddy_world *make_world(void)
+{
+	eddy_world_def d = eddy_default_world_def();
+	char err[256];
+	eddy_world *w = eddy_create_world(&d, err, sizeof err);
+	CHECKF(w != NULL, "create_world: %s", err);
+	return w;
+}
+
+static char *plan_text(const eddy_world *w)
+{
+	size_t n = eddy_world_plan(w, NULL, 0);
+	char *t = malloc(n + 1);
+	eddy_world_plan(w, t, n + 1);
+	CHECK(strlen(t) == n);
+	return t;
+}
+
+static void world_def_rejects_bad_values(void)
+{
+	char err[256];
+	eddy_world_def d = eddy_default_world_def();
+	d.bounds_max.y = d.bounds_min.y;
+	CHECK(eddy_create_world(&d, err, sizeof err) == NULL);
+	CHECK_HAS(err, "'bounds' must have max > min");
+	d = eddy_default_world_def();
+	d.cfl = NAN;
+	CHECK(eddy_create_world(&d, err, sizeof err) == NULL);
+	CHECK_HAS(err, "world: 'cfl' must be in (0, 10]");
+	d = eddy_default_world_def();
+	d.fps = -1;
+	CHECK(eddy_create_world(&d, err, sizeof err) == NULL);
+	CHECK_HAS(err, "'fps'");
+}
+
+/* "Simulate only the effects a scene calls for": an absent system leaves its
+ * columns unallocated, and the plan says so. */
+static void absent_systems_allocate_nothing(void)
+{
+	eddy_world *w = make_world();
+	size_t n = 99;
+	CHECK(eddy_world_channel(w, "x", &n) == NULL);
+	CHECK(n == 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	eddy_add_emit_box(w, &b);
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	CHECK(eddy_world_step(w) == EDDY_OK);
+	CHECK(eddy_world_channel(w, "x", &n) != NULL);
+	CHECK(n == 1000);
+	CHECK(eddy_world_channel(w, "density", &n) == NULL);
+	CHECK(eddy_world_channel(w, "pressure", NULL) == NULL);
+	CHECK(eddy_world_channel(w, "u", NULL) == NULL);
+	CHECK(!eddy_world_grid(w).allocated);
+	eddy_column_info info;
+	CHECK(eddy_world_column_info(w, eddy_world_find_column(w, "density"), &info) == EDDY_OK);
+	CHECK(!info.allocated && info.bytes == 0);
+	char *t = plan_text(w);
+	const char *na = strstr(t, "not allocated:");
+	CHECK(na != NULL);
+	CHECK(na && strstr(na, " density") != NULL);
+	/* and the allocated part of the plan does not list it */
+	char *cut = strstr(t, "not allocated:");
+	if (cut)
+		*cut = '\0';
+	CHECK(strstr(t, "density") == NULL);
+	CHECK_HAS(t, "emit_box");
+	free(t);
+	eddy_destroy_world(w);
+}
+
+static eddy_status noop_step(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	(void)w, (void)ctx, (void)user;
+	return EDDY_OK;
+}
+
+static void order_errors_name_the_fix(void)
+{
+	eddy_world *w = make_world();
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_system_id id = eddy_add_integrate(w, &it);
+	CHECK(!eddy_system_valid(w, id));
+	CHECK_HAS(eddy_world_error(w), "integrate reads 'ax' but no earlier system writes it: add gravity before it");
+	/* nothing was allocated by the failed add */
+	CHECK(eddy_world_channel(w, "x", NULL) == NULL);
+	CHECK(eddy_world_system_count(w) == 0);
+
+	const char *reads[] = {"density"};
+	eddy_custom_system_def c = eddy_default_custom_system_def();
+	c.name = "my_pressure";
+	c.reads = reads;
+	c.read_count = 1;
+	c.step = noop_step;
+	id = eddy_add_custom_system(w, &c);
+	CHECK(!eddy_system_valid(w, id));
+	CHECK_HAS(eddy_world_error(w), "my_pressure reads 'density' but no earlier system writes it");
+
+	const char *bogus[] = {"densty"};
+	c.reads = bogus;
+	CHECK(!eddy_system_valid(w, eddy_add_custom_system(w, &c)));
+	CHECK_HAS(eddy_world_error(w), "unknown column 'densty'");
+
+	/* a writer first makes the same reader valid */
+	const char *writes[] = {"density"};
+	eddy_custom_system_def wr = eddy_default_custom_system_def();
+	wr.name = "my_density";
+	wr.writes = writes;
+	wr.write_count = 1;
+	wr.step = noop_step;
+	eddy_system_id wid = eddy_add_custom_system(w, &wr);
+	CHECK(eddy_system_valid(w, wid));
+	c.reads = reads;
+	eddy_system_id rid = eddy_add_custom_system(w, &c);
+	CHECK(eddy_system_valid(w, rid));
+	CHECK(eddy_world_channel(w, "density", NULL) != NULL);
+	/* removing the writer would break the reader: refused */
+	CHECK(eddy_world_remove_system(w, wid) == EDDY_ERR_ORDER);
+	CHECK_HAS(eddy_world_error(w), "cannot remove my_density");
+	CHECK(eddy_world_remove_system(w, rid) == EDDY_OK);
+	CHECK(eddy_world_remove_system(w, wid) == EDDY_OK);
+	CHECK(eddy_world_channel(w, "density", NULL) == NULL);
+	eddy_destroy_world(w);
+}
+
+static void stale_handles_are_detected(void)
+{
+	eddy_world *w = make_world();
+	eddy_collide_sphere_def s = eddy_default_collide_sphere_def();
+	eddy_system_id a = eddy_add_collide_sphere(w, &s);
+	CHECK(eddy_system_valid(w, a));
+	CHECK(eddy_world_remove_system(w, a) == EDDY_OK);
+	CHECK(!eddy_system_valid(w, a));
+	CHECK(eddy_collider_set_offset(w, a, (eddy_vec3){0, 0, 0}) == EDDY_ERR_STALE);
+	CHECK(eddy_world_remove_system(w, a) == EDDY_ERR_STALE);
+	/* the slot is reused with a new generation; the old handle stays stale */
+	eddy_system_id b = eddy_add_collide_sphere(w, &s);
+	CHECK(b.index == a.index && b.generation != a.generation);
+	CHECK(!eddy_system_valid(w, a));
+	CHECK(eddy_system_valid(w, b));
+	CHECK(!eddy_system_valid(w, EDDY_NULL_SYSTEM));
+	eddy_destroy_world(w);
+}
+
+static void grid_exists_only_for_grid_systems(void)
+{
+	eddy_world *w = make_world();
+	const char *reads[] = {"u"};
+	eddy_custom_system_def c = eddy_default_custom_system_def();
+	c.name = "grid_user";
+	c.writes = reads;
+	c.write_count = 1;
+	c.step = noop_step;
+	CHECK(!eddy_system_valid(w, eddy_add_custom_system(w, &c)));
+	CHECK_HAS(eddy_world_error(w), "set world 'cell_size' > 0 m");
+	eddy_destroy_world(w);
+
+	eddy_world_def d = eddy_default_world_def();
+	d.cell_size = 0.1;
+	w = eddy_create_world(&d, NULL, 0);
+	CHECK(!eddy_world_grid(w).allocated);
+	eddy_system_id id = eddy_add_custom_system(w, &c);
+	CHECK(eddy_system_valid(w, id));
+	eddy_grid_info g = eddy_world_grid(w);
+	CHECK(g.allocated && g.nx == 10 && g.ny == 10 && g.nz == 10);
+	size_t n;
+	CHECK(eddy_world_channel(w, "u", &n) != NULL);
+	CHECK(n == 11 * 10 * 10);
+	CHECK(eddy_world_channel(w, "cell_pressure", NULL) == NULL);
+	CHECK(eddy_world_remove_system(w, id) == EDDY_OK);
+	CHECK(!eddy_world_grid(w).allocated);
+	CHECK(eddy_world_channel(w, "u", NULL) == NULL);
+	eddy_destroy_world(w);
+}
+
+static void swap_remove_and_growth(void)
+{
+	eddy_world *w = make_world();
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	enum { N = 1000 }; /* past the first capacity, so the table grows */
+	eddy_vec3 *p = malloc(N * sizeof *p);
+	for (int i = 0; i < N; ++i)
+		p[i] = (eddy_vec3){0.5f, (float)i / N, 0.5f};
+	CHECK(eddy_world_add_particles(w, N, p, NULL) == EDDY_OK);
+	CHECK(eddy_world_particle_count(w) == N);
+	const float *y = eddy_world_channel(w, "y", NULL);
+	CHECK(y[0] == 0.0f && y[N - 1] == (float)(N - 1) / N);
+	CHECK(eddy_world_remove_particle(w, 0) == EDDY_OK);
+	y = eddy_world_channel(w, "y", NULL);
+	CHECK(eddy_world_particle_count(w) == N - 1);
+	CHECK(y[0] == (float)(N - 1) / N);
+	CHECK(eddy_world_remove_particle(w, N) == EDDY_ERR_INVALID);
+	p[0].x = 2.0f; /* outside the unit box */
+	CHECK(eddy_world_add_particles(w, 1, p, NULL) == EDDY_ERR_INVALID);
+	CHECK_HAS(eddy_world_error(w), "outside the world bounds");
+	free(p);
+	eddy_destroy_world(w);
+}
+
+static void defs_are_range_checked(void)
+{
+	eddy_world *w = make_world();
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.spacing = -0.01f;
+	CHECK(!eddy_system_valid(w, eddy_add_emit_box(w, &b)));
+	CHECK_HAS(eddy_world_error(w), "emit_box: 'spacing' must be > 0 (got -0.01)");
+	b = eddy_default_emit_box_def();
+	b.max = (eddy_vec3){0.105f, 0.2f, 0.2f}; /* thinner than one spacing in x */
+	b.min = (eddy_vec3){0.1f, 0.1f, 0.1f};
+	CHECK(!eddy_system_valid(w, eddy_add_emit_box(w, &b)));
+	CHECK_HAS(eddy_world_error(w), "emits no particles");
+	b = eddy_default_emit_box_def();
+	b.jitter = 0.7f;
+	CHECK(!eddy_system_valid(w, eddy_add_emit_box(w, &b)));
+	CHECK_HAS(eddy_world_error(w), "'jitter' must be in [0, 0.5] (got 0.7");
+	eddy_collide_box_def cb = eddy_default_collide_box_def();
+	cb.response.restitution = 1.5f;
+	CHECK(!eddy_system_valid(w, eddy_add_collide_box(w, &cb)));
+	CHECK_HAS(eddy_world_error(w), "collide_box: 'restitution' must be in [0, 1]");
+	eddy_collide_plane_def pl = eddy_default_collide_plane_def();
+	pl.normal = (eddy_vec3){0, 0, 0};
+	CHECK(!eddy_system_valid(w, eddy_add_collide_plane(w, &pl)));
+	CHECK_HAS(eddy_world_error(w), "'normal' must be a non-zero vector");
+	eddy_emit_nozzle_def nz = eddy_default_emit_nozzle_def();
+	nz.speed = NAN;
+	CHECK(!eddy_system_valid(w, eddy_add_emit_nozzle(w, &nz)));
+	CHECK_HAS(eddy_world_error(w), "emit_nozzle: 'speed' must be > 0");
+	CHECK(eddy_world_system_count(w) == 0);
+	eddy_destroy_world(w);
+}
+
+/* Hard case 16: a count that cannot fit in memory is an error, not a crash. */
+static void huge_emitter_is_refused(void)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.bounds_max = (eddy_vec3){10, 10, 10};
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.min = (eddy_vec3){0, 0, 0};
+	b.max = (eddy_vec3){10, 10, 10};
+	b.spacing = 0.01f; /* 1e9 particles, 36 GB of columns */
+	CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &b)));
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	CHECK(eddy_world_step(w) == EDDY_ERR_NOMEM);
+	CHECK_HAS(eddy_world_error(w), "use a larger spacing");
+	CHECK(eddy_world_particle_count(w) == 0);
+	eddy_destroy_world(w);
+}
+
+static eddy_status poison_step(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	(void)user;
+	if (ctx->step == 5) {
+		float *vx = eddy_world_channel_mut(w, "vx", NULL);
+		vx[3] = NAN;
+	}
+	return EDDY_OK;
+}
+
+static void nonfinite_names_system_step_particle(void)
+{
+	eddy_world *w = make_world();
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.min = (eddy_vec3){0.2f, 0.2f, 0.2f};
+	b.max = (eddy_vec3){0.3f, 0.3f, 0.3f};
+	eddy_add_emit_box(w, &b);
+	const char *writes[] = {"vx"};
+	eddy_custom_system_def c = eddy_default_custom_system_def();
+	c.name = "poison";
+	c.writes = writes;
+	c.write_count = 1;
+	c.step = poison_step;
+	eddy_add_custom_system(w, &c);
+	eddy_status st = EDDY_OK;
+	for (int i = 0; i < 10 && st == EDDY_OK; ++i)
+		st = eddy_world_step(w);
+	CHECK(st == EDDY_ERR_NUMERIC);
+	CHECK_HAS(eddy_world_error(w), "poison: non-finite vx = nan of particle 3 at step 5");
+	CHECK(eddy_world_steps(w) == 5);
+	eddy_destroy_world(w);
+}
+
+static eddy_status failing_step(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	(void)ctx, (void)user;
+	return eddy_world_fail(w, EDDY_ERR_IO, "cannot open 'x.bin'");
+}
+
+static void custom_system_errors_are_labelled(void)
+{
+	eddy_world *w = make_world();
+	eddy_custom_system_def c = eddy_default_custom_system_def();
+	c.name = "writer";
+	c.step = failing_step;
+	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &c)));
+	CHECK(eddy_world_step(w) == EDDY_ERR_IO);
+	CHECK_HAS(eddy_world_error(w), "writer: step 0 (t = 0 s): cannot open 'x.bin'");
+	c.step = NULL;
+	CHECK(!eddy_system_valid(w, eddy_add_custom_system(w, &c)));
+	CHECK_HAS(eddy_world_error(w), "needs a step or a frame callback");
+	eddy_destroy_world(w);
+}
+
+static void arena_is_plain_memory(void)
+{
+	/* emit_nozzle takes its disc from the arena every emission; many
+	 * emissions must neither leak (asan) nor corrupt the emitted lattice. */
+	eddy_world_def d = eddy_default_world_def();
+	d.gravity = (eddy_vec3){0, 0, 0};
+	d.escape = EDDY_ESCAPE_REMOVE;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_nozzle_def nz = eddy_default_emit_nozzle_def();
+	nz.center = (eddy_vec3){0.5f, 0.5f, 0.5f};
+	nz.direction = (eddy_vec3){1, 0, 0};
+	nz.speed = 2.0f;
+	nz.radius = 0.05f;
+	nz.spacing = 0.01f;
+	eddy_add_emit_nozzle(w, &nz);
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	CHECK(eddy_world_advance(w, 0.2) == EDDY_OK);
+	size_t n;
+	const float *y = eddy_world_channel(w, "y", &n);
+	CHECK(n > 0);
+	for (size_t i = 0; i < n; ++i)
+		CHECKF(fabsf(y[i] - 0.5f) <= 0.0501f, "particle %zu at y = %g, outside the jet", i, (double)y[i]);
+	eddy_destroy_world(w);
+}
+
+void suite_core(void)
+{
+	RUN(world_def_rejects_bad_values);
+	RUN(absent_systems_allocate_nothing);
+	RUN(order_errors_name_the_fix);
+	RUN(stale_handles_are_detected);
+	RUN(grid_exists_only_for_grid_systems);
+	RUN(swap_remove_and_growth);
+	RUN(defs_are_range_checked);
+	RUN(huge_emitter_is_refused);
+	RUN(nonfinite_names_system_step_particle);
+	RUN(custom_system_errors_are_labelled);
+	RUN(arena_is_plain_memory);
+}

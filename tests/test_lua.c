@@ -1,0 +1,215 @@
+#define _POSIX_C_SOURCE 200809L
+/* The Lua binding, run in an embedded state: errors name the scene file and
+ * line, the system, the field and what is allowed; the API does what the
+ * scene asks. */
+#include "test.h"
+
+#include <lauxlib.h>
+#include <lualib.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "eddy_lua.h"
+
+static lua_State *new_state(void)
+{
+	lua_State *L = luaL_newstate();
+	luaL_openlibs(L);
+	luaL_requiref(L, "eddy", luaopen_eddy, 0);
+	lua_pop(L, 1);
+	return L;
+}
+
+/* Runs src as the chunk "@scenes/t.lua"; returns NULL on success or the error
+ * message (valid until the state is closed). */
+static const char *run(lua_State *L, const char *src)
+{
+	if (luaL_loadbuffer(L, src, strlen(src), "@scenes/t.lua") != LUA_OK || lua_pcall(L, 0, 1, 0) != LUA_OK)
+		return lua_tostring(L, -1);
+	return NULL;
+}
+
+static const char *run_fresh(const char *src, char *buf, size_t cap)
+{
+	lua_State *L = new_state();
+	const char *err = run(L, src);
+	snprintf(buf, cap, "%s", err ? err : "");
+	lua_close(L);
+	return err ? buf : NULL;
+}
+
+#define HEAD "local eddy = require 'eddy'\nlocal world = eddy.world{}\n"
+
+static void unknown_field_names_file_line_and_fix(void)
+{
+	char buf[512];
+	const char *e = run_fresh(HEAD "world:add(eddy.emit_box{ spacin = 0.01 })\n", buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:3: emit_box: unknown field 'spacin' (did you mean 'spacing'?");
+	CHECK_HAS(e, "fields: min, max, spacing, jitter, velocity, start)");
+	e = run_fresh("local eddy = require 'eddy'\nlocal w = eddy.world{ bounds = {{0,0,0},{1,1,1}}, fsp = 3 }\n", buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:2: world: unknown field 'fsp' (did you mean 'fps'?");
+}
+
+static void wrong_type_and_range(void)
+{
+	char buf[512];
+	const char *e = run_fresh(HEAD "world:add(eddy.emit_box{ spacing = 'fine' })\n", buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:3: emit_box: 'spacing' must be a number (got string)");
+	e = run_fresh(HEAD "world:add(eddy.emit_box{ min = {0, 0} })\n", buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:3: emit_box: 'min' must be a table of 3 numbers {x, y, z}");
+	e = run_fresh(HEAD "\nworld:add(eddy.emit_box{ spacing = -0.01 })\n", buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:4: emit_box: 'spacing' must be > 0 (got -0.01)");
+	e = run_fresh(HEAD "world:add(eddy.collide_box{ inside = 1 })\n", buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:3: collide_box: 'inside' must be true or false (got number)");
+	e = run_fresh("local eddy = require 'eddy'\nlocal w = eddy.world{ escape = 'bounce' }\n", buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:2: world: 'escape' must be \"error\" or \"remove\" (got bounce)");
+	e = run_fresh("local eddy = require 'eddy'\nlocal w = eddy.world{ cfl = 0 }\n", buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:2: world: 'cfl' must be in (0, 10] (got 0)");
+	e = run_fresh(HEAD "world:add(eddy.emit_nozzle{ max_particles = 1.5 })\n", buf, sizeof buf);
+	CHECK_HAS(e, "emit_nozzle: 'max_particles' must be an integer");
+	e = run_fresh(HEAD "world:add({})\n", buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:3: add: expects a system made by eddy.<system>{...}");
+}
+
+static void order_error_in_lua(void)
+{
+	char buf[512];
+	const char *e = run_fresh(HEAD "world:add(eddy.emit_box{})\nworld:add(eddy.integrate{})\n", buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:4: integrate reads 'ax' but no earlier system writes it: add gravity before it");
+}
+
+static void stale_handle_in_lua(void)
+{
+	char buf[512];
+	const char *e = run_fresh(HEAD "local s = world:add(eddy.collide_sphere{})\nworld:remove(s)\n"
+	                               "assert(not s:valid())\ns:set_offset{0, 0.1, 0}\n",
+	                          buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:6: stale system handle");
+}
+
+static void world_api_and_channels(void)
+{
+	lua_State *L = new_state();
+	const char *e = run(L, HEAD
+	                    "world:add(eddy.emit_box{ min = {0.1,0.1,0.1}, max = {0.2,0.3,0.2}, spacing = 0.05 })\n"
+	                    "world:add(eddy.gravity{})\n"
+	                    "world:add(eddy.integrate{})\n"
+	                    "world:add(eddy.collide_box{})\n"
+	                    "world:advance(0.1)\n"
+	                    "local y = world:channel('y')\n"
+	                    "assert(#y == world:count() and #y == 16, 'count ' .. #y)\n"
+	                    "assert(y[1] > 0 and y[1] < 0.3 and y[0] == nil and y[17] == nil)\n"
+	                    "local n = 0; for i, v in ipairs(y) do n = i end\n"
+	                    "assert(n == 16, 'ipairs ' .. n)\n"
+	                    "assert(math.abs(world:time() - 0.1) < 1e-12 and world:frame() == 3)\n"
+	                    "assert(world:step() > 0)\n"
+	                    "assert(world:plan():find('collide_box', 1, true))\n"
+	                    "assert(world:plan{dot = true}:find('digraph', 1, true))\n"
+	                    "local ok, err = pcall(world.channel, world, 'density')\n"
+	                    "assert(not ok and err:find('not allocated', 1, true), err)\n"
+	                    "return world:stats()\n");
+	CHECKF(e == NULL, "%s", e);
+	if (!e) {
+		lua_getfield(L, -1, "particles");
+		CHECK(lua_tointeger(L, -1) == 16);
+		lua_getfield(L, -2, "state_hash");
+		CHECK(lua_tostring(L, -1) && strlen(lua_tostring(L, -1)) == 16);
+	}
+	lua_close(L);
+}
+
+static void on_frame_fields_merge(void)
+{
+	lua_State *L = new_state();
+	const char *e = run(L, HEAD
+	                    "world:add(eddy.emit_box{ min = {0.1,0.1,0.1}, max = {0.2,0.2,0.2}, spacing = 0.05 })\n"
+	                    "world:on_frame(function(w, f) return { a = f } end)\n"
+	                    "world:on_frame(function(w, f) return { b = w:count() } end)\n"
+	                    "return world\n");
+	CHECKF(e == NULL, "%s", e);
+	eddy_world *w = eddy_lua_toworld(L, -1);
+	CHECK(w != NULL);
+	if (w) {
+		CHECK(eddy_world_step_frame(w) == EDDY_OK);
+		CHECK(eddy_world_step_frame(w) == EDDY_OK);
+		eddy_lua_take_frame_fields(L, -1);
+		CHECK(lua_istable(L, -1));
+		lua_getfield(L, -1, "a");
+		CHECK(lua_tointeger(L, -1) == 2);
+		lua_getfield(L, -2, "b");
+		CHECK(lua_tointeger(L, -1) == 8);
+		lua_pop(L, 3);
+		eddy_lua_take_frame_fields(L, -1);
+		CHECK(lua_isnil(L, -1)); /* taken: cleared for the next frame */
+		lua_pop(L, 1);
+	}
+	lua_close(L);
+
+	char buf[512];
+	e = run_fresh(HEAD "world:on_frame(function(w, f) local x = nil; return x.y end)\nworld:advance(0.1)\n", buf,
+	              sizeof buf);
+	CHECK_HAS(e, "on_frame: scenes/t.lua:3: attempt to index");
+	e = run_fresh(HEAD "world:on_frame(function(w, f) return 42 end)\nworld:advance(0.1)\n", buf, sizeof buf);
+	CHECK_HAS(e, "on_frame: must return a table of stats fields or nothing (got number)");
+	e = run_fresh(HEAD "world:on_frame(function(w, f) w:advance(1) end)\nworld:advance(0.1)\n", buf, sizeof buf);
+	CHECK_HAS(e, "cannot be stepped from inside its own callbacks");
+}
+
+static void params_convert_to_the_default_type(void)
+{
+	lua_State *L = new_state();
+	eddy_lua_set_param(L, "spacing", "0.05");
+	eddy_lua_set_param(L, "solver", "pcg");
+	eddy_lua_set_param(L, "fast", "true");
+	eddy_lua_set_param(L, "typo", "1");
+	const char *e = run(L, "local eddy = require 'eddy'\n"
+	                       "assert(eddy.param('spacing', 0.02) == 0.05)\n"
+	                       "assert(eddy.param('solver', 'cholmod') == 'pcg')\n"
+	                       "assert(eddy.param('fast', false) == true)\n"
+	                       "assert(eddy.param('absent', 7) == 7)\n");
+	CHECKF(e == NULL, "%s", e);
+	eddy_lua_push_unused_params(L);
+	lua_getfield(L, -1, "typo");
+	CHECK(lua_toboolean(L, -1));
+	lua_getfield(L, -2, "spacing");
+	CHECK(!lua_toboolean(L, -1));
+	lua_close(L);
+
+	L = new_state();
+	eddy_lua_set_param(L, "spacing", "fine");
+	e = run(L, "local eddy = require 'eddy'\nlocal h = eddy.param('spacing', 0.02)\n");
+	CHECK_HAS(e, "scenes/t.lua:2: --set spacing=fine: 'spacing' must be a number");
+	lua_close(L);
+}
+
+/* An animated offset moves the collider each step and shows in the plan. */
+static void animated_collider(void)
+{
+	lua_State *L = new_state();
+	const char *e = run(L, HEAD
+	                    "local s = world:add(eddy.collide_sphere{ center = {0.5,0.5,0.5}, radius = 0.1,\n"
+	                    "  offset = function(t) return {t, 0, 0} end })\n"
+	                    "world:advance(0.2)\n"
+	                    "local o = s:offset()\n"
+	                    "assert(math.abs(o[1] - 0.2) < 1e-6, 'offset ' .. o[1])\n"
+	                    "assert(world:plan():find('animate', 1, true))\n"
+	                    "local ok, err = pcall(eddy.collide_plane, { offset = function() end, normal = 3 })\n"
+	                    "assert(not ok and err:find(\"'normal' must be a table of 3 numbers\", 1, true), err)\n");
+	CHECKF(e == NULL, "%s", e);
+	lua_close(L);
+	char buf[512];
+	e = run_fresh(HEAD "world:add(eddy.collide_sphere{ offset = function(t) return {t} end })\n", buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:3: collide_sphere: 'offset (returned by the function)' must be a table of 3 numbers");
+}
+
+void suite_lua(void)
+{
+	RUN(unknown_field_names_file_line_and_fix);
+	RUN(wrong_type_and_range);
+	RUN(order_error_in_lua);
+	RUN(stale_handle_in_lua);
+	RUN(world_api_and_channels);
+	RUN(on_frame_fields_merge);
+	RUN(params_convert_to_the_default_type);
+	RUN(animated_collider);
+}
