@@ -12,7 +12,7 @@ BUILD   ?= build
 PREFIX  ?= /usr/local
 CC      ?= cc
 SAN     ?=
-OPT     ?= -O2
+OPT     ?= -O3
 
 # Layers depend downward only: src knows nothing of Lua or GL, and lua/, render/
 # and tests/ see only the public header, copied to $(BUILD)/include, never src/.
@@ -93,7 +93,8 @@ deps:
 
 run: deps
 	@$(MAKE) --no-print-directory all
-	$(BUILD)/eddy run scenes/bounce.lua
+	@mkdir -p out/bounce
+	$(BUILD)/eddy run scenes/bounce.lua --stats out/bounce/stats.jsonl
 
 test: deps
 	@$(MAKE) --no-print-directory all $(BUILD)/tests/run
