@@ -25,7 +25,7 @@ LUA_CFLAGS := $(shell pkg-config --cflags lua5.4 2>/dev/null)
 LUA_LIBS   := $(shell pkg-config --libs lua5.4 2>/dev/null)
 
 SRC_C   := $(wildcard src/*.c)
-LUA_C   := lua/eddy_lua.c
+LUA_C   := $(filter-out lua/main.c,$(wildcard lua/*.c))
 MAIN_C  := lua/main.c
 TEST_C  := $(wildcard tests/test_*.c) tests/runner.c
 BENCH_C := tests/bench.c

@@ -11,6 +11,7 @@
  * column). Host callbacks (on_frame, animated collider offsets) are custom
  * systems, so they show in the plan like any other system. */
 #include "eddy_lua.h"
+#include "bind.h"
 
 #include <lauxlib.h>
 #include <lualib.h>
@@ -30,102 +31,16 @@
 #define WORLDS_KEY "eddy.worlds" /* weak: eddy_world* -> its userdata */
 #define OUT_DIR_KEY "eddy.out_dir"
 
-/* ---- def descriptions ---------------------------------------------------- */
+/* Every list of kinds the module exposes; each ends with EDDY_LUA_KIND_END. */
+static const eddy_lua_kind *const kind_lists[] = {
+	eddy_lua_core_kinds,
+	/* more kind lists go here, one line per area */
 
-typedef enum field_type { F_FLOAT, F_DOUBLE, F_INT, F_INT64, F_U64, F_BOOL, F_VEC3, F_BOUNDS, F_ESCAPE, F_OFFSET } field_type;
+	/* SPH */
 
-typedef struct field {
-	const char *name;
-	field_type type;
-	size_t offset;
-} field;
+	/* FLIP */
 
-typedef union any_def {
-	eddy_world_def world;
-	eddy_emit_box_def emit_box;
-	eddy_emit_nozzle_def emit_nozzle;
-	eddy_gravity_def gravity;
-	eddy_integrate_def integrate;
-	eddy_collide_box_def collide_box;
-	eddy_collide_sphere_def collide_sphere;
-	eddy_collide_plane_def collide_plane;
-} any_def;
-
-typedef struct kind {
-	const char *name;
-	void (*defaults)(any_def *d);
-	eddy_system_id (*add)(eddy_world *w, const any_def *d);
-	const field *fields;
-} kind;
-
-#define FLD(T, f, type) {#f, type, offsetof(T, f)}
-#define RESPONSE_FIELDS(T) \
-	{"restitution", F_FLOAT, offsetof(T, response) + offsetof(eddy_collider_response, restitution)}, \
-	{"friction", F_FLOAT, offsetof(T, response) + offsetof(eddy_collider_response, friction)}, \
-	{"offset", F_OFFSET, 0}
-
-static const field world_fields[] = {
-	{"bounds", F_BOUNDS, offsetof(eddy_world_def, bounds_min)},
-	FLD(eddy_world_def, gravity, F_VEC3),
-	FLD(eddy_world_def, fps, F_DOUBLE),
-	FLD(eddy_world_def, duration, F_DOUBLE),
-	FLD(eddy_world_def, cfl, F_DOUBLE),
-	FLD(eddy_world_def, dt_max, F_DOUBLE),
-	FLD(eddy_world_def, dt_min, F_DOUBLE),
-	FLD(eddy_world_def, max_steps_per_frame, F_INT),
-	FLD(eddy_world_def, cell_size, F_DOUBLE),
-	FLD(eddy_world_def, seed, F_U64),
-	FLD(eddy_world_def, threads, F_INT),
-	FLD(eddy_world_def, escape, F_ESCAPE),
-	FLD(eddy_world_def, check_finite, F_BOOL),
-	{NULL, F_FLOAT, 0},
-};
-static const field emit_box_fields[] = {
-	FLD(eddy_emit_box_def, min, F_VEC3),      FLD(eddy_emit_box_def, max, F_VEC3),
-	FLD(eddy_emit_box_def, spacing, F_FLOAT), FLD(eddy_emit_box_def, jitter, F_FLOAT),
-	FLD(eddy_emit_box_def, velocity, F_VEC3), FLD(eddy_emit_box_def, start, F_DOUBLE),
-	{NULL, F_FLOAT, 0},
-};
-static const field emit_nozzle_fields[] = {
-	FLD(eddy_emit_nozzle_def, center, F_VEC3),     FLD(eddy_emit_nozzle_def, radius, F_FLOAT),
-	FLD(eddy_emit_nozzle_def, direction, F_VEC3),  FLD(eddy_emit_nozzle_def, speed, F_FLOAT),
-	FLD(eddy_emit_nozzle_def, spacing, F_FLOAT),   FLD(eddy_emit_nozzle_def, start, F_DOUBLE),
-	FLD(eddy_emit_nozzle_def, duration, F_DOUBLE), FLD(eddy_emit_nozzle_def, max_particles, F_INT64),
-	{NULL, F_FLOAT, 0},
-};
-static const field gravity_fields[] = {FLD(eddy_gravity_def, scale, F_FLOAT), {NULL, F_FLOAT, 0}};
-static const field integrate_fields[] = {FLD(eddy_integrate_def, max_speed, F_FLOAT), {NULL, F_FLOAT, 0}};
-static const field collide_box_fields[] = {
-	FLD(eddy_collide_box_def, min, F_VEC3), FLD(eddy_collide_box_def, max, F_VEC3),
-	FLD(eddy_collide_box_def, inside, F_BOOL), RESPONSE_FIELDS(eddy_collide_box_def), {NULL, F_FLOAT, 0},
-};
-static const field collide_sphere_fields[] = {
-	FLD(eddy_collide_sphere_def, center, F_VEC3), FLD(eddy_collide_sphere_def, radius, F_FLOAT),
-	FLD(eddy_collide_sphere_def, inside, F_BOOL), RESPONSE_FIELDS(eddy_collide_sphere_def), {NULL, F_FLOAT, 0},
-};
-static const field collide_plane_fields[] = {
-	FLD(eddy_collide_plane_def, point, F_VEC3), FLD(eddy_collide_plane_def, normal, F_VEC3),
-	RESPONSE_FIELDS(eddy_collide_plane_def), {NULL, F_FLOAT, 0},
-};
-
-#define KIND_FUNCS(k) \
-	static void k##_defaults(any_def *d) { d->k = eddy_default_##k##_def(); } \
-	static eddy_system_id k##_add(eddy_world *w, const any_def *d) { return eddy_add_##k(w, &d->k); }
-KIND_FUNCS(emit_box)
-KIND_FUNCS(emit_nozzle)
-KIND_FUNCS(gravity)
-KIND_FUNCS(integrate)
-KIND_FUNCS(collide_box)
-KIND_FUNCS(collide_sphere)
-KIND_FUNCS(collide_plane)
-static void world_defaults(any_def *d) { d->world = eddy_default_world_def(); }
-
-static const kind world_kind = {"world", world_defaults, NULL, world_fields};
-static const kind kinds[] = {
-#define KIND(k) {#k, k##_defaults, k##_add, k##_fields}
-	KIND(emit_box),    KIND(emit_nozzle),    KIND(gravity),       KIND(integrate),
-	KIND(collide_box), KIND(collide_sphere), KIND(collide_plane),
-#undef KIND
+	/* renderer */
 };
 
 /* ---- reading fields ------------------------------------------------------ */
@@ -149,13 +64,13 @@ static size_t edit_distance(const char *a, const char *b)
 	return d[la][lb];
 }
 
-static int unknown_field(lua_State *L, const kind *k, const char *name)
+static int unknown_field(lua_State *L, const eddy_lua_kind *k, const char *name)
 {
 	luaL_Buffer b;
 	luaL_buffinit(L, &b);
 	const char *best = NULL;
 	size_t best_d = 3;
-	for (const field *f = k->fields; f->name; ++f) {
+	for (const eddy_lua_field *f = k->fields; f->name; ++f) {
 		luaL_addstring(&b, f == k->fields ? "" : ", ");
 		luaL_addstring(&b, f->name);
 		size_t dist = edit_distance(name, f->name);
@@ -171,14 +86,14 @@ static int unknown_field(lua_State *L, const kind *k, const char *name)
 	return luaL_error(L, "%s: unknown field '%s' (fields: %s)", k->name, name, lua_tostring(L, -1));
 }
 
-static double number_field(lua_State *L, const kind *k, const char *name, int idx, const char *what)
+static double number_field(lua_State *L, const eddy_lua_kind *k, const char *name, int idx, const char *what)
 {
 	if (lua_type(L, idx) != LUA_TNUMBER)
 		return luaL_error(L, "%s: '%s' must be %s (got %s)", k->name, name, what, luaL_typename(L, idx));
 	return lua_tonumber(L, idx);
 }
 
-static eddy_vec3 vec3_field(lua_State *L, const kind *k, const char *name, int idx)
+static eddy_vec3 vec3_field(lua_State *L, const eddy_lua_kind *k, const char *name, int idx)
 {
 	idx = lua_absindex(L, idx);
 	if (!lua_istable(L, idx) || lua_rawlen(L, idx) != 3)
@@ -196,7 +111,7 @@ static eddy_vec3 vec3_field(lua_State *L, const kind *k, const char *name, int i
 	return (eddy_vec3){v[0], v[1], v[2]};
 }
 
-static lua_Integer integer_field(lua_State *L, const kind *k, const char *name, int idx, lua_Integer lo, lua_Integer hi)
+static lua_Integer integer_field(lua_State *L, const eddy_lua_kind *k, const char *name, int idx, lua_Integer lo, lua_Integer hi)
 {
 	int ok = 0;
 	lua_Integer v = lua_tointegerx(L, idx, &ok);
@@ -206,67 +121,89 @@ static lua_Integer integer_field(lua_State *L, const kind *k, const char *name, 
 }
 
 typedef struct lua_def {
-	const kind *k;
-	any_def d;
+	const eddy_lua_kind *k;
 	bool has_offset;    /* a constant offset in `offset` */
 	eddy_vec3 offset;
 	/* an offset function, if any, is the userdata's user value 1 */
+	max_align_t def[];  /* k->def_size bytes: the C def */
 } lua_def;
 
 /* Fills d from the table at idx; an `offset` function is left on user value 1
  * of the def userdata at ud (0 when reading a world def). */
-static void read_fields(lua_State *L, const kind *k, int idx, lua_def *ld, int ud)
+static void read_fields(lua_State *L, const eddy_lua_kind *k, int idx, void *def, lua_def *ld, int ud)
 {
 	idx = lua_absindex(L, idx);
 	luaL_checktype(L, idx, LUA_TTABLE);
-	char *base = (char *)&ld->d;
+	char *base = (char *)def;
 	lua_pushnil(L);
 	while (lua_next(L, idx)) {
 		if (lua_type(L, -2) != LUA_TSTRING)
 			luaL_error(L, "%s: fields must be named (found a %s key)", k->name, luaL_typename(L, -2));
 		const char *name = lua_tostring(L, -2);
-		const field *f = k->fields;
+		const eddy_lua_field *f = k->fields;
 		while (f->name && strcmp(f->name, name) != 0)
 			++f;
 		if (!f->name)
 			unknown_field(L, k, name);
 		void *p = base + f->offset;
 		switch (f->type) {
-		case F_FLOAT: *(float *)p = (float)number_field(L, k, name, -1, "a number"); break;
-		case F_DOUBLE: *(double *)p = number_field(L, k, name, -1, "a number"); break;
-		case F_INT: *(int *)p = (int)integer_field(L, k, name, -1, -1000000000, 1000000000); break;
-		case F_INT64: *(int64_t *)p = (int64_t)integer_field(L, k, name, -1, 0, LUA_MAXINTEGER); break;
-		case F_U64: *(uint64_t *)p = (uint64_t)integer_field(L, k, name, -1, 0, LUA_MAXINTEGER); break;
-		case F_BOOL:
+		case EDDY_LUA_FLOAT: *(float *)p = (float)number_field(L, k, name, -1, "a number"); break;
+		case EDDY_LUA_DOUBLE: *(double *)p = number_field(L, k, name, -1, "a number"); break;
+		case EDDY_LUA_INT: *(int *)p = (int)integer_field(L, k, name, -1, -1000000000, 1000000000); break;
+		case EDDY_LUA_INT64: *(int64_t *)p = (int64_t)integer_field(L, k, name, -1, 0, LUA_MAXINTEGER); break;
+		case EDDY_LUA_U64: *(uint64_t *)p = (uint64_t)integer_field(L, k, name, -1, 0, LUA_MAXINTEGER); break;
+		case EDDY_LUA_BOOL:
 			if (!lua_isboolean(L, -1))
 				luaL_error(L, "%s: '%s' must be true or false (got %s)", k->name, name, luaL_typename(L, -1));
 			*(bool *)p = lua_toboolean(L, -1);
 			break;
-		case F_VEC3: *(eddy_vec3 *)p = vec3_field(L, k, name, -1); break;
-		case F_BOUNDS: {
+		case EDDY_LUA_VEC3: *(eddy_vec3 *)p = vec3_field(L, k, name, -1); break;
+		case EDDY_LUA_BOUNDS: {
 			if (!lua_istable(L, -1) || lua_rawlen(L, -1) != 2)
-				luaL_error(L, "%s: 'bounds' must be {{xmin, ymin, zmin}, {xmax, ymax, zmax}} (got %s)", k->name,
+				luaL_error(L, "%s: '%s' must be {{xmin, ymin, zmin}, {xmax, ymax, zmax}} (got %s)", k->name, name,
 				           luaL_typename(L, -1));
 			lua_rawgeti(L, -1, 1);
-			ld->d.world.bounds_min = vec3_field(L, k, "bounds[1]", -1);
+			((eddy_vec3 *)p)[0] = vec3_field(L, k, name, -1);
 			lua_rawgeti(L, -2, 2);
-			ld->d.world.bounds_max = vec3_field(L, k, "bounds[2]", -1);
+			((eddy_vec3 *)p)[1] = vec3_field(L, k, name, -1);
 			lua_pop(L, 2);
 			break;
 		}
-		case F_ESCAPE: {
-			const char *s = lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "";
-			if (strcmp(s, "error") == 0)
-				*(eddy_escape_policy *)p = EDDY_ESCAPE_ERROR;
-			else if (strcmp(s, "remove") == 0)
-				*(eddy_escape_policy *)p = EDDY_ESCAPE_REMOVE;
-			else
-				luaL_error(L, "%s: 'escape' must be \"error\" or \"remove\" (got %s)", k->name,
-				           lua_type(L, -1) == LUA_TSTRING ? s : luaL_typename(L, -1));
+		case EDDY_LUA_ENUM: {
+			const char *s = lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : NULL;
+			int i = 0;
+			while (s && f->choices[i] && strcmp(f->choices[i], s) != 0)
+				++i;
+			if (!s || !f->choices[i]) {
+				luaL_Buffer b;
+				luaL_buffinit(L, &b);
+				for (int j = 0; f->choices[j]; ++j) {
+					luaL_addstring(&b, j ? (f->choices[j + 1] ? ", \"" : " or \"") : "\"");
+					luaL_addstring(&b, f->choices[j]);
+					luaL_addstring(&b, "\"");
+				}
+				luaL_pushresult(&b);
+				luaL_error(L, "%s: '%s' must be %s (got %s)", k->name, name, lua_tostring(L, -1),
+				           s ? s : luaL_typename(L, -2));
+			}
+			*(int *)p = i;
 			break;
 		}
-		case F_OFFSET:
-			if (lua_isfunction(L, -1) && ud) {
+		case EDDY_LUA_STRING: {
+			size_t len;
+			const char *s = lua_type(L, -1) == LUA_TSTRING ? lua_tolstring(L, -1, &len) : NULL;
+			if (!s)
+				luaL_error(L, "%s: '%s' must be a string (got %s)", k->name, name, luaL_typename(L, -1));
+			if (len >= f->size || strlen(s) != len)
+				luaL_error(L, "%s: '%s' must be a string of at most %d bytes without NUL", k->name, name,
+				           (int)f->size - 1);
+			memcpy(p, s, len + 1);
+			break;
+		}
+		case EDDY_LUA_OFFSET:
+			if (!ld)
+				luaL_error(L, "%s: '%s' is not allowed here", k->name, name);
+			if (lua_isfunction(L, -1)) {
 				lua_pushvalue(L, -1);
 				lua_setiuservalue(L, ud, 1);
 			} else {
@@ -282,19 +219,19 @@ static void read_fields(lua_State *L, const kind *k, int idx, lua_def *ld, int u
 /* eddy.<system>{...}: a def for world:add, checked for names and types here. */
 static int l_make_def(lua_State *L)
 {
-	const kind *k = lua_touserdata(L, lua_upvalueindex(1));
+	const eddy_lua_kind *k = lua_touserdata(L, lua_upvalueindex(1));
 	if (lua_isnoneornil(L, 1))
 		lua_newtable(L);
 	lua_settop(L, 1);
 	if (!lua_istable(L, 1))
 		return luaL_error(L, "%s: expects a table of fields, e.g. eddy.%s{...} (got %s)", k->name, k->name,
 		                  luaL_typename(L, 1));
-	lua_def *ld = lua_newuserdatauv(L, sizeof *ld, 1);
-	memset(ld, 0, sizeof *ld);
+	lua_def *ld = lua_newuserdatauv(L, sizeof *ld + k->def_size, 1);
+	memset(ld, 0, sizeof *ld + k->def_size);
 	ld->k = k;
-	k->defaults(&ld->d);
+	k->defaults(ld->def);
 	luaL_setmetatable(L, DEF_MT);
-	read_fields(L, k, 1, ld, 2);
+	read_fields(L, k, 1, ld->def, ld, 2);
 	return 1;
 }
 
@@ -336,15 +273,14 @@ static int l_world(lua_State *L)
 	if (!lua_istable(L, 1))
 		return luaL_error(L, "world: expects a table of fields, e.g. eddy.world{bounds = ...} (got %s)",
 		                  luaL_typename(L, 1));
-	lua_def ld;
-	memset(&ld, 0, sizeof ld);
-	world_kind.defaults(&ld.d);
-	read_fields(L, &world_kind, 1, &ld, 0);
+	eddy_world_def def;
+	eddy_lua_world_kind.defaults(&def);
+	read_fields(L, &eddy_lua_world_kind, 1, &def, NULL, 0);
 	lua_world *lw = lua_newuserdatauv(L, sizeof *lw, 1);
 	memset(lw, 0, sizeof *lw);
 	luaL_setmetatable(L, WORLD_MT);
 	char err[256];
-	lw->w = eddy_create_world(&ld.d.world, err, sizeof err);
+	lw->w = eddy_create_world(&def, err, sizeof err);
 	if (!lw->w)
 		return luaL_error(L, "%s", err);
 	/* LUA_RIDX_MAINTHREAD: callbacks run on the main thread even if the world
@@ -514,7 +450,7 @@ static int l_world_add(lua_State *L)
 		}
 	}
 	lua_pop(L, 1);
-	eddy_system_id id = ld->k->add(w, &ld->d);
+	eddy_system_id id = ld->k->add(w, ld->def);
 	if (!eddy_system_valid(w, id)) {
 		if (cb)
 			eddy_world_remove_system(w, anim);
@@ -794,7 +730,7 @@ static int l_system_set_offset(lua_State *L)
 {
 	lua_system *ls;
 	eddy_world *w = system_world(L, 1, &ls);
-	static const kind k = {"set_offset", NULL, NULL, NULL};
+	static const eddy_lua_kind k = {"set_offset", 0, NULL, NULL, NULL};
 	eddy_vec3 v = vec3_field(L, &k, "offset", 2);
 	if (!eddy_system_valid(w, ls->id))
 		return luaL_error(L, "stale system handle: the system was removed from the world");
@@ -1006,11 +942,12 @@ int luaopen_eddy(lua_State *L)
 	lua_setfield(L, -2, "param");
 	lua_pushcfunction(L, l_out_dir);
 	lua_setfield(L, -2, "out_dir");
-	for (size_t i = 0; i < sizeof kinds / sizeof kinds[0]; ++i) {
-		lua_pushlightuserdata(L, (void *)(uintptr_t)&kinds[i]);
-		lua_pushcclosure(L, l_make_def, 1);
-		lua_setfield(L, -2, kinds[i].name);
-	}
+	for (size_t l = 0; l < sizeof kind_lists / sizeof kind_lists[0]; ++l)
+		for (const eddy_lua_kind *k = kind_lists[l]; k->name; ++k) {
+			lua_pushlightuserdata(L, (void *)(uintptr_t)k);
+			lua_pushcclosure(L, l_make_def, 1);
+			lua_setfield(L, -2, k->name);
+		}
 	lua_pushliteral(L, EDDY_VERSION_STRING);
 	lua_setfield(L, -2, "version");
 	return 1;

@@ -22,12 +22,19 @@
 	X(AZ,        "az",       EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_DERIVED, "m/s^2") \
 	X(DENSITY,   "density",  EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_DERIVED, "kg/m^3") \
 	X(PRESSURE,  "pressure", EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_DERIVED, "Pa") \
+	/* SPH columns */ \
+	\
+	/* FLIP particle columns */ \
+	\
 	/* MAC grid */ \
 	X(CELL_TYPE, "cell_type",     EDDY_DOMAIN_CELL,   EDDY_U8,  EDDY_DERIVED, "") \
 	X(CELL_PRESSURE, "cell_pressure", EDDY_DOMAIN_CELL, EDDY_F32, EDDY_DERIVED, "Pa") \
 	X(FACE_U,    "u",        EDDY_DOMAIN_FACE_X,  EDDY_F32, EDDY_DERIVED, "m/s") \
 	X(FACE_V,    "v",        EDDY_DOMAIN_FACE_Y,  EDDY_F32, EDDY_DERIVED, "m/s") \
-	X(FACE_W,    "w",        EDDY_DOMAIN_FACE_Z,  EDDY_F32, EDDY_DERIVED, "m/s")
+	X(FACE_W,    "w",        EDDY_DOMAIN_FACE_Z,  EDDY_F32, EDDY_DERIVED, "m/s") \
+	/* FLIP grid columns */ \
+	\
+	/* renderer columns */
 
 enum eddy_builtin_column {
 #define EDDY_COL_ENUM(ident, name, domain, type, lifetime, unit) COL_##ident,

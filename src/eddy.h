@@ -390,6 +390,18 @@ typedef void (*eddy_check_fn)(eddy_check_level level, const char *message, void 
  * estimate; returns the number of EDDY_CHECK_ERROR findings. */
 int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user);
 
+/* ---- SPH (sys_sph_*.c) ------------------------------------------------- */
+
+/* (SPH defs and add functions go here) */
+
+/* ---- FLIP (sys_flip_*.c) ------------------------------------------------ */
+
+/* (FLIP defs and add functions go here) */
+
+/* ---- renderer and particle exports (render/) ----------------------------- */
+
+/* (renderer defs and add functions go here) */
+
 #ifdef __cplusplus
 }
 #endif

@@ -13,7 +13,12 @@
 	X(integrate) \
 	X(collide_box) \
 	X(collide_sphere) \
-	X(collide_plane)
+	X(collide_plane) \
+	/* SPH */ \
+	\
+	/* FLIP */ \
+	\
+	/* end */
 
 #define EDDY_KIND_DECL(ident) extern const eddy_system_vtable eddy__kind_##ident;
 EDDY_BUILTIN_SYSTEMS(EDDY_KIND_DECL)

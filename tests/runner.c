@@ -51,7 +51,15 @@ int main(int argc, char **argv)
 		const char *name;
 		void (*fn)(void);
 	} suites[] = {
-		{"core", suite_core}, {"physics", suite_physics}, {"lua", suite_lua}, {"cli", suite_cli},
+		{"core", suite_core},
+		{"physics", suite_physics},
+		{"lua", suite_lua},
+		{"cli", suite_cli},
+		/* SPH suites */
+
+		/* FLIP suites */
+
+		/* renderer suites */
 	};
 	for (size_t i = 0; i < sizeof suites / sizeof suites[0]; ++i) {
 		if (only && strcmp(only, suites[i].name) != 0)

@@ -50,5 +50,10 @@ void suite_core(void);
 void suite_physics(void);
 void suite_lua(void);
 void suite_cli(void);
+/* SPH suites */
+
+/* FLIP suites */
+
+/* renderer suites */
 
 #endif
