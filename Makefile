@@ -123,6 +123,8 @@ install: all
 	ln -sf libeddy.so.0 $(DESTDIR)$(PREFIX)/lib/libeddy.so
 	install -m 755 $(BUILD)/eddy $(DESTDIR)$(PREFIX)/bin/eddy
 	install -m 755 $(BUILD)/eddy.so $(DESTDIR)$(PREFIX)/lib/lua/5.4/eddy.so
+	install -d $(DESTDIR)$(PREFIX)/share/eddy/lua/eddy
+	install -m 644 lua/eddy/*.lua $(DESTDIR)$(PREFIX)/share/eddy/lua/eddy/
 	sed 's|^prefix=.*|prefix=$(PREFIX)|' $(BUILD)/eddy.pc > $(DESTDIR)$(PREFIX)/lib/pkgconfig/eddy.pc
 
 clean:

@@ -172,14 +172,24 @@ static void scene_name(const char *path, char *out, size_t cap)
 static int load_scene(lua_State *L, const options *o)
 {
 	luaL_openlibs(L); /* "eddy" is already in package.loaded (see main) */
-	/* scenes may require helpers beside them or in lua/ */
+	/* scenes may require helpers beside them, and eddy's own Lua helpers
+	 * (require "eddy.dam_break") from lua/ of the source tree the command was
+	 * built in (build/eddy -> lua/) or of an installed prefix (bin/eddy ->
+	 * share/eddy/lua/) */
 	const char *slash = strrchr(o->scene, '/');
 	int dirlen = slash ? (int)(slash - o->scene) : 1;
 	const char *dir = slash ? o->scene : ".";
+	char exe[2048] = "";
+	ssize_t len = readlink("/proc/self/exe", exe, sizeof exe - 1);
+	exe[len > 0 ? len : 0] = '\0';
+	char *cut = strrchr(exe, '/');
+	if (cut)
+		*cut = '\0'; /* the directory holding the command */
 	lua_getglobal(L, "package");
-	char path[4096];
+	char path[8192];
 	lua_getfield(L, -1, "path");
-	snprintf(path, sizeof path, "%.*s/?.lua;lua/?.lua;%s", dirlen, dir, lua_tostring(L, -1));
+	snprintf(path, sizeof path, "%.*s/?.lua;%s/../lua/?.lua;%s/../../lua/?.lua;%s/../share/eddy/lua/?.lua;%s", dirlen,
+	         dir, exe, exe, exe, lua_tostring(L, -1));
 	lua_pop(L, 1);
 	lua_pushstring(L, path);
 	lua_setfield(L, -2, "path");
