@@ -2,19 +2,24 @@
  *
  *   eddy run SCENE.lua [--frames N] [--duration S] [--out DIR] [--threads N]
  *                      [--set K=V ...] [--stats FILE] [--quiet]
+ *                      [--checkpoint-every N] [--resume DIR]
  *   eddy plan SCENE.lua [--dot] [--set K=V ...]
  *   eddy check SCENE.lua [--set K=V ...]
  *
  * Exit status: 0 success, 1 the scene or the run failed, 2 bad usage. Every
  * failure is one line on stderr starting with "eddy: ". */
 #define _POSIX_C_SOURCE 200809L
+#define _DEFAULT_SOURCE /* strdup, open_memstream, DIR */
 #include "eddy_lua.h"
 
 #include <lauxlib.h>
 #include <lualib.h>
 
+#include <dirent.h>
 #include <errno.h>
 #include <math.h>
+#include <signal.h>
+#include <sys/stat.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -35,6 +40,10 @@ typedef struct options {
 	int threads;         /* 0: the scene's */
 	const char *stats;
 	bool quiet, dot;
+	int checkpoint_every; /* 0: none */
+	const char *resume;   /* checkpoint directory to continue from */
+	uint64_t fingerprint; /* scene file and --set values, for checkpoints */
+	char outdir[1024];    /* --out or out/<scene> */
 } options;
 
 static const char usage_text[] =
@@ -53,6 +62,8 @@ static const char usage_text[] =
 	"  --set K=V       a scene parameter read with eddy.param(K, default); repeatable\n"
 	"  --stats FILE    per-frame statistics as JSON lines ('-' for stdout)\n"
 	"  --quiet         no progress bar and no summary\n"
+	"  --checkpoint-every N  (run) save the full state every N frames in OUT/checkpoints\n"
+	"  --resume DIR    (run) continue from the newest valid checkpoint in DIR\n"
 	"  --dot           (plan) print the pipeline as a Graphviz graph\n"
 	"  -h, --help      this help\n"
 	"  --version       the version\n";
@@ -79,6 +90,16 @@ static const char *first_line(const char *msg, char *buf, size_t cap)
 	snprintf(buf, cap, "%s", msg ? msg : "(no message)");
 	buf[strcspn(buf, "\n")] = '\0';
 	return buf;
+}
+
+static uint64_t fnv(uint64_t h, const void *data, size_t n)
+{
+	const unsigned char *p = data;
+	for (size_t i = 0; i < n; ++i) {
+		h ^= p[i];
+		h *= 0x100000001b3ull;
+	}
+	return h;
 }
 
 static bool parse_int(const char *s, int lo, int hi, int *out)
@@ -111,7 +132,8 @@ static int parse_args(int argc, char **argv, options *o, lua_State *L)
 		} else if (strcmp(a, "--dot") == 0) {
 			o->dot = true;
 		} else if (strcmp(a, "--frames") == 0 || strcmp(a, "--duration") == 0 || strcmp(a, "--out") == 0 ||
-		           strcmp(a, "--threads") == 0 || strcmp(a, "--set") == 0 || strcmp(a, "--stats") == 0) {
+		           strcmp(a, "--threads") == 0 || strcmp(a, "--set") == 0 || strcmp(a, "--stats") == 0 ||
+		           strcmp(a, "--checkpoint-every") == 0 || strcmp(a, "--resume") == 0) {
 			if (!next)
 				return fail(EXIT_USAGE, "%s needs a value (see eddy --help)", a);
 			++i;
@@ -130,6 +152,11 @@ static int parse_args(int argc, char **argv, options *o, lua_State *L)
 					return fail(EXIT_USAGE, "--threads must be an integer in [1, 256] (got '%s')", next);
 			} else if (strcmp(a, "--stats") == 0) {
 				o->stats = next;
+			} else if (strcmp(a, "--checkpoint-every") == 0) {
+				if (!parse_int(next, 1, 100000000, &o->checkpoint_every))
+					return fail(EXIT_USAGE, "--checkpoint-every must be an integer >= 1 (got '%s')", next);
+			} else if (strcmp(a, "--resume") == 0) {
+				o->resume = next;
 			} else {
 				const char *eq = strchr(next, '=');
 				if (!eq || eq == next)
@@ -137,6 +164,7 @@ static int parse_args(int argc, char **argv, options *o, lua_State *L)
 				char key[128];
 				snprintf(key, sizeof key, "%.*s", (int)(eq - next), next);
 				eddy_lua_set_param(L, key, eq + 1);
+				o->fingerprint += fnv(0xcbf29ce484222325ull, next, strlen(next)); /* order-free */
 			}
 		} else if (a[0] == '-' && a[1] != '\0') {
 			return fail(EXIT_USAGE, "unknown option '%s' (see eddy --help)", a);
@@ -169,7 +197,7 @@ static void scene_name(const char *path, char *out, size_t cap)
 }
 
 /* Runs the scene file; leaves the returned world on the stack. */
-static int load_scene(lua_State *L, const options *o)
+static int load_scene(lua_State *L, options *o)
 {
 	luaL_openlibs(L); /* "eddy" is already in package.loaded (see main) */
 	/* scenes may require helpers beside them, and eddy's own Lua helpers
@@ -195,12 +223,13 @@ static int load_scene(lua_State *L, const options *o)
 	lua_setfield(L, -2, "path");
 	lua_pop(L, 1);
 
-	char name[256], outdir[1024];
+	char name[256];
 	scene_name(o->scene, name, sizeof name);
-	snprintf(outdir, sizeof outdir, "%s", o->out ? o->out : "out");
-	if (!o->out)
-		snprintf(outdir, sizeof outdir, "out/%s", name);
-	eddy_lua_set_out_dir(L, outdir);
+	if (o->out)
+		snprintf(o->outdir, sizeof o->outdir, "%s", o->out);
+	else
+		snprintf(o->outdir, sizeof o->outdir, "out/%s", name);
+	eddy_lua_set_out_dir(L, o->outdir);
 
 	char buf[1024];
 	int rc = luaL_loadfile(L, o->scene);
@@ -208,6 +237,15 @@ static int load_scene(lua_State *L, const options *o)
 		return fail(EXIT_RUN, "cannot read scene '%s': %s", o->scene, strerror(errno ? errno : ENOENT));
 	if (rc != LUA_OK)
 		return fail(EXIT_RUN, "%s", first_line(lua_tostring(L, -1), buf, sizeof buf));
+	/* a checkpoint belongs to this scene text with these --set values */
+	FILE *sf = fopen(o->scene, "rb");
+	if (sf) {
+		char chunk[4096];
+		size_t k;
+		while ((k = fread(chunk, 1, sizeof chunk, sf)) > 0)
+			o->fingerprint = fnv(o->fingerprint ^ 0x9e3779b97f4a7c15ull, chunk, k);
+		fclose(sf);
+	}
 	if (lua_pcall(L, 0, 1, 0) != LUA_OK)
 		return fail(EXIT_RUN, "%s", first_line(lua_tostring(L, -1), buf, sizeof buf));
 	if (!eddy_lua_toworld(L, -1))
@@ -460,6 +498,107 @@ static double now_s(void)
 	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
+/* Set by SIGINT/SIGTERM; the run stops after the frame in progress. */
+static volatile sig_atomic_t stop_signal;
+
+static void on_signal(int sig) { stop_signal = sig; }
+
+static int make_dirs(const char *path)
+{
+	char p[1024];
+	snprintf(p, sizeof p, "%s", path);
+	for (char *s = p + 1; *s; ++s) {
+		if (*s != '/')
+			continue;
+		*s = '\0';
+		if (mkdir(p, 0755) != 0 && errno != EEXIST)
+			return -1;
+		*s = '/';
+	}
+	return mkdir(p, 0755) != 0 && errno != EEXIST ? -1 : 0;
+}
+
+static int checkpoint(eddy_world *w, const options *o, const char *dir)
+{
+	char path[2048];
+	if (make_dirs(dir) != 0)
+		return fail(EXIT_RUN, "cannot create checkpoint directory '%s': %s", dir, strerror(errno));
+	snprintf(path, sizeof path, "%s/frame-%06d.eddy", dir, eddy_world_frame(w));
+	if (eddy_world_save(w, path, o->fingerprint) != EDDY_OK)
+		return fail(EXIT_RUN, "%s", eddy_world_error(w));
+	return 0;
+}
+
+static int cmp_desc(const void *a, const void *b) { return -strcmp(*(char *const *)a, *(char *const *)b); }
+
+/* Loads the newest checkpoint in dir that is intact and of this scene; older
+ * ones stand in for rejected ones, each rejection said on stderr. */
+static int resume(eddy_world *w, const options *o)
+{
+	DIR *d = opendir(o->resume);
+	if (!d)
+		return fail(EXIT_RUN, "--resume %s: cannot open: %s", o->resume, strerror(errno));
+	char *names[4096];
+	int n = 0;
+	struct dirent *e;
+	while ((e = readdir(d)) && n < 4096) {
+		size_t len = strlen(e->d_name);
+		if (strncmp(e->d_name, "frame-", 6) == 0 && len > 5 && strcmp(e->d_name + len - 5, ".eddy") == 0)
+			names[n++] = strdup(e->d_name);
+	}
+	closedir(d);
+	qsort(names, (size_t)n, sizeof names[0], cmp_desc); /* zero-padded: newest first */
+	int code = -1; /* none loaded yet */
+	for (int i = 0; i < n; ++i) {
+		char path[2048];
+		snprintf(path, sizeof path, "%s/%s", o->resume, names[i]);
+		if (code < 0 && names[i]) {
+			if (eddy_world_load(w, path, o->fingerprint) == EDDY_OK) {
+				code = 0;
+				if (!o->quiet)
+					fprintf(stderr, "eddy: resuming from %s (frame %d, t = %.6g s)\n", path, eddy_world_frame(w),
+					        eddy_world_time(w));
+			} else {
+				fprintf(stderr, "eddy: warning: %s; trying an older one\n", eddy_world_error(w));
+			}
+		}
+		free(names[i]);
+	}
+	if (code < 0)
+		return fail(EXIT_RUN, "--resume %s: no valid checkpoint of this scene (frame-NNNNNN.eddy)", o->resume);
+	return 0;
+}
+
+/* On resume, keep the stats lines of the frames up to the checkpoint and drop
+ * those a crashed run wrote after it, so each frame appears once. */
+static FILE *open_stats(const options *o, int keep_frames)
+{
+	if (strcmp(o->stats, "-") == 0)
+		return stdout;
+	if (!o->resume)
+		return fopen(o->stats, "w");
+	FILE *in = fopen(o->stats, "r");
+	char *kept = NULL;
+	size_t kept_len = 0;
+	if (in) {
+		FILE *mem = open_memstream(&kept, &kept_len);
+		char line[65536];
+		while (mem && fgets(line, sizeof line, in)) {
+			int frame;
+			if (sscanf(line, "{\"frame\":%d", &frame) == 1 && frame <= keep_frames)
+				fputs(line, mem);
+		}
+		if (mem)
+			fclose(mem);
+		fclose(in);
+	}
+	FILE *f = fopen(o->stats, "w");
+	if (f && kept)
+		fwrite(kept, 1, kept_len, f);
+	free(kept);
+	return f;
+}
+
 static int cmd_run(lua_State *L, const options *o, int world_idx)
 {
 	eddy_world *w = eddy_lua_toworld(L, world_idx);
@@ -468,18 +607,30 @@ static int cmd_run(lua_State *L, const options *o, int world_idx)
 		return fail(EXIT_USAGE, "%s", eddy_world_error(w));
 	double duration = o->duration >= 0 ? o->duration : def->duration;
 	int frames = o->frames >= 0 ? o->frames : (int)ceil(duration * def->fps - 1e-9);
+	char ckpt_dir[1100];
+	snprintf(ckpt_dir, sizeof ckpt_dir, "%s/checkpoints", o->outdir);
+	if (o->resume) {
+		int code = resume(w, o);
+		if (code)
+			return code;
+	}
+	const int first = eddy_world_frame(w);
 
 	FILE *stats = NULL;
-	if (o->stats) {
-		stats = strcmp(o->stats, "-") == 0 ? stdout : fopen(o->stats, "w");
-		if (!stats)
-			return fail(EXIT_RUN, "cannot write stats file '%s': %s", o->stats, strerror(errno));
-	}
+	if (o->stats && !(stats = open_stats(o, first)))
+		return fail(EXIT_RUN, "cannot write stats file '%s': %s", o->stats, strerror(errno));
+	struct sigaction sa;
+	memset(&sa, 0, sizeof sa);
+	sa.sa_handler = on_signal;
+	sa.sa_flags = (int)SA_RESETHAND; /* a second signal ends the process at once */
+	sigaction(SIGINT, &sa, NULL);
+	sigaction(SIGTERM, &sa, NULL);
+
 	const bool bar = !o->quiet && isatty(STDERR_FILENO);
 	const double t0 = now_s();
 	int code = 0;
 	char buf[1024];
-	for (int i = 0; i < frames; ++i) {
+	for (int i = first; i < frames && code == 0; ++i) {
 		if (eddy_world_step_frame(w) != EDDY_OK) {
 			if (bar)
 				fputc('\n', stderr);
@@ -492,23 +643,32 @@ static int cmd_run(lua_State *L, const options *o, int world_idx)
 			eddy_world_frame_stats(w, &s);
 			const char *clash = write_stats(stats, &s, L, lua_gettop(L));
 			fflush(stats);
-			if (clash) {
+			if (clash)
 				code = fail(EXIT_RUN, "on_frame returned '%s', which is a stats field of eddy; give it another name", clash);
-				lua_pop(L, 1);
-				break;
-			}
 		}
 		lua_pop(L, 1);
+		if (code == 0 && o->checkpoint_every && (i + 1) % o->checkpoint_every == 0)
+			code = checkpoint(w, o, ckpt_dir);
 		if (bar)
 			progress(i + 1, frames, eddy_world_time(w), now_s() - t0, eddy_world_steps(w));
+		if (code == 0 && stop_signal && i + 1 < frames) {
+			if (bar)
+				fputc('\n', stderr);
+			code = checkpoint(w, o, ckpt_dir);
+			if (code == 0)
+				code = fail(128 + stop_signal,
+				            "interrupted after frame %d (t = %.6g s); resume with: eddy run %s --resume %s (and the same options)",
+				            i + 1, eddy_world_time(w), o->scene, ckpt_dir);
+		}
 	}
-	if (bar)
+	if (bar && code == 0)
 		fputc('\n', stderr);
 	if (stats && stats != stdout && fclose(stats) != 0 && code == 0)
 		code = fail(EXIT_RUN, "cannot finish stats file '%s': %s", o->stats, strerror(errno));
 	if (code == 0 && !o->quiet)
-		printf("eddy: %s: %d frames, %.3f s simulated in %.2f s wall (%lld steps, %zu particles)\n", o->scene, frames,
-		       eddy_world_time(w), now_s() - t0, (long long)eddy_world_steps(w), eddy_world_particle_count(w));
+		printf("eddy: %s: %d frames, %.3f s simulated in %.2f s wall (%lld steps, %zu particles)\n", o->scene,
+		       frames - first, eddy_world_time(w), now_s() - t0, (long long)eddy_world_steps(w),
+		       eddy_world_particle_count(w));
 	return code;
 }
 

@@ -10,11 +10,19 @@ bool eddy__check_response(eddy_world *w, const char *sys, eddy_collider_response
 	       eddy__check_nonneg(w, sys, "friction", r.friction);
 }
 
+void *eddy__collider_state(eddy_system *s, size_t *size)
+{
+	eddy_collider_base *b = s->data;
+	*size = sizeof b->motion;
+	return &b->motion;
+}
+
 eddy_vec3 eddy__collider_step_velocity(eddy_collider_base *b, double dt)
 {
 	const eddy_collider_motion m = b->motion;
 	const float inv = dt > 0 ? (float)(1.0 / dt) : 0.0f;
 	b->motion.last_offset = m.offset;
+	b->motion.stepped = true;
 	return (eddy_vec3){(m.offset.x - m.last_offset.x) * inv, (m.offset.y - m.last_offset.y) * inv,
 	                   (m.offset.z - m.last_offset.z) * inv};
 }
@@ -41,7 +49,10 @@ eddy_status eddy_collider_set_offset(eddy_world *w, eddy_system_id id, eddy_vec3
 	eddy_system *s = eddy__system_get(w, id);
 	if (!eddy__check_vec3(w, s->label, "offset", offset))
 		return EDDY_ERR_INVALID;
-	((eddy_collider_base *)s->data)->motion.offset = offset;
+	eddy_collider_motion *m = &((eddy_collider_base *)s->data)->motion;
+	m->offset = offset;
+	if (!m->stepped)
+		m->last_offset = offset; /* placing it before it ever ran is not motion */
 	return EDDY_OK;
 }
 

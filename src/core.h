@@ -33,6 +33,9 @@ typedef struct eddy_system_vtable {
 	float (*distance)(const eddy_system *s, eddy_vec3 p);
 	/* columns the kind writes, ending in -1; names the fix in order errors */
 	const int *default_writes;
+	/* the system's mutable state as one plain block, saved and restored
+	 * byte for byte by checkpoints; NULL for stateless systems */
+	void *(*state)(eddy_system *s, size_t *size);
 } eddy_system_vtable;
 
 struct eddy_system {
@@ -145,6 +148,8 @@ eddy_status eddy__reserve_particles(eddy_world *w, size_t count);
 /* Appends count zero-filled rows; returns the index of the first. */
 eddy_status eddy__append_particles(eddy_world *w, size_t count, size_t *first);
 void eddy__clear_derived(eddy_world *w);
+/* Starts a fresh frame's statistics. */
+void eddy__frame_reset(eddy_world *w);
 
 static inline float *eddy__col(eddy_world *w, int id) { return (float *)w->columns[id].data; }
 
@@ -188,6 +193,7 @@ double eddy__now_ms(void);
 typedef struct eddy_collider_motion {
 	eddy_vec3 offset;      /* m, current displacement from the def pose */
 	eddy_vec3 last_offset; /* m, displacement at the collider's last step */
+	bool stepped;          /* it has run: from now on offsets are motion */
 } eddy_collider_motion;
 
 /* Every collider's data block starts with this, so offset setting is shared. */
@@ -221,6 +227,9 @@ static inline void eddy__collide_response(float *vx, float *vy, float *vz, size_
 	vy[i] = vw.y + ty * keep + vn_new * n.y;
 	vz[i] = vw.z + tz * keep + vn_new * n.z;
 }
+
+/* A collider's checkpointed state: its motion. */
+void *eddy__collider_state(eddy_system *s, size_t *size);
 
 /* Wall velocity of a collider over a step of dt, then marks the offset as used. */
 eddy_vec3 eddy__collider_step_velocity(eddy_collider_base *b, double dt);

@@ -330,7 +330,8 @@ eddy_system_id eddy_add_collide_plane(eddy_world *w, const eddy_collide_plane_de
 
 /* Moves a collider by an offset from its def pose. The collider's velocity over
  * the next step is (new offset - offset at the last step) / dt, so animating the
- * offset every step gives moving walls that push particles. */
+ * offset every step gives moving walls that push particles. Before the
+ * collider's first step this only places it. */
 eddy_status eddy_collider_set_offset(eddy_world *w, eddy_system_id id, eddy_vec3 offset);
 eddy_status eddy_collider_get_offset(const eddy_world *w, eddy_system_id id, eddy_vec3 *offset);
 /* Signed distance from p to the collider's solid (< 0 inside the solid). */
@@ -380,6 +381,20 @@ void eddy_world_publish_text(eddy_world *w, const char *name, const char *text);
 
 /* Rest density the world compares densities against (set by density systems). */
 void eddy_world_set_rest_density(eddy_world *w, float rho0);
+
+/* ---- checkpoints ------------------------------------------------------- */
+
+/* Writes the world's full state (state columns, clock, random stream, the
+ * systems' own state) to path atomically: a temporary file, fsync, rename.
+ * fingerprint is mixed with the pipeline's own, so a checkpoint loads only into
+ * the same scene with the same parameters (the eddy command passes a hash of
+ * the scene file and its --set values). Derived columns are not saved: the next
+ * step recomputes them. */
+eddy_status eddy_world_save(eddy_world *w, const char *path, uint64_t fingerprint);
+/* Restores what eddy_world_save wrote into a world built by the same scene.
+ * A truncated, corrupted, foreign or other-version file is rejected with
+ * EDDY_ERR_IO and a message saying which, and the world is left unchanged. */
+eddy_status eddy_world_load(eddy_world *w, const char *path, uint64_t fingerprint);
 
 /* ---- preflight --------------------------------------------------------- */
 

@@ -109,6 +109,7 @@ static float distance(const eddy_system *s, eddy_vec3 q)
 const eddy_system_vtable eddy__kind_collide_box = {
 	.name = "collide_box",
 	.step = step,
+	.state = eddy__collider_state,
 	.distance = distance,
 	.default_writes = box_io,
 };

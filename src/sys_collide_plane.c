@@ -57,6 +57,7 @@ static float distance(const eddy_system *s, eddy_vec3 q)
 const eddy_system_vtable eddy__kind_collide_plane = {
 	.name = "collide_plane",
 	.step = step,
+	.state = eddy__collider_state,
 	.distance = distance,
 	.default_writes = plane_io,
 };

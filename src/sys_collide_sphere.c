@@ -67,6 +67,7 @@ static float distance(const eddy_system *s, eddy_vec3 q)
 const eddy_system_vtable eddy__kind_collide_sphere = {
 	.name = "collide_sphere",
 	.step = step,
+	.state = eddy__collider_state,
 	.distance = distance,
 	.default_writes = sphere_io,
 };

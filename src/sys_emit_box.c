@@ -99,8 +99,16 @@ static size_t sample(const eddy_world *w, const eddy_system *s, eddy_vec3 *out, 
 	return k;
 }
 
+static void *state(eddy_system *s, size_t *size)
+{
+	emit_box *e = s->data;
+	*size = sizeof e->done;
+	return &e->done;
+}
+
 const eddy_system_vtable eddy__kind_emit_box = {
 	.name = "emit_box",
+	.state = state,
 	.step = step,
 	.expected_particles = expected,
 	.sample = sample,

@@ -17,9 +17,11 @@ typedef struct emit_nozzle {
 	eddy_vec3 u, v;       /* unit vectors spanning the opening */
 	int disc;             /* particles per disc */
 	int half;             /* lattice extent: offsets in [-half, half] */
-	double travelled;     /* m the jet moved since the last disc left */
-	int64_t emitted;
-	bool started;
+	struct nozzle_state {  /* what a checkpoint saves */
+		double travelled;  /* m the jet moved since the last disc left */
+		int64_t emitted;
+		bool started;
+	} run;
 } emit_nozzle;
 
 static const int nozzle_writes[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, -1};
@@ -67,8 +69,8 @@ static int disc_points(const emit_nozzle *e, double downstream, eddy_vec3 *out, 
 static eddy_status emit_disc(eddy_world *w, emit_nozzle *e, double downstream)
 {
 	int count = e->disc;
-	if (e->def.max_particles > 0 && e->emitted + count > e->def.max_particles)
-		count = (int)(e->def.max_particles - e->emitted);
+	if (e->def.max_particles > 0 && e->run.emitted + count > e->def.max_particles)
+		count = (int)(e->def.max_particles - e->run.emitted);
 	if (count <= 0)
 		return EDDY_OK;
 	eddy_vec3 *pts = eddy__arena_alloc(&w->arena, (size_t)e->disc * sizeof *pts);
@@ -93,7 +95,7 @@ static eddy_status emit_disc(eddy_world *w, emit_nozzle *e, double downstream)
 		vy[i] = vel.y;
 		vz[i] = vel.z;
 	}
-	e->emitted += count;
+	e->run.emitted += count;
 	return EDDY_OK;
 }
 
@@ -102,20 +104,20 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	emit_nozzle *e = s->data;
 	const double t0 = fmax(ctx->time, e->def.start);
 	const double t1 = fmin(ctx->time + ctx->dt, e->def.start + e->def.duration);
-	if (t1 <= t0 || (e->def.max_particles > 0 && e->emitted >= e->def.max_particles))
+	if (t1 <= t0 || (e->def.max_particles > 0 && e->run.emitted >= e->def.max_particles))
 		return EDDY_OK;
-	if (!e->started) {
-		e->started = true;
-		e->travelled = e->def.spacing; /* the first disc leaves as the pour starts */
+	if (!e->run.started) {
+		e->run.started = true;
+		e->run.travelled = e->def.spacing; /* the first disc leaves as the pour starts */
 	}
-	e->travelled += e->def.speed * (t1 - t0);
+	e->run.travelled += e->def.speed * (t1 - t0);
 	/* integrate moves every particle by speed * dt after this; a disc that
 	 * left at t_k must end the step speed * (t + dt - t_k) downstream, so it
 	 * starts that much minus speed * dt, i.e. up to one step inside the pipe */
 	const double lead = e->def.speed * (t1 - ctx->time);
-	while (e->travelled >= e->def.spacing) {
-		e->travelled -= e->def.spacing;
-		eddy_status st = emit_disc(w, e, e->travelled - lead);
+	while (e->run.travelled >= e->def.spacing) {
+		e->run.travelled -= e->def.spacing;
+		eddy_status st = emit_disc(w, e, e->run.travelled - lead);
 		if (st != EDDY_OK)
 			return st;
 	}
@@ -131,7 +133,7 @@ static int64_t expected(const eddy_world *w, const eddy_system *s)
 		by_time = ((int64_t)floor(e->def.duration * e->def.speed / e->def.spacing) + 1) * e->disc;
 	if (e->def.max_particles > 0 && (by_time < 0 || e->def.max_particles < by_time))
 		by_time = e->def.max_particles;
-	return by_time < 0 ? -1 : by_time - e->emitted;
+	return by_time < 0 ? -1 : by_time - e->run.emitted;
 }
 
 static size_t sample(const eddy_world *w, const eddy_system *s, eddy_vec3 *out, size_t cap)
@@ -144,8 +146,16 @@ static size_t sample(const eddy_world *w, const eddy_system *s, eddy_vec3 *out, 
 	return (size_t)n < cap ? (size_t)n : cap;
 }
 
+static void *state(eddy_system *s, size_t *size)
+{
+	emit_nozzle *e = s->data;
+	*size = sizeof e->run;
+	return &e->run;
+}
+
 const eddy_system_vtable eddy__kind_emit_nozzle = {
 	.name = "emit_nozzle",
+	.state = state,
 	.step = step,
 	.expected_particles = expected,
 	.sample = sample,

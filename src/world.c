@@ -343,7 +343,7 @@ static eddy_status step_toward(eddy_world *w, double stop, bool *reached)
 
 static double next_frame_time(const eddy_world *w) { return (double)(w->frame + 1) / w->def.fps; }
 
-static void frame_reset(eddy_world *w)
+void eddy__frame_reset(eddy_world *w)
 {
 	w->frame_steps = 0;
 	w->frame_dt_min = INFINITY;
@@ -387,7 +387,7 @@ static eddy_status finish_frame(eddy_world *w)
 		w->last_frame.system_ms[k] = w->slots[w->order[k]].ms_frame;
 	memcpy(w->last_frame.extras, w->extras, sizeof w->extras);
 	w->last_frame.extra_count = w->extra_count;
-	frame_reset(w);
+	eddy__frame_reset(w);
 	return EDDY_OK;
 }
 

@@ -55,6 +55,7 @@ int main(int argc, char **argv)
 		{"physics", suite_physics},
 		{"lua", suite_lua},
 		{"cli", suite_cli},
+		{"reliability", suite_reliability},
 		/* SPH suites */
 
 		/* FLIP suites */

@@ -50,6 +50,7 @@ void suite_core(void);
 void suite_physics(void);
 void suite_lua(void);
 void suite_cli(void);
+void suite_reliability(void);
 /* SPH suites */
 
 /* FLIP suites */

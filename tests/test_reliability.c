@@ -1,0 +1,265 @@
+#define _POSIX_C_SOURCE 200809L
+/* Losing nothing: checkpoints continue a run bit for bit, bad checkpoints are
+ * rejected with the reason, an interrupted run ends its frame cleanly and says
+ * where to resume. */
+#include "test.h"
+
+#include <signal.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "eddy.h"
+
+/* A scene with every kind of system state: a one-shot block, a nozzle part way
+ * through its pour, a moving collider, jitter from the random stream. */
+static eddy_world *stateful_world(eddy_system_id *sphere)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.seed = 42;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.min = (eddy_vec3){0.1f, 0.5f, 0.1f};
+	b.max = (eddy_vec3){0.4f, 0.8f, 0.4f};
+	b.spacing = 0.03f;
+	b.jitter = 0.3f;
+	eddy_add_emit_box(w, &b);
+	eddy_emit_nozzle_def nz = eddy_default_emit_nozzle_def();
+	nz.center = (eddy_vec3){0.7f, 0.9f, 0.5f};
+	nz.spacing = 0.02f;
+	nz.radius = 0.04f;
+	nz.speed = 0.7f;
+	eddy_add_emit_nozzle(w, &nz);
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	eddy_collide_sphere_def s = eddy_default_collide_sphere_def();
+	s.center = (eddy_vec3){0.5f, 0.2f, 0.5f};
+	s.response.restitution = 0.4f;
+	*sphere = eddy_add_collide_sphere(w, &s);
+	eddy_collide_box_def bx = eddy_default_collide_box_def();
+	bx.response.restitution = 0.2f;
+	eddy_add_collide_box(w, &bx);
+	return w;
+}
+
+/* Frames with the sphere moving along a path known in advance. */
+static void run_frames(eddy_world *w, eddy_system_id sphere, int frames)
+{
+	for (int f = 0; f < frames; ++f) {
+		const double t = eddy_world_time(w) + 1.0 / 30.0;
+		eddy_collider_set_offset(w, sphere, (eddy_vec3){(float)(0.2 * sin(3 * t)), 0, 0});
+		CHECK(eddy_world_step_frame(w) == EDDY_OK);
+	}
+}
+
+static void ckpt_path(char *out, size_t cap, const char *name)
+{
+	snprintf(out, cap, "%s/%s", test_build_dir(), name);
+}
+
+static void checkpoint_resume_is_bit_identical(void)
+{
+	eddy_system_id sa, sb;
+	eddy_world *a = stateful_world(&sa);
+	run_frames(a, sa, 20);
+	const uint64_t straight = eddy_world_state_hash(a);
+
+	eddy_world *b = stateful_world(&sb);
+	run_frames(b, sb, 9);
+	char path[512];
+	ckpt_path(path, sizeof path, "t_ckpt.eddy");
+	CHECK(eddy_world_save(b, path, 7) == EDDY_OK);
+	run_frames(b, sb, 3); /* work after the checkpoint that a crash loses */
+	eddy_destroy_world(b);
+
+	eddy_world *c = stateful_world(&sb);
+	CHECKF(eddy_world_load(c, path, 7) == EDDY_OK, "%s", eddy_world_error(c));
+	CHECK(eddy_world_frame(c) == 9);
+	run_frames(c, sb, 11);
+	CHECK(eddy_world_frame(c) == 20);
+	CHECK(eddy_world_particle_count(c) == eddy_world_particle_count(a));
+	CHECK(eddy_world_state_hash(c) == straight);
+	eddy_destroy_world(c);
+	eddy_destroy_world(a);
+}
+
+static void corrupt_byte(const char *path, long at)
+{
+	FILE *f = fopen(path, "r+b");
+	fseek(f, at, at < 0 ? SEEK_END : SEEK_SET);
+	int c = fgetc(f);
+	fseek(f, -1, SEEK_CUR);
+	fputc(c ^ 0x5a, f);
+	fclose(f);
+}
+
+static void bad_checkpoints_are_rejected(void)
+{
+	eddy_system_id s;
+	eddy_world *w = stateful_world(&s);
+	run_frames(w, s, 3);
+	char path[512], copy[600];
+	ckpt_path(path, sizeof path, "t_bad.eddy");
+	CHECK(eddy_world_save(w, path, 1) == EDDY_OK);
+	const uint64_t before = eddy_world_state_hash(w);
+	char cmd[1400];
+
+	/* another fingerprint: another scene or other --set values */
+	CHECK(eddy_world_load(w, path, 2) == EDDY_ERR_IO);
+	CHECK_HAS(eddy_world_error(w), "written by another scene or other parameters");
+
+	snprintf(copy, sizeof copy, "%s.c", path);
+	snprintf(cmd, sizeof cmd, "cp %s %s", path, copy);
+	CHECK(system(cmd) == 0);
+	corrupt_byte(copy, -10);
+	CHECK(eddy_world_load(w, copy, 1) == EDDY_ERR_IO);
+	CHECK_HAS(eddy_world_error(w), "checksum mismatch (corrupted)");
+
+	CHECK(system(cmd) == 0);
+	snprintf(cmd, sizeof cmd, "truncate -s -100 %s", copy);
+	CHECK(system(cmd) == 0);
+	CHECK(eddy_world_load(w, copy, 1) == EDDY_ERR_IO);
+	CHECK_HAS(eddy_world_error(w), "truncated");
+
+	snprintf(cmd, sizeof cmd, "cp %s %s", path, copy);
+	CHECK(system(cmd) == 0);
+	corrupt_byte(copy, 8); /* the version */
+	CHECK(eddy_world_load(w, copy, 1) == EDDY_ERR_IO);
+	CHECK_HAS(eddy_world_error(w), "this eddy reads version 1");
+
+	snprintf(cmd, sizeof cmd, "printf 'hello' > %s", copy);
+	CHECK(system(cmd) == 0);
+	CHECK(eddy_world_load(w, copy, 1) == EDDY_ERR_IO);
+	CHECK_HAS(eddy_world_error(w), "not an eddy checkpoint");
+
+	/* every rejection left the world as it was */
+	CHECK(eddy_world_state_hash(w) == before);
+	CHECK(eddy_world_save(w, "/no/such/dir/x.eddy", 1) == EDDY_ERR_IO);
+	CHECK_HAS(eddy_world_error(w), "cannot create '/no/such/dir/x.eddy.tmp'");
+	eddy_destroy_world(w);
+
+	/* a world with another pipeline does not take it either */
+	eddy_world_def d = eddy_default_world_def();
+	d.seed = 42;
+	eddy_world *other = eddy_create_world(&d, NULL, 0);
+	CHECK(eddy_world_load(other, path, 1) == EDDY_ERR_IO);
+	eddy_destroy_world(other);
+}
+
+static int sh(const char *cmd, char *out, size_t cap)
+{
+	char full[4096];
+	snprintf(full, sizeof full, "%s 2>&1", cmd);
+	FILE *p = popen(full, "r");
+	size_t n = fread(out, 1, cap - 1, p);
+	out[n] = '\0';
+	int st = pclose(p);
+	return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+}
+
+/* The command resumes from the newest good checkpoint, skipping a corrupted
+ * one, and the resumed run ends in the same state as a straight one. */
+static void cli_resume_skips_a_corrupted_checkpoint(void)
+{
+	const char *bin = test_build_dir();
+	char cmd[2048], out[65536], a[8192], b[8192];
+	snprintf(cmd, sizeof cmd, "rm -rf %s/t_run && %s/eddy run scenes/bounce.lua --frames 16 --quiet --stats - "
+	         "| tail -1 | grep -o '\"state_hash\":\"[0-9a-f]*\"'", bin, bin);
+	CHECK(sh(cmd, a, sizeof a) == 0);
+	snprintf(cmd, sizeof cmd, "%s/eddy run scenes/bounce.lua --frames 11 --quiet --checkpoint-every 5 --out %s/t_run",
+	         bin, bin);
+	CHECK(sh(cmd, out, sizeof out) == 0);
+	char newest[512];
+	snprintf(newest, sizeof newest, "%s/t_run/checkpoints/frame-000010.eddy", bin);
+	corrupt_byte(newest, 100);
+	snprintf(cmd, sizeof cmd, "%s/eddy run scenes/bounce.lua --frames 16 --out %s/t_run --resume %s/t_run/checkpoints "
+	         "--stats %s/t_run/s.jsonl", bin, bin, bin, bin);
+	CHECK(sh(cmd, out, sizeof out) == 0);
+	CHECK_HAS(out, "checksum mismatch (corrupted); trying an older one");
+	CHECK_HAS(out, "resuming from");
+	CHECK_HAS(out, "frame-000005.eddy (frame 5");
+	snprintf(cmd, sizeof cmd, "tail -1 %s/t_run/s.jsonl | grep -o '\"state_hash\":\"[0-9a-f]*\"'", bin);
+	CHECK(sh(cmd, b, sizeof b) == 0);
+	CHECK(strlen(a) > 20);
+	CHECK(strcmp(a, b) == 0);
+	/* --set changes the scene: its checkpoints are not taken */
+	snprintf(cmd, sizeof cmd, "%s/eddy run scenes/bounce.lua --frames 16 --set restitution=0.9 --resume %s/t_run/checkpoints",
+	         bin, bin);
+	CHECK(sh(cmd, out, sizeof out) == 1);
+	CHECK_HAS(out, "no valid checkpoint of this scene");
+}
+
+/* SIGINT: the frame in progress finishes, its stats line is whole, a
+ * checkpoint is written and the message says how to resume. */
+static void interrupt_finishes_the_frame(void)
+{
+	char cmd[2048];
+	const char *bin = test_build_dir();
+	snprintf(cmd, sizeof cmd, "rm -rf %s/t_int", bin);
+	CHECK(system(cmd) == 0);
+	char exe[512], outdir[512], stats[512], errpath[512];
+	snprintf(exe, sizeof exe, "%s/eddy", bin);
+	snprintf(outdir, sizeof outdir, "%s/t_int", bin);
+	snprintf(stats, sizeof stats, "%s/t_int.jsonl", bin);
+	snprintf(errpath, sizeof errpath, "%s/t_int.err", bin);
+	pid_t pid = fork();
+	if (pid == 0) {
+		if (!freopen(errpath, "w", stderr))
+			_exit(98);
+		execl(exe, exe, "run", "scenes/bounce.lua", "--frames", "100000", "--set", "spacing=0.008", "--out", outdir,
+		      "--stats", stats, "--quiet", (char *)NULL);
+		_exit(99);
+	}
+	/* interrupt once a frame is out (a sanitizer build is slow to start) */
+	for (int i = 0; i < 600; ++i) {
+		struct timespec ts = {0, 50 * 1000 * 1000};
+		nanosleep(&ts, NULL);
+		FILE *probe = fopen(stats, "r");
+		int c = probe ? fgetc(probe) : EOF;
+		if (probe)
+			fclose(probe);
+		if (c != EOF)
+			break;
+	}
+	kill(pid, SIGINT);
+	int st;
+	waitpid(pid, &st, 0);
+	CHECKF(WIFEXITED(st) && WEXITSTATUS(st) == 128 + SIGINT, "exit status %d", WIFEXITED(st) ? WEXITSTATUS(st) : -1);
+	FILE *f = fopen(errpath, "r");
+	char msg[2048] = "";
+	if (f) {
+		size_t n = fread(msg, 1, sizeof msg - 1, f);
+		msg[n] = '\0';
+		fclose(f);
+	}
+	CHECK_HAS(msg, "eddy: interrupted after frame ");
+	CHECK_HAS(msg, "resume with: eddy run scenes/bounce.lua --resume ");
+	/* every stats line is complete */
+	f = fopen(stats, "r");
+	CHECK(f != NULL);
+	int lines = 0, whole = 0;
+	char line[65536];
+	while (f && fgets(line, sizeof line, f)) {
+		++lines;
+		size_t n = strlen(line);
+		whole += n > 2 && line[0] == '{' && line[n - 2] == '}' && line[n - 1] == '\n';
+	}
+	if (f)
+		fclose(f);
+	CHECK(lines >= 1 && whole == lines);
+	char ck[600];
+	snprintf(ck, sizeof ck, "%s/checkpoints/frame-%06d.eddy", outdir, lines);
+	CHECKF(access(ck, R_OK) == 0, "no checkpoint %s", ck);
+}
+
+void suite_reliability(void)
+{
+	RUN(checkpoint_resume_is_bit_identical);
+	RUN(bad_checkpoints_are_rejected);
+	RUN(cli_resume_skips_a_corrupted_checkpoint);
+	RUN(interrupt_finishes_the_frame);
+}
