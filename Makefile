@@ -27,7 +27,7 @@ LUA_LIBS   := $(shell pkg-config --libs lua5.4 2>/dev/null)
 SRC_C   := $(wildcard src/*.c)
 LUA_C   := $(filter-out lua/main.c,$(wildcard lua/*.c))
 MAIN_C  := lua/main.c
-TEST_C  := $(wildcard tests/test_*.c) tests/runner.c
+TEST_C  := $(wildcard tests/test_*.c) tests/runner.c tests/fuzz_scene.c
 BENCH_C := tests/bench.c
 
 SRC_O   := $(SRC_C:%.c=$(BUILD)/obj/%.o)
@@ -39,7 +39,7 @@ BENCH_O := $(BENCH_C:%.c=$(BUILD)/obj/%.o)
 HEADER  := $(BUILD)/include/eddy.h
 LIBS    := -lm
 
-.PHONY: all run test bench asan install clean deps check-tests
+.PHONY: all run test bench asan fuzz install clean deps check-tests
 .DEFAULT_GOAL := all
 
 all: $(BUILD)/libeddy.a $(BUILD)/libeddy.so $(BUILD)/eddy.so $(BUILD)/eddy $(BUILD)/eddy.pc
@@ -113,6 +113,25 @@ asan: deps
 		all build/asan/tests/run
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1 \
 		EDDY_BUILD=build/asan build/asan/tests/run
+
+# ---- fuzzing (clang libFuzzer): scene loading and stepping ---------------------
+# Everything is rebuilt with clang, libFuzzer, ASan and UBSan. OpenMP is left out
+# (its pragmas are ignored): the fuzzer runs one thread. make fuzz FUZZ_SECONDS=3600
+# for a longer session; crashes land in build/fuzz/ and belong in tests/fuzz/regressions/.
+FUZZ_SECONDS ?= 60
+FUZZ_CFLAGS := -std=c11 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
+               -Wall -Wextra -Wno-unknown-pragmas -DEDDY_LIBFUZZER
+FUZZ_SRC := $(SRC_C) $(LUA_C) tests/fuzz_scene.c
+
+$(BUILD)/fuzz/fuzz_scene: $(FUZZ_SRC) $(HEADER)
+	@mkdir -p $(dir $@)
+	clang $(FUZZ_CFLAGS) -Isrc -Ilua $(LUA_CFLAGS) $(FUZZ_SRC) -o $@ $(LUA_LIBS) -lm
+
+fuzz: deps
+	@$(MAKE) --no-print-directory $(BUILD)/fuzz/fuzz_scene
+	@mkdir -p $(BUILD)/fuzz/corpus
+	$(BUILD)/fuzz/fuzz_scene -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=4096 -timeout=30 \
+		-artifact_prefix=$(BUILD)/fuzz/ -print_final_stats=1 $(BUILD)/fuzz/corpus tests/fuzz/seeds tests/fuzz/regressions
 
 install: all
 	install -d $(DESTDIR)$(PREFIX)/include $(DESTDIR)$(PREFIX)/lib $(DESTDIR)$(PREFIX)/lib/pkgconfig \

@@ -7,7 +7,8 @@
  * speed * direction, placed where it is at the end of the step after the
  * integrator moved it; so the jet has the lattice density and the rate is speed * pi r^2 / h^3.
  * The pour runs over [start, start + duration] and stops early at
- * max_particles (the last disc is cut to hit the total exactly). */
+ * max_particles (the last disc is cut to hit the total exactly).
+ * Time-step limit (emission): dt <= spacing / speed. */
 #include "systems.h"
 
 #include <stdlib.h>
@@ -124,6 +125,17 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	return EDDY_OK;
 }
 
+/* The jet moves one spacing per disc: dt <= spacing / speed keeps it to about
+ * one disc per step at CFL 1, and bounds the discs a single step can emit. */
+static double limit(eddy_world *w, eddy_system *s, const char **reason)
+{
+	const emit_nozzle *e = s->data;
+	*reason = "emission";
+	const bool over = eddy_world_time(w) >= e->def.start + e->def.duration ||
+	                  (e->def.max_particles > 0 && e->run.emitted >= e->def.max_particles);
+	return over ? INFINITY : e->def.spacing / e->def.speed;
+}
+
 static int64_t expected(const eddy_world *w, const eddy_system *s)
 {
 	(void)w;
@@ -157,6 +169,7 @@ const eddy_system_vtable eddy__kind_emit_nozzle = {
 	.name = "emit_nozzle",
 	.state = state,
 	.step = step,
+	.limit = limit,
 	.expected_particles = expected,
 	.sample = sample,
 	.default_writes = nozzle_writes,

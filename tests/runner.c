@@ -56,6 +56,7 @@ int main(int argc, char **argv)
 		{"lua", suite_lua},
 		{"cli", suite_cli},
 		{"reliability", suite_reliability},
+		{"fuzz", suite_fuzz},
 		/* SPH suites */
 
 		/* FLIP suites */

@@ -51,6 +51,7 @@ void suite_physics(void);
 void suite_lua(void);
 void suite_cli(void);
 void suite_reliability(void);
+void suite_fuzz(void);
 /* SPH suites */
 
 /* FLIP suites */
