@@ -599,6 +599,13 @@ static FILE *open_stats(const options *o, int keep_frames)
 	return f;
 }
 
+static void run_check_report(eddy_check_level level, const char *message, void *user)
+{
+	const bool *quiet = user;
+	if (level == EDDY_CHECK_ERROR || (level == EDDY_CHECK_WARNING && !*quiet))
+		fprintf(stderr, "eddy: %s: %s\n", level == EDDY_CHECK_ERROR ? "error" : "warning", message);
+}
+
 static int cmd_run(lua_State *L, const options *o, int world_idx)
 {
 	eddy_world *w = eddy_lua_toworld(L, world_idx);
@@ -615,6 +622,15 @@ static int cmd_run(lua_State *L, const options *o, int world_idx)
 			return code;
 	}
 	const int first = eddy_world_frame(w);
+	/* the preflight of eddy check: a scene that cannot work (one that would
+	 * not fit in memory, say) is refused before it allocates anything */
+	if (first == 0) {
+		bool quiet = o->quiet;
+		int errors = eddy_world_check(w, run_check_report, &quiet);
+		if (errors)
+			return fail(EXIT_RUN, "%s: not run: %d problem%s found by the preflight check (above)", o->scene, errors,
+			            errors == 1 ? "" : "s");
+	}
 
 	FILE *stats = NULL;
 	if (o->stats && !(stats = open_stats(o, first)))

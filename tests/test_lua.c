@@ -9,6 +9,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "bind.h"
 #include "eddy_lua.h"
 
 static lua_State *new_state(void)
@@ -202,6 +203,8 @@ static void animated_collider(void)
 	CHECK_HAS(e, "scenes/t.lua:3: collide_sphere: 'offset (returned by the function)' must be a table of 3 numbers");
 }
 
+static void every_field_rejects_nan_and_inf(void);
+
 void suite_lua(void)
 {
 	RUN(unknown_field_names_file_line_and_fix);
@@ -212,4 +215,56 @@ void suite_lua(void)
 	RUN(on_frame_fields_merge);
 	RUN(params_convert_to_the_default_type);
 	RUN(animated_collider);
+	RUN(every_field_rejects_nan_and_inf);
+}
+
+/* Every number a scene can give, for every def, rejects NaN, and infinity
+ * unless infinity means "no limit" there; the error names the field. */
+static int nan_inf_sweep(const eddy_lua_kind *k, bool is_world)
+{
+	static const char *const inf_ok[] = {"emit_nozzle.duration", "integrate.max_speed", NULL};
+	static const char *const bad[] = {"0/0", "1/0", "-1/0"};
+	int checked = 0;
+	for (const eddy_lua_field *f = k->fields; f->name; ++f) {
+		if (f->type != EDDY_LUA_FLOAT && f->type != EDDY_LUA_DOUBLE && f->type != EDDY_LUA_VEC3 &&
+		    f->type != EDDY_LUA_BOUNDS && f->type != EDDY_LUA_OFFSET)
+			continue;
+		for (int b = 0; b < 3; ++b) {
+			char v[96], src[512], qual[96], buf[512];
+			if (f->type == EDDY_LUA_FLOAT || f->type == EDDY_LUA_DOUBLE)
+				snprintf(v, sizeof v, "%s", bad[b]);
+			else if (f->type == EDDY_LUA_BOUNDS)
+				snprintf(v, sizeof v, "{{0, 0, 0}, {1, %s, 1}}", bad[b]);
+			else
+				snprintf(v, sizeof v, "{0.5, %s, 0.5}", bad[b]);
+			snprintf(qual, sizeof qual, "%s.%s", k->name, f->name);
+			bool allowed = false;
+			for (int i = 0; inf_ok[i]; ++i)
+				allowed |= b == 1 && strcmp(inf_ok[i], qual) == 0;
+			if (is_world)
+				snprintf(src, sizeof src, "local eddy = require 'eddy'\nlocal w = eddy.world{ %s = %s }\n", f->name, v);
+			else /* gravity first, so systems that read the acceleration are in order */
+				snprintf(src, sizeof src, HEAD "world:add(eddy.gravity{})\nworld:add(eddy.%s{ %s = %s })\n", k->name,
+				         f->name, v);
+			const char *e = run_fresh(src, buf, sizeof buf);
+			if (allowed) {
+				CHECKF(e == NULL, "%s = %s should be accepted: %s", qual, bad[b], e);
+			} else {
+				char want[64];
+				snprintf(want, sizeof want, "'%s'", f->name);
+				CHECKF(e && strstr(e, want), "%s = %s: expected an error naming %s, got: %s", qual, bad[b], want,
+				       e ? e : "no error");
+			}
+			++checked;
+		}
+	}
+	return checked;
+}
+
+static void every_field_rejects_nan_and_inf(void)
+{
+	int checked = nan_inf_sweep(&eddy_lua_world_kind, true);
+	for (const eddy_lua_kind *k = eddy_lua_core_kinds; k->name; ++k)
+		checked += nan_inf_sweep(k, false);
+	CHECK(checked > 60);
 }

@@ -256,8 +256,25 @@ static void interrupt_finishes_the_frame(void)
 	CHECKF(access(ck, R_OK) == 0, "no checkpoint %s", ck);
 }
 
+/* Hard case 16: a scene too large for the machine is refused up front. */
+static void run_refuses_what_cannot_fit(void)
+{
+	char path[512], cmd[1200], out[4096];
+	snprintf(path, sizeof path, "%s/t_huge.lua", test_build_dir());
+	FILE *f = fopen(path, "w");
+	fputs("local eddy = require 'eddy'\nlocal w = eddy.world{ bounds = {{0,0,0},{10,10,10}} }\n"
+	      "w:add(eddy.emit_box{ min = {0,0,0}, max = {10,10,10}, spacing = 0.01 })\n"
+	      "w:add(eddy.gravity{})\nw:add(eddy.integrate{})\nreturn w\n", f);
+	fclose(f);
+	snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 1", test_build_dir(), path);
+	CHECK(sh(cmd, out, sizeof out) == 1);
+	CHECK_HAS(out, "memory: the scene needs about");
+	CHECK_HAS(out, "not run: 1 problem found by the preflight check");
+}
+
 void suite_reliability(void)
 {
+	RUN(run_refuses_what_cannot_fit);
 	RUN(checkpoint_resume_is_bit_identical);
 	RUN(bad_checkpoints_are_rejected);
 	RUN(cli_resume_skips_a_corrupted_checkpoint);
