@@ -113,6 +113,8 @@ asan: deps
 		all build/asan/tests/run
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1 \
 		EDDY_BUILD=build/asan build/asan/tests/run
+	@echo "asan: a full run of the default scene, leaks checked at exit"
+	ASAN_OPTIONS=detect_leaks=1 build/asan/eddy run scenes/bounce.lua --quiet --out build/asan/out
 
 # ---- fuzzing (clang libFuzzer): scene loading and stepping ---------------------
 # Everything is rebuilt with clang, libFuzzer, ASan and UBSan. OpenMP is left out

@@ -642,12 +642,32 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 		errors++;
 	}
 
+	/* particles per cell: a grid method wants 3 to 12 (VALIDATION.md §A) */
+	if (w->grid_allocated && w->length_scale > 0) {
+		const double ppc = pow(w->def.cell_size / w->length_scale, 3);
+		if (ppc < 3 || ppc > 12) {
+			/* 8 per cell: spacing = cell_size / 2 */
+			reportf(report, user, EDDY_CHECK_WARNING,
+			        "particles per cell: %.1f (cell_size %g m, spacing %g m); 3 to 12 keep the grid resolved, e.g. "
+			        "spacing = %g m",
+			        ppc, w->def.cell_size, (double)w->length_scale, w->def.cell_size / 2);
+		} else {
+			reportf(report, user, EDDY_CHECK_INFO, "particles per cell: %.1f", ppc);
+		}
+	}
+
 	/* time step at the start */
 	const char *reason;
 	double lim = step_limit(w, &reason);
 	double frame_dt = 1.0 / w->def.fps;
 	reportf(report, user, EDDY_CHECK_INFO, "time step: %.3g s at the start, limited by %s (%.0f steps per frame)",
 	        lim, reason, ceil(frame_dt / lim - 1e-9));
+	if (ceil(frame_dt / lim - 1e-9) > w->def.max_steps_per_frame) {
+		reportf(report, user, EDDY_CHECK_ERROR,
+		        "time step: a frame needs %.0f steps, more than max_steps_per_frame = %d; raise it or relax %s",
+		        ceil(frame_dt / lim - 1e-9), w->def.max_steps_per_frame, reason);
+		errors++;
+	}
 	if (lim < w->def.dt_min) {
 		reportf(report, user, EDDY_CHECK_ERROR, "time step: %s allows %.3g s, below dt_min = %.3g s", reason, lim, w->def.dt_min);
 		errors++;

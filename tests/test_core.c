@@ -346,8 +346,49 @@ static void arena_is_plain_memory(void)
 	eddy_destroy_world(w);
 }
 
+typedef struct findings {
+	char text[2048];
+	int errors;
+} findings;
+
+static void collect(eddy_check_level level, const char *message, void *user)
+{
+	findings *f = user;
+	size_t n = strlen(f->text);
+	snprintf(f->text + n, sizeof f->text - n, "%s\n", message);
+	f->errors += level == EDDY_CHECK_ERROR;
+}
+
+static void preflight_findings(void)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.cell_size = 0.1;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def(); /* spacing 0.01 */
+	eddy_add_emit_box(w, &b);
+	const char *writes[] = {"u"};
+	eddy_custom_system_def c = eddy_default_custom_system_def();
+	c.name = "grid_user";
+	c.writes = writes;
+	c.write_count = 1;
+	c.step = noop_step;
+	eddy_add_custom_system(w, &c);
+	eddy_collide_sphere_def s = eddy_default_collide_sphere_def();
+	s.center = (eddy_vec3){0.05f, 0.05f, 0.05f};
+	s.radius = 0.02f;
+	eddy_add_collide_sphere(w, &s);
+	findings f = {"", 0};
+	CHECK(eddy_world_check(w, collect, &f) == 0);
+	CHECK_HAS(f.text, "particles per cell: 1000.0 (cell_size 0.1 m, spacing 0.01 m)");
+	CHECK_HAS(f.text, "e.g. spacing = 0.05 m");
+	CHECK_HAS(f.text, "emit_box: 32 of 1000 particles start inside collide_sphere");
+	CHECK_HAS(f.text, "memory: 1000 particles x 24 bytes");
+	eddy_destroy_world(w);
+}
+
 void suite_core(void)
 {
+	RUN(preflight_findings);
 	RUN(world_def_rejects_bad_values);
 	RUN(absent_systems_allocate_nothing);
 	RUN(order_errors_name_the_fix);
