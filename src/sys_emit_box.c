@@ -30,11 +30,13 @@ eddy_emit_box_def eddy_default_emit_box_def(void)
 	return d;
 }
 
-static int axis_count(float lo, float hi, float h)
+/* Lattice points along one axis, as a double: a huge box over a tiny spacing
+ * must be refused, not overflow an int. */
+static double axis_count(float lo, float hi, float h)
 {
 	/* a hair of tolerance so a box of exactly k spacings gives k, not k - 1 */
 	double n = floor(((double)hi - lo) / h + 1e-6);
-	return n > 0 ? (int)n : 0;
+	return n > 0 ? n : 0;
 }
 
 /* Lattice point k (x fastest), jittered when rng is given. */
@@ -136,22 +138,24 @@ eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def)
 	if (!e)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
 	e->def = *def;
-	e->nx = axis_count(def->min.x, def->max.x, def->spacing);
-	e->ny = axis_count(def->min.y, def->max.y, def->spacing);
-	e->nz = axis_count(def->min.z, def->max.z, def->spacing);
-	if ((int64_t)e->nx * e->ny * e->nz == 0) {
+	const double nx = axis_count(def->min.x, def->max.x, def->spacing),
+	             ny = axis_count(def->min.y, def->max.y, def->spacing),
+	             nz = axis_count(def->min.z, def->max.z, def->spacing), count = nx * ny * nz;
+	if (count == 0) {
 		free(e);
 		eddy__fail(w, EDDY_ERR_INVALID,
 		           "%s: the block emits no particles: every side must be at least 'spacing' = %g m long", sys,
 		           (double)def->spacing);
 		return EDDY_NULL_SYSTEM;
 	}
-	const long long count = (long long)e->nx * e->ny * e->nz;
-	if (count > (1ll << 31)) {
+	if (count > (double)(1ll << 31)) {
 		free(e);
-		eddy__fail(w, EDDY_ERR_NOMEM, "%s: %lld particles is more than eddy can hold; use a larger spacing", sys, count);
+		eddy__fail(w, EDDY_ERR_NOMEM, "%s: %.3g particles is more than eddy can hold; use a larger spacing", sys, count);
 		return EDDY_NULL_SYSTEM;
 	}
+	e->nx = (int)nx;
+	e->ny = (int)ny;
+	e->nz = (int)nz;
 	eddy_system_id id = eddy__add_system(w, &eddy__kind_emit_box, e, NULL, 0, box_writes, 6);
 	if (eddy_system_valid(w, id))
 		eddy__note_length_scale(w, def->spacing);
