@@ -638,7 +638,9 @@ static int cmd_run(lua_State *L, const options *o, int world_idx)
 	struct sigaction sa;
 	memset(&sa, 0, sizeof sa);
 	sa.sa_handler = on_signal;
-	sa.sa_flags = (int)SA_RESETHAND; /* a second signal ends the process at once */
+	/* a second signal ends the process at once; interrupted writes restart, so
+	 * no frame file is left half written */
+	sa.sa_flags = (int)(SA_RESETHAND | SA_RESTART);
 	sigaction(SIGINT, &sa, NULL);
 	sigaction(SIGTERM, &sa, NULL);
 
