@@ -1,7 +1,7 @@
 /* The eddy command: run, plan and check Lua scenes.
  *
  *   eddy run SCENE.lua [--frames N] [--duration S] [--out DIR] [--threads N]
- *                      [--set K=V ...] [--stats FILE] [--quiet]
+ *                      [--set K=V ...] [--stats FILE] [--quiet] [--video FILE]
  *   eddy plan SCENE.lua [--dot] [--set K=V ...]
  *   eddy check SCENE.lua [--set K=V ...]
  *
@@ -15,6 +15,7 @@
 
 #include <errno.h>
 #include <math.h>
+#include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -34,6 +35,7 @@ typedef struct options {
 	const char *out;
 	int threads;         /* 0: the scene's */
 	const char *stats;
+	const char *video;   /* --video FILE: the rendered frames through ffmpeg */
 	bool quiet, dot;
 } options;
 
@@ -53,6 +55,7 @@ static const char usage_text[] =
 	"  --set K=V       a scene parameter read with eddy.param(K, default); repeatable\n"
 	"  --stats FILE    per-frame statistics as JSON lines ('-' for stdout)\n"
 	"  --quiet         no progress bar and no summary\n"
+	"  --video FILE    (run) also pipe the rendered frames to ffmpeg, making FILE (e.g. out.mp4)\n"
 	"  --dot           (plan) print the pipeline as a Graphviz graph\n"
 	"  -h, --help      this help\n"
 	"  --version       the version\n";
@@ -111,7 +114,8 @@ static int parse_args(int argc, char **argv, options *o, lua_State *L)
 		} else if (strcmp(a, "--dot") == 0) {
 			o->dot = true;
 		} else if (strcmp(a, "--frames") == 0 || strcmp(a, "--duration") == 0 || strcmp(a, "--out") == 0 ||
-		           strcmp(a, "--threads") == 0 || strcmp(a, "--set") == 0 || strcmp(a, "--stats") == 0) {
+		           strcmp(a, "--threads") == 0 || strcmp(a, "--set") == 0 || strcmp(a, "--stats") == 0 ||
+		           strcmp(a, "--video") == 0) {
 			if (!next)
 				return fail(EXIT_USAGE, "%s needs a value (see eddy --help)", a);
 			++i;
@@ -130,6 +134,8 @@ static int parse_args(int argc, char **argv, options *o, lua_State *L)
 					return fail(EXIT_USAGE, "--threads must be an integer in [1, 256] (got '%s')", next);
 			} else if (strcmp(a, "--stats") == 0) {
 				o->stats = next;
+			} else if (strcmp(a, "--video") == 0) {
+				o->video = next;
 			} else {
 				const char *eq = strchr(next, '=');
 				if (!eq || eq == next)
@@ -450,6 +456,76 @@ static double now_s(void)
 	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
 }
 
+/* ---- --video: the frames the scene renders, piped to ffmpeg -------------- */
+
+/* Whether an executable named name is on PATH. */
+static bool on_path(const char *name)
+{
+	const char *path = getenv("PATH");
+	if (!path)
+		return false;
+	char buf[4096];
+	while (*path) {
+		size_t n = strcspn(path, ":");
+		snprintf(buf, sizeof buf, "%.*s/%s", (int)(n ? n : 1), n ? path : ".", name);
+		if (access(buf, X_OK) == 0)
+			return true;
+		path += n;
+		if (*path == ':')
+			++path;
+	}
+	return false;
+}
+
+/* s in single quotes for sh, with ' written as '\'' */
+static void shell_quote(const char *s, char *out, size_t cap)
+{
+	size_t k = 0;
+	if (cap < 3) {
+		out[0] = '\0';
+		return;
+	}
+	out[k++] = '\'';
+	for (; *s && k + 6 < cap; ++s) {
+		if (*s == '\'') {
+			memcpy(out + k, "'\\''", 4);
+			k += 4;
+		} else {
+			out[k++] = *s;
+		}
+	}
+	out[k++] = '\'';
+	out[k] = '\0';
+}
+
+static FILE *open_video(const char *file, double fps)
+{
+	char q[2048], cmd[4096];
+	shell_quote(file, q, sizeof q);
+	const char *ext = strrchr(file, '.');
+	/* yuv420p: what players expect of H.264 files; even sizes for its chroma */
+	const bool h264 = ext && (strcmp(ext, ".mp4") == 0 || strcmp(ext, ".mov") == 0 || strcmp(ext, ".mkv") == 0);
+	snprintf(cmd, sizeof cmd,
+	         "ffmpeg -hide_banner -loglevel error -y -f image2pipe -c:v png -framerate %g -i - %s %s", fps,
+	         h264 ? "-pix_fmt yuv420p -vf 'pad=ceil(iw/2)*2:ceil(ih/2)*2'" : "", q);
+	return popen(cmd, "w");
+}
+
+/* Copies the PNG file at path into the ffmpeg pipe. */
+static bool send_frame(FILE *pipe, const char *path)
+{
+	FILE *f = fopen(path, "rb");
+	if (!f)
+		return false;
+	char buf[65536];
+	size_t n;
+	bool ok = true;
+	while (ok && (n = fread(buf, 1, sizeof buf, f)) > 0)
+		ok = fwrite(buf, 1, n, pipe) == n;
+	fclose(f);
+	return ok;
+}
+
 static int cmd_run(lua_State *L, const options *o, int world_idx)
 {
 	eddy_world *w = eddy_lua_toworld(L, world_idx);
@@ -464,6 +540,23 @@ static int cmd_run(lua_State *L, const options *o, int world_idx)
 		stats = strcmp(o->stats, "-") == 0 ? stdout : fopen(o->stats, "w");
 		if (!stats)
 			return fail(EXIT_RUN, "cannot write stats file '%s': %s", o->stats, strerror(errno));
+	}
+	FILE *video = NULL;
+	int video_frames = 0;
+	if (o->video) {
+		if (!on_path("ffmpeg")) {
+			if (stats && stats != stdout)
+				fclose(stats);
+			return fail(EXIT_RUN, "--video %s: ffmpeg is not installed (not found on PATH); install it (Debian: "
+			                      "apt-get install ffmpeg) or leave out --video (PNG frames need no ffmpeg)", o->video);
+		}
+		signal(SIGPIPE, SIG_IGN); /* a failing ffmpeg is reported, not fatal */
+		video = open_video(o->video, def->fps);
+		if (!video) {
+			if (stats && stats != stdout)
+				fclose(stats);
+			return fail(EXIT_RUN, "--video %s: cannot start ffmpeg: %s", o->video, strerror(errno));
+		}
 	}
 	const bool bar = !o->quiet && isatty(STDERR_FILENO);
 	const double t0 = now_s();
@@ -489,6 +582,20 @@ static int cmd_run(lua_State *L, const options *o, int world_idx)
 			}
 		}
 		lua_pop(L, 1);
+		if (video) {
+			/* the renderer publishes each image's path in the frame stats */
+			eddy_frame_stats s;
+			eddy_world_frame_stats(w, &s);
+			const eddy_stat_value *img = find_extra(&s, "image");
+			if (img && img->text) {
+				if (!send_frame(video, img->text)) {
+					code = fail(EXIT_RUN, "--video %s: cannot pass frame '%s' to ffmpeg: %s", o->video, img->text,
+					            strerror(errno));
+					break;
+				}
+				video_frames++;
+			}
+		}
 		if (bar)
 			progress(i + 1, frames, eddy_world_time(w), now_s() - t0, eddy_world_steps(w));
 	}
@@ -496,6 +603,13 @@ static int cmd_run(lua_State *L, const options *o, int world_idx)
 		fputc('\n', stderr);
 	if (stats && stats != stdout && fclose(stats) != 0 && code == 0)
 		code = fail(EXIT_RUN, "cannot finish stats file '%s': %s", o->stats, strerror(errno));
+	if (video) {
+		int st = pclose(video);
+		if (code == 0 && video_frames == 0)
+			code = fail(EXIT_RUN, "--video %s: the scene rendered no frames (add eddy.render_points to it)", o->video);
+		else if (code == 0 && st != 0)
+			code = fail(EXIT_RUN, "--video %s: ffmpeg failed (status %d); the PNG frames are on disk", o->video, st);
+	}
 	if (code == 0 && !o->quiet)
 		printf("eddy: %s: %d frames, %.3f s simulated in %.2f s wall (%lld steps, %zu particles)\n", o->scene, frames,
 		       eddy_world_time(w), now_s() - t0, (long long)eddy_world_steps(w), eddy_world_particle_count(w));

@@ -55,5 +55,6 @@ void suite_cli(void);
 /* FLIP suites */
 
 /* renderer suites */
+void suite_render(void);
 
 #endif
