@@ -7,15 +7,16 @@
  * orthographic views, the sphere's centre scale for perspective ones); the
  * fragment shader discards outside the unit disc, builds the sphere normal
  * n = (u, v, sqrt(1 - u^2 - v^2)), moves the fragment to the sphere surface
- * c + r n in eye space and writes that point's depth, so overlapping spheres
- * intersect and occlude correctly; colour = albedo (ambient + diffuse) plus a
- * Blinn-Phong highlight. */
+ * z = z_c + r n_z in eye space and writes that point's depth, so overlapping
+ * spheres intersect and occlude correctly; colour = albedo (ambient + diffuse)
+ * plus a Blinn-Phong highlight. */
 #define _POSIX_C_SOURCE 200809L
 #define GL_GLEXT_PROTOTYPES 1
 #include <GL/osmesa.h>
 #include <GL/gl.h>
 #include <GL/glext.h>
 
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -27,48 +28,51 @@ struct eddy_gl {
 	int width, height;
 	uint8_t *buffer; /* RGBA, bottom row first */
 	GLuint sprite_prog, line_prog;
-	GLint sp_view, sp_proj, sp_radius, sp_half_height, sp_light, sp_ax, sp_ay, sp_az, sp_color;
+	GLint sp_view, sp_proj, sp_radius, sp_half_height, sp_light, sp_halfway, sp_depth_a, sp_depth_b, sp_ortho;
+	GLint sp_ax, sp_ay, sp_az, sp_color;
 	GLint ln_view, ln_proj, ln_color, ln_pos;
 };
 
 static const char sprite_vs[] =
 	"#version 120\n"
 	"attribute float ax, ay, az;\n"
-	"attribute vec3 acolor;\n"
+	"attribute vec4 acolor;\n"
 	"uniform mat4 view, proj;\n"
 	"uniform float radius, half_height;\n"
-	"varying vec3 v_center;\n"
+	"varying float v_z;\n"
 	"varying vec3 v_color;\n"
 	"void main() {\n"
 	"  vec4 e = view * vec4(ax, ay, az, 1.0);\n"
-	"  v_center = e.xyz;\n"
-	"  v_color = acolor;\n"
+	"  v_z = e.z;\n"
+	"  v_color = acolor.rgb;\n"
 	"  vec4 c = proj * e;\n"
 	"  gl_Position = c;\n"
 	"  gl_PointSize = 2.0 * radius * proj[1][1] * half_height / c.w;\n"
 	"}\n";
 
+/* Per fragment only what varies over the sprite: the fragment shader is the
+ * cost at a million particles (writing depth turns off early depth tests), so
+ * the eye direction is taken as the view axis (halfway vector a uniform), the
+ * depth uses only the projection's z row (z_ndc = (a z + b) / w with w = -z,
+ * or 1 when orthographic) and the highlight is s^32 by squaring. */
 static const char sprite_fs[] =
 	"#version 120\n"
-	"uniform mat4 proj;\n"
-	"uniform float radius;\n"
-	"uniform vec3 light;\n"
-	"varying vec3 v_center;\n"
+	"uniform float radius, depth_a, depth_b, ortho;\n"
+	"uniform vec3 light, halfway;\n"
+	"varying float v_z;\n"
 	"varying vec3 v_color;\n"
 	"void main() {\n"
-	"  vec2 p = gl_PointCoord * 2.0 - 1.0;\n"
-	"  p.y = -p.y;\n" /* gl_PointCoord grows downwards */
+	"  vec2 p = gl_PointCoord * vec2(2.0, -2.0) + vec2(-1.0, 1.0);\n" /* y grows downwards */
 	"  float r2 = dot(p, p);\n"
 	"  if (r2 > 1.0) discard;\n"
-	"  vec3 n = vec3(p, sqrt(1.0 - r2));\n"
-	"  vec4 c = proj * vec4(v_center + radius * n, 1.0);\n"
-	"  gl_FragDepth = 0.5 * c.z / c.w + 0.5;\n"
-	"  vec3 toeye = normalize(-(v_center + radius * n));\n"
-	"  if (proj[3][3] > 0.5) toeye = vec3(0.0, 0.0, 1.0);\n" /* orthographic */
+	"  float nz = sqrt(1.0 - r2);\n"
+	"  float z = v_z + radius * nz;\n"
+	"  gl_FragDepth = 0.5 * (depth_a * z + depth_b) / mix(-z, 1.0, ortho) + 0.5;\n"
+	"  vec3 n = vec3(p, nz);\n"
 	"  float diffuse = max(dot(n, light), 0.0);\n"
-	"  float spec = pow(max(dot(n, normalize(light + toeye)), 0.0), 48.0);\n"
-	"  vec3 col = v_color * (0.32 + 0.68 * diffuse) + vec3(0.28 * spec);\n"
-	"  gl_FragColor = vec4(min(col, vec3(1.0)), 1.0);\n"
+	"  float s = max(dot(n, halfway), 0.0);\n"
+	"  s *= s; s *= s; s *= s; s *= s; s *= s;\n"
+	"  gl_FragColor = vec4(min(v_color * (0.32 + 0.68 * diffuse) + vec3(0.28 * s), vec3(1.0)), 1.0);\n"
 	"}\n";
 
 static const char line_vs[] =
@@ -179,6 +183,10 @@ eddy_gl *eddy_gl_create(int width, int height, char *err, size_t cap)
 	g->sp_radius = glGetUniformLocation(g->sprite_prog, "radius");
 	g->sp_half_height = glGetUniformLocation(g->sprite_prog, "half_height");
 	g->sp_light = glGetUniformLocation(g->sprite_prog, "light");
+	g->sp_halfway = glGetUniformLocation(g->sprite_prog, "halfway");
+	g->sp_depth_a = glGetUniformLocation(g->sprite_prog, "depth_a");
+	g->sp_depth_b = glGetUniformLocation(g->sprite_prog, "depth_b");
+	g->sp_ortho = glGetUniformLocation(g->sprite_prog, "ortho");
 	g->sp_ax = glGetAttribLocation(g->sprite_prog, "ax");
 	g->sp_ay = glGetAttribLocation(g->sprite_prog, "ay");
 	g->sp_az = glGetAttribLocation(g->sprite_prog, "az");
@@ -228,6 +236,13 @@ int eddy_gl_draw(eddy_gl *g, const eddy_gl_scene *s, char *err, size_t cap)
 		glUniform1f(g->sp_radius, s->radius);
 		glUniform1f(g->sp_half_height, 0.5f * (float)g->height);
 		glUniform3fv(g->sp_light, 1, s->light);
+		const float h[3] = {s->light[0], s->light[1], s->light[2] + 1.0f};
+		const float hl = sqrtf(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);
+		const float halfway[3] = {h[0] / hl, h[1] / hl, h[2] / hl};
+		glUniform3fv(g->sp_halfway, 1, halfway);
+		glUniform1f(g->sp_depth_a, s->proj[10]);
+		glUniform1f(g->sp_depth_b, s->proj[14]);
+		glUniform1f(g->sp_ortho, s->proj[15]); /* 1 for orthographic, 0 for perspective */
 		/* client-side arrays straight from the world's columns: no interleaving copy */
 		glBindBuffer(GL_ARRAY_BUFFER, 0);
 		const GLint loc[3] = {g->sp_ax, g->sp_ay, g->sp_az};
@@ -237,7 +252,7 @@ int eddy_gl_draw(eddy_gl *g, const eddy_gl_scene *s, char *err, size_t cap)
 			glVertexAttribPointer((GLuint)loc[i], 1, GL_FLOAT, GL_FALSE, 0, col[i]);
 		}
 		glEnableVertexAttribArray((GLuint)g->sp_color);
-		glVertexAttribPointer((GLuint)g->sp_color, 3, GL_UNSIGNED_BYTE, GL_TRUE, 0, s->rgb);
+		glVertexAttribPointer((GLuint)g->sp_color, 4, GL_UNSIGNED_BYTE, GL_TRUE, 0, s->rgb);
 		/* draw in chunks so a count beyond GLsizei still works */
 		for (size_t first = 0; first < s->count;) {
 			size_t n = s->count - first;

@@ -27,7 +27,7 @@ typedef struct eddy_gl_scene {
 	float radius;             /* m */
 	size_t count;             /* particles */
 	const float *x, *y, *z;   /* m, positions, count each */
-	const uint8_t *rgb;       /* colours, 3 bytes per particle */
+	const uint8_t *rgb;       /* colours, RGBA bytes per particle */
 	const eddy_gl_lines *lines;
 	int line_sets;
 } eddy_gl_scene;

@@ -27,7 +27,7 @@ typedef struct renderer {
 	eddy_render_points_def def;
 	eddy_gl *gl;
 	float *values;    /* scratch for derived channels (speed) */
-	uint8_t *rgb;     /* per-particle colours */
+	uint8_t *rgb;     /* per-particle colours, RGBA (4-byte aligned fetches are llvmpipe's fast path) */
 	size_t cap;       /* particles the scratch holds */
 	uint8_t *image;   /* the final RGB image, top row first */
 	float *lines;     /* outline segments, 6 floats each */
@@ -270,7 +270,7 @@ static bool reserve_particles(renderer *r, size_t n)
 	float *v = realloc(r->values, cap * sizeof *v);
 	if (v)
 		r->values = v;
-	uint8_t *c = realloc(r->rgb, cap * 3);
+	uint8_t *c = realloc(r->rgb, cap * 4);
 	if (c)
 		r->rgb = c;
 	if (!v || !c)
@@ -283,10 +283,10 @@ static eddy_status colour_particles(renderer *r, eddy_world *w, size_t n)
 {
 	const eddy_render_points_def *d = &r->def;
 	if (!d->color_by[0]) {
-		const uint8_t c[3] = {(uint8_t)lrintf(d->color.x * 255), (uint8_t)lrintf(d->color.y * 255),
-		                      (uint8_t)lrintf(d->color.z * 255)};
+		const uint8_t c[4] = {(uint8_t)lrintf(d->color.x * 255), (uint8_t)lrintf(d->color.y * 255),
+		                      (uint8_t)lrintf(d->color.z * 255), 255};
 		for (size_t i = 0; i < n; ++i)
-			memcpy(r->rgb + 3 * i, c, 3);
+			memcpy(r->rgb + 4 * i, c, 4);
 		return EDDY_OK;
 	}
 	const float *v = eddy_particle_values(w, d->color_by, r->values, n);
@@ -307,8 +307,10 @@ static eddy_status colour_particles(renderer *r, eddy_world *w, size_t n)
 	}
 	/* a uniform field gets the bottom colour instead of a division by zero */
 	const float inv = hi > lo ? 1.0f / (hi - lo) : 0.0f;
-	for (size_t i = 0; i < n; ++i)
-		eddy_colormap_rgb(d->colormap, (v[i] - lo) * inv, r->rgb + 3 * i);
+	for (size_t i = 0; i < n; ++i) {
+		eddy_colormap_rgb(d->colormap, (v[i] - lo) * inv, r->rgb + 4 * i);
+		r->rgb[4 * i + 3] = 255;
+	}
 	return EDDY_OK;
 }
 

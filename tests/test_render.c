@@ -310,7 +310,7 @@ static uint64_t fnv1a(const unsigned char *p, size_t n)
 
 /* A fixed scene, drawn twice by two renderers: the PNGs decode to the same
  * pixels, whose hash is pinned (Debian 12's Mesa 22.3 llvmpipe). */
-#define PINNED_IMAGE_HASH 0x61b3fe9f40814410ull
+#define PINNED_IMAGE_HASH 0x29d388e13771a6bdull
 
 static uint64_t fixed_scene_hash(const char *name)
 {
