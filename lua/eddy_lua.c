@@ -121,12 +121,20 @@ static lua_Integer integer_field(lua_State *L, const eddy_lua_kind *k, const cha
 	return v;
 }
 
+/* Lua aligns userdata memory for its own types (8 bytes on x86-64), not to
+ * max_align_t's 16: the defs need no more than their doubles and pointers. */
+typedef union def_align {
+	double d;
+	int64_t i;
+	void *p;
+} def_align;
+
 typedef struct lua_def {
 	const eddy_lua_kind *k;
 	bool has_offset;    /* a constant offset in `offset` */
 	eddy_vec3 offset;
 	/* an offset function, if any, is the userdata's user value 1 */
-	max_align_t def[];  /* k->def_size bytes: the C def */
+	def_align def[];    /* k->def_size bytes: the C def */
 } lua_def;
 
 /* Fills d from the table at idx; an `offset` function is left on user value 1
