@@ -116,6 +116,9 @@ bench-render: deps
 
 bench: bench-render
 
+# Mesa's process-wide allocations are not eddy's leaks (see the file)
+asan: export LSAN_OPTIONS = suppressions=$(CURDIR)/tests/lsan_mesa.supp:print_suppressions=0
+
 # ---- end of the renderer block ------------------------------------------------------
 
 # ---- the README's two commands -------------------------------------------------
