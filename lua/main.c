@@ -20,6 +20,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -498,16 +499,19 @@ static void shell_quote(const char *s, char *out, size_t cap)
 	out[k] = '\0';
 }
 
-static FILE *open_video(const char *file, double fps)
+/* ffmpeg's messages go to log (a temporary file), so a failure is still one
+ * line from eddy, quoting ffmpeg's first line. */
+static FILE *open_video(const char *file, double fps, const char *log)
 {
-	char q[2048], cmd[4096];
+	char q[2048], ql[1024], cmd[4096];
 	shell_quote(file, q, sizeof q);
+	shell_quote(log, ql, sizeof ql);
 	const char *ext = strrchr(file, '.');
 	/* yuv420p: what players expect of H.264 files; even sizes for its chroma */
 	const bool h264 = ext && (strcmp(ext, ".mp4") == 0 || strcmp(ext, ".mov") == 0 || strcmp(ext, ".mkv") == 0);
 	snprintf(cmd, sizeof cmd,
-	         "ffmpeg -hide_banner -loglevel error -y -f image2pipe -c:v png -framerate %g -i - %s %s", fps,
-	         h264 ? "-pix_fmt yuv420p -vf 'pad=ceil(iw/2)*2:ceil(ih/2)*2'" : "", q);
+	         "ffmpeg -hide_banner -loglevel error -y -f image2pipe -c:v png -framerate %g -i - %s %s 2>%s", fps,
+	         h264 ? "-pix_fmt yuv420p -vf 'pad=ceil(iw/2)*2:ceil(ih/2)*2'" : "", q, ql);
 	return popen(cmd, "w");
 }
 
@@ -543,6 +547,7 @@ static int cmd_run(lua_State *L, const options *o, int world_idx)
 	}
 	FILE *video = NULL;
 	int video_frames = 0;
+	char video_log[64] = "";
 	if (o->video) {
 		if (!on_path("ffmpeg")) {
 			if (stats && stats != stdout)
@@ -551,7 +556,13 @@ static int cmd_run(lua_State *L, const options *o, int world_idx)
 			                      "apt-get install ffmpeg) or leave out --video (PNG frames need no ffmpeg)", o->video);
 		}
 		signal(SIGPIPE, SIG_IGN); /* a failing ffmpeg is reported, not fatal */
-		video = open_video(o->video, def->fps);
+		snprintf(video_log, sizeof video_log, "/tmp/eddy-ffmpeg-XXXXXX");
+		int fd = mkstemp(video_log);
+		if (fd >= 0)
+			close(fd);
+		else
+			snprintf(video_log, sizeof video_log, "/dev/null");
+		video = open_video(o->video, def->fps, video_log);
 		if (!video) {
 			if (stats && stats != stdout)
 				fclose(stats);
@@ -589,8 +600,13 @@ static int cmd_run(lua_State *L, const options *o, int world_idx)
 			const eddy_stat_value *img = find_extra(&s, "image");
 			if (img && img->text) {
 				if (!send_frame(video, img->text)) {
-					code = fail(EXIT_RUN, "--video %s: cannot pass frame '%s' to ffmpeg: %s", o->video, img->text,
-					            strerror(errno));
+					/* stats texts hold 63 characters: a longer path arrives cut short */
+					if (strlen(img->text) >= 63)
+						code = fail(EXIT_RUN, "--video %s: the frame path '%s...' is too long to pass on (63 "
+						                      "characters at most); use a shorter --out or image path", o->video, img->text);
+					else
+						code = fail(EXIT_RUN, "--video %s: cannot pass frame '%s' to ffmpeg: %s", o->video, img->text,
+						            strerror(errno));
 					break;
 				}
 				video_frames++;
@@ -607,8 +623,20 @@ static int cmd_run(lua_State *L, const options *o, int world_idx)
 		int st = pclose(video);
 		if (code == 0 && video_frames == 0)
 			code = fail(EXIT_RUN, "--video %s: the scene rendered no frames (add eddy.render_points to it)", o->video);
-		else if (code == 0 && st != 0)
-			code = fail(EXIT_RUN, "--video %s: ffmpeg failed (status %d); the PNG frames are on disk", o->video, st);
+		else if (code == 0 && st != 0) {
+			char msg[512] = "";
+			FILE *lf = fopen(video_log, "r");
+			if (lf) {
+				if (!fgets(msg, sizeof msg, lf))
+					msg[0] = '\0';
+				fclose(lf);
+			}
+			msg[strcspn(msg, "\n")] = '\0';
+			code = fail(EXIT_RUN, "--video %s: ffmpeg failed (status %d%s%s); the PNG frames are on disk", o->video,
+			            WIFEXITED(st) ? WEXITSTATUS(st) : st, msg[0] ? ": " : "", msg);
+		}
+		if (strcmp(video_log, "/dev/null") != 0)
+			unlink(video_log);
 	}
 	if (code == 0 && !o->quiet)
 		printf("eddy: %s: %d frames, %.3f s simulated in %.2f s wall (%lld steps, %zu particles)\n", o->scene, frames,
