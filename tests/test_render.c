@@ -383,6 +383,20 @@ static void no_gl_context_is_a_clear_error(void)
 	unsetenv("EDDY_RENDER_FAIL_CONTEXT");
 }
 
+/* An image that cannot be written is EDDY_ERR_IO naming the path. */
+static void unwritable_path_is_an_io_error(void)
+{
+	eddy_world *w = make_world();
+	if (!w)
+		return;
+	eddy_render_points_def d = base_def("x_%d.png");
+	strcpy(d.path, "/proc/eddy-no-such-dir/frame_%d.png");
+	CHECK(eddy_system_valid(w, eddy_add_render_points(w, &d)));
+	CHECK(eddy_world_step_frame(w) == EDDY_ERR_IO);
+	CHECK_HAS(eddy_world_error(w), "/proc/eddy-no-such-dir/frame_1.png");
+	eddy_destroy_world(w);
+}
+
 static void bad_defs_are_rejected(void)
 {
 	eddy_world *w = make_world();
@@ -700,6 +714,7 @@ void suite_render(void)
 	RUN(background_where_nothing_is_drawn);
 	RUN(png_round_trip_and_pinned_hash);
 	RUN(no_gl_context_is_a_clear_error);
+	RUN(unwritable_path_is_an_io_error);
 	RUN(bad_defs_are_rejected);
 	RUN(ply_parses_back);
 	RUN(vtk_parses_back);
