@@ -7,7 +7,8 @@
  * per channel, x y z first, so every PLY reader sees a point cloud.
  * VTK (legacy "# vtk DataFile Version 3.0", BINARY, big-endian as that format
  * requires): POLYDATA with POINTS, one VERTICES cell per point (so ParaView
- * draws them without a Glyph filter) and each channel as POINT_DATA SCALARS. */
+ * draws them without a Glyph filter) and the channels as one POINT_DATA
+ * FIELD with a float array each. */
 #define _POSIX_C_SOURCE 200809L
 #include "render.h"
 
@@ -142,9 +143,13 @@ static eddy_status write_frame(eddy_world *w, int frame, void *user)
 			}
 			ok = fwrite(e->row, 1, (size_t)(p - e->row), f) == (size_t)(p - e->row);
 		}
+		/* a FIELD, not SCALARS: VTK's legacy reader keeps only the first
+		 * SCALARS of a dataset unless asked, but every array of a FIELD */
 		ok = ok && fprintf(f, "\nPOINT_DATA %zu\n", n) > 0;
+		if (nc > 3)
+			ok = ok && fprintf(f, "FIELD channels %zu\n", nc - 3) > 0;
 		for (size_t c = 3; c < nc && ok; ++c) {
-			ok = fprintf(f, "SCALARS %s float 1\nLOOKUP_TABLE default\n", e->names[c]) > 0;
+			ok = fprintf(f, "%s 1 %zu float\n", e->names[c], n) > 0;
 			for (size_t first = 0; first < n && ok; first += CHUNK) {
 				size_t m = n - first < CHUNK ? n - first : CHUNK;
 				unsigned char *p = e->row;

@@ -582,12 +582,15 @@ static void vtk_parses_back(void)
 		CHECK(be_u32(p) == 1 && be_u32(p + 4) == (uint32_t)i);
 	line(&p, end, buf, sizeof buf);
 	CHECK(sscanf(line(&p, end, buf, sizeof buf), "POINT_DATA %ld", &count) == 1 && count == NP);
+	long arrays = 0;
+	CHECK(sscanf(line(&p, end, buf, sizeof buf), "FIELD channels %ld", &arrays) == 1 && arrays == 4);
 	static const char *const names[4] = {"vx", "vy", "vz", "speed"};
 	for (int c = 0; c < 4; ++c) {
 		char name[64] = "";
-		CHECK(sscanf(line(&p, end, buf, sizeof buf), "SCALARS %63s float 1", name) == 1);
-		CHECKF(strcmp(name, names[c]) == 0, "scalars %d named %s", c, name);
-		CHECK(strcmp(line(&p, end, buf, sizeof buf), "LOOKUP_TABLE default") == 0);
+		long comps = 0, tuples = 0;
+		CHECK(sscanf(line(&p, end, buf, sizeof buf), "%63s %ld %ld float", name, &comps, &tuples) == 3 && comps == 1 &&
+		      tuples == NP);
+		CHECKF(strcmp(name, names[c]) == 0, "array %d named %s", c, name);
 		if (end - p < NP * 4)
 			break;
 		for (int i = 0; i < NP; ++i)
