@@ -423,17 +423,17 @@ typedef struct eddy_render_points_def {
 	eddy_vec3 target;      /* m, the point the camera looks at */
 	eddy_vec3 up;          /* 1, the camera's up direction (not parallel to the view) */
 	float fov;             /* degrees, vertical field of view (perspective), (0, 180) */
-	eddy_projection projection;
+	eddy_projection projection; /* perspective (uses fov) or orthographic (uses ortho_height) */
 	float ortho_height;    /* m, visible height (orthographic); 0 = fit the bounds */
 	eddy_vec3 background;  /* 1, RGB in [0, 1] */
 	float radius;          /* m, particle radius in world units, > 0 */
-	char color_by[32];     /* "speed", a particle column name, or "" for `color` */
+	char color_by[32];     /* "speed" (m/s, derived), a particle column name (its unit), or "" for `color` */
 	eddy_vec3 color;       /* 1, RGB in [0, 1] when color_by is "" */
-	eddy_colormap colormap;
+	eddy_colormap colormap; /* maps color_by's value range to colours */
 	float value_min;       /* unit of color_by, bottom of the colour map; NaN = the frame's minimum */
 	float value_max;       /* unit of color_by, top of the colour map; NaN = the frame's maximum */
-	bool outline_domain;   /* draw the edges of the world's bounds */
-	bool outline_colliders;/* draw outlines of the box and sphere colliders */
+	bool outline_domain;   /* draw the edges of the world's bounds (lines 1.5 px wide) */
+	bool outline_colliders;/* draw box colliders' edges and spheres' silhouettes (planes: none) */
 	eddy_vec3 outline_color; /* 1, RGB in [0, 1] */
 	char path[512];        /* printf pattern with one integer conversion (the frame), e.g. "out/f_%04d.png" */
 	int every;             /* frames, render every N-th frame, >= 1 */
@@ -452,7 +452,7 @@ typedef enum eddy_export_format {
 } eddy_export_format;
 
 typedef struct eddy_export_particles_def {
-	eddy_export_format format;
+	eddy_export_format format; /* PLY or legacy VTK */
 	char channels[256];    /* particle columns besides x y z, separated by spaces or commas; "speed" is derived */
 	char path[512];        /* printf pattern with one integer conversion (the frame) */
 	int every;             /* frames, export every N-th frame, >= 1 */
@@ -470,11 +470,11 @@ typedef enum eddy_collider_kind {
 } eddy_collider_kind;
 
 typedef struct eddy_collider_shape {
-	eddy_collider_kind kind;
+	eddy_collider_kind kind; /* which of the fields below apply */
 	eddy_vec3 a;           /* m, box min, sphere centre or a point on the plane */
 	eddy_vec3 b;           /* m, box max; 1, the plane's unit normal */
 	float radius;          /* m, sphere radius */
-	bool inside;           /* particles live inside the box or sphere */
+	bool inside;           /* particles live inside the box or sphere (a tank or bowl) */
 } eddy_collider_shape;
 
 /* The collider's current shape (its offset applied). */
