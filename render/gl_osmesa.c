@@ -203,7 +203,10 @@ void eddy_gl_destroy(eddy_gl *g)
 	if (!g)
 		return;
 	if (g->ctx) {
-		/* programs belong to the context and go with it */
+		/* unbind first: a context still current keeps its framebuffer alive;
+		 * programs belong to the context and go with it */
+		if (OSMesaGetCurrentContext() == g->ctx)
+			OSMesaMakeCurrent(NULL, NULL, 0, 0, 0);
 		OSMesaDestroyContext(g->ctx);
 	}
 	free(g->buffer);
