@@ -21,6 +21,7 @@ typedef enum eddy_lua_field_type {
 	EDDY_LUA_BOUNDS, /* two eddy_vec3 (min, max) from {{...}, {...}} */
 	EDDY_LUA_ENUM,   /* int from one of the strings in choices (index) */
 	EDDY_LUA_STRING, /* char[size] from a string */
+	EDDY_LUA_STRING_LIST, /* char[size]: a table of strings (or one string), joined by spaces */
 	EDDY_LUA_OFFSET  /* collider offset: a vector or a function of time */
 } eddy_lua_field_type;
 
@@ -61,6 +62,7 @@ extern const eddy_lua_kind eddy_lua_core_kinds[];
 /* FLIP: eddy_lua_flip_kinds (bind_flip.c) */
 
 /* renderer: eddy_lua_render_kinds (bind_render.c) */
+extern const eddy_lua_kind eddy_lua_render_kinds[];
 
 extern const eddy_lua_kind eddy_lua_world_kind;
 

@@ -41,6 +41,7 @@ static const eddy_lua_kind *const kind_lists[] = {
 	/* FLIP */
 
 	/* renderer */
+	eddy_lua_render_kinds,
 };
 
 /* ---- reading fields ------------------------------------------------------ */
@@ -204,6 +205,41 @@ static void read_fields(lua_State *L, const eddy_lua_kind *k, int idx, void *def
 				luaL_error(L, "%s: '%s' must be a string of at most %d bytes without NUL", k->name, name,
 				           (int)f->size - 1);
 			memcpy(p, s, len + 1);
+			break;
+		}
+		case EDDY_LUA_STRING_LIST: {
+			/* {"a", "b"} (or "a b") -> "a b": C defs hold lists as one string */
+			const int t = lua_absindex(L, -1);
+			const bool is_table = lua_istable(L, t);
+			if (!is_table && lua_type(L, t) != LUA_TSTRING)
+				luaL_error(L, "%s: '%s' must be a list of strings, e.g. {\"vx\", \"vy\"} (got %s)", k->name, name,
+				           luaL_typename(L, t));
+			const lua_Integer n = is_table ? (lua_Integer)lua_rawlen(L, t) : 0;
+			for (lua_Integer i = 1; i <= n; ++i) {
+				if (lua_rawgeti(L, t, i) != LUA_TSTRING)
+					luaL_error(L, "%s: '%s' must be a list of strings (element %d is %s)", k->name, name, (int)i,
+					           luaL_typename(L, -1));
+				lua_pop(L, 1);
+			}
+			luaL_Buffer b;
+			luaL_buffinit(L, &b);
+			if (!is_table) {
+				lua_pushvalue(L, t);
+				luaL_addvalue(&b);
+			}
+			for (lua_Integer i = 1; i <= n; ++i) {
+				if (i > 1)
+					luaL_addchar(&b, ' ');
+				lua_rawgeti(L, t, i);
+				luaL_addvalue(&b);
+			}
+			luaL_pushresult(&b);
+			size_t len;
+			const char *s = lua_tolstring(L, -1, &len);
+			if (len >= f->size || strlen(s) != len)
+				luaL_error(L, "%s: '%s' must join to at most %d bytes without NUL", k->name, name, (int)f->size - 1);
+			memcpy(p, s, len + 1);
+			lua_pop(L, 1);
 			break;
 		}
 		case EDDY_LUA_OFFSET:

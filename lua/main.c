@@ -1,7 +1,7 @@
 /* The eddy command: run, plan and check Lua scenes.
  *
  *   eddy run SCENE.lua [--frames N] [--duration S] [--out DIR] [--threads N]
- *                      [--set K=V ...] [--stats FILE] [--quiet]
+ *                      [--set K=V ...] [--stats FILE] [--quiet] [--video FILE]
  *                      [--checkpoint-every N] [--resume DIR]
  *   eddy plan SCENE.lua [--dot] [--set K=V ...]
  *   eddy check SCENE.lua [--set K=V ...]
@@ -24,6 +24,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -39,6 +40,7 @@ typedef struct options {
 	const char *out;
 	int threads;         /* 0: the scene's */
 	const char *stats;
+	const char *video;   /* --video FILE: the rendered frames through ffmpeg */
 	bool quiet, dot;
 	int checkpoint_every; /* 0: none */
 	const char *resume;   /* checkpoint directory to continue from */
@@ -64,6 +66,7 @@ static const char usage_text[] =
 	"  --quiet         no progress bar and no summary\n"
 	"  --checkpoint-every N  (run) save the full state every N frames in OUT/checkpoints\n"
 	"  --resume DIR    (run) continue from the newest valid checkpoint in DIR\n"
+	"  --video FILE    (run) also pipe the rendered frames to ffmpeg, making FILE (e.g. out.mp4)\n"
 	"  --dot           (plan) print the pipeline as a Graphviz graph\n"
 	"  -h, --help      this help\n"
 	"  --version       the version\n";
@@ -133,7 +136,7 @@ static int parse_args(int argc, char **argv, options *o, lua_State *L)
 			o->dot = true;
 		} else if (strcmp(a, "--frames") == 0 || strcmp(a, "--duration") == 0 || strcmp(a, "--out") == 0 ||
 		           strcmp(a, "--threads") == 0 || strcmp(a, "--set") == 0 || strcmp(a, "--stats") == 0 ||
-		           strcmp(a, "--checkpoint-every") == 0 || strcmp(a, "--resume") == 0) {
+		           strcmp(a, "--checkpoint-every") == 0 || strcmp(a, "--resume") == 0 || strcmp(a, "--video") == 0) {
 			if (!next)
 				return fail(EXIT_USAGE, "%s needs a value (see eddy --help)", a);
 			++i;
@@ -157,6 +160,8 @@ static int parse_args(int argc, char **argv, options *o, lua_State *L)
 					return fail(EXIT_USAGE, "--checkpoint-every must be an integer >= 1 (got '%s')", next);
 			} else if (strcmp(a, "--resume") == 0) {
 				o->resume = next;
+			} else if (strcmp(a, "--video") == 0) {
+				o->video = next;
 			} else {
 				const char *eq = strchr(next, '=');
 				if (!eq || eq == next)
@@ -606,6 +611,79 @@ static void run_check_report(eddy_check_level level, const char *message, void *
 		fprintf(stderr, "eddy: %s: %s\n", level == EDDY_CHECK_ERROR ? "error" : "warning", message);
 }
 
+/* ---- --video: the frames the scene renders, piped to ffmpeg -------------- */
+
+/* Whether an executable named name is on PATH. */
+static bool on_path(const char *name)
+{
+	const char *path = getenv("PATH");
+	if (!path)
+		return false;
+	char buf[4096];
+	while (*path) {
+		size_t n = strcspn(path, ":");
+		snprintf(buf, sizeof buf, "%.*s/%s", (int)(n ? n : 1), n ? path : ".", name);
+		if (access(buf, X_OK) == 0)
+			return true;
+		path += n;
+		if (*path == ':')
+			++path;
+	}
+	return false;
+}
+
+/* s in single quotes for sh, with ' written as '\'' */
+static void shell_quote(const char *s, char *out, size_t cap)
+{
+	size_t k = 0;
+	if (cap < 3) {
+		out[0] = '\0';
+		return;
+	}
+	out[k++] = '\'';
+	for (; *s && k + 6 < cap; ++s) {
+		if (*s == '\'') {
+			memcpy(out + k, "'\\''", 4);
+			k += 4;
+		} else {
+			out[k++] = *s;
+		}
+	}
+	out[k++] = '\'';
+	out[k] = '\0';
+}
+
+/* ffmpeg's messages go to log (a temporary file), so a failure is still one
+ * line from eddy, quoting ffmpeg's first line. */
+static FILE *open_video(const char *file, double fps, const char *log)
+{
+	char q[2048], ql[1024], cmd[4096];
+	shell_quote(file, q, sizeof q);
+	shell_quote(log, ql, sizeof ql);
+	const char *ext = strrchr(file, '.');
+	/* yuv420p: what players expect of H.264 files; even sizes for its chroma */
+	const bool h264 = ext && (strcmp(ext, ".mp4") == 0 || strcmp(ext, ".mov") == 0 || strcmp(ext, ".mkv") == 0);
+	snprintf(cmd, sizeof cmd,
+	         "ffmpeg -hide_banner -loglevel error -y -f image2pipe -c:v png -framerate %g -i - %s %s 2>%s", fps,
+	         h264 ? "-pix_fmt yuv420p -vf 'pad=ceil(iw/2)*2:ceil(ih/2)*2'" : "", q, ql);
+	return popen(cmd, "w");
+}
+
+/* Copies the PNG file at path into the ffmpeg pipe. */
+static bool send_frame(FILE *pipe, const char *path)
+{
+	FILE *f = fopen(path, "rb");
+	if (!f)
+		return false;
+	char buf[65536];
+	size_t n;
+	bool ok = true;
+	while (ok && (n = fread(buf, 1, sizeof buf, f)) > 0)
+		ok = fwrite(buf, 1, n, pipe) == n;
+	fclose(f);
+	return ok;
+}
+
 static int cmd_run(lua_State *L, const options *o, int world_idx)
 {
 	eddy_world *w = eddy_lua_toworld(L, world_idx);
@@ -644,6 +722,30 @@ static int cmd_run(lua_State *L, const options *o, int world_idx)
 	sigaction(SIGINT, &sa, NULL);
 	sigaction(SIGTERM, &sa, NULL);
 
+	FILE *video = NULL;
+	int video_frames = 0;
+	char video_log[64] = "";
+	if (o->video) {
+		if (!on_path("ffmpeg")) {
+			if (stats && stats != stdout)
+				fclose(stats);
+			return fail(EXIT_RUN, "--video %s: ffmpeg is not installed (not found on PATH); install it (Debian: "
+			                      "apt-get install ffmpeg) or leave out --video (PNG frames need no ffmpeg)", o->video);
+		}
+		signal(SIGPIPE, SIG_IGN); /* a failing ffmpeg is reported, not fatal */
+		snprintf(video_log, sizeof video_log, "/tmp/eddy-ffmpeg-XXXXXX");
+		int fd = mkstemp(video_log);
+		if (fd >= 0)
+			close(fd);
+		else
+			snprintf(video_log, sizeof video_log, "/dev/null");
+		video = open_video(o->video, def->fps, video_log);
+		if (!video) {
+			if (stats && stats != stdout)
+				fclose(stats);
+			return fail(EXIT_RUN, "--video %s: cannot start ffmpeg: %s", o->video, strerror(errno));
+		}
+	}
 	const bool bar = !o->quiet && isatty(STDERR_FILENO);
 	const double t0 = now_s();
 	int code = 0;
@@ -667,6 +769,25 @@ static int cmd_run(lua_State *L, const options *o, int world_idx)
 		lua_pop(L, 1);
 		if (code == 0 && o->checkpoint_every && (i + 1) % o->checkpoint_every == 0)
 			code = checkpoint(w, o, ckpt_dir);
+		if (video) {
+			/* the renderer publishes each image's path in the frame stats */
+			eddy_frame_stats s;
+			eddy_world_frame_stats(w, &s);
+			const eddy_stat_value *img = find_extra(&s, "image");
+			if (img && img->text) {
+				if (!send_frame(video, img->text)) {
+					/* stats texts hold 63 characters: a longer path arrives cut short */
+					if (strlen(img->text) >= 63)
+						code = fail(EXIT_RUN, "--video %s: the frame path '%s...' is too long to pass on (63 "
+						                      "characters at most); use a shorter --out or image path", o->video, img->text);
+					else
+						code = fail(EXIT_RUN, "--video %s: cannot pass frame '%s' to ffmpeg: %s", o->video, img->text,
+						            strerror(errno));
+					break;
+				}
+				video_frames++;
+			}
+		}
 		if (bar)
 			progress(i + 1, frames, eddy_world_time(w), now_s() - t0, eddy_world_steps(w));
 		if (code == 0 && stop_signal && i + 1 < frames) {
@@ -683,6 +804,25 @@ static int cmd_run(lua_State *L, const options *o, int world_idx)
 		fputc('\n', stderr);
 	if (stats && stats != stdout && fclose(stats) != 0 && code == 0)
 		code = fail(EXIT_RUN, "cannot finish stats file '%s': %s", o->stats, strerror(errno));
+	if (video) {
+		int st = pclose(video);
+		if (code == 0 && video_frames == 0)
+			code = fail(EXIT_RUN, "--video %s: the scene rendered no frames (add eddy.render_points to it)", o->video);
+		else if (code == 0 && st != 0) {
+			char msg[512] = "";
+			FILE *lf = fopen(video_log, "r");
+			if (lf) {
+				if (!fgets(msg, sizeof msg, lf))
+					msg[0] = '\0';
+				fclose(lf);
+			}
+			msg[strcspn(msg, "\n")] = '\0';
+			code = fail(EXIT_RUN, "--video %s: ffmpeg failed (status %d%s%s); the PNG frames are on disk", o->video,
+			            WIFEXITED(st) ? WEXITSTATUS(st) : st, msg[0] ? ": " : "", msg);
+		}
+		if (strcmp(video_log, "/dev/null") != 0)
+			unlink(video_log);
+	}
 	if (code == 0 && !o->quiet)
 		printf("eddy: %s: %d frames, %.3f s simulated in %.2f s wall (%lld steps, %zu particles)\n", o->scene,
 		       frames - first, eddy_world_time(w), now_s() - t0, (long long)eddy_world_steps(w),

@@ -4,6 +4,7 @@
 -- collider animated from Lua) and is the default scene of `make run`.
 --
 --   build/eddy run scenes/bounce.lua --set spacing=0.01 --stats out/bounce/stats.jsonl
+--   (PNG frames go to out/bounce/frame_0001.png ...; --out DIR moves them)
 
 local eddy = require "eddy"
 
@@ -27,6 +28,13 @@ world:add(eddy.collide_sphere {
 })
 world:add(eddy.collide_box { min = {0, 0, 0}, max = {1, 1, 0.5}, inside = true,
                              restitution = restitution, friction = 0.1 })
+
+-- frames: spheres coloured by speed, into out/bounce/ (or --out DIR)
+world:add(eddy.render_points {
+	width = 960, height = 540, radius = 0.55 * h,
+	color_by = "speed", colormap = "viridis", value_min = 0, value_max = 3,
+	path = eddy.out_dir("out/bounce") .. "/frame_%04d.png",
+})
 
 world:on_frame(function(w, frame)
 	-- the height of the highest particle, as a scene-defined stats field

@@ -415,7 +415,85 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user);
 
 /* ---- renderer and particle exports (render/) ----------------------------- */
 
-/* (renderer defs and add functions go here) */
+/* render_points: draws the particles as lit spheres (OSMesa point sprites, no
+ * GPU or display needed) and writes a PNG at every `every`-th frame time. It
+ * reads x y z and the columns color_by needs; it never runs per substep. The GL
+ * context is created at the first frame: a failure there is the frame's
+ * eddy_status (EDDY_ERR_EXTERNAL) with the reason in eddy_world_error(). */
+typedef enum eddy_projection {
+	EDDY_PROJECTION_PERSPECTIVE = 0,
+	EDDY_PROJECTION_ORTHOGRAPHIC
+} eddy_projection;
+
+typedef enum eddy_colormap {
+	EDDY_COLORMAP_VIRIDIS = 0, /* perceptually uniform, dark blue to yellow */
+	EDDY_COLORMAP_PLASMA,      /* perceptually uniform, dark blue to orange-yellow */
+	EDDY_COLORMAP_GRAY         /* black to white */
+} eddy_colormap;
+
+typedef struct eddy_render_points_def {
+	int width, height;     /* px, image size, [1, 8192] */
+	int supersample;       /* 1, samples per pixel along each axis (box-filtered), [1, 4] */
+	eddy_vec3 eye;         /* m, camera position; eye == target frames the world's bounds */
+	eddy_vec3 target;      /* m, the point the camera looks at */
+	eddy_vec3 up;          /* 1, the camera's up direction (not parallel to the view) */
+	float fov;             /* degrees, vertical field of view (perspective), (0, 180) */
+	eddy_projection projection; /* perspective (uses fov) or orthographic (uses ortho_height) */
+	float ortho_height;    /* m, visible height (orthographic); 0 = fit the bounds */
+	eddy_vec3 background;  /* 1, RGB in [0, 1] */
+	float radius;          /* m, particle radius in world units, > 0 */
+	char color_by[32];     /* "speed" (m/s, derived), a particle column name (its unit), or "" for `color` */
+	eddy_vec3 color;       /* 1, RGB in [0, 1] when color_by is "" */
+	eddy_colormap colormap; /* maps color_by's value range to colours */
+	float value_min;       /* unit of color_by, bottom of the colour map; NaN = the frame's minimum */
+	float value_max;       /* unit of color_by, top of the colour map; NaN = the frame's maximum */
+	bool outline_domain;   /* draw the edges of the world's bounds (lines 1.5 px wide) */
+	bool outline_colliders;/* draw box colliders' edges and spheres' silhouettes (planes: none) */
+	eddy_vec3 outline_color; /* 1, RGB in [0, 1] */
+	char path[512];        /* printf pattern with one integer conversion (the frame), e.g. "out/f_%04d.png" */
+	int every;             /* frames, render every N-th frame, >= 1 */
+} eddy_render_points_def;
+
+eddy_render_points_def eddy_default_render_points_def(void);
+eddy_system_id eddy_add_render_points(eddy_world *w, const eddy_render_points_def *def);
+
+/* export_particles: writes the chosen particle channels to one file per frame:
+ * binary little-endian PLY (vertex elements, float properties) or legacy VTK
+ * (binary big-endian POLYDATA with one vertex per point, the channels as point
+ * data). Positions x y z are always written; channels lists the others. */
+typedef enum eddy_export_format {
+	EDDY_EXPORT_PLY = 0,
+	EDDY_EXPORT_VTK
+} eddy_export_format;
+
+typedef struct eddy_export_particles_def {
+	eddy_export_format format; /* PLY or legacy VTK */
+	char channels[256];    /* particle columns besides x y z, separated by spaces or commas; "speed" is derived */
+	char path[512];        /* printf pattern with one integer conversion (the frame) */
+	int every;             /* frames, export every N-th frame, >= 1 */
+} eddy_export_particles_def;
+
+eddy_export_particles_def eddy_default_export_particles_def(void);
+eddy_system_id eddy_add_export_particles(eddy_world *w, const eddy_export_particles_def *def);
+
+/* What a collider is, for drawing it: kind, pose (offset included) and size. */
+typedef enum eddy_collider_kind {
+	EDDY_COLLIDER_BOX = 0,
+	EDDY_COLLIDER_SPHERE,
+	EDDY_COLLIDER_PLANE,
+	EDDY_COLLIDER_OTHER    /* a collider whose shape has no description */
+} eddy_collider_kind;
+
+typedef struct eddy_collider_shape {
+	eddy_collider_kind kind; /* which of the fields below apply */
+	eddy_vec3 a;           /* m, box min, sphere centre or a point on the plane */
+	eddy_vec3 b;           /* m, box max; 1, the plane's unit normal */
+	float radius;          /* m, sphere radius */
+	bool inside;           /* particles live inside the box or sphere (a tank or bowl) */
+} eddy_collider_shape;
+
+/* The collider's current shape (its offset applied). */
+eddy_status eddy_collider_shape_of(const eddy_world *w, eddy_system_id id, eddy_collider_shape *out);
 
 #ifdef __cplusplus
 }

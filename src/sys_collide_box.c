@@ -126,3 +126,15 @@ eddy_system_id eddy_add_collide_box(eddy_world *w, const eddy_collide_box_def *d
 		b->def = *def;
 	return eddy__add_system(w, &eddy__kind_collide_box, b, box_io, 6, box_io, 6);
 }
+
+/* ---- shape, for drawing (eddy_collider_shape_of) ---- */
+#include "collider_shape.h"
+
+void eddy__shape_collide_box(const eddy_system *s, eddy_collider_shape *out)
+{
+	const collide_box *b = s->data;
+	out->kind = EDDY_COLLIDER_BOX;
+	bounds(b, &out->a, &out->b);
+	out->radius = 0.0f;
+	out->inside = b->def.inside;
+}

@@ -78,3 +78,16 @@ eddy_system_id eddy_add_collide_plane(eddy_world *w, const eddy_collide_plane_de
 	}
 	return eddy__add_system(w, &eddy__kind_collide_plane, b, plane_io, 6, plane_io, 6);
 }
+
+/* ---- shape, for drawing (eddy_collider_shape_of) ---- */
+#include "collider_shape.h"
+
+void eddy__shape_collide_plane(const eddy_system *s, eddy_collider_shape *out)
+{
+	const collide_plane *b = s->data;
+	out->kind = EDDY_COLLIDER_PLANE;
+	out->a = eddy__add3(b->def.point, b->base.motion.offset);
+	out->b = b->def.normal;
+	out->radius = 0.0f;
+	out->inside = false;
+}

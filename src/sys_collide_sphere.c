@@ -85,3 +85,16 @@ eddy_system_id eddy_add_collide_sphere(eddy_world *w, const eddy_collide_sphere_
 		b->def = *def;
 	return eddy__add_system(w, &eddy__kind_collide_sphere, b, sphere_io, 6, sphere_io, 6);
 }
+
+/* ---- shape, for drawing (eddy_collider_shape_of) ---- */
+#include "collider_shape.h"
+
+void eddy__shape_collide_sphere(const eddy_system *s, eddy_collider_shape *out)
+{
+	const collide_sphere *b = s->data;
+	out->kind = EDDY_COLLIDER_SPHERE;
+	out->a = eddy__add3(b->def.center, b->base.motion.offset);
+	out->b = eddy__v3(0, 0, 0);
+	out->radius = b->def.radius;
+	out->inside = b->def.inside;
+}

@@ -62,6 +62,7 @@ int main(int argc, char **argv)
 		/* FLIP suites */
 
 		/* renderer suites */
+		{"render", suite_render},
 	};
 	for (size_t i = 0; i < sizeof suites / sizeof suites[0]; ++i) {
 		if (only && strcmp(only, suites[i].name) != 0)

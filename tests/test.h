@@ -57,5 +57,6 @@ void suite_fuzz(void);
 /* FLIP suites */
 
 /* renderer suites */
+void suite_render(void);
 
 #endif

@@ -1,0 +1,50 @@
+/* Lua descriptions of the renderer's and the exporters' defs (render/):
+ * eddy.render_points{...} and eddy.export_particles{...}. */
+#include "bind.h"
+
+static const char *const projection_choices[] = {"perspective", "orthographic", NULL};
+static const char *const colormap_choices[] = {"viridis", "plasma", "gray", NULL};
+static const char *const format_choices[] = {"ply", "vtk", NULL};
+
+static const eddy_lua_field render_points_fields[] = {
+	EDDY_LUA_FIELD(eddy_render_points_def, width, EDDY_LUA_INT),
+	EDDY_LUA_FIELD(eddy_render_points_def, height, EDDY_LUA_INT),
+	EDDY_LUA_FIELD(eddy_render_points_def, supersample, EDDY_LUA_INT),
+	EDDY_LUA_FIELD(eddy_render_points_def, eye, EDDY_LUA_VEC3),
+	EDDY_LUA_FIELD(eddy_render_points_def, target, EDDY_LUA_VEC3),
+	EDDY_LUA_FIELD(eddy_render_points_def, up, EDDY_LUA_VEC3),
+	EDDY_LUA_FIELD(eddy_render_points_def, fov, EDDY_LUA_FLOAT),
+	EDDY_LUA_ENUM_FIELD(eddy_render_points_def, projection, projection_choices),
+	EDDY_LUA_FIELD(eddy_render_points_def, ortho_height, EDDY_LUA_FLOAT),
+	EDDY_LUA_FIELD(eddy_render_points_def, background, EDDY_LUA_VEC3),
+	EDDY_LUA_FIELD(eddy_render_points_def, radius, EDDY_LUA_FLOAT),
+	EDDY_LUA_STRING_FIELD(eddy_render_points_def, color_by),
+	EDDY_LUA_FIELD(eddy_render_points_def, color, EDDY_LUA_VEC3),
+	EDDY_LUA_ENUM_FIELD(eddy_render_points_def, colormap, colormap_choices),
+	EDDY_LUA_FIELD(eddy_render_points_def, value_min, EDDY_LUA_FLOAT),
+	EDDY_LUA_FIELD(eddy_render_points_def, value_max, EDDY_LUA_FLOAT),
+	EDDY_LUA_FIELD(eddy_render_points_def, outline_domain, EDDY_LUA_BOOL),
+	EDDY_LUA_FIELD(eddy_render_points_def, outline_colliders, EDDY_LUA_BOOL),
+	EDDY_LUA_FIELD(eddy_render_points_def, outline_color, EDDY_LUA_VEC3),
+	EDDY_LUA_STRING_FIELD(eddy_render_points_def, path),
+	EDDY_LUA_FIELD(eddy_render_points_def, every, EDDY_LUA_INT),
+	EDDY_LUA_END,
+};
+
+static const eddy_lua_field export_particles_fields[] = {
+	EDDY_LUA_ENUM_FIELD(eddy_export_particles_def, format, format_choices),
+	{"channels", EDDY_LUA_STRING_LIST, offsetof(eddy_export_particles_def, channels), NULL,
+	 sizeof(((eddy_export_particles_def *)0)->channels)},
+	EDDY_LUA_STRING_FIELD(eddy_export_particles_def, path),
+	EDDY_LUA_FIELD(eddy_export_particles_def, every, EDDY_LUA_INT),
+	EDDY_LUA_END,
+};
+
+EDDY_LUA_KIND_FUNCS(render_points)
+EDDY_LUA_KIND_FUNCS(export_particles)
+
+const eddy_lua_kind eddy_lua_render_kinds[] = {
+	EDDY_LUA_KIND(render_points),
+	EDDY_LUA_KIND(export_particles),
+	EDDY_LUA_KIND_END,
+};

@@ -1,0 +1,64 @@
+/* Internals shared by the renderer's files. render/ sees only eddy.h: these
+ * are its own pieces (GL context, colour maps, PNG writing, file helpers). */
+#ifndef EDDY_RENDER_H
+#define EDDY_RENDER_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "eddy.h"
+
+/* ---- the GL context (gl_osmesa.c, the one file that includes OSMesa) ---- */
+
+typedef struct eddy_gl eddy_gl;
+
+/* A line segment list: 6 floats (two world points, m) per segment. */
+typedef struct eddy_gl_lines {
+	const float *xyz;
+	size_t segments;
+	float rgb[3];       /* 1 */
+	float width;        /* px */
+} eddy_gl_lines;
+
+typedef struct eddy_gl_scene {
+	float view[16], proj[16]; /* column-major, world to eye and eye to clip */
+	float background[3];      /* 1, RGB */
+	float light[3];           /* 1, unit direction to the light in eye space */
+	float radius;             /* m */
+	size_t count;             /* particles */
+	const float *x, *y, *z;   /* m, positions, count each */
+	const uint8_t *rgb;       /* colours, RGBA bytes per particle */
+	const eddy_gl_lines *lines;
+	int line_sets;
+} eddy_gl_scene;
+
+/* NULL with the reason in err when no context can be made. */
+eddy_gl *eddy_gl_create(int width, int height, char *err, size_t cap);
+void eddy_gl_destroy(eddy_gl *g);
+/* Draws the scene; returns 0 or -1 with the reason in err. The pixels are RGBA,
+ * bottom row first, width*height*4 bytes, valid until the next draw. */
+int eddy_gl_draw(eddy_gl *g, const eddy_gl_scene *s, char *err, size_t cap);
+const uint8_t *eddy_gl_pixels(const eddy_gl *g);
+
+/* ---- colour maps (colormap.c) ---- */
+
+/* RGB bytes of t in [0, 1] (clamped; NaN gives the bottom colour). */
+void eddy_colormap_rgb(eddy_colormap map, float t, uint8_t rgb[3]);
+
+/* ---- files (files.c) ---- */
+
+/* Checks a path pattern: exactly one integer conversion (%d, %05d, %i, %u),
+ * '%%' allowed. Returns NULL or what is wrong. */
+const char *eddy_check_frame_pattern(const char *pattern);
+/* Formats the pattern for a frame into out; -1 if it does not fit. */
+int eddy_frame_path(const char *pattern, int frame, char *out, size_t cap);
+/* Creates the parent directories of path (like mkdir -p); 0 or -1 (errno). */
+int eddy_make_parent_dirs(const char *path);
+/* Writes RGB rows (top row first) as PNG; 0 or -1. (png.c: stb_image_write) */
+int eddy_write_png(const char *path, int width, int height, const uint8_t *rgb);
+
+/* Particle values by channel name: "speed" is computed into scratch (count
+ * floats), other names are columns. NULL if the channel is missing. */
+const float *eddy_particle_values(const eddy_world *w, const char *name, float *scratch, size_t count);
+
+#endif

@@ -1,0 +1,28 @@
+/* eddy_collider_shape_of: what a collider looks like, for hosts that draw it
+ * (the renderer's outlines). Signed distance alone cannot give edges cheaply,
+ * so each built-in collider describes its own pose and size. */
+#include "collider_shape.h"
+#include "systems.h"
+
+#include <string.h>
+
+eddy_status eddy_collider_shape_of(const eddy_world *w, eddy_system_id id, eddy_collider_shape *out)
+{
+	if (!w || !out)
+		return EDDY_ERR_INVALID;
+	const eddy_system *s = eddy__system_peek(w, id);
+	if (!s)
+		return EDDY_ERR_STALE;
+	if (!eddy__is_collider(s))
+		return EDDY_ERR_INVALID;
+	memset(out, 0, sizeof *out);
+	if (s->vt == &eddy__kind_collide_box)
+		eddy__shape_collide_box(s, out);
+	else if (s->vt == &eddy__kind_collide_sphere)
+		eddy__shape_collide_sphere(s, out);
+	else if (s->vt == &eddy__kind_collide_plane)
+		eddy__shape_collide_plane(s, out);
+	else
+		out->kind = EDDY_COLLIDER_OTHER;
+	return EDDY_OK;
+}

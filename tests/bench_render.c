@@ -1,0 +1,167 @@
+#define _POSIX_C_SOURCE 200809L
+/* Renderer benchmark (make bench-render, part of make bench): milliseconds per
+ * rendered frame at 1280x720 for 10k, 100k and 1M particles with 1 and 2
+ * llvmpipe threads, as JSON. llvmpipe reads LP_NUM_THREADS once per process,
+ * so each thread count runs in a child process (this program, with --child).
+ *
+ *   bench_render OUT.json            all thread counts, JSON to OUT.json
+ *   bench_render --child [SS]        this process's LP_NUM_THREADS, JSON lines
+ *
+ * A frame is the whole render_points frame hook: colouring by speed, the GL
+ * draw (gl_ms), the downsample and the PNG (png_ms); cpu_ms is the process
+ * CPU time of the frame, all threads. Medians over repeated frames; the first
+ * frame (context and shader set-up) is reported apart. */
+#include <math.h>
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "eddy.h"
+
+/* CPU time of the whole process (all llvmpipe threads): on a shared machine
+ * it moves less with other people's load than wall time does. */
+static double cpu_ms(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+	return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+	double x = *(const double *)a, y = *(const double *)b;
+	return (x > y) - (x < y);
+}
+
+static double median(double *v, int n)
+{
+	qsort(v, (size_t)n, sizeof *v, cmp_double);
+	return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+static double extra(const eddy_frame_stats *s, const char *name)
+{
+	for (int i = 0; i < s->extra_count; ++i)
+		if (strcmp(s->extra[i].name, name) == 0)
+			return s->extra[i].value;
+	return NAN;
+}
+
+/* n particles filling the lower half of the unit box (a resting pool, the
+ * common case), jittered, with random velocities to colour by speed. */
+static int run(int n, int supersample, const char *threads)
+{
+	eddy_world_def wd = eddy_default_world_def();
+	char err[256];
+	eddy_world *w = eddy_create_world(&wd, err, sizeof err);
+	if (!w) {
+		fprintf(stderr, "bench_render: %s\n", err);
+		return 1;
+	}
+	eddy_render_points_def d = eddy_default_render_points_def();
+	d.width = 1280;
+	d.height = 720;
+	d.supersample = supersample;
+	const float spacing = cbrtf(0.5f / (float)n);
+	d.radius = 0.6f * spacing;
+	snprintf(d.path, sizeof d.path, "build/bench_render/frame_%%d.png");
+	if (!eddy_system_valid(w, eddy_add_render_points(w, &d))) {
+		fprintf(stderr, "bench_render: %s\n", eddy_world_error(w));
+		return 1;
+	}
+	eddy_vec3 *p = malloc((size_t)n * sizeof *p), *v = malloc((size_t)n * sizeof *v);
+	uint64_t s = 12345;
+	for (int i = 0; i < n; ++i) {
+		float r[6];
+		for (int k = 0; k < 6; ++k) {
+			s = s * 6364136223846793005ull + 1442695040888963407ull;
+			r[k] = (float)(s >> 40) / (float)(1 << 24);
+		}
+		p[i] = (eddy_vec3){r[0], 0.5f * r[1], r[2]};
+		v[i] = (eddy_vec3){r[3] - 0.5f, r[4] - 0.5f, r[5] - 0.5f};
+	}
+	eddy_world_add_particles(w, (size_t)n, p, v);
+	free(p);
+	free(v);
+	const int frames = n >= 1000000 ? 5 : 9;
+	double frame_ms[16], gl_ms[16], png_ms[16], cpu[16], first = 0;
+	for (int f = 0; f <= frames; ++f) {
+		const double c0 = cpu_ms();
+		eddy_status st_frame = eddy_world_step_frame(w);
+		const double c1 = cpu_ms();
+		if (st_frame != EDDY_OK) {
+			fprintf(stderr, "bench_render: %s\n", eddy_world_error(w));
+			return 1;
+		}
+		eddy_frame_stats st;
+		eddy_world_frame_stats(w, &st);
+		double ms = NAN;
+		for (int k = 0; k < st.system_count; ++k)
+			if (strncmp(st.system_names[k], "render_points", 13) == 0)
+				ms = st.system_ms[k];
+		if (f == 0) {
+			first = ms;
+			continue;
+		}
+		frame_ms[f - 1] = ms;
+		cpu[f - 1] = c1 - c0;
+		gl_ms[f - 1] = extra(&st, "render_ms");
+		png_ms[f - 1] = extra(&st, "png_ms");
+	}
+	printf("{\"particles\":%d,\"width\":1280,\"height\":720,\"supersample\":%d,\"lp_num_threads\":%s,\"frames\":%d,"
+	       "\"frame_ms_median\":%.1f,\"gl_ms_median\":%.1f,\"png_ms_median\":%.1f,\"cpu_ms_median\":%.1f,"
+	       "\"first_frame_ms\":%.1f}\n",
+	       n, supersample, threads, frames, median(frame_ms, frames), median(gl_ms, frames), median(png_ms, frames),
+	       median(cpu, frames), first);
+	fflush(stdout);
+	eddy_destroy_world(w);
+	return 0;
+}
+
+int main(int argc, char **argv)
+{
+	if (argc >= 2 && strcmp(argv[1], "--child") == 0) {
+		const char *t = getenv("LP_NUM_THREADS");
+		const int sizes[3] = {10000, 100000, 1000000};
+		for (int i = 0; i < 3; ++i)
+			if (run(sizes[i], 1, t ? t : "null") != 0)
+				return 1;
+		/* the default supersample 2 (an internal 2560x1440) at the largest size */
+		return run(1000000, 2, t ? t : "null");
+	}
+	const char *out = argc >= 2 ? argv[1] : "build/bench_render.json";
+	FILE *f = fopen(out, "w");
+	if (!f) {
+		perror(out);
+		return 1;
+	}
+	fprintf(f, "{\"benchmark\":\"render_points\",\"unit\":\"ms per frame (median)\",\"results\":[");
+	bool first = true;
+	for (int t = 1; t <= 2; ++t) {
+		char cmd[1024];
+		snprintf(cmd, sizeof cmd, "LP_NUM_THREADS=%d '%s' --child", t, argv[0]);
+		FILE *p = popen(cmd, "r");
+		if (!p) {
+			perror("popen");
+			return 1;
+		}
+		char line[1024];
+		while (fgets(line, sizeof line, p)) {
+			line[strcspn(line, "\n")] = '\0';
+			fprintf(f, "%s\n  %s", first ? "" : ",", line);
+			printf("%s\n", line);
+			first = false;
+		}
+		if (pclose(p) != 0) {
+			fprintf(stderr, "bench_render: the child with LP_NUM_THREADS=%d failed\n", t);
+			return 1;
+		}
+	}
+	fprintf(f, "\n]}\n");
+	fclose(f);
+	printf("bench_render: results in %s\n", out);
+	return 0;
+}
