@@ -199,7 +199,7 @@ static void interrupt_finishes_the_frame(void)
 {
 	char cmd[2048];
 	const char *bin = test_build_dir();
-	snprintf(cmd, sizeof cmd, "rm -rf %s/t_int", bin);
+	snprintf(cmd, sizeof cmd, "rm -rf %s/t_int %s/t_int.jsonl", bin, bin);
 	CHECK(system(cmd) == 0);
 	char exe[512], outdir[512], stats[512], errpath[512];
 	snprintf(exe, sizeof exe, "%s/eddy", bin);
