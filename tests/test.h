@@ -53,6 +53,7 @@ void suite_cli(void);
 /* SPH suites */
 
 /* FLIP suites */
+void suite_flip(void);
 
 /* renderer suites */
 

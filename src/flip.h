@@ -1,0 +1,141 @@
+/* Internals shared by the FLIP systems (sys_flip_*.c): MAC-grid indexing,
+ * trilinear stencils on the staggered grids, and the linear-solver interface
+ * (flip_pcg.c, flip_cholmod.c).
+ *
+ * Grid layout: cell (i, j, k) spans [i, i+1] dx from the world's lower corner;
+ * u lives on x-faces at (i, j+1/2, k+1/2) dx, v on y-faces, w on z-faces.
+ * Cell index i + nx (j + ny k); the x-face array has nx+1 per row, etc. */
+#ifndef EDDY_FLIP_H
+#define EDDY_FLIP_H
+
+#include "systems.h"
+
+static inline size_t flip_cell(const eddy_world *w, int i, int j, int k)
+{
+	return (size_t)i + (size_t)w->nx * ((size_t)j + (size_t)w->ny * (size_t)k);
+}
+static inline size_t flip_fu(const eddy_world *w, int i, int j, int k)
+{
+	return (size_t)i + (size_t)(w->nx + 1) * ((size_t)j + (size_t)w->ny * (size_t)k);
+}
+static inline size_t flip_fv(const eddy_world *w, int i, int j, int k)
+{
+	return (size_t)i + (size_t)w->nx * ((size_t)j + (size_t)(w->ny + 1) * (size_t)k);
+}
+static inline size_t flip_fw(const eddy_world *w, int i, int j, int k)
+{
+	return (size_t)i + (size_t)w->nx * ((size_t)j + (size_t)w->ny * (size_t)k);
+}
+
+/* One axis of a trilinear stencil: samples at (s + off) dx for s in [0, n);
+ * t is the particle coordinate in cells. Outside the sample range the nearest
+ * sample takes the whole weight (constant extension), so weights stay a
+ * partition of unity everywhere. */
+typedef struct flip_axis {
+	int i0, i1;
+	float w1; /* weight of i1; i0 gets 1 - w1 */
+} flip_axis;
+
+static inline flip_axis flip_axis_at(float t, float off, int n)
+{
+	flip_axis a;
+	const float s = t - off;
+	int i = (int)floorf(s);
+	float f = s - (float)i;
+	if (i < 0) {
+		i = 0;
+		f = 0;
+	} else if (i >= n - 1) {
+		i = n - 1;
+		f = 0;
+	}
+	a.i0 = i;
+	a.i1 = i + 1 < n ? i + 1 : i;
+	a.w1 = f;
+	return a;
+}
+
+/* The stencil of a point (in cells from the grid origin) on face grid `axis`
+ * (0 = u, 1 = v, 2 = w): 8 face indices and weights. */
+typedef struct flip_stencil {
+	size_t idx[8];
+	float wt[8];
+} flip_stencil;
+
+static inline void flip_stencil_at(const eddy_world *w, int axis, float gx, float gy, float gz, flip_stencil *st)
+{
+	const int nx = w->nx, ny = w->ny, nz = w->nz;
+	const flip_axis ax = flip_axis_at(gx, axis == 0 ? 0.0f : 0.5f, nx + (axis == 0));
+	const flip_axis ay = flip_axis_at(gy, axis == 1 ? 0.0f : 0.5f, ny + (axis == 1));
+	const flip_axis az = flip_axis_at(gz, axis == 2 ? 0.0f : 0.5f, nz + (axis == 2));
+	const size_t sx = 1, sy = (size_t)(nx + (axis == 0)), sz = sy * (size_t)(ny + (axis == 1));
+	int n = 0;
+	for (int c = 0; c < 2; ++c) {
+		const size_t kk = (size_t)(c ? az.i1 : az.i0) * sz;
+		const float wz = c ? az.w1 : 1.0f - az.w1;
+		for (int b = 0; b < 2; ++b) {
+			const size_t jj = (size_t)(b ? ay.i1 : ay.i0) * sy;
+			const float wy = b ? ay.w1 : 1.0f - ay.w1;
+			st->idx[n] = kk + jj + (size_t)ax.i0 * sx;
+			st->wt[n++] = wz * wy * (1.0f - ax.w1);
+			st->idx[n] = kk + jj + (size_t)ax.i1 * sx;
+			st->wt[n++] = wz * wy * ax.w1;
+		}
+	}
+}
+
+static inline float flip_interp(const float *f, const flip_stencil *st)
+{
+	float s = 0;
+	for (int q = 0; q < 8; ++q)
+		s += st->wt[q] * f[st->idx[q]];
+	return s;
+}
+
+/* Grid velocity at a world position (m), trilinear on each face grid. */
+static inline eddy_vec3 flip_velocity_at(const eddy_world *w, const float *u, const float *v, const float *wv,
+                                         eddy_vec3 p)
+{
+	const float inv = (float)(1.0 / w->def.cell_size);
+	const float gx = (p.x - w->def.bounds_min.x) * inv, gy = (p.y - w->def.bounds_min.y) * inv,
+	            gz = (p.z - w->def.bounds_min.z) * inv;
+	flip_stencil st;
+	eddy_vec3 r;
+	flip_stencil_at(w, 0, gx, gy, gz, &st);
+	r.x = flip_interp(u, &st);
+	flip_stencil_at(w, 1, gx, gy, gz, &st);
+	r.y = flip_interp(v, &st);
+	flip_stencil_at(w, 2, gx, gy, gz, &st);
+	r.z = flip_interp(wv, &st);
+	return r;
+}
+
+/* ---- the Poisson system ---------------------------------------------------
+ * Rows are fluid cells in cell-index order, so a row's -x, -y, -z neighbours
+ * come before it (what MIC(0) and the upper-triangle CSC for CHOLMOD need).
+ * Off-diagonals are -1 between linked rows; nb[6*r + d] is the row across
+ * side d (0 -x, 1 +x, 2 -y, 3 +y, 4 -z, 5 +z) or -1. */
+typedef struct flip_matrix {
+	int n;
+	double *diag; /* n */
+	int *nb;      /* 6 n */
+} flip_matrix;
+
+/* MIC(0)-PCG (flip_pcg.c). Solves A x = b to max|r| <= tol max|b|; x starts
+ * at 0. Scratch comes from the world's arena. Returns false if it did not
+ * converge in max_it; *it and *res (max|r| / max|b|) are always set. */
+bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double *x, double tol, int max_it,
+                    int *it, double *res);
+
+/* CHOLMOD (flip_cholmod.c, the only file including cholmod.h). One solver
+ * per flip_pressure system, keeping the symbolic analysis while the pattern
+ * is unchanged. */
+typedef struct flip_cholmod flip_cholmod;
+flip_cholmod *eddy__flip_cholmod_new(void);
+void eddy__flip_cholmod_free(flip_cholmod *c);
+/* Factorises A (re-analysing only if its pattern changed) and solves A x = b.
+ * On failure returns EDDY_ERR_SOLVER (or NOMEM) with the world error set. */
+eddy_status eddy__flip_cholmod_solve(eddy_world *w, flip_cholmod *c, const flip_matrix *A, const double *b,
+                                     double *x, bool *reanalysed);
+
+#endif
