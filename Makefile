@@ -94,6 +94,12 @@ $(BUILD)/tests/bench: $(BENCH_O) $(BUILD)/libeddy.a
 	@mkdir -p $(dir $@)
 	$(CC) $(LDBASE) $(BENCH_O) $(BUILD)/libeddy.a -o $@ $(LIBS)
 
+# ---- FLIP benchmarks (make bench) ----
+$(BUILD)/tests/bench_flip: $(BUILD)/obj/tests/bench_flip.o $(BUILD)/libeddy.a
+	@mkdir -p $(dir $@)
+	$(CC) $(LDBASE) $< $(BUILD)/libeddy.a -o $@ $(LIBS)
+# ---- end FLIP ----
+
 # ---- the README's two commands -------------------------------------------------
 
 deps:
@@ -112,8 +118,9 @@ check-tests:
 	EDDY_BUILD=$(BUILD) $(BUILD)/tests/run
 
 bench: deps
-	@$(MAKE) --no-print-directory all $(BUILD)/tests/bench
+	@$(MAKE) --no-print-directory all $(BUILD)/tests/bench $(BUILD)/tests/bench_flip
 	$(BUILD)/tests/bench $(BUILD)/bench.json
+	$(BUILD)/tests/bench_flip $(BUILD)/bench_flip.json
 
 asan: deps
 	@$(MAKE) --no-print-directory BUILD=build/asan OPT=-O1 \
