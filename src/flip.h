@@ -40,8 +40,12 @@ static inline flip_axis flip_axis_at(float t, float off, int n)
 {
 	flip_axis a;
 	const float s = t - off;
-	int i = (int)floorf(s);
-	float f = s - (float)i;
+	/* floor without a libm call (baseline x86-64 has no SSE4.1 round); the
+	 * clamp first keeps the int conversion defined for wild coordinates */
+	const float sc = s < -1.0f ? -1.0f : s > (float)n ? (float)n : s;
+	int i = (int)sc;
+	i -= (float)i > sc;
+	float f = sc - (float)i;
 	if (i < 0) {
 		i = 0;
 		f = 0;
