@@ -96,22 +96,58 @@ static inline float flip_interp(const float *f, const flip_stencil *st)
 	return s;
 }
 
-/* Grid velocity at a world position (m), trilinear on each face grid. */
-static inline eddy_vec3 flip_velocity_at(const eddy_world *w, const float *u, const float *v, const float *wv,
-                                         eddy_vec3 p)
+/* Trilinear sample of face grid f (row strides sy, sz) from its three axes. */
+static inline float flip_trilinear(const float *f, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az)
+{
+	const size_t j0 = (size_t)ay.i0 * sy, j1 = (size_t)ay.i1 * sy, k0 = (size_t)az.i0 * sz, k1 = (size_t)az.i1 * sz;
+	const size_t i0 = (size_t)ax.i0, i1 = (size_t)ax.i1;
+	const float c00 = f[k0 + j0 + i0] + ax.w1 * (f[k0 + j0 + i1] - f[k0 + j0 + i0]);
+	const float c01 = f[k0 + j1 + i0] + ax.w1 * (f[k0 + j1 + i1] - f[k0 + j1 + i0]);
+	const float c10 = f[k1 + j0 + i0] + ax.w1 * (f[k1 + j0 + i1] - f[k1 + j0 + i0]);
+	const float c11 = f[k1 + j1 + i0] + ax.w1 * (f[k1 + j1 + i1] - f[k1 + j1 + i0]);
+	const float c0 = c00 + ay.w1 * (c01 - c00), c1 = c10 + ay.w1 * (c11 - c10);
+	return c0 + az.w1 * (c1 - c0);
+}
+
+/* The six axis lookups of a world position (m): per axis, faces at i (f*)
+ * and centres at i + 1/2 (c*); they serve all three face grids. */
+typedef struct flip_axes {
+	flip_axis fx, cx, fy, cy, fz, cz;
+} flip_axes;
+
+static inline flip_axes flip_axes_at(const eddy_world *w, eddy_vec3 p)
 {
 	const float inv = (float)(1.0 / w->def.cell_size);
 	const float gx = (p.x - w->def.bounds_min.x) * inv, gy = (p.y - w->def.bounds_min.y) * inv,
 	            gz = (p.z - w->def.bounds_min.z) * inv;
-	flip_stencil st;
+	flip_axes a;
+	a.fx = flip_axis_at(gx, 0.0f, w->nx + 1);
+	a.cx = flip_axis_at(gx, 0.5f, w->nx);
+	a.fy = flip_axis_at(gy, 0.0f, w->ny + 1);
+	a.cy = flip_axis_at(gy, 0.5f, w->ny);
+	a.fz = flip_axis_at(gz, 0.0f, w->nz + 1);
+	a.cz = flip_axis_at(gz, 0.5f, w->nz);
+	return a;
+}
+
+/* Velocity of the face grids u, v, wv at the position behind a. */
+static inline eddy_vec3 flip_velocity_axes(const eddy_world *w, const float *u, const float *v, const float *wv,
+                                           const flip_axes *a)
+{
+	const size_t nx = (size_t)w->nx, ny = (size_t)w->ny;
 	eddy_vec3 r;
-	flip_stencil_at(w, 0, gx, gy, gz, &st);
-	r.x = flip_interp(u, &st);
-	flip_stencil_at(w, 1, gx, gy, gz, &st);
-	r.y = flip_interp(v, &st);
-	flip_stencil_at(w, 2, gx, gy, gz, &st);
-	r.z = flip_interp(wv, &st);
+	r.x = flip_trilinear(u, nx + 1, (nx + 1) * ny, a->fx, a->cy, a->cz);
+	r.y = flip_trilinear(v, nx, nx * (ny + 1), a->cx, a->fy, a->cz);
+	r.z = flip_trilinear(wv, nx, nx * ny, a->cx, a->cy, a->fz);
 	return r;
+}
+
+/* Grid velocity at a world position (m), trilinear on each face grid. */
+static inline eddy_vec3 flip_velocity_at(const eddy_world *w, const float *u, const float *v, const float *wv,
+                                         eddy_vec3 p)
+{
+	const flip_axes a = flip_axes_at(w, p);
+	return flip_velocity_axes(w, u, v, wv, &a);
 }
 
 /* ---- the Poisson system ---------------------------------------------------

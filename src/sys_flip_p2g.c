@@ -34,19 +34,6 @@ eddy_flip_p2g_def eddy_default_flip_p2g_def(void)
 	return d;
 }
 
-static void splat(const eddy_world *w, int axis, const float *x, const float *y, const float *z, const float *vel,
-                  float *f, float *wsum, float inv, eddy_vec3 o)
-{
-	flip_stencil st;
-	for (size_t i = 0; i < w->n; ++i) {
-		flip_stencil_at(w, axis, (x[i] - o.x) * inv, (y[i] - o.y) * inv, (z[i] - o.z) * inv, &st);
-		for (int q = 0; q < 8; ++q) {
-			f[st.idx[q]] += st.wt[q] * vel[i];
-			wsum[st.idx[q]] += st.wt[q];
-		}
-	}
-}
-
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	const p2g *pg = s->data;
@@ -67,17 +54,34 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const eddy_vec3 o = w->def.bounds_min;
 	float *face[3] = {eddy__col(w, COL_FACE_U), eddy__col(w, COL_FACE_V), eddy__col(w, COL_FACE_W)};
 	float *old[3] = {eddy__col(w, COL_U_OLD), eddy__col(w, COL_V_OLD), eddy__col(w, COL_W_OLD)};
-	const float *vel[3] = {vx, vy, vz};
 	const size_t nf[3] = {(size_t)(nx + 1) * ny * nz, (size_t)nx * (ny + 1) * nz, (size_t)nx * ny * (nz + 1)};
+	float *wsum[3];
 	for (int a = 0; a < 3; ++a) {
-		float *wsum = eddy__arena_alloc(&w->arena, nf[a] * sizeof *wsum);
-		if (!wsum)
+		wsum[a] = eddy__arena_alloc(&w->arena, nf[a] * sizeof *wsum[a]);
+		if (!wsum[a])
 			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_p2g: out of memory for splat weights");
-		memset(wsum, 0, nf[a] * sizeof *wsum);
-		splat(w, a, x, y, z, vel[a], face[a], wsum, inv, o);
+		memset(wsum[a], 0, nf[a] * sizeof *wsum[a]);
+	}
+	/* one pass over the particles, three face grids: the particle columns are
+	 * read once; the scatter is serial so the sums do not depend on threads */
+	for (size_t i = 0; i < w->n; ++i) {
+		const float gx = (x[i] - o.x) * inv, gy = (y[i] - o.y) * inv, gz = (z[i] - o.z) * inv;
+		const float vel[3] = {vx[i], vy[i], vz[i]};
+		for (int a = 0; a < 3; ++a) {
+			flip_stencil st;
+			flip_stencil_at(w, a, gx, gy, gz, &st);
+			float *f = face[a], *ws = wsum[a];
+			for (int q = 0; q < 8; ++q) {
+				f[st.idx[q]] += st.wt[q] * vel[a];
+				ws[st.idx[q]] += st.wt[q];
+			}
+		}
+	}
+	for (int a = 0; a < 3; ++a) {
 		float *f = face[a];
+		const float *ws = wsum[a];
 		for (size_t q = 0; q < nf[a]; ++q)
-			f[q] = wsum[q] > 0 ? f[q] / wsum[q] : 0.0f;
+			f[q] = ws[q] > 0 ? f[q] / ws[q] : 0.0f;
 		memcpy(old[a], f, nf[a] * sizeof *f);
 	}
 
