@@ -107,6 +107,13 @@ eddy_system_id eddy_add_flip_extrapolate(eddy_world *w, const eddy_flip_extrapol
 		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'layers' must be in [1, 64] (got %d)", sys, def->layers);
 		return EDDY_NULL_SYSTEM;
 	}
+	/* RK2 at CFL number C samples up to C + 1 cells past the fluid */
+	const int need = (int)ceil(w->def.cfl) + 1;
+	if (def->layers < need) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'layers' must be >= %d for the world's cfl = %g (got %d)", sys, need,
+		           w->def.cfl, def->layers);
+		return EDDY_NULL_SYSTEM;
+	}
 	extrapolate *ex = malloc(sizeof *ex);
 	if (ex)
 		ex->def = *def;

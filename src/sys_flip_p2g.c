@@ -34,6 +34,32 @@ eddy_flip_p2g_def eddy_default_flip_p2g_def(void)
 	return d;
 }
 
+/* floor and ceil without libm calls (baseline x86-64 has no SSE4.1 round);
+ * the clamp keeps the int conversion defined */
+static inline int floor_int(float t)
+{
+	t = t < -1e8f ? -1e8f : t > 1e8f ? 1e8f : t;
+	const int i = (int)t;
+	return i - ((float)i > t);
+}
+static inline int ceil_int(float t) { return -floor_int(-t); }
+
+/* Adds weight * val and weight to the 8 samples around a point of one face grid. */
+static inline void splat(float *f, float *ws, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az, float val)
+{
+	const size_t j[2] = {(size_t)ay.i0 * sy, (size_t)ay.i1 * sy}, k[2] = {(size_t)az.i0 * sz, (size_t)az.i1 * sz};
+	const float wy[2] = {1.0f - ay.w1, ay.w1}, wz[2] = {1.0f - az.w1, az.w1}, wx0 = 1.0f - ax.w1, wx1 = ax.w1;
+	for (int c = 0; c < 2; ++c)
+		for (int b = 0; b < 2; ++b) {
+			const size_t row = k[c] + j[b];
+			const float wyz = wz[c] * wy[b], w0 = wyz * wx0, w1 = wyz * wx1;
+			f[row + (size_t)ax.i0] += w0 * val;
+			ws[row + (size_t)ax.i0] += w0;
+			f[row + (size_t)ax.i1] += w1 * val;
+			ws[row + (size_t)ax.i1] += w1;
+		}
+}
+
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	const p2g *pg = s->data;
@@ -64,18 +90,12 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	}
 	/* one pass over the particles, three face grids: the particle columns are
 	 * read once; the scatter is serial so the sums do not depend on threads */
+	const size_t sx = (size_t)nx, sy = (size_t)ny;
 	for (size_t i = 0; i < w->n; ++i) {
-		const float gx = (x[i] - o.x) * inv, gy = (y[i] - o.y) * inv, gz = (z[i] - o.z) * inv;
-		const float vel[3] = {vx[i], vy[i], vz[i]};
-		for (int a = 0; a < 3; ++a) {
-			flip_stencil st;
-			flip_stencil_at(w, a, gx, gy, gz, &st);
-			float *f = face[a], *ws = wsum[a];
-			for (int q = 0; q < 8; ++q) {
-				f[st.idx[q]] += st.wt[q] * vel[a];
-				ws[st.idx[q]] += st.wt[q];
-			}
-		}
+		const flip_axes g = flip_axes_at(w, (eddy_vec3){x[i], y[i], z[i]});
+		splat(face[0], wsum[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, vx[i]);
+		splat(face[1], wsum[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, vy[i]);
+		splat(face[2], wsum[2], sx, sx * sy, g.cx, g.cy, g.fz, vz[i]);
 	}
 	for (int a = 0; a < 3; ++a) {
 		float *f = face[a];
@@ -101,9 +121,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		type[c] = EDDY_CELL_FLUID;
 		phi[c] = -1.0f;
 		/* cells whose centre (i + 1/2) is within r of the particle */
-		int i0 = (int)ceilf(gx - r - 0.5f), i1 = (int)floorf(gx + r - 0.5f);
-		int j0 = (int)ceilf(gy - r - 0.5f), j1 = (int)floorf(gy + r - 0.5f);
-		int k0 = (int)ceilf(gz - r - 0.5f), k1 = (int)floorf(gz + r - 0.5f);
+		int i0 = ceil_int(gx - r - 0.5f), i1 = floor_int(gx + r - 0.5f);
+		int j0 = ceil_int(gy - r - 0.5f), j1 = floor_int(gy + r - 0.5f);
+		int k0 = ceil_int(gz - r - 0.5f), k1 = floor_int(gz + r - 0.5f);
 		i0 = i0 < 0 ? 0 : i0, j0 = j0 < 0 ? 0 : j0, k0 = k0 < 0 ? 0 : k0;
 		i1 = i1 >= nx ? nx - 1 : i1, j1 = j1 >= ny ? ny - 1 : j1, k1 = k1 >= nz ? nz - 1 : k1;
 		for (int kk = k0; kk <= k1; ++kk)

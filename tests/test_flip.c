@@ -859,6 +859,10 @@ static void defs_and_order_are_checked(void)
 	pr = eddy_default_flip_pressure_def();
 	CHECK(!eddy_system_valid(w, eddy_add_flip_pressure(w, &pr)));
 	CHECK_HAS(eddy_world_error(w), "add flip_p2g");
+	eddy_flip_extrapolate_def ex = eddy_default_flip_extrapolate_def();
+	ex.layers = 1; /* the world's cfl 0.4 needs 2 */
+	CHECK(!eddy_system_valid(w, eddy_add_flip_extrapolate(w, &ex)));
+	CHECK_HAS(eddy_world_error(w), "'layers' must be >= 2");
 	eddy_destroy_world(w);
 	/* no grid */
 	d.cell_size = 0;
