@@ -759,6 +759,36 @@ static void moving_collider_pushes_fluid(void)
 	eddy_destroy_world(w);
 }
 
+/* Water falling onto a sphere and a tilted plane: solid cells from their
+ * signed distances, particles projected out; none ends inside a solid. */
+static void sphere_and_plane_keep_fluid_out(void)
+{
+	flip_setup s = setup_default();
+	s.h = 0.04;
+	s.hi = (eddy_vec3){0.8f, 0.8f, 0.16f};
+	s.cfl = 2;
+	eddy_world *w = flip_world(&s);
+	eddy_collide_sphere_def sp = eddy_default_collide_sphere_def();
+	sp.center = (eddy_vec3){0.4f, 0.25f, 0.08f};
+	sp.radius = 0.15f;
+	CHECK(eddy_system_valid(w, eddy_add_collide_sphere(w, &sp)));
+	eddy_collide_plane_def pl = eddy_default_collide_plane_def();
+	pl.point = (eddy_vec3){0, 0.1f, 0};
+	pl.normal = (eddy_vec3){0.3f, 1, 0};
+	CHECK(eddy_system_valid(w, eddy_add_collide_plane(w, &pl)));
+	fill(w, s.h, (eddy_vec3){0.24f, 0.48f, 0}, (eddy_vec3){0.56f, 0.8f, 0.16f}, NULL, (eddy_vec3){0, 0, 0});
+	if (step_frames(w, 30)) {
+		eddy_frame_stats fs;
+		eddy_world_frame_stats(w, &fs);
+		printf("    sphere and plane, 1 s: %zu particles, leaked %zu, max speed %.2f m/s\n", fs.particles, fs.leaked,
+		       fs.max_speed);
+		CHECK(fs.leaked == 0);
+		CHECK(fs.nonfinite == 0);
+		CHECK(fs.max_speed < 5);
+	}
+	eddy_destroy_world(w);
+}
+
 /* A solver failure is an error with the reason, not garbage. */
 static void pcg_failure_is_an_error(void)
 {
@@ -913,6 +943,7 @@ void suite_flip(void)
 	RUN(taylor_green_pic_vs_flip);
 	RUN(thin_features_stay_finite);
 	RUN(moving_collider_pushes_fluid);
+	RUN(sphere_and_plane_keep_fluid_out);
 	RUN(pcg_failure_is_an_error);
 	RUN(threads_do_not_change_results);
 	RUN(reseed_keeps_counts);
