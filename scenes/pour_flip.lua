@@ -24,7 +24,7 @@ world:add(eddy.flip_p2g {})
 world:add(eddy.flip_boundary {})
 world:add(eddy.flip_surface {})
 world:add(eddy.flip_pressure { solver = solver })
-world:add(eddy.flip_extrapolate {})
+world:add(eddy.flip_extrapolate { layers = 4 }) -- CFL 2 + 2
 world:add(eddy.flip_g2p {})
 world:add(eddy.flip_advect {})
 
