@@ -27,6 +27,17 @@ static inline size_t flip_fw(const eddy_world *w, int i, int j, int k)
 	return (size_t)i + (size_t)w->nx * ((size_t)j + (size_t)w->ny * (size_t)k);
 }
 
+/* Index of the cell holding grid coordinate t (in cells), clamped to [0, n). */
+static inline int flip_cell_index(float t, int n)
+{
+	if (!(t >= 0.0f))
+		return 0; /* also NaN */
+	if (t >= (float)n)
+		return n - 1;
+	const int i = (int)t;
+	return i < n ? i : n - 1;
+}
+
 /* One axis of a trilinear stencil: samples at (s + off) dx for s in [0, n);
  * t is the particle coordinate in cells. Outside the sample range the nearest
  * sample takes the whole weight (constant extension), so weights stay a
@@ -41,8 +52,9 @@ static inline flip_axis flip_axis_at(float t, float off, int n)
 	flip_axis a;
 	const float s = t - off;
 	/* floor without a libm call (baseline x86-64 has no SSE4.1 round); the
-	 * clamp first keeps the int conversion defined for wild coordinates */
-	const float sc = s < -1.0f ? -1.0f : s > (float)n ? (float)n : s;
+	 * clamp first keeps the int conversion defined for wild coordinates (NaN
+	 * goes to the low end) */
+	const float sc = !(s >= -1.0f) ? -1.0f : s > (float)n ? (float)n : s;
 	int i = (int)sc;
 	i -= (float)i > sc;
 	float f = sc - (float)i;

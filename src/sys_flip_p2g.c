@@ -38,7 +38,7 @@ eddy_flip_p2g_def eddy_default_flip_p2g_def(void)
  * the clamp keeps the int conversion defined */
 static inline int floor_int(float t)
 {
-	t = t < -1e8f ? -1e8f : t > 1e8f ? 1e8f : t;
+	t = !(t >= -1e8f) ? -1e8f : t > 1e8f ? 1e8f : t;
 	const int i = (int)t;
 	return i - ((float)i > t);
 }
@@ -113,11 +113,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const float r = pg->def.mark_radius, r2 = r * r;
 	for (size_t i = 0; i < w->n; ++i) {
 		const float gx = (x[i] - o.x) * inv, gy = (y[i] - o.y) * inv, gz = (z[i] - o.z) * inv;
-		int ci = (int)gx, cj = (int)gy, ck = (int)gz;
-		ci = ci < 0 ? 0 : ci >= nx ? nx - 1 : ci;
-		cj = cj < 0 ? 0 : cj >= ny ? ny - 1 : cj;
-		ck = ck < 0 ? 0 : ck >= nz ? nz - 1 : ck;
-		const size_t c = flip_cell(w, ci, cj, ck);
+		const size_t c = flip_cell(w, flip_cell_index(gx, nx), flip_cell_index(gy, ny), flip_cell_index(gz, nz));
 		type[c] = EDDY_CELL_FLUID;
 		phi[c] = -1.0f;
 		/* cells whose centre (i + 1/2) is within r of the particle */

@@ -32,11 +32,8 @@ static long cell_of(const eddy_world *w, float x, float y, float z)
 {
 	const float inv = (float)(1.0 / w->def.cell_size);
 	const eddy_vec3 o = w->def.bounds_min;
-	int i = (int)((x - o.x) * inv), j = (int)((y - o.y) * inv), k = (int)((z - o.z) * inv);
-	i = i < 0 ? 0 : i >= w->nx ? w->nx - 1 : i;
-	j = j < 0 ? 0 : j >= w->ny ? w->ny - 1 : j;
-	k = k < 0 ? 0 : k >= w->nz ? w->nz - 1 : k;
-	return (long)flip_cell(w, i, j, k);
+	return (long)flip_cell(w, flip_cell_index((x - o.x) * inv, w->nx), flip_cell_index((y - o.y) * inv, w->ny),
+	                       flip_cell_index((z - o.z) * inv, w->nz));
 }
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
