@@ -32,7 +32,6 @@ enum { MAX_R = 8 };
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
-	(void)ctx;
 	const surface *sf = s->data;
 	const int n[3] = {w->nx, w->ny, w->nz};
 	const size_t stride[3] = {1, (size_t)n[0], (size_t)n[0] * (size_t)n[1]};
@@ -51,23 +50,28 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	for (int a = 0; a < 3; ++a) {
 		const int len = n[a];
 		const size_t st = stride[a];
-		for (size_t c = 0; c < nc; ++c) {
+		const float *in = src;
+		float *out = dst;
+		/* each cell's output depends on the input pass only: same result on any thread count */
+#pragma omp parallel for num_threads(ctx->threads) if (nc > 32768) schedule(static)
+		for (long cl = 0; cl < (long)nc; ++cl) {
+			const size_t c = (size_t)cl;
 			if (type[c] == EDDY_CELL_SOLID) {
-				dst[c] = src[c];
+				out[c] = in[c];
 				continue;
 			}
 			const int pos = (int)((c / st) % (size_t)len);
-			float sum = g[0] * src[c], wsum = g[0];
+			float sum = g[0] * in[c], wsum = g[0];
 			/* outward each way, stopping at a solid: fluid behind a wall is not near */
 			for (int d = 1; d <= r && pos + d < len && type[c + (size_t)d * st] != EDDY_CELL_SOLID; ++d) {
-				sum += g[d] * src[c + (size_t)d * st];
+				sum += g[d] * in[c + (size_t)d * st];
 				wsum += g[d];
 			}
 			for (int d = 1; d <= r && pos - d >= 0 && type[c - (size_t)d * st] != EDDY_CELL_SOLID; ++d) {
-				sum += g[d] * src[c - (size_t)d * st];
+				sum += g[d] * in[c - (size_t)d * st];
 				wsum += g[d];
 			}
-			dst[c] = sum / wsum;
+			out[c] = sum / wsum;
 		}
 		float *t = src;
 		src = dst;
