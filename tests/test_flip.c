@@ -1009,6 +1009,24 @@ static void dam_break_scene_runs_both_solvers(void)
 	}
 }
 
+/* A wrong solver name is a one-line error naming the scene line and the choices. */
+static void scene_rejects_unknown_solver(void)
+{
+	char cmd[512], out[2048];
+	snprintf(cmd, sizeof cmd, "%s/eddy run scenes/dam_break_flip.lua --frames 1 --set solver=lu --quiet 2>&1",
+	         test_build_dir());
+	FILE *f = popen(cmd, "r");
+	CHECK(f != NULL);
+	if (!f)
+		return;
+	size_t n = fread(out, 1, sizeof out - 1, f);
+	out[n] = 0;
+	int st = pclose(f);
+	CHECK(WIFEXITED(st) && WEXITSTATUS(st) != 0);
+	CHECK_HAS(out, "scenes/dam_break_flip.lua:");
+	CHECK_HAS(out, "'solver' must be \"pcg\" or \"cholmod\"");
+}
+
 void suite_flip(void)
 {
 	RUN(poisson_matches_analytic_second_order);
@@ -1030,4 +1048,5 @@ void suite_flip(void)
 	RUN(reseed_keeps_counts);
 	RUN(defs_and_order_are_checked);
 	RUN(dam_break_scene_runs_both_solvers);
+	RUN(scene_rejects_unknown_solver);
 }
