@@ -12,8 +12,9 @@
  *   paper's marker field, smoothed later by flip_surface).
  * Cells holding a particle are always fluid, so a sheet one particle thick
  * stays on the grid (the role of the particle-radius rule r >= sqrt(3)/2 dx).
- * The splat is a serial scatter: summation order is fixed, so results do not
- * depend on the thread count. */
+ * The splat is a serial scatter (no parallel region at all: idle OpenMP
+ * workers would spin against it): summation order is fixed, so results do
+ * not depend on the thread count. */
 #include "flip.h"
 
 #include <stdlib.h>
@@ -67,14 +68,6 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
-	const long n = (long)w->n;
-#pragma omp parallel for num_threads(ctx->threads) if (n > 32768) schedule(static)
-	for (long i = 0; i < n; ++i) {
-		vx[i] += ax[i] * dt;
-		vy[i] += ay[i] * dt;
-		vz[i] += az[i] * dt;
-	}
-
 	const int nx = w->nx, ny = w->ny, nz = w->nz;
 	const float inv = (float)(1.0 / w->def.cell_size);
 	const eddy_vec3 o = w->def.bounds_min;
@@ -92,6 +85,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	 * read once; the scatter is serial so the sums do not depend on threads */
 	const size_t sx = (size_t)nx, sy = (size_t)ny;
 	for (size_t i = 0; i < w->n; ++i) {
+		vx[i] += ax[i] * dt;
+		vy[i] += ay[i] * dt;
+		vz[i] += az[i] * dt;
 		const flip_axes g = flip_axes_at(w, (eddy_vec3){x[i], y[i], z[i]});
 		splat(face[0], wsum[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, vx[i]);
 		splat(face[1], wsum[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, vy[i]);
