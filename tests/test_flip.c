@@ -952,6 +952,33 @@ static void reseed_keeps_counts(void)
 	eddy_destroy_world(w);
 }
 
+/* The particle-radius rule: a particle at a cell centre marks its own cell,
+ * and with mark_radius just over 1 cell also the six face neighbours
+ * (distance 1), not the edge neighbours (distance 1.41). */
+static void mark_radius_marks_neighbours(void)
+{
+	for (int t = 0; t < 2; ++t) {
+		eddy_world_def d = eddy_default_world_def();
+		d.cell_size = 0.1;
+		eddy_world *w = eddy_create_world(&d, NULL, 0);
+		eddy_gravity_def g = eddy_default_gravity_def();
+		eddy_add_gravity(w, &g);
+		eddy_flip_p2g_def p = eddy_default_flip_p2g_def();
+		p.mark_radius = t ? 1.01f : 0.0f; /* just past 1: float rounding of the position */
+		CHECK(eddy_system_valid(w, eddy_add_flip_p2g(w, &p)));
+		const eddy_vec3 pos = {0.55f, 0.55f, 0.55f};
+		CHECK(eddy_world_add_particles(w, 1, &pos, NULL) == EDDY_OK);
+		CHECK(eddy_world_step(w) == EDDY_OK);
+		size_t n;
+		const uint8_t *type = eddy_world_channel_u8(w, "cell_type", &n);
+		int fluid = 0;
+		for (size_t c = 0; c < n; ++c)
+			fluid += type[c] == EDDY_CELL_FLUID;
+		CHECKF(fluid == (t ? 7 : 1), "mark_radius %d: %d fluid cells", t, fluid);
+		eddy_destroy_world(w);
+	}
+}
+
 /* Misuse is rejected with the field named; order errors name the fix. */
 static void defs_and_order_are_checked(void)
 {
@@ -1046,6 +1073,7 @@ void suite_flip(void)
 	RUN(pcg_failure_is_an_error);
 	RUN(threads_do_not_change_results);
 	RUN(reseed_keeps_counts);
+	RUN(mark_radius_marks_neighbours);
 	RUN(defs_and_order_are_checked);
 	RUN(dam_break_scene_runs_both_solvers);
 	RUN(scene_rejects_unknown_solver);
