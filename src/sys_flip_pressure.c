@@ -204,6 +204,10 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			                  "(tolerance %.3g, %d unknowns); raise max_iterations or use solver = \"cholmod\"",
 			                  residual, iterations, ps->def.tolerance, n);
 	} else {
+		/* created at the first solve, not in add: a failed add frees the
+		 * system's data without its destroy hook */
+		if (!ps->chol && !(ps->chol = eddy__flip_cholmod_new()))
+			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: CHOLMOD could not start");
 		bool re = false;
 		eddy_status st = eddy__flip_cholmod_solve(w, ps->chol, &A, b, q, &re);
 		if (st != EDDY_OK)
@@ -328,15 +332,7 @@ eddy_system_id eddy_add_flip_pressure(eddy_world *w, const eddy_flip_pressure_de
 	if (!eddy__check_range(w, sys, "theta_min", def->theta_min, 1e-4, 0.5))
 		return EDDY_NULL_SYSTEM;
 	pressure *ps = calloc(1, sizeof *ps);
-	if (ps) {
+	if (ps)
 		ps->def = *def;
-		if (def->solver == EDDY_FLIP_CHOLMOD) {
-			ps->chol = eddy__flip_cholmod_new();
-			if (!ps->chol) {
-				free(ps);
-				ps = NULL;
-			}
-		}
-	}
 	return eddy__add_system(w, &eddy__kind_flip_pressure, ps, pressure_reads, 5, pressure_writes, 4);
 }
