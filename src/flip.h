@@ -121,32 +121,45 @@ static inline float flip_trilinear(const float *f, size_t sy, size_t sz, flip_ax
 	return c0 + az.w1 * (c1 - c0);
 }
 
+/* The grid's shape copied into locals: particle loops store floats, which
+ * could alias the world's float fields, so reading them through the world
+ * pointer would reload them for every particle. */
+typedef struct flip_grid {
+	int nx, ny, nz;
+	float inv;   /* 1/m, 1 / cell_size */
+	eddy_vec3 o; /* m, grid origin */
+} flip_grid;
+
+static inline flip_grid flip_grid_of(const eddy_world *w)
+{
+	flip_grid g = {w->nx, w->ny, w->nz, (float)(1.0 / w->def.cell_size), w->def.bounds_min};
+	return g;
+}
+
 /* The six axis lookups of a world position (m): per axis, faces at i (f*)
  * and centres at i + 1/2 (c*); they serve all three face grids. */
 typedef struct flip_axes {
 	flip_axis fx, cx, fy, cy, fz, cz;
 } flip_axes;
 
-static inline flip_axes flip_axes_at(const eddy_world *w, eddy_vec3 p)
+static inline flip_axes flip_axes_at(const flip_grid *g, eddy_vec3 p)
 {
-	const float inv = (float)(1.0 / w->def.cell_size);
-	const float gx = (p.x - w->def.bounds_min.x) * inv, gy = (p.y - w->def.bounds_min.y) * inv,
-	            gz = (p.z - w->def.bounds_min.z) * inv;
+	const float gx = (p.x - g->o.x) * g->inv, gy = (p.y - g->o.y) * g->inv, gz = (p.z - g->o.z) * g->inv;
 	flip_axes a;
-	a.fx = flip_axis_at(gx, 0.0f, w->nx + 1);
-	a.cx = flip_axis_at(gx, 0.5f, w->nx);
-	a.fy = flip_axis_at(gy, 0.0f, w->ny + 1);
-	a.cy = flip_axis_at(gy, 0.5f, w->ny);
-	a.fz = flip_axis_at(gz, 0.0f, w->nz + 1);
-	a.cz = flip_axis_at(gz, 0.5f, w->nz);
+	a.fx = flip_axis_at(gx, 0.0f, g->nx + 1);
+	a.cx = flip_axis_at(gx, 0.5f, g->nx);
+	a.fy = flip_axis_at(gy, 0.0f, g->ny + 1);
+	a.cy = flip_axis_at(gy, 0.5f, g->ny);
+	a.fz = flip_axis_at(gz, 0.0f, g->nz + 1);
+	a.cz = flip_axis_at(gz, 0.5f, g->nz);
 	return a;
 }
 
 /* Velocity of the face grids u, v, wv at the position behind a. */
-static inline eddy_vec3 flip_velocity_axes(const eddy_world *w, const float *u, const float *v, const float *wv,
+static inline eddy_vec3 flip_velocity_axes(const flip_grid *g, const float *u, const float *v, const float *wv,
                                            const flip_axes *a)
 {
-	const size_t nx = (size_t)w->nx, ny = (size_t)w->ny;
+	const size_t nx = (size_t)g->nx, ny = (size_t)g->ny;
 	eddy_vec3 r;
 	r.x = flip_trilinear(u, nx + 1, (nx + 1) * ny, a->fx, a->cy, a->cz);
 	r.y = flip_trilinear(v, nx, nx * (ny + 1), a->cx, a->fy, a->cz);
@@ -155,11 +168,11 @@ static inline eddy_vec3 flip_velocity_axes(const eddy_world *w, const float *u, 
 }
 
 /* Grid velocity at a world position (m), trilinear on each face grid. */
-static inline eddy_vec3 flip_velocity_at(const eddy_world *w, const float *u, const float *v, const float *wv,
+static inline eddy_vec3 flip_velocity_at(const flip_grid *g, const float *u, const float *v, const float *wv,
                                          eddy_vec3 p)
 {
-	const flip_axes a = flip_axes_at(w, p);
-	return flip_velocity_axes(w, u, v, wv, &a);
+	const flip_axes a = flip_axes_at(g, p);
+	return flip_velocity_axes(g, u, v, wv, &a);
 }
 
 /* ---- the Poisson system ---------------------------------------------------

@@ -63,12 +63,13 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		if (eddy__is_collider(&w->slots[w->order[q]]))
 			col[nc++] = &w->slots[w->order[q]];
 	const long n = (long)w->n;
+	const flip_grid grid = flip_grid_of(w);
 #pragma omp parallel for num_threads(ctx->threads) if (n > 16384) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		eddy_vec3 p = {x[i], y[i], z[i]};
-		const eddy_vec3 v0 = flip_velocity_at(w, u, v, wv, p);
+		const eddy_vec3 v0 = flip_velocity_at(&grid, u, v, wv, p);
 		const eddy_vec3 pm = {p.x + 0.5f * dt * v0.x, p.y + 0.5f * dt * v0.y, p.z + 0.5f * dt * v0.z};
-		const eddy_vec3 v1 = flip_velocity_at(w, u, v, wv, pm);
+		const eddy_vec3 v1 = flip_velocity_at(&grid, u, v, wv, pm);
 		p = eddy__v3(p.x + dt * v1.x, p.y + dt * v1.y, p.z + dt * v1.z);
 		for (int c = 0; c < nc; ++c)
 			p = push_out(col[c], p, gap, 0.01f * h);

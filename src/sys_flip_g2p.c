@@ -33,12 +33,13 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const float *now[3] = {eddy__col(w, COL_FACE_U), eddy__col(w, COL_FACE_V), eddy__col(w, COL_FACE_W)};
 	const float *old[3] = {eddy__col(w, COL_U_OLD), eddy__col(w, COL_V_OLD), eddy__col(w, COL_W_OLD)};
 	const long n = (long)w->n;
+	const flip_grid grid = flip_grid_of(w);
 #pragma omp parallel for num_threads(ctx->threads) if (n > 16384) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		/* interpolation is linear: I(u - u_old) = I(u) - I(u_old) */
-		const flip_axes ax = flip_axes_at(w, (eddy_vec3){x[i], y[i], z[i]});
-		const eddy_vec3 pic = flip_velocity_axes(w, now[0], now[1], now[2], &ax);
-		const eddy_vec3 before = flip_velocity_axes(w, old[0], old[1], old[2], &ax);
+		const flip_axes ax = flip_axes_at(&grid, (eddy_vec3){x[i], y[i], z[i]});
+		const eddy_vec3 pic = flip_velocity_axes(&grid, now[0], now[1], now[2], &ax);
+		const eddy_vec3 before = flip_velocity_axes(&grid, old[0], old[1], old[2], &ax);
 		vel[0][i] = r * (vel[0][i] + pic.x - before.x) + (1.0f - r) * pic.x;
 		vel[1][i] = r * (vel[1][i] + pic.y - before.y) + (1.0f - r) * pic.y;
 		vel[2][i] = r * (vel[2][i] + pic.z - before.z) + (1.0f - r) * pic.z;

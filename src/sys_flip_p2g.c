@@ -84,11 +84,13 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	/* one pass over the particles, three face grids: the particle columns are
 	 * read once; the scatter is serial so the sums do not depend on threads */
 	const size_t sx = (size_t)nx, sy = (size_t)ny;
-	for (size_t i = 0; i < w->n; ++i) {
+	const flip_grid grid = flip_grid_of(w);
+	const size_t np = w->n;
+	for (size_t i = 0; i < np; ++i) {
 		vx[i] += ax[i] * dt;
 		vy[i] += ay[i] * dt;
 		vz[i] += az[i] * dt;
-		const flip_axes g = flip_axes_at(w, (eddy_vec3){x[i], y[i], z[i]});
+		const flip_axes g = flip_axes_at(&grid, (eddy_vec3){x[i], y[i], z[i]});
 		splat(face[0], wsum[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, vx[i]);
 		splat(face[1], wsum[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, vy[i]);
 		splat(face[2], wsum[2], sx, sx * sy, g.cx, g.cy, g.fz, vz[i]);

@@ -62,6 +62,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		}
 	}
 	const double h = w->def.cell_size;
+	const flip_grid grid = flip_grid_of(w);
 	const eddy_vec3 o = w->def.bounds_min;
 	for (int k = 1; k < nz - 1; ++k)
 		for (int j = 1; j < ny - 1; ++j)
@@ -85,7 +86,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 					const eddy_vec3 p = {(float)(o.x + (i + eddy__rand01(&w->rng)) * h),
 					                     (float)(o.y + (j + eddy__rand01(&w->rng)) * h),
 					                     (float)(o.z + (k + eddy__rand01(&w->rng)) * h)};
-					const eddy_vec3 gv = flip_velocity_at(w, u, v, wv, p);
+					const eddy_vec3 gv = flip_velocity_at(&grid, u, v, wv, p);
 					x[q] = p.x, y[q] = p.y, z[q] = p.z;
 					vx[q] = gv.x, vy[q] = gv.y, vz[q] = gv.z;
 				}
