@@ -60,6 +60,7 @@ extern const eddy_lua_kind eddy_lua_core_kinds[];
 /* SPH: eddy_lua_sph_kinds (bind_sph.c) */
 
 /* FLIP: eddy_lua_flip_kinds (bind_flip.c) */
+extern const eddy_lua_kind eddy_lua_flip_kinds[];
 
 /* renderer: eddy_lua_render_kinds (bind_render.c) */
 extern const eddy_lua_kind eddy_lua_render_kinds[];

@@ -39,6 +39,7 @@ static const eddy_lua_kind *const kind_lists[] = {
 	/* SPH */
 
 	/* FLIP */
+	eddy_lua_flip_kinds,
 
 	/* renderer */
 	eddy_lua_render_kinds,

@@ -81,8 +81,11 @@ static eddy_status grid_setup(eddy_world *w, const eddy_column *c)
 		                  "column '%s' lives on the MAC grid, but the world has no grid: set world 'cell_size' > 0 m",
 		                  c->name);
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
-	const double nx = ceil((hi.x - lo.x) / h - 1e-6), ny = ceil((hi.y - lo.y) / h - 1e-6),
-	             nz = ceil((hi.z - lo.z) / h - 1e-6);
+	/* bounds are floats: 0.55f / 0.00625 is 88.000002 cells, which must not
+	 * round up to a sliver cell past the wall (FLIP puts its walls at the
+	 * grid's sides), hence a tolerance well above float rounding */
+	const double nx = ceil((hi.x - lo.x) / h - 1e-4), ny = ceil((hi.y - lo.y) / h - 1e-4),
+	             nz = ceil((hi.z - lo.z) / h - 1e-4);
 	if (nx * ny * nz > 2e9)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "grid of %.0f x %.0f x %.0f cells is too large; use a larger cell_size", nx, ny, nz);
 	w->nx = nx < 1 ? 1 : (int)nx;

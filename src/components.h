@@ -33,6 +33,10 @@
 	X(FACE_V,    "v",        EDDY_DOMAIN_FACE_Y,  EDDY_F32, EDDY_DERIVED, "m/s") \
 	X(FACE_W,    "w",        EDDY_DOMAIN_FACE_Z,  EDDY_F32, EDDY_DERIVED, "m/s") \
 	/* FLIP grid columns */ \
+	X(U_OLD,     "u_old",    EDDY_DOMAIN_FACE_X,  EDDY_F32, EDDY_DERIVED, "m/s") \
+	X(V_OLD,     "v_old",    EDDY_DOMAIN_FACE_Y,  EDDY_F32, EDDY_DERIVED, "m/s") \
+	X(W_OLD,     "w_old",    EDDY_DOMAIN_FACE_Z,  EDDY_F32, EDDY_DERIVED, "m/s") \
+	X(FLIP_PHI,  "flip_phi", EDDY_DOMAIN_CELL,    EDDY_F32, EDDY_DERIVED, "") \
 	\
 	/* renderer columns */
 

@@ -411,7 +411,89 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user);
 
 /* ---- FLIP (sys_flip_*.c) ------------------------------------------------ */
 
-/* (FLIP defs and add functions go here) */
+/* FLIP on the world's MAC grid (cell_size > 0). A step reads, in pipeline order:
+ *   gravity, flip_p2g, flip_boundary, flip_surface, flip_pressure,
+ *   flip_extrapolate, flip_g2p, flip_advect[, flip_reseed]
+ * Cell types in the "cell_type" column: */
+enum { EDDY_CELL_AIR = 0, EDDY_CELL_FLUID = 1, EDDY_CELL_SOLID = 2 };
+
+/* flip_p2g: particle accelerations applied (v += a dt), then a trilinear splat
+ * of particle velocity onto the three face grids (normalised weights), cells
+ * holding a particle marked fluid, the marker field flip_phi (-1 fluid, +1
+ * empty) and the pre-solve velocity (u_old, v_old, w_old) for the FLIP delta. */
+typedef struct eddy_flip_p2g_def {
+	float mark_radius; /* 1, in cells: a cell whose centre lies within this of a particle is fluid
+	                      too (the cell holding it always is); [0, 1.5] */
+} eddy_flip_p2g_def;
+eddy_flip_p2g_def eddy_default_flip_p2g_def(void);
+eddy_system_id eddy_add_flip_p2g(eddy_world *w, const eddy_flip_p2g_def *def);
+
+/* flip_boundary: the domain's sides and every collider in the pipeline become
+ * solid; faces touching a solid cell carry the solid's normal velocity. */
+typedef struct eddy_flip_boundary_def {
+	float margin; /* m, cells whose centre is closer than this to a collider's solid are solid; >= 0 */
+} eddy_flip_boundary_def;
+eddy_flip_boundary_def eddy_default_flip_boundary_def(void);
+eddy_system_id eddy_add_flip_boundary(eddy_world *w, const eddy_flip_boundary_def *def);
+
+/* flip_surface: the marker field smoothed by a 3D Gaussian (separable, solid
+ * cells excluded); flip_pressure finds the surface at its zero crossing. */
+typedef struct eddy_flip_surface_def {
+	float sigma; /* 1, Gaussian standard deviation in cells; (0, 4] */
+} eddy_flip_surface_def;
+eddy_flip_surface_def eddy_default_flip_surface_def(void);
+eddy_system_id eddy_add_flip_surface(eddy_world *w, const eddy_flip_surface_def *def);
+
+typedef enum eddy_flip_solver {
+	EDDY_FLIP_PCG = 0,  /* MIC(0)-preconditioned conjugate gradient, double precision */
+	EDDY_FLIP_CHOLMOD   /* supernodal sparse Cholesky (CHOLMOD), the exact reference */
+} eddy_flip_solver;
+
+/* flip_pressure: the pressure Poisson equation over fluid cells with
+ * ghost-fluid free-surface conditions, then the velocity update. Publishes
+ * solver, iterations, residual, divergence (max |div u| dt after projection)
+ * and volume. */
+typedef struct eddy_flip_pressure_def {
+	eddy_flip_solver solver;
+	float density;      /* kg/m^3, > 0 */
+	double tolerance;   /* 1, PCG stops at max|r| <= tolerance * max|b|; (0, 1) */
+	int max_iterations; /* 1, PCG cap; failure to converge is an error; >= 1 */
+	float theta_min;    /* 1, lower clamp of the ghost-fluid fraction; [1e-4, 0.5] */
+} eddy_flip_pressure_def;
+eddy_flip_pressure_def eddy_default_flip_pressure_def(void);
+eddy_system_id eddy_add_flip_pressure(eddy_world *w, const eddy_flip_pressure_def *def);
+
+/* flip_extrapolate: face velocities copied outward from faces next to fluid
+ * into the air, layer by layer; solid faces keep their velocity. */
+typedef struct eddy_flip_extrapolate_def {
+	int layers; /* 1, layers of faces filled; at least the CFL number + 1; [1, 64] */
+} eddy_flip_extrapolate_def;
+eddy_flip_extrapolate_def eddy_default_flip_extrapolate_def(void);
+eddy_system_id eddy_add_flip_extrapolate(eddy_world *w, const eddy_flip_extrapolate_def *def);
+
+/* flip_g2p: v = r (v + interp(u - u_old)) + (1 - r) interp(u), r = flip_ratio. */
+typedef struct eddy_flip_g2p_def {
+	float flip_ratio; /* 1, 1 = pure FLIP, 0 = pure PIC; [0, 1] */
+} eddy_flip_g2p_def;
+eddy_flip_g2p_def eddy_default_flip_g2p_def(void);
+eddy_system_id eddy_add_flip_g2p(eddy_world *w, const eddy_flip_g2p_def *def);
+
+/* flip_advect: midpoint (RK2) through the grid velocity; particles that end in
+ * a solid (domain sides, colliders) are projected out. Limit dt <= dx / v. */
+typedef struct eddy_flip_advect_def {
+	float wall_gap; /* 1, in cells: projected particles stop this far from a solid; [0, 0.5] */
+} eddy_flip_advect_def;
+eddy_flip_advect_def eddy_default_flip_advect_def(void);
+eddy_system_id eddy_add_flip_advect(eddy_world *w, const eddy_flip_advect_def *def);
+
+/* flip_reseed: keeps min..max particles in each fluid cell (new ones take the
+ * grid velocity, surplus ones are removed). */
+typedef struct eddy_flip_reseed_def {
+	int min_per_cell; /* 1, >= 1 */
+	int max_per_cell; /* 1, > min_per_cell */
+} eddy_flip_reseed_def;
+eddy_flip_reseed_def eddy_default_flip_reseed_def(void);
+eddy_system_id eddy_add_flip_reseed(eddy_world *w, const eddy_flip_reseed_def *def);
 
 /* ---- renderer and particle exports (render/) ----------------------------- */
 

@@ -17,6 +17,14 @@
 	/* SPH */ \
 	\
 	/* FLIP */ \
+	X(flip_p2g) \
+	X(flip_boundary) \
+	X(flip_surface) \
+	X(flip_pressure) \
+	X(flip_extrapolate) \
+	X(flip_g2p) \
+	X(flip_advect) \
+	X(flip_reseed) \
 	\
 	/* end */
 

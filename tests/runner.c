@@ -60,6 +60,7 @@ int main(int argc, char **argv)
 		/* SPH suites */
 
 		/* FLIP suites */
+		{"flip", suite_flip},
 
 		/* renderer suites */
 		{"render", suite_render},

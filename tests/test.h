@@ -55,6 +55,7 @@ void suite_fuzz(void);
 /* SPH suites */
 
 /* FLIP suites */
+void suite_flip(void);
 
 /* renderer suites */
 void suite_render(void);

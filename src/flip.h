@@ -1,0 +1,206 @@
+/* Internals shared by the FLIP systems (sys_flip_*.c): MAC-grid indexing,
+ * trilinear stencils on the staggered grids, and the linear-solver interface
+ * (flip_pcg.c, flip_cholmod.c).
+ *
+ * Grid layout: cell (i, j, k) spans [i, i+1] dx from the world's lower corner;
+ * u lives on x-faces at (i, j+1/2, k+1/2) dx, v on y-faces, w on z-faces.
+ * Cell index i + nx (j + ny k); the x-face array has nx+1 per row, etc. */
+#ifndef EDDY_FLIP_H
+#define EDDY_FLIP_H
+
+#include "systems.h"
+
+static inline size_t flip_cell(const eddy_world *w, int i, int j, int k)
+{
+	return (size_t)i + (size_t)w->nx * ((size_t)j + (size_t)w->ny * (size_t)k);
+}
+static inline size_t flip_fu(const eddy_world *w, int i, int j, int k)
+{
+	return (size_t)i + (size_t)(w->nx + 1) * ((size_t)j + (size_t)w->ny * (size_t)k);
+}
+static inline size_t flip_fv(const eddy_world *w, int i, int j, int k)
+{
+	return (size_t)i + (size_t)w->nx * ((size_t)j + (size_t)(w->ny + 1) * (size_t)k);
+}
+static inline size_t flip_fw(const eddy_world *w, int i, int j, int k)
+{
+	return (size_t)i + (size_t)w->nx * ((size_t)j + (size_t)w->ny * (size_t)k);
+}
+
+/* Index of the cell holding grid coordinate t (in cells), clamped to [0, n). */
+static inline int flip_cell_index(float t, int n)
+{
+	if (!(t >= 0.0f))
+		return 0; /* also NaN */
+	if (t >= (float)n)
+		return n - 1;
+	const int i = (int)t;
+	return i < n ? i : n - 1;
+}
+
+/* One axis of a trilinear stencil: samples at (s + off) dx for s in [0, n);
+ * t is the particle coordinate in cells. Outside the sample range the nearest
+ * sample takes the whole weight (constant extension), so weights stay a
+ * partition of unity everywhere. */
+typedef struct flip_axis {
+	int i0, i1;
+	float w1; /* weight of i1; i0 gets 1 - w1 */
+} flip_axis;
+
+static inline flip_axis flip_axis_at(float t, float off, int n)
+{
+	flip_axis a;
+	const float s = t - off;
+	/* floor without a libm call (baseline x86-64 has no SSE4.1 round); the
+	 * clamp first keeps the int conversion defined for wild coordinates (NaN
+	 * goes to the low end) */
+	const float sc = !(s >= -1.0f) ? -1.0f : s > (float)n ? (float)n : s;
+	int i = (int)sc;
+	i -= (float)i > sc;
+	float f = sc - (float)i;
+	if (i < 0) {
+		i = 0;
+		f = 0;
+	} else if (i >= n - 1) {
+		i = n - 1;
+		f = 0;
+	}
+	a.i0 = i;
+	a.i1 = i + 1 < n ? i + 1 : i;
+	a.w1 = f;
+	return a;
+}
+
+/* The stencil of a point (in cells from the grid origin) on face grid `axis`
+ * (0 = u, 1 = v, 2 = w): 8 face indices and weights. */
+typedef struct flip_stencil {
+	size_t idx[8];
+	float wt[8];
+} flip_stencil;
+
+static inline void flip_stencil_at(const eddy_world *w, int axis, float gx, float gy, float gz, flip_stencil *st)
+{
+	const int nx = w->nx, ny = w->ny, nz = w->nz;
+	const flip_axis ax = flip_axis_at(gx, axis == 0 ? 0.0f : 0.5f, nx + (axis == 0));
+	const flip_axis ay = flip_axis_at(gy, axis == 1 ? 0.0f : 0.5f, ny + (axis == 1));
+	const flip_axis az = flip_axis_at(gz, axis == 2 ? 0.0f : 0.5f, nz + (axis == 2));
+	const size_t sx = 1, sy = (size_t)(nx + (axis == 0)), sz = sy * (size_t)(ny + (axis == 1));
+	int n = 0;
+	for (int c = 0; c < 2; ++c) {
+		const size_t kk = (size_t)(c ? az.i1 : az.i0) * sz;
+		const float wz = c ? az.w1 : 1.0f - az.w1;
+		for (int b = 0; b < 2; ++b) {
+			const size_t jj = (size_t)(b ? ay.i1 : ay.i0) * sy;
+			const float wy = b ? ay.w1 : 1.0f - ay.w1;
+			st->idx[n] = kk + jj + (size_t)ax.i0 * sx;
+			st->wt[n++] = wz * wy * (1.0f - ax.w1);
+			st->idx[n] = kk + jj + (size_t)ax.i1 * sx;
+			st->wt[n++] = wz * wy * ax.w1;
+		}
+	}
+}
+
+static inline float flip_interp(const float *f, const flip_stencil *st)
+{
+	float s = 0;
+	for (int q = 0; q < 8; ++q)
+		s += st->wt[q] * f[st->idx[q]];
+	return s;
+}
+
+/* Trilinear sample of face grid f (row strides sy, sz) from its three axes. */
+static inline float flip_trilinear(const float *f, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az)
+{
+	const size_t j0 = (size_t)ay.i0 * sy, j1 = (size_t)ay.i1 * sy, k0 = (size_t)az.i0 * sz, k1 = (size_t)az.i1 * sz;
+	const size_t i0 = (size_t)ax.i0, i1 = (size_t)ax.i1;
+	const float c00 = f[k0 + j0 + i0] + ax.w1 * (f[k0 + j0 + i1] - f[k0 + j0 + i0]);
+	const float c01 = f[k0 + j1 + i0] + ax.w1 * (f[k0 + j1 + i1] - f[k0 + j1 + i0]);
+	const float c10 = f[k1 + j0 + i0] + ax.w1 * (f[k1 + j0 + i1] - f[k1 + j0 + i0]);
+	const float c11 = f[k1 + j1 + i0] + ax.w1 * (f[k1 + j1 + i1] - f[k1 + j1 + i0]);
+	const float c0 = c00 + ay.w1 * (c01 - c00), c1 = c10 + ay.w1 * (c11 - c10);
+	return c0 + az.w1 * (c1 - c0);
+}
+
+/* The grid's shape copied into locals: particle loops store floats, which
+ * could alias the world's float fields, so reading them through the world
+ * pointer would reload them for every particle. */
+typedef struct flip_grid {
+	int nx, ny, nz;
+	float inv;   /* 1/m, 1 / cell_size */
+	eddy_vec3 o; /* m, grid origin */
+} flip_grid;
+
+static inline flip_grid flip_grid_of(const eddy_world *w)
+{
+	flip_grid g = {w->nx, w->ny, w->nz, (float)(1.0 / w->def.cell_size), w->def.bounds_min};
+	return g;
+}
+
+/* The six axis lookups of a world position (m): per axis, faces at i (f*)
+ * and centres at i + 1/2 (c*); they serve all three face grids. */
+typedef struct flip_axes {
+	flip_axis fx, cx, fy, cy, fz, cz;
+} flip_axes;
+
+static inline flip_axes flip_axes_at(const flip_grid *g, eddy_vec3 p)
+{
+	const float gx = (p.x - g->o.x) * g->inv, gy = (p.y - g->o.y) * g->inv, gz = (p.z - g->o.z) * g->inv;
+	flip_axes a;
+	a.fx = flip_axis_at(gx, 0.0f, g->nx + 1);
+	a.cx = flip_axis_at(gx, 0.5f, g->nx);
+	a.fy = flip_axis_at(gy, 0.0f, g->ny + 1);
+	a.cy = flip_axis_at(gy, 0.5f, g->ny);
+	a.fz = flip_axis_at(gz, 0.0f, g->nz + 1);
+	a.cz = flip_axis_at(gz, 0.5f, g->nz);
+	return a;
+}
+
+/* Velocity of the face grids u, v, wv at the position behind a. */
+static inline eddy_vec3 flip_velocity_axes(const flip_grid *g, const float *u, const float *v, const float *wv,
+                                           const flip_axes *a)
+{
+	const size_t nx = (size_t)g->nx, ny = (size_t)g->ny;
+	eddy_vec3 r;
+	r.x = flip_trilinear(u, nx + 1, (nx + 1) * ny, a->fx, a->cy, a->cz);
+	r.y = flip_trilinear(v, nx, nx * (ny + 1), a->cx, a->fy, a->cz);
+	r.z = flip_trilinear(wv, nx, nx * ny, a->cx, a->cy, a->fz);
+	return r;
+}
+
+/* Grid velocity at a world position (m), trilinear on each face grid. */
+static inline eddy_vec3 flip_velocity_at(const flip_grid *g, const float *u, const float *v, const float *wv,
+                                         eddy_vec3 p)
+{
+	const flip_axes a = flip_axes_at(g, p);
+	return flip_velocity_axes(g, u, v, wv, &a);
+}
+
+/* ---- the Poisson system ---------------------------------------------------
+ * Rows are fluid cells in cell-index order, so a row's -x, -y, -z neighbours
+ * come before it (what MIC(0) and the upper-triangle CSC for CHOLMOD need).
+ * Off-diagonals are -1 between linked rows; nb[6*r + d] is the row across
+ * side d (0 -x, 1 +x, 2 -y, 3 +y, 4 -z, 5 +z) or -1. */
+typedef struct flip_matrix {
+	int n;
+	double *diag; /* n */
+	int *nb;      /* 6 n */
+} flip_matrix;
+
+/* MIC(0)-PCG (flip_pcg.c). Solves A x = b to max|r| <= tol max|b|; x starts
+ * at 0. Scratch comes from the world's arena. Returns false if it did not
+ * converge in max_it; *it and *res (max|r| / max|b|) are always set. */
+bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double *x, double tol, int max_it,
+                    int *it, double *res);
+
+/* CHOLMOD (flip_cholmod.c, the only file including cholmod.h). One solver
+ * per flip_pressure system, keeping the symbolic analysis while the pattern
+ * is unchanged. */
+typedef struct flip_cholmod flip_cholmod;
+flip_cholmod *eddy__flip_cholmod_new(void);
+void eddy__flip_cholmod_free(flip_cholmod *c);
+/* Factorises A (re-analysing only if its pattern changed) and solves A x = b.
+ * On failure returns EDDY_ERR_SOLVER (or NOMEM) with the world error set. */
+eddy_status eddy__flip_cholmod_solve(eddy_world *w, flip_cholmod *c, const flip_matrix *A, const double *b,
+                                     double *x, bool *reanalysed);
+
+#endif

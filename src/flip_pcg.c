@@ -1,0 +1,127 @@
+/* MIC(0)-preconditioned conjugate gradient for the FLIP pressure system
+ * (Bridson, "Fluid Simulation for Computer Graphics", 2nd ed., ch. 5.4:
+ * modified incomplete Cholesky with tau = 0.97 and the safety factor
+ * sigma = 0.25). Every scalar is double: single-precision dot products stall
+ * the iteration on large grids (VALIDATION.md, hard case 14). Loops are
+ * serial, so the result does not depend on the thread count. */
+#include "flip.h"
+
+#include <string.h>
+
+enum { NX_M, NX_P, NY_M, NY_P, NZ_M, NZ_P };
+
+static void matvec(const flip_matrix *A, const double *s, double *q)
+{
+	for (int i = 0; i < A->n; ++i) {
+		const int *nb = &A->nb[6 * i];
+		double t = A->diag[i] * s[i];
+		for (int d = 0; d < 6; ++d)
+			if (nb[d] >= 0)
+				t -= s[nb[d]];
+		q[i] = t;
+	}
+}
+
+static void mic0(const flip_matrix *A, double *precon)
+{
+	const double tau = 0.97, sigma = 0.25;
+	/* for a lower neighbour across side d: its two upper links other than this one */
+	static const int other[6][2] = {{NY_P, NZ_P}, {0, 0}, {NX_P, NZ_P}, {0, 0}, {NX_P, NY_P}, {0, 0}};
+	for (int i = 0; i < A->n; ++i) {
+		const int *nb = &A->nb[6 * i];
+		double e = A->diag[i];
+		for (int d = 0; d < 6; d += 2) {
+			const int q = nb[d];
+			if (q < 0)
+				continue;
+			const int *nq = &A->nb[6 * q];
+			const double cnt = (nq[other[d][0]] >= 0) + (nq[other[d][1]] >= 0);
+			e -= precon[q] * precon[q] * (1.0 + tau * cnt);
+		}
+		if (e < sigma * A->diag[i])
+			e = A->diag[i];
+		precon[i] = 1.0 / sqrt(e);
+	}
+}
+
+static void apply(const flip_matrix *A, const double *precon, const double *r, double *y, double *z)
+{
+	for (int i = 0; i < A->n; ++i) {
+		const int *nb = &A->nb[6 * i];
+		double t = r[i];
+		for (int d = 0; d < 6; d += 2)
+			if (nb[d] >= 0)
+				t += precon[nb[d]] * y[nb[d]];
+		y[i] = t * precon[i];
+	}
+	for (int i = A->n; i-- > 0;) {
+		const int *nb = &A->nb[6 * i];
+		double t = 0;
+		for (int d = 1; d < 6; d += 2)
+			if (nb[d] >= 0)
+				t += z[nb[d]];
+		z[i] = (y[i] + precon[i] * t) * precon[i];
+	}
+}
+
+static double dot(const double *a, const double *b, int n)
+{
+	double s = 0;
+	for (int i = 0; i < n; ++i)
+		s += a[i] * b[i];
+	return s;
+}
+
+static double maxabs(const double *a, int n)
+{
+	double m = 0;
+	for (int i = 0; i < n; ++i)
+		m = fabs(a[i]) > m ? fabs(a[i]) : m;
+	return m;
+}
+
+bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double *x, double tol, int max_it,
+                    int *it, double *res)
+{
+	const int n = A->n;
+	memset(x, 0, (size_t)n * sizeof *x);
+	*it = 0;
+	*res = 0;
+	const double bmax = maxabs(b, n);
+	if (n == 0 || bmax == 0)
+		return true;
+	double *mem = eddy__arena_alloc(&w->arena, 5 * (size_t)n * sizeof *mem);
+	if (!mem)
+		return false;
+	double *precon = mem, *r = mem + n, *y = mem + 2 * (size_t)n, *z = mem + 3 * (size_t)n, *s = mem + 4 * (size_t)n;
+	mic0(A, precon);
+	memcpy(r, b, (size_t)n * sizeof *r);
+	apply(A, precon, r, y, z);
+	memcpy(s, z, (size_t)n * sizeof *s);
+	double rho = dot(r, z, n);
+	for (int k = 1; k <= max_it; ++k) {
+		matvec(A, s, y); /* y doubles as q = A s */
+		const double sq = dot(s, y, n);
+		if (!(sq > 0)) { /* breakdown: A is not positive definite on s */
+			*it = k;
+			*res = maxabs(r, n) / bmax;
+			return false;
+		}
+		const double alpha = rho / sq;
+		for (int i = 0; i < n; ++i) {
+			x[i] += alpha * s[i];
+			r[i] -= alpha * y[i];
+		}
+		*it = k;
+		*res = maxabs(r, n) / bmax;
+		if (*res <= tol)
+			return true;
+		apply(A, precon, r, y, z);
+		const double rho_new = dot(r, z, n);
+		const double beta = rho_new / rho;
+		rho = rho_new;
+		for (int i = 0; i < n; ++i)
+			s[i] = z[i] + beta * s[i];
+	}
+	return false;
+}

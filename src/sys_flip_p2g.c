@@ -1,0 +1,154 @@
+/* flip_p2g: particles to grid (Zhu & Bridson 2005, section 4; Brackbill 1988).
+ *
+ * Reads: x y z vx vy vz ax ay az. Writes: vx vy vz, u v w, u_old v_old w_old,
+ * cell_type, flip_phi.
+ *   v_p += a_p dt                       (body forces act on the particles, so the
+ *                                        FLIP delta below carries pressure only)
+ *   u_f  = sum_p W_fp v_p / sum_p W_fp  (W trilinear on each face grid; faces no
+ *                                        particle reaches stay 0)
+ *   u_old = u                           (pre-solve velocity for G2P's delta)
+ *   cell_type = fluid where a particle is (or within mark_radius cells of a
+ *   particle's position), air elsewhere; flip_phi = -1 fluid, +1 empty (the
+ *   paper's marker field, smoothed later by flip_surface).
+ * Cells holding a particle are always fluid, so a sheet one particle thick
+ * stays on the grid (the role of the particle-radius rule r >= sqrt(3)/2 dx).
+ * The splat is a serial scatter (no parallel region at all: idle OpenMP
+ * workers would spin against it): summation order is fixed, so results do
+ * not depend on the thread count. */
+#include "flip.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct p2g {
+	eddy_flip_p2g_def def;
+} p2g;
+
+static const int p2g_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_AX, COL_AY, COL_AZ};
+static const int p2g_writes[] = {COL_VX,  COL_VY,  COL_VZ,  COL_FACE_U,    COL_FACE_V,   COL_FACE_W,
+                                 COL_U_OLD, COL_V_OLD, COL_W_OLD, COL_CELL_TYPE, COL_FLIP_PHI, -1};
+
+eddy_flip_p2g_def eddy_default_flip_p2g_def(void)
+{
+	eddy_flip_p2g_def d;
+	d.mark_radius = 0.0f;
+	return d;
+}
+
+/* floor and ceil without libm calls (baseline x86-64 has no SSE4.1 round);
+ * the clamp keeps the int conversion defined */
+static inline int floor_int(float t)
+{
+	t = !(t >= -1e8f) ? -1e8f : t > 1e8f ? 1e8f : t;
+	const int i = (int)t;
+	return i - ((float)i > t);
+}
+static inline int ceil_int(float t) { return -floor_int(-t); }
+
+/* Adds weight * val and weight to the 8 samples around a point of one face grid. */
+static inline void splat(float *f, float *ws, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az, float val)
+{
+	const size_t j[2] = {(size_t)ay.i0 * sy, (size_t)ay.i1 * sy}, k[2] = {(size_t)az.i0 * sz, (size_t)az.i1 * sz};
+	const float wy[2] = {1.0f - ay.w1, ay.w1}, wz[2] = {1.0f - az.w1, az.w1}, wx0 = 1.0f - ax.w1, wx1 = ax.w1;
+	for (int c = 0; c < 2; ++c)
+		for (int b = 0; b < 2; ++b) {
+			const size_t row = k[c] + j[b];
+			const float wyz = wz[c] * wy[b], w0 = wyz * wx0, w1 = wyz * wx1;
+			f[row + (size_t)ax.i0] += w0 * val;
+			ws[row + (size_t)ax.i0] += w0;
+			f[row + (size_t)ax.i1] += w1 * val;
+			ws[row + (size_t)ax.i1] += w1;
+		}
+}
+
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	const p2g *pg = s->data;
+	const float dt = (float)ctx->dt;
+	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
+	const int nx = w->nx, ny = w->ny, nz = w->nz;
+	const float inv = (float)(1.0 / w->def.cell_size);
+	const eddy_vec3 o = w->def.bounds_min;
+	float *face[3] = {eddy__col(w, COL_FACE_U), eddy__col(w, COL_FACE_V), eddy__col(w, COL_FACE_W)};
+	float *old[3] = {eddy__col(w, COL_U_OLD), eddy__col(w, COL_V_OLD), eddy__col(w, COL_W_OLD)};
+	const size_t nf[3] = {(size_t)(nx + 1) * ny * nz, (size_t)nx * (ny + 1) * nz, (size_t)nx * ny * (nz + 1)};
+	float *wsum[3];
+	for (int a = 0; a < 3; ++a) {
+		wsum[a] = eddy__arena_alloc(&w->arena, nf[a] * sizeof *wsum[a]);
+		if (!wsum[a])
+			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_p2g: out of memory for splat weights");
+		memset(wsum[a], 0, nf[a] * sizeof *wsum[a]);
+	}
+	/* one pass over the particles, three face grids: the particle columns are
+	 * read once; the scatter is serial so the sums do not depend on threads */
+	const size_t sx = (size_t)nx, sy = (size_t)ny;
+	const flip_grid grid = flip_grid_of(w);
+	const size_t np = w->n;
+	for (size_t i = 0; i < np; ++i) {
+		vx[i] += ax[i] * dt;
+		vy[i] += ay[i] * dt;
+		vz[i] += az[i] * dt;
+		const flip_axes g = flip_axes_at(&grid, (eddy_vec3){x[i], y[i], z[i]});
+		splat(face[0], wsum[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, vx[i]);
+		splat(face[1], wsum[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, vy[i]);
+		splat(face[2], wsum[2], sx, sx * sy, g.cx, g.cy, g.fz, vz[i]);
+	}
+	for (int a = 0; a < 3; ++a) {
+		float *f = face[a];
+		const float *ws = wsum[a];
+		for (size_t q = 0; q < nf[a]; ++q)
+			f[q] = ws[q] > 0 ? f[q] / ws[q] : 0.0f;
+		memcpy(old[a], f, nf[a] * sizeof *f);
+	}
+
+	uint8_t *type = (uint8_t *)w->columns[COL_CELL_TYPE].data;
+	float *phi = eddy__col(w, COL_FLIP_PHI);
+	const size_t nc = (size_t)nx * ny * nz;
+	for (size_t c = 0; c < nc; ++c)
+		phi[c] = 1.0f;
+	const float r = pg->def.mark_radius, r2 = r * r;
+	for (size_t i = 0; i < w->n; ++i) {
+		const float gx = (x[i] - o.x) * inv, gy = (y[i] - o.y) * inv, gz = (z[i] - o.z) * inv;
+		const size_t c = flip_cell(w, flip_cell_index(gx, nx), flip_cell_index(gy, ny), flip_cell_index(gz, nz));
+		type[c] = EDDY_CELL_FLUID;
+		phi[c] = -1.0f;
+		/* cells whose centre (i + 1/2) is within r of the particle */
+		int i0 = ceil_int(gx - r - 0.5f), i1 = floor_int(gx + r - 0.5f);
+		int j0 = ceil_int(gy - r - 0.5f), j1 = floor_int(gy + r - 0.5f);
+		int k0 = ceil_int(gz - r - 0.5f), k1 = floor_int(gz + r - 0.5f);
+		i0 = i0 < 0 ? 0 : i0, j0 = j0 < 0 ? 0 : j0, k0 = k0 < 0 ? 0 : k0;
+		i1 = i1 >= nx ? nx - 1 : i1, j1 = j1 >= ny ? ny - 1 : j1, k1 = k1 >= nz ? nz - 1 : k1;
+		for (int kk = k0; kk <= k1; ++kk)
+			for (int jj = j0; jj <= j1; ++jj)
+				for (int ii = i0; ii <= i1; ++ii) {
+					const float dx = (float)ii + 0.5f - gx, dy = (float)jj + 0.5f - gy, dz = (float)kk + 0.5f - gz;
+					if (dx * dx + dy * dy + dz * dz <= r2) {
+						const size_t q = flip_cell(w, ii, jj, kk);
+						type[q] = EDDY_CELL_FLUID;
+						phi[q] = -1.0f;
+					}
+				}
+	}
+	return EDDY_OK;
+}
+
+const eddy_system_vtable eddy__kind_flip_p2g = {
+	.name = "flip_p2g",
+	.step = step,
+	.default_writes = p2g_writes,
+};
+
+eddy_system_id eddy_add_flip_p2g(eddy_world *w, const eddy_flip_p2g_def *def)
+{
+	const char *sys = "flip_p2g";
+	if (!def)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__check_range(w, sys, "mark_radius", def->mark_radius, 0, 1.5))
+		return EDDY_NULL_SYSTEM;
+	p2g *pg = malloc(sizeof *pg);
+	if (pg)
+		pg->def = *def;
+	return eddy__add_system(w, &eddy__kind_flip_p2g, pg, p2g_reads, 9, p2g_writes, 11);
+}

@@ -1,0 +1,338 @@
+/* flip_pressure: pressure projection with a ghost-fluid free surface
+ * (Zhu & Bridson 2005; Enright, Nguyen, Gibou & Fedkiw 2003 for the
+ * ghost-fluid boundary; Bridson's book, ch. 5).
+ *
+ * Reads: cell_type flip_phi u v w. Writes: u v w cell_pressure.
+ * Unknown q = p dt / (rho dx) per fluid cell; D_i = dx div u (net outflow).
+ *   (A q)_i = sum over the 6 sides of i:  fluid j: q_i - q_j
+ *                                         air j:   q_i / theta_ij
+ *                                         solid / domain side: nothing
+ *   A q = -D
+ *   u_f -= q_right - q_left on every face with fluid on a side and no solid,
+ *   an air side taking the ghost value q_i (1 - 1/theta_ij), so the face sees
+ *   exactly the theta the matrix used and the update zeroes the divergence.
+ *   theta_ij = phi_i / (phi_i - phi_j), the linear zero crossing of the
+ *   smoothed marker between the cell centres, clamped to [theta_min, 1].
+ * A fluid component with no air side (closed box, sealed pocket, one walled-in
+ * cell) makes A singular: its right-hand side is made zero-mean and its first
+ * cell pinned (q = 0, links to it dropped), which solves the singular system
+ * exactly because its rows sum to zero.
+ * Solvers: MIC(0)-PCG (flip_pcg.c) or supernodal CHOLMOD (flip_cholmod.c).
+ * Every solve is checked: a non-converged PCG, a CHOLMOD status other than OK
+ * or a relative residual max|b - A q| / max|b| above tolerance (CHOLMOD:
+ * 1e-8) is an error and the velocities are left as they were.
+ * Published: solver, iterations, residual, divergence = max_i |div u| dt
+ * after projection, volume = dx^3 sum clamp((1 - phi) / 2, 0, 1) (m^3). */
+#include "flip.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct pressure {
+	eddy_flip_pressure_def def;
+	flip_cholmod *chol;
+	int64_t analyses; /* CHOLMOD symbolic analyses so far */
+} pressure;
+
+static const int pressure_reads[] = {COL_CELL_TYPE, COL_FLIP_PHI, COL_FACE_U, COL_FACE_V, COL_FACE_W};
+static const int pressure_writes[] = {COL_FACE_U, COL_FACE_V, COL_FACE_W, COL_CELL_PRESSURE, -1};
+
+eddy_flip_pressure_def eddy_default_flip_pressure_def(void)
+{
+	eddy_flip_pressure_def d;
+	d.solver = EDDY_FLIP_PCG;
+	d.density = 1000.0f;
+	d.tolerance = 1e-6;
+	d.max_iterations = 1000;
+	d.theta_min = 0.01f;
+	return d;
+}
+
+/* Fraction of the way from fluid centre i to air centre j where phi = 0. */
+static double theta(float pi, float pj, double tmin)
+{
+	double t;
+	if (pj <= 0)
+		t = 1; /* the blurred field says fluid up to j: surface at j */
+	else if (pi >= 0)
+		t = tmin; /* a thin sheet blurred positive: surface at i */
+	else
+		t = (double)pi / ((double)pi - (double)pj);
+	return t < tmin ? tmin : t > 1 ? 1 : t;
+}
+
+typedef struct grid_ctx {
+	int nx, ny, nz;
+	const uint8_t *type;
+	const float *phi;
+	const float *face[3];
+	const int *row; /* cell -> row or -1 */
+} grid_ctx;
+
+/* Cell across side d (0 -x, 1 +x, 2 -y, 3 +y, 4 -z, 5 +z) of (i, j, k), or -1
+ * beyond the domain; the face between them in *f (index in face grid d/2). */
+static long across(const eddy_world *w, int i, int j, int k, int d, size_t *f)
+{
+	const int a = d >> 1, plus = d & 1;
+	int c[3] = {i, j, k};
+	const int n[3] = {w->nx, w->ny, w->nz};
+	int fc[3] = {i, j, k};
+	fc[a] += plus;
+	*f = a == 0 ? flip_fu(w, fc[0], fc[1], fc[2]) : a == 1 ? flip_fv(w, fc[0], fc[1], fc[2]) : flip_fw(w, fc[0], fc[1], fc[2]);
+	c[a] += plus ? 1 : -1;
+	if (c[a] < 0 || c[a] >= n[a])
+		return -1;
+	return (long)flip_cell(w, c[0], c[1], c[2]);
+}
+
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	pressure *ps = s->data;
+	const int nx = w->nx, ny = w->ny, nz = w->nz;
+	const size_t nc = (size_t)nx * ny * nz;
+	const uint8_t *type = (const uint8_t *)w->columns[COL_CELL_TYPE].data;
+	const float *phi = eddy__col(w, COL_FLIP_PHI);
+	float *face[3] = {eddy__col(w, COL_FACE_U), eddy__col(w, COL_FACE_V), eddy__col(w, COL_FACE_W)};
+	float *pcell = eddy__col(w, COL_CELL_PRESSURE);
+	const double h = w->def.cell_size, tmin = ps->def.theta_min;
+
+	int *row = eddy__arena_alloc(&w->arena, nc * sizeof *row);
+	if (!row)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory");
+	int n = 0;
+	double vol = 0;
+	for (size_t c = 0; c < nc; ++c) {
+		row[c] = type[c] == EDDY_CELL_FLUID ? n++ : -1;
+		if (type[c] != EDDY_CELL_SOLID) {
+			const double f = 0.5 * (1.0 - (double)phi[c]);
+			vol += f < 0 ? 0 : f > 1 ? 1 : f;
+		}
+	}
+	vol *= h * h * h;
+	flip_matrix A = {n, NULL, NULL};
+	A.diag = eddy__arena_alloc(&w->arena, (size_t)n * sizeof *A.diag + 8);
+	A.nb = eddy__arena_alloc(&w->arena, 6 * (size_t)n * sizeof *A.nb + 8);
+	double *b = eddy__arena_alloc(&w->arena, (size_t)n * sizeof *b + 8);
+	double *q = eddy__arena_alloc(&w->arena, (size_t)n * sizeof *q + 8);
+	int *cell_of = eddy__arena_alloc(&w->arena, (size_t)n * sizeof *cell_of + 8);
+	int *comp = eddy__arena_alloc(&w->arena, (size_t)n * sizeof *comp + 8);
+	int *stack = eddy__arena_alloc(&w->arena, (size_t)n * sizeof *stack + 8);
+	if (!A.diag || !A.nb || !b || !q || !cell_of || !comp || !stack)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory for %d unknowns", n);
+
+	/* assemble: diagonal, links, right-hand side -D */
+	for (int k = 0; k < nz; ++k)
+		for (int j = 0; j < ny; ++j)
+			for (int i = 0; i < nx; ++i) {
+				const size_t c = flip_cell(w, i, j, k);
+				const int r = row[c];
+				if (r < 0)
+					continue;
+				cell_of[r] = (int)c;
+				double diag = 0, div = 0;
+				for (int d = 0; d < 6; ++d) {
+					size_t f;
+					const long o = across(w, i, j, k, d, &f);
+					const double flux = (double)face[d >> 1][f];
+					div += (d & 1) ? flux : -flux;
+					int link = -1;
+					if (o >= 0 && type[o] == EDDY_CELL_FLUID) {
+						diag += 1;
+						link = row[o];
+					} else if (o >= 0 && type[o] == EDDY_CELL_AIR) {
+						diag += 1.0 / theta(phi[c], phi[o], tmin);
+					}
+					A.nb[6 * r + d] = link;
+				}
+				A.diag[r] = diag;
+				b[r] = -div;
+			}
+
+	/* connected components; those without an air side are singular */
+	for (int r = 0; r < n; ++r)
+		comp[r] = -1;
+	int pinned = 0;
+	for (int r0 = 0; r0 < n; ++r0) {
+		if (comp[r0] >= 0)
+			continue;
+		int top = 0, members = 0;
+		bool open = false;
+		double sum = 0;
+		stack[top++] = r0;
+		comp[r0] = r0;
+		while (top > 0) {
+			const int r = stack[--top];
+			members++;
+			sum += b[r];
+			int lk = 0;
+			for (int d = 0; d < 6; ++d) {
+				const int o = A.nb[6 * r + d];
+				lk += o >= 0;
+				if (o >= 0 && comp[o] < 0) {
+					comp[o] = r0;
+					stack[top++] = o;
+				}
+			}
+			open |= A.diag[r] > (double)lk + 1e-12; /* an air side adds 1/theta beyond the links */
+		}
+		if (open)
+			continue;
+		/* zero-mean right-hand side, then pin the component's first row */
+		const double mean = sum / members;
+		for (int r = r0; r < n; ++r)
+			if (comp[r] == r0)
+				b[r] -= mean;
+		for (int d = 0; d < 6; ++d) {
+			const int o = A.nb[6 * r0 + d];
+			if (o >= 0)
+				A.nb[6 * o + (d ^ 1)] = -1;
+			A.nb[6 * r0 + d] = -1;
+		}
+		A.diag[r0] = 1;
+		b[r0] = 0;
+		pinned++;
+	}
+
+	/* solve */
+	int iterations = 0;
+	double residual = 0;
+	if (ps->def.solver == EDDY_FLIP_PCG) {
+		const bool ok = eddy__flip_pcg(w, &A, b, q, ps->def.tolerance, ps->def.max_iterations, &iterations, &residual);
+		if (!ok)
+			return eddy__fail(w, EDDY_ERR_SOLVER,
+			                  "flip_pressure: PCG did not converge: relative residual %.3g after %d iterations "
+			                  "(tolerance %.3g, %d unknowns); raise max_iterations or use solver = \"cholmod\"",
+			                  residual, iterations, ps->def.tolerance, n);
+	} else {
+		/* created at the first solve, not in add: a failed add frees the
+		 * system's data without its destroy hook */
+		if (!ps->chol && !(ps->chol = eddy__flip_cholmod_new()))
+			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: CHOLMOD could not start");
+		bool re = false;
+		eddy_status st = eddy__flip_cholmod_solve(w, ps->chol, &A, b, q, &re);
+		if (st != EDDY_OK)
+			return st;
+		ps->analyses += re;
+		iterations = 1;
+	}
+	/* the residual, measured rather than trusted */
+	double rmax = 0, bmax = 0;
+	bool finite = true;
+	for (int r = 0; r < n; ++r) {
+		const int *nb = &A.nb[6 * r];
+		double t = b[r] - A.diag[r] * q[r];
+		for (int d = 0; d < 6; ++d)
+			if (nb[d] >= 0)
+				t += q[nb[d]];
+		finite &= isfinite(q[r]) != 0;
+		rmax = fabs(t) > rmax ? fabs(t) : rmax;
+		bmax = fabs(b[r]) > bmax ? fabs(b[r]) : bmax;
+	}
+	residual = bmax > 0 ? rmax / bmax : rmax;
+	const double allowed = ps->def.solver == EDDY_FLIP_PCG ? ps->def.tolerance * 1.0001 : 1e-8;
+	if (!finite || !(residual <= allowed))
+		return eddy__fail(w, EDDY_ERR_SOLVER,
+		                  "flip_pressure: %s solution rejected: relative residual %.3g > %.3g (%d unknowns, %s)",
+		                  ps->def.solver == EDDY_FLIP_PCG ? "PCG" : "CHOLMOD", residual, allowed, n,
+		                  finite ? "finite" : "non-finite values");
+
+	/* velocity update on faces with fluid on a side and no solid */
+	const double pscale = ps->def.density * h / ctx->dt;
+	for (size_t c = 0; c < nc; ++c)
+		pcell[c] = row[c] >= 0 ? (float)(q[row[c]] * pscale) : 0.0f;
+	for (int a = 0; a < 3; ++a) {
+		const int fx = nx + (a == 0), fy = ny + (a == 1), fz = nz + (a == 2);
+		float *f = face[a];
+		for (int k = 0; k < fz; ++k)
+			for (int j = 0; j < fy; ++j)
+				for (int i = 0; i < fx; ++i) {
+					const int hi[3] = {i, j, k};
+					int lo[3] = {i, j, k};
+					lo[a]--;
+					const int na = a == 0 ? nx : a == 1 ? ny : nz;
+					if (lo[a] < 0 || hi[a] >= na)
+						continue; /* domain side */
+					const size_t cl = flip_cell(w, lo[0], lo[1], lo[2]), ch = flip_cell(w, hi[0], hi[1], hi[2]);
+					const uint8_t tl = type[cl], th = type[ch];
+					if (tl == EDDY_CELL_SOLID || th == EDDY_CELL_SOLID)
+						continue;
+					if (tl != EDDY_CELL_FLUID && th != EDDY_CELL_FLUID)
+						continue;
+					double ql, qh;
+					if (tl == EDDY_CELL_FLUID && th == EDDY_CELL_FLUID) {
+						ql = q[row[cl]];
+						qh = q[row[ch]];
+					} else if (tl == EDDY_CELL_FLUID) {
+						ql = q[row[cl]];
+						qh = ql * (1.0 - 1.0 / theta(phi[cl], phi[ch], tmin));
+					} else {
+						qh = q[row[ch]];
+						ql = qh * (1.0 - 1.0 / theta(phi[ch], phi[cl], tmin));
+					}
+					const size_t fi = a == 0 ? flip_fu(w, i, j, k) : a == 1 ? flip_fv(w, i, j, k) : flip_fw(w, i, j, k);
+					f[fi] = (float)((double)f[fi] - (qh - ql));
+				}
+	}
+	/* divergence left over, as volume change per step */
+	double dmax = 0;
+	for (int r = 0; r < n; ++r) {
+		const int c = cell_of[r];
+		const int i = c % nx, j = (c / nx) % ny, k = c / (nx * ny);
+		double div = 0;
+		for (int d = 0; d < 6; ++d) {
+			size_t f;
+			(void)across(w, i, j, k, d, &f);
+			div += (d & 1) ? (double)face[d >> 1][f] : -(double)face[d >> 1][f];
+		}
+		dmax = fabs(div) > dmax ? fabs(div) : dmax;
+	}
+	eddy_world_publish_text(w, "solver", ps->def.solver == EDDY_FLIP_PCG ? "pcg" : "cholmod");
+	eddy_world_publish(w, "iterations", iterations);
+	eddy_world_publish(w, "residual", residual);
+	eddy_world_publish(w, "divergence", dmax / h * ctx->dt);
+	eddy_world_publish(w, "volume", vol);
+	eddy_world_publish(w, "pinned", pinned);
+	eddy_world_publish(w, "analyses", (double)ps->analyses);
+	return EDDY_OK;
+}
+
+static void destroy(eddy_system *s)
+{
+	pressure *ps = s->data;
+	if (ps)
+		eddy__flip_cholmod_free(ps->chol);
+}
+
+const eddy_system_vtable eddy__kind_flip_pressure = {
+	.name = "flip_pressure",
+	.step = step,
+	.destroy = destroy,
+	.default_writes = pressure_writes,
+};
+
+eddy_system_id eddy_add_flip_pressure(eddy_world *w, const eddy_flip_pressure_def *def)
+{
+	const char *sys = "flip_pressure";
+	if (!def)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (def->solver != EDDY_FLIP_PCG && def->solver != EDDY_FLIP_CHOLMOD) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'solver' must be \"pcg\" or \"cholmod\" (got %d)", sys, (int)def->solver);
+		return EDDY_NULL_SYSTEM;
+	}
+	if (!eddy__check_positive(w, sys, "density", def->density) || !eddy__check_finite(w, sys, "density", def->density))
+		return EDDY_NULL_SYSTEM;
+	if (!(def->tolerance > 0 && def->tolerance < 1)) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'tolerance' must be in (0, 1) (got %g)", sys, def->tolerance);
+		return EDDY_NULL_SYSTEM;
+	}
+	if (def->max_iterations < 1) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'max_iterations' must be >= 1 (got %d)", sys, def->max_iterations);
+		return EDDY_NULL_SYSTEM;
+	}
+	if (!eddy__check_range(w, sys, "theta_min", def->theta_min, 1e-4, 0.5))
+		return EDDY_NULL_SYSTEM;
+	pressure *ps = calloc(1, sizeof *ps);
+	if (ps)
+		ps->def = *def;
+	return eddy__add_system(w, &eddy__kind_flip_pressure, ps, pressure_reads, 5, pressure_writes, 4);
+}

@@ -1,0 +1,118 @@
+/* flip_reseed: keeps the particle density in fluid cells between min and max
+ * per cell, against the clumping and thinning that make FLIP's volume drift
+ * (VALIDATION.md hard case 13; Zhu & Bridson keep about 8 per cell).
+ *
+ * Reads: x y z cell_type u v w. Writes: x y z vx vy vz.
+ *   Interior fluid cells (no air neighbour; surface cells are partly empty by
+ *   nature) with fewer than min particles get new ones at random positions
+ *   in the cell (the world's random stream, so runs repeat), with the grid
+ *   velocity there; cells with more than max lose the surplus (swap-remove,
+ *   highest index first). Run it last, after flip_advect. */
+#include "flip.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct reseed {
+	eddy_flip_reseed_def def;
+} reseed;
+
+static const int reseed_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_CELL_TYPE, COL_FACE_U, COL_FACE_V, COL_FACE_W};
+static const int reseed_writes[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, -1};
+
+eddy_flip_reseed_def eddy_default_flip_reseed_def(void)
+{
+	eddy_flip_reseed_def d;
+	d.min_per_cell = 3;
+	d.max_per_cell = 12;
+	return d;
+}
+
+static long cell_of(const eddy_world *w, float x, float y, float z)
+{
+	const float inv = (float)(1.0 / w->def.cell_size);
+	const eddy_vec3 o = w->def.bounds_min;
+	return (long)flip_cell(w, flip_cell_index((x - o.x) * inv, w->nx), flip_cell_index((y - o.y) * inv, w->ny),
+	                       flip_cell_index((z - o.z) * inv, w->nz));
+}
+
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	(void)ctx;
+	const reseed *rs = s->data;
+	const int nx = w->nx, ny = w->ny, nz = w->nz;
+	const size_t nc = (size_t)nx * ny * nz;
+	const uint8_t *type = (const uint8_t *)w->columns[COL_CELL_TYPE].data;
+	int *count = eddy__arena_alloc(&w->arena, nc * sizeof *count);
+	if (!count)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_reseed: out of memory");
+	memset(count, 0, nc * sizeof *count);
+	{
+		const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+		for (size_t i = 0; i < w->n; ++i)
+			count[cell_of(w, x[i], y[i], z[i])]++;
+	}
+	/* surplus: remove from the highest index down, so indices still to visit stay valid */
+	for (size_t i = w->n; i-- > 0;) {
+		const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+		const long c = cell_of(w, x[i], y[i], z[i]);
+		if (count[c] > rs->def.max_per_cell) {
+			count[c]--;
+			eddy_world_remove_particle(w, i);
+		}
+	}
+	const double h = w->def.cell_size;
+	const flip_grid grid = flip_grid_of(w);
+	const eddy_vec3 o = w->def.bounds_min;
+	for (int k = 1; k < nz - 1; ++k)
+		for (int j = 1; j < ny - 1; ++j)
+			for (int i = 1; i < nx - 1; ++i) {
+				const size_t c = flip_cell(w, i, j, k);
+				if (type[c] != EDDY_CELL_FLUID || count[c] >= rs->def.min_per_cell)
+					continue;
+				const size_t sx = 1, sy = (size_t)nx, sz = (size_t)nx * ny;
+				if (type[c - sx] == EDDY_CELL_AIR || type[c + sx] == EDDY_CELL_AIR || type[c - sy] == EDDY_CELL_AIR ||
+				    type[c + sy] == EDDY_CELL_AIR || type[c - sz] == EDDY_CELL_AIR || type[c + sz] == EDDY_CELL_AIR)
+					continue;
+				const size_t add = (size_t)(rs->def.min_per_cell - count[c]);
+				size_t first;
+				eddy_status st = eddy__append_particles(w, add, &first);
+				if (st != EDDY_OK)
+					return st;
+				float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+				float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+				const float *u = eddy__col(w, COL_FACE_U), *v = eddy__col(w, COL_FACE_V), *wv = eddy__col(w, COL_FACE_W);
+				for (size_t q = first; q < first + add; ++q) {
+					const eddy_vec3 p = {(float)(o.x + (i + eddy__rand01(&w->rng)) * h),
+					                     (float)(o.y + (j + eddy__rand01(&w->rng)) * h),
+					                     (float)(o.z + (k + eddy__rand01(&w->rng)) * h)};
+					const eddy_vec3 gv = flip_velocity_at(&grid, u, v, wv, p);
+					x[q] = p.x, y[q] = p.y, z[q] = p.z;
+					vx[q] = gv.x, vy[q] = gv.y, vz[q] = gv.z;
+				}
+				count[c] += (int)add;
+			}
+	return EDDY_OK;
+}
+
+const eddy_system_vtable eddy__kind_flip_reseed = {
+	.name = "flip_reseed",
+	.step = step,
+	.default_writes = reseed_writes,
+};
+
+eddy_system_id eddy_add_flip_reseed(eddy_world *w, const eddy_flip_reseed_def *def)
+{
+	const char *sys = "flip_reseed";
+	if (!def)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (def->min_per_cell < 1 || def->max_per_cell <= def->min_per_cell) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: need 1 <= 'min_per_cell' < 'max_per_cell' (got %d, %d)", sys,
+		           def->min_per_cell, def->max_per_cell);
+		return EDDY_NULL_SYSTEM;
+	}
+	reseed *rs = malloc(sizeof *rs);
+	if (rs)
+		rs->def = *def;
+	return eddy__add_system(w, &eddy__kind_flip_reseed, rs, reseed_reads, 7, reseed_writes, 6);
+}
