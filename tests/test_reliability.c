@@ -193,6 +193,29 @@ static void cli_resume_skips_a_corrupted_checkpoint(void)
 	CHECK_HAS(out, "no valid checkpoint of this scene");
 }
 
+/* The fluid methods resume bit for bit too: a straight run and a run stopped
+ * at frame 7 and resumed from its frame-6 checkpoint end in the same states. */
+static void fluid_scenes_resume_bit_identical(void)
+{
+	static const char *const scenes[] = {"scenes/dam_break_flip.lua", NULL};
+	const char *bin = test_build_dir();
+	for (int i = 0; scenes[i]; ++i) {
+		char cmd[2048], a[16384], b[16384], out[4096];
+		snprintf(cmd, sizeof cmd, "rm -rf %s/t_fluid %s/t_fluid_b.jsonl && %s/eddy run %s --frames 10 --quiet --out %s/t_fluid/a --stats - "
+		         "| grep -o '\"state_hash\":\"[0-9a-f]*\"'", bin, bin, scenes[i], bin);
+		CHECK(sh(cmd, a, sizeof a) == 0);
+		snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 7 --checkpoint-every 3 --quiet --out %s/t_fluid/b "
+		         "--stats %s/t_fluid_b.jsonl", bin, scenes[i], bin, bin);
+		CHECK(sh(cmd, out, sizeof out) == 0);
+		snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 10 --quiet --out %s/t_fluid/b --stats %s/t_fluid_b.jsonl "
+		         "--resume %s/t_fluid/b/checkpoints && grep -o '\"state_hash\":\"[0-9a-f]*\"' %s/t_fluid_b.jsonl",
+		         bin, scenes[i], bin, bin, bin, bin);
+		CHECK(sh(cmd, b, sizeof b) == 0);
+		CHECK(strlen(a) > 10 * 20);
+		CHECKF(strcmp(a, b) == 0, "%s: resumed hashes differ", scenes[i]);
+	}
+}
+
 /* SIGINT: the frame in progress finishes, its stats line is whole, a
  * checkpoint is written and the message says how to resume. */
 static void interrupt_finishes_the_frame(void)
@@ -279,4 +302,5 @@ void suite_reliability(void)
 	RUN(bad_checkpoints_are_rejected);
 	RUN(cli_resume_skips_a_corrupted_checkpoint);
 	RUN(interrupt_finishes_the_frame);
+	RUN(fluid_scenes_resume_bit_identical);
 }
