@@ -202,7 +202,7 @@ static void fluid_scenes_resume_bit_identical(void)
 	for (int i = 0; scenes[i]; ++i) {
 		char cmd[2048], a[16384], b[16384], out[4096];
 		snprintf(cmd, sizeof cmd, "rm -rf %s/t_fluid %s/t_fluid_b.jsonl && %s/eddy run %s --frames 10 --quiet --out %s/t_fluid/a --stats - "
-		         "| grep -o '\"state_hash\":\"[0-9a-f]*\"'", bin, bin, scenes[i], bin);
+		         "| grep -o '\"state_hash\":\"[0-9a-f]*\"'", bin, bin, bin, scenes[i], bin);
 		CHECK(sh(cmd, a, sizeof a) == 0);
 		snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 7 --checkpoint-every 3 --quiet --out %s/t_fluid/b "
 		         "--stats %s/t_fluid_b.jsonl", bin, scenes[i], bin, bin);
