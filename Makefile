@@ -142,8 +142,8 @@ deps:
 
 run: deps
 	@$(MAKE) --no-print-directory all
-	@mkdir -p out/bounce
-	$(BUILD)/eddy run scenes/bounce.lua --stats out/bounce/stats.jsonl
+	@mkdir -p out/splash
+	$(BUILD)/eddy run scenes/splash.lua --stats out/splash/stats.jsonl
 
 test: deps
 	@$(MAKE) --no-print-directory all $(BUILD)/tests/run
