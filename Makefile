@@ -173,11 +173,11 @@ asan: deps
 FUZZ_SECONDS ?= 60
 FUZZ_CFLAGS := -std=c11 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
                -Wall -Wextra -Wno-unknown-pragmas -DEDDY_LIBFUZZER
-FUZZ_SRC := $(SRC_C) $(LUA_C) tests/fuzz_scene.c
+FUZZ_SRC = $(SRC_C) $(LUA_C) $(RENDER_C) tests/fuzz_scene.c
 
 $(BUILD)/fuzz/fuzz_scene: $(FUZZ_SRC) $(HEADER)
 	@mkdir -p $(dir $@)
-	clang $(FUZZ_CFLAGS) -Isrc -Ilua $(LUA_CFLAGS) $(FUZZ_SRC) -o $@ $(LUA_LIBS) -lm
+	clang $(FUZZ_CFLAGS) -Isrc -Ilua $(LUA_CFLAGS) $(OSMESA_CFLAGS) $(FUZZ_SRC) -o $@ $(LUA_LIBS) $(LIBS)
 
 fuzz: deps
 	@$(MAKE) --no-print-directory $(BUILD)/fuzz/fuzz_scene

@@ -198,7 +198,7 @@ static void read_fields(lua_State *L, const eddy_lua_kind *k, int idx, void *def
 			break;
 		}
 		case EDDY_LUA_STRING: {
-			size_t len;
+			size_t len = 0;
 			const char *s = lua_type(L, -1) == LUA_TSTRING ? lua_tolstring(L, -1, &len) : NULL;
 			if (!s)
 				luaL_error(L, "%s: '%s' must be a string (got %s)", k->name, name, luaL_typename(L, -1));

@@ -95,6 +95,14 @@ static eddy_status grid_setup(eddy_world *w, const eddy_column *c)
 	return EDDY_OK;
 }
 
+static bool grid_in_use(const eddy_world *w)
+{
+	for (int i = 0; i < w->column_count; ++i)
+		if (w->columns[i].domain != EDDY_DOMAIN_PARTICLE && w->columns[i].data)
+			return true;
+	return false;
+}
+
 eddy_status eddy__column_acquire(eddy_world *w, int id)
 {
 	eddy_column *c = &w->columns[id];
@@ -108,6 +116,26 @@ eddy_status eddy__column_acquire(eddy_world *w, int id)
 		}
 	}
 	size_t cap = column_capacity(w, c);
+	if (c->domain != EDDY_DOMAIN_PARTICLE) {
+		/* calloc of a huge grid succeeds lazily and the process dies when the
+		 * solver first touches it: refuse what cannot fit instead */
+		double grid_bytes = (double)cap * (double)elem_size(c->type);
+		for (int i = 0; i < w->column_count; ++i)
+			if (w->columns[i].data && w->columns[i].domain != EDDY_DOMAIN_PARTICLE)
+				grid_bytes += (double)eddy__column_bytes(w, &w->columns[i]);
+		long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+		double phys = pages > 0 && page > 0 ? (double)pages * (double)page : 0;
+		if (phys > 0 && grid_bytes > 0.8 * phys) {
+			c->users--;
+			if (!grid_in_use(w)) {
+				w->grid_allocated = false;
+				w->nx = w->ny = w->nz = 0;
+			}
+			return eddy__fail(w, EDDY_ERR_NOMEM,
+			                  "the %d x %d x %d grid needs %.1f GB for its columns, more than this machine's %.1f GB; "
+			                  "use a larger cell_size", w->nx, w->ny, w->nz, grid_bytes / 1e9, phys / 1e9);
+		}
+	}
 	/* calloc(0) may return NULL; keep a real block so "allocated" stays visible. */
 	c->data = calloc(cap ? cap : 1, elem_size(c->type));
 	if (!c->data) {
@@ -124,10 +152,7 @@ void eddy__column_release(eddy_world *w, int id)
 		return;
 	free(c->data);
 	c->data = NULL;
-	bool grid_in_use = false;
-	for (int i = 0; i < w->column_count; ++i)
-		grid_in_use |= w->columns[i].domain != EDDY_DOMAIN_PARTICLE && w->columns[i].data;
-	if (!grid_in_use) {
+	if (!grid_in_use(w)) {
 		w->grid_allocated = false;
 		w->nx = w->ny = w->nz = 0;
 	}

@@ -65,10 +65,10 @@ static void value(input *in, char *out, size_t cap)
 		break;
 	case 5: snprintf(out, cap, "%s", take(in, 2) ? "true" : "false"); break;
 	case 6: {
-		static const char *const strs[] = {"'error'", "'remove'", "'x'", "''", "{}", "{1, 2}", "{{0,0,0},{1,1,1}}",
+		static const char *const strs[] = {"'error'", "'remove'", "'cholmod'", "'pcg'", "{}", "{1, 2}", "{{0,0,0},{1,1,1}}",
 		                                   "function(t) return {t, 0, 0} end", "function(t) return nil end",
 		                                   "function(t) error('boom') end"};
-		snprintf(out, cap, "%s", strs[take(in, 10)]);
+		snprintf(out, cap, "%s", strs[take(in, sizeof strs / sizeof strs[0])]);
 		break;
 	}
 	default:
@@ -77,11 +77,16 @@ static void value(input *in, char *out, size_t cap)
 	}
 }
 
-static const char *const systems[] = {"emit_box", "emit_nozzle", "gravity", "integrate",
-                                      "collide_box", "collide_sphere", "collide_plane"};
+static const char *const systems[] = {"emit_box", "emit_nozzle", "gravity", "integrate", "collide_box",
+                                      "collide_sphere", "collide_plane", "flip_p2g", "flip_boundary",
+                                      "flip_surface", "flip_pressure", "flip_extrapolate", "flip_g2p",
+                                      "flip_advect", "flip_reseed"};
 static const char *const fields[] = {"min", "max", "spacing", "jitter", "velocity", "start", "center", "radius",
                                      "direction", "speed", "duration", "max_particles", "scale", "max_speed",
-                                     "inside", "restitution", "friction", "offset", "point", "normal", "typo"};
+                                     "inside", "restitution", "friction", "offset", "point", "normal", "typo",
+                                     "mark_radius", "margin", "sigma", "solver", "density", "tolerance",
+                                     "max_iterations", "theta_min", "layers", "flip_ratio", "wall_gap",
+                                     "min_per_cell", "max_per_cell"};
 static const char *const world_fields[] = {"bounds", "gravity", "fps", "cfl", "dt_max", "dt_min", "seed",
                                            "escape", "check_finite", "cell_size", "duration"};
 
@@ -99,7 +104,8 @@ int eddy_fuzz_one(const uint8_t *data, size_t size)
 			len += (size_t)k_; \
 	} while (0)
 	/* a step budget keeps hostile time steps from running for hours */
-	EMIT("local eddy = require 'eddy'\nlocal w = eddy.world{ max_steps_per_frame = 300, escape = 'remove'");
+	EMIT("local eddy = require 'eddy'\nlocal w = eddy.world{ max_steps_per_frame = 300, escape = 'remove', "
+	     "cell_size = 0.1");
 	for (unsigned i = 0, nf = take(&in, 4); i < nf; ++i) {
 		value(&in, v, sizeof v);
 		EMIT(", %s = %s", world_fields[take(&in, sizeof world_fields / sizeof world_fields[0])], v);
@@ -133,7 +139,8 @@ int eddy_fuzz_one(const uint8_t *data, size_t size)
 			if (eddy_world_system_info(w, eddy_world_system_at(w, i), &info) == EDDY_OK)
 				expected += info.expected_particles < 0 ? 0 : info.expected_particles;
 		}
-		if (w && expected <= 20000) {
+		eddy_grid_info g = w ? eddy_world_grid(w) : (eddy_grid_info){0};
+		if (w && expected <= 20000 && (double)g.nx * g.ny * g.nz <= 1e6) {
 			char plan[64];
 			eddy_world_plan(w, plan, sizeof plan);
 			for (int step = 0; step < 200; ++step) {
