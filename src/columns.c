@@ -178,7 +178,7 @@ eddy_status eddy__reserve_particles(eddy_world *w, size_t count)
 	double phys = pages > 0 && page > 0 ? (double)pages * (double)page : 0;
 	if (phys > 0 && (double)cap * (double)per_particle > 0.8 * phys)
 		return eddy__fail(w, EDDY_ERR_NOMEM,
-		                  "%zu particles need %.1f GB of particle columns, more than this machine's %.1f GB; use a larger spacing",
+		                  "%zu particles need %.1f GB of particle columns, more than 80%% of this machine's %.1f GB; use a larger spacing",
 		                  count, (double)cap * (double)per_particle / 1e9, phys / 1e9);
 	for (int i = 0; i < w->column_count; ++i) {
 		eddy_column *c = &w->columns[i];
