@@ -132,7 +132,7 @@ eddy_status eddy__column_acquire(eddy_world *w, int id)
 				w->nx = w->ny = w->nz = 0;
 			}
 			return eddy__fail(w, EDDY_ERR_NOMEM,
-			                  "the %d x %d x %d grid needs %.1f GB for its columns, more than this machine's %.1f GB; "
+			                  "the %d x %d x %d grid needs %.1f GB for its columns, more than 80%% of this machine's %.1f GB; "
 			                  "use a larger cell_size", w->nx, w->ny, w->nz, grid_bytes / 1e9, phys / 1e9);
 		}
 	}
