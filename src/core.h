@@ -145,6 +145,9 @@ eddy_status eddy__reserve_particles(eddy_world *w, size_t count);
 /* Appends count zero-filled rows; returns the index of the first. */
 eddy_status eddy__append_particles(eddy_world *w, size_t count, size_t *first);
 void eddy__clear_derived(eddy_world *w);
+/* Reorders every allocated particle column so row i takes old row perm[i];
+ * scratch holds n floats. SPH keeps the table in grid-cell order with it. */
+void eddy__permute_particles(eddy_world *w, const uint32_t *perm, void *scratch);
 
 static inline float *eddy__col(eddy_world *w, int id) { return (float *)w->columns[id].data; }
 

@@ -56,6 +56,7 @@ int main(int argc, char **argv)
 		{"lua", suite_lua},
 		{"cli", suite_cli},
 		/* SPH suites */
+		{"sph", suite_sph},
 
 		/* FLIP suites */
 

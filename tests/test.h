@@ -51,6 +51,7 @@ void suite_physics(void);
 void suite_lua(void);
 void suite_cli(void);
 /* SPH suites */
+void suite_sph(void);
 
 /* FLIP suites */
 
