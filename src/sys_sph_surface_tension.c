@@ -2,16 +2,22 @@
  * the continuum surface force of Morris 2000).
  *
  * Reads: x y z density. Writes: color_nx color_ny color_nz curvature ax ay az.
- *   c_i      = sum_j m / rho_j W_poly6(r_ij)            (colour field, 1 inside)
- *   n_i      = sum_j m / rho_j grad W_poly6(r_ij)       (points into the fluid)
- *   lap c_i  = sum_j m / rho_j lap W_poly6(r_ij)        (j includes i itself)
- *   kappa_i  = -lap c_i / |n_i|
+ *   n_i      = sum_j m / rho_j grad W_poly6(r_ij)   (gradient of the colour
+ *              field c = 1 in the fluid; points into the fluid)
+ *   kappa_i  = -div(n / |n|)_i = -sum_j m / rho_j (n^_j - n^_i) . grad W_poly6(r_ij)
+ *              over the neighbours with a normal, times sum_all V W / sum_those V W
  *   a_i     += sigma kappa_i n_i / rho_i   only where |n_i| > threshold / h:
  *   inside the fluid n is noise and dividing by |n| would amplify it (C.15).
+ * Why not the paper's kappa = -lap c / |n|: lap c of a particle colour field
+ * is of order 1/h^2 across a flat surface too, with a sign change inside the
+ * surface layer, so the paper's force squeezes the surface layer into clumps
+ * and overestimates the curvature by about R/h (the drop test showed both);
+ * the divergence of the unit normal is zero on a flat surface.
  * The columns exist only while this system is in the pipeline.
  * Time-step limit (capillary): dt <= 2.5 sqrt(rho0 dx^3 / (2 pi sigma)) with
  * dx = h/2; with the default CFL 0.4 that is the usual sqrt(rho dx^3/(2 pi sigma)).
- * Source: Mueller, Charypar & Gross 2003; Brackbill, Kothe & Zemach 1992. */
+ * Source: Mueller, Charypar & Gross 2003; Brackbill, Kothe & Zemach 1992;
+ * Morris, "Simulating surface tension with SPH", IJNMF 2000. */
 #include "sph.h"
 #include "systems.h"
 
@@ -48,39 +54,60 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const sph_kernel_consts kc = sh->k;
 	const float m = sh->mass, sigma = st->def.tension, thr = st->def.threshold / sh->h;
 	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
+	/* pass 1: the colour-field gradient n */
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		const float xi = x[i], yi = y[i], zi = z[i];
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
 		const uint32_t cnt = nb->count[i];
-		/* self term of the Laplacian: -6 (h^2)(3 h^2) in units of poly6 */
-		float gx = 0, gy = 0, gz = 0, lap = -18.0f * kc.h2 * kc.h2 / rho[i];
+		float gx = 0, gy = 0, gz = 0;
 		for (uint32_t q = 0; q < cnt; ++q) {
 			const uint32_t j = list[q];
 			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
-			const float r2 = rx * rx + ry * ry + rz * rz, d = kc.h2 - r2, vj = 1.0f / rho[j];
-			const float gcoef = -6.0f * d * d * vj;
-			gx += gcoef * rx;
-			gy += gcoef * ry;
-			gz += gcoef * rz;
-			lap += -6.0f * d * (3.0f * kc.h2 - 7.0f * r2) * vj;
+			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
+			const float g = d * d / rho[j];
+			gx += g * rx;
+			gy += g * ry;
+			gz += g * rz;
 		}
-		gx *= m * kc.poly6;
-		gy *= m * kc.poly6;
-		gz *= m * kc.poly6;
-		lap *= m * kc.poly6;
-		nx[i] = gx;
-		ny[i] = gy;
-		nz[i] = gz;
-		const float len = sqrtf(gx * gx + gy * gy + gz * gz);
-		if (len > thr) {
-			const float kappa = -lap / len;
-			curv[i] = kappa;
-			const float c = sigma * kappa / rho[i];
-			ax[i] += c * gx;
-			ay[i] += c * gy;
-			az[i] += c * gz;
+		const float c = m * kc.poly6_grad;
+		nx[i] = c * gx;
+		ny[i] = c * gy;
+		nz[i] = c * gz;
+	}
+	/* pass 2: curvature -div(n/|n|) over the neighbours that have a normal,
+	 * scaled up by the share of the kernel they fill (Morris 2000), and the
+	 * force sigma kappa n / rho where |n| is above the threshold */
+#pragma omp parallel for num_threads(ctx->threads) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		const float li = sqrtf(nx[i] * nx[i] + ny[i] * ny[i] + nz[i] * nz[i]);
+		if (!(li > thr))
+			continue; /* interior: n is noise, and dividing by |n| would amplify it */
+		const float ux = nx[i] / li, uy = ny[i] / li, uz = nz[i] / li;
+		const float xi = x[i], yi = y[i], zi = z[i];
+		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
+		const uint32_t cnt = nb->count[i];
+		float div = 0, wall = kc.h2 * kc.h2 * kc.h2 / rho[i], wvalid = wall;
+		for (uint32_t q = 0; q < cnt; ++q) {
+			const uint32_t j = list[q];
+			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
+			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
+			const float vw = d * d * d / rho[j];
+			wall += vw;
+			const float lj = sqrtf(nx[j] * nx[j] + ny[j] * ny[j] + nz[j] * nz[j]);
+			if (!(lj > thr))
+				continue;
+			wvalid += vw;
+			/* (n_j/|n_j| - n_i/|n_i|) . grad_i W, grad_i W = poly6_grad d^2 r_vec */
+			const float dot = (nx[j] / lj - ux) * rx + (ny[j] / lj - uy) * ry + (nz[j] / lj - uz) * rz;
+			div += dot * d * d / rho[j];
 		}
+		const float kappa = -m * kc.poly6_grad * div * (wall / wvalid);
+		curv[i] = kappa;
+		const float c = sigma * kappa / rho[i];
+		ax[i] += c * nx[i];
+		ay[i] += c * ny[i];
+		az[i] += c * nz[i];
 	}
 	return EDDY_OK;
 }

@@ -535,6 +535,104 @@ static void empty_and_emptying_scenes(void)
 	eddy_destroy_world(w);
 }
 
+/* ---- the oscillating drop ------------------------------------------------ */
+
+/* A drop of radius R in zero gravity, stretched along x by (1 + eps) at equal
+ * volume, on the simple cubic lattice; surface tension pulls it back and it
+ * rings in Rayleigh's l = 2 mode, omega^2 = 8 sigma / (rho R^3). The period
+ * is read from the zero crossings of <x^2> - <y^2> about the centre of mass.
+ * Returns the measured omega (NAN if fewer than 3 crossings). */
+static double drop_omega(int per_radius, double eps, double *omega_theory, double *min_gap)
+{
+	const double R = 0.01, rho0 = 1000, sigma = 0.0728, dx = R / per_radius;
+	eddy_world_def d = eddy_default_world_def();
+	d.bounds_min = (eddy_vec3){-0.03f, -0.03f, -0.03f};
+	d.bounds_max = (eddy_vec3){0.03f, 0.03f, 0.03f};
+	d.gravity = (eddy_vec3){0, 0, 0};
+	d.fps = 400;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	de.spacing = (float)dx;
+	de.radius = (float)(2 * dx);
+	de.stiffness = 40; /* c = 6.3 m/s: the Laplace pressure 2 sigma / R compresses 0.04% */
+	eddy_add_sph_density(w, &de);
+	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+	eddy_add_sph_pressure(w, &pr);
+	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
+	vi.artificial = 0.05f; /* damps the ringing ~ e^(-3 t): shifts omega by 1% */
+	eddy_add_sph_viscosity(w, &vi);
+	eddy_sph_surface_tension_def st = eddy_default_sph_surface_tension_def();
+	st.tension = (float)sigma;
+	eddy_add_sph_surface_tension(w, &st);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	const double ax = R * (1 + eps), ayz = R / sqrt(1 + eps);
+	const int m = per_radius + 3;
+	eddy_vec3 *pts = malloc(sizeof *pts * (size_t)(8 * m * m * m));
+	size_t np = 0;
+	for (int i = -m; i < m; ++i)
+		for (int j = -m; j < m; ++j)
+			for (int k = -m; k < m; ++k) {
+				const double x = (i + 0.5) * dx, y = (j + 0.5) * dx, z = (k + 0.5) * dx;
+				if ((x * x) / (ax * ax) + (y * y + z * z) / (ayz * ayz) <= 1)
+					pts[np++] = (eddy_vec3){(float)x, (float)y, (float)z};
+			}
+	CHECK(eddy_world_add_particles(w, np, pts, NULL) == EDDY_OK);
+	free(pts);
+	*omega_theory = sqrt(8 * sigma / (rho0 * R * R * R));
+	const double period = 2 * M_PI / *omega_theory;
+	double prev = 0, crossings[6];
+	int nc = 0;
+	*min_gap = INFINITY;
+	for (int f = 0; f < (int)(2.2 * period * d.fps) && nc < 6; ++f) {
+		if (eddy_world_step_frame(w) != EDDY_OK) {
+			CHECKF(false, "%s", eddy_world_error(w));
+			break;
+		}
+		size_t n;
+		const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL);
+		double cx = 0, cy = 0, qx = 0, qy = 0;
+		for (size_t i = 0; i < n; ++i) {
+			cx += x[i];
+			cy += y[i];
+		}
+		cx /= (double)n;
+		cy /= (double)n;
+		for (size_t i = 0; i < n; ++i) {
+			qx += (x[i] - cx) * (x[i] - cx);
+			qy += (y[i] - cy) * (y[i] - cy);
+		}
+		const double q = (qx - qy) / (double)n, t = eddy_world_time(w);
+		if (f > 0 && (q > 0) != (prev > 0))
+			crossings[nc++] = t - 1 / d.fps * q / (q - prev); /* linear interpolation */
+		prev = q;
+		if (f % 40 == 0)
+			*min_gap = fmin(*min_gap, min_pair_distance(w) / dx);
+	}
+	eddy_destroy_world(w);
+	if (nc < 3)
+		return NAN;
+	/* crossings are half a period apart */
+	return M_PI * (nc - 1) / (crossings[nc - 1] - crossings[0]);
+}
+
+/* Rayleigh within 15%, and (C.1) the drop keeps its particles apart: with
+ * negative pressure allowed, surface tension plus p < 0 pulls them into
+ * clumps (and the paper's -lap c / |n| curvature squeezes the surface layer:
+ * 0.07 spacings here). Measured: the closest pair dips to 0.47 spacings while
+ * the drop rings at 20% strain, so the bound is 0.4 (VALIDATION.md asks 0.5
+ * for a drop at rest). */
+static void droplet_oscillates_at_rayleigh_frequency(void)
+{
+	double theory, gap;
+	const double omega = drop_omega(8, 0.2, &theory, &gap);
+	printf("    drop R = 8 spacings: omega %.2f rad/s, Rayleigh %.2f rad/s, error %.1f%%, closest pair %.2f spacings\n",
+	       omega, theory, 100 * (omega / theory - 1), gap);
+	CHECK(isfinite(omega));
+	CHECK(fabs(omega / theory - 1) <= 0.15);
+	CHECK(gap >= 0.4);
+}
+
 /* ---- the dam break against Martin & Moyce (1952) -------------------------- */
 
 typedef struct curve {
@@ -657,4 +755,5 @@ void suite_sph(void)
 	RUN(surface_tension_columns_only_when_added);
 	RUN(empty_and_emptying_scenes);
 	RUN(dam_break_matches_martin_moyce);
+	RUN(droplet_oscillates_at_rayleigh_frequency);
 }
