@@ -41,7 +41,13 @@ typedef struct sph_neighbors {
 	uint32_t *nbr, *count, *bnbr, *bcount;
 	size_t n_alloc, cap_alloc, bcap_alloc;
 
-	/* grid over the world bounds plus one cell of margin, cell size h */
+	/* fused into the search: sum_j (h^2 - r^2)^3 over the fluid neighbours
+	 * and sum_b V_b rho_b (h^2 - r^2)^3 over the boundary ones */
+	float *wsum, *bwsum;
+
+	/* grid over the world bounds plus a margin of h, cell size h / 2: the
+	 * 5^3 cells around a particle hold 58% of the candidates of 3^3 cells of
+	 * size h */
 	float ox, oy, oz, inv;
 	int gx, gy, gz;
 	uint32_t *cell_start; /* (cells + 1) fluid rows per cell, rows in cell order */
@@ -55,12 +61,15 @@ typedef struct sph_neighbors {
 	uint64_t bsig; /* which boundary systems the arrays were built from */
 } sph_neighbors;
 
+#define SPH_CELLS_PER_H 2
+
 /* What sph_density shares with the SPH systems after it. */
 typedef struct sph_shared {
 	float h, mass, rho0;
 	float c; /* m/s, speed of sound sqrt(k) */
 	sph_kernel_consts k;
 	sph_neighbors nb;
+	float *inv_rho; /* 1/rho this step (arena), set by sph_density */
 } sph_shared;
 
 /* The sph_density system nearest before system s in the pipeline, or NULL. */

@@ -1,12 +1,14 @@
 /* SPH neighbour search: a uniform grid of cell size h over the world bounds
  * (plus one cell of margin for the boundary particles on the walls).
  *
- * Each step: the cell of every particle, a counting sort by cell (stable, so
+ * Each step: the cell (size h/2, so 5^3 cells cover the support with fewer
+ * candidates than 3^3 cells of size h) of every particle, a counting sort by cell (stable, so
  * the order is deterministic), the whole particle table permuted into cell
  * order (eddy__permute_particles) so that the passes over neighbours stream
- * memory, then per particle the 27 cells around it (with x fastest, the three
- * cells along x are one contiguous run of rows, so 9 runs) filtered by
- * r^2 < h^2. The lists are stored with a fixed stride per particle; when a
+ * memory, then per particle the 125 cells around it (with x fastest, the five
+ * cells along x are one contiguous run of rows, so 25 runs) filtered by
+ * r^2 < h^2. The density's kernel sums are accumulated on the way, since
+ * r^2 is at hand. The lists are stored with a fixed stride per particle; when a
  * particle has more neighbours than the stride (compressed fluid), the stride
  * grows to the largest count and the lists are built again. Every particle
  * writes only its own list, so the lists are identical for any thread count.
@@ -24,6 +26,8 @@ void eddy__sph_neighbors_free(sph_neighbors *nb)
 {
 	free(nb->nbr);
 	free(nb->count);
+	free(nb->wsum);
+	free(nb->bwsum);
 	free(nb->bnbr);
 	free(nb->bcount);
 	free(nb->cell_start);
@@ -69,13 +73,15 @@ static eddy_status grid_setup(eddy_world *w, sph_neighbors *nb, float h)
 	nb->ox = lo.x - h;
 	nb->oy = lo.y - h;
 	nb->oz = lo.z - h;
-	nb->inv = 1.0f / h;
-	const double gx = ceil((hi.x - lo.x) / h) + 2, gy = ceil((hi.y - lo.y) / h) + 2, gz = ceil((hi.z - lo.z) / h) + 2;
+	nb->inv = SPH_CELLS_PER_H / h;
+	const double gx = ceil((hi.x - lo.x) * nb->inv) + 2 * SPH_CELLS_PER_H,
+	             gy = ceil((hi.y - lo.y) * nb->inv) + 2 * SPH_CELLS_PER_H,
+	             gz = ceil((hi.z - lo.z) * nb->inv) + 2 * SPH_CELLS_PER_H;
 	if (gx * gy * gz > 1.5e8)
 		return eddy__fail(w, EDDY_ERR_NOMEM,
-		                  "sph_density: the world bounds hold %.0f x %.0f x %.0f neighbour cells of size radius = %g m; "
+		                  "sph_density: the world bounds hold %.0f x %.0f x %.0f neighbour cells of size radius/2 = %g m; "
 		                  "shrink the bounds or use a larger radius",
-		                  gx, gy, gz, (double)h);
+		                  gx, gy, gz, (double)h / SPH_CELLS_PER_H);
 	nb->gx = (int)gx;
 	nb->gy = (int)gy;
 	nb->gz = (int)gz;
@@ -198,7 +204,7 @@ static void fill_lists(eddy_world *w, sph_neighbors *nb, const sph_kernel_consts
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const long n = (long)w->n;
-	const int gx = nb->gx, gy = nb->gy, gz = nb->gz;
+	const int gx = nb->gx, gy = nb->gy, gz = nb->gz, R = SPH_CELLS_PER_H;
 	const size_t cap = nb->cap, bcap = nb->bcap;
 	const float h2 = kc->h2;
 	uint32_t mf = 0, mb = 0;
@@ -207,15 +213,16 @@ static void fill_lists(eddy_world *w, sph_neighbors *nb, const sph_kernel_consts
 		const uint32_t c = nb->cell_of[i];
 		const int cx = (int)(c % (uint32_t)gx), cy = (int)(c / (uint32_t)gx % (uint32_t)gy),
 		          cz = (int)(c / ((uint32_t)gx * (uint32_t)gy));
-		const int x0 = cx > 0 ? cx - 1 : 0, x1 = cx < gx - 1 ? cx + 1 : gx - 1;
+		const int x0 = cx >= R ? cx - R : 0, x1 = cx < gx - R ? cx + R : gx - 1;
 		const float xi = x[i], yi = y[i], zi = z[i];
 		uint32_t *list = nb->nbr + (size_t)i * cap, *blist = nb->bnbr + (size_t)i * bcap;
 		uint32_t cnt = 0, bcnt = 0;
-		for (int dz = -1; dz <= 1; ++dz) {
+		float ws = 0, bws = 0;
+		for (int dz = -R; dz <= R; ++dz) {
 			const int zz = cz + dz;
 			if (zz < 0 || zz >= gz)
 				continue;
-			for (int dy = -1; dy <= 1; ++dy) {
+			for (int dy = -R; dy <= R; ++dy) {
 				const int yy = cy + dy;
 				if (yy < 0 || yy >= gy)
 					continue;
@@ -223,25 +230,31 @@ static void fill_lists(eddy_world *w, sph_neighbors *nb, const sph_kernel_consts
 				const uint32_t a = nb->cell_start[row + (size_t)x0], e = nb->cell_start[row + (size_t)x1 + 1];
 				for (uint32_t j = a; j < e; ++j) {
 					const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
-					if (rx * rx + ry * ry + rz * rz < h2 && j != (uint32_t)i) {
+					const float d = h2 - (rx * rx + ry * ry + rz * rz);
+					if (d > 0 && j != (uint32_t)i) {
 						if (cnt < cap)
 							list[cnt] = j;
 						cnt++;
+						ws += d * d * d;
 					}
 				}
 				const uint32_t ba = nb->bcell_start[row + (size_t)x0], be = nb->bcell_start[row + (size_t)x1 + 1];
 				for (uint32_t j = ba; j < be; ++j) {
 					const float rx = xi - nb->bx[j], ry = yi - nb->by[j], rz = zi - nb->bz[j];
-					if (rx * rx + ry * ry + rz * rz < h2) {
+					const float d = h2 - (rx * rx + ry * ry + rz * rz);
+					if (d > 0) {
 						if (bcnt < bcap)
 							blist[bcnt] = j;
 						bcnt++;
+						bws += nb->bvol[j] * nb->brho[j] * d * d * d;
 					}
 				}
 			}
 		}
 		nb->count[i] = cnt;
 		nb->bcount[i] = bcnt;
+		nb->wsum[i] = ws;
+		nb->bwsum[i] = bws;
 		mf = cnt > mf ? cnt : mf;
 		mb = bcnt > mb ? bcnt : mb;
 	}
@@ -274,6 +287,12 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
 	had = nb->n_alloc;
 	if (!grow((void **)&nb->bcount, &had, n, sizeof *nb->bcount))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
+	had = nb->n_alloc;
+	if (!grow((void **)&nb->wsum, &had, n, sizeof *nb->wsum))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
+	had = nb->n_alloc;
+	if (!grow((void **)&nb->bwsum, &had, n, sizeof *nb->bwsum))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
 	nb->n_alloc = had;
 

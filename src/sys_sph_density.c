@@ -72,13 +72,14 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 		const float xb = nb->bx[b], yb = nb->by[b], zb = nb->bz[b];
 		const int cx = (int)((xb - nb->ox) * nb->inv), cy = (int)((yb - nb->oy) * nb->inv),
 		          cz = (int)((zb - nb->oz) * nb->inv);
-		const int x0 = cx > 0 ? cx - 1 : 0, x1 = cx < gxn - 1 ? cx + 1 : gxn - 1;
+		const int R = SPH_CELLS_PER_H;
+		const int x0 = cx >= R ? cx - R : 0, x1 = cx < gxn - R ? cx + R : gxn - 1;
 		float sw = 0, sp = 0;
-		for (int dz = -1; dz <= 1; ++dz) {
+		for (int dz = -R; dz <= R; ++dz) {
 			const int zz = cz + dz;
 			if (zz < 0 || zz >= gzn)
 				continue;
-			for (int dy = -1; dy <= 1; ++dy) {
+			for (int dy = -R; dy <= R; ++dy) {
 				const int yy = cy + dy;
 				if (yy < 0 || yy >= gyn)
 					continue;
@@ -110,7 +111,6 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	if (st != EDDY_OK)
 		return st;
 	const sph_neighbors *nb = &sh->nb;
-	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE), *ncount = eddy__col(w, COL_SPH_NEIGHBORS);
 	const sph_kernel_consts kc = sh->k;
 	const float m = sh->mass, rho0 = sh->rho0, k = sd->def.stiffness;
@@ -118,33 +118,19 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const bool tait = sd->def.eos == EDDY_SPH_EOS_TAIT; /* EOS choice, not a feature switch */
 	const float B = k * rho0 / sd->def.tait_gamma, gamma = sd->def.tait_gamma;
 	const long n = (long)w->n;
+	float *inv_rho = eddy__arena_alloc(&w->arena, (w->n ? w->n : 1) * sizeof *inv_rho);
+	if (!inv_rho)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", w->n);
+	sh->inv_rho = inv_rho;
+	/* the kernel sums were accumulated by the neighbour search */
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
-		const float xi = x[i], yi = y[i], zi = z[i];
-		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
-		const uint32_t cnt = nb->count[i];
-		float sum = self;
-		for (uint32_t q = 0; q < cnt; ++q) {
-			const uint32_t j = list[q];
-			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
-			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
-			sum += d * d * d;
-		}
-		float r = m * kc.poly6 * sum;
-		const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
-		const uint32_t bcnt = nb->bcount[i];
-		float bsum = 0;
-		for (uint32_t q = 0; q < bcnt; ++q) {
-			const uint32_t b = blist[q];
-			const float rx = xi - nb->bx[b], ry = yi - nb->by[b], rz = zi - nb->bz[b];
-			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
-			bsum += nb->bvol[b] * nb->brho[b] * d * d * d;
-		}
-		r += kc.poly6 * bsum;
+		const float r = kc.poly6 * (m * (self + nb->wsum[i]) + nb->bwsum[i]);
 		rho[i] = r;
-		float pr = tait ? B * (powf(r / rho0, gamma) - 1.0f) : k * (r - rho0);
+		inv_rho[i] = 1.0f / r;
+		const float pr = tait ? B * (powf(r / rho0, gamma) - 1.0f) : k * (r - rho0);
 		p[i] = pr > 0 ? pr : 0;
-		ncount[i] = (float)(cnt + bcnt);
+		ncount[i] = (float)(nb->count[i] + nb->bcount[i]);
 	}
 	return boundary_pressure(w, sd, ctx->threads);
 }

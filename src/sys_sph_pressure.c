@@ -48,7 +48,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)", s->label);
 	const sph_neighbors *nb = &sh->nb;
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
-	const float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
+	const float *p = eddy__col(w, COL_PRESSURE), *inv_rho = sh->inv_rho;
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	const sph_kernel_consts kc = sh->k;
 	const float m = sh->mass, scale = sp->def.scale, eps2 = 1e-6f * kc.h2;
@@ -56,7 +56,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		const float xi = x[i], yi = y[i], zi = z[i];
-		const float ri = rho[i] > 1e-6f ? rho[i] : 1e-6f, pi_ = p[i];
+		/* rho >= m W(0) > 0 (the self term), so 1/rho is finite */
+		const float iri = inv_rho[i], pi_ = p[i];
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
 		const uint32_t cnt = nb->count[i];
 		float fx = 0, fy = 0, fz = 0;
@@ -76,9 +77,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 				sph_coincident_dir((size_t)i, j, &rx, &ry, &rz);
 			}
 			const float hr = kc.h - r;
-			const float rj = rho[j] > 1e-6f ? rho[j] : 1e-6f;
 			/* (p_i + p_j)/(rho_i rho_j) times |dW/dr|; the force pushes i away from j */
-			const float c = (pi_ + p[j]) / (ri * rj) * hr * hr;
+			const float c = (pi_ + p[j]) * inv_rho[j] * hr * hr;
 			fx += c * rx;
 			fy += c * ry;
 			fz += c * rz;
@@ -101,10 +101,10 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		}
 		/* -grad W = +45/(pi h^6) (h-r)^2 r_hat, so the signs above are already "away" */
 		const float g = -kc.spiky_grad * scale;
-		const float bcoef = 1.0f / ri;
-		ax[i] += g * (m * fx + bcoef * bx);
-		ay[i] += g * (m * fy + bcoef * by);
-		az[i] += g * (m * fz + bcoef * bz);
+		const float bcoef = 1.0f;
+		ax[i] += g * iri * (m * fx + bcoef * bx);
+		ay[i] += g * iri * (m * fy + bcoef * by);
+		az[i] += g * iri * (m * fz + bcoef * bz);
 	}
 	return EDDY_OK;
 }

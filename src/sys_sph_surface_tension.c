@@ -47,7 +47,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)", s->label);
 	const sph_neighbors *nb = &sh->nb;
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
-	const float *rho = eddy__col(w, COL_DENSITY);
+	const float *inv_rho = sh->inv_rho;
 	float *nx = eddy__col(w, COL_SPH_NX), *ny = eddy__col(w, COL_SPH_NY), *nz = eddy__col(w, COL_SPH_NZ);
 	float *curv = eddy__col(w, COL_SPH_CURVATURE);
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
@@ -65,7 +65,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			const uint32_t j = list[q];
 			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
 			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
-			const float g = d * d / rho[j];
+			const float g = d * d * inv_rho[j];
 			gx += g * rx;
 			gy += g * ry;
 			gz += g * rz;
@@ -87,12 +87,12 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		const float xi = x[i], yi = y[i], zi = z[i];
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
 		const uint32_t cnt = nb->count[i];
-		float div = 0, wall = kc.h2 * kc.h2 * kc.h2 / rho[i], wvalid = wall;
+		float div = 0, wall = kc.h2 * kc.h2 * kc.h2 * inv_rho[i], wvalid = wall;
 		for (uint32_t q = 0; q < cnt; ++q) {
 			const uint32_t j = list[q];
 			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
 			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
-			const float vw = d * d * d / rho[j];
+			const float vw = d * d * d * inv_rho[j];
 			wall += vw;
 			const float lj = sqrtf(nx[j] * nx[j] + ny[j] * ny[j] + nz[j] * nz[j]);
 			if (!(lj > thr))
@@ -100,11 +100,11 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			wvalid += vw;
 			/* (n_j/|n_j| - n_i/|n_i|) . grad_i W, grad_i W = poly6_grad d^2 r_vec */
 			const float dot = (nx[j] / lj - ux) * rx + (ny[j] / lj - uy) * ry + (nz[j] / lj - uz) * rz;
-			div += dot * d * d / rho[j];
+			div += dot * d * d * inv_rho[j];
 		}
 		const float kappa = -m * kc.poly6_grad * div * (wall / wvalid);
 		curv[i] = kappa;
-		const float c = sigma * kappa / rho[i];
+		const float c = sigma * kappa * inv_rho[i];
 		ax[i] += c * nx[i];
 		ay[i] += c * ny[i];
 		az[i] += c * nz[i];

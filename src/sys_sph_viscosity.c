@@ -46,7 +46,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const sph_neighbors *nb = &sh->nb;
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
-	const float *rho = eddy__col(w, COL_DENSITY);
+	const float *rho = eddy__col(w, COL_DENSITY), *inv_rho = sh->inv_rho;
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	const sph_kernel_consts kc = sh->k;
 	const float coef = sv->def.viscosity * sh->mass * kc.visc_lap;
@@ -64,7 +64,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
 			const float r2 = rx * rx + ry * ry + rz * rz, r = sqrtf(r2);
 			const float ux = ui - vx[j], uy = vi - vy[j], uz = wi - vz[j];
-			const float c = (kc.h - r) / rho[j];
+			const float c = (kc.h - r) * inv_rho[j];
 			fx -= c * ux;
 			fy -= c * uy;
 			fz -= c * uz;
@@ -72,13 +72,13 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			if (vr < 0 && r > 0) {
 				/* approaching: push apart along r_hat (vr < 0 makes the sign) */
 				const float hr = kc.h - r;
-				const float a = -vr / ((r2 + eps) * 0.5f * (rho[i] + rho[j])) * hr * hr / r;
+				const float a = -vr / ((r2 + eps) * 0.5f * (rho[i] + rho[j]) * r) * hr * hr;
 				gx += a * rx;
 				gy += a * ry;
 				gz += a * rz;
 			}
 		}
-		const float k = coef / rho[i];
+		const float k = coef * inv_rho[i];
 		ax[i] += k * fx + acoef * gx;
 		ay[i] += k * fy + acoef * gy;
 		az[i] += k * fz + acoef * gz;

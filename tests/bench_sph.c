@@ -32,7 +32,7 @@ static int cmp_double(const void *a, const void *b)
  * twice as wide, with gravity: the neighbourhoods of a real fluid. */
 static eddy_world *block(int n, int threads)
 {
-	const float dx = 0.01f, side = dx * floorf(cbrtf((float)n));
+	const float dx = 0.01f, side = dx * roundf(cbrtf((float)n));
 	eddy_world_def d = eddy_default_world_def();
 	d.bounds_max = (eddy_vec3){2 * side, 1.5f * side, 2 * side};
 	d.threads = threads;
