@@ -126,7 +126,13 @@ typedef struct lua_def {
 	bool has_offset;    /* a constant offset in `offset` */
 	eddy_vec3 offset;
 	/* an offset function, if any, is the userdata's user value 1 */
-	max_align_t def[];  /* k->def_size bytes: the C def */
+	/* k->def_size bytes: the C def. Lua aligns userdata to 8 bytes, not to
+	 * max_align_t; defs hold nothing wider than double, int64 or pointers. */
+	union {
+		double d;
+		int64_t i;
+		void *p;
+	} def[];
 } lua_def;
 
 /* Fills d from the table at idx; an `offset` function is left on user value 1

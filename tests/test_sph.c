@@ -741,6 +741,21 @@ static void dam_break_matches_martin_moyce(void)
 	CHECK(json_number(last, "leaked") == 0 && json_number(last, "nonfinite") == 0);
 }
 
+/* The SPH scenes run through the eddy command and report their fields. */
+static void scenes_run_and_report(void)
+{
+	curve c;
+	char last[16384] = "";
+	run_scene("scenes/hydrostatic.lua", "--frames 2", NULL, NULL, &c, last, sizeof last);
+	CHECK_HAS(last, "\"pressure_err\":");
+	CHECK(json_number(last, "bottom_density_expected") > 1.0);
+	run_scene("scenes/pour.lua", "--frames 3", NULL, NULL, &c, last, sizeof last);
+	CHECK(json_number(last, "particles") > 0 && json_number(last, "leaked") == 0);
+	run_scene("scenes/droplet.lua", "--frames 1 --set spacing=0.0025", NULL, NULL, &c, last, sizeof last);
+	CHECK_HAS(last, "\"q\":");
+	CHECK_HAS(last, "sph_surface_tension");
+}
+
 void suite_sph(void)
 {
 	RUN(kernels_integrate_to_one);
@@ -756,4 +771,5 @@ void suite_sph(void)
 	RUN(empty_and_emptying_scenes);
 	RUN(dam_break_matches_martin_moyce);
 	RUN(droplet_oscillates_at_rayleigh_frequency);
+	RUN(scenes_run_and_report);
 }
