@@ -326,6 +326,32 @@ static bool all_finite(const eddy_world *w)
 	return true;
 }
 
+/* Each SPH system reports its explicit limit (C.4, C.15) and the stats name
+ * the active one: acoustic h / (c + |v|), viscous 0.3125 h^2 / nu, each
+ * times the CFL number 0.4. (The capillary limit scales like the force
+ * limit of the surface particles it accelerates, which binds first here.) */
+static void time_step_limits_are_reported(void)
+{
+	const double h = 0.02, cfl = 0.4;
+	for (int which = 0; which < 2; ++which) {
+		sph_setup s = default_setup();
+		s.gravity = 0;
+		s.mu = which == 1 ? 200.0f : 1e-3f;
+		eddy_world *w = sph_world(&s, NULL);
+		CHECK(eddy_world_step(w) == EDDY_OK); /* emits at rest */
+		CHECK(eddy_world_step(w) == EDDY_OK);
+		CHECK(eddy_world_step_frame(w) == EDDY_OK);
+		eddy_frame_stats st;
+		eddy_world_frame_stats(w, &st);
+		const double expect = which == 0 ? cfl * h / sqrt(s.k) : cfl * 0.3125 * h * h / (s.mu / 1000.0);
+		const char *name = which == 0 ? "sph_density: acoustic" : "sph_viscosity: viscous";
+		printf("    limit %s: dt %.3e s (expected %.3e)\n", st.dt_limit, st.dt_max, expect);
+		CHECK_HAS(st.dt_limit, name);
+		CHECK(st.dt_max <= expect * 1.001 && st.dt_max > expect * 0.9);
+		eddy_destroy_world(w);
+	}
+}
+
 /* C.6: a particle dropped exactly onto another inside a resting block. The
  * gradient has no direction at r = 0; skipping the pair (the usual r > 0
  * guard) leaves them stuck together forever, dividing by r gives NaN. */
@@ -763,6 +789,7 @@ void suite_sph(void)
 	RUN(lattice_sums);
 	RUN(resting_block_stays_at_rest);
 	RUN(hydrostatic_tank);
+	RUN(time_step_limits_are_reported);
 	RUN(coincident_particles_separate);
 	RUN(high_stiffness_stays_bounded);
 	RUN(jet_does_not_tunnel_thin_plate);
