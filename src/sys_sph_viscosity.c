@@ -51,7 +51,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const sph_kernel_consts kc = sh->k;
 	const float coef = sv->def.viscosity * sh->mass * kc.visc_lap;
 	/* -m Pi grad W = m alpha c h vr / ((r^2 + eps) rho_ij) spiky_grad (h-r)^2 r_hat */
-	const float acoef = sh->mass * sv->def.artificial * sh->c * kc.h * -kc.spiky_grad, eps = 0.01f * kc.h2;
+	/* 2 x: the mean density (rho_i + rho_j) / 2 is folded into the pair term */
+	const float acoef = 2.0f * sh->mass * sv->def.artificial * sh->c * kc.h * -kc.spiky_grad, eps = 0.01f * kc.h2,
+	            rmin = 1e-3f * kc.h;
 	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
@@ -68,15 +70,13 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			fx -= c * ux;
 			fy -= c * uy;
 			fz -= c * uz;
-			const float vr = ux * rx + uy * ry + uz * rz;
-			if (vr < 0 && r > 0) {
-				/* approaching: push apart along r_hat (vr < 0 makes the sign) */
-				const float hr = kc.h - r;
-				const float a = -vr / ((r2 + eps) * 0.5f * (rho[i] + rho[j]) * r) * hr * hr;
-				gx += a * rx;
-				gy += a * ry;
-				gz += a * rz;
-			}
+			/* approaching pairs only (vr < 0), pushed apart along r_hat;
+			 * branch-free, since the sign of vr is a coin toss per pair */
+			const float vr = ux * rx + uy * ry + uz * rz, hr = kc.h - r;
+			const float a = fmaxf(-vr, 0.0f) * hr * hr / ((r2 + eps) * (rho[i] + rho[j]) * fmaxf(r, rmin));
+			gx += a * rx;
+			gy += a * ry;
+			gz += a * rz;
 		}
 		const float k = coef * inv_rho[i];
 		ax[i] += k * fx + acoef * gx;

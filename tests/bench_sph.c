@@ -32,7 +32,7 @@ static int cmp_double(const void *a, const void *b)
  * twice as wide, with gravity: the neighbourhoods of a real fluid. */
 static eddy_world *block(int n, int threads)
 {
-	const float dx = 0.01f, side = dx * roundf(cbrtf((float)n));
+	const float dx = 0.01f, side = dx * (roundf(cbrtf((float)n)) + 0.5f); /* + 0.5: a whole number of spacings after floor */
 	eddy_world_def d = eddy_default_world_def();
 	d.bounds_max = (eddy_vec3){2 * side, 1.5f * side, 2 * side};
 	d.threads = threads;
@@ -172,6 +172,11 @@ int main(int argc, char **argv)
 			printf(")\n");
 			eddy_destroy_world(w);
 		}
+	if (argc > 2 && strcmp(argv[2], "--no-pour") == 0) {
+		fprintf(f, "\n]}\n");
+		fclose(f);
+		return 0;
+	}
 	/* the pour: 2.5 s simulated (the jet ends at 2.0 s), one thread */
 	const float stiffness = 400;
 	eddy_world *w = pour(stiffness);
