@@ -352,6 +352,47 @@ static void time_step_limits_are_reported(void)
 	}
 }
 
+/* Both equations of state on a block packed 2% closer than the lattice the
+ * mass is calibrated on (interior density about 1.06 rho0): each interior
+ * particle's pressure is the EOS of its own density, and the surface
+ * particles' negative pressure is clamped to 0 (C.1). */
+static void equations_of_state(void)
+{
+	for (int tait = 0; tait < 2; ++tait) {
+		eddy_world_def d = eddy_default_world_def();
+		d.gravity = (eddy_vec3){0, 0, 0};
+		eddy_world *w = eddy_create_world(&d, NULL, 0);
+		eddy_emit_box_def b = eddy_default_emit_box_def();
+		b.min = (eddy_vec3){0.3f, 0.3f, 0.3f};
+		b.max = (eddy_vec3){0.398f, 0.398f, 0.398f};
+		b.spacing = 0.0098f;
+		eddy_add_emit_box(w, &b);
+		eddy_sph_density_def de = eddy_default_sph_density_def();
+		de.eos = tait ? EDDY_SPH_EOS_TAIT : EDDY_SPH_EOS_LINEAR;
+		de.stiffness = 400;
+		eddy_add_sph_density(w, &de);
+		CHECK(eddy_world_step(w) == EDDY_OK);
+		size_t n;
+		const float *rho = eddy_world_channel(w, "density", &n), *p = eddy_world_channel(w, "pressure", NULL);
+		double rho_max = 0, worst = 0;
+		int clamped = 0;
+		for (size_t i = 0; i < n; ++i) {
+			const double r = rho[i] / 1000.0;
+			const double expect = tait ? 400.0 * 1000.0 / 7.0 * (pow(r, 7) - 1) : 400.0 * (rho[i] - 1000.0);
+			worst = fmax(worst, fabs(p[i] - fmax(expect, 0)) / (400.0 * 1000.0));
+			clamped += expect < 0 && p[i] == 0;
+			rho_max = fmax(rho_max, rho[i]);
+		}
+		printf("    %s EOS: max density %.1f, worst |p - EOS| / (k rho0) %.1e, %d surface particles clamped to p = 0\n",
+		       tait ? "Tait" : "linear", rho_max, worst, clamped);
+		/* the interior sums the packed lattice with the calibrated mass */
+		CHECK_NEAR(rho_max, 1000.0 * eddy_sph_lattice_sum(EDDY_SPH_POLY6, 0.0098, 0.02) / eddy_sph_lattice_sum(EDDY_SPH_POLY6, 0.01, 0.02), 0.05);
+		CHECK(worst < 1e-5);
+		CHECK(clamped > 100);
+		eddy_destroy_world(w);
+	}
+}
+
 /* C.6: a particle dropped exactly onto another inside a resting block. The
  * gradient has no direction at r = 0; skipping the pair (the usual r > 0
  * guard) leaves them stuck together forever, dividing by r gives NaN. */
@@ -789,6 +830,7 @@ void suite_sph(void)
 	RUN(lattice_sums);
 	RUN(resting_block_stays_at_rest);
 	RUN(hydrostatic_tank);
+	RUN(equations_of_state);
 	RUN(time_step_limits_are_reported);
 	RUN(coincident_particles_separate);
 	RUN(high_stiffness_stays_bounded);
