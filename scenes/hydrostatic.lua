@@ -28,21 +28,35 @@ world:add(eddy.gravity {})
 world:add(eddy.integrate {})
 world:add(eddy.collide_box { min = {0, 0, 0}, max = {W, 2 * H, W}, inside = true })
 
+-- pressure_err: the largest error of the layer-mean pressure (layers one
+-- spacing thick, away from walls and surface); pressure_err_particle: the
+-- largest single-particle error, which carries the particle noise of k d(rho).
 world:on_frame(function(w)
 	local x, y, z, p, rho = w:channel("x"), w:channel("y"), w:channel("z"), w:channel("pressure"), w:channel("density")
 	local top = 0
 	for i = 1, #y do if y[i] > top then top = y[i] end end
 	local surface = top + dx / 2
-	local err, bottom, nb = 0, 0, 0
+	local err_p, bottom, nb = 0, 0, 0
+	local sum, count = {}, {}
 	for i = 1, #y do
 		local d = surface - y[i]
 		if d > h and y[i] > h and x[i] > h and x[i] < W - h and z[i] > h and z[i] < W - h then
 			local e = math.abs(p[i] - rho0 * g * d) / (rho0 * g * surface)
-			if e > err then err = e end
+			if e > err_p then err_p = e end
+			local layer = math.floor(y[i] / dx)
+			sum[layer] = (sum[layer] or 0) + p[i]
+			count[layer] = (count[layer] or 0) + 1
 		end
 		if y[i] < dx then bottom, nb = bottom + rho[i], nb + 1 end
 	end
-	return { pressure_err = err, bottom_density_ratio = bottom / math.max(nb, 1) / rho0,
+	local err = 0
+	for layer, s in pairs(sum) do
+		local d = surface - (layer + 0.5) * dx
+		local e = math.abs(s / count[layer] - rho0 * g * d) / (rho0 * g * surface)
+		if e > err then err = e end
+	end
+	return { pressure_err = err, pressure_err_particle = err_p,
+	         bottom_density_ratio = bottom / math.max(nb, 1) / rho0,
 	         bottom_density_expected = 1 + g * surface / stiffness }
 end)
 
