@@ -422,7 +422,7 @@ typedef struct eddy_sph_density_def {
 	float spacing;      /* m, particle spacing the mass is calibrated on; > 0 */
 	float rest_density; /* kg/m^3, rho0; > 0 */
 	float stiffness;    /* m^2/s^2, k = c^2 (speed of sound squared); > 0 */
-	eddy_sph_eos eos;
+	eddy_sph_eos eos;   /* equation of state: linear (the paper's) or Tait */
 	float tait_gamma;   /* 1, exponent of the Tait EOS; >= 1 */
 } eddy_sph_density_def;
 eddy_sph_density_def eddy_default_sph_density_def(void);
