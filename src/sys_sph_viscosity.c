@@ -73,7 +73,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			/* approaching pairs only (vr < 0), pushed apart along r_hat;
 			 * branch-free, since the sign of vr is a coin toss per pair */
 			const float vr = ux * rx + uy * ry + uz * rz, hr = kc.h - r;
-			const float a = fmaxf(-vr, 0.0f) * hr * hr / ((r2 + eps) * (rho[i] + rho[j]) * fmaxf(r, rmin));
+			/* ternaries, not fmaxf: without -ffinite-math-only fmaxf is a libm call */
+			const float app = vr < 0 ? -vr : 0.0f, rs = r > rmin ? r : rmin;
+			const float a = app * hr * hr / ((r2 + eps) * (rho[i] + rho[j]) * rs);
 			gx += a * rx;
 			gy += a * ry;
 			gz += a * rz;
