@@ -326,6 +326,68 @@ static bool all_finite(const eddy_world *w)
 	return true;
 }
 
+static eddy_status no_step(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	(void)w;
+	(void)ctx;
+	(void)user;
+	return EDDY_OK;
+}
+
+/* sph_density keeps the table in grid-cell order (cells of h/2 from the world
+ * bounds minus h, z slowest) and the reorder moves every particle column with
+ * it, a custom one included: particles added in reverse lattice order carry a
+ * tag made from their position, and after a step each row's tag still
+ * matches its position. */
+static void table_is_kept_in_cell_order(void)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.gravity = (eddy_vec3){0, 0, 0};
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	CHECK(eddy_world_declare_column(w, "tag", EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "") >= 0);
+	eddy_custom_system_def cs = eddy_default_custom_system_def();
+	const char *writes[] = {"tag"};
+	cs.name = "tagger";
+	cs.writes = writes;
+	cs.write_count = 1;
+	cs.step = no_step;
+	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	eddy_add_sph_density(w, &de);
+	enum { N = 10 };
+	eddy_vec3 pts[N * N * N];
+	for (int k = 0; k < N * N * N; ++k) {
+		const int q = N * N * N - 1 - k; /* reverse order: z fastest descending */
+		pts[k] = (eddy_vec3){0.3f + 0.01f * (float)(q % N), 0.3f + 0.01f * (float)(q / N % N), 0.3f + 0.01f * (float)(q / (N * N))};
+	}
+	CHECK(eddy_world_add_particles(w, N * N * N, pts, NULL) == EDDY_OK);
+	size_t n;
+	float *tag = eddy_world_channel_mut(w, "tag", &n);
+	const float *x = eddy_world_channel(w, "x", NULL), *y = eddy_world_channel(w, "y", NULL), *z = eddy_world_channel(w, "z", NULL);
+	for (size_t i = 0; i < n; ++i)
+		tag[i] = x[i] + 10 * y[i] + 100 * z[i];
+	CHECK(eddy_world_step(w) == EDDY_OK);
+	tag = eddy_world_channel_mut(w, "tag", &n);
+	x = eddy_world_channel(w, "x", NULL);
+	y = eddy_world_channel(w, "y", NULL);
+	z = eddy_world_channel(w, "z", NULL);
+	const double h = de.radius, inv = 2 / h, o = -h; /* bounds start at 0 */
+	const long gx = (long)ceil(1 * inv) + 4, gy = gx;
+	long prev = -1;
+	int unsorted = 0, mismatched = 0;
+	for (size_t i = 0; i < n; ++i) {
+		const long c = ((long)((z[i] - o) * inv) * gy + (long)((y[i] - o) * inv)) * gx + (long)((x[i] - o) * inv);
+		unsorted += c < prev;
+		prev = c;
+		mismatched += fabsf(tag[i] - (x[i] + 10 * y[i] + 100 * z[i])) > 1e-4f;
+	}
+	CHECK(n == N * N * N);
+	CHECK(unsorted == 0);
+	CHECK(mismatched == 0);
+	CHECK(x[0] < 0.301f && y[0] < 0.301f && z[0] < 0.301f); /* the first row is the lowest corner now */
+	eddy_destroy_world(w);
+}
+
 /* Each SPH system reports its explicit limit (C.4, C.15) and the stats name
  * the active one: acoustic h / (c + |v|), viscous 0.3125 h^2 / nu, each
  * times the CFL number 0.4. (The capillary limit scales like the force
@@ -830,6 +892,7 @@ void suite_sph(void)
 	RUN(lattice_sums);
 	RUN(resting_block_stays_at_rest);
 	RUN(hydrostatic_tank);
+	RUN(table_is_kept_in_cell_order);
 	RUN(equations_of_state);
 	RUN(time_step_limits_are_reported);
 	RUN(coincident_particles_separate);
