@@ -1,5 +1,5 @@
-/* SPH neighbour search: a uniform grid of cell size h over the world bounds
- * (plus one cell of margin for the boundary particles on the walls).
+/* SPH neighbour search: a uniform grid of cell size h/2 over the world bounds
+ * (plus a margin of h for the boundary particles behind the walls).
  *
  * Each step: the cell (size h/2, so 5^3 cells cover the support with fewer
  * candidates than 3^3 cells of size h) of every particle, a counting sort by cell (stable, so
