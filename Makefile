@@ -202,3 +202,18 @@ clean:
 	rm -rf build out
 
 -include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)
+
+# ---- SPH benchmark (tests/bench_sph.c): run by make bench -------------------------
+BENCH_SPH_O := $(BUILD)/obj/tests/bench_sph.o
+
+$(BUILD)/tests/bench_sph: $(BENCH_SPH_O) $(BUILD)/libeddy.a
+	@mkdir -p $(dir $@)
+	$(CC) $(LDBASE) $(BENCH_SPH_O) $(BUILD)/libeddy.a -o $@ $(LIBS)
+
+.PHONY: bench-sph
+bench-sph: deps
+	@$(MAKE) --no-print-directory $(BUILD)/tests/bench_sph
+	$(BUILD)/tests/bench_sph $(BUILD)/bench_sph.json
+
+bench: bench-sph
+# ---- end SPH benchmark ------------------------------------------------------------

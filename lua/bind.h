@@ -58,6 +58,7 @@ extern const eddy_lua_kind eddy_lua_core_kinds[];
 /* more lists: add them here and in kind_lists[] of eddy_lua.c */
 
 /* SPH: eddy_lua_sph_kinds (bind_sph.c) */
+extern const eddy_lua_kind eddy_lua_sph_kinds[];
 
 /* FLIP: eddy_lua_flip_kinds (bind_flip.c) */
 extern const eddy_lua_kind eddy_lua_flip_kinds[];

@@ -37,6 +37,7 @@ static const eddy_lua_kind *const kind_lists[] = {
 	/* more kind lists go here, one line per area */
 
 	/* SPH */
+	eddy_lua_sph_kinds,
 
 	/* FLIP */
 	eddy_lua_flip_kinds,

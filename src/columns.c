@@ -219,6 +219,29 @@ void eddy__clear_derived(eddy_world *w)
 	}
 }
 
+void eddy__permute_particles(eddy_world *w, const uint32_t *perm, void *scratch)
+{
+	const size_t n = w->n;
+	for (int c = 0; c < w->column_count; ++c) {
+		eddy_column *col = &w->columns[c];
+		if (!col->data || col->domain != EDDY_DOMAIN_PARTICLE)
+			continue;
+		if (col->type == EDDY_U8) {
+			const uint8_t *src = col->data;
+			uint8_t *tmp = scratch;
+			for (size_t i = 0; i < n; ++i)
+				tmp[i] = src[perm[i]];
+			memcpy(col->data, tmp, n);
+		} else {
+			const float *src = col->data;
+			float *tmp = scratch;
+			for (size_t i = 0; i < n; ++i)
+				tmp[i] = src[perm[i]];
+			memcpy(col->data, tmp, n * sizeof(float));
+		}
+	}
+}
+
 /* ---- public access ------------------------------------------------------- */
 
 int eddy_world_column_count(const eddy_world *w) { return w->column_count; }

@@ -140,6 +140,9 @@ eddy_status eddy__fail(eddy_world *w, eddy_status s, const char *fmt, ...)
 /* columns (columns.c) */
 void eddy__columns_init(eddy_world *w);
 void eddy__columns_free(eddy_world *w);
+/* Reorders every allocated particle column so row i takes old row perm[i];
+ * scratch holds n floats. SPH keeps the table in grid-cell order with it. */
+void eddy__permute_particles(eddy_world *w, const uint32_t *perm, void *scratch);
 size_t eddy__column_elems(const eddy_world *w, const eddy_column *c);
 size_t eddy__column_bytes(const eddy_world *w, const eddy_column *c);
 eddy_status eddy__column_acquire(eddy_world *w, int id);

@@ -407,7 +407,81 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user);
 
 /* ---- SPH (sys_sph_*.c) ------------------------------------------------- */
 
-/* (SPH defs and add functions go here) */
+/* SPH after Mueller, Charypar & Gross 2003, with the fixes VALIDATION.md lists.
+ * sph_density builds the neighbour lists (uniform grid, cells of radius/2) once
+ * per step and keeps the particle table in cell order; the later SPH systems
+ * reuse those lists, so they must come after it (they read 'density'). */
+
+/* The three kernels of the paper (3D), for hosts and tests. */
+typedef enum eddy_sph_kernel {
+	EDDY_SPH_POLY6 = 0, /* 315/(64 pi h^9) (h^2 - r^2)^3: density, colour field */
+	EDDY_SPH_SPIKY,     /* 15/(pi h^6) (h - r)^3: pressure gradient */
+	EDDY_SPH_VISCOSITY  /* 15/(2 pi h^3) (-r^3/2h^3 + r^2/h^2 + h/2r - 1): viscosity Laplacian */
+} eddy_sph_kernel;
+/* W(r, h) in 1/m^3, dW/dr in 1/m^4, Laplacian in 1/m^5; 0 for r >= h. */
+double eddy_sph_kernel_value(eddy_sph_kernel k, double r, double h);
+double eddy_sph_kernel_derivative(eddy_sph_kernel k, double r, double h);
+double eddy_sph_kernel_laplacian(eddy_sph_kernel k, double r, double h);
+/* Sum of W over a simple cubic lattice of the given spacing around a lattice
+ * point (itself included), 1/m^3: the calibrated particle mass is rho0 / sum. */
+double eddy_sph_lattice_sum(eddy_sph_kernel k, double spacing, double h);
+
+typedef enum eddy_sph_eos {
+	EDDY_SPH_EOS_LINEAR = 0, /* p = k (rho - rho0), the paper's */
+	EDDY_SPH_EOS_TAIT        /* p = (k rho0 / gamma) ((rho/rho0)^gamma - 1) */
+} eddy_sph_eos;
+
+/* sph_density: neighbour search, poly6 density, equation of state. */
+typedef struct eddy_sph_density_def {
+	float radius;       /* m, kernel support h; > spacing */
+	float spacing;      /* m, particle spacing the mass is calibrated on; > 0 */
+	float rest_density; /* kg/m^3, rho0; > 0 */
+	float stiffness;    /* m^2/s^2, k = c^2 (speed of sound squared); > 0 */
+	eddy_sph_eos eos;   /* equation of state: linear (the paper's) or Tait */
+	float tait_gamma;   /* 1, exponent of the Tait EOS; >= 1 */
+} eddy_sph_density_def;
+eddy_sph_density_def eddy_default_sph_density_def(void);
+eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *def);
+/* The particle mass sph_density calibrated (kg), 0 if id is not one. */
+float eddy_sph_particle_mass(const eddy_world *w, eddy_system_id id);
+
+/* sph_pressure: symmetric spiky-gradient pressure force. */
+typedef struct eddy_sph_pressure_def {
+	float scale; /* 1, multiplies the force (1 = the paper's); > 0 */
+} eddy_sph_pressure_def;
+eddy_sph_pressure_def eddy_default_sph_pressure_def(void);
+eddy_system_id eddy_add_sph_pressure(eddy_world *w, const eddy_sph_pressure_def *def);
+
+/* sph_viscosity: viscosity-kernel Laplacian of the velocity, plus Monaghan's
+ * artificial viscosity on approaching pairs, which damps the acoustic noise of
+ * weakly compressible SPH that a physical viscosity too small to slow the flow
+ * cannot. */
+typedef struct eddy_sph_viscosity_def {
+	float viscosity;  /* Pa s, dynamic viscosity mu; >= 0 */
+	float artificial; /* 1, Monaghan's alpha (0.01-0.1 usual); >= 0 */
+} eddy_sph_viscosity_def;
+eddy_sph_viscosity_def eddy_default_sph_viscosity_def(void);
+eddy_system_id eddy_add_sph_viscosity(eddy_world *w, const eddy_sph_viscosity_def *def);
+
+/* sph_surface_tension: colour-field (CSF) surface tension where |n| > threshold. */
+typedef struct eddy_sph_surface_tension_def {
+	float tension;   /* N/m, sigma; >= 0 */
+	float threshold; /* 1/m, |grad c| below this gets no force; >= 0 */
+} eddy_sph_surface_tension_def;
+eddy_sph_surface_tension_def eddy_default_sph_surface_tension_def(void);
+eddy_system_id eddy_add_sph_surface_tension(eddy_world *w, const eddy_sph_surface_tension_def *def);
+
+/* sph_boundary_box: the six faces of a box sampled with boundary particles
+ * (Akinci et al. 2012) that sph_density and sph_pressure see as fluid at rest,
+ * so particles at walls have full neighbourhoods: no sticking, no gap. Keep a
+ * collide_box with the same bounds as the hard limit. */
+typedef struct eddy_sph_boundary_box_def {
+	eddy_vec3 min;  /* m */
+	eddy_vec3 max;  /* m */
+	float spacing;  /* m, spacing of the boundary particles; > 0 (about the fluid's) */
+} eddy_sph_boundary_box_def;
+eddy_sph_boundary_box_def eddy_default_sph_boundary_box_def(void);
+eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_boundary_box_def *def);
 
 /* ---- FLIP (sys_flip_*.c) ------------------------------------------------ */
 

@@ -15,6 +15,11 @@
 	X(collide_sphere) \
 	X(collide_plane) \
 	/* SPH */ \
+	X(sph_density) \
+	X(sph_pressure) \
+	X(sph_viscosity) \
+	X(sph_surface_tension) \
+	X(sph_boundary_box) \
 	\
 	/* FLIP */ \
 	X(flip_p2g) \

@@ -58,6 +58,7 @@ int main(int argc, char **argv)
 		{"reliability", suite_reliability},
 		{"fuzz", suite_fuzz},
 		/* SPH suites */
+		{"sph", suite_sph},
 
 		/* FLIP suites */
 		{"flip", suite_flip},

@@ -53,6 +53,7 @@ void suite_cli(void);
 void suite_reliability(void);
 void suite_fuzz(void);
 /* SPH suites */
+void suite_sph(void);
 
 /* FLIP suites */
 void suite_flip(void);

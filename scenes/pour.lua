@@ -1,0 +1,29 @@
+-- pour (SPH): the scene of Mueller, Charypar & Gross 2003 - water poured
+-- into a box, 5625 particles in all. A round jet falls from a nozzle near
+-- the top into a box whose walls are boundary particles.
+--
+--   build/eddy run scenes/pour.lua --stats out/pour/stats.jsonl
+--   build/eddy run scenes/pour.lua --set stiffness=900     (stiffer: smaller density error)
+
+local eddy = require "eddy"
+
+local dx = eddy.param("spacing", 0.01)          -- m
+local stiffness = eddy.param("stiffness", 400)  -- m^2/s^2: c = 20 m/s, about 6 x the impact speed
+local count = eddy.param("particles", 5625)
+local L, H = 0.2, 0.3                           -- m, box side and height
+
+local world = eddy.world {
+	bounds = { {0, 0, 0}, {L, H, L} },
+	gravity = {0, -9.81, 0}, fps = 30, duration = 4.0, cfl = 0.4,
+}
+world:add(eddy.emit_nozzle { center = {L / 2, H - 0.04, L / 2}, radius = 0.03, direction = {0, -1, 0},
+                             speed = 1.0, spacing = dx, max_particles = count })
+world:add(eddy.sph_density { radius = 2 * dx, spacing = dx, rest_density = 1000, stiffness = stiffness })
+world:add(eddy.sph_pressure {})
+world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.05 })
+world:add(eddy.sph_boundary_box { min = {0, 0, 0}, max = {L, H, L}, spacing = dx })
+world:add(eddy.gravity {})
+world:add(eddy.integrate {})
+world:add(eddy.collide_box { min = {0, 0, 0}, max = {L, H, L}, inside = true })
+
+return world

@@ -1,0 +1,97 @@
+/* Internals shared by the SPH systems (sys_sph_*.c): kernels as inline
+ * functions of r^2 where possible, and the neighbour data that sph_density
+ * builds once per step for the later SPH passes. */
+#ifndef EDDY_SPH_H
+#define EDDY_SPH_H
+
+#include "core.h"
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+/* Kernel constants for support h (3D, Mueller 2003). */
+typedef struct sph_kernel_consts {
+	float h, h2;
+	float poly6;      /* 315/(64 pi h^9) */
+	float poly6_grad; /* -6 * poly6: grad W = poly6_grad (h^2-r^2)^2 r_vec */
+	float spiky_grad; /* -45/(pi h^6): dW/dr = spiky_grad (h-r)^2 */
+	float visc_lap;   /* 45/(pi h^6): lap W = visc_lap (h-r) */
+} sph_kernel_consts;
+
+static inline sph_kernel_consts sph_consts(float h)
+{
+	sph_kernel_consts k;
+	const double hd = h, h6 = hd * hd * hd * hd * hd * hd, h9 = h6 * hd * hd * hd;
+	k.h = h;
+	k.h2 = h * h;
+	k.poly6 = (float)(315.0 / (64.0 * M_PI * h9));
+	k.poly6_grad = (float)(-6.0 * 315.0 / (64.0 * M_PI * h9));
+	k.spiky_grad = (float)(-45.0 / (M_PI * h6));
+	k.visc_lap = (float)(45.0 / (M_PI * h6));
+	return k;
+}
+
+/* Neighbour lists: particle i's fluid neighbours (itself excluded) are
+ * nbr[i*cap .. i*cap + count[i]), its boundary neighbours bnbr[i*bcap ..
+ * i*bcap + bcount[i]) indexing the boundary arrays. Valid for the step in
+ * which sph_density built them (the particle table is in that order). */
+typedef struct sph_neighbors {
+	size_t n, cap, bcap;
+	uint32_t *nbr, *count, *bnbr, *bcount;
+	size_t n_alloc, cap_alloc, bcap_alloc;
+
+	/* fused into the search: sum_j (h^2 - r^2)^3 over the fluid neighbours
+	 * and sum_b V_b rho_b (h^2 - r^2)^3 over the boundary ones */
+	float *wsum, *bwsum;
+
+	/* grid over the world bounds plus a margin of h, cell size h / 2: the
+	 * 5^3 cells around a particle hold 58% of the candidates of 3^3 cells of
+	 * size h */
+	float ox, oy, oz, inv;
+	int gx, gy, gz;
+	uint32_t *cell_start; /* (cells + 1) fluid rows per cell, rows in cell order */
+	uint32_t *cell_of;    /* cell of each row (n_alloc) */
+
+	/* boundary particles of every sph_boundary_box, cell-sorted */
+	size_t nb;
+	float *bx, *by, *bz, *bvol; /* m, m^3 (volume each boundary particle stands for) */
+	float *bp, *brho;           /* Pa, kg/m^3: extrapolated from the fluid each step */
+	uint32_t *bcell_start;
+	uint64_t bsig; /* which boundary systems the arrays were built from */
+} sph_neighbors;
+
+#define SPH_CELLS_PER_H 2
+
+/* What sph_density shares with the SPH systems after it. */
+typedef struct sph_shared {
+	float h, mass, rho0;
+	float c; /* m/s, speed of sound sqrt(k) */
+	sph_kernel_consts k;
+	sph_neighbors nb;
+	float *inv_rho; /* 1/rho this step (arena), set by sph_density */
+} sph_shared;
+
+/* The sph_density system nearest before system s in the pipeline, or NULL. */
+sph_shared *eddy__sph_find(eddy_world *w, const eddy_system *s);
+
+/* Builds the lists for the current particle table, reordering it by cell. */
+eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads);
+void eddy__sph_neighbors_free(sph_neighbors *nb);
+
+/* Boundary particle access for sph_density's builder. */
+/* With x == NULL only counts; h sets how many layers the shell has. */
+size_t eddy__sph_boundary_box_points(const eddy_system *s, float h, float *x, float *y, float *z, float *vol);
+
+/* Deterministic antisymmetric direction for a coincident pair (i, j): the
+ * gradient has no direction at r = 0, so an arbitrary fixed one (not along a
+ * wall axis) separates them while keeping the pair's forces opposite. */
+static inline void sph_coincident_dir(size_t i, size_t j, float *dx, float *dy, float *dz)
+{
+	const float s = i < j ? 1.0f : -1.0f;
+	*dx = s * 0.80178373f; /* (3, 2, 1) / sqrt(14) */
+	*dy = s * 0.53452248f;
+	*dz = s * 0.26726124f;
+}
+
+#endif

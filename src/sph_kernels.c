@@ -1,0 +1,82 @@
+/* The SPH kernels of Mueller, Charypar & Gross 2003 (3D) as public functions
+ * of r, for hosts and tests; the systems use the inline forms in sph.h.
+ *   poly6      W = 315/(64 pi h^9) (h^2 - r^2)^3
+ *   spiky      W = 15/(pi h^6) (h - r)^3,          dW/dr = -45/(pi h^6) (h - r)^2
+ *   viscosity  W = 15/(2 pi h^3) (-r^3/(2h^3) + r^2/h^2 + h/(2r) - 1),
+ *              lap W = 45/(pi h^6) (h - r)
+ * All are zero for r >= h and integrate to 1 over the ball of radius h. */
+#include "sph.h"
+
+double eddy_sph_kernel_value(eddy_sph_kernel k, double r, double h)
+{
+	if (!(h > 0) || !(r >= 0) || r >= h)
+		return 0;
+	const double h3 = h * h * h, h6 = h3 * h3;
+	switch (k) {
+	case EDDY_SPH_POLY6: {
+		const double d = h * h - r * r;
+		return 315.0 / (64.0 * M_PI * h6 * h3) * d * d * d;
+	}
+	case EDDY_SPH_SPIKY: return 15.0 / (M_PI * h6) * (h - r) * (h - r) * (h - r);
+	case EDDY_SPH_VISCOSITY:
+		if (r == 0)
+			return INFINITY; /* integrable 1/r singularity */
+		return 15.0 / (2.0 * M_PI * h3) * (-r * r * r / (2 * h3) + r * r / (h * h) + h / (2 * r) - 1);
+	}
+	return 0;
+}
+
+double eddy_sph_kernel_derivative(eddy_sph_kernel k, double r, double h)
+{
+	if (!(h > 0) || !(r >= 0) || r >= h)
+		return 0;
+	const double h3 = h * h * h, h6 = h3 * h3;
+	switch (k) {
+	case EDDY_SPH_POLY6: {
+		const double d = h * h - r * r;
+		return -6.0 * 315.0 / (64.0 * M_PI * h6 * h3) * d * d * r;
+	}
+	case EDDY_SPH_SPIKY: return -45.0 / (M_PI * h6) * (h - r) * (h - r);
+	case EDDY_SPH_VISCOSITY:
+		if (r == 0)
+			return -INFINITY;
+		return 15.0 / (2.0 * M_PI * h3) * (-3 * r * r / (2 * h3) + 2 * r / (h * h) - h / (2 * r * r));
+	}
+	return 0;
+}
+
+double eddy_sph_kernel_laplacian(eddy_sph_kernel k, double r, double h)
+{
+	if (!(h > 0) || !(r >= 0) || r >= h)
+		return 0;
+	const double h3 = h * h * h, h6 = h3 * h3;
+	switch (k) {
+	case EDDY_SPH_POLY6: {
+		const double d = h * h - r * r;
+		return -6.0 * 315.0 / (64.0 * M_PI * h6 * h3) * d * (3 * h * h - 7 * r * r);
+	}
+	case EDDY_SPH_SPIKY:
+		if (r == 0)
+			return -INFINITY;
+		return -90.0 / (M_PI * h6) * (h - r) * (h - 2 * r) / r; /* (1/r^2) d/dr (r^2 dW/dr) */
+	case EDDY_SPH_VISCOSITY: return 45.0 / (M_PI * h6) * (h - r);
+	}
+	return 0;
+}
+
+double eddy_sph_lattice_sum(eddy_sph_kernel k, double spacing, double h)
+{
+	if (!(spacing > 0) || !(h > 0))
+		return 0;
+	const int m = (int)ceil(h / spacing);
+	double sum = 0;
+	for (int i = -m; i <= m; ++i)
+		for (int j = -m; j <= m; ++j)
+			for (int l = -m; l <= m; ++l) {
+				const double r = spacing * sqrt((double)(i * i + j * j + l * l));
+				if (k == EDDY_SPH_VISCOSITY && r == 0)
+					continue; /* singular: its self term is not defined */
+				sum += eddy_sph_kernel_value(k, r, h);
+			}
+	return sum;
+}

@@ -1,0 +1,208 @@
+/* sph_density: neighbour search, density and equation of state.
+ *
+ * Reads: x y z. Writes: density pressure neighbors (and reorders the
+ * particle table into grid-cell order, see sph_neighbors.c).
+ *   rho_i = m sum_j W_poly6(x_i - x_j) + sum_b V_b rho_b W_poly6(x_i - x_b)
+ *   (j over fluid particles including i itself, b over boundary particles)
+ * Boundary particles carry a pressure extrapolated from the fluid near them
+ * with the hydrostatic correction (Adami, Hu & Adams 2012, eq. 27),
+ *   p_b = max(0, sum_f (p_f + rho_f g . (x_b - x_f)) W_bf / sum_f W_bf),
+ * and the density rho_b the EOS gives for it; computed after the fluid pass,
+ * used in the next step. Frozen at rho0 (plain Akinci et al. 2012) the walls
+ * would leave the fluid beside them less compressed than the fluid away from
+ * them, their pressure short of hydrostatic, and the fluid would sink along
+ * the walls in a steady circulation.
+ *   linear EOS: p_i = k (rho_i - rho0)                      (Mueller 2003, eq. 12)
+ *   Tait EOS:   p_i = (k rho0 / gamma) ((rho_i/rho0)^gamma - 1)
+ *   p_i is clamped at 0: negative pressure pulls particles into clumps
+ *   (tensile instability, VALIDATION.md C.1).
+ * The particle mass is m = rho0 / sum_lattice W_poly6, the sum over a simple
+ * cubic lattice of the given spacing, so a block at rest starts at rho0
+ * exactly instead of 1% above it at h = 2 spacings (C.8). The self term
+ * keeps rho > 0 for a lone particle (C.6).
+ * Time-step limit (acoustic): dt <= h / (c + max|v|), c = sqrt(k); the
+ * world's CFL number is the Courant factor lambda (0.25-0.4).
+ * Source: Mueller, Charypar & Gross, "Particle-Based Fluid Simulation for
+ * Interactive Applications", SCA 2003; Akinci et al., "Versatile rigid-fluid
+ * coupling for incompressible SPH", SIGGRAPH 2012 (boundary term). */
+#include "sph.h"
+#include "systems.h"
+
+#include <stdlib.h>
+
+typedef struct sph_density {
+	sph_shared sh; /* first: the later SPH systems read it through eddy__sph_find */
+	eddy_sph_density_def def;
+} sph_density;
+
+static const int density_reads[] = {COL_X_, COL_Y_, COL_Z_};
+static const int density_writes[] = {COL_DENSITY, COL_PRESSURE, COL_SPH_NEIGHBORS, -1};
+
+eddy_sph_density_def eddy_default_sph_density_def(void)
+{
+	eddy_sph_density_def d;
+	d.radius = 0.02f;
+	d.spacing = 0.01f;
+	d.rest_density = 1000.0f;
+	d.stiffness = 400.0f;
+	d.eos = EDDY_SPH_EOS_LINEAR;
+	d.tait_gamma = 7.0f;
+	return d;
+}
+
+/* Adami et al. 2012, eq. 27, with the wall at rest: each boundary particle
+ * takes the Shepard average of the fluid pressure near it plus the hydrostatic
+ * difference, and the EOS density for that pressure. */
+static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads)
+{
+	sph_neighbors *nb = &sd->sh.nb;
+	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	const float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
+	const sph_kernel_consts kc = sd->sh.k;
+	const float gx = w->def.gravity.x, gy = w->def.gravity.y, gz = w->def.gravity.z;
+	const float rho0 = sd->sh.rho0, k = sd->def.stiffness, gamma = sd->def.tait_gamma;
+	const bool tait = sd->def.eos == EDDY_SPH_EOS_TAIT;
+	const float B = k * rho0 / gamma;
+	const int gxn = nb->gx, gyn = nb->gy, gzn = nb->gz;
+	const long nbound = (long)nb->nb;
+	if (w->n == 0)
+		return EDDY_OK;
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (long b = 0; b < nbound; ++b) {
+		const float xb = nb->bx[b], yb = nb->by[b], zb = nb->bz[b];
+		const int cx = (int)((xb - nb->ox) * nb->inv), cy = (int)((yb - nb->oy) * nb->inv),
+		          cz = (int)((zb - nb->oz) * nb->inv);
+		const int R = SPH_CELLS_PER_H;
+		const int x0 = cx >= R ? cx - R : 0, x1 = cx < gxn - R ? cx + R : gxn - 1;
+		float sw = 0, sp = 0;
+		for (int dz = -R; dz <= R; ++dz) {
+			const int zz = cz + dz;
+			if (zz < 0 || zz >= gzn)
+				continue;
+			for (int dy = -R; dy <= R; ++dy) {
+				const int yy = cy + dy;
+				if (yy < 0 || yy >= gyn)
+					continue;
+				const size_t row = ((size_t)zz * (size_t)gyn + (size_t)yy) * (size_t)gxn;
+				const uint32_t a = nb->cell_start[row + (size_t)x0], e = nb->cell_start[row + (size_t)x1 + 1];
+				for (uint32_t j = a; j < e; ++j) {
+					const float rx = xb - x[j], ry = yb - y[j], rz = zb - z[j];
+					const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
+					if (d <= 0)
+						continue;
+					const float wgt = d * d * d;
+					sw += wgt;
+					sp += wgt * (p[j] + rho[j] * (gx * rx + gy * ry + gz * rz));
+				}
+			}
+		}
+		const float pb = sw > 0 ? fmaxf(sp / sw, 0.0f) : 0.0f;
+		nb->bp[b] = pb;
+		nb->brho[b] = tait ? rho0 * powf(pb / B + 1.0f, 1.0f / gamma) : rho0 + pb / k;
+	}
+	return EDDY_OK;
+}
+
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	sph_density *sd = s->data;
+	sph_shared *sh = &sd->sh;
+	eddy_status st = eddy__sph_neighbors_build(w, sh, ctx->threads);
+	if (st != EDDY_OK)
+		return st;
+	const sph_neighbors *nb = &sh->nb;
+	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE), *ncount = eddy__col(w, COL_SPH_NEIGHBORS);
+	const sph_kernel_consts kc = sh->k;
+	const float m = sh->mass, rho0 = sh->rho0, k = sd->def.stiffness;
+	const float self = kc.h2 * kc.h2 * kc.h2; /* (h^2 - 0)^3: the particle itself */
+	const bool tait = sd->def.eos == EDDY_SPH_EOS_TAIT; /* EOS choice, not a feature switch */
+	const float B = k * rho0 / sd->def.tait_gamma, gamma = sd->def.tait_gamma;
+	const long n = (long)w->n;
+	float *inv_rho = eddy__arena_alloc(&w->arena, (w->n ? w->n : 1) * sizeof *inv_rho);
+	if (!inv_rho)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", w->n);
+	sh->inv_rho = inv_rho;
+	/* the kernel sums were accumulated by the neighbour search */
+#pragma omp parallel for num_threads(ctx->threads) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		const float r = kc.poly6 * (m * (self + nb->wsum[i]) + nb->bwsum[i]);
+		rho[i] = r;
+		inv_rho[i] = 1.0f / r;
+		const float pr = tait ? B * (powf(r / rho0, gamma) - 1.0f) : k * (r - rho0);
+		p[i] = pr > 0 ? pr : 0;
+		ncount[i] = (float)(nb->count[i] + nb->bcount[i]);
+	}
+	return boundary_pressure(w, sd, ctx->threads);
+}
+
+static double limit(eddy_world *w, eddy_system *s, const char **reason)
+{
+	const sph_density *sd = s->data;
+	*reason = "acoustic";
+	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	float v2 = 0;
+	if (vx && vy && vz)
+		for (size_t i = 0; i < w->n; ++i) {
+			const float q = vx[i] * vx[i] + vy[i] * vy[i] + vz[i] * vz[i];
+			v2 = q > v2 ? q : v2;
+		}
+	return sd->def.radius / (sqrt((double)sd->def.stiffness) + sqrt((double)v2));
+}
+
+static void destroy(eddy_system *s)
+{
+	sph_density *sd = s->data;
+	if (sd)
+		eddy__sph_neighbors_free(&sd->sh.nb);
+}
+
+const eddy_system_vtable eddy__kind_sph_density = {
+	.name = "sph_density",
+	.step = step,
+	.limit = limit,
+	.destroy = destroy,
+	.default_writes = density_writes,
+};
+
+float eddy_sph_particle_mass(const eddy_world *w, eddy_system_id id)
+{
+	const eddy_system *s = eddy__system_peek(w, id);
+	if (!s || s->vt != &eddy__kind_sph_density)
+		return 0;
+	return ((const sph_density *)s->data)->sh.mass;
+}
+
+eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *def)
+{
+	const char *sys = "sph_density";
+	if (!def)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__check_positive(w, sys, "spacing", def->spacing) || !eddy__check_positive(w, sys, "radius", def->radius) ||
+	    !eddy__check_positive(w, sys, "rest_density", def->rest_density) ||
+	    !eddy__check_positive(w, sys, "stiffness", def->stiffness) ||
+	    !eddy__check_range(w, sys, "tait_gamma", def->tait_gamma, 1, 20))
+		return EDDY_NULL_SYSTEM;
+	if (!(def->radius > def->spacing && def->radius <= 5 * def->spacing)) {
+		eddy__fail(w, EDDY_ERR_INVALID,
+		           "%s: 'radius' must be between 1 and 5 times 'spacing' (got radius = %g m, spacing = %g m; 2 x spacing is usual)",
+		           sys, (double)def->radius, (double)def->spacing);
+		return EDDY_NULL_SYSTEM;
+	}
+	if (def->eos != EDDY_SPH_EOS_LINEAR && def->eos != EDDY_SPH_EOS_TAIT) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'eos' must be linear or tait", sys);
+		return EDDY_NULL_SYSTEM;
+	}
+	sph_density *sd = calloc(1, sizeof *sd);
+	if (!sd)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
+	sd->def = *def;
+	sd->sh.h = def->radius;
+	sd->sh.rho0 = def->rest_density;
+	sd->sh.c = sqrtf(def->stiffness);
+	sd->sh.k = sph_consts(def->radius);
+	sd->sh.mass = (float)(def->rest_density / eddy_sph_lattice_sum(EDDY_SPH_POLY6, def->spacing, def->radius));
+	eddy_system_id id = eddy__add_system(w, &eddy__kind_sph_density, sd, density_reads, 3, density_writes, 3);
+	if (eddy_system_valid(w, id))
+		eddy_world_set_rest_density(w, def->rest_density);
+	return id;
+}

@@ -1,0 +1,147 @@
+/* sph_pressure: the symmetric pressure force with the spiky kernel's gradient
+ * (Mueller 2003, eq. 10, without its factor 1/2; see below); boundary
+ * particles enter the same sum with the pressure sph_density extrapolated onto
+ * them (Adami et al. 2012).
+ *
+ * Reads: x y z density pressure. Writes: ax ay az (accumulated).
+ *   a_i -= scale * [ sum_j m (p_i + p_j) / (rho_i rho_j) grad W_spiky(x_i - x_j)
+ *                  + sum_b V_b (p_i + p_b) / rho_i grad W_spiky(x_i - x_b) ]
+ *   grad W_spiky(r_vec) = -45/(pi h^6) (h - r)^2 r_vec / r
+ * Why not the paper's (p_i + p_j) / 2: in the interior sum_j V_j grad W = 0,
+ * so sum_j V_j (p_i + p_j)/2 grad W = grad p / 2. The paper's force is half
+ * the pressure gradient; a resting column then compresses twice as much as
+ * g H / k says and sound travels at sqrt(k/2). The form here is the same
+ * symmetric (momentum-conserving) pair force, doubled, so it reproduces
+ * grad p and c = sqrt(k) (tested by the hydrostatic tank).
+ * Pairs closer than 1e-3 h take a fixed antisymmetric direction (sph.h): the
+ * gradient has no direction at r = 0, and skipping them would leave
+ * coincident particles stuck together (VALIDATION.md C.6).
+ * Time-step limit (force): dt <= 0.625 sqrt(h / max|a|), max|a| from the last
+ * step; with the default CFL 0.4 that is the usual 0.25 sqrt(h/|a|).
+ * Source: Mueller, Charypar & Gross 2003; Adami, Hu & Adams, "A generalized
+ * wall boundary condition for SPH", JCP 2012. */
+#include "sph.h"
+#include "systems.h"
+
+#include <stdlib.h>
+
+typedef struct sph_pressure {
+	eddy_sph_pressure_def def;
+} sph_pressure;
+
+static const int pressure_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_DENSITY, COL_PRESSURE};
+static const int pressure_writes[] = {COL_AX, COL_AY, COL_AZ, -1};
+static const int no_hint_writes[] = {-1};
+
+eddy_sph_pressure_def eddy_default_sph_pressure_def(void)
+{
+	eddy_sph_pressure_def d;
+	d.scale = 1.0f;
+	return d;
+}
+
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	const sph_pressure *sp = s->data;
+	sph_shared *sh = eddy__sph_find(w, s);
+	if (!sh)
+		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)", s->label);
+	const sph_neighbors *nb = &sh->nb;
+	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	const float *p = eddy__col(w, COL_PRESSURE), *inv_rho = sh->inv_rho;
+	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
+	const sph_kernel_consts kc = sh->k;
+	const float m = sh->mass, scale = sp->def.scale, eps2 = 1e-6f * kc.h2;
+	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
+#pragma omp parallel for num_threads(ctx->threads) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		const float xi = x[i], yi = y[i], zi = z[i];
+		/* rho >= m W(0) > 0 (the self term), so 1/rho is finite */
+		const float iri = inv_rho[i], pi_ = p[i];
+		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
+		const uint32_t cnt = nb->count[i];
+		float fx = 0, fy = 0, fz = 0;
+		for (uint32_t q = 0; q < cnt; ++q) {
+			const uint32_t j = list[q];
+			float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
+			const float r2 = rx * rx + ry * ry + rz * rz;
+			float r;
+			if (r2 > eps2) {
+				r = sqrtf(r2);
+				const float inv = 1.0f / r;
+				rx *= inv;
+				ry *= inv;
+				rz *= inv;
+			} else {
+				r = 0;
+				sph_coincident_dir((size_t)i, j, &rx, &ry, &rz);
+			}
+			const float hr = kc.h - r;
+			/* (p_i + p_j)/(rho_i rho_j) times |dW/dr|; the force pushes i away from j */
+			const float c = (pi_ + p[j]) * inv_rho[j] * hr * hr;
+			fx += c * rx;
+			fy += c * ry;
+			fz += c * rz;
+		}
+		const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
+		const uint32_t bcnt = nb->bcount[i];
+		float bx = 0, by = 0, bz = 0;
+		for (uint32_t q = 0; q < bcnt; ++q) {
+			const uint32_t b = blist[q];
+			float rx = xi - nb->bx[b], ry = yi - nb->by[b], rz = zi - nb->bz[b];
+			const float r2 = rx * rx + ry * ry + rz * rz;
+			if (!(r2 > eps2))
+				continue; /* on the wall surface: the collider handles it */
+			const float r = sqrtf(r2), inv = 1.0f / r, hr = kc.h - r;
+			/* m_b (p_i + p_b) / (rho_i rho_b) with m_b = V_b rho_b */
+			const float c = nb->bvol[b] * (pi_ + nb->bp[b]) * hr * hr * inv;
+			bx += c * rx;
+			by += c * ry;
+			bz += c * rz;
+		}
+		/* -grad W = +45/(pi h^6) (h-r)^2 r_hat, so the signs above are already "away" */
+		const float g = -kc.spiky_grad * scale;
+		const float bcoef = 1.0f;
+		ax[i] += g * iri * (m * fx + bcoef * bx);
+		ay[i] += g * iri * (m * fy + bcoef * by);
+		az[i] += g * iri * (m * fz + bcoef * bz);
+	}
+	return EDDY_OK;
+}
+
+static double limit(eddy_world *w, eddy_system *s, const char **reason)
+{
+	(void)s;
+	*reason = "force";
+	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
+	const sph_shared *sh = eddy__sph_find(w, s);
+	if (!ax || !sh)
+		return INFINITY;
+	float a2 = 0;
+	for (size_t i = 0; i < w->n; ++i) {
+		const float q = ax[i] * ax[i] + ay[i] * ay[i] + az[i] * az[i];
+		a2 = q > a2 ? q : a2;
+	}
+	return a2 > 0 ? 0.625 * sqrt(sh->h / sqrt((double)a2)) : INFINITY;
+}
+
+const eddy_system_vtable eddy__kind_sph_pressure = {
+	.name = "sph_pressure",
+	.step = step,
+	.limit = limit,
+	/* ax ay az are every force's: order hints for them name gravity alone */
+	.default_writes = no_hint_writes,
+};
+
+eddy_system_id eddy_add_sph_pressure(eddy_world *w, const eddy_sph_pressure_def *def)
+{
+	const char *sys = "sph_pressure";
+	if (!def)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__check_positive(w, sys, "scale", def->scale))
+		return EDDY_NULL_SYSTEM;
+	sph_pressure *sp = malloc(sizeof *sp);
+	if (sp)
+		sp->def = *def;
+	return eddy__add_system(w, &eddy__kind_sph_pressure, sp, pressure_reads, 5, pressure_writes, 3);
+}

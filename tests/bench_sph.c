@@ -1,0 +1,217 @@
+#define _POSIX_C_SOURCE 200809L
+/* SPH benchmarks (make bench; not part of make test), as JSON:
+ *  - ns per particle per step of sph_density (neighbour search included),
+ *    sph_pressure and sph_viscosity, for 5k / 30k / 100k particles at
+ *    h = 2 spacings, on 1 and 2 threads: a block settling in a tank;
+ *  - the pour scene of scenes/pour.lua (5625 particles, one thread):
+ *    simulated seconds per wall second and the density error.
+ * Every figure is the median of repeated runs: the machine is shared, and a
+ * neighbour's job shows up as outliers. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "eddy.h"
+
+static double now_ms(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+	double x = *(const double *)a, y = *(const double *)b;
+	return (x > y) - (x < y);
+}
+
+/* A cube of about n particles on the lattice, resting on the floor of a tank
+ * twice as wide, with gravity: the neighbourhoods of a real fluid. */
+static eddy_world *block(int n, int threads)
+{
+	const float dx = 0.01f, side = dx * (roundf(cbrtf((float)n)) + 0.5f); /* + 0.5: a whole number of spacings after floor */
+	eddy_world_def d = eddy_default_world_def();
+	d.bounds_max = (eddy_vec3){2 * side, 1.5f * side, 2 * side};
+	d.threads = threads;
+	d.fps = 1000;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.min = (eddy_vec3){0.5f * side, 0, 0.5f * side};
+	b.max = (eddy_vec3){1.5f * side, side, 1.5f * side};
+	b.spacing = dx;
+	eddy_add_emit_box(w, &b);
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	de.spacing = dx;
+	de.radius = 2 * dx;
+	de.stiffness = 400;
+	eddy_add_sph_density(w, &de);
+	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+	eddy_add_sph_pressure(w, &pr);
+	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
+	eddy_add_sph_viscosity(w, &vi);
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	eddy_collide_box_def bx = eddy_default_collide_box_def();
+	bx.max = d.bounds_max;
+	eddy_add_collide_box(w, &bx);
+	return w;
+}
+
+/* scenes/pour.lua in C (the benchmark links the engine only) */
+static eddy_world *pour(float stiffness)
+{
+	const float dx = 0.01f, L = 0.2f, H = 0.3f;
+	eddy_world_def d = eddy_default_world_def();
+	d.bounds_max = (eddy_vec3){L, H, L};
+	d.fps = 30;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_nozzle_def nz = eddy_default_emit_nozzle_def();
+	nz.center = (eddy_vec3){L / 2, H - 0.04f, L / 2};
+	nz.radius = 0.03f;
+	nz.direction = (eddy_vec3){0, -1, 0};
+	nz.speed = 1;
+	nz.spacing = dx;
+	nz.max_particles = 5625;
+	eddy_add_emit_nozzle(w, &nz);
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	de.spacing = dx;
+	de.radius = 2 * dx;
+	de.stiffness = stiffness;
+	eddy_add_sph_density(w, &de);
+	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+	eddy_add_sph_pressure(w, &pr);
+	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
+	eddy_add_sph_viscosity(w, &vi);
+	eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
+	bb.max = d.bounds_max;
+	bb.spacing = dx;
+	eddy_add_sph_boundary_box(w, &bb);
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	eddy_collide_box_def bx = eddy_default_collide_box_def();
+	bx.max = d.bounds_max;
+	eddy_add_collide_box(w, &bx);
+	return w;
+}
+
+int main(int argc, char **argv)
+{
+	const char *path = argc > 1 ? argv[1] : "build/bench_sph.json";
+	FILE *f = fopen(path, "w");
+	if (!f) {
+		fprintf(stderr, "bench_sph: cannot write %s\n", path);
+		return 1;
+	}
+	const int counts[] = {5000, 30000, 100000};
+	const int threads[] = {1, 2};
+	const char *names[] = {"sph_density", "sph_pressure", "sph_viscosity"};
+	enum { REPS = 7, STEPS = 5 };
+	double sph1[3] = {0};
+	fprintf(f, "{\"benchmark\":\"sph\",\"unit\":\"ns per particle per step\",\"note\":\"medians of %d runs of %d steps; "
+	           "shared 2-core machine\",\"results\":[",
+	        REPS, STEPS);
+	for (size_t c = 0; c < 3; ++c)
+		for (size_t t = 0; t < 2; ++t) {
+			eddy_world *w = block(counts[c], threads[t]);
+			for (int s = 0; s < 3; ++s)
+				eddy_world_step_frame(w); /* emit, then settle the first kick */
+			const size_t n = eddy_world_particle_count(w);
+			double per[3][REPS], sum[REPS];
+			for (int r = 0; r < REPS; ++r) {
+				double before[3] = {0}, after[3] = {0};
+				for (int k = 0; k < eddy_world_system_count(w); ++k) {
+					eddy_system_info info;
+					eddy_world_system_info(w, eddy_world_system_at(w, k), &info);
+					for (int q = 0; q < 3; ++q)
+						if (strcmp(info.name, names[q]) == 0)
+							before[q] = info.profile_ms;
+				}
+				for (int s = 0; s < STEPS; ++s)
+					if (eddy_world_step(w) != EDDY_OK) {
+						fprintf(stderr, "bench_sph: %s\n", eddy_world_error(w));
+						return 1;
+					}
+				for (int k = 0; k < eddy_world_system_count(w); ++k) {
+					eddy_system_info info;
+					eddy_world_system_info(w, eddy_world_system_at(w, k), &info);
+					for (int q = 0; q < 3; ++q)
+						if (strcmp(info.name, names[q]) == 0)
+							after[q] = info.profile_ms;
+				}
+				sum[r] = 0;
+				for (int q = 0; q < 3; ++q) {
+					per[q][r] = (after[q] - before[q]) * 1e6 / ((double)n * STEPS);
+					sum[r] += per[q][r];
+				}
+			}
+			qsort(sum, REPS, sizeof sum[0], cmp_double);
+			for (int q = 0; q < 3; ++q)
+				qsort(per[q], REPS, sizeof per[q][0], cmp_double);
+			fprintf(f, "%s\n {\"particles\":%zu,\"threads\":%d,\"density_pressure_viscosity_ns\":%.1f,\"systems\":{", c + t ? "," : "",
+			        n, threads[t], sum[REPS / 2]);
+			printf("%7zu particles, %d thread%s: %7.1f ns/particle/step (", n, threads[t], threads[t] > 1 ? "s" : " ",
+			       sum[REPS / 2]);
+			for (int q = 0; q < 3; ++q) {
+				fprintf(f, "%s\"%s\":%.1f", q ? "," : "", names[q], per[q][REPS / 2]);
+				printf("%s%s %.1f", q ? ", " : "", names[q], per[q][REPS / 2]);
+			}
+			if (threads[t] == 1)
+				sph1[c] = sum[REPS / 2];
+			else
+				printf("; speed-up %.2fx", sph1[c] / sum[REPS / 2]);
+			fprintf(f, "}%s}", threads[t] == 1 ? "" : "");
+			if (threads[t] == 2)
+				fprintf(f, ",\n {\"particles\":%zu,\"speedup_2_threads\":%.2f}", n, sph1[c] / sum[REPS / 2]);
+			printf(")\n");
+			eddy_destroy_world(w);
+		}
+	if (argc > 2 && strcmp(argv[2], "--no-pour") == 0) {
+		fprintf(f, "\n]}\n");
+		fclose(f);
+		return 0;
+	}
+	/* the pour: 2.5 s simulated (the jet ends at 2.0 s), one thread */
+	const float stiffness = 400;
+	eddy_world *w = pour(stiffness);
+	const double a = now_ms();
+	double err_avg_full = 0, err_max_full = 0;
+	int full_frames = 0;
+	double full_start = 0, full_sim = 0;
+	while (eddy_world_time(w) < 2.5 - 1e-9) {
+		if (eddy_world_step_frame(w) != EDDY_OK) {
+			fprintf(stderr, "bench_sph: pour: %s\n", eddy_world_error(w));
+			return 1;
+		}
+		eddy_frame_stats st;
+		eddy_world_frame_stats(w, &st);
+		if (st.particles == 5625) {
+			if (!full_frames) {
+				full_start = now_ms();
+				full_sim = eddy_world_time(w);
+			}
+			full_frames++;
+			err_avg_full = fmax(err_avg_full, st.density_err_avg);
+			err_max_full = fmax(err_max_full, st.density_err_max);
+		}
+	}
+	const double wall = (now_ms() - a) / 1e3, wall_full = (now_ms() - full_start) / 1e3;
+	const double rate = 2.5 / wall, rate_full = (eddy_world_time(w) - full_sim) / wall_full;
+	printf("pour (5625 particles, k = %.0f, 1 thread): %.3f simulated s per wall s over 2.5 s, %.3f with all particles in; "
+	       "density error avg %.4f (max over frames), max %.3f (surface particles)\n",
+	       (double)stiffness, rate, rate_full, err_avg_full, err_max_full);
+	fprintf(f, ",\n {\"scene\":\"pour\",\"particles\":5625,\"stiffness\":%.0f,\"threads\":1,\"sim_s_per_wall_s\":%.4f,"
+	           "\"sim_s_per_wall_s_full\":%.4f,\"density_err_avg\":%.4f,\"density_err_max\":%.4f}",
+	        (double)stiffness, rate, rate_full, err_avg_full, err_max_full);
+	eddy_destroy_world(w);
+	fprintf(f, "\n]}\n");
+	fclose(f);
+	printf("bench_sph: wrote %s\n", path);
+	return 0;
+}

@@ -1,0 +1,907 @@
+/* SPH (Mueller 2003) validation: kernels against their analytic integrals and
+ * lattice sums, then whole scenes against physics (hydrostatic tank, dam
+ * break vs Martin & Moyce, oscillating drop vs Rayleigh) and the hard cases
+ * of VALIDATION.md section C. Sizes are small so the suite runs in seconds;
+ * every test prints the figure it checks. */
+#include "test.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#include "eddy.h"
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+/* ---- kernels ------------------------------------------------------------ */
+
+/* 4 pi int_0^h W(r) r^2 dr by the midpoint rule (fine enough for the 1/r
+ * singularity of the viscosity kernel, whose r^2 W is finite). */
+static double kernel_integral(eddy_sph_kernel k, double h)
+{
+	const int n = 200000;
+	double s = 0, dr = h / n;
+	for (int i = 0; i < n; ++i) {
+		double r = (i + 0.5) * dr;
+		s += eddy_sph_kernel_value(k, r, h) * r * r;
+	}
+	return 4 * M_PI * s * dr;
+}
+
+static void kernels_integrate_to_one(void)
+{
+	const double hs[] = {0.02, 1.0, 3.5};
+	for (int i = 0; i < 3; ++i) {
+		CHECK_NEAR(kernel_integral(EDDY_SPH_POLY6, hs[i]), 1.0, 1e-6);
+		CHECK_NEAR(kernel_integral(EDDY_SPH_SPIKY, hs[i]), 1.0, 1e-6);
+		CHECK_NEAR(kernel_integral(EDDY_SPH_VISCOSITY, hs[i]), 1.0, 1e-5);
+	}
+	/* compact support, and the constants the literature copies wrong (65 pi) */
+	CHECK(eddy_sph_kernel_value(EDDY_SPH_POLY6, 1.0, 1.0) == 0);
+	CHECK(eddy_sph_kernel_value(EDDY_SPH_SPIKY, 1.2, 1.0) == 0);
+	CHECK_NEAR(eddy_sph_kernel_value(EDDY_SPH_POLY6, 0, 1.0), 315.0 / (64 * M_PI), 1e-12);
+	CHECK_NEAR(eddy_sph_kernel_value(EDDY_SPH_SPIKY, 0, 1.0), 15.0 / M_PI, 1e-12);
+	CHECK_NEAR(eddy_sph_kernel_laplacian(EDDY_SPH_VISCOSITY, 0, 1.0), 45.0 / M_PI, 1e-12);
+}
+
+/* The derivative and Laplacian agree with finite differences of the value. */
+static void kernel_derivatives_match_finite_differences(void)
+{
+	const double h = 0.5, e = 1e-6;
+	const eddy_sph_kernel ks[] = {EDDY_SPH_POLY6, EDDY_SPH_SPIKY, EDDY_SPH_VISCOSITY};
+	for (int k = 0; k < 3; ++k)
+		for (double r = 0.05; r < h - 0.01; r += 0.04) {
+			double fd = (eddy_sph_kernel_value(ks[k], r + e, h) - eddy_sph_kernel_value(ks[k], r - e, h)) / (2 * e);
+			double an = eddy_sph_kernel_derivative(ks[k], r, h);
+			CHECKF(fabs(fd - an) <= 1e-5 * (fabs(an) + 1), "kernel %d r %g: dW/dr %g vs fd %g", k, r, an, fd);
+			/* Laplacian = (1/r^2) d/dr (r^2 dW/dr) */
+			double g1 = (r + e) * (r + e) * eddy_sph_kernel_derivative(ks[k], r + e, h);
+			double g0 = (r - e) * (r - e) * eddy_sph_kernel_derivative(ks[k], r - e, h);
+			double lfd = (g1 - g0) / (2 * e) / (r * r), lan = eddy_sph_kernel_laplacian(ks[k], r, h);
+			CHECKF(fabs(lfd - lan) <= 1e-4 * (fabs(lan) + 1), "kernel %d r %g: lap %g vs fd %g", k, r, lan, lfd);
+		}
+}
+
+/* Lattice facts (VALIDATION.md A): sum V W at h = 1.5, 2, 2.5, 3 spacings, the
+ * spiky kernel's 24% excess, and sum V (x_j - x_i) (x) grad W = -I with the
+ * gradient taken with respect to x_j (+I with respect to x_i, as here). */
+static void lattice_sums(void)
+{
+	const double dx = 0.01, V = dx * dx * dx;
+	CHECK_NEAR(V * eddy_sph_lattice_sum(EDDY_SPH_POLY6, dx, 1.5 * dx), 0.949, 0.001);
+	CHECK_NEAR(V * eddy_sph_lattice_sum(EDDY_SPH_POLY6, dx, 2.0 * dx), 1.0098, 0.0005);
+	CHECK_NEAR(V * eddy_sph_lattice_sum(EDDY_SPH_POLY6, dx, 2.5 * dx), 0.995, 0.001);
+	CHECK_NEAR(V * eddy_sph_lattice_sum(EDDY_SPH_POLY6, dx, 3.0 * dx), 1.002, 0.001);
+	CHECK_NEAR(V * eddy_sph_lattice_sum(EDDY_SPH_SPIKY, dx, 2.0 * dx), 1.236, 0.001);
+	/* gradient consistency: the xx entry (1 exactly in the continuum) and the
+	 * off-diagonal xy entry (0 by symmetry) on an interior lattice point */
+	const eddy_sph_kernel ks[] = {EDDY_SPH_POLY6, EDDY_SPH_SPIKY};
+	for (int k = 0; k < 2; ++k) {
+		const double h = 3 * dx;
+		double xx = 0, xy = 0;
+		for (int i = -3; i <= 3; ++i)
+			for (int j = -3; j <= 3; ++j)
+				for (int l = -3; l <= 3; ++l) {
+					double rx = i * dx, ry = j * dx, rz = l * dx, r = sqrt(rx * rx + ry * ry + rz * rz);
+					if (r == 0)
+						continue;
+					/* grad_i W(x_i - x_j) with x_j - x_i = (rx, ry, rz) */
+					double dw = eddy_sph_kernel_derivative(ks[k], r, h);
+					double gx = dw * -rx / r, gy = dw * -ry / r;
+					xx += V * rx * gx;
+					xy += V * rx * gy;
+					(void)gy;
+				}
+		printf("    lattice gradient tensor, kernel %d at h = 3 dx: xx = %.4f, xy = %.1e\n", k, xx, xy);
+		CHECK_NEAR(xx, 1.0, 0.02);
+		CHECK_NEAR(xy, 0.0, 1e-9);
+	}
+}
+
+
+/* ---- scenes ------------------------------------------------------------- */
+
+typedef struct sph_setup {
+	float dx;             /* m, particle spacing (h = 2 dx) */
+	eddy_vec3 lo, hi;     /* m, tank (and world bounds) */
+	eddy_vec3 fmin, fmax; /* m, fluid block */
+	float k;              /* m^2/s^2, stiffness */
+	float mu;             /* Pa s */
+	float sigma;          /* N/m, < 0: no surface tension system */
+	float gravity;        /* m/s^2 downwards */
+	bool walls;           /* boundary particles on the tank */
+	int threads;
+	double cfl;
+} sph_setup;
+
+static sph_setup default_setup(void)
+{
+	sph_setup s;
+	s.dx = 0.01f;
+	s.lo = (eddy_vec3){0, 0, 0};
+	s.hi = (eddy_vec3){0.1f, 0.2f, 0.1f};
+	s.fmin = s.lo;
+	s.fmax = (eddy_vec3){0.1f, 0.1f, 0.1f};
+	s.k = 200;
+	s.mu = 0.05f;
+	s.sigma = -1;
+	s.gravity = 9.81f;
+	s.walls = true;
+	s.threads = 1;
+	s.cfl = 0.4;
+	return s;
+}
+
+static eddy_world *sph_world(const sph_setup *s, eddy_system_id *density)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.bounds_min = s->lo;
+	d.bounds_max = s->hi;
+	d.gravity = (eddy_vec3){0, -s->gravity, 0};
+	d.threads = s->threads;
+	d.cfl = s->cfl;
+	d.fps = 100;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.min = s->fmin;
+	b.max = s->fmax;
+	b.spacing = s->dx;
+	CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &b)));
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	de.spacing = s->dx;
+	de.radius = 2 * s->dx;
+	de.stiffness = s->k;
+	eddy_system_id id = eddy_add_sph_density(w, &de);
+	CHECKF(eddy_system_valid(w, id), "%s", eddy_world_error(w));
+	if (density)
+		*density = id;
+	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+	CHECK(eddy_system_valid(w, eddy_add_sph_pressure(w, &pr)));
+	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
+	vi.viscosity = s->mu;
+	CHECK(eddy_system_valid(w, eddy_add_sph_viscosity(w, &vi)));
+	if (s->sigma >= 0) {
+		eddy_sph_surface_tension_def st = eddy_default_sph_surface_tension_def();
+		st.tension = s->sigma;
+		CHECK(eddy_system_valid(w, eddy_add_sph_surface_tension(w, &st)));
+	}
+	if (s->walls) {
+		eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
+		bb.min = s->lo;
+		bb.max = s->hi;
+		bb.spacing = s->dx;
+		CHECK(eddy_system_valid(w, eddy_add_sph_boundary_box(w, &bb)));
+	}
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	eddy_collide_box_def bx = eddy_default_collide_box_def();
+	bx.min = s->lo;
+	bx.max = s->hi;
+	eddy_add_collide_box(w, &bx);
+	return w;
+}
+
+static double max_speed(const eddy_world *w)
+{
+	size_t n;
+	const float *vx = eddy_world_channel(w, "vx", &n), *vy = eddy_world_channel(w, "vy", NULL),
+	            *vz = eddy_world_channel(w, "vz", NULL);
+	double m = 0;
+	for (size_t i = 0; i < n; ++i)
+		m = fmax(m, sqrt((double)vx[i] * vx[i] + (double)vy[i] * vy[i] + (double)vz[i] * vz[i]));
+	return m;
+}
+
+/* Hydrostatic tank (C.2, C.3): a 10^3 block settles in a tank with boundary
+ * particles, then pressure and density are averaged over 0.2 s (the column
+ * keeps ringing at its acoustic frequency c / 4H, which weakly compressible
+ * SPH damps slowly). Compared with p = rho0 g d, d the depth below the
+ * settled surface, away from the walls and the surface (more than h from
+ * both). With p = k (rho - rho0) the pressure needs a compression p / k, so
+ * the bottom layer's density is rho0 (1 + g H / k) (C.3), and the surface
+ * sinks by H g H / (2k). */
+static void hydrostatic_tank(void)
+{
+	sph_setup s = default_setup();
+	eddy_world *w = sph_world(&s, NULL);
+	CHECKF(eddy_world_advance(w, 0.5) == EDDY_OK, "%s", eddy_world_error(w));
+	size_t n = eddy_world_particle_count(w);
+	/* the table is reordered every step: average per depth bin, not per particle */
+	enum { BINS = 10 };
+	double psum[BINS] = {0}, pcount[BINS] = {0}, dsum = 0, dcount = 0, top_sum = 0, v2sum = 0, vcount = 0;
+	double xmin = 1, xmax = 0, ymin = 1;
+	const double rho0 = 1000, g = 9.81, h = 2 * s.dx;
+	const int frames = 20;
+	for (int f = 0; f < frames; ++f) {
+		CHECKF(eddy_world_step_frame(w) == EDDY_OK, "%s", eddy_world_error(w));
+		const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
+		            *z = eddy_world_channel(w, "z", NULL), *p = eddy_world_channel(w, "pressure", NULL),
+		            *rho = eddy_world_channel(w, "density", NULL), *vx = eddy_world_channel(w, "vx", NULL),
+		            *vy = eddy_world_channel(w, "vy", NULL), *vz = eddy_world_channel(w, "vz", NULL);
+		double top = 0;
+		for (size_t i = 0; i < n; ++i) {
+			top = fmax(top, y[i]);
+			xmin = fmin(xmin, fmin(x[i], z[i]));
+			xmax = fmax(xmax, fmax(x[i], z[i]));
+			ymin = fmin(ymin, y[i]);
+			v2sum += (double)vx[i] * vx[i] + (double)vy[i] * vy[i] + (double)vz[i] * vz[i];
+			vcount++;
+			const int bin = (int)(y[i] / s.dx);
+			if (bin >= 0 && bin < BINS && x[i] > h && x[i] < s.hi.x - h && z[i] > h && z[i] < s.hi.z - h) {
+				psum[bin] += p[i];
+				pcount[bin]++;
+			}
+			if (y[i] < s.dx) {
+				dsum += rho[i];
+				dcount++;
+			}
+		}
+		top_sum += top;
+	}
+	const double surface = top_sum / frames + s.dx / 2, H = surface;
+	double err = 0;
+	int used = 0;
+	for (int b = 0; b < BINS; ++b) {
+		const double yc = (b + 0.5) * s.dx, d = surface - yc;
+		if (!(pcount[b] > 0) || d < h || yc < h)
+			continue;
+		err = fmax(err, fabs(psum[b] / pcount[b] - rho0 * g * d) / (rho0 * g * H));
+		used++;
+	}
+	const double gH_k = g * H / s.k, rho_bottom = dsum / dcount / rho0, vrms = sqrt(v2sum / vcount);
+	printf("    hydrostatic: pressure_err %.4f over %d depths, gH/k %.4f, bottom rho/rho0 %.4f (1 + gH/k = %.4f), "
+	       "closest to walls x/z %.4f / %.4f y %.4f m, rms speed %.3f m/s = %.3f sqrt(gH)\n",
+	       err, used, gH_k, rho_bottom, 1 + gH_k, xmin, s.hi.x - xmax, ymin, vrms, vrms / sqrt(g * H));
+	CHECK(used >= 4);
+	/* p comes from the density, so noise of k dρ maps to the error; bound it
+	 * by a fifth of the hydrostatic range, and the compression to 2 gH/k */
+	CHECK(err < 0.2);
+	CHECK_NEAR(rho_bottom, 1 + gH_k, gH_k);
+	/* no wall gap: the lattice sits half a spacing from each wall; a gap of
+	 * half a spacing more would show as a distance above one spacing */
+	CHECK(xmin < s.dx && s.hi.x - xmax < s.dx && ymin < s.dx);
+	CHECK(vrms < 0.1 * sqrt(g * H));
+	eddy_destroy_world(w);
+}
+
+/* C.8: a block at rest, without gravity, in free space and in a tank. With
+ * the mass calibrated on the lattice every particle starts at rho0 (the
+ * surface below it, clamped to p = 0), so nothing moves; with the naive mass
+ * (rho0 spacing^3) the interior starts 1% over rho0 and the layer under the
+ * surface is kicked outwards at once. */
+static void resting_block_stays_at_rest(void)
+{
+	for (int walls = 0; walls < 2; ++walls) {
+		sph_setup s = default_setup();
+		s.gravity = 0;
+		s.walls = walls;
+		s.hi = (eddy_vec3){0.2f, 0.2f, 0.2f};
+		s.fmin = walls ? s.lo : (eddy_vec3){0.05f, 0.05f, 0.05f};
+		s.fmax = walls ? (eddy_vec3){0.2f, 0.1f, 0.2f} : (eddy_vec3){0.15f, 0.15f, 0.15f};
+		eddy_system_id dens;
+		eddy_world *w = sph_world(&s, &dens);
+		const double m = eddy_sph_particle_mass(w, dens), naive = 1000.0 * s.dx * s.dx * s.dx;
+		CHECK_NEAR(naive / m, 1.0098, 0.0005);
+		for (int i = 0; i < 20; ++i)
+			CHECK(eddy_world_step(w) == EDDY_OK);
+		eddy_frame_stats st;
+		CHECK(eddy_world_step_frame(w) == EDDY_OK);
+		eddy_world_frame_stats(w, &st);
+		const double v = max_speed(w);
+		printf("    resting block (walls %d): max speed %.2e m/s after %lld steps, density error max %.2e\n", walls, v,
+		       (long long)eddy_world_steps(w), st.density_err_max);
+		/* the naive mass gives about k * 0.0098 rho0 over one layer: ~ 0.1 m/s here */
+		CHECK(v < 1e-4);
+		eddy_destroy_world(w);
+	}
+}
+
+static double min_pair_distance(const eddy_world *w)
+{
+	size_t n;
+	const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
+	            *z = eddy_world_channel(w, "z", NULL);
+	double m2 = INFINITY;
+	for (size_t i = 0; i < n; ++i)
+		for (size_t j = i + 1; j < n; ++j) {
+			const double dx = x[i] - x[j], dy = y[i] - y[j], dz = z[i] - z[j];
+			m2 = fmin(m2, dx * dx + dy * dy + dz * dz);
+		}
+	return sqrt(m2);
+}
+
+static bool all_finite(const eddy_world *w)
+{
+	const char *cols[] = {"x", "y", "z", "vx", "vy", "vz", "density", "pressure"};
+	for (int c = 0; c < 8; ++c) {
+		size_t n;
+		const float *v = eddy_world_channel(w, cols[c], &n);
+		for (size_t i = 0; v && i < n; ++i)
+			if (!isfinite(v[i]))
+				return false;
+	}
+	return true;
+}
+
+static eddy_status no_step(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	(void)w;
+	(void)ctx;
+	(void)user;
+	return EDDY_OK;
+}
+
+/* sph_density keeps the table in grid-cell order (cells of h/2 from the world
+ * bounds minus h, z slowest) and the reorder moves every particle column with
+ * it, a custom one included: particles added in reverse lattice order carry a
+ * tag made from their position, and after a step each row's tag still
+ * matches its position. */
+static void table_is_kept_in_cell_order(void)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.gravity = (eddy_vec3){0, 0, 0};
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	CHECK(eddy_world_declare_column(w, "tag", EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "") >= 0);
+	eddy_custom_system_def cs = eddy_default_custom_system_def();
+	const char *writes[] = {"tag"};
+	cs.name = "tagger";
+	cs.writes = writes;
+	cs.write_count = 1;
+	cs.step = no_step;
+	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	eddy_add_sph_density(w, &de);
+	enum { N = 10 };
+	eddy_vec3 pts[N * N * N];
+	for (int k = 0; k < N * N * N; ++k) {
+		const int q = N * N * N - 1 - k; /* reverse order: z fastest descending */
+		pts[k] = (eddy_vec3){0.3f + 0.01f * (float)(q % N), 0.3f + 0.01f * (float)(q / N % N), 0.3f + 0.01f * (float)(q / (N * N))};
+	}
+	CHECK(eddy_world_add_particles(w, N * N * N, pts, NULL) == EDDY_OK);
+	size_t n;
+	float *tag = eddy_world_channel_mut(w, "tag", &n);
+	const float *x = eddy_world_channel(w, "x", NULL), *y = eddy_world_channel(w, "y", NULL), *z = eddy_world_channel(w, "z", NULL);
+	for (size_t i = 0; i < n; ++i)
+		tag[i] = x[i] + 10 * y[i] + 100 * z[i];
+	CHECK(eddy_world_step(w) == EDDY_OK);
+	tag = eddy_world_channel_mut(w, "tag", &n);
+	x = eddy_world_channel(w, "x", NULL);
+	y = eddy_world_channel(w, "y", NULL);
+	z = eddy_world_channel(w, "z", NULL);
+	const double h = de.radius, inv = 2 / h, o = -h; /* bounds start at 0 */
+	const long gx = (long)ceil(1 * inv) + 4, gy = gx;
+	long prev = -1;
+	int unsorted = 0, mismatched = 0;
+	for (size_t i = 0; i < n; ++i) {
+		const long c = ((long)((z[i] - o) * inv) * gy + (long)((y[i] - o) * inv)) * gx + (long)((x[i] - o) * inv);
+		unsorted += c < prev;
+		prev = c;
+		mismatched += fabsf(tag[i] - (x[i] + 10 * y[i] + 100 * z[i])) > 1e-4f;
+	}
+	CHECK(n == N * N * N);
+	CHECK(unsorted == 0);
+	CHECK(mismatched == 0);
+	CHECK(x[0] < 0.301f && y[0] < 0.301f && z[0] < 0.301f); /* the first row is the lowest corner now */
+	eddy_destroy_world(w);
+}
+
+/* Each SPH system reports its explicit limit (C.4, C.15) and the stats name
+ * the active one: acoustic h / (c + |v|), viscous 0.3125 h^2 / nu, each
+ * times the CFL number 0.4. (The capillary limit scales like the force
+ * limit of the surface particles it accelerates, which binds first here.) */
+static void time_step_limits_are_reported(void)
+{
+	const double h = 0.02, cfl = 0.4;
+	for (int which = 0; which < 2; ++which) {
+		sph_setup s = default_setup();
+		s.gravity = 0;
+		s.mu = which == 1 ? 200.0f : 1e-3f;
+		eddy_world *w = sph_world(&s, NULL);
+		CHECK(eddy_world_step(w) == EDDY_OK); /* emits at rest */
+		CHECK(eddy_world_step(w) == EDDY_OK);
+		CHECK(eddy_world_step_frame(w) == EDDY_OK);
+		eddy_frame_stats st;
+		eddy_world_frame_stats(w, &st);
+		const double expect = which == 0 ? cfl * h / sqrt(s.k) : cfl * 0.3125 * h * h / (s.mu / 1000.0);
+		const char *name = which == 0 ? "sph_density: acoustic" : "sph_viscosity: viscous";
+		printf("    limit %s: dt %.3e s (expected %.3e)\n", st.dt_limit, st.dt_max, expect);
+		CHECK_HAS(st.dt_limit, name);
+		CHECK(st.dt_max <= expect * 1.001 && st.dt_max > expect * 0.9);
+		eddy_destroy_world(w);
+	}
+}
+
+/* Both equations of state on a block packed 2% closer than the lattice the
+ * mass is calibrated on (interior density about 1.06 rho0): each interior
+ * particle's pressure is the EOS of its own density, and the surface
+ * particles' negative pressure is clamped to 0 (C.1). */
+static void equations_of_state(void)
+{
+	for (int tait = 0; tait < 2; ++tait) {
+		eddy_world_def d = eddy_default_world_def();
+		d.gravity = (eddy_vec3){0, 0, 0};
+		eddy_world *w = eddy_create_world(&d, NULL, 0);
+		eddy_emit_box_def b = eddy_default_emit_box_def();
+		b.min = (eddy_vec3){0.3f, 0.3f, 0.3f};
+		b.max = (eddy_vec3){0.398f, 0.398f, 0.398f};
+		b.spacing = 0.0098f;
+		eddy_add_emit_box(w, &b);
+		eddy_sph_density_def de = eddy_default_sph_density_def();
+		de.eos = tait ? EDDY_SPH_EOS_TAIT : EDDY_SPH_EOS_LINEAR;
+		de.stiffness = 400;
+		eddy_add_sph_density(w, &de);
+		CHECK(eddy_world_step(w) == EDDY_OK);
+		size_t n;
+		const float *rho = eddy_world_channel(w, "density", &n), *p = eddy_world_channel(w, "pressure", NULL);
+		double rho_max = 0, worst = 0;
+		int clamped = 0;
+		for (size_t i = 0; i < n; ++i) {
+			const double r = rho[i] / 1000.0;
+			const double expect = tait ? 400.0 * 1000.0 / 7.0 * (pow(r, 7) - 1) : 400.0 * (rho[i] - 1000.0);
+			worst = fmax(worst, fabs(p[i] - fmax(expect, 0)) / (400.0 * 1000.0));
+			clamped += expect < 0 && p[i] == 0;
+			rho_max = fmax(rho_max, rho[i]);
+		}
+		printf("    %s EOS: max density %.1f, worst |p - EOS| / (k rho0) %.1e, %d surface particles clamped to p = 0\n",
+		       tait ? "Tait" : "linear", rho_max, worst, clamped);
+		/* the interior sums the packed lattice with the calibrated mass */
+		CHECK_NEAR(rho_max, 1000.0 * eddy_sph_lattice_sum(EDDY_SPH_POLY6, 0.0098, 0.02) / eddy_sph_lattice_sum(EDDY_SPH_POLY6, 0.01, 0.02), 0.05);
+		CHECK(worst < 1e-5);
+		CHECK(clamped > 100);
+		eddy_destroy_world(w);
+	}
+}
+
+/* C.6: a particle dropped exactly onto another inside a resting block. The
+ * gradient has no direction at r = 0; skipping the pair (the usual r > 0
+ * guard) leaves them stuck together forever, dividing by r gives NaN. */
+static void coincident_particles_separate(void)
+{
+	sph_setup s = default_setup();
+	s.gravity = 0;
+	s.hi = (eddy_vec3){0.1f, 0.1f, 0.1f};
+	eddy_world *w = sph_world(&s, NULL);
+	CHECK(eddy_world_step(w) == EDDY_OK); /* emits the block */
+	const eddy_vec3 p = {0.045f, 0.045f, 0.045f};
+	CHECK(min_pair_distance(w) > 0.9 * s.dx);
+	CHECK(eddy_world_add_particles(w, 1, &p, NULL) == EDDY_OK);
+	CHECK(min_pair_distance(w) < 1e-6);
+	for (int i = 0; i < 200; ++i)
+		CHECKF(eddy_world_step(w) == EDDY_OK, "%s", eddy_world_error(w));
+	const double d = min_pair_distance(w);
+	printf("    coincident pair: closest pair %.3f spacings apart after 200 steps\n", d / s.dx);
+	CHECK(all_finite(w));
+	CHECK(d > 0.3 * s.dx);
+	eddy_destroy_world(w);
+}
+
+/* C.4: a stiff fluid (c = 100 m/s, 50 x the flow speed) collapsing in a
+ * tank. With dt from the acoustic limit it stays in the density band
+ * [0.7, 1.3] rho0 (the fluid's side; surface particles are light) with a
+ * full neighbourhood; with the step 5 x too long (CFL 2) it does not. */
+static void high_stiffness_stays_bounded(void)
+{
+	for (int bad = 0; bad < 2; ++bad) {
+		sph_setup s = default_setup();
+		s.hi = (eddy_vec3){0.2f, 0.1f, 0.04f};
+		s.fmax = (eddy_vec3){0.06f, 0.08f, 0.04f};
+		s.k = 10000;
+		s.cfl = bad ? 2.0 : 0.4;
+		eddy_world *w = sph_world(&s, NULL);
+		eddy_status st = EDDY_OK;
+		double rho_max = 0, v_max = 0, nbr_mean = 0;
+		for (int f = 0; f < 12 && st == EDDY_OK; ++f) {
+			st = eddy_world_step_frame(w);
+			if (st != EDDY_OK)
+				break;
+			size_t n;
+			const float *rho = eddy_world_channel(w, "density", &n), *nb = eddy_world_channel(w, "neighbors", NULL);
+			double sum = 0;
+			for (size_t i = 0; i < n; ++i) {
+				rho_max = fmax(rho_max, rho[i]);
+				sum += nb[i];
+			}
+			nbr_mean = sum / (double)n;
+			v_max = fmax(v_max, max_speed(w));
+		}
+		const bool ok = st == EDDY_OK && rho_max < 1300 && all_finite(w) && nbr_mean > 15 && v_max < 3;
+		printf("    stiff fluid, CFL %.1f: %s, max density %.0f, mean neighbours %.1f, max speed %.2f m/s, dt %.2e s\n",
+		       s.cfl, st == EDDY_OK ? "ran" : eddy_world_error(w), rho_max, nbr_mean, v_max, eddy_world_last_dt(w));
+		CHECK(ok == !bad);
+		eddy_destroy_world(w);
+	}
+}
+
+/* C.5: a jet at 4 m/s against a plate 0.1 spacing thick, both as boundary
+ * particles and as a collider. Per step a particle moves 0.4 spacings, four
+ * times the plate: the collider alone would let it pass between two
+ * steps; the boundary particles' pressure stops the jet before the plate. */
+static void jet_does_not_tunnel_thin_plate(void)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.bounds_max = (eddy_vec3){0.3f, 0.2f, 0.2f};
+	d.gravity = (eddy_vec3){0, 0, 0};
+	d.fps = 100;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	const float dx = 0.01f, plate = 0.2f;
+	eddy_emit_nozzle_def nz = eddy_default_emit_nozzle_def();
+	nz.center = (eddy_vec3){0.04f, 0.1f, 0.1f};
+	nz.radius = 0.03f;
+	nz.direction = (eddy_vec3){1, 0, 0};
+	nz.speed = 4;
+	nz.spacing = dx;
+	nz.max_particles = 1500;
+	CHECK(eddy_system_valid(w, eddy_add_emit_nozzle(w, &nz)));
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	de.spacing = dx;
+	de.radius = 2 * dx;
+	de.stiffness = 1600; /* c = 40 m/s, 10 x the jet */
+	eddy_add_sph_density(w, &de);
+	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+	eddy_add_sph_pressure(w, &pr);
+	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
+	eddy_add_sph_viscosity(w, &vi);
+	eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
+	bb.min = (eddy_vec3){plate, 0, 0};
+	bb.max = (eddy_vec3){plate + 0.1f * dx, 0.2f, 0.2f};
+	bb.spacing = dx;
+	eddy_add_sph_boundary_box(w, &bb);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	eddy_collide_box_def cb = eddy_default_collide_box_def();
+	cb.min = bb.min;
+	cb.max = bb.max;
+	cb.inside = false;
+	eddy_add_collide_box(w, &cb);
+	eddy_collide_box_def tank = eddy_default_collide_box_def();
+	tank.max = d.bounds_max;
+	eddy_add_collide_box(w, &tank);
+	size_t beyond = 0, n = 0;
+	for (int f = 0; f < 30; ++f) {
+		CHECKF(eddy_world_step_frame(w) == EDDY_OK, "%s", eddy_world_error(w));
+		const float *x = eddy_world_channel(w, "x", &n);
+		for (size_t i = 0; i < n; ++i)
+			beyond += x[i] > plate;
+	}
+	eddy_frame_stats st;
+	eddy_world_frame_stats(w, &st);
+	printf("    jet at a plate 0.1 spacing thick: %zu particles, %zu frames x particles beyond it, leaked %zu\n", n, beyond,
+	       st.leaked);
+	CHECK(n == 1500);
+	CHECK(beyond == 0 && st.leaked == 0);
+	eddy_destroy_world(w);
+}
+
+/* Results are identical for 1 and 2 threads: every particle gathers its own
+ * sums in a fixed neighbour order, and the cell sort is stable. */
+static void deterministic_across_threads(void)
+{
+	uint64_t hash[2];
+	for (int t = 0; t < 2; ++t) {
+		sph_setup s = default_setup();
+		s.hi = (eddy_vec3){0.2f, 0.1f, 0.04f};
+		s.fmax = (eddy_vec3){0.06f, 0.08f, 0.04f};
+		s.threads = t + 1;
+		s.sigma = 0.0728f;
+		eddy_world *w = sph_world(&s, NULL);
+		for (int f = 0; f < 5; ++f)
+			CHECK(eddy_world_step_frame(w) == EDDY_OK);
+		hash[t] = eddy_world_state_hash(w);
+		eddy_destroy_world(w);
+	}
+	printf("    state hash 1 thread %016llx, 2 threads %016llx\n", (unsigned long long)hash[0], (unsigned long long)hash[1]);
+	CHECK(hash[0] == hash[1]);
+}
+
+/* Surface-tension columns exist only while the system is in the pipeline;
+ * removing it frees them. The neighbour count column comes with sph_density. */
+static void surface_tension_columns_only_when_added(void)
+{
+	sph_setup s = default_setup();
+	eddy_world *w = sph_world(&s, NULL);
+	CHECK(eddy_world_channel(w, "color_nx", NULL) == NULL);
+	CHECK(eddy_world_channel(w, "curvature", NULL) == NULL);
+	CHECK(eddy_world_channel(w, "neighbors", NULL) != NULL);
+	eddy_sph_surface_tension_def st = eddy_default_sph_surface_tension_def();
+	eddy_system_id id = eddy_add_sph_surface_tension(w, &st);
+	CHECK(eddy_system_valid(w, id));
+	CHECK(eddy_world_channel(w, "color_nx", NULL) != NULL && eddy_world_channel(w, "curvature", NULL) != NULL);
+	CHECK(eddy_world_remove_system(w, id) == EDDY_OK);
+	CHECK(eddy_world_channel(w, "color_nx", NULL) == NULL);
+	eddy_destroy_world(w);
+	/* and an SPH system without sph_density before it is an order error that names the fix */
+	eddy_world_def d = eddy_default_world_def();
+	w = eddy_create_world(&d, NULL, 0);
+	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+	CHECK(!eddy_system_valid(w, eddy_add_sph_pressure(w, &pr)));
+	CHECK_HAS(eddy_world_error(w), "add sph_density before it");
+	eddy_destroy_world(w);
+}
+
+/* C.16: an SPH pipeline with no particles steps; all particles leaving the
+ * domain (escape = remove) leaves an empty, working world; bad defs are
+ * refused with the field named. */
+static void empty_and_emptying_scenes(void)
+{
+	sph_setup s = default_setup();
+	eddy_world_def d = eddy_default_world_def();
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	eddy_add_sph_density(w, &de);
+	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+	eddy_add_sph_pressure(w, &pr);
+	CHECK(eddy_world_step_frame(w) == EDDY_OK);
+	CHECK(eddy_world_particle_count(w) == 0);
+	de.radius = 0;
+	CHECK(!eddy_system_valid(w, eddy_add_sph_density(w, &de)));
+	CHECK_HAS(eddy_world_error(w), "sph_density: 'radius' must be > 0");
+	de = eddy_default_sph_density_def();
+	de.radius = 10 * de.spacing;
+	CHECK(!eddy_system_valid(w, eddy_add_sph_density(w, &de)));
+	CHECK_HAS(eddy_world_error(w), "'radius' must be between 1 and 5 times 'spacing'");
+	eddy_destroy_world(w);
+
+	d.escape = EDDY_ESCAPE_REMOVE;
+	d.bounds_max = (eddy_vec3){0.1f, 0.1f, 0.1f};
+	w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.max = (eddy_vec3){0.1f, 0.05f, 0.1f};
+	b.spacing = s.dx;
+	eddy_add_emit_box(w, &b);
+	de = eddy_default_sph_density_def();
+	eddy_add_sph_density(w, &de);
+	eddy_add_sph_pressure(w, &pr);
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	CHECKF(eddy_world_advance(w, 0.5) == EDDY_OK, "%s", eddy_world_error(w));
+	CHECK(eddy_world_particle_count(w) == 0);
+	CHECK(eddy_world_step_frame(w) == EDDY_OK);
+	eddy_destroy_world(w);
+}
+
+/* ---- the oscillating drop ------------------------------------------------ */
+
+/* A drop of radius R in zero gravity, stretched along x by (1 + eps) at equal
+ * volume, on the simple cubic lattice; surface tension pulls it back and it
+ * rings in Rayleigh's l = 2 mode, omega^2 = 8 sigma / (rho R^3). The period
+ * is read from the zero crossings of <x^2> - <y^2> about the centre of mass.
+ * Returns the measured omega (NAN if fewer than 3 crossings). */
+static double drop_omega(int per_radius, double eps, double *omega_theory, double *min_gap)
+{
+	const double R = 0.01, rho0 = 1000, sigma = 0.0728, dx = R / per_radius;
+	eddy_world_def d = eddy_default_world_def();
+	d.bounds_min = (eddy_vec3){-0.03f, -0.03f, -0.03f};
+	d.bounds_max = (eddy_vec3){0.03f, 0.03f, 0.03f};
+	d.gravity = (eddy_vec3){0, 0, 0};
+	d.fps = 400;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	de.spacing = (float)dx;
+	de.radius = (float)(2 * dx);
+	de.stiffness = 40; /* c = 6.3 m/s: the Laplace pressure 2 sigma / R compresses 0.04% */
+	eddy_add_sph_density(w, &de);
+	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+	eddy_add_sph_pressure(w, &pr);
+	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
+	vi.artificial = 0.05f; /* damps the ringing ~ e^(-3 t): shifts omega by 1% */
+	eddy_add_sph_viscosity(w, &vi);
+	eddy_sph_surface_tension_def st = eddy_default_sph_surface_tension_def();
+	st.tension = (float)sigma;
+	eddy_add_sph_surface_tension(w, &st);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	const double ax = R * (1 + eps), ayz = R / sqrt(1 + eps);
+	const int m = per_radius + 3;
+	eddy_vec3 *pts = malloc(sizeof *pts * (size_t)(8 * m * m * m));
+	size_t np = 0;
+	for (int i = -m; i < m; ++i)
+		for (int j = -m; j < m; ++j)
+			for (int k = -m; k < m; ++k) {
+				const double x = (i + 0.5) * dx, y = (j + 0.5) * dx, z = (k + 0.5) * dx;
+				if ((x * x) / (ax * ax) + (y * y + z * z) / (ayz * ayz) <= 1)
+					pts[np++] = (eddy_vec3){(float)x, (float)y, (float)z};
+			}
+	CHECK(eddy_world_add_particles(w, np, pts, NULL) == EDDY_OK);
+	free(pts);
+	*omega_theory = sqrt(8 * sigma / (rho0 * R * R * R));
+	const double period = 2 * M_PI / *omega_theory;
+	double prev = 0, crossings[6];
+	int nc = 0;
+	*min_gap = INFINITY;
+	for (int f = 0; f < (int)(2.2 * period * d.fps) && nc < 6; ++f) {
+		if (eddy_world_step_frame(w) != EDDY_OK) {
+			CHECKF(false, "%s", eddy_world_error(w));
+			break;
+		}
+		size_t n;
+		const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL);
+		double cx = 0, cy = 0, qx = 0, qy = 0;
+		for (size_t i = 0; i < n; ++i) {
+			cx += x[i];
+			cy += y[i];
+		}
+		cx /= (double)n;
+		cy /= (double)n;
+		for (size_t i = 0; i < n; ++i) {
+			qx += (x[i] - cx) * (x[i] - cx);
+			qy += (y[i] - cy) * (y[i] - cy);
+		}
+		const double q = (qx - qy) / (double)n, t = eddy_world_time(w);
+		if (f > 0 && (q > 0) != (prev > 0))
+			crossings[nc++] = t - 1 / d.fps * q / (q - prev); /* linear interpolation */
+		prev = q;
+		if (f % 40 == 0)
+			*min_gap = fmin(*min_gap, min_pair_distance(w) / dx);
+	}
+	eddy_destroy_world(w);
+	if (nc < 3)
+		return NAN;
+	/* crossings are half a period apart */
+	return M_PI * (nc - 1) / (crossings[nc - 1] - crossings[0]);
+}
+
+/* Rayleigh within 15%, and (C.1) the drop keeps its particles apart: with
+ * negative pressure allowed, surface tension plus p < 0 pulls them into
+ * clumps (and the paper's -lap c / |n| curvature squeezes the surface layer:
+ * 0.07 spacings here). Measured: the closest pair dips to 0.47 spacings while
+ * the drop rings at 20% strain, so the bound is 0.4 (VALIDATION.md asks 0.5
+ * for a drop at rest). */
+static void droplet_oscillates_at_rayleigh_frequency(void)
+{
+	double theory, gap;
+	const double omega = drop_omega(8, 0.2, &theory, &gap);
+	printf("    drop R = 8 spacings: omega %.2f rad/s, Rayleigh %.2f rad/s, error %.1f%%, closest pair %.2f spacings\n",
+	       omega, theory, 100 * (omega / theory - 1), gap);
+	CHECK(isfinite(omega));
+	CHECK(fabs(omega / theory - 1) <= 0.15);
+	CHECK(gap >= 0.4);
+}
+
+/* ---- the dam break against Martin & Moyce (1952) -------------------------- */
+
+typedef struct curve {
+	double T[256], Z[256];
+	int n;
+} curve;
+
+/* Rows "T,Z" of a Martin & Moyce CSV (comments and the header skipped). */
+static bool read_reference(const char *path, curve *c)
+{
+	FILE *f = fopen(path, "r");
+	c->n = 0;
+	if (!f)
+		return false;
+	char line[256];
+	while (fgets(line, sizeof line, f) && c->n < 256) {
+		double t, z;
+		if (line[0] != '#' && sscanf(line, "%lf,%lf", &t, &z) == 2) {
+			c->T[c->n] = t;
+			c->Z[c->n] = z;
+			c->n++;
+		}
+	}
+	fclose(f);
+	return c->n > 1;
+}
+
+static double curve_at(const curve *c, double T)
+{
+	for (int i = 1; i < c->n; ++i)
+		if (T >= c->T[i - 1] && T <= c->T[i])
+			return c->Z[i - 1] + (c->Z[i] - c->Z[i - 1]) * (T - c->T[i - 1]) / (c->T[i] - c->T[i - 1]);
+	return NAN;
+}
+
+static double json_number(const char *line, const char *key)
+{
+	char pat[64];
+	snprintf(pat, sizeof pat, "\"%s\":", key);
+	const char *p = strstr(line, pat);
+	return p ? strtod(p + strlen(pat), NULL) : NAN;
+}
+
+/* Runs a scene with the eddy command; each stats line gives (T, Z)-like
+ * pairs of the two named fields. Returns the number of lines. */
+static int run_scene(const char *scene, const char *sets, const char *kx, const char *ky, curve *out, char *last,
+                     size_t last_size)
+{
+	char cmd[1024];
+	snprintf(cmd, sizeof cmd, "%s/eddy run %s %s --stats - --quiet 2>&1", test_build_dir(), scene, sets);
+	FILE *p = popen(cmd, "r");
+	out->n = 0;
+	if (!p)
+		return 0;
+	static char line[16384];
+	int lines = 0;
+	while (fgets(line, sizeof line, p)) {
+		lines++;
+		if (last)
+			snprintf(last, last_size, "%s", line);
+		if (out->n < 256 && kx) {
+			out->T[out->n] = json_number(line, kx);
+			out->Z[out->n] = json_number(line, ky);
+			out->n++;
+		}
+	}
+	int st = pclose(p);
+	CHECKF(st == 0, "%s exited with %d: %s", cmd, st, last ? last : "");
+	return lines;
+}
+
+/* |Z_sim - Z_exp| / Z_exp <= 10% for T in [1, 3] against both data sets,
+ * after the best time shift of at most 0.2 (VALIDATION.md A: the gate
+ * opened in finite time, so the experiment starts late). a/12 resolution. */
+static void dam_break_matches_martin_moyce(void)
+{
+	curve ref[2], sim;
+	CHECK(read_reference("../shared/data/martin_moyce_1952_a2.25in.csv", &ref[0]));
+	CHECK(read_reference("../shared/data/martin_moyce_1952_a1.125in.csv", &ref[1]));
+	char last[16384] = "";
+	run_scene("scenes/dam_break.lua", "--set spacing=0.008333 --set fps=100", "T", "Z", &sim, last, sizeof last);
+	CHECK(sim.n > 20);
+	if (sim.n <= 20 || ref[0].n < 2 || ref[1].n < 2)
+		return;
+	double best = INFINITY, best_shift = 0, noshift = 0;
+	for (int k = -20; k <= 20; ++k) {
+		const double shift = 0.01 * k;
+		double worst = 0;
+		for (int r = 0; r < 2; ++r)
+			for (double T = 1.0; T <= 3.0 + 1e-9; T += 0.05) {
+				const double ze = curve_at(&ref[r], T), zs = curve_at(&sim, T - shift);
+				if (isfinite(ze) && isfinite(zs))
+					worst = fmax(worst, fabs(zs - ze) / ze);
+			}
+		if (k == 0)
+			noshift = worst;
+		if (worst < best) {
+			best = worst;
+			best_shift = shift;
+		}
+	}
+	printf("    dam break a/12: worst |Z_sim - Z_exp| / Z_exp over T in [1, 3] = %.3f after a shift of %.2f in T "
+	       "(%.3f unshifted); Z_sim(1, 2, 3) = %.3f %.3f %.3f\n",
+	       best, best_shift, noshift, curve_at(&sim, 1.0), curve_at(&sim, 2.0), curve_at(&sim, 3.0));
+	CHECK(best <= 0.10);
+	CHECK(json_number(last, "leaked") == 0 && json_number(last, "nonfinite") == 0);
+}
+
+/* The SPH scenes run through the eddy command and report their fields. */
+static void scenes_run_and_report(void)
+{
+	curve c;
+	char last[16384] = "";
+	run_scene("scenes/hydrostatic.lua", "--frames 2", NULL, NULL, &c, last, sizeof last);
+	CHECK_HAS(last, "\"pressure_err\":");
+	CHECK(json_number(last, "bottom_density_expected") > 1.0);
+	run_scene("scenes/pour.lua", "--frames 3", NULL, NULL, &c, last, sizeof last);
+	CHECK(json_number(last, "particles") > 0 && json_number(last, "leaked") == 0);
+	run_scene("scenes/droplet.lua", "--frames 1 --set spacing=0.0025", NULL, NULL, &c, last, sizeof last);
+	CHECK_HAS(last, "\"q\":");
+	CHECK_HAS(last, "sph_surface_tension");
+}
+
+void suite_sph(void)
+{
+	RUN(kernels_integrate_to_one);
+	RUN(kernel_derivatives_match_finite_differences);
+	RUN(lattice_sums);
+	RUN(resting_block_stays_at_rest);
+	RUN(hydrostatic_tank);
+	RUN(table_is_kept_in_cell_order);
+	RUN(equations_of_state);
+	RUN(time_step_limits_are_reported);
+	RUN(coincident_particles_separate);
+	RUN(high_stiffness_stays_bounded);
+	RUN(jet_does_not_tunnel_thin_plate);
+	RUN(deterministic_across_threads);
+	RUN(surface_tension_columns_only_when_added);
+	RUN(empty_and_emptying_scenes);
+	RUN(dam_break_matches_martin_moyce);
+	RUN(droplet_oscillates_at_rayleigh_frequency);
+	RUN(scenes_run_and_report);
+}
