@@ -26,5 +26,6 @@ world:add(eddy.gravity {})
 world:add(eddy.integrate {})
 world:add(eddy.collide_box { min = geo.tank_min, max = geo.tank_max, inside = true })
 dam.report(world, geo)
+dam.render(eddy, world, geo, "dam_break")
 
 return world

@@ -29,5 +29,6 @@ world:add(eddy.flip_g2p { flip_ratio = flip_ratio })
 world:add(eddy.flip_advect {})
 world:add(eddy.flip_reseed {})
 dam.report(world, geo)
+dam.render(eddy, world, geo, "dam_break_flip")
 
 return world

@@ -34,4 +34,6 @@ world:on_frame(function(w)
 	return { q = q / n }
 end)
 
+require("eddy.view").render(eddy, world, "droplet")
+
 return world

@@ -60,4 +60,6 @@ world:on_frame(function(w)
 	         bottom_density_expected = 1 + g * surface / stiffness }
 end)
 
+require("eddy.view").render(eddy, world, "hydrostatic")
+
 return world

@@ -26,4 +26,6 @@ world:add(eddy.gravity {})
 world:add(eddy.integrate {})
 world:add(eddy.collide_box { min = {0, 0, 0}, max = {L, H, L}, inside = true })
 
+require("eddy.view").render(eddy, world, "pour")
+
 return world

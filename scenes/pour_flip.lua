@@ -28,4 +28,6 @@ world:add(eddy.flip_extrapolate { layers = 4 }) -- CFL 2 + 2
 world:add(eddy.flip_g2p {})
 world:add(eddy.flip_advect {})
 
+require("eddy.view").render(eddy, world, "pour_flip")
+
 return world

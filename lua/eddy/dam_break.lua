@@ -61,6 +61,18 @@ function M.report(world, geo)
 	end)
 end
 
+-- Renders the thin slab from the front, orthographic, into out/<name>/.
+function M.render(eddy, world, geo, name)
+	local a = geo.a
+	local L, H = geo.tank_max[1], geo.tank_max[2]
+	local W = geo.tank_max[3]
+	return require("eddy.view").render(eddy, world, name, {
+		width = 1056, height = 480, projection = "orthographic", ortho_height = 1.1 * H,
+		eye = {L / 2, H / 2, W + 10 * a}, target = {L / 2, H / 2, W / 2},
+		radius = 0.6 * geo.spacing, value_min = 0, value_max = 1.5 * math.sqrt(2 * geo.g * a),
+	})
+end
+
 -- Reads a Martin & Moyce CSV (# comments, a "T,Z" header, then rows) into
 -- { {T = ..., Z = ...}, ... } sorted by T.
 function M.read_reference(path)
