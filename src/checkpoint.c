@@ -5,9 +5,13 @@
  *   header   "EDDYCKPT", u32 version, u32 0, u64 fingerprint, u64 payload bytes,
  *            u64 FNV-1a of the payload
  *   payload  clock (time, frame, step, last dt), random state, length scale,
- *            rest density, particle count; every allocated state column (name,
+ *            rest density, particle count; every allocated column (name,
  *            domain, type, bytes, data); every system's state block (label,
  *            bytes, data)
+ * Derived columns are saved too, although the next step recomputes them:
+ * time-step limits read the last step's values (SPH's force limit reads the
+ * accelerations), and a resumed run must pick the same steps to be
+ * bit-identical.
  * Loading parses and checks everything before it changes the world, so a bad
  * file leaves the world as it was. */
 #define _POSIX_C_SOURCE 200809L
@@ -124,11 +128,11 @@ eddy_status eddy_world_save(eddy_world *w, const char *path, uint64_t fingerprin
 	PUT(&b, n);
 	uint32_t ncols = 0;
 	for (int c = 0; c < w->column_count; ++c)
-		ncols += w->columns[c].data && w->columns[c].lifetime == EDDY_STATE;
+		ncols += w->columns[c].data != NULL;
 	PUT(&b, ncols);
 	for (int c = 0; c < w->column_count; ++c) {
 		const eddy_column *col = &w->columns[c];
-		if (!col->data || col->lifetime != EDDY_STATE)
+		if (!col->data)
 			continue;
 		put_name(&b, col->name);
 		uint8_t dom = (uint8_t)col->domain, type = (uint8_t)col->type;
@@ -143,7 +147,7 @@ eddy_status eddy_world_save(eddy_world *w, const char *path, uint64_t fingerprin
 	for (int k = 0; k < w->order_count; ++k) {
 		eddy_system *s = &w->slots[w->order[k]];
 		size_t size = 0;
-		void *st = s->vt->state ? s->vt->state(s, &size) : NULL;
+		void *st = s->vt->state ? s->vt->state(w, s, &size) : NULL;
 		put_name(&b, s->label);
 		uint64_t sz = st ? size : 0;
 		PUT(&b, sz);
@@ -342,7 +346,7 @@ eddy_status eddy_world_load(eddy_world *w, const char *path, uint64_t fingerprin
 		eddy_system *s = &w->slots[w->order[k]];
 		size_t have = 0;
 		if (s->vt->state)
-			s->vt->state(s, &have);
+			s->vt->state(w, s, &have);
 		if (!r.short_read && (strcmp(label, s->label) != 0 || sz != have))
 			st = eddy__fail(w, EDDY_ERR_IO, "checkpoint '%s': system %u is %s, the scene has %s", path, k + 1, label,
 			                s->label);
@@ -370,11 +374,10 @@ eddy_status eddy_world_load(eddy_world *w, const char *path, uint64_t fingerprin
 	for (uint32_t k = 0; k < nsys; ++k) {
 		eddy_system *s = &w->slots[w->order[k]];
 		size_t have = 0;
-		void *dst = s->vt->state ? s->vt->state(s, &have) : NULL;
+		void *dst = s->vt->state ? s->vt->state(w, s, &have) : NULL;
 		if (dst && have)
 			memcpy(dst, sys_data[k], have);
 	}
-	eddy__clear_derived(w);
 	eddy__frame_reset(w);
 	free(payload);
 	return EDDY_OK;

@@ -10,8 +10,9 @@ bool eddy__check_response(eddy_world *w, const char *sys, eddy_collider_response
 	       eddy__check_nonneg(w, sys, "friction", r.friction);
 }
 
-void *eddy__collider_state(eddy_system *s, size_t *size)
+void *eddy__collider_state(eddy_world *w, eddy_system *s, size_t *size)
 {
+	(void)w;
 	eddy_collider_base *b = s->data;
 	*size = sizeof b->motion;
 	return &b->motion;

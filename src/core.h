@@ -34,8 +34,10 @@ typedef struct eddy_system_vtable {
 	/* columns the kind writes, ending in -1; names the fix in order errors */
 	const int *default_writes;
 	/* the system's mutable state as one plain block, saved and restored
-	 * byte for byte by checkpoints; NULL for stateless systems */
-	void *(*state)(eddy_system *s, size_t *size);
+	 * byte for byte by checkpoints; NULL for stateless systems. It may build
+	 * what the block lives in (the same way for the same scene), so a world
+	 * that has not stepped yet can take a saved state. */
+	void *(*state)(eddy_world *w, eddy_system *s, size_t *size);
 } eddy_system_vtable;
 
 struct eddy_system {
@@ -232,7 +234,7 @@ static inline void eddy__collide_response(float *vx, float *vy, float *vz, size_
 }
 
 /* A collider's checkpointed state: its motion. */
-void *eddy__collider_state(eddy_system *s, size_t *size);
+void *eddy__collider_state(eddy_world *w, eddy_system *s, size_t *size);
 
 /* Wall velocity of a collider over a step of dt, then marks the offset as used. */
 eddy_vec3 eddy__collider_step_velocity(eddy_collider_base *b, double dt);

@@ -384,12 +384,11 @@ void eddy_world_set_rest_density(eddy_world *w, float rho0);
 
 /* ---- checkpoints ------------------------------------------------------- */
 
-/* Writes the world's full state (state columns, clock, random stream, the
- * systems' own state) to path atomically: a temporary file, fsync, rename.
+/* Writes the world's full state (all allocated columns, clock, random stream,
+ * the systems' own state) to path atomically: a temporary file, fsync, rename.
  * fingerprint is mixed with the pipeline's own, so a checkpoint loads only into
  * the same scene with the same parameters (the eddy command passes a hash of
- * the scene file and its --set values). Derived columns are not saved: the next
- * step recomputes them. */
+ * the scene file and its --set values). */
 eddy_status eddy_world_save(eddy_world *w, const char *path, uint64_t fingerprint);
 /* Restores what eddy_world_save wrote into a world built by the same scene.
  * A truncated, corrupted, foreign or other-version file is rejected with

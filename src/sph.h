@@ -75,6 +75,9 @@ typedef struct sph_shared {
 /* The sph_density system nearest before system s in the pipeline, or NULL. */
 sph_shared *eddy__sph_find(eddy_world *w, const eddy_system *s);
 
+/* Builds the boundary particles (once per set of boundary systems). */
+eddy_status eddy__sph_boundary_ready(eddy_world *w, sph_shared *sh);
+
 /* Builds the lists for the current particle table, reordering it by cell. */
 eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads);
 void eddy__sph_neighbors_free(sph_neighbors *nb);

@@ -36,8 +36,7 @@ void eddy__sph_neighbors_free(sph_neighbors *nb)
 	free(nb->by);
 	free(nb->bz);
 	free(nb->bvol);
-	free(nb->bp);
-	free(nb->brho);
+	free(nb->bp); /* brho lives in the same block */
 	free(nb->bcell_start);
 	memset(nb, 0, sizeof *nb);
 }
@@ -140,10 +139,10 @@ static eddy_status boundary_build(eddy_world *w, sph_shared *sh)
 	free(nb->by);
 	free(nb->bz);
 	free(nb->bvol);
-	free(nb->bp);
-	free(nb->brho);
-	nb->bp = calloc(alloc, sizeof *nb->bp);
-	nb->brho = malloc(alloc * sizeof *nb->brho);
+	free(nb->bp); /* brho lives in the same block */
+	/* one block, bp then brho: it is sph_density's checkpointed state */
+	nb->bp = calloc(2 * alloc, sizeof *nb->bp);
+	nb->brho = nb->bp ? nb->bp + alloc : NULL;
 	nb->bx = malloc(alloc * sizeof *nb->bx);
 	nb->by = malloc(alloc * sizeof *nb->by);
 	nb->bz = malloc(alloc * sizeof *nb->bz);
@@ -260,6 +259,12 @@ static void fill_lists(eddy_world *w, sph_neighbors *nb, const sph_kernel_consts
 	}
 	*max_f = mf;
 	*max_b = mb;
+}
+
+eddy_status eddy__sph_boundary_ready(eddy_world *w, sph_shared *sh)
+{
+	eddy_status st = grid_setup(w, &sh->nb, sh->h);
+	return st == EDDY_OK ? boundary_build(w, sh) : st;
 }
 
 eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads)

@@ -101,8 +101,9 @@ static size_t sample(const eddy_world *w, const eddy_system *s, eddy_vec3 *out, 
 	return k;
 }
 
-static void *state(eddy_system *s, size_t *size)
+static void *state(eddy_world *w, eddy_system *s, size_t *size)
 {
+	(void)w;
 	emit_box *e = s->data;
 	*size = sizeof e->done;
 	return &e->done;

@@ -158,8 +158,9 @@ static size_t sample(const eddy_world *w, const eddy_system *s, eddy_vec3 *out, 
 	return (size_t)n < cap ? (size_t)n : cap;
 }
 
-static void *state(eddy_system *s, size_t *size)
+static void *state(eddy_world *w, eddy_system *s, size_t *size)
 {
+	(void)w;
 	emit_nozzle *e = s->data;
 	*size = sizeof e->run;
 	return &e->run;

@@ -156,9 +156,23 @@ static void destroy(eddy_system *s)
 		eddy__sph_neighbors_free(&sd->sh.nb);
 }
 
+/* Checkpointed state: the boundary particles' pressure and density, which the
+ * next step's density sum reads before this step's extrapolation replaces
+ * them (a lag of one step). */
+static void *state(eddy_world *w, eddy_system *s, size_t *size)
+{
+	sph_density *sd = s->data;
+	*size = 0;
+	if (eddy__sph_boundary_ready(w, &sd->sh) != EDDY_OK || !sd->sh.nb.bp)
+		return NULL;
+	*size = 2 * sd->sh.nb.nb * sizeof *sd->sh.nb.bp;
+	return sd->sh.nb.bp;
+}
+
 const eddy_system_vtable eddy__kind_sph_density = {
 	.name = "sph_density",
 	.step = step,
+	.state = state,
 	.limit = limit,
 	.destroy = destroy,
 	.default_writes = density_writes,
