@@ -41,14 +41,35 @@ local M = {}
 
 -- ---- study file constructors and their checks ------------------------------
 
--- "file:line: " of the function `level` calls up from where's caller
--- (1: the caller itself, 2: its caller, ...).
-local function where(level)
-	local info = debug.getinfo(level + 1, "Sl")
-	if info and info.currentline and info.currentline > 0 then
-		return info.short_src .. ":" .. info.currentline .. ": "
+-- Where a mistake is: "file:line: " of the field's own line when it can be
+-- found after the constructor's line (Lua keeps no line per table field),
+-- else of the constructor call. `return study {...}` is a tail call, which
+-- leaves no caller frame: its line is then found by scanning the file.
+local function locator(file, lines, line)
+	return function(field)
+		if not line then return file .. ": " end
+		if field then
+			local pat = "%f[%w_]" .. field:gsub("%W", "%%%0") .. "%s*="
+			for i = line, math.min(#lines, line + 200) do
+				if lines[i]:find(pat) then return file .. ":" .. i .. ": " end
+			end
+		end
+		return file .. ":" .. line .. ": "
 	end
-	return ""
+end
+
+-- The line of the call to the constructor that calls this (nil if unknown).
+local function call_line(lines, name)
+	local me = debug.getinfo(2, "t")
+	if me and not me.istailcall then
+		local info = debug.getinfo(3, "l")
+		if info and info.currentline and info.currentline > 0 then return info.currentline end
+	end
+	for i, l in ipairs(lines) do
+		local code = l:gsub("%-%-.*$", "")
+		if code:find("%f[%w_]" .. name .. "%s*[{(]") then return i end
+	end
+	return nil
 end
 
 local function list_keys(schema)
@@ -59,26 +80,26 @@ local function list_keys(schema)
 end
 
 -- schema: field -> { type = "string"|"number"|"table"|"boolean"|"function"|"any", required = bool }
-local function check_fields(what, t, schema, level)
+local function check_fields(what, t, schema, loc)
 	if type(t) ~= "table" then
-		error(where(level + 1) .. what .. ": expects a table (got " .. type(t) .. ")", 0)
+		error(loc() .. what .. ": expects a table (got " .. type(t) .. ")", 0)
 	end
 	for k, v in pairs(t) do
 		local s = schema[k]
 		if not s then
-			error(where(level + 1) .. what .. ": unknown field '" .. tostring(k) .. "' (fields: " .. list_keys(schema) .. ")", 0)
+			error(loc(tostring(k)) .. what .. ": unknown field '" .. tostring(k) .. "' (fields: " .. list_keys(schema) .. ")", 0)
 		end
 		local ok = false
 		for ty in s.type:gmatch("[^|]+") do
 			if ty == "any" or type(v) == ty then ok = true end
 		end
 		if not ok then
-			error(where(level + 1) .. what .. ": '" .. k .. "' must be a " .. s.type .. " (got " .. type(v) .. ")", 0)
+			error(loc(k) .. what .. ": '" .. k .. "' must be a " .. s.type .. " (got " .. type(v) .. ")", 0)
 		end
 	end
 	for k, s in pairs(schema) do
 		if s.required and t[k] == nil then
-			error(where(level + 1) .. what .. ": '" .. k .. "' is required", 0)
+			error(loc() .. what .. ": '" .. k .. "' is required", 0)
 		end
 	end
 end
@@ -123,67 +144,79 @@ local METRIC = {
 	field = { type = "string" },
 	from = { type = "number" },
 	to = { type = "number" },
+	shift = { type = "number" },
 	label = { type = "string" },
 }
 
 local KINDS = { mean_abs = true, mean = true, max = true, frequency = true }
 
-local function check_sweep(what, sweep, level)
+local function check_sweep(what, sweep, loc)
 	for k, values in pairs(sweep) do
 		if type(k) ~= "string" then
-			error(where(level + 1) .. what .. ": sweep keys are parameter names (got " .. type(k) .. ")", 0)
+			error(loc() .. what .. ": sweep keys are parameter names (got " .. type(k) .. ")", 0)
 		end
 		if type(values) ~= "table" or #values == 0 then
-			error(where(level + 1) .. what .. ": sweep '" .. k .. "' must be a non-empty list of values", 0)
+			error(loc(k) .. what .. ": sweep '" .. k .. "' must be a non-empty list of values", 0)
 		end
 		for _, v in ipairs(values) do
 			if type(v) ~= "number" and type(v) ~= "string" and type(v) ~= "boolean" then
-				error(where(level + 1) .. what .. ": sweep '" .. k .. "' holds a " .. type(v) .. "; values are numbers, strings or booleans", 0)
+				error(loc(k) .. what .. ": sweep '" .. k .. "' holds a " .. type(v) .. "; values are numbers, strings or booleans", 0)
 			end
 		end
 	end
 end
 
-local function check_metric(what, m, level)
+local function check_metric(what, m, loc)
 	if type(m) == "function" then return end
-	check_fields(what .. " metric", m, METRIC, level + 1)
+	check_fields(what .. " metric", m, METRIC, loc)
 	if not KINDS[m.kind] then
-		error(where(level + 1) .. what .. ": metric kind '" .. m.kind .. "' is not one of mean_abs, mean, max, frequency", 0)
+		error(loc("kind") .. what .. ": metric kind '" .. m.kind .. "' is not one of mean_abs, mean, max, frequency", 0)
 	end
 	if m.kind == "mean_abs" and not (m.x and m.y) then
-		error(where(level + 1) .. what .. ": metric mean_abs needs x and y (stats fields)", 0)
+		error(loc("metric") .. what .. ": metric mean_abs needs x and y (stats fields)", 0)
 	end
 	if m.kind ~= "mean_abs" and not m.field then
-		error(where(level + 1) .. what .. ": metric " .. m.kind .. " needs 'field' (a stats field)", 0)
+		error(loc("metric") .. what .. ": metric " .. m.kind .. " needs 'field' (a stats field)", 0)
 	end
 end
 
-local function method(t)
-	check_fields("method", t, METHOD, 2)
-	if t.sweep then check_sweep("method '" .. t.name .. "'", t.sweep, 2) end
-	if type(t.quick) == "table" then check_sweep("method '" .. t.name .. "' quick", t.quick, 2) end
-	if t.metric then check_metric("method '" .. t.name .. "'", t.metric, 2) end
-	if t.resolution and not ((t.sweep or {})[t.resolution]) then
-		error(where(2) .. "method '" .. t.name .. "': resolution '" .. t.resolution .. "' is not a swept parameter", 0)
+-- The constructors a study file calls, bound to that file.
+local function constructors(file)
+	local lines = {}
+	local f = io.open(file, "r")
+	if f then
+		for l in f:lines() do lines[#lines + 1] = l end
+		f:close()
 	end
-	t.line = where(2)
-	return setmetatable(t, { __name = "eddy.study.method" })
-end
-
-local function study(t)
-	check_fields("study", t, STUDY, 2)
-	check_fields("study reference", t.reference, REFERENCE, 2)
-	check_metric("study", t.metric, 2)
-	if #t.methods == 0 then error(where(2) .. "study: 'methods' is empty", 0) end
-	for i, m in ipairs(t.methods) do
-		if getmetatable(m) == nil or getmetatable(m).__name ~= "eddy.study.method" then
-			error(where(2) .. "study: methods[" .. i .. "] must be made with method { ... }", 0)
+	local function method(t)
+		local loc = locator(file, lines, call_line(lines, "method"))
+		check_fields("method", t, METHOD, loc)
+		local what = "method '" .. t.name .. "'"
+		if t.sweep then check_sweep(what, t.sweep, loc) end
+		if type(t.quick) == "table" then check_sweep(what .. " quick", t.quick, loc) end
+		if t.metric then check_metric(what, t.metric, loc) end
+		if t.resolution and not ((t.sweep or {})[t.resolution]) then
+			error(loc("resolution") .. what .. ": resolution '" .. t.resolution .. "' is not a swept parameter", 0)
 		end
+		return setmetatable(t, { __name = "eddy.study.method" })
 	end
-	if not t.name:match("^[%w_%-]+$") then
-		error(where(2) .. "study: 'name' must be letters, digits, '_' or '-' (it names files)", 0)
+	local function study(t)
+		local loc = locator(file, lines, call_line(lines, "study"))
+		check_fields("study", t, STUDY, loc)
+		check_fields("study reference", t.reference, REFERENCE, loc)
+		check_metric("study", t.metric, loc)
+		if #t.methods == 0 then error(loc("methods") .. "study: 'methods' is empty", 0) end
+		for i, m in ipairs(t.methods) do
+			if getmetatable(m) == nil or getmetatable(m).__name ~= "eddy.study.method" then
+				error(loc("methods") .. "study: methods[" .. i .. "] must be made with method { ... }", 0)
+			end
+		end
+		if not t.name:match("^[%w_%-]+$") then
+			error(loc("name") .. "study: 'name' must be letters, digits, '_' or '-' (it names files)", 0)
+		end
+		return setmetatable(t, { __name = "eddy.study" })
 	end
-	return setmetatable(t, { __name = "eddy.study" })
+	return study, method
 end
 
 -- ---- files and JSON ------------------------------------------------------------
@@ -333,12 +366,12 @@ end
 
 -- ---- metrics ---------------------------------------------------------------
 
-local function mean_abs(frames, rows, m)
+local function mean_abs(frames, rows, m, shift)
 	local sum, n = 0, 0
 	for _, f in ipairs(frames) do
 		local x, y = f[m.x], f[m.y]
 		if type(x) == "number" and type(y) == "number" and x >= (m.from or -math.huge) and x <= (m.to or math.huge) then
-			local r = interpolate(rows, x)
+			local r = interpolate(rows, x + (shift or 0))
 			if r then sum, n = sum + math.abs(y - r), n + 1 end
 		end
 	end
@@ -488,6 +521,18 @@ local function compute_error(ctx, s, m, row, finest)
 			end
 			table.sort(rows, function(a, b) return a[1] < b[1] end)
 		end
+		if metric.shift and not s.reference.finest then
+			-- the experiment's clock may start before the simulated release (a
+			-- gate opens in finite time): also the best error over shifts of
+			-- the reference's x in [0, shift]
+			local best, best_s = math.huge, 0
+			for i = 0, 40 do
+				local sh = metric.shift * i / 40
+				local e = mean_abs(row.data, rows, metric, sh)
+				if e < best then best, best_s = e, sh end
+			end
+			row.shifted = { error_shifted = best, shift = best_s }
+		end
 		return mean_abs(row.data, rows, metric)
 	elseif metric.kind == "frequency" then
 		local omega = omega_of(row.data, metric.field, metric.from)
@@ -594,6 +639,7 @@ end
 
 -- args: file, out, quick, exe, spawn. Returns the exit status.
 function M.main(args)
+	local study, method = constructors(args.file)
 	local env = setmetatable({ study = study, method = method }, { __index = _G })
 	local chunk, err = loadfile(args.file, "t", env)
 	if not chunk then
@@ -693,6 +739,13 @@ function M.main(args)
 	local extra_keys = {}
 	for k in pairs(s.extra or {}) do extra_keys[#extra_keys + 1] = k end
 	table.sort(extra_keys)
+	if type(s.metric) == "table" and s.metric.shift then
+		extra_keys[#extra_keys + 1] = "error_shifted"
+		extra_keys[#extra_keys + 1] = "shift"
+		for _, r in ipairs(rows) do
+			if r.shifted then r.extra.error_shifted, r.extra.shift = r.shifted.error_shifted, r.shifted.shift end
+		end
+	end
 	if type(s.metric) == "table" and s.metric.kind == "frequency" then
 		extra_keys[#extra_keys + 1] = "omega"
 		extra_keys[#extra_keys + 1] = "omega_ref"

@@ -1,7 +1,9 @@
 -- Dam break, SPH against FLIP: how close the surge front comes to Martin &
 -- Moyce's measurements (a = 2.25 in) for the wall time each resolution costs.
 -- error = mean |Z_sim - Z_exp| over T in [1, 3] (Z = front / a, T = t sqrt(2g/a)),
--- no time shift.
+-- no time shift; the CSV also has error_shifted, the best error after shifting
+-- the experiment's clock by up to 0.2 in T (VALIDATION.md: the gate opened in
+-- finite time), and that shift.
 --
 --   build/eddy study scenes/studies/dam_break.lua            (about 40 s)
 --   build/eddy study scenes/studies/dam_break.lua --quick    (a few seconds)
@@ -14,7 +16,8 @@ return study {
 	name = "dam_break",
 	title = "Dam break vs Martin & Moyce: SPH and FLIP",
 	reference = { data = "../shared/data/martin_moyce_1952_a2.25in.csv" },
-	metric = { kind = "mean_abs", x = "T", y = "Z", from = 1, to = 3, label = "mean |Z - Z_exp|, T in [1, 3]" },
+	metric = { kind = "mean_abs", x = "T", y = "Z", from = 1, to = 3, shift = 0.2,
+	           label = "mean |Z - Z_exp|, T in [1, 3]" },
 	extra = { density_err_avg = "mean", divergence = "max" },
 	methods = {
 		method { name = "SPH", scene = "scenes/dam_break.lua", resolution = "spacing",
