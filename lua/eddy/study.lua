@@ -392,7 +392,7 @@ local function field_reduce(frames, field, how, from)
 end
 
 -- omega (rad/s) of a stats field from its zero crossings (linearly
--- interpolated), which are half a period apart; NaN with fewer than 3.
+-- interpolated), which are half a period apart; NaN with fewer than 2.
 local function omega_of(frames, field, from)
 	local crossings, prev, prev_t = {}, nil, nil
 	for _, f in ipairs(frames) do
@@ -404,7 +404,7 @@ local function omega_of(frames, field, from)
 			prev, prev_t = v, t
 		end
 	end
-	if #crossings < 3 then return 0 / 0 end
+	if #crossings < 2 then return 0 / 0 end
 	return math.pi * (#crossings - 1) / (crossings[#crossings] - crossings[1])
 end
 
@@ -612,7 +612,7 @@ local function write_chart(ctx, s, rows, label)
 	f = assert(io.open(gp, "w"))
 	f:write("set terminal pngcairo size 900,600 font 'sans,11'\n")
 	f:write("set output ", string.format("%q", png), "\n")
-	f:write("set logscale xy\nset grid\nset key outside right top\n")
+	f:write("set termoption noenhanced\nset logscale xy\nset grid\nset key outside right top\n")
 	f:write("set title ", string.format("%q", (s.title or s.name) .. (ctx.quick and " (quick)" or "")), "\n")
 	f:write("set xlabel 'wall time per run (s)'\n")
 	f:write("set ylabel ", string.format("%q", label), "\n")

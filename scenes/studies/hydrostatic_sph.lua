@@ -13,7 +13,7 @@ return study {
 	extra = { pressure_err = "mean", density_err_max = "max" },
 	duration = 0.5, quick_duration = 0.2,
 	methods = {
-		method { name = "SPH", scene = "scenes/hydrostatic.lua", resolution = "stiffness",
+		method { name = "SPH", scene = "scenes/hydrostatic.lua",
 		         sweep = { stiffness = { 50, 100, 200, 400, 800, 1600 } },
 		         quick = { stiffness = { 100, 400 } } },
 	},
