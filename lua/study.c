@@ -15,6 +15,7 @@
 
 #include <errno.h>
 #include <fcntl.h>
+#include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -112,7 +113,9 @@ static void self_exe(char *out, size_t cap)
 	out[len > 0 ? (size_t)len : 0] = '\0';
 }
 
-static int traceback(lua_State *L)
+/* Message handler: errors from the driver are already "file:line: message";
+ * a non-string error object still gets a line. */
+static int error_message(lua_State *L)
 {
 	const char *msg = lua_tostring(L, 1);
 	lua_pushstring(L, msg ? msg : "(error object is not a string)");
@@ -173,7 +176,7 @@ int eddy_study_main(int argc, char **argv)
 	lua_pop(L, 2);
 
 	int code = 1;
-	lua_pushcfunction(L, traceback);
+	lua_pushcfunction(L, error_message);
 	int handler = lua_gettop(L);
 	lua_getglobal(L, "require");
 	lua_pushstring(L, "eddy.study");

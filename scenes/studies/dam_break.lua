@@ -10,7 +10,8 @@
 --
 -- Resolutions are fractions of the column base a = 0.1 m: SPH spacing a/10,
 -- a/15, a/20; FLIP cells a/8, a/12, a/16 with 2 x 2 x 2 particles per cell
--- (so FLIP's particle spacing is half its cell).
+-- (so FLIP's particle spacing is half its cell); PIC is the FLIP scene with
+-- flip_ratio = 0.
 
 return study {
 	name = "dam_break",
@@ -26,5 +27,8 @@ return study {
 		method { name = "FLIP", scene = "scenes/dam_break_flip.lua", resolution = "cell_size",
 		         sweep = { cell_size = { 0.0125, 0.1 / 12, 0.00625 } },
 		         quick = { cell_size = { 0.025, 0.0125 } } },
+		-- PIC (flip_ratio 0): the dissipative end of the FLIP/PIC blend
+		method { name = "PIC", scene = "scenes/dam_break_flip.lua", resolution = "cell_size",
+		         set = { flip_ratio = 0 }, sweep = { cell_size = { 0.0125, 0.1 / 12, 0.00625 } }, quick = false },
 	},
 }
