@@ -235,6 +235,9 @@ static void bad_study_files(void)
 		{"local m = method { name = 'A', scene = 's.lua',\n sweep = { spacing = 0.01 } }\n",
 		 "bad.lua:2: method 'A': sweep 'spacing' must be a non-empty list"},
 		{"return 42\n", "must return study { ... }"},
+		{"return study {\n name = 'x', reference = { finest = true },\n metric = { kind = 'mean', field = 'q' },\n"
+		 " methods = {\n  method { name = 'A',\n   scene = 'scenes/nope.lua' },\n },\n}\n",
+		 "bad.lua:6: method 'A': scene 'scenes/nope.lua' not found"},
 	};
 	for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
 		write_file(path, cases[i].src);

@@ -198,7 +198,7 @@ local function constructors(file)
 		if t.resolution and not ((t.sweep or {})[t.resolution]) then
 			error(loc("resolution") .. what .. ": resolution '" .. t.resolution .. "' is not a swept parameter", 0)
 		end
-		return setmetatable(t, { __name = "eddy.study.method" })
+		return setmetatable(t, { __name = "eddy.study.method", scene_at = loc("scene") })
 	end
 	local function study(t)
 		local loc = locator(file, lines, call_line(lines, "study"))
@@ -455,7 +455,20 @@ local function run_one(ctx, s, m, params, index, quick)
 	local stats = string.format("%s/runs/%s_%02d.jsonl", ctx.out, m.name:gsub("[^%w]", "_"), index)
 	local log = stats:gsub("%.jsonl$", ".log")
 	os.remove(stats)
-	local argv = { ctx.exe, "run", resolve(m.scene, ctx.file), "--quiet", "--stats", stats, "--set", "render=false" }
+	local scene = resolve(m.scene, ctx.file)
+	local argv = { ctx.exe, "run", scene, "--quiet", "--stats", stats }
+	-- wall time should measure physics: the shipped scenes render through
+	-- eddy.view unless --set render=false, but a --set the scene never reads
+	-- is an error, so pass it only to scenes that read it
+	local f = io.open(scene, "r")
+	local src = f and f:read("a") or ""
+	if f then f:close() end
+	if src:find("eddy%.view") or src:find("param%s*%(%s*[\"']render[\"']") then
+		argv[#argv + 1] = "--set"
+		argv[#argv + 1] = "render=false"
+	elseif src:find("render_points") and index == 1 then
+		io.stderr:write("eddy: study: warning: " .. scene .. " renders and reads no 'render' parameter: its wall time includes rendering\n")
+	end
 	local set = {}
 	for k, v in pairs(s.set or {}) do set[k] = v end
 	for k, v in pairs(m.set or {}) do set[k] = v end
@@ -590,6 +603,14 @@ local function write_chart(ctx, s, rows, label)
 	for _, r in ipairs(rows) do
 		if not seen[r.method] then seen[r.method] = true methods[#methods + 1] = r.method end
 	end
+	local plottable = false
+	for _, r in ipairs(rows) do
+		plottable = plottable or (r.status == 0 and r.error == r.error and r.error > 0)
+	end
+	if not plottable then
+		io.stderr:write("eddy: study: no run has an error to plot, no chart\n")
+		return nil
+	end
 	local dat = ctx.out .. "/" .. s.name .. ".dat"
 	local f = assert(io.open(dat, "w"))
 	-- one gnuplot data block per method, then the front
@@ -653,6 +674,12 @@ function M.main(args)
 	end
 	local ctx = { file = args.file, exe = args.exe, spawn = args.spawn, quick = args.quick,
 	              out = args.out or ("out/study_" .. s.name) }
+	-- a missing scene is the study file's mistake: say so before running anything
+	for _, m in ipairs(s.methods) do
+		if not exists(resolve(m.scene, args.file)) then
+			error(getmetatable(m).scene_at .. "method '" .. m.name .. "': scene '" .. m.scene .. "' not found", 0)
+		end
+	end
 	mkdir_p(ctx.out .. "/runs")
 	if s.reference.data then ctx.reference = read_data(s.reference.data, args.file) end
 	local metric_label = (type(s.metric) == "table" and (s.metric.label or s.metric.kind .. " " .. (s.metric.field or s.metric.y))) or "error"
