@@ -162,6 +162,7 @@ static void quick_dam_break_study(void)
 	char out[256];
 	snprintf(out, sizeof out, "%s/study_test/dam_break", test_build_dir());
 	if (run_quick("dam_break", out, c)) {
+		char png[512], buf[256];
 		CHECK(c->rows == 4);
 		check_common(c, "dam_break");
 		/* against the experiment every error is finite and the finer SPH run is
@@ -174,7 +175,11 @@ static void quick_dam_break_study(void)
 		}
 		CHECKF(num(c, 1, err) < num(c, 0, err), "SPH a/10 error %g not below a/5 %g", num(c, 1, err),
 		       num(c, 0, err));
-		char png[512], buf[256];
+		/* the runs timed physics alone: no frame was rendered */
+		char cmd[600];
+		snprintf(cmd, sizeof cmd, "cat %s/runs/*.jsonl | grep -c '\"image\"'", out);
+		sh(cmd, buf, sizeof buf);
+		CHECKF(atoi(buf) == 0, "%d stats lines of the study's runs carry a rendered image", atoi(buf));
 		snprintf(png, sizeof png, "command -v gnuplot >/dev/null && head -c 8 %s/dam_break.png | od -An -c", out);
 		if (sh("command -v gnuplot", buf, sizeof buf) == 0) {
 			sh(png, buf, sizeof buf);

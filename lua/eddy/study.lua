@@ -456,19 +456,11 @@ local function run_one(ctx, s, m, params, index, quick)
 	local log = stats:gsub("%.jsonl$", ".log")
 	os.remove(stats)
 	local scene = resolve(m.scene, ctx.file)
-	local argv = { ctx.exe, "run", scene, "--quiet", "--stats", stats }
-	-- wall time should measure physics: the shipped scenes render through
-	-- eddy.view unless --set render=false, but a --set the scene never reads
-	-- is an error, so pass it only to scenes that read it
-	local f = io.open(scene, "r")
-	local src = f and f:read("a") or ""
-	if f then f:close() end
-	if src:find("eddy%.view") or src:find("param%s*%(%s*[\"']render[\"']") then
-		argv[#argv + 1] = "--set"
-		argv[#argv + 1] = "render=false"
-	elseif src:find("render_points") and index == 1 then
-		io.stderr:write("eddy: study: warning: " .. scene .. " renders and reads no 'render' parameter: its wall time includes rendering\n")
-	end
+	-- wall time measures physics: the shipped scenes render (eddy.view)
+	-- unless --set render=false, so a scene run by a study must read the
+	-- 'render' parameter (eddy.param("render", true)); eddy run rejects a
+	-- --set the scene never reads, which names the fix
+	local argv = { ctx.exe, "run", scene, "--quiet", "--stats", stats, "--set", "render=false" }
 	local set = {}
 	for k, v in pairs(s.set or {}) do set[k] = v end
 	for k, v in pairs(m.set or {}) do set[k] = v end
