@@ -718,8 +718,10 @@ function M.main(args)
 					r.extra[k] = field_reduce(r.data, k, how, nil)
 				end
 			end
-			-- observed order between successive resolutions (coarse to fine)
-			if m.resolution then
+			-- observed order between successive resolutions (coarse to fine);
+			-- not against experimental data, whose gap to the model does not
+			-- vanish with resolution
+			if m.resolution and not s.reference.data then
 				local sorted = {}
 				for _, r in ipairs(method_rows) do
 					if r.resolution and r.error == r.error and r.error > 0 then sorted[#sorted + 1] = r end
