@@ -217,3 +217,15 @@ bench-sph: deps
 
 bench: bench-sph
 # ---- end SPH benchmark ------------------------------------------------------------
+
+# ---- accuracy/time study (eddy study; lua/study.c, lua/eddy/study.lua) -------------
+# Every shipped study, full sweep: out/study_<name>/<name>.csv and .png.
+# make study STUDY_FLAGS=--quick for the reduced sweeps.
+STUDIES ?= $(sort $(wildcard scenes/studies/*.lua))
+STUDY_FLAGS ?=
+
+.PHONY: study
+study: deps
+	@$(MAKE) --no-print-directory all
+	@for s in $(STUDIES); do echo "== $$s"; $(BUILD)/eddy study $$s $(STUDY_FLAGS) || exit 1; done
+# ---- end study ----------------------------------------------------------------------

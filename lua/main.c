@@ -5,6 +5,7 @@
  *                      [--checkpoint-every N] [--resume DIR]
  *   eddy plan SCENE.lua [--dot] [--set K=V ...]
  *   eddy check SCENE.lua [--set K=V ...]
+ *   eddy study STUDY.lua [--out DIR] [--quick]   (lua/study.c)
  *
  * Exit status: 0 success, 1 the scene or the run failed, 2 bad usage. Every
  * failure is one line on stderr starting with "eddy: ". */
@@ -29,6 +30,7 @@
 #include <unistd.h>
 
 #include "eddy.h"
+#include "study.h" /* eddy study: lua/study.c */
 
 enum { EXIT_RUN = 1, EXIT_USAGE = 2 };
 
@@ -55,6 +57,8 @@ static const char usage_text[] =
 	"  run    simulate the scene; write its frames and, with --stats, one JSON object per frame\n"
 	"  plan   print the validated pipeline: systems in order, columns and their bytes\n"
 	"  check  preflight: time-step limits, particles starting in colliders, memory\n"
+	"  study  accuracy against wall time over a sweep: eddy study STUDY.lua [--out DIR] [--quick]\n"
+	"         (see eddy study --help)\n"
 	"\n"
 	"options:\n"
 	"  --frames N      frames to simulate (default: the scene's duration times fps)\n"
@@ -863,6 +867,9 @@ static int cmd_check(lua_State *L, const options *o, int world_idx)
 
 int main(int argc, char **argv)
 {
+	/* eddy study has its own arguments and runs scenes as child processes */
+	if (argc > 1 && strcmp(argv[1], "study") == 0)
+		return eddy_study_main(argc, argv);
 	lua_State *L = luaL_newstate();
 	if (!L)
 		return fail(EXIT_RUN, "cannot create a Lua state (out of memory)");

@@ -11,7 +11,7 @@ local eddy = require "eddy"
 
 local dx = eddy.param("spacing", 0.00125)      -- m: 16 spacings across
 local sigma = eddy.param("tension", 0.0728)    -- N/m, water-air
-local a = 8 * dx                                -- m, half width across
+local a = eddy.param("radius", 8 * dx)          -- m, half width across
 local world = eddy.world {
 	bounds = { {-0.03, -0.03, -0.03}, {0.03, 0.03, 0.03} },
 	gravity = {0, 0, 0}, fps = 200, duration = 0.6, cfl = 0.4,

@@ -3,7 +3,7 @@
 # installs; does nothing when all are present. Needs root (or sudo) only then.
 set -eu
 
-PKGS="make gcc pkg-config liblua5.4-dev lua5.4 libsuitesparse-dev libopenblas-dev libosmesa6-dev libstb-dev graphviz clang libclang-rt-14-dev"
+PKGS="make gcc pkg-config liblua5.4-dev lua5.4 libsuitesparse-dev libopenblas-dev libosmesa6-dev libstb-dev graphviz gnuplot-nox clang libclang-rt-14-dev"
 
 missing=""
 for p in $PKGS; do

@@ -65,6 +65,9 @@ int main(int argc, char **argv)
 
 		/* renderer suites */
 		{"render", suite_render},
+
+		/* accuracy/time study */
+		{"study", suite_study},
 	};
 	for (size_t i = 0; i < sizeof suites / sizeof suites[0]; ++i) {
 		if (only && strcmp(only, suites[i].name) != 0)

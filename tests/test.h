@@ -61,4 +61,7 @@ void suite_flip(void);
 /* renderer suites */
 void suite_render(void);
 
+/* accuracy/time study (eddy study) */
+void suite_study(void);
+
 #endif

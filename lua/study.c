@@ -1,0 +1,210 @@
+/* `eddy study STUDY.lua [--out DIR] [--quick]`: the accuracy/time study.
+ *
+ * The sweep, the error metrics, the CSV and the chart are Lua
+ * (lua/eddy/study.lua). C adds what Lua cannot do: run one configuration as a
+ * child process (`eddy run ...`, this very binary) and measure its wall time
+ * and peak resident memory through wait4's rusage. Each run is a separate
+ * process so that one run's memory peak, allocator state or crash cannot leak
+ * into the next one's figures. */
+#define _POSIX_C_SOURCE 200809L
+#define _DEFAULT_SOURCE /* wait4 */
+#include "study.h"
+
+#include <lauxlib.h>
+#include <lualib.h>
+
+#include <errno.h>
+#include <fcntl.h>
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <sys/time.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+static const char study_usage[] =
+	"usage: eddy study STUDY.lua [--out DIR] [--quick]\n"
+	"\n"
+	"Runs every configuration the study file sweeps (each as `eddy run SCENE\n"
+	"--set render=false`, one process per run), measures its error against the\n"
+	"study's reference, its wall time, per-system time, steps and peak memory,\n"
+	"and writes into DIR (default out/study_<name>):\n"
+	"  <name>.csv   one row per run\n"
+	"  <name>.png   error against wall time, log-log, one series per method,\n"
+	"               Pareto front marked (needs gnuplot: apt-get install gnuplot-nox)\n"
+	"\n"
+	"options:\n"
+	"  --out DIR   output directory\n"
+	"  --quick     the study's reduced sweep (under a minute)\n"
+	"  -h, --help  this help\n"
+	"\n"
+	"Shipped studies: scenes/studies/*.lua (the format is described in\n"
+	"lua/eddy/study.lua).\n";
+
+static double now_s(void)
+{
+	struct timespec t;
+	clock_gettime(CLOCK_MONOTONIC, &t);
+	return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+/* spawn(argv, log_path) -> exit_code, wall_s, maxrss_kb
+ * argv[1] is the program; its stdout and stderr go to log_path. A program
+ * that cannot start exits with 127 (as a shell's would). exit_code is
+ * 128 + signal for a child killed by a signal. */
+static int l_spawn(lua_State *L)
+{
+	luaL_checktype(L, 1, LUA_TTABLE);
+	const char *log = luaL_checkstring(L, 2);
+	lua_Integer n = luaL_len(L, 1);
+	if (n < 1 || n > 4096)
+		return luaL_error(L, "spawn: argv must hold 1 to 4096 strings");
+	/* argv strings stay alive in the table on the stack while the child starts */
+	char **argv = lua_newuserdatauv(L, sizeof(char *) * (size_t)(n + 1), 0);
+	for (lua_Integer i = 1; i <= n; ++i) {
+		lua_geti(L, 1, i);
+		const char *s = lua_tostring(L, -1);
+		if (!s)
+			return luaL_error(L, "spawn: argv[%d] is not a string", (int)i);
+		argv[i - 1] = (char *)(uintptr_t)s; /* execv's prototype is not const-correct */
+		lua_pop(L, 1);
+	}
+	argv[n] = NULL;
+	int fd = open(log, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+	if (fd < 0)
+		return luaL_error(L, "spawn: cannot write '%s': %s", log, strerror(errno));
+	fflush(NULL);
+	double t0 = now_s();
+	pid_t pid = fork();
+	if (pid < 0) {
+		close(fd);
+		return luaL_error(L, "spawn: fork failed: %s", strerror(errno));
+	}
+	if (pid == 0) {
+		dup2(fd, 1);
+		dup2(fd, 2);
+		execv(argv[0], argv);
+		_exit(127);
+	}
+	close(fd);
+	int status = 0;
+	struct rusage ru;
+	memset(&ru, 0, sizeof ru);
+	while (wait4(pid, &status, 0, &ru) < 0) {
+		if (errno != EINTR)
+			return luaL_error(L, "spawn: wait4 failed: %s", strerror(errno));
+	}
+	double wall = now_s() - t0;
+	int code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+	lua_pushinteger(L, code);
+	lua_pushnumber(L, wall);
+	lua_pushinteger(L, (lua_Integer)ru.ru_maxrss); /* KiB on Linux */
+	return 3;
+}
+
+/* The path of the running eddy binary, so children run the same build. */
+static void self_exe(char *out, size_t cap)
+{
+	ssize_t len = readlink("/proc/self/exe", out, cap - 1);
+	out[len > 0 ? (size_t)len : 0] = '\0';
+}
+
+/* Message handler: errors from the driver are already "file:line: message";
+ * a non-string error object still gets a line. */
+static int error_message(lua_State *L)
+{
+	const char *msg = lua_tostring(L, 1);
+	lua_pushstring(L, msg ? msg : "(error object is not a string)");
+	return 1;
+}
+
+int eddy_study_main(int argc, char **argv)
+{
+	const char *file = NULL, *out = NULL;
+	bool quick = false;
+	for (int i = 2; i < argc; ++i) {
+		const char *a = argv[i];
+		if (strcmp(a, "-h") == 0 || strcmp(a, "--help") == 0) {
+			fputs(study_usage, stdout);
+			return 0;
+		} else if (strcmp(a, "--quick") == 0) {
+			quick = true;
+		} else if (strcmp(a, "--out") == 0) {
+			if (i + 1 >= argc) {
+				fputs("eddy: --out needs a value (see eddy study --help)\n", stderr);
+				return 2;
+			}
+			out = argv[++i];
+		} else if (a[0] == '-' && a[1] != '\0') {
+			fprintf(stderr, "eddy: study: unknown option '%s' (see eddy study --help)\n", a);
+			return 2;
+		} else if (!file) {
+			file = a;
+		} else {
+			fprintf(stderr, "eddy: study: unexpected argument '%s' (see eddy study --help)\n", a);
+			return 2;
+		}
+	}
+	if (!file) {
+		fputs("eddy: study needs a study file, e.g. eddy study scenes/studies/dam_break.lua\n", stderr);
+		return 2;
+	}
+	lua_State *L = luaL_newstate();
+	if (!L) {
+		fputs("eddy: cannot create a Lua state (out of memory)\n", stderr);
+		return 1;
+	}
+	luaL_openlibs(L);
+	char exe[2048];
+	self_exe(exe, sizeof exe);
+	char dir[2048];
+	snprintf(dir, sizeof dir, "%s", exe);
+	char *cut = strrchr(dir, '/');
+	if (cut)
+		*cut = '\0';
+	/* lua/eddy/study.lua of the source tree (build/eddy or build/asan/eddy)
+	 * or of an installed prefix (bin/eddy -> share/eddy/lua) */
+	lua_getglobal(L, "package");
+	lua_getfield(L, -1, "path");
+	lua_pushfstring(L, "%s/../lua/?.lua;%s/../../lua/?.lua;%s/../share/eddy/lua/?.lua;%s", dir, dir, dir,
+	                lua_tostring(L, -1));
+	lua_setfield(L, -3, "path");
+	lua_pop(L, 2);
+
+	int code = 1;
+	lua_pushcfunction(L, error_message);
+	int handler = lua_gettop(L);
+	lua_getglobal(L, "require");
+	lua_pushstring(L, "eddy.study");
+	if (lua_pcall(L, 1, 1, handler) != LUA_OK) {
+		fprintf(stderr, "eddy: study: %s\n", lua_tostring(L, -1));
+		goto done;
+	}
+	lua_getfield(L, -1, "main");
+	lua_newtable(L);
+	lua_pushstring(L, file);
+	lua_setfield(L, -2, "file");
+	if (out) {
+		lua_pushstring(L, out);
+		lua_setfield(L, -2, "out");
+	}
+	lua_pushboolean(L, quick);
+	lua_setfield(L, -2, "quick");
+	lua_pushstring(L, exe);
+	lua_setfield(L, -2, "exe");
+	lua_pushcfunction(L, l_spawn);
+	lua_setfield(L, -2, "spawn");
+	if (lua_pcall(L, 1, 1, handler) != LUA_OK) {
+		/* errors are already "file:line: message" */
+		fprintf(stderr, "eddy: %s\n", lua_tostring(L, -1));
+		goto done;
+	}
+	code = (int)lua_tointeger(L, -1);
+done:
+	lua_close(L);
+	return code;
+}

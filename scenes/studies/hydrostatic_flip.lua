@@ -1,0 +1,22 @@
+-- Hydrostatic tank, FLIP: CHOLMOD (exact) against MIC(0)-PCG at several
+-- tolerances. error = mean over frames of pressure_err, the largest
+-- |p - rho g d| / (rho g H) of the interior cells (scenes/hydrostatic_flip.lua);
+-- the CSV also has the largest divergence |div u| dt after projection.
+--
+--   build/eddy study scenes/studies/hydrostatic_flip.lua     (about a minute)
+
+return study {
+	name = "hydrostatic_flip",
+	title = "Hydrostatic tank, FLIP: pressure error vs solver and tolerance",
+	reference = { analytic = "p = rho g (H - y), computed by the scene as pressure_err" },
+	metric = { kind = "mean", field = "pressure_err", label = "mean max |p - rho g d| / (rho g H)" },
+	extra = { divergence = "max", iterations = "mean" },
+	duration = 0.5, quick_duration = 0.1,
+	methods = {
+		method { name = "FLIP CHOLMOD", scene = "scenes/hydrostatic_flip.lua",
+		         sweep = { solver = { "cholmod" } } },
+		method { name = "FLIP PCG", scene = "scenes/hydrostatic_flip.lua",
+		         sweep = { solver = { "pcg" }, tolerance = { 1e-1, 1e-2, 1e-3, 1e-4, 1e-6, 1e-8 } },
+		         quick = { solver = { "pcg" }, tolerance = { 1e-1, 1e-4 } } },
+	},
+}
