@@ -71,7 +71,11 @@ static void extrapolate_grid(float *u, uint8_t *layer, size_t *cur, size_t *next
 					}
 			}
 	for (int l = 1; l <= layers && ncur > 0; ++l) {
-		/* values first, from faces known before this layer only */
+		/* one pass: each frontier face's value, from faces known before this
+		 * layer only (the frontier's own faces are QUEUED, not < l, until the
+		 * pass is over), and its unknown neighbours queued for the next
+		 * layer; the coordinates are computed once for both */
+		size_t nnext = 0;
 		for (size_t q = 0; q < ncur; ++q) {
 			const size_t f = cur[q];
 			size_t c[3];
@@ -89,15 +93,6 @@ static void extrapolate_grid(float *u, uint8_t *layer, size_t *cur, size_t *next
 				}
 			}
 			u[f] = cnt ? sum / (float)cnt : u[f];
-		}
-		for (size_t q = 0; q < ncur; ++q)
-			layer[cur[q]] = (uint8_t)l;
-		/* the next frontier: unknown neighbours of this layer */
-		size_t nnext = 0;
-		for (size_t q = 0; q < ncur; ++q) {
-			const size_t f = cur[q];
-			size_t c[3];
-			face_coords(f, st, m[1], small, c);
 			for (int d = 0; d < 3; ++d) {
 				if (c[d] > 0 && layer[f - st[d]] == UNKNOWN) {
 					layer[f - st[d]] = QUEUED;
@@ -109,6 +104,8 @@ static void extrapolate_grid(float *u, uint8_t *layer, size_t *cur, size_t *next
 				}
 			}
 		}
+		for (size_t q = 0; q < ncur; ++q)
+			layer[cur[q]] = (uint8_t)l;
 		size_t *t = cur;
 		cur = next;
 		next = t;
