@@ -203,6 +203,13 @@ clean:
 
 -include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)
 
+# ---- SPH pair loops: sqrtf as the bare instruction ---------------------------------
+# With errno semantics GCC follows every sqrtss with a compare and a branch to
+# libm's sqrtf (to set errno for a negative argument, which r^2 never is) in
+# the innermost pair loops. -fno-math-errno drops only that: results are
+# bit-identical, and no code here reads errno.
+$(BUILD)/obj/src/sys_sph_pressure.o $(BUILD)/obj/src/sys_sph_viscosity.o: BASE += -fno-math-errno
+
 # ---- SPH benchmark (tests/bench_sph.c): run by make bench -------------------------
 BENCH_SPH_O := $(BUILD)/obj/tests/bench_sph.o
 

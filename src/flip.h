@@ -50,24 +50,17 @@ typedef struct flip_axis {
 static inline flip_axis flip_axis_at(float t, float off, int n)
 {
 	flip_axis a;
-	const float s = t - off;
-	/* floor without a libm call (baseline x86-64 has no SSE4.1 round); the
-	 * clamp first keeps the int conversion defined for wild coordinates (NaN
-	 * goes to the low end) */
-	const float sc = !(s >= -1.0f) ? -1.0f : s > (float)n ? (float)n : s;
-	int i = (int)sc;
-	i -= (float)i > sc;
-	float f = sc - (float)i;
-	if (i < 0) {
-		i = 0;
-		f = 0;
-	} else if (i >= n - 1) {
-		i = n - 1;
-		f = 0;
-	}
+	const float s = t - off, top = (float)(n - 1);
+	/* Clamping s to the sample range [0, n-1] first gives the constant
+	 * extension (below 0: i = 0 and weight 0; from n-1 up: i = n-1, weight 0),
+	 * maps NaN to the low end and keeps the int conversion defined; inside the
+	 * range it is the identity, and truncation is floor since sc >= 0 (no libm
+	 * call, no branches). */
+	const float sc = s >= 0.0f ? (s < top ? s : top) : 0.0f;
+	const int i = (int)sc;
 	a.i0 = i;
-	a.i1 = i + 1 < n ? i + 1 : i;
-	a.w1 = f;
+	a.i1 = i + (i < n - 1);
+	a.w1 = sc - (float)i;
 	return a;
 }
 

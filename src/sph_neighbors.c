@@ -21,6 +21,9 @@
 
 #include <stdlib.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 void eddy__sph_neighbors_free(sph_neighbors *nb)
 {
@@ -214,6 +217,9 @@ static void fill_lists(eddy_world *w, sph_neighbors *nb, const sph_kernel_consts
 		          cz = (int)(c / ((uint32_t)gx * (uint32_t)gy));
 		const int x0 = cx >= R ? cx - R : 0, x1 = cx < gx - R ? cx + R : gx - 1;
 		const float xi = x[i], yi = y[i], zi = z[i];
+#ifdef __SSE2__
+		const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh2 = _mm_set1_ps(h2);
+#endif
 		uint32_t *list = nb->nbr + (size_t)i * cap, *blist = nb->bnbr + (size_t)i * bcap;
 		uint32_t cnt = 0, bcnt = 0;
 		float ws = 0, bws = 0;
@@ -227,7 +233,34 @@ static void fill_lists(eddy_world *w, sph_neighbors *nb, const sph_kernel_consts
 					continue;
 				const size_t row = ((size_t)zz * (size_t)gy + (size_t)yy) * (size_t)gx;
 				const uint32_t a = nb->cell_start[row + (size_t)x0], e = nb->cell_start[row + (size_t)x1 + 1];
-				for (uint32_t j = a; j < e; ++j) {
+				uint32_t j = a;
+#ifdef __SSE2__
+				/* four candidates at a time: the distance tests are most of
+				 * the search. The lanes do the scalar loop's operations in
+				 * the same order (no FMA), and hits are taken in order, so
+				 * lists and sums are bit for bit those of the scalar loop. */
+				for (; j + 4 <= e; j += 4) {
+					const __m128 rx = _mm_sub_ps(vxi, _mm_loadu_ps(x + j)), ry = _mm_sub_ps(vyi, _mm_loadu_ps(y + j)),
+					             rz = _mm_sub_ps(vzi, _mm_loadu_ps(z + j));
+					const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
+					const __m128 d4 = _mm_sub_ps(vh2, r2);
+					unsigned hit = (unsigned)_mm_movemask_ps(_mm_cmpgt_ps(d4, _mm_setzero_ps()));
+					if ((uint32_t)i - j < 4)
+						hit &= ~(1u << ((uint32_t)i - j)); /* not itself */
+					if (!hit)
+						continue;
+					float dv[4];
+					_mm_storeu_ps(dv, d4);
+					for (unsigned q = 0; q < 4; ++q)
+						if (hit >> q & 1) {
+							if (cnt < cap)
+								list[cnt] = j + q;
+							cnt++;
+							ws += dv[q] * dv[q] * dv[q];
+						}
+				}
+#endif
+				for (; j < e; ++j) {
 					const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
 					const float d = h2 - (rx * rx + ry * ry + rz * rz);
 					if (d > 0 && j != (uint32_t)i) {
@@ -238,14 +271,14 @@ static void fill_lists(eddy_world *w, sph_neighbors *nb, const sph_kernel_consts
 					}
 				}
 				const uint32_t ba = nb->bcell_start[row + (size_t)x0], be = nb->bcell_start[row + (size_t)x1 + 1];
-				for (uint32_t j = ba; j < be; ++j) {
-					const float rx = xi - nb->bx[j], ry = yi - nb->by[j], rz = zi - nb->bz[j];
+				for (uint32_t jb = ba; jb < be; ++jb) {
+					const float rx = xi - nb->bx[jb], ry = yi - nb->by[jb], rz = zi - nb->bz[jb];
 					const float d = h2 - (rx * rx + ry * ry + rz * rz);
 					if (d > 0) {
 						if (bcnt < bcap)
-							blist[bcnt] = j;
+							blist[bcnt] = jb;
 						bcnt++;
-						bws += nb->bvol[j] * nb->brho[j] * d * d * d;
+						bws += nb->bvol[jb] * nb->brho[jb] * d * d * d;
 					}
 				}
 			}

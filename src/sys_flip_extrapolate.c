@@ -31,12 +31,30 @@ eddy_flip_extrapolate_def eddy_default_flip_extrapolate_def(void)
 
 enum { UNKNOWN = 255, QUEUED = 254 };
 
+/* (i, j, k) of face f. The divisions dominate the frontier passes, and a
+ * 32-bit division is several times faster than a 64-bit one: grids of fewer
+ * than 2^32 faces (all in practice) take it. */
+static inline void face_coords(size_t f, const size_t st[3], int m1, bool small, size_t c[3])
+{
+	if (small) {
+		const uint32_t g = (uint32_t)f, s1 = (uint32_t)st[1], row = g / s1;
+		c[0] = g - row * s1;
+		c[1] = row % (uint32_t)m1;
+		c[2] = row / (uint32_t)m1;
+	} else {
+		c[0] = f % st[1];
+		c[1] = f / st[1] % (size_t)m1;
+		c[2] = f / st[2];
+	}
+}
+
 /* One face grid: m faces per axis (strides st), layer flags (0 known,
  * UNKNOWN), two frontier buffers of m0 m1 m2 entries each. Only faces next to
  * the last layer are visited, so the cost follows the filled region. */
 static void extrapolate_grid(float *u, uint8_t *layer, size_t *cur, size_t *next, const int m[3], const size_t st[3],
                              int layers)
 {
+	const bool small = st[2] * (size_t)m[2] <= UINT32_MAX;
 	size_t ncur = 0;
 	for (int k = 0; k < m[2]; ++k)
 		for (int j = 0; j < m[1]; ++j)
@@ -53,11 +71,15 @@ static void extrapolate_grid(float *u, uint8_t *layer, size_t *cur, size_t *next
 					}
 			}
 	for (int l = 1; l <= layers && ncur > 0; ++l) {
-		/* values first, from faces known before this layer only */
+		/* one pass: each frontier face's value, from faces known before this
+		 * layer only (the frontier's own faces are QUEUED, not < l, until the
+		 * pass is over), and its unknown neighbours queued for the next
+		 * layer; the coordinates are computed once for both */
+		size_t nnext = 0;
 		for (size_t q = 0; q < ncur; ++q) {
 			const size_t f = cur[q];
-			const size_t i = f % st[1], j = f / st[1] % (size_t)m[1], k = f / st[2];
-			const size_t c[3] = {i, j, k};
+			size_t c[3];
+			face_coords(f, st, m[1], small, c);
 			float sum = 0;
 			int cnt = 0;
 			for (int d = 0; d < 3; ++d) {
@@ -71,14 +93,6 @@ static void extrapolate_grid(float *u, uint8_t *layer, size_t *cur, size_t *next
 				}
 			}
 			u[f] = cnt ? sum / (float)cnt : u[f];
-		}
-		for (size_t q = 0; q < ncur; ++q)
-			layer[cur[q]] = (uint8_t)l;
-		/* the next frontier: unknown neighbours of this layer */
-		size_t nnext = 0;
-		for (size_t q = 0; q < ncur; ++q) {
-			const size_t f = cur[q];
-			const size_t c[3] = {f % st[1], f / st[1] % (size_t)m[1], f / st[2]};
 			for (int d = 0; d < 3; ++d) {
 				if (c[d] > 0 && layer[f - st[d]] == UNKNOWN) {
 					layer[f - st[d]] = QUEUED;
@@ -90,6 +104,8 @@ static void extrapolate_grid(float *u, uint8_t *layer, size_t *cur, size_t *next
 				}
 			}
 		}
+		for (size_t q = 0; q < ncur; ++q)
+			layer[cur[q]] = (uint8_t)l;
 		size_t *t = cur;
 		cur = next;
 		next = t;

@@ -45,19 +45,22 @@ static inline int floor_int(float t)
 }
 static inline int ceil_int(float t) { return -floor_int(-t); }
 
-/* Adds weight * val and weight to the 8 samples around a point of one face grid. */
-static inline void splat(float *f, float *ws, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az, float val)
+/* Adds weight * val and weight to the 8 samples around a point of one face
+ * grid. acc interleaves the two sums per face (acc[2q] = sum W v, acc[2q+1]
+ * = sum W): each update touches one cache line instead of two. */
+static inline void splat(float *restrict acc, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az, float val)
 {
 	const size_t j[2] = {(size_t)ay.i0 * sy, (size_t)ay.i1 * sy}, k[2] = {(size_t)az.i0 * sz, (size_t)az.i1 * sz};
 	const float wy[2] = {1.0f - ay.w1, ay.w1}, wz[2] = {1.0f - az.w1, az.w1}, wx0 = 1.0f - ax.w1, wx1 = ax.w1;
 	for (int c = 0; c < 2; ++c)
 		for (int b = 0; b < 2; ++b) {
-			const size_t row = k[c] + j[b];
+			float *row = acc + 2 * (k[c] + j[b]);
 			const float wyz = wz[c] * wy[b], w0 = wyz * wx0, w1 = wyz * wx1;
-			f[row + (size_t)ax.i0] += w0 * val;
-			ws[row + (size_t)ax.i0] += w0;
-			f[row + (size_t)ax.i1] += w1 * val;
-			ws[row + (size_t)ax.i1] += w1;
+			float *a0 = row + 2 * (size_t)ax.i0, *a1 = row + 2 * (size_t)ax.i1;
+			a0[0] += w0 * val;
+			a0[1] += w0;
+			a1[0] += w1 * val;
+			a1[1] += w1;
 		}
 }
 
@@ -74,12 +77,12 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	float *face[3] = {eddy__col(w, COL_FACE_U), eddy__col(w, COL_FACE_V), eddy__col(w, COL_FACE_W)};
 	float *old[3] = {eddy__col(w, COL_U_OLD), eddy__col(w, COL_V_OLD), eddy__col(w, COL_W_OLD)};
 	const size_t nf[3] = {(size_t)(nx + 1) * ny * nz, (size_t)nx * (ny + 1) * nz, (size_t)nx * ny * (nz + 1)};
-	float *wsum[3];
+	float *acc[3]; /* per face: sum W v, sum W (see splat) */
 	for (int a = 0; a < 3; ++a) {
-		wsum[a] = eddy__arena_alloc(&w->arena, nf[a] * sizeof *wsum[a]);
-		if (!wsum[a])
+		acc[a] = eddy__arena_alloc(&w->arena, 2 * nf[a] * sizeof *acc[a]);
+		if (!acc[a])
 			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_p2g: out of memory for splat weights");
-		memset(wsum[a], 0, nf[a] * sizeof *wsum[a]);
+		memset(acc[a], 0, 2 * nf[a] * sizeof *acc[a]);
 	}
 	/* one pass over the particles, three face grids: the particle columns are
 	 * read once; the scatter is serial so the sums do not depend on threads */
@@ -87,19 +90,20 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const flip_grid grid = flip_grid_of(w);
 	const size_t np = w->n;
 	for (size_t i = 0; i < np; ++i) {
-		vx[i] += ax[i] * dt;
-		vy[i] += ay[i] * dt;
-		vz[i] += az[i] * dt;
+		const float pvx = vx[i] + ax[i] * dt, pvy = vy[i] + ay[i] * dt, pvz = vz[i] + az[i] * dt;
+		vx[i] = pvx;
+		vy[i] = pvy;
+		vz[i] = pvz;
 		const flip_axes g = flip_axes_at(&grid, (eddy_vec3){x[i], y[i], z[i]});
-		splat(face[0], wsum[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, vx[i]);
-		splat(face[1], wsum[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, vy[i]);
-		splat(face[2], wsum[2], sx, sx * sy, g.cx, g.cy, g.fz, vz[i]);
+		splat(acc[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, pvx);
+		splat(acc[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, pvy);
+		splat(acc[2], sx, sx * sy, g.cx, g.cy, g.fz, pvz);
 	}
 	for (int a = 0; a < 3; ++a) {
 		float *f = face[a];
-		const float *ws = wsum[a];
+		const float *s2 = acc[a];
 		for (size_t q = 0; q < nf[a]; ++q)
-			f[q] = ws[q] > 0 ? f[q] / ws[q] : 0.0f;
+			f[q] = s2[2 * q + 1] > 0 ? s2[2 * q] / s2[2 * q + 1] : 0.0f;
 		memcpy(old[a], f, nf[a] * sizeof *f);
 	}
 
@@ -109,12 +113,15 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	for (size_t c = 0; c < nc; ++c)
 		phi[c] = 1.0f;
 	const float r = pg->def.mark_radius, r2 = r * r;
-	for (size_t i = 0; i < w->n; ++i) {
+	for (size_t i = 0; i < np; ++i) {
 		const float gx = (x[i] - o.x) * inv, gy = (y[i] - o.y) * inv, gz = (z[i] - o.z) * inv;
 		const size_t c = flip_cell(w, flip_cell_index(gx, nx), flip_cell_index(gy, ny), flip_cell_index(gz, nz));
 		type[c] = EDDY_CELL_FLUID;
 		phi[c] = -1.0f;
-		/* cells whose centre (i + 1/2) is within r of the particle */
+		/* cells whose centre (i + 1/2) is within r of the particle; at r = 0
+		 * that is at most the particle's own cell, marked above */
+		if (r <= 0)
+			continue;
 		int i0 = ceil_int(gx - r - 0.5f), i1 = floor_int(gx + r - 0.5f);
 		int j0 = ceil_int(gy - r - 0.5f), j1 = floor_int(gy + r - 0.5f);
 		int k0 = ceil_int(gz - r - 0.5f), k1 = floor_int(gz + r - 0.5f);

@@ -24,6 +24,9 @@
 #include "systems.h"
 
 #include <stdlib.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 typedef struct sph_pressure {
 	eddy_sph_pressure_def def;
@@ -61,7 +64,43 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
 		const uint32_t cnt = nb->count[i];
 		float fx = 0, fy = 0, fz = 0;
-		for (uint32_t q = 0; q < cnt; ++q) {
+		uint32_t q = 0;
+#ifdef __SSE2__
+		/* four neighbours at a time for the square roots and divisions (the
+		 * bulk of the cost), each lane doing the scalar loop's operations in
+		 * the same order; the products are then added to the sums one
+		 * neighbour at a time in list order, so the sums are bit-identical
+		 * to the scalar loop's. A group with a coincident pair goes scalar. */
+		const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vpi = _mm_set1_ps(pi_),
+		             vh = _mm_set1_ps(kc.h), veps2 = _mm_set1_ps(eps2), one = _mm_set1_ps(1.0f);
+		for (; q + 4 <= cnt; q += 4) {
+			const uint32_t j0 = list[q], j1 = list[q + 1], j2 = list[q + 2], j3 = list[q + 3];
+			__m128 rx = _mm_sub_ps(vxi, _mm_setr_ps(x[j0], x[j1], x[j2], x[j3]));
+			__m128 ry = _mm_sub_ps(vyi, _mm_setr_ps(y[j0], y[j1], y[j2], y[j3]));
+			__m128 rz = _mm_sub_ps(vzi, _mm_setr_ps(z[j0], z[j1], z[j2], z[j3]));
+			const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
+			if (_mm_movemask_ps(_mm_cmpgt_ps(r2, veps2)) != 15)
+				break; /* the scalar loop takes it from here */
+			const __m128 r = _mm_sqrt_ps(r2), inv = _mm_div_ps(one, r);
+			rx = _mm_mul_ps(rx, inv);
+			ry = _mm_mul_ps(ry, inv);
+			rz = _mm_mul_ps(rz, inv);
+			const __m128 hr = _mm_sub_ps(vh, r);
+			const __m128 pj = _mm_setr_ps(p[j0], p[j1], p[j2], p[j3]),
+			             irj = _mm_setr_ps(inv_rho[j0], inv_rho[j1], inv_rho[j2], inv_rho[j3]);
+			const __m128 c = _mm_mul_ps(_mm_mul_ps(_mm_mul_ps(_mm_add_ps(vpi, pj), irj), hr), hr);
+			float cx[4], cy[4], cz[4];
+			_mm_storeu_ps(cx, _mm_mul_ps(c, rx));
+			_mm_storeu_ps(cy, _mm_mul_ps(c, ry));
+			_mm_storeu_ps(cz, _mm_mul_ps(c, rz));
+			for (int l = 0; l < 4; ++l) {
+				fx += cx[l];
+				fy += cy[l];
+				fz += cz[l];
+			}
+		}
+#endif
+		for (; q < cnt; ++q) {
 			const uint32_t j = list[q];
 			float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
 			const float r2 = rx * rx + ry * ry + rz * rz;
@@ -86,8 +125,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
 		const uint32_t bcnt = nb->bcount[i];
 		float bx = 0, by = 0, bz = 0;
-		for (uint32_t q = 0; q < bcnt; ++q) {
-			const uint32_t b = blist[q];
+		for (uint32_t qb = 0; qb < bcnt; ++qb) {
+			const uint32_t b = blist[qb];
 			float rx = xi - nb->bx[b], ry = yi - nb->by[b], rz = zi - nb->bz[b];
 			const float r2 = rx * rx + ry * ry + rz * rz;
 			if (!(r2 > eps2))
