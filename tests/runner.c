@@ -1,9 +1,11 @@
+#define _POSIX_C_SOURCE 200809L
 /* Runs every suite and ends with the summary line "N passed, N failed". */
 #include "test.h"
 
 #include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/wait.h>
 #include <time.h>
 
 static int failures_in_test;
@@ -36,6 +38,19 @@ void test_run(const char *name, void (*fn)(void))
 		printf("ok    %s (%.0f ms)\n", name, ms);
 	}
 	fflush(stdout);
+}
+
+int test_sh(const char *cmd, char *out, size_t cap)
+{
+	char full[4096];
+	snprintf(full, sizeof full, "%s 2>&1", cmd);
+	FILE *p = popen(full, "r");
+	if (!p)
+		return -1;
+	size_t n = fread(out, 1, cap - 1, p);
+	out[n] = '\0';
+	int st = pclose(p);
+	return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
 }
 
 const char *test_build_dir(void)

@@ -14,6 +14,9 @@ void test_fail(const char *file, int line, const char *fmt, ...)
 #endif
 	;
 void test_run(const char *name, void (*fn)(void));
+/* Runs a shell command with stderr merged into stdout, captured in out;
+ * returns its exit status (-1 if it did not exit). */
+int test_sh(const char *cmd, char *out, size_t cap);
 /* Directory of the build under test (build/ or build/asan/). */
 const char *test_build_dir(void);
 

@@ -10,20 +10,6 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-/* Runs a shell command; captures stdout and stderr (merged if err is NULL). */
-static int sh(const char *cmd, char *out, size_t cap)
-{
-	char full[4096];
-	snprintf(full, sizeof full, "%s 2>&1", cmd);
-	FILE *p = popen(full, "r");
-	if (!p)
-		return -1;
-	size_t n = fread(out, 1, cap - 1, p);
-	out[n] = '\0';
-	int st = pclose(p);
-	return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-}
-
 static const char *eddy(void)
 {
 	static char path[256];
@@ -204,7 +190,7 @@ static void run_writes_stats_lines(void)
 	char cmd[1024], out[8192];
 	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 3 --stats %s/t_stats.jsonl --quiet", eddy(),
 	         test_build_dir());
-	CHECK(sh(cmd, out, sizeof out) == 0);
+	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECKF(out[0] == '\0', "--quiet printed: %s", out);
 	char path[512];
 	snprintf(path, sizeof path, "%s/t_stats.jsonl", test_build_dir());
@@ -236,10 +222,10 @@ static void run_is_deterministic(void)
 {
 	char cmd[1024], a[16384], b[16384], c[16384];
 	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 4 --stats - --quiet | grep -o '\"state_hash\":\"[0-9a-f]*\"'", eddy());
-	CHECK(sh(cmd, a, sizeof a) == 0);
-	CHECK(sh(cmd, b, sizeof b) == 0);
+	CHECK(test_sh(cmd, a, sizeof a) == 0);
+	CHECK(test_sh(cmd, b, sizeof b) == 0);
 	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 4 --threads 2 --stats - --quiet | grep -o '\"state_hash\":\"[0-9a-f]*\"'", eddy());
-	CHECK(sh(cmd, c, sizeof c) == 0);
+	CHECK(test_sh(cmd, c, sizeof c) == 0);
 	CHECK(strlen(a) > 40);
 	CHECK(strcmp(a, b) == 0);
 	CHECK(strcmp(a, c) == 0);
@@ -249,13 +235,13 @@ static void set_changes_the_scene(void)
 {
 	char cmd[2048], out[16384];
 	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 1 --set spacing=0.04 --stats - --quiet", eddy());
-	CHECK(sh(cmd, out, sizeof out) == 0);
+	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK(field_num(out, "particles") == 10 * 12 * 10); /* a 0.4 x 0.5 x 0.4 block at 0.04 m */
 	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 1 --set spcing=0.04", eddy());
-	CHECK(sh(cmd, out, sizeof out) == 2);
+	CHECK(test_sh(cmd, out, sizeof out) == 2);
 	CHECK_HAS(out, "eddy: --set spcing: scenes/bounce.lua has no parameter 'spcing'");
 	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 1 --set spacing=-1", eddy());
-	CHECK(sh(cmd, out, sizeof out) == 1);
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "eddy: scenes/bounce.lua:");
 	CHECK_HAS(out, "emit_box: 'spacing' must be > 0 (got -1)");
 	CHECK(strchr(out, '\n') == out + strlen(out) - 1); /* one line */
@@ -265,24 +251,24 @@ static void usage_and_errors(void)
 {
 	char cmd[1024], out[8192];
 	snprintf(cmd, sizeof cmd, "%s --version", eddy());
-	CHECK(sh(cmd, out, sizeof out) == 0);
+	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK_HAS(out, "eddy 0.1.0");
 	snprintf(cmd, sizeof cmd, "%s --help", eddy());
-	CHECK(sh(cmd, out, sizeof out) == 0);
+	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK_HAS(out, "usage: eddy <command> SCENE.lua");
 	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frobnicate", eddy());
-	CHECK(sh(cmd, out, sizeof out) == 2);
+	CHECK(test_sh(cmd, out, sizeof out) == 2);
 	CHECK_HAS(out, "eddy: unknown option '--frobnicate'");
 	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames many", eddy());
-	CHECK(sh(cmd, out, sizeof out) == 2);
+	CHECK(test_sh(cmd, out, sizeof out) == 2);
 	CHECK_HAS(out, "--frames must be an integer");
 	snprintf(cmd, sizeof cmd, "%s fly scenes/bounce.lua", eddy());
-	CHECK(sh(cmd, out, sizeof out) == 2);
+	CHECK(test_sh(cmd, out, sizeof out) == 2);
 	snprintf(cmd, sizeof cmd, "%s run no/such/scene.lua", eddy());
-	CHECK(sh(cmd, out, sizeof out) == 1);
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "eddy: cannot read scene 'no/such/scene.lua'");
 	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --stats /no/such/dir/s.jsonl --frames 1", eddy());
-	CHECK(sh(cmd, out, sizeof out) == 1);
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "eddy: cannot write stats file '/no/such/dir/s.jsonl'");
 }
 
@@ -299,17 +285,17 @@ static void bad_scenes_fail_with_one_line(void)
 	snprintf(path, sizeof path, "%s/t_bad.lua", test_build_dir());
 	write_scene(path, "local eddy = require 'eddy'\nlocal w = eddy.world{}\n\nw:add(eddy.emit_box{ spacin = 0.01 })\nreturn w\n");
 	snprintf(cmd, sizeof cmd, "%s run %s", eddy(), path);
-	CHECK(sh(cmd, out, sizeof out) == 1);
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	char expect[600];
 	snprintf(expect, sizeof expect, "eddy: %s:4: emit_box: unknown field 'spacin' (did you mean 'spacing'?", path);
 	CHECK_HAS(out, expect);
 
 	write_scene(path, "local eddy = require 'eddy'\nlocal w = eddy.world{}\n");
-	CHECK(sh(cmd, out, sizeof out) == 1);
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "the scene must return a world (got nil)");
 
 	write_scene(path, "local eddy = require 'eddy'\nlocal w = eddy.world{\n");
-	CHECK(sh(cmd, out, sizeof out) == 1);
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "t_bad.lua:");
 
 	/* no tank: the block falls out of the domain and the run says where */
@@ -317,7 +303,7 @@ static void bad_scenes_fail_with_one_line(void)
 	                  "w:add(eddy.emit_box{ min = {0.4, 0.05, 0.4}, max = {0.5, 0.15, 0.5} })\n"
 	                  "w:add(eddy.gravity{})\nw:add(eddy.integrate{})\nreturn w\n");
 	snprintf(cmd, sizeof cmd, "%s run %s --frames 10 --stats %s/t_bad.jsonl", eddy(), path, test_build_dir());
-	CHECK(sh(cmd, out, sizeof out) == 1);
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "eddy: particle ");
 	CHECK_HAS(out, "left the domain at step");
 	CHECK(strchr(out, '\n') == out + strlen(out) - 1);
@@ -326,7 +312,7 @@ static void bad_scenes_fail_with_one_line(void)
 	write_scene(path, "local eddy = require 'eddy'\nlocal w = eddy.world{}\n"
 	                  "w:on_frame(function() return { time = 1 } end)\nreturn w\n");
 	snprintf(cmd, sizeof cmd, "%s run %s --frames 1 --stats -", eddy(), path);
-	CHECK(sh(cmd, out, sizeof out) == 1);
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "on_frame returned 'time', which is a stats field of eddy");
 }
 
@@ -334,17 +320,17 @@ static void plan_and_check(void)
 {
 	char cmd[2048], out[16384];
 	snprintf(cmd, sizeof cmd, "%s plan scenes/bounce.lua", eddy());
-	CHECK(sh(cmd, out, sizeof out) == 0);
+	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK_HAS(out, "pipeline: 8 systems"); /* bounce renders: render_points is the 8th */
 	CHECK_HAS(out, "3  integrate");
 	CHECK_HAS(out, "10000 more from emitters; 36 bytes per particle");
 	CHECK_HAS(out, "not allocated: density pressure");
 	snprintf(cmd, sizeof cmd, "%s plan scenes/bounce.lua --dot", eddy());
-	CHECK(sh(cmd, out, sizeof out) == 0);
+	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK(strncmp(out, "digraph eddy {", 14) == 0);
 	CHECK_HAS(out, "s1 -> s2 [label=\"ax ay az\"]");
 	snprintf(cmd, sizeof cmd, "%s check scenes/bounce.lua", eddy());
-	CHECK(sh(cmd, out, sizeof out) == 0);
+	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK_HAS(out, "memory: 10000 particles x 36 bytes");
 	CHECK_HAS(out, "time step:");
 	/* a block started inside the sphere is reported */
@@ -354,14 +340,14 @@ static void plan_and_check(void)
 	                  "w:add(eddy.emit_box{ min = {0.4,0.4,0.4}, max = {0.6,0.6,0.6}, spacing = 0.05 })\n"
 	                  "w:add(eddy.collide_sphere{ center = {0.5,0.5,0.5}, radius = 0.08 })\nreturn w\n");
 	snprintf(cmd, sizeof cmd, "%s check %s", eddy(), path);
-	CHECK(sh(cmd, out, sizeof out) == 0);
+	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK_HAS(out, "warning  emit_box: 8 of 64 particles start inside collide_sphere");
 }
 
 static void stock_lua_requires_the_module(void)
 {
 	char cmd[1024], out[4096];
-	if (sh("command -v lua5.4", out, sizeof out) != 0) {
+	if (test_sh("command -v lua5.4", out, sizeof out) != 0) {
 		test_fail(__FILE__, __LINE__, "lua5.4 is not installed (scripts/deps.sh installs it)");
 		return;
 	}
@@ -375,7 +361,7 @@ static void stock_lua_requires_the_module(void)
 	setenv("LD_PRELOAD", "libasan.so.8", 1);
 	setenv("ASAN_OPTIONS", "detect_leaks=0", 1);
 #endif
-	int rc = sh(cmd, out, sizeof out);
+	int rc = test_sh(cmd, out, sizeof out);
 #if defined(__SANITIZE_ADDRESS__)
 	unsetenv("LD_PRELOAD");
 #endif
@@ -390,7 +376,7 @@ static void readme_c_example_builds_and_runs(void)
 #if defined(__SANITIZE_ADDRESS__)
 	setenv("EDDY_EXAMPLE_CFLAGS", "-fsanitize=address,undefined", 1);
 #endif
-	int rc = sh(cmd, out, sizeof out);
+	int rc = test_sh(cmd, out, sizeof out);
 	CHECKF(rc == 0, "readme example exited %d: %s", rc, out);
 	CHECK_HAS(out, "particles: 1000");
 	CHECK_HAS(out, "lowest particle above the floor: yes");

@@ -150,17 +150,6 @@ static void bad_checkpoints_are_rejected(void)
 	eddy_destroy_world(other);
 }
 
-static int sh(const char *cmd, char *out, size_t cap)
-{
-	char full[4096];
-	snprintf(full, sizeof full, "%s 2>&1", cmd);
-	FILE *p = popen(full, "r");
-	size_t n = fread(out, 1, cap - 1, p);
-	out[n] = '\0';
-	int st = pclose(p);
-	return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-}
-
 /* The command resumes from the newest good checkpoint, skipping a corrupted
  * one, and the resumed run ends in the same state as a straight one. */
 static void cli_resume_skips_a_corrupted_checkpoint(void)
@@ -169,27 +158,27 @@ static void cli_resume_skips_a_corrupted_checkpoint(void)
 	char cmd[2048], out[65536], a[8192], b[8192];
 	snprintf(cmd, sizeof cmd, "rm -rf %s/t_run && %s/eddy run scenes/bounce.lua --frames 16 --quiet --stats - "
 	         "| tail -1 | grep -o '\"state_hash\":\"[0-9a-f]*\"'", bin, bin);
-	CHECK(sh(cmd, a, sizeof a) == 0);
+	CHECK(test_sh(cmd, a, sizeof a) == 0);
 	snprintf(cmd, sizeof cmd, "%s/eddy run scenes/bounce.lua --frames 11 --quiet --checkpoint-every 5 --out %s/t_run",
 	         bin, bin);
-	CHECK(sh(cmd, out, sizeof out) == 0);
+	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	char newest[512];
 	snprintf(newest, sizeof newest, "%s/t_run/checkpoints/frame-000010.eddy", bin);
 	corrupt_byte(newest, 100);
 	snprintf(cmd, sizeof cmd, "%s/eddy run scenes/bounce.lua --frames 16 --out %s/t_run --resume %s/t_run/checkpoints "
 	         "--stats %s/t_run/s.jsonl", bin, bin, bin, bin);
-	CHECK(sh(cmd, out, sizeof out) == 0);
+	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK_HAS(out, "checksum mismatch (corrupted); trying an older one");
 	CHECK_HAS(out, "resuming from");
 	CHECK_HAS(out, "frame-000005.eddy (frame 5");
 	snprintf(cmd, sizeof cmd, "tail -1 %s/t_run/s.jsonl | grep -o '\"state_hash\":\"[0-9a-f]*\"'", bin);
-	CHECK(sh(cmd, b, sizeof b) == 0);
+	CHECK(test_sh(cmd, b, sizeof b) == 0);
 	CHECK(strlen(a) > 20);
 	CHECK(strcmp(a, b) == 0);
 	/* --set changes the scene: its checkpoints are not taken */
 	snprintf(cmd, sizeof cmd, "%s/eddy run scenes/bounce.lua --frames 16 --set restitution=0.9 --resume %s/t_run/checkpoints",
 	         bin, bin);
-	CHECK(sh(cmd, out, sizeof out) == 1);
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "no valid checkpoint of this scene");
 }
 
@@ -204,14 +193,14 @@ static void fluid_scenes_resume_bit_identical(void)
 		char cmd[2048], a[16384], b[16384], out[4096];
 		snprintf(cmd, sizeof cmd, "rm -rf %s/t_fluid %s/t_fluid_b.jsonl && %s/eddy run %s --frames 10 --quiet --out %s/t_fluid/a --stats - "
 		         "| grep -o '\"state_hash\":\"[0-9a-f]*\"'", bin, bin, bin, scenes[i], bin);
-		CHECK(sh(cmd, a, sizeof a) == 0);
+		CHECK(test_sh(cmd, a, sizeof a) == 0);
 		snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 7 --checkpoint-every 3 --quiet --out %s/t_fluid/b "
 		         "--stats %s/t_fluid_b.jsonl", bin, scenes[i], bin, bin);
-		CHECK(sh(cmd, out, sizeof out) == 0);
+		CHECK(test_sh(cmd, out, sizeof out) == 0);
 		snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 10 --quiet --out %s/t_fluid/b --stats %s/t_fluid_b.jsonl "
 		         "--resume %s/t_fluid/b/checkpoints && grep -o '\"state_hash\":\"[0-9a-f]*\"' %s/t_fluid_b.jsonl",
 		         bin, scenes[i], bin, bin, bin, bin);
-		CHECK(sh(cmd, b, sizeof b) == 0);
+		CHECK(test_sh(cmd, b, sizeof b) == 0);
 		CHECK(strlen(a) > 10 * 20);
 		CHECKF(strcmp(a, b) == 0, "%s: resumed hashes differ", scenes[i]);
 	}
@@ -291,7 +280,7 @@ static void run_refuses_what_cannot_fit(void)
 	      "w:add(eddy.gravity{})\nw:add(eddy.integrate{})\nreturn w\n", f);
 	fclose(f);
 	snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 1", test_build_dir(), path);
-	CHECK(sh(cmd, out, sizeof out) == 1);
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "memory: the scene needs about");
 	CHECK_HAS(out, "not run: 1 problem found by the preflight check");
 }

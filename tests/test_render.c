@@ -646,19 +646,6 @@ static void lua_scene_renders_and_exports(void)
 	lua_close(L);
 }
 
-static int sh(const char *cmd, char *out, size_t cap)
-{
-	char full[4096];
-	snprintf(full, sizeof full, "%s 2>&1", cmd);
-	FILE *p = popen(full, "r");
-	if (!p)
-		return -1;
-	size_t n = fread(out, 1, cap - 1, p);
-	out[n] = '\0';
-	int st = pclose(p);
-	return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-}
-
 /* bounce renders into --out; --video says when ffmpeg is missing and pipes
  * PNG frames to it when present (here a stand-in that keeps what it gets);
  * a GL failure is one line and exit status 1. */
@@ -668,7 +655,7 @@ static void command_renders_and_pipes_video(void)
 	char cmd[2048], out[4096], path[600];
 	snprintf(cmd, sizeof cmd, "rm -rf %s/t_render/cli && %s/eddy run scenes/bounce.lua --frames 2 --out %s/t_render/cli --quiet",
 	         b, b, b);
-	CHECKF(sh(cmd, out, sizeof out) == 0, "%s", out);
+	CHECKF(test_sh(cmd, out, sizeof out) == 0, "%s", out);
 	snprintf(path, sizeof path, "%s/t_render/cli/frame_0002.png", b);
 	int iw = 0, ih = 0, comp;
 	unsigned char *px = stbi_load(path, &iw, &ih, &comp, 3);
@@ -677,7 +664,7 @@ static void command_renders_and_pipes_video(void)
 
 	snprintf(cmd, sizeof cmd, "PATH=/nonexistent %s/eddy run scenes/bounce.lua --frames 1 --out %s/t_render/cli --video %s/t_render/v.mp4",
 	         b, b, b);
-	CHECK(sh(cmd, out, sizeof out) == 1);
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "ffmpeg is not installed");
 	CHECK(strchr(out, '\n') == strrchr(out, '\n')); /* one line */
 
@@ -686,7 +673,7 @@ static void command_renders_and_pipes_video(void)
 	         "chmod +x %s/t_render/fakebin/ffmpeg && EDDY_FAKE_FFMPEG=%s/t_render/piped PATH=%s/t_render/fakebin:$PATH "
 	         "%s/eddy run scenes/bounce.lua --frames 3 --out %s/t_render/cli --video %s/t_render/v.mp4 --quiet",
 	         b, b, b, b, b, b, b, b);
-	CHECKF(sh(cmd, out, sizeof out) == 0, "%s", out);
+	CHECKF(test_sh(cmd, out, sizeof out) == 0, "%s", out);
 	snprintf(path, sizeof path, "%s/t_render/piped", b);
 	size_t n = 0;
 	unsigned char *data = slurp(path, &n);
@@ -701,7 +688,7 @@ static void command_renders_and_pipes_video(void)
 
 	snprintf(cmd, sizeof cmd, "EDDY_RENDER_FAIL_CONTEXT=1 %s/eddy run scenes/bounce.lua --frames 1 --out %s/t_render/cli --quiet",
 	         b, b);
-	CHECK(sh(cmd, out, sizeof out) == 1);
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "eddy: render_points: frame 1: ");
 	CHECK_HAS(out, "cannot create an OpenGL context with OSMesa");
 }

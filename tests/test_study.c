@@ -11,19 +11,6 @@
 #include <string.h>
 #include <sys/wait.h>
 
-static int sh(const char *cmd, char *out, size_t cap)
-{
-	char full[4096];
-	snprintf(full, sizeof full, "%s 2>&1", cmd);
-	FILE *p = popen(full, "r");
-	if (!p)
-		return -1;
-	size_t n = fread(out, 1, cap - 1, p);
-	out[n] = '\0';
-	int st = pclose(p);
-	return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
-}
-
 enum { MAX_ROWS = 32, MAX_COLS = 64, CELL = 64 };
 
 typedef struct csv {
@@ -89,7 +76,7 @@ static bool run_quick(const char *study, const char *out, csv *c)
 	char cmd[1024], buf[8192];
 	snprintf(cmd, sizeof cmd, "rm -rf %s && %s/eddy study scenes/studies/%s.lua --quick --out %s", out,
 	         test_build_dir(), study, out);
-	int code = sh(cmd, buf, sizeof buf);
+	int code = test_sh(cmd, buf, sizeof buf);
 	CHECKF(code == 0, "%s exited %d:\n%s", cmd, code, buf);
 	char path[512];
 	snprintf(path, sizeof path, "%s/%s.csv", out, study);
@@ -178,11 +165,11 @@ static void quick_dam_break_study(void)
 		/* the runs timed physics alone: no frame was rendered */
 		char cmd[600];
 		snprintf(cmd, sizeof cmd, "cat %s/runs/*.jsonl | grep -c '\"image\"'", out);
-		sh(cmd, buf, sizeof buf);
+		test_sh(cmd, buf, sizeof buf);
 		CHECKF(atoi(buf) == 0, "%d stats lines of the study's runs carry a rendered image", atoi(buf));
 		snprintf(png, sizeof png, "command -v gnuplot >/dev/null && head -c 8 %s/dam_break.png | od -An -c", out);
-		if (sh("command -v gnuplot", buf, sizeof buf) == 0) {
-			sh(png, buf, sizeof buf);
+		if (test_sh("command -v gnuplot", buf, sizeof buf) == 0) {
+			test_sh(png, buf, sizeof buf);
 			CHECK_HAS(buf, "P   N   G");
 		}
 	}
@@ -223,7 +210,7 @@ static void bad_study_files(void)
 	char dir[256], path[320], cmd[1024], buf[4096];
 	snprintf(dir, sizeof dir, "%s/study_test", test_build_dir());
 	snprintf(cmd, sizeof cmd, "mkdir -p %s", dir);
-	sh(cmd, buf, sizeof buf);
+	test_sh(cmd, buf, sizeof buf);
 	snprintf(path, sizeof path, "%s/bad.lua", dir);
 	static const struct {
 		const char *src, *expect;
@@ -247,19 +234,19 @@ static void bad_study_files(void)
 	for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
 		write_file(path, cases[i].src);
 		snprintf(cmd, sizeof cmd, "%s/eddy study %s --out %s/bad_out", test_build_dir(), path, dir);
-		int code = sh(cmd, buf, sizeof buf);
+		int code = test_sh(cmd, buf, sizeof buf);
 		CHECKF(code == 1, "case %zu: exit %d", i, code);
 		CHECK_HAS(buf, cases[i].expect);
 		CHECKF(strchr(buf, '\n') == buf + strlen(buf) - 1, "case %zu: not one line: %s", i, buf);
 	}
 	snprintf(cmd, sizeof cmd, "%s/eddy study", test_build_dir());
-	CHECK(sh(cmd, buf, sizeof buf) == 2);
+	CHECK(test_sh(cmd, buf, sizeof buf) == 2);
 	CHECK_HAS(buf, "study needs a study file");
 	snprintf(cmd, sizeof cmd, "%s/eddy study --help", test_build_dir());
-	CHECK(sh(cmd, buf, sizeof buf) == 0);
+	CHECK(test_sh(cmd, buf, sizeof buf) == 0);
 	CHECK_HAS(buf, "--quick");
 	snprintf(cmd, sizeof cmd, "%s/eddy study x.lua --fast", test_build_dir());
-	CHECK(sh(cmd, buf, sizeof buf) == 2);
+	CHECK(test_sh(cmd, buf, sizeof buf) == 2);
 	CHECK_HAS(buf, "unknown option '--fast'");
 }
 
