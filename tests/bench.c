@@ -9,19 +9,9 @@
 #include <time.h>
 
 #include "eddy.h"
+#include "bench_util.h"
 
-static double now_ms(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
-}
 
-static int cmp_double(const void *a, const void *b)
-{
-	double x = *(const double *)a, y = *(const double *)b;
-	return (x > y) - (x < y);
-}
 
 /* A block of n particles (approximately) bouncing in a tank around a ball. */
 static eddy_world *scene(int n, int threads)

@@ -20,6 +20,7 @@
 #include <time.h>
 
 #include "eddy.h"
+#include "bench_util.h"
 
 /* CPU time of the whole process (all llvmpipe threads): on a shared machine
  * it moves less with other people's load than wall time does. */
@@ -30,17 +31,7 @@ static double cpu_ms(void)
 	return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
 }
 
-static int cmp_double(const void *a, const void *b)
-{
-	double x = *(const double *)a, y = *(const double *)b;
-	return (x > y) - (x < y);
-}
 
-static double median(double *v, int n)
-{
-	qsort(v, (size_t)n, sizeof *v, cmp_double);
-	return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
 
 static double extra(const eddy_frame_stats *s, const char *name)
 {
