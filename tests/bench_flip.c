@@ -14,6 +14,7 @@
 #include <time.h>
 
 #include "eddy.h"
+#include "grid_fixture.h"
 #include "bench_util.h"
 
 
@@ -125,18 +126,10 @@ static eddy_status setup(eddy_world *w, const eddy_step_context *ctx, void *user
 	(void)ctx;
 	(void)user;
 	const eddy_grid_info g = eddy_world_grid(w);
-	size_t nu, nv, nw, nc;
-	float *f[3] = {eddy_world_channel_mut(w, "u", &nu), eddy_world_channel_mut(w, "v", &nv),
-	               eddy_world_channel_mut(w, "w", &nw)};
-	const size_t len[3] = {nu, nv, nw};
+	size_t nc;
 	float *phi = eddy_world_channel_mut(w, "flip_phi", &nc);
 	uint8_t *type = (uint8_t *)(uintptr_t)eddy_world_channel_u8(w, "cell_type", NULL);
-	uint64_t r = 99;
-	for (int a = 0; a < 3; ++a)
-		for (size_t i = 0; i < len[a]; ++i) {
-			r = r * 6364136223846793005ull + 1442695040888963407ull;
-			f[a][i] = (float)((double)(r >> 40) / (double)(1ull << 24) - 0.5);
-		}
+	fixture_random_faces(w, 99);
 	for (size_t c = 0; c < nc; ++c) {
 		const int j = (int)(c / (size_t)g.nx % (size_t)g.ny);
 		const bool fluid = j < g.ny / 2;
