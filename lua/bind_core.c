@@ -24,6 +24,7 @@ static const eddy_lua_field world_fields[] = {
 	EDDY_LUA_FIELD(eddy_world_def, check_finite, EDDY_LUA_BOOL),
 	EDDY_LUA_END,
 };
+static const char *const shape_choices[] = {"block", "ellipsoid", NULL};
 static const eddy_lua_field emit_box_fields[] = {
 	EDDY_LUA_FIELD(eddy_emit_box_def, min, EDDY_LUA_VEC3),
 	EDDY_LUA_FIELD(eddy_emit_box_def, max, EDDY_LUA_VEC3),
@@ -31,6 +32,7 @@ static const eddy_lua_field emit_box_fields[] = {
 	EDDY_LUA_FIELD(eddy_emit_box_def, jitter, EDDY_LUA_FLOAT),
 	EDDY_LUA_FIELD(eddy_emit_box_def, velocity, EDDY_LUA_VEC3),
 	EDDY_LUA_FIELD(eddy_emit_box_def, start, EDDY_LUA_DOUBLE),
+	EDDY_LUA_ENUM_FIELD(eddy_emit_box_def, shape, shape_choices),
 	EDDY_LUA_END,
 };
 static const eddy_lua_field emit_nozzle_fields[] = {

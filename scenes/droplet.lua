@@ -1,9 +1,9 @@
 -- droplet (SPH): a drop in zero gravity relaxing under surface tension. It
--- starts as a block 1.3 times longer along x than across (the engine has no
--- ellipsoid emitter; tests/test_sph.c builds a true ellipsoid through the C
--- API), rounds off and rings in its l = 2 mode, whose frequency Rayleigh
--- gives as omega^2 = 8 sigma / (rho R^3). Reports the quadrupole moment
--- q = <x^2> - <y^2> (m^2) about the centre of mass each frame.
+-- starts as an ellipsoid stretched along x (by 1 + stretch, its volume that
+-- of the round drop of radius R), rounds off and rings in its l = 2 mode,
+-- whose frequency Rayleigh gives as omega^2 = 8 sigma / (rho R^3) (24 rad/s
+-- for R = 1 cm). Reports the quadrupole moment q = <x^2> - <y^2> (m^2) about
+-- the centre of mass each frame; tests/test_sph.c measures omega from it.
 --
 --   build/eddy run scenes/droplet.lua --stats out/drop/stats.jsonl
 
@@ -11,15 +11,18 @@ local eddy = require "eddy"
 
 local dx = eddy.param("spacing", 0.00125)      -- m: 16 spacings across
 local sigma = eddy.param("tension", 0.0728)    -- N/m, water-air
-local a = eddy.param("radius", 8 * dx)          -- m, half width across
+local R = eddy.param("radius", 0.01)            -- m, radius of the round drop
+local stretch = eddy.param("stretch", 0.2)      -- 1, x semi-axis R (1 + stretch)
+local ax, ayz = R * (1 + stretch), R / math.sqrt(1 + stretch)
 local world = eddy.world {
 	bounds = { {-0.03, -0.03, -0.03}, {0.03, 0.03, 0.03} },
 	gravity = {0, 0, 0}, fps = 200, duration = 0.6, cfl = 0.4,
 }
-world:add(eddy.emit_box { min = {-1.3 * a, -a, -a}, max = {1.3 * a, a, a}, spacing = dx })
+world:add(eddy.emit_box { min = {-ax, -ayz, -ayz}, max = {ax, ayz, ayz}, spacing = dx, shape = "ellipsoid" })
 world:add(eddy.sph_density { radius = 2 * dx, spacing = dx, rest_density = 1000, stiffness = 40 })
 world:add(eddy.sph_pressure {})
-world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.05 })
+-- alpha 0.1: also keeps the surface layer's pairs apart (VALIDATION.md C.1)
+world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.1 })
 world:add(eddy.sph_surface_tension { tension = sigma, threshold = 0.5 })
 world:add(eddy.integrate {})
 world:add(eddy.collide_box { min = {-0.03, -0.03, -0.03}, max = {0.03, 0.03, 0.03}, inside = true })

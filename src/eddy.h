@@ -246,7 +246,15 @@ eddy_system_id eddy_add_custom_system(eddy_world *w, const eddy_custom_system_de
  * eddy_world_error(): "<system>: '<field>' must be <what is allowed> (got <v>)".
  */
 
-/* emit_box: a block of particles on a cubic lattice, once, at time `start`. */
+/* What emit_box fills: the whole box, or the ellipsoid inscribed in it (a
+ * drop: centre (min + max) / 2, semi-axes (max - min) / 2). */
+typedef enum eddy_emit_shape {
+	EDDY_EMIT_BLOCK = 0,
+	EDDY_EMIT_ELLIPSOID
+} eddy_emit_shape;
+
+/* emit_box: a block (or the ellipsoid inscribed in it) of particles on a
+ * cubic lattice, once, at time `start`. */
 typedef struct eddy_emit_box_def {
 	eddy_vec3 min;       /* m, lower corner of the block */
 	eddy_vec3 max;       /* m, upper corner of the block */
@@ -254,6 +262,7 @@ typedef struct eddy_emit_box_def {
 	float jitter;        /* 1, random offset as a fraction of spacing, [0, 0.5] */
 	eddy_vec3 velocity;  /* m/s, initial velocity */
 	double start;        /* s, emission time */
+	eddy_emit_shape shape; /* block (default) or the inscribed ellipsoid */
 } eddy_emit_box_def;
 eddy_emit_box_def eddy_default_emit_box_def(void);
 eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def);

@@ -5,6 +5,12 @@
  * fills [min, max] with cells of size spacing; the count per axis is
  * floor((max - min) / spacing). Jitter moves each point by a uniform offset in
  * [-jitter, jitter] * spacing per axis, from the world's seeded stream.
+ * With shape = ellipsoid only the lattice points inside the ellipsoid
+ * inscribed in [min, max] are emitted (tested before jitter, so the count
+ * does not depend on the random stream), on the lattice with a cell corner
+ * at the centre, (min + max) / 2 + (i + 1/2) * spacing: the drop is then
+ * mirror-symmetric about its centre on every axis, and it stands on the
+ * simple cubic lattice the SPH mass calibration assumes.
  * The spacing becomes the world's length scale for the advection limit. */
 #include "systems.h"
 
@@ -13,6 +19,8 @@
 typedef struct emit_box {
 	eddy_emit_box_def def;
 	int nx, ny, nz;
+	eddy_vec3 origin; /* m, corner of the lattice's first cell */
+	size_t count; /* points emitted: nx ny nz, or those inside the ellipsoid */
 	bool done;
 } emit_box;
 
@@ -27,6 +35,7 @@ eddy_emit_box_def eddy_default_emit_box_def(void)
 	d.jitter = 0;
 	d.velocity = eddy__v3(0, 0, 0);
 	d.start = 0;
+	d.shape = EDDY_EMIT_BLOCK;
 	return d;
 }
 
@@ -39,13 +48,31 @@ static double axis_count(float lo, float hi, float h)
 	return n > 0 ? n : 0;
 }
 
-/* Lattice point k (x fastest), jittered when rng is given. */
-static eddy_vec3 lattice_point(const emit_box *e, size_t k, uint64_t *rng)
+/* Lattice point k of the block (x fastest), before jitter. */
+static eddy_vec3 lattice_point(const emit_box *e, size_t k)
 {
 	const eddy_emit_box_def *d = &e->def;
 	const size_t ix = k % (size_t)e->nx, iy = k / (size_t)e->nx % (size_t)e->ny, iz = k / ((size_t)e->nx * (size_t)e->ny);
-	eddy_vec3 p = {d->min.x + ((float)ix + 0.5f) * d->spacing, d->min.y + ((float)iy + 0.5f) * d->spacing,
-	               d->min.z + ((float)iz + 0.5f) * d->spacing};
+	return (eddy_vec3){e->origin.x + ((float)ix + 0.5f) * d->spacing, e->origin.y + ((float)iy + 0.5f) * d->spacing,
+	                   e->origin.z + ((float)iz + 0.5f) * d->spacing};
+}
+
+/* Whether lattice point p is emitted: always for a block; for an ellipsoid,
+ * when it lies inside (in double, so the count is the same on every host). */
+static bool emitted(const eddy_emit_box_def *d, eddy_vec3 p)
+{
+	if (d->shape != EDDY_EMIT_ELLIPSOID)
+		return true;
+	const double ux = ((double)p.x - 0.5 * ((double)d->min.x + d->max.x)) / (0.5 * ((double)d->max.x - d->min.x)),
+	             uy = ((double)p.y - 0.5 * ((double)d->min.y + d->max.y)) / (0.5 * ((double)d->max.y - d->min.y)),
+	             uz = ((double)p.z - 0.5 * ((double)d->min.z + d->max.z)) / (0.5 * ((double)d->max.z - d->min.z));
+	return ux * ux + uy * uy + uz * uz <= 1.0;
+}
+
+/* Lattice point p moved by the jitter, when rng is given. */
+static eddy_vec3 jittered(const emit_box *e, eddy_vec3 p, uint64_t *rng)
+{
+	const eddy_emit_box_def *d = &e->def;
 	if (rng && d->jitter > 0) {
 		p.x += (float)((2 * eddy__rand01(rng) - 1) * d->jitter * d->spacing);
 		p.y += (float)((2 * eddy__rand01(rng) - 1) * d->jitter * d->spacing);
@@ -60,7 +87,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	if (e->done || ctx->time + 1e-12 < e->def.start)
 		return EDDY_OK;
 	e->done = true;
-	const size_t count = (size_t)e->nx * (size_t)e->ny * (size_t)e->nz;
+	const size_t count = e->count, lattice = (size_t)e->nx * (size_t)e->ny * (size_t)e->nz;
 	size_t first;
 	eddy_status st = eddy__append_particles(w, count, &first);
 	if (st != EDDY_OK)
@@ -68,8 +95,12 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
-	for (size_t k = 0; k < count; ++k) {
-		const eddy_vec3 p = lattice_point(e, k, &w->rng);
+	size_t k = 0;
+	for (size_t q = 0; q < lattice && k < count; ++q) {
+		const eddy_vec3 l = lattice_point(e, q);
+		if (!emitted(&e->def, l))
+			continue;
+		const eddy_vec3 p = jittered(e, l, &w->rng);
 		/* jitter must not push a particle out of the world */
 		x[first + k] = fminf(fmaxf(p.x, lo.x), hi.x);
 		y[first + k] = fminf(fmaxf(p.y, lo.y), hi.y);
@@ -77,6 +108,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		vx[first + k] = e->def.velocity.x;
 		vy[first + k] = e->def.velocity.y;
 		vz[first + k] = e->def.velocity.z;
+		k++;
 	}
 	return EDDY_OK;
 }
@@ -85,19 +117,22 @@ static int64_t expected(const eddy_world *w, const eddy_system *s)
 {
 	(void)w;
 	const emit_box *e = s->data;
-	return e->done ? 0 : (int64_t)e->nx * e->ny * e->nz;
+	return e->done ? 0 : (int64_t)e->count;
 }
 
 static size_t sample(const eddy_world *w, const eddy_system *s, eddy_vec3 *out, size_t cap)
 {
 	(void)w;
 	const emit_box *e = s->data;
-	const size_t count = (size_t)e->nx * (size_t)e->ny * (size_t)e->nz;
+	const size_t lattice = (size_t)e->nx * (size_t)e->ny * (size_t)e->nz;
 	if (!out)
-		return count;
+		return e->count;
 	size_t k = 0;
-	for (; k < count && k < cap; ++k)
-		out[k] = lattice_point(e, k, NULL);
+	for (size_t q = 0; q < lattice && k < cap; ++q) {
+		const eddy_vec3 p = lattice_point(e, q);
+		if (emitted(&e->def, p))
+			out[k++] = p;
+	}
 	return k;
 }
 
@@ -127,6 +162,8 @@ eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def)
 	    !eddy__check_range(w, sys, "jitter", def->jitter, 0, 0.5) ||
 	    !eddy__check_vec3(w, sys, "velocity", def->velocity) || !eddy__check_nonneg(w, sys, "start", def->start))
 		return EDDY_NULL_SYSTEM;
+	if (def->shape != EDDY_EMIT_BLOCK && def->shape != EDDY_EMIT_ELLIPSOID)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: 'shape' must be block or ellipsoid", sys), EDDY_NULL_SYSTEM;
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
 	if (def->min.x < lo.x || def->min.y < lo.y || def->min.z < lo.z || def->max.x > hi.x || def->max.y > hi.y ||
 	    def->max.z > hi.z) {
@@ -157,6 +194,32 @@ eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def)
 	e->nx = (int)nx;
 	e->ny = (int)ny;
 	e->nz = (int)nz;
+	e->origin = def->min;
+	e->count = (size_t)count;
+	if (def->shape == EDDY_EMIT_ELLIPSOID) {
+		/* an even number of cells per axis, centred on the ellipsoid (at most
+		 * two more per axis than the block's; about pi/6 of them are inside) */
+		const double hx = 0.5 * ((double)def->max.x - def->min.x), hy = 0.5 * ((double)def->max.y - def->min.y),
+		             hz = 0.5 * ((double)def->max.z - def->min.z);
+		const double cx = ceil(hx / def->spacing - 1e-6), cy = ceil(hy / def->spacing - 1e-6),
+		             cz = ceil(hz / def->spacing - 1e-6);
+		e->nx = 2 * (int)cx;
+		e->ny = 2 * (int)cy;
+		e->nz = 2 * (int)cz;
+		e->origin = eddy__v3((float)(def->min.x + hx - cx * def->spacing), (float)(def->min.y + hy - cy * def->spacing),
+		                     (float)(def->min.z + hz - cz * def->spacing));
+		const size_t lattice = (size_t)e->nx * (size_t)e->ny * (size_t)e->nz;
+		e->count = 0;
+		for (size_t q = 0; q < lattice; ++q)
+			e->count += emitted(def, lattice_point(e, q));
+		if (e->count == 0) {
+			free(e);
+			eddy__fail(w, EDDY_ERR_INVALID,
+			           "%s: the ellipsoid holds no lattice point: make every side at least 'spacing' = %g m long", sys,
+			           (double)def->spacing);
+			return EDDY_NULL_SYSTEM;
+		}
+	}
 	eddy_system_id id = eddy__add_system(w, &eddy__kind_emit_box, e, NULL, 0, box_writes, 6);
 	if (eddy_system_valid(w, id))
 		eddy__note_length_scale(w, def->spacing);

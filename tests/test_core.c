@@ -264,6 +264,50 @@ static void huge_emitter_is_refused(void)
 	eddy_destroy_world(w);
 }
 
+/* emit_box with shape = ellipsoid: only lattice points inside the inscribed
+ * ellipsoid, on a lattice centred on it, so the drop is mirror-symmetric
+ * and holds about its volume / spacing^3 points. */
+static void ellipsoid_emitter(void)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.bounds_min = (eddy_vec3){-1, -1, -1};
+	d.gravity = (eddy_vec3){0, 0, 0};
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	const double a = 0.12, c = 0.1, e = 0.08, dx = 0.01; /* semi-axes, m */
+	b.min = (eddy_vec3){(float)(0.3 - a), (float)(-0.2 - c), (float)(0.1 - e)};
+	b.max = (eddy_vec3){(float)(0.3 + a), (float)(-0.2 + c), (float)(0.1 + e)};
+	b.spacing = (float)dx;
+	b.shape = EDDY_EMIT_ELLIPSOID;
+	CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &b)));
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	CHECK(eddy_world_step(w) == EDDY_OK);
+	size_t n;
+	const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL), *z = eddy_world_channel(w, "z", NULL);
+	const double volume = 4.0 / 3.0 * 3.14159265358979 * a * c * e / (dx * dx * dx);
+	printf("    ellipsoid: %zu particles, volume / spacing^3 = %.0f\n", n, volume);
+	CHECK(fabs((double)n / volume - 1) < 0.03);
+	double cx = 0, cy = 0, cz = 0, outside = 0;
+	for (size_t i = 0; i < n; ++i) {
+		const double u = (x[i] - 0.3) / a, v = (y[i] + 0.2) / c, q = (z[i] - 0.1) / e;
+		outside += u * u + v * v + q * q > 1 + 1e-5;
+		cx += x[i];
+		cy += y[i];
+		cz += z[i];
+	}
+	CHECK(outside == 0);
+	CHECK_NEAR(cx / (double)n, 0.3, 1e-5);
+	CHECK_NEAR(cy / (double)n, -0.2, 1e-5);
+	CHECK_NEAR(cz / (double)n, 0.1, 1e-5);
+	b.shape = (eddy_emit_shape)7;
+	CHECK(!eddy_system_valid(w, eddy_add_emit_box(w, &b)));
+	CHECK_HAS(eddy_world_error(w), "emit_box: 'shape' must be block or ellipsoid");
+	eddy_destroy_world(w);
+}
+
 static eddy_status poison_step(eddy_world *w, const eddy_step_context *ctx, void *user)
 {
 	(void)user;
@@ -397,6 +441,7 @@ void suite_core(void)
 	RUN(swap_remove_and_growth);
 	RUN(defs_are_range_checked);
 	RUN(huge_emitter_is_refused);
+	RUN(ellipsoid_emitter);
 	RUN(nonfinite_names_system_step_particle);
 	RUN(custom_system_errors_are_labelled);
 	RUN(arena_is_plain_memory);
