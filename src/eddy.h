@@ -433,6 +433,11 @@ double eddy_sph_kernel_laplacian(eddy_sph_kernel k, double r, double h);
 /* Sum of W over a simple cubic lattice of the given spacing around a lattice
  * point (itself included), 1/m^3: the calibrated particle mass is rho0 / sum. */
 double eddy_sph_lattice_sum(eddy_sph_kernel k, double spacing, double h);
+/* First moment of the kernel gradient over the same lattice (the point itself
+ * excluded), sum_j spacing^3 x_j^2 |dW/dr|(r_j) / r_j, dimensionless: 1 in
+ * the continuum, so that the SPH gradient of a linear field is exact; 0.956
+ * for spiky at h = 2 spacings, i.e. pressure gradients come out 4.4% short. */
+double eddy_sph_lattice_gradient_moment(eddy_sph_kernel k, double spacing, double h);
 
 typedef enum eddy_sph_eos {
 	EDDY_SPH_EOS_LINEAR = 0, /* p = k (rho - rho0), the paper's */

@@ -80,3 +80,20 @@ double eddy_sph_lattice_sum(eddy_sph_kernel k, double spacing, double h)
 			}
 	return sum;
 }
+
+double eddy_sph_lattice_gradient_moment(eddy_sph_kernel k, double spacing, double h)
+{
+	if (!(spacing > 0) || !(h > 0))
+		return 0;
+	const int m = (int)ceil(h / spacing);
+	const double vol = spacing * spacing * spacing;
+	double sum = 0;
+	for (int i = -m; i <= m; ++i)
+		for (int j = -m; j <= m; ++j)
+			for (int l = -m; l <= m; ++l) {
+				const double r = spacing * sqrt((double)(i * i + j * j + l * l)), xi = spacing * i;
+				if (r > 0) /* the point itself has no direction */
+					sum -= vol * xi * xi * eddy_sph_kernel_derivative(k, r, h) / r;
+			}
+	return sum;
+}

@@ -46,7 +46,7 @@ static void unknown_field_names_file_line_and_fix(void)
 	char buf[512];
 	const char *e = run_fresh(HEAD "world:add(eddy.emit_box{ spacin = 0.01 })\n", buf, sizeof buf);
 	CHECK_HAS(e, "scenes/t.lua:3: emit_box: unknown field 'spacin' (did you mean 'spacing'?");
-	CHECK_HAS(e, "fields: min, max, spacing, jitter, velocity, start)");
+	CHECK_HAS(e, "fields: min, max, spacing, jitter, velocity, start, shape)");
 	e = run_fresh("local eddy = require 'eddy'\nlocal w = eddy.world{ bounds = {{0,0,0},{1,1,1}}, fsp = 3 }\n", buf, sizeof buf);
 	CHECK_HAS(e, "scenes/t.lua:2: world: unknown field 'fsp' (did you mean 'fps'?");
 }

@@ -74,6 +74,11 @@ static void lattice_sums(void)
 	CHECK_NEAR(V * eddy_sph_lattice_sum(EDDY_SPH_POLY6, dx, 2.5 * dx), 0.995, 0.001);
 	CHECK_NEAR(V * eddy_sph_lattice_sum(EDDY_SPH_POLY6, dx, 3.0 * dx), 1.002, 0.001);
 	CHECK_NEAR(V * eddy_sph_lattice_sum(EDDY_SPH_SPIKY, dx, 2.0 * dx), 1.236, 0.001);
+	/* the gradient's first moment: 1 in the continuum, short on coarse
+	 * lattices (sph_pressure divides by it), closer to 1 as h / dx grows */
+	CHECK_NEAR(eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, dx, 2.0 * dx), 0.9563, 0.0005);
+	CHECK_NEAR(eddy_sph_lattice_gradient_moment(EDDY_SPH_POLY6, dx, 2.0 * dx), 1.0649, 0.0005);
+	CHECK_NEAR(eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, dx, 6.0 * dx), 1.0, 0.005);
 	/* gradient consistency: the xx entry (1 exactly in the continuum) and the
 	 * off-diagonal xy entry (0 by symmetry) on an interior lattice point */
 	const eddy_sph_kernel ks[] = {EDDY_SPH_POLY6, EDDY_SPH_SPIKY};
@@ -184,6 +189,12 @@ static eddy_world *sph_world(const sph_setup *s, eddy_system_id *density)
 	return w;
 }
 
+static int cmp_float(const void *a, const void *b)
+{
+	const float u = *(const float *)a, v = *(const float *)b;
+	return (u > v) - (u < v);
+}
+
 static double max_speed(const eddy_world *w)
 {
 	size_t n;
@@ -195,28 +206,51 @@ static double max_speed(const eddy_world *w)
 	return m;
 }
 
-/* Hydrostatic tank (C.2, C.3): a 10^3 block settles in a tank with boundary
- * particles, then pressure and density are averaged over 0.2 s (the column
- * keeps ringing at its acoustic frequency c / 4H, which weakly compressible
- * SPH damps slowly). Compared with p = rho0 g d, d the depth below the
- * settled surface, away from the walls and the surface (more than h from
- * both). With p = k (rho - rho0) the pressure needs a compression p / k, so
- * the bottom layer's density is rho0 (1 + g H / k) (C.3), and the surface
- * sinks by H g H / (2k). */
+/* Hydrostatic tank (C.2, C.3): a 10^3 block settles for 0.5 s in a tank with
+ * boundary particles, then p - rho0 g d is averaged over 0.6 s (every step:
+ * frames at 100 Hz would alias the column's ringing at c / 4H = 35 Hz), for
+ * the particles more than h from walls, floor and surface, by layers one
+ * spacing thick and over all of them. The depth d of a particle is that of
+ * the fluid above it at rest density, m N_above / (rho0 A), so rho0 g d is
+ * the weight above per unit area: no surface position to guess (the top
+ * particles splash), and a column that compresses still has its true
+ * hydrostatic pressure as the reference.
+ * The bound from k: p = k (rho - rho0) needs the fluid compressed by up to
+ * g H / k, vertically only, and both lattice calibrations (the mass for the
+ * density sum, the spiky gradient's moment for the pressure force) hold for
+ * the undeformed lattice: each is off by up to g H / k, so the column's mean
+ * pressure may be off the weight above by 2 (g H / k) rho0 g H. The mean
+ * error is held to that plus three standard errors of its own measurement
+ * (from six 0.1 s blocks): the particles never stop rearranging out of the
+ * initial cubic lattice (rms speed ~0.04 sqrt(gH)), and that motion is the
+ * noise. Measured: +0.74% +- 0.12% against 0.98% + 0.36%; without the
+ * gradient calibration +3.7%. Found on the way: the mean error stays at
+ * +0.6 to +0.9% for k = 100 to 800, so what is left is not compressibility
+ * but the particles' disorder, and at k = 800 this bound would not hold.
+ * Single layers scatter more (one layer at +3%): held to 5%.
+ * The bottom layer's density is rho0 (1 + g H / k) (C.3). */
 static void hydrostatic_tank(void)
 {
 	sph_setup s = default_setup();
-	eddy_world *w = sph_world(&s, NULL);
+	eddy_system_id density;
+	eddy_world *w = sph_world(&s, &density);
 	CHECKF(eddy_world_advance(w, 0.5) == EDDY_OK, "%s", eddy_world_error(w));
 	size_t n = eddy_world_particle_count(w);
-	/* the table is reordered every step: average per depth bin, not per particle */
-	enum { BINS = 10 };
-	double psum[BINS] = {0}, pcount[BINS] = {0}, dsum = 0, dcount = 0, top_sum = 0, v2sum = 0, vcount = 0;
-	double xmin = 1, xmax = 0, ymin = 1;
-	const double rho0 = 1000, g = 9.81, h = 2 * s.dx;
-	const int frames = 20;
-	for (int f = 0; f < frames; ++f) {
-		CHECKF(eddy_world_step_frame(w) == EDDY_OK, "%s", eddy_world_error(w));
+	/* the table is reordered every step: average per layer, not per particle */
+	/* every step, not every frame: frames (100 Hz) would alias the column's
+	 * ringing (c / 4H = 35 Hz) into the mean */
+	enum { LAYERS = 10, BLOCKS = 6 };
+	const double t0 = eddy_world_time(w), span = 0.6;
+	int samples = 0;
+	double lsum[LAYERS] = {0}, lcount[LAYERS] = {0}, bsum[BLOCKS] = {0}, bcount[BLOCKS] = {0};
+	double dsum = 0, dcount = 0, top_sum = 0, v2sum = 0, vcount = 0, xmin = 1, xmax = 0, ymin = 1;
+	const double rho0 = 1000, g = 9.81, h = 2 * s.dx, H = s.fmax.y; /* rho0 g H: the scale of the errors */
+	const double m = eddy_sph_particle_mass(w, density), area = (double)(s.hi.x - s.lo.x) * (s.hi.z - s.lo.z);
+	float *sorted = malloc(n * sizeof *sorted);
+	while (eddy_world_time(w) < t0 + span) {
+		CHECKF(eddy_world_step(w) == EDDY_OK, "%s", eddy_world_error(w));
+		const int blk = (int)fmin(BLOCKS - 1, (eddy_world_time(w) - t0) / span * BLOCKS);
+		samples++;
 		const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
 		            *z = eddy_world_channel(w, "z", NULL), *p = eddy_world_channel(w, "pressure", NULL),
 		            *rho = eddy_world_channel(w, "density", NULL), *vx = eddy_world_channel(w, "vx", NULL),
@@ -224,15 +258,30 @@ static void hydrostatic_tank(void)
 		double top = 0;
 		for (size_t i = 0; i < n; ++i) {
 			top = fmax(top, y[i]);
+			sorted[i] = y[i];
+		}
+		qsort(sorted, n, sizeof *sorted, cmp_float);
+		for (size_t i = 0; i < n; ++i) {
 			xmin = fmin(xmin, fmin(x[i], z[i]));
 			xmax = fmax(xmax, fmax(x[i], z[i]));
 			ymin = fmin(ymin, y[i]);
 			v2sum += (double)vx[i] * vx[i] + (double)vy[i] * vy[i] + (double)vz[i] * vz[i];
 			vcount++;
-			const int bin = (int)(y[i] / s.dx);
-			if (bin >= 0 && bin < BINS && x[i] > h && x[i] < s.hi.x - h && z[i] > h && z[i] < s.hi.z - h) {
-				psum[bin] += p[i];
-				pcount[bin]++;
+			size_t lo = 0, hi = n; /* particles at or below y[i] */
+			while (lo < hi) {
+				const size_t mid = (lo + hi) / 2;
+				if (sorted[mid] <= y[i])
+					lo = mid + 1;
+				else
+					hi = mid;
+			}
+			const double d = m * ((double)(n - lo) + 0.5) / (rho0 * area), e = (p[i] - rho0 * g * d) / (rho0 * g * H);
+			const int layer = (int)(y[i] / s.dx);
+			if (d > h && y[i] > h && x[i] > h && x[i] < s.hi.x - h && z[i] > h && z[i] < s.hi.z - h && layer < LAYERS) {
+				lsum[layer] += e;
+				lcount[layer]++;
+				bsum[blk] += e;
+				bcount[blk]++;
 			}
 			if (y[i] < s.dx) {
 				dsum += rho[i];
@@ -241,24 +290,30 @@ static void hydrostatic_tank(void)
 		}
 		top_sum += top;
 	}
-	const double surface = top_sum / frames + s.dx / 2, H = surface;
-	double err = 0;
+	double worst = 0, mean = 0, var = 0, total = 0;
 	int used = 0;
-	for (int b = 0; b < BINS; ++b) {
-		const double yc = (b + 0.5) * s.dx, d = surface - yc;
-		if (!(pcount[b] > 0) || d < h || yc < h)
-			continue;
-		err = fmax(err, fabs(psum[b] / pcount[b] - rho0 * g * d) / (rho0 * g * H));
-		used++;
+	for (int l = 0; l < LAYERS; ++l)
+		if (lcount[l] > 10.0 * samples) { /* a layer the interior fills, not a stray particle */
+			worst = fmax(worst, fabs(lsum[l] / lcount[l]));
+			used++;
+		}
+	for (int b = 0; b < BLOCKS; ++b) {
+		mean += bsum[b];
+		total += bcount[b];
 	}
-	const double gH_k = g * H / s.k, rho_bottom = dsum / dcount / rho0, vrms = sqrt(v2sum / vcount);
-	printf("    hydrostatic: pressure_err %.4f over %d depths, gH/k %.4f, bottom rho/rho0 %.4f (1 + gH/k = %.4f), "
-	       "closest to walls x/z %.4f / %.4f y %.4f m, rms speed %.3f m/s = %.3f sqrt(gH)\n",
-	       err, used, gH_k, rho_bottom, 1 + gH_k, xmin, s.hi.x - xmax, ymin, vrms, vrms / sqrt(g * H));
-	CHECK(used >= 4);
-	/* p comes from the density, so noise of k dρ maps to the error; bound it
-	 * by a fifth of the hydrostatic range, and the compression to 2 gH/k */
-	CHECK(err < 0.2);
+	mean /= total;
+	for (int b = 0; b < BLOCKS; ++b)
+		var += pow(bsum[b] / bcount[b] - mean, 2) / (BLOCKS - 1);
+	const double se = sqrt(var / BLOCKS), surface = top_sum / samples + s.dx / 2;
+	const double gH_k = g * surface / s.k, rho_bottom = dsum / dcount / rho0, vrms = sqrt(v2sum / vcount);
+	printf("    hydrostatic: mean (p - rho0 g d) / (rho0 g H) %+.4f +- %.4f (bound 2 gH/k = %.4f), worst of %d layers %.4f, "
+	       "bottom rho/rho0 %.4f (1 + gH/k = %.4f), closest to walls x/z %.4f / %.4f y %.4f m, rms speed %.3f sqrt(gH)\n",
+	       mean, se, 2 * gH_k, used, worst, rho_bottom, 1 + gH_k, xmin, s.hi.x - xmax, ymin, vrms / sqrt(g * H));
+	free(sorted);
+	CHECK(used >= 5);
+	CHECK(fabs(mean) <= 2 * gH_k + 3 * se);
+	CHECK(se < gH_k); /* the measurement itself must be able to tell */
+	CHECK(worst < 0.05);
 	CHECK_NEAR(rho_bottom, 1 + gH_k, gH_k);
 	/* no wall gap: the lattice sits half a spacing from each wall; a gap of
 	 * half a spacing more would show as a distance above one spacing */
