@@ -1,0 +1,437 @@
+/* sph_dfsph: implicit (incompressible) SPH pressure, the divergence-free SPH
+ * of Bender & Koschier (SCA 2015, TVCG 2017). It replaces sph_pressure: the
+ * pressure is solved for each step so the fluid keeps its rest density, and
+ * the time step is limited by the flow speed, not by a speed of sound.
+ *
+ * Reads: x y z vx vy vz density ax ay az. Writes: pressure ax ay az
+ * (accumulated). Runs after the non-pressure forces (gravity, sph_viscosity,
+ * sph_surface_tension) and before integrate, whose v += dt a then gives the
+ * corrected velocity.
+ *
+ * With G_ij = m grad W(x_i - x_j) (the spiky kernel's gradient, as in
+ * sph_pressure), B_i = sum_b V_b rho_b grad W(x_i - x_b) over the boundary
+ * particles (Akinci et al. 2012; the walls do not move) and the pressure
+ * written as k_i = p_i / rho_i^2:
+ *   Drho_i/Dt = sum_j (v_i - v_j) . G_ij + v_i . B_i
+ *   a_i^p     = -sum_j (k_i + k_j) G_ij - k_i B_i
+ * A change k_i alone moves Drho_i/Dt by -dt k_i D_i, with
+ *   D_i = |sum_j G_ij + B_i|^2 + sum_j |G_ij|^2        (the paper's rho_i/alpha_i)
+ * so each Jacobi-style sweep sets, from the current predicted velocities v*,
+ *   constant density:  k_i = max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
+ *   divergence-free:   k_i = max(Drho_i/Dt, 0) / (dt D_i)
+ * and moves v*_i by dt a_i^p(k). The divergence solver runs first, on the
+ * velocity at the start of the step (positions are new, velocities not yet
+ * consistent with them); then v* = v + dt a (the forces so far) and the
+ * constant-density solver runs until the mean predicted compression
+ * max(rho*_i - rho0, 0) / rho0 is at most max_density_error (at least two
+ * sweeps, as in the paper). Only compression is corrected: the free surface
+ * has too few neighbours to reach rho0 and must not be pulled together.
+ * The result, a^p = (v* - (v + dt a)) / dt, is added to ax ay az, and the
+ * pressure column gets p_i = k_i rho_i^2 with k_i summed over both solvers.
+ * Sums over neighbours run in list order and per particle, and the mean
+ * errors are summed serially in row order, so the result does not depend on
+ * the thread count.
+ *
+ * Published per frame: solver = "dfsph", iterations (mean constant-density
+ * sweeps per step), residual (largest final mean density error of a step),
+ * divergence_iterations (mean), unconverged (steps that hit max_iterations).
+ * A step whose final mean density error is above 5% fails: the time step is
+ * far too long for the solver.
+ * Time-step limit (velocity): dt <= h / max|v|; the world multiplies it by
+ * its CFL number (0.4 keeps a particle within 0.4 h per step). With it in the
+ * pipeline, sph_density's acoustic limit does not apply.
+ * Source: Bender & Koschier, "Divergence-free smoothed particle hydrodynamics",
+ * SCA 2015 (eqs. 8-9, 12, Alg. 2-3); Akinci et al., "Versatile rigid-fluid
+ * coupling for incompressible SPH", SIGGRAPH 2012. */
+#include "sph.h"
+#include "systems.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct sph_dfsph {
+	eddy_sph_dfsph_def def;
+	/* statistics of the current frame */
+	int frame;
+	int64_t steps, sweeps, div_sweeps, unconverged;
+	double residual;
+} sph_dfsph;
+
+static const int dfsph_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, COL_AX, COL_AY, COL_AZ};
+static const int dfsph_writes[] = {COL_PRESSURE, COL_AX, COL_AY, COL_AZ};
+static const int no_hint_writes[] = {-1};
+
+/* above this final mean density error a step fails instead of going on */
+#define DFSPH_FAIL_ERROR 0.05
+
+eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
+{
+	eddy_sph_dfsph_def d;
+	d.max_density_error = 0.005f;
+	d.max_iterations = 100;
+	d.divergence_solver = true;
+	d.max_divergence_error = 0.01f;
+	d.max_divergence_iterations = 100;
+	return d;
+}
+
+/* The solver's per-step scratch, all in the world's arena. */
+typedef struct dfsph_work {
+	long n;
+	size_t cap;
+	const uint32_t *nbr, *count;
+	float *gx, *gy, *gz;   /* G_ij, n * cap */
+	float *bx, *by, *bz;   /* B_i */
+	float *inv_d;          /* 1 / D_i, 0 where D_i is negligible */
+	float *vx, *vy, *vz;   /* v* */
+	float *k, *ksum;       /* this sweep's k_i, and the sum over sweeps */
+	float *err;            /* per particle: the error the sweep measured */
+} dfsph_work;
+
+/* G_ij and B_i from the neighbour lists; D_i from them. */
+static void gradients(const sph_shared *sh, const float *x, const float *y, const float *z, dfsph_work *wk,
+                      int threads)
+{
+	const sph_neighbors *nb = &sh->nb;
+	const sph_kernel_consts kc = sh->k;
+	const float m = sh->mass, eps2 = 1e-6f * kc.h2, rho0 = sh->rho0;
+	const float dref = m * kc.spiky_grad * kc.h2, dmin = 1e-6f * dref * dref;
+	const long n = wk->n;
+	const size_t cap = wk->cap;
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		const float xi = x[i], yi = y[i], zi = z[i];
+		const uint32_t *list = nb->nbr + (size_t)i * cap;
+		float *gx = wk->gx + (size_t)i * cap, *gy = wk->gy + (size_t)i * cap, *gz = wk->gz + (size_t)i * cap;
+		const uint32_t cnt = nb->count[i];
+		float sx = 0, sy = 0, sz = 0, s2 = 0;
+		for (uint32_t q = 0; q < cnt; ++q) {
+			const uint32_t j = list[q];
+			float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
+			const float r2 = rx * rx + ry * ry + rz * rz;
+			float c;
+			if (r2 > eps2) {
+				const float r = sqrtf(r2), hr = kc.h - r;
+				c = m * kc.spiky_grad * hr * hr / r;
+			} else {
+				sph_coincident_dir((size_t)i, j, &rx, &ry, &rz);
+				c = m * kc.spiky_grad * kc.h2;
+			}
+			/* spiky_grad < 0: G_ij points from i towards j */
+			gx[q] = c * rx;
+			gy[q] = c * ry;
+			gz[q] = c * rz;
+			sx += gx[q];
+			sy += gy[q];
+			sz += gz[q];
+			s2 += gx[q] * gx[q] + gy[q] * gy[q] + gz[q] * gz[q];
+		}
+		const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
+		const uint32_t bcnt = nb->bcount[i];
+		float bx = 0, by = 0, bz = 0;
+		for (uint32_t q = 0; q < bcnt; ++q) {
+			const uint32_t b = blist[q];
+			const float rx = xi - nb->bx[b], ry = yi - nb->by[b], rz = zi - nb->bz[b];
+			const float r2 = rx * rx + ry * ry + rz * rz;
+			if (!(r2 > eps2))
+				continue; /* on the wall surface: the collider handles it */
+			const float r = sqrtf(r2), hr = kc.h - r;
+			const float mb = nb->bvol[b] * (nb->brho ? nb->brho[b] : rho0);
+			const float c = mb * kc.spiky_grad * hr * hr / r;
+			bx += c * rx;
+			by += c * ry;
+			bz += c * rz;
+		}
+		wk->bx[i] = bx;
+		wk->by[i] = by;
+		wk->bz[i] = bz;
+		sx += bx;
+		sy += by;
+		sz += bz;
+		const float d = sx * sx + sy * sy + sz * sz + s2;
+		wk->inv_d[i] = d > dmin ? 1.0f / d : 0.0f;
+	}
+}
+
+/* Drho_i/Dt from the predicted velocities. */
+static inline float density_rate(const dfsph_work *wk, long i)
+{
+	const size_t o = (size_t)i * wk->cap;
+	const uint32_t *list = wk->nbr + o;
+	const float *gx = wk->gx + o, *gy = wk->gy + o, *gz = wk->gz + o;
+	const float vxi = wk->vx[i], vyi = wk->vy[i], vzi = wk->vz[i];
+	const uint32_t cnt = wk->count[i];
+	float s = vxi * wk->bx[i] + vyi * wk->by[i] + vzi * wk->bz[i];
+	for (uint32_t q = 0; q < cnt; ++q) {
+		const uint32_t j = list[q];
+		s += (vxi - wk->vx[j]) * gx[q] + (vyi - wk->vy[j]) * gy[q] + (vzi - wk->vz[j]) * gz[q];
+	}
+	return s;
+}
+
+/* v*_i -= dt sum_j (k_i + k_j) G_ij + dt k_i B_i */
+static void correct(dfsph_work *wk, float dt, int threads)
+{
+	const long n = wk->n;
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		const size_t o = (size_t)i * wk->cap;
+		const uint32_t *list = wk->nbr + o;
+		const float *gx = wk->gx + o, *gy = wk->gy + o, *gz = wk->gz + o;
+		const float ki = wk->k[i];
+		const uint32_t cnt = wk->count[i];
+		float ax = ki * wk->bx[i], ay = ki * wk->by[i], az = ki * wk->bz[i];
+		for (uint32_t q = 0; q < cnt; ++q) {
+			const float c = ki + wk->k[list[q]];
+			ax += c * gx[q];
+			ay += c * gy[q];
+			az += c * gz[q];
+		}
+		wk->vx[i] -= dt * ax;
+		wk->vy[i] -= dt * ay;
+		wk->vz[i] -= dt * az;
+	}
+}
+
+/* Serial sum in row order: the same for any thread count. */
+static double mean_of(const float *e, long n)
+{
+	double s = 0;
+	for (long i = 0; i < n; ++i)
+		s += e[i];
+	return n > 0 ? s / (double)n : 0;
+}
+
+/* Divergence-free solve: sweeps until mean max(Drho/Dt, 0) dt / rho0 <= tol. */
+static int divergence_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float dt, int threads)
+{
+	const long n = wk->n;
+	const float inv_dt = 1.0f / dt;
+	int it = 0;
+	for (;;) {
+#pragma omp parallel for num_threads(threads) schedule(static)
+		for (long i = 0; i < n; ++i) {
+			float r = density_rate(wk, i);
+			r = r > 0 ? r : 0;
+			wk->err[i] = r * dt;
+			wk->k[i] = r * inv_dt * wk->inv_d[i];
+		}
+		const double e = mean_of(wk->err, n) / rho0;
+		if ((it >= 1 && e <= sd->def.max_divergence_error) || it >= sd->def.max_divergence_iterations)
+			break;
+		correct(wk, dt, threads);
+		for (long i = 0; i < n; ++i)
+			wk->ksum[i] += wk->k[i];
+		++it;
+	}
+	return it;
+}
+
+/* Constant-density solve: sweeps until mean max(rho* - rho0, 0) / rho0 <= tol. */
+static int density_solve(dfsph_work *wk, const sph_dfsph *sd, const float *rho, float rho0, float dt, int threads,
+                         double *residual)
+{
+	const long n = wk->n;
+	const float inv_dt2 = 1.0f / (dt * dt);
+	int it = 0;
+	for (;;) {
+#pragma omp parallel for num_threads(threads) schedule(static)
+		for (long i = 0; i < n; ++i) {
+			float e = rho[i] + dt * density_rate(wk, i) - rho0;
+			e = e > 0 ? e : 0;
+			wk->err[i] = e;
+			wk->k[i] = e * inv_dt2 * wk->inv_d[i];
+		}
+		*residual = mean_of(wk->err, n) / rho0;
+		if ((it >= 2 && *residual <= sd->def.max_density_error) || it >= sd->def.max_iterations)
+			break;
+		correct(wk, dt, threads);
+		for (long i = 0; i < n; ++i)
+			wk->ksum[i] += wk->k[i];
+		++it;
+	}
+	return it;
+}
+
+/* A scene uses one pressure system: sph_pressure's force on top of the solve
+ * would be counted twice. */
+static bool has_sph_pressure(const eddy_world *w)
+{
+	for (int k = 0; k < w->order_count; ++k)
+		if (w->slots[w->order[k]].vt == &eddy__kind_sph_pressure)
+			return true;
+	return false;
+}
+
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	sph_dfsph *sd = s->data;
+	sph_shared *sh = eddy__sph_find(w, s);
+	if (!sh)
+		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)", s->label);
+	if (has_sph_pressure(w))
+		return eddy__fail(w, EDDY_ERR_ORDER, "%s: replaces sph_pressure; remove one of them from the scene", s->label);
+	if (sd->frame != w->frame) {
+		sd->frame = w->frame;
+		sd->steps = sd->sweeps = sd->div_sweeps = sd->unconverged = 0;
+		sd->residual = 0;
+	}
+	const sph_neighbors *nb = &sh->nb;
+	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
+	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	const float *rho = eddy__col(w, COL_DENSITY);
+	float *p = eddy__col(w, COL_PRESSURE);
+	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
+	const float dt = (float)ctx->dt, rho0 = sh->rho0;
+	if (n == 0 || !(dt > 0))
+		return EDDY_OK;
+
+	dfsph_work wk;
+	wk.n = n;
+	wk.cap = nb->cap;
+	wk.nbr = nb->nbr;
+	wk.count = nb->count;
+	const size_t pairs = (size_t)n * (nb->cap ? nb->cap : 1), un = (size_t)n;
+	float *block = eddy__arena_alloc(&w->arena, (3 * pairs + 11 * un) * sizeof(float));
+	if (!block)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
+	wk.gx = block;
+	wk.gy = wk.gx + pairs;
+	wk.gz = wk.gy + pairs;
+	wk.bx = wk.gz + pairs;
+	wk.by = wk.bx + un;
+	wk.bz = wk.by + un;
+	wk.inv_d = wk.bz + un;
+	wk.vx = wk.inv_d + un;
+	wk.vy = wk.vx + un;
+	wk.vz = wk.vy + un;
+	wk.k = wk.vz + un;
+	wk.ksum = wk.k + un;
+	wk.err = wk.ksum + un;
+
+	gradients(sh, x, y, z, &wk, ctx->threads);
+	memset(wk.ksum, 0, un * sizeof *wk.ksum);
+
+	int div_it = 0;
+	if (sd->def.divergence_solver) {
+		memcpy(wk.vx, vx, un * sizeof *wk.vx);
+		memcpy(wk.vy, vy, un * sizeof *wk.vy);
+		memcpy(wk.vz, vz, un * sizeof *wk.vz);
+		div_it = divergence_solve(&wk, sd, rho0, dt, ctx->threads);
+		/* v* = v_div + dt a */
+		for (long i = 0; i < n; ++i) {
+			wk.vx[i] += dt * ax[i];
+			wk.vy[i] += dt * ay[i];
+			wk.vz[i] += dt * az[i];
+		}
+	} else {
+		for (long i = 0; i < n; ++i) {
+			wk.vx[i] = vx[i] + dt * ax[i];
+			wk.vy[i] = vy[i] + dt * ay[i];
+			wk.vz[i] = vz[i] + dt * az[i];
+		}
+	}
+	double residual = 0;
+	const int it = density_solve(&wk, sd, rho, rho0, dt, ctx->threads, &residual);
+
+	/* a += (v* - (v + dt a)) / dt; p = k rho^2 */
+	const float inv_dt = 1.0f / dt;
+	long bad = -1;
+	for (long i = 0; i < n; ++i) {
+		const float ux = (wk.vx[i] - (vx[i] + dt * ax[i])) * inv_dt, uy = (wk.vy[i] - (vy[i] + dt * ay[i])) * inv_dt,
+		            uz = (wk.vz[i] - (vz[i] + dt * az[i])) * inv_dt;
+		ax[i] += ux;
+		ay[i] += uy;
+		az[i] += uz;
+		p[i] = wk.ksum[i] * rho[i] * rho[i];
+		if (bad < 0 && !(isfinite(ux) && isfinite(uy) && isfinite(uz) && isfinite(p[i])))
+			bad = i;
+	}
+	if (bad >= 0)
+		return eddy__fail(w, EDDY_ERR_NUMERIC,
+		                  "%s: non-finite pressure acceleration at step %lld, particle %ld (density %g kg/m^3, %u neighbours)",
+		                  s->label, (long long)ctx->step, bad, (double)rho[bad], nb->count[bad]);
+
+	sd->steps++;
+	sd->sweeps += it;
+	sd->div_sweeps += div_it;
+	sd->unconverged += it >= sd->def.max_iterations && residual > sd->def.max_density_error;
+	sd->residual = residual > sd->residual ? residual : sd->residual;
+	eddy_world_publish_text(w, "solver", "dfsph");
+	eddy_world_publish(w, "iterations", (double)sd->sweeps / (double)sd->steps);
+	eddy_world_publish(w, "residual", sd->residual);
+	if (sd->def.divergence_solver)
+		eddy_world_publish(w, "divergence_iterations", (double)sd->div_sweeps / (double)sd->steps);
+	eddy_world_publish(w, "unconverged", (double)sd->unconverged);
+	if (!(residual <= DFSPH_FAIL_ERROR))
+		return eddy__fail(w, EDDY_ERR_NUMERIC,
+		                  "%s: did not converge at step %lld: mean density error %.3g after %d iterations "
+		                  "(max_density_error %g); lower the world's cfl or raise max_iterations",
+		                  s->label, (long long)ctx->step, residual, it, (double)sd->def.max_density_error);
+	return EDDY_OK;
+}
+
+static double limit(eddy_world *w, eddy_system *s, const char **reason)
+{
+	const sph_shared *sh = eddy__sph_find(w, s);
+	*reason = "velocity";
+	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	if (!sh || !vx || !vy || !vz)
+		return INFINITY;
+	float v2 = 0;
+	for (size_t i = 0; i < w->n; ++i) {
+		const float q = vx[i] * vx[i] + vy[i] * vy[i] + vz[i] * vz[i];
+		v2 = q > v2 ? q : v2;
+	}
+	return v2 > 0 ? (double)sh->h / sqrt((double)v2) : INFINITY;
+}
+
+const eddy_system_vtable eddy__kind_sph_dfsph = {
+	.name = "sph_dfsph",
+	.step = step,
+	.limit = limit,
+	/* ax ay az are every force's: order hints for them name gravity alone */
+	.default_writes = no_hint_writes,
+};
+
+bool eddy__sph_dfsph_follows(const eddy_world *w, const eddy_system *s)
+{
+	bool after = false;
+	for (int k = 0; k < w->order_count; ++k) {
+		const eddy_system *o = &w->slots[w->order[k]];
+		if (o == s)
+			after = true;
+		else if (after && o->vt == &eddy__kind_sph_dfsph)
+			return true;
+		else if (after && o->vt == &eddy__kind_sph_density)
+			return false; /* the next density system owns what follows */
+	}
+	return false;
+}
+
+eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
+{
+	const char *sys = "sph_dfsph";
+	if (!def)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__check_range(w, sys, "max_density_error", def->max_density_error, 1e-6, 0.1) ||
+	    !eddy__check_range(w, sys, "max_divergence_error", def->max_divergence_error, 1e-6, 1))
+		return EDDY_NULL_SYSTEM;
+	if (def->max_iterations < 2 || def->max_iterations > 10000) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'max_iterations' must be between 2 and 10000 (got %d)", sys,
+		           def->max_iterations);
+		return EDDY_NULL_SYSTEM;
+	}
+	if (def->max_divergence_iterations < 1 || def->max_divergence_iterations > 10000) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'max_divergence_iterations' must be between 1 and 10000 (got %d)", sys,
+		           def->max_divergence_iterations);
+		return EDDY_NULL_SYSTEM;
+	}
+	sph_dfsph *sd = calloc(1, sizeof *sd);
+	if (!sd)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
+	sd->def = *def;
+	sd->frame = -1;
+	return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, dfsph_reads, 10, dfsph_writes, 4);
+}
