@@ -492,11 +492,11 @@ eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_boundary_
  * divergence_iterations and unconverged in the frame stats. */
 typedef struct eddy_sph_dfsph_def {
 	float max_density_error;    /* 1, mean compression max(rho - rho0, 0)/rho0 the
-	                               solve stops at; 1e-6 to 0.1 (0.001-0.01 usual) */
+	                               solve stops at; > 0 and <= 0.1 (0.001-0.01 usual) */
 	int max_iterations;         /* 1, cap on constant-density sweeps per step; 2 to 10000 */
 	bool divergence_solver;     /* also make the velocity divergence-free each step */
 	float max_divergence_error; /* 1, mean max(Drho/Dt, 0) dt / rho0 the divergence
-	                               solve stops at (per step); 1e-6 to 1 */
+	                               solve stops at (per step); > 0 and <= 1 */
 	int max_divergence_iterations; /* 1, cap on divergence sweeps per step; 1 to 10000 */
 } eddy_sph_dfsph_def;
 eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void);

@@ -48,6 +48,11 @@
 
 #include <stdlib.h>
 #include <string.h>
+#include <stdio.h>
+
+#ifndef DFSPH_POLY6
+#define DFSPH_POLY6 1
+#endif
 
 typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
@@ -94,7 +99,10 @@ static void gradients(const sph_shared *sh, const float *x, const float *y, cons
 {
 	const sph_neighbors *nb = &sh->nb;
 	const sph_kernel_consts kc = sh->k;
-	const float m = sh->mass, eps2 = 1e-6f * kc.h2, rho0 = sh->rho0;
+	const float m = sh->mass, rho0 = sh->rho0;
+#if !DFSPH_POLY6
+	const float eps2 = 1e-6f * kc.h2;
+#endif
 	const float dref = m * kc.spiky_grad * kc.h2, dmin = 1e-6f * dref * dref;
 	const long n = wk->n;
 	const size_t cap = wk->cap;
@@ -107,17 +115,21 @@ static void gradients(const sph_shared *sh, const float *x, const float *y, cons
 		float sx = 0, sy = 0, sz = 0, s2 = 0;
 		for (uint32_t q = 0; q < cnt; ++q) {
 			const uint32_t j = list[q];
-			float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
-			const float r2 = rx * rx + ry * ry + rz * rz;
+			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
+#if DFSPH_POLY6
+			const float d2 = kc.h2 - (rx * rx + ry * ry + rz * rz);
+			const float c = d2 > 0 ? m * kc.poly6_grad * d2 * d2 : 0.0f;
+#else
 			float c;
+			const float r2 = rx * rx + ry * ry + rz * rz;
 			if (r2 > eps2) {
 				const float r = sqrtf(r2), hr = kc.h - r;
 				c = m * kc.spiky_grad * hr * hr / r;
 			} else {
-				sph_coincident_dir((size_t)i, j, &rx, &ry, &rz);
-				c = m * kc.spiky_grad * kc.h2;
+				c = 0;
 			}
-			/* spiky_grad < 0: G_ij points from i towards j */
+#endif
+			/* the gradient's factor is < 0: G_ij points from i towards j */
 			gx[q] = c * rx;
 			gy[q] = c * ry;
 			gz[q] = c * rz;
@@ -133,11 +145,16 @@ static void gradients(const sph_shared *sh, const float *x, const float *y, cons
 			const uint32_t b = blist[q];
 			const float rx = xi - nb->bx[b], ry = yi - nb->by[b], rz = zi - nb->bz[b];
 			const float r2 = rx * rx + ry * ry + rz * rz;
+			const float mb = nb->bvol[b] * (nb->brho ? nb->brho[b] : rho0);
+#if DFSPH_POLY6
+			const float d2 = kc.h2 - r2;
+			const float c = d2 > 0 ? mb * kc.poly6_grad * d2 * d2 : 0.0f;
+#else
 			if (!(r2 > eps2))
 				continue; /* on the wall surface: the collider handles it */
 			const float r = sqrtf(r2), hr = kc.h - r;
-			const float mb = nb->bvol[b] * (nb->brho ? nb->brho[b] : rho0);
 			const float c = mb * kc.spiky_grad * hr * hr / r;
+#endif
 			bx += c * rx;
 			by += c * ry;
 			bz += c * rz;
@@ -145,10 +162,9 @@ static void gradients(const sph_shared *sh, const float *x, const float *y, cons
 		wk->bx[i] = bx;
 		wk->by[i] = by;
 		wk->bz[i] = bz;
-		sx += bx;
-		sy += by;
-		sz += bz;
-		const float d = sx * sx + sy * sy + sz * sz + s2;
+		/* (S + 2B) . (S + B) + sum |G|^2, S = sum_j G_ij: the boundary term of
+		 * the acceleration counts twice (pressure mirroring) */
+		const float d = (sx + 2 * bx) * (sx + bx) + (sy + 2 * by) * (sy + by) + (sz + 2 * bz) * (sz + bz) + s2;
 		wk->inv_d[i] = d > dmin ? 1.0f / d : 0.0f;
 	}
 }
@@ -180,7 +196,8 @@ static void correct(dfsph_work *wk, float dt, int threads)
 		const float *gx = wk->gx + o, *gy = wk->gy + o, *gz = wk->gz + o;
 		const float ki = wk->k[i];
 		const uint32_t cnt = wk->count[i];
-		float ax = ki * wk->bx[i], ay = ki * wk->by[i], az = ki * wk->bz[i];
+		const float kb = 2 * ki; /* the boundary particles mirror k_i */
+		float ax = kb * wk->bx[i], ay = kb * wk->by[i], az = kb * wk->bz[i];
 		for (uint32_t q = 0; q < cnt; ++q) {
 			const float c = ki + wk->k[list[q]];
 			ax += c * gx[q];
@@ -191,6 +208,12 @@ static void correct(dfsph_work *wk, float dt, int threads)
 		wk->vy[i] -= dt * ay;
 		wk->vz[i] -= dt * az;
 	}
+}
+
+static float dfsph_omega(void)
+{
+	const char *e = getenv("DFSPH_OMEGA");
+	return e ? (float)atof(e) : 1.0f;
 }
 
 /* Serial sum in row order: the same for any thread count. */
@@ -206,7 +229,7 @@ static double mean_of(const float *e, long n)
 static int divergence_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float dt, int threads)
 {
 	const long n = wk->n;
-	const float inv_dt = 1.0f / dt;
+	const float inv_dt = dfsph_omega() / dt;
 	int it = 0;
 	for (;;) {
 #pragma omp parallel for num_threads(threads) schedule(static)
@@ -232,7 +255,7 @@ static int density_solve(dfsph_work *wk, const sph_dfsph *sd, const float *rho, 
                          double *residual)
 {
 	const long n = wk->n;
-	const float inv_dt2 = 1.0f / (dt * dt);
+	const float inv_dt2 = dfsph_omega() / (dt * dt);
 	int it = 0;
 	for (;;) {
 #pragma omp parallel for num_threads(threads) schedule(static)
@@ -353,6 +376,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		                  "%s: non-finite pressure acceleration at step %lld, particle %ld (density %g kg/m^3, %u neighbours)",
 		                  s->label, (long long)ctx->step, bad, (double)rho[bad], nb->count[bad]);
 
+	if (getenv("DFSPH_DEBUG"))
+		fprintf(stderr, "dfsph step %lld dt %g: %d sweeps, residual %g, div %d\n", (long long)ctx->step, (double)dt, it, residual, div_it);
 	sd->steps++;
 	sd->sweeps += it;
 	sd->div_sweeps += div_it;
@@ -415,8 +440,10 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 	const char *sys = "sph_dfsph";
 	if (!def)
 		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
-	if (!eddy__check_range(w, sys, "max_density_error", def->max_density_error, 1e-6, 0.1) ||
-	    !eddy__check_range(w, sys, "max_divergence_error", def->max_divergence_error, 1e-6, 1))
+	if (!eddy__check_positive(w, sys, "max_density_error", def->max_density_error) ||
+	    !eddy__check_range(w, sys, "max_density_error", def->max_density_error, 0, 0.1) ||
+	    !eddy__check_positive(w, sys, "max_divergence_error", def->max_divergence_error) ||
+	    !eddy__check_range(w, sys, "max_divergence_error", def->max_divergence_error, 0, 1))
 		return EDDY_NULL_SYSTEM;
 	if (def->max_iterations < 2 || def->max_iterations > 10000) {
 		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'max_iterations' must be between 2 and 10000 (got %d)", sys,
