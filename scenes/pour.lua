@@ -35,7 +35,7 @@ if dfsph then
 	-- the pressure solve comes after the other forces, before integrate
 	world:add(eddy.gravity {})
 	world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = eddy.param("alpha", 0.05) })
-	world:add(eddy.sph_dfsph { max_density_error = tolerance })
+	world:add(eddy.sph_dfsph { max_density_error = tolerance, divergence_solver = eddy.param("divergence", true) })
 else
 	world:add(eddy.sph_pressure {})
 	world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.05 })
