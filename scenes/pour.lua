@@ -26,7 +26,7 @@ local dfsph = solver == "dfsph"
 local world = eddy.world {
 	bounds = { {0, 0, 0}, {L, H, L} },
 	gravity = {0, -9.81, 0}, fps = 30, duration = 4.0,
-	cfl = eddy.param("cfl", dfsph and 0.8 or 0.4),
+	cfl = eddy.param("cfl", dfsph and 0.8 or 0.4), dt_max = eddy.param("dt_max", 1 / 120),
 }
 world:add(eddy.emit_nozzle { center = {L / 2, H - 0.04, L / 2}, radius = 0.03, direction = {0, -1, 0},
                              speed = 1.0, spacing = dx, max_particles = count })

@@ -48,11 +48,7 @@
 
 #include <stdlib.h>
 #include <string.h>
-#include <stdio.h>
 
-#ifndef DFSPH_POLY6
-#define DFSPH_POLY6 1
-#endif
 
 typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
@@ -100,10 +96,7 @@ static void gradients(const sph_shared *sh, const float *x, const float *y, cons
 	const sph_neighbors *nb = &sh->nb;
 	const sph_kernel_consts kc = sh->k;
 	const float m = sh->mass, rho0 = sh->rho0;
-#if !DFSPH_POLY6
-	const float eps2 = 1e-6f * kc.h2;
-#endif
-	const float dref = m * kc.spiky_grad * kc.h2, dmin = 1e-6f * dref * dref;
+	const float dref = m * kc.poly6_grad * kc.h2 * kc.h2 * kc.h, dmin = 1e-6f * dref * dref;
 	const long n = wk->n;
 	const size_t cap = wk->cap;
 #pragma omp parallel for num_threads(threads) schedule(static)
@@ -113,22 +106,12 @@ static void gradients(const sph_shared *sh, const float *x, const float *y, cons
 		float *gx = wk->gx + (size_t)i * cap, *gy = wk->gy + (size_t)i * cap, *gz = wk->gz + (size_t)i * cap;
 		const uint32_t cnt = nb->count[i];
 		float sx = 0, sy = 0, sz = 0, s2 = 0;
+#pragma omp simd reduction(+ : sx, sy, sz, s2)
 		for (uint32_t q = 0; q < cnt; ++q) {
 			const uint32_t j = list[q];
 			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
-#if DFSPH_POLY6
 			const float d2 = kc.h2 - (rx * rx + ry * ry + rz * rz);
 			const float c = d2 > 0 ? m * kc.poly6_grad * d2 * d2 : 0.0f;
-#else
-			float c;
-			const float r2 = rx * rx + ry * ry + rz * rz;
-			if (r2 > eps2) {
-				const float r = sqrtf(r2), hr = kc.h - r;
-				c = m * kc.spiky_grad * hr * hr / r;
-			} else {
-				c = 0;
-			}
-#endif
 			/* the gradient's factor is < 0: G_ij points from i towards j */
 			gx[q] = c * rx;
 			gy[q] = c * ry;
@@ -146,15 +129,8 @@ static void gradients(const sph_shared *sh, const float *x, const float *y, cons
 			const float rx = xi - nb->bx[b], ry = yi - nb->by[b], rz = zi - nb->bz[b];
 			const float r2 = rx * rx + ry * ry + rz * rz;
 			const float mb = nb->bvol[b] * (nb->brho ? nb->brho[b] : rho0);
-#if DFSPH_POLY6
 			const float d2 = kc.h2 - r2;
 			const float c = d2 > 0 ? mb * kc.poly6_grad * d2 * d2 : 0.0f;
-#else
-			if (!(r2 > eps2))
-				continue; /* on the wall surface: the collider handles it */
-			const float r = sqrtf(r2), hr = kc.h - r;
-			const float c = mb * kc.spiky_grad * hr * hr / r;
-#endif
 			bx += c * rx;
 			by += c * ry;
 			bz += c * rz;
@@ -178,6 +154,7 @@ static inline float density_rate(const dfsph_work *wk, long i)
 	const float vxi = wk->vx[i], vyi = wk->vy[i], vzi = wk->vz[i];
 	const uint32_t cnt = wk->count[i];
 	float s = vxi * wk->bx[i] + vyi * wk->by[i] + vzi * wk->bz[i];
+#pragma omp simd reduction(+ : s)
 	for (uint32_t q = 0; q < cnt; ++q) {
 		const uint32_t j = list[q];
 		s += (vxi - wk->vx[j]) * gx[q] + (vyi - wk->vy[j]) * gy[q] + (vzi - wk->vz[j]) * gz[q];
@@ -198,6 +175,7 @@ static void correct(dfsph_work *wk, float dt, int threads)
 		const uint32_t cnt = wk->count[i];
 		const float kb = 2 * ki; /* the boundary particles mirror k_i */
 		float ax = kb * wk->bx[i], ay = kb * wk->by[i], az = kb * wk->bz[i];
+#pragma omp simd reduction(+ : ax, ay, az)
 		for (uint32_t q = 0; q < cnt; ++q) {
 			const float c = ki + wk->k[list[q]];
 			ax += c * gx[q];
@@ -208,12 +186,6 @@ static void correct(dfsph_work *wk, float dt, int threads)
 		wk->vy[i] -= dt * ay;
 		wk->vz[i] -= dt * az;
 	}
-}
-
-static float dfsph_omega(void)
-{
-	const char *e = getenv("DFSPH_OMEGA");
-	return e ? (float)atof(e) : 1.0f;
 }
 
 /* Serial sum in row order: the same for any thread count. */
@@ -229,7 +201,7 @@ static double mean_of(const float *e, long n)
 static int divergence_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float dt, int threads)
 {
 	const long n = wk->n;
-	const float inv_dt = dfsph_omega() / dt;
+	const float inv_dt = 1.0f / dt;
 	int it = 0;
 	for (;;) {
 #pragma omp parallel for num_threads(threads) schedule(static)
@@ -255,7 +227,7 @@ static int density_solve(dfsph_work *wk, const sph_dfsph *sd, const float *rho, 
                          double *residual)
 {
 	const long n = wk->n;
-	const float inv_dt2 = dfsph_omega() / (dt * dt);
+	const float inv_dt2 = 1.0f / (dt * dt);
 	int it = 0;
 	for (;;) {
 #pragma omp parallel for num_threads(threads) schedule(static)
@@ -376,8 +348,6 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		                  "%s: non-finite pressure acceleration at step %lld, particle %ld (density %g kg/m^3, %u neighbours)",
 		                  s->label, (long long)ctx->step, bad, (double)rho[bad], nb->count[bad]);
 
-	if (getenv("DFSPH_DEBUG"))
-		fprintf(stderr, "dfsph step %lld dt %g: %d sweeps, residual %g, div %d\n", (long long)ctx->step, (double)dt, it, residual, div_it);
 	sd->steps++;
 	sd->sweeps += it;
 	sd->div_sweeps += div_it;
