@@ -53,6 +53,7 @@
 typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
 	/* statistics of the current frame */
+	float ratio_h, ratio_m, ratio; /* spiky mass / poly6 mass, for this h and mass */
 	int frame;
 	int64_t steps, sweeps, div_sweeps, unconverged;
 	double residual;
@@ -87,15 +88,37 @@ typedef struct dfsph_work {
 	float *vx, *vy, *vz;   /* v* */
 	float *k, *ksum;       /* this sweep's k_i, and the sum over sweeps */
 	float *err;            /* per particle: the error the sweep measured */
+	float *hx, *hy, *hz;   /* the walls' hydrostatic push, m/s^2 */
+	float *rho;            /* the spiky-kernel density */
 } dfsph_work;
 
+/* m' / m: the mass that makes the spiky kernel sum to rho0 on the lattice
+ * sph_density calibrated its poly6 mass m on. The lattice spacing is found
+ * back from m = rho0 / sum_lattice W_poly6 (the sum falls as the spacing
+ * grows). */
+static float spiky_ratio(const sph_shared *sh)
+{
+	const double target = sh->rho0 / sh->mass, h = sh->h;
+	double lo = h / 5.01, hi = h;
+	for (int it = 0; it < 60; ++it) {
+		const double mid = 0.5 * (lo + hi);
+		if (eddy_sph_lattice_sum(EDDY_SPH_POLY6, mid, h) > target)
+			lo = mid;
+		else
+			hi = mid;
+	}
+	const double sp = 0.5 * (lo + hi);
+	return (float)(eddy_sph_lattice_sum(EDDY_SPH_POLY6, sp, h) / eddy_sph_lattice_sum(EDDY_SPH_SPIKY, sp, h));
+}
+
 /* G_ij and B_i from the neighbour lists; D_i from them. */
-static void gradients(const sph_shared *sh, const float *x, const float *y, const float *z, dfsph_work *wk,
-                      int threads)
+static void gradients(const sph_shared *sh, float ratio, const float *x, const float *y, const float *z,
+                      eddy_vec3 grav, dfsph_work *wk, int threads)
 {
 	const sph_neighbors *nb = &sh->nb;
 	const sph_kernel_consts kc = sh->k;
-	const float m = sh->mass, rho0 = sh->rho0;
+	const float m = sh->mass * ratio, rho0 = sh->rho0, eps2 = 1e-6f * kc.h2;
+	const float wnorm = (float)(15.0 / (M_PI * (double)kc.h2 * kc.h2 * kc.h2)), self = kc.h * kc.h2;
 	const float dref = m * kc.poly6_grad * kc.h2 * kc.h2 * kc.h, dmin = 1e-6f * dref * dref;
 	const long n = wk->n;
 	const size_t cap = wk->cap;
@@ -105,13 +128,15 @@ static void gradients(const sph_shared *sh, const float *x, const float *y, cons
 		const uint32_t *list = nb->nbr + (size_t)i * cap;
 		float *gx = wk->gx + (size_t)i * cap, *gy = wk->gy + (size_t)i * cap, *gz = wk->gz + (size_t)i * cap;
 		const uint32_t cnt = nb->count[i];
-		float sx = 0, sy = 0, sz = 0, s2 = 0;
-#pragma omp simd reduction(+ : sx, sy, sz, s2)
+		float sx = 0, sy = 0, sz = 0, s2 = 0, ws = 0;
+#pragma omp simd reduction(+ : sx, sy, sz, s2, ws)
 		for (uint32_t q = 0; q < cnt; ++q) {
 			const uint32_t j = list[q];
 			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
-			const float d2 = kc.h2 - (rx * rx + ry * ry + rz * rz);
-			const float c = d2 > 0 ? m * kc.poly6_grad * d2 * d2 : 0.0f;
+			const float r2 = rx * rx + ry * ry + rz * rz;
+			const float r = sqrtf(r2), hr = kc.h - r;
+			const float c = r2 > eps2 && hr > 0 ? m * kc.spiky_grad * hr * hr / r : 0.0f;
+			ws += hr > 0 ? hr * hr * hr : 0.0f;
 			/* the gradient's factor is < 0: G_ij points from i towards j */
 			gx[q] = c * rx;
 			gy[q] = c * ry;
@@ -123,18 +148,30 @@ static void gradients(const sph_shared *sh, const float *x, const float *y, cons
 		}
 		const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
 		const uint32_t bcnt = nb->bcount[i];
-		float bx = 0, by = 0, bz = 0;
+		float bx = 0, by = 0, bz = 0, hx = 0, hy = 0, hz = 0, wb = 0;
 		for (uint32_t q = 0; q < bcnt; ++q) {
 			const uint32_t b = blist[q];
 			const float rx = xi - nb->bx[b], ry = yi - nb->by[b], rz = zi - nb->bz[b];
 			const float r2 = rx * rx + ry * ry + rz * rz;
-			const float mb = nb->bvol[b] * (nb->brho ? nb->brho[b] : rho0);
-			const float d2 = kc.h2 - r2;
-			const float c = d2 > 0 ? mb * kc.poly6_grad * d2 * d2 : 0.0f;
+			const float mb = ratio * nb->bvol[b] * (nb->brho ? nb->brho[b] : rho0);
+			const float r = sqrtf(r2), hr = kc.h - r;
+			const float c = r2 > eps2 && hr > 0 ? mb * kc.spiky_grad * hr * hr / r : 0.0f;
+			wb += hr > 0 ? mb * hr * hr * hr : 0.0f;
 			bx += c * rx;
 			by += c * ry;
 			bz += c * rz;
+			/* g . (x_b - x_i) */
+			const float gh = -(grav.x * rx + grav.y * ry + grav.z * rz) * c;
+			hx += gh * rx;
+			hy += gh * ry;
+			hz += gh * rz;
 		}
+		const float rs = wnorm * (m * (self + ws) + wb);
+		wk->rho[i] = rs;
+		const float ir = 1.0f / rs;
+		wk->hx[i] = -hx * ir;
+		wk->hy[i] = -hy * ir;
+		wk->hz[i] = -hz * ir;
 		wk->bx[i] = bx;
 		wk->by[i] = by;
 		wk->bz[i] = bz;
@@ -288,7 +325,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	wk.nbr = nb->nbr;
 	wk.count = nb->count;
 	const size_t pairs = (size_t)n * (nb->cap ? nb->cap : 1), un = (size_t)n;
-	float *block = eddy__arena_alloc(&w->arena, (3 * pairs + 11 * un) * sizeof(float));
+	float *block = eddy__arena_alloc(&w->arena, (3 * pairs + 15 * un) * sizeof(float));
 	if (!block)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
 	wk.gx = block;
@@ -304,8 +341,17 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	wk.k = wk.vz + un;
 	wk.ksum = wk.k + un;
 	wk.err = wk.ksum + un;
+	wk.hx = wk.err + un;
+	wk.hy = wk.hx + un;
+	wk.hz = wk.hy + un;
+	wk.rho = wk.hz + un;
+	if (sd->ratio_h != sh->h || sd->ratio_m != sh->mass) {
+		sd->ratio = spiky_ratio(sh);
+		sd->ratio_h = sh->h;
+		sd->ratio_m = sh->mass;
+	}
 
-	gradients(sh, x, y, z, &wk, ctx->threads);
+	gradients(sh, sd->ratio, x, y, z, w->def.gravity, &wk, ctx->threads);
 	memset(wk.ksum, 0, un * sizeof *wk.ksum);
 
 	int div_it = 0;
@@ -316,19 +362,19 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		div_it = divergence_solve(&wk, sd, rho0, dt, ctx->threads);
 		/* v* = v_div + dt a */
 		for (long i = 0; i < n; ++i) {
-			wk.vx[i] += dt * ax[i];
-			wk.vy[i] += dt * ay[i];
-			wk.vz[i] += dt * az[i];
+			wk.vx[i] += dt * (ax[i] + wk.hx[i]);
+			wk.vy[i] += dt * (ay[i] + wk.hy[i]);
+			wk.vz[i] += dt * (az[i] + wk.hz[i]);
 		}
 	} else {
 		for (long i = 0; i < n; ++i) {
-			wk.vx[i] = vx[i] + dt * ax[i];
-			wk.vy[i] = vy[i] + dt * ay[i];
-			wk.vz[i] = vz[i] + dt * az[i];
+			wk.vx[i] = vx[i] + dt * (ax[i] + wk.hx[i]);
+			wk.vy[i] = vy[i] + dt * (ay[i] + wk.hy[i]);
+			wk.vz[i] = vz[i] + dt * (az[i] + wk.hz[i]);
 		}
 	}
 	double residual = 0;
-	const int it = density_solve(&wk, sd, rho, rho0, dt, ctx->threads, &residual);
+	const int it = density_solve(&wk, sd, wk.rho, rho0, dt, ctx->threads, &residual);
 
 	/* a += (v* - (v + dt a)) / dt; p = k rho^2 */
 	const float inv_dt = 1.0f / dt;
