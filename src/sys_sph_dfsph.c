@@ -54,6 +54,7 @@ typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
 	/* statistics of the current frame */
 	float ratio_h, ratio_m, ratio; /* spiky mass / poly6 mass, for this h and mass */
+	float moment;                  /* the gradient's lattice moment (1 for an exact gradient) */
 	int frame;
 	int64_t steps, sweeps, div_sweeps, unconverged;
 	double residual;
@@ -62,6 +63,13 @@ typedef struct sph_dfsph {
 static const int dfsph_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, COL_AX, COL_AY, COL_AZ};
 static const int dfsph_writes[] = {COL_PRESSURE, COL_AX, COL_AY, COL_AZ};
 static const int no_hint_writes[] = {-1};
+
+/* dt <= DFSPH_GRAVITY_LIMIT sqrt(h / |g|) (times the CFL number): gravity
+ * compresses the fluid by g dt^2 each step, which the first-order prediction
+ * of the solve must absorb; a tank at rest rings up from dt = 0.19 sqrt(h / g)
+ * on (h = 2 cm, dt 8.5 ms) and stays quiet below it. Transient forces
+ * (viscosity, impacts) do not need it: the velocity limit covers them. */
+#define DFSPH_GRAVITY_LIMIT 0.18
 
 /* above this final mean density error a step fails instead of going on */
 #define DFSPH_FAIL_ERROR 0.05
@@ -95,8 +103,11 @@ typedef struct dfsph_work {
 /* m' / m: the mass that makes the spiky kernel sum to rho0 on the lattice
  * sph_density calibrated its poly6 mass m on. The lattice spacing is found
  * back from m = rho0 / sum_lattice W_poly6 (the sum falls as the spacing
- * grows). */
-static float spiky_ratio(const sph_shared *sh)
+ * grows). *moment gets the gradient's lattice moment
+ *   M = (m' / rho0) sum_j r_j |W'(r_j)| / 3,
+ * so the force -sum_j m' (p_i + p_j) / rho^2 grad W_ij of a linear pressure
+ * field p is M grad p / rho: the solve's p / M is the pressure in Pa. */
+static float spiky_ratio(const sph_shared *sh, float *moment)
 {
 	const double target = sh->rho0 / sh->mass, h = sh->h;
 	double lo = h / 5.01, hi = h;
@@ -107,8 +118,18 @@ static float spiky_ratio(const sph_shared *sh)
 		else
 			hi = mid;
 	}
-	const double sp = 0.5 * (lo + hi);
-	return (float)(eddy_sph_lattice_sum(EDDY_SPH_POLY6, sp, h) / eddy_sph_lattice_sum(EDDY_SPH_SPIKY, sp, h));
+	const double sp = 0.5 * (lo + hi), ws = eddy_sph_lattice_sum(EDDY_SPH_SPIKY, sp, h);
+	const int L = (int)ceil(h / sp);
+	double mom = 0;
+	for (int i = -L; i <= L; ++i)
+		for (int j = -L; j <= L; ++j)
+			for (int l = -L; l <= L; ++l) {
+				const double r = sp * sqrt((double)(i * i + j * j + l * l));
+				if (r > 0)
+					mom += r * fabs(eddy_sph_kernel_derivative(EDDY_SPH_SPIKY, r, h));
+			}
+	*moment = (float)(mom / (3 * ws));
+	return (float)(eddy_sph_lattice_sum(EDDY_SPH_POLY6, sp, h) / ws);
 }
 
 /* G_ij and B_i from the neighbour lists; D_i from them. */
@@ -153,7 +174,7 @@ static void gradients(const sph_shared *sh, float ratio, const float *x, const f
 			const uint32_t b = blist[q];
 			const float rx = xi - nb->bx[b], ry = yi - nb->by[b], rz = zi - nb->bz[b];
 			const float r2 = rx * rx + ry * ry + rz * rz;
-			const float mb = ratio * nb->bvol[b] * (nb->brho ? nb->brho[b] : rho0);
+			const float mb = ratio * nb->bvol[b] * rho0; /* Akinci: the wall at rest density */
 			const float r = sqrtf(r2), hr = kc.h - r;
 			const float c = r2 > eps2 && hr > 0 ? mb * kc.spiky_grad * hr * hr / r : 0.0f;
 			wb += hr > 0 ? mb * hr * hr * hr : 0.0f;
@@ -346,7 +367,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	wk.hz = wk.hy + un;
 	wk.rho = wk.hz + un;
 	if (sd->ratio_h != sh->h || sd->ratio_m != sh->mass) {
-		sd->ratio = spiky_ratio(sh);
+		sd->ratio = spiky_ratio(sh, &sd->moment);
 		sd->ratio_h = sh->h;
 		sd->ratio_m = sh->mass;
 	}
@@ -373,6 +394,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			wk.vz[i] = vz[i] + dt * (az[i] + wk.hz[i]);
 		}
 	}
+
 	double residual = 0;
 	const int it = density_solve(&wk, sd, wk.rho, rho0, dt, ctx->threads, &residual);
 
@@ -385,7 +407,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		ax[i] += ux;
 		ay[i] += uy;
 		az[i] += uz;
-		p[i] = wk.ksum[i] * rho[i] * rho[i];
+		p[i] = sd->moment * wk.ksum[i] * wk.rho[i] * wk.rho[i];
 		if (bad < 0 && !(isfinite(ux) && isfinite(uy) && isfinite(uz) && isfinite(p[i])))
 			bad = i;
 	}
@@ -425,7 +447,13 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 		const float q = vx[i] * vx[i] + vy[i] * vy[i] + vz[i] * vz[i];
 		v2 = q > v2 ? q : v2;
 	}
-	return v2 > 0 ? (double)sh->h / sqrt((double)v2) : INFINITY;
+	const double lv = v2 > 0 ? (double)sh->h / sqrt((double)v2) : INFINITY;
+	const eddy_vec3 g = w->def.gravity;
+	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
+	const double la = g1 > 0 ? DFSPH_GRAVITY_LIMIT * sqrt((double)sh->h / g1) : INFINITY;
+	if (la < lv)
+		*reason = "gravity";
+	return la < lv ? la : lv;
 }
 
 const eddy_system_vtable eddy__kind_sph_dfsph = {

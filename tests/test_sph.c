@@ -979,12 +979,14 @@ static double dfsph_stat(const eddy_frame_stats *st, const char *name)
 
 /* Hydrostatic tank with the implicit solve: the 10^3 block of the WCSPH test
  * settles for 0.5 s, then 0.2 s are averaged. The solve stops each step at a
- * mean predicted compression of max_density_error; what it leaves is
- * corrected the next step, so the measured mean compression stays within
- * twice that (the prediction is first order in dt). The pressure is
- * p = rho0 g d with no stiffness in it: the layer means away from walls and
- * surface must match to 15% of rho0 g H (the lattice rearranges as it settles
- * and the per-step pressure carries that motion). */
+ * mean predicted compression (of its spiky-kernel density) of
+ * max_density_error; what it leaves is corrected the next step, and the
+ * poly6 density of the 'density' column differs from the spiky one by a
+ * fraction of that, so the column's mean compression stays within twice the
+ * tolerance. There is no stiffness in the pressure: the layer means away
+ * from walls and surface must give rho0 g d to 8% of rho0 g H (measured 3%;
+ * the WCSPH test allows 20%), and the fluid must be at rest (rms speed under
+ * 5% of sqrt(g H); WCSPH: 10%). */
 static void dfsph_hydrostatic_tank(void)
 {
 	sph_setup s = default_setup();
@@ -1037,9 +1039,9 @@ static void dfsph_hydrostatic_tank(void)
 	       "density_err_avg %.4f, %.1f iterations per step, rms speed %.3f m/s = %.3f sqrt(gH)\n",
 	       err, used, comp, (double)df.max_density_error, err_avg, iters, vrms, vrms / sqrt(g * H));
 	CHECK(used >= 4);
-	CHECK(err < 0.15);
+	CHECK(err < 0.08);
 	CHECK(comp <= 2 * df.max_density_error);
-	CHECK(vrms < 0.1 * sqrt(g * H));
+	CHECK(vrms < 0.05 * sqrt(g * H));
 	eddy_destroy_world(w);
 }
 
@@ -1153,7 +1155,7 @@ static void dfsph_deterministic_across_threads(void)
 		s.cfl = 0.8;
 		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
 		eddy_world *w = dfsph_world(&s, &df, 100);
-		for (int f = 0; f < 5; ++f)
+		for (int f = 0; f < 30; ++f)
 			CHECK(eddy_world_step_frame(w) == EDDY_OK);
 		hash[t] = eddy_world_state_hash(w);
 		eddy_destroy_world(w);
