@@ -486,8 +486,9 @@ eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_boundary_
  * in place of sph_pressure. Put it after the other forces (gravity,
  * sph_viscosity, sph_surface_tension) and before integrate: it predicts the
  * velocities those forces give, solves for the pressure that keeps the density
- * at rest density, and adds the pressure acceleration. The time step is then
- * limited by the flow speed (h / max|v| times the CFL number), not by
+ * at rest density, adds the pressure acceleration and writes the pressure (Pa)
+ * to the 'pressure' column. The time step is then limited by the flow speed
+ * (h / max|v|, and 0.18 sqrt(h / |g|), times the CFL number; CFL <= 1), not by
  * sph_density's speed of sound. Publishes solver, iterations, residual,
  * divergence_iterations and unconverged in the frame stats. */
 typedef struct eddy_sph_dfsph_def {

@@ -6,28 +6,49 @@
  * Reads: x y z vx vy vz density ax ay az. Writes: pressure ax ay az
  * (accumulated). Runs after the non-pressure forces (gravity, sph_viscosity,
  * sph_surface_tension) and before integrate, whose v += dt a then gives the
- * corrected velocity.
+ * corrected velocity. It uses sph_density's neighbour lists.
  *
- * With G_ij = m grad W(x_i - x_j) (the spiky kernel's gradient, as in
- * sph_pressure), B_i = sum_b V_b rho_b grad W(x_i - x_b) over the boundary
- * particles (Akinci et al. 2012; the walls do not move) and the pressure
- * written as k_i = p_i / rho_i^2:
+ * Kernel: the solve needs the gradient of the density it controls, so it
+ * keeps its own density with the spiky kernel,
+ *   rho_i = m' (W(0) + sum_j W(r_ij)) + sum_b m_b W(r_ib),  G_ij = m' grad W(x_i - x_j),
+ * m' = rho0 / sum_lattice W_spiky on the lattice sph_density calibrated on
+ * (so a block at rest starts at rho0), and boundary particles (Akinci et al.
+ * 2012) of mass m_b = (m'/m) V_b rho0. The spiky gradient stays repulsive as
+ * particles close in; with poly6 (whose gradient vanishes at r = 0) a tank
+ * at rest kept churning at 0.1 m/s as particles clustered. The 'density'
+ * column (poly6, sph_density) stays what the stats report; the two agree to
+ * a fraction of the tolerance where the fluid is compressed.
+ * With B_i = sum_b m_b grad W(x_i - x_b) and the pressure written as
+ * k_i = p_i / rho_i^2:
  *   Drho_i/Dt = sum_j (v_i - v_j) . G_ij + v_i . B_i
- *   a_i^p     = -sum_j (k_i + k_j) G_ij - k_i B_i
+ *   a_i^p     = -sum_j (k_i + k_j) G_ij - 2 k_i B_i - h_i
+ * The boundary particles mirror the particle's pressure (p_b = p_i, so the
+ * wall term counts twice: with a single k_i the wall could not hold a
+ * particle whose neighbourhood is full, as sum_j G_ij + B_i ~ 0 there), plus
+ * Adami et al.'s (2012) hydrostatic part p_b - p_i = rho_i g . (x_b - x_i):
+ *   h_i = (1/rho_i) sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b),
+ * known before the solve and added to the forces; without it the fluid
+ * beside the walls lacks support and circulates.
  * A change k_i alone moves Drho_i/Dt by -dt k_i D_i, with
- *   D_i = |sum_j G_ij + B_i|^2 + sum_j |G_ij|^2        (the paper's rho_i/alpha_i)
- * so each Jacobi-style sweep sets, from the current predicted velocities v*,
+ *   D_i = (S_i + 2 B_i) . (S_i + B_i) + sum_j |G_ij|^2,   S_i = sum_j G_ij
+ * (the paper's rho_i / alpha_i with the mirrored wall), so each Jacobi sweep
+ * sets, from the current predicted velocities v*,
  *   constant density:  k_i = max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
  *   divergence-free:   k_i = max(Drho_i/Dt, 0) / (dt D_i)
  * and moves v*_i by dt a_i^p(k). The divergence solver runs first, on the
  * velocity at the start of the step (positions are new, velocities not yet
- * consistent with them); then v* = v + dt a (the forces so far) and the
- * constant-density solver runs until the mean predicted compression
- * max(rho*_i - rho0, 0) / rho0 is at most max_density_error (at least two
- * sweeps, as in the paper). Only compression is corrected: the free surface
- * has too few neighbours to reach rho0 and must not be pulled together.
- * The result, a^p = (v* - (v + dt a)) / dt, is added to ax ay az, and the
- * pressure column gets p_i = k_i rho_i^2 with k_i summed over both solvers.
+ * consistent with them); then v* = v + dt (a + h) and the constant-density
+ * solver runs until the mean predicted compression max(rho*_i - rho0, 0) / rho0
+ * is at most max_density_error (at least two sweeps, as in the paper). Only
+ * compression is corrected: the free surface has too few neighbours to reach
+ * rho0 and must not be pulled together. (Tried and dropped: the paper's warm
+ * start from last step's k, which with sweeps that only add pressure pushed
+ * the free surface apart (mean density error 2% -> 4.5% in the pour), and a
+ * projected Jacobi that could take pressure back, which diverged.)
+ * The result, a^p = (v* - (v + dt a)) / dt, is added to ax ay az. The pressure
+ * column gets p_i = M k_i rho_i^2, k_i summed over both solvers, M the
+ * gradient's lattice moment (spiky_ratio): the force of a linear field is
+ * M grad p / rho, so this is the pressure in Pa (0.77 at h = 2 spacings).
  * Sums over neighbours run in list order and per particle, and the mean
  * errors are summed serially in row order, so the result does not depend on
  * the thread count.
@@ -37,24 +58,24 @@
  * divergence_iterations (mean), unconverged (steps that hit max_iterations).
  * A step whose final mean density error is above 5% fails: the time step is
  * far too long for the solver.
- * Time-step limit (velocity): dt <= h / max|v|; the world multiplies it by
- * its CFL number (0.4 keeps a particle within 0.4 h per step). With it in the
- * pipeline, sph_density's acoustic limit does not apply.
+ * Time-step limits (the world multiplies them by its CFL number): velocity,
+ * dt <= h / max|v|; gravity, dt <= 0.18 sqrt(h / |g|) (see below). With it in
+ * the pipeline, sph_density's acoustic limit does not apply.
  * Source: Bender & Koschier, "Divergence-free smoothed particle hydrodynamics",
  * SCA 2015 (eqs. 8-9, 12, Alg. 2-3); Akinci et al., "Versatile rigid-fluid
- * coupling for incompressible SPH", SIGGRAPH 2012. */
+ * coupling for incompressible SPH", SIGGRAPH 2012; Adami, Hu & Adams, "A
+ * generalized wall boundary condition for SPH", JCP 2012 (eq. 27). */
 #include "sph.h"
 #include "systems.h"
 
 #include <stdlib.h>
 #include <string.h>
 
-
 typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
-	/* statistics of the current frame */
-	float ratio_h, ratio_m, ratio; /* spiky mass / poly6 mass, for this h and mass */
+	float ratio_h, ratio_m, ratio; /* m' / m, for this h and m */
 	float moment;                  /* the gradient's lattice moment (1 for an exact gradient) */
+	/* statistics of the current frame */
 	int frame;
 	int64_t steps, sweeps, div_sweeps, unconverged;
 	double residual;
