@@ -106,19 +106,30 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	return d;
 }
 
-/* The solver's per-step scratch, all in the world's arena. */
+/* The solver's per-step scratch, all in the world's arena. Four floats per
+ * entry, so a neighbour's velocity and k come in one load (the sweeps are
+ * gathers over the neighbour lists). */
+typedef struct dfsph_f4 {
+	float x, y, z, w;
+} dfsph_f4;
+
+typedef struct dfsph_f3 {
+	float x, y, z;
+} dfsph_f3;
+
 typedef struct dfsph_work {
 	long n;
-	size_t cap;
-	const uint32_t *nbr, *count;
-	float *gx, *gy, *gz;   /* G_ij, n * cap */
-	float *bx, *by, *bz;   /* B_i */
-	float *inv_d;          /* 1 / D_i, 0 where D_i is negligible */
-	float *vx, *vy, *vz;   /* v* */
-	float *k, *ksum;       /* this sweep's k_i, and the sum over sweeps */
-	float *err;            /* per particle: the error the sweep measured */
-	float *hx, *hy, *hz;   /* the walls' hydrostatic push, m/s^2 */
-	float *rho;            /* the spiky-kernel density */
+	const uint32_t *count;
+	size_t *off;   /* particle i's pairs are off[i] .. off[i] + count[i]: packed, so
+	                * a sweep streams through them (sph_density's lists have a
+	                * fixed stride) */
+	uint32_t *nbr; /* the neighbour of each pair */
+	dfsph_f3 *g;   /* G_ij of each pair */
+	dfsph_f4 *b;   /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
+	dfsph_f4 *v;   /* v*_i, and w = this sweep's k_i */
+	dfsph_f4 *h;   /* the walls' hydrostatic push h_i (m/s^2), and w = the spiky density */
+	float *ksum;   /* the sum of k_i over the sweeps */
+	float *err;    /* per particle: the error the sweep measured */
 } dfsph_work;
 
 /* m' / m: the mass that makes the spiky kernel sum to rho0 on the lattice
@@ -163,12 +174,13 @@ static void gradients(const sph_shared *sh, float ratio, const float *x, const f
 	const float wnorm = (float)(15.0 / (M_PI * (double)kc.h2 * kc.h2 * kc.h2)), self = kc.h * kc.h2;
 	const float dref = m * kc.poly6_grad * kc.h2 * kc.h2 * kc.h, dmin = 1e-6f * dref * dref;
 	const long n = wk->n;
-	const size_t cap = wk->cap;
+	const size_t cap = nb->cap;
 #pragma omp parallel for num_threads(threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		const float xi = x[i], yi = y[i], zi = z[i];
 		const uint32_t *list = nb->nbr + (size_t)i * cap;
-		float *gx = wk->gx + (size_t)i * cap, *gy = wk->gy + (size_t)i * cap, *gz = wk->gz + (size_t)i * cap;
+		uint32_t *packed = wk->nbr + wk->off[i];
+		dfsph_f3 *g = wk->g + wk->off[i];
 		const uint32_t cnt = nb->count[i];
 		float sx = 0, sy = 0, sz = 0, s2 = 0, ws = 0;
 #pragma omp simd reduction(+ : sx, sy, sz, s2, ws)
@@ -180,13 +192,15 @@ static void gradients(const sph_shared *sh, float ratio, const float *x, const f
 			const float c = r2 > eps2 && hr > 0 ? m * kc.spiky_grad * hr * hr / r : 0.0f;
 			ws += hr > 0 ? hr * hr * hr : 0.0f;
 			/* the gradient's factor is < 0: G_ij points from i towards j */
-			gx[q] = c * rx;
-			gy[q] = c * ry;
-			gz[q] = c * rz;
-			sx += gx[q];
-			sy += gy[q];
-			sz += gz[q];
-			s2 += gx[q] * gx[q] + gy[q] * gy[q] + gz[q] * gz[q];
+			const float gx = c * rx, gy = c * ry, gz = c * rz;
+			packed[q] = j;
+			g[q].x = gx;
+			g[q].y = gy;
+			g[q].z = gz;
+			sx += gx;
+			sy += gy;
+			sz += gz;
+			s2 += gx * gx + gy * gy + gz * gz;
 		}
 		const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
 		const uint32_t bcnt = nb->bcount[i];
@@ -208,62 +222,59 @@ static void gradients(const sph_shared *sh, float ratio, const float *x, const f
 			hy += gh * ry;
 			hz += gh * rz;
 		}
-		const float rs = wnorm * (m * (self + ws) + wb);
-		wk->rho[i] = rs;
-		const float ir = 1.0f / rs;
-		wk->hx[i] = -hx * ir;
-		wk->hy[i] = -hy * ir;
-		wk->hz[i] = -hz * ir;
-		wk->bx[i] = bx;
-		wk->by[i] = by;
-		wk->bz[i] = bz;
+		const float rs = wnorm * (m * (self + ws) + wb), ir = 1.0f / rs;
+		wk->h[i] = (dfsph_f4){-hx * ir, -hy * ir, -hz * ir, rs};
 		/* (S + 2B) . (S + B) + sum |G|^2, S = sum_j G_ij: the boundary term of
 		 * the acceleration counts twice (pressure mirroring) */
 		const float d = (sx + 2 * bx) * (sx + bx) + (sy + 2 * by) * (sy + by) + (sz + 2 * bz) * (sz + bz) + s2;
-		wk->inv_d[i] = d > dmin ? 1.0f / d : 0.0f;
+		wk->b[i] = (dfsph_f4){bx, by, bz, d > dmin ? 1.0f / d : 0.0f};
 	}
 }
 
 /* Drho_i/Dt from the predicted velocities. */
 static inline float density_rate(const dfsph_work *wk, long i)
 {
-	const size_t o = (size_t)i * wk->cap;
+	const size_t o = wk->off[i];
 	const uint32_t *list = wk->nbr + o;
-	const float *gx = wk->gx + o, *gy = wk->gy + o, *gz = wk->gz + o;
-	const float vxi = wk->vx[i], vyi = wk->vy[i], vzi = wk->vz[i];
+	const dfsph_f3 *g = wk->g + o;
+	const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
 	const uint32_t cnt = wk->count[i];
-	float s = vxi * wk->bx[i] + vyi * wk->by[i] + vzi * wk->bz[i];
-#pragma omp simd reduction(+ : s)
+	/* three partial sums: independent chains of adds */
+	float sx = 0, sy = 0, sz = 0;
 	for (uint32_t q = 0; q < cnt; ++q) {
-		const uint32_t j = list[q];
-		s += (vxi - wk->vx[j]) * gx[q] + (vyi - wk->vy[j]) * gy[q] + (vzi - wk->vz[j]) * gz[q];
+		const dfsph_f4 vj = wk->v[list[q]];
+		sx += (vi.x - vj.x) * g[q].x;
+		sy += (vi.y - vj.y) * g[q].y;
+		sz += (vi.z - vj.z) * g[q].z;
 	}
-	return s;
+	return (sx + sy + sz) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z);
 }
 
-/* v*_i -= dt sum_j (k_i + k_j) G_ij + dt k_i B_i */
+/* v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i); k in v[].w. Writes only
+ * its own particle's x y z (others read w), and adds k_i to its sum. */
 static void correct(dfsph_work *wk, float dt, int threads)
 {
 	const long n = wk->n;
 #pragma omp parallel for num_threads(threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
-		const size_t o = (size_t)i * wk->cap;
+		const size_t o = wk->off[i];
 		const uint32_t *list = wk->nbr + o;
-		const float *gx = wk->gx + o, *gy = wk->gy + o, *gz = wk->gz + o;
-		const float ki = wk->k[i];
+		const dfsph_f3 *g = wk->g + o;
+		const dfsph_f4 bi = wk->b[i];
+		const float ki = wk->v[i].w;
 		const uint32_t cnt = wk->count[i];
 		const float kb = 2 * ki; /* the boundary particles mirror k_i */
-		float ax = kb * wk->bx[i], ay = kb * wk->by[i], az = kb * wk->bz[i];
-#pragma omp simd reduction(+ : ax, ay, az)
+		float ax = kb * bi.x, ay = kb * bi.y, az = kb * bi.z;
 		for (uint32_t q = 0; q < cnt; ++q) {
-			const float c = ki + wk->k[list[q]];
-			ax += c * gx[q];
-			ay += c * gy[q];
-			az += c * gz[q];
+			const float c = ki + wk->v[list[q]].w;
+			ax += c * g[q].x;
+			ay += c * g[q].y;
+			az += c * g[q].z;
 		}
-		wk->vx[i] -= dt * ax;
-		wk->vy[i] -= dt * ay;
-		wk->vz[i] -= dt * az;
+		wk->v[i].x -= dt * ax;
+		wk->v[i].y -= dt * ay;
+		wk->v[i].z -= dt * az;
+		wk->ksum[i] += ki;
 	}
 }
 
@@ -288,22 +299,19 @@ static int divergence_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, flo
 			float r = density_rate(wk, i);
 			r = r > 0 ? r : 0;
 			wk->err[i] = r * dt;
-			wk->k[i] = r * inv_dt * wk->inv_d[i];
+			wk->v[i].w = r * inv_dt * wk->b[i].w;
 		}
 		const double e = mean_of(wk->err, n) / rho0;
 		if ((it >= 1 && e <= sd->def.max_divergence_error) || it >= sd->def.max_divergence_iterations)
 			break;
 		correct(wk, dt, threads);
-		for (long i = 0; i < n; ++i)
-			wk->ksum[i] += wk->k[i];
 		++it;
 	}
 	return it;
 }
 
 /* Constant-density solve: sweeps until mean max(rho* - rho0, 0) / rho0 <= tol. */
-static int density_solve(dfsph_work *wk, const sph_dfsph *sd, const float *rho, float rho0, float dt, int threads,
-                         double *residual)
+static int density_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float dt, int threads, double *residual)
 {
 	const long n = wk->n;
 	const float inv_dt2 = 1.0f / (dt * dt);
@@ -311,17 +319,15 @@ static int density_solve(dfsph_work *wk, const sph_dfsph *sd, const float *rho, 
 	for (;;) {
 #pragma omp parallel for num_threads(threads) schedule(static)
 		for (long i = 0; i < n; ++i) {
-			float e = rho[i] + dt * density_rate(wk, i) - rho0;
+			float e = wk->h[i].w + dt * density_rate(wk, i) - rho0;
 			e = e > 0 ? e : 0;
 			wk->err[i] = e;
-			wk->k[i] = e * inv_dt2 * wk->inv_d[i];
+			wk->v[i].w = e * inv_dt2 * wk->b[i].w;
 		}
 		*residual = mean_of(wk->err, n) / rho0;
 		if ((it >= 2 && *residual <= sd->def.max_density_error) || it >= sd->def.max_iterations)
 			break;
 		correct(wk, dt, threads);
-		for (long i = 0; i < n; ++i)
-			wk->ksum[i] += wk->k[i];
 		++it;
 	}
 	return it;
@@ -363,30 +369,25 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 
 	dfsph_work wk;
 	wk.n = n;
-	wk.cap = nb->cap;
-	wk.nbr = nb->nbr;
 	wk.count = nb->count;
-	const size_t pairs = (size_t)n * (nb->cap ? nb->cap : 1), un = (size_t)n;
-	float *block = eddy__arena_alloc(&w->arena, (3 * pairs + 15 * un) * sizeof(float));
-	if (!block)
+	const size_t un = (size_t)n;
+	wk.off = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk.off);
+	if (!wk.off)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
-	wk.gx = block;
-	wk.gy = wk.gx + pairs;
-	wk.gz = wk.gy + pairs;
-	wk.bx = wk.gz + pairs;
-	wk.by = wk.bx + un;
-	wk.bz = wk.by + un;
-	wk.inv_d = wk.bz + un;
-	wk.vx = wk.inv_d + un;
-	wk.vy = wk.vx + un;
-	wk.vz = wk.vy + un;
-	wk.k = wk.vz + un;
-	wk.ksum = wk.k + un;
+	wk.off[0] = 0;
+	for (long i = 0; i < n; ++i)
+		wk.off[i + 1] = wk.off[i] + nb->count[i];
+	const size_t pairs = wk.off[n] ? wk.off[n] : 1;
+	wk.nbr = eddy__arena_alloc(&w->arena, pairs * sizeof *wk.nbr);
+	wk.g = eddy__arena_alloc(&w->arena, pairs * sizeof *wk.g);
+	dfsph_f4 *block = eddy__arena_alloc(&w->arena, 3 * un * sizeof(dfsph_f4) + 2 * un * sizeof(float));
+	if (!wk.nbr || !wk.g || !block)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
+	wk.b = block;
+	wk.v = wk.b + un;
+	wk.h = wk.v + un;
+	wk.ksum = (float *)(wk.h + un);
 	wk.err = wk.ksum + un;
-	wk.hx = wk.err + un;
-	wk.hy = wk.hx + un;
-	wk.hz = wk.hy + un;
-	wk.rho = wk.hz + un;
 	if (sd->ratio_h != sh->h || sd->ratio_m != sh->mass) {
 		sd->ratio = spiky_ratio(sh, &sd->moment);
 		sd->ratio_h = sh->h;
@@ -398,37 +399,33 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 
 	int div_it = 0;
 	if (sd->def.divergence_solver) {
-		memcpy(wk.vx, vx, un * sizeof *wk.vx);
-		memcpy(wk.vy, vy, un * sizeof *wk.vy);
-		memcpy(wk.vz, vz, un * sizeof *wk.vz);
+		for (long i = 0; i < n; ++i)
+			wk.v[i] = (dfsph_f4){vx[i], vy[i], vz[i], 0};
 		div_it = divergence_solve(&wk, sd, rho0, dt, ctx->threads);
-		/* v* = v_div + dt a */
-		for (long i = 0; i < n; ++i) {
-			wk.vx[i] += dt * (ax[i] + wk.hx[i]);
-			wk.vy[i] += dt * (ay[i] + wk.hy[i]);
-			wk.vz[i] += dt * (az[i] + wk.hz[i]);
-		}
 	} else {
-		for (long i = 0; i < n; ++i) {
-			wk.vx[i] = vx[i] + dt * (ax[i] + wk.hx[i]);
-			wk.vy[i] = vy[i] + dt * (ay[i] + wk.hy[i]);
-			wk.vz[i] = vz[i] + dt * (az[i] + wk.hz[i]);
-		}
+		for (long i = 0; i < n; ++i)
+			wk.v[i] = (dfsph_f4){vx[i], vy[i], vz[i], 0};
+	}
+	/* v* = v (divergence-free) + dt (a + h) */
+	for (long i = 0; i < n; ++i) {
+		wk.v[i].x += dt * (ax[i] + wk.h[i].x);
+		wk.v[i].y += dt * (ay[i] + wk.h[i].y);
+		wk.v[i].z += dt * (az[i] + wk.h[i].z);
 	}
 
 	double residual = 0;
-	const int it = density_solve(&wk, sd, wk.rho, rho0, dt, ctx->threads, &residual);
+	const int it = density_solve(&wk, sd, rho0, dt, ctx->threads, &residual);
 
 	/* a += (v* - (v + dt a)) / dt; p = k rho^2 */
 	const float inv_dt = 1.0f / dt;
 	long bad = -1;
 	for (long i = 0; i < n; ++i) {
-		const float ux = (wk.vx[i] - (vx[i] + dt * ax[i])) * inv_dt, uy = (wk.vy[i] - (vy[i] + dt * ay[i])) * inv_dt,
-		            uz = (wk.vz[i] - (vz[i] + dt * az[i])) * inv_dt;
+		const float ux = (wk.v[i].x - (vx[i] + dt * ax[i])) * inv_dt, uy = (wk.v[i].y - (vy[i] + dt * ay[i])) * inv_dt,
+		            uz = (wk.v[i].z - (vz[i] + dt * az[i])) * inv_dt;
 		ax[i] += ux;
 		ay[i] += uy;
 		az[i] += uz;
-		p[i] = sd->moment * wk.ksum[i] * wk.rho[i] * wk.rho[i];
+		p[i] = sd->moment * wk.ksum[i] * wk.h[i].w * wk.h[i].w;
 		if (bad < 0 && !(isfinite(ux) && isfinite(uy) && isfinite(uz) && isfinite(p[i])))
 			bad = i;
 	}

@@ -980,13 +980,15 @@ static double dfsph_stat(const eddy_frame_stats *st, const char *name)
 /* Hydrostatic tank with the implicit solve: the 10^3 block of the WCSPH test
  * settles for 0.5 s, then 0.2 s are averaged. The solve stops each step at a
  * mean predicted compression (of its spiky-kernel density) of
- * max_density_error; what it leaves is corrected the next step, and the
- * poly6 density of the 'density' column differs from the spiky one by a
- * fraction of that, so the column's mean compression stays within twice the
- * tolerance. There is no stiffness in the pressure: the layer means away
- * from walls and surface must give rho0 g d to 8% of rho0 g H (measured 3%;
- * the WCSPH test allows 20%), and the fluid must be at rest (rms speed under
- * 5% of sqrt(g H); WCSPH: 10%). */
+ * max_density_error; the prediction is first order in the step, so the
+ * density it reaches differs by a further fraction of that, and the poly6
+ * density of the 'density' column differs from the spiky one by about as
+ * much again: the column's mean compression must stay within three times
+ * the tolerance (measured 1.5-1.6 times). There is no stiffness in the
+ * pressure: the layer means away from walls and surface must give rho0 g d
+ * to 10% of rho0 g H (measured 3-6%, depending on rounding; the WCSPH test
+ * allows 20%), and the fluid must be at rest (rms speed under 5% of
+ * sqrt(g H), measured 1.3%; WCSPH: 10%). */
 static void dfsph_hydrostatic_tank(void)
 {
 	sph_setup s = default_setup();
@@ -1039,8 +1041,8 @@ static void dfsph_hydrostatic_tank(void)
 	       "density_err_avg %.4f, %.1f iterations per step, rms speed %.3f m/s = %.3f sqrt(gH)\n",
 	       err, used, comp, (double)df.max_density_error, err_avg, iters, vrms, vrms / sqrt(g * H));
 	CHECK(used >= 4);
-	CHECK(err < 0.08);
-	CHECK(comp <= 2 * df.max_density_error);
+	CHECK(err < 0.1);
+	CHECK(comp <= 3 * df.max_density_error);
 	CHECK(vrms < 0.05 * sqrt(g * H));
 	eddy_destroy_world(w);
 }
