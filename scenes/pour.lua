@@ -19,7 +19,7 @@ local tolerance = eddy.param("tolerance", 0.005) -- 1 (dfsph): mean density erro
 local count = eddy.param("particles", 5625)
 local L, H = 0.2, 0.3                           -- m, box side and height
 if solver ~= "dfsph" and solver ~= "wcsph" then
-	error("pour: solver must be \"dfsph\" or \"wcsph\" (got " .. tostring(solver) .. ")", 0)
+	error("pour: solver must be \"dfsph\" or \"wcsph\" (got " .. tostring(solver) .. ")")
 end
 local dfsph = solver == "dfsph"
 
