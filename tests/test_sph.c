@@ -979,16 +979,14 @@ static double dfsph_stat(const eddy_frame_stats *st, const char *name)
 
 /* Hydrostatic tank with the implicit solve: the 10^3 block of the WCSPH test
  * settles for 0.5 s, then 0.2 s are averaged. The solve stops each step at a
- * mean predicted compression (of its spiky-kernel density) of
- * max_density_error; the prediction is first order in the step, so the
- * density it reaches differs by a further fraction of that, and the poly6
- * density of the 'density' column differs from the spiky one by about as
- * much again: the column's mean compression must stay within three times
- * the tolerance (measured 1.5-1.6 times). There is no stiffness in the
- * pressure: the layer means away from walls and surface must give rho0 g d
- * to 10% of rho0 g H (measured 3-6%, depending on rounding; the WCSPH test
- * allows 20%), and the fluid must be at rest (rms speed under 5% of
- * sqrt(g H), measured 1.3%; WCSPH: 10%). */
+ * mean predicted compression of max_density_error; the prediction is first
+ * order in the step and uses the spiky gradient for the poly6 density, so
+ * the density it reaches differs by a fraction of that: the mean compression
+ * must stay within three times the tolerance (measured about once). There is
+ * no stiffness in the pressure: the layer means away from walls and surface
+ * must give rho0 g d to 10% of rho0 g H (measured 3-6%, depending on
+ * rounding; the WCSPH test allows 20%), and the fluid must be at rest (rms
+ * speed under 5% of sqrt(g H), measured 1-2%; WCSPH: 10%). */
 static void dfsph_hydrostatic_tank(void)
 {
 	sph_setup s = default_setup();
