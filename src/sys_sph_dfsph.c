@@ -20,12 +20,13 @@
  * With B_i = sum_b m_b grad W(x_i - x_b) and the pressure written as
  * k_i = p_i / rho_i^2:
  *   Drho_i/Dt = sum_j (v_i - v_j) . G_ij + v_i . B_i
- *   a_i^p     = -sum_j (k_i + k_j) G_ij - 2 k_i B_i - h_i
+ *   a_i^p     = -sum_j (k_i + k_j) G_ij - 2 k_i B_i + h_i
  * The boundary particles mirror the particle's pressure (p_b = p_i, so the
  * wall term counts twice: with a single k_i the wall could not hold a
  * particle whose neighbourhood is full, as sum_j G_ij + B_i ~ 0 there), plus
  * Adami et al.'s (2012) hydrostatic part p_b - p_i = rho_i g . (x_b - x_i):
- *   h_i = (1/rho_i) sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b),
+ *   h_i = -(1/rho_i) sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b)
+ * (up, away from a floor),
  * known before the solve and added to the forces; without it the fluid
  * beside the walls lacks support and circulates.
  * A change k_i alone moves Drho_i/Dt by -dt k_i D_i, with
@@ -172,7 +173,7 @@ static void gradients(const sph_shared *sh, const float *x, const float *y, cons
 	const sph_neighbors *nb = &sh->nb;
 	const sph_kernel_consts kc = sh->k;
 	const float m = sh->mass, rho0 = sh->rho0, eps2 = 1e-6f * kc.h2;
-	const float dref = m * kc.poly6_grad * kc.h2 * kc.h2 * kc.h, dmin = 1e-6f * dref * dref;
+	const float dref = m * kc.spiky_grad * kc.h2, dmin = 1e-6f * dref * dref; /* |G| scale */
 	const long n = wk->n;
 	const size_t cap = nb->cap;
 #pragma omp parallel for num_threads(threads) schedule(static)
