@@ -33,13 +33,24 @@ static const eddy_lua_field sph_boundary_box_fields[] = {
 	EDDY_LUA_END,
 };
 
+static const eddy_lua_field sph_dfsph_fields[] = {
+	EDDY_LUA_FIELD(eddy_sph_dfsph_def, max_density_error, EDDY_LUA_FLOAT),
+	EDDY_LUA_FIELD(eddy_sph_dfsph_def, max_iterations, EDDY_LUA_INT),
+	EDDY_LUA_FIELD(eddy_sph_dfsph_def, divergence_solver, EDDY_LUA_BOOL),
+	EDDY_LUA_FIELD(eddy_sph_dfsph_def, max_divergence_error, EDDY_LUA_FLOAT),
+	EDDY_LUA_FIELD(eddy_sph_dfsph_def, max_divergence_iterations, EDDY_LUA_INT),
+	EDDY_LUA_END,
+};
+
 EDDY_LUA_KIND_FUNCS(sph_density)
 EDDY_LUA_KIND_FUNCS(sph_pressure)
 EDDY_LUA_KIND_FUNCS(sph_viscosity)
 EDDY_LUA_KIND_FUNCS(sph_surface_tension)
 EDDY_LUA_KIND_FUNCS(sph_boundary_box)
+EDDY_LUA_KIND_FUNCS(sph_dfsph)
 
 const eddy_lua_kind eddy_lua_sph_kinds[] = {
 	EDDY_LUA_KIND(sph_density),         EDDY_LUA_KIND(sph_pressure),     EDDY_LUA_KIND(sph_viscosity),
-	EDDY_LUA_KIND(sph_surface_tension), EDDY_LUA_KIND(sph_boundary_box), EDDY_LUA_KIND_END,
+	EDDY_LUA_KIND(sph_surface_tension), EDDY_LUA_KIND(sph_boundary_box), EDDY_LUA_KIND(sph_dfsph),
+	EDDY_LUA_KIND_END,
 };

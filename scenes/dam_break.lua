@@ -15,14 +15,22 @@ local a = eddy.param("a", 0.1)                  -- m, column base
 local h = eddy.param("spacing", a / 20)         -- m, particle spacing
 local stiffness = eddy.param("stiffness", 400)  -- m^2/s^2: c = 20 m/s, 10 x the front speed
 local alpha = eddy.param("alpha", 0.05)         -- Monaghan artificial viscosity
+local solver = eddy.param("solver", "wcsph")    -- "wcsph" (sph_pressure) or "dfsph" (implicit, sph_dfsph)
 
-local world, geo = dam.world(eddy, { a = a, spacing = h, fps = eddy.param("fps", 200) })
+local world, geo = dam.world(eddy, { a = a, spacing = h, fps = eddy.param("fps", 200), cfl = eddy.param("cfl", 0.4) })
 world:add(eddy.emit_box { min = geo.column_min, max = geo.column_max, spacing = h })
 world:add(eddy.sph_density { radius = 2 * h, spacing = h, rest_density = 1000, stiffness = stiffness })
-world:add(eddy.sph_pressure {})
-world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = alpha })
+if solver == "dfsph" then
+	-- the pressure solve after the other forces, before integrate
+	world:add(eddy.gravity {})
+	world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = alpha })
+	world:add(eddy.sph_dfsph { max_density_error = eddy.param("tolerance", 0.001) })
+else
+	world:add(eddy.sph_pressure {})
+	world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = alpha })
+	world:add(eddy.gravity {})
+end
 world:add(eddy.sph_boundary_box { min = geo.tank_min, max = geo.tank_max, spacing = h })
-world:add(eddy.gravity {})
 world:add(eddy.integrate {})
 world:add(eddy.collide_box { min = geo.tank_min, max = geo.tank_max, inside = true })
 dam.report(world, geo)

@@ -13,18 +13,25 @@ local dx = eddy.param("spacing", 0.01)          -- m
 local H = eddy.param("depth", 0.1)              -- m, water depth
 local W = eddy.param("width", 0.1)              -- m, tank width (x and z)
 local stiffness = eddy.param("stiffness", 200)  -- m^2/s^2: g H / k = 0.5%
+local solver = eddy.param("solver", "wcsph")   -- "wcsph" (sph_pressure) or "dfsph" (implicit)
 local rho0, g, h = 1000, 9.81, 2 * dx
 
 local world = eddy.world {
 	bounds = { {0, 0, 0}, {W, 2 * H, W} },
-	gravity = {0, -g, 0}, fps = 30, duration = 1.0, cfl = 0.4,
+	gravity = {0, -g, 0}, fps = 30, duration = 1.0, cfl = eddy.param("cfl", 0.4), dt_max = eddy.param("dt_max", 0.01),
 }
 world:add(eddy.emit_box { min = {0, 0, 0}, max = {W, H, W}, spacing = dx })
 world:add(eddy.sph_density { radius = h, spacing = dx, rest_density = rho0, stiffness = stiffness })
-world:add(eddy.sph_pressure {})
-world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.05 })
+if solver == "dfsph" then
+	world:add(eddy.gravity {})
+	world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = eddy.param("alpha", 0.05) })
+	world:add(eddy.sph_dfsph { max_density_error = eddy.param("tolerance", 0.001), divergence_solver = eddy.param("divergence", true) })
+else
+	world:add(eddy.sph_pressure {})
+	world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.05 })
+	world:add(eddy.gravity {})
+end
 world:add(eddy.sph_boundary_box { min = {0, 0, 0}, max = {W, 2 * H, W}, spacing = dx })
-world:add(eddy.gravity {})
 world:add(eddy.integrate {})
 world:add(eddy.collide_box { min = {0, 0, 0}, max = {W, 2 * H, W}, inside = true })
 
@@ -33,8 +40,12 @@ world:add(eddy.collide_box { min = {0, 0, 0}, max = {W, 2 * H, W}, inside = true
 -- largest single-particle error, which carries the particle noise of k d(rho).
 world:on_frame(function(w)
 	local x, y, z, p, rho = w:channel("x"), w:channel("y"), w:channel("z"), w:channel("pressure"), w:channel("density")
-	local top = 0
-	for i = 1, #y do if y[i] > top then top = y[i] end end
+	local vx, vy, vz = w:channel("vx"), w:channel("vy"), w:channel("vz")
+	local top, v2 = 0, 0
+	for i = 1, #y do
+		if y[i] > top then top = y[i] end
+		v2 = v2 + vx[i] ^ 2 + vy[i] ^ 2 + vz[i] ^ 2
+	end
 	local surface = top + dx / 2
 	local err_p, bottom, nb = 0, 0, 0
 	local sum, count = {}, {}
@@ -55,7 +66,7 @@ world:on_frame(function(w)
 		local e = math.abs(s / count[layer] - rho0 * g * d) / (rho0 * g * surface)
 		if e > err then err = e end
 	end
-	return { pressure_err = err, pressure_err_particle = err_p,
+	return { pressure_err = err, pressure_err_particle = err_p, rms_speed = math.sqrt(v2 / math.max(#y, 1)),
 	         bottom_density_ratio = bottom / math.max(nb, 1) / rho0,
 	         bottom_density_expected = 1 + g * surface / stiffness }
 end)

@@ -496,6 +496,27 @@ typedef struct eddy_sph_boundary_box_def {
 eddy_sph_boundary_box_def eddy_default_sph_boundary_box_def(void);
 eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_boundary_box_def *def);
 
+/* sph_dfsph: implicit pressure, divergence-free SPH (Bender & Koschier 2015),
+ * in place of sph_pressure. Put it after the other forces (gravity,
+ * sph_viscosity, sph_surface_tension) and before integrate: it predicts the
+ * velocities those forces give, solves for the pressure that keeps the density
+ * at rest density, adds the pressure acceleration and writes the pressure (Pa)
+ * to the 'pressure' column. The time step is then limited by the flow speed
+ * (h / max|v|, and 0.18 sqrt(h / |g|), times the CFL number; CFL <= 1), not by
+ * sph_density's speed of sound. Publishes solver, iterations, residual,
+ * divergence_iterations and unconverged in the frame stats. */
+typedef struct eddy_sph_dfsph_def {
+	float max_density_error;    /* 1, mean compression max(rho - rho0, 0)/rho0 the
+	                               solve stops at; > 0 and <= 0.1 (0.001-0.01 usual) */
+	int max_iterations;         /* 1, cap on constant-density sweeps per step; 2 to 10000 */
+	bool divergence_solver;     /* also make the velocity divergence-free each step */
+	float max_divergence_error; /* 1, mean max(Drho/Dt, 0) dt / rho0 the divergence
+	                               solve stops at (per step); > 0 and <= 1 */
+	int max_divergence_iterations; /* 1, cap on divergence sweeps per step; 1 to 10000 */
+} eddy_sph_dfsph_def;
+eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void);
+eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def);
+
 /* ---- FLIP (sys_flip_*.c) ------------------------------------------------ */
 
 /* FLIP on the world's MAC grid (cell_size > 0). A step reads, in pipeline order:

@@ -139,6 +139,8 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
 	const sph_density *sd = s->data;
 	*reason = "acoustic";
+	if (eddy__sph_dfsph_follows(w, s)) /* dfsph: an implicit pressure solve has no acoustic limit */
+		return INFINITY;
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	float v2 = 0;
 	if (vx && vy && vz)

@@ -20,6 +20,7 @@
 	X(sph_viscosity) \
 	X(sph_surface_tension) \
 	X(sph_boundary_box) \
+	X(sph_dfsph) \
 	\
 	/* FLIP */ \
 	X(flip_p2g) \
@@ -36,5 +37,9 @@
 #define EDDY_KIND_DECL(ident) extern const eddy_system_vtable eddy__kind_##ident;
 EDDY_BUILTIN_SYSTEMS(EDDY_KIND_DECL)
 #undef EDDY_KIND_DECL
+
+/* sph_dfsph: true if an implicit pressure solve follows the density system s
+ * (sys_sph_dfsph.c), so sph_density's acoustic time-step limit does not apply. */
+bool eddy__sph_dfsph_follows(const eddy_world *w, const eddy_system *s);
 
 #endif

@@ -3,8 +3,10 @@
  *  - ns per particle per step of sph_density (neighbour search included),
  *    sph_pressure and sph_viscosity, for 5k / 30k / 100k particles at
  *    h = 2 spacings, on 1 and 2 threads: a block settling in a tank;
- *  - the pour scene of scenes/pour.lua (5625 particles, one thread):
- *    simulated seconds per wall second and the density error.
+ *  - the pour scene of scenes/pour.lua (5625 particles, one thread) with
+ *    the implicit solve (sph_dfsph, the scene's default) and with WCSPH:
+ *    simulated seconds per wall second, the density error, the mean
+ *    compression and the solver's iterations per step (one run each).
  * Every figure is the median of repeated runs: the machine is shared, and a
  * neighbour's job shows up as outliers. */
 #include <math.h>
@@ -52,13 +54,19 @@ static eddy_world *block(int n, int threads)
 	return w;
 }
 
-/* scenes/pour.lua in C (the benchmark links the engine only) */
-static eddy_world *pour(float stiffness)
+/* scenes/pour.lua in C (the benchmark links the engine only): solver
+ * "dfsph" (sph_dfsph after gravity and viscosity, CFL 1, no divergence
+ * solve: the scene's default) or "wcsph" (sph_pressure with stiffness k,
+ * CFL 0.4). */
+static eddy_world *pour(const char *solver, float stiffness)
 {
+	const bool dfsph = strcmp(solver, "dfsph") == 0;
 	const float dx = 0.01f, L = 0.2f, H = 0.3f;
 	eddy_world_def d = eddy_default_world_def();
 	d.bounds_max = (eddy_vec3){L, H, L};
 	d.fps = 30;
+	d.cfl = dfsph ? 1.0 : 0.4;
+	d.threads = 1;
 	eddy_world *w = eddy_create_world(&d, NULL, 0);
 	eddy_emit_nozzle_def nz = eddy_default_emit_nozzle_def();
 	nz.center = (eddy_vec3){L / 2, H - 0.04f, L / 2};
@@ -73,22 +81,101 @@ static eddy_world *pour(float stiffness)
 	de.radius = 2 * dx;
 	de.stiffness = stiffness;
 	eddy_add_sph_density(w, &de);
-	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
-	eddy_add_sph_pressure(w, &pr);
+	eddy_gravity_def g = eddy_default_gravity_def();
 	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
-	eddy_add_sph_viscosity(w, &vi);
+	if (dfsph) {
+		eddy_add_gravity(w, &g);
+		eddy_add_sph_viscosity(w, &vi);
+		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+		df.max_density_error = 0.005f;
+		df.divergence_solver = false;
+		eddy_add_sph_dfsph(w, &df);
+	} else {
+		eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+		eddy_add_sph_pressure(w, &pr);
+		eddy_add_sph_viscosity(w, &vi);
+		eddy_add_gravity(w, &g);
+	}
 	eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
 	bb.max = d.bounds_max;
 	bb.spacing = dx;
 	eddy_add_sph_boundary_box(w, &bb);
-	eddy_gravity_def g = eddy_default_gravity_def();
-	eddy_add_gravity(w, &g);
 	eddy_integrate_def it = eddy_default_integrate_def();
 	eddy_add_integrate(w, &it);
 	eddy_collide_box_def bx = eddy_default_collide_box_def();
 	bx.max = d.bounds_max;
 	eddy_add_collide_box(w, &bx);
 	return w;
+}
+
+/* Mean compression max(rho - rho0, 0) / rho0: the part of the density error
+ * a pressure solve controls (density_err_avg also counts the under-dense
+ * free surface: the jet and spray). */
+static double compression(const eddy_world *w)
+{
+	size_t n;
+	const float *rho = eddy_world_channel(w, "density", &n);
+	double s = 0;
+	for (size_t i = 0; i < n; ++i)
+		s += fmax((double)rho[i] - 1000.0, 0) / 1000.0;
+	return n ? s / (double)n : 0;
+}
+
+static double extra_stat(const eddy_frame_stats *st, const char *name)
+{
+	for (int k = 0; k < st->extra_count; ++k)
+		if (strcmp(st->extra[k].name, name) == 0)
+			return st->extra[k].value;
+	return 0;
+}
+
+/* One pour of 2.5 s simulated (the jet ends at 2.0 s) on one thread; one
+ * JSON row. Returns false on a failed step. */
+static bool pour_row(FILE *f, const char *solver, float stiffness)
+{
+	eddy_world *w = pour(solver, stiffness);
+	const double a = now_ms();
+	double err_avg_full = 0, err_max_full = 0, comp_full = 0, full_start = 0, full_sim = 0, sweeps = 0, div_sweeps = 0;
+	int full_frames = 0;
+	int64_t steps = 0;
+	while (eddy_world_time(w) < 2.5 - 1e-9) {
+		if (eddy_world_step_frame(w) != EDDY_OK) {
+			fprintf(stderr, "bench_sph: pour (%s): %s\n", solver, eddy_world_error(w));
+			eddy_destroy_world(w);
+			return false;
+		}
+		eddy_frame_stats st;
+		eddy_world_frame_stats(w, &st);
+		steps += st.steps;
+		sweeps += extra_stat(&st, "iterations") * (double)st.steps;
+		div_sweeps += extra_stat(&st, "divergence_iterations") * (double)st.steps;
+		if (st.particles == 5625) {
+			if (!full_frames) {
+				full_start = now_ms();
+				full_sim = eddy_world_time(w);
+			}
+			full_frames++;
+			err_avg_full = fmax(err_avg_full, st.density_err_avg);
+			err_max_full = fmax(err_max_full, st.density_err_max);
+			comp_full = fmax(comp_full, compression(w));
+		}
+	}
+	const double wall = (now_ms() - a) / 1e3, wall_full = (now_ms() - full_start) / 1e3;
+	const double rate = 2.5 / wall, rate_full = (eddy_world_time(w) - full_sim) / wall_full;
+	printf("pour %s (5625 particles, %s, 1 thread): %.3f simulated s per wall s over 2.5 s, %.3f with all particles in; "
+	       "%lld steps (mean dt %.2g s); density error avg %.4f (max over frames with all particles in), max %.3f "
+	       "(surface particles), mean compression %.5f; %.2f iterations per step (+ %.2f divergence)\n",
+	       solver, strcmp(solver, "dfsph") == 0 ? "tolerance 0.005" : "k = 400", rate, rate_full, (long long)steps,
+	       2.5 / (double)steps, err_avg_full, err_max_full, comp_full, sweeps / (double)steps,
+	       div_sweeps / (double)steps);
+	fprintf(f, ",\n {\"scene\":\"pour\",\"solver\":\"%s\",\"particles\":5625,\"stiffness\":%.0f,\"threads\":1,"
+	           "\"sim_s_per_wall_s\":%.4f,\"sim_s_per_wall_s_full\":%.4f,\"steps\":%lld,\"density_err_avg\":%.4f,"
+	           "\"density_err_max\":%.4f,\"compression_avg\":%.5f,\"iterations_per_step\":%.3f,"
+	           "\"divergence_iterations_per_step\":%.3f}",
+	        solver, (double)stiffness, rate, rate_full, (long long)steps, err_avg_full, err_max_full, comp_full,
+	        sweeps / (double)steps, div_sweeps / (double)steps);
+	eddy_destroy_world(w);
+	return true;
 }
 
 int main(int argc, char **argv)
@@ -167,39 +254,9 @@ int main(int argc, char **argv)
 		fclose(f);
 		return 0;
 	}
-	/* the pour: 2.5 s simulated (the jet ends at 2.0 s), one thread */
-	const float stiffness = 400;
-	eddy_world *w = pour(stiffness);
-	const double a = now_ms();
-	double err_avg_full = 0, err_max_full = 0;
-	int full_frames = 0;
-	double full_start = 0, full_sim = 0;
-	while (eddy_world_time(w) < 2.5 - 1e-9) {
-		if (eddy_world_step_frame(w) != EDDY_OK) {
-			fprintf(stderr, "bench_sph: pour: %s\n", eddy_world_error(w));
-			return 1;
-		}
-		eddy_frame_stats st;
-		eddy_world_frame_stats(w, &st);
-		if (st.particles == 5625) {
-			if (!full_frames) {
-				full_start = now_ms();
-				full_sim = eddy_world_time(w);
-			}
-			full_frames++;
-			err_avg_full = fmax(err_avg_full, st.density_err_avg);
-			err_max_full = fmax(err_max_full, st.density_err_max);
-		}
-	}
-	const double wall = (now_ms() - a) / 1e3, wall_full = (now_ms() - full_start) / 1e3;
-	const double rate = 2.5 / wall, rate_full = (eddy_world_time(w) - full_sim) / wall_full;
-	printf("pour (5625 particles, k = %.0f, 1 thread): %.3f simulated s per wall s over 2.5 s, %.3f with all particles in; "
-	       "density error avg %.4f (max over frames), max %.3f (surface particles)\n",
-	       (double)stiffness, rate, rate_full, err_avg_full, err_max_full);
-	fprintf(f, ",\n {\"scene\":\"pour\",\"particles\":5625,\"stiffness\":%.0f,\"threads\":1,\"sim_s_per_wall_s\":%.4f,"
-	           "\"sim_s_per_wall_s_full\":%.4f,\"density_err_avg\":%.4f,\"density_err_max\":%.4f}",
-	        (double)stiffness, rate, rate_full, err_avg_full, err_max_full);
-	eddy_destroy_world(w);
+	/* the pour: the implicit solve (the scene's default), then WCSPH */
+	if (!pour_row(f, "dfsph", 400) || !pour_row(f, "wcsph", 400))
+		return 1;
 	fprintf(f, "\n]}\n");
 	fclose(f);
 	printf("bench_sph: wrote %s\n", path);

@@ -952,6 +952,8 @@ static void scenes_run_and_report(void)
 	CHECK_HAS(last, "sph_surface_tension");
 }
 
+static void sph_dfsph_suite(void); /* dfsph helper */
+
 void suite_sph(void)
 {
 	RUN(kernels_integrate_to_one);
@@ -972,4 +974,338 @@ void suite_sph(void)
 	RUN(droplet_oscillates_at_rayleigh_frequency);
 	RUN(resting_drop_keeps_pairs_apart);
 	RUN(scenes_run_and_report);
+	sph_dfsph_suite(); /* dfsph helper */
+}
+
+/* ---- dfsph helper ---- */
+/* sph_dfsph, the implicit pressure solve (divergence-free SPH): hydrostatics,
+ * the dam break, bad input, determinism and convergence. */
+
+/* A scene of sph_setup with sph_dfsph in place of sph_pressure: the solve
+ * comes after the other forces and before integrate. */
+static eddy_world *dfsph_world(const sph_setup *s, const eddy_sph_dfsph_def *df, double fps)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.bounds_min = s->lo;
+	d.bounds_max = s->hi;
+	d.gravity = (eddy_vec3){0, -s->gravity, 0};
+	d.threads = s->threads;
+	d.cfl = s->cfl;
+	d.fps = fps;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.min = s->fmin;
+	b.max = s->fmax;
+	b.spacing = s->dx;
+	CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &b)));
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	de.spacing = s->dx;
+	de.radius = 2 * s->dx;
+	de.stiffness = s->k;
+	CHECKF(eddy_system_valid(w, eddy_add_sph_density(w, &de)), "%s", eddy_world_error(w));
+	eddy_gravity_def g = eddy_default_gravity_def();
+	CHECK(eddy_system_valid(w, eddy_add_gravity(w, &g)));
+	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
+	vi.viscosity = s->mu;
+	CHECK(eddy_system_valid(w, eddy_add_sph_viscosity(w, &vi)));
+	CHECKF(eddy_system_valid(w, eddy_add_sph_dfsph(w, df)), "%s", eddy_world_error(w));
+	if (s->walls) {
+		eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
+		bb.min = s->lo;
+		bb.max = s->hi;
+		bb.spacing = s->dx;
+		CHECK(eddy_system_valid(w, eddy_add_sph_boundary_box(w, &bb)));
+	}
+	eddy_integrate_def it = eddy_default_integrate_def();
+	CHECK(eddy_system_valid(w, eddy_add_integrate(w, &it)));
+	eddy_collide_box_def bx = eddy_default_collide_box_def();
+	bx.min = s->lo;
+	bx.max = s->hi;
+	CHECK(eddy_system_valid(w, eddy_add_collide_box(w, &bx)));
+	return w;
+}
+
+/* Mean compression max(rho - rho0, 0) / rho0 over the particles: what the
+ * solve controls (the free surface is under-dense and stays so). */
+static double dfsph_compression(const eddy_world *w)
+{
+	size_t n;
+	const float *rho = eddy_world_channel(w, "density", &n);
+	double s = 0;
+	for (size_t i = 0; i < n; ++i)
+		s += fmax((double)rho[i] - 1000.0, 0) / 1000.0;
+	return n ? s / (double)n : 0;
+}
+
+static double dfsph_stat(const eddy_frame_stats *st, const char *name)
+{
+	for (int k = 0; k < st->extra_count; ++k)
+		if (strcmp(st->extra[k].name, name) == 0)
+			return st->extra[k].value;
+	return NAN;
+}
+
+/* Hydrostatic tank with the implicit solve: the 10^3 block of the WCSPH test
+ * settles for 0.5 s, then 0.2 s are averaged. The solve stops each step at a
+ * mean predicted compression of max_density_error; the prediction is first
+ * order in the step and uses the spiky gradient for the poly6 density, so
+ * the density it reaches differs by a fraction of that: the mean compression
+ * must stay within three times the tolerance (measured about once). There is
+ * no stiffness in the pressure: the layer means away from walls and surface
+ * must give rho0 g d to 10% of rho0 g H (measured 3-6%, depending on
+ * rounding; the WCSPH test allows 20%), and the fluid must be at rest (rms
+ * speed under 5% of sqrt(g H), measured 1-2%; WCSPH: 10%). */
+static void dfsph_hydrostatic_tank(void)
+{
+	sph_setup s = default_setup();
+	eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+	df.max_density_error = 0.001f;
+	eddy_world *w = dfsph_world(&s, &df, 100);
+	CHECKF(eddy_world_advance(w, 0.5) == EDDY_OK, "%s", eddy_world_error(w));
+	enum { BINS = 10 };
+	double psum[BINS] = {0}, pcount[BINS] = {0}, top_sum = 0, v2sum = 0, vcount = 0, comp = 0, err_avg = 0, iters = 0;
+	const double rho0 = 1000, g = 9.81, h = 2 * s.dx;
+	const int frames = 20;
+	for (int f = 0; f < frames; ++f) {
+		CHECKF(eddy_world_step_frame(w) == EDDY_OK, "%s", eddy_world_error(w));
+		size_t n;
+		const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
+		            *z = eddy_world_channel(w, "z", NULL), *p = eddy_world_channel(w, "pressure", NULL),
+		            *vx = eddy_world_channel(w, "vx", NULL), *vy = eddy_world_channel(w, "vy", NULL),
+		            *vz = eddy_world_channel(w, "vz", NULL);
+		double top = 0;
+		for (size_t i = 0; i < n; ++i) {
+			top = fmax(top, y[i]);
+			v2sum += (double)vx[i] * vx[i] + (double)vy[i] * vy[i] + (double)vz[i] * vz[i];
+			vcount++;
+			const int bin = (int)(y[i] / s.dx);
+			if (bin >= 0 && bin < BINS && x[i] > h && x[i] < s.hi.x - h && z[i] > h && z[i] < s.hi.z - h) {
+				psum[bin] += p[i];
+				pcount[bin]++;
+			}
+		}
+		top_sum += top;
+		comp = fmax(comp, dfsph_compression(w));
+		eddy_frame_stats st;
+		eddy_world_frame_stats(w, &st);
+		err_avg = fmax(err_avg, st.density_err_avg);
+		iters += dfsph_stat(&st, "iterations") / frames;
+		CHECK(dfsph_stat(&st, "unconverged") == 0);
+	}
+	const double surface = top_sum / frames + s.dx / 2, H = surface;
+	double err = 0;
+	int used = 0;
+	for (int b = 0; b < BINS; ++b) {
+		const double yc = (b + 0.5) * s.dx, d = surface - yc;
+		if (!(pcount[b] > 0) || d < h || yc < h)
+			continue;
+		err = fmax(err, fabs(psum[b] / pcount[b] - rho0 * g * d) / (rho0 * g * H));
+		used++;
+	}
+	const double vrms = sqrt(v2sum / vcount);
+	printf("    dfsph hydrostatic: pressure_err %.4f over %d depths, mean compression %.5f (tolerance %.4f), "
+	       "density_err_avg %.4f, %.1f iterations per step, rms speed %.3f m/s = %.3f sqrt(gH)\n",
+	       err, used, comp, (double)df.max_density_error, err_avg, iters, vrms, vrms / sqrt(g * H));
+	CHECK(used >= 4);
+	CHECK(err < 0.1);
+	CHECK(comp <= 3 * df.max_density_error);
+	CHECK(vrms < 0.05 * sqrt(g * H));
+	eddy_destroy_world(w);
+}
+
+/* The dam break of dam_break_matches_martin_moyce with the implicit solve:
+ * |Z_sim - Z_exp| / Z_exp <= 10% for T in [1, 3] after a shift <= 0.2. */
+static void dfsph_dam_break_matches_martin_moyce(void)
+{
+	curve ref[2], sim;
+	CHECK(read_reference("../shared/data/martin_moyce_1952_a2.25in.csv", &ref[0]));
+	CHECK(read_reference("../shared/data/martin_moyce_1952_a1.125in.csv", &ref[1]));
+	char last[16384] = "";
+	run_scene("scenes/dam_break.lua", "--set spacing=0.008333 --set fps=100 --set solver=dfsph --set cfl=0.8", "T",
+	          "Z", &sim, last, sizeof last);
+	CHECK(sim.n > 20);
+	if (sim.n <= 20 || ref[0].n < 2 || ref[1].n < 2)
+		return;
+	double best = INFINITY, best_shift = 0;
+	for (int k = -20; k <= 20; ++k) {
+		const double shift = 0.01 * k;
+		double worst = 0;
+		for (int r = 0; r < 2; ++r)
+			for (double T = 1.0; T <= 3.0 + 1e-9; T += 0.05) {
+				const double ze = curve_at(&ref[r], T), zs = curve_at(&sim, T - shift);
+				if (isfinite(ze) && isfinite(zs))
+					worst = fmax(worst, fabs(zs - ze) / ze);
+			}
+		if (worst < best) {
+			best = worst;
+			best_shift = shift;
+		}
+	}
+	printf("    dfsph dam break a/12: worst |Z_sim - Z_exp| / Z_exp over T in [1, 3] = %.3f after a shift of %.2f; "
+	       "Z_sim(1, 2, 3) = %.3f %.3f %.3f\n",
+	       best, best_shift, curve_at(&sim, 1.0), curve_at(&sim, 2.0), curve_at(&sim, 3.0));
+	CHECK(best <= 0.10);
+	CHECK(json_number(last, "leaked") == 0 && json_number(last, "nonfinite") == 0);
+	CHECK_HAS(last, "\"solver\":\"dfsph\"");
+}
+
+/* Out-of-range fields are rejected with the field's name, from C and from a
+ * scene (file and line); sph_pressure and sph_dfsph together are an error. */
+static void dfsph_rejects_bad_input(void)
+{
+	eddy_world_def d = eddy_default_world_def();
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+	df.max_density_error = -0.001f;
+	CHECK(!eddy_system_valid(w, eddy_add_sph_dfsph(w, &df)));
+	CHECK_HAS(eddy_world_error(w), "sph_dfsph: 'max_density_error' must be > 0");
+	df = eddy_default_sph_dfsph_def();
+	df.max_density_error = NAN;
+	CHECK(!eddy_system_valid(w, eddy_add_sph_dfsph(w, &df)));
+	CHECK_HAS(eddy_world_error(w), "'max_density_error'");
+	df = eddy_default_sph_dfsph_def();
+	df.max_iterations = 0;
+	CHECK(!eddy_system_valid(w, eddy_add_sph_dfsph(w, &df)));
+	CHECK_HAS(eddy_world_error(w), "'max_iterations' must be between 2 and 10000 (got 0)");
+	df = eddy_default_sph_dfsph_def();
+	df.max_divergence_error = 2;
+	CHECK(!eddy_system_valid(w, eddy_add_sph_dfsph(w, &df)));
+	CHECK_HAS(eddy_world_error(w), "'max_divergence_error'");
+	CHECK(!eddy_system_valid(w, eddy_add_sph_dfsph(w, NULL)));
+	eddy_destroy_world(w);
+
+	/* with sph_pressure too, the first step says to remove one */
+	sph_setup s = default_setup();
+	df = eddy_default_sph_dfsph_def();
+	w = dfsph_world(&s, &df, 100);
+	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+	CHECK(eddy_system_valid(w, eddy_add_sph_pressure(w, &pr)));
+	CHECK(eddy_world_step(w) != EDDY_OK);
+	CHECK_HAS(eddy_world_error(w), "replaces sph_pressure");
+	eddy_destroy_world(w);
+
+	char path[512], cmd[1200], out[4096];
+	snprintf(path, sizeof path, "%s/dfsph_bad.lua", test_build_dir());
+	FILE *f = fopen(path, "w");
+	CHECK(f != NULL);
+	if (!f)
+		return;
+	fputs("local eddy = require 'eddy'\nlocal world = eddy.world{}\n"
+	      "world:add(eddy.sph_dfsph{ max_density_error = -0.01 })\nreturn world\n",
+	      f);
+	fclose(f);
+	snprintf(cmd, sizeof cmd, "%s/eddy check %s", test_build_dir(), path);
+	CHECK(test_sh(cmd, out, sizeof out) != 0);
+	CHECK_HAS(out, "dfsph_bad.lua:3: sph_dfsph: 'max_density_error' must be > 0 (got -0.01)");
+	f = fopen(path, "w");
+	CHECK(f != NULL);
+	if (f) {
+		fputs("local eddy = require 'eddy'\nlocal world = eddy.world{}\n"
+		      "world:add(eddy.sph_dfsph{ max_density_eror = 0.01 })\nreturn world\n",
+		      f);
+		fclose(f);
+		CHECK(test_sh(cmd, out, sizeof out) != 0);
+		CHECK_HAS(out, "dfsph_bad.lua:3: sph_dfsph: unknown field 'max_density_eror'");
+	}
+	remove(path);
+}
+
+/* Same state hash on 1 and 2 threads: every particle writes only its own
+ * values and the mean errors are summed serially. */
+static void dfsph_deterministic_across_threads(void)
+{
+	uint64_t hash[2];
+	for (int t = 0; t < 2; ++t) {
+		sph_setup s = default_setup();
+		s.hi = (eddy_vec3){0.2f, 0.1f, 0.04f};
+		s.fmax = (eddy_vec3){0.06f, 0.08f, 0.04f};
+		s.threads = t + 1;
+		s.cfl = 0.8;
+		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+		eddy_world *w = dfsph_world(&s, &df, 100);
+		for (int f = 0; f < 30; ++f)
+			CHECK(eddy_world_step_frame(w) == EDDY_OK);
+		hash[t] = eddy_world_state_hash(w);
+		eddy_destroy_world(w);
+	}
+	printf("    dfsph state hash 1 thread %016llx, 2 threads %016llx\n", (unsigned long long)hash[0],
+	       (unsigned long long)hash[1]);
+	CHECK(hash[0] == hash[1]);
+}
+
+/* A block dropped from 3 cm into a tank, at CFL 0.8 with no acoustic limit:
+ * every step converges (no step hits max_iterations), the published residual
+ * stays within the tolerance, and the measured mean compression within twice
+ * it. The time step is set by the flow, so it is far above WCSPH's. */
+static void dfsph_drop_converges(void)
+{
+	sph_setup s = default_setup();
+	s.fmin = (eddy_vec3){0.0f, 0.03f, 0.0f};
+	s.fmax = (eddy_vec3){0.06f, 0.09f, 0.1f};
+	s.mu = 1e-3f;
+	s.cfl = 0.8;
+	eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+	eddy_world *w = dfsph_world(&s, &df, 30);
+	double comp = 0, resid = 0, dt_min = INFINITY, iters = 0;
+	int64_t steps = 0;
+	const int frames = 12;
+	for (int f = 0; f < frames; ++f) {
+		CHECKF(eddy_world_step_frame(w) == EDDY_OK, "%s", eddy_world_error(w));
+		eddy_frame_stats st;
+		eddy_world_frame_stats(w, &st);
+		CHECK(dfsph_stat(&st, "unconverged") == 0);
+		CHECK(st.leaked == 0 && st.nonfinite == 0);
+		resid = fmax(resid, dfsph_stat(&st, "residual"));
+		iters += dfsph_stat(&st, "iterations") * (double)st.steps;
+		steps += st.steps;
+		dt_min = fmin(dt_min, st.dt_min);
+		comp = fmax(comp, dfsph_compression(w));
+	}
+	printf("    dfsph drop: %lld steps in %.2f s (dt >= %.2g s), %.1f iterations per step, residual <= %.5f, "
+	       "mean compression <= %.5f (tolerance %.4f)\n",
+	       (long long)steps, frames / 30.0, dt_min, iters / (double)steps, resid, comp, (double)df.max_density_error);
+	CHECK(resid <= df.max_density_error);
+	CHECK(comp <= 2 * df.max_density_error);
+	CHECK(dt_min > 5e-4); /* WCSPH at k = 200 would need 3e-4 s */
+	eddy_destroy_world(w);
+}
+
+/* sph_dfsph keeps no state across steps (no warm start), so a run resumed
+ * from a checkpoint is bit-identical to one that never stopped. */
+static void dfsph_resume_is_bit_identical(void)
+{
+	sph_setup s = default_setup();
+	s.fmin = (eddy_vec3){0.0f, 0.03f, 0.0f};
+	s.fmax = (eddy_vec3){0.06f, 0.09f, 0.1f};
+	s.cfl = 1.0;
+	eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+	eddy_world *a = dfsph_world(&s, &df, 30);
+	for (int f = 0; f < 8; ++f)
+		CHECK(eddy_world_step_frame(a) == EDDY_OK);
+	const uint64_t straight = eddy_world_state_hash(a);
+	eddy_world *b = dfsph_world(&s, &df, 30);
+	for (int f = 0; f < 4; ++f)
+		CHECK(eddy_world_step_frame(b) == EDDY_OK);
+	char path[512];
+	snprintf(path, sizeof path, "%s/dfsph_ckpt.eddy", test_build_dir());
+	CHECK(eddy_world_save(b, path, 3) == EDDY_OK);
+	eddy_destroy_world(b);
+	eddy_world *c = dfsph_world(&s, &df, 30);
+	CHECKF(eddy_world_load(c, path, 3) == EDDY_OK, "%s", eddy_world_error(c));
+	for (int f = 0; f < 4; ++f)
+		CHECK(eddy_world_step_frame(c) == EDDY_OK);
+	CHECK(eddy_world_state_hash(c) == straight);
+	remove(path);
+	eddy_destroy_world(c);
+	eddy_destroy_world(a);
+}
+
+static void sph_dfsph_suite(void)
+{
+	RUN(dfsph_hydrostatic_tank);
+	RUN(dfsph_dam_break_matches_martin_moyce);
+	RUN(dfsph_rejects_bad_input);
+	RUN(dfsph_deterministic_across_threads);
+	RUN(dfsph_drop_converges);
+	RUN(dfsph_resume_is_bit_identical);
 }
