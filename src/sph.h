@@ -66,7 +66,7 @@ typedef struct sph_neighbors {
 /* What sph_density shares with the SPH systems after it. */
 typedef struct sph_shared {
 	float h, mass, rho0;
-	float grad_cal; /* 1 / spiky's lattice gradient moment: see sph_pressure */
+	float grad_cal; /* 1 / the pressure force's lattice moment: see sph_pressure */
 	float c; /* m/s, speed of sound sqrt(k) */
 	sph_kernel_consts k;
 	sph_neighbors nb;

@@ -217,7 +217,12 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	sd->sh.c = sqrtf(def->stiffness);
 	sd->sh.k = sph_consts(def->radius);
 	sd->sh.mass = (float)(def->rest_density / eddy_sph_lattice_sum(EDDY_SPH_POLY6, def->spacing, def->radius));
-	sd->sh.grad_cal = (float)(1.0 / eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, def->spacing, def->radius));
+	/* the force sums m grad W, and m = rho0 / sum_lattice W is not rho0
+	 * spacing^3: the moment the force sees is the lattice moment times
+	 * m / (rho0 spacing^3) (0.956 / 1.010 = 0.947 at h = 2 spacings) */
+	const double vol = (double)def->spacing * def->spacing * def->spacing;
+	sd->sh.grad_cal = (float)(eddy_sph_lattice_sum(EDDY_SPH_POLY6, def->spacing, def->radius) * vol /
+	                          eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, def->spacing, def->radius));
 	eddy_system_id id = eddy__add_system(w, &eddy__kind_sph_density, sd, density_reads, 3, density_writes, 3);
 	if (eddy_system_valid(w, id))
 		eddy_world_set_rest_density(w, def->rest_density);

@@ -13,12 +13,13 @@
  * g H / k says and sound travels at sqrt(k/2). The form here is the same
  * symmetric (momentum-conserving) pair force, doubled, so it reproduces
  * grad p and c = sqrt(k) (tested by the hydrostatic tank).
- * The force is divided by the spiky gradient's lattice moment (0.956 at
- * h = 2 spacings, eddy_sph_lattice_gradient_moment): on the lattice of the
- * particle spacing, sum_j V_j x_j dW/dx_j falls 4.4% short of the continuum's
- * 1, so an uncalibrated force is 4.4% short of grad p and a resting column
- * carries 4% too much pressure (the hydrostatic test saw +3.7%, then +0.7%);
- * the same correction sph_density makes for the mass.
+ * The force is divided by the moment it has on the particle lattice,
+ * (m / rho0) sum_j x_j^2 |dW/dr| / r_j = 0.947 at h = 2 spacings (the spiky
+ * lattice moment 0.956, eddy_sph_lattice_gradient_moment, times the
+ * calibrated m over rho0 spacing^3): uncorrected, the force of a linear
+ * pressure field falls 5.3% short of grad p and a resting column carries that
+ * much more pressure (the hydrostatic test saw +3.7%, now +0.6%). The same
+ * correction sph_density makes for the mass.
  * Pairs closer than 1e-3 h take a fixed antisymmetric direction (sph.h): the
  * gradient has no direction at r = 0, and skipping them would leave
  * coincident particles stuck together (VALIDATION.md C.6).

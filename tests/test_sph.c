@@ -223,7 +223,7 @@ static double max_speed(const eddy_world *w)
  * error is held to that plus three standard errors of its own measurement
  * (from six 0.1 s blocks): the particles never stop rearranging out of the
  * initial cubic lattice (rms speed ~0.04 sqrt(gH)), and that motion is the
- * noise. Measured: +0.74% +- 0.12% against 0.98% + 0.36%; without the
+ * noise. Measured: +0.62% +- 0.26% against 0.97% + 0.78%; without the
  * gradient calibration +3.7%. Found on the way: the mean error stays at
  * +0.6 to +0.9% for k = 100 to 800, so what is left is not compressibility
  * but the particles' disorder, and at k = 800 this bound would not hold.
