@@ -47,9 +47,9 @@
  * projected Jacobi that could take pressure back, which diverged.)
  * The result, a^p = (v* - (v + dt a)) / dt, is added to ax ay az. The pressure
  * column gets p_i = M k_i rho_i^2, k_i summed over both solvers, M the
- * gradient's lattice moment (gradient_moment): the force of a linear field
- * is M grad p / rho, so this is the pressure in Pa (M = 0.95 at h = 2
- * spacings).
+ * force's lattice moment (1 / grad_cal, see sph_pressure): the force of a
+ * linear field is M grad p / rho, so this is the pressure in Pa (M = 0.947
+ * at h = 2 spacings).
  * Sums over neighbours run in list order and per particle, and the mean
  * errors are summed serially in row order, so the result does not depend on
  * the thread count.
@@ -74,8 +74,6 @@
 
 typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
-	float moment_h, moment_m; /* h and m the moment is for */
-	float moment;             /* the gradient's lattice moment (1 for an exact gradient) */
 	/* statistics of the current frame */
 	int frame;
 	int64_t steps, sweeps, div_sweeps, unconverged;
@@ -136,36 +134,6 @@ typedef struct dfsph_work {
 	float *ksum;   /* the sum of k_i over the sweeps */
 	float *err;    /* per particle: the error the sweep measured */
 } dfsph_work;
-
-/* The lattice moment of the spiky gradient with the poly6 mass m,
- *   M = (m / rho0) sum_j r_j |W'(r_j)| / 3,
- * on the lattice sph_density calibrated m on (its spacing is found back from
- * m = rho0 / sum_lattice W_poly6, which falls as the spacing grows). The force
- * -sum_j m (p_i + p_j) / rho^2 grad W_ij of a linear pressure field p is
- * M grad p / rho, so the solve's p times M is the pressure in Pa. */
-static float gradient_moment(const sph_shared *sh)
-{
-	const double target = sh->rho0 / sh->mass, h = sh->h;
-	double lo = h / 5.01, hi = h;
-	for (int it = 0; it < 60; ++it) {
-		const double mid = 0.5 * (lo + hi);
-		if (eddy_sph_lattice_sum(EDDY_SPH_POLY6, mid, h) > target)
-			lo = mid;
-		else
-			hi = mid;
-	}
-	const double sp = 0.5 * (lo + hi);
-	const int L = (int)ceil(h / sp);
-	double mom = 0;
-	for (int i = -L; i <= L; ++i)
-		for (int j = -L; j <= L; ++j)
-			for (int l = -L; l <= L; ++l) {
-				const double r = sp * sqrt((double)(i * i + j * j + l * l));
-				if (r > 0)
-					mom += r * fabs(eddy_sph_kernel_derivative(EDDY_SPH_SPIKY, r, h));
-			}
-	return (float)(mom / (3 * eddy_sph_lattice_sum(EDDY_SPH_POLY6, sp, h)));
-}
 
 static void gradients(const sph_shared *sh, const float *x, const float *y, const float *z, const float *rho,
                       eddy_vec3 grav, dfsph_work *wk, int threads)
@@ -387,11 +355,6 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	wk.h = wk.v + un;
 	wk.ksum = (float *)(wk.h + un);
 	wk.err = wk.ksum + un;
-	if (sd->moment_h != sh->h || sd->moment_m != sh->mass) {
-		sd->moment = gradient_moment(sh);
-		sd->moment_h = sh->h;
-		sd->moment_m = sh->mass;
-	}
 
 	gradients(sh, x, y, z, rho, w->def.gravity, &wk, ctx->threads);
 	memset(wk.ksum, 0, un * sizeof *wk.ksum);
@@ -424,7 +387,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		ax[i] += ux;
 		ay[i] += uy;
 		az[i] += uz;
-		p[i] = sd->moment * wk.ksum[i] * wk.h[i].w * wk.h[i].w;
+		p[i] = wk.ksum[i] * wk.h[i].w * wk.h[i].w / sh->grad_cal;
 		if (bad < 0 && !(isfinite(ux) && isfinite(uy) && isfinite(uz) && isfinite(p[i])))
 			bad = i;
 	}
