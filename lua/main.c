@@ -369,7 +369,7 @@ static void json_lua(FILE *f, lua_State *L, int idx, int depth)
 
 static const char *const contract_fields[] = {
 	"frame", "time", "steps", "dt_min", "dt_max", "dt_limit", "particles", "max_speed", "cfl", "density_err_avg",
-	"density_err_max", "volume", "leaked", "nonfinite", "solver", "iterations", "residual", "divergence", "wall_ms",
+	"density_err_max", "density_compression_avg", "volume", "leaked", "nonfinite", "solver", "iterations", "residual", "divergence", "wall_ms",
 	"state_hash", "systems", NULL,
 };
 
@@ -419,6 +419,8 @@ static const char *write_stats(FILE *f, const eddy_frame_stats *s, lua_State *L,
 	json_number(f, s->density_err_avg);
 	fputs(",\"density_err_max\":", f);
 	json_number(f, s->density_err_max);
+	fputs(",\"density_compression_avg\":", f);
+	json_number(f, s->density_compression_avg);
 	fputs(",\"volume\":", f);
 	json_number(f, s->volume);
 	fprintf(f, ",\"leaked\":%zu,\"nonfinite\":%zu", s->leaked, s->nonfinite);

@@ -368,6 +368,9 @@ typedef struct eddy_frame_stats {
 	double cfl;             /* 1, max_speed * dt / length; NAN without a length */
 	double density_err_avg; /* 1, |rho - rho0| / rho0; NAN without a density */
 	double density_err_max; /* 1 */
+	double density_compression_avg; /* 1, mean of max(rho - rho0, 0) / rho0: the part of
+	                         * the density error a pressure solve controls (the free
+	                         * surface's under-density is the rest); NAN without a density */
 	double volume;          /* m^3, fluid volume on the grid; NAN without a grid */
 	size_t leaked;          /* particles outside the bounds or inside a collider */
 	size_t nonfinite;       /* non-finite values in particle state columns */

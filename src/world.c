@@ -525,18 +525,21 @@ eddy_status eddy_world_frame_stats(eddy_world *w, eddy_frame_stats *out)
 
 	const float *rho = eddy__col(w, COL_DENSITY);
 	if (rho && w->rest_density > 0 && w->n > 0) {
-		double sum = 0, mx = 0;
+		double sum = 0, mx = 0, comp = 0;
 		for (size_t i = 0; i < w->n; ++i) {
-			double e = fabs((double)rho[i] - w->rest_density) / w->rest_density;
+			const double d = ((double)rho[i] - w->rest_density) / w->rest_density, e = fabs(d);
 			sum += e;
+			comp += d > 0 ? d : 0;
 			if (e > mx)
 				mx = e;
 		}
 		out->density_err_avg = sum / (double)w->n;
 		out->density_err_max = mx;
+		out->density_compression_avg = comp / (double)w->n;
 	} else {
 		out->density_err_avg = NAN;
 		out->density_err_max = NAN;
+		out->density_compression_avg = NAN;
 	}
 	out->volume = NAN; /* a grid system publishes "volume" when a grid exists */
 

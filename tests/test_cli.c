@@ -181,7 +181,7 @@ static void json_reader_rejects_bad_json(void)
 
 static const char *const contract[] = {
 	"frame", "time", "steps", "dt_min", "dt_max", "particles", "max_speed", "cfl", "density_err_avg",
-	"density_err_max", "volume", "leaked", "nonfinite", "solver", "iterations", "residual", "divergence",
+	"density_err_max", "density_compression_avg", "volume", "leaked", "nonfinite", "solver", "iterations", "residual", "divergence",
 	"wall_ms", "state_hash", "systems", NULL,
 };
 
