@@ -71,6 +71,9 @@
 
 #include <stdlib.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
@@ -116,9 +119,6 @@ typedef struct dfsph_f4 {
 	float x, y, z, w;
 } dfsph_f4;
 
-typedef struct dfsph_f3 {
-	float x, y, z;
-} dfsph_f3;
 
 typedef struct dfsph_work {
 	long n;
@@ -127,7 +127,7 @@ typedef struct dfsph_work {
 	                * a sweep streams through them (sph_density's lists have a
 	                * fixed stride) */
 	uint32_t *nbr; /* the neighbour of each pair */
-	dfsph_f3 *g;   /* G_ij of each pair */
+	float *gx, *gy, *gz; /* G_ij of each pair, by component: four pairs are one load */
 	dfsph_f4 *b;   /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
 	dfsph_f4 *v;   /* v*_i, and w = this sweep's k_i */
 	dfsph_f4 *h;   /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
@@ -148,23 +148,63 @@ static void gradients(const sph_shared *sh, const float *x, const float *y, cons
 	for (long i = 0; i < n; ++i) {
 		const float xi = x[i], yi = y[i], zi = z[i];
 		const uint32_t *list = nb->nbr + (size_t)i * cap;
-		uint32_t *packed = wk->nbr + wk->off[i];
-		dfsph_f3 *g = wk->g + wk->off[i];
+		const size_t o = wk->off[i];
+		uint32_t *packed = wk->nbr + o;
+		float *gxo = wk->gx + o, *gyo = wk->gy + o, *gzo = wk->gz + o;
 		const uint32_t cnt = nb->count[i];
+		const float mg = m * kc.spiky_grad;
 		float sx = 0, sy = 0, sz = 0, s2 = 0;
-#pragma omp simd reduction(+ : sx, sy, sz, s2)
-		for (uint32_t q = 0; q < cnt; ++q) {
+		uint32_t q = 0;
+#ifdef __SSE2__
+		/* four pairs at a time (the square root and division are most of
+		 * the pass); lanes add in a fixed order, so any thread count gives
+		 * the same sums */
+		__m128 vsx = _mm_setzero_ps(), vsy = vsx, vsz = vsx, vs2 = vsx;
+		const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh = _mm_set1_ps(kc.h),
+		             veps2 = _mm_set1_ps(eps2), vmg = _mm_set1_ps(mg), zero = _mm_setzero_ps();
+		for (; q + 4 <= cnt; q += 4) {
+			const uint32_t j0 = list[q], j1 = list[q + 1], j2 = list[q + 2], j3 = list[q + 3];
+			const __m128 rx = _mm_sub_ps(vxi, _mm_setr_ps(x[j0], x[j1], x[j2], x[j3])),
+			             ry = _mm_sub_ps(vyi, _mm_setr_ps(y[j0], y[j1], y[j2], y[j3])),
+			             rz = _mm_sub_ps(vzi, _mm_setr_ps(z[j0], z[j1], z[j2], z[j3]));
+			const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
+			const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
+			const __m128 ok = _mm_and_ps(_mm_cmpgt_ps(r2, veps2), _mm_cmpgt_ps(hr, zero));
+			/* r is at least sqrt(eps2) where ok; elsewhere divide by 1 */
+			const __m128 rs = _mm_or_ps(_mm_and_ps(ok, r), _mm_andnot_ps(ok, _mm_set1_ps(1.0f)));
+			const __m128 c = _mm_and_ps(ok, _mm_div_ps(_mm_mul_ps(_mm_mul_ps(vmg, hr), hr), rs));
+			const __m128 gx = _mm_mul_ps(c, rx), gy = _mm_mul_ps(c, ry), gz = _mm_mul_ps(c, rz);
+			_mm_storeu_si128((__m128i *)(packed + q), _mm_loadu_si128((const __m128i *)(list + q)));
+			_mm_storeu_ps(gxo + q, gx);
+			_mm_storeu_ps(gyo + q, gy);
+			_mm_storeu_ps(gzo + q, gz);
+			vsx = _mm_add_ps(vsx, gx);
+			vsy = _mm_add_ps(vsy, gy);
+			vsz = _mm_add_ps(vsz, gz);
+			vs2 = _mm_add_ps(vs2, _mm_add_ps(_mm_add_ps(_mm_mul_ps(gx, gx), _mm_mul_ps(gy, gy)), _mm_mul_ps(gz, gz)));
+		}
+		float l4[4];
+		_mm_storeu_ps(l4, vsx);
+		sx = (l4[0] + l4[1]) + (l4[2] + l4[3]);
+		_mm_storeu_ps(l4, vsy);
+		sy = (l4[0] + l4[1]) + (l4[2] + l4[3]);
+		_mm_storeu_ps(l4, vsz);
+		sz = (l4[0] + l4[1]) + (l4[2] + l4[3]);
+		_mm_storeu_ps(l4, vs2);
+		s2 = (l4[0] + l4[1]) + (l4[2] + l4[3]);
+#endif
+		for (; q < cnt; ++q) {
 			const uint32_t j = list[q];
 			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
 			const float r2 = rx * rx + ry * ry + rz * rz;
 			const float r = sqrtf(r2), hr = kc.h - r;
-			const float c = r2 > eps2 && hr > 0 ? m * kc.spiky_grad * hr * hr / r : 0.0f;
+			const float c = r2 > eps2 && hr > 0 ? mg * hr * hr / r : 0.0f;
 			/* the gradient's factor is < 0: G_ij points from i towards j */
 			const float gx = c * rx, gy = c * ry, gz = c * rz;
 			packed[q] = j;
-			g[q].x = gx;
-			g[q].y = gy;
-			g[q].z = gz;
+			gxo[q] = gx;
+			gyo[q] = gy;
+			gzo[q] = gz;
 			sx += gx;
 			sy += gy;
 			sz += gz;
@@ -173,8 +213,8 @@ static void gradients(const sph_shared *sh, const float *x, const float *y, cons
 		const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
 		const uint32_t bcnt = nb->bcount[i];
 		float bx = 0, by = 0, bz = 0, hx = 0, hy = 0, hz = 0;
-		for (uint32_t q = 0; q < bcnt; ++q) {
-			const uint32_t b = blist[q];
+		for (uint32_t qb = 0; qb < bcnt; ++qb) {
+			const uint32_t b = blist[qb];
 			const float rx = xi - nb->bx[b], ry = yi - nb->by[b], rz = zi - nb->bz[b];
 			const float r2 = rx * rx + ry * ry + rz * rz;
 			const float mb = nb->bvol[b] * rho0; /* Akinci: the wall at rest density */
@@ -203,16 +243,31 @@ static inline float density_rate(const dfsph_work *wk, long i)
 {
 	const size_t o = wk->off[i];
 	const uint32_t *list = wk->nbr + o;
-	const dfsph_f3 *g = wk->g + o;
+	const float *gx = wk->gx + o, *gy = wk->gy + o, *gz = wk->gz + o;
 	const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
 	const uint32_t cnt = wk->count[i];
-	/* three partial sums: independent chains of adds */
 	float sx = 0, sy = 0, sz = 0;
-	for (uint32_t q = 0; q < cnt; ++q) {
+	uint32_t q = 0;
+#ifdef __SSE2__
+	/* four neighbours' (v, k) are four loads and a transpose */
+	__m128 ax = _mm_setzero_ps(), ay = ax, az = ax;
+	for (; q + 4 <= cnt; q += 4) {
+		__m128 a = _mm_loadu_ps(&wk->v[list[q]].x), b = _mm_loadu_ps(&wk->v[list[q + 1]].x),
+		       c = _mm_loadu_ps(&wk->v[list[q + 2]].x), d = _mm_loadu_ps(&wk->v[list[q + 3]].x);
+		_MM_TRANSPOSE4_PS(a, b, c, d); /* a = vx, b = vy, c = vz of the four */
+		ax = _mm_add_ps(ax, _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(vi.x), a), _mm_loadu_ps(gx + q)));
+		ay = _mm_add_ps(ay, _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(vi.y), b), _mm_loadu_ps(gy + q)));
+		az = _mm_add_ps(az, _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(vi.z), c), _mm_loadu_ps(gz + q)));
+	}
+	float l4[4];
+	_mm_storeu_ps(l4, _mm_add_ps(_mm_add_ps(ax, ay), az));
+	sx = (l4[0] + l4[1]) + (l4[2] + l4[3]);
+#endif
+	for (; q < cnt; ++q) {
 		const dfsph_f4 vj = wk->v[list[q]];
-		sx += (vi.x - vj.x) * g[q].x;
-		sy += (vi.y - vj.y) * g[q].y;
-		sz += (vi.z - vj.z) * g[q].z;
+		sx += (vi.x - vj.x) * gx[q];
+		sy += (vi.y - vj.y) * gy[q];
+		sz += (vi.z - vj.z) * gz[q];
 	}
 	return (sx + sy + sz) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z);
 }
@@ -226,17 +281,36 @@ static void correct(dfsph_work *wk, float dt, int threads)
 	for (long i = 0; i < n; ++i) {
 		const size_t o = wk->off[i];
 		const uint32_t *list = wk->nbr + o;
-		const dfsph_f3 *g = wk->g + o;
+		const float *gx = wk->gx + o, *gy = wk->gy + o, *gz = wk->gz + o;
 		const dfsph_f4 bi = wk->b[i];
 		const float ki = wk->v[i].w;
 		const uint32_t cnt = wk->count[i];
 		const float kb = 2 * ki; /* the boundary particles mirror k_i */
 		float ax = kb * bi.x, ay = kb * bi.y, az = kb * bi.z;
-		for (uint32_t q = 0; q < cnt; ++q) {
+		uint32_t q = 0;
+#ifdef __SSE2__
+		__m128 sx = _mm_setzero_ps(), sy = sx, sz = sx;
+		const __m128 vki = _mm_set1_ps(ki);
+		for (; q + 4 <= cnt; q += 4) {
+			const __m128 c = _mm_add_ps(vki, _mm_setr_ps(wk->v[list[q]].w, wk->v[list[q + 1]].w,
+			                                             wk->v[list[q + 2]].w, wk->v[list[q + 3]].w));
+			sx = _mm_add_ps(sx, _mm_mul_ps(c, _mm_loadu_ps(gx + q)));
+			sy = _mm_add_ps(sy, _mm_mul_ps(c, _mm_loadu_ps(gy + q)));
+			sz = _mm_add_ps(sz, _mm_mul_ps(c, _mm_loadu_ps(gz + q)));
+		}
+		float l4[4];
+		_mm_storeu_ps(l4, sx);
+		ax += (l4[0] + l4[1]) + (l4[2] + l4[3]);
+		_mm_storeu_ps(l4, sy);
+		ay += (l4[0] + l4[1]) + (l4[2] + l4[3]);
+		_mm_storeu_ps(l4, sz);
+		az += (l4[0] + l4[1]) + (l4[2] + l4[3]);
+#endif
+		for (; q < cnt; ++q) {
 			const float c = ki + wk->v[list[q]].w;
-			ax += c * g[q].x;
-			ay += c * g[q].y;
-			az += c * g[q].z;
+			ax += c * gx[q];
+			ay += c * gy[q];
+			az += c * gz[q];
 		}
 		wk->v[i].x -= dt * ax;
 		wk->v[i].y -= dt * ay;
@@ -346,9 +420,11 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		wk.off[i + 1] = wk.off[i] + nb->count[i];
 	const size_t pairs = wk.off[n] ? wk.off[n] : 1;
 	wk.nbr = eddy__arena_alloc(&w->arena, pairs * sizeof *wk.nbr);
-	wk.g = eddy__arena_alloc(&w->arena, pairs * sizeof *wk.g);
+	wk.gx = eddy__arena_alloc(&w->arena, 3 * pairs * sizeof *wk.gx);
+	wk.gy = wk.gx ? wk.gx + pairs : NULL;
+	wk.gz = wk.gx ? wk.gy + pairs : NULL;
 	dfsph_f4 *block = eddy__arena_alloc(&w->arena, 3 * un * sizeof(dfsph_f4) + 2 * un * sizeof(float));
-	if (!wk.nbr || !wk.g || !block)
+	if (!wk.nbr || !wk.gx || !block)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
 	wk.b = block;
 	wk.v = wk.b + un;
