@@ -21,7 +21,7 @@ local eddy = require "eddy"
 local dx = eddy.param("spacing", 0.01)          -- m
 local solver = eddy.param("solver", "dfsph")    -- "dfsph" or "wcsph"
 local stiffness = eddy.param("stiffness", 400)  -- m^2/s^2 (wcsph): c = 20 m/s, about 6 x the impact speed
-local tolerance = eddy.param("tolerance", 0.005) -- 1 (dfsph): mean density error the solve stops at
+local tolerance = eddy.param("tolerance", 0.01) -- 1 (dfsph): mean predicted compression the solve stops at
 local count = eddy.param("particles", 5625)
 local L, H = 0.2, 0.3                           -- m, box side and height
 if solver ~= "dfsph" and solver ~= "wcsph" then
