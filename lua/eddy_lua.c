@@ -770,6 +770,22 @@ static int l_system_name(lua_State *L)
 	return 1;
 }
 
+/* h:mass(): the particle mass an sph_density calibrated (kg); an error for
+ * other systems, which have none. */
+static int l_system_mass(lua_State *L)
+{
+	lua_system *ls;
+	eddy_world *w = system_world(L, 1, &ls);
+	eddy_system_info info;
+	if (eddy_world_system_info(w, ls->id, &info) != EDDY_OK)
+		return luaL_error(L, "stale system handle: the system was removed from the world");
+	const float m = eddy_sph_particle_mass(w, ls->id);
+	if (!(m > 0))
+		return luaL_error(L, "%s has no particle mass (only sph_density calibrates one)", info.label);
+	lua_pushnumber(L, m);
+	return 1;
+}
+
 static int l_system_set_offset(lua_State *L)
 {
 	lua_system *ls;
@@ -905,6 +921,7 @@ static const luaL_Reg world_methods[] = {
 static const luaL_Reg system_methods[] = {
 	{"valid", l_system_valid},
 	{"name", l_system_name},
+	{"mass", l_system_mass},
 	{"set_offset", l_system_set_offset},
 	{"offset", l_system_offset},
 	{NULL, NULL},

@@ -88,6 +88,19 @@ static void stale_handle_in_lua(void)
 	CHECK_HAS(e, "scenes/t.lua:6: stale system handle");
 }
 
+/* h:mass() gives sph_density's calibrated particle mass, rho0 / sum_lattice
+ * W (0.99 rho0 dx^3 at h = 2 dx), and names the system that has none. */
+static void sph_mass_from_the_handle(void)
+{
+	char buf[512];
+	const char *e = run_fresh(HEAD "local d = world:add(eddy.sph_density{ spacing = 0.01, radius = 0.02 })\n"
+	                               "local m = d:mass()\n"
+	                               "assert(math.abs(m - 1000 * 0.01^3 / 1.0097752) < 1e-8, m)\n"
+	                               "world:add(eddy.gravity{}):mass()\n",
+	                          buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:6: gravity has no particle mass (only sph_density calibrates one)");
+}
+
 static void world_api_and_channels(void)
 {
 	lua_State *L = new_state();
@@ -211,6 +224,7 @@ void suite_lua(void)
 	RUN(wrong_type_and_range);
 	RUN(order_error_in_lua);
 	RUN(stale_handle_in_lua);
+	RUN(sph_mass_from_the_handle);
 	RUN(world_api_and_channels);
 	RUN(on_frame_fields_merge);
 	RUN(params_convert_to_the_default_type);
