@@ -6,6 +6,10 @@
 
 #include "core.h"
 
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
+
 #ifndef M_PI
 #define M_PI 3.14159265358979323846
 #endif
@@ -96,5 +100,16 @@ static inline void sph_coincident_dir(size_t i, size_t j, float *dx, float *dy, 
 	*dy = s * 0.53452248f;
 	*dz = s * 0.26726124f;
 }
+
+#ifdef __SSE2__
+/* Sum of the four lanes in a fixed order, (l0 + l1) + (l2 + l3): the passes
+ * over neighbours keep four partial sums and end with this. */
+static inline float sph_hsum4(__m128 v)
+{
+	const __m128 sw = _mm_shuffle_ps(v, v, _MM_SHUFFLE(2, 3, 0, 1)); /* l1 l0 l3 l2 */
+	const __m128 s = _mm_add_ps(v, sw);                               /* l0+l1, ., l2+l3, . */
+	return _mm_cvtss_f32(_mm_add_ss(s, _mm_movehl_ps(s, s)));
+}
+#endif
 
 #endif
