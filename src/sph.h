@@ -36,26 +36,41 @@ static inline sph_kernel_consts sph_consts(float h)
 	return k;
 }
 
-/* Neighbour lists: particle i's fluid neighbours (itself excluded) are
- * nbr[i*cap .. i*cap + count[i]), its boundary neighbours bnbr[i*bcap ..
- * i*bcap + bcount[i]) indexing the boundary arrays. Valid for the step in
- * which sph_density built them (the particle table is in that order). */
+/* Neighbour lists: particle i's fluid neighbours (itself excluded, r < h
+ * exactly, in ascending index order) are nbr[i*cap .. i*cap + count[i]), its
+ * boundary neighbours (r < h, ascending) bnbr[i*bcap .. i*bcap + bcount[i])
+ * indexing the boundary arrays. Valid for the step in which sph_density built
+ * them (the particle table is in that order, sorted by grid cell).
+ *
+ * Behind them, private to sph_neighbors.c, a Verlet list: the pairs closer
+ * than h (1 + SPH_SKIN) when it was last searched, in the indices of that
+ * time ("build slots"), reused while no particle has moved more than half
+ * the skin. It changes how fast the lists are made, never what they hold. */
 typedef struct sph_neighbors {
 	size_t n, cap, bcap;
 	uint32_t *nbr, *count, *bnbr, *bcount;
 	size_t n_alloc, cap_alloc, bcap_alloc;
 
-	/* fused into the search: sum_j (h^2 - r^2)^3 over the fluid neighbours
-	 * and sum_b V_b rho_b (h^2 - r^2)^3 over the boundary ones */
+	/* sum_j (h^2 - r^2)^3 over the fluid neighbours and sum_b V_b rho_b
+	 * (h^2 - r^2)^3 over the boundary ones, made with the lists */
 	float *wsum, *bwsum;
 
 	/* grid over the world bounds plus a margin of h, cell size h / 2: the
 	 * 5^3 cells around a particle hold 58% of the candidates of 3^3 cells of
-	 * size h */
+	 * size h, and 7^3 cover the Verlet radius */
 	float ox, oy, oz, inv;
 	int gx, gy, gz;
 	uint32_t *cell_start; /* (cells + 1) fluid rows per cell, rows in cell order */
 	uint32_t *cell_of;    /* cell of each row (n_alloc) */
+
+	/* the Verlet list (see above) */
+	size_t vn, vcap, vbcap, vcap_alloc, vbcap_alloc, v_alloc;
+	uint32_t *vnbr, *vcount, *vbnbr, *vbcount;
+	float *vx, *vy, *vz;             /* m, position of each build slot at the search */
+	uint32_t *slot_of, *now_of;       /* build slot of each row, row of each build slot */
+	uint64_t vbsig;                   /* boundary systems at the search */
+	bool vvalid;
+	int64_t searches;                 /* statistics: Verlet searches so far */
 
 	/* boundary particles of every sph_boundary_box, cell-sorted */
 	size_t nb;
@@ -65,6 +80,10 @@ typedef struct sph_neighbors {
 	uint64_t bsig; /* which boundary systems the arrays were built from */
 } sph_neighbors;
 
+/* Verlet skin as a fraction of h: larger means rarer searches but more
+ * candidates to filter every step */
+#define SPH_SKIN 0.2f
+#define SPH_VERLET_CELLS 3 /* cells of h/2 the Verlet radius spans: ceil(2 (1 + SPH_SKIN)) */
 #define SPH_CELLS_PER_H 2
 
 /* What sph_density shares with the SPH systems after it. */

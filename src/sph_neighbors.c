@@ -1,17 +1,33 @@
-/* SPH neighbour search: a uniform grid of cell size h/2 over the world bounds
- * (plus a margin of h for the boundary particles behind the walls).
+/* SPH neighbour lists: a Verlet list over a uniform grid, filtered every
+ * step into exact lists.
  *
- * Each step: the cell (size h/2, so 5^3 cells cover the support with fewer
- * candidates than 3^3 cells of size h) of every particle, a counting sort by cell (stable, so
- * the order is deterministic), the whole particle table permuted into cell
- * order (eddy__permute_particles) so that the passes over neighbours stream
- * memory, then per particle the 125 cells around it (with x fastest, the five
- * cells along x are one contiguous run of rows, so 25 runs) filtered by
- * r^2 < h^2. The density's kernel sums are accumulated on the way, since
- * r^2 is at hand. The lists are stored with a fixed stride per particle; when a
- * particle has more neighbours than the stride (compressed fluid), the stride
- * grows to the largest count and the lists are built again. Every particle
- * writes only its own list, so the lists are identical for any thread count.
+ * Every step: the cell (size h/2) of every particle, a counting sort by cell
+ * (stable, so the order is deterministic) and the whole particle table
+ * permuted into cell order (eddy__permute_particles), so the passes over
+ * neighbours stream memory.
+ *
+ * The grid search, the costly part, runs only when the Verlet list is stale:
+ * per particle the 7^3 cells around it (with x fastest, the seven cells
+ * along x are one contiguous run of rows, so 49 runs) filtered by
+ * r^2 < h_s^2, h_s = h (1 + SPH_SKIN), in the rows of that time ("build slots"); the permutations of later steps are
+ * followed with slot_of / now_of. The list stays valid while every particle
+ * is within skin/2 of where it was at the search: then a pair closer than h
+ * now was closer than h + skin then. A change in the particle count or in
+ * the boundary systems also forces a search. Any row may hold any particle
+ * (a swap-remove, a loaded checkpoint): the argument is about positions, so
+ * the displacement test covers that as well.
+ *
+ * Every step each particle's Verlet candidates are filtered by r^2 < h^2 into
+ * its exact list, sorted by index, and the density's kernel sums are
+ * accumulated on the way in that order. Since the particle order is a
+ * function of the positions alone (a stable sort of the table each step), the
+ * exact lists and sums are the same whenever the last search ran: a resumed
+ * run is bit-identical without checkpointing the Verlet list.
+ *
+ * The lists are stored with a fixed stride per particle; when a particle has
+ * more candidates than the stride (compressed fluid), the stride grows to the
+ * largest count and the search runs again. Every particle writes only its
+ * own lists, so they are identical for any thread count.
  *
  * Boundary particles (sph_boundary_box systems) are static: they are gathered
  * and cell-sorted once, and again only when the set of boundary systems
@@ -35,6 +51,15 @@ void eddy__sph_neighbors_free(sph_neighbors *nb)
 	free(nb->bcount);
 	free(nb->cell_start);
 	free(nb->cell_of);
+	free(nb->vnbr);
+	free(nb->vcount);
+	free(nb->vbnbr);
+	free(nb->vbcount);
+	free(nb->vx);
+	free(nb->vy);
+	free(nb->vz);
+	free(nb->slot_of);
+	free(nb->now_of);
 	free(nb->bx);
 	free(nb->by);
 	free(nb->bz);
@@ -199,16 +224,16 @@ static bool grow(void **p, size_t *have, size_t want, size_t elem)
 	return true;
 }
 
-/* One pass of list building with the current strides; returns the largest
- * fluid and boundary counts seen (a count above the stride means: rebuild). */
-static void fill_lists(eddy_world *w, sph_neighbors *nb, const sph_kernel_consts *kc, int threads, uint32_t *max_f,
-                       uint32_t *max_b)
+/* The grid search into the Verlet list: one pass with the current strides;
+ * returns the largest fluid and boundary counts seen (a count above the
+ * stride means: search again). The table is in cell order, so the candidates
+ * come in ascending row order. */
+static void search(eddy_world *w, sph_neighbors *nb, float hs2, int threads, uint32_t *max_f, uint32_t *max_b)
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const long n = (long)w->n;
-	const int gx = nb->gx, gy = nb->gy, gz = nb->gz, R = SPH_CELLS_PER_H;
-	const size_t cap = nb->cap, bcap = nb->bcap;
-	const float h2 = kc->h2;
+	const int gx = nb->gx, gy = nb->gy, gz = nb->gz, R = SPH_VERLET_CELLS;
+	const size_t cap = nb->vcap, bcap = nb->vbcap;
 	uint32_t mf = 0, mb = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : mf, mb)
 	for (long i = 0; i < n; ++i) {
@@ -218,11 +243,10 @@ static void fill_lists(eddy_world *w, sph_neighbors *nb, const sph_kernel_consts
 		const int x0 = cx >= R ? cx - R : 0, x1 = cx < gx - R ? cx + R : gx - 1;
 		const float xi = x[i], yi = y[i], zi = z[i];
 #ifdef __SSE2__
-		const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh2 = _mm_set1_ps(h2);
+		const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh2 = _mm_set1_ps(hs2);
 #endif
-		uint32_t *list = nb->nbr + (size_t)i * cap, *blist = nb->bnbr + (size_t)i * bcap;
+		uint32_t *list = nb->vnbr + (size_t)i * cap, *blist = nb->vbnbr + (size_t)i * bcap;
 		uint32_t cnt = 0, bcnt = 0;
-		float ws = 0, bws = 0;
 		for (int dz = -R; dz <= R; ++dz) {
 			const int zz = cz + dz;
 			if (zz < 0 || zz >= gz)
@@ -236,57 +260,42 @@ static void fill_lists(eddy_world *w, sph_neighbors *nb, const sph_kernel_consts
 				uint32_t j = a;
 #ifdef __SSE2__
 				/* four candidates at a time: the distance tests are most of
-				 * the search. The lanes do the scalar loop's operations in
-				 * the same order (no FMA), and hits are taken in order, so
-				 * lists and sums are bit for bit those of the scalar loop. */
+				 * the search; hits are taken in order */
 				for (; j + 4 <= e; j += 4) {
 					const __m128 rx = _mm_sub_ps(vxi, _mm_loadu_ps(x + j)), ry = _mm_sub_ps(vyi, _mm_loadu_ps(y + j)),
 					             rz = _mm_sub_ps(vzi, _mm_loadu_ps(z + j));
 					const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
-					const __m128 d4 = _mm_sub_ps(vh2, r2);
-					unsigned hit = (unsigned)_mm_movemask_ps(_mm_cmpgt_ps(d4, _mm_setzero_ps()));
+					unsigned hit = (unsigned)_mm_movemask_ps(_mm_cmplt_ps(r2, vh2));
 					if ((uint32_t)i - j < 4)
 						hit &= ~(1u << ((uint32_t)i - j)); /* not itself */
-					if (!hit)
-						continue;
-					float dv[4];
-					_mm_storeu_ps(dv, d4);
-					for (unsigned q = 0; q < 4; ++q)
-						if (hit >> q & 1) {
-							if (cnt < cap)
-								list[cnt] = j + q;
-							cnt++;
-							ws += dv[q] * dv[q] * dv[q];
-						}
+					for (; hit; hit &= hit - 1) {
+						if (cnt < cap)
+							list[cnt] = j + (uint32_t)__builtin_ctz(hit);
+						cnt++;
+					}
 				}
 #endif
 				for (; j < e; ++j) {
 					const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
-					const float d = h2 - (rx * rx + ry * ry + rz * rz);
-					if (d > 0 && j != (uint32_t)i) {
+					if (rx * rx + ry * ry + rz * rz < hs2 && j != (uint32_t)i) {
 						if (cnt < cap)
 							list[cnt] = j;
 						cnt++;
-						ws += d * d * d;
 					}
 				}
 				const uint32_t ba = nb->bcell_start[row + (size_t)x0], be = nb->bcell_start[row + (size_t)x1 + 1];
 				for (uint32_t jb = ba; jb < be; ++jb) {
 					const float rx = xi - nb->bx[jb], ry = yi - nb->by[jb], rz = zi - nb->bz[jb];
-					const float d = h2 - (rx * rx + ry * ry + rz * rz);
-					if (d > 0) {
+					if (rx * rx + ry * ry + rz * rz < hs2) {
 						if (bcnt < bcap)
 							blist[bcnt] = jb;
 						bcnt++;
-						bws += nb->bvol[jb] * nb->brho[jb] * d * d * d;
 					}
 				}
 			}
 		}
-		nb->count[i] = cnt;
-		nb->bcount[i] = bcnt;
-		nb->wsum[i] = ws;
-		nb->bwsum[i] = bws;
+		nb->vcount[i] = cnt;
+		nb->vbcount[i] = bcnt;
 		mf = cnt > mf ? cnt : mf;
 		mb = bcnt > mb ? bcnt : mb;
 	}
@@ -294,10 +303,158 @@ static void fill_lists(eddy_world *w, sph_neighbors *nb, const sph_kernel_consts
 	*max_b = mb;
 }
 
+/* Candidates of a row, kept with their (h^2 - r^2) while they are sorted
+ * by index; a longer row (a huge radius) takes a slower path. */
+#define SORT_MAX 256
+
+/* The exact lists and kernel sums from the Verlet list: candidates mapped to
+ * the rows they are in now, r^2 < h^2 kept, sorted by row, summed in that
+ * order. p4 holds (x, y, z, -) per row. */
+static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, int threads)
+{
+	const size_t vcap = nb->vcap, vbcap = nb->vbcap, cap = nb->cap, bcap = nb->bcap;
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		const uint32_t b = nb->slot_of[i];
+		const uint32_t *cand = nb->vnbr + (size_t)b * vcap;
+		const uint32_t vc = nb->vcount[b];
+		uint32_t *list = nb->nbr + (size_t)i * cap;
+		const float xi = p4[4 * i], yi = p4[4 * i + 1], zi = p4[4 * i + 2];
+		uint32_t cnt = 0;
+		float ws = 0;
+		if (vc <= SORT_MAX) {
+			float dv[SORT_MAX];
+			uint32_t q = 0;
+			/* branch-free (whether a candidate is in is a coin toss): every
+			 * candidate is written, and the count moves past the ones in */
+#ifdef __SSE2__
+			const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh2 = _mm_set1_ps(h2);
+			for (; q + 4 <= vc; q += 4) {
+				const uint32_t j0 = nb->now_of[cand[q]], j1 = nb->now_of[cand[q + 1]], j2 = nb->now_of[cand[q + 2]],
+				               j3 = nb->now_of[cand[q + 3]];
+				__m128 px = _mm_loadu_ps(p4 + 4 * (size_t)j0), py = _mm_loadu_ps(p4 + 4 * (size_t)j1),
+				       pz = _mm_loadu_ps(p4 + 4 * (size_t)j2), pw = _mm_loadu_ps(p4 + 4 * (size_t)j3);
+				_MM_TRANSPOSE4_PS(px, py, pz, pw);
+				const __m128 rx = _mm_sub_ps(vxi, px), ry = _mm_sub_ps(vyi, py), rz = _mm_sub_ps(vzi, pz);
+				const __m128 d = _mm_sub_ps(
+					vh2, _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz)));
+				const unsigned in = (unsigned)_mm_movemask_ps(_mm_cmpgt_ps(d, _mm_setzero_ps()));
+				float dd[4];
+				_mm_storeu_ps(dd, d);
+				list[cnt] = j0;
+				dv[cnt] = dd[0];
+				cnt += in & 1;
+				list[cnt] = j1;
+				dv[cnt] = dd[1];
+				cnt += in >> 1 & 1;
+				list[cnt] = j2;
+				dv[cnt] = dd[2];
+				cnt += in >> 2 & 1;
+				list[cnt] = j3;
+				dv[cnt] = dd[3];
+				cnt += in >> 3;
+			}
+#endif
+			for (; q < vc; ++q) {
+				const uint32_t j = nb->now_of[cand[q]];
+				const float *pj = p4 + 4 * (size_t)j;
+				const float rx = xi - pj[0], ry = yi - pj[1], rz = zi - pj[2];
+				const float d = h2 - (rx * rx + ry * ry + rz * rz);
+				list[cnt] = j;
+				dv[cnt] = d;
+				cnt += d > 0;
+			}
+			/* nearly sorted already: only particles that changed cell since
+			 * the search are out of place, so this is about one compare each */
+			for (uint32_t a = 1; a < cnt; ++a) {
+				const uint32_t j = list[a];
+				if (list[a - 1] < j)
+					continue;
+				const float d = dv[a];
+				uint32_t k = a;
+				for (; k > 0 && list[k - 1] > j; --k) {
+					list[k] = list[k - 1];
+					dv[k] = dv[k - 1];
+				}
+				list[k] = j;
+				dv[k] = d;
+			}
+			q = 0;
+#ifdef __SSE2__
+			/* four partial sums, added up in a fixed order */
+			__m128 acc = _mm_setzero_ps();
+			for (; q + 4 <= cnt; q += 4) {
+				const __m128 d = _mm_loadu_ps(dv + q);
+				acc = _mm_add_ps(acc, _mm_mul_ps(_mm_mul_ps(d, d), d));
+			}
+			ws = sph_hsum4(acc);
+#endif
+			for (; q < cnt; ++q)
+				ws += dv[q] * dv[q] * dv[q];
+		} else {
+			for (uint32_t q = 0; q < vc; ++q) {
+				const uint32_t j = nb->now_of[cand[q]];
+				const float rx = xi - p4[4 * j], ry = yi - p4[4 * j + 1], rz = zi - p4[4 * j + 2];
+				if (h2 - (rx * rx + ry * ry + rz * rz) > 0)
+					list[cnt++] = j;
+			}
+			for (uint32_t a = 1; a < cnt; ++a) {
+				const uint32_t j = list[a];
+				uint32_t k = a;
+				for (; k > 0 && list[k - 1] > j; --k)
+					list[k] = list[k - 1];
+				list[k] = j;
+			}
+			for (uint32_t q = 0; q < cnt; ++q) {
+				const uint32_t j = list[q];
+				const float rx = xi - p4[4 * j], ry = yi - p4[4 * j + 1], rz = zi - p4[4 * j + 2];
+				const float d = h2 - (rx * rx + ry * ry + rz * rz);
+				ws += d * d * d;
+			}
+		}
+		nb->count[i] = cnt;
+		nb->wsum[i] = ws;
+
+		/* boundary particles never move: their candidates stay in order */
+		const uint32_t *bcand = nb->vbnbr + (size_t)b * vbcap;
+		const uint32_t vbc = nb->vbcount[b];
+		uint32_t *blist = nb->bnbr + (size_t)i * bcap;
+		uint32_t bcnt = 0;
+		float bws = 0;
+		for (uint32_t q = 0; q < vbc; ++q) {
+			const uint32_t jb = bcand[q];
+			const float rx = xi - nb->bx[jb], ry = yi - nb->by[jb], rz = zi - nb->bz[jb];
+			const float d = h2 - (rx * rx + ry * ry + rz * rz);
+			if (d > 0) {
+				blist[bcnt++] = jb;
+				bws += nb->bvol[jb] * nb->brho[jb] * d * d * d;
+			}
+		}
+		nb->bcount[i] = bcnt;
+		nb->bwsum[i] = bws;
+	}
+}
+
 eddy_status eddy__sph_boundary_ready(eddy_world *w, sph_shared *sh)
 {
 	eddy_status st = grid_setup(w, &sh->nb, sh->h);
 	return st == EDDY_OK ? boundary_build(w, sh) : st;
+}
+
+/* Grows every per-particle array to n. */
+static bool grow_rows(sph_neighbors *nb, size_t n)
+{
+	void **arrays[] = {(void **)&nb->cell_of, (void **)&nb->count, (void **)&nb->bcount, (void **)&nb->wsum,
+	                   (void **)&nb->bwsum,   (void **)&nb->vcount, (void **)&nb->vbcount, (void **)&nb->vx,
+	                   (void **)&nb->vy,      (void **)&nb->vz,     (void **)&nb->slot_of, (void **)&nb->now_of};
+	size_t had = nb->n_alloc;
+	for (size_t a = 0; a < sizeof arrays / sizeof arrays[0]; ++a) {
+		had = nb->n_alloc;
+		if (!grow(arrays[a], &had, n, 4)) /* every one is 4 bytes a row */
+			return false;
+	}
+	nb->n_alloc = had;
+	return true;
 }
 
 eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads)
@@ -311,35 +468,24 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		return st;
 	const size_t n = w->n;
 	nb->n = n;
-	if (n == 0)
+	if (n == 0) {
+		nb->vvalid = false;
 		return EDDY_OK;
-	if (!nb->cap) {
-		nb->cap = 48;
-		nb->bcap = 16;
 	}
-	size_t had = nb->n_alloc;
-	if (!grow((void **)&nb->cell_of, &had, n, sizeof *nb->cell_of))
+	if (!nb->vcap) {
+		nb->vcap = 80;
+		nb->vbcap = 32;
+	}
+	if (!grow_rows(nb, n))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
-	had = nb->n_alloc;
-	if (!grow((void **)&nb->count, &had, n, sizeof *nb->count))
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
-	had = nb->n_alloc;
-	if (!grow((void **)&nb->bcount, &had, n, sizeof *nb->bcount))
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
-	had = nb->n_alloc;
-	if (!grow((void **)&nb->wsum, &had, n, sizeof *nb->wsum))
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
-	had = nb->n_alloc;
-	if (!grow((void **)&nb->bwsum, &had, n, sizeof *nb->bwsum))
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
-	nb->n_alloc = had;
 
 	/* cell order */
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	uint32_t *key = eddy__arena_alloc(&w->arena, n * sizeof *key);
 	uint32_t *order = eddy__arena_alloc(&w->arena, n * sizeof *order);
 	void *scratch = eddy__arena_alloc(&w->arena, n * sizeof(float));
-	if (!key || !order || !scratch)
+	float *p4 = eddy__arena_alloc(&w->arena, 4 * n * sizeof *p4);
+	if (!key || !order || !scratch || !p4)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", n);
 	for (size_t i = 0; i < n; ++i)
 		key[i] = cell_index(nb, x[i], y[i], z[i]);
@@ -349,25 +495,82 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	for (size_t i = 0; i < n; ++i)
 		nb->cell_of[i] = key[order[i]];
 
-	for (;;) {
-		size_t want = n * nb->cap, have = nb->cap_alloc;
-		if (!grow((void **)&nb->nbr, &have, want, sizeof *nb->nbr))
-			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n, nb->cap);
-		nb->cap_alloc = have;
-		want = n * nb->bcap;
-		have = nb->bcap_alloc;
-		if (!grow((void **)&nb->bnbr, &have, want, sizeof *nb->bnbr))
-			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n, nb->bcap);
-		nb->bcap_alloc = have;
-		uint32_t mf, mb;
-		fill_lists(w, nb, &sh->k, threads, &mf, &mb);
-		if (mf <= nb->cap && mb <= nb->bcap)
-			break;
-		/* a particle had more neighbours than the stride: widen and redo */
-		if (mf > nb->cap)
-			nb->cap = (mf + 15) / 16 * 16;
-		if (mb > nb->bcap)
-			nb->bcap = (mb + 15) / 16 * 16;
+	/* is the Verlet list still good? Follow the rows through the permutation,
+	 * then check how far each particle is from its build slot's position */
+	bool valid = nb->vvalid && nb->vn == n && nb->vbsig == nb->bsig;
+	if (valid) {
+		uint32_t *slot = scratch;
+		for (size_t i = 0; i < n; ++i)
+			slot[i] = nb->slot_of[order[i]];
+		memcpy(nb->slot_of, slot, n * sizeof *slot);
+		for (size_t i = 0; i < n; ++i)
+			nb->now_of[nb->slot_of[i]] = (uint32_t)i;
+		const float half = 0.49f * SPH_SKIN * sh->h; /* 0.49: float rounding */
+		const float lim2 = half * half;
+		float d2max = 0;
+		const long ln = (long)n;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : d2max)
+		for (long i = 0; i < ln; ++i) {
+			const uint32_t b = nb->slot_of[i];
+			const float dx = x[i] - nb->vx[b], dy = y[i] - nb->vy[b], dz = z[i] - nb->vz[b];
+			const float d2 = dx * dx + dy * dy + dz * dz;
+			d2max = d2 > d2max ? d2 : d2max;
+		}
+		valid = d2max < lim2; /* false for NaN too */
 	}
+	if (!valid) {
+		const float hs = sh->h * (1.0f + SPH_SKIN), hs2 = hs * hs;
+		for (;;) {
+			size_t want = n * nb->vcap, have = nb->vcap_alloc;
+			if (!grow((void **)&nb->vnbr, &have, want, sizeof *nb->vnbr))
+				return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n,
+				                  nb->vcap);
+			nb->vcap_alloc = have;
+			want = n * nb->vbcap;
+			have = nb->vbcap_alloc;
+			if (!grow((void **)&nb->vbnbr, &have, want, sizeof *nb->vbnbr))
+				return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n,
+				                  nb->vbcap);
+			nb->vbcap_alloc = have;
+			uint32_t mf, mb;
+			search(w, nb, hs2, threads, &mf, &mb);
+			if (mf <= nb->vcap && mb <= nb->vbcap)
+				break;
+			/* a particle had more candidates than the stride: widen and redo */
+			if (mf > nb->vcap)
+				nb->vcap = (mf + 15) / 16 * 16;
+			if (mb > nb->vbcap)
+				nb->vbcap = (mb + 15) / 16 * 16;
+		}
+		memcpy(nb->vx, x, n * sizeof *x);
+		memcpy(nb->vy, y, n * sizeof *y);
+		memcpy(nb->vz, z, n * sizeof *z);
+		for (size_t i = 0; i < n; ++i)
+			nb->slot_of[i] = nb->now_of[i] = (uint32_t)i;
+		nb->vn = n;
+		nb->vbsig = nb->bsig;
+		nb->vvalid = true;
+		nb->searches++;
+	}
+
+	/* the exact lists: never longer than the candidates */
+	nb->cap = nb->vcap;
+	nb->bcap = nb->vbcap;
+	size_t want = n * nb->cap, have = nb->cap_alloc;
+	if (!grow((void **)&nb->nbr, &have, want, sizeof *nb->nbr))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n, nb->cap);
+	nb->cap_alloc = have;
+	want = n * nb->bcap;
+	have = nb->bcap_alloc;
+	if (!grow((void **)&nb->bnbr, &have, want, sizeof *nb->bnbr))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n, nb->bcap);
+	nb->bcap_alloc = have;
+	for (size_t i = 0; i < n; ++i) {
+		p4[4 * i] = x[i];
+		p4[4 * i + 1] = y[i];
+		p4[4 * i + 2] = z[i];
+		p4[4 * i + 3] = 0;
+	}
+	filter(nb, p4, sh->k.h2, (long)n, threads);
 	return EDDY_OK;
 }

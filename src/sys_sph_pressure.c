@@ -24,9 +24,6 @@
 #include "systems.h"
 
 #include <stdlib.h>
-#ifdef __SSE2__
-#include <emmintrin.h>
-#endif
 
 typedef struct sph_pressure {
 	eddy_sph_pressure_def def;
@@ -56,6 +53,19 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const sph_kernel_consts kc = sh->k;
 	const float m = sh->mass, scale = sp->def.scale, eps2 = 1e-6f * kc.h2;
 	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
+	/* each neighbour's position and 1/rho as one 16-byte quad: a group of
+	 * four neighbours then costs four loads and a transpose instead of
+	 * sixteen scattered loads */
+	float *pk = eddy__arena_alloc(&w->arena, (size_t)(n ? n : 1) * 4 * sizeof *pk);
+	if (!pk)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
+#pragma omp parallel for num_threads(ctx->threads) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		pk[4 * i] = x[i];
+		pk[4 * i + 1] = y[i];
+		pk[4 * i + 2] = z[i];
+		pk[4 * i + 3] = inv_rho[i];
+	}
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		const float xi = x[i], yi = y[i], zi = z[i];
@@ -66,39 +76,33 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		float fx = 0, fy = 0, fz = 0;
 		uint32_t q = 0;
 #ifdef __SSE2__
-		/* four neighbours at a time for the square roots and divisions (the
-		 * bulk of the cost), each lane doing the scalar loop's operations in
-		 * the same order; the products are then added to the sums one
-		 * neighbour at a time in list order, so the sums are bit-identical
-		 * to the scalar loop's. A group with a coincident pair goes scalar. */
+		/* four neighbours at a time, with four partial sums per component
+		 * added up at the end (a fixed order, the same for any thread
+		 * count). A group with a coincident pair goes scalar. */
 		const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vpi = _mm_set1_ps(pi_),
 		             vh = _mm_set1_ps(kc.h), veps2 = _mm_set1_ps(eps2), one = _mm_set1_ps(1.0f);
+		__m128 sx = _mm_setzero_ps(), sy = _mm_setzero_ps(), sz = _mm_setzero_ps();
 		for (; q + 4 <= cnt; q += 4) {
 			const uint32_t j0 = list[q], j1 = list[q + 1], j2 = list[q + 2], j3 = list[q + 3];
-			__m128 rx = _mm_sub_ps(vxi, _mm_setr_ps(x[j0], x[j1], x[j2], x[j3]));
-			__m128 ry = _mm_sub_ps(vyi, _mm_setr_ps(y[j0], y[j1], y[j2], y[j3]));
-			__m128 rz = _mm_sub_ps(vzi, _mm_setr_ps(z[j0], z[j1], z[j2], z[j3]));
+			__m128 px = _mm_loadu_ps(pk + 4 * (size_t)j0), py = _mm_loadu_ps(pk + 4 * (size_t)j1),
+			       pz = _mm_loadu_ps(pk + 4 * (size_t)j2), pir = _mm_loadu_ps(pk + 4 * (size_t)j3);
+			_MM_TRANSPOSE4_PS(px, py, pz, pir);
+			__m128 rx = _mm_sub_ps(vxi, px), ry = _mm_sub_ps(vyi, py), rz = _mm_sub_ps(vzi, pz);
 			const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
 			if (_mm_movemask_ps(_mm_cmpgt_ps(r2, veps2)) != 15)
 				break; /* the scalar loop takes it from here */
-			const __m128 r = _mm_sqrt_ps(r2), inv = _mm_div_ps(one, r);
-			rx = _mm_mul_ps(rx, inv);
-			ry = _mm_mul_ps(ry, inv);
-			rz = _mm_mul_ps(rz, inv);
-			const __m128 hr = _mm_sub_ps(vh, r);
-			const __m128 pj = _mm_setr_ps(p[j0], p[j1], p[j2], p[j3]),
-			             irj = _mm_setr_ps(inv_rho[j0], inv_rho[j1], inv_rho[j2], inv_rho[j3]);
-			const __m128 c = _mm_mul_ps(_mm_mul_ps(_mm_mul_ps(_mm_add_ps(vpi, pj), irj), hr), hr);
-			float cx[4], cy[4], cz[4];
-			_mm_storeu_ps(cx, _mm_mul_ps(c, rx));
-			_mm_storeu_ps(cy, _mm_mul_ps(c, ry));
-			_mm_storeu_ps(cz, _mm_mul_ps(c, rz));
-			for (int l = 0; l < 4; ++l) {
-				fx += cx[l];
-				fy += cy[l];
-				fz += cz[l];
-			}
+			const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
+			const __m128 pj = _mm_setr_ps(p[j0], p[j1], p[j2], p[j3]);
+			/* (p_i + p_j) / rho_j (h - r)^2 / r: the 1/r normalises r_vec */
+			const __m128 c = _mm_div_ps(_mm_mul_ps(_mm_mul_ps(_mm_mul_ps(_mm_add_ps(vpi, pj), pir), hr), hr), r);
+			sx = _mm_add_ps(sx, _mm_mul_ps(c, rx));
+			sy = _mm_add_ps(sy, _mm_mul_ps(c, ry));
+			sz = _mm_add_ps(sz, _mm_mul_ps(c, rz));
 		}
+		(void)one;
+		fx = sph_hsum4(sx);
+		fy = sph_hsum4(sy);
+		fz = sph_hsum4(sz);
 #endif
 		for (; q < cnt; ++q) {
 			const uint32_t j = list[q];
