@@ -310,10 +310,12 @@ static void search(eddy_world *w, sph_neighbors *nb, float hs2, int threads, uin
 /* The exact lists and kernel sums from the Verlet list: candidates mapped to
  * the rows they are in now, r^2 < h^2 kept, sorted by row, summed in that
  * order. p4 holds (x, y, z, -) per row. */
-static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, int threads)
+static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, int threads, uint32_t *max_f,
+                   uint32_t *max_b)
 {
 	const size_t vcap = nb->vcap, vbcap = nb->vbcap, cap = nb->cap, bcap = nb->bcap;
-#pragma omp parallel for num_threads(threads) schedule(static)
+	uint32_t mf = 0, mb = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : mf, mb)
 	for (long i = 0; i < n; ++i) {
 		const uint32_t b = nb->slot_of[i];
 		const uint32_t *cand = nb->vnbr + (size_t)b * vcap;
@@ -323,6 +325,9 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 		uint32_t cnt = 0;
 		float ws = 0;
 		if (vc <= SORT_MAX) {
+			/* on the stack until sorted: the rows of the list are then written
+			 * once, whole, which the memory system streams */
+			uint32_t jl[SORT_MAX];
 			float dv[SORT_MAX];
 			uint32_t q = 0;
 			/* branch-free (whether a candidate is in is a coin toss): every
@@ -341,16 +346,16 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 				const unsigned in = (unsigned)_mm_movemask_ps(_mm_cmpgt_ps(d, _mm_setzero_ps()));
 				float dd[4];
 				_mm_storeu_ps(dd, d);
-				list[cnt] = j0;
+				jl[cnt] = j0;
 				dv[cnt] = dd[0];
 				cnt += in & 1;
-				list[cnt] = j1;
+				jl[cnt] = j1;
 				dv[cnt] = dd[1];
 				cnt += in >> 1 & 1;
-				list[cnt] = j2;
+				jl[cnt] = j2;
 				dv[cnt] = dd[2];
 				cnt += in >> 2 & 1;
-				list[cnt] = j3;
+				jl[cnt] = j3;
 				dv[cnt] = dd[3];
 				cnt += in >> 3;
 			}
@@ -360,23 +365,23 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 				const float *pj = p4 + 4 * (size_t)j;
 				const float rx = xi - pj[0], ry = yi - pj[1], rz = zi - pj[2];
 				const float d = h2 - (rx * rx + ry * ry + rz * rz);
-				list[cnt] = j;
+				jl[cnt] = j;
 				dv[cnt] = d;
 				cnt += d > 0;
 			}
 			/* nearly sorted already: only particles that changed cell since
 			 * the search are out of place, so this is about one compare each */
 			for (uint32_t a = 1; a < cnt; ++a) {
-				const uint32_t j = list[a];
-				if (list[a - 1] < j)
+				const uint32_t j = jl[a];
+				if (jl[a - 1] < j)
 					continue;
 				const float d = dv[a];
 				uint32_t k = a;
-				for (; k > 0 && list[k - 1] > j; --k) {
-					list[k] = list[k - 1];
+				for (; k > 0 && jl[k - 1] > j; --k) {
+					jl[k] = jl[k - 1];
 					dv[k] = dv[k - 1];
 				}
-				list[k] = j;
+				jl[k] = j;
 				dv[k] = d;
 			}
 			q = 0;
@@ -391,21 +396,26 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 #endif
 			for (; q < cnt; ++q)
 				ws += dv[q] * dv[q] * dv[q];
+			if (cnt <= cap)
+				memcpy(list, jl, cnt * sizeof *jl);
 		} else {
 			for (uint32_t q = 0; q < vc; ++q) {
 				const uint32_t j = nb->now_of[cand[q]];
 				const float rx = xi - p4[4 * j], ry = yi - p4[4 * j + 1], rz = zi - p4[4 * j + 2];
-				if (h2 - (rx * rx + ry * ry + rz * rz) > 0)
-					list[cnt++] = j;
+				if (h2 - (rx * rx + ry * ry + rz * rz) > 0) {
+					if (cnt < cap)
+						list[cnt] = j;
+					cnt++;
+				}
 			}
-			for (uint32_t a = 1; a < cnt; ++a) {
+			for (uint32_t a = 1; a < cnt && cnt <= cap; ++a) {
 				const uint32_t j = list[a];
 				uint32_t k = a;
 				for (; k > 0 && list[k - 1] > j; --k)
 					list[k] = list[k - 1];
 				list[k] = j;
 			}
-			for (uint32_t q = 0; q < cnt; ++q) {
+			for (uint32_t q = 0; q < cnt && cnt <= cap; ++q) {
 				const uint32_t j = list[q];
 				const float rx = xi - p4[4 * j], ry = yi - p4[4 * j + 1], rz = zi - p4[4 * j + 2];
 				const float d = h2 - (rx * rx + ry * ry + rz * rz);
@@ -426,13 +436,19 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 			const float rx = xi - nb->bx[jb], ry = yi - nb->by[jb], rz = zi - nb->bz[jb];
 			const float d = h2 - (rx * rx + ry * ry + rz * rz);
 			if (d > 0) {
-				blist[bcnt++] = jb;
+				if (bcnt < bcap)
+					blist[bcnt] = jb;
+				bcnt++;
 				bws += nb->bvol[jb] * nb->brho[jb] * d * d * d;
 			}
 		}
 		nb->bcount[i] = bcnt;
 		nb->bwsum[i] = bws;
+		mf = cnt > mf ? cnt : mf;
+		mb = bcnt > mb ? bcnt : mb;
 	}
+	*max_f = mf;
+	*max_b = mb;
 }
 
 eddy_status eddy__sph_boundary_ready(eddy_world *w, sph_shared *sh)
@@ -553,24 +569,37 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		nb->searches++;
 	}
 
-	/* the exact lists: never longer than the candidates */
-	nb->cap = nb->vcap;
-	nb->bcap = nb->vbcap;
-	size_t want = n * nb->cap, have = nb->cap_alloc;
-	if (!grow((void **)&nb->nbr, &have, want, sizeof *nb->nbr))
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n, nb->cap);
-	nb->cap_alloc = have;
-	want = n * nb->bcap;
-	have = nb->bcap_alloc;
-	if (!grow((void **)&nb->bnbr, &have, want, sizeof *nb->bnbr))
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n, nb->bcap);
-	nb->bcap_alloc = have;
 	for (size_t i = 0; i < n; ++i) {
 		p4[4 * i] = x[i];
 		p4[4 * i + 1] = y[i];
 		p4[4 * i + 2] = z[i];
 		p4[4 * i + 3] = 0;
 	}
-	filter(nb, p4, sh->k.h2, (long)n, threads);
+	/* the exact lists, with their own (tighter) strides */
+	if (!nb->cap) {
+		nb->cap = 32;
+		nb->bcap = 16;
+	}
+	for (;;) {
+		size_t want = n * nb->cap, have = nb->cap_alloc;
+		if (!grow((void **)&nb->nbr, &have, want, sizeof *nb->nbr))
+			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n, nb->cap);
+		nb->cap_alloc = have;
+		want = n * nb->bcap;
+		have = nb->bcap_alloc;
+		if (!grow((void **)&nb->bnbr, &have, want, sizeof *nb->bnbr))
+			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n, nb->bcap);
+		nb->bcap_alloc = have;
+		uint32_t mf, mb;
+		filter(nb, p4, sh->k.h2, (long)n, threads, &mf, &mb);
+		if (mf <= nb->cap && mb <= nb->bcap)
+			break;
+		/* more neighbours than the stride (compressed fluid): widen, with
+		 * room to spare so that this stays rare, and redo */
+		if (mf > nb->cap)
+			nb->cap = (mf + 7) / 8 * 8 + 8;
+		if (mb > nb->bcap)
+			nb->bcap = (mb + 7) / 8 * 8 + 8;
+	}
 	return EDDY_OK;
 }
