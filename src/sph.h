@@ -69,7 +69,7 @@ typedef struct sph_neighbors {
 	float *vx, *vy, *vz;             /* m, position of each build slot at the search */
 	uint32_t *slot_of, *now_of;       /* build slot of each row, row of each build slot */
 	uint64_t vbsig;                   /* boundary systems at the search */
-	bool vvalid;
+	bool vvalid, vsame; /* vsame: no particle has changed row since the search */
 	int64_t searches;                 /* statistics: Verlet searches so far */
 
 	/* boundary particles of every sph_boundary_box, cell-sorted */

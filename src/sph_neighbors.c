@@ -314,6 +314,10 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
                    uint32_t *max_b)
 {
 	const size_t vcap = nb->vcap, vbcap = nb->vbcap, cap = nb->cap, bcap = nb->bcap;
+	/* the row a build slot is in now; the same while no permutation moved a
+	 * particle since the search (a loop-invariant test, hoisted) */
+	const uint32_t *now_of = nb->vsame ? NULL : nb->now_of;
+#define ROW(slot) (now_of ? now_of[slot] : (slot))
 	uint32_t mf = 0, mb = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : mf, mb)
 	for (long i = 0; i < n; ++i) {
@@ -335,8 +339,7 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 #ifdef __SSE2__
 			const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh2 = _mm_set1_ps(h2);
 			for (; q + 4 <= vc; q += 4) {
-				const uint32_t j0 = nb->now_of[cand[q]], j1 = nb->now_of[cand[q + 1]], j2 = nb->now_of[cand[q + 2]],
-				               j3 = nb->now_of[cand[q + 3]];
+				const uint32_t j0 = ROW(cand[q]), j1 = ROW(cand[q + 1]), j2 = ROW(cand[q + 2]), j3 = ROW(cand[q + 3]);
 				__m128 px = _mm_loadu_ps(p4 + 4 * (size_t)j0), py = _mm_loadu_ps(p4 + 4 * (size_t)j1),
 				       pz = _mm_loadu_ps(p4 + 4 * (size_t)j2), pw = _mm_loadu_ps(p4 + 4 * (size_t)j3);
 				_MM_TRANSPOSE4_PS(px, py, pz, pw);
@@ -361,7 +364,7 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 			}
 #endif
 			for (; q < vc; ++q) {
-				const uint32_t j = nb->now_of[cand[q]];
+				const uint32_t j = ROW(cand[q]);
 				const float *pj = p4 + 4 * (size_t)j;
 				const float rx = xi - pj[0], ry = yi - pj[1], rz = zi - pj[2];
 				const float d = h2 - (rx * rx + ry * ry + rz * rz);
@@ -400,7 +403,7 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 				memcpy(list, jl, cnt * sizeof *jl);
 		} else {
 			for (uint32_t q = 0; q < vc; ++q) {
-				const uint32_t j = nb->now_of[cand[q]];
+				const uint32_t j = ROW(cand[q]);
 				const float rx = xi - p4[4 * j], ry = yi - p4[4 * j + 1], rz = zi - p4[4 * j + 2];
 				if (h2 - (rx * rx + ry * ry + rz * rz) > 0) {
 					if (cnt < cap)
@@ -449,6 +452,7 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 	}
 	*max_f = mf;
 	*max_b = mb;
+#undef ROW
 }
 
 eddy_status eddy__sph_boundary_ready(eddy_world *w, sph_shared *sh)
@@ -507,20 +511,28 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		key[i] = cell_index(nb, x[i], y[i], z[i]);
 	const size_t cells = (size_t)nb->gx * (size_t)nb->gy * (size_t)nb->gz;
 	counting_sort(key, n, cells, nb->cell_start, order);
-	eddy__permute_particles(w, order, scratch);
+	/* a fluid at rest keeps its order from step to step: skip the copying */
+	bool same = true;
+	for (size_t i = 0; i < n && same; ++i)
+		same = order[i] == i;
+	if (!same)
+		eddy__permute_particles(w, order, scratch);
 	for (size_t i = 0; i < n; ++i)
 		nb->cell_of[i] = key[order[i]];
 
 	/* is the Verlet list still good? Follow the rows through the permutation,
 	 * then check how far each particle is from its build slot's position */
 	bool valid = nb->vvalid && nb->vn == n && nb->vbsig == nb->bsig;
-	if (valid) {
+	if (valid && !same) {
 		uint32_t *slot = scratch;
 		for (size_t i = 0; i < n; ++i)
 			slot[i] = nb->slot_of[order[i]];
 		memcpy(nb->slot_of, slot, n * sizeof *slot);
 		for (size_t i = 0; i < n; ++i)
 			nb->now_of[nb->slot_of[i]] = (uint32_t)i;
+		nb->vsame = false;
+	}
+	if (valid) {
 		const float half = 0.49f * SPH_SKIN * sh->h; /* 0.49: float rounding */
 		const float lim2 = half * half;
 		float d2max = 0;
@@ -566,6 +578,7 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		nb->vn = n;
 		nb->vbsig = nb->bsig;
 		nb->vvalid = true;
+		nb->vsame = true;
 		nb->searches++;
 	}
 
