@@ -399,8 +399,17 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 #endif
 			for (; q < cnt; ++q)
 				ws += dv[q] * dv[q] * dv[q];
-			if (cnt <= cap)
-				memcpy(list, jl, cnt * sizeof *jl);
+			if (cnt <= cap) {
+				/* whole quads (cap is a multiple of 8): short rows, where a
+				 * memcpy call costs more than the copy */
+				q = 0;
+#ifdef __SSE2__
+				for (; q < cnt; q += 4)
+					_mm_storeu_si128((__m128i *)(list + q), _mm_loadu_si128((const __m128i *)(jl + q)));
+#endif
+				for (; q < cnt; ++q)
+					list[q] = jl[q];
+			}
 		} else {
 			for (uint32_t q = 0; q < vc; ++q) {
 				const uint32_t j = ROW(cand[q]);
