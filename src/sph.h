@@ -131,4 +131,37 @@ static inline float sph_hsum4(__m128 v)
 }
 #endif
 
+/* An AVX2 path beside the SSE one (chosen at run time, the default build
+ * stays portable): the pair loops work on groups of eight neighbours, which
+ * the SSE path does as two halves with separate partial sums, so that both
+ * paths do the same operations per lane and give the same bits. */
+#if defined(__SSE2__) && defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__))
+#define SPH_AVX2 1
+#include <immintrin.h>
+static inline bool sph_use_avx2(void) { return __builtin_cpu_supports("avx2"); }
+
+/* Sum of eight lanes as the SSE path sums its two halves. */
+__attribute__((target("avx2"))) static inline float sph_hsum8(__m256 v)
+{
+	return sph_hsum4(_mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1)));
+}
+
+/* Quads a[0..7] (16 bytes each) to four vectors of eight lanes: lanes 0-3
+ * from a[0..3], lanes 4-7 from a[4..7], as two _MM_TRANSPOSE4_PS would. */
+__attribute__((target("avx2"))) static inline void sph_transpose8(const float *const a[8], __m256 *c0, __m256 *c1,
+                                                                  __m256 *c2, __m256 *c3)
+{
+	const __m256 v0 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[0])), _mm_loadu_ps(a[4]), 1),
+	             v1 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[1])), _mm_loadu_ps(a[5]), 1),
+	             v2 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[2])), _mm_loadu_ps(a[6]), 1),
+	             v3 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[3])), _mm_loadu_ps(a[7]), 1);
+	const __m256 t0 = _mm256_unpacklo_ps(v0, v1), t1 = _mm256_unpacklo_ps(v2, v3), t2 = _mm256_unpackhi_ps(v0, v1),
+	             t3 = _mm256_unpackhi_ps(v2, v3);
+	*c0 = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(1, 0, 1, 0));
+	*c1 = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(3, 2, 3, 2));
+	*c2 = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(1, 0, 1, 0));
+	*c3 = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(3, 2, 3, 2));
+}
+#endif
+
 #endif
