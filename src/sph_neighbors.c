@@ -307,6 +307,53 @@ static void search(eddy_world *w, sph_neighbors *nb, float hs2, int threads, uin
  * by index; a longer row (a huge radius) takes a slower path. */
 #define SORT_MAX 256
 
+#ifdef SPH_AVX2
+/* The AVX2 path of filter() for the groups of eight candidates of one row:
+ * the candidates in (r^2 < h^2) are packed to the front of the group with a
+ * permutation made from the mask (pdep/pext), stored eight at a time. The
+ * same candidates in the same order as the SSE path, so the same lists. */
+__attribute__((target("avx2,bmi2"))) static uint32_t filter_avx2(const uint32_t *cand, uint32_t vc,
+                                                                 const uint32_t *now_of, const float *p4, float xi,
+                                                                 float yi, float zi, float h2, uint32_t *jl,
+                                                                 float *dv, uint32_t *done)
+{
+	const __m256 vxi = _mm256_set1_ps(xi), vyi = _mm256_set1_ps(yi), vzi = _mm256_set1_ps(zi), vh2 = _mm256_set1_ps(h2);
+	uint32_t cnt = 0, q = 0;
+	for (; q + 8 <= vc; q += 8) {
+		uint32_t j[8];
+		__m256i jv;
+		if (now_of) {
+			for (int k = 0; k < 8; ++k)
+				j[k] = now_of[cand[q + (uint32_t)k]];
+			jv = _mm256_setr_epi32((int)j[0], (int)j[1], (int)j[2], (int)j[3], (int)j[4], (int)j[5], (int)j[6],
+			                       (int)j[7]);
+		} else {
+			for (int k = 0; k < 8; ++k)
+				j[k] = cand[q + (uint32_t)k];
+			jv = _mm256_loadu_si256((const __m256i *)(cand + q));
+		}
+		const float *const quad[8] = {p4 + 4 * (size_t)j[0], p4 + 4 * (size_t)j[1], p4 + 4 * (size_t)j[2],
+		                              p4 + 4 * (size_t)j[3], p4 + 4 * (size_t)j[4], p4 + 4 * (size_t)j[5],
+		                              p4 + 4 * (size_t)j[6], p4 + 4 * (size_t)j[7]};
+		__m256 px, py, pz, pw;
+		sph_transpose8(quad, &px, &py, &pz, &pw);
+		const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
+		const __m256 d = _mm256_sub_ps(
+			vh2, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz)));
+		const unsigned in = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(d, _mm256_setzero_ps(), _CMP_GT_OQ));
+		/* lane numbers of the ones in, packed: a byte per lane */
+		const uint64_t keep = _pdep_u64(in, 0x0101010101010101ull) * 0xFF;
+		const __m256i perm =
+			_mm256_cvtepu8_epi32(_mm_cvtsi64_si128((long long)_pext_u64(0x0706050403020100ull, keep)));
+		_mm256_storeu_si256((__m256i *)(jl + cnt), _mm256_permutevar8x32_epi32(jv, perm));
+		_mm256_storeu_ps(dv + cnt, _mm256_permutevar8x32_ps(d, perm));
+		cnt += (uint32_t)__builtin_popcount(in);
+	}
+	*done = q;
+	return cnt;
+}
+#endif
+
 /* The exact lists and kernel sums from the Verlet list: candidates mapped to
  * the rows they are in now, r^2 < h^2 kept, sorted by row, summed in that
  * order. p4 holds (x, y, z, -) per row. */
@@ -318,6 +365,9 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 	 * particle since the search (a loop-invariant test, hoisted) */
 	const uint32_t *now_of = nb->vsame ? NULL : nb->now_of;
 #define ROW(slot) (now_of ? now_of[slot] : (slot))
+#ifdef SPH_AVX2
+	const bool avx2 = sph_use_avx2() && __builtin_cpu_supports("bmi2");
+#endif
 	uint32_t mf = 0, mb = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : mf, mb)
 	for (long i = 0; i < n; ++i) {
@@ -331,11 +381,15 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 		if (vc <= SORT_MAX) {
 			/* on the stack until sorted: the rows of the list are then written
 			 * once, whole, which the memory system streams */
-			uint32_t jl[SORT_MAX];
-			float dv[SORT_MAX];
+			uint32_t jl[SORT_MAX + 8]; /* + 8: whole groups are stored */
+			float dv[SORT_MAX + 8];
 			uint32_t q = 0;
 			/* branch-free (whether a candidate is in is a coin toss): every
 			 * candidate is written, and the count moves past the ones in */
+#ifdef SPH_AVX2
+			if (avx2)
+				cnt = filter_avx2(cand, vc, now_of, p4, xi, yi, zi, h2, jl, dv, &q);
+#endif
 #ifdef __SSE2__
 			const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh2 = _mm_set1_ps(h2);
 			for (; q + 4 <= vc; q += 4) {
