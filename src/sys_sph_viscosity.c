@@ -40,6 +40,119 @@ eddy_sph_viscosity_def eddy_default_sph_viscosity_def(void)
 	return d;
 }
 
+/* The fluid pairs of one particle, eight neighbours at a time (the last
+ * group padded with copies of the last neighbour, masked out). f[0..2] get
+ * -sum (h - r) / rho_j (v_i - v_j), f[3..5] the artificial viscosity's
+ * sum of max(0, -v_ij . r_vec) (h - r)^2 / ((r^2 + eps) (rho_i + rho_j)
+ * max(r, rmin)) r_vec. */
+typedef struct pair_args {
+	const float *pk; /* (x y z 1/rho)(vx vy vz rho) per particle */
+	float h, eps, rmin;
+} pair_args;
+
+static inline void group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t l[8])
+{
+	for (uint32_t k = 0; k < 8; ++k)
+		l[k] = list[q + k < cnt ? q + k : cnt - 1];
+}
+
+#ifdef __SSE2__
+static void pairs_sse(const pair_args *a, const uint32_t *list, uint32_t cnt, const float *pi, float f[6])
+{
+	const __m128 vxi = _mm_set1_ps(pi[0]), vyi = _mm_set1_ps(pi[1]), vzi = _mm_set1_ps(pi[2]),
+	             vui = _mm_set1_ps(pi[4]), vvi = _mm_set1_ps(pi[5]), vwi = _mm_set1_ps(pi[6]),
+	             vrhoi = _mm_set1_ps(pi[7]), vh = _mm_set1_ps(a->h), veps = _mm_set1_ps(a->eps),
+	             vrmin = _mm_set1_ps(a->rmin), zero = _mm_setzero_ps();
+	__m128 s[6][2];
+	for (int c = 0; c < 6; ++c)
+		s[c][0] = s[c][1] = zero;
+	for (uint32_t q = 0; q < cnt; q += 8) {
+		uint32_t l[8];
+		group_rows(list, cnt, q, l);
+		const __m128i left = _mm_set1_epi32((int)(cnt - q));
+		for (int k = 0; k < 2; ++k) {
+			const float *p0 = a->pk + 8 * (size_t)l[4 * k], *p1 = a->pk + 8 * (size_t)l[4 * k + 1],
+			            *p2 = a->pk + 8 * (size_t)l[4 * k + 2], *p3 = a->pk + 8 * (size_t)l[4 * k + 3];
+			__m128 px = _mm_loadu_ps(p0), py = _mm_loadu_ps(p1), pz = _mm_loadu_ps(p2), pir = _mm_loadu_ps(p3);
+			_MM_TRANSPOSE4_PS(px, py, pz, pir);
+			__m128 pu = _mm_loadu_ps(p0 + 4), pv = _mm_loadu_ps(p1 + 4), pw = _mm_loadu_ps(p2 + 4),
+			       prho = _mm_loadu_ps(p3 + 4);
+			_MM_TRANSPOSE4_PS(pu, pv, pw, prho);
+			const __m128 in =
+				_mm_castsi128_ps(_mm_cmpgt_epi32(left, _mm_setr_epi32(4 * k, 4 * k + 1, 4 * k + 2, 4 * k + 3)));
+			const __m128 rx = _mm_sub_ps(vxi, px), ry = _mm_sub_ps(vyi, py), rz = _mm_sub_ps(vzi, pz);
+			const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
+			const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
+			const __m128 ux = _mm_sub_ps(vui, pu), uy = _mm_sub_ps(vvi, pv), uz = _mm_sub_ps(vwi, pw);
+			const __m128 c = _mm_and_ps(in, _mm_mul_ps(hr, pir));
+			s[0][k] = _mm_sub_ps(s[0][k], _mm_mul_ps(c, ux));
+			s[1][k] = _mm_sub_ps(s[1][k], _mm_mul_ps(c, uy));
+			s[2][k] = _mm_sub_ps(s[2][k], _mm_mul_ps(c, uz));
+			const __m128 vr = _mm_add_ps(_mm_add_ps(_mm_mul_ps(ux, rx), _mm_mul_ps(uy, ry)), _mm_mul_ps(uz, rz));
+			const __m128 app = _mm_and_ps(_mm_and_ps(in, _mm_cmplt_ps(vr, zero)), _mm_sub_ps(zero, vr));
+			const __m128 g = _mm_div_ps(_mm_mul_ps(_mm_mul_ps(app, hr), hr),
+			                            _mm_mul_ps(_mm_mul_ps(_mm_add_ps(r2, veps), _mm_add_ps(vrhoi, prho)),
+			                                       _mm_max_ps(r, vrmin)));
+			s[3][k] = _mm_add_ps(s[3][k], _mm_mul_ps(g, rx));
+			s[4][k] = _mm_add_ps(s[4][k], _mm_mul_ps(g, ry));
+			s[5][k] = _mm_add_ps(s[5][k], _mm_mul_ps(g, rz));
+		}
+	}
+	for (int c = 0; c < 6; ++c)
+		f[c] = sph_hsum4(_mm_add_ps(s[c][0], s[c][1]));
+}
+#endif
+
+#ifdef SPH_AVX2
+__attribute__((target("avx2"))) static void pairs_avx2(const pair_args *a, const uint32_t *list, uint32_t cnt,
+                                                       const float *pi, float f[6])
+{
+	const __m256 vxi = _mm256_set1_ps(pi[0]), vyi = _mm256_set1_ps(pi[1]), vzi = _mm256_set1_ps(pi[2]),
+	             vui = _mm256_set1_ps(pi[4]), vvi = _mm256_set1_ps(pi[5]), vwi = _mm256_set1_ps(pi[6]),
+	             vrhoi = _mm256_set1_ps(pi[7]), vh = _mm256_set1_ps(a->h), veps = _mm256_set1_ps(a->eps),
+	             vrmin = _mm256_set1_ps(a->rmin), zero = _mm256_setzero_ps();
+	const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+	__m256 s0 = zero, s1 = zero, s2 = zero, s3 = zero, s4 = zero, s5 = zero;
+	for (uint32_t q = 0; q < cnt; q += 8) {
+		uint32_t l[8];
+		group_rows(list, cnt, q, l);
+		const float *const qa[8] = {a->pk + 8 * (size_t)l[0], a->pk + 8 * (size_t)l[1], a->pk + 8 * (size_t)l[2],
+		                            a->pk + 8 * (size_t)l[3], a->pk + 8 * (size_t)l[4], a->pk + 8 * (size_t)l[5],
+		                            a->pk + 8 * (size_t)l[6], a->pk + 8 * (size_t)l[7]};
+		const float *const qb[8] = {qa[0] + 4, qa[1] + 4, qa[2] + 4, qa[3] + 4, qa[4] + 4, qa[5] + 4, qa[6] + 4, qa[7] + 4};
+		__m256 px, py, pz, pir, pu, pv, pw, prho;
+		sph_transpose8(qa, &px, &py, &pz, &pir);
+		sph_transpose8(qb, &pu, &pv, &pw, &prho);
+		const __m256 in = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32((int)(cnt - q)), lane));
+		const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
+		const __m256 r2 =
+			_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz));
+		const __m256 r = _mm256_sqrt_ps(r2), hr = _mm256_sub_ps(vh, r);
+		const __m256 ux = _mm256_sub_ps(vui, pu), uy = _mm256_sub_ps(vvi, pv), uz = _mm256_sub_ps(vwi, pw);
+		const __m256 c = _mm256_and_ps(in, _mm256_mul_ps(hr, pir));
+		s0 = _mm256_sub_ps(s0, _mm256_mul_ps(c, ux));
+		s1 = _mm256_sub_ps(s1, _mm256_mul_ps(c, uy));
+		s2 = _mm256_sub_ps(s2, _mm256_mul_ps(c, uz));
+		const __m256 vr =
+			_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ux, rx), _mm256_mul_ps(uy, ry)), _mm256_mul_ps(uz, rz));
+		const __m256 app =
+			_mm256_and_ps(_mm256_and_ps(in, _mm256_cmp_ps(vr, zero, _CMP_LT_OQ)), _mm256_sub_ps(zero, vr));
+		const __m256 g = _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(app, hr), hr),
+		                               _mm256_mul_ps(_mm256_mul_ps(_mm256_add_ps(r2, veps), _mm256_add_ps(vrhoi, prho)),
+		                                             _mm256_max_ps(r, vrmin)));
+		s3 = _mm256_add_ps(s3, _mm256_mul_ps(g, rx));
+		s4 = _mm256_add_ps(s4, _mm256_mul_ps(g, ry));
+		s5 = _mm256_add_ps(s5, _mm256_mul_ps(g, rz));
+	}
+	f[0] = sph_hsum8(s0);
+	f[1] = sph_hsum8(s1);
+	f[2] = sph_hsum8(s2);
+	f[3] = sph_hsum8(s3);
+	f[4] = sph_hsum8(s4);
+	f[5] = sph_hsum8(s5);
+}
+#endif
+
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	const sph_viscosity *sv = s->data;
@@ -59,8 +172,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	            rmin = 1e-3f * kc.h;
 	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
 	/* each neighbour's eight inputs as two 16-byte quads, (x y z 1/rho) and
-	 * (vx vy vz rho): a pair then costs two loads and a transpose instead of
-	 * eight scattered loads, which were most of the pass */
+	 * (vx vy vz rho): a group of neighbours then costs two loads each and
+	 * two transposes instead of eight scattered loads each, which were most
+	 * of the pass */
 	float *pk = eddy__arena_alloc(&w->arena, (size_t)(n ? n : 1) * 8 * sizeof *pk);
 	if (!pk)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
@@ -76,6 +190,10 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		o[6] = vz[i];
 		o[7] = rho[i];
 	}
+	const pair_args pa = {pk, kc.h, eps, rmin};
+#ifdef SPH_AVX2
+	const bool avx2 = sph_use_avx2();
+#endif
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		const float *pi = pk + 8 * i;
@@ -85,41 +203,22 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		float fx = 0, fy = 0, fz = 0, gx = 0, gy = 0, gz = 0;
 		uint32_t q = 0;
 #ifdef __SSE2__
-		/* four neighbours at a time, with four partial sums per component
-		 * added up at the end: a fixed order, the same for any thread count */
-		const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vui = _mm_set1_ps(ui),
-		             vvi = _mm_set1_ps(vi), vwi = _mm_set1_ps(wi), vh = _mm_set1_ps(kc.h), veps = _mm_set1_ps(eps),
-		             vrmin = _mm_set1_ps(rmin), vrhoi = _mm_set1_ps(rhoi), zero = _mm_setzero_ps();
-		__m128 sfx = zero, sfy = zero, sfz = zero, sgx = zero, sgy = zero, sgz = zero;
-		for (; q + 4 <= cnt; q += 4) {
-			const float *p0 = pk + 8 * (size_t)list[q], *p1 = pk + 8 * (size_t)list[q + 1],
-			            *p2 = pk + 8 * (size_t)list[q + 2], *p3 = pk + 8 * (size_t)list[q + 3];
-			__m128 px = _mm_loadu_ps(p0), py = _mm_loadu_ps(p1), pz = _mm_loadu_ps(p2), pir = _mm_loadu_ps(p3);
-			_MM_TRANSPOSE4_PS(px, py, pz, pir);
-			__m128 pu = _mm_loadu_ps(p0 + 4), pv = _mm_loadu_ps(p1 + 4), pw = _mm_loadu_ps(p2 + 4), prho = _mm_loadu_ps(p3 + 4);
-			_MM_TRANSPOSE4_PS(pu, pv, pw, prho);
-			const __m128 rx = _mm_sub_ps(vxi, px), ry = _mm_sub_ps(vyi, py), rz = _mm_sub_ps(vzi, pz);
-			const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
-			const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
-			const __m128 ux = _mm_sub_ps(vui, pu), uy = _mm_sub_ps(vvi, pv), uz = _mm_sub_ps(vwi, pw);
-			const __m128 c = _mm_mul_ps(hr, pir);
-			sfx = _mm_sub_ps(sfx, _mm_mul_ps(c, ux));
-			sfy = _mm_sub_ps(sfy, _mm_mul_ps(c, uy));
-			sfz = _mm_sub_ps(sfz, _mm_mul_ps(c, uz));
-			const __m128 vr = _mm_add_ps(_mm_add_ps(_mm_mul_ps(ux, rx), _mm_mul_ps(uy, ry)), _mm_mul_ps(uz, rz));
-			const __m128 app = _mm_and_ps(_mm_cmplt_ps(vr, zero), _mm_sub_ps(zero, vr)), rs = _mm_max_ps(r, vrmin);
-			const __m128 a = _mm_div_ps(_mm_mul_ps(_mm_mul_ps(app, hr), hr),
-			                            _mm_mul_ps(_mm_mul_ps(_mm_add_ps(r2, veps), _mm_add_ps(vrhoi, prho)), rs));
-			sgx = _mm_add_ps(sgx, _mm_mul_ps(a, rx));
-			sgy = _mm_add_ps(sgy, _mm_mul_ps(a, ry));
-			sgz = _mm_add_ps(sgz, _mm_mul_ps(a, rz));
-		}
-		fx = sph_hsum4(sfx);
-		fy = sph_hsum4(sfy);
-		fz = sph_hsum4(sfz);
-		gx = sph_hsum4(sgx);
-		gy = sph_hsum4(sgy);
-		gz = sph_hsum4(sgz);
+		/* partial sums added up at the end: a fixed order, the same for any
+		 * thread count and either path */
+		float f[6];
+#ifdef SPH_AVX2
+		if (avx2)
+			pairs_avx2(&pa, list, cnt, pi, f);
+		else
+#endif
+			pairs_sse(&pa, list, cnt, pi, f);
+		fx = f[0];
+		fy = f[1];
+		fz = f[2];
+		gx = f[3];
+		gy = f[4];
+		gz = f[5];
+		q = cnt;
 #endif
 		for (; q < cnt; ++q) {
 			const float *pj = pk + 8 * (size_t)list[q];
