@@ -93,6 +93,9 @@ typedef struct sph_shared {
 	sph_kernel_consts k;
 	sph_neighbors nb;
 	float *inv_rho; /* 1/rho this step (arena), set by sph_density */
+	/* (x, y, z, 1/rho) per particle this step (arena), as sph_density saw
+	 * them: the force passes load a neighbour's four with one 16-byte load */
+	float *pq;
 } sph_shared;
 
 /* The sph_density system nearest before system s in the pipeline, or NULL. */

@@ -308,7 +308,7 @@ static void search(eddy_world *w, sph_neighbors *nb, float hs2, int threads, uin
 #define SORT_MAX 256
 
 #ifdef SPH_AVX2
-/* The AVX2 path of filter() for the groups of eight candidates of one row:
+/* The AVX2 path of filter() for the candidates of one row, eight a group:
  * the candidates in (r^2 < h^2) are packed to the front of the group with a
  * permutation made from the mask (pdep/pext), stored eight at a time. The
  * same candidates in the same order as the SSE path, so the same lists. */
@@ -318,19 +318,23 @@ __attribute__((target("avx2,bmi2"))) static uint32_t filter_avx2(const uint32_t 
                                                                  float *dv, uint32_t *done)
 {
 	const __m256 vxi = _mm256_set1_ps(xi), vyi = _mm256_set1_ps(yi), vzi = _mm256_set1_ps(zi), vh2 = _mm256_set1_ps(h2);
+	const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
 	uint32_t cnt = 0, q = 0;
-	for (; q + 8 <= vc; q += 8) {
+	/* the last group is padded with copies of the last candidate, masked */
+	for (; q < vc; q += 8) {
 		uint32_t j[8];
 		__m256i jv;
-		if (now_of) {
-			for (int k = 0; k < 8; ++k)
-				j[k] = now_of[cand[q + (uint32_t)k]];
+		if (q + 8 <= vc && !now_of) {
+			for (uint32_t k = 0; k < 8; ++k)
+				j[k] = cand[q + k];
+			jv = _mm256_loadu_si256((const __m256i *)(cand + q));
+		} else {
+			for (uint32_t k = 0; k < 8; ++k) {
+				const uint32_t c = cand[q + k < vc ? q + k : vc - 1];
+				j[k] = now_of ? now_of[c] : c;
+			}
 			jv = _mm256_setr_epi32((int)j[0], (int)j[1], (int)j[2], (int)j[3], (int)j[4], (int)j[5], (int)j[6],
 			                       (int)j[7]);
-		} else {
-			for (int k = 0; k < 8; ++k)
-				j[k] = cand[q + (uint32_t)k];
-			jv = _mm256_loadu_si256((const __m256i *)(cand + q));
 		}
 		const float *const quad[8] = {p4 + 4 * (size_t)j[0], p4 + 4 * (size_t)j[1], p4 + 4 * (size_t)j[2],
 		                              p4 + 4 * (size_t)j[3], p4 + 4 * (size_t)j[4], p4 + 4 * (size_t)j[5],
@@ -340,7 +344,9 @@ __attribute__((target("avx2,bmi2"))) static uint32_t filter_avx2(const uint32_t 
 		const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
 		const __m256 d = _mm256_sub_ps(
 			vh2, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz)));
-		const unsigned in = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(d, _mm256_setzero_ps(), _CMP_GT_OQ));
+		const __m256 real = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32((int)(vc - q)), lane));
+		const unsigned in =
+			(unsigned)_mm256_movemask_ps(_mm256_and_ps(real, _mm256_cmp_ps(d, _mm256_setzero_ps(), _CMP_GT_OQ)));
 		/* lane numbers of the ones in, packed: a byte per lane */
 		const uint64_t keep = _pdep_u64(in, 0x0101010101010101ull) * 0xFF;
 		const __m256i perm =
@@ -349,7 +355,7 @@ __attribute__((target("avx2,bmi2"))) static uint32_t filter_avx2(const uint32_t 
 		_mm256_storeu_ps(dv + cnt, _mm256_permutevar8x32_ps(d, perm));
 		cnt += (uint32_t)__builtin_popcount(in);
 	}
-	*done = q;
+	*done = vc;
 	return cnt;
 }
 #endif
@@ -426,9 +432,19 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 				dv[cnt] = d;
 				cnt += d > 0;
 			}
-			/* nearly sorted already: only particles that changed cell since
-			 * the search are out of place, so this is about one compare each */
-			for (uint32_t a = 1; a < cnt; ++a) {
+			/* sorted already unless a particle changed cell since the search,
+			 * and then nearly: check four at a time, insertion-sort if not */
+			uint32_t a = 1;
+#ifdef __SSE2__
+			const __m128i flip = _mm_set1_epi32(INT32_MIN); /* unsigned order by a signed compare */
+			for (; a + 4 <= cnt; a += 4) {
+				const __m128i prev = _mm_xor_si128(_mm_loadu_si128((const __m128i *)(jl + a - 1)), flip),
+				              cur = _mm_xor_si128(_mm_loadu_si128((const __m128i *)(jl + a)), flip);
+				if (_mm_movemask_epi8(_mm_cmpgt_epi32(prev, cur)))
+					break;
+			}
+#endif
+			for (; a < cnt; ++a) {
 				const uint32_t j = jl[a];
 				if (jl[a - 1] < j)
 					continue;
@@ -551,6 +567,7 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		return st;
 	const size_t n = w->n;
 	nb->n = n;
+	sh->pq = NULL;
 	if (n == 0) {
 		nb->vvalid = false;
 		return EDDY_OK;
@@ -649,8 +666,9 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		p4[4 * i] = x[i];
 		p4[4 * i + 1] = y[i];
 		p4[4 * i + 2] = z[i];
-		p4[4 * i + 3] = 0;
+		p4[4 * i + 3] = 0; /* sph_density puts 1/rho here */
 	}
+	sh->pq = p4;
 	/* the exact lists, with their own (tighter) strides */
 	if (!nb->cap) {
 		nb->cap = 32;

@@ -128,6 +128,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		const float r = kc.poly6 * (m * (self + nb->wsum[i]) + nb->bwsum[i]);
 		rho[i] = r;
 		inv_rho[i] = 1.0f / r;
+		sh->pq[4 * i + 3] = inv_rho[i];
 		const float pr = tait ? B * (powf(r / rho0, gamma) - 1.0f) : k * (r - rho0);
 		p[i] = pr > 0 ? pr : 0;
 		ncount[i] = (float)(nb->count[i] + nb->bcount[i]);

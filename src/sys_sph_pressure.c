@@ -154,19 +154,10 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const sph_kernel_consts kc = sh->k;
 	const float m = sh->mass, scale = sp->def.scale, eps2 = 1e-6f * kc.h2;
 	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
-	/* each neighbour's position and 1/rho as one 16-byte quad: a group of
-	 * neighbours then costs a load each and a transpose instead of four
-	 * scattered loads each */
-	float *pk = eddy__arena_alloc(&w->arena, (size_t)(n ? n : 1) * 4 * sizeof *pk);
-	if (!pk)
-		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
-#pragma omp parallel for num_threads(ctx->threads) schedule(static)
-	for (long i = 0; i < n; ++i) {
-		pk[4 * i] = x[i];
-		pk[4 * i + 1] = y[i];
-		pk[4 * i + 2] = z[i];
-		pk[4 * i + 3] = inv_rho[i];
-	}
+	/* each neighbour's position and 1/rho as one 16-byte quad (sph_density
+	 * made them): a group of neighbours then costs a load each and a
+	 * transpose instead of four scattered loads each */
+	const float *pk = sh->pq;
 	const pair_args pa = {pk, p, kc.h, eps2};
 #ifdef SPH_AVX2
 	const bool avx2 = sph_use_avx2();

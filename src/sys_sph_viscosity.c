@@ -46,7 +46,7 @@ eddy_sph_viscosity_def eddy_default_sph_viscosity_def(void)
  * sum of max(0, -v_ij . r_vec) (h - r)^2 / ((r^2 + eps) (rho_i + rho_j)
  * max(r, rmin)) r_vec. */
 typedef struct pair_args {
-	const float *pk; /* (x y z 1/rho)(vx vy vz rho) per particle */
+	const float *pq, *pv; /* (x y z 1/rho) and (vx vy vz rho) per particle */
 	float h, eps, rmin;
 } pair_args;
 
@@ -57,11 +57,12 @@ static inline void group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, ui
 }
 
 #ifdef __SSE2__
-static void pairs_sse(const pair_args *a, const uint32_t *list, uint32_t cnt, const float *pi, float f[6])
+static void pairs_sse(const pair_args *a, const uint32_t *list, uint32_t cnt, const float *pi, const float *vi,
+                      float f[6])
 {
 	const __m128 vxi = _mm_set1_ps(pi[0]), vyi = _mm_set1_ps(pi[1]), vzi = _mm_set1_ps(pi[2]),
-	             vui = _mm_set1_ps(pi[4]), vvi = _mm_set1_ps(pi[5]), vwi = _mm_set1_ps(pi[6]),
-	             vrhoi = _mm_set1_ps(pi[7]), vh = _mm_set1_ps(a->h), veps = _mm_set1_ps(a->eps),
+	             vui = _mm_set1_ps(vi[0]), vvi = _mm_set1_ps(vi[1]), vwi = _mm_set1_ps(vi[2]),
+	             vrhoi = _mm_set1_ps(vi[3]), vh = _mm_set1_ps(a->h), veps = _mm_set1_ps(a->eps),
 	             vrmin = _mm_set1_ps(a->rmin), zero = _mm_setzero_ps();
 	__m128 s[6][2];
 	for (int c = 0; c < 6; ++c)
@@ -71,12 +72,13 @@ static void pairs_sse(const pair_args *a, const uint32_t *list, uint32_t cnt, co
 		group_rows(list, cnt, q, l);
 		const __m128i left = _mm_set1_epi32((int)(cnt - q));
 		for (int k = 0; k < 2; ++k) {
-			const float *p0 = a->pk + 8 * (size_t)l[4 * k], *p1 = a->pk + 8 * (size_t)l[4 * k + 1],
-			            *p2 = a->pk + 8 * (size_t)l[4 * k + 2], *p3 = a->pk + 8 * (size_t)l[4 * k + 3];
-			__m128 px = _mm_loadu_ps(p0), py = _mm_loadu_ps(p1), pz = _mm_loadu_ps(p2), pir = _mm_loadu_ps(p3);
+			const size_t o0 = 4 * (size_t)l[4 * k], o1 = 4 * (size_t)l[4 * k + 1], o2 = 4 * (size_t)l[4 * k + 2],
+			             o3 = 4 * (size_t)l[4 * k + 3];
+			__m128 px = _mm_loadu_ps(a->pq + o0), py = _mm_loadu_ps(a->pq + o1), pz = _mm_loadu_ps(a->pq + o2),
+			       pir = _mm_loadu_ps(a->pq + o3);
 			_MM_TRANSPOSE4_PS(px, py, pz, pir);
-			__m128 pu = _mm_loadu_ps(p0 + 4), pv = _mm_loadu_ps(p1 + 4), pw = _mm_loadu_ps(p2 + 4),
-			       prho = _mm_loadu_ps(p3 + 4);
+			__m128 pu = _mm_loadu_ps(a->pv + o0), pv = _mm_loadu_ps(a->pv + o1), pw = _mm_loadu_ps(a->pv + o2),
+			       prho = _mm_loadu_ps(a->pv + o3);
 			_MM_TRANSPOSE4_PS(pu, pv, pw, prho);
 			const __m128 in =
 				_mm_castsi128_ps(_mm_cmpgt_epi32(left, _mm_setr_epi32(4 * k, 4 * k + 1, 4 * k + 2, 4 * k + 3)));
@@ -105,21 +107,23 @@ static void pairs_sse(const pair_args *a, const uint32_t *list, uint32_t cnt, co
 
 #ifdef SPH_AVX2
 __attribute__((target("avx2"))) static void pairs_avx2(const pair_args *a, const uint32_t *list, uint32_t cnt,
-                                                       const float *pi, float f[6])
+                                                       const float *pi, const float *vi, float f[6])
 {
 	const __m256 vxi = _mm256_set1_ps(pi[0]), vyi = _mm256_set1_ps(pi[1]), vzi = _mm256_set1_ps(pi[2]),
-	             vui = _mm256_set1_ps(pi[4]), vvi = _mm256_set1_ps(pi[5]), vwi = _mm256_set1_ps(pi[6]),
-	             vrhoi = _mm256_set1_ps(pi[7]), vh = _mm256_set1_ps(a->h), veps = _mm256_set1_ps(a->eps),
+	             vui = _mm256_set1_ps(vi[0]), vvi = _mm256_set1_ps(vi[1]), vwi = _mm256_set1_ps(vi[2]),
+	             vrhoi = _mm256_set1_ps(vi[3]), vh = _mm256_set1_ps(a->h), veps = _mm256_set1_ps(a->eps),
 	             vrmin = _mm256_set1_ps(a->rmin), zero = _mm256_setzero_ps();
 	const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
 	__m256 s0 = zero, s1 = zero, s2 = zero, s3 = zero, s4 = zero, s5 = zero;
 	for (uint32_t q = 0; q < cnt; q += 8) {
 		uint32_t l[8];
 		group_rows(list, cnt, q, l);
-		const float *const qa[8] = {a->pk + 8 * (size_t)l[0], a->pk + 8 * (size_t)l[1], a->pk + 8 * (size_t)l[2],
-		                            a->pk + 8 * (size_t)l[3], a->pk + 8 * (size_t)l[4], a->pk + 8 * (size_t)l[5],
-		                            a->pk + 8 * (size_t)l[6], a->pk + 8 * (size_t)l[7]};
-		const float *const qb[8] = {qa[0] + 4, qa[1] + 4, qa[2] + 4, qa[3] + 4, qa[4] + 4, qa[5] + 4, qa[6] + 4, qa[7] + 4};
+		const float *const qa[8] = {a->pq + 4 * (size_t)l[0], a->pq + 4 * (size_t)l[1], a->pq + 4 * (size_t)l[2],
+		                            a->pq + 4 * (size_t)l[3], a->pq + 4 * (size_t)l[4], a->pq + 4 * (size_t)l[5],
+		                            a->pq + 4 * (size_t)l[6], a->pq + 4 * (size_t)l[7]};
+		const float *const qb[8] = {a->pv + 4 * (size_t)l[0], a->pv + 4 * (size_t)l[1], a->pv + 4 * (size_t)l[2],
+		                            a->pv + 4 * (size_t)l[3], a->pv + 4 * (size_t)l[4], a->pv + 4 * (size_t)l[5],
+		                            a->pv + 4 * (size_t)l[6], a->pv + 4 * (size_t)l[7]};
 		__m256 px, py, pz, pir, pu, pv, pw, prho;
 		sph_transpose8(qa, &px, &py, &pz, &pir);
 		sph_transpose8(qb, &pu, &pv, &pw, &prho);
@@ -160,9 +164,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	if (!sh)
 		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)", s->label);
 	const sph_neighbors *nb = &sh->nb;
-	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	/* positions and 1/rho come with sph_density's quads (sh->pq) */
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
-	const float *rho = eddy__col(w, COL_DENSITY), *inv_rho = sh->inv_rho;
+	const float *rho = eddy__col(w, COL_DENSITY);
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	const sph_kernel_consts kc = sh->k;
 	const float coef = sv->def.viscosity * sh->mass * kc.visc_lap;
@@ -171,33 +175,29 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const float acoef = 2.0f * sh->mass * sv->def.artificial * sh->c * kc.h * -kc.spiky_grad, eps = 0.01f * kc.h2,
 	            rmin = 1e-3f * kc.h;
 	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
-	/* each neighbour's eight inputs as two 16-byte quads, (x y z 1/rho) and
-	 * (vx vy vz rho): a group of neighbours then costs two loads each and
-	 * two transposes instead of eight scattered loads each, which were most
-	 * of the pass */
-	float *pk = eddy__arena_alloc(&w->arena, (size_t)(n ? n : 1) * 8 * sizeof *pk);
-	if (!pk)
+	/* each neighbour's eight inputs as two 16-byte quads, (x y z 1/rho) from
+	 * sph_density and (vx vy vz rho) made here: a group of neighbours then
+	 * costs two loads each and two transposes instead of eight scattered
+	 * loads each, which were most of the pass */
+	const float *pq = sh->pq;
+	float *pv = eddy__arena_alloc(&w->arena, (size_t)(n ? n : 1) * 4 * sizeof *pv);
+	if (!pv)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
-		float *o = pk + 8 * i;
-		o[0] = x[i];
-		o[1] = y[i];
-		o[2] = z[i];
-		o[3] = inv_rho[i];
-		o[4] = vx[i];
-		o[5] = vy[i];
-		o[6] = vz[i];
-		o[7] = rho[i];
+		pv[4 * i] = vx[i];
+		pv[4 * i + 1] = vy[i];
+		pv[4 * i + 2] = vz[i];
+		pv[4 * i + 3] = rho[i];
 	}
-	const pair_args pa = {pk, kc.h, eps, rmin};
+	const pair_args pa = {pq, pv, kc.h, eps, rmin};
 #ifdef SPH_AVX2
 	const bool avx2 = sph_use_avx2();
 #endif
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
-		const float *pi = pk + 8 * i;
-		const float xi = pi[0], yi = pi[1], zi = pi[2], ui = pi[4], vi = pi[5], wi = pi[6], rhoi = pi[7];
+		const float *pi = pq + 4 * i, *vel = pv + 4 * i;
+		const float xi = pi[0], yi = pi[1], zi = pi[2], ui = vel[0], vi = vel[1], wi = vel[2], rhoi = vel[3];
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
 		const uint32_t cnt = nb->count[i];
 		float fx = 0, fy = 0, fz = 0, gx = 0, gy = 0, gz = 0;
@@ -208,10 +208,10 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		float f[6];
 #ifdef SPH_AVX2
 		if (avx2)
-			pairs_avx2(&pa, list, cnt, pi, f);
+			pairs_avx2(&pa, list, cnt, pi, vel, f);
 		else
 #endif
-			pairs_sse(&pa, list, cnt, pi, f);
+			pairs_sse(&pa, list, cnt, pi, vel, f);
 		fx = f[0];
 		fy = f[1];
 		fz = f[2];
@@ -221,10 +221,10 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		q = cnt;
 #endif
 		for (; q < cnt; ++q) {
-			const float *pj = pk + 8 * (size_t)list[q];
+			const float *pj = pq + 4 * (size_t)list[q], *vj = pv + 4 * (size_t)list[q];
 			const float rx = xi - pj[0], ry = yi - pj[1], rz = zi - pj[2];
 			const float r2 = rx * rx + ry * ry + rz * rz, r = sqrtf(r2);
-			const float ux = ui - pj[4], uy = vi - pj[5], uz = wi - pj[6];
+			const float ux = ui - vj[0], uy = vi - vj[1], uz = wi - vj[2];
 			const float c = (kc.h - r) * pj[3];
 			fx -= c * ux;
 			fy -= c * uy;
@@ -234,7 +234,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			const float vr = ux * rx + uy * ry + uz * rz, hr = kc.h - r;
 			/* ternaries, not fmaxf: without -ffinite-math-only fmaxf is a libm call */
 			const float app = vr < 0 ? -vr : 0.0f, rs = r > rmin ? r : rmin;
-			const float a = app * hr * hr / ((r2 + eps) * (rhoi + pj[7]) * rs);
+			const float a = app * hr * hr / ((r2 + eps) * (rhoi + vj[3]) * rs);
 			gx += a * rx;
 			gy += a * ry;
 			gz += a * rz;
