@@ -136,6 +136,18 @@ static void counting_sort(const uint32_t *keys, size_t n, size_t cells, uint32_t
 	start[0] = 0;
 }
 
+/* The cell offsets of a table already in cell order (keys non-decreasing):
+ * start[c] is the first row in cell c or after it. */
+static void cell_ranges(const uint32_t *key, size_t n, size_t cells, uint32_t *start)
+{
+	size_t c = 0;
+	for (size_t i = 0; i < n; ++i)
+		while (c <= key[i])
+			start[c++] = (uint32_t)i;
+	while (c <= cells)
+		start[c++] = (uint32_t)n;
+}
+
 static uint64_t boundary_signature(const eddy_world *w)
 {
 	uint64_t sig = 0x9E3779B97F4A7C15ull;
@@ -587,36 +599,49 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	float *p4 = eddy__arena_alloc(&w->arena, 4 * n * sizeof *p4);
 	if (!key || !order || !scratch || !p4)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", n);
-	for (size_t i = 0; i < n; ++i)
+	const long ln = (long)n;
+	/* a fluid at rest keeps its order from step to step: then the counting
+	 * sort (over every cell of the world) and the copying are skipped, and
+	 * the cell ranges are made only if something needs them */
+	int sorted = 1;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(&& : sorted)
+	for (long i = 0; i < ln; ++i) {
 		key[i] = cell_index(nb, x[i], y[i], z[i]);
+		const uint32_t before = i ? cell_index(nb, x[i - 1], y[i - 1], z[i - 1]) : 0;
+		sorted = sorted && before <= key[i];
+	}
 	const size_t cells = (size_t)nb->gx * (size_t)nb->gy * (size_t)nb->gz;
-	counting_sort(key, n, cells, nb->cell_start, order);
-	/* a fluid at rest keeps its order from step to step: skip the copying */
-	bool same = true;
-	for (size_t i = 0; i < n && same; ++i)
-		same = order[i] == i;
-	if (!same)
+	const bool same = sorted;
+	bool ranges = false; /* nb->cell_start matches the table */
+	if (!same) {
+		counting_sort(key, n, cells, nb->cell_start, order);
 		eddy__permute_particles(w, order, scratch);
-	for (size_t i = 0; i < n; ++i)
-		nb->cell_of[i] = key[order[i]];
+		ranges = true;
+#pragma omp parallel for num_threads(threads) schedule(static)
+		for (long i = 0; i < ln; ++i)
+			nb->cell_of[i] = key[order[i]];
+	} else
+		memcpy(nb->cell_of, key, n * sizeof *key);
 
 	/* is the Verlet list still good? Follow the rows through the permutation,
 	 * then check how far each particle is from its build slot's position */
 	bool valid = nb->vvalid && nb->vn == n && nb->vbsig == nb->bsig;
 	if (valid && !same) {
 		uint32_t *slot = scratch;
-		for (size_t i = 0; i < n; ++i)
+#pragma omp parallel for num_threads(threads) schedule(static)
+		for (long i = 0; i < ln; ++i)
 			slot[i] = nb->slot_of[order[i]];
 		memcpy(nb->slot_of, slot, n * sizeof *slot);
-		for (size_t i = 0; i < n; ++i)
+#pragma omp parallel for num_threads(threads) schedule(static)
+		for (long i = 0; i < ln; ++i)
 			nb->now_of[nb->slot_of[i]] = (uint32_t)i;
 		nb->vsame = false;
 	}
+
 	if (valid) {
 		const float half = 0.49f * SPH_SKIN * sh->h; /* 0.49: float rounding */
 		const float lim2 = half * half;
 		float d2max = 0;
-		const long ln = (long)n;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : d2max)
 		for (long i = 0; i < ln; ++i) {
 			const uint32_t b = nb->slot_of[i];
@@ -625,6 +650,11 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 			d2max = d2 > d2max ? d2 : d2max;
 		}
 		valid = d2max < lim2; /* false for NaN too */
+	}
+	/* the search and the boundary pressure walk cells */
+	if (!ranges && (!valid || nb->nb > 0)) {
+		cell_ranges(key, n, cells, nb->cell_start);
+		ranges = true;
 	}
 	if (!valid) {
 		const float hs = sh->h * (1.0f + SPH_SKIN), hs2 = hs * hs;
@@ -662,7 +692,8 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		nb->searches++;
 	}
 
-	for (size_t i = 0; i < n; ++i) {
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (long i = 0; i < ln; ++i) {
 		p4[4 * i] = x[i];
 		p4[4 * i + 1] = y[i];
 		p4[4 * i + 2] = z[i];
