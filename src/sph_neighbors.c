@@ -246,13 +246,26 @@ static void search(eddy_world *w, sph_neighbors *nb, float hs2, int threads, uin
 	const long n = (long)w->n;
 	const int gx = nb->gx, gy = nb->gy, gz = nb->gz, R = SPH_VERLET_CELLS;
 	const size_t cap = nb->vcap, bcap = nb->vbcap;
+	/* how many cells along x a run at cell offsets (dy, dz) needs: a cell k
+	 * cells away is at least (k - 1) cells of h/2 from the particle, so the
+	 * corners of the 7^3 block are beyond the Verlet radius; -1: none */
+	int reach[SPH_VERLET_CELLS + 1][SPH_VERLET_CELLS + 1];
+	const double rs2 = 1.001 * (double)hs2 * (double)nb->inv * (double)nb->inv; /* in cells^2, 0.1% for rounding */
+	for (int a = 0; a <= R; ++a)
+		for (int b = 0; b <= R; ++b) {
+			const double ey = a > 0 ? a - 1 : 0, ez = b > 0 ? b - 1 : 0, rem = rs2 - ey * ey - ez * ez;
+			int k = -1;
+			if (rem > 0) /* x offsets k with (k - 1)^2 < rem */
+				for (k = 0; k < R && (double)k * k < rem; ++k)
+					;
+			reach[a][b] = k;
+		}
 	uint32_t mf = 0, mb = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : mf, mb)
 	for (long i = 0; i < n; ++i) {
 		const uint32_t c = nb->cell_of[i];
 		const int cx = (int)(c % (uint32_t)gx), cy = (int)(c / (uint32_t)gx % (uint32_t)gy),
 		          cz = (int)(c / ((uint32_t)gx * (uint32_t)gy));
-		const int x0 = cx >= R ? cx - R : 0, x1 = cx < gx - R ? cx + R : gx - 1;
 		const float xi = x[i], yi = y[i], zi = z[i];
 #ifdef __SSE2__
 		const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh2 = _mm_set1_ps(hs2);
@@ -265,8 +278,10 @@ static void search(eddy_world *w, sph_neighbors *nb, float hs2, int threads, uin
 				continue;
 			for (int dy = -R; dy <= R; ++dy) {
 				const int yy = cy + dy;
-				if (yy < 0 || yy >= gy)
+				const int ext = reach[abs(dy)][abs(dz)];
+				if (yy < 0 || yy >= gy || ext < 0)
 					continue;
+				const int x0 = cx >= ext ? cx - ext : 0, x1 = cx < gx - ext ? cx + ext : gx - 1;
 				const size_t row = ((size_t)zz * (size_t)gy + (size_t)yy) * (size_t)gx;
 				const uint32_t a = nb->cell_start[row + (size_t)x0], e = nb->cell_start[row + (size_t)x1 + 1];
 				uint32_t j = a;
@@ -604,12 +619,12 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	 * sort (over every cell of the world) and the copying are skipped, and
 	 * the cell ranges are made only if something needs them */
 	int sorted = 1;
-#pragma omp parallel for num_threads(threads) schedule(static) reduction(&& : sorted)
-	for (long i = 0; i < ln; ++i) {
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (long i = 0; i < ln; ++i)
 		key[i] = cell_index(nb, x[i], y[i], z[i]);
-		const uint32_t before = i ? cell_index(nb, x[i - 1], y[i - 1], z[i - 1]) : 0;
-		sorted = sorted && before <= key[i];
-	}
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(&& : sorted)
+	for (long i = 1; i < ln; ++i)
+		sorted = sorted && key[i - 1] <= key[i];
 	const size_t cells = (size_t)nb->gx * (size_t)nb->gy * (size_t)nb->gz;
 	const bool same = sorted;
 	bool ranges = false; /* nb->cell_start matches the table */
