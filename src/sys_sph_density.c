@@ -1,7 +1,11 @@
 /* sph_density: neighbour search, density and equation of state.
  *
  * Reads: x y z. Writes: density pressure neighbors (and reorders the
- * particle table into grid-cell order, see sph_neighbors.c).
+ * particle table into grid-cell order, see sph_neighbors.c, where the exact
+ * neighbour lists are filtered each step from a Verlet list and the kernel
+ * sums below are made on the way, in ascending neighbour order with four
+ * partial sums). Shares with the later SPH systems (sph.h, sph_shared): the
+ * lists, 1/rho, and (x y z 1/rho) quads per particle.
  *   rho_i = m sum_j W_poly6(x_i - x_j) + sum_b V_b rho_b W_poly6(x_i - x_b)
  *   (j over fluid particles including i itself, b over boundary particles)
  * Boundary particles carry a pressure extrapolated from the fluid near them

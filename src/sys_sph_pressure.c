@@ -16,6 +16,10 @@
  * Pairs closer than 1e-3 h take a fixed antisymmetric direction (sph.h): the
  * gradient has no direction at r = 0, and skipping them would leave
  * coincident particles stuck together (VALIDATION.md C.6).
+ * Positions and 1/rho come from sph_density's (x y z 1/rho) quads (sh->pq).
+ * The fluid pairs go eight at a time (AVX2 when the CPU has it, else SSE as
+ * two halves doing the same per lane), with per-lane partial sums added in a
+ * fixed order: the same bits for any thread count and either path.
  * Time-step limit (force): dt <= 0.625 sqrt(h / max|a|), max|a| from the last
  * step; with the default CFL 0.4 that is the usual 0.25 sqrt(h/|a|).
  * Source: Mueller, Charypar & Gross 2003; Adami, Hu & Adams, "A generalized
@@ -148,7 +152,6 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	if (!sh)
 		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)", s->label);
 	const sph_neighbors *nb = &sh->nb;
-	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const float *p = eddy__col(w, COL_PRESSURE), *inv_rho = sh->inv_rho;
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	const sph_kernel_consts kc = sh->k;
@@ -164,7 +167,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 #endif
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
-		const float xi = x[i], yi = y[i], zi = z[i];
+		const float xi = pk[4 * i], yi = pk[4 * i + 1], zi = pk[4 * i + 2];
 		/* rho >= m W(0) > 0 (the self term), so 1/rho is finite */
 		const float iri = inv_rho[i], pi_ = p[i];
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
@@ -187,7 +190,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 #endif
 		for (; q < cnt; ++q) {
 			const uint32_t j = list[q];
-			float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
+			float rx = xi - pk[4 * (size_t)j], ry = yi - pk[4 * (size_t)j + 1], rz = zi - pk[4 * (size_t)j + 2];
 			const float r2 = rx * rx + ry * ry + rz * rz;
 			float r;
 			if (r2 > eps2) {

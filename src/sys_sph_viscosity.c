@@ -14,15 +14,17 @@
  * dam-break validation wants.
  * Time-step limit (viscous): dt <= 0.3125 h^2 / nu, nu = mu / rho0; with the
  * default CFL 0.4 that is the usual 0.125 h^2/nu.
+ * Positions and 1/rho come from sph_density's (x y z 1/rho) quads (sh->pq,
+ * the positions its lists were made from). The pairs go eight at a time
+ * (AVX2 when the CPU has it, else SSE as two halves doing the same per lane),
+ * with per-lane partial sums added in a fixed order: the same bits for any
+ * thread count and either path.
  * Source: Mueller, Charypar & Gross 2003; Monaghan, "Smoothed particle
  * hydrodynamics", ARAA 1992. */
 #include "sph.h"
 #include "systems.h"
 
 #include <stdlib.h>
-#ifdef __SSE2__
-#include <emmintrin.h>
-#endif
 
 typedef struct sph_viscosity {
 	eddy_sph_viscosity_def def;
