@@ -1,33 +1,36 @@
 /* SPH neighbour lists: a Verlet list over a uniform grid, filtered every
  * step into exact lists.
  *
- * Every step: the cell (size h/2) of every particle, a counting sort by cell
- * (stable, so the order is deterministic) and the whole particle table
- * permuted into cell order (eddy__permute_particles), so the passes over
- * neighbours stream memory.
+ * Every step: the cell (size h/2) of every particle, and unless the table is
+ * still in cell order (a fluid at rest), a counting sort by cell (stable, so
+ * the order is deterministic) and the whole particle table permuted into
+ * cell order (eddy__permute_particles), so the passes over neighbours stream
+ * memory.
  *
  * The grid search, the costly part, runs only when the Verlet list is stale:
- * per particle the 7^3 cells around it (with x fastest, the seven cells
- * along x are one contiguous run of rows, so 49 runs) filtered by
- * r^2 < h_s^2, h_s = h (1 + SPH_SKIN), in the rows of that time ("build slots"); the permutations of later steps are
- * followed with slot_of / now_of. The list stays valid while every particle
- * is within skin/2 of where it was at the search: then a pair closer than h
- * now was closer than h + skin then. A change in the particle count or in
- * the boundary systems also forces a search. Any row may hold any particle
- * (a swap-remove, a loaded checkpoint): the argument is about positions, so
- * the displacement test covers that as well.
+ * per particle the 7^3 cells around it (with x fastest, the cells along x are
+ * one contiguous run of rows, so 49 runs, shorter at the corners) filtered by
+ * r^2 < h_s^2, h_s = h (1 + SPH_SKIN), in the rows of that time ("build
+ * slots"); the permutations of later steps are followed with slot_of /
+ * now_of. The list stays valid while every particle is within skin/2 of
+ * where it was at the search: then a pair closer than h now was closer than
+ * h + skin then. A change in the particle count or in the boundary systems
+ * also forces a search. Any row may hold any particle (a swap-remove, a
+ * loaded checkpoint): the argument is about positions, so the displacement
+ * test covers that as well.
  *
  * Every step each particle's Verlet candidates are filtered by r^2 < h^2 into
- * its exact list, sorted by index, and the density's kernel sums are
- * accumulated on the way in that order. Since the particle order is a
- * function of the positions alone (a stable sort of the table each step), the
- * exact lists and sums are the same whenever the last search ran: a resumed
- * run is bit-identical without checkpointing the Verlet list.
+ * its exact list, sorted by index, and the density's kernel sums are made
+ * from it in that order. Since the particle order is a function of the
+ * positions alone (a stable sort of the table each step), the exact lists
+ * and sums are the same whenever the last search ran: a resumed run is
+ * bit-identical without checkpointing the Verlet list.
  *
- * The lists are stored with a fixed stride per particle; when a particle has
- * more candidates than the stride (compressed fluid), the stride grows to the
- * largest count and the search runs again. Every particle writes only its
- * own lists, so they are identical for any thread count.
+ * Both lists are stored with a fixed stride per particle (the Verlet one
+ * wider); when a particle has more entries than a stride (compressed fluid),
+ * the stride grows and that pass runs again. Every particle writes only its
+ * own lists, so they are identical for any thread count. The filter has an
+ * AVX2 path (chosen at run time) giving the same lists as the SSE one.
  *
  * Boundary particles (sph_boundary_box systems) are static: they are gathered
  * and cell-sorted once, and again only when the set of boundary systems

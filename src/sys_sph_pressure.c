@@ -161,7 +161,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	 * made them): a group of neighbours then costs a load each and a
 	 * transpose instead of four scattered loads each */
 	const float *pk = sh->pq;
+#ifdef __SSE2__
 	const pair_args pa = {pk, p, kc.h, eps2};
+#endif
 #ifdef SPH_AVX2
 	const bool avx2 = sph_use_avx2();
 #endif

@@ -192,7 +192,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		pv[4 * i + 2] = vz[i];
 		pv[4 * i + 3] = rho[i];
 	}
+#ifdef __SSE2__
 	const pair_args pa = {pq, pv, kc.h, eps, rmin};
+#endif
 #ifdef SPH_AVX2
 	const bool avx2 = sph_use_avx2();
 #endif
