@@ -60,7 +60,10 @@ typedef struct sph_neighbors {
 	 * size h, and 7^3 cover the Verlet radius */
 	float ox, oy, oz, inv;
 	int gx, gy, gz;
-	uint32_t *cell_start; /* (cells + 1) fluid rows per cell, rows in cell order */
+	/* (cells + 1) fluid rows per cell, rows in cell order; made only when a
+	 * search runs or boundary particles exist (a table that stayed in cell
+	 * order skips it): private to sph_density, use the lists */
+	uint32_t *cell_start;
 	uint32_t *cell_of;    /* cell of each row (n_alloc) */
 
 	/* the Verlet list (see above) */
