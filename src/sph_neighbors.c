@@ -620,14 +620,31 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	const long ln = (long)n;
 	/* a fluid at rest keeps its order from step to step: then the counting
 	 * sort (over every cell of the world) and the copying are skipped, and
-	 * the cell ranges are made only if something needs them */
+	 * the cell ranges are made only if something needs them. One pass does
+	 * what such a step needs (a parallel region costs a thread wake-up): the
+	 * cells, the order check, the (x y z -) quads and, if the Verlet list
+	 * may still be good, how far the particles are from their build slots. */
+	const bool prevalid = nb->vvalid && nb->vn == n && nb->vbsig == nb->bsig;
+	const float half = 0.49f * SPH_SKIN * sh->h; /* 0.49: float rounding */
+	const float lim2 = half * half;
 	int sorted = 1;
-#pragma omp parallel for num_threads(threads) schedule(static)
-	for (long i = 0; i < ln; ++i)
-		key[i] = cell_index(nb, x[i], y[i], z[i]);
-#pragma omp parallel for num_threads(threads) schedule(static) reduction(&& : sorted)
-	for (long i = 1; i < ln; ++i)
-		sorted = sorted && key[i - 1] <= key[i];
+	float d2max = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(&& : sorted) reduction(max : d2max)
+	for (long i = 0; i < ln; ++i) {
+		const uint32_t k = cell_index(nb, x[i], y[i], z[i]);
+		key[i] = nb->cell_of[i] = k;
+		sorted = sorted && (i == 0 || cell_index(nb, x[i - 1], y[i - 1], z[i - 1]) <= k);
+		p4[4 * i] = x[i];
+		p4[4 * i + 1] = y[i];
+		p4[4 * i + 2] = z[i];
+		p4[4 * i + 3] = 0; /* sph_density puts 1/rho here */
+		if (prevalid) {
+			const uint32_t b = nb->slot_of[i];
+			const float dx = x[i] - nb->vx[b], dy = y[i] - nb->vy[b], dz = z[i] - nb->vz[b];
+			const float d2 = dx * dx + dy * dy + dz * dz;
+			d2max = d2 > d2max ? d2 : d2max;
+		}
+	}
 	const size_t cells = (size_t)nb->gx * (size_t)nb->gy * (size_t)nb->gz;
 	const bool same = sorted;
 	bool ranges = false; /* nb->cell_start matches the table */
@@ -635,40 +652,35 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		counting_sort(key, n, cells, nb->cell_start, order);
 		eddy__permute_particles(w, order, scratch);
 		ranges = true;
+		/* follow the rows through the permutation */
+		if (prevalid) {
+			uint32_t *slot = scratch;
 #pragma omp parallel for num_threads(threads) schedule(static)
-		for (long i = 0; i < ln; ++i)
-			nb->cell_of[i] = key[order[i]];
-	} else
-		memcpy(nb->cell_of, key, n * sizeof *key);
-
-	/* is the Verlet list still good? Follow the rows through the permutation,
-	 * then check how far each particle is from its build slot's position */
-	bool valid = nb->vvalid && nb->vn == n && nb->vbsig == nb->bsig;
-	if (valid && !same) {
-		uint32_t *slot = scratch;
-#pragma omp parallel for num_threads(threads) schedule(static)
-		for (long i = 0; i < ln; ++i)
-			slot[i] = nb->slot_of[order[i]];
-		memcpy(nb->slot_of, slot, n * sizeof *slot);
-#pragma omp parallel for num_threads(threads) schedule(static)
-		for (long i = 0; i < ln; ++i)
-			nb->now_of[nb->slot_of[i]] = (uint32_t)i;
-		nb->vsame = false;
-	}
-
-	if (valid) {
-		const float half = 0.49f * SPH_SKIN * sh->h; /* 0.49: float rounding */
-		const float lim2 = half * half;
-		float d2max = 0;
+			for (long i = 0; i < ln; ++i)
+				slot[i] = nb->slot_of[order[i]];
+			memcpy(nb->slot_of, slot, n * sizeof *slot);
+			nb->vsame = false;
+		}
+		d2max = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : d2max)
 		for (long i = 0; i < ln; ++i) {
-			const uint32_t b = nb->slot_of[i];
-			const float dx = x[i] - nb->vx[b], dy = y[i] - nb->vy[b], dz = z[i] - nb->vz[b];
-			const float d2 = dx * dx + dy * dy + dz * dz;
-			d2max = d2 > d2max ? d2 : d2max;
+			nb->cell_of[i] = key[order[i]];
+			p4[4 * i] = x[i];
+			p4[4 * i + 1] = y[i];
+			p4[4 * i + 2] = z[i];
+			p4[4 * i + 3] = 0;
+			if (prevalid) {
+				const uint32_t b = nb->slot_of[i];
+				nb->now_of[b] = (uint32_t)i;
+				const float dx = x[i] - nb->vx[b], dy = y[i] - nb->vy[b], dz = z[i] - nb->vz[b];
+				const float d2 = dx * dx + dy * dy + dz * dz;
+				d2max = d2 > d2max ? d2 : d2max;
+			}
 		}
-		valid = d2max < lim2; /* false for NaN too */
 	}
+	/* the Verlet list is good while every particle is within skin/2 of its
+	 * build slot's position */
+	bool valid = prevalid && d2max < lim2; /* false for NaN too */
 	/* the search and the boundary pressure walk cells */
 	if (!ranges && (!valid || nb->nb > 0)) {
 		cell_ranges(key, n, cells, nb->cell_start);
@@ -710,13 +722,6 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		nb->searches++;
 	}
 
-#pragma omp parallel for num_threads(threads) schedule(static)
-	for (long i = 0; i < ln; ++i) {
-		p4[4 * i] = x[i];
-		p4[4 * i + 1] = y[i];
-		p4[4 * i + 2] = z[i];
-		p4[4 * i + 3] = 0; /* sph_density puts 1/rho here */
-	}
 	sh->pq = p4;
 	/* the exact lists, with their own (tighter) strides */
 	if (!nb->cap) {

@@ -69,7 +69,7 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 	const float B = k * rho0 / gamma;
 	const int gxn = nb->gx, gyn = nb->gy, gzn = nb->gz;
 	const long nbound = (long)nb->nb;
-	if (w->n == 0)
+	if (w->n == 0 || nbound == 0)
 		return EDDY_OK;
 #pragma omp parallel for num_threads(threads) schedule(static)
 	for (long b = 0; b < nbound; ++b) {
