@@ -6,6 +6,10 @@
 
 #include "core.h"
 
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
+
 #ifndef M_PI
 #define M_PI 3.14159265358979323846
 #endif
@@ -32,26 +36,44 @@ static inline sph_kernel_consts sph_consts(float h)
 	return k;
 }
 
-/* Neighbour lists: particle i's fluid neighbours (itself excluded) are
- * nbr[i*cap .. i*cap + count[i]), its boundary neighbours bnbr[i*bcap ..
- * i*bcap + bcount[i]) indexing the boundary arrays. Valid for the step in
- * which sph_density built them (the particle table is in that order). */
+/* Neighbour lists: particle i's fluid neighbours (itself excluded, r < h
+ * exactly, in ascending index order) are nbr[i*cap .. i*cap + count[i]), its
+ * boundary neighbours (r < h, ascending) bnbr[i*bcap .. i*bcap + bcount[i])
+ * indexing the boundary arrays. Valid for the step in which sph_density built
+ * them (the particle table is in that order, sorted by grid cell).
+ *
+ * Behind them, private to sph_neighbors.c, a Verlet list: the pairs closer
+ * than h (1 + SPH_SKIN) when it was last searched, in the indices of that
+ * time ("build slots"), reused while no particle has moved more than half
+ * the skin. It changes how fast the lists are made, never what they hold. */
 typedef struct sph_neighbors {
 	size_t n, cap, bcap;
 	uint32_t *nbr, *count, *bnbr, *bcount;
 	size_t n_alloc, cap_alloc, bcap_alloc;
 
-	/* fused into the search: sum_j (h^2 - r^2)^3 over the fluid neighbours
-	 * and sum_b V_b rho_b (h^2 - r^2)^3 over the boundary ones */
+	/* sum_j (h^2 - r^2)^3 over the fluid neighbours and sum_b V_b rho_b
+	 * (h^2 - r^2)^3 over the boundary ones, made with the lists */
 	float *wsum, *bwsum;
 
 	/* grid over the world bounds plus a margin of h, cell size h / 2: the
 	 * 5^3 cells around a particle hold 58% of the candidates of 3^3 cells of
-	 * size h */
+	 * size h, and 7^3 cover the Verlet radius */
 	float ox, oy, oz, inv;
 	int gx, gy, gz;
-	uint32_t *cell_start; /* (cells + 1) fluid rows per cell, rows in cell order */
+	/* (cells + 1) fluid rows per cell, rows in cell order; made only when a
+	 * search runs or boundary particles exist (a table that stayed in cell
+	 * order skips it): private to sph_density, use the lists */
+	uint32_t *cell_start;
 	uint32_t *cell_of;    /* cell of each row (n_alloc) */
+
+	/* the Verlet list (see above) */
+	size_t vn, vcap, vbcap, vcap_alloc, vbcap_alloc, v_alloc;
+	uint32_t *vnbr, *vcount, *vbnbr, *vbcount;
+	float *vx, *vy, *vz;             /* m, position of each build slot at the search */
+	uint32_t *slot_of, *now_of;       /* build slot of each row, row of each build slot */
+	uint64_t vbsig;                   /* boundary systems at the search */
+	bool vvalid, vsame; /* vsame: no particle has changed row since the search */
+	int64_t searches;                 /* statistics: Verlet searches so far */
 
 	/* boundary particles of every sph_boundary_box, cell-sorted */
 	size_t nb;
@@ -61,6 +83,10 @@ typedef struct sph_neighbors {
 	uint64_t bsig; /* which boundary systems the arrays were built from */
 } sph_neighbors;
 
+/* Verlet skin as a fraction of h: larger means rarer searches but more
+ * candidates to filter every step */
+#define SPH_SKIN 0.2f
+#define SPH_VERLET_CELLS 3 /* cells of h/2 the Verlet radius spans: ceil(2 (1 + SPH_SKIN)) */
 #define SPH_CELLS_PER_H 2
 
 /* What sph_density shares with the SPH systems after it. */
@@ -71,6 +97,9 @@ typedef struct sph_shared {
 	sph_kernel_consts k;
 	sph_neighbors nb;
 	float *inv_rho; /* 1/rho this step (arena), set by sph_density */
+	/* (x, y, z, 1/rho) per particle this step (arena), as sph_density saw
+	 * them: the force passes load a neighbour's four with one 16-byte load */
+	float *pq;
 } sph_shared;
 
 /* The sph_density system nearest before system s in the pipeline, or NULL. */
@@ -97,5 +126,49 @@ static inline void sph_coincident_dir(size_t i, size_t j, float *dx, float *dy, 
 	*dy = s * 0.53452248f;
 	*dz = s * 0.26726124f;
 }
+
+#ifdef __SSE2__
+/* Sum of the four lanes in a fixed order, (l0 + l1) + (l2 + l3): the passes
+ * over neighbours keep four partial sums and end with this. */
+static inline float sph_hsum4(__m128 v)
+{
+	const __m128 sw = _mm_shuffle_ps(v, v, _MM_SHUFFLE(2, 3, 0, 1)); /* l1 l0 l3 l2 */
+	const __m128 s = _mm_add_ps(v, sw);                               /* l0+l1, ., l2+l3, . */
+	return _mm_cvtss_f32(_mm_add_ss(s, _mm_movehl_ps(s, s)));
+}
+#endif
+
+/* An AVX2 path beside the SSE one (chosen at run time, the default build
+ * stays portable): the pair loops work on groups of eight neighbours, which
+ * the SSE path does as two halves with separate partial sums, so that both
+ * paths do the same operations per lane and give the same bits. */
+#if defined(__SSE2__) && defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__))
+#define SPH_AVX2 1
+#include <immintrin.h>
+static inline bool sph_use_avx2(void) { return __builtin_cpu_supports("avx2"); }
+
+/* Sum of eight lanes as the SSE path sums its two halves. */
+__attribute__((target("avx2"))) static inline float sph_hsum8(__m256 v)
+{
+	return sph_hsum4(_mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1)));
+}
+
+/* Quads a[0..7] (16 bytes each) to four vectors of eight lanes: lanes 0-3
+ * from a[0..3], lanes 4-7 from a[4..7], as two _MM_TRANSPOSE4_PS would. */
+__attribute__((target("avx2"))) static inline void sph_transpose8(const float *const a[8], __m256 *c0, __m256 *c1,
+                                                                  __m256 *c2, __m256 *c3)
+{
+	const __m256 v0 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[0])), _mm_loadu_ps(a[4]), 1),
+	             v1 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[1])), _mm_loadu_ps(a[5]), 1),
+	             v2 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[2])), _mm_loadu_ps(a[6]), 1),
+	             v3 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[3])), _mm_loadu_ps(a[7]), 1);
+	const __m256 t0 = _mm256_unpacklo_ps(v0, v1), t1 = _mm256_unpacklo_ps(v2, v3), t2 = _mm256_unpackhi_ps(v0, v1),
+	             t3 = _mm256_unpackhi_ps(v2, v3);
+	*c0 = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(1, 0, 1, 0));
+	*c1 = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(3, 2, 3, 2));
+	*c2 = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(1, 0, 1, 0));
+	*c3 = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(3, 2, 3, 2));
+}
+#endif
 
 #endif

@@ -1,17 +1,36 @@
-/* SPH neighbour search: a uniform grid of cell size h/2 over the world bounds
- * (plus a margin of h for the boundary particles behind the walls).
+/* SPH neighbour lists: a Verlet list over a uniform grid, filtered every
+ * step into exact lists.
  *
- * Each step: the cell (size h/2, so 5^3 cells cover the support with fewer
- * candidates than 3^3 cells of size h) of every particle, a counting sort by cell (stable, so
- * the order is deterministic), the whole particle table permuted into cell
- * order (eddy__permute_particles) so that the passes over neighbours stream
- * memory, then per particle the 125 cells around it (with x fastest, the five
- * cells along x are one contiguous run of rows, so 25 runs) filtered by
- * r^2 < h^2. The density's kernel sums are accumulated on the way, since
- * r^2 is at hand. The lists are stored with a fixed stride per particle; when a
- * particle has more neighbours than the stride (compressed fluid), the stride
- * grows to the largest count and the lists are built again. Every particle
- * writes only its own list, so the lists are identical for any thread count.
+ * Every step: the cell (size h/2) of every particle, and unless the table is
+ * still in cell order (a fluid at rest), a counting sort by cell (stable, so
+ * the order is deterministic) and the whole particle table permuted into
+ * cell order (eddy__permute_particles), so the passes over neighbours stream
+ * memory.
+ *
+ * The grid search, the costly part, runs only when the Verlet list is stale:
+ * per particle the 7^3 cells around it (with x fastest, the cells along x are
+ * one contiguous run of rows, so 49 runs, shorter at the corners) filtered by
+ * r^2 < h_s^2, h_s = h (1 + SPH_SKIN), in the rows of that time ("build
+ * slots"); the permutations of later steps are followed with slot_of /
+ * now_of. The list stays valid while every particle is within skin/2 of
+ * where it was at the search: then a pair closer than h now was closer than
+ * h + skin then. A change in the particle count or in the boundary systems
+ * also forces a search. Any row may hold any particle (a swap-remove, a
+ * loaded checkpoint): the argument is about positions, so the displacement
+ * test covers that as well.
+ *
+ * Every step each particle's Verlet candidates are filtered by r^2 < h^2 into
+ * its exact list, sorted by index, and the density's kernel sums are made
+ * from it in that order. Since the particle order is a function of the
+ * positions alone (a stable sort of the table each step), the exact lists
+ * and sums are the same whenever the last search ran: a resumed run is
+ * bit-identical without checkpointing the Verlet list.
+ *
+ * Both lists are stored with a fixed stride per particle (the Verlet one
+ * wider); when a particle has more entries than a stride (compressed fluid),
+ * the stride grows and that pass runs again. Every particle writes only its
+ * own lists, so they are identical for any thread count. The filter has an
+ * AVX2 path (chosen at run time) giving the same lists as the SSE one.
  *
  * Boundary particles (sph_boundary_box systems) are static: they are gathered
  * and cell-sorted once, and again only when the set of boundary systems
@@ -35,6 +54,15 @@ void eddy__sph_neighbors_free(sph_neighbors *nb)
 	free(nb->bcount);
 	free(nb->cell_start);
 	free(nb->cell_of);
+	free(nb->vnbr);
+	free(nb->vcount);
+	free(nb->vbnbr);
+	free(nb->vbcount);
+	free(nb->vx);
+	free(nb->vy);
+	free(nb->vz);
+	free(nb->slot_of);
+	free(nb->now_of);
 	free(nb->bx);
 	free(nb->by);
 	free(nb->bz);
@@ -109,6 +137,18 @@ static void counting_sort(const uint32_t *keys, size_t n, size_t cells, uint32_t
 	for (size_t c = cells; c > 0; --c)
 		start[c] = start[c - 1];
 	start[0] = 0;
+}
+
+/* The cell offsets of a table already in cell order (keys non-decreasing):
+ * start[c] is the first row in cell c or after it. */
+static void cell_ranges(const uint32_t *key, size_t n, size_t cells, uint32_t *start)
+{
+	size_t c = 0;
+	for (size_t i = 0; i < n; ++i)
+		while (c <= key[i])
+			start[c++] = (uint32_t)i;
+	while (c <= cells)
+		start[c++] = (uint32_t)n;
 }
 
 static uint64_t boundary_signature(const eddy_world *w)
@@ -199,94 +239,93 @@ static bool grow(void **p, size_t *have, size_t want, size_t elem)
 	return true;
 }
 
-/* One pass of list building with the current strides; returns the largest
- * fluid and boundary counts seen (a count above the stride means: rebuild). */
-static void fill_lists(eddy_world *w, sph_neighbors *nb, const sph_kernel_consts *kc, int threads, uint32_t *max_f,
-                       uint32_t *max_b)
+/* The grid search into the Verlet list: one pass with the current strides;
+ * returns the largest fluid and boundary counts seen (a count above the
+ * stride means: search again). The table is in cell order, so the candidates
+ * come in ascending row order. */
+static void search(eddy_world *w, sph_neighbors *nb, float hs2, int threads, uint32_t *max_f, uint32_t *max_b)
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const long n = (long)w->n;
-	const int gx = nb->gx, gy = nb->gy, gz = nb->gz, R = SPH_CELLS_PER_H;
-	const size_t cap = nb->cap, bcap = nb->bcap;
-	const float h2 = kc->h2;
+	const int gx = nb->gx, gy = nb->gy, gz = nb->gz, R = SPH_VERLET_CELLS;
+	const size_t cap = nb->vcap, bcap = nb->vbcap;
+	/* how many cells along x a run at cell offsets (dy, dz) needs: a cell k
+	 * cells away is at least (k - 1) cells of h/2 from the particle, so the
+	 * corners of the 7^3 block are beyond the Verlet radius; -1: none */
+	int reach[SPH_VERLET_CELLS + 1][SPH_VERLET_CELLS + 1];
+	const double rs2 = 1.001 * (double)hs2 * (double)nb->inv * (double)nb->inv; /* in cells^2, 0.1% for rounding */
+	for (int a = 0; a <= R; ++a)
+		for (int b = 0; b <= R; ++b) {
+			const double ey = a > 0 ? a - 1 : 0, ez = b > 0 ? b - 1 : 0, rem = rs2 - ey * ey - ez * ez;
+			int k = -1;
+			if (rem > 0) /* x offsets k with (k - 1)^2 < rem */
+				for (k = 0; k < R && (double)k * k < rem; ++k)
+					;
+			reach[a][b] = k;
+		}
 	uint32_t mf = 0, mb = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : mf, mb)
 	for (long i = 0; i < n; ++i) {
 		const uint32_t c = nb->cell_of[i];
 		const int cx = (int)(c % (uint32_t)gx), cy = (int)(c / (uint32_t)gx % (uint32_t)gy),
 		          cz = (int)(c / ((uint32_t)gx * (uint32_t)gy));
-		const int x0 = cx >= R ? cx - R : 0, x1 = cx < gx - R ? cx + R : gx - 1;
 		const float xi = x[i], yi = y[i], zi = z[i];
 #ifdef __SSE2__
-		const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh2 = _mm_set1_ps(h2);
+		const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh2 = _mm_set1_ps(hs2);
 #endif
-		uint32_t *list = nb->nbr + (size_t)i * cap, *blist = nb->bnbr + (size_t)i * bcap;
+		uint32_t *list = nb->vnbr + (size_t)i * cap, *blist = nb->vbnbr + (size_t)i * bcap;
 		uint32_t cnt = 0, bcnt = 0;
-		float ws = 0, bws = 0;
 		for (int dz = -R; dz <= R; ++dz) {
 			const int zz = cz + dz;
 			if (zz < 0 || zz >= gz)
 				continue;
 			for (int dy = -R; dy <= R; ++dy) {
 				const int yy = cy + dy;
-				if (yy < 0 || yy >= gy)
+				const int ext = reach[abs(dy)][abs(dz)];
+				if (yy < 0 || yy >= gy || ext < 0)
 					continue;
+				const int x0 = cx >= ext ? cx - ext : 0, x1 = cx < gx - ext ? cx + ext : gx - 1;
 				const size_t row = ((size_t)zz * (size_t)gy + (size_t)yy) * (size_t)gx;
 				const uint32_t a = nb->cell_start[row + (size_t)x0], e = nb->cell_start[row + (size_t)x1 + 1];
 				uint32_t j = a;
 #ifdef __SSE2__
 				/* four candidates at a time: the distance tests are most of
-				 * the search. The lanes do the scalar loop's operations in
-				 * the same order (no FMA), and hits are taken in order, so
-				 * lists and sums are bit for bit those of the scalar loop. */
+				 * the search; hits are taken in order */
 				for (; j + 4 <= e; j += 4) {
 					const __m128 rx = _mm_sub_ps(vxi, _mm_loadu_ps(x + j)), ry = _mm_sub_ps(vyi, _mm_loadu_ps(y + j)),
 					             rz = _mm_sub_ps(vzi, _mm_loadu_ps(z + j));
 					const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
-					const __m128 d4 = _mm_sub_ps(vh2, r2);
-					unsigned hit = (unsigned)_mm_movemask_ps(_mm_cmpgt_ps(d4, _mm_setzero_ps()));
+					unsigned hit = (unsigned)_mm_movemask_ps(_mm_cmplt_ps(r2, vh2));
 					if ((uint32_t)i - j < 4)
 						hit &= ~(1u << ((uint32_t)i - j)); /* not itself */
-					if (!hit)
-						continue;
-					float dv[4];
-					_mm_storeu_ps(dv, d4);
-					for (unsigned q = 0; q < 4; ++q)
-						if (hit >> q & 1) {
-							if (cnt < cap)
-								list[cnt] = j + q;
-							cnt++;
-							ws += dv[q] * dv[q] * dv[q];
-						}
+					for (; hit; hit &= hit - 1) {
+						if (cnt < cap)
+							list[cnt] = j + (uint32_t)__builtin_ctz(hit);
+						cnt++;
+					}
 				}
 #endif
 				for (; j < e; ++j) {
 					const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
-					const float d = h2 - (rx * rx + ry * ry + rz * rz);
-					if (d > 0 && j != (uint32_t)i) {
+					if (rx * rx + ry * ry + rz * rz < hs2 && j != (uint32_t)i) {
 						if (cnt < cap)
 							list[cnt] = j;
 						cnt++;
-						ws += d * d * d;
 					}
 				}
 				const uint32_t ba = nb->bcell_start[row + (size_t)x0], be = nb->bcell_start[row + (size_t)x1 + 1];
 				for (uint32_t jb = ba; jb < be; ++jb) {
 					const float rx = xi - nb->bx[jb], ry = yi - nb->by[jb], rz = zi - nb->bz[jb];
-					const float d = h2 - (rx * rx + ry * ry + rz * rz);
-					if (d > 0) {
+					if (rx * rx + ry * ry + rz * rz < hs2) {
 						if (bcnt < bcap)
 							blist[bcnt] = jb;
 						bcnt++;
-						bws += nb->bvol[jb] * nb->brho[jb] * d * d * d;
 					}
 				}
 			}
 		}
-		nb->count[i] = cnt;
-		nb->bcount[i] = bcnt;
-		nb->wsum[i] = ws;
-		nb->bwsum[i] = bws;
+		nb->vcount[i] = cnt;
+		nb->vbcount[i] = bcnt;
 		mf = cnt > mf ? cnt : mf;
 		mb = bcnt > mb ? bcnt : mb;
 	}
@@ -294,10 +333,257 @@ static void fill_lists(eddy_world *w, sph_neighbors *nb, const sph_kernel_consts
 	*max_b = mb;
 }
 
+/* Candidates of a row, kept with their (h^2 - r^2) while they are sorted
+ * by index; a longer row (a huge radius) takes a slower path. */
+#define SORT_MAX 256
+
+#ifdef SPH_AVX2
+/* The AVX2 path of filter() for the candidates of one row, eight a group:
+ * the candidates in (r^2 < h^2) are packed to the front of the group with a
+ * permutation made from the mask (pdep/pext), stored eight at a time. The
+ * same candidates in the same order as the SSE path, so the same lists. */
+__attribute__((target("avx2,bmi2"))) static uint32_t filter_avx2(const uint32_t *cand, uint32_t vc,
+                                                                 const uint32_t *now_of, const float *p4, float xi,
+                                                                 float yi, float zi, float h2, uint32_t *jl,
+                                                                 float *dv, uint32_t *done)
+{
+	const __m256 vxi = _mm256_set1_ps(xi), vyi = _mm256_set1_ps(yi), vzi = _mm256_set1_ps(zi), vh2 = _mm256_set1_ps(h2);
+	const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+	uint32_t cnt = 0, q = 0;
+	/* the last group is padded with copies of the last candidate, masked */
+	for (; q < vc; q += 8) {
+		uint32_t j[8];
+		__m256i jv;
+		if (q + 8 <= vc && !now_of) {
+			for (uint32_t k = 0; k < 8; ++k)
+				j[k] = cand[q + k];
+			jv = _mm256_loadu_si256((const __m256i *)(cand + q));
+		} else {
+			for (uint32_t k = 0; k < 8; ++k) {
+				const uint32_t c = cand[q + k < vc ? q + k : vc - 1];
+				j[k] = now_of ? now_of[c] : c;
+			}
+			jv = _mm256_setr_epi32((int)j[0], (int)j[1], (int)j[2], (int)j[3], (int)j[4], (int)j[5], (int)j[6],
+			                       (int)j[7]);
+		}
+		const float *const quad[8] = {p4 + 4 * (size_t)j[0], p4 + 4 * (size_t)j[1], p4 + 4 * (size_t)j[2],
+		                              p4 + 4 * (size_t)j[3], p4 + 4 * (size_t)j[4], p4 + 4 * (size_t)j[5],
+		                              p4 + 4 * (size_t)j[6], p4 + 4 * (size_t)j[7]};
+		__m256 px, py, pz, pw;
+		sph_transpose8(quad, &px, &py, &pz, &pw);
+		const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
+		const __m256 d = _mm256_sub_ps(
+			vh2, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz)));
+		const __m256 real = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32((int)(vc - q)), lane));
+		const unsigned in =
+			(unsigned)_mm256_movemask_ps(_mm256_and_ps(real, _mm256_cmp_ps(d, _mm256_setzero_ps(), _CMP_GT_OQ)));
+		/* lane numbers of the ones in, packed: a byte per lane */
+		const uint64_t keep = _pdep_u64(in, 0x0101010101010101ull) * 0xFF;
+		const __m256i perm =
+			_mm256_cvtepu8_epi32(_mm_cvtsi64_si128((long long)_pext_u64(0x0706050403020100ull, keep)));
+		_mm256_storeu_si256((__m256i *)(jl + cnt), _mm256_permutevar8x32_epi32(jv, perm));
+		_mm256_storeu_ps(dv + cnt, _mm256_permutevar8x32_ps(d, perm));
+		cnt += (uint32_t)__builtin_popcount(in);
+	}
+	*done = vc;
+	return cnt;
+}
+#endif
+
+/* The exact lists and kernel sums from the Verlet list: candidates mapped to
+ * the rows they are in now, r^2 < h^2 kept, sorted by row, summed in that
+ * order. p4 holds (x, y, z, -) per row. */
+static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, int threads, uint32_t *max_f,
+                   uint32_t *max_b)
+{
+	const size_t vcap = nb->vcap, vbcap = nb->vbcap, cap = nb->cap, bcap = nb->bcap;
+	/* the row a build slot is in now; the same while no permutation moved a
+	 * particle since the search (a loop-invariant test, hoisted) */
+	const uint32_t *now_of = nb->vsame ? NULL : nb->now_of;
+#define ROW(slot) (now_of ? now_of[slot] : (slot))
+#ifdef SPH_AVX2
+	const bool avx2 = sph_use_avx2() && __builtin_cpu_supports("bmi2");
+#endif
+	uint32_t mf = 0, mb = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : mf, mb)
+	for (long i = 0; i < n; ++i) {
+		const uint32_t b = nb->slot_of[i];
+		const uint32_t *cand = nb->vnbr + (size_t)b * vcap;
+		const uint32_t vc = nb->vcount[b];
+		uint32_t *list = nb->nbr + (size_t)i * cap;
+		const float xi = p4[4 * i], yi = p4[4 * i + 1], zi = p4[4 * i + 2];
+		uint32_t cnt = 0;
+		float ws = 0;
+		if (vc <= SORT_MAX) {
+			/* on the stack until sorted: the rows of the list are then written
+			 * once, whole, which the memory system streams */
+			uint32_t jl[SORT_MAX + 8]; /* + 8: whole groups are stored */
+			float dv[SORT_MAX + 8];
+			uint32_t q = 0;
+			/* branch-free (whether a candidate is in is a coin toss): every
+			 * candidate is written, and the count moves past the ones in */
+#ifdef SPH_AVX2
+			if (avx2)
+				cnt = filter_avx2(cand, vc, now_of, p4, xi, yi, zi, h2, jl, dv, &q);
+#endif
+#ifdef __SSE2__
+			const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh2 = _mm_set1_ps(h2);
+			for (; q + 4 <= vc; q += 4) {
+				const uint32_t j0 = ROW(cand[q]), j1 = ROW(cand[q + 1]), j2 = ROW(cand[q + 2]), j3 = ROW(cand[q + 3]);
+				__m128 px = _mm_loadu_ps(p4 + 4 * (size_t)j0), py = _mm_loadu_ps(p4 + 4 * (size_t)j1),
+				       pz = _mm_loadu_ps(p4 + 4 * (size_t)j2), pw = _mm_loadu_ps(p4 + 4 * (size_t)j3);
+				_MM_TRANSPOSE4_PS(px, py, pz, pw);
+				const __m128 rx = _mm_sub_ps(vxi, px), ry = _mm_sub_ps(vyi, py), rz = _mm_sub_ps(vzi, pz);
+				const __m128 d = _mm_sub_ps(
+					vh2, _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz)));
+				const unsigned in = (unsigned)_mm_movemask_ps(_mm_cmpgt_ps(d, _mm_setzero_ps()));
+				float dd[4];
+				_mm_storeu_ps(dd, d);
+				jl[cnt] = j0;
+				dv[cnt] = dd[0];
+				cnt += in & 1;
+				jl[cnt] = j1;
+				dv[cnt] = dd[1];
+				cnt += in >> 1 & 1;
+				jl[cnt] = j2;
+				dv[cnt] = dd[2];
+				cnt += in >> 2 & 1;
+				jl[cnt] = j3;
+				dv[cnt] = dd[3];
+				cnt += in >> 3;
+			}
+#endif
+			for (; q < vc; ++q) {
+				const uint32_t j = ROW(cand[q]);
+				const float *pj = p4 + 4 * (size_t)j;
+				const float rx = xi - pj[0], ry = yi - pj[1], rz = zi - pj[2];
+				const float d = h2 - (rx * rx + ry * ry + rz * rz);
+				jl[cnt] = j;
+				dv[cnt] = d;
+				cnt += d > 0;
+			}
+			/* sorted already unless a particle changed cell since the search,
+			 * and then nearly: check four at a time, insertion-sort if not */
+			uint32_t a = 1;
+#ifdef __SSE2__
+			const __m128i flip = _mm_set1_epi32(INT32_MIN); /* unsigned order by a signed compare */
+			for (; a + 4 <= cnt; a += 4) {
+				const __m128i prev = _mm_xor_si128(_mm_loadu_si128((const __m128i *)(jl + a - 1)), flip),
+				              cur = _mm_xor_si128(_mm_loadu_si128((const __m128i *)(jl + a)), flip);
+				if (_mm_movemask_epi8(_mm_cmpgt_epi32(prev, cur)))
+					break;
+			}
+#endif
+			for (; a < cnt; ++a) {
+				const uint32_t j = jl[a];
+				if (jl[a - 1] < j)
+					continue;
+				const float d = dv[a];
+				uint32_t k = a;
+				for (; k > 0 && jl[k - 1] > j; --k) {
+					jl[k] = jl[k - 1];
+					dv[k] = dv[k - 1];
+				}
+				jl[k] = j;
+				dv[k] = d;
+			}
+			q = 0;
+#ifdef __SSE2__
+			/* four partial sums, added up in a fixed order */
+			__m128 acc = _mm_setzero_ps();
+			for (; q + 4 <= cnt; q += 4) {
+				const __m128 d = _mm_loadu_ps(dv + q);
+				acc = _mm_add_ps(acc, _mm_mul_ps(_mm_mul_ps(d, d), d));
+			}
+			ws = sph_hsum4(acc);
+#endif
+			for (; q < cnt; ++q)
+				ws += dv[q] * dv[q] * dv[q];
+			if (cnt <= cap) {
+				/* whole quads (cap is a multiple of 8): short rows, where a
+				 * memcpy call costs more than the copy */
+				q = 0;
+#ifdef __SSE2__
+				for (; q < cnt; q += 4)
+					_mm_storeu_si128((__m128i *)(list + q), _mm_loadu_si128((const __m128i *)(jl + q)));
+#endif
+				for (; q < cnt; ++q)
+					list[q] = jl[q];
+			}
+		} else {
+			for (uint32_t q = 0; q < vc; ++q) {
+				const uint32_t j = ROW(cand[q]);
+				const float rx = xi - p4[4 * j], ry = yi - p4[4 * j + 1], rz = zi - p4[4 * j + 2];
+				if (h2 - (rx * rx + ry * ry + rz * rz) > 0) {
+					if (cnt < cap)
+						list[cnt] = j;
+					cnt++;
+				}
+			}
+			for (uint32_t a = 1; a < cnt && cnt <= cap; ++a) {
+				const uint32_t j = list[a];
+				uint32_t k = a;
+				for (; k > 0 && list[k - 1] > j; --k)
+					list[k] = list[k - 1];
+				list[k] = j;
+			}
+			for (uint32_t q = 0; q < cnt && cnt <= cap; ++q) {
+				const uint32_t j = list[q];
+				const float rx = xi - p4[4 * j], ry = yi - p4[4 * j + 1], rz = zi - p4[4 * j + 2];
+				const float d = h2 - (rx * rx + ry * ry + rz * rz);
+				ws += d * d * d;
+			}
+		}
+		nb->count[i] = cnt;
+		nb->wsum[i] = ws;
+
+		/* boundary particles never move: their candidates stay in order */
+		const uint32_t *bcand = nb->vbnbr + (size_t)b * vbcap;
+		const uint32_t vbc = nb->vbcount[b];
+		uint32_t *blist = nb->bnbr + (size_t)i * bcap;
+		uint32_t bcnt = 0;
+		float bws = 0;
+		for (uint32_t q = 0; q < vbc; ++q) {
+			const uint32_t jb = bcand[q];
+			const float rx = xi - nb->bx[jb], ry = yi - nb->by[jb], rz = zi - nb->bz[jb];
+			const float d = h2 - (rx * rx + ry * ry + rz * rz);
+			if (d > 0) {
+				if (bcnt < bcap)
+					blist[bcnt] = jb;
+				bcnt++;
+				bws += nb->bvol[jb] * nb->brho[jb] * d * d * d;
+			}
+		}
+		nb->bcount[i] = bcnt;
+		nb->bwsum[i] = bws;
+		mf = cnt > mf ? cnt : mf;
+		mb = bcnt > mb ? bcnt : mb;
+	}
+	*max_f = mf;
+	*max_b = mb;
+#undef ROW
+}
+
 eddy_status eddy__sph_boundary_ready(eddy_world *w, sph_shared *sh)
 {
 	eddy_status st = grid_setup(w, &sh->nb, sh->h);
 	return st == EDDY_OK ? boundary_build(w, sh) : st;
+}
+
+/* Grows every per-particle array to n. */
+static bool grow_rows(sph_neighbors *nb, size_t n)
+{
+	void **arrays[] = {(void **)&nb->cell_of, (void **)&nb->count, (void **)&nb->bcount, (void **)&nb->wsum,
+	                   (void **)&nb->bwsum,   (void **)&nb->vcount, (void **)&nb->vbcount, (void **)&nb->vx,
+	                   (void **)&nb->vy,      (void **)&nb->vz,     (void **)&nb->slot_of, (void **)&nb->now_of};
+	size_t had = nb->n_alloc;
+	for (size_t a = 0; a < sizeof arrays / sizeof arrays[0]; ++a) {
+		had = nb->n_alloc;
+		if (!grow(arrays[a], &had, n, 4)) /* every one is 4 bytes a row */
+			return false;
+	}
+	nb->n_alloc = had;
+	return true;
 }
 
 eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads)
@@ -311,44 +597,137 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		return st;
 	const size_t n = w->n;
 	nb->n = n;
-	if (n == 0)
+	sh->pq = NULL;
+	if (n == 0) {
+		nb->vvalid = false;
 		return EDDY_OK;
-	if (!nb->cap) {
-		nb->cap = 48;
-		nb->bcap = 16;
 	}
-	size_t had = nb->n_alloc;
-	if (!grow((void **)&nb->cell_of, &had, n, sizeof *nb->cell_of))
+	if (!nb->vcap) {
+		nb->vcap = 80;
+		nb->vbcap = 32;
+	}
+	if (!grow_rows(nb, n))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
-	had = nb->n_alloc;
-	if (!grow((void **)&nb->count, &had, n, sizeof *nb->count))
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
-	had = nb->n_alloc;
-	if (!grow((void **)&nb->bcount, &had, n, sizeof *nb->bcount))
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
-	had = nb->n_alloc;
-	if (!grow((void **)&nb->wsum, &had, n, sizeof *nb->wsum))
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
-	had = nb->n_alloc;
-	if (!grow((void **)&nb->bwsum, &had, n, sizeof *nb->bwsum))
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
-	nb->n_alloc = had;
 
 	/* cell order */
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	uint32_t *key = eddy__arena_alloc(&w->arena, n * sizeof *key);
 	uint32_t *order = eddy__arena_alloc(&w->arena, n * sizeof *order);
 	void *scratch = eddy__arena_alloc(&w->arena, n * sizeof(float));
-	if (!key || !order || !scratch)
+	float *p4 = eddy__arena_alloc(&w->arena, 4 * n * sizeof *p4);
+	if (!key || !order || !scratch || !p4)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", n);
-	for (size_t i = 0; i < n; ++i)
-		key[i] = cell_index(nb, x[i], y[i], z[i]);
+	const long ln = (long)n;
+	/* a fluid at rest keeps its order from step to step: then the counting
+	 * sort (over every cell of the world) and the copying are skipped, and
+	 * the cell ranges are made only if something needs them. One pass does
+	 * what such a step needs (a parallel region costs a thread wake-up): the
+	 * cells, the order check, the (x y z -) quads and, if the Verlet list
+	 * may still be good, how far the particles are from their build slots. */
+	const bool prevalid = nb->vvalid && nb->vn == n && nb->vbsig == nb->bsig;
+	const float half = 0.49f * SPH_SKIN * sh->h; /* 0.49: float rounding */
+	const float lim2 = half * half;
+	int sorted = 1;
+	float d2max = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(&& : sorted) reduction(max : d2max)
+	for (long i = 0; i < ln; ++i) {
+		const uint32_t k = cell_index(nb, x[i], y[i], z[i]);
+		key[i] = nb->cell_of[i] = k;
+		sorted = sorted && (i == 0 || cell_index(nb, x[i - 1], y[i - 1], z[i - 1]) <= k);
+		p4[4 * i] = x[i];
+		p4[4 * i + 1] = y[i];
+		p4[4 * i + 2] = z[i];
+		p4[4 * i + 3] = 0; /* sph_density puts 1/rho here */
+		if (prevalid) {
+			const uint32_t b = nb->slot_of[i];
+			const float dx = x[i] - nb->vx[b], dy = y[i] - nb->vy[b], dz = z[i] - nb->vz[b];
+			const float d2 = dx * dx + dy * dy + dz * dz;
+			d2max = d2 > d2max ? d2 : d2max;
+		}
+	}
 	const size_t cells = (size_t)nb->gx * (size_t)nb->gy * (size_t)nb->gz;
-	counting_sort(key, n, cells, nb->cell_start, order);
-	eddy__permute_particles(w, order, scratch);
-	for (size_t i = 0; i < n; ++i)
-		nb->cell_of[i] = key[order[i]];
+	const bool same = sorted;
+	bool ranges = false; /* nb->cell_start matches the table */
+	if (!same) {
+		counting_sort(key, n, cells, nb->cell_start, order);
+		eddy__permute_particles(w, order, scratch);
+		ranges = true;
+		/* follow the rows through the permutation */
+		if (prevalid) {
+			uint32_t *slot = scratch;
+#pragma omp parallel for num_threads(threads) schedule(static)
+			for (long i = 0; i < ln; ++i)
+				slot[i] = nb->slot_of[order[i]];
+			memcpy(nb->slot_of, slot, n * sizeof *slot);
+			nb->vsame = false;
+		}
+		d2max = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : d2max)
+		for (long i = 0; i < ln; ++i) {
+			nb->cell_of[i] = key[order[i]];
+			p4[4 * i] = x[i];
+			p4[4 * i + 1] = y[i];
+			p4[4 * i + 2] = z[i];
+			p4[4 * i + 3] = 0;
+			if (prevalid) {
+				const uint32_t b = nb->slot_of[i];
+				nb->now_of[b] = (uint32_t)i;
+				const float dx = x[i] - nb->vx[b], dy = y[i] - nb->vy[b], dz = z[i] - nb->vz[b];
+				const float d2 = dx * dx + dy * dy + dz * dz;
+				d2max = d2 > d2max ? d2 : d2max;
+			}
+		}
+	}
+	/* the Verlet list is good while every particle is within skin/2 of its
+	 * build slot's position */
+	bool valid = prevalid && d2max < lim2; /* false for NaN too */
+	/* the search and the boundary pressure walk cells */
+	if (!ranges && (!valid || nb->nb > 0)) {
+		cell_ranges(key, n, cells, nb->cell_start);
+		ranges = true;
+	}
+	if (!valid) {
+		const float hs = sh->h * (1.0f + SPH_SKIN), hs2 = hs * hs;
+		for (;;) {
+			size_t want = n * nb->vcap, have = nb->vcap_alloc;
+			if (!grow((void **)&nb->vnbr, &have, want, sizeof *nb->vnbr))
+				return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n,
+				                  nb->vcap);
+			nb->vcap_alloc = have;
+			want = n * nb->vbcap;
+			have = nb->vbcap_alloc;
+			if (!grow((void **)&nb->vbnbr, &have, want, sizeof *nb->vbnbr))
+				return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n,
+				                  nb->vbcap);
+			nb->vbcap_alloc = have;
+			uint32_t mf, mb;
+			search(w, nb, hs2, threads, &mf, &mb);
+			if (mf <= nb->vcap && mb <= nb->vbcap)
+				break;
+			/* a particle had more candidates than the stride: widen and redo */
+			if (mf > nb->vcap)
+				nb->vcap = (mf + 15) / 16 * 16;
+			if (mb > nb->vbcap)
+				nb->vbcap = (mb + 15) / 16 * 16;
+		}
+		memcpy(nb->vx, x, n * sizeof *x);
+		memcpy(nb->vy, y, n * sizeof *y);
+		memcpy(nb->vz, z, n * sizeof *z);
+		for (size_t i = 0; i < n; ++i)
+			nb->slot_of[i] = nb->now_of[i] = (uint32_t)i;
+		nb->vn = n;
+		nb->vbsig = nb->bsig;
+		nb->vvalid = true;
+		nb->vsame = true;
+		nb->searches++;
+	}
 
+	sh->pq = p4;
+	/* the exact lists, with their own (tighter) strides */
+	if (!nb->cap) {
+		nb->cap = 32;
+		nb->bcap = 16;
+	}
 	for (;;) {
 		size_t want = n * nb->cap, have = nb->cap_alloc;
 		if (!grow((void **)&nb->nbr, &have, want, sizeof *nb->nbr))
@@ -360,14 +739,15 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n, nb->bcap);
 		nb->bcap_alloc = have;
 		uint32_t mf, mb;
-		fill_lists(w, nb, &sh->k, threads, &mf, &mb);
+		filter(nb, p4, sh->k.h2, (long)n, threads, &mf, &mb);
 		if (mf <= nb->cap && mb <= nb->bcap)
 			break;
-		/* a particle had more neighbours than the stride: widen and redo */
+		/* more neighbours than the stride (compressed fluid): widen, with
+		 * room to spare so that this stays rare, and redo */
 		if (mf > nb->cap)
-			nb->cap = (mf + 15) / 16 * 16;
+			nb->cap = (mf + 7) / 8 * 8 + 8;
 		if (mb > nb->bcap)
-			nb->bcap = (mb + 15) / 16 * 16;
+			nb->bcap = (mb + 7) / 8 * 8 + 8;
 	}
 	return EDDY_OK;
 }

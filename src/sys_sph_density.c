@@ -1,7 +1,11 @@
 /* sph_density: neighbour search, density and equation of state.
  *
  * Reads: x y z. Writes: density pressure neighbors (and reorders the
- * particle table into grid-cell order, see sph_neighbors.c).
+ * particle table into grid-cell order, see sph_neighbors.c, where the exact
+ * neighbour lists are filtered each step from a Verlet list and the kernel
+ * sums below are made on the way, in ascending neighbour order with four
+ * partial sums). Shares with the later SPH systems (sph.h, sph_shared): the
+ * lists, 1/rho, and (x y z 1/rho) quads per particle.
  *   rho_i = m sum_j W_poly6(x_i - x_j) + sum_b V_b rho_b W_poly6(x_i - x_b)
  *   (j over fluid particles including i itself, b over boundary particles)
  * Boundary particles carry a pressure extrapolated from the fluid near them
@@ -29,6 +33,7 @@
 #include "systems.h"
 
 #include <stdlib.h>
+#include <string.h>
 
 typedef struct sph_density {
 	sph_shared sh; /* first: the later SPH systems read it through eddy__sph_find */
@@ -63,38 +68,46 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 	const float rho0 = sd->sh.rho0, k = sd->def.stiffness, gamma = sd->def.tait_gamma;
 	const bool tait = sd->def.eos == EDDY_SPH_EOS_TAIT;
 	const float B = k * rho0 / gamma;
-	const int gxn = nb->gx, gyn = nb->gy, gzn = nb->gz;
-	const long nbound = (long)nb->nb;
-	if (w->n == 0)
+	const size_t n = w->n, nbound = nb->nb;
+	if (n == 0 || nbound == 0)
 		return EDDY_OK;
+	/* the fluid near each boundary particle, from the fluid's boundary lists
+	 * turned around (most wall particles have none, and a grid walk for each
+	 * was most of a walled scene's step): rows ascending, as a walk over the
+	 * cell-ordered table would give them */
+	uint32_t *start = eddy__arena_alloc(&w->arena, (nbound + 1) * sizeof *start);
+	if (!start)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", nbound);
+	memset(start, 0, (nbound + 1) * sizeof *start);
+	for (size_t i = 0; i < n; ++i) {
+		const uint32_t *bl = nb->bnbr + i * nb->bcap;
+		for (uint32_t q = 0; q < nb->bcount[i]; ++q)
+			start[bl[q] + 1]++;
+	}
+	for (size_t b = 0; b < nbound; ++b)
+		start[b + 1] += start[b];
+	uint32_t *fluid = eddy__arena_alloc(&w->arena, (start[nbound] ? start[nbound] : 1) * sizeof *fluid),
+	         *at = eddy__arena_alloc(&w->arena, nbound * sizeof *at);
+	if (!fluid || !at)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", nbound);
+	memcpy(at, start, nbound * sizeof *at);
+	for (size_t i = 0; i < n; ++i) {
+		const uint32_t *bl = nb->bnbr + i * nb->bcap;
+		for (uint32_t q = 0; q < nb->bcount[i]; ++q)
+			fluid[at[bl[q]]++] = (uint32_t)i;
+	}
+	const long lb = (long)nbound;
 #pragma omp parallel for num_threads(threads) schedule(static)
-	for (long b = 0; b < nbound; ++b) {
+	for (long b = 0; b < lb; ++b) {
 		const float xb = nb->bx[b], yb = nb->by[b], zb = nb->bz[b];
-		const int cx = (int)((xb - nb->ox) * nb->inv), cy = (int)((yb - nb->oy) * nb->inv),
-		          cz = (int)((zb - nb->oz) * nb->inv);
-		const int R = SPH_CELLS_PER_H;
-		const int x0 = cx >= R ? cx - R : 0, x1 = cx < gxn - R ? cx + R : gxn - 1;
 		float sw = 0, sp = 0;
-		for (int dz = -R; dz <= R; ++dz) {
-			const int zz = cz + dz;
-			if (zz < 0 || zz >= gzn)
-				continue;
-			for (int dy = -R; dy <= R; ++dy) {
-				const int yy = cy + dy;
-				if (yy < 0 || yy >= gyn)
-					continue;
-				const size_t row = ((size_t)zz * (size_t)gyn + (size_t)yy) * (size_t)gxn;
-				const uint32_t a = nb->cell_start[row + (size_t)x0], e = nb->cell_start[row + (size_t)x1 + 1];
-				for (uint32_t j = a; j < e; ++j) {
-					const float rx = xb - x[j], ry = yb - y[j], rz = zb - z[j];
-					const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
-					if (d <= 0)
-						continue;
-					const float wgt = d * d * d;
-					sw += wgt;
-					sp += wgt * (p[j] + rho[j] * (gx * rx + gy * ry + gz * rz));
-				}
-			}
+		for (uint32_t q = start[b]; q < start[b + 1]; ++q) {
+			const uint32_t j = fluid[q];
+			const float rx = xb - x[j], ry = yb - y[j], rz = zb - z[j];
+			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
+			const float wgt = d * d * d;
+			sw += wgt;
+			sp += wgt * (p[j] + rho[j] * (gx * rx + gy * ry + gz * rz));
 		}
 		const float pb = sw > 0 ? fmaxf(sp / sw, 0.0f) : 0.0f;
 		nb->bp[b] = pb;
@@ -128,6 +141,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		const float r = kc.poly6 * (m * (self + nb->wsum[i]) + nb->bwsum[i]);
 		rho[i] = r;
 		inv_rho[i] = 1.0f / r;
+		sh->pq[4 * i + 3] = inv_rho[i];
 		const float pr = tait ? B * (powf(r / rho0, gamma) - 1.0f) : k * (r - rho0);
 		p[i] = pr > 0 ? pr : 0;
 		ncount[i] = (float)(nb->count[i] + nb->bcount[i]);

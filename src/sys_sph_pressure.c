@@ -23,6 +23,10 @@
  * Pairs closer than 1e-3 h take a fixed antisymmetric direction (sph.h): the
  * gradient has no direction at r = 0, and skipping them would leave
  * coincident particles stuck together (VALIDATION.md C.6).
+ * Positions and 1/rho come from sph_density's (x y z 1/rho) quads (sh->pq).
+ * The fluid pairs go eight at a time (AVX2 when the CPU has it, else SSE as
+ * two halves doing the same per lane), with per-lane partial sums added in a
+ * fixed order: the same bits for any thread count and either path.
  * Time-step limit (force): dt <= 0.625 sqrt(h / max|a|), max|a| from the last
  * step; with the default CFL 0.4 that is the usual 0.25 sqrt(h/|a|).
  * Source: Mueller, Charypar & Gross 2003; Adami, Hu & Adams, "A generalized
@@ -31,9 +35,6 @@
 #include "systems.h"
 
 #include <stdlib.h>
-#ifdef __SSE2__
-#include <emmintrin.h>
-#endif
 
 typedef struct sph_pressure {
 	eddy_sph_pressure_def def;
@@ -50,6 +51,107 @@ eddy_sph_pressure_def eddy_default_sph_pressure_def(void)
 	return d;
 }
 
+/* The fluid pairs of one particle, eight neighbours at a time (the last
+ * group padded with copies of the last neighbour, masked out); returns how
+ * many it did, all unless a group has a coincident pair: the scalar loop
+ * takes it from there. f gets the sums of (p_i + p_j) / rho_j (h - r)^2
+ * r_vec / r: the 1/r normalises r_vec. */
+typedef struct pair_args {
+	const float *pk, *p; /* (x y z 1/rho) quads; pressures */
+	float h, eps2;
+} pair_args;
+
+/* The neighbours of group q, padded; lanes past the count are masked. */
+static inline void group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t l[8])
+{
+	for (uint32_t k = 0; k < 8; ++k)
+		l[k] = list[q + k < cnt ? q + k : cnt - 1];
+}
+
+#ifdef __SSE2__
+static uint32_t pairs_sse(const pair_args *a, const uint32_t *list, uint32_t cnt, float xi, float yi, float zi,
+                          float pi_, float f[3])
+{
+	const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vpi = _mm_set1_ps(pi_),
+	             vh = _mm_set1_ps(a->h), veps2 = _mm_set1_ps(a->eps2);
+	__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
+	uint32_t q = 0;
+	for (; q < cnt; q += 8) {
+		uint32_t l[8];
+		group_rows(list, cnt, q, l);
+		const __m128i left = _mm_set1_epi32((int)(cnt - q));
+		__m128 rx[2], ry[2], rz[2], ir[2], r2[2], in[2];
+		for (int k = 0; k < 2; ++k) {
+			const uint32_t *lk = l + 4 * k;
+			__m128 px = _mm_loadu_ps(a->pk + 4 * (size_t)lk[0]), py = _mm_loadu_ps(a->pk + 4 * (size_t)lk[1]),
+			       pz = _mm_loadu_ps(a->pk + 4 * (size_t)lk[2]), pw = _mm_loadu_ps(a->pk + 4 * (size_t)lk[3]);
+			_MM_TRANSPOSE4_PS(px, py, pz, pw);
+			rx[k] = _mm_sub_ps(vxi, px);
+			ry[k] = _mm_sub_ps(vyi, py);
+			rz[k] = _mm_sub_ps(vzi, pz);
+			ir[k] = pw;
+			r2[k] = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx[k], rx[k]), _mm_mul_ps(ry[k], ry[k])), _mm_mul_ps(rz[k], rz[k]));
+			in[k] = _mm_castsi128_ps(_mm_cmpgt_epi32(left, _mm_setr_epi32(4 * k, 4 * k + 1, 4 * k + 2, 4 * k + 3)));
+		}
+		if ((_mm_movemask_ps(_mm_cmpgt_ps(r2[0], veps2)) & _mm_movemask_ps(_mm_cmpgt_ps(r2[1], veps2))) != 15)
+			break;
+		for (int k = 0; k < 2; ++k) {
+			const uint32_t *lk = l + 4 * k;
+			const __m128 r = _mm_sqrt_ps(r2[k]), hr = _mm_sub_ps(vh, r);
+			const __m128 pj = _mm_setr_ps(a->p[lk[0]], a->p[lk[1]], a->p[lk[2]], a->p[lk[3]]);
+			const __m128 c = _mm_and_ps(
+				in[k], _mm_div_ps(_mm_mul_ps(_mm_mul_ps(_mm_mul_ps(_mm_add_ps(vpi, pj), ir[k]), hr), hr), r));
+			sx[k] = _mm_add_ps(sx[k], _mm_mul_ps(c, rx[k]));
+			sy[k] = _mm_add_ps(sy[k], _mm_mul_ps(c, ry[k]));
+			sz[k] = _mm_add_ps(sz[k], _mm_mul_ps(c, rz[k]));
+		}
+	}
+	f[0] = sph_hsum4(_mm_add_ps(sx[0], sx[1]));
+	f[1] = sph_hsum4(_mm_add_ps(sy[0], sy[1]));
+	f[2] = sph_hsum4(_mm_add_ps(sz[0], sz[1]));
+	return q < cnt ? q : cnt;
+}
+#endif
+
+#ifdef SPH_AVX2
+__attribute__((target("avx2"))) static uint32_t pairs_avx2(const pair_args *a, const uint32_t *list, uint32_t cnt,
+                                                           float xi, float yi, float zi, float pi_, float f[3])
+{
+	const __m256 vxi = _mm256_set1_ps(xi), vyi = _mm256_set1_ps(yi), vzi = _mm256_set1_ps(zi),
+	             vpi = _mm256_set1_ps(pi_), vh = _mm256_set1_ps(a->h), veps2 = _mm256_set1_ps(a->eps2);
+	const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+	__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
+	uint32_t q = 0;
+	for (; q < cnt; q += 8) {
+		uint32_t l[8];
+		group_rows(list, cnt, q, l);
+		const float *const quad[8] = {a->pk + 4 * (size_t)l[0], a->pk + 4 * (size_t)l[1], a->pk + 4 * (size_t)l[2],
+		                              a->pk + 4 * (size_t)l[3], a->pk + 4 * (size_t)l[4], a->pk + 4 * (size_t)l[5],
+		                              a->pk + 4 * (size_t)l[6], a->pk + 4 * (size_t)l[7]};
+		__m256 px, py, pz, ir;
+		sph_transpose8(quad, &px, &py, &pz, &ir);
+		const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
+		const __m256 r2 =
+			_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz));
+		if (_mm256_movemask_ps(_mm256_cmp_ps(r2, veps2, _CMP_GT_OQ)) != 255)
+			break;
+		const __m256 in = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32((int)(cnt - q)), lane));
+		const __m256 r = _mm256_sqrt_ps(r2), hr = _mm256_sub_ps(vh, r);
+		const __m256 pj = _mm256_setr_ps(a->p[l[0]], a->p[l[1]], a->p[l[2]], a->p[l[3]], a->p[l[4]], a->p[l[5]],
+		                                 a->p[l[6]], a->p[l[7]]);
+		const __m256 c = _mm256_and_ps(
+			in, _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(_mm256_mul_ps(_mm256_add_ps(vpi, pj), ir), hr), hr), r));
+		sx = _mm256_add_ps(sx, _mm256_mul_ps(c, rx));
+		sy = _mm256_add_ps(sy, _mm256_mul_ps(c, ry));
+		sz = _mm256_add_ps(sz, _mm256_mul_ps(c, rz));
+	}
+	f[0] = sph_hsum8(sx);
+	f[1] = sph_hsum8(sy);
+	f[2] = sph_hsum8(sz);
+	return q < cnt ? q : cnt;
+}
+#endif
+
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	const sph_pressure *sp = s->data;
@@ -57,15 +159,24 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	if (!sh)
 		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)", s->label);
 	const sph_neighbors *nb = &sh->nb;
-	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const float *p = eddy__col(w, COL_PRESSURE), *inv_rho = sh->inv_rho;
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	const sph_kernel_consts kc = sh->k;
 	const float m = sh->mass, scale = sp->def.scale, eps2 = 1e-6f * kc.h2;
 	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
+	/* each neighbour's position and 1/rho as one 16-byte quad (sph_density
+	 * made them): a group of neighbours then costs a load each and a
+	 * transpose instead of four scattered loads each */
+	const float *pk = sh->pq;
+#ifdef __SSE2__
+	const pair_args pa = {pk, p, kc.h, eps2};
+#endif
+#ifdef SPH_AVX2
+	const bool avx2 = sph_use_avx2();
+#endif
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
-		const float xi = x[i], yi = y[i], zi = z[i];
+		const float xi = pk[4 * i], yi = pk[4 * i + 1], zi = pk[4 * i + 2];
 		/* rho >= m W(0) > 0 (the self term), so 1/rho is finite */
 		const float iri = inv_rho[i], pi_ = p[i];
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
@@ -73,43 +184,22 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		float fx = 0, fy = 0, fz = 0;
 		uint32_t q = 0;
 #ifdef __SSE2__
-		/* four neighbours at a time for the square roots and divisions (the
-		 * bulk of the cost), each lane doing the scalar loop's operations in
-		 * the same order; the products are then added to the sums one
-		 * neighbour at a time in list order, so the sums are bit-identical
-		 * to the scalar loop's. A group with a coincident pair goes scalar. */
-		const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vpi = _mm_set1_ps(pi_),
-		             vh = _mm_set1_ps(kc.h), veps2 = _mm_set1_ps(eps2), one = _mm_set1_ps(1.0f);
-		for (; q + 4 <= cnt; q += 4) {
-			const uint32_t j0 = list[q], j1 = list[q + 1], j2 = list[q + 2], j3 = list[q + 3];
-			__m128 rx = _mm_sub_ps(vxi, _mm_setr_ps(x[j0], x[j1], x[j2], x[j3]));
-			__m128 ry = _mm_sub_ps(vyi, _mm_setr_ps(y[j0], y[j1], y[j2], y[j3]));
-			__m128 rz = _mm_sub_ps(vzi, _mm_setr_ps(z[j0], z[j1], z[j2], z[j3]));
-			const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
-			if (_mm_movemask_ps(_mm_cmpgt_ps(r2, veps2)) != 15)
-				break; /* the scalar loop takes it from here */
-			const __m128 r = _mm_sqrt_ps(r2), inv = _mm_div_ps(one, r);
-			rx = _mm_mul_ps(rx, inv);
-			ry = _mm_mul_ps(ry, inv);
-			rz = _mm_mul_ps(rz, inv);
-			const __m128 hr = _mm_sub_ps(vh, r);
-			const __m128 pj = _mm_setr_ps(p[j0], p[j1], p[j2], p[j3]),
-			             irj = _mm_setr_ps(inv_rho[j0], inv_rho[j1], inv_rho[j2], inv_rho[j3]);
-			const __m128 c = _mm_mul_ps(_mm_mul_ps(_mm_mul_ps(_mm_add_ps(vpi, pj), irj), hr), hr);
-			float cx[4], cy[4], cz[4];
-			_mm_storeu_ps(cx, _mm_mul_ps(c, rx));
-			_mm_storeu_ps(cy, _mm_mul_ps(c, ry));
-			_mm_storeu_ps(cz, _mm_mul_ps(c, rz));
-			for (int l = 0; l < 4; ++l) {
-				fx += cx[l];
-				fy += cy[l];
-				fz += cz[l];
-			}
-		}
+		/* partial sums added up at the end: a fixed order, the same for any
+		 * thread count and either path */
+		float f[3];
+#ifdef SPH_AVX2
+		if (avx2)
+			q = pairs_avx2(&pa, list, cnt, xi, yi, zi, pi_, f);
+		else
+#endif
+			q = pairs_sse(&pa, list, cnt, xi, yi, zi, pi_, f);
+		fx = f[0];
+		fy = f[1];
+		fz = f[2];
 #endif
 		for (; q < cnt; ++q) {
 			const uint32_t j = list[q];
-			float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
+			float rx = xi - pk[4 * (size_t)j], ry = yi - pk[4 * (size_t)j + 1], rz = zi - pk[4 * (size_t)j + 2];
 			const float r2 = rx * rx + ry * ry + rz * rz;
 			float r;
 			if (r2 > eps2) {

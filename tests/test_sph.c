@@ -953,6 +953,7 @@ static void scenes_run_and_report(void)
 }
 
 static void sph_dfsph_suite(void); /* dfsph helper */
+static void verlet_lists_match_brute_force(void);
 
 void suite_sph(void)
 {
@@ -974,6 +975,7 @@ void suite_sph(void)
 	RUN(droplet_oscillates_at_rayleigh_frequency);
 	RUN(resting_drop_keeps_pairs_apart);
 	RUN(scenes_run_and_report);
+	RUN(verlet_lists_match_brute_force);
 	sph_dfsph_suite(); /* dfsph helper */
 }
 
@@ -1308,4 +1310,101 @@ static void sph_dfsph_suite(void)
 	RUN(dfsph_deterministic_across_threads);
 	RUN(dfsph_drop_converges);
 	RUN(dfsph_resume_is_bit_identical);
+}
+
+/* ---- speed helper ---- */
+
+/* sph_density reuses a Verlet list (pairs within h (1 + skin)) between grid
+ * searches and filters it every step: the neighbour counts must be exactly
+ * those of an all-pairs test and the densities those of an all-pairs sum,
+ * through falling, splashing, removed and added particles (a removal and an
+ * addition in the same step keep the count). */
+typedef struct verlet_check {
+	float h, mass;
+	int steps, count_mismatch;
+	double worst_rel;
+} verlet_check;
+
+static eddy_status verlet_check_step(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	(void)ctx;
+	verlet_check *vc = user;
+	size_t n;
+	const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
+	            *z = eddy_world_channel(w, "z", NULL), *rho = eddy_world_channel(w, "density", NULL),
+	            *nc = eddy_world_channel(w, "neighbors", NULL);
+	const float h2 = vc->h * vc->h;
+	const double poly6 = 315.0 / (64.0 * M_PI * pow(vc->h, 9));
+	for (size_t i = 0; i < n; ++i) {
+		int cnt = 0;
+		double sum = (double)h2 * h2 * h2;
+		for (size_t j = 0; j < n; ++j) {
+			const float rx = x[i] - x[j], ry = y[i] - y[j], rz = z[i] - z[j];
+			const float d = h2 - (rx * rx + ry * ry + rz * rz);
+			if (d > 0 && j != i) {
+				cnt++;
+				sum += (double)d * d * d;
+			}
+		}
+		vc->count_mismatch += (float)cnt != nc[i];
+		const double want = vc->mass * poly6 * sum;
+		vc->worst_rel = fmax(vc->worst_rel, fabs(rho[i] - want) / want);
+	}
+	vc->steps++;
+	return EDDY_OK;
+}
+
+static void verlet_lists_match_brute_force(void)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.bounds_max = (eddy_vec3){0.3f, 0.3f, 0.3f};
+	d.threads = 2;
+	d.fps = 200;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.min = (eddy_vec3){0.05f, 0.12f, 0.05f};
+	b.max = (eddy_vec3){0.15f, 0.22f, 0.15f};
+	b.spacing = 0.01f;
+	eddy_add_emit_box(w, &b);
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	const eddy_system_id dens = eddy_add_sph_density(w, &de);
+	verlet_check vc = {de.radius, 0, 0, 0, 0};
+	eddy_custom_system_def cs = eddy_default_custom_system_def();
+	const char *reads[] = {"x", "y", "z", "density", "neighbors"};
+	cs.name = "verlet_check";
+	cs.reads = reads;
+	cs.read_count = 5;
+	cs.step = verlet_check_step;
+	cs.user = &vc;
+	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
+	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+	eddy_add_sph_pressure(w, &pr);
+	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
+	eddy_add_sph_viscosity(w, &vi);
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	eddy_collide_box_def bx = eddy_default_collide_box_def();
+	bx.max = d.bounds_max;
+	eddy_add_collide_box(w, &bx);
+	vc.mass = eddy_sph_particle_mass(w, dens);
+	for (int f = 0; f < 40; ++f) {
+		CHECK(eddy_world_step_frame(w) == EDDY_OK);
+		if (f == 20) { /* a removal and an addition between two steps: n unchanged */
+			const eddy_vec3 p = {0.25f, 0.05f, 0.25f};
+			CHECK(eddy_world_remove_particle(w, 7) == EDDY_OK);
+			CHECK(eddy_world_add_particles(w, 1, &p, NULL) == EDDY_OK);
+		}
+		if (f == 30) { /* n changes */
+			const eddy_vec3 p[2] = {{0.2f, 0.2f, 0.2f}, {0.205f, 0.2f, 0.2f}};
+			CHECK(eddy_world_add_particles(w, 2, p, NULL) == EDDY_OK);
+		}
+	}
+	printf("    %d steps: %d neighbour counts differ from all pairs, worst density error %.1e\n", vc.steps,
+	       vc.count_mismatch, vc.worst_rel);
+	CHECK(vc.steps > 100);
+	CHECK(vc.count_mismatch == 0);
+	CHECK(vc.worst_rel < 1e-5);
+	eddy_destroy_world(w);
 }
