@@ -43,9 +43,11 @@ static inline sph_kernel_consts sph_consts(float h)
  * them (the particle table is in that order, sorted by grid cell).
  *
  * Behind them, private to sph_neighbors.c, a Verlet list: the pairs closer
- * than h (1 + SPH_SKIN) when it was last searched, in the indices of that
- * time ("build slots"), reused while no particle has moved more than half
- * the skin. It changes how fast the lists are made, never what they hold. */
+ * than h (1 + skin) when it was last searched, in the indices of that time
+ * ("build slots"), reused while no particle has moved more than half the
+ * skin. The skin is SPH_SKIN, or 0 while a list would not outlive a few
+ * steps anyway (large implicit steps, an emitter adding particles every
+ * step). It changes how fast the lists are made, never what they hold. */
 typedef struct sph_neighbors {
 	size_t n, cap, bcap;
 	uint32_t *nbr, *count, *bnbr, *bcount;
@@ -73,6 +75,9 @@ typedef struct sph_neighbors {
 	uint32_t *slot_of, *now_of;       /* build slot of each row, row of each build slot */
 	uint64_t vbsig;                   /* boundary systems at the search */
 	bool vvalid, vsame; /* vsame: no particle has changed row since the search */
+	float skin;                       /* 1, of h: this list's skin, SPH_SKIN or 0 */
+	int age;                          /* steps since the search */
+	bool count_changed;               /* the search was forced by a new particle count */
 	int64_t searches;                 /* statistics: Verlet searches so far */
 
 	/* boundary particles of every sph_boundary_box, cell-sorted */
@@ -86,6 +91,8 @@ typedef struct sph_neighbors {
 /* Verlet skin as a fraction of h: larger means rarer searches but more
  * candidates to filter every step */
 #define SPH_SKIN 0.2f
+/* a list is searched with the skin only if it should last this many steps */
+#define SPH_SKIN_MIN_LIFE 3
 #define SPH_VERLET_CELLS 3 /* cells of h/2 the Verlet radius spans: ceil(2 (1 + SPH_SKIN)) */
 #define SPH_CELLS_PER_H 2
 

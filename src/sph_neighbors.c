@@ -247,7 +247,8 @@ static void search(eddy_world *w, sph_neighbors *nb, float hs2, int threads, uin
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const long n = (long)w->n;
-	const int gx = nb->gx, gy = nb->gy, gz = nb->gz, R = SPH_VERLET_CELLS;
+	/* without a skin the support itself: two cells of h/2 each way */
+	const int gx = nb->gx, gy = nb->gy, gz = nb->gz, R = nb->skin > 0 ? SPH_VERLET_CELLS : SPH_CELLS_PER_H;
 	const size_t cap = nb->vcap, bcap = nb->vbcap;
 	/* how many cells along x a run at cell offsets (dy, dz) needs: a cell k
 	 * cells away is at least (k - 1) cells of h/2 from the particle, so the
@@ -625,7 +626,8 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	 * cells, the order check, the (x y z -) quads and, if the Verlet list
 	 * may still be good, how far the particles are from their build slots. */
 	const bool prevalid = nb->vvalid && nb->vn == n && nb->vbsig == nb->bsig;
-	const float half = 0.49f * SPH_SKIN * sh->h; /* 0.49: float rounding */
+	const float half = 0.49f * nb->skin * sh->h; /* 0.49: float rounding */
+	nb->age++;
 	const float lim2 = half * half;
 	int sorted = 1;
 	float d2max = 0;
@@ -687,7 +689,18 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		ranges = true;
 	}
 	if (!valid) {
-		const float hs = sh->h * (1.0f + SPH_SKIN), hs2 = hs * hs;
+		/* The skin pays only if the list outlives a few steps: when particles
+		 * move a good part of the skin per step (DFSPH's steps are ten times
+		 * WCSPH's) or the count changes every step (an emitter), a skin only
+		 * adds candidates (1.7x at 0.2 h) to a search made every step anyway.
+		 * Then the list is searched at h itself until the motion per step,
+		 * seen against the last search, would let a skin last. */
+		const bool emitting = !prevalid && nb->vvalid && nb->vn != n && nb->count_changed && nb->age <= 1;
+		const float step_move = prevalid ? sqrtf(d2max) / (float)nb->age : 0.0f;
+		const bool fast = prevalid && step_move * SPH_SKIN_MIN_LIFE > 0.5f * SPH_SKIN * sh->h;
+		nb->count_changed = nb->vvalid && nb->vn != n;
+		nb->skin = emitting || fast ? 0.0f : SPH_SKIN;
+		const float hs = sh->h * (1.0f + nb->skin), hs2 = hs * hs;
 		for (;;) {
 			size_t want = n * nb->vcap, have = nb->vcap_alloc;
 			if (!grow((void **)&nb->vnbr, &have, want, sizeof *nb->vnbr))
@@ -719,6 +732,7 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		nb->vbsig = nb->bsig;
 		nb->vvalid = true;
 		nb->vsame = true;
+		nb->age = 0;
 		nb->searches++;
 	}
 
