@@ -727,7 +727,7 @@ static void empty_and_emptying_scenes(void)
  * is read from the zero crossings of <x^2> - <y^2> about the centre of mass.
  * Returns the measured omega (NAN if fewer than 3 crossings). */
 /* A drop of radius 1 cm, per_radius spacings, stretched along x by 1 + eps
- * (volume kept), in zero gravity, run for seconds (0: 2.2 Rayleigh periods);
+ * (volume kept), in zero gravity, run for seconds (0: until eight zero crossings, at most 4.2 Rayleigh periods);
  * returns omega from the zero crossings of <x^2> - <y^2> (NAN with fewer
  * than three) and the closest pair seen, in spacings. */
 static double drop_omega(int per_radius, double eps, double seconds, double *omega_theory, double *min_gap)
@@ -766,11 +766,13 @@ static double drop_omega(int per_radius, double eps, double seconds, double *ome
 	CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &drop)));
 	*omega_theory = sqrt(8 * sigma / (rho0 * R * R * R));
 	const double period = 2 * M_PI / *omega_theory;
-	double prev = 0, crossings[6];
+	enum { CROSSINGS = 8 }; /* three and a half periods: chaos in the particle motion moves
+	                         * single crossings by a few percent of a period */
+	double prev = 0, crossings[CROSSINGS];
 	int nc = 0;
 	*min_gap = INFINITY;
-	const int frames = (int)((seconds > 0 ? seconds : 2.2 * period) * d.fps);
-	for (int f = 0; f < frames && (nc < 6 || seconds > 0); ++f) {
+	const int frames = (int)((seconds > 0 ? seconds : 4.2 * period) * d.fps);
+	for (int f = 0; f < frames && (nc < CROSSINGS || seconds > 0); ++f) {
 		if (eddy_world_step_frame(w) != EDDY_OK) {
 			CHECKF(false, "%s", eddy_world_error(w));
 			break;
@@ -789,7 +791,7 @@ static double drop_omega(int per_radius, double eps, double seconds, double *ome
 			qy += (y[i] - cy) * (y[i] - cy);
 		}
 		const double q = (qx - qy) / (double)n, t = eddy_world_time(w);
-		if (f > 0 && (q > 0) != (prev > 0) && nc < 6)
+		if (f > 0 && (q > 0) != (prev > 0) && nc < CROSSINGS)
 			crossings[nc++] = t - 1 / d.fps * q / (q - prev); /* linear interpolation */
 		prev = q;
 		if (f % 10 == 0)
