@@ -45,9 +45,10 @@ static inline sph_kernel_consts sph_consts(float h)
  * Behind them, private to sph_neighbors.c, a Verlet list: the pairs closer
  * than h (1 + skin) when it was last searched, in the indices of that time
  * ("build slots"), reused while no particle has moved more than half the
- * skin. The skin is SPH_SKIN, or 0 while a list would not outlive a few
- * steps anyway (large implicit steps, an emitter adding particles every
- * step). It changes how fast the lists are made, never what they hold. */
+ * skin. The skin follows the motion (see SPH_SKIN), and is 0 while a list
+ * would not outlive a few steps anyway (large implicit steps, an emitter
+ * adding particles every step). It changes how fast the lists are made,
+ * never what they hold. */
 typedef struct sph_neighbors {
 	size_t n, cap, bcap;
 	uint32_t *nbr, *count, *bnbr, *bcount;
@@ -75,7 +76,7 @@ typedef struct sph_neighbors {
 	uint32_t *slot_of, *now_of;       /* build slot of each row, row of each build slot */
 	uint64_t vbsig;                   /* boundary systems at the search */
 	bool vvalid, vsame; /* vsame: no particle has changed row since the search */
-	float skin;                       /* 1, of h: this list's skin, SPH_SKIN or 0 */
+	float skin;                       /* 1, of h: this list's skin (see SPH_SKIN) */
 	int age;                          /* steps since the search */
 	bool count_changed;               /* the search was forced by a new particle count */
 	int64_t searches;                 /* statistics: Verlet searches so far */
@@ -89,9 +90,13 @@ typedef struct sph_neighbors {
 } sph_neighbors;
 
 /* Verlet skin as a fraction of h: larger means rarer searches but more
- * candidates to filter every step */
+ * candidates to filter every step ((1 + skin)^3 of the exact list's). It is
+ * sized from the motion per step seen at the last search, so that a list
+ * should last SPH_SKIN_LIFE steps, within [SPH_SKIN_MIN, SPH_SKIN]; 0 when
+ * even SPH_SKIN would not last SPH_SKIN_MIN_LIFE steps. */
 #define SPH_SKIN 0.2f
-/* a list is searched with the skin only if it should last this many steps */
+#define SPH_SKIN_MIN 0.05f
+#define SPH_SKIN_LIFE 8
 #define SPH_SKIN_MIN_LIFE 3
 #define SPH_VERLET_CELLS 3 /* cells of h/2 the Verlet radius spans: ceil(2 (1 + SPH_SKIN)) */
 #define SPH_CELLS_PER_H 2

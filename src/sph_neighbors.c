@@ -694,12 +694,17 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		 * WCSPH's) or the count changes every step (an emitter), a skin only
 		 * adds candidates (1.7x at 0.2 h) to a search made every step anyway.
 		 * Then the list is searched at h itself until the motion per step,
-		 * seen against the last search, would let a skin last. */
+		 * seen against the last search, would let a skin last. Otherwise
+		 * the skin is sized for SPH_SKIN_LIFE steps of that motion: a fluid
+		 * at rest filters (1.05)^3 of its exact lists' pairs, not (1.2)^3. */
 		const bool emitting = !prevalid && nb->vvalid && nb->vn != n && nb->count_changed && nb->age <= 1;
 		const float step_move = prevalid ? sqrtf(d2max) / (float)nb->age : 0.0f;
 		const bool fast = prevalid && step_move * SPH_SKIN_MIN_LIFE > 0.5f * SPH_SKIN * sh->h;
+		const float sized = 2.0f * SPH_SKIN_LIFE * step_move / sh->h;
 		nb->count_changed = nb->vvalid && nb->vn != n;
-		nb->skin = emitting || fast ? 0.0f : SPH_SKIN;
+		nb->skin = emitting || fast ? 0.0f
+		           : !prevalid      ? SPH_SKIN
+		                            : fminf(SPH_SKIN, fmaxf(SPH_SKIN_MIN, sized));
 		const float hs = sh->h * (1.0f + nb->skin), hs2 = hs * hs;
 		for (;;) {
 			size_t want = n * nb->vcap, have = nb->vcap_alloc;
