@@ -186,9 +186,10 @@ static eddy_status boundary_build(eddy_world *w, sph_shared *sh)
 	/* one block, bp then brho: it is sph_density's checkpointed state */
 	nb->bp = calloc(2 * alloc, sizeof *nb->bp);
 	nb->brho = nb->bp ? nb->bp + alloc : NULL;
-	nb->bx = malloc(alloc * sizeof *nb->bx);
-	nb->by = malloc(alloc * sizeof *nb->by);
-	nb->bz = malloc(alloc * sizeof *nb->bz);
+	/* positions padded by three for the search's groups of four */
+	nb->bx = malloc((alloc + 3) * sizeof *nb->bx);
+	nb->by = malloc((alloc + 3) * sizeof *nb->by);
+	nb->bz = malloc((alloc + 3) * sizeof *nb->bz);
 	nb->bvol = malloc(alloc * sizeof *nb->bvol);
 	eddy_status st = EDDY_OK;
 	if (!x || !y || !z || !v || !key || !order || !nb->bx || !nb->by || !nb->bz || !nb->bvol || !nb->bp || !nb->brho) {
@@ -205,6 +206,8 @@ static eddy_status boundary_build(eddy_world *w, sph_shared *sh)
 		key[i] = cell_index(nb, x[i], y[i], z[i]);
 	const size_t cells = (size_t)nb->gx * (size_t)nb->gy * (size_t)nb->gz;
 	counting_sort(key, total, cells, nb->bcell_start, order);
+	for (size_t i = total; i < total + 3; ++i)
+		nb->bx[i] = nb->by[i] = nb->bz[i] = 0; /* read, always masked */
 	for (size_t i = 0; i < total; ++i) {
 		nb->bx[i] = x[order[i]];
 		nb->by[i] = y[order[i]];
@@ -250,6 +253,7 @@ static void search(eddy_world *w, sph_neighbors *nb, float hs2, int threads, uin
 	/* without a skin the support itself: two cells of h/2 each way */
 	const int gx = nb->gx, gy = nb->gy, gz = nb->gz, R = nb->skin > 0 ? SPH_VERLET_CELLS : SPH_CELLS_PER_H;
 	const size_t cap = nb->vcap, bcap = nb->vbcap;
+	const uint32_t room = w->capacity < UINT32_MAX ? (uint32_t)w->capacity : UINT32_MAX;
 	/* how many cells along x a run at cell offsets (dy, dz) needs: a cell k
 	 * cells away is at least (k - 1) cells of h/2 from the particle, so the
 	 * corners of the 7^3 block are beyond the Verlet radius; -1: none */
@@ -291,12 +295,17 @@ static void search(eddy_world *w, sph_neighbors *nb, float hs2, int threads, uin
 				uint32_t j = a;
 #ifdef __SSE2__
 				/* four candidates at a time: the distance tests are most of
-				 * the search; hits are taken in order */
-				for (; j + 4 <= e; j += 4) {
+				 * the search; hits are taken in order. A row's last group is
+				 * masked to the row (the columns hold at least 'room' rows),
+				 * not finished one by one: rows of h/2 cells hold only a
+				 * few particles, so the tail was a third of the search. */
+				for (; j < e && j + 4 <= room; j += 4) {
 					const __m128 rx = _mm_sub_ps(vxi, _mm_loadu_ps(x + j)), ry = _mm_sub_ps(vyi, _mm_loadu_ps(y + j)),
 					             rz = _mm_sub_ps(vzi, _mm_loadu_ps(z + j));
 					const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
 					unsigned hit = (unsigned)_mm_movemask_ps(_mm_cmplt_ps(r2, vh2));
+					if (e - j < 4)
+						hit &= (1u << (e - j)) - 1;
 					if ((uint32_t)i - j < 4)
 						hit &= ~(1u << ((uint32_t)i - j)); /* not itself */
 					for (; hit; hit &= hit - 1) {
@@ -315,7 +324,25 @@ static void search(eddy_world *w, sph_neighbors *nb, float hs2, int threads, uin
 					}
 				}
 				const uint32_t ba = nb->bcell_start[row + (size_t)x0], be = nb->bcell_start[row + (size_t)x1 + 1];
-				for (uint32_t jb = ba; jb < be; ++jb) {
+				uint32_t jb = ba;
+#ifdef __SSE2__
+				/* the boundary arrays are padded by three: groups of four, masked */
+				for (; jb < be; jb += 4) {
+					const __m128 rx = _mm_sub_ps(vxi, _mm_loadu_ps(nb->bx + jb)),
+					             ry = _mm_sub_ps(vyi, _mm_loadu_ps(nb->by + jb)),
+					             rz = _mm_sub_ps(vzi, _mm_loadu_ps(nb->bz + jb));
+					const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
+					unsigned hit = (unsigned)_mm_movemask_ps(_mm_cmplt_ps(r2, vh2));
+					if (be - jb < 4)
+						hit &= (1u << (be - jb)) - 1;
+					for (; hit; hit &= hit - 1) {
+						if (bcnt < bcap)
+							blist[bcnt] = jb + (uint32_t)__builtin_ctz(hit);
+						bcnt++;
+					}
+				}
+#endif
+				for (; jb < be; ++jb) {
 					const float rx = xi - nb->bx[jb], ry = yi - nb->by[jb], rz = zi - nb->bz[jb];
 					if (rx * rx + ry * ry + rz * rz < hs2) {
 						if (bcnt < bcap)
