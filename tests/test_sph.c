@@ -118,6 +118,8 @@ typedef struct sph_setup {
 	bool walls;           /* boundary particles on the tank */
 	int threads;
 	double cfl;
+	double fps;                     /* frames per second */
+	const eddy_sph_dfsph_def *dfsph; /* the implicit solve in place of sph_pressure, or NULL */
 } sph_setup;
 
 static sph_setup default_setup(void)
@@ -135,9 +137,14 @@ static sph_setup default_setup(void)
 	s.walls = true;
 	s.threads = 1;
 	s.cfl = 0.4;
+	s.fps = 100;
+	s.dfsph = NULL;
 	return s;
 }
 
+/* The scene of a setup: WCSPH (sph_pressure before the other forces) or,
+ * with s->dfsph, the implicit solve after gravity and viscosity and before
+ * integrate. */
 static eddy_world *sph_world(const sph_setup *s, eddy_system_id *density)
 {
 	eddy_world_def d = eddy_default_world_def();
@@ -146,7 +153,7 @@ static eddy_world *sph_world(const sph_setup *s, eddy_system_id *density)
 	d.gravity = (eddy_vec3){0, -s->gravity, 0};
 	d.threads = s->threads;
 	d.cfl = s->cfl;
-	d.fps = 100;
+	d.fps = s->fps;
 	eddy_world *w = eddy_create_world(&d, NULL, 0);
 	eddy_emit_box_def b = eddy_default_emit_box_def();
 	b.min = s->fmin;
@@ -161,8 +168,13 @@ static eddy_world *sph_world(const sph_setup *s, eddy_system_id *density)
 	CHECKF(eddy_system_valid(w, id), "%s", eddy_world_error(w));
 	if (density)
 		*density = id;
-	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
-	CHECK(eddy_system_valid(w, eddy_add_sph_pressure(w, &pr)));
+	eddy_gravity_def g = eddy_default_gravity_def();
+	if (s->dfsph)
+		CHECK(eddy_system_valid(w, eddy_add_gravity(w, &g)));
+	else {
+		eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+		CHECK(eddy_system_valid(w, eddy_add_sph_pressure(w, &pr)));
+	}
 	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
 	vi.viscosity = s->mu;
 	CHECK(eddy_system_valid(w, eddy_add_sph_viscosity(w, &vi)));
@@ -171,6 +183,8 @@ static eddy_world *sph_world(const sph_setup *s, eddy_system_id *density)
 		st.tension = s->sigma;
 		CHECK(eddy_system_valid(w, eddy_add_sph_surface_tension(w, &st)));
 	}
+	if (s->dfsph)
+		CHECKF(eddy_system_valid(w, eddy_add_sph_dfsph(w, s->dfsph)), "%s", eddy_world_error(w));
 	if (s->walls) {
 		eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
 		bb.min = s->lo;
@@ -178,8 +192,8 @@ static eddy_world *sph_world(const sph_setup *s, eddy_system_id *density)
 		bb.spacing = s->dx;
 		CHECK(eddy_system_valid(w, eddy_add_sph_boundary_box(w, &bb)));
 	}
-	eddy_gravity_def g = eddy_default_gravity_def();
-	eddy_add_gravity(w, &g);
+	if (!s->dfsph)
+		eddy_add_gravity(w, &g);
 	eddy_integrate_def it = eddy_default_integrate_def();
 	eddy_add_integrate(w, &it);
 	eddy_collide_box_def bx = eddy_default_collide_box_def();
@@ -187,6 +201,19 @@ static eddy_world *sph_world(const sph_setup *s, eddy_system_id *density)
 	bx.max = s->hi;
 	eddy_add_collide_box(w, &bx);
 	return w;
+}
+
+/* The state hash after some frames of the setup on 1 and on 2 threads. */
+static void hashes_on_one_and_two_threads(sph_setup s, int frames, uint64_t hash[2])
+{
+	for (int t = 0; t < 2; ++t) {
+		s.threads = t + 1;
+		eddy_world *w = sph_world(&s, NULL);
+		for (int f = 0; f < frames; ++f)
+			CHECK(eddy_world_step_frame(w) == EDDY_OK);
+		hash[t] = eddy_world_state_hash(w);
+		eddy_destroy_world(w);
+	}
 }
 
 static int cmp_float(const void *a, const void *b)
@@ -635,18 +662,11 @@ static void jet_does_not_tunnel_thin_plate(void)
 static void deterministic_across_threads(void)
 {
 	uint64_t hash[2];
-	for (int t = 0; t < 2; ++t) {
-		sph_setup s = default_setup();
-		s.hi = (eddy_vec3){0.2f, 0.1f, 0.04f};
-		s.fmax = (eddy_vec3){0.06f, 0.08f, 0.04f};
-		s.threads = t + 1;
-		s.sigma = 0.0728f;
-		eddy_world *w = sph_world(&s, NULL);
-		for (int f = 0; f < 5; ++f)
-			CHECK(eddy_world_step_frame(w) == EDDY_OK);
-		hash[t] = eddy_world_state_hash(w);
-		eddy_destroy_world(w);
-	}
+	sph_setup s = default_setup();
+	s.hi = (eddy_vec3){0.2f, 0.1f, 0.04f};
+	s.fmax = (eddy_vec3){0.06f, 0.08f, 0.04f};
+	s.sigma = 0.0728f;
+	hashes_on_one_and_two_threads(s, 5, hash);
 	printf("    state hash 1 thread %016llx, 2 threads %016llx\n", (unsigned long long)hash[0], (unsigned long long)hash[1]);
 	CHECK(hash[0] == hash[1]);
 }
@@ -985,48 +1005,12 @@ void suite_sph(void)
 /* sph_dfsph, the implicit pressure solve (divergence-free SPH): hydrostatics,
  * the dam break, bad input, determinism and convergence. */
 
-/* A scene of sph_setup with sph_dfsph in place of sph_pressure: the solve
- * comes after the other forces and before integrate. */
-static eddy_world *dfsph_world(const sph_setup *s, const eddy_sph_dfsph_def *df, double fps)
+/* A scene of sph_setup with sph_dfsph in place of sph_pressure. */
+static eddy_world *dfsph_world(sph_setup s, const eddy_sph_dfsph_def *df, double fps)
 {
-	eddy_world_def d = eddy_default_world_def();
-	d.bounds_min = s->lo;
-	d.bounds_max = s->hi;
-	d.gravity = (eddy_vec3){0, -s->gravity, 0};
-	d.threads = s->threads;
-	d.cfl = s->cfl;
-	d.fps = fps;
-	eddy_world *w = eddy_create_world(&d, NULL, 0);
-	eddy_emit_box_def b = eddy_default_emit_box_def();
-	b.min = s->fmin;
-	b.max = s->fmax;
-	b.spacing = s->dx;
-	CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &b)));
-	eddy_sph_density_def de = eddy_default_sph_density_def();
-	de.spacing = s->dx;
-	de.radius = 2 * s->dx;
-	de.stiffness = s->k;
-	CHECKF(eddy_system_valid(w, eddy_add_sph_density(w, &de)), "%s", eddy_world_error(w));
-	eddy_gravity_def g = eddy_default_gravity_def();
-	CHECK(eddy_system_valid(w, eddy_add_gravity(w, &g)));
-	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
-	vi.viscosity = s->mu;
-	CHECK(eddy_system_valid(w, eddy_add_sph_viscosity(w, &vi)));
-	CHECKF(eddy_system_valid(w, eddy_add_sph_dfsph(w, df)), "%s", eddy_world_error(w));
-	if (s->walls) {
-		eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
-		bb.min = s->lo;
-		bb.max = s->hi;
-		bb.spacing = s->dx;
-		CHECK(eddy_system_valid(w, eddy_add_sph_boundary_box(w, &bb)));
-	}
-	eddy_integrate_def it = eddy_default_integrate_def();
-	CHECK(eddy_system_valid(w, eddy_add_integrate(w, &it)));
-	eddy_collide_box_def bx = eddy_default_collide_box_def();
-	bx.min = s->lo;
-	bx.max = s->hi;
-	CHECK(eddy_system_valid(w, eddy_add_collide_box(w, &bx)));
-	return w;
+	s.dfsph = df;
+	s.fps = fps;
+	return sph_world(&s, NULL);
 }
 
 /* Mean compression max(rho - rho0, 0) / rho0 over the particles: what the
@@ -1064,7 +1048,7 @@ static void dfsph_hydrostatic_tank(void)
 	sph_setup s = default_setup();
 	eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
 	df.max_density_error = 0.001f;
-	eddy_world *w = dfsph_world(&s, &df, 100);
+	eddy_world *w = dfsph_world(s, &df, 100);
 	CHECKF(eddy_world_advance(w, 0.5) == EDDY_OK, "%s", eddy_world_error(w));
 	enum { BINS = 10 };
 	double psum[BINS] = {0}, pcount[BINS] = {0}, top_sum = 0, v2sum = 0, vcount = 0, comp = 0, err_avg = 0, iters = 0;
@@ -1181,7 +1165,7 @@ static void dfsph_rejects_bad_input(void)
 	/* with sph_pressure too, the first step says to remove one */
 	sph_setup s = default_setup();
 	df = eddy_default_sph_dfsph_def();
-	w = dfsph_world(&s, &df, 100);
+	w = dfsph_world(s, &df, 100);
 	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
 	CHECK(eddy_system_valid(w, eddy_add_sph_pressure(w, &pr)));
 	CHECK(eddy_world_step(w) != EDDY_OK);
@@ -1219,19 +1203,13 @@ static void dfsph_rejects_bad_input(void)
 static void dfsph_deterministic_across_threads(void)
 {
 	uint64_t hash[2];
-	for (int t = 0; t < 2; ++t) {
-		sph_setup s = default_setup();
-		s.hi = (eddy_vec3){0.2f, 0.1f, 0.04f};
-		s.fmax = (eddy_vec3){0.06f, 0.08f, 0.04f};
-		s.threads = t + 1;
-		s.cfl = 0.8;
-		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
-		eddy_world *w = dfsph_world(&s, &df, 100);
-		for (int f = 0; f < 30; ++f)
-			CHECK(eddy_world_step_frame(w) == EDDY_OK);
-		hash[t] = eddy_world_state_hash(w);
-		eddy_destroy_world(w);
-	}
+	sph_setup s = default_setup();
+	s.hi = (eddy_vec3){0.2f, 0.1f, 0.04f};
+	s.fmax = (eddy_vec3){0.06f, 0.08f, 0.04f};
+	s.cfl = 0.8;
+	const eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+	s.dfsph = &df;
+	hashes_on_one_and_two_threads(s, 30, hash);
 	printf("    dfsph state hash 1 thread %016llx, 2 threads %016llx\n", (unsigned long long)hash[0],
 	       (unsigned long long)hash[1]);
 	CHECK(hash[0] == hash[1]);
@@ -1249,7 +1227,7 @@ static void dfsph_drop_converges(void)
 	s.mu = 1e-3f;
 	s.cfl = 0.8;
 	eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
-	eddy_world *w = dfsph_world(&s, &df, 30);
+	eddy_world *w = dfsph_world(s, &df, 30);
 	double comp = 0, resid = 0, dt_min = INFINITY, iters = 0;
 	int64_t steps = 0;
 	const int frames = 12;
@@ -1283,18 +1261,18 @@ static void dfsph_resume_is_bit_identical(void)
 	s.fmax = (eddy_vec3){0.06f, 0.09f, 0.1f};
 	s.cfl = 1.0;
 	eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
-	eddy_world *a = dfsph_world(&s, &df, 30);
+	eddy_world *a = dfsph_world(s, &df, 30);
 	for (int f = 0; f < 8; ++f)
 		CHECK(eddy_world_step_frame(a) == EDDY_OK);
 	const uint64_t straight = eddy_world_state_hash(a);
-	eddy_world *b = dfsph_world(&s, &df, 30);
+	eddy_world *b = dfsph_world(s, &df, 30);
 	for (int f = 0; f < 4; ++f)
 		CHECK(eddy_world_step_frame(b) == EDDY_OK);
 	char path[512];
 	snprintf(path, sizeof path, "%s/dfsph_ckpt.eddy", test_build_dir());
 	CHECK(eddy_world_save(b, path, 3) == EDDY_OK);
 	eddy_destroy_world(b);
-	eddy_world *c = dfsph_world(&s, &df, 30);
+	eddy_world *c = dfsph_world(s, &df, 30);
 	CHECKF(eddy_world_load(c, path, 3) == EDDY_OK, "%s", eddy_world_error(c));
 	for (int f = 0; f < 4; ++f)
 		CHECK(eddy_world_step_frame(c) == EDDY_OK);
