@@ -439,7 +439,8 @@ double eddy_sph_lattice_sum(eddy_sph_kernel k, double spacing, double h);
 /* First moment of the kernel gradient over the same lattice (the point itself
  * excluded), sum_j spacing^3 x_j^2 |dW/dr|(r_j) / r_j, dimensionless: 1 in
  * the continuum, so that the SPH gradient of a linear field is exact; 0.956
- * for spiky at h = 2 spacings, i.e. pressure gradients come out 4.4% short. */
+ * for spiky at h = 2 spacings. With the calibrated mass in place of
+ * rho0 spacing^3 the pressure force sees 0.947, and sph_pressure divides by it. */
 double eddy_sph_lattice_gradient_moment(eddy_sph_kernel k, double spacing, double h);
 
 typedef enum eddy_sph_eos {
