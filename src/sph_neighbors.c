@@ -732,7 +732,9 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		nb->skin = emitting || fast ? 0.0f
 		           : !prevalid      ? SPH_SKIN
 		                            : fminf(SPH_SKIN, fmaxf(SPH_SKIN_MIN, sized));
-		const float hs = sh->h * (1.0f + nb->skin), hs2 = hs * hs;
+		/* 1e-4 over: the filter's exact test (r < h, other operation
+		 * order) must find every pair it would keep among the candidates */
+		const float hs = sh->h * (1.0f + nb->skin + 1e-4f), hs2 = hs * hs;
 		for (;;) {
 			size_t want = n * nb->vcap, have = nb->vcap_alloc;
 			if (!grow((void **)&nb->vnbr, &have, want, sizeof *nb->vnbr))
