@@ -24,8 +24,9 @@
  * cubic lattice of the given spacing, so a block at rest starts at rho0
  * exactly instead of 1% above it at h = 2 spacings (C.8). The self term
  * keeps rho > 0 for a lone particle (C.6).
- * Time-step limit (acoustic): dt <= h / (c + max|v|), c = sqrt(k); the
- * world's CFL number is the Courant factor lambda (0.25-0.4).
+ * The acoustic time-step limit that the stiffness sets is sph_pressure's:
+ * it is that force that carries sound at c = sqrt(k), and a scene solving
+ * for the pressure (sph_dfsph) has none.
  * Source: Mueller, Charypar & Gross, "Particle-Based Fluid Simulation for
  * Interactive Applications", SCA 2003; Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012 (boundary term). */
@@ -149,22 +150,6 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	return boundary_pressure(w, sd, ctx->threads);
 }
 
-static double limit(eddy_world *w, eddy_system *s, const char **reason)
-{
-	const sph_density *sd = s->data;
-	*reason = "acoustic";
-	if (eddy__sph_dfsph_follows(w, s)) /* dfsph: an implicit pressure solve has no acoustic limit */
-		return INFINITY;
-	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
-	float v2 = 0;
-	if (vx && vy && vz)
-		for (size_t i = 0; i < w->n; ++i) {
-			const float q = vx[i] * vx[i] + vy[i] * vy[i] + vz[i] * vz[i];
-			v2 = q > v2 ? q : v2;
-		}
-	return sd->def.radius / (sqrt((double)sd->def.stiffness) + sqrt((double)v2));
-}
-
 static void destroy(eddy_system *s)
 {
 	sph_density *sd = s->data;
@@ -189,7 +174,6 @@ const eddy_system_vtable eddy__kind_sph_density = {
 	.name = "sph_density",
 	.step = step,
 	.state = state,
-	.limit = limit,
 	.destroy = destroy,
 	.default_writes = density_writes,
 };

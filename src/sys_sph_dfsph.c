@@ -60,8 +60,8 @@
  * A step whose final mean density error is above 5% fails: the time step is
  * far too long for the solver.
  * Time-step limits (the world multiplies them by its CFL number): velocity,
- * dt <= h / max|v|; gravity, dt <= 0.18 sqrt(h / |g|) (see below). With it in
- * the pipeline, sph_density's acoustic limit does not apply.
+ * dt <= h / max|v|; gravity, dt <= 0.18 sqrt(h / |g|) (see below). There is
+ * no acoustic limit: that is sph_pressure's, which a scene with this lacks.
  * Source: Bender & Koschier, "Divergence-free smoothed particle hydrodynamics",
  * SCA 2015 (eqs. 8-9, 12, Alg. 2-3); Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012; Adami, Hu & Adams, "A
@@ -519,21 +519,6 @@ const eddy_system_vtable eddy__kind_sph_dfsph = {
 	/* ax ay az are every force's: order hints for them name gravity alone */
 	.default_writes = no_hint_writes,
 };
-
-bool eddy__sph_dfsph_follows(const eddy_world *w, const eddy_system *s)
-{
-	bool after = false;
-	for (int k = 0; k < w->order_count; ++k) {
-		const eddy_system *o = &w->slots[w->order[k]];
-		if (o == s)
-			after = true;
-		else if (after && o->vt == &eddy__kind_sph_dfsph)
-			return true;
-		else if (after && o->vt == &eddy__kind_sph_density)
-			return false; /* the next density system owns what follows */
-	}
-	return false;
-}
 
 eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 {

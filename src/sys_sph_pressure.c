@@ -27,8 +27,11 @@
  * The fluid pairs go eight at a time (AVX2 when the CPU has it, else SSE as
  * two halves doing the same per lane), with per-lane partial sums added in a
  * fixed order: the same bits for any thread count and either path.
- * Time-step limit (force): dt <= 0.625 sqrt(h / max|a|), max|a| from the last
- * step; with the default CFL 0.4 that is the usual 0.25 sqrt(h/|a|).
+ * Time-step limits, the smaller reported: acoustic, dt <= h / (c + max|v|),
+ * c = sqrt(k) from sph_density's stiffness (the world's CFL number is the
+ * Courant factor lambda, 0.25-0.4); force, dt <= 0.625 sqrt(h / max|a|),
+ * max|a| from the last step (with the default CFL 0.4 the usual
+ * 0.25 sqrt(h/|a|)).
  * Source: Mueller, Charypar & Gross 2003; Adami, Hu & Adams, "A generalized
  * wall boundary condition for SPH", JCP 2012. */
 #include "sph.h"
@@ -245,20 +248,30 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	return EDDY_OK;
 }
 
+/* The largest |(u, v, w)| over the particles, 0 without the columns. */
+static double max_norm(eddy_world *w, int cu, int cv, int cw)
+{
+	const float *u = eddy__col(w, cu), *v = eddy__col(w, cv), *q = eddy__col(w, cw);
+	float m2 = 0;
+	if (u && v && q)
+		for (size_t i = 0; i < w->n; ++i) {
+			const float s2 = u[i] * u[i] + v[i] * v[i] + q[i] * q[i];
+			m2 = s2 > m2 ? s2 : m2;
+		}
+	return sqrt((double)m2);
+}
+
 static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
-	(void)s;
-	*reason = "force";
-	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	const sph_shared *sh = eddy__sph_find(w, s);
-	if (!ax || !sh)
+	*reason = "acoustic";
+	if (!sh)
 		return INFINITY;
-	float a2 = 0;
-	for (size_t i = 0; i < w->n; ++i) {
-		const float q = ax[i] * ax[i] + ay[i] * ay[i] + az[i] * az[i];
-		a2 = q > a2 ? q : a2;
-	}
-	return a2 > 0 ? 0.625 * sqrt(sh->h / sqrt((double)a2)) : INFINITY;
+	const double acoustic = sh->h / (sh->c + max_norm(w, COL_VX, COL_VY, COL_VZ)), a = max_norm(w, COL_AX, COL_AY, COL_AZ);
+	const double force = a > 0 ? 0.625 * sqrt(sh->h / a) : INFINITY;
+	if (force < acoustic)
+		*reason = "force";
+	return force < acoustic ? force : acoustic;
 }
 
 const eddy_system_vtable eddy__kind_sph_pressure = {

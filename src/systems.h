@@ -38,8 +38,4 @@
 EDDY_BUILTIN_SYSTEMS(EDDY_KIND_DECL)
 #undef EDDY_KIND_DECL
 
-/* sph_dfsph: true if an implicit pressure solve follows the density system s
- * (sys_sph_dfsph.c), so sph_density's acoustic time-step limit does not apply. */
-bool eddy__sph_dfsph_follows(const eddy_world *w, const eddy_system *s);
-
 #endif

@@ -488,7 +488,7 @@ static void time_step_limits_are_reported(void)
 		eddy_frame_stats st;
 		eddy_world_frame_stats(w, &st);
 		const double expect = which == 0 ? cfl * h / sqrt(s.k) : cfl * 0.3125 * h * h / (s.mu / 1000.0);
-		const char *name = which == 0 ? "sph_density: acoustic" : "sph_viscosity: viscous";
+		const char *name = which == 0 ? "sph_pressure: acoustic" : "sph_viscosity: viscous";
 		printf("    limit %s: dt %.3e s (expected %.3e)\n", st.dt_limit, st.dt_max, expect);
 		CHECK_HAS(st.dt_limit, name);
 		CHECK(st.dt_max <= expect * 1.001 && st.dt_max > expect * 0.9);
