@@ -76,6 +76,7 @@ typedef struct sph_neighbors {
 	uint32_t *slot_of, *now_of;       /* build slot of each row, row of each build slot */
 	uint64_t vbsig;                   /* boundary systems at the search */
 	bool vvalid, vsame; /* vsame: no particle has changed row since the search */
+	bool vlist;         /* the list was stored: a search without a skin makes the exact lists directly */
 	float skin;                       /* 1, of h: this list's skin (see SPH_SKIN) */
 	int age;                          /* steps since the search */
 	bool count_changed;               /* the search was forced by a new particle count */

@@ -242,23 +242,169 @@ static bool grow(void **p, size_t *have, size_t want, size_t elem)
 	return true;
 }
 
-/* The grid search into the Verlet list: one pass with the current strides;
- * returns the largest fluid and boundary counts seen (a count above the
- * stride means: search again). The table is in cell order, so the candidates
- * come in ascending row order. */
-static void search(eddy_world *w, sph_neighbors *nb, float hs2, int threads, uint32_t *max_f, uint32_t *max_b)
+/* The search works on blocks: the particles of SEARCH_BLOCK consecutive cells
+ * of one row (about that many particles in a fluid at cells of h/2) share
+ * their candidates, the runs of cells around the block, gathered once into a
+ * contiguous buffer. Each particle then tests the whole buffer in one loop of
+ * groups of four (eight with AVX2) and packs the hits without branches.
+ * Looping over the runs per particle instead cost a lookup per run and a
+ * masked, mispredicted tail per run: with about one particle per cell that
+ * was most of the search. */
+#define SEARCH_BLOCK 4
+
+/* one thread's buffers: a block's candidates (padded by eight far-away
+ * points, so groups never need a tail) and one particle's hits */
+typedef struct search_buf {
+	size_t cap;
+	float *x, *y, *z, *d;
+	uint32_t *j, *hit;
+} search_buf;
+
+static void search_buf_free(search_buf *b)
+{
+	free(b->x);
+	free(b->y);
+	free(b->z);
+	free(b->d);
+	free(b->j);
+	free(b->hit);
+	memset(b, 0, sizeof *b);
+}
+
+static bool search_buf_grow(search_buf *b, size_t want)
+{
+	want += 8;
+	if (want <= b->cap)
+		return true;
+	size_t cap = b->cap ? b->cap : 256;
+	while (cap < want)
+		cap *= 2;
+	search_buf_free(b);
+	b->x = malloc(cap * sizeof *b->x);
+	b->y = malloc(cap * sizeof *b->y);
+	b->z = malloc(cap * sizeof *b->z);
+	b->d = malloc(cap * sizeof *b->d);
+	b->j = malloc(cap * sizeof *b->j);
+	b->hit = malloc(cap * sizeof *b->hit);
+	b->cap = cap;
+	return b->x && b->y && b->z && b->d && b->j && b->hit;
+}
+
+/* The candidates c[0..nc) (nc a multiple of four, the padding far away)
+ * with r2max - r^2 > 0, in order, into hit/d; returns how many. The same
+ * operations as filter(), so the same (r2max - r^2) bits. */
+static uint32_t hits_sse(const search_buf *c, uint32_t nc, float xi, float yi, float zi, float r2max, uint32_t *hit,
+                         float *dv)
+{
+	uint32_t cnt = 0, q = 0;
+#ifdef __SSE2__
+	const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh2 = _mm_set1_ps(r2max);
+	for (; q < nc; q += 4) {
+		const __m128 rx = _mm_sub_ps(vxi, _mm_loadu_ps(c->x + q)), ry = _mm_sub_ps(vyi, _mm_loadu_ps(c->y + q)),
+		             rz = _mm_sub_ps(vzi, _mm_loadu_ps(c->z + q));
+		const __m128 d =
+			_mm_sub_ps(vh2, _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz)));
+		const unsigned in = (unsigned)_mm_movemask_ps(_mm_cmpgt_ps(d, _mm_setzero_ps()));
+		if (!in)
+			continue; /* most groups of a block's buffer miss a given particle */
+		float dd[4];
+		_mm_storeu_ps(dd, d);
+		for (unsigned k = 0; k < 4; ++k) {
+			hit[cnt] = c->j[q + k];
+			dv[cnt] = dd[k];
+			cnt += in >> k & 1;
+		}
+	}
+#endif
+	for (; q < nc; ++q) {
+		const float rx = xi - c->x[q], ry = yi - c->y[q], rz = zi - c->z[q];
+		const float d = r2max - (rx * rx + ry * ry + rz * rz);
+		hit[cnt] = c->j[q];
+		dv[cnt] = d;
+		cnt += d > 0;
+	}
+	return cnt;
+}
+
+#ifdef SPH_AVX2
+/* hits_sse with eight lanes, packed with a permutation made from the mask
+ * (pdep/pext) and stored eight at a time: the same hits in the same order. */
+__attribute__((target("avx2,bmi2"))) static uint32_t hits_avx2(const search_buf *c, uint32_t nc, float xi, float yi,
+                                                               float zi, float r2max, uint32_t *hit, float *dv)
+{
+	const __m256 vxi = _mm256_set1_ps(xi), vyi = _mm256_set1_ps(yi), vzi = _mm256_set1_ps(zi),
+	             vh2 = _mm256_set1_ps(r2max);
+	const float *cx = c->x, *cy = c->y, *cz = c->z;
+	const uint32_t *cj = c->j;
+	uint32_t cnt = 0;
+	/* no test for a group without hits: which groups hit is a coin toss,
+	 * and storing nothing costs less than a mispredicted branch */
+	for (uint32_t q = 0; q < nc; q += 8) {
+		const __m256 rx = _mm256_sub_ps(vxi, _mm256_loadu_ps(cx + q)), ry = _mm256_sub_ps(vyi, _mm256_loadu_ps(cy + q)),
+		             rz = _mm256_sub_ps(vzi, _mm256_loadu_ps(cz + q));
+		const __m256 d = _mm256_sub_ps(
+			vh2, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz)));
+		const unsigned in = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(d, _mm256_setzero_ps(), _CMP_GT_OQ));
+		const uint64_t keep = _pdep_u64(in, 0x0101010101010101ull) * 0xFF;
+		const __m256i perm =
+			_mm256_cvtepu8_epi32(_mm_cvtsi64_si128((long long)_pext_u64(0x0706050403020100ull, keep)));
+		_mm256_storeu_si256((__m256i *)(hit + cnt),
+		                    _mm256_permutevar8x32_epi32(_mm256_loadu_si256((const __m256i *)(cj + q)), perm));
+		_mm256_storeu_ps(dv + cnt, _mm256_permutevar8x32_ps(d, perm));
+		cnt += (uint32_t)__builtin_popcount(in);
+	}
+	return cnt;
+}
+#endif
+
+/* sum_k d_k^3 in a fixed order, four partial sums then (0+1)+(2+3), the
+ * tail after: every path that makes a particle's list (the filter, the
+ * exact search) sums this way, so they give the same bits. */
+static inline float cube_sum(const float *d, uint32_t cnt)
+{
+	uint32_t q = 0;
+	float ws = 0;
+#ifdef __SSE2__
+	__m128 acc = _mm_setzero_ps();
+	for (; q + 4 <= cnt; q += 4) {
+		const __m128 v = _mm_loadu_ps(d + q);
+		acc = _mm_add_ps(acc, _mm_mul_ps(_mm_mul_ps(v, v), v));
+	}
+	ws = sph_hsum4(acc);
+#else
+	float a[4] = {0, 0, 0, 0};
+	for (; q + 4 <= cnt; q += 4)
+		for (int k = 0; k < 4; ++k)
+			a[k] += d[q + k] * d[q + k] * d[q + k];
+	ws = (a[0] + a[1]) + (a[2] + a[3]);
+#endif
+	for (; q < cnt; ++q)
+		ws += d[q] * d[q] * d[q];
+	return ws;
+}
+
+/* The grid search. Verlet mode (exact false): the pairs closer than
+ * sqrt(r2max) into the Verlet list with the current strides. Exact mode (a
+ * skin of 0, r2max = h^2): straight into the exact lists and kernel sums,
+ * which the filter would make from such a list (same tests, same order,
+ * same sums), so the filter is skipped. Returns the largest fluid and
+ * boundary counts seen (a count above the stride means: search again).
+ * The table is in cell order and the runs are gathered in cell order, so
+ * the hits come in ascending row order. */
+static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, int threads, uint32_t *max_f,
+                   uint32_t *max_b)
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
-	const long n = (long)w->n;
-	/* without a skin the support itself: two cells of h/2 each way */
-	const int gx = nb->gx, gy = nb->gy, gz = nb->gz, R = nb->skin > 0 ? SPH_VERLET_CELLS : SPH_CELLS_PER_H;
-	const size_t cap = nb->vcap, bcap = nb->vbcap;
-	const uint32_t room = w->capacity < UINT32_MAX ? (uint32_t)w->capacity : UINT32_MAX;
+	const size_t n = w->n;
+	const int gx = nb->gx, gy = nb->gy, gz = nb->gz, R = exact ? SPH_CELLS_PER_H : SPH_VERLET_CELLS;
+	const size_t cap = exact ? nb->cap : nb->vcap, bcap = exact ? nb->bcap : nb->vbcap;
+	uint32_t *const lists = exact ? nb->nbr : nb->vnbr, *const blists = exact ? nb->bnbr : nb->vbnbr;
+	uint32_t *const counts = exact ? nb->count : nb->vcount, *const bcounts = exact ? nb->bcount : nb->vbcount;
 	/* how many cells along x a run at cell offsets (dy, dz) needs: a cell k
 	 * cells away is at least (k - 1) cells of h/2 from the particle, so the
-	 * corners of the 7^3 block are beyond the Verlet radius; -1: none */
+	 * corners of the block are beyond the radius; -1: none */
 	int reach[SPH_VERLET_CELLS + 1][SPH_VERLET_CELLS + 1];
-	const double rs2 = 1.001 * (double)hs2 * (double)nb->inv * (double)nb->inv; /* in cells^2, 0.1% for rounding */
+	const double rs2 = 1.001 * (double)r2max * (double)nb->inv * (double)nb->inv; /* in cells^2, 0.1% for rounding */
 	for (int a = 0; a <= R; ++a)
 		for (int b = 0; b <= R; ++b) {
 			const double ey = a > 0 ? a - 1 : 0, ez = b > 0 ? b - 1 : 0, rem = rs2 - ey * ey - ez * ez;
@@ -268,102 +414,135 @@ static void search(eddy_world *w, sph_neighbors *nb, float hs2, int threads, uin
 					;
 			reach[a][b] = k;
 		}
+	/* the blocks: runs of rows in the same row of cells and the same
+	 * SEARCH_BLOCK cells along it */
+	uint32_t *first = eddy__arena_alloc(&w->arena, (n + 1) * sizeof *first);
+	if (!first)
+		return false;
+	long blocks = 0;
+	uint32_t prev = UINT32_MAX;
+	for (size_t i = 0; i < n; ++i) {
+		const uint32_t c = nb->cell_of[i], id = c - c % (uint32_t)gx % SEARCH_BLOCK;
+		if (id != prev)
+			first[blocks++] = (uint32_t)i;
+		prev = id;
+	}
+	first[blocks] = (uint32_t)n;
+#ifdef SPH_AVX2
+	const bool avx2 = sph_use_avx2() && __builtin_cpu_supports("bmi2");
+#endif
 	uint32_t mf = 0, mb = 0;
-#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : mf, mb)
-	for (long i = 0; i < n; ++i) {
-		const uint32_t c = nb->cell_of[i];
-		const int cx = (int)(c % (uint32_t)gx), cy = (int)(c / (uint32_t)gx % (uint32_t)gy),
-		          cz = (int)(c / ((uint32_t)gx * (uint32_t)gy));
-		const float xi = x[i], yi = y[i], zi = z[i];
-#ifdef __SSE2__
-		const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh2 = _mm_set1_ps(hs2);
-#endif
-		uint32_t *list = nb->vnbr + (size_t)i * cap, *blist = nb->vbnbr + (size_t)i * bcap;
-		uint32_t cnt = 0, bcnt = 0;
-		for (int dz = -R; dz <= R; ++dz) {
-			const int zz = cz + dz;
-			if (zz < 0 || zz >= gz)
+	bool ok = true;
+#pragma omp parallel num_threads(threads) reduction(max : mf, mb) reduction(&& : ok)
+	{
+		search_buf fb = {0}, bb = {0};
+#pragma omp for schedule(dynamic, 16)
+		for (long k = 0; k < blocks; ++k) {
+			if (!ok)
 				continue;
-			for (int dy = -R; dy <= R; ++dy) {
-				const int yy = cy + dy;
-				const int ext = reach[abs(dy)][abs(dz)];
-				if (yy < 0 || yy >= gy || ext < 0)
+			const uint32_t pa = first[k], pe = first[k + 1], c = nb->cell_of[pa];
+			const int cx = (int)(c % (uint32_t)gx), cy = (int)(c / (uint32_t)gx % (uint32_t)gy),
+			          cz = (int)(c / ((uint32_t)gx * (uint32_t)gy));
+			const int bx0 = cx - cx % SEARCH_BLOCK, bx1 = bx0 + SEARCH_BLOCK - 1 < gx ? bx0 + SEARCH_BLOCK - 1 : gx - 1;
+			/* the runs, in cell order */
+			uint32_t run[(2 * SPH_VERLET_CELLS + 1) * (2 * SPH_VERLET_CELLS + 1)][4];
+			int runs = 0;
+			size_t nf = 0, nbd = 0;
+			for (int dz = -R; dz <= R; ++dz) {
+				const int zz = cz + dz;
+				if (zz < 0 || zz >= gz)
 					continue;
-				const int x0 = cx >= ext ? cx - ext : 0, x1 = cx < gx - ext ? cx + ext : gx - 1;
-				const size_t row = ((size_t)zz * (size_t)gy + (size_t)yy) * (size_t)gx;
-				const uint32_t a = nb->cell_start[row + (size_t)x0], e = nb->cell_start[row + (size_t)x1 + 1];
-				uint32_t j = a;
-#ifdef __SSE2__
-				/* four candidates at a time: the distance tests are most of
-				 * the search; hits are taken in order. A row's last group is
-				 * masked to the row (the columns hold at least 'room' rows),
-				 * not finished one by one: rows of h/2 cells hold only a
-				 * few particles, so the tail was a third of the search. */
-				for (; j < e && j + 4 <= room; j += 4) {
-					const __m128 rx = _mm_sub_ps(vxi, _mm_loadu_ps(x + j)), ry = _mm_sub_ps(vyi, _mm_loadu_ps(y + j)),
-					             rz = _mm_sub_ps(vzi, _mm_loadu_ps(z + j));
-					const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
-					unsigned hit = (unsigned)_mm_movemask_ps(_mm_cmplt_ps(r2, vh2));
-					if (e - j < 4)
-						hit &= (1u << (e - j)) - 1;
-					if ((uint32_t)i - j < 4)
-						hit &= ~(1u << ((uint32_t)i - j)); /* not itself */
-					for (; hit; hit &= hit - 1) {
-						if (cnt < cap)
-							list[cnt] = j + (uint32_t)__builtin_ctz(hit);
-						cnt++;
-					}
-				}
-#endif
-				for (; j < e; ++j) {
-					const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
-					if (rx * rx + ry * ry + rz * rz < hs2 && j != (uint32_t)i) {
-						if (cnt < cap)
-							list[cnt] = j;
-						cnt++;
-					}
-				}
-				const uint32_t ba = nb->bcell_start[row + (size_t)x0], be = nb->bcell_start[row + (size_t)x1 + 1];
-				uint32_t jb = ba;
-#ifdef __SSE2__
-				/* the boundary arrays are padded by three: groups of four, masked */
-				for (; jb < be; jb += 4) {
-					const __m128 rx = _mm_sub_ps(vxi, _mm_loadu_ps(nb->bx + jb)),
-					             ry = _mm_sub_ps(vyi, _mm_loadu_ps(nb->by + jb)),
-					             rz = _mm_sub_ps(vzi, _mm_loadu_ps(nb->bz + jb));
-					const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
-					unsigned hit = (unsigned)_mm_movemask_ps(_mm_cmplt_ps(r2, vh2));
-					if (be - jb < 4)
-						hit &= (1u << (be - jb)) - 1;
-					for (; hit; hit &= hit - 1) {
-						if (bcnt < bcap)
-							blist[bcnt] = jb + (uint32_t)__builtin_ctz(hit);
-						bcnt++;
-					}
-				}
-#endif
-				for (; jb < be; ++jb) {
-					const float rx = xi - nb->bx[jb], ry = yi - nb->by[jb], rz = zi - nb->bz[jb];
-					if (rx * rx + ry * ry + rz * rz < hs2) {
-						if (bcnt < bcap)
-							blist[bcnt] = jb;
-						bcnt++;
-					}
+				for (int dy = -R; dy <= R; ++dy) {
+					const int yy = cy + dy, ext = reach[abs(dy)][abs(dz)];
+					if (yy < 0 || yy >= gy || ext < 0)
+						continue;
+					const int x0 = bx0 >= ext ? bx0 - ext : 0, x1 = bx1 < gx - ext ? bx1 + ext : gx - 1;
+					const size_t row = ((size_t)zz * (size_t)gy + (size_t)yy) * (size_t)gx;
+					uint32_t *r = run[runs++];
+					r[0] = nb->cell_start[row + (size_t)x0];
+					r[1] = nb->cell_start[row + (size_t)x1 + 1];
+					r[2] = nb->bcell_start[row + (size_t)x0];
+					r[3] = nb->bcell_start[row + (size_t)x1 + 1];
+					nf += r[1] - r[0];
+					nbd += r[3] - r[2];
 				}
 			}
+			if (!search_buf_grow(&fb, nf) || !search_buf_grow(&bb, nbd)) {
+				ok = false;
+				continue;
+			}
+			/* gathered; the block's own rows are one run, at 'self' */
+			uint32_t nc = 0, nbc = 0, self = 0;
+			for (int r = 0; r < runs; ++r) {
+				if (run[r][0] <= pa && pa < run[r][1])
+					self = nc + (pa - run[r][0]);
+				for (uint32_t j = run[r][0]; j < run[r][1]; ++j, ++nc) {
+					fb.x[nc] = x[j];
+					fb.y[nc] = y[j];
+					fb.z[nc] = z[j];
+					fb.j[nc] = j;
+				}
+				for (uint32_t j = run[r][2]; j < run[r][3]; ++j, ++nbc) {
+					bb.x[nbc] = nb->bx[j];
+					bb.y[nbc] = nb->by[j];
+					bb.z[nbc] = nb->bz[j];
+					bb.j[nbc] = j;
+				}
+			}
+			/* pad to whole groups of eight with points no test keeps */
+			const uint32_t ncp = (nc + 7) & ~7u, nbcp = (nbc + 7) & ~7u;
+			for (uint32_t q = nc; q < ncp; ++q) {
+				fb.x[q] = fb.y[q] = fb.z[q] = 1e30f;
+				fb.j[q] = 0;
+			}
+			for (uint32_t q = nbc; q < nbcp; ++q) {
+				bb.x[q] = bb.y[q] = bb.z[q] = 1e30f;
+				bb.j[q] = 0;
+			}
+			for (uint32_t i = pa; i < pe; ++i) {
+				const float xi = x[i], yi = y[i], zi = z[i];
+				/* not itself: its own entry is moved far away for its turn */
+				const uint32_t s = self + (i - pa);
+				fb.x[s] = 1e30f;
+				uint32_t cnt, bcnt;
+#ifdef SPH_AVX2
+				if (avx2) {
+					cnt = hits_avx2(&fb, ncp, xi, yi, zi, r2max, fb.hit, fb.d);
+					bcnt = hits_avx2(&bb, nbcp, xi, yi, zi, r2max, bb.hit, bb.d);
+				} else
+#endif
+				{
+					cnt = hits_sse(&fb, ncp, xi, yi, zi, r2max, fb.hit, fb.d);
+					bcnt = hits_sse(&bb, nbcp, xi, yi, zi, r2max, bb.hit, bb.d);
+				}
+				fb.x[s] = xi;
+				if (cnt <= cap)
+					memcpy(lists + (size_t)i * cap, fb.hit, cnt * sizeof *fb.hit);
+				if (bcnt <= bcap)
+					memcpy(blists + (size_t)i * bcap, bb.hit, bcnt * sizeof *bb.hit);
+				counts[i] = cnt;
+				bcounts[i] = bcnt;
+				if (exact) {
+					nb->wsum[i] = cube_sum(fb.d, cnt);
+					float bws = 0;
+					for (uint32_t q = 0; q < bcnt; ++q) {
+						const uint32_t jb = bb.hit[q];
+						const float d = bb.d[q];
+						bws += nb->bvol[jb] * nb->brho[jb] * d * d * d;
+					}
+					nb->bwsum[i] = bws;
+				}
+				mf = cnt > mf ? cnt : mf;
+				mb = bcnt > mb ? bcnt : mb;
+			}
 		}
-		nb->vcount[i] = cnt;
-		nb->vbcount[i] = bcnt;
-		mf = cnt > mf ? cnt : mf;
-		mb = bcnt > mb ? bcnt : mb;
+		search_buf_free(&fb);
+		search_buf_free(&bb);
 	}
 	*max_f = mf;
 	*max_b = mb;
+	return ok;
 }
-
-/* Candidates of a row, kept with their (h^2 - r^2) while they are sorted
- * by index; a longer row (a huge radius) takes a slower path. */
-#define SORT_MAX 256
 
 #ifdef SPH_AVX2
 /* The AVX2 path of filter() for the candidates of one row, eight a group:
@@ -421,7 +600,7 @@ __attribute__((target("avx2,bmi2"))) static uint32_t filter_avx2(const uint32_t 
 /* The exact lists and kernel sums from the Verlet list: candidates mapped to
  * the rows they are in now, r^2 < h^2 kept, sorted by row, summed in that
  * order. p4 holds (x, y, z, -) per row. */
-static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, int threads, uint32_t *max_f,
+static bool filter(const sph_neighbors *nb, const float *p4, float h2, long n, int threads, uint32_t *max_f,
                    uint32_t *max_b)
 {
 	const size_t vcap = nb->vcap, vbcap = nb->vbcap, cap = nb->cap, bcap = nb->bcap;
@@ -433,8 +612,18 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 	const bool avx2 = sph_use_avx2() && __builtin_cpu_supports("bmi2");
 #endif
 	uint32_t mf = 0, mb = 0;
-#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : mf, mb)
+	bool ok = true;
+#pragma omp parallel num_threads(threads) reduction(max : mf, mb) reduction(&& : ok)
+	{
+	/* a particle's hits, sorted here and then written once, whole, which
+	 * the memory system streams; + 8: whole groups are stored */
+	uint32_t *jl = malloc((vcap + 8) * sizeof *jl);
+	float *dv = malloc((vcap + 8) * sizeof *dv);
+	ok = jl && dv;
+#pragma omp for schedule(static)
 	for (long i = 0; i < n; ++i) {
+		if (!ok)
+			continue;
 		const uint32_t b = nb->slot_of[i];
 		const uint32_t *cand = nb->vnbr + (size_t)b * vcap;
 		const uint32_t vc = nb->vcount[b];
@@ -442,11 +631,7 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 		const float xi = p4[4 * i], yi = p4[4 * i + 1], zi = p4[4 * i + 2];
 		uint32_t cnt = 0;
 		float ws = 0;
-		if (vc <= SORT_MAX) {
-			/* on the stack until sorted: the rows of the list are then written
-			 * once, whole, which the memory system streams */
-			uint32_t jl[SORT_MAX + 8]; /* + 8: whole groups are stored */
-			float dv[SORT_MAX + 8];
+		{
 			uint32_t q = 0;
 			/* branch-free (whether a candidate is in is a coin toss): every
 			 * candidate is written, and the count moves past the ones in */
@@ -515,18 +700,7 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 				jl[k] = j;
 				dv[k] = d;
 			}
-			q = 0;
-#ifdef __SSE2__
-			/* four partial sums, added up in a fixed order */
-			__m128 acc = _mm_setzero_ps();
-			for (; q + 4 <= cnt; q += 4) {
-				const __m128 d = _mm_loadu_ps(dv + q);
-				acc = _mm_add_ps(acc, _mm_mul_ps(_mm_mul_ps(d, d), d));
-			}
-			ws = sph_hsum4(acc);
-#endif
-			for (; q < cnt; ++q)
-				ws += dv[q] * dv[q] * dv[q];
+			ws = cube_sum(dv, cnt);
 			if (cnt <= cap) {
 				/* whole quads (cap is a multiple of 8): short rows, where a
 				 * memcpy call costs more than the copy */
@@ -537,29 +711,6 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 #endif
 				for (; q < cnt; ++q)
 					list[q] = jl[q];
-			}
-		} else {
-			for (uint32_t q = 0; q < vc; ++q) {
-				const uint32_t j = ROW(cand[q]);
-				const float rx = xi - p4[4 * j], ry = yi - p4[4 * j + 1], rz = zi - p4[4 * j + 2];
-				if (h2 - (rx * rx + ry * ry + rz * rz) > 0) {
-					if (cnt < cap)
-						list[cnt] = j;
-					cnt++;
-				}
-			}
-			for (uint32_t a = 1; a < cnt && cnt <= cap; ++a) {
-				const uint32_t j = list[a];
-				uint32_t k = a;
-				for (; k > 0 && list[k - 1] > j; --k)
-					list[k] = list[k - 1];
-				list[k] = j;
-			}
-			for (uint32_t q = 0; q < cnt && cnt <= cap; ++q) {
-				const uint32_t j = list[q];
-				const float rx = xi - p4[4 * j], ry = yi - p4[4 * j + 1], rz = zi - p4[4 * j + 2];
-				const float d = h2 - (rx * rx + ry * ry + rz * rz);
-				ws += d * d * d;
 			}
 		}
 		nb->count[i] = cnt;
@@ -587,8 +738,12 @@ static void filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 		mf = cnt > mf ? cnt : mf;
 		mb = bcnt > mb ? bcnt : mb;
 	}
+	free(jl);
+	free(dv);
+	}
 	*max_f = mf;
 	*max_b = mb;
+	return ok;
 #undef ROW
 }
 
@@ -709,7 +864,7 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	}
 	/* the Verlet list is good while every particle is within skin/2 of its
 	 * build slot's position */
-	bool valid = prevalid && d2max < lim2; /* false for NaN too */
+	bool valid = prevalid && nb->vlist && d2max < lim2; /* false for NaN too */
 	/* the search and the boundary pressure walk cells */
 	if (!ranges && (!valid || nb->nb > 0)) {
 		cell_ranges(key, n, cells, nb->cell_start);
@@ -732,30 +887,33 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		nb->skin = emitting || fast ? 0.0f
 		           : !prevalid      ? SPH_SKIN
 		                            : fminf(SPH_SKIN, fmaxf(SPH_SKIN_MIN, sized));
-		/* 1e-4 over: the filter's exact test (r < h, other operation
-		 * order) must find every pair it would keep among the candidates */
-		const float hs = sh->h * (1.0f + nb->skin + 1e-4f), hs2 = hs * hs;
-		for (;;) {
-			size_t want = n * nb->vcap, have = nb->vcap_alloc;
-			if (!grow((void **)&nb->vnbr, &have, want, sizeof *nb->vnbr))
-				return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n,
-				                  nb->vcap);
-			nb->vcap_alloc = have;
-			want = n * nb->vbcap;
-			have = nb->vbcap_alloc;
-			if (!grow((void **)&nb->vbnbr, &have, want, sizeof *nb->vbnbr))
-				return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n,
-				                  nb->vbcap);
-			nb->vbcap_alloc = have;
-			uint32_t mf, mb;
-			search(w, nb, hs2, threads, &mf, &mb);
-			if (mf <= nb->vcap && mb <= nb->vbcap)
-				break;
-			/* a particle had more candidates than the stride: widen and redo */
-			if (mf > nb->vcap)
-				nb->vcap = (mf + 15) / 16 * 16;
-			if (mb > nb->vbcap)
-				nb->vbcap = (mb + 15) / 16 * 16;
+		if (nb->skin > 0) {
+			/* 1e-4 over: the filter's exact test (r < h, other operation
+			 * order) must find every pair it would keep among the candidates */
+			const float hs = sh->h * (1.0f + nb->skin + 1e-4f), hs2 = hs * hs;
+			for (;;) {
+				size_t want = n * nb->vcap, have = nb->vcap_alloc;
+				if (!grow((void **)&nb->vnbr, &have, want, sizeof *nb->vnbr))
+					return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)",
+					                  n, nb->vcap);
+				nb->vcap_alloc = have;
+				want = n * nb->vbcap;
+				have = nb->vbcap_alloc;
+				if (!grow((void **)&nb->vbnbr, &have, want, sizeof *nb->vbnbr))
+					return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)",
+					                  n, nb->vbcap);
+				nb->vbcap_alloc = have;
+				uint32_t mf, mb;
+				if (!search(w, nb, hs2, false, threads, &mf, &mb))
+					return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for the neighbour search");
+				if (mf <= nb->vcap && mb <= nb->vbcap)
+					break;
+				/* a particle had more candidates than the stride: widen and redo */
+				if (mf > nb->vcap)
+					nb->vcap = (mf + 15) / 16 * 16;
+				if (mb > nb->vbcap)
+					nb->vbcap = (mb + 15) / 16 * 16;
+			}
 		}
 		memcpy(nb->vx, x, n * sizeof *x);
 		memcpy(nb->vy, y, n * sizeof *y);
@@ -764,7 +922,10 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 			nb->slot_of[i] = nb->now_of[i] = (uint32_t)i;
 		nb->vn = n;
 		nb->vbsig = nb->bsig;
+		/* without a skin only the positions are kept (to size the next
+		 * skin): the search below writes the exact lists directly */
 		nb->vvalid = true;
+		nb->vlist = nb->skin > 0;
 		nb->vsame = true;
 		nb->age = 0;
 		nb->searches++;
@@ -772,6 +933,7 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 
 	sh->pq = p4;
 	/* the exact lists, with their own (tighter) strides */
+	const bool direct = !nb->vlist;
 	if (!nb->cap) {
 		nb->cap = 32;
 		nb->bcap = 16;
@@ -787,7 +949,10 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n, nb->bcap);
 		nb->bcap_alloc = have;
 		uint32_t mf, mb;
-		filter(nb, p4, sh->k.h2, (long)n, threads, &mf, &mb);
+		const bool ok = direct ? search(w, nb, sh->k.h2, true, threads, &mf, &mb)
+		                       : filter(nb, p4, sh->k.h2, (long)n, threads, &mf, &mb);
+		if (!ok)
+			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for the neighbour lists");
 		if (mf <= nb->cap && mb <= nb->bcap)
 			break;
 		/* more neighbours than the stride (compressed fluid): widen, with
