@@ -250,7 +250,15 @@ static bool grow(void **p, size_t *have, size_t want, size_t elem)
  * Looping over the runs per particle instead cost a lookup per run and a
  * masked, mispredicted tail per run: with about one particle per cell that
  * was most of the search. */
-#define SEARCH_BLOCK 4
+#define SEARCH_BX 4
+#define SEARCH_BY 2
+#define SEARCH_BZ 2
+
+static int cmp_u32(const void *a, const void *b)
+{
+	const uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+	return (x > y) - (x < y);
+}
 
 /* one thread's buffers: a block's candidates (padded by eight far-away
  * points, so groups never need a tail) and one particle's hits */
@@ -414,20 +422,28 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 					;
 			reach[a][b] = k;
 		}
-	/* the blocks: runs of rows in the same row of cells and the same
-	 * SEARCH_BLOCK cells along it */
-	uint32_t *first = eddy__arena_alloc(&w->arena, (n + 1) * sizeof *first);
-	if (!first)
+	/* the blocks that hold particles, as ids in block order: one per
+	 * stretch of rows in one row of cells and one block, then unique */
+	const int nbx = (gx + SEARCH_BX - 1) / SEARCH_BX, nby = (gy + SEARCH_BY - 1) / SEARCH_BY;
+	uint32_t *ids = eddy__arena_alloc(&w->arena, (n + 1) * sizeof *ids);
+	if (!ids)
 		return false;
 	long blocks = 0;
 	uint32_t prev = UINT32_MAX;
 	for (size_t i = 0; i < n; ++i) {
-		const uint32_t c = nb->cell_of[i], id = c - c % (uint32_t)gx % SEARCH_BLOCK;
+		const uint32_t c = nb->cell_of[i], cx = c % (uint32_t)gx, cy = c / (uint32_t)gx % (uint32_t)gy,
+		               cz = c / ((uint32_t)gx * (uint32_t)gy);
+		const uint32_t id = (cz / SEARCH_BZ * (uint32_t)nby + cy / SEARCH_BY) * (uint32_t)nbx + cx / SEARCH_BX;
 		if (id != prev)
-			first[blocks++] = (uint32_t)i;
+			ids[blocks++] = id;
 		prev = id;
 	}
-	first[blocks] = (uint32_t)n;
+	qsort(ids, (size_t)blocks, sizeof *ids, cmp_u32);
+	long unique = 0;
+	for (long k = 0; k < blocks; ++k)
+		if (k == 0 || ids[k] != ids[unique - 1])
+			ids[unique++] = ids[k];
+	blocks = unique;
 #ifdef SPH_AVX2
 	const bool avx2 = sph_use_avx2() && __builtin_cpu_supports("bmi2");
 #endif
@@ -436,24 +452,25 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 #pragma omp parallel num_threads(threads) reduction(max : mf, mb) reduction(&& : ok)
 	{
 		search_buf fb = {0}, bb = {0};
-#pragma omp for schedule(dynamic, 16)
+#pragma omp for schedule(dynamic, 8)
 		for (long k = 0; k < blocks; ++k) {
 			if (!ok)
 				continue;
-			const uint32_t pa = first[k], pe = first[k + 1], c = nb->cell_of[pa];
-			const int cx = (int)(c % (uint32_t)gx), cy = (int)(c / (uint32_t)gx % (uint32_t)gy),
-			          cz = (int)(c / ((uint32_t)gx * (uint32_t)gy));
-			const int bx0 = cx - cx % SEARCH_BLOCK, bx1 = bx0 + SEARCH_BLOCK - 1 < gx ? bx0 + SEARCH_BLOCK - 1 : gx - 1;
-			/* the runs, in cell order */
-			uint32_t run[(2 * SPH_VERLET_CELLS + 1) * (2 * SPH_VERLET_CELLS + 1)][4];
+			const int bxi = (int)(ids[k] % (uint32_t)nbx), byi = (int)(ids[k] / (uint32_t)nbx % (uint32_t)nby),
+			          bzi = (int)(ids[k] / ((uint32_t)nbx * (uint32_t)nby));
+			const int bx0 = bxi * SEARCH_BX, bx1 = bx0 + SEARCH_BX - 1 < gx ? bx0 + SEARCH_BX - 1 : gx - 1;
+			const int by0 = byi * SEARCH_BY, by1 = by0 + SEARCH_BY - 1 < gy ? by0 + SEARCH_BY - 1 : gy - 1;
+			const int bz0 = bzi * SEARCH_BZ, bz1 = bz0 + SEARCH_BZ - 1 < gz ? bz0 + SEARCH_BZ - 1 : gz - 1;
+			/* the runs, in cell order; own[] marks the block's own rows */
+			uint32_t run[(2 * SPH_VERLET_CELLS + SEARCH_BY) * (2 * SPH_VERLET_CELLS + SEARCH_BZ)][5];
 			int runs = 0;
 			size_t nf = 0, nbd = 0;
-			for (int dz = -R; dz <= R; ++dz) {
-				const int zz = cz + dz;
+			for (int zz = bz0 - R; zz <= bz1 + R; ++zz) {
 				if (zz < 0 || zz >= gz)
 					continue;
-				for (int dy = -R; dy <= R; ++dy) {
-					const int yy = cy + dy, ext = reach[abs(dy)][abs(dz)];
+				const int ez = zz < bz0 ? bz0 - zz : zz > bz1 ? zz - bz1 : 0;
+				for (int yy = by0 - R; yy <= by1 + R; ++yy) {
+					const int ey = yy < by0 ? by0 - yy : yy > by1 ? yy - by1 : 0, ext = reach[ey][ez];
 					if (yy < 0 || yy >= gy || ext < 0)
 						continue;
 					const int x0 = bx0 >= ext ? bx0 - ext : 0, x1 = bx1 < gx - ext ? bx1 + ext : gx - 1;
@@ -463,6 +480,8 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 					r[1] = nb->cell_start[row + (size_t)x1 + 1];
 					r[2] = nb->bcell_start[row + (size_t)x0];
 					r[3] = nb->bcell_start[row + (size_t)x1 + 1];
+					/* the block's own particles in this row: a stretch of the run */
+					r[4] = ey == 0 && ez == 0 ? (uint32_t)(row + (size_t)bx0) : UINT32_MAX;
 					nf += r[1] - r[0];
 					nbd += r[3] - r[2];
 				}
@@ -471,11 +490,9 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 				ok = false;
 				continue;
 			}
-			/* gathered; the block's own rows are one run, at 'self' */
-			uint32_t nc = 0, nbc = 0, self = 0;
+			uint32_t nc = 0, nbc = 0, at[(2 * SPH_VERLET_CELLS + SEARCH_BY) * (2 * SPH_VERLET_CELLS + SEARCH_BZ)];
 			for (int r = 0; r < runs; ++r) {
-				if (run[r][0] <= pa && pa < run[r][1])
-					self = nc + (pa - run[r][0]);
+				at[r] = nc;
 				for (uint32_t j = run[r][0]; j < run[r][1]; ++j, ++nc) {
 					fb.x[nc] = x[j];
 					fb.y[nc] = y[j];
@@ -499,10 +516,14 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 				bb.x[q] = bb.y[q] = bb.z[q] = 1e30f;
 				bb.j[q] = 0;
 			}
+			for (int r = 0; r < runs; ++r) {
+				if (run[r][4] == UINT32_MAX)
+					continue;
+				const uint32_t pa = nb->cell_start[run[r][4]], pe = nb->cell_start[run[r][4] + (uint32_t)(bx1 - bx0) + 1];
 			for (uint32_t i = pa; i < pe; ++i) {
 				const float xi = x[i], yi = y[i], zi = z[i];
 				/* not itself: its own entry is moved far away for its turn */
-				const uint32_t s = self + (i - pa);
+				const uint32_t s = at[r] + (i - run[r][0]);
 				fb.x[s] = 1e30f;
 				uint32_t cnt, bcnt;
 #ifdef SPH_AVX2
@@ -534,6 +555,7 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 				}
 				mf = cnt > mf ? cnt : mf;
 				mb = bcnt > mb ? bcnt : mb;
+			}
 			}
 		}
 		search_buf_free(&fb);
