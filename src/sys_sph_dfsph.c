@@ -71,9 +71,6 @@
 
 #include <stdlib.h>
 #include <string.h>
-#ifdef __SSE2__
-#include <emmintrin.h>
-#endif
 
 typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
@@ -81,6 +78,7 @@ typedef struct sph_dfsph {
 	int frame;
 	int64_t steps, sweeps, div_sweeps, unconverged;
 	double residual;
+	bool avx2; /* the sweeps' AVX2 path (else SSE, the same bits) */
 } sph_dfsph;
 
 static const int dfsph_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, COL_AX, COL_AY, COL_AZ};
@@ -112,104 +110,198 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	return d;
 }
 
-/* The solver's per-step scratch, all in the world's arena. Four floats per
- * entry, so a neighbour's velocity and k come in one load (the sweeps are
- * gathers over the neighbour lists). */
+/* The solver's per-step scratch, all in the world's arena. */
 typedef struct dfsph_f4 {
 	float x, y, z, w;
 } dfsph_f4;
 
+/* Eight pairs of one particle: the neighbours and G_ij by component. A
+ * particle's pairs are whole groups, the last one padded with the particle
+ * itself and G = 0 (exact zeros in every sum), so the sweeps stream through
+ * one array with neither a scalar tail nor a mask, and a group is what one
+ * AVX2 register or two SSE ones hold. */
+typedef struct dfsph_group {
+	uint32_t j[8];
+	float gx[8], gy[8], gz[8];
+} dfsph_group;
 
 typedef struct dfsph_work {
 	long n;
-	const uint32_t *count;
-	size_t *off;   /* particle i's pairs are off[i] .. off[i] + count[i]: packed, so
-	                * a sweep streams through them (sph_density's lists have a
-	                * fixed stride) */
-	uint32_t *nbr; /* the neighbour of each pair */
-	float *gx, *gy, *gz; /* G_ij of each pair, by component: four pairs are one load */
-	dfsph_f4 *b;   /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
-	dfsph_f4 *v;   /* v*_i, and w = this sweep's k_i */
-	dfsph_f4 *h;   /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
-	float *ksum;   /* the sum of k_i over the sweeps */
-	float *err;    /* per particle: the error the sweep measured */
+	size_t *goff;   /* particle i's groups are goff[i] .. goff[i + 1] */
+	dfsph_group *g;
+	dfsph_f4 *b;    /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
+	dfsph_f4 *v;    /* v*_i (w unused: a neighbour's velocity is one 16-byte load) */
+	dfsph_f4 *h;    /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
+	float *k;       /* the k_i a correction applies, apart from v: correct
+	                 * gathers it from 4 bytes a particle, which stay in L1 */
+	float *ksum;    /* the sum of k_i over the sweeps */
+	float *err;     /* per particle: the error the sweep measured */
+	bool avx2;
 } dfsph_work;
 
-static void gradients(const sph_shared *sh, const float *x, const float *y, const float *z, const float *rho,
-                      eddy_vec3 grav, dfsph_work *wk, int threads)
+/* What a sweep needs beside the work arrays. */
+typedef struct sweep_args {
+	float dt, inv_dt, inv_dt2, rho0;
+	bool divergence; /* the divergence-free solve, else the constant-density one */
+} sweep_args;
+
+/* The neighbours of group q, padded with i itself. */
+static inline void group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t i, uint32_t l[8])
+{
+	for (uint32_t k = 0; k < 8; ++k)
+		l[k] = q + k < cnt ? list[q + k] : i;
+}
+
+/* Constants of the gradient pass. */
+typedef struct grad_args {
+	const float *pq; /* (x y z 1/rho) quads of sph_density */
+	float h, eps2, mg;
+} grad_args;
+
+/* Particle i's groups from its list, with s = (sum_j G_ij, sum_j |G_ij|^2).
+ * G_ij = mg (h - r)^2 / r r_vec, and 0 for a pair closer than sqrt(eps2)
+ * (no direction) or at r >= h (the list's margin) and for the padding. */
+#if defined(__SSE2__)
+static void grads_sse(const grad_args *a, const uint32_t *list, uint32_t cnt, uint32_t i, dfsph_group *g, float s[4])
+{
+	const float *pi = a->pq + 4 * (size_t)i;
+	const __m128 vxi = _mm_set1_ps(pi[0]), vyi = _mm_set1_ps(pi[1]), vzi = _mm_set1_ps(pi[2]), vh = _mm_set1_ps(a->h),
+	             veps2 = _mm_set1_ps(a->eps2), vmg = _mm_set1_ps(a->mg), one = _mm_set1_ps(1.0f),
+	             zero = _mm_setzero_ps();
+	__m128 sx[2] = {zero, zero}, sy[2] = {zero, zero}, sz[2] = {zero, zero}, s2[2] = {zero, zero};
+	for (uint32_t q = 0; q < cnt; q += 8, ++g) {
+		group_rows(list, cnt, q, i, g->j);
+		for (int k = 0; k < 2; ++k) {
+			const uint32_t *l = g->j + 4 * k;
+			__m128 px = _mm_loadu_ps(a->pq + 4 * (size_t)l[0]), py = _mm_loadu_ps(a->pq + 4 * (size_t)l[1]),
+			       pz = _mm_loadu_ps(a->pq + 4 * (size_t)l[2]), pw = _mm_loadu_ps(a->pq + 4 * (size_t)l[3]);
+			_MM_TRANSPOSE4_PS(px, py, pz, pw);
+			const __m128 rx = _mm_sub_ps(vxi, px), ry = _mm_sub_ps(vyi, py), rz = _mm_sub_ps(vzi, pz);
+			const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
+			const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
+			const __m128 ok = _mm_and_ps(_mm_cmpgt_ps(r2, veps2), _mm_cmpgt_ps(hr, zero));
+			/* r is at least sqrt(eps2) where ok; elsewhere divide by 1 */
+			const __m128 rs = _mm_or_ps(_mm_and_ps(ok, r), _mm_andnot_ps(ok, one));
+			const __m128 c = _mm_and_ps(ok, _mm_div_ps(_mm_mul_ps(_mm_mul_ps(vmg, hr), hr), rs));
+			const __m128 gx = _mm_mul_ps(c, rx), gy = _mm_mul_ps(c, ry), gz = _mm_mul_ps(c, rz);
+			_mm_storeu_ps(g->gx + 4 * k, gx);
+			_mm_storeu_ps(g->gy + 4 * k, gy);
+			_mm_storeu_ps(g->gz + 4 * k, gz);
+			sx[k] = _mm_add_ps(sx[k], gx);
+			sy[k] = _mm_add_ps(sy[k], gy);
+			sz[k] = _mm_add_ps(sz[k], gz);
+			s2[k] = _mm_add_ps(s2[k],
+			                   _mm_add_ps(_mm_add_ps(_mm_mul_ps(gx, gx), _mm_mul_ps(gy, gy)), _mm_mul_ps(gz, gz)));
+		}
+	}
+	s[0] = sph_hsum4(_mm_add_ps(sx[0], sx[1]));
+	s[1] = sph_hsum4(_mm_add_ps(sy[0], sy[1]));
+	s[2] = sph_hsum4(_mm_add_ps(sz[0], sz[1]));
+	s[3] = sph_hsum4(_mm_add_ps(s2[0], s2[1]));
+}
+#else
+/* Without SSE the lanes of the vector paths one by one, summed in their order. */
+static float lanes_sum(const float l[8])
+{
+	return ((l[0] + l[4]) + (l[1] + l[5])) + ((l[2] + l[6]) + (l[3] + l[7]));
+}
+
+static void grads_scalar(const grad_args *a, const uint32_t *list, uint32_t cnt, uint32_t i, dfsph_group *g, float s[4])
+{
+	const float *pi = a->pq + 4 * (size_t)i;
+	float sx[8] = {0}, sy[8] = {0}, sz[8] = {0}, s2[8] = {0};
+	for (uint32_t q = 0; q < cnt; q += 8, ++g) {
+		group_rows(list, cnt, q, i, g->j);
+		for (int l = 0; l < 8; ++l) {
+			const float *pj = a->pq + 4 * (size_t)g->j[l];
+			const float rx = pi[0] - pj[0], ry = pi[1] - pj[1], rz = pi[2] - pj[2];
+			const float r2 = rx * rx + ry * ry + rz * rz;
+			const float r = sqrtf(r2), hr = a->h - r;
+			const float c = r2 > a->eps2 && hr > 0 ? a->mg * hr * hr / r : 0.0f;
+			g->gx[l] = c * rx;
+			g->gy[l] = c * ry;
+			g->gz[l] = c * rz;
+			sx[l] += g->gx[l];
+			sy[l] += g->gy[l];
+			sz[l] += g->gz[l];
+			s2[l] += g->gx[l] * g->gx[l] + g->gy[l] * g->gy[l] + g->gz[l] * g->gz[l];
+		}
+	}
+	s[0] = lanes_sum(sx);
+	s[1] = lanes_sum(sy);
+	s[2] = lanes_sum(sz);
+	s[3] = lanes_sum(s2);
+}
+#endif
+
+#ifdef SPH_AVX2
+__attribute__((target("avx2"))) static void grads_avx2(const grad_args *a, const uint32_t *list, uint32_t cnt,
+                                                       uint32_t i, dfsph_group *g, float s[4])
+{
+	const float *pi = a->pq + 4 * (size_t)i;
+	const __m256 vxi = _mm256_set1_ps(pi[0]), vyi = _mm256_set1_ps(pi[1]), vzi = _mm256_set1_ps(pi[2]),
+	             vh = _mm256_set1_ps(a->h), veps2 = _mm256_set1_ps(a->eps2), vmg = _mm256_set1_ps(a->mg),
+	             one = _mm256_set1_ps(1.0f), zero = _mm256_setzero_ps();
+	__m256 sx = zero, sy = zero, sz = zero, s2 = zero;
+	for (uint32_t q = 0; q < cnt; q += 8, ++g) {
+		group_rows(list, cnt, q, i, g->j);
+		const uint32_t *l = g->j;
+		const float *const quad[8] = {a->pq + 4 * (size_t)l[0], a->pq + 4 * (size_t)l[1], a->pq + 4 * (size_t)l[2],
+		                              a->pq + 4 * (size_t)l[3], a->pq + 4 * (size_t)l[4], a->pq + 4 * (size_t)l[5],
+		                              a->pq + 4 * (size_t)l[6], a->pq + 4 * (size_t)l[7]};
+		__m256 px, py, pz, pw;
+		sph_transpose8(quad, &px, &py, &pz, &pw);
+		const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
+		const __m256 r2 =
+			_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz));
+		const __m256 r = _mm256_sqrt_ps(r2), hr = _mm256_sub_ps(vh, r);
+		const __m256 ok = _mm256_and_ps(_mm256_cmp_ps(r2, veps2, _CMP_GT_OQ), _mm256_cmp_ps(hr, zero, _CMP_GT_OQ));
+		const __m256 rs = _mm256_blendv_ps(one, r, ok);
+		const __m256 c = _mm256_and_ps(ok, _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(vmg, hr), hr), rs));
+		const __m256 gx = _mm256_mul_ps(c, rx), gy = _mm256_mul_ps(c, ry), gz = _mm256_mul_ps(c, rz);
+		_mm256_storeu_ps(g->gx, gx);
+		_mm256_storeu_ps(g->gy, gy);
+		_mm256_storeu_ps(g->gz, gz);
+		sx = _mm256_add_ps(sx, gx);
+		sy = _mm256_add_ps(sy, gy);
+		sz = _mm256_add_ps(sz, gz);
+		s2 = _mm256_add_ps(
+			s2, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(gx, gx), _mm256_mul_ps(gy, gy)), _mm256_mul_ps(gz, gz)));
+	}
+	s[0] = sph_hsum8(sx);
+	s[1] = sph_hsum8(sy);
+	s[2] = sph_hsum8(sz);
+	s[3] = sph_hsum8(s2);
+}
+#endif
+
+static void gradients(const sph_shared *sh, const float *rho, eddy_vec3 grav, dfsph_work *wk, int threads)
 {
 	const sph_neighbors *nb = &sh->nb;
 	const sph_kernel_consts kc = sh->k;
 	const float m = sh->mass, rho0 = sh->rho0, eps2 = 1e-6f * kc.h2;
 	const float dref = m * kc.spiky_grad * kc.h2, dmin = 1e-6f * dref * dref; /* |G| scale */
 	const long n = wk->n;
-	const size_t cap = nb->cap;
+	const float *pq = sh->pq;
+	/* the gradient's factor is < 0: G_ij points from i towards j */
+	const grad_args ga = {pq, kc.h, eps2, m * kc.spiky_grad};
 #pragma omp parallel for num_threads(threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
-		const float xi = x[i], yi = y[i], zi = z[i];
-		const uint32_t *list = nb->nbr + (size_t)i * cap;
-		const size_t o = wk->off[i];
-		uint32_t *packed = wk->nbr + o;
-		float *gxo = wk->gx + o, *gyo = wk->gy + o, *gzo = wk->gz + o;
-		const uint32_t cnt = nb->count[i];
-		const float mg = m * kc.spiky_grad;
-		float sx = 0, sy = 0, sz = 0, s2 = 0;
-		uint32_t q = 0;
-#ifdef __SSE2__
-		/* four pairs at a time (the square root and division are most of
-		 * the pass); lanes add in a fixed order, so any thread count gives
-		 * the same sums */
-		__m128 vsx = _mm_setzero_ps(), vsy = vsx, vsz = vsx, vs2 = vsx;
-		const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh = _mm_set1_ps(kc.h),
-		             veps2 = _mm_set1_ps(eps2), vmg = _mm_set1_ps(mg), zero = _mm_setzero_ps();
-		for (; q + 4 <= cnt; q += 4) {
-			const uint32_t j0 = list[q], j1 = list[q + 1], j2 = list[q + 2], j3 = list[q + 3];
-			const __m128 rx = _mm_sub_ps(vxi, _mm_setr_ps(x[j0], x[j1], x[j2], x[j3])),
-			             ry = _mm_sub_ps(vyi, _mm_setr_ps(y[j0], y[j1], y[j2], y[j3])),
-			             rz = _mm_sub_ps(vzi, _mm_setr_ps(z[j0], z[j1], z[j2], z[j3]));
-			const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
-			const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
-			const __m128 ok = _mm_and_ps(_mm_cmpgt_ps(r2, veps2), _mm_cmpgt_ps(hr, zero));
-			/* r is at least sqrt(eps2) where ok; elsewhere divide by 1 */
-			const __m128 rs = _mm_or_ps(_mm_and_ps(ok, r), _mm_andnot_ps(ok, _mm_set1_ps(1.0f)));
-			const __m128 c = _mm_and_ps(ok, _mm_div_ps(_mm_mul_ps(_mm_mul_ps(vmg, hr), hr), rs));
-			const __m128 gx = _mm_mul_ps(c, rx), gy = _mm_mul_ps(c, ry), gz = _mm_mul_ps(c, rz);
-			_mm_storeu_si128((__m128i *)(packed + q), _mm_loadu_si128((const __m128i *)(list + q)));
-			_mm_storeu_ps(gxo + q, gx);
-			_mm_storeu_ps(gyo + q, gy);
-			_mm_storeu_ps(gzo + q, gz);
-			vsx = _mm_add_ps(vsx, gx);
-			vsy = _mm_add_ps(vsy, gy);
-			vsz = _mm_add_ps(vsz, gz);
-			vs2 = _mm_add_ps(vs2, _mm_add_ps(_mm_add_ps(_mm_mul_ps(gx, gx), _mm_mul_ps(gy, gy)), _mm_mul_ps(gz, gz)));
-		}
-		float l4[4];
-		_mm_storeu_ps(l4, vsx);
-		sx = (l4[0] + l4[1]) + (l4[2] + l4[3]);
-		_mm_storeu_ps(l4, vsy);
-		sy = (l4[0] + l4[1]) + (l4[2] + l4[3]);
-		_mm_storeu_ps(l4, vsz);
-		sz = (l4[0] + l4[1]) + (l4[2] + l4[3]);
-		_mm_storeu_ps(l4, vs2);
-		s2 = (l4[0] + l4[1]) + (l4[2] + l4[3]);
+		const float xi = pq[4 * i], yi = pq[4 * i + 1], zi = pq[4 * i + 2];
+		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
+		dfsph_group *g = wk->g + wk->goff[i];
+		float s[4];
+#ifdef SPH_AVX2
+		if (wk->avx2)
+			grads_avx2(&ga, list, nb->count[i], (uint32_t)i, g, s);
+		else
 #endif
-		for (; q < cnt; ++q) {
-			const uint32_t j = list[q];
-			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
-			const float r2 = rx * rx + ry * ry + rz * rz;
-			const float r = sqrtf(r2), hr = kc.h - r;
-			const float c = r2 > eps2 && hr > 0 ? mg * hr * hr / r : 0.0f;
-			/* the gradient's factor is < 0: G_ij points from i towards j */
-			const float gx = c * rx, gy = c * ry, gz = c * rz;
-			packed[q] = j;
-			gxo[q] = gx;
-			gyo[q] = gy;
-			gzo[q] = gz;
-			sx += gx;
-			sy += gy;
-			sz += gz;
-			s2 += gx * gx + gy * gy + gz * gz;
-		}
+#ifdef __SSE2__
+			grads_sse(&ga, list, nb->count[i], (uint32_t)i, g, s);
+#else
+			grads_scalar(&ga, list, nb->count[i], (uint32_t)i, g, s);
+#endif
+		const float sx = s[0], sy = s[1], sz = s[2], s2 = s[3];
 		const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
 		const uint32_t bcnt = nb->bcount[i];
 		float bx = 0, by = 0, bz = 0, hx = 0, hy = 0, hz = 0;
@@ -238,85 +330,183 @@ static void gradients(const sph_shared *sh, const float *x, const float *y, cons
 	}
 }
 
-/* Drho_i/Dt from the predicted velocities. */
-static inline float density_rate(const dfsph_work *wk, long i)
+/* From Drho_i/Dt = r, the sweep's error and k_i. */
+static inline void settle(dfsph_work *wk, long i, float r, const sweep_args *a)
 {
-	const size_t o = wk->off[i];
-	const uint32_t *list = wk->nbr + o;
-	const float *gx = wk->gx + o, *gy = wk->gy + o, *gz = wk->gz + o;
-	const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
-	const uint32_t cnt = wk->count[i];
-	float sx = 0, sy = 0, sz = 0;
-	uint32_t q = 0;
-#ifdef __SSE2__
-	/* four neighbours' (v, k) are four loads and a transpose */
-	__m128 ax = _mm_setzero_ps(), ay = ax, az = ax;
-	for (; q + 4 <= cnt; q += 4) {
-		__m128 a = _mm_loadu_ps(&wk->v[list[q]].x), b = _mm_loadu_ps(&wk->v[list[q + 1]].x),
-		       c = _mm_loadu_ps(&wk->v[list[q + 2]].x), d = _mm_loadu_ps(&wk->v[list[q + 3]].x);
-		_MM_TRANSPOSE4_PS(a, b, c, d); /* a = vx, b = vy, c = vz of the four */
-		ax = _mm_add_ps(ax, _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(vi.x), a), _mm_loadu_ps(gx + q)));
-		ay = _mm_add_ps(ay, _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(vi.y), b), _mm_loadu_ps(gy + q)));
-		az = _mm_add_ps(az, _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(vi.z), c), _mm_loadu_ps(gz + q)));
+	if (a->divergence) {
+		r = r > 0 ? r : 0;
+		wk->err[i] = r * a->dt;
+		wk->k[i] = r * a->inv_dt * wk->b[i].w;
+	} else {
+		float e = wk->h[i].w + a->dt * r - a->rho0;
+		e = e > 0 ? e : 0;
+		wk->err[i] = e;
+		wk->k[i] = e * a->inv_dt2 * wk->b[i].w;
 	}
-	float l4[4];
-	_mm_storeu_ps(l4, _mm_add_ps(_mm_add_ps(ax, ay), az));
-	sx = (l4[0] + l4[1]) + (l4[2] + l4[3]);
-#endif
-	for (; q < cnt; ++q) {
-		const dfsph_f4 vj = wk->v[list[q]];
-		sx += (vi.x - vj.x) * gx[q];
-		sy += (vi.y - vj.y) * gy[q];
-		sz += (vi.z - vj.z) * gz[q];
-	}
-	return (sx + sy + sz) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z);
 }
 
-/* v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i); k in v[].w. Writes only
- * its own particle's x y z (others read w), and adds k_i to its sum. */
-static void correct(dfsph_work *wk, float dt, int threads)
-{
-	const long n = wk->n;
-#pragma omp parallel for num_threads(threads) schedule(static)
-	for (long i = 0; i < n; ++i) {
-		const size_t o = wk->off[i];
-		const uint32_t *list = wk->nbr + o;
-		const float *gx = wk->gx + o, *gy = wk->gy + o, *gz = wk->gz + o;
-		const dfsph_f4 bi = wk->b[i];
-		const float ki = wk->v[i].w;
-		const uint32_t cnt = wk->count[i];
-		const float kb = 2 * ki; /* the boundary particles mirror k_i */
-		float ax = kb * bi.x, ay = kb * bi.y, az = kb * bi.z;
-		uint32_t q = 0;
+/* The two halves of a sweep, over particles lo .. hi - 1. rate: from
+ * Drho_i/Dt of the predicted velocities, err and k. correct:
+ * v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i); it writes only particle
+ * i's velocity (the others read k) and adds k_i to its sum. */
+typedef void sweep_fn(dfsph_work *wk, const sweep_args *a, long lo, long hi);
+
 #ifdef __SSE2__
-		__m128 sx = _mm_setzero_ps(), sy = sx, sz = sx;
+static void rate_sse(dfsph_work *wk, const sweep_args *a, long lo, long hi)
+{
+	const dfsph_f4 *v = wk->v;
+	for (long i = lo; i < hi; ++i) {
+		const dfsph_f4 vi = v[i], bi = wk->b[i];
+		const __m128 vix = _mm_set1_ps(vi.x), viy = _mm_set1_ps(vi.y), viz = _mm_set1_ps(vi.z);
+		__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
+		for (const dfsph_group *g = wk->g + wk->goff[i], *ge = wk->g + wk->goff[i + 1]; g < ge; ++g)
+			for (int k = 0; k < 2; ++k) {
+				const uint32_t *l = g->j + 4 * k;
+				/* four neighbours' velocities are four loads and a transpose */
+				__m128 vx = _mm_loadu_ps(&v[l[0]].x), vy = _mm_loadu_ps(&v[l[1]].x), vz = _mm_loadu_ps(&v[l[2]].x),
+				       vw = _mm_loadu_ps(&v[l[3]].x);
+				_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
+				sx[k] = _mm_add_ps(sx[k], _mm_mul_ps(_mm_sub_ps(vix, vx), _mm_loadu_ps(g->gx + 4 * k)));
+				sy[k] = _mm_add_ps(sy[k], _mm_mul_ps(_mm_sub_ps(viy, vy), _mm_loadu_ps(g->gy + 4 * k)));
+				sz[k] = _mm_add_ps(sz[k], _mm_mul_ps(_mm_sub_ps(viz, vz), _mm_loadu_ps(g->gz + 4 * k)));
+			}
+		const __m128 s0 = _mm_add_ps(_mm_add_ps(sx[0], sy[0]), sz[0]), s1 = _mm_add_ps(_mm_add_ps(sx[1], sy[1]), sz[1]);
+		settle(wk, i, sph_hsum4(_mm_add_ps(s0, s1)) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z), a);
+	}
+}
+
+static void correct_sse(dfsph_work *wk, const sweep_args *a, long lo, long hi)
+{
+	const float *k = wk->k;
+	for (long i = lo; i < hi; ++i) {
+		const dfsph_f4 bi = wk->b[i];
+		const float ki = k[i], kb = 2 * ki; /* the boundary particles mirror k_i */
 		const __m128 vki = _mm_set1_ps(ki);
-		for (; q + 4 <= cnt; q += 4) {
-			const __m128 c = _mm_add_ps(vki, _mm_setr_ps(wk->v[list[q]].w, wk->v[list[q + 1]].w,
-			                                             wk->v[list[q + 2]].w, wk->v[list[q + 3]].w));
-			sx = _mm_add_ps(sx, _mm_mul_ps(c, _mm_loadu_ps(gx + q)));
-			sy = _mm_add_ps(sy, _mm_mul_ps(c, _mm_loadu_ps(gy + q)));
-			sz = _mm_add_ps(sz, _mm_mul_ps(c, _mm_loadu_ps(gz + q)));
-		}
-		float l4[4];
-		_mm_storeu_ps(l4, sx);
-		ax += (l4[0] + l4[1]) + (l4[2] + l4[3]);
-		_mm_storeu_ps(l4, sy);
-		ay += (l4[0] + l4[1]) + (l4[2] + l4[3]);
-		_mm_storeu_ps(l4, sz);
-		az += (l4[0] + l4[1]) + (l4[2] + l4[3]);
-#endif
-		for (; q < cnt; ++q) {
-			const float c = ki + wk->v[list[q]].w;
-			ax += c * gx[q];
-			ay += c * gy[q];
-			az += c * gz[q];
-		}
-		wk->v[i].x -= dt * ax;
-		wk->v[i].y -= dt * ay;
-		wk->v[i].z -= dt * az;
+		__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
+		for (const dfsph_group *g = wk->g + wk->goff[i], *ge = wk->g + wk->goff[i + 1]; g < ge; ++g)
+			for (int h = 0; h < 2; ++h) {
+				const uint32_t *l = g->j + 4 * h;
+				const __m128 c = _mm_add_ps(vki, _mm_setr_ps(k[l[0]], k[l[1]], k[l[2]], k[l[3]]));
+				sx[h] = _mm_add_ps(sx[h], _mm_mul_ps(c, _mm_loadu_ps(g->gx + 4 * h)));
+				sy[h] = _mm_add_ps(sy[h], _mm_mul_ps(c, _mm_loadu_ps(g->gy + 4 * h)));
+				sz[h] = _mm_add_ps(sz[h], _mm_mul_ps(c, _mm_loadu_ps(g->gz + 4 * h)));
+			}
+		wk->v[i].x -= a->dt * (kb * bi.x + sph_hsum4(_mm_add_ps(sx[0], sx[1])));
+		wk->v[i].y -= a->dt * (kb * bi.y + sph_hsum4(_mm_add_ps(sy[0], sy[1])));
+		wk->v[i].z -= a->dt * (kb * bi.z + sph_hsum4(_mm_add_ps(sz[0], sz[1])));
 		wk->ksum[i] += ki;
 	}
+}
+#else
+static void rate_scalar(dfsph_work *wk, const sweep_args *a, long lo, long hi)
+{
+	const dfsph_f4 *v = wk->v;
+	for (long i = lo; i < hi; ++i) {
+		const dfsph_f4 vi = v[i], bi = wk->b[i];
+		float sx[8] = {0}, sy[8] = {0}, sz[8] = {0}, s[8];
+		for (const dfsph_group *g = wk->g + wk->goff[i], *ge = wk->g + wk->goff[i + 1]; g < ge; ++g)
+			for (int l = 0; l < 8; ++l) {
+				const dfsph_f4 vj = v[g->j[l]];
+				sx[l] += (vi.x - vj.x) * g->gx[l];
+				sy[l] += (vi.y - vj.y) * g->gy[l];
+				sz[l] += (vi.z - vj.z) * g->gz[l];
+			}
+		for (int l = 0; l < 8; ++l)
+			s[l] = (sx[l] + sy[l]) + sz[l];
+		settle(wk, i, lanes_sum(s) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z), a);
+	}
+}
+
+static void correct_scalar(dfsph_work *wk, const sweep_args *a, long lo, long hi)
+{
+	const float *k = wk->k;
+	for (long i = lo; i < hi; ++i) {
+		const dfsph_f4 bi = wk->b[i];
+		const float ki = k[i], kb = 2 * ki;
+		float sx[8] = {0}, sy[8] = {0}, sz[8] = {0};
+		for (const dfsph_group *g = wk->g + wk->goff[i], *ge = wk->g + wk->goff[i + 1]; g < ge; ++g)
+			for (int l = 0; l < 8; ++l) {
+				const float c = ki + k[g->j[l]];
+				sx[l] += c * g->gx[l];
+				sy[l] += c * g->gy[l];
+				sz[l] += c * g->gz[l];
+			}
+		wk->v[i].x -= a->dt * (kb * bi.x + lanes_sum(sx));
+		wk->v[i].y -= a->dt * (kb * bi.y + lanes_sum(sy));
+		wk->v[i].z -= a->dt * (kb * bi.z + lanes_sum(sz));
+		wk->ksum[i] += ki;
+	}
+}
+#endif
+
+#ifdef SPH_AVX2
+__attribute__((target("avx2"))) static void rate_avx2(dfsph_work *wk, const sweep_args *a, long lo, long hi)
+{
+	const dfsph_f4 *v = wk->v;
+	for (long i = lo; i < hi; ++i) {
+		const dfsph_f4 vi = v[i], bi = wk->b[i];
+		const __m256 vix = _mm256_set1_ps(vi.x), viy = _mm256_set1_ps(vi.y), viz = _mm256_set1_ps(vi.z);
+		__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
+		for (const dfsph_group *g = wk->g + wk->goff[i], *ge = wk->g + wk->goff[i + 1]; g < ge; ++g) {
+			const uint32_t *l = g->j;
+			const float *const quad[8] = {&v[l[0]].x, &v[l[1]].x, &v[l[2]].x, &v[l[3]].x,
+			                              &v[l[4]].x, &v[l[5]].x, &v[l[6]].x, &v[l[7]].x};
+			__m256 vx, vy, vz, vw;
+			sph_transpose8(quad, &vx, &vy, &vz, &vw);
+			sx = _mm256_add_ps(sx, _mm256_mul_ps(_mm256_sub_ps(vix, vx), _mm256_loadu_ps(g->gx)));
+			sy = _mm256_add_ps(sy, _mm256_mul_ps(_mm256_sub_ps(viy, vy), _mm256_loadu_ps(g->gy)));
+			sz = _mm256_add_ps(sz, _mm256_mul_ps(_mm256_sub_ps(viz, vz), _mm256_loadu_ps(g->gz)));
+		}
+		settle(wk, i, sph_hsum8(_mm256_add_ps(_mm256_add_ps(sx, sy), sz)) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z),
+		       a);
+	}
+}
+
+__attribute__((target("avx2"))) static void correct_avx2(dfsph_work *wk, const sweep_args *a, long lo, long hi)
+{
+	const float *k = wk->k;
+	for (long i = lo; i < hi; ++i) {
+		const dfsph_f4 bi = wk->b[i];
+		const float ki = k[i], kb = 2 * ki; /* the boundary particles mirror k_i */
+		const __m256 vki = _mm256_set1_ps(ki);
+		__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
+		for (const dfsph_group *g = wk->g + wk->goff[i], *ge = wk->g + wk->goff[i + 1]; g < ge; ++g) {
+			/* eight scalar loads: faster here than vgatherdps */
+			const uint32_t *l = g->j;
+			const __m256 kj = _mm256_setr_ps(k[l[0]], k[l[1]], k[l[2]], k[l[3]], k[l[4]], k[l[5]], k[l[6]], k[l[7]]);
+			const __m256 c = _mm256_add_ps(vki, kj);
+			sx = _mm256_add_ps(sx, _mm256_mul_ps(c, _mm256_loadu_ps(g->gx)));
+			sy = _mm256_add_ps(sy, _mm256_mul_ps(c, _mm256_loadu_ps(g->gy)));
+			sz = _mm256_add_ps(sz, _mm256_mul_ps(c, _mm256_loadu_ps(g->gz)));
+		}
+		wk->v[i].x -= a->dt * (kb * bi.x + sph_hsum8(sx));
+		wk->v[i].y -= a->dt * (kb * bi.y + sph_hsum8(sy));
+		wk->v[i].z -= a->dt * (kb * bi.z + sph_hsum8(sz));
+		wk->ksum[i] += ki;
+	}
+}
+#endif
+
+/* A pass over all particles, the threads taking equal shares in order:
+ * each particle's result depends on no other's order, so it is the same for
+ * any thread count. rate sets err and k from the current velocities, correct
+ * applies k to them. (Tried: fusing a correction with the next rates, rating
+ * a particle as soon as its neighbours were corrected while its groups were
+ * in cache; the same bits, but no faster: the passes are not bound by
+ * streaming the groups.) */
+static void sweep(dfsph_work *wk, const sweep_args *a, bool rate, int threads)
+{
+#if defined(SPH_AVX2)
+	sweep_fn *fn = wk->avx2 ? (rate ? rate_avx2 : correct_avx2) : (rate ? rate_sse : correct_sse);
+#elif defined(__SSE2__)
+	sweep_fn *fn = rate ? rate_sse : correct_sse;
+#else
+	sweep_fn *fn = rate ? rate_scalar : correct_scalar;
+#endif
+	const long n = wk->n;
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (int t = 0; t < threads; ++t)
+		fn(wk, a, n * t / threads, n * (t + 1) / threads);
 }
 
 /* Serial sum in row order: the same for any thread count. */
@@ -331,21 +521,14 @@ static double mean_of(const float *e, long n)
 /* Divergence-free solve: sweeps until mean max(Drho/Dt, 0) dt / rho0 <= tol. */
 static int divergence_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float dt, int threads)
 {
-	const long n = wk->n;
-	const float inv_dt = 1.0f / dt;
+	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true};
 	int it = 0;
 	for (;;) {
-#pragma omp parallel for num_threads(threads) schedule(static)
-		for (long i = 0; i < n; ++i) {
-			float r = density_rate(wk, i);
-			r = r > 0 ? r : 0;
-			wk->err[i] = r * dt;
-			wk->v[i].w = r * inv_dt * wk->b[i].w;
-		}
-		const double e = mean_of(wk->err, n) / rho0;
+		sweep(wk, &a, true, threads);
+		const double e = mean_of(wk->err, wk->n) / rho0;
 		if ((it >= 1 && e <= sd->def.max_divergence_error) || it >= sd->def.max_divergence_iterations)
 			break;
-		correct(wk, dt, threads);
+		sweep(wk, &a, false, threads);
 		++it;
 	}
 	return it;
@@ -354,21 +537,14 @@ static int divergence_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, flo
 /* Constant-density solve: sweeps until mean max(rho* - rho0, 0) / rho0 <= tol. */
 static int density_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float dt, int threads, double *residual)
 {
-	const long n = wk->n;
-	const float inv_dt2 = 1.0f / (dt * dt);
+	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, false};
 	int it = 0;
 	for (;;) {
-#pragma omp parallel for num_threads(threads) schedule(static)
-		for (long i = 0; i < n; ++i) {
-			float e = wk->h[i].w + dt * density_rate(wk, i) - rho0;
-			e = e > 0 ? e : 0;
-			wk->err[i] = e;
-			wk->v[i].w = e * inv_dt2 * wk->b[i].w;
-		}
-		*residual = mean_of(wk->err, n) / rho0;
+		sweep(wk, &a, true, threads);
+		*residual = mean_of(wk->err, wk->n) / rho0;
 		if ((it >= DFSPH_MIN_SWEEPS && *residual <= sd->def.max_density_error) || it >= sd->def.max_iterations)
 			break;
-		correct(wk, dt, threads);
+		sweep(wk, &a, false, threads);
 		++it;
 	}
 	return it;
@@ -399,7 +575,6 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	}
 	const sph_neighbors *nb = &sh->nb;
 	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
-	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *rho = eddy__col(w, COL_DENSITY);
 	float *p = eddy__col(w, COL_PRESSURE);
@@ -410,29 +585,26 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 
 	dfsph_work wk;
 	wk.n = n;
-	wk.count = nb->count;
+	wk.avx2 = sd->avx2;
 	const size_t un = (size_t)n;
-	wk.off = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk.off);
-	if (!wk.off)
+	wk.goff = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk.goff);
+	if (!wk.goff)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
-	wk.off[0] = 0;
+	wk.goff[0] = 0;
 	for (long i = 0; i < n; ++i)
-		wk.off[i + 1] = wk.off[i] + nb->count[i];
-	const size_t pairs = wk.off[n] ? wk.off[n] : 1;
-	wk.nbr = eddy__arena_alloc(&w->arena, pairs * sizeof *wk.nbr);
-	wk.gx = eddy__arena_alloc(&w->arena, 3 * pairs * sizeof *wk.gx);
-	wk.gy = wk.gx ? wk.gx + pairs : NULL;
-	wk.gz = wk.gx ? wk.gy + pairs : NULL;
-	dfsph_f4 *block = eddy__arena_alloc(&w->arena, 3 * un * sizeof(dfsph_f4) + 2 * un * sizeof(float));
-	if (!wk.nbr || !wk.gx || !block)
+		wk.goff[i + 1] = wk.goff[i] + (nb->count[i] + 7) / 8;
+	wk.g = eddy__arena_alloc(&w->arena, (wk.goff[n] ? wk.goff[n] : 1) * sizeof *wk.g);
+	dfsph_f4 *block = eddy__arena_alloc(&w->arena, 3 * un * sizeof(dfsph_f4) + 3 * un * sizeof(float));
+	if (!wk.g || !block)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
 	wk.b = block;
 	wk.v = wk.b + un;
 	wk.h = wk.v + un;
-	wk.ksum = (float *)(wk.h + un);
+	wk.k = (float *)(wk.h + un);
+	wk.ksum = wk.k + un;
 	wk.err = wk.ksum + un;
 
-	gradients(sh, x, y, z, rho, w->def.gravity, &wk, ctx->threads);
+	gradients(sh, rho, w->def.gravity, &wk, ctx->threads);
 	memset(wk.ksum, 0, un * sizeof *wk.ksum);
 
 	int div_it = 0;
@@ -545,5 +717,9 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
 	sd->def = *def;
 	sd->frame = -1;
+#ifdef SPH_AVX2
+	const char *no_avx2 = getenv("EDDY_NO_AVX2");
+	sd->avx2 = sph_use_avx2() && !(no_avx2 && *no_avx2);
+#endif
 	return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, dfsph_reads, 10, dfsph_writes, 4);
 }
