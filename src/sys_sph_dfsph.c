@@ -121,9 +121,21 @@ typedef struct dfsph_f4 {
  * one array with neither a scalar tail nor a mask, and a group is what one
  * AVX2 register or two SSE ones hold. */
 typedef struct dfsph_group {
-	uint32_t j[8];
+	uint32_t j2[8]; /* 2 j: address modes of scale 8 and 2 then reach the 16-byte
+	                 * v[j] and pq[j] and the 4-byte k[j] without a shift */
 	float gx[8], gy[8], gz[8];
 } dfsph_group;
+
+/* v[j] or pq[j] (four floats), and k[j], of 2 j */
+static inline const float *quad_of(const float *base, uint32_t j2)
+{
+	return base + 2 * (size_t)j2;
+}
+
+static inline float k_of(const float *k, uint32_t j2)
+{
+	return *(const float *)((const char *)k + 2 * (size_t)j2);
+}
 
 typedef struct dfsph_work {
 	long n;
@@ -145,11 +157,11 @@ typedef struct sweep_args {
 	bool divergence; /* the divergence-free solve, else the constant-density one */
 } sweep_args;
 
-/* The neighbours of group q, padded with i itself. */
-static inline void group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t i, uint32_t l[8])
+/* The neighbours of group q, padded with i itself, as 2 j. */
+static inline void group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t i, uint32_t l2[8])
 {
 	for (uint32_t k = 0; k < 8; ++k)
-		l[k] = q + k < cnt ? list[q + k] : i;
+		l2[k] = 2 * (q + k < cnt ? list[q + k] : i);
 }
 
 /* Constants of the gradient pass. */
@@ -170,11 +182,11 @@ static void grads_sse(const grad_args *a, const uint32_t *list, uint32_t cnt, ui
 	             zero = _mm_setzero_ps();
 	__m128 sx[2] = {zero, zero}, sy[2] = {zero, zero}, sz[2] = {zero, zero}, s2[2] = {zero, zero};
 	for (uint32_t q = 0; q < cnt; q += 8, ++g) {
-		group_rows(list, cnt, q, i, g->j);
+		group_rows(list, cnt, q, i, g->j2);
 		for (int k = 0; k < 2; ++k) {
-			const uint32_t *l = g->j + 4 * k;
-			__m128 px = _mm_loadu_ps(a->pq + 4 * (size_t)l[0]), py = _mm_loadu_ps(a->pq + 4 * (size_t)l[1]),
-			       pz = _mm_loadu_ps(a->pq + 4 * (size_t)l[2]), pw = _mm_loadu_ps(a->pq + 4 * (size_t)l[3]);
+			const uint32_t *l = g->j2 + 4 * k;
+			__m128 px = _mm_loadu_ps(quad_of(a->pq, l[0])), py = _mm_loadu_ps(quad_of(a->pq, l[1])),
+			       pz = _mm_loadu_ps(quad_of(a->pq, l[2])), pw = _mm_loadu_ps(quad_of(a->pq, l[3]));
 			_MM_TRANSPOSE4_PS(px, py, pz, pw);
 			const __m128 rx = _mm_sub_ps(vxi, px), ry = _mm_sub_ps(vyi, py), rz = _mm_sub_ps(vzi, pz);
 			const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
@@ -211,9 +223,9 @@ static void grads_scalar(const grad_args *a, const uint32_t *list, uint32_t cnt,
 	const float *pi = a->pq + 4 * (size_t)i;
 	float sx[8] = {0}, sy[8] = {0}, sz[8] = {0}, s2[8] = {0};
 	for (uint32_t q = 0; q < cnt; q += 8, ++g) {
-		group_rows(list, cnt, q, i, g->j);
+		group_rows(list, cnt, q, i, g->j2);
 		for (int l = 0; l < 8; ++l) {
-			const float *pj = a->pq + 4 * (size_t)g->j[l];
+			const float *pj = quad_of(a->pq, g->j2[l]);
 			const float rx = pi[0] - pj[0], ry = pi[1] - pj[1], rz = pi[2] - pj[2];
 			const float r2 = rx * rx + ry * ry + rz * rz;
 			const float r = sqrtf(r2), hr = a->h - r;
@@ -244,11 +256,11 @@ __attribute__((target("avx2"))) static void grads_avx2(const grad_args *a, const
 	             one = _mm256_set1_ps(1.0f), zero = _mm256_setzero_ps();
 	__m256 sx = zero, sy = zero, sz = zero, s2 = zero;
 	for (uint32_t q = 0; q < cnt; q += 8, ++g) {
-		group_rows(list, cnt, q, i, g->j);
-		const uint32_t *l = g->j;
-		const float *const quad[8] = {a->pq + 4 * (size_t)l[0], a->pq + 4 * (size_t)l[1], a->pq + 4 * (size_t)l[2],
-		                              a->pq + 4 * (size_t)l[3], a->pq + 4 * (size_t)l[4], a->pq + 4 * (size_t)l[5],
-		                              a->pq + 4 * (size_t)l[6], a->pq + 4 * (size_t)l[7]};
+		group_rows(list, cnt, q, i, g->j2);
+		const uint32_t *l = g->j2;
+		const float *const quad[8] = {quad_of(a->pq, l[0]), quad_of(a->pq, l[1]), quad_of(a->pq, l[2]),
+		                              quad_of(a->pq, l[3]), quad_of(a->pq, l[4]), quad_of(a->pq, l[5]),
+		                              quad_of(a->pq, l[6]), quad_of(a->pq, l[7])};
 		__m256 px, py, pz, pw;
 		sph_transpose8(quad, &px, &py, &pz, &pw);
 		const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
@@ -330,90 +342,139 @@ static void gradients(const sph_shared *sh, const float *rho, eddy_vec3 grav, df
 	}
 }
 
-/* From Drho_i/Dt = r, the sweep's error and k_i. */
-static inline void settle(dfsph_work *wk, long i, float r, const sweep_args *a)
-{
-	if (a->divergence) {
-		r = r > 0 ? r : 0;
-		wk->err[i] = r * a->dt;
-		wk->k[i] = r * a->inv_dt * wk->b[i].w;
-	} else {
-		float e = wk->h[i].w + a->dt * r - a->rho0;
-		e = e > 0 ? e : 0;
-		wk->err[i] = e;
-		wk->k[i] = e * a->inv_dt2 * wk->b[i].w;
-	}
-}
-
 /* The two halves of a sweep, over particles lo .. hi - 1. rate: from
  * Drho_i/Dt of the predicted velocities, err and k. correct:
  * v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i); it writes only particle
- * i's velocity (the others read k) and adds k_i to its sum. */
+ * i's velocity (the others read k) and adds k_i to its sum.
+ * Both go in blocks of particles: first the sums over the groups, left as
+ * four lanes a particle, then the rest for the block. Finishing each
+ * particle right after its groups made a chain of dependent adds, some 50
+ * cycles, that a mispredicted loop exit left exposed for every particle;
+ * the particles of the second loop are independent. */
 typedef void sweep_fn(dfsph_work *wk, const sweep_args *a, long lo, long hi);
 
+#define DFSPH_BLOCK 64
+
 #ifdef __SSE2__
+/* rate's second loop: t = the lanes of (v_i - v_j) . G_ij over the pairs
+ * (lane l holding lanes l and l + 4 of the groups) */
+static inline void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, const float (*t)[4])
+{
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
+		const float r = sph_hsum4(_mm_loadu_ps(t[q])) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z);
+		if (a->divergence) {
+			const float d = r > 0 ? r : 0;
+			wk->err[i] = d * a->dt;
+			wk->k[i] = d * a->inv_dt * bi.w;
+		} else {
+			float e = wk->h[i].w + a->dt * r - a->rho0;
+			e = e > 0 ? e : 0;
+			wk->err[i] = e;
+			wk->k[i] = e * a->inv_dt2 * bi.w;
+		}
+	}
+}
+
+/* correct's second loop: t = the lanes of the sums (k_i + k_j) G_ij by
+ * component (x, y, z, four lanes each) */
+static inline void correct_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, const float (*t)[12])
+{
+	const __m128 xyz = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0)), vdt = _mm_set1_ps(a->dt);
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		const float ki = wk->k[i], kb = 2 * ki; /* the boundary particles mirror k_i */
+		const __m128 f = _mm_setr_ps(sph_hsum4(_mm_loadu_ps(t[q])), sph_hsum4(_mm_loadu_ps(t[q] + 4)),
+		                             sph_hsum4(_mm_loadu_ps(t[q] + 8)), 0.0f);
+		const __m128 d = _mm_mul_ps(vdt, _mm_add_ps(_mm_mul_ps(_mm_set1_ps(kb), _mm_loadu_ps(&wk->b[i].x)), f));
+		/* lane 3 masked: v's w stays as it was */
+		_mm_storeu_ps(&wk->v[i].x, _mm_sub_ps(_mm_loadu_ps(&wk->v[i].x), _mm_and_ps(d, xyz)));
+		wk->ksum[i] += ki;
+	}
+}
+
 static void rate_sse(dfsph_work *wk, const sweep_args *a, long lo, long hi)
 {
-	const dfsph_f4 *v = wk->v;
-	for (long i = lo; i < hi; ++i) {
-		const dfsph_f4 vi = v[i], bi = wk->b[i];
-		const __m128 vix = _mm_set1_ps(vi.x), viy = _mm_set1_ps(vi.y), viz = _mm_set1_ps(vi.z);
-		__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
-		for (const dfsph_group *g = wk->g + wk->goff[i], *ge = wk->g + wk->goff[i + 1]; g < ge; ++g)
-			for (int k = 0; k < 2; ++k) {
-				const uint32_t *l = g->j + 4 * k;
-				/* four neighbours' velocities are four loads and a transpose */
-				__m128 vx = _mm_loadu_ps(&v[l[0]].x), vy = _mm_loadu_ps(&v[l[1]].x), vz = _mm_loadu_ps(&v[l[2]].x),
-				       vw = _mm_loadu_ps(&v[l[3]].x);
-				_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
-				sx[k] = _mm_add_ps(sx[k], _mm_mul_ps(_mm_sub_ps(vix, vx), _mm_loadu_ps(g->gx + 4 * k)));
-				sy[k] = _mm_add_ps(sy[k], _mm_mul_ps(_mm_sub_ps(viy, vy), _mm_loadu_ps(g->gy + 4 * k)));
-				sz[k] = _mm_add_ps(sz[k], _mm_mul_ps(_mm_sub_ps(viz, vz), _mm_loadu_ps(g->gz + 4 * k)));
-			}
-		const __m128 s0 = _mm_add_ps(_mm_add_ps(sx[0], sy[0]), sz[0]), s1 = _mm_add_ps(_mm_add_ps(sx[1], sy[1]), sz[1]);
-		settle(wk, i, sph_hsum4(_mm_add_ps(s0, s1)) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z), a);
+	const float *vf = &wk->v->x;
+	float t[DFSPH_BLOCK][4];
+	for (long i0 = lo; i0 < hi; i0 += DFSPH_BLOCK) {
+		const long cnt = hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK;
+		for (long q = 0; q < cnt; ++q) {
+			const float *vi = vf + 4 * (i0 + q);
+			const __m128 vix = _mm_set1_ps(vi[0]), viy = _mm_set1_ps(vi[1]), viz = _mm_set1_ps(vi[2]);
+			__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
+			for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
+				for (int k = 0; k < 2; ++k) {
+					const uint32_t *l = g->j2 + 4 * k;
+					/* four neighbours' velocities are four loads and a transpose */
+					__m128 vx = _mm_loadu_ps(quad_of(vf, l[0])), vy = _mm_loadu_ps(quad_of(vf, l[1])),
+					       vz = _mm_loadu_ps(quad_of(vf, l[2])), vw = _mm_loadu_ps(quad_of(vf, l[3]));
+					_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
+					sx[k] = _mm_add_ps(sx[k], _mm_mul_ps(_mm_sub_ps(vix, vx), _mm_loadu_ps(g->gx + 4 * k)));
+					sy[k] = _mm_add_ps(sy[k], _mm_mul_ps(_mm_sub_ps(viy, vy), _mm_loadu_ps(g->gy + 4 * k)));
+					sz[k] = _mm_add_ps(sz[k], _mm_mul_ps(_mm_sub_ps(viz, vz), _mm_loadu_ps(g->gz + 4 * k)));
+				}
+			_mm_storeu_ps(t[q], _mm_add_ps(_mm_add_ps(_mm_add_ps(sx[0], sy[0]), sz[0]),
+			                               _mm_add_ps(_mm_add_ps(sx[1], sy[1]), sz[1])));
+		}
+		rate_finish(wk, a, i0, cnt, (const float(*)[4])t);
 	}
 }
 
 static void correct_sse(dfsph_work *wk, const sweep_args *a, long lo, long hi)
 {
 	const float *k = wk->k;
-	for (long i = lo; i < hi; ++i) {
-		const dfsph_f4 bi = wk->b[i];
-		const float ki = k[i], kb = 2 * ki; /* the boundary particles mirror k_i */
-		const __m128 vki = _mm_set1_ps(ki);
-		__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
-		for (const dfsph_group *g = wk->g + wk->goff[i], *ge = wk->g + wk->goff[i + 1]; g < ge; ++g)
-			for (int h = 0; h < 2; ++h) {
-				const uint32_t *l = g->j + 4 * h;
-				const __m128 c = _mm_add_ps(vki, _mm_setr_ps(k[l[0]], k[l[1]], k[l[2]], k[l[3]]));
-				sx[h] = _mm_add_ps(sx[h], _mm_mul_ps(c, _mm_loadu_ps(g->gx + 4 * h)));
-				sy[h] = _mm_add_ps(sy[h], _mm_mul_ps(c, _mm_loadu_ps(g->gy + 4 * h)));
-				sz[h] = _mm_add_ps(sz[h], _mm_mul_ps(c, _mm_loadu_ps(g->gz + 4 * h)));
-			}
-		wk->v[i].x -= a->dt * (kb * bi.x + sph_hsum4(_mm_add_ps(sx[0], sx[1])));
-		wk->v[i].y -= a->dt * (kb * bi.y + sph_hsum4(_mm_add_ps(sy[0], sy[1])));
-		wk->v[i].z -= a->dt * (kb * bi.z + sph_hsum4(_mm_add_ps(sz[0], sz[1])));
-		wk->ksum[i] += ki;
+	float t[DFSPH_BLOCK][12];
+	for (long i0 = lo; i0 < hi; i0 += DFSPH_BLOCK) {
+		const long cnt = hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK;
+		for (long q = 0; q < cnt; ++q) {
+			const __m128 vki = _mm_set1_ps(k[i0 + q]);
+			__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
+			for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
+				for (int h = 0; h < 2; ++h) {
+					const uint32_t *l = g->j2 + 4 * h;
+					const __m128 c =
+						_mm_add_ps(vki, _mm_setr_ps(k_of(k, l[0]), k_of(k, l[1]), k_of(k, l[2]), k_of(k, l[3])));
+					sx[h] = _mm_add_ps(sx[h], _mm_mul_ps(c, _mm_loadu_ps(g->gx + 4 * h)));
+					sy[h] = _mm_add_ps(sy[h], _mm_mul_ps(c, _mm_loadu_ps(g->gy + 4 * h)));
+					sz[h] = _mm_add_ps(sz[h], _mm_mul_ps(c, _mm_loadu_ps(g->gz + 4 * h)));
+				}
+			_mm_storeu_ps(t[q], _mm_add_ps(sx[0], sx[1]));
+			_mm_storeu_ps(t[q] + 4, _mm_add_ps(sy[0], sy[1]));
+			_mm_storeu_ps(t[q] + 8, _mm_add_ps(sz[0], sz[1]));
+		}
+		correct_finish(wk, a, i0, cnt, (const float(*)[12])t);
 	}
 }
 #else
+/* Without SSE the vector paths' lanes one by one, summed in their order. */
 static void rate_scalar(dfsph_work *wk, const sweep_args *a, long lo, long hi)
 {
-	const dfsph_f4 *v = wk->v;
+	const float *vf = &wk->v->x;
 	for (long i = lo; i < hi; ++i) {
-		const dfsph_f4 vi = v[i], bi = wk->b[i];
+		const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
 		float sx[8] = {0}, sy[8] = {0}, sz[8] = {0}, s[8];
 		for (const dfsph_group *g = wk->g + wk->goff[i], *ge = wk->g + wk->goff[i + 1]; g < ge; ++g)
 			for (int l = 0; l < 8; ++l) {
-				const dfsph_f4 vj = v[g->j[l]];
-				sx[l] += (vi.x - vj.x) * g->gx[l];
-				sy[l] += (vi.y - vj.y) * g->gy[l];
-				sz[l] += (vi.z - vj.z) * g->gz[l];
+				const float *vj = quad_of(vf, g->j2[l]);
+				sx[l] += (vi.x - vj[0]) * g->gx[l];
+				sy[l] += (vi.y - vj[1]) * g->gy[l];
+				sz[l] += (vi.z - vj[2]) * g->gz[l];
 			}
 		for (int l = 0; l < 8; ++l)
 			s[l] = (sx[l] + sy[l]) + sz[l];
-		settle(wk, i, lanes_sum(s) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z), a);
+		const float r = lanes_sum(s) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z);
+		if (a->divergence) {
+			const float d = r > 0 ? r : 0;
+			wk->err[i] = d * a->dt;
+			wk->k[i] = d * a->inv_dt * bi.w;
+		} else {
+			float e = wk->h[i].w + a->dt * r - a->rho0;
+			e = e > 0 ? e : 0;
+			wk->err[i] = e;
+			wk->k[i] = e * a->inv_dt2 * bi.w;
+		}
 	}
 }
 
@@ -426,7 +487,7 @@ static void correct_scalar(dfsph_work *wk, const sweep_args *a, long lo, long hi
 		float sx[8] = {0}, sy[8] = {0}, sz[8] = {0};
 		for (const dfsph_group *g = wk->g + wk->goff[i], *ge = wk->g + wk->goff[i + 1]; g < ge; ++g)
 			for (int l = 0; l < 8; ++l) {
-				const float c = ki + k[g->j[l]];
+				const float c = ki + k_of(k, g->j2[l]);
 				sx[l] += c * g->gx[l];
 				sy[l] += c * g->gy[l];
 				sz[l] += c * g->gz[l];
@@ -440,49 +501,63 @@ static void correct_scalar(dfsph_work *wk, const sweep_args *a, long lo, long hi
 #endif
 
 #ifdef SPH_AVX2
+/* lanes l and l + 4 added, as the SSE path adds its halves */
+__attribute__((target("avx2"))) static inline __m128 fold8(__m256 v)
+{
+	return _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
+}
+
 __attribute__((target("avx2"))) static void rate_avx2(dfsph_work *wk, const sweep_args *a, long lo, long hi)
 {
-	const dfsph_f4 *v = wk->v;
-	for (long i = lo; i < hi; ++i) {
-		const dfsph_f4 vi = v[i], bi = wk->b[i];
-		const __m256 vix = _mm256_set1_ps(vi.x), viy = _mm256_set1_ps(vi.y), viz = _mm256_set1_ps(vi.z);
-		__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
-		for (const dfsph_group *g = wk->g + wk->goff[i], *ge = wk->g + wk->goff[i + 1]; g < ge; ++g) {
-			const uint32_t *l = g->j;
-			const float *const quad[8] = {&v[l[0]].x, &v[l[1]].x, &v[l[2]].x, &v[l[3]].x,
-			                              &v[l[4]].x, &v[l[5]].x, &v[l[6]].x, &v[l[7]].x};
-			__m256 vx, vy, vz, vw;
-			sph_transpose8(quad, &vx, &vy, &vz, &vw);
-			sx = _mm256_add_ps(sx, _mm256_mul_ps(_mm256_sub_ps(vix, vx), _mm256_loadu_ps(g->gx)));
-			sy = _mm256_add_ps(sy, _mm256_mul_ps(_mm256_sub_ps(viy, vy), _mm256_loadu_ps(g->gy)));
-			sz = _mm256_add_ps(sz, _mm256_mul_ps(_mm256_sub_ps(viz, vz), _mm256_loadu_ps(g->gz)));
+	const float *vf = &wk->v->x;
+	float t[DFSPH_BLOCK][4];
+	for (long i0 = lo; i0 < hi; i0 += DFSPH_BLOCK) {
+		const long cnt = hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK;
+		for (long q = 0; q < cnt; ++q) {
+			const float *vi = vf + 4 * (i0 + q);
+			const __m256 vix = _mm256_set1_ps(vi[0]), viy = _mm256_set1_ps(vi[1]), viz = _mm256_set1_ps(vi[2]);
+			__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
+			for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
+				const uint32_t *l = g->j2;
+				const float *const quad[8] = {quad_of(vf, l[0]), quad_of(vf, l[1]), quad_of(vf, l[2]),
+				                              quad_of(vf, l[3]), quad_of(vf, l[4]), quad_of(vf, l[5]),
+				                              quad_of(vf, l[6]), quad_of(vf, l[7])};
+				__m256 vx, vy, vz, vw;
+				sph_transpose8(quad, &vx, &vy, &vz, &vw);
+				sx = _mm256_add_ps(sx, _mm256_mul_ps(_mm256_sub_ps(vix, vx), _mm256_loadu_ps(g->gx)));
+				sy = _mm256_add_ps(sy, _mm256_mul_ps(_mm256_sub_ps(viy, vy), _mm256_loadu_ps(g->gy)));
+				sz = _mm256_add_ps(sz, _mm256_mul_ps(_mm256_sub_ps(viz, vz), _mm256_loadu_ps(g->gz)));
+			}
+			_mm_storeu_ps(t[q], fold8(_mm256_add_ps(_mm256_add_ps(sx, sy), sz)));
 		}
-		settle(wk, i, sph_hsum8(_mm256_add_ps(_mm256_add_ps(sx, sy), sz)) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z),
-		       a);
+		rate_finish(wk, a, i0, cnt, (const float(*)[4])t);
 	}
 }
 
 __attribute__((target("avx2"))) static void correct_avx2(dfsph_work *wk, const sweep_args *a, long lo, long hi)
 {
 	const float *k = wk->k;
-	for (long i = lo; i < hi; ++i) {
-		const dfsph_f4 bi = wk->b[i];
-		const float ki = k[i], kb = 2 * ki; /* the boundary particles mirror k_i */
-		const __m256 vki = _mm256_set1_ps(ki);
-		__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
-		for (const dfsph_group *g = wk->g + wk->goff[i], *ge = wk->g + wk->goff[i + 1]; g < ge; ++g) {
-			/* eight scalar loads: faster here than vgatherdps */
-			const uint32_t *l = g->j;
-			const __m256 kj = _mm256_setr_ps(k[l[0]], k[l[1]], k[l[2]], k[l[3]], k[l[4]], k[l[5]], k[l[6]], k[l[7]]);
-			const __m256 c = _mm256_add_ps(vki, kj);
-			sx = _mm256_add_ps(sx, _mm256_mul_ps(c, _mm256_loadu_ps(g->gx)));
-			sy = _mm256_add_ps(sy, _mm256_mul_ps(c, _mm256_loadu_ps(g->gy)));
-			sz = _mm256_add_ps(sz, _mm256_mul_ps(c, _mm256_loadu_ps(g->gz)));
+	float t[DFSPH_BLOCK][12];
+	for (long i0 = lo; i0 < hi; i0 += DFSPH_BLOCK) {
+		const long cnt = hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK;
+		for (long q = 0; q < cnt; ++q) {
+			const __m256 vki = _mm256_set1_ps(k[i0 + q]);
+			__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
+			for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
+				/* eight scalar loads: faster here than vgatherdps */
+				const uint32_t *l = g->j2;
+				const __m256 kj = _mm256_setr_ps(k_of(k, l[0]), k_of(k, l[1]), k_of(k, l[2]), k_of(k, l[3]),
+				                                 k_of(k, l[4]), k_of(k, l[5]), k_of(k, l[6]), k_of(k, l[7]));
+				const __m256 c = _mm256_add_ps(vki, kj);
+				sx = _mm256_add_ps(sx, _mm256_mul_ps(c, _mm256_loadu_ps(g->gx)));
+				sy = _mm256_add_ps(sy, _mm256_mul_ps(c, _mm256_loadu_ps(g->gy)));
+				sz = _mm256_add_ps(sz, _mm256_mul_ps(c, _mm256_loadu_ps(g->gz)));
+			}
+			_mm_storeu_ps(t[q], fold8(sx));
+			_mm_storeu_ps(t[q] + 4, fold8(sy));
+			_mm_storeu_ps(t[q] + 8, fold8(sz));
 		}
-		wk->v[i].x -= a->dt * (kb * bi.x + sph_hsum8(sx));
-		wk->v[i].y -= a->dt * (kb * bi.y + sph_hsum8(sy));
-		wk->v[i].z -= a->dt * (kb * bi.z + sph_hsum8(sz));
-		wk->ksum[i] += ki;
+		correct_finish(wk, a, i0, cnt, (const float(*)[12])t);
 	}
 }
 #endif
