@@ -137,6 +137,24 @@ static inline float k_of(const float *k, uint32_t j2)
 	return *(const float *)((const char *)k + 2 * (size_t)j2);
 }
 
+/* What the gradient pass reads. */
+typedef struct grad_args {
+	const sph_neighbors *nb;
+	const float *pq;  /* (x y z 1/rho) quads of sph_density */
+	const float *rho;
+	float h, eps2;
+	float mg;         /* m spiky_grad: G_ij = mg (h - r)^2 / r r_vec */
+	float rho0, spiky_grad;
+	float gx, gy, gz; /* gravity */
+	float dmin;       /* D_i below this is negligible */
+} grad_args;
+
+struct dfsph_work;
+/* A pass's sums over the groups of particles i0 .. i0 + cnt - 1, written
+ * as four lanes each (lane l holding lanes l and l + 4 of the groups) to
+ * t: the part of a pass that has an SSE and an AVX2 path. */
+typedef void sums_fn(struct dfsph_work *wk, long i0, long cnt, float *t);
+
 typedef struct dfsph_work {
 	long n;
 	size_t *goff;   /* particle i's groups are goff[i] .. goff[i + 1] */
@@ -148,7 +166,8 @@ typedef struct dfsph_work {
 	                 * gathers it from 4 bytes a particle, which stay in L1 */
 	float *ksum;    /* the sum of k_i over the sweeps */
 	float *err;     /* per particle: the error the sweep measured */
-	bool avx2;
+	const grad_args *ga;
+	sums_fn *grads, *rate, *correct; /* the path's sums (AVX2 or SSE) */
 } dfsph_work;
 
 /* What a sweep needs beside the work arrays. */
@@ -157,6 +176,24 @@ typedef struct sweep_args {
 	bool divergence; /* the divergence-free solve, else the constant-density one */
 } sweep_args;
 
+/* The passes go in blocks of particles: first the sums over the groups
+ * (sums_fn), then the rest for the block. Finishing each particle right
+ * after its groups made a chain of dependent adds, some 50 cycles, that the
+ * mispredicted exit of the loop over its groups left exposed for every
+ * particle; the particles of the second loop are independent. */
+#define DFSPH_BLOCK 64
+
+/* floats of t per particle */
+#define GRAD_T 16 /* sum G_ij by component, sum |G_ij|^2 */
+#define RATE_T 4  /* sum (v_i - v_j) . G_ij */
+#define CORR_T 12 /* sum (k_i + k_j) G_ij by component */
+
+/* (l0 + l1) + (l2 + l3), the order of sph_hsum4 */
+static inline float sum4(const float *l)
+{
+	return (l[0] + l[1]) + (l[2] + l[3]);
+}
+
 /* The neighbours of group q, padded with i itself, as 2 j. */
 static inline void group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t i, uint32_t l2[8])
 {
@@ -164,338 +201,187 @@ static inline void group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, ui
 		l2[k] = 2 * (q + k < cnt ? list[q + k] : i);
 }
 
-/* Constants of the gradient pass. */
-typedef struct grad_args {
-	const float *pq; /* (x y z 1/rho) quads of sph_density */
-	float h, eps2, mg;
-} grad_args;
-
-/* Particle i's groups from its list, with s = (sum_j G_ij, sum_j |G_ij|^2).
- * G_ij = mg (h - r)^2 / r r_vec, and 0 for a pair closer than sqrt(eps2)
- * (no direction) or at r >= h (the list's margin) and for the padding. */
-#if defined(__SSE2__)
-static void grads_sse(const grad_args *a, const uint32_t *list, uint32_t cnt, uint32_t i, dfsph_group *g, float s[4])
+/* The gradient pass's sums: each particle's groups from its list, with
+ * G_ij = 0 for a pair closer than sqrt(eps2) (no direction), at r >= h
+ * (the list's margin) and for the padding. */
+#ifdef __SSE2__
+static void grads_sse(struct dfsph_work *wk, long i0, long cnt, float *t)
 {
-	const float *pi = a->pq + 4 * (size_t)i;
-	const __m128 vxi = _mm_set1_ps(pi[0]), vyi = _mm_set1_ps(pi[1]), vzi = _mm_set1_ps(pi[2]), vh = _mm_set1_ps(a->h),
-	             veps2 = _mm_set1_ps(a->eps2), vmg = _mm_set1_ps(a->mg), one = _mm_set1_ps(1.0f),
-	             zero = _mm_setzero_ps();
-	__m128 sx[2] = {zero, zero}, sy[2] = {zero, zero}, sz[2] = {zero, zero}, s2[2] = {zero, zero};
-	for (uint32_t q = 0; q < cnt; q += 8, ++g) {
-		group_rows(list, cnt, q, i, g->j2);
-		for (int k = 0; k < 2; ++k) {
-			const uint32_t *l = g->j2 + 4 * k;
-			__m128 px = _mm_loadu_ps(quad_of(a->pq, l[0])), py = _mm_loadu_ps(quad_of(a->pq, l[1])),
-			       pz = _mm_loadu_ps(quad_of(a->pq, l[2])), pw = _mm_loadu_ps(quad_of(a->pq, l[3]));
-			_MM_TRANSPOSE4_PS(px, py, pz, pw);
-			const __m128 rx = _mm_sub_ps(vxi, px), ry = _mm_sub_ps(vyi, py), rz = _mm_sub_ps(vzi, pz);
-			const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
-			const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
-			const __m128 ok = _mm_and_ps(_mm_cmpgt_ps(r2, veps2), _mm_cmpgt_ps(hr, zero));
-			/* r is at least sqrt(eps2) where ok; elsewhere divide by 1 */
-			const __m128 rs = _mm_or_ps(_mm_and_ps(ok, r), _mm_andnot_ps(ok, one));
-			const __m128 c = _mm_and_ps(ok, _mm_div_ps(_mm_mul_ps(_mm_mul_ps(vmg, hr), hr), rs));
-			const __m128 gx = _mm_mul_ps(c, rx), gy = _mm_mul_ps(c, ry), gz = _mm_mul_ps(c, rz);
-			_mm_storeu_ps(g->gx + 4 * k, gx);
-			_mm_storeu_ps(g->gy + 4 * k, gy);
-			_mm_storeu_ps(g->gz + 4 * k, gz);
-			sx[k] = _mm_add_ps(sx[k], gx);
-			sy[k] = _mm_add_ps(sy[k], gy);
-			sz[k] = _mm_add_ps(sz[k], gz);
-			s2[k] = _mm_add_ps(s2[k],
-			                   _mm_add_ps(_mm_add_ps(_mm_mul_ps(gx, gx), _mm_mul_ps(gy, gy)), _mm_mul_ps(gz, gz)));
-		}
-	}
-	s[0] = sph_hsum4(_mm_add_ps(sx[0], sx[1]));
-	s[1] = sph_hsum4(_mm_add_ps(sy[0], sy[1]));
-	s[2] = sph_hsum4(_mm_add_ps(sz[0], sz[1]));
-	s[3] = sph_hsum4(_mm_add_ps(s2[0], s2[1]));
-}
-#else
-/* Without SSE the lanes of the vector paths one by one, summed in their order. */
-static float lanes_sum(const float l[8])
-{
-	return ((l[0] + l[4]) + (l[1] + l[5])) + ((l[2] + l[6]) + (l[3] + l[7]));
-}
-
-static void grads_scalar(const grad_args *a, const uint32_t *list, uint32_t cnt, uint32_t i, dfsph_group *g, float s[4])
-{
-	const float *pi = a->pq + 4 * (size_t)i;
-	float sx[8] = {0}, sy[8] = {0}, sz[8] = {0}, s2[8] = {0};
-	for (uint32_t q = 0; q < cnt; q += 8, ++g) {
-		group_rows(list, cnt, q, i, g->j2);
-		for (int l = 0; l < 8; ++l) {
-			const float *pj = quad_of(a->pq, g->j2[l]);
-			const float rx = pi[0] - pj[0], ry = pi[1] - pj[1], rz = pi[2] - pj[2];
-			const float r2 = rx * rx + ry * ry + rz * rz;
-			const float r = sqrtf(r2), hr = a->h - r;
-			const float c = r2 > a->eps2 && hr > 0 ? a->mg * hr * hr / r : 0.0f;
-			g->gx[l] = c * rx;
-			g->gy[l] = c * ry;
-			g->gz[l] = c * rz;
-			sx[l] += g->gx[l];
-			sy[l] += g->gy[l];
-			sz[l] += g->gz[l];
-			s2[l] += g->gx[l] * g->gx[l] + g->gy[l] * g->gy[l] + g->gz[l] * g->gz[l];
-		}
-	}
-	s[0] = lanes_sum(sx);
-	s[1] = lanes_sum(sy);
-	s[2] = lanes_sum(sz);
-	s[3] = lanes_sum(s2);
-}
-#endif
-
-#ifdef SPH_AVX2
-__attribute__((target("avx2"))) static void grads_avx2(const grad_args *a, const uint32_t *list, uint32_t cnt,
-                                                       uint32_t i, dfsph_group *g, float s[4])
-{
-	const float *pi = a->pq + 4 * (size_t)i;
-	const __m256 vxi = _mm256_set1_ps(pi[0]), vyi = _mm256_set1_ps(pi[1]), vzi = _mm256_set1_ps(pi[2]),
-	             vh = _mm256_set1_ps(a->h), veps2 = _mm256_set1_ps(a->eps2), vmg = _mm256_set1_ps(a->mg),
-	             one = _mm256_set1_ps(1.0f), zero = _mm256_setzero_ps();
-	__m256 sx = zero, sy = zero, sz = zero, s2 = zero;
-	for (uint32_t q = 0; q < cnt; q += 8, ++g) {
-		group_rows(list, cnt, q, i, g->j2);
-		const uint32_t *l = g->j2;
-		const float *const quad[8] = {quad_of(a->pq, l[0]), quad_of(a->pq, l[1]), quad_of(a->pq, l[2]),
-		                              quad_of(a->pq, l[3]), quad_of(a->pq, l[4]), quad_of(a->pq, l[5]),
-		                              quad_of(a->pq, l[6]), quad_of(a->pq, l[7])};
-		__m256 px, py, pz, pw;
-		sph_transpose8(quad, &px, &py, &pz, &pw);
-		const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
-		const __m256 r2 =
-			_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz));
-		const __m256 r = _mm256_sqrt_ps(r2), hr = _mm256_sub_ps(vh, r);
-		const __m256 ok = _mm256_and_ps(_mm256_cmp_ps(r2, veps2, _CMP_GT_OQ), _mm256_cmp_ps(hr, zero, _CMP_GT_OQ));
-		const __m256 rs = _mm256_blendv_ps(one, r, ok);
-		const __m256 c = _mm256_and_ps(ok, _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(vmg, hr), hr), rs));
-		const __m256 gx = _mm256_mul_ps(c, rx), gy = _mm256_mul_ps(c, ry), gz = _mm256_mul_ps(c, rz);
-		_mm256_storeu_ps(g->gx, gx);
-		_mm256_storeu_ps(g->gy, gy);
-		_mm256_storeu_ps(g->gz, gz);
-		sx = _mm256_add_ps(sx, gx);
-		sy = _mm256_add_ps(sy, gy);
-		sz = _mm256_add_ps(sz, gz);
-		s2 = _mm256_add_ps(
-			s2, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(gx, gx), _mm256_mul_ps(gy, gy)), _mm256_mul_ps(gz, gz)));
-	}
-	s[0] = sph_hsum8(sx);
-	s[1] = sph_hsum8(sy);
-	s[2] = sph_hsum8(sz);
-	s[3] = sph_hsum8(s2);
-}
-#endif
-
-static void gradients(const sph_shared *sh, const float *rho, eddy_vec3 grav, dfsph_work *wk, int threads)
-{
-	const sph_neighbors *nb = &sh->nb;
-	const sph_kernel_consts kc = sh->k;
-	const float m = sh->mass, rho0 = sh->rho0, eps2 = 1e-6f * kc.h2;
-	const float dref = m * kc.spiky_grad * kc.h2, dmin = 1e-6f * dref * dref; /* |G| scale */
-	const long n = wk->n;
-	const float *pq = sh->pq;
-	/* the gradient's factor is < 0: G_ij points from i towards j */
-	const grad_args ga = {pq, kc.h, eps2, m * kc.spiky_grad};
-#pragma omp parallel for num_threads(threads) schedule(static)
-	for (long i = 0; i < n; ++i) {
-		const float xi = pq[4 * i], yi = pq[4 * i + 1], zi = pq[4 * i + 2];
-		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
+	const grad_args *a = wk->ga;
+	const sph_neighbors *nb = a->nb;
+	const __m128 vh = _mm_set1_ps(a->h), veps2 = _mm_set1_ps(a->eps2), vmg = _mm_set1_ps(a->mg),
+	             one = _mm_set1_ps(1.0f), zero = _mm_setzero_ps();
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
+		const float *pi = a->pq + 4 * i;
+		const __m128 vxi = _mm_set1_ps(pi[0]), vyi = _mm_set1_ps(pi[1]), vzi = _mm_set1_ps(pi[2]);
+		__m128 sx[2] = {zero, zero}, sy[2] = {zero, zero}, sz[2] = {zero, zero}, s2[2] = {zero, zero};
 		dfsph_group *g = wk->g + wk->goff[i];
-		float s[4];
-#ifdef SPH_AVX2
-		if (wk->avx2)
-			grads_avx2(&ga, list, nb->count[i], (uint32_t)i, g, s);
-		else
-#endif
-#ifdef __SSE2__
-			grads_sse(&ga, list, nb->count[i], (uint32_t)i, g, s);
-#else
-			grads_scalar(&ga, list, nb->count[i], (uint32_t)i, g, s);
-#endif
-		const float sx = s[0], sy = s[1], sz = s[2], s2 = s[3];
-		const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
-		const uint32_t bcnt = nb->bcount[i];
-		float bx = 0, by = 0, bz = 0, hx = 0, hy = 0, hz = 0;
-		for (uint32_t qb = 0; qb < bcnt; ++qb) {
-			const uint32_t b = blist[qb];
-			const float rx = xi - nb->bx[b], ry = yi - nb->by[b], rz = zi - nb->bz[b];
-			const float r2 = rx * rx + ry * ry + rz * rz;
-			const float mb = nb->bvol[b] * rho0; /* Akinci: the wall at rest density */
-			const float r = sqrtf(r2), hr = kc.h - r;
-			const float c = r2 > eps2 && hr > 0 ? mb * kc.spiky_grad * hr * hr / r : 0.0f;
-			bx += c * rx;
-			by += c * ry;
-			bz += c * rz;
-			/* g . (x_b - x_i) */
-			const float gh = -(grav.x * rx + grav.y * ry + grav.z * rz) * c;
-			hx += gh * rx;
-			hy += gh * ry;
-			hz += gh * rz;
+		for (uint32_t p = 0; p < c; p += 8, ++g) {
+			if (p + 8 <= c) {
+				const __m128i l0 = _mm_loadu_si128((const __m128i *)(list + p)),
+				              l1 = _mm_loadu_si128((const __m128i *)(list + p + 4));
+				_mm_storeu_si128((__m128i *)g->j2, _mm_add_epi32(l0, l0));
+				_mm_storeu_si128((__m128i *)(g->j2 + 4), _mm_add_epi32(l1, l1));
+			} else {
+				group_rows(list, c, p, (uint32_t)i, g->j2);
+			}
+			for (int k = 0; k < 2; ++k) {
+				const uint32_t *l = g->j2 + 4 * k;
+				__m128 px = _mm_loadu_ps(quad_of(a->pq, l[0])), py = _mm_loadu_ps(quad_of(a->pq, l[1])),
+				       pz = _mm_loadu_ps(quad_of(a->pq, l[2])), pw = _mm_loadu_ps(quad_of(a->pq, l[3]));
+				_MM_TRANSPOSE4_PS(px, py, pz, pw);
+				const __m128 rx = _mm_sub_ps(vxi, px), ry = _mm_sub_ps(vyi, py), rz = _mm_sub_ps(vzi, pz);
+				const __m128 r2 =
+					_mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
+				const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
+				const __m128 ok = _mm_and_ps(_mm_cmpgt_ps(r2, veps2), _mm_cmpgt_ps(hr, zero));
+				/* r is at least sqrt(eps2) where ok; elsewhere divide by 1 */
+				const __m128 rs = _mm_or_ps(_mm_and_ps(ok, r), _mm_andnot_ps(ok, one));
+				const __m128 f = _mm_and_ps(ok, _mm_div_ps(_mm_mul_ps(_mm_mul_ps(vmg, hr), hr), rs));
+				const __m128 gx = _mm_mul_ps(f, rx), gy = _mm_mul_ps(f, ry), gz = _mm_mul_ps(f, rz);
+				_mm_storeu_ps(g->gx + 4 * k, gx);
+				_mm_storeu_ps(g->gy + 4 * k, gy);
+				_mm_storeu_ps(g->gz + 4 * k, gz);
+				sx[k] = _mm_add_ps(sx[k], gx);
+				sy[k] = _mm_add_ps(sy[k], gy);
+				sz[k] = _mm_add_ps(sz[k], gz);
+				s2[k] = _mm_add_ps(
+					s2[k], _mm_add_ps(_mm_add_ps(_mm_mul_ps(gx, gx), _mm_mul_ps(gy, gy)), _mm_mul_ps(gz, gz)));
+			}
 		}
-		const float ir = 1.0f / rho[i];
-		wk->h[i] = (dfsph_f4){-hx * ir, -hy * ir, -hz * ir, rho[i]};
-		/* (S + 2B) . (S + B) + sum |G|^2, S = sum_j G_ij: the boundary term of
-		 * the acceleration counts twice (pressure mirroring) */
-		const float d = (sx + 2 * bx) * (sx + bx) + (sy + 2 * by) * (sy + by) + (sz + 2 * bz) * (sz + bz) + s2;
-		wk->b[i] = (dfsph_f4){bx, by, bz, d > dmin ? 1.0f / d : 0.0f};
+		float *ti = t + GRAD_T * q;
+		_mm_storeu_ps(ti, _mm_add_ps(sx[0], sx[1]));
+		_mm_storeu_ps(ti + 4, _mm_add_ps(sy[0], sy[1]));
+		_mm_storeu_ps(ti + 8, _mm_add_ps(sz[0], sz[1]));
+		_mm_storeu_ps(ti + 12, _mm_add_ps(s2[0], s2[1]));
 	}
 }
 
-/* The two halves of a sweep, over particles lo .. hi - 1. rate: from
- * Drho_i/Dt of the predicted velocities, err and k. correct:
- * v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i); it writes only particle
- * i's velocity (the others read k) and adds k_i to its sum.
- * Both go in blocks of particles: first the sums over the groups, left as
- * four lanes a particle, then the rest for the block. Finishing each
- * particle right after its groups made a chain of dependent adds, some 50
- * cycles, that a mispredicted loop exit left exposed for every particle;
- * the particles of the second loop are independent. */
-typedef void sweep_fn(dfsph_work *wk, const sweep_args *a, long lo, long hi);
-
-#define DFSPH_BLOCK 64
-
-#ifdef __SSE2__
-/* rate's second loop: t = the lanes of (v_i - v_j) . G_ij over the pairs
- * (lane l holding lanes l and l + 4 of the groups) */
-static inline void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, const float (*t)[4])
-{
-	for (long q = 0; q < cnt; ++q) {
-		const long i = i0 + q;
-		const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
-		const float r = sph_hsum4(_mm_loadu_ps(t[q])) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z);
-		if (a->divergence) {
-			const float d = r > 0 ? r : 0;
-			wk->err[i] = d * a->dt;
-			wk->k[i] = d * a->inv_dt * bi.w;
-		} else {
-			float e = wk->h[i].w + a->dt * r - a->rho0;
-			e = e > 0 ? e : 0;
-			wk->err[i] = e;
-			wk->k[i] = e * a->inv_dt2 * bi.w;
-		}
-	}
-}
-
-/* correct's second loop: t = the lanes of the sums (k_i + k_j) G_ij by
- * component (x, y, z, four lanes each) */
-static inline void correct_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, const float (*t)[12])
-{
-	const __m128 xyz = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0)), vdt = _mm_set1_ps(a->dt);
-	for (long q = 0; q < cnt; ++q) {
-		const long i = i0 + q;
-		const float ki = wk->k[i], kb = 2 * ki; /* the boundary particles mirror k_i */
-		const __m128 f = _mm_setr_ps(sph_hsum4(_mm_loadu_ps(t[q])), sph_hsum4(_mm_loadu_ps(t[q] + 4)),
-		                             sph_hsum4(_mm_loadu_ps(t[q] + 8)), 0.0f);
-		const __m128 d = _mm_mul_ps(vdt, _mm_add_ps(_mm_mul_ps(_mm_set1_ps(kb), _mm_loadu_ps(&wk->b[i].x)), f));
-		/* lane 3 masked: v's w stays as it was */
-		_mm_storeu_ps(&wk->v[i].x, _mm_sub_ps(_mm_loadu_ps(&wk->v[i].x), _mm_and_ps(d, xyz)));
-		wk->ksum[i] += ki;
-	}
-}
-
-static void rate_sse(dfsph_work *wk, const sweep_args *a, long lo, long hi)
+static void rate_sse(struct dfsph_work *wk, long i0, long cnt, float *t)
 {
 	const float *vf = &wk->v->x;
-	float t[DFSPH_BLOCK][4];
-	for (long i0 = lo; i0 < hi; i0 += DFSPH_BLOCK) {
-		const long cnt = hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK;
-		for (long q = 0; q < cnt; ++q) {
-			const float *vi = vf + 4 * (i0 + q);
-			const __m128 vix = _mm_set1_ps(vi[0]), viy = _mm_set1_ps(vi[1]), viz = _mm_set1_ps(vi[2]);
-			__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
-			for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
-				for (int k = 0; k < 2; ++k) {
-					const uint32_t *l = g->j2 + 4 * k;
-					/* four neighbours' velocities are four loads and a transpose */
-					__m128 vx = _mm_loadu_ps(quad_of(vf, l[0])), vy = _mm_loadu_ps(quad_of(vf, l[1])),
-					       vz = _mm_loadu_ps(quad_of(vf, l[2])), vw = _mm_loadu_ps(quad_of(vf, l[3]));
-					_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
-					sx[k] = _mm_add_ps(sx[k], _mm_mul_ps(_mm_sub_ps(vix, vx), _mm_loadu_ps(g->gx + 4 * k)));
-					sy[k] = _mm_add_ps(sy[k], _mm_mul_ps(_mm_sub_ps(viy, vy), _mm_loadu_ps(g->gy + 4 * k)));
-					sz[k] = _mm_add_ps(sz[k], _mm_mul_ps(_mm_sub_ps(viz, vz), _mm_loadu_ps(g->gz + 4 * k)));
-				}
-			_mm_storeu_ps(t[q], _mm_add_ps(_mm_add_ps(_mm_add_ps(sx[0], sy[0]), sz[0]),
-			                               _mm_add_ps(_mm_add_ps(sx[1], sy[1]), sz[1])));
-		}
-		rate_finish(wk, a, i0, cnt, (const float(*)[4])t);
+	for (long q = 0; q < cnt; ++q) {
+		const float *vi = vf + 4 * (i0 + q);
+		const __m128 vix = _mm_set1_ps(vi[0]), viy = _mm_set1_ps(vi[1]), viz = _mm_set1_ps(vi[2]);
+		__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
+			for (int k = 0; k < 2; ++k) {
+				const uint32_t *l = g->j2 + 4 * k;
+				/* four neighbours' velocities are four loads and a transpose */
+				__m128 vx = _mm_loadu_ps(quad_of(vf, l[0])), vy = _mm_loadu_ps(quad_of(vf, l[1])),
+				       vz = _mm_loadu_ps(quad_of(vf, l[2])), vw = _mm_loadu_ps(quad_of(vf, l[3]));
+				_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
+				sx[k] = _mm_add_ps(sx[k], _mm_mul_ps(_mm_sub_ps(vix, vx), _mm_loadu_ps(g->gx + 4 * k)));
+				sy[k] = _mm_add_ps(sy[k], _mm_mul_ps(_mm_sub_ps(viy, vy), _mm_loadu_ps(g->gy + 4 * k)));
+				sz[k] = _mm_add_ps(sz[k], _mm_mul_ps(_mm_sub_ps(viz, vz), _mm_loadu_ps(g->gz + 4 * k)));
+			}
+		_mm_storeu_ps(t + RATE_T * q, _mm_add_ps(_mm_add_ps(_mm_add_ps(sx[0], sy[0]), sz[0]),
+		                                         _mm_add_ps(_mm_add_ps(sx[1], sy[1]), sz[1])));
 	}
 }
 
-static void correct_sse(dfsph_work *wk, const sweep_args *a, long lo, long hi)
+static void correct_sse(struct dfsph_work *wk, long i0, long cnt, float *t)
 {
 	const float *k = wk->k;
-	float t[DFSPH_BLOCK][12];
-	for (long i0 = lo; i0 < hi; i0 += DFSPH_BLOCK) {
-		const long cnt = hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK;
-		for (long q = 0; q < cnt; ++q) {
-			const __m128 vki = _mm_set1_ps(k[i0 + q]);
-			__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
-			for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
-				for (int h = 0; h < 2; ++h) {
-					const uint32_t *l = g->j2 + 4 * h;
-					const __m128 c =
-						_mm_add_ps(vki, _mm_setr_ps(k_of(k, l[0]), k_of(k, l[1]), k_of(k, l[2]), k_of(k, l[3])));
-					sx[h] = _mm_add_ps(sx[h], _mm_mul_ps(c, _mm_loadu_ps(g->gx + 4 * h)));
-					sy[h] = _mm_add_ps(sy[h], _mm_mul_ps(c, _mm_loadu_ps(g->gy + 4 * h)));
-					sz[h] = _mm_add_ps(sz[h], _mm_mul_ps(c, _mm_loadu_ps(g->gz + 4 * h)));
-				}
-			_mm_storeu_ps(t[q], _mm_add_ps(sx[0], sx[1]));
-			_mm_storeu_ps(t[q] + 4, _mm_add_ps(sy[0], sy[1]));
-			_mm_storeu_ps(t[q] + 8, _mm_add_ps(sz[0], sz[1]));
-		}
-		correct_finish(wk, a, i0, cnt, (const float(*)[12])t);
+	for (long q = 0; q < cnt; ++q) {
+		const __m128 vki = _mm_set1_ps(k[i0 + q]);
+		__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
+			for (int h = 0; h < 2; ++h) {
+				const uint32_t *l = g->j2 + 4 * h;
+				const __m128 c =
+					_mm_add_ps(vki, _mm_setr_ps(k_of(k, l[0]), k_of(k, l[1]), k_of(k, l[2]), k_of(k, l[3])));
+				sx[h] = _mm_add_ps(sx[h], _mm_mul_ps(c, _mm_loadu_ps(g->gx + 4 * h)));
+				sy[h] = _mm_add_ps(sy[h], _mm_mul_ps(c, _mm_loadu_ps(g->gy + 4 * h)));
+				sz[h] = _mm_add_ps(sz[h], _mm_mul_ps(c, _mm_loadu_ps(g->gz + 4 * h)));
+			}
+		float *ti = t + CORR_T * q;
+		_mm_storeu_ps(ti, _mm_add_ps(sx[0], sx[1]));
+		_mm_storeu_ps(ti + 4, _mm_add_ps(sy[0], sy[1]));
+		_mm_storeu_ps(ti + 8, _mm_add_ps(sz[0], sz[1]));
 	}
 }
 #else
-/* Without SSE the vector paths' lanes one by one, summed in their order. */
-static void rate_scalar(dfsph_work *wk, const sweep_args *a, long lo, long hi)
+/* Without SSE the vector paths' lanes one by one, folded as they fold. */
+static void fold(const float s[8], float *t)
+{
+	for (int l = 0; l < 4; ++l)
+		t[l] = s[l] + s[l + 4];
+}
+
+static void grads_scalar(struct dfsph_work *wk, long i0, long cnt, float *t)
+{
+	const grad_args *a = wk->ga;
+	const sph_neighbors *nb = a->nb;
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
+		const float *pi = a->pq + 4 * i;
+		float sx[8] = {0}, sy[8] = {0}, sz[8] = {0}, s2[8] = {0};
+		dfsph_group *g = wk->g + wk->goff[i];
+		for (uint32_t p = 0; p < c; p += 8, ++g) {
+			group_rows(list, c, p, (uint32_t)i, g->j2);
+			for (int l = 0; l < 8; ++l) {
+				const float *pj = quad_of(a->pq, g->j2[l]);
+				const float rx = pi[0] - pj[0], ry = pi[1] - pj[1], rz = pi[2] - pj[2];
+				const float r2 = rx * rx + ry * ry + rz * rz;
+				const float r = sqrtf(r2), hr = a->h - r;
+				const float f = r2 > a->eps2 && hr > 0 ? a->mg * hr * hr / r : 0.0f;
+				g->gx[l] = f * rx;
+				g->gy[l] = f * ry;
+				g->gz[l] = f * rz;
+				sx[l] += g->gx[l];
+				sy[l] += g->gy[l];
+				sz[l] += g->gz[l];
+				s2[l] += g->gx[l] * g->gx[l] + g->gy[l] * g->gy[l] + g->gz[l] * g->gz[l];
+			}
+		}
+		float *ti = t + GRAD_T * q;
+		fold(sx, ti);
+		fold(sy, ti + 4);
+		fold(sz, ti + 8);
+		fold(s2, ti + 12);
+	}
+}
+
+static void rate_scalar(struct dfsph_work *wk, long i0, long cnt, float *t)
 {
 	const float *vf = &wk->v->x;
-	for (long i = lo; i < hi; ++i) {
-		const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
+	for (long q = 0; q < cnt; ++q) {
+		const float *vi = vf + 4 * (i0 + q);
 		float sx[8] = {0}, sy[8] = {0}, sz[8] = {0}, s[8];
-		for (const dfsph_group *g = wk->g + wk->goff[i], *ge = wk->g + wk->goff[i + 1]; g < ge; ++g)
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
 			for (int l = 0; l < 8; ++l) {
 				const float *vj = quad_of(vf, g->j2[l]);
-				sx[l] += (vi.x - vj[0]) * g->gx[l];
-				sy[l] += (vi.y - vj[1]) * g->gy[l];
-				sz[l] += (vi.z - vj[2]) * g->gz[l];
+				sx[l] += (vi[0] - vj[0]) * g->gx[l];
+				sy[l] += (vi[1] - vj[1]) * g->gy[l];
+				sz[l] += (vi[2] - vj[2]) * g->gz[l];
 			}
 		for (int l = 0; l < 8; ++l)
 			s[l] = (sx[l] + sy[l]) + sz[l];
-		const float r = lanes_sum(s) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z);
-		if (a->divergence) {
-			const float d = r > 0 ? r : 0;
-			wk->err[i] = d * a->dt;
-			wk->k[i] = d * a->inv_dt * bi.w;
-		} else {
-			float e = wk->h[i].w + a->dt * r - a->rho0;
-			e = e > 0 ? e : 0;
-			wk->err[i] = e;
-			wk->k[i] = e * a->inv_dt2 * bi.w;
-		}
+		fold(s, t + RATE_T * q);
 	}
 }
 
-static void correct_scalar(dfsph_work *wk, const sweep_args *a, long lo, long hi)
+static void correct_scalar(struct dfsph_work *wk, long i0, long cnt, float *t)
 {
 	const float *k = wk->k;
-	for (long i = lo; i < hi; ++i) {
-		const dfsph_f4 bi = wk->b[i];
-		const float ki = k[i], kb = 2 * ki;
+	for (long q = 0; q < cnt; ++q) {
+		const float ki = k[i0 + q];
 		float sx[8] = {0}, sy[8] = {0}, sz[8] = {0};
-		for (const dfsph_group *g = wk->g + wk->goff[i], *ge = wk->g + wk->goff[i + 1]; g < ge; ++g)
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
 			for (int l = 0; l < 8; ++l) {
 				const float c = ki + k_of(k, g->j2[l]);
 				sx[l] += c * g->gx[l];
 				sy[l] += c * g->gy[l];
 				sz[l] += c * g->gz[l];
 			}
-		wk->v[i].x -= a->dt * (kb * bi.x + lanes_sum(sx));
-		wk->v[i].y -= a->dt * (kb * bi.y + lanes_sum(sy));
-		wk->v[i].z -= a->dt * (kb * bi.z + lanes_sum(sz));
-		wk->ksum[i] += ki;
+		float *ti = t + CORR_T * q;
+		fold(sx, ti);
+		fold(sy, ti + 4);
+		fold(sz, ti + 8);
 	}
 }
 #endif
@@ -507,81 +393,263 @@ __attribute__((target("avx2"))) static inline __m128 fold8(__m256 v)
 	return _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
 }
 
-__attribute__((target("avx2"))) static void rate_avx2(dfsph_work *wk, const sweep_args *a, long lo, long hi)
+__attribute__((target("avx2"))) static void grads_avx2(struct dfsph_work *wk, long i0, long cnt, float *t)
+{
+	const grad_args *a = wk->ga;
+	const sph_neighbors *nb = a->nb;
+	const __m256 vh = _mm256_set1_ps(a->h), veps2 = _mm256_set1_ps(a->eps2), vmg = _mm256_set1_ps(a->mg),
+	             one = _mm256_set1_ps(1.0f), zero = _mm256_setzero_ps();
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
+		const float *pi = a->pq + 4 * i;
+		const __m256 vxi = _mm256_set1_ps(pi[0]), vyi = _mm256_set1_ps(pi[1]), vzi = _mm256_set1_ps(pi[2]);
+		__m256 sx = zero, sy = zero, sz = zero, s2 = zero;
+		dfsph_group *g = wk->g + wk->goff[i];
+		for (uint32_t p = 0; p < c; p += 8, ++g) {
+			if (p + 8 <= c) {
+				const __m256i l = _mm256_loadu_si256((const __m256i *)(list + p));
+				_mm256_storeu_si256((__m256i *)g->j2, _mm256_add_epi32(l, l));
+			} else {
+				group_rows(list, c, p, (uint32_t)i, g->j2);
+			}
+			const uint32_t *l = g->j2;
+			const float *const quad[8] = {quad_of(a->pq, l[0]), quad_of(a->pq, l[1]), quad_of(a->pq, l[2]),
+			                              quad_of(a->pq, l[3]), quad_of(a->pq, l[4]), quad_of(a->pq, l[5]),
+			                              quad_of(a->pq, l[6]), quad_of(a->pq, l[7])};
+			__m256 px, py, pz, pw;
+			sph_transpose8(quad, &px, &py, &pz, &pw);
+			const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
+			const __m256 r2 =
+				_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz));
+			const __m256 r = _mm256_sqrt_ps(r2), hr = _mm256_sub_ps(vh, r);
+			const __m256 ok =
+				_mm256_and_ps(_mm256_cmp_ps(r2, veps2, _CMP_GT_OQ), _mm256_cmp_ps(hr, zero, _CMP_GT_OQ));
+			const __m256 rs = _mm256_blendv_ps(one, r, ok);
+			const __m256 f = _mm256_and_ps(ok, _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(vmg, hr), hr), rs));
+			const __m256 gx = _mm256_mul_ps(f, rx), gy = _mm256_mul_ps(f, ry), gz = _mm256_mul_ps(f, rz);
+			_mm256_storeu_ps(g->gx, gx);
+			_mm256_storeu_ps(g->gy, gy);
+			_mm256_storeu_ps(g->gz, gz);
+			sx = _mm256_add_ps(sx, gx);
+			sy = _mm256_add_ps(sy, gy);
+			sz = _mm256_add_ps(sz, gz);
+			s2 = _mm256_add_ps(s2, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(gx, gx), _mm256_mul_ps(gy, gy)),
+			                                     _mm256_mul_ps(gz, gz)));
+		}
+		float *ti = t + GRAD_T * q;
+		_mm_storeu_ps(ti, fold8(sx));
+		_mm_storeu_ps(ti + 4, fold8(sy));
+		_mm_storeu_ps(ti + 8, fold8(sz));
+		_mm_storeu_ps(ti + 12, fold8(s2));
+	}
+}
+
+__attribute__((target("avx2"))) static void rate_avx2(struct dfsph_work *wk, long i0, long cnt, float *t)
 {
 	const float *vf = &wk->v->x;
-	float t[DFSPH_BLOCK][4];
-	for (long i0 = lo; i0 < hi; i0 += DFSPH_BLOCK) {
-		const long cnt = hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK;
-		for (long q = 0; q < cnt; ++q) {
-			const float *vi = vf + 4 * (i0 + q);
-			const __m256 vix = _mm256_set1_ps(vi[0]), viy = _mm256_set1_ps(vi[1]), viz = _mm256_set1_ps(vi[2]);
-			__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
-			for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
-				const uint32_t *l = g->j2;
-				const float *const quad[8] = {quad_of(vf, l[0]), quad_of(vf, l[1]), quad_of(vf, l[2]),
-				                              quad_of(vf, l[3]), quad_of(vf, l[4]), quad_of(vf, l[5]),
-				                              quad_of(vf, l[6]), quad_of(vf, l[7])};
-				__m256 vx, vy, vz, vw;
-				sph_transpose8(quad, &vx, &vy, &vz, &vw);
-				sx = _mm256_add_ps(sx, _mm256_mul_ps(_mm256_sub_ps(vix, vx), _mm256_loadu_ps(g->gx)));
-				sy = _mm256_add_ps(sy, _mm256_mul_ps(_mm256_sub_ps(viy, vy), _mm256_loadu_ps(g->gy)));
-				sz = _mm256_add_ps(sz, _mm256_mul_ps(_mm256_sub_ps(viz, vz), _mm256_loadu_ps(g->gz)));
-			}
-			_mm_storeu_ps(t[q], fold8(_mm256_add_ps(_mm256_add_ps(sx, sy), sz)));
+	for (long q = 0; q < cnt; ++q) {
+		const float *vi = vf + 4 * (i0 + q);
+		const __m256 vix = _mm256_set1_ps(vi[0]), viy = _mm256_set1_ps(vi[1]), viz = _mm256_set1_ps(vi[2]);
+		__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
+			const uint32_t *l = g->j2;
+			const float *const quad[8] = {quad_of(vf, l[0]), quad_of(vf, l[1]), quad_of(vf, l[2]), quad_of(vf, l[3]),
+			                              quad_of(vf, l[4]), quad_of(vf, l[5]), quad_of(vf, l[6]), quad_of(vf, l[7])};
+			__m256 vx, vy, vz, vw;
+			sph_transpose8(quad, &vx, &vy, &vz, &vw);
+			sx = _mm256_add_ps(sx, _mm256_mul_ps(_mm256_sub_ps(vix, vx), _mm256_loadu_ps(g->gx)));
+			sy = _mm256_add_ps(sy, _mm256_mul_ps(_mm256_sub_ps(viy, vy), _mm256_loadu_ps(g->gy)));
+			sz = _mm256_add_ps(sz, _mm256_mul_ps(_mm256_sub_ps(viz, vz), _mm256_loadu_ps(g->gz)));
 		}
-		rate_finish(wk, a, i0, cnt, (const float(*)[4])t);
+		_mm_storeu_ps(t + RATE_T * q, fold8(_mm256_add_ps(_mm256_add_ps(sx, sy), sz)));
 	}
 }
 
-__attribute__((target("avx2"))) static void correct_avx2(dfsph_work *wk, const sweep_args *a, long lo, long hi)
+__attribute__((target("avx2"))) static void correct_avx2(struct dfsph_work *wk, long i0, long cnt, float *t)
 {
 	const float *k = wk->k;
-	float t[DFSPH_BLOCK][12];
-	for (long i0 = lo; i0 < hi; i0 += DFSPH_BLOCK) {
-		const long cnt = hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK;
-		for (long q = 0; q < cnt; ++q) {
-			const __m256 vki = _mm256_set1_ps(k[i0 + q]);
-			__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
-			for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
-				/* eight scalar loads: faster here than vgatherdps */
-				const uint32_t *l = g->j2;
-				const __m256 kj = _mm256_setr_ps(k_of(k, l[0]), k_of(k, l[1]), k_of(k, l[2]), k_of(k, l[3]),
-				                                 k_of(k, l[4]), k_of(k, l[5]), k_of(k, l[6]), k_of(k, l[7]));
-				const __m256 c = _mm256_add_ps(vki, kj);
-				sx = _mm256_add_ps(sx, _mm256_mul_ps(c, _mm256_loadu_ps(g->gx)));
-				sy = _mm256_add_ps(sy, _mm256_mul_ps(c, _mm256_loadu_ps(g->gy)));
-				sz = _mm256_add_ps(sz, _mm256_mul_ps(c, _mm256_loadu_ps(g->gz)));
-			}
-			_mm_storeu_ps(t[q], fold8(sx));
-			_mm_storeu_ps(t[q] + 4, fold8(sy));
-			_mm_storeu_ps(t[q] + 8, fold8(sz));
+	for (long q = 0; q < cnt; ++q) {
+		const __m256 vki = _mm256_set1_ps(k[i0 + q]);
+		__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
+			/* eight scalar loads: faster here than vgatherdps */
+			const uint32_t *l = g->j2;
+			const __m256 kj = _mm256_setr_ps(k_of(k, l[0]), k_of(k, l[1]), k_of(k, l[2]), k_of(k, l[3]),
+			                                 k_of(k, l[4]), k_of(k, l[5]), k_of(k, l[6]), k_of(k, l[7]));
+			const __m256 c = _mm256_add_ps(vki, kj);
+			sx = _mm256_add_ps(sx, _mm256_mul_ps(c, _mm256_loadu_ps(g->gx)));
+			sy = _mm256_add_ps(sy, _mm256_mul_ps(c, _mm256_loadu_ps(g->gy)));
+			sz = _mm256_add_ps(sz, _mm256_mul_ps(c, _mm256_loadu_ps(g->gz)));
 		}
-		correct_finish(wk, a, i0, cnt, (const float(*)[12])t);
+		float *ti = t + CORR_T * q;
+		_mm_storeu_ps(ti, fold8(sx));
+		_mm_storeu_ps(ti + 4, fold8(sy));
+		_mm_storeu_ps(ti + 8, fold8(sz));
 	}
 }
 #endif
 
-/* A pass over all particles, the threads taking equal shares in order:
- * each particle's result depends on no other's order, so it is the same for
- * any thread count. rate sets err and k from the current velocities, correct
- * applies k to them. (Tried: fusing a correction with the next rates, rating
- * a particle as soon as its neighbours were corrected while its groups were
- * in cache; the same bits, but no faster: the passes are not bound by
- * streaming the groups.) */
-static void sweep(dfsph_work *wk, const sweep_args *a, bool rate, int threads)
+/* The wall sums of particle i: B_i (out[0..2]) and the hydrostatic sum
+ * sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b) (out[3..5]). Four boundary
+ * particles at a time (the last four padded with copies of the last one,
+ * masked out), for either path: most particles have none, those at a wall
+ * a dozen, not enough to fill AVX2 registers. */
+static void wall_sums(const grad_args *a, long i, float out[6])
 {
-#if defined(SPH_AVX2)
-	sweep_fn *fn = wk->avx2 ? (rate ? rate_avx2 : correct_avx2) : (rate ? rate_sse : correct_sse);
-#elif defined(__SSE2__)
-	sweep_fn *fn = rate ? rate_sse : correct_sse;
+	const sph_neighbors *nb = a->nb;
+	const float *pi = a->pq + 4 * i;
+	const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
+	const uint32_t bcnt = nb->bcount[i];
+#ifdef __SSE2__
+	const __m128 vxi = _mm_set1_ps(pi[0]), vyi = _mm_set1_ps(pi[1]), vzi = _mm_set1_ps(pi[2]), vh = _mm_set1_ps(a->h),
+	             veps2 = _mm_set1_ps(a->eps2), vrho0 = _mm_set1_ps(a->rho0), vsg = _mm_set1_ps(a->spiky_grad),
+	             vgx = _mm_set1_ps(a->gx), vgy = _mm_set1_ps(a->gy), vgz = _mm_set1_ps(a->gz),
+	             one = _mm_set1_ps(1.0f), zero = _mm_setzero_ps(), sign = _mm_set1_ps(-0.0f);
+	__m128 s[6] = {zero, zero, zero, zero, zero, zero};
+	for (uint32_t q = 0; q < bcnt; q += 4) {
+		uint32_t l[4];
+		for (uint32_t k = 0; k < 4; ++k)
+			l[k] = blist[q + k < bcnt ? q + k : bcnt - 1];
+		const __m128 in = _mm_castsi128_ps(_mm_cmpgt_epi32(_mm_set1_epi32((int)(bcnt - q)), _mm_setr_epi32(0, 1, 2, 3)));
+		const __m128 rx = _mm_sub_ps(vxi, _mm_setr_ps(nb->bx[l[0]], nb->bx[l[1]], nb->bx[l[2]], nb->bx[l[3]])),
+		             ry = _mm_sub_ps(vyi, _mm_setr_ps(nb->by[l[0]], nb->by[l[1]], nb->by[l[2]], nb->by[l[3]])),
+		             rz = _mm_sub_ps(vzi, _mm_setr_ps(nb->bz[l[0]], nb->bz[l[1]], nb->bz[l[2]], nb->bz[l[3]]));
+		/* Akinci: the wall at rest density */
+		const __m128 mb =
+			_mm_mul_ps(_mm_setr_ps(nb->bvol[l[0]], nb->bvol[l[1]], nb->bvol[l[2]], nb->bvol[l[3]]), vrho0);
+		const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
+		const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
+		const __m128 ok = _mm_and_ps(in, _mm_and_ps(_mm_cmpgt_ps(r2, veps2), _mm_cmpgt_ps(hr, zero)));
+		const __m128 rs = _mm_or_ps(_mm_and_ps(ok, r), _mm_andnot_ps(ok, one));
+		const __m128 c = _mm_and_ps(ok, _mm_div_ps(_mm_mul_ps(_mm_mul_ps(_mm_mul_ps(mb, vsg), hr), hr), rs));
+		s[0] = _mm_add_ps(s[0], _mm_mul_ps(c, rx));
+		s[1] = _mm_add_ps(s[1], _mm_mul_ps(c, ry));
+		s[2] = _mm_add_ps(s[2], _mm_mul_ps(c, rz));
+		/* g . (x_b - x_i) */
+		const __m128 gh = _mm_mul_ps(
+			_mm_xor_ps(sign, _mm_add_ps(_mm_add_ps(_mm_mul_ps(vgx, rx), _mm_mul_ps(vgy, ry)), _mm_mul_ps(vgz, rz))), c);
+		s[3] = _mm_add_ps(s[3], _mm_mul_ps(gh, rx));
+		s[4] = _mm_add_ps(s[4], _mm_mul_ps(gh, ry));
+		s[5] = _mm_add_ps(s[5], _mm_mul_ps(gh, rz));
+	}
+	for (int k = 0; k < 6; ++k)
+		out[k] = sph_hsum4(s[k]);
 #else
-	sweep_fn *fn = rate ? rate_scalar : correct_scalar;
+	float s[6][4] = {{0}};
+	for (uint32_t q = 0; q < bcnt; ++q) {
+		const uint32_t b = blist[q], l = q % 4;
+		const float rx = pi[0] - nb->bx[b], ry = pi[1] - nb->by[b], rz = pi[2] - nb->bz[b];
+		const float r2 = rx * rx + ry * ry + rz * rz;
+		const float mb = nb->bvol[b] * a->rho0;
+		const float r = sqrtf(r2), hr = a->h - r;
+		const float c = r2 > a->eps2 && hr > 0 ? mb * a->spiky_grad * hr * hr / r : 0.0f;
+		s[0][l] += c * rx;
+		s[1][l] += c * ry;
+		s[2][l] += c * rz;
+		const float gh = -(a->gx * rx + a->gy * ry + a->gz * rz) * c;
+		s[3][l] += gh * rx;
+		s[4][l] += gh * ry;
+		s[5][l] += gh * rz;
+	}
+	for (int k = 0; k < 6; ++k)
+		out[k] = sum4(s[k]);
 #endif
+}
+
+/* The gradient pass's second loop: the walls' sums, h_i and 1 / D_i. */
+static void grads_finish(dfsph_work *wk, long i0, long cnt, const float *t)
+{
+	const grad_args *a = wk->ga;
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		const float *ti = t + GRAD_T * q;
+		const float sx = sum4(ti), sy = sum4(ti + 4), sz = sum4(ti + 8), s2 = sum4(ti + 12);
+		float w[6];
+		wall_sums(a, i, w);
+		const float bx = w[0], by = w[1], bz = w[2];
+		const float ir = 1.0f / a->rho[i];
+		wk->h[i] = (dfsph_f4){-w[3] * ir, -w[4] * ir, -w[5] * ir, a->rho[i]};
+		/* (S + 2B) . (S + B) + sum |G|^2, S = sum_j G_ij: the boundary term of
+		 * the acceleration counts twice (pressure mirroring) */
+		const float d = (sx + 2 * bx) * (sx + bx) + (sy + 2 * by) * (sy + by) + (sz + 2 * bz) * (sz + bz) + s2;
+		wk->b[i] = (dfsph_f4){bx, by, bz, d > a->dmin ? 1.0f / d : 0.0f};
+	}
+}
+
+/* max(e, 0), 0 for NaN: without the explicit maxss the compiler made a
+ * branch of it, mispredicted for about every other particle */
+static inline float positive(float e)
+{
+#ifdef __SSE2__
+	return _mm_cvtss_f32(_mm_max_ss(_mm_set_ss(e), _mm_setzero_ps()));
+#else
+	return e > 0 ? e : 0;
+#endif
+}
+
+/* rate's second loop: Drho_i/Dt, the sweep's error and k_i. */
+static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, const float *t)
+{
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
+		const float r = sum4(t + RATE_T * q) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z);
+		if (a->divergence) {
+			const float d = positive(r);
+			wk->err[i] = d * a->dt;
+			wk->k[i] = d * a->inv_dt * bi.w;
+		} else {
+			const float e = positive(wk->h[i].w + a->dt * r - a->rho0);
+			wk->err[i] = e;
+			wk->k[i] = e * a->inv_dt2 * bi.w;
+		}
+	}
+}
+
+/* correct's second loop: v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i),
+ * and k_i added to its sum. */
+static void correct_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, const float *t)
+{
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		const float *ti = t + CORR_T * q;
+		const dfsph_f4 bi = wk->b[i];
+		const float ki = wk->k[i], kb = 2 * ki; /* the boundary particles mirror k_i */
+		wk->v[i].x -= a->dt * (kb * bi.x + sum4(ti));
+		wk->v[i].y -= a->dt * (kb * bi.y + sum4(ti + 4));
+		wk->v[i].z -= a->dt * (kb * bi.z + sum4(ti + 8));
+		wk->ksum[i] += ki;
+	}
+}
+
+enum pass_kind { PASS_GRADIENTS, PASS_RATE, PASS_CORRECT };
+
+/* A pass over all particles, the threads taking equal shares in order.
+ * Each particle writes only its own values (rate its err and k, correct its
+ * velocity: the others read k) from inputs no other particle of the pass
+ * changes, so the result is the same for any thread count. (Tried: fusing a
+ * correction with the next rates, rating a particle as soon as its
+ * neighbours were corrected while its groups were in cache; the same bits,
+ * but no faster: the passes are not bound by streaming the groups.) */
+static void pass(dfsph_work *wk, enum pass_kind kind, const sweep_args *a, int threads)
+{
+	sums_fn *sums = kind == PASS_GRADIENTS ? wk->grads : kind == PASS_RATE ? wk->rate : wk->correct;
 	const long n = wk->n;
 #pragma omp parallel for num_threads(threads) schedule(static)
-	for (int t = 0; t < threads; ++t)
-		fn(wk, a, n * t / threads, n * (t + 1) / threads);
+	for (int th = 0; th < threads; ++th) {
+		float t[DFSPH_BLOCK * GRAD_T];
+		for (long i0 = n * th / threads, hi = n * (th + 1) / threads; i0 < hi; i0 += DFSPH_BLOCK) {
+			const long cnt = hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK;
+			sums(wk, i0, cnt, t);
+			if (kind == PASS_GRADIENTS)
+				grads_finish(wk, i0, cnt, t);
+			else if (kind == PASS_RATE)
+				rate_finish(wk, a, i0, cnt, t);
+			else
+				correct_finish(wk, a, i0, cnt, t);
+		}
+	}
 }
 
 /* Serial sum in row order: the same for any thread count. */
@@ -599,11 +667,11 @@ static int divergence_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, flo
 	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true};
 	int it = 0;
 	for (;;) {
-		sweep(wk, &a, true, threads);
+		pass(wk, PASS_RATE, &a, threads);
 		const double e = mean_of(wk->err, wk->n) / rho0;
 		if ((it >= 1 && e <= sd->def.max_divergence_error) || it >= sd->def.max_divergence_iterations)
 			break;
-		sweep(wk, &a, false, threads);
+		pass(wk, PASS_CORRECT, &a, threads);
 		++it;
 	}
 	return it;
@@ -615,11 +683,11 @@ static int density_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float 
 	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, false};
 	int it = 0;
 	for (;;) {
-		sweep(wk, &a, true, threads);
+		pass(wk, PASS_RATE, &a, threads);
 		*residual = mean_of(wk->err, wk->n) / rho0;
 		if ((it >= DFSPH_MIN_SWEEPS && *residual <= sd->def.max_density_error) || it >= sd->def.max_iterations)
 			break;
-		sweep(wk, &a, false, threads);
+		pass(wk, PASS_CORRECT, &a, threads);
 		++it;
 	}
 	return it;
@@ -660,7 +728,19 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 
 	dfsph_work wk;
 	wk.n = n;
-	wk.avx2 = sd->avx2;
+#if defined(SPH_AVX2)
+	wk.grads = sd->avx2 ? grads_avx2 : grads_sse;
+	wk.rate = sd->avx2 ? rate_avx2 : rate_sse;
+	wk.correct = sd->avx2 ? correct_avx2 : correct_sse;
+#elif defined(__SSE2__)
+	wk.grads = grads_sse;
+	wk.rate = rate_sse;
+	wk.correct = correct_sse;
+#else
+	wk.grads = grads_scalar;
+	wk.rate = rate_scalar;
+	wk.correct = correct_scalar;
+#endif
 	const size_t un = (size_t)n;
 	wk.goff = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk.goff);
 	if (!wk.goff)
@@ -679,7 +759,13 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	wk.ksum = wk.k + un;
 	wk.err = wk.ksum + un;
 
-	gradients(sh, rho, w->def.gravity, &wk, ctx->threads);
+	const sph_kernel_consts kc = sh->k;
+	const float dref = sh->mass * kc.spiky_grad * kc.h2; /* |G| scale */
+	const eddy_vec3 g = w->def.gravity;
+	const grad_args ga = {nb,  sh->pq, rho, kc.h, 1e-6f * kc.h2, sh->mass * kc.spiky_grad, rho0, kc.spiky_grad,
+	                      g.x, g.y,    g.z, 1e-6f * dref * dref};
+	wk.ga = &ga;
+	pass(&wk, PASS_GRADIENTS, NULL, ctx->threads);
 	memset(wk.ksum, 0, un * sizeof *wk.ksum);
 
 	int div_it = 0;
