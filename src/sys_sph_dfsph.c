@@ -588,10 +588,41 @@ static inline float positive(float e)
 #endif
 }
 
-/* rate's second loop: Drho_i/Dt, the sweep's error and k_i. */
+/* rate's second loop: Drho_i/Dt, the sweep's error and k_i. Four particles
+ * at a time where SSE is (the scalar loop does the same per particle). */
 static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, const float *t)
 {
-	for (long q = 0; q < cnt; ++q) {
+	long q = 0;
+#ifdef __SSE2__
+	const __m128 vdt = _mm_set1_ps(a->dt), vrho0 = _mm_set1_ps(a->rho0), zero = _mm_setzero_ps(),
+	             vinv = _mm_set1_ps(a->divergence ? a->inv_dt : a->inv_dt2);
+	for (; q + 4 <= cnt; q += 4) {
+		const long i = i0 + q;
+		__m128 s0 = _mm_loadu_ps(t + RATE_T * q), s1 = _mm_loadu_ps(t + RATE_T * (q + 1)),
+		       s2 = _mm_loadu_ps(t + RATE_T * (q + 2)), s3 = _mm_loadu_ps(t + RATE_T * (q + 3));
+		_MM_TRANSPOSE4_PS(s0, s1, s2, s3);
+		__m128 vx = _mm_loadu_ps(&wk->v[i].x), vy = _mm_loadu_ps(&wk->v[i + 1].x), vz = _mm_loadu_ps(&wk->v[i + 2].x),
+		       vw = _mm_loadu_ps(&wk->v[i + 3].x);
+		_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
+		__m128 bx = _mm_loadu_ps(&wk->b[i].x), by = _mm_loadu_ps(&wk->b[i + 1].x), bz = _mm_loadu_ps(&wk->b[i + 2].x),
+		       bw = _mm_loadu_ps(&wk->b[i + 3].x);
+		_MM_TRANSPOSE4_PS(bx, by, bz, bw);
+		const __m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)),
+		                            _mm_add_ps(_mm_add_ps(_mm_mul_ps(vx, bx), _mm_mul_ps(vy, by)), _mm_mul_ps(vz, bz)));
+		__m128 e;
+		if (a->divergence) {
+			const __m128 d = _mm_max_ps(r, zero);
+			e = _mm_mul_ps(d, vdt);
+			_mm_storeu_ps(wk->k + i, _mm_mul_ps(_mm_mul_ps(d, vinv), bw));
+		} else {
+			const __m128 rho = _mm_setr_ps(wk->h[i].w, wk->h[i + 1].w, wk->h[i + 2].w, wk->h[i + 3].w);
+			e = _mm_max_ps(_mm_sub_ps(_mm_add_ps(rho, _mm_mul_ps(vdt, r)), vrho0), zero);
+			_mm_storeu_ps(wk->k + i, _mm_mul_ps(_mm_mul_ps(e, vinv), bw));
+		}
+		_mm_storeu_ps(wk->err + i, e);
+	}
+#endif
+	for (; q < cnt; ++q) {
 		const long i = i0 + q;
 		const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
 		const float r = sum4(t + RATE_T * q) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z);
@@ -608,10 +639,41 @@ static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, 
 }
 
 /* correct's second loop: v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i),
- * and k_i added to its sum. */
+ * and k_i added to its sum. Four particles at a time where SSE is. */
 static void correct_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, const float *t)
 {
-	for (long q = 0; q < cnt; ++q) {
+	long q = 0;
+#ifdef __SSE2__
+	const __m128 vdt = _mm_set1_ps(a->dt), two = _mm_set1_ps(2.0f);
+	for (; q + 4 <= cnt; q += 4) {
+		const long i = i0 + q;
+		const float *t0 = t + CORR_T * q, *t1 = t0 + CORR_T, *t2 = t1 + CORR_T, *t3 = t2 + CORR_T;
+		__m128 f[3];
+		for (int c = 0; c < 3; ++c) {
+			__m128 l0 = _mm_loadu_ps(t0 + 4 * c), l1 = _mm_loadu_ps(t1 + 4 * c), l2 = _mm_loadu_ps(t2 + 4 * c),
+			       l3 = _mm_loadu_ps(t3 + 4 * c);
+			_MM_TRANSPOSE4_PS(l0, l1, l2, l3);
+			f[c] = _mm_add_ps(_mm_add_ps(l0, l1), _mm_add_ps(l2, l3));
+		}
+		__m128 vx = _mm_loadu_ps(&wk->v[i].x), vy = _mm_loadu_ps(&wk->v[i + 1].x), vz = _mm_loadu_ps(&wk->v[i + 2].x),
+		       vw = _mm_loadu_ps(&wk->v[i + 3].x);
+		_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
+		__m128 bx = _mm_loadu_ps(&wk->b[i].x), by = _mm_loadu_ps(&wk->b[i + 1].x), bz = _mm_loadu_ps(&wk->b[i + 2].x),
+		       bw = _mm_loadu_ps(&wk->b[i + 3].x);
+		_MM_TRANSPOSE4_PS(bx, by, bz, bw);
+		const __m128 ki = _mm_loadu_ps(wk->k + i), kb = _mm_mul_ps(two, ki); /* the boundary particles mirror k_i */
+		vx = _mm_sub_ps(vx, _mm_mul_ps(vdt, _mm_add_ps(_mm_mul_ps(kb, bx), f[0])));
+		vy = _mm_sub_ps(vy, _mm_mul_ps(vdt, _mm_add_ps(_mm_mul_ps(kb, by), f[1])));
+		vz = _mm_sub_ps(vz, _mm_mul_ps(vdt, _mm_add_ps(_mm_mul_ps(kb, bz), f[2])));
+		_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
+		_mm_storeu_ps(&wk->v[i].x, vx);
+		_mm_storeu_ps(&wk->v[i + 1].x, vy);
+		_mm_storeu_ps(&wk->v[i + 2].x, vz);
+		_mm_storeu_ps(&wk->v[i + 3].x, vw);
+		_mm_storeu_ps(wk->ksum + i, _mm_add_ps(_mm_loadu_ps(wk->ksum + i), ki));
+	}
+#endif
+	for (; q < cnt; ++q) {
 		const long i = i0 + q;
 		const float *ti = t + CORR_T * q;
 		const dfsph_f4 bi = wk->b[i];
