@@ -407,16 +407,18 @@ __attribute__((target("avx2"))) static void grads_avx2(struct dfsph_work *wk, lo
 		__m256 sx = zero, sy = zero, sz = zero, s2 = zero;
 		dfsph_group *g = wk->g + wk->goff[i];
 		for (uint32_t p = 0; p < c; p += 8, ++g) {
+			const float *quad[8];
 			if (p + 8 <= c) {
 				const __m256i l = _mm256_loadu_si256((const __m256i *)(list + p));
 				_mm256_storeu_si256((__m256i *)g->j2, _mm256_add_epi32(l, l));
+				/* the rows from the list, not read back from the store just made */
+				for (int k = 0; k < 8; ++k)
+					quad[k] = a->pq + 4 * (size_t)list[p + k];
 			} else {
 				group_rows(list, c, p, (uint32_t)i, g->j2);
+				for (int k = 0; k < 8; ++k)
+					quad[k] = quad_of(a->pq, g->j2[k]);
 			}
-			const uint32_t *l = g->j2;
-			const float *const quad[8] = {quad_of(a->pq, l[0]), quad_of(a->pq, l[1]), quad_of(a->pq, l[2]),
-			                              quad_of(a->pq, l[3]), quad_of(a->pq, l[4]), quad_of(a->pq, l[5]),
-			                              quad_of(a->pq, l[6]), quad_of(a->pq, l[7])};
 			__m256 px, py, pz, pw;
 			sph_transpose8(quad, &px, &py, &pz, &pw);
 			const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
