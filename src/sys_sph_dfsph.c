@@ -167,6 +167,7 @@ typedef struct dfsph_work {
 	float *ksum;    /* the sum of k_i over the sweeps */
 	float *err;     /* per particle: the error the sweep measured */
 	const grad_args *ga;
+	uint32_t *owner; /* the particle of each group */
 	sums_fn *grads, *rate, *correct; /* the path's sums (AVX2 or SSE) */
 } dfsph_work;
 
@@ -397,42 +398,47 @@ __attribute__((target("avx2"))) static void grads_avx2(struct dfsph_work *wk, lo
 {
 	const grad_args *a = wk->ga;
 	const sph_neighbors *nb = a->nb;
-	const __m256 vh = _mm256_set1_ps(a->h), veps2 = _mm256_set1_ps(a->eps2), vmg = _mm256_set1_ps(a->mg),
-	             one = _mm256_set1_ps(1.0f), zero = _mm256_setzero_ps();
 	for (long q = 0; q < cnt; ++q) {
 		const long i = i0 + q;
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
-		const float *pi = a->pq + 4 * i;
-		const __m256 vxi = _mm256_set1_ps(pi[0]), vyi = _mm256_set1_ps(pi[1]), vzi = _mm256_set1_ps(pi[2]);
-		__m256 sx = zero, sy = zero, sz = zero, s2 = zero;
 		dfsph_group *g = wk->g + wk->goff[i];
-		for (uint32_t p = 0; p < c; p += 8, ++g) {
-			const float *quad[8];
-			if (p + 8 <= c) {
-				const __m256i l = _mm256_loadu_si256((const __m256i *)(list + p));
-				_mm256_storeu_si256((__m256i *)g->j2, _mm256_add_epi32(l, l));
-				/* the rows from the list, not read back from the store just made */
-				for (int k = 0; k < 8; ++k)
-					quad[k] = a->pq + 4 * (size_t)list[p + k];
-			} else {
-				group_rows(list, c, p, (uint32_t)i, g->j2);
-				for (int k = 0; k < 8; ++k)
-					quad[k] = quad_of(a->pq, g->j2[k]);
-			}
-			__m256 px, py, pz, pw;
-			sph_transpose8(quad, &px, &py, &pz, &pw);
-			const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
-			const __m256 r2 =
-				_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz));
-			const __m256 r = _mm256_sqrt_ps(r2), hr = _mm256_sub_ps(vh, r);
-			const __m256 ok =
-				_mm256_and_ps(_mm256_cmp_ps(r2, veps2, _CMP_GT_OQ), _mm256_cmp_ps(hr, zero, _CMP_GT_OQ));
-			const __m256 rs = _mm256_blendv_ps(one, r, ok);
-			const __m256 f = _mm256_and_ps(ok, _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(vmg, hr), hr), rs));
-			const __m256 gx = _mm256_mul_ps(f, rx), gy = _mm256_mul_ps(f, ry), gz = _mm256_mul_ps(f, rz);
-			_mm256_storeu_ps(g->gx, gx);
-			_mm256_storeu_ps(g->gy, gy);
-			_mm256_storeu_ps(g->gz, gz);
+		uint32_t p = 0;
+		for (; p + 8 <= c; p += 8, ++g) {
+			const __m256i l = _mm256_loadu_si256((const __m256i *)(list + p));
+			_mm256_storeu_si256((__m256i *)g->j2, _mm256_add_epi32(l, l));
+		}
+		if (p < c)
+			group_rows(list, c, p, (uint32_t)i, g->j2);
+	}
+	/* the block's groups in one loop: the square roots and divisions of
+	 * several particles overlap */
+	const __m256 vh = _mm256_set1_ps(a->h), veps2 = _mm256_set1_ps(a->eps2), vmg = _mm256_set1_ps(a->mg),
+	             one = _mm256_set1_ps(1.0f), zero = _mm256_setzero_ps();
+	for (size_t gi = wk->goff[i0], ge = wk->goff[i0 + cnt]; gi < ge; ++gi) {
+		dfsph_group *g = wk->g + gi;
+		const float *pi = a->pq + 4 * (size_t)wk->owner[gi];
+		const __m256 vxi = _mm256_broadcast_ss(pi), vyi = _mm256_broadcast_ss(pi + 1), vzi = _mm256_broadcast_ss(pi + 2);
+		const uint32_t *l = g->j2;
+		const float *const quad[8] = {quad_of(a->pq, l[0]), quad_of(a->pq, l[1]), quad_of(a->pq, l[2]),
+		                              quad_of(a->pq, l[3]), quad_of(a->pq, l[4]), quad_of(a->pq, l[5]),
+		                              quad_of(a->pq, l[6]), quad_of(a->pq, l[7])};
+		__m256 px, py, pz, pw;
+		sph_transpose8(quad, &px, &py, &pz, &pw);
+		const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
+		const __m256 r2 =
+			_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz));
+		const __m256 r = _mm256_sqrt_ps(r2), hr = _mm256_sub_ps(vh, r);
+		const __m256 ok = _mm256_and_ps(_mm256_cmp_ps(r2, veps2, _CMP_GT_OQ), _mm256_cmp_ps(hr, zero, _CMP_GT_OQ));
+		const __m256 rs = _mm256_blendv_ps(one, r, ok);
+		const __m256 f = _mm256_and_ps(ok, _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(vmg, hr), hr), rs));
+		_mm256_storeu_ps(g->gx, _mm256_mul_ps(f, rx));
+		_mm256_storeu_ps(g->gy, _mm256_mul_ps(f, ry));
+		_mm256_storeu_ps(g->gz, _mm256_mul_ps(f, rz));
+	}
+	for (long q = 0; q < cnt; ++q) {
+		__m256 sx = zero, sy = zero, sz = zero, s2 = zero;
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
+			const __m256 gx = _mm256_loadu_ps(g->gx), gy = _mm256_loadu_ps(g->gy), gz = _mm256_loadu_ps(g->gz);
 			sx = _mm256_add_ps(sx, gx);
 			sy = _mm256_add_ps(sy, gy);
 			sz = _mm256_add_ps(sz, gz);
@@ -562,20 +568,22 @@ static void wall_sums(const grad_args *a, long i, float out[6])
 /* The gradient pass's second loop: the walls' sums, h_i and 1 / D_i. */
 static void grads_finish(dfsph_work *wk, long i0, long cnt, const float *t)
 {
-	const grad_args *a = wk->ga;
+	/* a copy the stores below cannot alias: the constants stay in registers */
+	const grad_args a = *wk->ga;
 	for (long q = 0; q < cnt; ++q) {
 		const long i = i0 + q;
 		const float *ti = t + GRAD_T * q;
 		const float sx = sum4(ti), sy = sum4(ti + 4), sz = sum4(ti + 8), s2 = sum4(ti + 12);
-		float w[6];
-		wall_sums(a, i, w);
+		float w[6] = {0, 0, 0, 0, 0, 0};
+		if (a.nb->bcount[i]) /* most particles are away from the walls */
+			wall_sums(&a, i, w);
 		const float bx = w[0], by = w[1], bz = w[2];
-		const float ir = 1.0f / a->rho[i];
-		wk->h[i] = (dfsph_f4){-w[3] * ir, -w[4] * ir, -w[5] * ir, a->rho[i]};
+		const float ir = a.pq[4 * i + 3]; /* 1 / rho_i */
+		wk->h[i] = (dfsph_f4){-w[3] * ir, -w[4] * ir, -w[5] * ir, a.rho[i]};
 		/* (S + 2B) . (S + B) + sum |G|^2, S = sum_j G_ij: the boundary term of
 		 * the acceleration counts twice (pressure mirroring) */
 		const float d = (sx + 2 * bx) * (sx + bx) + (sy + 2 * by) * (sy + by) + (sz + 2 * bz) * (sz + bz) + s2;
-		wk->b[i] = (dfsph_f4){bx, by, bz, d > a->dmin ? 1.0f / d : 0.0f};
+		wk->b[i] = (dfsph_f4){bx, by, bz, d > a.dmin ? 1.0f / d : 0.0f};
 	}
 }
 
@@ -813,8 +821,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	for (long i = 0; i < n; ++i)
 		wk.goff[i + 1] = wk.goff[i] + (nb->count[i] + 7) / 8;
 	wk.g = eddy__arena_alloc(&w->arena, (wk.goff[n] ? wk.goff[n] : 1) * sizeof *wk.g);
+	wk.owner = eddy__arena_alloc(&w->arena, (wk.goff[n] ? wk.goff[n] : 1) * sizeof *wk.owner);
 	dfsph_f4 *block = eddy__arena_alloc(&w->arena, 3 * un * sizeof(dfsph_f4) + 3 * un * sizeof(float));
-	if (!wk.g || !block)
+	if (!wk.g || !wk.owner || !block)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
 	wk.b = block;
 	wk.v = wk.b + un;
@@ -822,6 +831,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	wk.k = (float *)(wk.h + un);
 	wk.ksum = wk.k + un;
 	wk.err = wk.ksum + un;
+	for (long i = 0; i < n; ++i)
+		for (size_t gi = wk.goff[i]; gi < wk.goff[i + 1]; ++gi)
+			wk.owner[gi] = (uint32_t)i;
 
 	const sph_kernel_consts kc = sh->k;
 	const float dref = sh->mass * kc.spiky_grad * kc.h2; /* |G| scale */
