@@ -398,6 +398,7 @@ __attribute__((target("avx2"))) static void grads_avx2(struct dfsph_work *wk, lo
 {
 	const grad_args *a = wk->ga;
 	const sph_neighbors *nb = a->nb;
+	const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
 	for (long q = 0; q < cnt; ++q) {
 		const long i = i0 + q;
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
@@ -407,8 +408,12 @@ __attribute__((target("avx2"))) static void grads_avx2(struct dfsph_work *wk, lo
 			const __m256i l = _mm256_loadu_si256((const __m256i *)(list + p));
 			_mm256_storeu_si256((__m256i *)g->j2, _mm256_add_epi32(l, l));
 		}
-		if (p < c)
-			group_rows(list, c, p, (uint32_t)i, g->j2);
+		if (p < c) { /* the last group: lanes past the count (not read) get i */
+			const __m256i in = _mm256_cmpgt_epi32(_mm256_set1_epi32((int)(c - p)), lane);
+			const __m256i l = _mm256_blendv_epi8(_mm256_set1_epi32((int)i),
+			                                     _mm256_maskload_epi32((const int *)(list + p), in), in);
+			_mm256_storeu_si256((__m256i *)g->j2, _mm256_add_epi32(l, l));
+		}
 	}
 	/* the block's groups in one loop: the square roots and divisions of
 	 * several particles overlap */
