@@ -50,9 +50,17 @@
  * force's lattice moment (1 / grad_cal, see sph_pressure): the force of a
  * linear field is M grad p / rho, so this is the pressure in Pa (M = 0.947
  * at h = 2 spacings).
- * Sums over neighbours run in list order and per particle, and the mean
- * errors are summed serially in row order, so the result does not depend on
- * the thread count.
+ * The pairs are packed once a step into groups of eight (the neighbours and
+ * G_ij by component, a particle's last group padded with G = 0), which the
+ * sweeps stream; positions come from sph_density's (x y z 1/rho) quads. The
+ * sums over a particle's groups go eight lanes at a time, with AVX2 when the
+ * CPU has it, else SSE doing each group as two halves with the same
+ * operations per lane, and end in a fixed order (lane l + 4 onto lane l,
+ * then sph_hsum4's); each particle writes only its own results, and the mean
+ * errors are summed serially in row order. So the result is the same, bit
+ * for bit, on either path and for any thread count. EDDY_NO_AVX2 (set and
+ * not empty when the system is added) makes it take the SSE path, to compare
+ * the two.
  *
  * Published per frame: solver = "dfsph", iterations (mean constant-density
  * sweeps per step), residual (largest final mean density error of a step),
@@ -167,7 +175,7 @@ typedef struct dfsph_work {
 	float *ksum;    /* the sum of k_i over the sweeps */
 	float *err;     /* per particle: the error the sweep measured */
 	const grad_args *ga;
-	uint32_t *owner; /* the particle of each group */
+	uint32_t *owner; /* the particle of each group (the AVX2 gradient pass) */
 	sums_fn *grads, *rate, *correct; /* the path's sums (AVX2 or SSE) */
 } dfsph_work;
 
@@ -179,9 +187,10 @@ typedef struct sweep_args {
 
 /* The passes go in blocks of particles: first the sums over the groups
  * (sums_fn), then the rest for the block. Finishing each particle right
- * after its groups made a chain of dependent adds, some 50 cycles, that the
- * mispredicted exit of the loop over its groups left exposed for every
- * particle; the particles of the second loop are independent. */
+ * after its groups put a long chain of dependent adds and multiplies behind
+ * every (often mispredicted) exit of the loop over its groups; the
+ * particles of the second loop are independent, and the passes took 10%
+ * less time. */
 #define DFSPH_BLOCK 64
 
 /* floats of t per particle */
@@ -506,8 +515,8 @@ __attribute__((target("avx2"))) static void correct_avx2(struct dfsph_work *wk, 
 /* The wall sums of particle i: B_i (out[0..2]) and the hydrostatic sum
  * sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b) (out[3..5]). Four boundary
  * particles at a time (the last four padded with copies of the last one,
- * masked out), for either path: most particles have none, those at a wall
- * a dozen, not enough to fill AVX2 registers. */
+ * masked out), the same code for either path: most particles have none and
+ * those at a wall a few, a small part of the pass. */
 static void wall_sums(const grad_args *a, long i, float out[6])
 {
 	const sph_neighbors *nb = a->nb;
@@ -802,6 +811,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const float dt = (float)ctx->dt, rho0 = sh->rho0;
 	if (n == 0 || !(dt > 0))
 		return EDDY_OK;
+	if ((uint64_t)n > (uint64_t)INT32_MAX) /* the groups hold 2 j in 32 bits */
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: too many particles (%ld)", s->label, n);
 
 	dfsph_work wk;
 	wk.n = n;
@@ -849,15 +860,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	pass(&wk, PASS_GRADIENTS, NULL, ctx->threads);
 	memset(wk.ksum, 0, un * sizeof *wk.ksum);
 
-	int div_it = 0;
-	if (sd->def.divergence_solver) {
-		for (long i = 0; i < n; ++i)
-			wk.v[i] = (dfsph_f4){vx[i], vy[i], vz[i], 0};
-		div_it = divergence_solve(&wk, sd, rho0, dt, ctx->threads);
-	} else {
-		for (long i = 0; i < n; ++i)
-			wk.v[i] = (dfsph_f4){vx[i], vy[i], vz[i], 0};
-	}
+	for (long i = 0; i < n; ++i)
+		wk.v[i] = (dfsph_f4){vx[i], vy[i], vz[i], 0};
+	const int div_it = sd->def.divergence_solver ? divergence_solve(&wk, sd, rho0, dt, ctx->threads) : 0;
 	/* v* = v (divergence-free) + dt (a + h) */
 	for (long i = 0; i < n; ++i) {
 		wk.v[i].x += dt * (ax[i] + wk.h[i].x);
