@@ -86,7 +86,7 @@ typedef struct sph_dfsph {
 	int frame;
 	int64_t steps, sweeps, div_sweeps, unconverged;
 	double residual;
-	bool avx2; /* the sweeps' AVX2 path (else SSE, the same bits) */
+	bool avx2; /* the passes' AVX2 path (else SSE, the same bits) */
 } sph_dfsph;
 
 static const int dfsph_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, COL_AX, COL_AY, COL_AZ};
@@ -171,7 +171,8 @@ typedef struct dfsph_work {
 	dfsph_f4 *v;    /* v*_i (w unused: a neighbour's velocity is one 16-byte load) */
 	dfsph_f4 *h;    /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
 	float *k;       /* the k_i a correction applies, apart from v: correct
-	                 * gathers it from 4 bytes a particle, which stay in L1 */
+	                 * gathers it from 4 bytes a particle (22 KB in the pour,
+	                 * within L1) */
 	float *ksum;    /* the sum of k_i over the sweeps */
 	float *err;     /* per particle: the error the sweep measured */
 	const grad_args *ga;
