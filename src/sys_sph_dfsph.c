@@ -50,9 +50,17 @@
  * force's lattice moment (1 / grad_cal, see sph_pressure): the force of a
  * linear field is M grad p / rho, so this is the pressure in Pa (M = 0.947
  * at h = 2 spacings).
- * Sums over neighbours run in list order and per particle, and the mean
- * errors are summed serially in row order, so the result does not depend on
- * the thread count.
+ * The pairs are packed once a step into groups of eight (the neighbours and
+ * G_ij by component, a particle's last group padded with G = 0), which the
+ * sweeps stream; positions come from sph_density's (x y z 1/rho) quads. The
+ * sums over a particle's groups go eight lanes at a time, with AVX2 when the
+ * CPU has it, else SSE doing each group as two halves with the same
+ * operations per lane, and end in a fixed order (lane l + 4 onto lane l,
+ * then sph_hsum4's); each particle writes only its own results, and the mean
+ * errors are summed serially in row order. So the result is the same, bit
+ * for bit, on either path and for any thread count. EDDY_NO_AVX2 (set and
+ * not empty when the system is added) makes it take the SSE path, to compare
+ * the two.
  *
  * Published per frame: solver = "dfsph", iterations (mean constant-density
  * sweeps per step), residual (largest final mean density error of a step),
@@ -71,9 +79,6 @@
 
 #include <stdlib.h>
 #include <string.h>
-#ifdef __SSE2__
-#include <emmintrin.h>
-#endif
 
 typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
@@ -81,6 +86,7 @@ typedef struct sph_dfsph {
 	int frame;
 	int64_t steps, sweeps, div_sweeps, unconverged;
 	double residual;
+	bool avx2; /* the passes' AVX2 path (else SSE, the same bits) */
 } sph_dfsph;
 
 static const int dfsph_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, COL_AX, COL_AY, COL_AZ};
@@ -112,210 +118,624 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	return d;
 }
 
-/* The solver's per-step scratch, all in the world's arena. Four floats per
- * entry, so a neighbour's velocity and k come in one load (the sweeps are
- * gathers over the neighbour lists). */
+/* The solver's per-step scratch, all in the world's arena. */
 typedef struct dfsph_f4 {
 	float x, y, z, w;
 } dfsph_f4;
 
+/* Eight pairs of one particle: the neighbours and G_ij by component. A
+ * particle's pairs are whole groups, the last one padded with the particle
+ * itself and G = 0 (exact zeros in every sum), so the sweeps stream through
+ * one array with neither a scalar tail nor a mask, and a group is what one
+ * AVX2 register or two SSE ones hold. */
+typedef struct dfsph_group {
+	uint32_t j2[8]; /* 2 j: address modes of scale 8 and 2 then reach the 16-byte
+	                 * v[j] and pq[j] and the 4-byte k[j] without a shift */
+	float gx[8], gy[8], gz[8];
+} dfsph_group;
+
+/* v[j] or pq[j] (four floats), and k[j], of 2 j */
+static inline const float *quad_of(const float *base, uint32_t j2)
+{
+	return base + 2 * (size_t)j2;
+}
+
+static inline float k_of(const float *k, uint32_t j2)
+{
+	return *(const float *)((const char *)k + 2 * (size_t)j2);
+}
+
+/* What the gradient pass reads. */
+typedef struct grad_args {
+	const sph_neighbors *nb;
+	const float *pq;  /* (x y z 1/rho) quads of sph_density */
+	const float *rho;
+	float h, eps2;
+	float mg;         /* m spiky_grad: G_ij = mg (h - r)^2 / r r_vec */
+	float rho0, spiky_grad;
+	float gx, gy, gz; /* gravity */
+	float dmin;       /* D_i below this is negligible */
+} grad_args;
+
+struct dfsph_work;
+/* A pass's sums over the groups of particles i0 .. i0 + cnt - 1, written
+ * as four lanes each (lane l holding lanes l and l + 4 of the groups) to
+ * t: the part of a pass that has an SSE and an AVX2 path. */
+typedef void sums_fn(struct dfsph_work *wk, long i0, long cnt, float *t);
 
 typedef struct dfsph_work {
 	long n;
-	const uint32_t *count;
-	size_t *off;   /* particle i's pairs are off[i] .. off[i] + count[i]: packed, so
-	                * a sweep streams through them (sph_density's lists have a
-	                * fixed stride) */
-	uint32_t *nbr; /* the neighbour of each pair */
-	float *gx, *gy, *gz; /* G_ij of each pair, by component: four pairs are one load */
-	dfsph_f4 *b;   /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
-	dfsph_f4 *v;   /* v*_i, and w = this sweep's k_i */
-	dfsph_f4 *h;   /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
-	float *ksum;   /* the sum of k_i over the sweeps */
-	float *err;    /* per particle: the error the sweep measured */
+	size_t *goff;   /* particle i's groups are goff[i] .. goff[i + 1] */
+	dfsph_group *g;
+	dfsph_f4 *b;    /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
+	dfsph_f4 *v;    /* v*_i (w unused: a neighbour's velocity is one 16-byte load) */
+	dfsph_f4 *h;    /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
+	float *k;       /* the k_i a correction applies, apart from v: correct
+	                 * gathers it from 4 bytes a particle (22 KB in the pour,
+	                 * within L1) */
+	float *ksum;    /* the sum of k_i over the sweeps */
+	float *err;     /* per particle: the error the sweep measured */
+	const grad_args *ga;
+	uint32_t *owner; /* the particle of each group (the AVX2 gradient pass) */
+	sums_fn *grads, *rate, *correct; /* the path's sums (AVX2 or SSE) */
 } dfsph_work;
 
-static void gradients(const sph_shared *sh, const float *x, const float *y, const float *z, const float *rho,
-                      eddy_vec3 grav, dfsph_work *wk, int threads)
+/* What a sweep needs beside the work arrays. */
+typedef struct sweep_args {
+	float dt, inv_dt, inv_dt2, rho0;
+	bool divergence; /* the divergence-free solve, else the constant-density one */
+} sweep_args;
+
+/* The passes go in blocks of particles: first the sums over the groups
+ * (sums_fn), then the rest for the block. Finishing each particle right
+ * after its groups put a long chain of dependent adds and multiplies behind
+ * every (often mispredicted) exit of the loop over its groups; the
+ * particles of the second loop are independent, and the passes took 10%
+ * less time. */
+#define DFSPH_BLOCK 64
+
+/* floats of t per particle */
+#define GRAD_T 16 /* sum G_ij by component, sum |G_ij|^2 */
+#define RATE_T 4  /* sum (v_i - v_j) . G_ij */
+#define CORR_T 12 /* sum (k_i + k_j) G_ij by component */
+
+/* (l0 + l1) + (l2 + l3), the order of sph_hsum4 */
+static inline float sum4(const float *l)
 {
-	const sph_neighbors *nb = &sh->nb;
-	const sph_kernel_consts kc = sh->k;
-	const float m = sh->mass, rho0 = sh->rho0, eps2 = 1e-6f * kc.h2;
-	const float dref = m * kc.spiky_grad * kc.h2, dmin = 1e-6f * dref * dref; /* |G| scale */
-	const long n = wk->n;
-	const size_t cap = nb->cap;
-#pragma omp parallel for num_threads(threads) schedule(static)
-	for (long i = 0; i < n; ++i) {
-		const float xi = x[i], yi = y[i], zi = z[i];
-		const uint32_t *list = nb->nbr + (size_t)i * cap;
-		const size_t o = wk->off[i];
-		uint32_t *packed = wk->nbr + o;
-		float *gxo = wk->gx + o, *gyo = wk->gy + o, *gzo = wk->gz + o;
-		const uint32_t cnt = nb->count[i];
-		const float mg = m * kc.spiky_grad;
-		float sx = 0, sy = 0, sz = 0, s2 = 0;
-		uint32_t q = 0;
+	return (l[0] + l[1]) + (l[2] + l[3]);
+}
+
+/* The neighbours of group q, padded with i itself, as 2 j. */
+static inline void group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t i, uint32_t l2[8])
+{
+	for (uint32_t k = 0; k < 8; ++k)
+		l2[k] = 2 * (q + k < cnt ? list[q + k] : i);
+}
+
+/* The gradient pass's sums: each particle's groups from its list, with
+ * G_ij = 0 for a pair closer than sqrt(eps2) (no direction), at r >= h
+ * (the list's margin) and for the padding. */
 #ifdef __SSE2__
-		/* four pairs at a time (the square root and division are most of
-		 * the pass); lanes add in a fixed order, so any thread count gives
-		 * the same sums */
-		__m128 vsx = _mm_setzero_ps(), vsy = vsx, vsz = vsx, vs2 = vsx;
-		const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh = _mm_set1_ps(kc.h),
-		             veps2 = _mm_set1_ps(eps2), vmg = _mm_set1_ps(mg), zero = _mm_setzero_ps();
-		for (; q + 4 <= cnt; q += 4) {
-			const uint32_t j0 = list[q], j1 = list[q + 1], j2 = list[q + 2], j3 = list[q + 3];
-			const __m128 rx = _mm_sub_ps(vxi, _mm_setr_ps(x[j0], x[j1], x[j2], x[j3])),
-			             ry = _mm_sub_ps(vyi, _mm_setr_ps(y[j0], y[j1], y[j2], y[j3])),
-			             rz = _mm_sub_ps(vzi, _mm_setr_ps(z[j0], z[j1], z[j2], z[j3]));
-			const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
-			const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
-			const __m128 ok = _mm_and_ps(_mm_cmpgt_ps(r2, veps2), _mm_cmpgt_ps(hr, zero));
-			/* r is at least sqrt(eps2) where ok; elsewhere divide by 1 */
-			const __m128 rs = _mm_or_ps(_mm_and_ps(ok, r), _mm_andnot_ps(ok, _mm_set1_ps(1.0f)));
-			const __m128 c = _mm_and_ps(ok, _mm_div_ps(_mm_mul_ps(_mm_mul_ps(vmg, hr), hr), rs));
-			const __m128 gx = _mm_mul_ps(c, rx), gy = _mm_mul_ps(c, ry), gz = _mm_mul_ps(c, rz);
-			_mm_storeu_si128((__m128i *)(packed + q), _mm_loadu_si128((const __m128i *)(list + q)));
-			_mm_storeu_ps(gxo + q, gx);
-			_mm_storeu_ps(gyo + q, gy);
-			_mm_storeu_ps(gzo + q, gz);
-			vsx = _mm_add_ps(vsx, gx);
-			vsy = _mm_add_ps(vsy, gy);
-			vsz = _mm_add_ps(vsz, gz);
-			vs2 = _mm_add_ps(vs2, _mm_add_ps(_mm_add_ps(_mm_mul_ps(gx, gx), _mm_mul_ps(gy, gy)), _mm_mul_ps(gz, gz)));
+static void grads_sse(struct dfsph_work *wk, long i0, long cnt, float *t)
+{
+	const grad_args *a = wk->ga;
+	const sph_neighbors *nb = a->nb;
+	const __m128 vh = _mm_set1_ps(a->h), veps2 = _mm_set1_ps(a->eps2), vmg = _mm_set1_ps(a->mg),
+	             one = _mm_set1_ps(1.0f), zero = _mm_setzero_ps();
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
+		const float *pi = a->pq + 4 * i;
+		const __m128 vxi = _mm_set1_ps(pi[0]), vyi = _mm_set1_ps(pi[1]), vzi = _mm_set1_ps(pi[2]);
+		__m128 sx[2] = {zero, zero}, sy[2] = {zero, zero}, sz[2] = {zero, zero}, s2[2] = {zero, zero};
+		dfsph_group *g = wk->g + wk->goff[i];
+		for (uint32_t p = 0; p < c; p += 8, ++g) {
+			if (p + 8 <= c) {
+				const __m128i l0 = _mm_loadu_si128((const __m128i *)(list + p)),
+				              l1 = _mm_loadu_si128((const __m128i *)(list + p + 4));
+				_mm_storeu_si128((__m128i *)g->j2, _mm_add_epi32(l0, l0));
+				_mm_storeu_si128((__m128i *)(g->j2 + 4), _mm_add_epi32(l1, l1));
+			} else {
+				group_rows(list, c, p, (uint32_t)i, g->j2);
+			}
+			for (int k = 0; k < 2; ++k) {
+				const uint32_t *l = g->j2 + 4 * k;
+				__m128 px = _mm_loadu_ps(quad_of(a->pq, l[0])), py = _mm_loadu_ps(quad_of(a->pq, l[1])),
+				       pz = _mm_loadu_ps(quad_of(a->pq, l[2])), pw = _mm_loadu_ps(quad_of(a->pq, l[3]));
+				_MM_TRANSPOSE4_PS(px, py, pz, pw);
+				const __m128 rx = _mm_sub_ps(vxi, px), ry = _mm_sub_ps(vyi, py), rz = _mm_sub_ps(vzi, pz);
+				const __m128 r2 =
+					_mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
+				const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
+				const __m128 ok = _mm_and_ps(_mm_cmpgt_ps(r2, veps2), _mm_cmpgt_ps(hr, zero));
+				/* r is at least sqrt(eps2) where ok; elsewhere divide by 1 */
+				const __m128 rs = _mm_or_ps(_mm_and_ps(ok, r), _mm_andnot_ps(ok, one));
+				const __m128 f = _mm_and_ps(ok, _mm_div_ps(_mm_mul_ps(_mm_mul_ps(vmg, hr), hr), rs));
+				const __m128 gx = _mm_mul_ps(f, rx), gy = _mm_mul_ps(f, ry), gz = _mm_mul_ps(f, rz);
+				_mm_storeu_ps(g->gx + 4 * k, gx);
+				_mm_storeu_ps(g->gy + 4 * k, gy);
+				_mm_storeu_ps(g->gz + 4 * k, gz);
+				sx[k] = _mm_add_ps(sx[k], gx);
+				sy[k] = _mm_add_ps(sy[k], gy);
+				sz[k] = _mm_add_ps(sz[k], gz);
+				s2[k] = _mm_add_ps(
+					s2[k], _mm_add_ps(_mm_add_ps(_mm_mul_ps(gx, gx), _mm_mul_ps(gy, gy)), _mm_mul_ps(gz, gz)));
+			}
 		}
-		float l4[4];
-		_mm_storeu_ps(l4, vsx);
-		sx = (l4[0] + l4[1]) + (l4[2] + l4[3]);
-		_mm_storeu_ps(l4, vsy);
-		sy = (l4[0] + l4[1]) + (l4[2] + l4[3]);
-		_mm_storeu_ps(l4, vsz);
-		sz = (l4[0] + l4[1]) + (l4[2] + l4[3]);
-		_mm_storeu_ps(l4, vs2);
-		s2 = (l4[0] + l4[1]) + (l4[2] + l4[3]);
+		float *ti = t + GRAD_T * q;
+		_mm_storeu_ps(ti, _mm_add_ps(sx[0], sx[1]));
+		_mm_storeu_ps(ti + 4, _mm_add_ps(sy[0], sy[1]));
+		_mm_storeu_ps(ti + 8, _mm_add_ps(sz[0], sz[1]));
+		_mm_storeu_ps(ti + 12, _mm_add_ps(s2[0], s2[1]));
+	}
+}
+
+static void rate_sse(struct dfsph_work *wk, long i0, long cnt, float *t)
+{
+	const float *vf = &wk->v->x;
+	for (long q = 0; q < cnt; ++q) {
+		const float *vi = vf + 4 * (i0 + q);
+		const __m128 vix = _mm_set1_ps(vi[0]), viy = _mm_set1_ps(vi[1]), viz = _mm_set1_ps(vi[2]);
+		__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
+			for (int k = 0; k < 2; ++k) {
+				const uint32_t *l = g->j2 + 4 * k;
+				/* four neighbours' velocities are four loads and a transpose */
+				__m128 vx = _mm_loadu_ps(quad_of(vf, l[0])), vy = _mm_loadu_ps(quad_of(vf, l[1])),
+				       vz = _mm_loadu_ps(quad_of(vf, l[2])), vw = _mm_loadu_ps(quad_of(vf, l[3]));
+				_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
+				sx[k] = _mm_add_ps(sx[k], _mm_mul_ps(_mm_sub_ps(vix, vx), _mm_loadu_ps(g->gx + 4 * k)));
+				sy[k] = _mm_add_ps(sy[k], _mm_mul_ps(_mm_sub_ps(viy, vy), _mm_loadu_ps(g->gy + 4 * k)));
+				sz[k] = _mm_add_ps(sz[k], _mm_mul_ps(_mm_sub_ps(viz, vz), _mm_loadu_ps(g->gz + 4 * k)));
+			}
+		_mm_storeu_ps(t + RATE_T * q, _mm_add_ps(_mm_add_ps(_mm_add_ps(sx[0], sy[0]), sz[0]),
+		                                         _mm_add_ps(_mm_add_ps(sx[1], sy[1]), sz[1])));
+	}
+}
+
+static void correct_sse(struct dfsph_work *wk, long i0, long cnt, float *t)
+{
+	const float *k = wk->k;
+	for (long q = 0; q < cnt; ++q) {
+		const __m128 vki = _mm_set1_ps(k[i0 + q]);
+		__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
+			for (int h = 0; h < 2; ++h) {
+				const uint32_t *l = g->j2 + 4 * h;
+				const __m128 c =
+					_mm_add_ps(vki, _mm_setr_ps(k_of(k, l[0]), k_of(k, l[1]), k_of(k, l[2]), k_of(k, l[3])));
+				sx[h] = _mm_add_ps(sx[h], _mm_mul_ps(c, _mm_loadu_ps(g->gx + 4 * h)));
+				sy[h] = _mm_add_ps(sy[h], _mm_mul_ps(c, _mm_loadu_ps(g->gy + 4 * h)));
+				sz[h] = _mm_add_ps(sz[h], _mm_mul_ps(c, _mm_loadu_ps(g->gz + 4 * h)));
+			}
+		float *ti = t + CORR_T * q;
+		_mm_storeu_ps(ti, _mm_add_ps(sx[0], sx[1]));
+		_mm_storeu_ps(ti + 4, _mm_add_ps(sy[0], sy[1]));
+		_mm_storeu_ps(ti + 8, _mm_add_ps(sz[0], sz[1]));
+	}
+}
+#else
+/* Without SSE the vector paths' lanes one by one, folded as they fold. */
+static void fold(const float s[8], float *t)
+{
+	for (int l = 0; l < 4; ++l)
+		t[l] = s[l] + s[l + 4];
+}
+
+static void grads_scalar(struct dfsph_work *wk, long i0, long cnt, float *t)
+{
+	const grad_args *a = wk->ga;
+	const sph_neighbors *nb = a->nb;
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
+		const float *pi = a->pq + 4 * i;
+		float sx[8] = {0}, sy[8] = {0}, sz[8] = {0}, s2[8] = {0};
+		dfsph_group *g = wk->g + wk->goff[i];
+		for (uint32_t p = 0; p < c; p += 8, ++g) {
+			group_rows(list, c, p, (uint32_t)i, g->j2);
+			for (int l = 0; l < 8; ++l) {
+				const float *pj = quad_of(a->pq, g->j2[l]);
+				const float rx = pi[0] - pj[0], ry = pi[1] - pj[1], rz = pi[2] - pj[2];
+				const float r2 = rx * rx + ry * ry + rz * rz;
+				const float r = sqrtf(r2), hr = a->h - r;
+				const float f = r2 > a->eps2 && hr > 0 ? a->mg * hr * hr / r : 0.0f;
+				g->gx[l] = f * rx;
+				g->gy[l] = f * ry;
+				g->gz[l] = f * rz;
+				sx[l] += g->gx[l];
+				sy[l] += g->gy[l];
+				sz[l] += g->gz[l];
+				s2[l] += g->gx[l] * g->gx[l] + g->gy[l] * g->gy[l] + g->gz[l] * g->gz[l];
+			}
+		}
+		float *ti = t + GRAD_T * q;
+		fold(sx, ti);
+		fold(sy, ti + 4);
+		fold(sz, ti + 8);
+		fold(s2, ti + 12);
+	}
+}
+
+static void rate_scalar(struct dfsph_work *wk, long i0, long cnt, float *t)
+{
+	const float *vf = &wk->v->x;
+	for (long q = 0; q < cnt; ++q) {
+		const float *vi = vf + 4 * (i0 + q);
+		float sx[8] = {0}, sy[8] = {0}, sz[8] = {0}, s[8];
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
+			for (int l = 0; l < 8; ++l) {
+				const float *vj = quad_of(vf, g->j2[l]);
+				sx[l] += (vi[0] - vj[0]) * g->gx[l];
+				sy[l] += (vi[1] - vj[1]) * g->gy[l];
+				sz[l] += (vi[2] - vj[2]) * g->gz[l];
+			}
+		for (int l = 0; l < 8; ++l)
+			s[l] = (sx[l] + sy[l]) + sz[l];
+		fold(s, t + RATE_T * q);
+	}
+}
+
+static void correct_scalar(struct dfsph_work *wk, long i0, long cnt, float *t)
+{
+	const float *k = wk->k;
+	for (long q = 0; q < cnt; ++q) {
+		const float ki = k[i0 + q];
+		float sx[8] = {0}, sy[8] = {0}, sz[8] = {0};
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
+			for (int l = 0; l < 8; ++l) {
+				const float c = ki + k_of(k, g->j2[l]);
+				sx[l] += c * g->gx[l];
+				sy[l] += c * g->gy[l];
+				sz[l] += c * g->gz[l];
+			}
+		float *ti = t + CORR_T * q;
+		fold(sx, ti);
+		fold(sy, ti + 4);
+		fold(sz, ti + 8);
+	}
+}
 #endif
-		for (; q < cnt; ++q) {
-			const uint32_t j = list[q];
-			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
-			const float r2 = rx * rx + ry * ry + rz * rz;
-			const float r = sqrtf(r2), hr = kc.h - r;
-			const float c = r2 > eps2 && hr > 0 ? mg * hr * hr / r : 0.0f;
-			/* the gradient's factor is < 0: G_ij points from i towards j */
-			const float gx = c * rx, gy = c * ry, gz = c * rz;
-			packed[q] = j;
-			gxo[q] = gx;
-			gyo[q] = gy;
-			gzo[q] = gz;
-			sx += gx;
-			sy += gy;
-			sz += gz;
-			s2 += gx * gx + gy * gy + gz * gz;
+
+#ifdef SPH_AVX2
+/* lanes l and l + 4 added, as the SSE path adds its halves */
+__attribute__((target("avx2"))) static inline __m128 fold8(__m256 v)
+{
+	return _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
+}
+
+__attribute__((target("avx2"))) static void grads_avx2(struct dfsph_work *wk, long i0, long cnt, float *t)
+{
+	const grad_args *a = wk->ga;
+	const sph_neighbors *nb = a->nb;
+	const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
+		dfsph_group *g = wk->g + wk->goff[i];
+		uint32_t p = 0;
+		for (; p + 8 <= c; p += 8, ++g) {
+			const __m256i l = _mm256_loadu_si256((const __m256i *)(list + p));
+			_mm256_storeu_si256((__m256i *)g->j2, _mm256_add_epi32(l, l));
 		}
-		const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
-		const uint32_t bcnt = nb->bcount[i];
-		float bx = 0, by = 0, bz = 0, hx = 0, hy = 0, hz = 0;
-		for (uint32_t qb = 0; qb < bcnt; ++qb) {
-			const uint32_t b = blist[qb];
-			const float rx = xi - nb->bx[b], ry = yi - nb->by[b], rz = zi - nb->bz[b];
-			const float r2 = rx * rx + ry * ry + rz * rz;
-			const float mb = nb->bvol[b] * rho0; /* Akinci: the wall at rest density */
-			const float r = sqrtf(r2), hr = kc.h - r;
-			const float c = r2 > eps2 && hr > 0 ? mb * kc.spiky_grad * hr * hr / r : 0.0f;
-			bx += c * rx;
-			by += c * ry;
-			bz += c * rz;
-			/* g . (x_b - x_i) */
-			const float gh = -(grav.x * rx + grav.y * ry + grav.z * rz) * c;
-			hx += gh * rx;
-			hy += gh * ry;
-			hz += gh * rz;
+		if (p < c) { /* the last group: lanes past the count (not read) get i */
+			const __m256i in = _mm256_cmpgt_epi32(_mm256_set1_epi32((int)(c - p)), lane);
+			const __m256i l = _mm256_blendv_epi8(_mm256_set1_epi32((int)i),
+			                                     _mm256_maskload_epi32((const int *)(list + p), in), in);
+			_mm256_storeu_si256((__m256i *)g->j2, _mm256_add_epi32(l, l));
 		}
-		const float ir = 1.0f / rho[i];
-		wk->h[i] = (dfsph_f4){-hx * ir, -hy * ir, -hz * ir, rho[i]};
+	}
+	/* the block's groups in one loop: the square roots and divisions of
+	 * several particles overlap */
+	const __m256 vh = _mm256_set1_ps(a->h), veps2 = _mm256_set1_ps(a->eps2), vmg = _mm256_set1_ps(a->mg),
+	             one = _mm256_set1_ps(1.0f), zero = _mm256_setzero_ps();
+	for (size_t gi = wk->goff[i0], ge = wk->goff[i0 + cnt]; gi < ge; ++gi) {
+		dfsph_group *g = wk->g + gi;
+		const float *pi = a->pq + 4 * (size_t)wk->owner[gi];
+		const __m256 vxi = _mm256_broadcast_ss(pi), vyi = _mm256_broadcast_ss(pi + 1), vzi = _mm256_broadcast_ss(pi + 2);
+		const uint32_t *l = g->j2;
+		const float *const quad[8] = {quad_of(a->pq, l[0]), quad_of(a->pq, l[1]), quad_of(a->pq, l[2]),
+		                              quad_of(a->pq, l[3]), quad_of(a->pq, l[4]), quad_of(a->pq, l[5]),
+		                              quad_of(a->pq, l[6]), quad_of(a->pq, l[7])};
+		__m256 px, py, pz, pw;
+		sph_transpose8(quad, &px, &py, &pz, &pw);
+		const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
+		const __m256 r2 =
+			_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz));
+		const __m256 r = _mm256_sqrt_ps(r2), hr = _mm256_sub_ps(vh, r);
+		const __m256 ok = _mm256_and_ps(_mm256_cmp_ps(r2, veps2, _CMP_GT_OQ), _mm256_cmp_ps(hr, zero, _CMP_GT_OQ));
+		const __m256 rs = _mm256_blendv_ps(one, r, ok);
+		const __m256 f = _mm256_and_ps(ok, _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(vmg, hr), hr), rs));
+		_mm256_storeu_ps(g->gx, _mm256_mul_ps(f, rx));
+		_mm256_storeu_ps(g->gy, _mm256_mul_ps(f, ry));
+		_mm256_storeu_ps(g->gz, _mm256_mul_ps(f, rz));
+	}
+	for (long q = 0; q < cnt; ++q) {
+		__m256 sx = zero, sy = zero, sz = zero, s2 = zero;
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
+			const __m256 gx = _mm256_loadu_ps(g->gx), gy = _mm256_loadu_ps(g->gy), gz = _mm256_loadu_ps(g->gz);
+			sx = _mm256_add_ps(sx, gx);
+			sy = _mm256_add_ps(sy, gy);
+			sz = _mm256_add_ps(sz, gz);
+			s2 = _mm256_add_ps(s2, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(gx, gx), _mm256_mul_ps(gy, gy)),
+			                                     _mm256_mul_ps(gz, gz)));
+		}
+		float *ti = t + GRAD_T * q;
+		_mm_storeu_ps(ti, fold8(sx));
+		_mm_storeu_ps(ti + 4, fold8(sy));
+		_mm_storeu_ps(ti + 8, fold8(sz));
+		_mm_storeu_ps(ti + 12, fold8(s2));
+	}
+}
+
+__attribute__((target("avx2"))) static void rate_avx2(struct dfsph_work *wk, long i0, long cnt, float *t)
+{
+	const float *vf = &wk->v->x;
+	for (long q = 0; q < cnt; ++q) {
+		const float *vi = vf + 4 * (i0 + q);
+		const __m256 vix = _mm256_set1_ps(vi[0]), viy = _mm256_set1_ps(vi[1]), viz = _mm256_set1_ps(vi[2]);
+		__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
+			const uint32_t *l = g->j2;
+			const float *const quad[8] = {quad_of(vf, l[0]), quad_of(vf, l[1]), quad_of(vf, l[2]), quad_of(vf, l[3]),
+			                              quad_of(vf, l[4]), quad_of(vf, l[5]), quad_of(vf, l[6]), quad_of(vf, l[7])};
+			__m256 vx, vy, vz, vw;
+			sph_transpose8(quad, &vx, &vy, &vz, &vw);
+			sx = _mm256_add_ps(sx, _mm256_mul_ps(_mm256_sub_ps(vix, vx), _mm256_loadu_ps(g->gx)));
+			sy = _mm256_add_ps(sy, _mm256_mul_ps(_mm256_sub_ps(viy, vy), _mm256_loadu_ps(g->gy)));
+			sz = _mm256_add_ps(sz, _mm256_mul_ps(_mm256_sub_ps(viz, vz), _mm256_loadu_ps(g->gz)));
+		}
+		_mm_storeu_ps(t + RATE_T * q, fold8(_mm256_add_ps(_mm256_add_ps(sx, sy), sz)));
+	}
+}
+
+__attribute__((target("avx2"))) static void correct_avx2(struct dfsph_work *wk, long i0, long cnt, float *t)
+{
+	const float *k = wk->k;
+	for (long q = 0; q < cnt; ++q) {
+		const __m256 vki = _mm256_set1_ps(k[i0 + q]);
+		__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
+			/* eight scalar loads: faster here than vgatherdps */
+			const uint32_t *l = g->j2;
+			const __m256 kj = _mm256_setr_ps(k_of(k, l[0]), k_of(k, l[1]), k_of(k, l[2]), k_of(k, l[3]),
+			                                 k_of(k, l[4]), k_of(k, l[5]), k_of(k, l[6]), k_of(k, l[7]));
+			const __m256 c = _mm256_add_ps(vki, kj);
+			sx = _mm256_add_ps(sx, _mm256_mul_ps(c, _mm256_loadu_ps(g->gx)));
+			sy = _mm256_add_ps(sy, _mm256_mul_ps(c, _mm256_loadu_ps(g->gy)));
+			sz = _mm256_add_ps(sz, _mm256_mul_ps(c, _mm256_loadu_ps(g->gz)));
+		}
+		float *ti = t + CORR_T * q;
+		_mm_storeu_ps(ti, fold8(sx));
+		_mm_storeu_ps(ti + 4, fold8(sy));
+		_mm_storeu_ps(ti + 8, fold8(sz));
+	}
+}
+#endif
+
+/* The wall sums of particle i: B_i (out[0..2]) and the hydrostatic sum
+ * sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b) (out[3..5]). Four boundary
+ * particles at a time (the last four padded with copies of the last one,
+ * masked out), the same code for either path: most particles have none and
+ * those at a wall a few, a small part of the pass. */
+static void wall_sums(const grad_args *a, long i, float out[6])
+{
+	const sph_neighbors *nb = a->nb;
+	const float *pi = a->pq + 4 * i;
+	const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
+	const uint32_t bcnt = nb->bcount[i];
+#ifdef __SSE2__
+	const __m128 vxi = _mm_set1_ps(pi[0]), vyi = _mm_set1_ps(pi[1]), vzi = _mm_set1_ps(pi[2]), vh = _mm_set1_ps(a->h),
+	             veps2 = _mm_set1_ps(a->eps2), vrho0 = _mm_set1_ps(a->rho0), vsg = _mm_set1_ps(a->spiky_grad),
+	             vgx = _mm_set1_ps(a->gx), vgy = _mm_set1_ps(a->gy), vgz = _mm_set1_ps(a->gz),
+	             one = _mm_set1_ps(1.0f), zero = _mm_setzero_ps(), sign = _mm_set1_ps(-0.0f);
+	__m128 s[6] = {zero, zero, zero, zero, zero, zero};
+	for (uint32_t q = 0; q < bcnt; q += 4) {
+		uint32_t l[4];
+		for (uint32_t k = 0; k < 4; ++k)
+			l[k] = blist[q + k < bcnt ? q + k : bcnt - 1];
+		const __m128 in = _mm_castsi128_ps(_mm_cmpgt_epi32(_mm_set1_epi32((int)(bcnt - q)), _mm_setr_epi32(0, 1, 2, 3)));
+		const __m128 rx = _mm_sub_ps(vxi, _mm_setr_ps(nb->bx[l[0]], nb->bx[l[1]], nb->bx[l[2]], nb->bx[l[3]])),
+		             ry = _mm_sub_ps(vyi, _mm_setr_ps(nb->by[l[0]], nb->by[l[1]], nb->by[l[2]], nb->by[l[3]])),
+		             rz = _mm_sub_ps(vzi, _mm_setr_ps(nb->bz[l[0]], nb->bz[l[1]], nb->bz[l[2]], nb->bz[l[3]]));
+		/* Akinci: the wall at rest density */
+		const __m128 mb =
+			_mm_mul_ps(_mm_setr_ps(nb->bvol[l[0]], nb->bvol[l[1]], nb->bvol[l[2]], nb->bvol[l[3]]), vrho0);
+		const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
+		const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
+		const __m128 ok = _mm_and_ps(in, _mm_and_ps(_mm_cmpgt_ps(r2, veps2), _mm_cmpgt_ps(hr, zero)));
+		const __m128 rs = _mm_or_ps(_mm_and_ps(ok, r), _mm_andnot_ps(ok, one));
+		const __m128 c = _mm_and_ps(ok, _mm_div_ps(_mm_mul_ps(_mm_mul_ps(_mm_mul_ps(mb, vsg), hr), hr), rs));
+		s[0] = _mm_add_ps(s[0], _mm_mul_ps(c, rx));
+		s[1] = _mm_add_ps(s[1], _mm_mul_ps(c, ry));
+		s[2] = _mm_add_ps(s[2], _mm_mul_ps(c, rz));
+		/* g . (x_b - x_i) */
+		const __m128 gh = _mm_mul_ps(
+			_mm_xor_ps(sign, _mm_add_ps(_mm_add_ps(_mm_mul_ps(vgx, rx), _mm_mul_ps(vgy, ry)), _mm_mul_ps(vgz, rz))), c);
+		s[3] = _mm_add_ps(s[3], _mm_mul_ps(gh, rx));
+		s[4] = _mm_add_ps(s[4], _mm_mul_ps(gh, ry));
+		s[5] = _mm_add_ps(s[5], _mm_mul_ps(gh, rz));
+	}
+	for (int k = 0; k < 6; ++k)
+		out[k] = sph_hsum4(s[k]);
+#else
+	float s[6][4] = {{0}};
+	for (uint32_t q = 0; q < bcnt; ++q) {
+		const uint32_t b = blist[q], l = q % 4;
+		const float rx = pi[0] - nb->bx[b], ry = pi[1] - nb->by[b], rz = pi[2] - nb->bz[b];
+		const float r2 = rx * rx + ry * ry + rz * rz;
+		const float mb = nb->bvol[b] * a->rho0;
+		const float r = sqrtf(r2), hr = a->h - r;
+		const float c = r2 > a->eps2 && hr > 0 ? mb * a->spiky_grad * hr * hr / r : 0.0f;
+		s[0][l] += c * rx;
+		s[1][l] += c * ry;
+		s[2][l] += c * rz;
+		const float gh = -(a->gx * rx + a->gy * ry + a->gz * rz) * c;
+		s[3][l] += gh * rx;
+		s[4][l] += gh * ry;
+		s[5][l] += gh * rz;
+	}
+	for (int k = 0; k < 6; ++k)
+		out[k] = sum4(s[k]);
+#endif
+}
+
+/* The gradient pass's second loop: the walls' sums, h_i and 1 / D_i. */
+static void grads_finish(dfsph_work *wk, long i0, long cnt, const float *t)
+{
+	/* a copy the stores below cannot alias: the constants stay in registers */
+	const grad_args a = *wk->ga;
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		const float *ti = t + GRAD_T * q;
+		const float sx = sum4(ti), sy = sum4(ti + 4), sz = sum4(ti + 8), s2 = sum4(ti + 12);
+		float w[6] = {0, 0, 0, 0, 0, 0};
+		if (a.nb->bcount[i]) /* most particles are away from the walls */
+			wall_sums(&a, i, w);
+		const float bx = w[0], by = w[1], bz = w[2];
+		const float ir = a.pq[4 * i + 3]; /* 1 / rho_i */
+		wk->h[i] = (dfsph_f4){-w[3] * ir, -w[4] * ir, -w[5] * ir, a.rho[i]};
 		/* (S + 2B) . (S + B) + sum |G|^2, S = sum_j G_ij: the boundary term of
 		 * the acceleration counts twice (pressure mirroring) */
 		const float d = (sx + 2 * bx) * (sx + bx) + (sy + 2 * by) * (sy + by) + (sz + 2 * bz) * (sz + bz) + s2;
-		wk->b[i] = (dfsph_f4){bx, by, bz, d > dmin ? 1.0f / d : 0.0f};
+		wk->b[i] = (dfsph_f4){bx, by, bz, d > a.dmin ? 1.0f / d : 0.0f};
 	}
 }
 
-/* Drho_i/Dt from the predicted velocities. */
-static inline float density_rate(const dfsph_work *wk, long i)
+/* max(e, 0), 0 for NaN: without the explicit maxss the compiler made a
+ * branch of it, mispredicted for about every other particle */
+static inline float positive(float e)
 {
-	const size_t o = wk->off[i];
-	const uint32_t *list = wk->nbr + o;
-	const float *gx = wk->gx + o, *gy = wk->gy + o, *gz = wk->gz + o;
-	const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
-	const uint32_t cnt = wk->count[i];
-	float sx = 0, sy = 0, sz = 0;
-	uint32_t q = 0;
 #ifdef __SSE2__
-	/* four neighbours' (v, k) are four loads and a transpose */
-	__m128 ax = _mm_setzero_ps(), ay = ax, az = ax;
+	return _mm_cvtss_f32(_mm_max_ss(_mm_set_ss(e), _mm_setzero_ps()));
+#else
+	return e > 0 ? e : 0;
+#endif
+}
+
+/* rate's second loop: Drho_i/Dt, the sweep's error and k_i. Four particles
+ * at a time where SSE is (the scalar loop does the same per particle). */
+static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, const float *t)
+{
+	long q = 0;
+#ifdef __SSE2__
+	const __m128 vdt = _mm_set1_ps(a->dt), vrho0 = _mm_set1_ps(a->rho0), zero = _mm_setzero_ps(),
+	             vinv = _mm_set1_ps(a->divergence ? a->inv_dt : a->inv_dt2);
 	for (; q + 4 <= cnt; q += 4) {
-		__m128 a = _mm_loadu_ps(&wk->v[list[q]].x), b = _mm_loadu_ps(&wk->v[list[q + 1]].x),
-		       c = _mm_loadu_ps(&wk->v[list[q + 2]].x), d = _mm_loadu_ps(&wk->v[list[q + 3]].x);
-		_MM_TRANSPOSE4_PS(a, b, c, d); /* a = vx, b = vy, c = vz of the four */
-		ax = _mm_add_ps(ax, _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(vi.x), a), _mm_loadu_ps(gx + q)));
-		ay = _mm_add_ps(ay, _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(vi.y), b), _mm_loadu_ps(gy + q)));
-		az = _mm_add_ps(az, _mm_mul_ps(_mm_sub_ps(_mm_set1_ps(vi.z), c), _mm_loadu_ps(gz + q)));
+		const long i = i0 + q;
+		__m128 s0 = _mm_loadu_ps(t + RATE_T * q), s1 = _mm_loadu_ps(t + RATE_T * (q + 1)),
+		       s2 = _mm_loadu_ps(t + RATE_T * (q + 2)), s3 = _mm_loadu_ps(t + RATE_T * (q + 3));
+		_MM_TRANSPOSE4_PS(s0, s1, s2, s3);
+		__m128 vx = _mm_loadu_ps(&wk->v[i].x), vy = _mm_loadu_ps(&wk->v[i + 1].x), vz = _mm_loadu_ps(&wk->v[i + 2].x),
+		       vw = _mm_loadu_ps(&wk->v[i + 3].x);
+		_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
+		__m128 bx = _mm_loadu_ps(&wk->b[i].x), by = _mm_loadu_ps(&wk->b[i + 1].x), bz = _mm_loadu_ps(&wk->b[i + 2].x),
+		       bw = _mm_loadu_ps(&wk->b[i + 3].x);
+		_MM_TRANSPOSE4_PS(bx, by, bz, bw);
+		const __m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)),
+		                            _mm_add_ps(_mm_add_ps(_mm_mul_ps(vx, bx), _mm_mul_ps(vy, by)), _mm_mul_ps(vz, bz)));
+		__m128 e;
+		if (a->divergence) {
+			const __m128 d = _mm_max_ps(r, zero);
+			e = _mm_mul_ps(d, vdt);
+			_mm_storeu_ps(wk->k + i, _mm_mul_ps(_mm_mul_ps(d, vinv), bw));
+		} else {
+			const __m128 rho = _mm_setr_ps(wk->h[i].w, wk->h[i + 1].w, wk->h[i + 2].w, wk->h[i + 3].w);
+			e = _mm_max_ps(_mm_sub_ps(_mm_add_ps(rho, _mm_mul_ps(vdt, r)), vrho0), zero);
+			_mm_storeu_ps(wk->k + i, _mm_mul_ps(_mm_mul_ps(e, vinv), bw));
+		}
+		_mm_storeu_ps(wk->err + i, e);
 	}
-	float l4[4];
-	_mm_storeu_ps(l4, _mm_add_ps(_mm_add_ps(ax, ay), az));
-	sx = (l4[0] + l4[1]) + (l4[2] + l4[3]);
 #endif
 	for (; q < cnt; ++q) {
-		const dfsph_f4 vj = wk->v[list[q]];
-		sx += (vi.x - vj.x) * gx[q];
-		sy += (vi.y - vj.y) * gy[q];
-		sz += (vi.z - vj.z) * gz[q];
+		const long i = i0 + q;
+		const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
+		const float r = sum4(t + RATE_T * q) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z);
+		if (a->divergence) {
+			const float d = positive(r);
+			wk->err[i] = d * a->dt;
+			wk->k[i] = d * a->inv_dt * bi.w;
+		} else {
+			const float e = positive(wk->h[i].w + a->dt * r - a->rho0);
+			wk->err[i] = e;
+			wk->k[i] = e * a->inv_dt2 * bi.w;
+		}
 	}
-	return (sx + sy + sz) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z);
 }
 
-/* v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i); k in v[].w. Writes only
- * its own particle's x y z (others read w), and adds k_i to its sum. */
-static void correct(dfsph_work *wk, float dt, int threads)
+/* correct's second loop: v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i),
+ * and k_i added to its sum. Four particles at a time where SSE is. */
+static void correct_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, const float *t)
 {
+	long q = 0;
+#ifdef __SSE2__
+	const __m128 vdt = _mm_set1_ps(a->dt), two = _mm_set1_ps(2.0f);
+	for (; q + 4 <= cnt; q += 4) {
+		const long i = i0 + q;
+		const float *t0 = t + CORR_T * q, *t1 = t0 + CORR_T, *t2 = t1 + CORR_T, *t3 = t2 + CORR_T;
+		__m128 f[3];
+		for (int c = 0; c < 3; ++c) {
+			__m128 l0 = _mm_loadu_ps(t0 + 4 * c), l1 = _mm_loadu_ps(t1 + 4 * c), l2 = _mm_loadu_ps(t2 + 4 * c),
+			       l3 = _mm_loadu_ps(t3 + 4 * c);
+			_MM_TRANSPOSE4_PS(l0, l1, l2, l3);
+			f[c] = _mm_add_ps(_mm_add_ps(l0, l1), _mm_add_ps(l2, l3));
+		}
+		__m128 vx = _mm_loadu_ps(&wk->v[i].x), vy = _mm_loadu_ps(&wk->v[i + 1].x), vz = _mm_loadu_ps(&wk->v[i + 2].x),
+		       vw = _mm_loadu_ps(&wk->v[i + 3].x);
+		_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
+		__m128 bx = _mm_loadu_ps(&wk->b[i].x), by = _mm_loadu_ps(&wk->b[i + 1].x), bz = _mm_loadu_ps(&wk->b[i + 2].x),
+		       bw = _mm_loadu_ps(&wk->b[i + 3].x);
+		_MM_TRANSPOSE4_PS(bx, by, bz, bw);
+		const __m128 ki = _mm_loadu_ps(wk->k + i), kb = _mm_mul_ps(two, ki); /* the boundary particles mirror k_i */
+		vx = _mm_sub_ps(vx, _mm_mul_ps(vdt, _mm_add_ps(_mm_mul_ps(kb, bx), f[0])));
+		vy = _mm_sub_ps(vy, _mm_mul_ps(vdt, _mm_add_ps(_mm_mul_ps(kb, by), f[1])));
+		vz = _mm_sub_ps(vz, _mm_mul_ps(vdt, _mm_add_ps(_mm_mul_ps(kb, bz), f[2])));
+		_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
+		_mm_storeu_ps(&wk->v[i].x, vx);
+		_mm_storeu_ps(&wk->v[i + 1].x, vy);
+		_mm_storeu_ps(&wk->v[i + 2].x, vz);
+		_mm_storeu_ps(&wk->v[i + 3].x, vw);
+		_mm_storeu_ps(wk->ksum + i, _mm_add_ps(_mm_loadu_ps(wk->ksum + i), ki));
+	}
+#endif
+	for (; q < cnt; ++q) {
+		const long i = i0 + q;
+		const float *ti = t + CORR_T * q;
+		const dfsph_f4 bi = wk->b[i];
+		const float ki = wk->k[i], kb = 2 * ki; /* the boundary particles mirror k_i */
+		wk->v[i].x -= a->dt * (kb * bi.x + sum4(ti));
+		wk->v[i].y -= a->dt * (kb * bi.y + sum4(ti + 4));
+		wk->v[i].z -= a->dt * (kb * bi.z + sum4(ti + 8));
+		wk->ksum[i] += ki;
+	}
+}
+
+enum pass_kind { PASS_GRADIENTS, PASS_RATE, PASS_CORRECT };
+
+/* A pass over all particles, the threads taking equal shares in order.
+ * Each particle writes only its own values (rate its err and k, correct its
+ * velocity: the others read k) from inputs no other particle of the pass
+ * changes, so the result is the same for any thread count. (Tried: fusing a
+ * correction with the next rates, rating a particle as soon as its
+ * neighbours were corrected while its groups were in cache; the same bits,
+ * but no faster: the passes are not bound by streaming the groups.) */
+static void pass(dfsph_work *wk, enum pass_kind kind, const sweep_args *a, int threads)
+{
+	sums_fn *sums = kind == PASS_GRADIENTS ? wk->grads : kind == PASS_RATE ? wk->rate : wk->correct;
 	const long n = wk->n;
 #pragma omp parallel for num_threads(threads) schedule(static)
-	for (long i = 0; i < n; ++i) {
-		const size_t o = wk->off[i];
-		const uint32_t *list = wk->nbr + o;
-		const float *gx = wk->gx + o, *gy = wk->gy + o, *gz = wk->gz + o;
-		const dfsph_f4 bi = wk->b[i];
-		const float ki = wk->v[i].w;
-		const uint32_t cnt = wk->count[i];
-		const float kb = 2 * ki; /* the boundary particles mirror k_i */
-		float ax = kb * bi.x, ay = kb * bi.y, az = kb * bi.z;
-		uint32_t q = 0;
-#ifdef __SSE2__
-		__m128 sx = _mm_setzero_ps(), sy = sx, sz = sx;
-		const __m128 vki = _mm_set1_ps(ki);
-		for (; q + 4 <= cnt; q += 4) {
-			const __m128 c = _mm_add_ps(vki, _mm_setr_ps(wk->v[list[q]].w, wk->v[list[q + 1]].w,
-			                                             wk->v[list[q + 2]].w, wk->v[list[q + 3]].w));
-			sx = _mm_add_ps(sx, _mm_mul_ps(c, _mm_loadu_ps(gx + q)));
-			sy = _mm_add_ps(sy, _mm_mul_ps(c, _mm_loadu_ps(gy + q)));
-			sz = _mm_add_ps(sz, _mm_mul_ps(c, _mm_loadu_ps(gz + q)));
+	for (int th = 0; th < threads; ++th) {
+		float t[DFSPH_BLOCK * GRAD_T];
+		for (long i0 = n * th / threads, hi = n * (th + 1) / threads; i0 < hi; i0 += DFSPH_BLOCK) {
+			const long cnt = hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK;
+			sums(wk, i0, cnt, t);
+			if (kind == PASS_GRADIENTS)
+				grads_finish(wk, i0, cnt, t);
+			else if (kind == PASS_RATE)
+				rate_finish(wk, a, i0, cnt, t);
+			else
+				correct_finish(wk, a, i0, cnt, t);
 		}
-		float l4[4];
-		_mm_storeu_ps(l4, sx);
-		ax += (l4[0] + l4[1]) + (l4[2] + l4[3]);
-		_mm_storeu_ps(l4, sy);
-		ay += (l4[0] + l4[1]) + (l4[2] + l4[3]);
-		_mm_storeu_ps(l4, sz);
-		az += (l4[0] + l4[1]) + (l4[2] + l4[3]);
-#endif
-		for (; q < cnt; ++q) {
-			const float c = ki + wk->v[list[q]].w;
-			ax += c * gx[q];
-			ay += c * gy[q];
-			az += c * gz[q];
-		}
-		wk->v[i].x -= dt * ax;
-		wk->v[i].y -= dt * ay;
-		wk->v[i].z -= dt * az;
-		wk->ksum[i] += ki;
 	}
 }
 
@@ -331,21 +751,14 @@ static double mean_of(const float *e, long n)
 /* Divergence-free solve: sweeps until mean max(Drho/Dt, 0) dt / rho0 <= tol. */
 static int divergence_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float dt, int threads)
 {
-	const long n = wk->n;
-	const float inv_dt = 1.0f / dt;
+	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true};
 	int it = 0;
 	for (;;) {
-#pragma omp parallel for num_threads(threads) schedule(static)
-		for (long i = 0; i < n; ++i) {
-			float r = density_rate(wk, i);
-			r = r > 0 ? r : 0;
-			wk->err[i] = r * dt;
-			wk->v[i].w = r * inv_dt * wk->b[i].w;
-		}
-		const double e = mean_of(wk->err, n) / rho0;
+		pass(wk, PASS_RATE, &a, threads);
+		const double e = mean_of(wk->err, wk->n) / rho0;
 		if ((it >= 1 && e <= sd->def.max_divergence_error) || it >= sd->def.max_divergence_iterations)
 			break;
-		correct(wk, dt, threads);
+		pass(wk, PASS_CORRECT, &a, threads);
 		++it;
 	}
 	return it;
@@ -354,21 +767,14 @@ static int divergence_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, flo
 /* Constant-density solve: sweeps until mean max(rho* - rho0, 0) / rho0 <= tol. */
 static int density_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float dt, int threads, double *residual)
 {
-	const long n = wk->n;
-	const float inv_dt2 = 1.0f / (dt * dt);
+	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, false};
 	int it = 0;
 	for (;;) {
-#pragma omp parallel for num_threads(threads) schedule(static)
-		for (long i = 0; i < n; ++i) {
-			float e = wk->h[i].w + dt * density_rate(wk, i) - rho0;
-			e = e > 0 ? e : 0;
-			wk->err[i] = e;
-			wk->v[i].w = e * inv_dt2 * wk->b[i].w;
-		}
-		*residual = mean_of(wk->err, n) / rho0;
+		pass(wk, PASS_RATE, &a, threads);
+		*residual = mean_of(wk->err, wk->n) / rho0;
 		if ((it >= DFSPH_MIN_SWEEPS && *residual <= sd->def.max_density_error) || it >= sd->def.max_iterations)
 			break;
-		correct(wk, dt, threads);
+		pass(wk, PASS_CORRECT, &a, threads);
 		++it;
 	}
 	return it;
@@ -399,7 +805,6 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	}
 	const sph_neighbors *nb = &sh->nb;
 	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
-	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *rho = eddy__col(w, COL_DENSITY);
 	float *p = eddy__col(w, COL_PRESSURE);
@@ -407,43 +812,58 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const float dt = (float)ctx->dt, rho0 = sh->rho0;
 	if (n == 0 || !(dt > 0))
 		return EDDY_OK;
+	if ((uint64_t)n > (uint64_t)INT32_MAX) /* the groups hold 2 j in 32 bits */
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: too many particles (%ld)", s->label, n);
 
 	dfsph_work wk;
 	wk.n = n;
-	wk.count = nb->count;
+#if defined(SPH_AVX2)
+	wk.grads = sd->avx2 ? grads_avx2 : grads_sse;
+	wk.rate = sd->avx2 ? rate_avx2 : rate_sse;
+	wk.correct = sd->avx2 ? correct_avx2 : correct_sse;
+#elif defined(__SSE2__)
+	wk.grads = grads_sse;
+	wk.rate = rate_sse;
+	wk.correct = correct_sse;
+#else
+	wk.grads = grads_scalar;
+	wk.rate = rate_scalar;
+	wk.correct = correct_scalar;
+#endif
 	const size_t un = (size_t)n;
-	wk.off = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk.off);
-	if (!wk.off)
+	wk.goff = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk.goff);
+	if (!wk.goff)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
-	wk.off[0] = 0;
+	wk.goff[0] = 0;
 	for (long i = 0; i < n; ++i)
-		wk.off[i + 1] = wk.off[i] + nb->count[i];
-	const size_t pairs = wk.off[n] ? wk.off[n] : 1;
-	wk.nbr = eddy__arena_alloc(&w->arena, pairs * sizeof *wk.nbr);
-	wk.gx = eddy__arena_alloc(&w->arena, 3 * pairs * sizeof *wk.gx);
-	wk.gy = wk.gx ? wk.gx + pairs : NULL;
-	wk.gz = wk.gx ? wk.gy + pairs : NULL;
-	dfsph_f4 *block = eddy__arena_alloc(&w->arena, 3 * un * sizeof(dfsph_f4) + 2 * un * sizeof(float));
-	if (!wk.nbr || !wk.gx || !block)
+		wk.goff[i + 1] = wk.goff[i] + (nb->count[i] + 7) / 8;
+	wk.g = eddy__arena_alloc(&w->arena, (wk.goff[n] ? wk.goff[n] : 1) * sizeof *wk.g);
+	wk.owner = eddy__arena_alloc(&w->arena, (wk.goff[n] ? wk.goff[n] : 1) * sizeof *wk.owner);
+	dfsph_f4 *block = eddy__arena_alloc(&w->arena, 3 * un * sizeof(dfsph_f4) + 3 * un * sizeof(float));
+	if (!wk.g || !wk.owner || !block)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
 	wk.b = block;
 	wk.v = wk.b + un;
 	wk.h = wk.v + un;
-	wk.ksum = (float *)(wk.h + un);
+	wk.k = (float *)(wk.h + un);
+	wk.ksum = wk.k + un;
 	wk.err = wk.ksum + un;
+	for (long i = 0; i < n; ++i)
+		for (size_t gi = wk.goff[i]; gi < wk.goff[i + 1]; ++gi)
+			wk.owner[gi] = (uint32_t)i;
 
-	gradients(sh, x, y, z, rho, w->def.gravity, &wk, ctx->threads);
+	const sph_kernel_consts kc = sh->k;
+	const float dref = sh->mass * kc.spiky_grad * kc.h2; /* |G| scale */
+	const eddy_vec3 g = w->def.gravity;
+	const grad_args ga = {nb,  sh->pq, rho, kc.h, 1e-6f * kc.h2, sh->mass * kc.spiky_grad, rho0, kc.spiky_grad,
+	                      g.x, g.y,    g.z, 1e-6f * dref * dref};
+	wk.ga = &ga;
+	pass(&wk, PASS_GRADIENTS, NULL, ctx->threads);
 	memset(wk.ksum, 0, un * sizeof *wk.ksum);
 
-	int div_it = 0;
-	if (sd->def.divergence_solver) {
-		for (long i = 0; i < n; ++i)
-			wk.v[i] = (dfsph_f4){vx[i], vy[i], vz[i], 0};
-		div_it = divergence_solve(&wk, sd, rho0, dt, ctx->threads);
-	} else {
-		for (long i = 0; i < n; ++i)
-			wk.v[i] = (dfsph_f4){vx[i], vy[i], vz[i], 0};
-	}
+	for (long i = 0; i < n; ++i)
+		wk.v[i] = (dfsph_f4){vx[i], vy[i], vz[i], 0};
+	const int div_it = sd->def.divergence_solver ? divergence_solve(&wk, sd, rho0, dt, ctx->threads) : 0;
 	/* v* = v (divergence-free) + dt (a + h) */
 	for (long i = 0; i < n; ++i) {
 		wk.v[i].x += dt * (ax[i] + wk.h[i].x);
@@ -545,5 +965,9 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
 	sd->def = *def;
 	sd->frame = -1;
+#ifdef SPH_AVX2
+	const char *no_avx2 = getenv("EDDY_NO_AVX2");
+	sd->avx2 = sph_use_avx2() && !(no_avx2 && *no_avx2);
+#endif
 	return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, dfsph_reads, 10, dfsph_writes, 4);
 }
