@@ -158,7 +158,14 @@ static inline float sph_hsum4(__m128 v)
 #if defined(__SSE2__) && defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__))
 #define SPH_AVX2 1
 #include <immintrin.h>
-static inline bool sph_use_avx2(void) { return __builtin_cpu_supports("avx2"); }
+#include <stdlib.h>
+/* EDDY_NO_AVX2 (set, not empty) takes the SSE path on an AVX2 machine: the
+ * test that both paths give the same bits, and a way around a suspect CPU. */
+static inline bool sph_use_avx2(void)
+{
+	const char *off = getenv("EDDY_NO_AVX2");
+	return __builtin_cpu_supports("avx2") && !(off && *off);
+}
 
 /* Sum of eight lanes as the SSE path sums its two halves. */
 __attribute__((target("avx2"))) static inline float sph_hsum8(__m256 v)

@@ -966,8 +966,7 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 	sd->def = *def;
 	sd->frame = -1;
 #ifdef SPH_AVX2
-	const char *no_avx2 = getenv("EDDY_NO_AVX2");
-	sd->avx2 = sph_use_avx2() && !(no_avx2 && *no_avx2);
+	sd->avx2 = sph_use_avx2();
 #endif
 	return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, dfsph_reads, 10, dfsph_writes, 4);
 }

@@ -3,6 +3,7 @@
  * break vs Martin & Moyce, oscillating drop vs Rayleigh) and the hard cases
  * of VALIDATION.md section C. Sizes are small so the suite runs in seconds;
  * every test prints the figure it checks. */
+#define _POSIX_C_SOURCE 200809L /* setenv, strdup */
 #include "test.h"
 
 #include <stdlib.h>
@@ -1218,6 +1219,50 @@ static void dfsph_deterministic_across_threads(void)
 	CHECK(hash[0] == hash[1]);
 }
 
+/* The SSE and AVX2 paths give the same bits (the AVX2 one is chosen at run
+ * time; EDDY_NO_AVX2 forces SSE): a WCSPH splash with surface tension (grid
+ * search and Verlet filter, pressure, viscosity) and a DFSPH drop (the
+ * search without a skin and the solver's passes), hashed on both paths. On
+ * a CPU without AVX2 both runs take the SSE path and the test says so. */
+static void simd_paths_give_the_same_bits(void)
+{
+	const char *had = getenv("EDDY_NO_AVX2");
+	char *saved = had ? strdup(had) : NULL;
+	const eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+	for (int k = 0; k < 2; ++k) {
+		sph_setup s = default_setup();
+		s.hi = (eddy_vec3){0.2f, 0.1f, 0.04f};
+		s.fmax = (eddy_vec3){0.06f, 0.08f, 0.04f};
+		if (k == 0) {
+			s.sigma = 0.0728f;
+		} else {
+			s.cfl = 0.8;
+			s.dfsph = &df;
+		}
+		uint64_t hash[2];
+		for (int path = 0; path < 2; ++path) {
+			if (path == 0)
+				unsetenv("EDDY_NO_AVX2");
+			else
+				setenv("EDDY_NO_AVX2", "1", 1);
+			eddy_world *w = sph_world(&s, NULL);
+			for (int f = 0; f < (k == 0 ? 8 : 20); ++f)
+				CHECK(eddy_world_step_frame(w) == EDDY_OK);
+			hash[path] = eddy_world_state_hash(w);
+			eddy_destroy_world(w);
+		}
+		printf("    %s: state hash %016llx (%s), %016llx (SSE)\n", k == 0 ? "wcsph" : "dfsph",
+		       (unsigned long long)hash[0], __builtin_cpu_supports("avx2") ? "AVX2" : "no AVX2 here: SSE",
+		       (unsigned long long)hash[1]);
+		CHECK(hash[0] == hash[1]);
+	}
+	if (saved)
+		setenv("EDDY_NO_AVX2", saved, 1);
+	else
+		unsetenv("EDDY_NO_AVX2");
+	free(saved);
+}
+
 /* A block dropped from 3 cm into a tank, at CFL 0.8 with no acoustic limit:
  * every step converges (no step hits max_iterations), the published residual
  * stays within the tolerance, and the measured mean compression within twice
@@ -1291,6 +1336,7 @@ static void sph_dfsph_suite(void)
 	RUN(dfsph_dam_break_matches_martin_moyce);
 	RUN(dfsph_rejects_bad_input);
 	RUN(dfsph_deterministic_across_threads);
+	RUN(simd_paths_give_the_same_bits);
 	RUN(dfsph_drop_converges);
 	RUN(dfsph_resume_is_bit_identical);
 }
