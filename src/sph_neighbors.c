@@ -305,23 +305,24 @@ static bool search_buf_grow(search_buf *b, size_t want)
 	return b->x && b->y && b->z && b->d && b->j && b->hit;
 }
 
-/* The candidates c[0..nc) (nc a multiple of four, the padding far away)
- * with r2max - r^2 > 0, in order, into hit/d; returns how many. The same
- * operations as filter(), so the same (r2max - r^2) bits. */
-static uint32_t hits_sse(const search_buf *c, uint32_t nc, float xi, float yi, float zi, float r2max, uint32_t *hit,
-                         float *dv)
+/* The candidates c[q0..q1) with r2max - r^2 > 0, in order, into hit/d;
+ * returns how many. The last group reads past q1 (the buffer is padded by
+ * eight) and is masked to q1. The same operations as filter(), so the same
+ * (r2max - r^2) bits. */
+static uint32_t hits_sse(const search_buf *c, uint32_t q0, uint32_t q1, float xi, float yi, float zi, float r2max,
+                         uint32_t *hit, float *dv)
 {
-	uint32_t cnt = 0, q = 0;
+	uint32_t cnt = 0, q = q0;
 #ifdef __SSE2__
 	const __m128 vxi = _mm_set1_ps(xi), vyi = _mm_set1_ps(yi), vzi = _mm_set1_ps(zi), vh2 = _mm_set1_ps(r2max);
-	for (; q < nc; q += 4) {
+	for (; q < q1; q += 4) {
 		const __m128 rx = _mm_sub_ps(vxi, _mm_loadu_ps(c->x + q)), ry = _mm_sub_ps(vyi, _mm_loadu_ps(c->y + q)),
 		             rz = _mm_sub_ps(vzi, _mm_loadu_ps(c->z + q));
 		const __m128 d =
 			_mm_sub_ps(vh2, _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz)));
-		const unsigned in = (unsigned)_mm_movemask_ps(_mm_cmpgt_ps(d, _mm_setzero_ps()));
-		if (!in)
-			continue; /* most groups of a block's buffer miss a given particle */
+		unsigned in = (unsigned)_mm_movemask_ps(_mm_cmpgt_ps(d, _mm_setzero_ps()));
+		if (q1 - q < 4)
+			in &= (1u << (q1 - q)) - 1;
 		float dd[4];
 		_mm_storeu_ps(dd, d);
 		for (unsigned k = 0; k < 4; ++k) {
@@ -331,7 +332,7 @@ static uint32_t hits_sse(const search_buf *c, uint32_t nc, float xi, float yi, f
 		}
 	}
 #endif
-	for (; q < nc; ++q) {
+	for (; q < q1; ++q) {
 		const float rx = xi - c->x[q], ry = yi - c->y[q], rz = zi - c->z[q];
 		const float d = r2max - (rx * rx + ry * ry + rz * rz);
 		hit[cnt] = c->j[q];
@@ -344,8 +345,9 @@ static uint32_t hits_sse(const search_buf *c, uint32_t nc, float xi, float yi, f
 #ifdef SPH_AVX2
 /* hits_sse with eight lanes, packed with a permutation made from the mask
  * (pdep/pext) and stored eight at a time: the same hits in the same order. */
-__attribute__((target("avx2,bmi2"))) static uint32_t hits_avx2(const search_buf *c, uint32_t nc, float xi, float yi,
-                                                               float zi, float r2max, uint32_t *hit, float *dv)
+__attribute__((target("avx2,bmi2"))) static uint32_t hits_avx2(const search_buf *c, uint32_t q0, uint32_t q1, float xi,
+                                                               float yi, float zi, float r2max, uint32_t *hit,
+                                                               float *dv)
 {
 	const __m256 vxi = _mm256_set1_ps(xi), vyi = _mm256_set1_ps(yi), vzi = _mm256_set1_ps(zi),
 	             vh2 = _mm256_set1_ps(r2max);
@@ -354,12 +356,14 @@ __attribute__((target("avx2,bmi2"))) static uint32_t hits_avx2(const search_buf 
 	uint32_t cnt = 0;
 	/* no test for a group without hits: which groups hit is a coin toss,
 	 * and storing nothing costs less than a mispredicted branch */
-	for (uint32_t q = 0; q < nc; q += 8) {
+	for (uint32_t q = q0; q < q1; q += 8) {
 		const __m256 rx = _mm256_sub_ps(vxi, _mm256_loadu_ps(cx + q)), ry = _mm256_sub_ps(vyi, _mm256_loadu_ps(cy + q)),
 		             rz = _mm256_sub_ps(vzi, _mm256_loadu_ps(cz + q));
 		const __m256 d = _mm256_sub_ps(
 			vh2, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz)));
-		const unsigned in = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(d, _mm256_setzero_ps(), _CMP_GT_OQ));
+		unsigned in = (unsigned)_mm256_movemask_ps(_mm256_cmp_ps(d, _mm256_setzero_ps(), _CMP_GT_OQ));
+		if (q1 - q < 8)
+			in &= (1u << (q1 - q)) - 1;
 		const uint64_t keep = _pdep_u64(in, 0x0101010101010101ull) * 0xFF;
 		const __m256i perm =
 			_mm256_cvtepu8_epi32(_mm_cvtsi64_si128((long long)_pext_u64(0x0706050403020100ull, keep)));
@@ -469,7 +473,7 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 			const int by0 = byi * SEARCH_BY, by1 = by0 + SEARCH_BY - 1 < gy ? by0 + SEARCH_BY - 1 : gy - 1;
 			const int bz0 = bzi * SEARCH_BZ, bz1 = bz0 + SEARCH_BZ - 1 < gz ? bz0 + SEARCH_BZ - 1 : gz - 1;
 			/* the runs, in cell order; own[] marks the block's own rows */
-			uint32_t run[(2 * SPH_VERLET_CELLS + SEARCH_BY) * (2 * SPH_VERLET_CELLS + SEARCH_BZ)][5];
+			uint32_t run[(2 * SPH_VERLET_CELLS + SEARCH_BY) * (2 * SPH_VERLET_CELLS + SEARCH_BZ)][6];
 			int runs = 0;
 			size_t nf = 0, nbd = 0;
 			for (int zz = bz0 - R; zz <= bz1 + R; ++zz) {
@@ -489,6 +493,7 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 					r[3] = nb->bcell_start[row + (size_t)x1 + 1];
 					/* the block's own particles in this row: a stretch of the run */
 					r[4] = ey == 0 && ez == 0 ? (uint32_t)(row + (size_t)bx0) : UINT32_MAX;
+					r[5] = (uint32_t)(zz - (bz0 - R)); /* its layer */
 					nf += r[1] - r[0];
 					nbd += r[3] - r[2];
 				}
@@ -497,8 +502,17 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 				ok = false;
 				continue;
 			}
+			/* the buffers' offsets at each run and at each layer of cells
+			 * in z: a particle needs only the 2R + 1 layers around its own,
+			 * one stretch of the buffer (the block spans 2R + SEARCH_BZ) */
 			uint32_t nc = 0, nbc = 0, at[(2 * SPH_VERLET_CELLS + SEARCH_BY) * (2 * SPH_VERLET_CELLS + SEARCH_BZ)];
+			uint32_t zf[2 * SPH_VERLET_CELLS + SEARCH_BZ + 1], zb[2 * SPH_VERLET_CELLS + SEARCH_BZ + 1];
+			int layer = 0;
 			for (int r = 0; r < runs; ++r) {
+				for (; layer <= (int)run[r][5]; ++layer) {
+					zf[layer] = nc;
+					zb[layer] = nbc;
+				}
 				at[r] = nc;
 				for (uint32_t j = run[r][0]; j < run[r][1]; ++j, ++nc) {
 					fb.x[nc] = x[j];
@@ -513,13 +527,17 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 					bb.j[nbc] = j;
 				}
 			}
-			/* pad to whole groups of eight with points no test keeps */
-			const uint32_t ncp = (nc + 7) & ~7u, nbcp = (nbc + 7) & ~7u;
-			for (uint32_t q = nc; q < ncp; ++q) {
+			for (; layer <= 2 * R + bz1 - bz0 + 1; ++layer) {
+				zf[layer] = nc;
+				zb[layer] = nbc;
+			}
+			/* a group of eight may start anywhere: eight points past the end
+			 * (masked; far away all the same) */
+			for (uint32_t q = nc; q < nc + 8; ++q) {
 				fb.x[q] = fb.y[q] = fb.z[q] = 1e30f;
 				fb.j[q] = 0;
 			}
-			for (uint32_t q = nbc; q < nbcp; ++q) {
+			for (uint32_t q = nbc; q < nbc + 8; ++q) {
 				bb.x[q] = bb.y[q] = bb.z[q] = 1e30f;
 				bb.j[q] = 0;
 			}
@@ -533,15 +551,16 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 				const uint32_t s = at[r] + (i - run[r][0]);
 				fb.x[s] = 1e30f;
 				uint32_t cnt, bcnt;
+				const uint32_t l0 = run[r][5] - (uint32_t)R, l1 = run[r][5] + (uint32_t)R + 1;
 #ifdef SPH_AVX2
 				if (avx2) {
-					cnt = hits_avx2(&fb, ncp, xi, yi, zi, r2max, fb.hit, fb.d);
-					bcnt = hits_avx2(&bb, nbcp, xi, yi, zi, r2max, bb.hit, bb.d);
+					cnt = hits_avx2(&fb, zf[l0], zf[l1], xi, yi, zi, r2max, fb.hit, fb.d);
+					bcnt = hits_avx2(&bb, zb[l0], zb[l1], xi, yi, zi, r2max, bb.hit, bb.d);
 				} else
 #endif
 				{
-					cnt = hits_sse(&fb, ncp, xi, yi, zi, r2max, fb.hit, fb.d);
-					bcnt = hits_sse(&bb, nbcp, xi, yi, zi, r2max, bb.hit, bb.d);
+					cnt = hits_sse(&fb, zf[l0], zf[l1], xi, yi, zi, r2max, fb.hit, fb.d);
+					bcnt = hits_sse(&bb, zb[l0], zb[l1], xi, yi, zi, r2max, bb.hit, bb.d);
 				}
 				fb.x[s] = xi;
 				if (cnt <= cap)
