@@ -58,7 +58,7 @@ eddy_sph_viscosity_def eddy_default_sph_viscosity_def(void)
  * max(r, rmin)) r_vec (3-5). */
 typedef struct pair_args {
 	const sph_neighbors *nb;
-	const float *pq, *pv; /* (x y z 1/rho) and (vx vy vz rho) per particle */
+	const float *pq, *pv; /* (x y z 1/rho) and (vx vy vz -rho) per particle */
 	float h, eps, rmin;
 } pair_args;
 
@@ -83,9 +83,15 @@ static inline void group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, ui
 
 #ifdef __SSE2__
 /* One group (neighbours l[0..7]) as two halves, with the same operations
- * per lane as the AVX2 path. Whole groups (masked false) need no mask: the
- * compiler drops it where the argument is constant. */
-static inline void group_sse(const pair_args *a, const uint32_t *l, bool masked, uint32_t left, const __m128 vi[7],
+ * per lane as the AVX2 path. The differences are taken on the quads before
+ * the transpose: qp = (x_i y_i z_i 0) minus (x_j y_j z_j 1/rho_j) gives
+ * r_vec and -1/rho_j, qv = (v_i rho_i) minus (v_j -rho_j) gives v_ij and
+ * rho_i + rho_j, exactly the lanes' former operations; i's inputs are then
+ * two registers, not seven, and the six sums stay in registers. The -1/rho_j
+ * makes c the negative of (h - r) / rho_j, added instead of subtracted.
+ * Whole groups (masked false) need no mask: the compiler drops it where the
+ * argument is constant. */
+static inline void group_sse(const pair_args *a, const uint32_t *l, bool masked, uint32_t left, __m128 qp, __m128 qv,
                              __m128 s[6][2])
 {
 	const __m128 vh = _mm_set1_ps(a->h), veps = _mm_set1_ps(a->eps), vrmin = _mm_set1_ps(a->rmin),
@@ -93,37 +99,41 @@ static inline void group_sse(const pair_args *a, const uint32_t *l, bool masked,
 	for (int k = 0; k < 2; ++k) {
 		const size_t o0 = 4 * (size_t)l[4 * k], o1 = 4 * (size_t)l[4 * k + 1], o2 = 4 * (size_t)l[4 * k + 2],
 		             o3 = 4 * (size_t)l[4 * k + 3];
-		__m128 px = _mm_loadu_ps(a->pq + o0), py = _mm_loadu_ps(a->pq + o1), pz = _mm_loadu_ps(a->pq + o2),
-		       pir = _mm_loadu_ps(a->pq + o3);
-		_MM_TRANSPOSE4_PS(px, py, pz, pir);
-		__m128 pu = _mm_loadu_ps(a->pv + o0), pv = _mm_loadu_ps(a->pv + o1), pw = _mm_loadu_ps(a->pv + o2),
-		       prho = _mm_loadu_ps(a->pv + o3);
-		_MM_TRANSPOSE4_PS(pu, pv, pw, prho);
-		const __m128 rx = _mm_sub_ps(vi[0], px), ry = _mm_sub_ps(vi[1], py), rz = _mm_sub_ps(vi[2], pz);
+		__m128 rx = _mm_sub_ps(qp, _mm_loadu_ps(a->pq + o0)), ry = _mm_sub_ps(qp, _mm_loadu_ps(a->pq + o1)),
+		       rz = _mm_sub_ps(qp, _mm_loadu_ps(a->pq + o2)), nir = _mm_sub_ps(qp, _mm_loadu_ps(a->pq + o3));
+		_MM_TRANSPOSE4_PS(rx, ry, rz, nir);
+		__m128 ux = _mm_sub_ps(qv, _mm_loadu_ps(a->pv + o0)), uy = _mm_sub_ps(qv, _mm_loadu_ps(a->pv + o1)),
+		       uz = _mm_sub_ps(qv, _mm_loadu_ps(a->pv + o2)), rho2 = _mm_sub_ps(qv, _mm_loadu_ps(a->pv + o3));
+		_MM_TRANSPOSE4_PS(ux, uy, uz, rho2);
 		const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
 		const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
-		const __m128 ux = _mm_sub_ps(vi[3], pu), uy = _mm_sub_ps(vi[4], pv), uz = _mm_sub_ps(vi[5], pw);
 		const __m128 in = masked ? _mm_castsi128_ps(_mm_cmpgt_epi32(_mm_set1_epi32((int)left),
 		                                                            _mm_setr_epi32(4 * k, 4 * k + 1, 4 * k + 2, 4 * k + 3)))
 		                         : zero;
-		__m128 c = _mm_mul_ps(hr, pir);
+		__m128 c = _mm_mul_ps(hr, nir);
 		if (masked)
 			c = _mm_and_ps(in, c);
-		s[0][k] = _mm_sub_ps(s[0][k], _mm_mul_ps(c, ux));
-		s[1][k] = _mm_sub_ps(s[1][k], _mm_mul_ps(c, uy));
-		s[2][k] = _mm_sub_ps(s[2][k], _mm_mul_ps(c, uz));
+		s[0][k] = _mm_add_ps(s[0][k], _mm_mul_ps(c, ux));
+		s[1][k] = _mm_add_ps(s[1][k], _mm_mul_ps(c, uy));
+		s[2][k] = _mm_add_ps(s[2][k], _mm_mul_ps(c, uz));
 		const __m128 vr = _mm_add_ps(_mm_add_ps(_mm_mul_ps(ux, rx), _mm_mul_ps(uy, ry)), _mm_mul_ps(uz, rz));
 		__m128 neg = _mm_cmplt_ps(vr, zero);
 		if (masked)
 			neg = _mm_and_ps(in, neg);
 		const __m128 app = _mm_and_ps(neg, _mm_sub_ps(zero, vr));
 		const __m128 g = _mm_div_ps(_mm_mul_ps(_mm_mul_ps(app, hr), hr),
-		                            _mm_mul_ps(_mm_mul_ps(_mm_add_ps(r2, veps), _mm_add_ps(vi[6], prho)),
-		                                       _mm_max_ps(r, vrmin)));
+		                            _mm_mul_ps(_mm_mul_ps(_mm_add_ps(r2, veps), rho2), _mm_max_ps(r, vrmin)));
 		s[3][k] = _mm_add_ps(s[3][k], _mm_mul_ps(g, rx));
 		s[4][k] = _mm_add_ps(s[4][k], _mm_mul_ps(g, ry));
 		s[5][k] = _mm_add_ps(s[5][k], _mm_mul_ps(g, rz));
 	}
+}
+
+/* (x_i y_i z_i 0) and (v_i rho_i) from i's quads */
+static inline void own_quads(const float *pi, const float *vel, __m128 *qp, __m128 *qv)
+{
+	*qp = _mm_and_ps(_mm_loadu_ps(pi), _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0)));
+	*qv = _mm_xor_ps(_mm_loadu_ps(vel), _mm_setr_ps(0.0f, 0.0f, 0.0f, -0.0f));
 }
 
 static void pair_sums_sse(const pair_args *a, long i0, long cnt, float *t)
@@ -132,19 +142,18 @@ static void pair_sums_sse(const pair_args *a, long i0, long cnt, float *t)
 	for (long b = 0; b < cnt; ++b) {
 		const long i = i0 + b;
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
-		const float *pi = a->pq + 4 * i, *vel = a->pv + 4 * i;
-		const __m128 vi[7] = {_mm_set1_ps(pi[0]),  _mm_set1_ps(pi[1]),  _mm_set1_ps(pi[2]), _mm_set1_ps(vel[0]),
-		                      _mm_set1_ps(vel[1]), _mm_set1_ps(vel[2]), _mm_set1_ps(vel[3])};
+		__m128 qp, qv;
+		own_quads(a->pq + 4 * i, a->pv + 4 * i, &qp, &qv);
 		__m128 s[6][2];
 		for (int k = 0; k < 6; ++k)
 			s[k][0] = s[k][1] = _mm_setzero_ps();
 		uint32_t q = 0;
 		for (; q + 8 <= c; q += 8)
-			group_sse(a, list + q, false, 8, vi, s);
+			group_sse(a, list + q, false, 8, qp, qv, s);
 		if (q < c) {
 			uint32_t l[8];
 			group_rows(list, c, q, l);
-			group_sse(a, l, true, c - q, vi, s);
+			group_sse(a, l, true, c - q, qp, qv, s);
 		}
 		for (int k = 0; k < 6; ++k)
 			_mm_storeu_ps(t + VISC_T * b + 4 * k, _mm_add_ps(s[k][0], s[k][1]));
@@ -172,7 +181,8 @@ static void pair_sums_scalar(const pair_args *a, long i0, long cnt, float *t)
 			/* approaching pairs only (vr < 0), pushed apart along r_hat */
 			const float vr = ux * rx + uy * ry + uz * rz;
 			const float app = vr < 0 ? -vr : 0.0f, rs = r > a->rmin ? r : a->rmin;
-			const float g = app * hr * hr / ((r2 + a->eps) * (vel[3] + vj[3]) * rs);
+			/* pv holds -rho */
+			const float g = app * hr * hr / ((r2 + a->eps) * (-vel[3] - vj[3]) * rs);
 			f[3] += g * rx;
 			f[4] += g * ry;
 			f[5] += g * rz;
@@ -187,8 +197,30 @@ static void pair_sums_scalar(const pair_args *a, long i0, long cnt, float *t)
 #endif
 
 #ifdef SPH_AVX2
+/* Quads a[0..7] subtracted from q (lanes 0-3 from a[0..3], 4-7 from
+ * a[4..7]) and transposed, as the SSE path's four subtractions and
+ * _MM_TRANSPOSE4_PS per half. */
+__attribute__((target("avx2"))) static inline void sub_transpose8(__m256 q, const float *const a[8], __m256 *c0,
+                                                                  __m256 *c1, __m256 *c2, __m256 *c3)
+{
+	const __m256 v0 = _mm256_sub_ps(
+		             q, _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[0])), _mm_loadu_ps(a[4]), 1)),
+	             v1 = _mm256_sub_ps(
+		             q, _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[1])), _mm_loadu_ps(a[5]), 1)),
+	             v2 = _mm256_sub_ps(
+		             q, _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[2])), _mm_loadu_ps(a[6]), 1)),
+	             v3 = _mm256_sub_ps(
+		             q, _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[3])), _mm_loadu_ps(a[7]), 1));
+	const __m256 t0 = _mm256_unpacklo_ps(v0, v1), t1 = _mm256_unpacklo_ps(v2, v3), t2 = _mm256_unpackhi_ps(v0, v1),
+	             t3 = _mm256_unpackhi_ps(v2, v3);
+	*c0 = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(1, 0, 1, 0));
+	*c1 = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(3, 2, 3, 2));
+	*c2 = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(1, 0, 1, 0));
+	*c3 = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(3, 2, 3, 2));
+}
+
 __attribute__((target("avx2"))) static inline void group_avx2(const pair_args *a, const uint32_t *l, bool masked,
-                                                              uint32_t left, const __m256 vi[7], __m256 s[6])
+                                                              uint32_t left, __m256 qp, __m256 qv, __m256 s[6])
 {
 	const __m256 vh = _mm256_set1_ps(a->h), veps = _mm256_set1_ps(a->eps), vrmin = _mm256_set1_ps(a->rmin),
 	             zero = _mm256_setzero_ps();
@@ -198,30 +230,27 @@ __attribute__((target("avx2"))) static inline void group_avx2(const pair_args *a
 	const float *const qb[8] = {a->pv + 4 * (size_t)l[0], a->pv + 4 * (size_t)l[1], a->pv + 4 * (size_t)l[2],
 	                            a->pv + 4 * (size_t)l[3], a->pv + 4 * (size_t)l[4], a->pv + 4 * (size_t)l[5],
 	                            a->pv + 4 * (size_t)l[6], a->pv + 4 * (size_t)l[7]};
-	__m256 px, py, pz, pir, pu, pv, pw, prho;
-	sph_transpose8(qa, &px, &py, &pz, &pir);
-	sph_transpose8(qb, &pu, &pv, &pw, &prho);
-	const __m256 rx = _mm256_sub_ps(vi[0], px), ry = _mm256_sub_ps(vi[1], py), rz = _mm256_sub_ps(vi[2], pz);
+	__m256 rx, ry, rz, nir, ux, uy, uz, rho2;
+	sub_transpose8(qp, qa, &rx, &ry, &rz, &nir);
+	sub_transpose8(qv, qb, &ux, &uy, &uz, &rho2);
 	const __m256 r2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz));
 	const __m256 r = _mm256_sqrt_ps(r2), hr = _mm256_sub_ps(vh, r);
-	const __m256 ux = _mm256_sub_ps(vi[3], pu), uy = _mm256_sub_ps(vi[4], pv), uz = _mm256_sub_ps(vi[5], pw);
 	const __m256 in = masked ? _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32((int)left),
 	                                                                  _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7)))
 	                         : zero;
-	__m256 c = _mm256_mul_ps(hr, pir);
+	__m256 c = _mm256_mul_ps(hr, nir);
 	if (masked)
 		c = _mm256_and_ps(in, c);
-	s[0] = _mm256_sub_ps(s[0], _mm256_mul_ps(c, ux));
-	s[1] = _mm256_sub_ps(s[1], _mm256_mul_ps(c, uy));
-	s[2] = _mm256_sub_ps(s[2], _mm256_mul_ps(c, uz));
+	s[0] = _mm256_add_ps(s[0], _mm256_mul_ps(c, ux));
+	s[1] = _mm256_add_ps(s[1], _mm256_mul_ps(c, uy));
+	s[2] = _mm256_add_ps(s[2], _mm256_mul_ps(c, uz));
 	const __m256 vr = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ux, rx), _mm256_mul_ps(uy, ry)), _mm256_mul_ps(uz, rz));
 	__m256 neg = _mm256_cmp_ps(vr, zero, _CMP_LT_OQ);
 	if (masked)
 		neg = _mm256_and_ps(in, neg);
 	const __m256 app = _mm256_and_ps(neg, _mm256_sub_ps(zero, vr));
 	const __m256 g = _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(app, hr), hr),
-	                               _mm256_mul_ps(_mm256_mul_ps(_mm256_add_ps(r2, veps), _mm256_add_ps(vi[6], prho)),
-	                                             _mm256_max_ps(r, vrmin)));
+	                               _mm256_mul_ps(_mm256_mul_ps(_mm256_add_ps(r2, veps), rho2), _mm256_max_ps(r, vrmin)));
 	s[3] = _mm256_add_ps(s[3], _mm256_mul_ps(g, rx));
 	s[4] = _mm256_add_ps(s[4], _mm256_mul_ps(g, ry));
 	s[5] = _mm256_add_ps(s[5], _mm256_mul_ps(g, rz));
@@ -233,20 +262,19 @@ __attribute__((target("avx2"))) static void pair_sums_avx2(const pair_args *a, l
 	for (long b = 0; b < cnt; ++b) {
 		const long i = i0 + b;
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
-		const float *pi = a->pq + 4 * i, *vel = a->pv + 4 * i;
-		const __m256 vi[7] = {_mm256_broadcast_ss(pi),      _mm256_broadcast_ss(pi + 1),  _mm256_broadcast_ss(pi + 2),
-		                      _mm256_broadcast_ss(vel),     _mm256_broadcast_ss(vel + 1), _mm256_broadcast_ss(vel + 2),
-		                      _mm256_broadcast_ss(vel + 3)};
+		__m128 qp4, qv4;
+		own_quads(a->pq + 4 * i, a->pv + 4 * i, &qp4, &qv4);
+		const __m256 qp = _mm256_set_m128(qp4, qp4), qv = _mm256_set_m128(qv4, qv4);
 		__m256 s[6];
 		for (int k = 0; k < 6; ++k)
 			s[k] = _mm256_setzero_ps();
 		uint32_t q = 0;
 		for (; q + 8 <= c; q += 8)
-			group_avx2(a, list + q, false, 8, vi, s);
+			group_avx2(a, list + q, false, 8, qp, qv, s);
 		if (q < c) {
 			uint32_t l[8];
 			group_rows(list, c, q, l);
-			group_avx2(a, l, true, c - q, vi, s);
+			group_avx2(a, l, true, c - q, qp, qv, s);
 		}
 		/* lanes l and l + 4 added, as the SSE path adds its halves */
 		for (int k = 0; k < 6; ++k)
@@ -275,7 +303,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	            rmin = 1e-3f * kc.h;
 	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
 	/* each neighbour's eight inputs as two 16-byte quads, (x y z 1/rho) from
-	 * sph_density and (vx vy vz rho) made here: a group of neighbours then
+	 * sph_density and (vx vy vz -rho) made here: a group of neighbours then
 	 * costs two loads each and two transposes instead of eight scattered
 	 * loads each, which were most of the pass */
 	const float *pq = sh->pq;
@@ -287,7 +315,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		pv[4 * i] = vx[i];
 		pv[4 * i + 1] = vy[i];
 		pv[4 * i + 2] = vz[i];
-		pv[4 * i + 3] = rho[i];
+		pv[4 * i + 3] = -rho[i]; /* negated: see group_sse */
 	}
 	const pair_args pa = {nb, pq, pv, kc.h, eps, rmin};
 #ifdef SPH_AVX2
