@@ -92,8 +92,11 @@ static inline float sum4(const float *l)
  * neighbour (the padding's lanes are masked out). */
 static inline void group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t l[8])
 {
+	const uint32_t *g = list + q, last = cnt - 1 - q;
+	/* min(k, last) in arithmetic: written as a choice, it became a branch
+	 * per lane, mispredicted for the lanes around the count */
 	for (uint32_t k = 0; k < 8; ++k)
-		l[k] = list[q + k < cnt ? q + k : cnt - 1];
+		l[k] = g[last + ((k - last) & (0u - (uint32_t)(k < last)))];
 }
 
 #ifdef __SSE2__
