@@ -16,9 +16,11 @@
  * default CFL 0.4 that is the usual 0.125 h^2/nu.
  * Positions and 1/rho come from sph_density's (x y z 1/rho) quads (sh->pq,
  * the positions its lists were made from). The pairs go eight at a time
- * (AVX2 when the CPU has it, else SSE as two halves doing the same per lane),
- * with per-lane partial sums added in a fixed order: the same bits for any
- * thread count and either path.
+ * (AVX2 when the CPU has it, else SSE as two halves doing the same per lane;
+ * EDDY_NO_AVX2 forces SSE), a particle's last group masked, with per-lane
+ * partial sums added in a fixed order: the same bits for any thread count
+ * and either path. The particles go in blocks of 64, the sums over the
+ * block's groups first, then a loop adding the totals to ax ay az.
  * Source: Mueller, Charypar & Gross 2003; Monaghan, "Smoothed particle
  * hydrodynamics", ARAA 1992. */
 #include "sph.h"
@@ -42,120 +44,247 @@ eddy_sph_viscosity_def eddy_default_sph_viscosity_def(void)
 	return d;
 }
 
-/* The fluid pairs of one particle, eight neighbours at a time (the last
- * group padded with copies of the last neighbour, masked out). f[0..2] get
- * -sum (h - r) / rho_j (v_i - v_j), f[3..5] the artificial viscosity's
- * sum of max(0, -v_ij . r_vec) (h - r)^2 / ((r^2 + eps) (rho_i + rho_j)
- * max(r, rmin)) r_vec. */
+/* The pass goes in blocks of particles: first the sums over the pairs of the
+ * block (pair_sums), then a loop adding each particle's totals to ax ay az.
+ * Finishing each particle right after its groups put the adds of its six
+ * totals behind every (often mispredicted) exit of the loop over its groups;
+ * the particles of the second loop are independent (as in sph_dfsph). */
+#define VISC_BLOCK 64
+#define VISC_T 24 /* floats of the sums per particle: 4 lanes of each of six */
+
+/* What the pair sums read. Per particle they give -sum (h - r) / rho_j
+ * (v_i - v_j) (components 0-2) and the artificial viscosity's sum of
+ * max(0, -v_ij . r_vec) (h - r)^2 / ((r^2 + eps) (rho_i + rho_j)
+ * max(r, rmin)) r_vec (3-5). */
 typedef struct pair_args {
-	const float *pq, *pv; /* (x y z 1/rho) and (vx vy vz rho) per particle */
+	const sph_neighbors *nb;
+	const float *pq, *pv; /* (x y z 1/rho) and (vx vy vz -rho) per particle */
 	float h, eps, rmin;
 } pair_args;
 
+/* The sums over the pairs of particles i0 .. i0 + cnt - 1, eight neighbours
+ * at a time, each particle's as four lanes per component (lane l holding
+ * lanes l and l + 4 of the groups) at t + VISC_T q. */
+typedef void pair_sums_fn(const pair_args *a, long i0, long cnt, float *t);
+
+/* (l0 + l1) + (l2 + l3), the order of sph_hsum4 */
+static inline float sum4(const float *l)
+{
+	return (l[0] + l[1]) + (l[2] + l[3]);
+}
+
+/* The neighbours of the last group q, padded with copies of its last
+ * neighbour (the padding's lanes are masked out). */
 static inline void group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t l[8])
 {
+	const uint32_t *g = list + q, last = cnt - 1 - q;
+	/* min(k, last) in arithmetic: written as a choice, it became a branch
+	 * per lane, mispredicted for the lanes around the count */
 	for (uint32_t k = 0; k < 8; ++k)
-		l[k] = list[q + k < cnt ? q + k : cnt - 1];
+		l[k] = g[last + ((k - last) & (0u - (uint32_t)(k < last)))];
 }
 
 #ifdef __SSE2__
-static void pairs_sse(const pair_args *a, const uint32_t *list, uint32_t cnt, const float *pi, const float *vi,
-                      float f[6])
+/* One group (neighbours l[0..7]) as two halves, with the same operations
+ * per lane as the AVX2 path. The differences are taken on the quads before
+ * the transpose: qp = (x_i y_i z_i 0) minus (x_j y_j z_j 1/rho_j) gives
+ * r_vec and -1/rho_j, qv = (v_i rho_i) minus (v_j -rho_j) gives v_ij and
+ * rho_i + rho_j (a - (-b) is a + b, bit for bit): the same results per
+ * lane, but i's inputs take two registers, not seven, and fewer of the six
+ * sums spill to the stack (the pass some 5-10% faster). The -1/rho_j makes
+ * c the negative of (h - r) / rho_j, added instead of subtracted. Whole
+ * groups (masked false) need no mask: the compiler drops it where the
+ * argument is constant. */
+static inline void group_sse(const pair_args *a, const uint32_t *l, bool masked, uint32_t left, __m128 qp, __m128 qv,
+                             __m128 s[6][2])
 {
-	const __m128 vxi = _mm_set1_ps(pi[0]), vyi = _mm_set1_ps(pi[1]), vzi = _mm_set1_ps(pi[2]),
-	             vui = _mm_set1_ps(vi[0]), vvi = _mm_set1_ps(vi[1]), vwi = _mm_set1_ps(vi[2]),
-	             vrhoi = _mm_set1_ps(vi[3]), vh = _mm_set1_ps(a->h), veps = _mm_set1_ps(a->eps),
-	             vrmin = _mm_set1_ps(a->rmin), zero = _mm_setzero_ps();
-	__m128 s[6][2];
-	for (int c = 0; c < 6; ++c)
-		s[c][0] = s[c][1] = zero;
-	for (uint32_t q = 0; q < cnt; q += 8) {
-		uint32_t l[8];
-		group_rows(list, cnt, q, l);
-		const __m128i left = _mm_set1_epi32((int)(cnt - q));
-		for (int k = 0; k < 2; ++k) {
-			const size_t o0 = 4 * (size_t)l[4 * k], o1 = 4 * (size_t)l[4 * k + 1], o2 = 4 * (size_t)l[4 * k + 2],
-			             o3 = 4 * (size_t)l[4 * k + 3];
-			__m128 px = _mm_loadu_ps(a->pq + o0), py = _mm_loadu_ps(a->pq + o1), pz = _mm_loadu_ps(a->pq + o2),
-			       pir = _mm_loadu_ps(a->pq + o3);
-			_MM_TRANSPOSE4_PS(px, py, pz, pir);
-			__m128 pu = _mm_loadu_ps(a->pv + o0), pv = _mm_loadu_ps(a->pv + o1), pw = _mm_loadu_ps(a->pv + o2),
-			       prho = _mm_loadu_ps(a->pv + o3);
-			_MM_TRANSPOSE4_PS(pu, pv, pw, prho);
-			const __m128 in =
-				_mm_castsi128_ps(_mm_cmpgt_epi32(left, _mm_setr_epi32(4 * k, 4 * k + 1, 4 * k + 2, 4 * k + 3)));
-			const __m128 rx = _mm_sub_ps(vxi, px), ry = _mm_sub_ps(vyi, py), rz = _mm_sub_ps(vzi, pz);
-			const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
-			const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
-			const __m128 ux = _mm_sub_ps(vui, pu), uy = _mm_sub_ps(vvi, pv), uz = _mm_sub_ps(vwi, pw);
-			const __m128 c = _mm_and_ps(in, _mm_mul_ps(hr, pir));
-			s[0][k] = _mm_sub_ps(s[0][k], _mm_mul_ps(c, ux));
-			s[1][k] = _mm_sub_ps(s[1][k], _mm_mul_ps(c, uy));
-			s[2][k] = _mm_sub_ps(s[2][k], _mm_mul_ps(c, uz));
-			const __m128 vr = _mm_add_ps(_mm_add_ps(_mm_mul_ps(ux, rx), _mm_mul_ps(uy, ry)), _mm_mul_ps(uz, rz));
-			const __m128 app = _mm_and_ps(_mm_and_ps(in, _mm_cmplt_ps(vr, zero)), _mm_sub_ps(zero, vr));
-			const __m128 g = _mm_div_ps(_mm_mul_ps(_mm_mul_ps(app, hr), hr),
-			                            _mm_mul_ps(_mm_mul_ps(_mm_add_ps(r2, veps), _mm_add_ps(vrhoi, prho)),
-			                                       _mm_max_ps(r, vrmin)));
-			s[3][k] = _mm_add_ps(s[3][k], _mm_mul_ps(g, rx));
-			s[4][k] = _mm_add_ps(s[4][k], _mm_mul_ps(g, ry));
-			s[5][k] = _mm_add_ps(s[5][k], _mm_mul_ps(g, rz));
+	const __m128 vh = _mm_set1_ps(a->h), veps = _mm_set1_ps(a->eps), vrmin = _mm_set1_ps(a->rmin),
+	             zero = _mm_setzero_ps();
+	for (int k = 0; k < 2; ++k) {
+		const size_t o0 = 4 * (size_t)l[4 * k], o1 = 4 * (size_t)l[4 * k + 1], o2 = 4 * (size_t)l[4 * k + 2],
+		             o3 = 4 * (size_t)l[4 * k + 3];
+		__m128 rx = _mm_sub_ps(qp, _mm_loadu_ps(a->pq + o0)), ry = _mm_sub_ps(qp, _mm_loadu_ps(a->pq + o1)),
+		       rz = _mm_sub_ps(qp, _mm_loadu_ps(a->pq + o2)), nir = _mm_sub_ps(qp, _mm_loadu_ps(a->pq + o3));
+		_MM_TRANSPOSE4_PS(rx, ry, rz, nir);
+		__m128 ux = _mm_sub_ps(qv, _mm_loadu_ps(a->pv + o0)), uy = _mm_sub_ps(qv, _mm_loadu_ps(a->pv + o1)),
+		       uz = _mm_sub_ps(qv, _mm_loadu_ps(a->pv + o2)), rho2 = _mm_sub_ps(qv, _mm_loadu_ps(a->pv + o3));
+		_MM_TRANSPOSE4_PS(ux, uy, uz, rho2);
+		const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
+		const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
+		const __m128 in = masked ? _mm_castsi128_ps(_mm_cmpgt_epi32(_mm_set1_epi32((int)left),
+		                                                            _mm_setr_epi32(4 * k, 4 * k + 1, 4 * k + 2, 4 * k + 3)))
+		                         : zero;
+		__m128 c = _mm_mul_ps(hr, nir);
+		if (masked)
+			c = _mm_and_ps(in, c);
+		s[0][k] = _mm_add_ps(s[0][k], _mm_mul_ps(c, ux));
+		s[1][k] = _mm_add_ps(s[1][k], _mm_mul_ps(c, uy));
+		s[2][k] = _mm_add_ps(s[2][k], _mm_mul_ps(c, uz));
+		const __m128 vr = _mm_add_ps(_mm_add_ps(_mm_mul_ps(ux, rx), _mm_mul_ps(uy, ry)), _mm_mul_ps(uz, rz));
+		__m128 neg = _mm_cmplt_ps(vr, zero);
+		if (masked)
+			neg = _mm_and_ps(in, neg);
+		const __m128 app = _mm_and_ps(neg, _mm_sub_ps(zero, vr));
+		const __m128 g = _mm_div_ps(_mm_mul_ps(_mm_mul_ps(app, hr), hr),
+		                            _mm_mul_ps(_mm_mul_ps(_mm_add_ps(r2, veps), rho2), _mm_max_ps(r, vrmin)));
+		s[3][k] = _mm_add_ps(s[3][k], _mm_mul_ps(g, rx));
+		s[4][k] = _mm_add_ps(s[4][k], _mm_mul_ps(g, ry));
+		s[5][k] = _mm_add_ps(s[5][k], _mm_mul_ps(g, rz));
+	}
+}
+
+/* (x_i y_i z_i 0) and (v_i rho_i) from i's quads */
+static inline void own_quads(const float *pi, const float *vel, __m128 *qp, __m128 *qv)
+{
+	*qp = _mm_and_ps(_mm_loadu_ps(pi), _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0)));
+	*qv = _mm_xor_ps(_mm_loadu_ps(vel), _mm_setr_ps(0.0f, 0.0f, 0.0f, -0.0f));
+}
+
+static void pair_sums_sse(const pair_args *a, long i0, long cnt, float *t)
+{
+	const sph_neighbors *nb = a->nb;
+	for (long b = 0; b < cnt; ++b) {
+		const long i = i0 + b;
+		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
+		__m128 qp, qv;
+		own_quads(a->pq + 4 * i, a->pv + 4 * i, &qp, &qv);
+		__m128 s[6][2];
+		for (int k = 0; k < 6; ++k)
+			s[k][0] = s[k][1] = _mm_setzero_ps();
+		uint32_t q = 0;
+		for (; q + 8 <= c; q += 8)
+			group_sse(a, list + q, false, 8, qp, qv, s);
+		if (q < c) {
+			uint32_t l[8];
+			group_rows(list, c, q, l);
+			group_sse(a, l, true, c - q, qp, qv, s);
+		}
+		for (int k = 0; k < 6; ++k)
+			_mm_storeu_ps(t + VISC_T * b + 4 * k, _mm_add_ps(s[k][0], s[k][1]));
+	}
+}
+#else
+/* Without SSE, pair by pair: the totals in lane 0, the other lanes 0. */
+static void pair_sums_scalar(const pair_args *a, long i0, long cnt, float *t)
+{
+	const sph_neighbors *nb = a->nb;
+	for (long b = 0; b < cnt; ++b) {
+		const long i = i0 + b;
+		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, cnt_i = nb->count[i];
+		const float *pi = a->pq + 4 * i, *vel = a->pv + 4 * i;
+		float f[6] = {0, 0, 0, 0, 0, 0};
+		for (uint32_t q = 0; q < cnt_i; ++q) {
+			const float *pj = a->pq + 4 * (size_t)list[q], *vj = a->pv + 4 * (size_t)list[q];
+			const float rx = pi[0] - pj[0], ry = pi[1] - pj[1], rz = pi[2] - pj[2];
+			const float r2 = rx * rx + ry * ry + rz * rz, r = sqrtf(r2), hr = a->h - r;
+			const float ux = vel[0] - vj[0], uy = vel[1] - vj[1], uz = vel[2] - vj[2];
+			const float c = hr * pj[3];
+			f[0] -= c * ux;
+			f[1] -= c * uy;
+			f[2] -= c * uz;
+			/* approaching pairs only (vr < 0), pushed apart along r_hat */
+			const float vr = ux * rx + uy * ry + uz * rz;
+			const float app = vr < 0 ? -vr : 0.0f, rs = r > a->rmin ? r : a->rmin;
+			/* pv holds -rho */
+			const float g = app * hr * hr / ((r2 + a->eps) * (-vel[3] - vj[3]) * rs);
+			f[3] += g * rx;
+			f[4] += g * ry;
+			f[5] += g * rz;
+		}
+		for (int k = 0; k < 6; ++k) {
+			float *l = t + VISC_T * b + 4 * k;
+			l[0] = f[k];
+			l[1] = l[2] = l[3] = 0;
 		}
 	}
-	for (int c = 0; c < 6; ++c)
-		f[c] = sph_hsum4(_mm_add_ps(s[c][0], s[c][1]));
 }
 #endif
 
 #ifdef SPH_AVX2
-__attribute__((target("avx2"))) static void pairs_avx2(const pair_args *a, const uint32_t *list, uint32_t cnt,
-                                                       const float *pi, const float *vi, float f[6])
+/* Quads a[0..7] subtracted from q (lanes 0-3 from a[0..3], 4-7 from
+ * a[4..7]) and transposed, as the SSE path's four subtractions and
+ * _MM_TRANSPOSE4_PS per half. */
+__attribute__((target("avx2"))) static inline void sub_transpose8(__m256 q, const float *const a[8], __m256 *c0,
+                                                                  __m256 *c1, __m256 *c2, __m256 *c3)
 {
-	const __m256 vxi = _mm256_set1_ps(pi[0]), vyi = _mm256_set1_ps(pi[1]), vzi = _mm256_set1_ps(pi[2]),
-	             vui = _mm256_set1_ps(vi[0]), vvi = _mm256_set1_ps(vi[1]), vwi = _mm256_set1_ps(vi[2]),
-	             vrhoi = _mm256_set1_ps(vi[3]), vh = _mm256_set1_ps(a->h), veps = _mm256_set1_ps(a->eps),
-	             vrmin = _mm256_set1_ps(a->rmin), zero = _mm256_setzero_ps();
-	const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-	__m256 s0 = zero, s1 = zero, s2 = zero, s3 = zero, s4 = zero, s5 = zero;
-	for (uint32_t q = 0; q < cnt; q += 8) {
-		uint32_t l[8];
-		group_rows(list, cnt, q, l);
-		const float *const qa[8] = {a->pq + 4 * (size_t)l[0], a->pq + 4 * (size_t)l[1], a->pq + 4 * (size_t)l[2],
-		                            a->pq + 4 * (size_t)l[3], a->pq + 4 * (size_t)l[4], a->pq + 4 * (size_t)l[5],
-		                            a->pq + 4 * (size_t)l[6], a->pq + 4 * (size_t)l[7]};
-		const float *const qb[8] = {a->pv + 4 * (size_t)l[0], a->pv + 4 * (size_t)l[1], a->pv + 4 * (size_t)l[2],
-		                            a->pv + 4 * (size_t)l[3], a->pv + 4 * (size_t)l[4], a->pv + 4 * (size_t)l[5],
-		                            a->pv + 4 * (size_t)l[6], a->pv + 4 * (size_t)l[7]};
-		__m256 px, py, pz, pir, pu, pv, pw, prho;
-		sph_transpose8(qa, &px, &py, &pz, &pir);
-		sph_transpose8(qb, &pu, &pv, &pw, &prho);
-		const __m256 in = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32((int)(cnt - q)), lane));
-		const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
-		const __m256 r2 =
-			_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz));
-		const __m256 r = _mm256_sqrt_ps(r2), hr = _mm256_sub_ps(vh, r);
-		const __m256 ux = _mm256_sub_ps(vui, pu), uy = _mm256_sub_ps(vvi, pv), uz = _mm256_sub_ps(vwi, pw);
-		const __m256 c = _mm256_and_ps(in, _mm256_mul_ps(hr, pir));
-		s0 = _mm256_sub_ps(s0, _mm256_mul_ps(c, ux));
-		s1 = _mm256_sub_ps(s1, _mm256_mul_ps(c, uy));
-		s2 = _mm256_sub_ps(s2, _mm256_mul_ps(c, uz));
-		const __m256 vr =
-			_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ux, rx), _mm256_mul_ps(uy, ry)), _mm256_mul_ps(uz, rz));
-		const __m256 app =
-			_mm256_and_ps(_mm256_and_ps(in, _mm256_cmp_ps(vr, zero, _CMP_LT_OQ)), _mm256_sub_ps(zero, vr));
-		const __m256 g = _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(app, hr), hr),
-		                               _mm256_mul_ps(_mm256_mul_ps(_mm256_add_ps(r2, veps), _mm256_add_ps(vrhoi, prho)),
-		                                             _mm256_max_ps(r, vrmin)));
-		s3 = _mm256_add_ps(s3, _mm256_mul_ps(g, rx));
-		s4 = _mm256_add_ps(s4, _mm256_mul_ps(g, ry));
-		s5 = _mm256_add_ps(s5, _mm256_mul_ps(g, rz));
+	const __m256 v0 = _mm256_sub_ps(
+		             q, _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[0])), _mm_loadu_ps(a[4]), 1)),
+	             v1 = _mm256_sub_ps(
+		             q, _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[1])), _mm_loadu_ps(a[5]), 1)),
+	             v2 = _mm256_sub_ps(
+		             q, _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[2])), _mm_loadu_ps(a[6]), 1)),
+	             v3 = _mm256_sub_ps(
+		             q, _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[3])), _mm_loadu_ps(a[7]), 1));
+	const __m256 t0 = _mm256_unpacklo_ps(v0, v1), t1 = _mm256_unpacklo_ps(v2, v3), t2 = _mm256_unpackhi_ps(v0, v1),
+	             t3 = _mm256_unpackhi_ps(v2, v3);
+	*c0 = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(1, 0, 1, 0));
+	*c1 = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(3, 2, 3, 2));
+	*c2 = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(1, 0, 1, 0));
+	*c3 = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(3, 2, 3, 2));
+}
+
+__attribute__((target("avx2"))) static inline void group_avx2(const pair_args *a, const uint32_t *l, bool masked,
+                                                              uint32_t left, __m256 qp, __m256 qv, __m256 s[6])
+{
+	const __m256 vh = _mm256_set1_ps(a->h), veps = _mm256_set1_ps(a->eps), vrmin = _mm256_set1_ps(a->rmin),
+	             zero = _mm256_setzero_ps();
+	const float *const qa[8] = {a->pq + 4 * (size_t)l[0], a->pq + 4 * (size_t)l[1], a->pq + 4 * (size_t)l[2],
+	                            a->pq + 4 * (size_t)l[3], a->pq + 4 * (size_t)l[4], a->pq + 4 * (size_t)l[5],
+	                            a->pq + 4 * (size_t)l[6], a->pq + 4 * (size_t)l[7]};
+	const float *const qb[8] = {a->pv + 4 * (size_t)l[0], a->pv + 4 * (size_t)l[1], a->pv + 4 * (size_t)l[2],
+	                            a->pv + 4 * (size_t)l[3], a->pv + 4 * (size_t)l[4], a->pv + 4 * (size_t)l[5],
+	                            a->pv + 4 * (size_t)l[6], a->pv + 4 * (size_t)l[7]};
+	__m256 rx, ry, rz, nir, ux, uy, uz, rho2;
+	sub_transpose8(qp, qa, &rx, &ry, &rz, &nir);
+	sub_transpose8(qv, qb, &ux, &uy, &uz, &rho2);
+	const __m256 r2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz));
+	const __m256 r = _mm256_sqrt_ps(r2), hr = _mm256_sub_ps(vh, r);
+	const __m256 in = masked ? _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32((int)left),
+	                                                                  _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7)))
+	                         : zero;
+	__m256 c = _mm256_mul_ps(hr, nir);
+	if (masked)
+		c = _mm256_and_ps(in, c);
+	s[0] = _mm256_add_ps(s[0], _mm256_mul_ps(c, ux));
+	s[1] = _mm256_add_ps(s[1], _mm256_mul_ps(c, uy));
+	s[2] = _mm256_add_ps(s[2], _mm256_mul_ps(c, uz));
+	const __m256 vr = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ux, rx), _mm256_mul_ps(uy, ry)), _mm256_mul_ps(uz, rz));
+	__m256 neg = _mm256_cmp_ps(vr, zero, _CMP_LT_OQ);
+	if (masked)
+		neg = _mm256_and_ps(in, neg);
+	const __m256 app = _mm256_and_ps(neg, _mm256_sub_ps(zero, vr));
+	const __m256 g = _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(app, hr), hr),
+	                               _mm256_mul_ps(_mm256_mul_ps(_mm256_add_ps(r2, veps), rho2), _mm256_max_ps(r, vrmin)));
+	s[3] = _mm256_add_ps(s[3], _mm256_mul_ps(g, rx));
+	s[4] = _mm256_add_ps(s[4], _mm256_mul_ps(g, ry));
+	s[5] = _mm256_add_ps(s[5], _mm256_mul_ps(g, rz));
+}
+
+__attribute__((target("avx2"))) static void pair_sums_avx2(const pair_args *a, long i0, long cnt, float *t)
+{
+	const sph_neighbors *nb = a->nb;
+	for (long b = 0; b < cnt; ++b) {
+		const long i = i0 + b;
+		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
+		__m128 qp4, qv4;
+		own_quads(a->pq + 4 * i, a->pv + 4 * i, &qp4, &qv4);
+		const __m256 qp = _mm256_set_m128(qp4, qp4), qv = _mm256_set_m128(qv4, qv4);
+		__m256 s[6];
+		for (int k = 0; k < 6; ++k)
+			s[k] = _mm256_setzero_ps();
+		uint32_t q = 0;
+		for (; q + 8 <= c; q += 8)
+			group_avx2(a, list + q, false, 8, qp, qv, s);
+		if (q < c) {
+			uint32_t l[8];
+			group_rows(list, c, q, l);
+			group_avx2(a, l, true, c - q, qp, qv, s);
+		}
+		/* lanes l and l + 4 added, as the SSE path adds its halves */
+		for (int k = 0; k < 6; ++k)
+			_mm_storeu_ps(t + VISC_T * b + 4 * k,
+			              _mm_add_ps(_mm256_castps256_ps128(s[k]), _mm256_extractf128_ps(s[k], 1)));
 	}
-	f[0] = sph_hsum8(s0);
-	f[1] = sph_hsum8(s1);
-	f[2] = sph_hsum8(s2);
-	f[3] = sph_hsum8(s3);
-	f[4] = sph_hsum8(s4);
-	f[5] = sph_hsum8(s5);
 }
 #endif
 
@@ -178,7 +307,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	            rmin = 1e-3f * kc.h;
 	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
 	/* each neighbour's eight inputs as two 16-byte quads, (x y z 1/rho) from
-	 * sph_density and (vx vy vz rho) made here: a group of neighbours then
+	 * sph_density and (vx vy vz -rho) made here: a group of neighbours then
 	 * costs two loads each and two transposes instead of eight scattered
 	 * loads each, which were most of the pass */
 	const float *pq = sh->pq;
@@ -190,63 +319,34 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		pv[4 * i] = vx[i];
 		pv[4 * i + 1] = vy[i];
 		pv[4 * i + 2] = vz[i];
-		pv[4 * i + 3] = rho[i];
+		pv[4 * i + 3] = -rho[i]; /* negated: see group_sse */
 	}
-#ifdef __SSE2__
-	const pair_args pa = {pq, pv, kc.h, eps, rmin};
-#endif
+	const pair_args pa = {nb, pq, pv, kc.h, eps, rmin};
 #ifdef SPH_AVX2
-	const bool avx2 = sph_use_avx2();
+	pair_sums_fn *sums = sph_use_avx2() ? pair_sums_avx2 : pair_sums_sse;
+#elif defined(__SSE2__)
+	pair_sums_fn *sums = pair_sums_sse;
+#else
+	pair_sums_fn *sums = pair_sums_scalar;
 #endif
-#pragma omp parallel for num_threads(ctx->threads) schedule(static)
-	for (long i = 0; i < n; ++i) {
-		const float *pi = pq + 4 * i, *vel = pv + 4 * i;
-		const float xi = pi[0], yi = pi[1], zi = pi[2], ui = vel[0], vi = vel[1], wi = vel[2], rhoi = vel[3];
-		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
-		const uint32_t cnt = nb->count[i];
-		float fx = 0, fy = 0, fz = 0, gx = 0, gy = 0, gz = 0;
-		uint32_t q = 0;
-#ifdef __SSE2__
-		/* partial sums added up at the end: a fixed order, the same for any
-		 * thread count and either path */
-		float f[6];
-#ifdef SPH_AVX2
-		if (avx2)
-			pairs_avx2(&pa, list, cnt, pi, vel, f);
-		else
-#endif
-			pairs_sse(&pa, list, cnt, pi, vel, f);
-		fx = f[0];
-		fy = f[1];
-		fz = f[2];
-		gx = f[3];
-		gy = f[4];
-		gz = f[5];
-		q = cnt;
-#endif
-		for (; q < cnt; ++q) {
-			const float *pj = pq + 4 * (size_t)list[q], *vj = pv + 4 * (size_t)list[q];
-			const float rx = xi - pj[0], ry = yi - pj[1], rz = zi - pj[2];
-			const float r2 = rx * rx + ry * ry + rz * rz, r = sqrtf(r2);
-			const float ux = ui - vj[0], uy = vi - vj[1], uz = wi - vj[2];
-			const float c = (kc.h - r) * pj[3];
-			fx -= c * ux;
-			fy -= c * uy;
-			fz -= c * uz;
-			/* approaching pairs only (vr < 0), pushed apart along r_hat;
-			 * branch-free, since the sign of vr is a coin toss per pair */
-			const float vr = ux * rx + uy * ry + uz * rz, hr = kc.h - r;
-			/* ternaries, not fmaxf: without -ffinite-math-only fmaxf is a libm call */
-			const float app = vr < 0 ? -vr : 0.0f, rs = r > rmin ? r : rmin;
-			const float a = app * hr * hr / ((r2 + eps) * (rhoi + vj[3]) * rs);
-			gx += a * rx;
-			gy += a * ry;
-			gz += a * rz;
+	const int threads = ctx->threads;
+	/* the threads take equal shares in order; a particle's result does not
+	 * depend on the blocks, so it is the same for any thread count */
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (int th = 0; th < threads; ++th) {
+		float t[VISC_BLOCK * VISC_T];
+		for (long i0 = n * th / threads, hi = n * (th + 1) / threads; i0 < hi; i0 += VISC_BLOCK) {
+			const long cnt = hi - i0 < VISC_BLOCK ? hi - i0 : VISC_BLOCK;
+			sums(&pa, i0, cnt, t);
+			for (long b = 0; b < cnt; ++b) {
+				const long i = i0 + b;
+				const float *tb = t + VISC_T * b;
+				const float k = coef * pq[4 * i + 3];
+				ax[i] += k * sum4(tb) + acoef * sum4(tb + 12);
+				ay[i] += k * sum4(tb + 4) + acoef * sum4(tb + 16);
+				az[i] += k * sum4(tb + 8) + acoef * sum4(tb + 20);
+			}
 		}
-		const float k = coef * pi[3];
-		ax[i] += k * fx + acoef * gx;
-		ay[i] += k * fy + acoef * gy;
-		az[i] += k * fz + acoef * gz;
 	}
 	return EDDY_OK;
 }
