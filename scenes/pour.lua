@@ -9,10 +9,13 @@
 -- solver = "dfsph" (default) solves the pressure implicitly (sph_dfsph), so
 -- the time step follows the flow speed instead of the speed of sound;
 -- "wcsph" uses the equation of state p = k (rho - rho0) (sph_pressure).
--- Measured on one thread over the first 2.5 s (tests/bench_sph.c): dfsph at
--- CFL 1 about 0.5-0.6 simulated s per wall s, WCSPH (k = 400) 0.09; the mean
--- density error, dominated by the under-dense jet and spray, is 4% for both
--- when the last particle leaves the nozzle and 1.3-2% once the pool settles.
+-- Measured on one thread (tests/bench_sph.c, `make bench`; README): dfsph at
+-- CFL 1 runs the whole 4 s at 1.4 simulated s per wall s (about 1.1 in the
+-- busiest half second, the pool with the jet still falling in), WCSPH
+-- (k = 400) at 0.19. The mean compression (density_compression_avg, what the
+-- solve controls) peaks at 1.3-2.3%; the mean density error, dominated by the
+-- under-dense jet and spray, at 4-7% while the pool fills, and is 1.3% once
+-- it settles.
 -- The divergence solve is off here: at CFL <= 1 it changed neither errors nor
 -- stability and cost 10% (it does help at CFL 1.2: --set divergence=true).
 
