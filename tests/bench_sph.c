@@ -2,7 +2,9 @@
 /* SPH benchmarks (make bench; not part of make test), as JSON:
  *  - ns per particle per step of sph_density (neighbour search included),
  *    sph_pressure and sph_viscosity, for 5k / 30k / 100k particles at
- *    h = 2 spacings, on 1 and 2 threads: a block settling in a tank;
+ *    h = 2 spacings, on 1 and 2 threads: a block settling in a tank, one
+ *    world per thread count, measured in turns so that the speed-up is a
+ *    median of paired ratios;
  *  - the pour scene of scenes/pour.lua (5625 particles, one thread) with
  *    the implicit solve (sph_dfsph, the scene's default) and with WCSPH:
  *    simulated seconds per wall second, the density error, the mean
@@ -206,69 +208,75 @@ int main(int argc, char **argv)
 		return 1;
 	}
 	const int counts[] = {5000, 30000, 100000};
-	const int threads[] = {1, 2};
 	const char *names[] = {"sph_density", "sph_pressure", "sph_viscosity"};
-	enum { REPS = 7, STEPS = 5 };
-	double sph1[3] = {0};
-	fprintf(f, "{\"benchmark\":\"sph\",\"unit\":\"ns per particle per step\",\"note\":\"medians of %d runs of %d steps; "
-	           "shared 2-core machine\",\"results\":[",
+	enum { REPS = 9, STEPS = 5 };
+	fprintf(f, "{\"benchmark\":\"sph\",\"unit\":\"ns per particle per step\",\"note\":\"medians of %d runs of %d steps, "
+	           "1 and 2 threads alternating; the speed-up is the median of the paired ratios; shared 2-core machine\","
+	           "\"results\":[",
 	        REPS, STEPS);
 	const bool pour_only = argc > 2 && strcmp(argv[2], "--pour-only") == 0;
-	for (size_t c = 0; c < 3 && !pour_only; ++c)
-		for (size_t t = 0; t < 2; ++t) {
-			eddy_world *w = block(counts[c], threads[t]);
+	for (size_t c = 0; c < 3 && !pour_only; ++c) {
+		/* the same block on 1 and on 2 threads, measured in turns: the host's
+		 * load drifts over seconds, so a ratio of runs made minutes apart
+		 * measures the host as much as the code */
+		eddy_world *w[2] = {block(counts[c], 1), block(counts[c], 2)};
+		for (int t = 0; t < 2; ++t)
 			for (int s = 0; s < 3; ++s)
-				eddy_world_step_frame(w); /* emit, then settle the first kick */
-			const size_t n = eddy_world_particle_count(w);
-			double per[3][REPS], sum[REPS];
-			for (int r = 0; r < REPS; ++r) {
+				eddy_world_step_frame(w[t]); /* emit, then settle the first kick */
+		const size_t n = eddy_world_particle_count(w[0]);
+		double per[2][3][REPS], sum[2][REPS], ratio[REPS];
+		for (int r = 0; r < REPS; ++r) {
+			for (int t = 0; t < 2; ++t) {
 				double before[3] = {0}, after[3] = {0};
-				for (int k = 0; k < eddy_world_system_count(w); ++k) {
+				for (int k = 0; k < eddy_world_system_count(w[t]); ++k) {
 					eddy_system_info info;
-					eddy_world_system_info(w, eddy_world_system_at(w, k), &info);
+					eddy_world_system_info(w[t], eddy_world_system_at(w[t], k), &info);
 					for (int q = 0; q < 3; ++q)
 						if (strcmp(info.name, names[q]) == 0)
 							before[q] = info.profile_ms;
 				}
 				for (int s = 0; s < STEPS; ++s)
-					if (eddy_world_step(w) != EDDY_OK) {
-						fprintf(stderr, "bench_sph: %s\n", eddy_world_error(w));
+					if (eddy_world_step(w[t]) != EDDY_OK) {
+						fprintf(stderr, "bench_sph: %s\n", eddy_world_error(w[t]));
 						return 1;
 					}
-				for (int k = 0; k < eddy_world_system_count(w); ++k) {
+				for (int k = 0; k < eddy_world_system_count(w[t]); ++k) {
 					eddy_system_info info;
-					eddy_world_system_info(w, eddy_world_system_at(w, k), &info);
+					eddy_world_system_info(w[t], eddy_world_system_at(w[t], k), &info);
 					for (int q = 0; q < 3; ++q)
 						if (strcmp(info.name, names[q]) == 0)
 							after[q] = info.profile_ms;
 				}
-				sum[r] = 0;
+				sum[t][r] = 0;
 				for (int q = 0; q < 3; ++q) {
-					per[q][r] = (after[q] - before[q]) * 1e6 / ((double)n * STEPS);
-					sum[r] += per[q][r];
+					per[t][q][r] = (after[q] - before[q]) * 1e6 / ((double)n * STEPS);
+					sum[t][r] += per[t][q][r];
 				}
 			}
-			qsort(sum, REPS, sizeof sum[0], cmp_double);
-			for (int q = 0; q < 3; ++q)
-				qsort(per[q], REPS, sizeof per[q][0], cmp_double);
-			fprintf(f, "%s\n {\"particles\":%zu,\"threads\":%d,\"density_pressure_viscosity_ns\":%.1f,\"systems\":{", c + t ? "," : "",
-			        n, threads[t], sum[REPS / 2]);
-			printf("%7zu particles, %d thread%s: %7.1f ns/particle/step (", n, threads[t], threads[t] > 1 ? "s" : " ",
-			       sum[REPS / 2]);
-			for (int q = 0; q < 3; ++q) {
-				fprintf(f, "%s\"%s\":%.1f", q ? "," : "", names[q], per[q][REPS / 2]);
-				printf("%s%s %.1f", q ? ", " : "", names[q], per[q][REPS / 2]);
-			}
-			if (threads[t] == 1)
-				sph1[c] = sum[REPS / 2];
-			else
-				printf("; speed-up %.2fx", sph1[c] / sum[REPS / 2]);
-			fprintf(f, "}%s}", threads[t] == 1 ? "" : "");
-			if (threads[t] == 2)
-				fprintf(f, ",\n {\"particles\":%zu,\"speedup_2_threads\":%.2f}", n, sph1[c] / sum[REPS / 2]);
-			printf(")\n");
-			eddy_destroy_world(w);
+			ratio[r] = sum[0][r] / sum[1][r];
 		}
+		qsort(ratio, REPS, sizeof ratio[0], cmp_double);
+		for (int t = 0; t < 2; ++t) {
+			qsort(sum[t], REPS, sizeof sum[t][0], cmp_double);
+			for (int q = 0; q < 3; ++q)
+				qsort(per[t][q], REPS, sizeof per[t][q][0], cmp_double);
+			fprintf(f, "%s\n {\"particles\":%zu,\"threads\":%d,\"density_pressure_viscosity_ns\":%.1f,\"systems\":{",
+			        c + (size_t)t ? "," : "", n, t + 1, sum[t][REPS / 2]);
+			printf("%7zu particles, %d thread%s: %7.1f ns/particle/step (", n, t + 1, t ? "s" : " ", sum[t][REPS / 2]);
+			for (int q = 0; q < 3; ++q) {
+				fprintf(f, "%s\"%s\":%.1f", q ? "," : "", names[q], per[t][q][REPS / 2]);
+				printf("%s%s %.1f", q ? ", " : "", names[q], per[t][q][REPS / 2]);
+			}
+			fprintf(f, "}}");
+			if (t == 1) {
+				fprintf(f, ",\n {\"particles\":%zu,\"speedup_2_threads\":%.2f}", n, ratio[REPS / 2]);
+				printf("; speed-up %.2fx, median of paired runs", ratio[REPS / 2]);
+			}
+			printf(")\n");
+		}
+		eddy_destroy_world(w[0]);
+		eddy_destroy_world(w[1]);
+	}
 	if (argc > 2 && strcmp(argv[2], "--no-pour") == 0) {
 		fprintf(f, "\n]}\n");
 		fclose(f);
