@@ -472,7 +472,8 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 			const int bx0 = bxi * SEARCH_BX, bx1 = bx0 + SEARCH_BX - 1 < gx ? bx0 + SEARCH_BX - 1 : gx - 1;
 			const int by0 = byi * SEARCH_BY, by1 = by0 + SEARCH_BY - 1 < gy ? by0 + SEARCH_BY - 1 : gy - 1;
 			const int bz0 = bzi * SEARCH_BZ, bz1 = bz0 + SEARCH_BZ - 1 < gz ? bz0 + SEARCH_BZ - 1 : gz - 1;
-			/* the runs, in cell order; own[] marks the block's own rows */
+			/* the runs, in cell order: fluid rows [0], [1], boundary [2], [3], the
+			 * first cell of the block's own particles in it [4], its z layer [5] */
 			uint32_t run[(2 * SPH_VERLET_CELLS + SEARCH_BY) * (2 * SPH_VERLET_CELLS + SEARCH_BZ)][6];
 			int runs = 0;
 			size_t nf = 0, nbd = 0;
