@@ -140,6 +140,23 @@ static inline void sph_coincident_dir(size_t i, size_t j, float *dx, float *dy, 
 	*dz = s * 0.26726124f;
 }
 
+/* Four partial sums stored to memory, added in sph_hsum4's order. */
+static inline float sph_sum4(const float *l)
+{
+	return (l[0] + l[1]) + (l[2] + l[3]);
+}
+
+/* The neighbours of a particle's last group, from q, padded with copies of
+ * its last neighbour (the padding's lanes are masked out by the caller). */
+static inline void sph_group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t l[8])
+{
+	const uint32_t *g = list + q, last = cnt - 1 - q;
+	/* min(k, last) in arithmetic: written as a choice, it became a branch
+	 * per lane, mispredicted for the lanes around the count */
+	for (uint32_t k = 0; k < 8; ++k)
+		l[k] = g[last + ((k - last) & (0u - (uint32_t)(k < last)))];
+}
+
 #ifdef __SSE2__
 /* Sum of the four lanes in a fixed order, (l0 + l1) + (l2 + l3): the passes
  * over neighbours keep four partial sums and end with this. */
@@ -159,12 +176,14 @@ static inline float sph_hsum4(__m128 v)
 #define SPH_AVX2 1
 #include <immintrin.h>
 #include <stdlib.h>
-/* EDDY_NO_AVX2 (set, not empty) takes the SSE path on an AVX2 machine: the
- * test that both paths give the same bits, and a way around a suspect CPU. */
+/* AVX2 with BMI2 (the search and filter pack their hits with pdep/pext;
+ * every AVX2 CPU from Haswell and Zen on has both). EDDY_NO_AVX2 (set, not
+ * empty) takes the SSE path on such a machine: the test that both paths
+ * give the same bits, and a way around a suspect CPU. */
 static inline bool sph_use_avx2(void)
 {
 	const char *off = getenv("EDDY_NO_AVX2");
-	return __builtin_cpu_supports("avx2") && !(off && *off);
+	return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("bmi2") && !(off && *off);
 }
 
 /* Sum of eight lanes as the SSE path sums its two halves. */

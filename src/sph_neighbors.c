@@ -456,7 +456,7 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 			ids[unique++] = ids[k];
 	blocks = unique;
 #ifdef SPH_AVX2
-	const bool avx2 = sph_use_avx2() && __builtin_cpu_supports("bmi2");
+	const bool avx2 = sph_use_avx2();
 #endif
 	uint32_t mf = 0, mb = 0;
 	bool ok = true;
@@ -658,7 +658,7 @@ static bool filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 	const uint32_t *now_of = nb->vsame ? NULL : nb->now_of;
 #define ROW(slot) (now_of ? now_of[slot] : (slot))
 #ifdef SPH_AVX2
-	const bool avx2 = sph_use_avx2() && __builtin_cpu_supports("bmi2");
+	const bool avx2 = sph_use_avx2();
 #endif
 	uint32_t mf = 0, mb = 0;
 	bool ok = true;

@@ -123,6 +123,19 @@ typedef struct dfsph_f4 {
 	float x, y, z, w;
 } dfsph_f4;
 
+#ifdef __SSE2__
+/* Four consecutive particles' quads as four vectors of their x, y, z, w. */
+static inline void load4(const dfsph_f4 *p, __m128 *x, __m128 *y, __m128 *z, __m128 *w)
+{
+	__m128 a = _mm_loadu_ps(&p[0].x), b = _mm_loadu_ps(&p[1].x), c = _mm_loadu_ps(&p[2].x), d = _mm_loadu_ps(&p[3].x);
+	_MM_TRANSPOSE4_PS(a, b, c, d);
+	*x = a;
+	*y = b;
+	*z = c;
+	*w = d;
+}
+#endif
+
 /* Eight pairs of one particle: the neighbours and G_ij by component. A
  * particle's pairs are whole groups, the last one padded with the particle
  * itself and G = 0 (exact zeros in every sum), so the sweeps stream through
@@ -199,14 +212,8 @@ typedef struct sweep_args {
 #define RATE_T 4  /* sum (v_i - v_j) . G_ij */
 #define CORR_T 12 /* sum (k_i + k_j) G_ij by component */
 
-/* (l0 + l1) + (l2 + l3), the order of sph_hsum4 */
-static inline float sum4(const float *l)
-{
-	return (l[0] + l[1]) + (l[2] + l[3]);
-}
-
 /* The neighbours of group q, padded with i itself, as 2 j. */
-static inline void group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t i, uint32_t l2[8])
+static inline void group_rows_self(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t i, uint32_t l2[8])
 {
 	for (uint32_t k = 0; k < 8; ++k)
 		l2[k] = 2 * (q + k < cnt ? list[q + k] : i);
@@ -236,7 +243,7 @@ static void grads_sse(struct dfsph_work *wk, long i0, long cnt, float *t)
 				_mm_storeu_si128((__m128i *)g->j2, _mm_add_epi32(l0, l0));
 				_mm_storeu_si128((__m128i *)(g->j2 + 4), _mm_add_epi32(l1, l1));
 			} else {
-				group_rows(list, c, p, (uint32_t)i, g->j2);
+				group_rows_self(list, c, p, (uint32_t)i, g->j2);
 			}
 			for (int k = 0; k < 2; ++k) {
 				const uint32_t *l = g->j2 + 4 * k;
@@ -333,7 +340,7 @@ static void grads_scalar(struct dfsph_work *wk, long i0, long cnt, float *t)
 		float sx[8] = {0}, sy[8] = {0}, sz[8] = {0}, s2[8] = {0};
 		dfsph_group *g = wk->g + wk->goff[i];
 		for (uint32_t p = 0; p < c; p += 8, ++g) {
-			group_rows(list, c, p, (uint32_t)i, g->j2);
+			group_rows_self(list, c, p, (uint32_t)i, g->j2);
 			for (int l = 0; l < 8; ++l) {
 				const float *pj = quad_of(a->pq, g->j2[l]);
 				const float rx = pi[0] - pj[0], ry = pi[1] - pj[1], rz = pi[2] - pj[2];
@@ -576,7 +583,7 @@ static void wall_sums(const grad_args *a, long i, float out[6])
 		s[5][l] += gh * rz;
 	}
 	for (int k = 0; k < 6; ++k)
-		out[k] = sum4(s[k]);
+		out[k] = sph_sum4(s[k]);
 #endif
 }
 
@@ -588,7 +595,7 @@ static void grads_finish(dfsph_work *wk, long i0, long cnt, const float *t)
 	for (long q = 0; q < cnt; ++q) {
 		const long i = i0 + q;
 		const float *ti = t + GRAD_T * q;
-		const float sx = sum4(ti), sy = sum4(ti + 4), sz = sum4(ti + 8), s2 = sum4(ti + 12);
+		const float sx = sph_sum4(ti), sy = sph_sum4(ti + 4), sz = sph_sum4(ti + 8), s2 = sph_sum4(ti + 12);
 		float w[6] = {0, 0, 0, 0, 0, 0};
 		if (a.nb->bcount[i]) /* most particles are away from the walls */
 			wall_sums(&a, i, w);
@@ -626,12 +633,9 @@ static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, 
 		__m128 s0 = _mm_loadu_ps(t + RATE_T * q), s1 = _mm_loadu_ps(t + RATE_T * (q + 1)),
 		       s2 = _mm_loadu_ps(t + RATE_T * (q + 2)), s3 = _mm_loadu_ps(t + RATE_T * (q + 3));
 		_MM_TRANSPOSE4_PS(s0, s1, s2, s3);
-		__m128 vx = _mm_loadu_ps(&wk->v[i].x), vy = _mm_loadu_ps(&wk->v[i + 1].x), vz = _mm_loadu_ps(&wk->v[i + 2].x),
-		       vw = _mm_loadu_ps(&wk->v[i + 3].x);
-		_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
-		__m128 bx = _mm_loadu_ps(&wk->b[i].x), by = _mm_loadu_ps(&wk->b[i + 1].x), bz = _mm_loadu_ps(&wk->b[i + 2].x),
-		       bw = _mm_loadu_ps(&wk->b[i + 3].x);
-		_MM_TRANSPOSE4_PS(bx, by, bz, bw);
+		__m128 vx, vy, vz, vw, bx, by, bz, bw;
+		load4(wk->v + i, &vx, &vy, &vz, &vw);
+		load4(wk->b + i, &bx, &by, &bz, &bw);
 		const __m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)),
 		                            _mm_add_ps(_mm_add_ps(_mm_mul_ps(vx, bx), _mm_mul_ps(vy, by)), _mm_mul_ps(vz, bz)));
 		__m128 e;
@@ -650,7 +654,7 @@ static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, 
 	for (; q < cnt; ++q) {
 		const long i = i0 + q;
 		const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
-		const float r = sum4(t + RATE_T * q) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z);
+		const float r = sph_sum4(t + RATE_T * q) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z);
 		if (a->divergence) {
 			const float d = positive(r);
 			wk->err[i] = d * a->dt;
@@ -680,12 +684,9 @@ static void correct_finish(dfsph_work *wk, const sweep_args *a, long i0, long cn
 			_MM_TRANSPOSE4_PS(l0, l1, l2, l3);
 			f[c] = _mm_add_ps(_mm_add_ps(l0, l1), _mm_add_ps(l2, l3));
 		}
-		__m128 vx = _mm_loadu_ps(&wk->v[i].x), vy = _mm_loadu_ps(&wk->v[i + 1].x), vz = _mm_loadu_ps(&wk->v[i + 2].x),
-		       vw = _mm_loadu_ps(&wk->v[i + 3].x);
-		_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
-		__m128 bx = _mm_loadu_ps(&wk->b[i].x), by = _mm_loadu_ps(&wk->b[i + 1].x), bz = _mm_loadu_ps(&wk->b[i + 2].x),
-		       bw = _mm_loadu_ps(&wk->b[i + 3].x);
-		_MM_TRANSPOSE4_PS(bx, by, bz, bw);
+		__m128 vx, vy, vz, vw, bx, by, bz, bw;
+		load4(wk->v + i, &vx, &vy, &vz, &vw);
+		load4(wk->b + i, &bx, &by, &bz, &bw);
 		const __m128 ki = _mm_loadu_ps(wk->k + i), kb = _mm_mul_ps(two, ki); /* the boundary particles mirror k_i */
 		vx = _mm_sub_ps(vx, _mm_mul_ps(vdt, _mm_add_ps(_mm_mul_ps(kb, bx), f[0])));
 		vy = _mm_sub_ps(vy, _mm_mul_ps(vdt, _mm_add_ps(_mm_mul_ps(kb, by), f[1])));
@@ -703,9 +704,9 @@ static void correct_finish(dfsph_work *wk, const sweep_args *a, long i0, long cn
 		const float *ti = t + CORR_T * q;
 		const dfsph_f4 bi = wk->b[i];
 		const float ki = wk->k[i], kb = 2 * ki; /* the boundary particles mirror k_i */
-		wk->v[i].x -= a->dt * (kb * bi.x + sum4(ti));
-		wk->v[i].y -= a->dt * (kb * bi.y + sum4(ti + 4));
-		wk->v[i].z -= a->dt * (kb * bi.z + sum4(ti + 8));
+		wk->v[i].x -= a->dt * (kb * bi.x + sph_sum4(ti));
+		wk->v[i].y -= a->dt * (kb * bi.y + sph_sum4(ti + 4));
+		wk->v[i].z -= a->dt * (kb * bi.z + sph_sum4(ti + 8));
 		wk->ksum[i] += ki;
 	}
 }

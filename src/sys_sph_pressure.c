@@ -85,23 +85,6 @@ typedef struct pair_args {
  * coincident pair, from which on the finish loop takes the pairs one by one. */
 typedef void pair_sums_fn(const pair_args *a, long i0, long cnt, float *t, uint32_t *done);
 
-/* (l0 + l1) + (l2 + l3), the order of sph_hsum4 */
-static inline float sum4(const float *l)
-{
-	return (l[0] + l[1]) + (l[2] + l[3]);
-}
-
-/* The neighbours of the last group q, padded with copies of its last
- * neighbour (the padding's lanes are masked out). */
-static inline void group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t l[8])
-{
-	const uint32_t *g = list + q, last = cnt - 1 - q;
-	/* min(k, last) in arithmetic: written as a choice, it became a branch
-	 * per lane, mispredicted for the lanes around the count */
-	for (uint32_t k = 0; k < 8; ++k)
-		l[k] = g[last + ((k - last) & (0u - (uint32_t)(k < last)))];
-}
-
 #ifdef __SSE2__
 /* One group (neighbours l[0..7]) as two halves, with the same operations
  * per lane as the AVX2 path; false, summing nothing, if a pair is
@@ -156,7 +139,7 @@ static void pair_sums_sse(const pair_args *a, long i0, long cnt, float *t, uint3
 				break;
 		if (q + 8 > c && q < c) {
 			uint32_t l[8];
-			group_rows(list, c, q, l);
+			sph_group_rows(list, c, q, l);
 			if (group_sse(a, l, true, c - q, vxi, vyi, vzi, vpi, sx, sy, sz))
 				q = c;
 		}
@@ -232,7 +215,7 @@ __attribute__((target("avx2"))) static void pair_sums_avx2(const pair_args *a, l
 				break;
 		if (q + 8 > c && q < c) {
 			uint32_t l[8];
-			group_rows(list, c, q, l);
+			sph_group_rows(list, c, q, l);
 			if (group_avx2(a, l, true, c - q, vxi, vyi, vzi, vpi, &sx, &sy, &sz))
 				q = c;
 		}
@@ -265,7 +248,7 @@ static void finish(const finish_args *fa, long i0, long cnt, const float *t, con
 		const float xi = a.pk[4 * i], yi = a.pk[4 * i + 1], zi = a.pk[4 * i + 2];
 		/* rho >= m W(0) > 0 (the self term), so 1/rho is finite */
 		const float iri = a.inv_rho[i], pi_ = a.p[i];
-		float fx = sum4(tb), fy = sum4(tb + 4), fz = sum4(tb + 8);
+		float fx = sph_sum4(tb), fy = sph_sum4(tb + 4), fz = sph_sum4(tb + 8);
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
 		for (uint32_t q = done[b], cnt_i = nb->count[i]; q < cnt_i; ++q) {
 			const uint32_t j = list[q];

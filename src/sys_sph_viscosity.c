@@ -67,23 +67,6 @@ typedef struct pair_args {
  * lanes l and l + 4 of the groups) at t + VISC_T q. */
 typedef void pair_sums_fn(const pair_args *a, long i0, long cnt, float *t);
 
-/* (l0 + l1) + (l2 + l3), the order of sph_hsum4 */
-static inline float sum4(const float *l)
-{
-	return (l[0] + l[1]) + (l[2] + l[3]);
-}
-
-/* The neighbours of the last group q, padded with copies of its last
- * neighbour (the padding's lanes are masked out). */
-static inline void group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t l[8])
-{
-	const uint32_t *g = list + q, last = cnt - 1 - q;
-	/* min(k, last) in arithmetic: written as a choice, it became a branch
-	 * per lane, mispredicted for the lanes around the count */
-	for (uint32_t k = 0; k < 8; ++k)
-		l[k] = g[last + ((k - last) & (0u - (uint32_t)(k < last)))];
-}
-
 #ifdef __SSE2__
 /* One group (neighbours l[0..7]) as two halves, with the same operations
  * per lane as the AVX2 path. The differences are taken on the quads before
@@ -156,7 +139,7 @@ static void pair_sums_sse(const pair_args *a, long i0, long cnt, float *t)
 			group_sse(a, list + q, false, 8, qp, qv, s);
 		if (q < c) {
 			uint32_t l[8];
-			group_rows(list, c, q, l);
+			sph_group_rows(list, c, q, l);
 			group_sse(a, l, true, c - q, qp, qv, s);
 		}
 		for (int k = 0; k < 6; ++k)
@@ -277,7 +260,7 @@ __attribute__((target("avx2"))) static void pair_sums_avx2(const pair_args *a, l
 			group_avx2(a, list + q, false, 8, qp, qv, s);
 		if (q < c) {
 			uint32_t l[8];
-			group_rows(list, c, q, l);
+			sph_group_rows(list, c, q, l);
 			group_avx2(a, l, true, c - q, qp, qv, s);
 		}
 		/* lanes l and l + 4 added, as the SSE path adds its halves */
@@ -342,9 +325,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 				const long i = i0 + b;
 				const float *tb = t + VISC_T * b;
 				const float k = coef * pq[4 * i + 3];
-				ax[i] += k * sum4(tb) + acoef * sum4(tb + 12);
-				ay[i] += k * sum4(tb + 4) + acoef * sum4(tb + 16);
-				az[i] += k * sum4(tb + 8) + acoef * sum4(tb + 20);
+				ax[i] += k * sph_sum4(tb) + acoef * sph_sum4(tb + 12);
+				ay[i] += k * sph_sum4(tb + 4) + acoef * sph_sum4(tb + 16);
+				az[i] += k * sph_sum4(tb + 8) + acoef * sph_sum4(tb + 20);
 			}
 		}
 	}

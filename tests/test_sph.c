@@ -204,6 +204,16 @@ static eddy_world *sph_world(const sph_setup *s, eddy_system_id *density)
 	return w;
 }
 
+/* A block falling into a 20 x 10 x 4 cm tank: the splash the determinism
+ * and SIMD tests hash. */
+static sph_setup splash_setup(void)
+{
+	sph_setup s = default_setup();
+	s.hi = (eddy_vec3){0.2f, 0.1f, 0.04f};
+	s.fmax = (eddy_vec3){0.06f, 0.08f, 0.04f};
+	return s;
+}
+
 /* The state hash after some frames of the setup on 1 and on 2 threads. */
 static void hashes_on_one_and_two_threads(sph_setup s, int frames, uint64_t hash[2])
 {
@@ -568,9 +578,7 @@ static void coincident_particles_separate(void)
 static void high_stiffness_stays_bounded(void)
 {
 	for (int bad = 0; bad < 2; ++bad) {
-		sph_setup s = default_setup();
-		s.hi = (eddy_vec3){0.2f, 0.1f, 0.04f};
-		s.fmax = (eddy_vec3){0.06f, 0.08f, 0.04f};
+		sph_setup s = splash_setup();
 		s.k = 10000;
 		s.cfl = bad ? 2.0 : 0.4;
 		eddy_world *w = sph_world(&s, NULL);
@@ -663,9 +671,7 @@ static void jet_does_not_tunnel_thin_plate(void)
 static void deterministic_across_threads(void)
 {
 	uint64_t hash[2];
-	sph_setup s = default_setup();
-	s.hi = (eddy_vec3){0.2f, 0.1f, 0.04f};
-	s.fmax = (eddy_vec3){0.06f, 0.08f, 0.04f};
+	sph_setup s = splash_setup();
 	s.sigma = 0.0728f;
 	hashes_on_one_and_two_threads(s, 5, hash);
 	printf("    state hash 1 thread %016llx, 2 threads %016llx\n", (unsigned long long)hash[0], (unsigned long long)hash[1]);
@@ -1207,9 +1213,7 @@ static void dfsph_rejects_bad_input(void)
 static void dfsph_deterministic_across_threads(void)
 {
 	uint64_t hash[2];
-	sph_setup s = default_setup();
-	s.hi = (eddy_vec3){0.2f, 0.1f, 0.04f};
-	s.fmax = (eddy_vec3){0.06f, 0.08f, 0.04f};
+	sph_setup s = splash_setup();
 	s.cfl = 0.8;
 	const eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
 	s.dfsph = &df;
@@ -1230,9 +1234,7 @@ static void simd_paths_give_the_same_bits(void)
 	char *saved = had ? strdup(had) : NULL;
 	const eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
 	for (int k = 0; k < 2; ++k) {
-		sph_setup s = default_setup();
-		s.hi = (eddy_vec3){0.2f, 0.1f, 0.04f};
-		s.fmax = (eddy_vec3){0.06f, 0.08f, 0.04f};
+		sph_setup s = splash_setup();
 		if (k == 0) {
 			s.sigma = 0.0728f;
 		} else {
