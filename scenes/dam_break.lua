@@ -1,7 +1,7 @@
 -- dam_break (SPH): Martin & Moyce's collapsing column, a x 2a against the back
 -- wall of a tank 5.5 a long, in a slab 4 spacings thick with free-slip walls
 -- (2D-like flow). Reports Z = front / a and T = t sqrt(2 g / a) every frame,
--- to compare with ../shared/data/martin_moyce_1952_*.csv.
+-- to compare with data/martin_moyce_1952_*.csv.
 --
 --   build/eddy run scenes/dam_break.lua --set spacing=0.005 --stats out/dam/stats.jsonl
 --

@@ -21,7 +21,7 @@ local world = eddy.world {
 world:add(eddy.emit_box { min = {-ax, -ayz, -ayz}, max = {ax, ayz, ayz}, spacing = dx, shape = "ellipsoid" })
 world:add(eddy.sph_density { radius = 2 * dx, spacing = dx, rest_density = 1000, stiffness = 40 })
 world:add(eddy.sph_pressure {})
--- alpha 0.1: also keeps the surface layer's pairs apart (VALIDATION.md C.1)
+-- alpha 0.1: also keeps the surface layer's pairs apart (docs/validation.md C.1)
 world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.1 })
 world:add(eddy.sph_surface_tension { tension = sigma, threshold = 0.5 })
 world:add(eddy.integrate {})

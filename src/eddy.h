@@ -418,7 +418,7 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user);
 
 /* ---- SPH (sys_sph_*.c) ------------------------------------------------- */
 
-/* SPH after Mueller, Charypar & Gross 2003, with the fixes VALIDATION.md lists.
+/* SPH after Mueller, Charypar & Gross 2003, with the fixes docs/validation.md lists.
  * sph_density builds the neighbour lists (uniform grid, cells of radius/2) once
  * per step and keeps the particle table in cell order; the later SPH systems
  * reuse those lists, so they must come after it (they read 'density'). */

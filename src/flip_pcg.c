@@ -2,7 +2,7 @@
  * (Bridson, "Fluid Simulation for Computer Graphics", 2nd ed., ch. 5.4:
  * modified incomplete Cholesky with tau = 0.97 and the safety factor
  * sigma = 0.25). Every scalar is double: single-precision dot products stall
- * the iteration on large grids (VALIDATION.md, hard case 14). Loops are
+ * the iteration on large grids (docs/validation.md, hard case 14). Loops are
  * serial, so the result does not depend on the thread count. */
 #include "flip.h"
 

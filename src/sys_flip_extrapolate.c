@@ -1,6 +1,6 @@
 /* flip_extrapolate: velocity extrapolation into the air (Bridson's book,
  * ch. 4.6; without it particles near the surface interpolate the zeros of
- * faces no particle reached and stall: VALIDATION.md hard case 12).
+ * faces no particle reached and stall: docs/validation.md hard case 12).
  *
  * Reads: cell_type u v w. Writes: u v w.
  *   Known faces: a fluid or solid cell on a side, or on the domain's sides.

@@ -1,7 +1,7 @@
 /* flip_g2p: grid to particles, FLIP blended with PIC (Brackbill 1988; Zhu &
  * Bridson 2005, section 4: FLIP adds the grid's change, PIC takes the grid
  * value; PIC is stable but smooths the flow like a strong viscosity, FLIP
- * keeps detail but is noisy, VALIDATION.md hard case 11).
+ * keeps detail but is noisy, docs/validation.md hard case 11).
  *
  * Reads: x y z vx vy vz u v w u_old v_old w_old. Writes: vx vy vz.
  *   v_flip = v_p + I(u - u_old),  v_pic = I(u),  I trilinear on each face grid

@@ -1,6 +1,6 @@
 /* flip_reseed: keeps the particle density in fluid cells between min and max
  * per cell, against the clumping and thinning that make FLIP's volume drift
- * (VALIDATION.md hard case 13; Zhu & Bridson keep about 8 per cell).
+ * (docs/validation.md hard case 13; Zhu & Bridson keep about 8 per cell).
  *
  * Reads: x y z cell_type u v w. Writes: x y z vx vy vz.
  *   Interior fluid cells (no air neighbour; surface cells are partly empty by

@@ -4,7 +4,7 @@
  * search and adds them to the density sum; sph_pressure mirrors the fluid
  * particle's pressure onto them. A fluid particle at a wall so sees a full
  * neighbourhood: it is neither sucked onto the wall nor held a gap away from
- * it, as plain clamping with a deficient density does (VALIDATION.md C.2).
+ * it, as plain clamping with a deficient density does (docs/validation.md C.2).
  *
  * Reads: nothing. Writes: nothing.
  * Layout: the fluid lattice continued through the walls. Points sit at

@@ -19,7 +19,7 @@
  *   linear EOS: p_i = k (rho_i - rho0)                      (Mueller 2003, eq. 12)
  *   Tait EOS:   p_i = (k rho0 / gamma) ((rho_i/rho0)^gamma - 1)
  *   p_i is clamped at 0: negative pressure pulls particles into clumps
- *   (tensile instability, VALIDATION.md C.1).
+ *   (tensile instability, docs/validation.md C.1).
  * The particle mass is m = rho0 / sum_lattice W_poly6, the sum over a simple
  * cubic lattice of the given spacing, so a block at rest starts at rho0
  * exactly instead of 1% above it at h = 2 spacings (C.8). The self term

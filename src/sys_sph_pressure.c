@@ -22,7 +22,7 @@
  * correction sph_density makes for the mass.
  * Pairs closer than 1e-3 h take a fixed antisymmetric direction (sph.h): the
  * gradient has no direction at r = 0, and skipping them would leave
- * coincident particles stuck together (VALIDATION.md C.6).
+ * coincident particles stuck together (docs/validation.md C.6).
  * Positions and 1/rho come from sph_density's (x y z 1/rho) quads (sh->pq).
  * The fluid pairs go eight at a time (AVX2 when the CPU has it, else SSE as
  * two halves doing the same per lane; EDDY_NO_AVX2 forces SSE), a particle's

@@ -645,7 +645,7 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 		errors++;
 	}
 
-	/* particles per cell: a grid method wants 3 to 12 (VALIDATION.md §A) */
+	/* particles per cell: a grid method wants 3 to 12 (docs/validation.md §A) */
 	if (w->grid_allocated && w->length_scale > 0) {
 		const double ppc = pow(w->def.cell_size / w->length_scale, 3);
 		if (ppc < 3 || ppc > 12) {

@@ -1,5 +1,5 @@
 #define _POSIX_C_SOURCE 200809L
-/* FLIP validation (VALIDATION.md §A, §C 9-14): the Poisson solve against
+/* FLIP validation (docs/validation.md §A, §C 9-14): the Poisson solve against
  * analytic answers, the two solvers against each other, still water in a
  * closed box and in a tank, a ballistic blob, the dam break against Martin &
  * Moyce, volume over a long slosh, Taylor-Green decay for PIC vs FLIP, and
@@ -581,7 +581,7 @@ static double mm_interp(const char *path, double T)
  * data sets, after the best time shift of at most 0.2 in T. */
 static void dam_break_matches_martin_moyce(void)
 {
-	const char *files[2] = {"../shared/data/martin_moyce_1952_a1.125in.csv", "../shared/data/martin_moyce_1952_a2.25in.csv"};
+	const char *files[2] = {"data/martin_moyce_1952_a1.125in.csv", "data/martin_moyce_1952_a2.25in.csv"};
 	FILE *probe = fopen(files[0], "r");
 	CHECKF(probe != NULL, "reference data missing: %s (run from the repository root)", files[0]);
 	if (!probe)

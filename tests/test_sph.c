@@ -1,7 +1,7 @@
 /* SPH (Mueller 2003) validation: kernels against their analytic integrals and
  * lattice sums, then whole scenes against physics (hydrostatic tank, dam
  * break vs Martin & Moyce, oscillating drop vs Rayleigh) and the hard cases
- * of VALIDATION.md section C. Sizes are small so the suite runs in seconds;
+ * of docs/validation.md section C. Sizes are small so the suite runs in seconds;
  * every test prints the figure it checks. */
 #define _POSIX_C_SOURCE 200809L /* setenv, strdup */
 #include "test.h"
@@ -64,7 +64,7 @@ static void kernel_derivatives_match_finite_differences(void)
 		}
 }
 
-/* Lattice facts (VALIDATION.md A): sum V W at h = 1.5, 2, 2.5, 3 spacings, the
+/* Lattice facts (docs/validation.md A): sum V W at h = 1.5, 2, 2.5, 3 spacings, the
  * spiky kernel's 24% excess, and sum V (x_j - x_i) (x) grad W = -I with the
  * gradient taken with respect to x_j (+I with respect to x_i, as here). */
 static void lattice_sums(void)
@@ -836,7 +836,7 @@ static double drop_omega(int per_radius, double eps, double seconds, double *ome
  * clumps (and the paper's -lap c / |n| curvature squeezes the surface layer:
  * 0.07 spacings here). Measured: the closest pair dips to 0.44 spacings while
  * the drop rings at 20% strain, so the bound here is 0.4; the drop at rest
- * (the next test) is held to VALIDATION.md's 0.5. */
+ * (the next test) is held to docs/validation.md's 0.5. */
 static void droplet_oscillates_at_rayleigh_frequency(void)
 {
 	double theory, gap;
@@ -848,7 +848,7 @@ static void droplet_oscillates_at_rayleigh_frequency(void)
 	CHECK(gap >= 0.4);
 }
 
-/* C.1 as VALIDATION.md states it: a round drop at rest (surface tension on,
+/* C.1 as docs/validation.md states it: a round drop at rest (surface tension on,
  * negative pressure clamped) keeps every pair at least half a spacing apart. */
 static void resting_drop_keeps_pairs_apart(void)
 {
@@ -930,13 +930,13 @@ static int run_scene(const char *scene, const char *sets, const char *kx, const 
 }
 
 /* |Z_sim - Z_exp| / Z_exp <= 10% for T in [1, 3] against both data sets,
- * after the best time shift of at most 0.2 (VALIDATION.md A: the gate
+ * after the best time shift of at most 0.2 (docs/validation.md A: the gate
  * opened in finite time, so the experiment starts late). a/12 resolution. */
 static void dam_break_matches_martin_moyce(void)
 {
 	curve ref[2], sim;
-	CHECK(read_reference("../shared/data/martin_moyce_1952_a2.25in.csv", &ref[0]));
-	CHECK(read_reference("../shared/data/martin_moyce_1952_a1.125in.csv", &ref[1]));
+	CHECK(read_reference("data/martin_moyce_1952_a2.25in.csv", &ref[0]));
+	CHECK(read_reference("data/martin_moyce_1952_a1.125in.csv", &ref[1]));
 	char last[16384] = "";
 	run_scene("scenes/dam_break.lua", "--set spacing=0.008333 --set fps=100", "T", "Z", &sim, last, sizeof last);
 	CHECK(sim.n > 20);
@@ -1116,8 +1116,8 @@ static void dfsph_hydrostatic_tank(void)
 static void dfsph_dam_break_matches_martin_moyce(void)
 {
 	curve ref[2], sim;
-	CHECK(read_reference("../shared/data/martin_moyce_1952_a2.25in.csv", &ref[0]));
-	CHECK(read_reference("../shared/data/martin_moyce_1952_a1.125in.csv", &ref[1]));
+	CHECK(read_reference("data/martin_moyce_1952_a2.25in.csv", &ref[0]));
+	CHECK(read_reference("data/martin_moyce_1952_a1.125in.csv", &ref[1]));
 	char last[16384] = "";
 	run_scene("scenes/dam_break.lua", "--set spacing=0.008333 --set fps=100 --set solver=dfsph --set cfl=0.8", "T",
 	          "Z", &sim, last, sizeof last);

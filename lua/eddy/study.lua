@@ -7,7 +7,7 @@
 --   return study {
 --     name = "dam_break",                       -- output files: <name>.csv, <name>.png
 --     title = "Dam break against Martin & Moyce",
---     reference = { data = "../shared/data/martin_moyce_1952_a2.25in.csv" },
+--     reference = { data = "data/martin_moyce_1952_a2.25in.csv" },
 --              -- or { analytic = "what the scene's error field measures" }
 --              -- or { analytic = function(params) return omega end } (metric "frequency")
 --              -- or { finest = true }: each method's finest run is its reference
@@ -228,7 +228,7 @@ local function exists(path)
 end
 
 -- A path as given (from the repository root), else relative to the study
--- file's directory and its parents (so ../shared/data/... resolves from
+-- file's directory and its parents (so data/... resolves from
 -- scenes/studies/ as well).
 local function resolve(path, study_file)
 	if path:sub(1, 1) == "/" or exists(path) then return path end

@@ -1,5 +1,5 @@
 -- Convergence: the dam-break front Z(T), T in [1, 3], against each method's
--- finest run (VALIDATION.md's protocol: halve the spacing at fixed CFL and
+-- finest run (docs/validation.md's protocol: halve the spacing at fixed CFL and
 -- read the observed order p = log2(E(dx) / E(dx/2)) from the CSV's `order`).
 -- The experiment cannot serve here: both methods converge to a front that
 -- leads Martin & Moyce's (see scenes/studies/dam_break.lua).

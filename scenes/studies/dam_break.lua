@@ -2,7 +2,7 @@
 -- Moyce's measurements (a = 2.25 in) for the wall time each resolution costs.
 -- error = mean |Z_sim - Z_exp| over T in [1, 3] (Z = front / a, T = t sqrt(2g/a)),
 -- no time shift; the CSV also has error_shifted, the best error after shifting
--- the experiment's clock by up to 0.2 in T (VALIDATION.md: the gate opened in
+-- the experiment's clock by up to 0.2 in T (docs/validation.md: the gate opened in
 -- finite time), and that shift.
 --
 --   build/eddy study scenes/studies/dam_break.lua            (about 40 s)
@@ -16,7 +16,7 @@
 return study {
 	name = "dam_break",
 	title = "Dam break vs Martin & Moyce: SPH and FLIP",
-	reference = { data = "../shared/data/martin_moyce_1952_a2.25in.csv" },
+	reference = { data = "data/martin_moyce_1952_a2.25in.csv" },
 	metric = { kind = "mean_abs", x = "T", y = "Z", from = 1, to = 3, shift = 0.2,
 	           label = "mean |Z - Z_exp|, T in [1, 3]" },
 	extra = { density_err_avg = "mean", divergence = "max" },
