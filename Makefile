@@ -1,11 +1,14 @@
-# eddy — one Makefile for the engine, the Lua module, the command, tests and benchmarks.
+# SPDX-License-Identifier: MIT
+# eddy: one Makefile for the engine, the Lua module, the command, tests and benchmarks.
 #
 #   make            build everything into build/
 #   make run        install missing Debian packages, build, run the default scene
 #   make test       install missing Debian packages, build, run the tests
-#   make bench      benchmarks (machine-readable, into build/bench.json)
+#   make bench      benchmarks (machine-readable JSON in build/bench*.json)
 #   make asan       the tests under AddressSanitizer + UndefinedBehaviorSanitizer
-#   make install PREFIX=/usr/local
+#   make fuzz       libFuzzer over scene loading and stepping (FUZZ_SECONDS)
+#   make study      every accuracy/time study in scenes/studies/
+#   make install PREFIX=/usr/local [DESTDIR=...]
 #   make clean
 
 BUILD   ?= build
@@ -14,43 +17,49 @@ CC      ?= cc
 SAN     ?=
 OPT     ?= -O3
 
+# The version lives in the public header; the soname carries the major.
+VERSION := $(shell sed -n 's/^\#define EDDY_VERSION_STRING "\(.*\)"/\1/p' src/eddy.h)
+SOMAJOR := $(firstword $(subst ., ,$(VERSION)))
+
 # Layers depend downward only: src knows nothing of Lua or GL, and lua/, render/
 # and tests/ see only the public header, copied to $(BUILD)/include, never src/.
+# Symbols are hidden unless the public header marks them EDDY_API.
 WARN    := -Wall -Wextra -Wpedantic -Wshadow -Wstrict-prototypes -Wmissing-prototypes \
            -Wformat=2 -Wvla -Wpointer-arith -Wcast-qual -Wundef -Werror
 BASE    := -std=c11 $(OPT) -g -fPIC -fopenmp $(WARN) $(SAN) -MMD -MP
 LDBASE  := -fopenmp $(SAN)
 
-LUA_CFLAGS := $(shell pkg-config --cflags lua5.4 2>/dev/null)
-LUA_LIBS   := $(shell pkg-config --libs lua5.4 2>/dev/null)
+LUA_CFLAGS    := $(shell pkg-config --cflags lua5.4 2>/dev/null)
+LUA_LIBS      := $(shell pkg-config --libs lua5.4 2>/dev/null)
+OSMESA_CFLAGS := $(shell pkg-config --cflags osmesa 2>/dev/null)
+OSMESA_LIBS   := $(shell pkg-config --libs osmesa 2>/dev/null || echo -lOSMesa)
+# CHOLMOD pulls libblas.so.3, which Debian points at OpenBLAS when it is
+# installed (reference BLAS is about 7x slower for the factorisation). Only
+# src/flip_cholmod.c includes CHOLMOD, only render/gl_osmesa.c OSMesa.
+LIBS          := -lcholmod $(OSMESA_LIBS) -lm
 
-SRC_C   := $(wildcard src/*.c)
-LUA_C   := $(filter-out lua/main.c,$(wildcard lua/*.c))
-MAIN_C  := lua/main.c
-TEST_C  := $(wildcard tests/test_*.c) tests/runner.c tests/fuzz_scene.c
-BENCH_C := tests/bench.c
+# The command-line host: main.c and the files named cli_*.c are the command's
+# own and stay out of the Lua module.
+CLI_C    := lua/main.c $(wildcard lua/cli_*.c)
+SRC_C    := $(wildcard src/*.c)
+RENDER_C := $(wildcard render/*.c)
+LUA_C    := $(filter-out $(CLI_C),$(wildcard lua/*.c))
+TEST_C   := $(wildcard tests/test_*.c) tests/runner.c tests/fuzz_scene.c
+BENCHES  := bench bench_flip bench_sph bench_render
 
-SRC_O   := $(SRC_C:%.c=$(BUILD)/obj/%.o)
-LUA_O   := $(LUA_C:%.c=$(BUILD)/obj/%.o)
-MAIN_O  := $(MAIN_C:%.c=$(BUILD)/obj/%.o)
-TEST_O  := $(TEST_C:%.c=$(BUILD)/obj/%.o)
-BENCH_O := $(BENCH_C:%.c=$(BUILD)/obj/%.o)
-
+obj = $(1:%.c=$(BUILD)/obj/%.o)
+LIB_O   := $(call obj,$(SRC_C) $(RENDER_C))
+LUA_O   := $(call obj,$(LUA_C))
+CLI_O   := $(call obj,$(CLI_C))
+TEST_O  := $(call obj,$(TEST_C))
 HEADER  := $(BUILD)/include/eddy.h
-LIBS    := -lm
 
-# ---- FLIP: CHOLMOD (sparse Cholesky), BLAS through Debian's alternatives ----
-# libcholmod pulls libblas.so.3, which Debian points at OpenBLAS when
-# libopenblas0-pthread is installed (update-alternatives; reference BLAS is
-# about 7x slower for the factorisation). Only src/flip_cholmod.c includes it.
-CHOLMOD_LIBS := -lcholmod
-LIBS    += $(CHOLMOD_LIBS)
-# ---- end FLIP ----
-
-.PHONY: all run test bench asan fuzz install clean deps check-tests
+.PHONY: all run test check-tests bench asan fuzz study install clean deps deps-test
 .DEFAULT_GOAL := all
 
 all: $(BUILD)/libeddy.a $(BUILD)/libeddy.so $(BUILD)/eddy.so $(BUILD)/eddy $(BUILD)/eddy.pc
+
+# ---- compiling: each folder gets its own include flags ----------------------------
 
 $(HEADER): src/eddy.h
 	@mkdir -p $(dir $@)
@@ -60,6 +69,10 @@ $(BUILD)/obj/src/%.o: src/%.c
 	@mkdir -p $(dir $@)
 	$(CC) $(BASE) -Isrc -c $< -o $@
 
+$(BUILD)/obj/render/%.o: render/%.c $(HEADER)
+	@mkdir -p $(dir $@)
+	$(CC) $(BASE) -I$(BUILD)/include $(OSMESA_CFLAGS) -c $< -o $@
+
 $(BUILD)/obj/lua/%.o: lua/%.c $(HEADER)
 	@mkdir -p $(dir $@)
 	$(CC) $(BASE) -I$(BUILD)/include $(LUA_CFLAGS) -c $< -o $@
@@ -68,112 +81,96 @@ $(BUILD)/obj/tests/%.o: tests/%.c $(HEADER)
 	@mkdir -p $(dir $@)
 	$(CC) $(BASE) -I$(BUILD)/include -Ilua $(LUA_CFLAGS) -c $< -o $@
 
-$(BUILD)/libeddy.a: $(SRC_O)
+# SPH pair loops: with errno semantics GCC follows every sqrtss with a compare
+# and a branch to libm's sqrtf (to set errno for a negative argument, which r^2
+# never is). -fno-math-errno drops only that; results are bit-identical.
+$(BUILD)/obj/src/sys_sph_pressure.o $(BUILD)/obj/src/sys_sph_viscosity.o: BASE += -fno-math-errno
+
+# ---- linking --------------------------------------------------------------------
+
+$(BUILD)/libeddy.a: $(LIB_O)
 	@rm -f $@
 	ar rcs $@ $^
 
-$(BUILD)/libeddy.so: $(SRC_O)
-	$(CC) -shared -Wl,-soname,libeddy.so.0 $(LDBASE) $^ -o $@ $(LIBS)
+$(BUILD)/libeddy.so: $(LIB_O)
+	$(CC) -shared -Wl,-soname,libeddy.so.$(SOMAJOR) $(LDBASE) $^ -o $@ $(LIBS)
 
 # The Lua module: the stock lua5.4 interpreter provides the Lua symbols.
-$(BUILD)/eddy.so: $(LUA_O) $(SRC_O)
+$(BUILD)/eddy.so: $(LUA_O) $(LIB_O)
 	$(CC) -shared $(LDBASE) $^ -o $@ $(LIBS)
 
-$(BUILD)/eddy: $(MAIN_O) $(LUA_O) $(BUILD)/libeddy.a
-	$(CC) $(LDBASE) $(MAIN_O) $(LUA_O) $(BUILD)/libeddy.a -o $@ $(LUA_LIBS) $(LIBS)
+$(BUILD)/eddy: $(CLI_O) $(LUA_O) $(BUILD)/libeddy.a
+	$(CC) $(LDBASE) $(CLI_O) $(LUA_O) $(BUILD)/libeddy.a -o $@ $(LUA_LIBS) $(LIBS)
 
-$(BUILD)/eddy.pc: Makefile
+$(BUILD)/eddy.pc: Makefile src/eddy.h
 	@mkdir -p $(BUILD)
-	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: 0.1.0\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lm -fopenmp\n' '$(PREFIX)' > $@
+	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lm -fopenmp\n' '$(PREFIX)' '$(VERSION)' > $@
 
 $(BUILD)/tests/run: $(TEST_O) $(LUA_O) $(BUILD)/libeddy.a
 	@mkdir -p $(dir $@)
 	$(CC) $(LDBASE) $(TEST_O) $(LUA_O) $(BUILD)/libeddy.a -o $@ $(LUA_LIBS) $(LIBS)
 
-$(BUILD)/tests/bench: $(BENCH_O) $(BUILD)/libeddy.a
-	@mkdir -p $(dir $@)
-	$(CC) $(LDBASE) $(BENCH_O) $(BUILD)/libeddy.a -o $@ $(LIBS)
-
-# ---- renderer and particle exports (render/) ------------------------------------
-# render/ compiles against the public header only. gl_osmesa.c is the one file
-# that includes OSMesa, png.c the one with stb_image_write's implementation.
-# The render objects join libeddy (and so eddy, eddy.so and the tests), which
-# therefore links OSMesa.
-OSMESA_CFLAGS := $(shell pkg-config --cflags osmesa 2>/dev/null)
-OSMESA_LIBS   := $(shell pkg-config --libs osmesa 2>/dev/null || echo -lOSMesa)
-RENDER_C      := $(wildcard render/*.c)
-RENDER_O      := $(RENDER_C:%.c=$(BUILD)/obj/%.o)
-LIBS          += $(OSMESA_LIBS)
-
-.PHONY: bench-render
-
-$(BUILD)/obj/render/%.o: render/%.c $(HEADER)
-	@mkdir -p $(dir $@)
-	$(CC) $(BASE) -I$(BUILD)/include $(OSMESA_CFLAGS) -c $< -o $@
-
-$(BUILD)/libeddy.a $(BUILD)/libeddy.so $(BUILD)/eddy.so: $(RENDER_O)
-
-$(BUILD)/tests/bench_render: $(BUILD)/obj/tests/bench_render.o $(BUILD)/libeddy.a
-	@mkdir -p $(dir $@)
-	$(CC) $(LDBASE) $^ -o $@ $(LIBS)
-
-# per-frame render time at 1280x720, 10k/100k/1M particles, 1 and 2 llvmpipe threads
-bench-render: deps
-	@$(MAKE) --no-print-directory $(BUILD)/tests/bench_render
-	$(BUILD)/tests/bench_render $(BUILD)/bench_render.json
-
-bench: bench-render
-
-# Mesa's process-wide allocations are not eddy's leaks (see the file)
-asan: export LSAN_OPTIONS = suppressions=$(CURDIR)/tests/lsan_mesa.supp:print_suppressions=0
-
-# ---- end of the renderer block ------------------------------------------------------
-
-# ---- FLIP benchmarks (make bench) ----
-$(BUILD)/tests/bench_flip: $(BUILD)/obj/tests/bench_flip.o $(BUILD)/libeddy.a
+$(BENCHES:%=$(BUILD)/tests/%): $(BUILD)/tests/%: $(BUILD)/obj/tests/%.o $(BUILD)/libeddy.a
 	@mkdir -p $(dir $@)
 	$(CC) $(LDBASE) $< $(BUILD)/libeddy.a -o $@ $(LIBS)
-# ---- end FLIP ----
 
-# ---- the README's two commands -------------------------------------------------
+# ---- the README's two commands ----------------------------------------------------
 
 deps:
 	@sh scripts/deps.sh
+
+# the tests also read exports back with VTK's own reader (python3-vtk9)
+deps-test:
+	@sh scripts/deps.sh test
 
 run: deps
 	@$(MAKE) --no-print-directory all
 	@mkdir -p out/splash
 	$(BUILD)/eddy run scenes/splash.lua --stats out/splash/stats.jsonl
 
-test: deps
+test: deps-test
 	@$(MAKE) --no-print-directory all $(BUILD)/tests/run
 	@$(MAKE) --no-print-directory check-tests
 
 check-tests:
 	EDDY_BUILD=$(BUILD) $(BUILD)/tests/run
 
-bench: deps
-	@$(MAKE) --no-print-directory all $(BUILD)/tests/bench $(BUILD)/tests/bench_flip
-	$(BUILD)/tests/bench $(BUILD)/bench.json
-	$(BUILD)/tests/bench_flip $(BUILD)/bench_flip.json
+# ---- benchmarks: JSON into build/, never part of make test ------------------------
+# bench: core systems; bench_flip: FLIP transfers and pressure; bench_sph: SPH
+# blocks and the pour; bench_render: 1280x720 frames of 10k/100k/1M particles.
 
-asan: deps
+bench: deps
+	@$(MAKE) --no-print-directory all $(BENCHES:%=$(BUILD)/tests/%)
+	@for b in $(BENCHES); do $(BUILD)/tests/$$b $(BUILD)/$$b.json || exit 1; done
+
+# one of them: make bench-sph, bench-flip, bench-render
+bench-%: deps
+	@$(MAKE) --no-print-directory $(BUILD)/tests/bench_$*
+	$(BUILD)/tests/bench_$* $(BUILD)/bench_$*.json
+
+# ---- sanitizers ---------------------------------------------------------------------
+# Mesa's process-wide allocations are not eddy's leaks (see the suppressions file).
+
+asan: deps-test
 	@$(MAKE) --no-print-directory BUILD=build/asan OPT=-O1 \
 		SAN="-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer" \
 		all build/asan/tests/run
+	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan_mesa.supp:print_suppressions=0 \
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1 \
 		EDDY_BUILD=build/asan build/asan/tests/run
 	@echo "asan: a full run of the default scene, leaks checked at exit"
+	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan_mesa.supp:print_suppressions=0 \
 	ASAN_OPTIONS=detect_leaks=1 build/asan/eddy run scenes/bounce.lua --quiet --out build/asan/out
 
-# ---- fuzzing (clang libFuzzer): scene loading and stepping ---------------------
+# ---- fuzzing (clang libFuzzer): scene loading and stepping ------------------------
 # Everything is rebuilt with clang, libFuzzer, ASan and UBSan. OpenMP is left out
-# (its pragmas are ignored): the fuzzer runs one thread. make fuzz FUZZ_SECONDS=3600
-# for a longer session; crashes land in build/fuzz/ and belong in tests/fuzz/regressions/.
+# (its pragmas are ignored): the fuzzer runs one thread. Crashes land in
+# build/fuzz/ and belong in tests/fuzz/regressions/, which make test replays.
+
 FUZZ_SECONDS ?= 60
-FUZZ_CFLAGS := -std=c11 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
-               -Wall -Wextra -Wno-unknown-pragmas -DEDDY_LIBFUZZER
-FUZZ_SRC = $(SRC_C) $(LUA_C) $(RENDER_C) tests/fuzz_scene.c
+FUZZ_CFLAGS  := -std=c11 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
+                -Wall -Wextra -Wno-unknown-pragmas -DEDDY_LIBFUZZER
+FUZZ_SRC     := $(SRC_C) $(LUA_C) $(RENDER_C) tests/fuzz_scene.c
 
 $(BUILD)/fuzz/fuzz_scene: $(FUZZ_SRC) $(HEADER)
 	@mkdir -p $(dir $@)
@@ -185,54 +182,44 @@ fuzz: deps
 	$(BUILD)/fuzz/fuzz_scene -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=4096 -timeout=30 \
 		-artifact_prefix=$(BUILD)/fuzz/ -print_final_stats=1 $(BUILD)/fuzz/corpus tests/fuzz/seeds tests/fuzz/regressions
 
+# ---- accuracy/time studies (eddy study) -------------------------------------------
+# Every shipped study, full sweep: out/study_<name>/<name>.csv and .png.
+# make study STUDY_FLAGS=--quick for the reduced sweeps.
+
+STUDIES     ?= $(sort $(wildcard scenes/studies/*.lua))
+STUDY_FLAGS ?=
+
+study: deps
+	@$(MAKE) --no-print-directory all
+	@for s in $(STUDIES); do echo "== $$s"; $(BUILD)/eddy study $$s $(STUDY_FLAGS) || exit 1; done
+
+# ---- install ------------------------------------------------------------------------
+# The Lua module and helpers go where the stock lua5.4 looks (lib/lua/5.4/,
+# share/lua/5.4/); scenes, studies and their reference data under share/eddy/.
+
+LIBDIR   := $(DESTDIR)$(PREFIX)/lib
+SHAREDIR := $(DESTDIR)$(PREFIX)/share
+
 install: all
-	install -d $(DESTDIR)$(PREFIX)/include $(DESTDIR)$(PREFIX)/lib $(DESTDIR)$(PREFIX)/lib/pkgconfig \
-		$(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/lib/lua/5.4
+	install -d $(DESTDIR)$(PREFIX)/include $(LIBDIR)/pkgconfig $(DESTDIR)$(PREFIX)/bin \
+		$(LIBDIR)/lua/5.4 $(SHAREDIR)/lua/5.4/eddy $(SHAREDIR)/eddy/scenes/studies $(SHAREDIR)/eddy/data \
+		$(SHAREDIR)/man/man1 $(SHAREDIR)/doc/eddy
 	install -m 644 src/eddy.h $(DESTDIR)$(PREFIX)/include/eddy.h
-	install -m 644 $(BUILD)/libeddy.a $(DESTDIR)$(PREFIX)/lib/libeddy.a
-	install -m 755 $(BUILD)/libeddy.so $(DESTDIR)$(PREFIX)/lib/libeddy.so.0
-	ln -sf libeddy.so.0 $(DESTDIR)$(PREFIX)/lib/libeddy.so
+	install -m 644 $(BUILD)/libeddy.a $(LIBDIR)/libeddy.a
+	install -m 755 $(BUILD)/libeddy.so $(LIBDIR)/libeddy.so.$(VERSION)
+	ln -sf libeddy.so.$(VERSION) $(LIBDIR)/libeddy.so.$(SOMAJOR)
+	ln -sf libeddy.so.$(SOMAJOR) $(LIBDIR)/libeddy.so
 	install -m 755 $(BUILD)/eddy $(DESTDIR)$(PREFIX)/bin/eddy
-	install -m 755 $(BUILD)/eddy.so $(DESTDIR)$(PREFIX)/lib/lua/5.4/eddy.so
-	install -d $(DESTDIR)$(PREFIX)/share/eddy/lua/eddy
-	install -m 644 lua/eddy/*.lua $(DESTDIR)$(PREFIX)/share/eddy/lua/eddy/
-	sed 's|^prefix=.*|prefix=$(PREFIX)|' $(BUILD)/eddy.pc > $(DESTDIR)$(PREFIX)/lib/pkgconfig/eddy.pc
+	install -m 755 $(BUILD)/eddy.so $(LIBDIR)/lua/5.4/eddy.so
+	install -m 644 lua/eddy/*.lua $(SHAREDIR)/lua/5.4/eddy/
+	install -m 644 scenes/*.lua $(SHAREDIR)/eddy/scenes/
+	install -m 644 scenes/studies/*.lua $(SHAREDIR)/eddy/scenes/studies/
+	install -m 644 data/*.csv data/README.md $(SHAREDIR)/eddy/data/
+	install -m 644 docs/eddy.1 $(SHAREDIR)/man/man1/eddy.1
+	install -m 644 LICENSE README.md CHANGELOG.md $(SHAREDIR)/doc/eddy/
+	sed 's|^prefix=.*|prefix=$(PREFIX)|' $(BUILD)/eddy.pc > $(LIBDIR)/pkgconfig/eddy.pc
 
 clean:
 	rm -rf build out
 
 -include $(shell find $(BUILD)/obj -name '*.d' 2>/dev/null)
-
-# ---- SPH pair loops: sqrtf as the bare instruction ---------------------------------
-# With errno semantics GCC follows every sqrtss with a compare and a branch to
-# libm's sqrtf (to set errno for a negative argument, which r^2 never is) in
-# the innermost pair loops. -fno-math-errno drops only that: results are
-# bit-identical, and no code here reads errno.
-$(BUILD)/obj/src/sys_sph_pressure.o $(BUILD)/obj/src/sys_sph_viscosity.o: BASE += -fno-math-errno
-
-# ---- SPH benchmark (tests/bench_sph.c): run by make bench -------------------------
-BENCH_SPH_O := $(BUILD)/obj/tests/bench_sph.o
-
-$(BUILD)/tests/bench_sph: $(BENCH_SPH_O) $(BUILD)/libeddy.a
-	@mkdir -p $(dir $@)
-	$(CC) $(LDBASE) $(BENCH_SPH_O) $(BUILD)/libeddy.a -o $@ $(LIBS)
-
-.PHONY: bench-sph
-bench-sph: deps
-	@$(MAKE) --no-print-directory $(BUILD)/tests/bench_sph
-	$(BUILD)/tests/bench_sph $(BUILD)/bench_sph.json
-
-bench: bench-sph
-# ---- end SPH benchmark ------------------------------------------------------------
-
-# ---- accuracy/time study (eddy study; lua/study.c, lua/eddy/study.lua) -------------
-# Every shipped study, full sweep: out/study_<name>/<name>.csv and .png.
-# make study STUDY_FLAGS=--quick for the reduced sweeps.
-STUDIES ?= $(sort $(wildcard scenes/studies/*.lua))
-STUDY_FLAGS ?=
-
-.PHONY: study
-study: deps
-	@$(MAKE) --no-print-directory all
-	@for s in $(STUDIES); do echo "== $$s"; $(BUILD)/eddy study $$s $(STUDY_FLAGS) || exit 1; done
-# ---- end study ----------------------------------------------------------------------

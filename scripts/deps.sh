@@ -1,9 +1,14 @@
 #!/bin/sh
+# SPDX-License-Identifier: MIT
 # Installs the Debian packages eddy needs, if any are missing. Prints what it
 # installs; does nothing when all are present. Needs root (or sudo) only then.
+#   sh scripts/deps.sh        what building, running and fuzzing need
+#   sh scripts/deps.sh test   also what the tests use to read eddy's files back
+#                             (VTK's own reader, python3-vtk9)
 set -eu
 
 PKGS="make gcc pkg-config liblua5.4-dev lua5.4 libsuitesparse-dev libopenblas-dev libosmesa6-dev libstb-dev graphviz gnuplot-nox clang libclang-rt-14-dev"
+[ "${1:-}" = test ] && PKGS="$PKGS python3-vtk9"
 
 missing=""
 for p in $PKGS; do
