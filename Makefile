@@ -199,10 +199,12 @@ study: deps
 
 LIBDIR   := $(DESTDIR)$(PREFIX)/lib
 SHAREDIR := $(DESTDIR)$(PREFIX)/share
+LUA_CMOD ?= $(PREFIX)/lib/lua/5.4
+LUA_LMOD ?= $(PREFIX)/share/lua/5.4
 
 install: all
 	install -d $(DESTDIR)$(PREFIX)/include $(LIBDIR)/pkgconfig $(DESTDIR)$(PREFIX)/bin \
-		$(LIBDIR)/lua/5.4 $(SHAREDIR)/lua/5.4/eddy $(SHAREDIR)/eddy/scenes/studies $(SHAREDIR)/eddy/data \
+		$(DESTDIR)$(LUA_CMOD) $(DESTDIR)$(LUA_LMOD)/eddy $(SHAREDIR)/eddy/scenes/studies $(SHAREDIR)/eddy/data \
 		$(SHAREDIR)/man/man1 $(SHAREDIR)/doc/eddy
 	install -m 644 src/eddy.h $(DESTDIR)$(PREFIX)/include/eddy.h
 	install -m 644 $(BUILD)/libeddy.a $(LIBDIR)/libeddy.a
@@ -210,8 +212,8 @@ install: all
 	ln -sf libeddy.so.$(VERSION) $(LIBDIR)/libeddy.so.$(SOMAJOR)
 	ln -sf libeddy.so.$(SOMAJOR) $(LIBDIR)/libeddy.so
 	install -m 755 $(BUILD)/eddy $(DESTDIR)$(PREFIX)/bin/eddy
-	install -m 755 $(BUILD)/eddy.so $(LIBDIR)/lua/5.4/eddy.so
-	install -m 644 lua/eddy/*.lua $(SHAREDIR)/lua/5.4/eddy/
+	install -m 755 $(BUILD)/eddy.so $(DESTDIR)$(LUA_CMOD)/eddy.so
+	install -m 644 lua/eddy/*.lua $(DESTDIR)$(LUA_LMOD)/eddy/
 	install -m 644 scenes/*.lua $(SHAREDIR)/eddy/scenes/
 	install -m 644 scenes/studies/*.lua $(SHAREDIR)/eddy/scenes/studies/
 	install -m 644 data/*.csv data/README.md $(SHAREDIR)/eddy/data/

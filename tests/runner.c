@@ -72,6 +72,7 @@ int main(int argc, char **argv)
 		{"cli", suite_cli},
 		{"reliability", suite_reliability},
 		{"fuzz", suite_fuzz},
+		{"package", suite_package},
 		/* SPH suites */
 		{"sph", suite_sph},
 

@@ -55,6 +55,7 @@ void suite_lua(void);
 void suite_cli(void);
 void suite_reliability(void);
 void suite_fuzz(void);
+void suite_package(void);
 /* SPH suites */
 void suite_sph(void);
 
