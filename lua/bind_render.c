@@ -4,7 +4,8 @@
 
 static const char *const projection_choices[] = {"perspective", "orthographic", NULL};
 static const char *const colormap_choices[] = {"viridis", "plasma", "gray", NULL};
-static const char *const format_choices[] = {"ply", "vtk", NULL};
+/* in eddy_export_format's order: the index is the enum value */
+static const char *const format_choices[] = {"ply", "vtk", "vtp", NULL};
 
 static const eddy_lua_field render_points_fields[] = {
 	EDDY_LUA_FIELD(eddy_render_points_def, width, EDDY_LUA_INT),

@@ -1,13 +1,17 @@
 /* Helpers for the renderer and the exporters: frame path patterns, parent
- * directories, and particle values by channel name. */
+ * directories, particle values by channel name, and files written through a
+ * temporary name so a reader never sees a partial one. */
 #define _POSIX_C_SOURCE 200809L
 #include "render.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <math.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 const char *eddy_check_frame_pattern(const char *p)
 {
@@ -89,4 +93,88 @@ const float *eddy_particle_values(const eddy_world *w, const char *name, float *
 	}
 	const float *v = eddy_world_channel(w, name, &n);
 	return v && n == count ? v : NULL;
+}
+
+/* ---- files written whole or not at all ---- */
+
+int eddy_file_begin(eddy_file *o, const char *path)
+{
+	memset(o, 0, sizeof *o);
+	o->path = path;
+	if (eddy_make_parent_dirs(path) != 0)
+		return o->err = errno ? errno : EIO;
+	/* a hidden name in the final file's folder: rename() within one file
+	 * system is atomic, and file-series readers never list it */
+	const char *slash = strrchr(path, '/');
+	const int dir_len = slash ? (int)(slash - path) + 1 : 0;
+	static unsigned counter; /* frame hooks run on the stepping thread only */
+	for (int attempt = 0; attempt < 100; ++attempt) {
+		int n = snprintf(o->tmp, sizeof o->tmp, "%.*s.%s.%ld-%u.tmp", dir_len, path, path + dir_len, (long)getpid(),
+		                 counter++);
+		if (n < 0 || (size_t)n >= sizeof o->tmp)
+			return o->err = ENAMETOOLONG;
+		/* O_EXCL: never write through a file (or link) someone else made */
+		int fd = open(o->tmp, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+		if (fd < 0 && errno == EEXIST)
+			continue;
+		if (fd < 0)
+			return o->err = errno;
+		o->f = fdopen(fd, "wb");
+		if (!o->f) {
+			o->err = errno;
+			close(fd);
+			unlink(o->tmp);
+			return o->err;
+		}
+		return 0;
+	}
+	return o->err = EEXIST;
+}
+
+void eddy_file_write(eddy_file *o, const void *p, size_t n)
+{
+	if (o->err || n == 0)
+		return;
+	errno = 0;
+	if (fwrite(p, 1, n, o->f) != n)
+		o->err = errno ? errno : EIO;
+}
+
+void eddy_file_printf(eddy_file *o, const char *fmt, ...)
+{
+	if (o->err)
+		return;
+	va_list ap;
+	va_start(ap, fmt);
+	errno = 0;
+	int n = vfprintf(o->f, fmt, ap);
+	va_end(ap);
+	if (n < 0)
+		o->err = errno ? errno : EIO;
+}
+
+int eddy_file_finish(eddy_file *o)
+{
+	if (!o->f)
+		return o->err ? o->err : EINVAL;
+	if (!o->err && fflush(o->f) != 0)
+		o->err = errno ? errno : EIO;
+	/* fclose always releases the stream, whatever it returns */
+	if (fclose(o->f) != 0 && !o->err)
+		o->err = errno ? errno : EIO;
+	o->f = NULL;
+	if (!o->err && rename(o->tmp, o->path) != 0)
+		o->err = errno ? errno : EIO;
+	if (o->err)
+		unlink(o->tmp);
+	return o->err;
+}
+
+void eddy_file_abort(eddy_file *o)
+{
+	if (!o->f)
+		return;
+	fclose(o->f);
+	o->f = NULL;
+	unlink(o->tmp);
 }

@@ -5,6 +5,7 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 
 #include "eddy.h"
 
@@ -54,8 +55,38 @@ const char *eddy_check_frame_pattern(const char *pattern);
 int eddy_frame_path(const char *pattern, int frame, char *out, size_t cap);
 /* Creates the parent directories of path (like mkdir -p); 0 or -1 (errno). */
 int eddy_make_parent_dirs(const char *path);
-/* Writes RGB rows (top row first) as PNG; 0 or -1. (png.c: stb_image_write) */
+/* Writes RGB rows (top row first) as PNG, whole or not at all (eddy_file);
+ * 0 or an errno value. (png.c: stb_image_write) */
 int eddy_write_png(const char *path, int width, int height, const uint8_t *rgb);
+
+/* A file written whole or not at all: the bytes go to a hidden temporary file
+ * in the final file's folder (".NAME.PID-N.tmp"), every write, the flush and
+ * the close are checked, and only when all succeeded is it renamed over the
+ * final name; on any failure the temporary file is removed and the final name
+ * keeps whatever it held before. (Not fsync'ed: a power loss may still lose
+ * the newest file, but never leaves a short one under the final name from a
+ * failed write.) Usage: begin; write/printf (no-ops once one failed); finish
+ * (or abort). err holds the first failure's errno. */
+typedef struct eddy_file {
+	FILE *f;
+	const char *path; /* the final name: the caller's string, alive until finish */
+	char tmp[1100];
+	int err;          /* errno of the first failure, 0 while all succeeded */
+} eddy_file;
+
+/* Creates the parent folders and the temporary file; 0 or an errno value. */
+int eddy_file_begin(eddy_file *o, const char *path);
+void eddy_file_write(eddy_file *o, const void *p, size_t n);
+void eddy_file_printf(eddy_file *o, const char *fmt, ...)
+#if defined(__GNUC__)
+	__attribute__((format(printf, 2, 3)))
+#endif
+	;
+/* Flushes, closes, and renames into place; 0 or the first failure's errno
+ * (then the temporary file is gone). */
+int eddy_file_finish(eddy_file *o);
+/* Closes and removes the temporary file (for failures found by the caller). */
+void eddy_file_abort(eddy_file *o);
 
 /* Particle values by channel name: "speed" is computed into scratch (count
  * floats), other names are columns. NULL if the channel is missing. */

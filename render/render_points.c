@@ -395,11 +395,10 @@ static eddy_status render_frame(eddy_world *w, int frame, void *user)
 	char path[1024];
 	if (eddy_frame_path(d->path, frame, path, sizeof path) != 0)
 		return eddy_world_fail(w, EDDY_ERR_IO, "the image path for frame %d is too long", frame);
-	if (eddy_make_parent_dirs(path) != 0)
-		return eddy_world_fail(w, EDDY_ERR_IO, "cannot create the directory of '%s': %s", path, strerror(errno));
-	errno = 0;
-	if (eddy_write_png(path, d->width, d->height, r->image) != 0)
-		return eddy_world_fail(w, EDDY_ERR_IO, "cannot write '%s': %s", path, errno ? strerror(errno) : "write failed");
+	/* creates the folders too; a failure leaves no file under path */
+	const int werr = eddy_write_png(path, d->width, d->height, r->image);
+	if (werr != 0)
+		return eddy_world_fail(w, EDDY_ERR_IO, "cannot write '%s': %s", path, strerror(werr));
 	const double t2 = now_ms();
 	eddy_world_publish(w, "render_ms", t1 - t0);
 	eddy_world_publish(w, "png_ms", t2 - t1);

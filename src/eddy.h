@@ -652,17 +652,25 @@ eddy_render_points_def eddy_default_render_points_def(void);
 eddy_system_id eddy_add_render_points(eddy_world *w, const eddy_render_points_def *def);
 
 /* export_particles: writes the chosen particle channels to one file per frame:
- * binary little-endian PLY (vertex elements, float properties) or legacy VTK
+ * binary little-endian PLY (vertex elements, float properties), legacy VTK
  * (binary big-endian POLYDATA with one vertex per point, the channels as point
- * data). Positions x y z are always written; channels lists the others. */
+ * data) or VTK XML PolyData .vtp (one vertex cell per point, the channels as
+ * point data, <p>x <p>y <p>z triples as one 3-component array, vx vy vz as
+ * "velocity"; plus a <stem>.pvd collection listing every frame file with its
+ * time, e.g. out/p_%04d.vtp gives out/p.pvd). Positions x y z are always
+ * written; channels lists the others. Every file is written to a temporary
+ * name and renamed into place only when every write succeeded: a failure is
+ * the frame's EDDY_ERR_IO naming the file, and leaves no partial file. */
 typedef enum eddy_export_format {
-	EDDY_EXPORT_PLY = 0,
-	EDDY_EXPORT_VTK
+	EDDY_EXPORT_PLY = 0, /* .ply, binary little-endian */
+	EDDY_EXPORT_VTK,     /* .vtk, legacy 3.0 binary POLYDATA */
+	EDDY_EXPORT_VTP      /* .vtp per frame plus a .pvd collection (ParaView, VTK's XML readers) */
 } eddy_export_format;
 
 typedef struct eddy_export_particles_def {
-	eddy_export_format format; /* PLY or legacy VTK */
-	char channels[256];    /* particle columns besides x y z, separated by spaces or commas; "speed" is derived */
+	eddy_export_format format; /* EDDY_EXPORT_PLY (default), EDDY_EXPORT_VTP, or EDDY_EXPORT_VTK */
+	char channels[256];    /* "all" (default: every allocated particle float column at each frame), or particle
+	                        * columns besides x y z, separated by spaces or commas; "speed" is derived */
 	char path[512];        /* printf pattern with one integer conversion (the frame) */
 	int every;             /* frames, export every N-th frame, >= 1 */
 } eddy_export_particles_def;

@@ -3,17 +3,24 @@
  * camera projects them to, nearer spheres hide farther ones whatever the draw
  * order, the colour map is applied, the background shows where nothing is
  * drawn; PNGs read back (stb_image) with a pinned hash; a GL context failure
- * is a clear eddy_status, not a crash; PLY and VTK files parse back to the
- * values written; the Lua binding and the eddy command's --video. */
+ * is a clear eddy_status, not a crash; PLY, VTK and VTP files parse back to
+ * the values written (VTP and its .pvd through VTK's own Python reader); a
+ * write that fails leaves neither a partial file nor a temporary one; NULL
+ * worlds and defs are refused; the Lua binding and the eddy command's --video. */
 #include "test.h"
 
+#include <dirent.h>
+#include <errno.h>
 #include <lauxlib.h>
 #include <lualib.h>
+#include <signal.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include "eddy.h"
 #include "eddy_lua.h"
@@ -602,6 +609,408 @@ static void vtk_parses_back(void)
 	free(b);
 }
 
+/* ---- round trips through strict and real readers ---- */
+
+/* A grid of n particles inside the unit box with small, distinct velocities
+ * (whole binary fractions are avoided so a conversion would show). */
+static void grid_particles(eddy_world *w, int n)
+{
+	eddy_vec3 *p = malloc((size_t)n * sizeof *p), *v = malloc((size_t)n * sizeof *v);
+	if (!p || !v) {
+		CHECK(!"out of memory");
+		free(p), free(v);
+		return;
+	}
+	for (int i = 0; i < n; ++i) {
+		p[i] = (eddy_vec3){0.2f + 0.05f * (float)(i % 12), 0.4f + 0.05f * (float)((i / 12) % 12),
+		                   0.2f + 0.05f * (float)(i / 144)};
+		v[i] = (eddy_vec3){0.1f * sinf((float)i), 0.07f * cosf(1.3f * (float)i), 0.05f * sinf(0.7f * (float)i + 1)};
+	}
+	add_particles(w, (size_t)n, p, v);
+	free(p), free(v);
+}
+
+/* gravity, integrate and a tank: the velocities change and ax ay az exist */
+static void add_motion(eddy_world *w)
+{
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_integrate_def in = eddy_default_integrate_def();
+	eddy_collide_box_def box = eddy_default_collide_box_def();
+	CHECKF(eddy_system_valid(w, eddy_add_gravity(w, &g)), "%s", eddy_world_error(w));
+	CHECKF(eddy_system_valid(w, eddy_add_integrate(w, &in)), "%s", eddy_world_error(w));
+	CHECKF(eddy_system_valid(w, eddy_add_collide_box(w, &box)), "%s", eddy_world_error(w));
+}
+
+/* The default export ("all" channels) of a moving scene, read back with a
+ * strict PLY parser: the header is exactly what PLY allows for a binary
+ * little-endian point cloud, and every property's 4 bytes per particle are
+ * the world's column bit for bit (x y z first, then vx vy vz among them). */
+static void ply_round_trip_is_bit_exact(void)
+{
+	eddy_world *w = make_world();
+	if (!w)
+		return;
+	add_motion(w);
+	eddy_export_particles_def e = eddy_default_export_particles_def();
+	CHECK(strcmp(e.channels, "all") == 0 && e.format == EDDY_EXPORT_PLY);
+	out_path(e.path, sizeof e.path, "rt_%03d.ply");
+	CHECKF(eddy_system_valid(w, eddy_add_export_particles(w, &e)), "%s", eddy_world_error(w));
+	enum { N = 300 };
+	grid_particles(w, N);
+	CHECK(eddy_world_step_frame(w) == EDDY_OK);
+	CHECK(eddy_world_step_frame(w) == EDDY_OK);
+	char path[600];
+	out_path(path, sizeof path, "rt_002.ply");
+	size_t n = 0;
+	unsigned char *b = slurp(path, &n);
+	CHECKF(b != NULL, "no %s", path);
+	if (!b) {
+		eddy_destroy_world(w);
+		return;
+	}
+	const unsigned char *p = b, *end = b + n;
+	char buf[256], names[32][64];
+	int props = 0;
+	long vertices = -1;
+	CHECK(strcmp(line(&p, end, buf, sizeof buf), "ply") == 0);
+	CHECK(strcmp(line(&p, end, buf, sizeof buf), "format binary_little_endian 1.0") == 0);
+	bool ended = false;
+	while (p < end && !ended) {
+		line(&p, end, buf, sizeof buf);
+		char name[64], extra[8];
+		long count;
+		if (strcmp(buf, "end_header") == 0) {
+			ended = true;
+		} else if (strncmp(buf, "comment ", 8) == 0) {
+			continue;
+		} else if (sscanf(buf, "element vertex %ld%7s", &count, extra) == 1) {
+			CHECKF(vertices < 0 && props == 0, "a second element or one after properties: %s", buf);
+			vertices = count;
+		} else if (sscanf(buf, "property float %63s%7s", name, extra) == 1) {
+			CHECKF(vertices >= 0 && props < 32, "property before the element: %s", buf);
+			if (props < 32)
+				strcpy(names[props++], name);
+		} else {
+			CHECKF(0, "not a header line eddy writes: \"%s\"", buf);
+		}
+	}
+	CHECK(ended);
+	CHECKF(vertices == N, "element vertex %ld, expected %d", vertices, N);
+	CHECK(props >= 6 && !strcmp(names[0], "x") && !strcmp(names[1], "y") && !strcmp(names[2], "z"));
+	bool seen_v[3] = {false, false, false};
+	for (int c = 0; c < props; ++c)
+		for (int k = 0; k < 3; ++k)
+			seen_v[k] = seen_v[k] || !strcmp(names[c], (const char *[]){"vx", "vy", "vz"}[k]);
+	CHECKF(seen_v[0] && seen_v[1] && seen_v[2], "vx vy vz missing from the default (\"all\") export");
+	CHECKF((size_t)(end - p) == (size_t)N * (size_t)props * 4, "body %zu bytes, expected %zu", (size_t)(end - p),
+	       (size_t)N * (size_t)props * 4);
+	if ((size_t)(end - p) == (size_t)N * (size_t)props * 4) {
+		int mismatches = 0;
+		for (int c = 0; c < props; ++c) {
+			size_t cnt = 0;
+			const float *col = eddy_world_channel(w, names[c], &cnt);
+			CHECKF(col && cnt == N, "property %s is not a column of the world", names[c]);
+			for (size_t i = 0; col && cnt == N && i < N; ++i) {
+				const float got = le_float(p + (i * (size_t)props + (size_t)c) * 4);
+				mismatches += memcmp(&got, &col[i], 4) != 0;
+			}
+		}
+		CHECKF(mismatches == 0, "%d values differ from the world's bits", mismatches);
+	}
+	free(b);
+	eddy_destroy_world(w);
+}
+
+/* The Python that has VTK: $EDDY_PYTHON, Debian's /usr/bin/python3 (where
+ * python3-vtk9 installs it, even when another python3 comes first on PATH),
+ * then python3. NULL if none imports vtk. */
+static const char *python_with_vtk(void)
+{
+	const char *env = getenv("EDDY_PYTHON");
+	const char *const cand[3] = {env && env[0] ? env : NULL, "/usr/bin/python3", "python3"};
+	for (int i = 0; i < 3; ++i) {
+		char cmd[700], out[256];
+		if (!cand[i])
+			continue;
+		snprintf(cmd, sizeof cmd, "%s -c 'import vtk' </dev/null", cand[i]);
+		if (test_sh(cmd, out, sizeof out) == 0)
+			return cand[i];
+	}
+	return NULL;
+}
+
+/* VTK's own reader on eddy's .vtp frames, and the .pvd parsed strictly:
+ * every listed frame exists, has the particle count, a vertex cell per
+ * point, TimeValue equal to the .pvd's timestep equal to eddy's time, a
+ * 3-component "velocity"; the last frame's points and velocities are the
+ * world's floats exactly. Missing VTK fails: the set-up installs it. */
+static const char vtp_check_py[] =
+	"import os, sys\n"
+	"import xml.etree.ElementTree as ET\n"
+	"import vtk\n"
+	"d = sys.argv[1]\n"
+	"def fail(m):\n"
+	"    print('FAIL: ' + m); sys.exit(1)\n"
+	"lines = open(os.path.join(d, 'expect.txt')).read().split('\\n')\n"
+	"n = int(lines[0]); times = [float(t) for t in lines[1].split()]; arrays = sorted(lines[2].split())\n"
+	"rows = [[float.fromhex(v) for v in l.split()] for l in lines[3:3 + n]]\n"
+	"root = ET.parse(os.path.join(d, 'p.pvd')).getroot()\n"
+	"if root.tag != 'VTKFile' or root.get('type') != 'Collection': fail('pvd root %s %s' % (root.tag, root.attrib))\n"
+	"if len(root) != 1 or root[0].tag != 'Collection': fail('pvd must hold one Collection')\n"
+	"sets = list(root[0])\n"
+	"if len(sets) != len(times): fail('pvd lists %d frames, eddy wrote %d' % (len(sets), len(times)))\n"
+	"for k, (ds, t) in enumerate(zip(sets, times)):\n"
+	"    f = ds.get('file')\n"
+	"    if ds.tag != 'DataSet' or f != 'p_%04d.vtp' % (k + 1): fail('entry %d: %s %s' % (k, ds.tag, ds.attrib))\n"
+	"    if float(ds.get('timestep')) != t: fail('entry %d: timestep %s, eddy time %r' % (k, ds.get('timestep'), t))\n"
+	"    r = vtk.vtkXMLPolyDataReader(); r.SetFileName(os.path.join(d, f)); r.Update()\n"
+	"    if r.GetErrorCode() != 0: fail('%s: reader error %d' % (f, r.GetErrorCode()))\n"
+	"    o = r.GetOutput()\n"
+	"    if o.GetNumberOfPoints() != n or o.GetNumberOfVerts() != n or o.GetNumberOfCells() != n:\n"
+	"        fail('%s: %d points, %d verts, expected %d' % (f, o.GetNumberOfPoints(), o.GetNumberOfVerts(), n))\n"
+	"    tv = o.GetFieldData().GetArray('TimeValue')\n"
+	"    if tv is None or tv.GetValue(0) != t: fail('%s: TimeValue %r, expected %r' % (f, tv and tv.GetValue(0), t))\n"
+	"    pd = o.GetPointData()\n"
+	"    names = sorted(pd.GetArrayName(i) for i in range(pd.GetNumberOfArrays()))\n"
+	"    if names != arrays: fail('%s: point data %s, expected %s' % (f, names, arrays))\n"
+	"    v = pd.GetArray('velocity')\n"
+	"    if v.GetNumberOfComponents() != 3 or v.GetNumberOfTuples() != n: fail('velocity is not %d 3-vectors' % n)\n"
+	"for i, row in enumerate(rows):\n"
+	"    if list(o.GetPoint(i)) != row[0:3]: fail('point %d: %s, eddy %s' % (i, o.GetPoint(i), row[0:3]))\n"
+	"    if list(v.GetTuple3(i)) != row[3:6]: fail('velocity %d: %s, eddy %s' % (i, v.GetTuple3(i), row[3:6]))\n"
+	"print('ok %d points, %d frames' % (n, len(times)))\n";
+
+static void vtp_reads_back_with_vtk(void)
+{
+	const char *py = python_with_vtk();
+	CHECKF(py != NULL, "python3 with VTK is not importable (tried $EDDY_PYTHON, /usr/bin/python3, python3): run the "
+	                   "test set-up (scripts/deps.sh), which installs python3-vtk9");
+	char dir[300], cmd[2048], out[4096];
+	snprintf(dir, sizeof dir, "%s/t_render/vtp", test_build_dir());
+	snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
+	test_sh(cmd, out, sizeof out);
+	eddy_world *w = make_world();
+	if (!w)
+		return;
+	add_motion(w);
+	eddy_export_particles_def e = eddy_default_export_particles_def();
+	e.format = EDDY_EXPORT_VTP;
+	snprintf(e.path, sizeof e.path, "%s/p_%%04d.vtp", dir);
+	CHECKF(eddy_system_valid(w, eddy_add_export_particles(w, &e)), "%s", eddy_world_error(w));
+	enum { N = 200, FRAMES = 3 };
+	grid_particles(w, N);
+	double t[FRAMES];
+	for (int f = 0; f < FRAMES; ++f) {
+		CHECKF(eddy_world_step_frame(w) == EDDY_OK, "%s", eddy_world_error(w));
+		t[f] = eddy_world_time(w);
+	}
+	char path[700];
+	snprintf(path, sizeof path, "%s/expect.txt", dir);
+	FILE *f = fopen(path, "w");
+	CHECK(f != NULL);
+	size_t cnt = 0;
+	const char *const col[6] = {"x", "y", "z", "vx", "vy", "vz"};
+	const float *c[6];
+	for (int k = 0; k < 6; ++k) {
+		c[k] = eddy_world_channel(w, col[k], &cnt);
+		CHECK(c[k] && cnt == N);
+	}
+	if (f && c[0] && c[1] && c[2] && c[3] && c[4] && c[5] && cnt == N) {
+		fprintf(f, "%d\n", N);
+		for (int k = 0; k < FRAMES; ++k)
+			fprintf(f, "%.17g ", t[k]);
+		/* the arrays "all" gives here: vx vy vz and ax ay az, grouped */
+		fprintf(f, "\nvelocity acceleration\n");
+		for (size_t i = 0; i < N; ++i)
+			for (int k = 0; k < 6; ++k)
+				fprintf(f, "%a%c", (double)c[k][i], k == 5 ? '\n' : ' ');
+	}
+	if (f)
+		CHECK(fclose(f) == 0);
+	eddy_destroy_world(w);
+	if (!py)
+		return;
+	snprintf(path, sizeof path, "%s/t_render/vtp_check.py", test_build_dir());
+	f = fopen(path, "w");
+	CHECK(f && fputs(vtp_check_py, f) >= 0);
+	if (f)
+		CHECK(fclose(f) == 0);
+	snprintf(cmd, sizeof cmd, "%s %s %s", py, path, dir);
+	const int rc = test_sh(cmd, out, sizeof out);
+	CHECKF(rc == 0 && strncmp(out, "ok ", 3) == 0, "VTK's reader on %s (exit %d): %s", dir, rc, out);
+}
+
+/* The names in a folder besides . and .., space-separated ("" if none). */
+static void list_dir(const char *dir, char *out, size_t cap)
+{
+	out[0] = '\0';
+	DIR *d = opendir(dir);
+	if (!d)
+		return;
+	for (struct dirent *ent; (ent = readdir(d));) {
+		if (!strcmp(ent->d_name, ".") || !strcmp(ent->d_name, ".."))
+			continue;
+		size_t len = strlen(out);
+		snprintf(out + len, cap - len, "%s%s", len ? " " : "", ent->d_name);
+	}
+	closedir(d);
+}
+
+/* Whether a failed frame left dir clean and named its file; what is wrong
+ * is appended to why. */
+static void expect_clean_failure(eddy_world *w, eddy_status st, const char *dir, const char *file, char *why, size_t cap)
+{
+	char ls[1024];
+	size_t len = strlen(why);
+	if (st != EDDY_ERR_IO)
+		len += (size_t)snprintf(why + len, cap - len, "[%s: status %s, not io] ", file, eddy_status_name(st));
+	if (len < cap && !strstr(eddy_world_error(w), file))
+		len += (size_t)snprintf(why + len, cap - len, "[message '%s' does not name %s] ", eddy_world_error(w), file);
+	if (len < cap && !strstr(eddy_world_error(w), strerror(EFBIG)))
+		len += (size_t)snprintf(why + len, cap - len, "[message '%s' lacks '%s'] ", eddy_world_error(w), strerror(EFBIG));
+	list_dir(dir, ls, sizeof ls);
+	if (len < cap && ls[0])
+		snprintf(why + len, cap - len, "[%s: left behind in %s: %s] ", file, dir, ls);
+}
+
+/* Files larger than RLIMIT_FSIZE cannot be written (EFBIG once SIGXFSZ is
+ * ignored), on any file system and without root. In a forked child, so the
+ * limit never touches the runner: every format's frame fails with
+ * EDDY_ERR_IO naming the file and the reason, and the folder is left empty
+ * (no short file under the final name, no temporary file, no .pvd). */
+static void failed_export_leaves_no_file(void)
+{
+	static const struct {
+		eddy_export_format format;
+		const char *name;
+	} formats[3] = {{EDDY_EXPORT_PLY, "ply"}, {EDDY_EXPORT_VTK, "vtk"}, {EDDY_EXPORT_VTP, "vtp"}};
+	const char *b = test_build_dir();
+	char cmd[1024], out[256];
+	snprintf(cmd, sizeof cmd, "rm -rf %s/t_render/full && mkdir -p %s/t_render/full/ply %s/t_render/full/vtk %s/t_render/full/vtp",
+	         b, b, b, b);
+	CHECK(test_sh(cmd, out, sizeof out) == 0);
+	int fds[2];
+	CHECK(pipe(fds) == 0);
+	fflush(stdout), fflush(stderr);
+	pid_t pid = fork();
+	CHECK(pid >= 0);
+	if (pid == 0) {
+		close(fds[0]);
+		char why[4096] = "";
+		struct rlimit rl;
+		signal(SIGXFSZ, SIG_IGN);
+		if (getrlimit(RLIMIT_FSIZE, &rl) != 0 || (rl.rlim_cur = 4096, setrlimit(RLIMIT_FSIZE, &rl)) != 0)
+			snprintf(why, sizeof why, "setrlimit: %s", strerror(errno));
+		for (int i = 0; i < 3 && !why[0]; ++i) {
+			eddy_world_def wd = eddy_default_world_def();
+			eddy_world *w = eddy_create_world(&wd, NULL, 0);
+			if (!w)
+				break;
+			eddy_export_particles_def e = eddy_default_export_particles_def();
+			e.format = formats[i].format;
+			char dir[300], file[400];
+			snprintf(dir, sizeof dir, "%s/t_render/full/%s", b, formats[i].name);
+			snprintf(e.path, sizeof e.path, "%s/f_%%d.%s", dir, formats[i].name);
+			snprintf(file, sizeof file, "%s/f_1.%s", dir, formats[i].name);
+			if (!eddy_system_valid(w, eddy_add_export_particles(w, &e))) {
+				snprintf(why, sizeof why, "add: %s", eddy_world_error(w));
+			} else {
+				eddy_vec3 p[1000]; /* 12 kB of positions alone: past the 4 kB limit */
+				for (int k = 0; k < 1000; ++k)
+					p[k] = (eddy_vec3){0.001f * (float)k, 0.5f, 0.5f};
+				if (eddy_world_add_particles(w, 1000, p, NULL) != EDDY_OK)
+					snprintf(why, sizeof why, "add particles: %s", eddy_world_error(w));
+				else
+					expect_clean_failure(w, eddy_world_step_frame(w), dir, file, why, sizeof why);
+			}
+			eddy_destroy_world(w);
+		}
+		ssize_t put = write(fds[1], why, strlen(why));
+		_exit(put == (ssize_t)strlen(why) ? 0 : 1);
+	}
+	close(fds[1]);
+	char why[4096];
+	size_t got = 0;
+	for (ssize_t r; got + 1 < sizeof why && (r = read(fds[0], why + got, sizeof why - 1 - got)) > 0;)
+		got += (size_t)r;
+	why[got] = '\0';
+	close(fds[0]);
+	int status = 0;
+	CHECK(waitpid(pid, &status, 0) == pid);
+	CHECKF(WIFEXITED(status) && WEXITSTATUS(status) == 0, "the child did not finish (status %d)", status);
+	CHECKF(got == 0, "%s", why);
+}
+
+/* A PNG that cannot be written whole is EDDY_ERR_IO naming it and leaves
+ * nothing. In this process, not a forked child (a child of a process that
+ * has run llvmpipe's threads cannot safely make a GL context): frame 1 is
+ * drawn normally, so Mesa has compiled (and cached) its shaders, then frame
+ * 2 runs under a 64-byte RLIMIT_FSIZE, restored right after. */
+static void failed_png_leaves_no_file(void)
+{
+	const char *b = test_build_dir();
+	char cmd[1024], out[256], dir[300], file[400], why[2048] = "";
+	snprintf(dir, sizeof dir, "%s/t_render/fullpng", b);
+	snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
+	test_sh(cmd, out, sizeof out);
+	eddy_world *w = make_world();
+	if (!w)
+		return;
+	const eddy_vec3 p = {0.5f, 0.5f, 0.5f};
+	eddy_render_points_def d = base_def("unused_%d.png");
+	snprintf(d.path, sizeof d.path, "%s/f_%%d.png", dir);
+	CHECK(eddy_system_valid(w, eddy_add_render_points(w, &d)));
+	add_particles(w, 1, &p, NULL);
+	CHECK(eddy_world_step_frame(w) == EDDY_OK);
+	snprintf(file, sizeof file, "%s/f_1.png", dir);
+	CHECKF(unlink(file) == 0, "frame 1 was not written: %s", file);
+	struct rlimit old, lim;
+	CHECK(getrlimit(RLIMIT_FSIZE, &old) == 0);
+	lim = old;
+	lim.rlim_cur = 64;
+	fflush(stdout), fflush(stderr); /* nothing of ours may be written under the limit */
+	void (*handler)(int) = signal(SIGXFSZ, SIG_IGN);
+	const bool limited = setrlimit(RLIMIT_FSIZE, &lim) == 0;
+	const eddy_status st = eddy_world_step_frame(w);
+	const bool restored = setrlimit(RLIMIT_FSIZE, &old) == 0;
+	signal(SIGXFSZ, handler);
+	CHECK(limited && restored);
+	snprintf(file, sizeof file, "%s/f_2.png", dir);
+	expect_clean_failure(w, st, dir, file, why, sizeof why);
+	CHECKF(why[0] == '\0', "%s", why);
+	eddy_destroy_world(w);
+}
+
+/* NULL world or def: an invalid id and no crash (with a world, the error
+ * says which); an unknown format, "all" mixed with names. */
+static void null_world_or_def_is_an_invalid_id(void)
+{
+	eddy_render_points_def d = eddy_default_render_points_def();
+	eddy_export_particles_def e = eddy_default_export_particles_def();
+	CHECK(!eddy_system_valid(NULL, eddy_add_render_points(NULL, &d)));
+	CHECK(!eddy_system_valid(NULL, eddy_add_export_particles(NULL, &e)));
+	CHECK(!eddy_system_valid(NULL, eddy_add_render_points(NULL, NULL)));
+	CHECK(!eddy_system_valid(NULL, eddy_add_export_particles(NULL, NULL)));
+	eddy_world *w = make_world();
+	if (!w)
+		return;
+	eddy_system_id id = eddy_add_render_points(w, NULL);
+	CHECK(!eddy_system_valid(w, id) && id.index == 0 && id.generation == 0);
+	CHECK_HAS(eddy_world_error(w), "render_points: def is NULL");
+	id = eddy_add_export_particles(w, NULL);
+	CHECK(!eddy_system_valid(w, id) && id.index == 0 && id.generation == 0);
+	CHECK_HAS(eddy_world_error(w), "export_particles: def is NULL");
+	e.format = (eddy_export_format)7;
+	CHECK(!eddy_system_valid(w, eddy_add_export_particles(w, &e)));
+	CHECK_HAS(eddy_world_error(w), "'format' must be ply, vtk or vtp");
+	e = eddy_default_export_particles_def();
+	strcpy(e.channels, "all vx");
+	CHECK(!eddy_system_valid(w, eddy_add_export_particles(w, &e)));
+	CHECK_HAS(eddy_world_error(w), "\"all\" stands alone");
+	CHECK(eddy_world_system_count(w) == 0);
+	eddy_destroy_world(w);
+}
+
 /* ---- Lua and the command ---- */
 
 static void lua_scene_renders_and_exports(void)
@@ -622,18 +1031,21 @@ static void lua_scene_renders_and_exports(void)
 	         "                          path = eddy.out_dir('x') .. '/f_%%02d.png', every = 2 })\n"
 	         "w:add(eddy.export_particles{ format = 'vtk', channels = {'vy', 'speed'},\n"
 	         "                             path = eddy.out_dir('x') .. '/p_%%02d.vtk' })\n"
+	         "w:add(eddy.export_particles{ format = 'vtp', path = eddy.out_dir('x') .. '/q_%%02d.vtp' })\n"
 	         "w:advance(4 / 30)\n"
 	         "local ok, err = pcall(eddy.render_points, { colour_by = 'speed' })\n"
 	         "assert(not ok and err:find(\"unknown field 'colour_by'\"), err)\n"
 	         "ok, err = pcall(eddy.export_particles, { channels = {'vx', 3} })\n"
 	         "assert(not ok and err:find('must be a list of strings'), err)\n"
+	         "ok, err = pcall(eddy.export_particles, { format = 'obj' })\n"
+	         "assert(not ok and err:find('\\'format\\' must be \"ply\", \"vtk\" or \"vtp\" (got obj)', 1, true), err)\n"
 	         "ok, err = pcall(eddy.render_points, { projection = 'fisheye' })\n"
 	         "assert(not ok and err:find('perspective'), err)\n"
 	         "return w\n");
 	int rc = luaL_dostring(L, chunk);
 	CHECKF(rc == LUA_OK, "lua: %s", rc == LUA_OK ? "" : lua_tostring(L, -1));
-	static const char *const files[] = {"f_02.png", "f_04.png", "p_01.vtk", "p_04.vtk"};
-	for (int i = 0; i < 4; ++i) {
+	static const char *const files[] = {"f_02.png", "f_04.png", "p_01.vtk", "p_04.vtk", "q_04.vtp", "q.pvd"};
+	for (int i = 0; i < 6; ++i) {
 		char path[700];
 		snprintf(path, sizeof path, "%s/%s", dir, files[i]);
 		struct stat st;
@@ -708,6 +1120,11 @@ void suite_render(void)
 	RUN(bad_defs_are_rejected);
 	RUN(ply_parses_back);
 	RUN(vtk_parses_back);
+	RUN(ply_round_trip_is_bit_exact);
+	RUN(vtp_reads_back_with_vtk);
+	RUN(failed_export_leaves_no_file);
+	RUN(failed_png_leaves_no_file);
+	RUN(null_world_or_def_is_an_invalid_id);
 	RUN(lua_scene_renders_and_exports);
 	RUN(command_renders_and_pipes_video);
 }
