@@ -1,0 +1,65 @@
+-- still_water (SPH stress case): a 0.1 x 0.1 m column of water at rest in a
+-- closed box (boundary particles), depth a param, to see whether a pressure
+-- solve holds deep water still. At rest the bottom layer's pressure is the
+-- weight above it per unit area: with N particles of mass m in the area A
+-- the fluid is H = N m / (rho0 A) deep, and the bottom layer's centre (one
+-- spacing thick) lies dx / 2 above the floor, so p_bottom = rho0 g (H - dx / 2);
+-- the layer mean of particles with y < dx is compared with it.
+-- Per frame: vmax (m/s), vmax_ratio = vmax / sqrt(g H) (the speed of a wave
+-- on water H deep: a still column keeps it far below 1), bottom_p_ratio
+-- (bottom layer mean pressure / rho0 g (H - dx / 2)) and thrown (particles
+-- more than 3 spacings above the surface).
+--
+--   build/eddy run scenes/stress/still_water.lua --set depth=0.5 --set solver=dfsph --stats - --quiet
+--
+-- Params: depth (m, 0.5 = 40 layers at the default spacing), spacing (m),
+-- solver ("dfsph" or "wcsph"), tolerance (sph_dfsph's max_density_error),
+-- stiffness (sph_pressure's, m^2/s^2), cfl, duration (s).
+
+local eddy = require "eddy"
+
+local dx = eddy.param("spacing", 0.0125)        -- m
+local D = eddy.param("depth", 0.5)              -- m, water depth
+local W = eddy.param("width", 0.1)              -- m, column width (x and z)
+local solver = eddy.param("solver", "dfsph")    -- "dfsph" (sph_dfsph) or "wcsph" (sph_pressure)
+local rho0, g = 1000, 9.81
+local top = D * 1.5
+
+local world = eddy.world {
+	bounds = { {0, 0, 0}, {W, top, W} }, gravity = {0, -g, 0},
+	fps = 30, duration = eddy.param("duration", 2.0), cfl = eddy.param("cfl", 0.5),
+}
+world:add(eddy.emit_box { min = {0, 0, 0}, max = {W, D, W}, spacing = dx })
+-- WCSPH: g D / k = 1% by default (k = 100 g D)
+local density = world:add(eddy.sph_density { radius = 2 * dx, spacing = dx, rest_density = rho0,
+                                             stiffness = eddy.param("stiffness", 100 * g * D) })
+if solver == "dfsph" then
+	world:add(eddy.gravity {})
+	world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.05 })
+	local tol = eddy.param("tolerance", nil)
+	world:add(eddy.sph_dfsph(tol and { max_density_error = tol } or {}))
+else
+	world:add(eddy.sph_pressure {})
+	world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.05 })
+	world:add(eddy.gravity {})
+end
+world:add(eddy.sph_boundary_box { min = {0, 0, 0}, max = {W, top, W}, spacing = dx })
+world:add(eddy.integrate {})
+world:add(eddy.collide_box { min = {0, 0, 0}, max = {W, top, W}, inside = true })
+
+world:on_frame(function(w)
+	local y, p = w:channel("y"), w:channel("pressure")
+	local vx, vy, vz = w:channel("vx"), w:channel("vy"), w:channel("vz")
+	local n, vmax, pb, nb, thrown = #y, 0, 0, 0, 0
+	local H = n * density:mass() / (rho0 * W * W)
+	for i = 1, n do
+		local s = math.sqrt(vx[i] ^ 2 + vy[i] ^ 2 + vz[i] ^ 2)
+		if s > vmax then vmax = s end
+		if y[i] < dx then pb, nb = pb + p[i], nb + 1 end
+		if y[i] > H + 3 * dx then thrown = thrown + 1 end
+	end
+	return { vmax = vmax, vmax_ratio = vmax / math.sqrt(g * H),
+	         bottom_p_ratio = pb / math.max(nb, 1) / (rho0 * g * (H - dx / 2)), thrown = thrown }
+end)
+
+return world
