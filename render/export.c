@@ -26,9 +26,11 @@
 #include "render.h"
 
 #include <errno.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #define MAX_CHANNELS 20 /* names incl. x y z; with vx vy vz the reads stay within the core's 24 */
 #define NAME_CAP 64     /* a written channel name, sanitised, plus a NUL */
@@ -65,6 +67,7 @@ typedef struct exporter {
 	size_t pvd_dir_len;           /* bytes of the frame paths' folder prefix the .pvd shares */
 	pvd_entry *entries;
 	size_t entry_count, entry_cap;
+	bool pvd_read;                /* the collection on disk was taken over (see pvd_take_over) */
 } exporter;
 
 eddy_export_particles_def eddy_default_export_particles_def(void)
@@ -324,13 +327,8 @@ static void write_vtp(exporter *e, eddy_file *f, size_t n, int nc, int frame, do
 	eddy_file_printf(f, "\n  </AppendedData>\n</VTKFile>\n");
 }
 
-/* Records the frame and rewrites the collection. A frame at or before one
- * already listed (a world loaded from a checkpoint and run again) replaces
- * that entry and every later one, so the list follows the files on disk. */
-static eddy_status write_pvd(eddy_world *w, exporter *e, int frame, double t)
+static eddy_status pvd_add(eddy_world *w, exporter *e, int frame, double t)
 {
-	while (e->entry_count > 0 && e->entries[e->entry_count - 1].frame >= frame)
-		--e->entry_count;
 	if (e->entry_count == e->entry_cap) {
 		size_t cap = e->entry_cap ? 2 * e->entry_cap : 64;
 		pvd_entry *p = realloc(e->entries, cap * sizeof *p);
@@ -340,30 +338,101 @@ static eddy_status write_pvd(eddy_world *w, exporter *e, int frame, double t)
 		e->entry_cap = cap;
 	}
 	e->entries[e->entry_count++] = (pvd_entry){frame, t};
+	return EDDY_OK;
+}
+
+/* A frame path relative to the .pvd, XML-escaped as the collection stores it. */
+static int pvd_file_attr(const exporter *e, int frame, char *out, size_t cap)
+{
+	char path[1024];
+	if (eddy_frame_path(e->def.path, frame, path, sizeof path) != 0)
+		return -1;
+	size_t n = 0;
+	for (const char *c = path + e->pvd_dir_len; *c; ++c) {
+		const char *rep = *c == '&' ? "&amp;" : *c == '<' ? "&lt;" : *c == '>' ? "&gt;" : *c == '"' ? "&quot;" : NULL;
+		size_t k = rep ? strlen(rep) : 1;
+		if (n + k + 1 > cap)
+			return -1;
+		memcpy(out + n, rep ? rep : c, k);
+		n += k;
+	}
+	out[n] = '\0';
+	return 0;
+}
+
+/* A world resumed from a checkpoint in a new process starts its exporter at
+ * the checkpoint's frame: the frames before it are on disk from the earlier
+ * process, listed in the collection it left. Those of its entries whose file
+ * still exists and whose frame comes before this one are kept, with their
+ * times; anything unreadable is simply not taken over. */
+static eddy_status pvd_take_over(eddy_world *w, exporter *e, int frame)
+{
+	e->pvd_read = true;
+	if (frame <= 1)
+		return EDDY_OK;
+	FILE *f = fopen(e->pvd, "rb");
+	if (!f)
+		return EDDY_OK;
+	char *text = NULL;
+	long size = fseek(f, 0, SEEK_END) == 0 ? ftell(f) : -1;
+	if (size > 0 && size < (64L << 20) && fseek(f, 0, SEEK_SET) == 0 && (text = malloc((size_t)size + 1)) &&
+	    fread(text, 1, (size_t)size, f) == (size_t)size)
+		text[size] = '\0';
+	else {
+		free(text);
+		text = NULL;
+	}
+	fclose(f);
+	eddy_status st = EDDY_OK;
+	for (int k = 0; text && k < frame && st == EDDY_OK; ++k) {
+		char attr[1100], needle[1120], path[1024];
+		if (pvd_file_attr(e, k, attr, sizeof attr) != 0 || eddy_frame_path(e->def.path, k, path, sizeof path) != 0)
+			break;
+		snprintf(needle, sizeof needle, "file=\"%s\"", attr);
+		const char *hit = strstr(text, needle);
+		if (!hit || access(path, F_OK) != 0)
+			continue;
+		const char *line = hit;
+		while (line > text && line[-1] != '\n')
+			--line;
+		const char *ts = strstr(line, "timestep=\"");
+		if (!ts || ts > hit)
+			continue;
+		double t = strtod(ts + 10, NULL);
+		if (isfinite(t))
+			st = pvd_add(w, e, k, t);
+	}
+	free(text);
+	return st;
+}
+
+/* Records the frame and rewrites the collection. A frame at or before one
+ * already listed (a world loaded from a checkpoint and run again) replaces
+ * that entry and every later one, so the list follows the files on disk. */
+static eddy_status write_pvd(eddy_world *w, exporter *e, int frame, double t)
+{
+	eddy_status st = e->pvd_read ? EDDY_OK : pvd_take_over(w, e, frame);
+	while (e->entry_count > 0 && e->entries[e->entry_count - 1].frame >= frame)
+		--e->entry_count;
+	if (st == EDDY_OK)
+		st = pvd_add(w, e, frame, t);
+	if (st != EDDY_OK)
+		return st;
 	eddy_file f;
 	if (eddy_file_begin(&f, e->pvd) != 0)
 		return eddy_world_fail(w, EDDY_ERR_IO, "cannot write '%s': %s", e->pvd, strerror(f.err));
 	eddy_file_printf(&f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n"
 	                     "  <Collection>\n");
 	for (size_t i = 0; i < e->entry_count && !f.err; ++i) {
-		char path[1024];
-		if (eddy_frame_path(e->def.path, e->entries[i].frame, path, sizeof path) != 0) {
+		/* frame paths share the .pvd's folder prefix; the rest is relative
+		 * to it */
+		char attr[1100];
+		if (pvd_file_attr(e, e->entries[i].frame, attr, sizeof attr) != 0) {
 			eddy_file_abort(&f);
 			return eddy_world_fail(w, EDDY_ERR_IO, "the export path for frame %d is too long", e->entries[i].frame);
 		}
-		/* frame paths share the .pvd's folder prefix; the rest is relative
-		 * to it, and XML-escaped */
-		eddy_file_printf(&f, "    <DataSet timestep=\"%.17g\" group=\"\" part=\"0\" file=\"", e->entries[i].time);
-		for (const char *c = path + e->pvd_dir_len; *c; ++c) {
-			switch (*c) {
-			case '&': eddy_file_printf(&f, "&amp;"); break;
-			case '<': eddy_file_printf(&f, "&lt;"); break;
-			case '>': eddy_file_printf(&f, "&gt;"); break;
-			case '"': eddy_file_printf(&f, "&quot;"); break;
-			default: eddy_file_write(&f, c, 1); break;
-			}
-		}
-		eddy_file_printf(&f, "\"/>\n");
+		eddy_file_printf(&f, "    <DataSet timestep=\"%.17g\" group=\"\" part=\"0\" file=\"%s\"/>\n",
+		                 e->entries[i].time, attr);
 	}
 	eddy_file_printf(&f, "  </Collection>\n</VTKFile>\n");
 	if (eddy_file_finish(&f) != 0)

@@ -840,6 +840,61 @@ static void vtp_reads_back_with_vtk(void)
 	CHECKF(rc == 0 && strncmp(out, "ok ", 3) == 0, "VTK's reader on %s (exit %d): %s", dir, rc, out);
 }
 
+/* A world resumed from a checkpoint in a new exporter keeps the frames the
+ * first one wrote in the collection: frames 1-2 from the first world, 3 from
+ * the resumed one, with the first world's times. */
+static eddy_world *vtp_world(const char *dir)
+{
+	eddy_world *w = make_world();
+	if (!w)
+		return NULL;
+	add_motion(w);
+	eddy_export_particles_def e = eddy_default_export_particles_def();
+	e.format = EDDY_EXPORT_VTP;
+	snprintf(e.path, sizeof e.path, "%s/p_%%04d.vtp", dir);
+	CHECKF(eddy_system_valid(w, eddy_add_export_particles(w, &e)), "%s", eddy_world_error(w));
+	grid_particles(w, 50);
+	return w;
+}
+
+static void vtp_collection_survives_a_resume(void)
+{
+	char dir[300], cmd[700], out[4096], ckpt[400];
+	snprintf(dir, sizeof dir, "%s/t_render/vtp_resume", test_build_dir());
+	snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", dir, dir);
+	test_sh(cmd, out, sizeof out);
+	snprintf(ckpt, sizeof ckpt, "%s/frame2.eddy", dir);
+	eddy_world *a = vtp_world(dir);
+	if (!a)
+		return;
+	double t[3] = {0};
+	for (int f = 0; f < 3; ++f) {
+		CHECKF(eddy_world_step_frame(a) == EDDY_OK, "%s", eddy_world_error(a));
+		t[f] = eddy_world_time(a);
+		if (f == 1)
+			CHECKF(eddy_world_save(a, ckpt, 7) == EDDY_OK, "%s", eddy_world_error(a));
+	}
+	eddy_destroy_world(a);
+	eddy_world *b = vtp_world(dir);
+	if (!b)
+		return;
+	CHECKF(eddy_world_load(b, ckpt, 7) == EDDY_OK, "%s", eddy_world_error(b));
+	CHECKF(eddy_world_step_frame(b) == EDDY_OK, "%s", eddy_world_error(b));
+	CHECK(eddy_world_frame(b) == 3);
+	eddy_destroy_world(b);
+	snprintf(cmd, sizeof cmd, "grep -o 'timestep=\"[^\"]*\".*file=\"[^\"]*\"' %s/p.pvd", dir);
+	CHECK(test_sh(cmd, out, sizeof out) == 0);
+	char want[200];
+	for (int f = 0; f < 3; ++f) {
+		snprintf(want, sizeof want, "timestep=\"%.17g\" group=\"\" part=\"0\" file=\"p_%04d.vtp\"", t[f], f + 1);
+		CHECK_HAS(out, want);
+	}
+	int lines = 0;
+	for (const char *c = out; *c; ++c)
+		lines += *c == '\n';
+	CHECKF(lines == 3, "%d entries: %s", lines, out);
+}
+
 /* The names in a folder besides . and .., space-separated ("" if none). */
 static void list_dir(const char *dir, char *out, size_t cap)
 {
@@ -1122,6 +1177,7 @@ void suite_render(void)
 	RUN(vtk_parses_back);
 	RUN(ply_round_trip_is_bit_exact);
 	RUN(vtp_reads_back_with_vtk);
+	RUN(vtp_collection_survives_a_resume);
 	RUN(failed_export_leaves_no_file);
 	RUN(failed_png_leaves_no_file);
 	RUN(null_world_or_def_is_an_invalid_id);
