@@ -340,10 +340,8 @@ int cli_parse(int argc, char **argv, cli_options *o, lua_State *L)
 			printf("eddy %s\n", EDDY_VERSION_STRING);
 		return -1;
 	}
-	if (!o->command) {
-		fputs(usage_text, stderr);
-		return CLI_EXIT_USAGE;
-	}
+	if (!o->command)
+		return cli_fail(CLI_EXIT_USAGE, "no command: eddy run|plan|check|study SCENE.lua [options] (see eddy --help)");
 	if (strcmp(o->command, "run") != 0 && strcmp(o->command, "plan") != 0 && strcmp(o->command, "check") != 0)
 		return cli_fail(CLI_EXIT_USAGE, "unknown command '%s': use run, plan, check or study (see eddy --help)",
 		                o->command);

@@ -272,6 +272,10 @@ static void usage_and_errors(void)
 	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames many", eddy());
 	CHECK(test_sh(cmd, out, sizeof out) == 2);
 	CHECK_HAS(out, "--frames must be an integer");
+	snprintf(cmd, sizeof cmd, "%s", eddy());
+	CHECK(test_sh(cmd, out, sizeof out) == 2);
+	CHECK_HAS(out, "eddy: no command");
+	CHECK(one_line(out));
 	snprintf(cmd, sizeof cmd, "%s fly scenes/bounce.lua", eddy());
 	CHECK(test_sh(cmd, out, sizeof out) == 2);
 	snprintf(cmd, sizeof cmd, "%s run no/such/scene.lua", eddy());
@@ -595,6 +599,38 @@ static void safe_mode_refuses_os_execute(void)
 	CHECK(one_line(out));
 }
 
+/* Every option the help texts name is in the manual (docs/eddy.1). */
+static void manual_covers_every_option(void)
+{
+	char *man = slurp("docs/eddy.1");
+	CHECK(man != NULL);
+	if (!man)
+		return;
+	static const char *const helps[] = {"--help", "run --help", "plan --help", "check --help", "study --help", NULL};
+	for (int h = 0; helps[h]; ++h) {
+		char cmd[512], out[16384];
+		snprintf(cmd, sizeof cmd, "%s %s", eddy(), helps[h]);
+		CHECK(test_sh(cmd, out, sizeof out) == 0);
+		for (const char *p = strstr(out, "--"); p; p = strstr(p + 2, "--")) {
+			size_t n = 2;
+			while ((p[n] >= 'a' && p[n] <= 'z') || p[n] == '-')
+				++n;
+			char name[64], troff[80];
+			snprintf(name, sizeof name, "%.*s", (int)n, p);
+			/* troff writes each '-' as "\-" */
+			size_t k = 0;
+			for (size_t i = 0; name[i] && k + 3 < sizeof troff; ++i) {
+				if (name[i] == '-')
+					troff[k++] = '\\';
+				troff[k++] = name[i];
+			}
+			troff[k] = '\0';
+			CHECKF(n <= 2 || strstr(man, troff), "eddy %s names %s, docs/eddy.1 does not", helps[h], name);
+		}
+	}
+	free(man);
+}
+
 static void plan_and_check(void)
 {
 	char cmd[2048], out[16384];
@@ -680,6 +716,7 @@ void suite_cli(void)
 	RUN(binary_scenes_are_refused);
 	RUN(export_adds_particle_files);
 	RUN(safe_mode_refuses_os_execute);
+	RUN(manual_covers_every_option);
 	RUN(stock_lua_requires_the_module);
 	RUN(readme_c_example_builds_and_runs);
 }
