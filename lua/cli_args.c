@@ -4,8 +4,6 @@
 #define _GNU_SOURCE /* getopt_long */
 #include "cli.h"
 
-#include <lauxlib.h>
-
 #include <errno.h>
 #include <getopt.h>
 #include <math.h>

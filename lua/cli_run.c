@@ -4,8 +4,6 @@
 #define _DEFAULT_SOURCE /* flock, DIR */
 #include "cli.h"
 
-#include <lauxlib.h>
-
 #include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
@@ -127,7 +125,9 @@ static int list_checkpoints(const char *dir, char ***names)
 				break;
 			*names = grown;
 		}
-		(*names)[n++] = strdup(e->d_name);
+		char *name = strdup(e->d_name);
+		if (name)
+			(*names)[n++] = name;
 	}
 	closedir(d);
 	if (n)

@@ -3,8 +3,6 @@
 #define _POSIX_C_SOURCE 200809L /* open_memstream */
 #include "cli.h"
 
-#include <lauxlib.h>
-
 #include <errno.h>
 #include <math.h>
 #include <stdlib.h>
