@@ -250,9 +250,33 @@ static void bad_study_files(void)
 	CHECK_HAS(buf, "unknown option '--fast'");
 }
 
+/* A command whose Lua driver is not where it looks (a copy of the binary
+ * outside the tree) says so in one line, not Lua's list of searched paths. */
+static void missing_driver_is_one_line(void)
+{
+	const char *b = test_build_dir();
+	char cmd[1024], buf[4096];
+	snprintf(cmd, sizeof cmd, "rm -rf %s/t_lonely && mkdir -p %s/t_lonely/a/b && cp %s/eddy %s/t_lonely/a/b/eddy && "
+	         "%s/t_lonely/a/b/eddy study scenes/studies/dam_break.lua --quick", b, b, b, b, b);
+	CHECK(test_sh(cmd, buf, sizeof buf) == 1);
+	CHECK_HAS(buf, "eddy: study: its Lua driver eddy/study.lua is not installed (looked in ");
+	CHECKF(strchr(buf, '\n') == buf + strlen(buf) - 1, "not one line: %s", buf);
+	/* options take their value either way; flags take none */
+	snprintf(cmd, sizeof cmd, "%s/eddy study --out=%s/t_lonely/o", b, b);
+	CHECK(test_sh(cmd, buf, sizeof buf) == 2);
+	CHECK_HAS(buf, "eddy: study needs a study file");
+	snprintf(cmd, sizeof cmd, "%s/eddy study x.lua --quick=yes", b);
+	CHECK(test_sh(cmd, buf, sizeof buf) == 2);
+	CHECK_HAS(buf, "eddy: study: option '--quick' takes no value");
+	snprintf(cmd, sizeof cmd, "%s/eddy study --help", b);
+	CHECK(test_sh(cmd, buf, sizeof buf) == 0);
+	CHECK_HAS(buf, "--safe");
+}
+
 void suite_study(void)
 {
 	RUN(bad_study_files);
+	RUN(missing_driver_is_one_line);
 	RUN(quick_dam_break_study);
 	RUN(quick_convergence_study);
 }

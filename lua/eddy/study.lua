@@ -459,9 +459,13 @@ local function run_one(ctx, s, m, params, index, quick)
 	-- wall time measures physics: the shipped scenes render (eddy.view)
 	-- unless --set render=false, so a scene run by a study must read the
 	-- 'render' parameter (eddy.param("render", true)); eddy run rejects a
-	-- --set the scene never reads, which names the fix
-	local argv = { ctx.exe, "run", scene, "--quiet", "--stats", stats, "--set", "render=false" }
-	local set = {}
+	-- --set the scene never reads, which names the fix. Each run has its own
+	-- --out (beside its stats), so it never contends for the lock of the
+	-- scene's default output folder with another run of the same scene.
+	local argv = { ctx.exe, "run", scene, "--quiet", "--stats", stats, "--out", (stats:gsub("%.jsonl$", "")) }
+	if ctx.safe then argv[#argv + 1] = "--safe" end
+	-- render = false unless the study sets it: eddy run takes each --set once
+	local set = { render = false }
 	for k, v in pairs(s.set or {}) do set[k] = v end
 	for k, v in pairs(m.set or {}) do set[k] = v end
 	for k, v in pairs(params) do set[k] = v end
@@ -650,7 +654,7 @@ end
 
 -- ---- entry point -----------------------------------------------------------
 
--- args: file, out, quick, exe, spawn. Returns the exit status.
+-- args: file, out, quick, safe, exe, spawn. Returns the exit status.
 function M.main(args)
 	local study, method = constructors(args.file)
 	local env = setmetatable({ study = study, method = method }, { __index = _G })
@@ -664,7 +668,7 @@ function M.main(args)
 	if getmetatable(s) == nil or getmetatable(s).__name ~= "eddy.study" then
 		error(args.file .. ": the study file must return study { ... } (got " .. type(s) .. ")", 0)
 	end
-	local ctx = { file = args.file, exe = args.exe, spawn = args.spawn, quick = args.quick,
+	local ctx = { file = args.file, exe = args.exe, spawn = args.spawn, quick = args.quick, safe = args.safe,
 	              out = args.out or ("out/study_" .. s.name) }
 	-- a missing scene is the study file's mistake: say so before running anything
 	for _, m in ipairs(s.methods) do
