@@ -239,8 +239,8 @@ static int add_export(run *r)
 		d.format = EDDY_EXPORT_PLY;
 	else if (strcmp(fmt, "vtk") == 0)
 		d.format = EDDY_EXPORT_VTK;
-	else /* vtp: EDDY_EXPORT_VTP and its .pvd series come with render/export.c's VTP writer */
-		return cli_fail(CLI_EXIT_USAGE, "--export %s: not available in this build (use ply or vtk)", fmt);
+	else
+		d.format = EDDY_EXPORT_VTP; /* one .vtp a frame and OUT/particles.pvd */
 	/* the path is a printf pattern: a '%' of the folder is written "%%" */
 	char dir[1024];
 	size_t k = 0;
@@ -253,7 +253,7 @@ static int add_export(run *r)
 	if (snprintf(d.path, sizeof d.path, "%s/particles_%%04d.%s", dir, fmt) >= (int)sizeof d.path)
 		return cli_fail(CLI_EXIT_USAGE, "--export: the output folder '%s' is too long", r->o->outdir);
 	eddy_system_id id = eddy_add_export_particles(r->w, &d);
-	if (id.index == 0 && id.generation == 0)
+	if (!eddy_system_valid(r->w, id))
 		return cli_fail(CLI_EXIT_RUN, "--export %s: %s", fmt, eddy_world_error(r->w));
 	return 0;
 }

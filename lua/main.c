@@ -48,7 +48,7 @@ static void scene_name(const char *path, char *out, size_t cap)
 /* package.path: scenes may require helpers beside them, and eddy's own Lua
  * helpers (require "eddy.dam_break") from lua/ of the source tree the command
  * was built in (build/eddy -> lua/) or of an installed prefix (bin/eddy ->
- * share/eddy/lua/). */
+ * share/lua/5.4/). */
 static void set_package_path(lua_State *L, const char *scene)
 {
 	const char *slash = strrchr(scene, '/');
@@ -63,7 +63,7 @@ static void set_package_path(lua_State *L, const char *scene)
 	lua_getglobal(L, "package");
 	char path[8192];
 	lua_getfield(L, -1, "path");
-	snprintf(path, sizeof path, "%.*s/?.lua;%s/../lua/?.lua;%s/../../lua/?.lua;%s/../share/eddy/lua/?.lua;%s", dirlen,
+	snprintf(path, sizeof path, "%.*s/?.lua;%s/../lua/?.lua;%s/../../lua/?.lua;%s/../share/lua/5.4/?.lua;%s", dirlen,
 	         dir, exe, exe, exe, lua_tostring(L, -1));
 	lua_pop(L, 1);
 	lua_pushstring(L, path);

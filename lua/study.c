@@ -182,7 +182,7 @@ static void report(const char *msg, const char *exe_dir)
 	buf[strcspn(buf, "\n")] = '\0';
 	if (strncmp(buf, "module 'eddy.study' not found", 29) == 0)
 		fprintf(stderr, "eddy: study: its Lua driver eddy/study.lua is not installed (looked in %s/../lua, "
-		                "%s/../../lua and %s/../share/eddy/lua)\n", exe_dir, exe_dir, exe_dir);
+		                "%s/../../lua and %s/../share/lua/5.4)\n", exe_dir, exe_dir, exe_dir);
 	else
 		fprintf(stderr, "eddy: %s\n", buf);
 }
@@ -215,10 +215,10 @@ int eddy_study_main(int argc, char **argv)
 	if (cut)
 		*cut = '\0';
 	/* lua/eddy/study.lua of the source tree (build/eddy or build/asan/eddy)
-	 * or of an installed prefix (bin/eddy -> share/eddy/lua) */
+	 * or of an installed prefix (bin/eddy -> share/lua/5.4) */
 	lua_getglobal(L, "package");
 	lua_getfield(L, -1, "path");
-	lua_pushfstring(L, "%s/../lua/?.lua;%s/../../lua/?.lua;%s/../share/eddy/lua/?.lua;%s", dir, dir, dir,
+	lua_pushfstring(L, "%s/../lua/?.lua;%s/../../lua/?.lua;%s/../share/lua/5.4/?.lua;%s", dir, dir, dir,
 	                lua_tostring(L, -1));
 	lua_setfield(L, -3, "path");
 	lua_pop(L, 2);

@@ -575,6 +575,12 @@ static void export_adds_particle_files(void)
 	         b, eddy(), b, b, b);
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK(strcmp(out, "2\nply") == 0);
+	/* vtp: a file a frame and the collection listing both */
+	snprintf(cmd, sizeof cmd, "rm -rf %s/t_exp && %s run scenes/bounce.lua --frames=2 --quiet --out %s/t_exp "
+	         "--export=vtp && ls %s/t_exp | grep -c '^particles_000[12]\\.vtp$' && grep -c '<DataSet ' %s/t_exp/particles.pvd",
+	         b, eddy(), b, b, b);
+	CHECK(test_sh(cmd, out, sizeof out) == 0);
+	CHECKF(strcmp(out, "2\n2\n") == 0, "%s", out);
 }
 
 /* --safe: the scene runs without os.execute; the failure is one line with
