@@ -242,6 +242,8 @@ eddy_status eddy_world_load(eddy_world *w, const char *path, uint64_t fingerprin
 {
 	if (!w || !path)
 		return eddy__fail(w, EDDY_ERR_INVALID, "checkpoint: world or path is NULL");
+	if (eddy__refuse_busy(w, "eddy_world_load"))
+		return EDDY_ERR_INVALID;
 	FILE *f = fopen(path, "rb");
 	if (!f)
 		return eddy__fail(w, EDDY_ERR_IO, "checkpoint '%s': cannot open: %s", path, strerror(errno));

@@ -87,6 +87,10 @@ typedef struct eddy_extra_stat {
 struct eddy_world {
 	eddy_world_def def;
 	char error[EDDY_ERROR_MAX];
+	/* Non-NULL while a step, advance or check runs systems' or hosts' code:
+	 * names what runs ("a step callback", "a frame callback", ...). Calls that
+	 * would change the clock or the pipeline under that code are refused. */
+	const char *busy;
 
 	/* clock */
 	double time;
@@ -138,6 +142,13 @@ eddy_status eddy__fail(eddy_world *w, eddy_status s, const char *fmt, ...)
 	__attribute__((format(printf, 3, 4)))
 #endif
 	;
+
+/* Refuses a call that changes the clock or the pipeline while w->busy: sets
+ * the error ("<fn> called from inside <what>") and returns true. */
+bool eddy__refuse_busy(eddy_world *w, const char *fn);
+/* The checks every eddy_add_* starts with: a world, a def, and no step
+ * running. False with the world error set (when there is a world). */
+bool eddy__add_args(eddy_world *w, const void *def, const char *sys);
 
 /* columns (columns.c) */
 void eddy__columns_init(eddy_world *w);

@@ -9,6 +9,23 @@
  * stale one is detected. Functions that can fail return an eddy_status and leave
  * a one-line message in eddy_world_error(). The library never exits or aborts on
  * user input.
+ *
+ * NULL arguments: every function checks its pointers. A NULL world, def,
+ * name, path or out-pointer makes a status function return EDDY_ERR_INVALID
+ * (with a message in eddy_world_error(w) when w is not NULL), an eddy_add_*
+ * return EDDY_NULL_SYSTEM, a getter return a neutral value: 0 for counts and
+ * hashes, NaN for times (eddy_world_time, frame_time, last_dt), NULL for
+ * pointers, < 0 for column ids, EDDY_NULL_SYSTEM for handles; functions
+ * returning void do nothing. Pointers documented as optional (vel, err, a
+ * plan's buf with cap 0, a channel's count) may be NULL.
+ *
+ * Re-entrancy: while the world runs systems' and hosts' code (custom step,
+ * frame and limit callbacks, the renderer), that code may read the world but
+ * not step it, load a checkpoint or change its pipeline: eddy_world_step,
+ * step_frame, advance, load, set_threads, remove_system and every eddy_add_*
+ * called from a callback return EDDY_ERR_INVALID (or EDDY_NULL_SYSTEM) with
+ * "<function> called from inside a frame callback" (or step, limit callback).
+ * Adding and removing particles and moving colliders stay allowed.
  */
 #ifndef EDDY_H
 #define EDDY_H
@@ -413,7 +430,11 @@ typedef enum eddy_check_level { EDDY_CHECK_INFO, EDDY_CHECK_WARNING, EDDY_CHECK_
 typedef void (*eddy_check_fn)(eddy_check_level level, const char *message, void *user);
 
 /* Reports time-step limits, particles starting inside colliders and a memory
- * estimate; returns the number of EDDY_CHECK_ERROR findings. */
+ * estimate, and scene mistakes that would run but give a wrong answer (an
+ * emitter spacing other than the one sph_density calibrates its mass on, a
+ * first frame longer than the run, ...); returns the number of
+ * EDDY_CHECK_ERROR findings. report may be NULL to only count; a NULL world
+ * counts as one error. */
 int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user);
 
 /* ---- SPH (sys_sph_*.c) ------------------------------------------------- */

@@ -156,8 +156,8 @@ const eddy_system_vtable eddy__kind_emit_box = {
 eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def)
 {
 	const char *sys = "emit_box";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_box(w, sys, def->min, def->max) || !eddy__check_positive(w, sys, "spacing", def->spacing) ||
 	    !eddy__check_range(w, sys, "jitter", def->jitter, 0, 0.5) ||
 	    !eddy__check_vec3(w, sys, "velocity", def->velocity) || !eddy__check_nonneg(w, sys, "start", def->start))

@@ -179,8 +179,8 @@ const eddy_system_vtable eddy__kind_emit_nozzle = {
 eddy_system_id eddy_add_emit_nozzle(eddy_world *w, const eddy_emit_nozzle_def *def)
 {
 	const char *sys = "emit_nozzle";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	eddy_vec3 dir = def->direction;
 	if (!eddy__check_vec3(w, sys, "center", def->center) || !eddy__check_positive(w, sys, "radius", def->radius) ||
 	    !eddy__check_unit(w, sys, "direction", &dir) || !eddy__check_positive(w, sys, "speed", def->speed) ||

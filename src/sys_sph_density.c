@@ -189,8 +189,8 @@ float eddy_sph_particle_mass(const eddy_world *w, eddy_system_id id)
 eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *def)
 {
 	const char *sys = "sph_density";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_positive(w, sys, "spacing", def->spacing) || !eddy__check_positive(w, sys, "radius", def->radius) ||
 	    !eddy__check_positive(w, sys, "rest_density", def->rest_density) ||
 	    !eddy__check_positive(w, sys, "stiffness", def->stiffness) ||

@@ -55,6 +55,8 @@ eddy_status eddy__fail(eddy_world *w, eddy_status s, const char *fmt, ...)
 
 eddy_status eddy_world_fail(eddy_world *w, eddy_status status, const char *fmt, ...)
 {
+	if (!fmt)
+		return eddy__fail(w, status, "(no message)");
 	va_list ap;
 	va_start(ap, fmt);
 	vfail(w, status, fmt, ap);
@@ -63,6 +65,30 @@ eddy_status eddy_world_fail(eddy_world *w, eddy_status status, const char *fmt, 
 }
 
 const char *eddy_world_error(const eddy_world *w) { return w ? w->error : "no world"; }
+
+bool eddy__refuse_busy(eddy_world *w, const char *fn)
+{
+	if (!w->busy)
+		return false;
+	eddy__fail(w, EDDY_ERR_INVALID,
+	           "%s called from inside %s: a callback may read the world but not step it, load it or change its "
+	           "pipeline; do that after the step or frame returns",
+	           fn, w->busy);
+	return true;
+}
+
+bool eddy__add_args(eddy_world *w, const void *def, const char *sys)
+{
+	if (!w)
+		return false;
+	if (!def) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys);
+		return false;
+	}
+	char fn[EDDY_NAME_MAX + 16];
+	snprintf(fn, sizeof fn, "eddy_add_%s", sys);
+	return !eddy__refuse_busy(w, fn);
+}
 
 eddy_world_def eddy_default_world_def(void)
 {
@@ -161,21 +187,25 @@ void eddy_destroy_world(eddy_world *w)
 	free(w);
 }
 
-const eddy_world_def *eddy_world_get_def(const eddy_world *w) { return &w->def; }
+const eddy_world_def *eddy_world_get_def(const eddy_world *w) { return w ? &w->def : NULL; }
 
 eddy_status eddy_world_set_threads(eddy_world *w, int threads)
 {
+	if (!w)
+		return EDDY_ERR_INVALID;
+	if (eddy__refuse_busy(w, "eddy_world_set_threads"))
+		return EDDY_ERR_INVALID;
 	if (threads < 1 || threads > 256)
 		return eddy__fail(w, EDDY_ERR_INVALID, "world: 'threads' must be in [1, 256] (got %d)", threads);
 	w->def.threads = threads;
 	return EDDY_OK;
 }
 
-double eddy_world_time(const eddy_world *w) { return w->time; }
-double eddy_world_frame_time(const eddy_world *w) { return 1.0 / w->def.fps; }
-int eddy_world_frame(const eddy_world *w) { return w->frame; }
-int64_t eddy_world_steps(const eddy_world *w) { return w->step; }
-double eddy_world_last_dt(const eddy_world *w) { return w->last_dt; }
+double eddy_world_time(const eddy_world *w) { return w ? w->time : NAN; }
+double eddy_world_frame_time(const eddy_world *w) { return w ? 1.0 / w->def.fps : NAN; }
+int eddy_world_frame(const eddy_world *w) { return w ? w->frame : 0; }
+int64_t eddy_world_steps(const eddy_world *w) { return w ? w->step : 0; }
+double eddy_world_last_dt(const eddy_world *w) { return w ? w->last_dt : NAN; }
 
 void eddy__note_length_scale(eddy_world *w, float h)
 {
@@ -183,7 +213,11 @@ void eddy__note_length_scale(eddy_world *w, float h)
 		w->length_scale = h;
 }
 
-void eddy_world_set_rest_density(eddy_world *w, float rho0) { w->rest_density = rho0; }
+void eddy_world_set_rest_density(eddy_world *w, float rho0)
+{
+	if (w && isfinite(rho0) && rho0 >= 0)
+		w->rest_density = rho0;
+}
 
 /* ---- stepping ----------------------------------------------------------- */
 
@@ -192,6 +226,8 @@ static double step_limit(eddy_world *w, const char **reason)
 {
 	double lim = w->def.dt_max;
 	*reason = "dt_max";
+	const char *was = w->busy;
+	w->busy = "a time-step limit callback";
 	for (int k = 0; k < w->order_count; ++k) {
 		eddy_system *s = &w->slots[w->order[k]];
 		if (!s->vt->limit)
@@ -204,6 +240,7 @@ static double step_limit(eddy_world *w, const char **reason)
 			*reason = w->last_limit_buf;
 		}
 	}
+	w->busy = was;
 	return lim;
 }
 
@@ -298,6 +335,7 @@ static eddy_status step_toward(eddy_world *w, double stop, bool *reached)
 	eddy__arena_reset(&w->arena);
 	eddy__clear_derived(w);
 	const eddy_step_context ctx = {dt, w->time, w->step, w->def.threads};
+	w->busy = "a step callback";
 	for (int k = 0; k < w->order_count; ++k) {
 		eddy_system *s = &w->slots[w->order[k]];
 		if (!s->vt->step)
@@ -359,6 +397,7 @@ void eddy__frame_reset(eddy_world *w)
 static eddy_status finish_frame(eddy_world *w)
 {
 	w->frame++;
+	w->busy = "a frame callback";
 	for (int k = 0; k < w->order_count; ++k) {
 		eddy_system *s = &w->slots[w->order[k]];
 		if (!s->vt->frame)
@@ -391,10 +430,8 @@ static eddy_status finish_frame(eddy_world *w)
 	return EDDY_OK;
 }
 
-eddy_status eddy_world_step(eddy_world *w)
+static eddy_status step_once(eddy_world *w)
 {
-	if (!w)
-		return EDDY_ERR_INVALID;
 	bool reached;
 	eddy_status st = step_toward(w, next_frame_time(w), &reached);
 	if (st == EDDY_OK && reached)
@@ -402,23 +439,48 @@ eddy_status eddy_world_step(eddy_world *w)
 	return st;
 }
 
+/* The stepping entry points run systems' and hosts' code, which must not
+ * re-enter them: w->busy is set below them and cleared when they return. */
+eddy_status eddy_world_step(eddy_world *w)
+{
+	if (!w)
+		return EDDY_ERR_INVALID;
+	if (eddy__refuse_busy(w, "eddy_world_step"))
+		return EDDY_ERR_INVALID;
+	eddy_status st = step_once(w);
+	w->busy = NULL;
+	return st;
+}
+
 eddy_status eddy_world_step_frame(eddy_world *w)
 {
 	if (!w)
 		return EDDY_ERR_INVALID;
+	if (eddy__refuse_busy(w, "eddy_world_step_frame"))
+		return EDDY_ERR_INVALID;
 	const int target = w->frame + 1;
-	while (w->frame < target) {
-		eddy_status st = eddy_world_step(w);
-		if (st != EDDY_OK)
-			return st;
-	}
-	return EDDY_OK;
+	eddy_status st = EDDY_OK;
+	while (st == EDDY_OK && w->frame < target)
+		st = step_once(w);
+	w->busy = NULL;
+	return st;
 }
+
+static eddy_status advance(eddy_world *w, double seconds);
 
 eddy_status eddy_world_advance(eddy_world *w, double seconds)
 {
 	if (!w)
 		return EDDY_ERR_INVALID;
+	if (eddy__refuse_busy(w, "eddy_world_advance"))
+		return EDDY_ERR_INVALID;
+	eddy_status st = advance(w, seconds);
+	w->busy = NULL;
+	return st;
+}
+
+static eddy_status advance(eddy_world *w, double seconds)
+{
 	if (!(seconds >= 0 && isfinite(seconds)))
 		return eddy__fail(w, EDDY_ERR_INVALID, "advance: 'seconds' must be >= 0 and finite (got %g)", seconds);
 	const double end = w->time + seconds;
@@ -444,6 +506,8 @@ eddy_status eddy_world_advance(eddy_world *w, double seconds)
 
 void eddy_world_publish(eddy_world *w, const char *name, double value)
 {
+	if (!w || !name)
+		return;
 	int k = 0;
 	while (k < w->extra_count && strcmp(w->extras[k].name, name) != 0)
 		++k;
@@ -458,6 +522,10 @@ void eddy_world_publish(eddy_world *w, const char *name, double value)
 
 void eddy_world_publish_text(eddy_world *w, const char *name, const char *text)
 {
+	if (!w || !name)
+		return;
+	if (!text)
+		text = "";
 	eddy_world_publish(w, name, NAN);
 	for (int k = 0; k < w->extra_count; ++k) {
 		if (strcmp(w->extras[k].name, name) == 0) {
@@ -573,6 +641,8 @@ static uint64_t fnv1a(uint64_t h, const void *data, size_t n)
 
 uint64_t eddy_world_state_hash(const eddy_world *w)
 {
+	if (!w)
+		return 0;
 	uint64_t h = 0xcbf29ce484222325ull;
 	uint64_t n = w->n;
 	h = fnv1a(h, &n, sizeof n);
@@ -604,8 +674,21 @@ static void reportf(eddy_check_fn report, void *user, eddy_check_level level, co
 	report(level, msg, user);
 }
 
+static void count_only(eddy_check_level level, const char *message, void *user)
+{
+	(void)level;
+	(void)message;
+	(void)user;
+}
+
 int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 {
+	if (!report)
+		report = count_only;
+	if (!w) {
+		report(EDDY_CHECK_ERROR, "world: no world to check (NULL)", user);
+		return 1;
+	}
 	int errors = 0;
 	/* memory: particle columns in use times the particles the emitters will make */
 	int64_t expected = 0;
