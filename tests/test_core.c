@@ -430,8 +430,255 @@ static void preflight_findings(void)
 	eddy_destroy_world(w);
 }
 
+static bool is_null_system(eddy_system_id id) { return id.index == 0 && id.generation == 0; }
+
+/* Each eddy_add_* with a NULL world and with a NULL def. */
+#define CHECK_ADDER(kind) \
+	do { \
+		eddy_##kind##_def d_ = eddy_default_##kind##_def(); \
+		CHECK(is_null_system(eddy_add_##kind(NULL, &d_))); \
+		CHECK(is_null_system(eddy_add_##kind(NULL, NULL))); \
+		CHECK(is_null_system(eddy_add_##kind(w, NULL))); \
+		CHECK_HAS(eddy_world_error(w), "def is NULL"); \
+	} while (0)
+
+/* Every public function of eddy.h with NULL in each pointer argument: no
+ * crash, and the neutral value or status eddy.h's header comment documents. */
+static void null_arguments_are_refused(void)
+{
+	eddy_world *w = make_world();
+	eddy_world_def wd = eddy_default_world_def();
+	char err[64] = "untouched";
+	CHECK(eddy_create_world(NULL, err, sizeof err) == NULL);
+	CHECK_HAS(err, "def is NULL");
+	CHECK(eddy_create_world(NULL, NULL, 16) == NULL);
+	eddy_world *w2 = eddy_create_world(&wd, NULL, 16);
+	CHECK(w2 != NULL);
+	eddy_destroy_world(w2);
+	eddy_destroy_world(NULL);
+	CHECK(eddy_world_error(NULL) != NULL);
+	CHECK(eddy_world_fail(NULL, EDDY_ERR_EXTERNAL, "x %d", 1) == EDDY_ERR_EXTERNAL);
+	CHECK(eddy_world_fail(w, EDDY_ERR_EXTERNAL, NULL) == EDDY_ERR_EXTERNAL);
+	CHECK(eddy_world_get_def(NULL) == NULL);
+	CHECK(eddy_world_set_threads(NULL, 2) == EDDY_ERR_INVALID);
+	CHECK(isnan(eddy_world_time(NULL)));
+	CHECK(isnan(eddy_world_frame_time(NULL)));
+	CHECK(eddy_world_frame(NULL) == 0);
+	CHECK(eddy_world_steps(NULL) == 0);
+	CHECK(isnan(eddy_world_last_dt(NULL)));
+	CHECK(eddy_world_step(NULL) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_step_frame(NULL) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_advance(NULL, 0.1) == EDDY_ERR_INVALID);
+
+	/* columns */
+	eddy_column_info info;
+	CHECK(eddy_world_column_count(NULL) == 0);
+	CHECK(eddy_world_find_column(NULL, "x") < 0);
+	CHECK(eddy_world_find_column(w, NULL) < 0);
+	CHECK(eddy_world_column_info(NULL, 0, &info) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_column_info(w, 0, NULL) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_declare_column(NULL, "t", EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "K") < 0);
+	CHECK(eddy_world_declare_column(w, NULL, EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "K") < 0);
+	CHECK(eddy_world_declare_column(w, "t_no_unit", EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, NULL) >= 0);
+	size_t count = 7;
+	CHECK(eddy_world_channel(NULL, "x", &count) == NULL && count == 0);
+	CHECK(eddy_world_channel(w, NULL, &count) == NULL);
+	CHECK(eddy_world_channel(w, "x", NULL) == NULL);
+	CHECK(eddy_world_channel_mut(NULL, "x", &count) == NULL);
+	CHECK(eddy_world_channel_mut(w, NULL, NULL) == NULL);
+	CHECK(eddy_world_channel_u8(NULL, "cell_type", &count) == NULL);
+	CHECK(eddy_world_channel_u8(w, NULL, NULL) == NULL);
+	CHECK(eddy_world_particle_count(NULL) == 0);
+	eddy_vec3 p = {0.5f, 0.5f, 0.5f};
+	CHECK(eddy_world_add_particles(NULL, 1, &p, NULL) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_add_particles(w, 1, NULL, NULL) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_remove_particle(NULL, 0) == EDDY_ERR_INVALID);
+	CHECK(!eddy_world_grid(NULL).allocated);
+	CHECK(eddy_world_state_hash(NULL) == 0);
+
+	/* pipeline */
+	eddy_system_info si;
+	CHECK(eddy_world_system_count(NULL) == 0);
+	CHECK(is_null_system(eddy_world_system_at(NULL, 0)));
+	CHECK(eddy_world_system_info(NULL, EDDY_NULL_SYSTEM, &si) == EDDY_ERR_INVALID);
+	CHECK(!eddy_system_valid(NULL, EDDY_NULL_SYSTEM));
+	CHECK(eddy_world_remove_system(NULL, EDDY_NULL_SYSTEM) == EDDY_ERR_INVALID);
+	char plan[16] = "untouched";
+	CHECK(eddy_world_plan(NULL, plan, sizeof plan) == 0 && plan[0] == '\0');
+	CHECK(eddy_world_plan(w, NULL, 100) > 0);
+	CHECK(eddy_world_plan_dot(NULL, plan, sizeof plan) == 0);
+	CHECK(eddy_world_plan_dot(w, NULL, 100) > 0);
+
+	/* systems */
+	CHECK_ADDER(custom_system);
+	eddy_custom_system_def cd = eddy_default_custom_system_def();
+	cd.step = noop_step;
+	cd.name = NULL;
+	CHECK(is_null_system(eddy_add_custom_system(w, &cd)));
+	CHECK_HAS(eddy_world_error(w), "'name'");
+	cd.name = "c";
+	cd.step = NULL;
+	CHECK(is_null_system(eddy_add_custom_system(w, &cd)));
+	CHECK_HAS(eddy_world_error(w), "needs a step or a frame callback");
+	cd.step = noop_step;
+	cd.read_count = 1; /* reads is NULL */
+	CHECK(is_null_system(eddy_add_custom_system(w, &cd)));
+	CHECK_ADDER(emit_box);
+	CHECK_ADDER(emit_nozzle);
+	CHECK_ADDER(gravity);
+	CHECK_ADDER(integrate);
+	CHECK_ADDER(collide_box);
+	CHECK_ADDER(collide_sphere);
+	CHECK_ADDER(collide_plane);
+	CHECK_ADDER(sph_density);
+	CHECK_ADDER(sph_pressure);
+	CHECK_ADDER(sph_viscosity);
+	CHECK_ADDER(sph_surface_tension);
+	CHECK_ADDER(sph_boundary_box);
+	CHECK_ADDER(sph_dfsph);
+	CHECK_ADDER(flip_p2g);
+	CHECK_ADDER(flip_boundary);
+	CHECK_ADDER(flip_surface);
+	CHECK_ADDER(flip_pressure);
+	CHECK_ADDER(flip_extrapolate);
+	CHECK_ADDER(flip_g2p);
+	CHECK_ADDER(flip_advect);
+	CHECK_ADDER(flip_reseed);
+	CHECK_ADDER(render_points);
+	CHECK_ADDER(export_particles);
+	CHECK(eddy_sph_particle_mass(NULL, EDDY_NULL_SYSTEM) == 0);
+
+	/* colliders */
+	eddy_collide_box_def bd = eddy_default_collide_box_def();
+	eddy_system_id box = eddy_add_collide_box(w, &bd);
+	CHECK(eddy_system_valid(w, box));
+	eddy_vec3 off;
+	float dist;
+	eddy_collider_shape shape;
+	CHECK(eddy_collider_set_offset(NULL, box, p) == EDDY_ERR_INVALID);
+	CHECK(eddy_collider_get_offset(NULL, box, &off) == EDDY_ERR_INVALID);
+	CHECK(eddy_collider_get_offset(w, box, NULL) == EDDY_ERR_INVALID);
+	CHECK(eddy_collider_distance(NULL, box, p, &dist) == EDDY_ERR_INVALID);
+	CHECK(eddy_collider_distance(w, box, p, NULL) == EDDY_ERR_INVALID);
+	CHECK(eddy_collider_shape_of(NULL, box, &shape) == EDDY_ERR_INVALID);
+	CHECK(eddy_collider_shape_of(w, box, NULL) == EDDY_ERR_INVALID);
+
+	/* statistics, checkpoints, preflight */
+	eddy_frame_stats fs;
+	CHECK(eddy_world_frame_stats(NULL, &fs) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_frame_stats(w, NULL) == EDDY_ERR_INVALID);
+	eddy_world_publish(NULL, "a", 1);
+	eddy_world_publish(w, NULL, 1);
+	eddy_world_publish_text(NULL, "a", "b");
+	eddy_world_publish_text(w, NULL, "b");
+	eddy_world_publish_text(w, "a", NULL);
+	eddy_world_set_rest_density(NULL, 1000);
+	CHECK(eddy_world_save(NULL, "/tmp/eddy_null.ckpt", 0) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_save(w, NULL, 0) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_load(NULL, "/tmp/eddy_null.ckpt", 0) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_load(w, NULL, 0) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_check(NULL, NULL, NULL) == 1);
+	CHECK(eddy_world_check(w, NULL, NULL) == 0);
+
+	/* the world still works */
+	CHECK(eddy_world_step(w) == EDDY_OK);
+	eddy_destroy_world(w);
+}
+
+/* What a callback tried, and what each call returned. */
+typedef struct reentry {
+	eddy_status step, step_frame, advance, add, remove, load, threads;
+	bool added_valid;
+	char error[512];
+	double time_seen;
+	int calls;
+	eddy_system_id self;
+} reentry;
+
+static void try_reentry(eddy_world *w, reentry *r)
+{
+	if (r->calls++ > 0)
+		return;
+	r->step = eddy_world_step(w);
+	r->step_frame = eddy_world_step_frame(w);
+	r->advance = eddy_world_advance(w, 0.1);
+	snprintf(r->error, sizeof r->error, "%s", eddy_world_error(w));
+	eddy_gravity_def g = eddy_default_gravity_def();
+	r->added_valid = eddy_system_valid(w, eddy_add_gravity(w, &g));
+	r->remove = eddy_world_remove_system(w, r->self);
+	r->load = eddy_world_load(w, "/nonexistent/eddy.ckpt", 0);
+	r->threads = eddy_world_set_threads(w, 2);
+	/* reading stays allowed */
+	r->time_seen = eddy_world_time(w);
+	eddy_frame_stats fs;
+	CHECK(eddy_world_frame_stats(w, &fs) == EDDY_OK);
+}
+
+static eddy_status reenter_step(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	(void)ctx;
+	try_reentry(w, user);
+	return EDDY_OK;
+}
+
+static eddy_status reenter_frame(eddy_world *w, int frame, void *user)
+{
+	(void)frame;
+	try_reentry(w, user);
+	return EDDY_OK;
+}
+
+static void check_reentry_refused(const reentry *r, const char *where)
+{
+	CHECK(r->calls > 0);
+	CHECK(r->step == EDDY_ERR_INVALID);
+	CHECK(r->step_frame == EDDY_ERR_INVALID);
+	CHECK(r->advance == EDDY_ERR_INVALID);
+	CHECK(!r->added_valid);
+	CHECK(r->remove == EDDY_ERR_INVALID);
+	CHECK(r->load == EDDY_ERR_INVALID);
+	CHECK(r->threads == EDDY_ERR_INVALID);
+	char want[128];
+	snprintf(want, sizeof want, "eddy_world_advance called from inside %s", where);
+	CHECK_HAS(r->error, want);
+}
+
+/* A step or frame callback that steps the world again would run frames
+ * inside frames (0.3 s simulated for 0.2 asked); such calls are refused and
+ * the run keeps its clock. */
+static void callbacks_cannot_reenter(void)
+{
+	for (int frame_hook = 0; frame_hook < 2; ++frame_hook) {
+		eddy_world *w = make_world();
+		reentry r;
+		memset(&r, 0, sizeof r);
+		eddy_custom_system_def c = eddy_default_custom_system_def();
+		c.name = "reenter";
+		if (frame_hook)
+			c.frame = reenter_frame;
+		else
+			c.step = reenter_step;
+		c.user = &r;
+		r.self = eddy_add_custom_system(w, &c);
+		CHECK(eddy_system_valid(w, r.self));
+		CHECK(eddy_world_advance(w, 0.2) == EDDY_OK);
+		check_reentry_refused(&r, frame_hook ? "a frame callback" : "a step callback");
+		CHECK_NEAR(eddy_world_time(w), 0.2, 1e-12);
+		CHECK(eddy_world_frame(w) == 6);
+		CHECK(eddy_world_system_count(w) == 1);
+		CHECK(eddy_world_get_def(w)->threads == 1);
+		/* outside a callback the same calls work again */
+		CHECK(eddy_world_step_frame(w) == EDDY_OK);
+		CHECK(eddy_world_frame(w) == 7);
+		CHECK(eddy_world_set_threads(w, 2) == EDDY_OK);
+		eddy_destroy_world(w);
+	}
+}
+
 void suite_core(void)
 {
+	RUN(null_arguments_are_refused);
+	RUN(callbacks_cannot_reenter);
 	RUN(preflight_findings);
 	RUN(world_def_rejects_bad_values);
 	RUN(absent_systems_allocate_nothing);
