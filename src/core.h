@@ -29,6 +29,11 @@ typedef struct eddy_system_vtable {
 	/* emitters: positions of the first emission, for preflight; returns the count
 	 * written (up to cap) */
 	size_t (*sample)(const eddy_world *w, const eddy_system *s, eddy_vec3 *out, size_t cap);
+	/* emitters: the lattice spacing they emit at (m), for the preflight */
+	float (*spacing)(const eddy_system *s);
+	/* the kind's own preflight findings (eddy_world_check), one line each;
+	 * returns the number of EDDY_CHECK_ERROR findings it reported */
+	int (*check)(eddy_world *w, const eddy_system *s, eddy_check_fn report, void *user);
 	/* colliders: signed distance to the solid, < 0 inside it */
 	float (*distance)(const eddy_system *s, eddy_vec3 p);
 	/* columns the kind writes, ending in -1; names the fix in order errors */
@@ -203,6 +208,12 @@ bool eddy__check_box(eddy_world *w, const char *sys, eddy_vec3 lo, eddy_vec3 hi)
 bool eddy__check_unit(eddy_world *w, const char *sys, const char *field, eddy_vec3 *v);
 
 void eddy__note_length_scale(eddy_world *w, float h);
+/* One preflight finding, printf style (eddy_world_check and the kinds' check). */
+void eddy__report(eddy_check_fn report, void *user, eddy_check_level level, const char *fmt, ...)
+#if defined(__GNUC__)
+	__attribute__((format(printf, 4, 5)))
+#endif
+	;
 double eddy__now_ms(void);
 
 /* collider helpers (collider.c) */

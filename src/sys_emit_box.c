@@ -144,12 +144,15 @@ static void *state(eddy_world *w, eddy_system *s, size_t *size)
 	return &e->done;
 }
 
+static float spacing(const eddy_system *s) { return ((const emit_box *)s->data)->def.spacing; }
+
 const eddy_system_vtable eddy__kind_emit_box = {
 	.name = "emit_box",
 	.state = state,
 	.step = step,
 	.expected_particles = expected,
 	.sample = sample,
+	.spacing = spacing,
 	.default_writes = box_writes,
 };
 

@@ -166,6 +166,8 @@ static void *state(eddy_world *w, eddy_system *s, size_t *size)
 	return &e->run;
 }
 
+static float spacing(const eddy_system *s) { return ((const emit_nozzle *)s->data)->def.spacing; }
+
 const eddy_system_vtable eddy__kind_emit_nozzle = {
 	.name = "emit_nozzle",
 	.state = state,
@@ -173,6 +175,7 @@ const eddy_system_vtable eddy__kind_emit_nozzle = {
 	.limit = limit,
 	.expected_particles = expected,
 	.sample = sample,
+	.spacing = spacing,
 	.default_writes = nozzle_writes,
 };
 

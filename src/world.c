@@ -6,6 +6,7 @@
  * then check that no particle left the bounds. */
 #define _POSIX_C_SOURCE 200809L
 #include "core.h"
+#include "systems.h"
 
 #include <float.h>
 #include <stdio.h>
@@ -659,12 +660,7 @@ uint64_t eddy_world_state_hash(const eddy_world *w)
 
 /* ---- preflight ---------------------------------------------------------- */
 
-static void reportf(eddy_check_fn report, void *user, eddy_check_level level, const char *fmt, ...)
-#if defined(__GNUC__)
-	__attribute__((format(printf, 4, 5)))
-#endif
-	;
-static void reportf(eddy_check_fn report, void *user, eddy_check_level level, const char *fmt, ...)
+void eddy__report(eddy_check_fn report, void *user, eddy_check_level level, const char *fmt, ...)
 {
 	char msg[512];
 	va_list ap;
@@ -715,47 +711,83 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 	long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
 	double avail = pages > 0 && page > 0 ? (double)pages * (double)page : 0;
 	if (unbounded)
-		reportf(report, user, EDDY_CHECK_WARNING,
+		eddy__report(report, user, EDDY_CHECK_WARNING,
 		        "memory: an emitter has no end (set duration or max_particles); %lld particles known, %zu bytes each",
 		        (long long)expected, per_particle);
 	else
-		reportf(report, user, EDDY_CHECK_INFO, "memory: %lld particles x %zu bytes, about %.1f MB in all",
+		eddy__report(report, user, EDDY_CHECK_INFO, "memory: %lld particles x %zu bytes, about %.1f MB in all",
 		        (long long)expected, per_particle, bytes / 1e6);
 	if (avail > 0 && bytes > 0.8 * avail) {
-		reportf(report, user, EDDY_CHECK_ERROR,
+		eddy__report(report, user, EDDY_CHECK_ERROR,
 		        "memory: the scene needs about %.1f GB but the machine has %.1f GB; use a coarser spacing",
 		        bytes / 1e9, avail / 1e9);
 		errors++;
 	}
 
-	/* particles per cell: a grid method wants 3 to 12 (docs/validation.md §A) */
+	/* frames: eddy run simulates ceil(duration * fps) whole frames, so a frame
+	 * longer than the run makes the run longer than asked */
+	const double fps = w->def.fps, duration = w->def.duration;
+	if (duration > 0 && fps * duration < 1 - 1e-9) {
+		eddy__report(report, user, EDDY_CHECK_ERROR,
+		             "world: 'fps' is %g but 'duration' is %g s: the first frame (%g s) is longer than the whole run, "
+		             "so a run would simulate %g s; set fps >= %g",
+		             fps, duration, 1 / fps, 1 / fps, 1 / duration);
+		errors++;
+	} else if (duration > 0) {
+		const double frames = ceil(duration * fps - 1e-9), simulated = frames / fps;
+		if (simulated > duration * 1.01)
+			eddy__report(report, user, EDDY_CHECK_WARNING,
+			             "world: 'duration' %g s is not a whole number of frames at %g fps; a run simulates %.0f "
+			             "frames = %g s",
+			             duration, fps, frames, simulated);
+	}
+
+	/* particles per cell: a grid method wants 3 to 12 (docs/validation.md §A);
+	 * FLIP with less than one leaves fluid cells holding no particle, which
+	 * the grid then takes for air */
+	bool flip = false;
+	for (int k = 0; k < w->order_count; ++k)
+		flip = flip || w->slots[w->order[k]].vt == &eddy__kind_flip_p2g;
 	if (w->grid_allocated && w->length_scale > 0) {
 		const double ppc = pow(w->def.cell_size / w->length_scale, 3);
-		if (ppc < 3 || ppc > 12) {
+		if (flip && ppc < 1) {
+			eddy__report(report, user, EDDY_CHECK_ERROR,
+			             "flip_p2g: %.2f particles per cell (world cell_size %g m, emitter spacing %g m), below 1: "
+			             "fluid cells would hold no particle; set spacing = cell_size / 2 = %g m",
+			             ppc, w->def.cell_size, (double)w->length_scale, w->def.cell_size / 2);
+			errors++;
+		} else if (ppc < 3 || ppc > 12) {
 			/* 8 per cell: spacing = cell_size / 2 */
-			reportf(report, user, EDDY_CHECK_WARNING,
+			eddy__report(report, user, EDDY_CHECK_WARNING,
 			        "particles per cell: %.1f (cell_size %g m, spacing %g m); 3 to 12 keep the grid resolved, e.g. "
 			        "spacing = %g m",
 			        ppc, w->def.cell_size, (double)w->length_scale, w->def.cell_size / 2);
 		} else {
-			reportf(report, user, EDDY_CHECK_INFO, "particles per cell: %.1f", ppc);
+			eddy__report(report, user, EDDY_CHECK_INFO, "particles per cell: %.1f", ppc);
 		}
+	}
+
+	/* the kinds' own checks (SPH spacing against the emitters, ...) */
+	for (int k = 0; k < w->order_count; ++k) {
+		const eddy_system *s = &w->slots[w->order[k]];
+		if (s->vt->check)
+			errors += s->vt->check(w, s, report, user);
 	}
 
 	/* time step at the start */
 	const char *reason;
 	double lim = step_limit(w, &reason);
 	double frame_dt = 1.0 / w->def.fps;
-	reportf(report, user, EDDY_CHECK_INFO, "time step: %.3g s at the start, limited by %s (%.0f steps per frame)",
+	eddy__report(report, user, EDDY_CHECK_INFO, "time step: %.3g s at the start, limited by %s (%.0f steps per frame)",
 	        lim, reason, ceil(frame_dt / lim - 1e-9));
 	if (ceil(frame_dt / lim - 1e-9) > w->def.max_steps_per_frame) {
-		reportf(report, user, EDDY_CHECK_ERROR,
+		eddy__report(report, user, EDDY_CHECK_ERROR,
 		        "time step: a frame needs %.0f steps, more than max_steps_per_frame = %d; raise it or relax %s",
 		        ceil(frame_dt / lim - 1e-9), w->def.max_steps_per_frame, reason);
 		errors++;
 	}
 	if (lim < w->def.dt_min) {
-		reportf(report, user, EDDY_CHECK_ERROR, "time step: %s allows %.3g s, below dt_min = %.3g s", reason, lim, w->def.dt_min);
+		eddy__report(report, user, EDDY_CHECK_ERROR, "time step: %s allows %.3g s, below dt_min = %.3g s", reason, lim, w->def.dt_min);
 		errors++;
 	}
 
@@ -772,7 +804,7 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 			continue;
 		size_t np = e->vt->sample(w, e, pts, cap);
 		if (np == 0) {
-			reportf(report, user, EDDY_CHECK_ERROR, "%s: emits no particles; make its region larger than its spacing", e->label);
+			eddy__report(report, user, EDDY_CHECK_ERROR, "%s: emits no particles; make its region larger than its spacing", e->label);
 			errors++;
 		}
 		for (int j = 0; j < w->order_count; ++j) {
@@ -782,10 +814,17 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 			size_t inside = 0;
 			for (size_t i = 0; i < np; ++i)
 				inside += c->vt->distance(c, pts[i]) < 0;
-			if (inside)
-				reportf(report, user, EDDY_CHECK_WARNING,
+			if (inside && inside == np) {
+				eddy__report(report, user, EDDY_CHECK_ERROR,
+				             "%s: all %zu particles start inside the solid of %s; move the emitter or the collider "
+				             "(for a tank, set the collider's inside = true)",
+				             e->label, np, c->label);
+				errors++;
+			} else if (inside) {
+				eddy__report(report, user, EDDY_CHECK_WARNING,
 				        "%s: %zu of %zu particles start inside %s; they will be pushed out in the first step",
 				        e->label, inside, np, c->label);
+			}
 		}
 		size_t outside = 0;
 		const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
@@ -794,7 +833,7 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 			outside += !(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z);
 		}
 		if (outside) {
-			reportf(report, user, EDDY_CHECK_ERROR, "%s: %zu of %zu particles start outside the world bounds", e->label, outside, np);
+			eddy__report(report, user, EDDY_CHECK_ERROR, "%s: %zu of %zu particles start outside the world bounds", e->label, outside, np);
 			errors++;
 		}
 		free(pts);
