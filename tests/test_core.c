@@ -675,8 +675,117 @@ static void callbacks_cannot_reenter(void)
 	}
 }
 
+/* One emitter of the given spacing in [0.1, 0.3]^3 of a default world with
+ * fps and duration, the findings of eddy_world_check in f. */
+static eddy_world *spacing_world(float spacing, double fps, double duration)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.fps = fps;
+	d.duration = duration;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.min = (eddy_vec3){0.1f, 0.1f, 0.1f};
+	b.max = (eddy_vec3){0.3f, 0.3f, 0.3f};
+	b.spacing = spacing;
+	eddy_add_emit_box(w, &b);
+	return w;
+}
+
+/* Scene mistakes that run without an error but give a wrong answer are
+ * errors of the check (and so refused by eddy run). */
+static void check_catches_scene_mistakes(void)
+{
+	/* sph_density left at its default spacing (0.01 m) under an emitter at 0.02 m */
+	eddy_world *w = spacing_world(0.02f, 30, 2);
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	CHECK(eddy_system_valid(w, eddy_add_sph_density(w, &de)));
+	findings f = {"", 0};
+	CHECK(eddy_world_check(w, collect, &f) == 1);
+	CHECK_HAS(f.text, "sph_density: 'spacing' is 0.01 m but emit_box emits at spacing 0.02 m");
+	CHECK_HAS(f.text, "0.12 x rest density and collapses; set sph_density's spacing = 0.02 (and radius = 0.04)");
+	eddy_destroy_world(w);
+
+	/* the same with the spacings matched: no error */
+	w = spacing_world(0.01f, 30, 2);
+	CHECK(eddy_system_valid(w, eddy_add_sph_density(w, &de)));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 0);
+	/* a nozzle off the lattice */
+	eddy_emit_nozzle_def nz = eddy_default_emit_nozzle_def();
+	nz.center = (eddy_vec3){0.5f, 0.8f, 0.5f};
+	nz.spacing = 0.005f;
+	nz.max_particles = 1000;
+	CHECK(eddy_system_valid(w, eddy_add_emit_nozzle(w, &nz)));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 1);
+	CHECK_HAS(f.text, "emit_nozzle emits at spacing 0.005 m");
+	CHECK_HAS(f.text, "8.00 x rest density and blows apart");
+	eddy_destroy_world(w);
+
+	/* a kernel barely wider than the spacing */
+	w = spacing_world(0.01f, 30, 2);
+	de.radius = 0.011f;
+	CHECK(eddy_system_valid(w, eddy_add_sph_density(w, &de)));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 1);
+	CHECK_HAS(f.text, "sph_density: 'radius' 0.011 m is 1.10 x 'spacing' 0.01 m, below 1.2");
+	eddy_destroy_world(w);
+
+	/* fps 0.5 for a 0.2 s run: one 2 s frame, 10 times the run */
+	w = spacing_world(0.01f, 0.5, 0.2);
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 1);
+	CHECK_HAS(f.text, "world: 'fps' is 0.5 but 'duration' is 0.2 s: the first frame (2 s) is longer than the whole run");
+	CHECK_HAS(f.text, "set fps >= 5");
+	eddy_destroy_world(w);
+	w = spacing_world(0.01f, 30, 0.21);
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 0);
+	CHECK_HAS(f.text, "a run simulates 7 frames = 0.233333 s");
+	eddy_destroy_world(w);
+
+	/* FLIP cells smaller than the particle spacing */
+	eddy_world_def d = eddy_default_world_def();
+	d.cell_size = 0.01;
+	w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.min = (eddy_vec3){0.1f, 0.1f, 0.1f};
+	b.max = (eddy_vec3){0.3f, 0.3f, 0.3f};
+	b.spacing = 0.02f;
+	eddy_add_emit_box(w, &b);
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_flip_p2g_def pg = eddy_default_flip_p2g_def();
+	CHECKF(eddy_system_valid(w, eddy_add_flip_p2g(w, &pg)), "%s", eddy_world_error(w));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 1);
+	CHECK_HAS(f.text, "flip_p2g: 0.1");
+	CHECK_HAS(f.text, "particles per cell (world cell_size 0.01 m, emitter spacing 0.02 m), below 1");
+	eddy_destroy_world(w);
+
+	/* an emitter wholly inside a solid block */
+	w = spacing_world(0.02f, 30, 2);
+	eddy_collide_box_def cb = eddy_default_collide_box_def();
+	cb.min = (eddy_vec3){0.05f, 0.05f, 0.05f};
+	cb.max = (eddy_vec3){0.35f, 0.35f, 0.35f};
+	cb.inside = false;
+	CHECK(eddy_system_valid(w, eddy_add_collide_box(w, &cb)));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 1);
+	CHECK_HAS(f.text, "emit_box: all 1000 particles start inside the solid of collide_box");
+	eddy_destroy_world(w);
+	/* and a collider box with min > max never gets that far */
+	w = make_world();
+	cb.min.x = 0.5f;
+	cb.max.x = 0.4f;
+	CHECK(!eddy_system_valid(w, eddy_add_collide_box(w, &cb)));
+	CHECK_HAS(eddy_world_error(w), "collide_box: 'max' must exceed 'min' on every axis");
+	eddy_destroy_world(w);
+}
+
 void suite_core(void)
 {
+	RUN(check_catches_scene_mistakes);
 	RUN(null_arguments_are_refused);
 	RUN(callbacks_cannot_reenter);
 	RUN(preflight_findings);

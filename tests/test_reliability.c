@@ -382,8 +382,32 @@ static void crafted_checkpoints_are_rejected(void)
 	eddy_destroy_world(w);
 }
 
+/* Red-team case: sph_density left at its default spacing (0.01 m) under an
+ * emitter at 0.02 m collapsed the tank silently; eddy run's preflight now
+ * refuses it, naming both systems, both spacings and the fix. */
+static void run_refuses_mismatched_sph_spacing(void)
+{
+	char path[512], cmd[1200], out[4096];
+	snprintf(path, sizeof path, "%s/t_spacing.lua", test_build_dir());
+	FILE *f = fopen(path, "w");
+	fputs("local eddy = require 'eddy'\nlocal w = eddy.world{ bounds = {{0,0,0},{1,1,1}} }\n"
+	      "w:add(eddy.emit_box{ min = {0.1,0.1,0.1}, max = {0.3,0.3,0.3}, spacing = 0.02 })\n"
+	      "w:add(eddy.sph_density{})\nw:add(eddy.gravity{})\nw:add(eddy.sph_pressure{})\n"
+	      "w:add(eddy.integrate{})\nreturn w\n", f);
+	fclose(f);
+	snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 1 --out %s/t_spacing_out", test_build_dir(), path,
+	         test_build_dir());
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
+	CHECK_HAS(out, "sph_density: 'spacing' is 0.01 m but emit_box emits at spacing 0.02 m");
+	CHECK_HAS(out, "not run: 1 problem found by the preflight check");
+	snprintf(cmd, sizeof cmd, "%s/eddy check %s", test_build_dir(), path);
+	CHECK(test_sh(cmd, out, sizeof out) != 0);
+	CHECK_HAS(out, "set sph_density's spacing = 0.02");
+}
+
 void suite_reliability(void)
 {
+	RUN(run_refuses_mismatched_sph_spacing);
 	RUN(run_refuses_what_cannot_fit);
 	RUN(checkpoint_resume_is_bit_identical);
 	RUN(bad_checkpoints_are_rejected);
