@@ -267,20 +267,34 @@ static size_t first_nonfinite(const float *v, size_t n)
 	return n;
 }
 
-/* Scans the particle columns system s writes; the first non-finite value names
- * the system, step and particle. */
+/* Scans the float columns system s writes; the first non-finite value names
+ * the system, step and particle, or the grid cell or face (i, j, k), so a
+ * grid pass that goes wrong is blamed, not the particle pass that reads it. */
 static eddy_status check_written(eddy_world *w, const eddy_system *s)
 {
 	for (int k = 0; k < s->write_count; ++k) {
 		const eddy_column *c = &w->columns[s->writes[k]];
-		if (c->domain != EDDY_DOMAIN_PARTICLE || c->type != EDDY_F32 || !c->data)
+		if (c->type != EDDY_F32 || !c->data)
 			continue;
 		const float *v = c->data;
-		const size_t bad = first_nonfinite(v, w->n);
-		if (bad < w->n)
-			return eddy__fail(w, EDDY_ERR_NUMERIC,
-			                  "%s: non-finite %s = %g of particle %zu at step %lld (t = %.6g s)",
-			                  s->label, c->name, (double)v[bad], bad, (long long)w->step, w->time);
+		if (c->domain == EDDY_DOMAIN_PARTICLE) {
+			const size_t bad = first_nonfinite(v, w->n);
+			if (bad < w->n)
+				return eddy__fail(w, EDDY_ERR_NUMERIC,
+				                  "%s: non-finite %s = %g of particle %zu at step %lld (t = %.6g s)",
+				                  s->label, c->name, (double)v[bad], bad, (long long)w->step, w->time);
+			continue;
+		}
+		const size_t n = eddy__column_elems(w, c), bad = first_nonfinite(v, n);
+		if (bad == n)
+			continue;
+		/* x fastest; a face grid has one more layer along its axis */
+		const size_t nx = (size_t)w->nx + (c->domain == EDDY_DOMAIN_FACE_X),
+		             ny = (size_t)w->ny + (c->domain == EDDY_DOMAIN_FACE_Y);
+		const char *where = c->domain == EDDY_DOMAIN_CELL ? "cell" : "face";
+		return eddy__fail(w, EDDY_ERR_NUMERIC, "%s: non-finite %s = %g at %s (%zu, %zu, %zu) at step %lld (t = %.6g s)",
+		                  s->label, c->name, (double)v[bad], where, bad % nx, bad / nx % ny, bad / (nx * ny),
+		                  (long long)w->step, w->time);
 	}
 	return EDDY_OK;
 }

@@ -783,8 +783,40 @@ static void check_catches_scene_mistakes(void)
 	eddy_destroy_world(w);
 }
 
+static eddy_status poison_face(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	(void)ctx;
+	(void)user;
+	size_t n;
+	float *u = eddy_world_channel_mut(w, "u", &n);
+	eddy_grid_info g = eddy_world_grid(w);
+	/* face (2, 1, 3) of the x-face grid, (nx + 1) faces along x */
+	u[2 + (size_t)(g.nx + 1) * (1 + (size_t)g.ny * 3)] = NAN;
+	return EDDY_OK;
+}
+
+/* A grid pass that writes a non-finite value is blamed with the face or cell,
+ * not the particle pass that would read it next. */
+static void nonfinite_on_the_grid_names_the_face(void)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.cell_size = 0.1;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	const char *writes[] = {"u"};
+	eddy_custom_system_def c = eddy_default_custom_system_def();
+	c.name = "grid_pass";
+	c.writes = writes;
+	c.write_count = 1;
+	c.step = poison_face;
+	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &c)));
+	CHECK(eddy_world_step(w) == EDDY_ERR_NUMERIC);
+	CHECK_HAS(eddy_world_error(w), "grid_pass: non-finite u = nan at face (2, 1, 3) at step 0");
+	eddy_destroy_world(w);
+}
+
 void suite_core(void)
 {
+	RUN(nonfinite_on_the_grid_names_the_face);
 	RUN(check_catches_scene_mistakes);
 	RUN(null_arguments_are_refused);
 	RUN(callbacks_cannot_reenter);
