@@ -455,7 +455,9 @@ double eddy_sph_kernel_value(eddy_sph_kernel k, double r, double h);
 double eddy_sph_kernel_derivative(eddy_sph_kernel k, double r, double h);
 double eddy_sph_kernel_laplacian(eddy_sph_kernel k, double r, double h);
 /* Sum of W over a simple cubic lattice of the given spacing around a lattice
- * point (itself included), 1/m^3: the calibrated particle mass is rho0 / sum. */
+ * point (itself included), 1/m^3: the calibrated particle mass is rho0 / sum.
+ * This and the moment below return 0 for spacing or h <= 0 and NaN for
+ * h > 100 spacings. */
 double eddy_sph_lattice_sum(eddy_sph_kernel k, double spacing, double h);
 /* First moment of the kernel gradient over the same lattice (the point itself
  * excluded), sum_j spacing^3 x_j^2 |dW/dr|(r_j) / r_j, dimensionless: 1 in

@@ -501,6 +501,7 @@ static void null_arguments_are_refused(void)
 	CHECK(eddy_world_system_count(NULL) == 0);
 	CHECK(is_null_system(eddy_world_system_at(NULL, 0)));
 	CHECK(eddy_world_system_info(NULL, EDDY_NULL_SYSTEM, &si) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_system_info(w, EDDY_NULL_SYSTEM, NULL) == EDDY_ERR_INVALID);
 	CHECK(!eddy_system_valid(NULL, EDDY_NULL_SYSTEM));
 	CHECK(eddy_world_remove_system(NULL, EDDY_NULL_SYSTEM) == EDDY_ERR_INVALID);
 	char plan[16] = "untouched";
@@ -547,6 +548,9 @@ static void null_arguments_are_refused(void)
 	CHECK_ADDER(render_points);
 	CHECK_ADDER(export_particles);
 	CHECK(eddy_sph_particle_mass(NULL, EDDY_NULL_SYSTEM) == 0);
+	/* not pointers, but a mistaken lattice must not hang the host */
+	CHECK(isnan(eddy_sph_lattice_sum(EDDY_SPH_POLY6, 1e-9, 1)));
+	CHECK(isnan(eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, 1e-9, 1)));
 
 	/* colliders */
 	eddy_collide_box_def bd = eddy_default_collide_box_def();
