@@ -26,6 +26,7 @@
  * called from a callback return EDDY_ERR_INVALID (or EDDY_NULL_SYSTEM) with
  * "<function> called from inside a frame callback" (or step, limit callback).
  * Adding and removing particles and moving colliders stay allowed.
+ * eddy_destroy_world called from a callback does nothing (the world is in use).
  */
 #ifndef EDDY_H
 #define EDDY_H

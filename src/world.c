@@ -181,6 +181,10 @@ void eddy_destroy_world(eddy_world *w)
 {
 	if (!w)
 		return;
+	/* the step running the callback still uses the world: refused (the world
+	 * lives on, and its error says why) rather than freed under the step */
+	if (eddy__refuse_busy(w, "eddy_destroy_world"))
+		return;
 	for (int i = w->order_count - 1; i >= 0; --i)
 		eddy__system_free(w, &w->slots[w->order[i]]);
 	eddy__columns_free(w);

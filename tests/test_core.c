@@ -612,6 +612,7 @@ static void try_reentry(eddy_world *w, reentry *r)
 	r->remove = eddy_world_remove_system(w, r->self);
 	r->load = eddy_world_load(w, "/nonexistent/eddy.ckpt", 0);
 	r->threads = eddy_world_set_threads(w, 2);
+	eddy_destroy_world(w); /* refused: the step still uses the world */
 	/* reading stays allowed */
 	r->time_seen = eddy_world_time(w);
 	eddy_frame_stats fs;
