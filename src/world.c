@@ -785,6 +785,23 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 		}
 	}
 
+	/* emitted particles that nothing moves: a scene without integrate (or
+	 * flip_advect) runs, and its fluid hangs in the air */
+	bool emits = false, moves = false;
+	for (int k = 0; k < w->order_count; ++k) {
+		const eddy_system *s = &w->slots[w->order[k]];
+		if (s->vt->spacing) {
+			emits = true;
+			continue;
+		}
+		for (int j = 0; j < s->write_count; ++j)
+			moves = moves || s->writes[j] == COL_X_;
+	}
+	if (emits && !moves)
+		eddy__report(report, user, EDDY_CHECK_WARNING,
+		             "pipeline: no system moves the particles (none writes x after emitting); add integrate "
+		             "(flip_advect for FLIP)");
+
 	/* the kinds' own checks (SPH spacing against the emitters, ...) */
 	for (int k = 0; k < w->order_count; ++k) {
 		const eddy_system *s = &w->slots[w->order[k]];

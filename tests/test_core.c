@@ -736,6 +736,24 @@ static void check_catches_scene_mistakes(void)
 	CHECK_HAS(f.text, "sph_density: 'radius' 0.011 m is 1.10 x 'spacing' 0.01 m, below 1.2");
 	eddy_destroy_world(w);
 
+	/* a block emitted after the run, and nothing to move it */
+	w = spacing_world(0.01f, 30, 2);
+	eddy_emit_box_def late = eddy_default_emit_box_def();
+	late.start = 2.5;
+	CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &late)));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 0);
+	CHECK_HAS(f.text, "emit_box#2: 'start' is 2.5 s, not before the end of the run (duration 2 s): it emits nothing");
+	CHECK_HAS(f.text, "pipeline: no system moves the particles");
+	eddy_gravity_def gr = eddy_default_gravity_def();
+	eddy_add_gravity(w, &gr);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	CHECK(eddy_system_valid(w, eddy_add_integrate(w, &it)));
+	memset(&f, 0, sizeof f);
+	eddy_world_check(w, collect, &f);
+	CHECK(strstr(f.text, "no system moves") == NULL);
+	eddy_destroy_world(w);
+
 	/* fps 0.5 for a 0.2 s run: one 2 s frame, 10 times the run */
 	w = spacing_world(0.01f, 0.5, 0.2);
 	memset(&f, 0, sizeof f);
