@@ -422,7 +422,10 @@ void eddy_world_set_rest_density(eddy_world *w, float rho0);
 eddy_status eddy_world_save(eddy_world *w, const char *path, uint64_t fingerprint);
 /* Restores what eddy_world_save wrote into a world built by the same scene.
  * A truncated, corrupted, foreign or other-version file is rejected with
- * EDDY_ERR_IO and a message saying which, and the world is left unchanged. */
+ * EDDY_ERR_IO and a message saying which, and the world is left unchanged;
+ * so is one whose checksum holds but whose clock or counts no run of this
+ * world reaches (a negative frame, a frame off time * fps, a non-finite time
+ * or dt, ...): the message names the file and the field. */
 eddy_status eddy_world_load(eddy_world *w, const char *path, uint64_t fingerprint);
 
 /* ---- preflight --------------------------------------------------------- */
