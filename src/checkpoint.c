@@ -18,6 +18,7 @@
 #include "core.h"
 
 #include <errno.h>
+#include <math.h>
 #include <fcntl.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -238,10 +239,66 @@ static const unsigned char *skip(reader *r, size_t n)
 	return p;
 }
 
+/* The clock and counts of a checkpoint, checked against what a run of this
+ * world can reach: a file whose checksum holds may still have been crafted,
+ * and a negative frame or a NaN time would run on and fail far from the cause. */
+static eddy_status check_clock(eddy_world *w, const char *path, double time, int frame, int64_t step, double last_dt,
+                               float length_scale, float rest_density, uint64_t n, uint32_t ncols)
+{
+	const double fps = w->def.fps;
+	const char *bad = NULL;
+	char why[160];
+	if (!(isfinite(time) && time >= 0)) {
+		bad = "time";
+		snprintf(why, sizeof why, "%g s, must be finite and >= 0", time);
+	} else if (frame < 0 || frame >= INT32_MAX - 1) {
+		bad = "frame";
+		snprintf(why, sizeof why, "%d, must be in [0, %d)", frame, INT32_MAX - 1);
+	} else if (!(time * fps >= frame - 1e-6 * (frame + 1.0) && time * fps <= frame + 1 + 1e-6 * (frame + 1.0))) {
+		/* frame k ends at k / fps and the clock lands on it exactly; between
+		 * frames the time lies in [frame / fps, (frame + 1) / fps] */
+		bad = "frame";
+		snprintf(why, sizeof why, "%d, inconsistent with time %.9g s at %g fps (frame %.0f expected)", frame, time,
+		         fps, floor(time * fps + 1e-6));
+	} else if (step < frame) {
+		bad = "step";
+		snprintf(why, sizeof why, "%lld, fewer than the %d frames (every frame takes a step)", (long long)step,
+		         frame);
+	} else if (!(isfinite(last_dt) && last_dt >= 0 && last_dt <= w->def.dt_max * (1 + 1e-9))) {
+		bad = "last_dt";
+		snprintf(why, sizeof why, "%g s, must be in [0, dt_max = %g s]", last_dt, w->def.dt_max);
+	} else if (step > 0 && !(last_dt > 0)) {
+		bad = "last_dt";
+		snprintf(why, sizeof why, "%g s after %lld steps, must be > 0", last_dt, (long long)step);
+	} else if (!(isfinite(length_scale) && length_scale >= 0)) {
+		bad = "length_scale";
+		snprintf(why, sizeof why, "%g m, must be finite and >= 0", (double)length_scale);
+	} else if (!(isfinite(rest_density) && rest_density >= 0)) {
+		bad = "rest_density";
+		snprintf(why, sizeof why, "%g kg/m^3, must be finite and >= 0", (double)rest_density);
+	} else if (n > ((uint64_t)1 << 40)) {
+		bad = "particles";
+		snprintf(why, sizeof why, "%llu, more than 2^40", (unsigned long long)n);
+	} else {
+		uint32_t have = 0;
+		for (int c = 0; c < w->column_count; ++c)
+			have += w->columns[c].data != NULL;
+		if (ncols != have) {
+			bad = "columns";
+			snprintf(why, sizeof why, "%u, the world has %u allocated", ncols, have);
+		}
+	}
+	if (!bad)
+		return EDDY_OK;
+	return eddy__fail(w, EDDY_ERR_IO, "checkpoint '%s': field '%s' is %s (crafted or corrupted)", path, bad, why);
+}
+
 eddy_status eddy_world_load(eddy_world *w, const char *path, uint64_t fingerprint)
 {
 	if (!w || !path)
 		return eddy__fail(w, EDDY_ERR_INVALID, "checkpoint: world or path is NULL");
+	if (eddy__refuse_busy(w, "eddy_world_load"))
+		return EDDY_ERR_INVALID;
 	FILE *f = fopen(path, "rb");
 	if (!f)
 		return eddy__fail(w, EDDY_ERR_IO, "checkpoint '%s': cannot open: %s", path, strerror(errno));
@@ -301,14 +358,15 @@ eddy_status eddy_world_load(eddy_world *w, const char *path, uint64_t fingerprin
 	GET(&r, n);
 	uint32_t ncols;
 	GET(&r, ncols);
-	eddy_status st = EDDY_OK;
-	if (n > ((uint64_t)1 << 40) || ncols > EDDY_MAX_COLUMNS)
-		st = eddy__fail(w, EDDY_ERR_IO, "checkpoint '%s': implausible contents", path);
+	eddy_status st = r.short_read ? eddy__fail(w, EDDY_ERR_IO, "checkpoint '%s': malformed payload", path)
+	                              : check_clock(w, path, time, frame, step, last_dt, length_scale, rest_density, n,
+	                                            ncols);
 	struct {
 		int id;
 		const unsigned char *data;
 		uint64_t bytes;
 	} cols[EDDY_MAX_COLUMNS];
+	bool seen[EDDY_MAX_COLUMNS] = {false};
 	for (uint32_t i = 0; st == EDDY_OK && i < ncols; ++i) {
 		char name[EDDY_NAME_MAX + 8];
 		uint8_t dom, type;
@@ -325,8 +383,10 @@ eddy_status eddy_world_load(eddy_world *w, const char *path, uint64_t fingerprin
 		const eddy_column *c = id >= 0 ? &w->columns[id] : NULL;
 		size_t es = type == EDDY_U8 ? 1 : 4;
 		uint64_t expect = c && c->domain == EDDY_DOMAIN_PARTICLE ? n * es : c ? eddy__column_bytes(w, c) : 0;
-		if (!c || !c->data || c->domain != dom || c->type != type || bytes != expect)
+		if (!c || !c->data || c->domain != dom || c->type != type || bytes != expect || seen[id])
 			st = eddy__fail(w, EDDY_ERR_IO, "checkpoint '%s': column '%s' does not fit this world", path, name);
+		else
+			seen[id] = true;
 		cols[i].id = id;
 		cols[i].data = data;
 		cols[i].bytes = bytes;

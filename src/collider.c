@@ -45,6 +45,8 @@ static const eddy_system *collider(const eddy_world *w, eddy_system_id id, const
 
 eddy_status eddy_collider_set_offset(eddy_world *w, eddy_system_id id, eddy_vec3 offset)
 {
+	if (!w)
+		return EDDY_ERR_INVALID;
 	if (!collider(w, id, "collider_set_offset", w))
 		return eddy_system_valid(w, id) ? EDDY_ERR_INVALID : EDDY_ERR_STALE;
 	eddy_system *s = eddy__system_get(w, id);
@@ -59,6 +61,8 @@ eddy_status eddy_collider_set_offset(eddy_world *w, eddy_system_id id, eddy_vec3
 
 eddy_status eddy_collider_get_offset(const eddy_world *w, eddy_system_id id, eddy_vec3 *offset)
 {
+	if (!w || !offset)
+		return EDDY_ERR_INVALID;
 	const eddy_system *s = collider(w, id, "collider_get_offset", NULL);
 	if (!s)
 		return eddy_system_valid(w, id) ? EDDY_ERR_INVALID : EDDY_ERR_STALE;
@@ -68,6 +72,8 @@ eddy_status eddy_collider_get_offset(const eddy_world *w, eddy_system_id id, edd
 
 eddy_status eddy_collider_distance(const eddy_world *w, eddy_system_id id, eddy_vec3 p, float *dist)
 {
+	if (!w || !dist)
+		return EDDY_ERR_INVALID;
 	const eddy_system *s = collider(w, id, "collider_distance", NULL);
 	if (!s)
 		return eddy_system_valid(w, id) ? EDDY_ERR_INVALID : EDDY_ERR_STALE;

@@ -244,7 +244,7 @@ void eddy__permute_particles(eddy_world *w, const uint32_t *perm, void *scratch)
 
 /* ---- public access ------------------------------------------------------- */
 
-int eddy_world_column_count(const eddy_world *w) { return w->column_count; }
+int eddy_world_column_count(const eddy_world *w) { return w ? w->column_count : 0; }
 
 eddy_column_id eddy_world_find_column(const eddy_world *w, const char *name)
 {
@@ -258,7 +258,7 @@ eddy_column_id eddy_world_find_column(const eddy_world *w, const char *name)
 
 eddy_status eddy_world_column_info(const eddy_world *w, eddy_column_id id, eddy_column_info *out)
 {
-	if (id < 0 || id >= w->column_count || !out)
+	if (!w || !out || id < 0 || id >= w->column_count)
 		return EDDY_ERR_INVALID;
 	const eddy_column *c = &w->columns[id];
 	out->name = c->name;
@@ -274,6 +274,8 @@ eddy_status eddy_world_column_info(const eddy_world *w, eddy_column_id id, eddy_
 eddy_column_id eddy_world_declare_column(eddy_world *w, const char *name, eddy_domain domain,
                                          eddy_type type, eddy_lifetime lifetime, const char *unit)
 {
+	if (!w)
+		return -1;
 	if (!name || !name[0] || strlen(name) >= EDDY_NAME_MAX) {
 		eddy__fail(w, EDDY_ERR_INVALID, "column name must be 1 to %d characters", EDDY_NAME_MAX - 1);
 		return -1;
@@ -328,7 +330,7 @@ const uint8_t *eddy_world_channel_u8(const eddy_world *w, const char *name, size
 	return channel(w, name, count, EDDY_U8);
 }
 
-size_t eddy_world_particle_count(const eddy_world *w) { return w->n; }
+size_t eddy_world_particle_count(const eddy_world *w) { return w ? w->n : 0; }
 
 eddy_status eddy_world_add_particles(eddy_world *w, size_t count, const eddy_vec3 *pos, const eddy_vec3 *vel)
 {
@@ -364,6 +366,8 @@ eddy_status eddy_world_add_particles(eddy_world *w, size_t count, const eddy_vec
 
 eddy_status eddy_world_remove_particle(eddy_world *w, size_t i)
 {
+	if (!w)
+		return EDDY_ERR_INVALID;
 	if (i >= w->n)
 		return eddy__fail(w, EDDY_ERR_INVALID, "remove_particle: index %zu out of range (%zu particles)", i, w->n);
 	const size_t last = w->n - 1;
@@ -381,6 +385,8 @@ eddy_status eddy_world_remove_particle(eddy_world *w, size_t i)
 eddy_grid_info eddy_world_grid(const eddy_world *w)
 {
 	eddy_grid_info g = {0};
+	if (!w)
+		return g;
 	g.allocated = w->grid_allocated;
 	g.nx = w->nx;
 	g.ny = w->ny;

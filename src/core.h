@@ -29,6 +29,11 @@ typedef struct eddy_system_vtable {
 	/* emitters: positions of the first emission, for preflight; returns the count
 	 * written (up to cap) */
 	size_t (*sample)(const eddy_world *w, const eddy_system *s, eddy_vec3 *out, size_t cap);
+	/* emitters: the lattice spacing they emit at (m), for the preflight */
+	float (*spacing)(const eddy_system *s);
+	/* the kind's own preflight findings (eddy_world_check), one line each;
+	 * returns the number of EDDY_CHECK_ERROR findings it reported */
+	int (*check)(eddy_world *w, const eddy_system *s, eddy_check_fn report, void *user);
 	/* colliders: signed distance to the solid, < 0 inside it */
 	float (*distance)(const eddy_system *s, eddy_vec3 p);
 	/* columns the kind writes, ending in -1; names the fix in order errors */
@@ -87,6 +92,10 @@ typedef struct eddy_extra_stat {
 struct eddy_world {
 	eddy_world_def def;
 	char error[EDDY_ERROR_MAX];
+	/* Non-NULL while a step, advance or check runs systems' or hosts' code:
+	 * names what runs ("a step callback", "a frame callback", ...). Calls that
+	 * would change the clock or the pipeline under that code are refused. */
+	const char *busy;
 
 	/* clock */
 	double time;
@@ -138,6 +147,13 @@ eddy_status eddy__fail(eddy_world *w, eddy_status s, const char *fmt, ...)
 	__attribute__((format(printf, 3, 4)))
 #endif
 	;
+
+/* Refuses a call that changes the clock or the pipeline while w->busy: sets
+ * the error ("<fn> called from inside <what>") and returns true. */
+bool eddy__refuse_busy(eddy_world *w, const char *fn);
+/* The checks every eddy_add_* starts with: a world, a def, and no step
+ * running. False with the world error set (when there is a world). */
+bool eddy__add_args(eddy_world *w, const void *def, const char *sys);
 
 /* columns (columns.c) */
 void eddy__columns_init(eddy_world *w);
@@ -192,6 +208,12 @@ bool eddy__check_box(eddy_world *w, const char *sys, eddy_vec3 lo, eddy_vec3 hi)
 bool eddy__check_unit(eddy_world *w, const char *sys, const char *field, eddy_vec3 *v);
 
 void eddy__note_length_scale(eddy_world *w, float h);
+/* One preflight finding, printf style (eddy_world_check and the kinds' check). */
+void eddy__report(eddy_check_fn report, void *user, eddy_check_level level, const char *fmt, ...)
+#if defined(__GNUC__)
+	__attribute__((format(printf, 4, 5)))
+#endif
+	;
 double eddy__now_ms(void);
 
 /* collider helpers (collider.c) */

@@ -9,6 +9,24 @@
  * stale one is detected. Functions that can fail return an eddy_status and leave
  * a one-line message in eddy_world_error(). The library never exits or aborts on
  * user input.
+ *
+ * NULL arguments: every function checks its pointers. A NULL world, def,
+ * name, path or out-pointer makes a status function return EDDY_ERR_INVALID
+ * (with a message in eddy_world_error(w) when w is not NULL), an eddy_add_*
+ * return EDDY_NULL_SYSTEM, a getter return a neutral value: 0 for counts and
+ * hashes, NaN for times (eddy_world_time, frame_time, last_dt), NULL for
+ * pointers, < 0 for column ids, EDDY_NULL_SYSTEM for handles; functions
+ * returning void do nothing. Pointers documented as optional (vel, err, a
+ * plan's buf with cap 0, a channel's count) may be NULL.
+ *
+ * Re-entrancy: while the world runs systems' and hosts' code (custom step,
+ * frame and limit callbacks, the renderer), that code may read the world but
+ * not step it, load a checkpoint or change its pipeline: eddy_world_step,
+ * step_frame, advance, load, set_threads, remove_system and every eddy_add_*
+ * called from a callback return EDDY_ERR_INVALID (or EDDY_NULL_SYSTEM) with
+ * "<function> called from inside a frame callback" (or step, limit callback).
+ * Adding and removing particles and moving colliders stay allowed.
+ * eddy_destroy_world called from a callback does nothing (the world is in use).
  */
 #ifndef EDDY_H
 #define EDDY_H
@@ -404,7 +422,10 @@ void eddy_world_set_rest_density(eddy_world *w, float rho0);
 eddy_status eddy_world_save(eddy_world *w, const char *path, uint64_t fingerprint);
 /* Restores what eddy_world_save wrote into a world built by the same scene.
  * A truncated, corrupted, foreign or other-version file is rejected with
- * EDDY_ERR_IO and a message saying which, and the world is left unchanged. */
+ * EDDY_ERR_IO and a message saying which, and the world is left unchanged;
+ * so is one whose checksum holds but whose clock or counts no run of this
+ * world reaches (a negative frame, a frame off time * fps, a non-finite time
+ * or dt, ...): the message names the file and the field. */
 eddy_status eddy_world_load(eddy_world *w, const char *path, uint64_t fingerprint);
 
 /* ---- preflight --------------------------------------------------------- */
@@ -413,7 +434,11 @@ typedef enum eddy_check_level { EDDY_CHECK_INFO, EDDY_CHECK_WARNING, EDDY_CHECK_
 typedef void (*eddy_check_fn)(eddy_check_level level, const char *message, void *user);
 
 /* Reports time-step limits, particles starting inside colliders and a memory
- * estimate; returns the number of EDDY_CHECK_ERROR findings. */
+ * estimate, and scene mistakes that would run but give a wrong answer (an
+ * emitter spacing other than the one sph_density calibrates its mass on, a
+ * first frame longer than the run, ...); returns the number of
+ * EDDY_CHECK_ERROR findings. report may be NULL to only count; a NULL world
+ * counts as one error. */
 int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user);
 
 /* ---- SPH (sys_sph_*.c) ------------------------------------------------- */
@@ -434,7 +459,9 @@ double eddy_sph_kernel_value(eddy_sph_kernel k, double r, double h);
 double eddy_sph_kernel_derivative(eddy_sph_kernel k, double r, double h);
 double eddy_sph_kernel_laplacian(eddy_sph_kernel k, double r, double h);
 /* Sum of W over a simple cubic lattice of the given spacing around a lattice
- * point (itself included), 1/m^3: the calibrated particle mass is rho0 / sum. */
+ * point (itself included), 1/m^3: the calibrated particle mass is rho0 / sum.
+ * This and the moment below return 0 for spacing or h <= 0 and NaN for
+ * h > 100 spacings. */
 double eddy_sph_lattice_sum(eddy_sph_kernel k, double spacing, double h);
 /* First moment of the kernel gradient over the same lattice (the point itself
  * excluded), sum_j spacing^3 x_j^2 |dW/dr|(r_j) / r_j, dimensionless: 1 in

@@ -109,6 +109,10 @@ static void make_label(eddy_world *w, eddy_system *s)
 static eddy_system_id add_system_named(eddy_world *w, const eddy_system_vtable *vt, const char *name, void *data,
                                        const int *reads, int read_count, const int *writes, int write_count)
 {
+	if (eddy__refuse_busy(w, "adding a system")) {
+		free(data);
+		return EDDY_NULL_SYSTEM;
+	}
 	int slot = -1;
 	for (int i = 0; i < w->slot_count; ++i)
 		if (!w->slots[i].live) {
@@ -177,6 +181,10 @@ static eddy_system_id add_system_named(eddy_world *w, const eddy_system_vtable *
 eddy_system_id eddy__add_system(eddy_world *w, const eddy_system_vtable *vt, void *data, const int *reads,
                                 int read_count, const int *writes, int write_count)
 {
+	if (!w) {
+		free(data);
+		return EDDY_NULL_SYSTEM;
+	}
 	if (!data) {
 		eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", vt->name);
 		return EDDY_NULL_SYSTEM;
@@ -186,6 +194,10 @@ eddy_system_id eddy__add_system(eddy_world *w, const eddy_system_vtable *vt, voi
 
 eddy_status eddy_world_remove_system(eddy_world *w, eddy_system_id id)
 {
+	if (!w)
+		return EDDY_ERR_INVALID;
+	if (eddy__refuse_busy(w, "eddy_world_remove_system"))
+		return EDDY_ERR_INVALID;
 	eddy_system *s = eddy__system_get(w, id);
 	if (!s)
 		return eddy__fail(w, EDDY_ERR_STALE, "remove_system: stale or invalid system handle");
@@ -213,11 +225,11 @@ eddy_status eddy_world_remove_system(eddy_world *w, eddy_system_id id)
 	return EDDY_OK;
 }
 
-int eddy_world_system_count(const eddy_world *w) { return w->order_count; }
+int eddy_world_system_count(const eddy_world *w) { return w ? w->order_count : 0; }
 
 eddy_system_id eddy_world_system_at(const eddy_world *w, int i)
 {
-	if (i < 0 || i >= w->order_count)
+	if (!w || i < 0 || i >= w->order_count)
 		return EDDY_NULL_SYSTEM;
 	int slot = w->order[i];
 	return (eddy_system_id){(uint16_t)slot, w->slots[slot].generation};
@@ -225,8 +237,10 @@ eddy_system_id eddy_world_system_at(const eddy_world *w, int i)
 
 eddy_status eddy_world_system_info(const eddy_world *w, eddy_system_id id, eddy_system_info *out)
 {
+	if (!w || !out)
+		return EDDY_ERR_INVALID;
 	const eddy_system *s = eddy__system_peek(w, id);
-	if (!s || !out)
+	if (!s)
 		return EDDY_ERR_STALE;
 	out->name = s->name;
 	out->label = s->label;
@@ -309,11 +323,8 @@ static bool resolve_names(eddy_world *w, const char *sys, const char *const *nam
 
 eddy_system_id eddy_add_custom_system(eddy_world *w, const eddy_custom_system_def *def)
 {
-	if (!w || !def) {
-		if (w)
-			eddy__fail(w, EDDY_ERR_INVALID, "custom system: def is NULL");
+	if (!eddy__add_args(w, def, "custom_system"))
 		return EDDY_NULL_SYSTEM;
-	}
 	const char *name = def->name ? def->name : "";
 	if (!name[0] || strlen(name) >= EDDY_NAME_MAX) {
 		eddy__fail(w, EDDY_ERR_INVALID, "custom system: 'name' must be 1 to %d characters", EDDY_NAME_MAX - 1);
@@ -381,9 +392,13 @@ static void human_bytes(double b, char *out, size_t cap)
 
 size_t eddy_world_plan(const eddy_world *w, char *buf, size_t cap)
 {
+	if (!buf)
+		cap = 0;
 	sbuf b = {buf, cap, 0};
 	if (cap)
 		buf[0] = '\0';
+	if (!w)
+		return 0;
 	sb_printf(&b, "pipeline: %d system%s, run in this order every step\n", w->order_count, w->order_count == 1 ? "" : "s");
 	int64_t expected = 0;
 	bool unbounded = false;
@@ -493,9 +508,13 @@ static int producer_of(const eddy_world *w, int col, int pos, bool previous_step
 
 size_t eddy_world_plan_dot(const eddy_world *w, char *buf, size_t cap)
 {
+	if (!buf)
+		cap = 0;
 	sbuf b = {buf, cap, 0};
 	if (cap)
 		buf[0] = '\0';
+	if (!w)
+		return 0;
 	sb_printf(&b, "digraph eddy {\n  rankdir=LR;\n  node [shape=box, style=\"rounded,filled\", fillcolor=\"#eef4fb\", fontname=\"Helvetica\"];\n");
 	sb_printf(&b, "  edge [fontname=\"Helvetica\", fontsize=10];\n");
 	for (int k = 0; k < w->order_count; ++k)

@@ -68,6 +68,8 @@ double eddy_sph_lattice_sum(eddy_sph_kernel k, double spacing, double h)
 {
 	if (!(spacing > 0) || !(h > 0))
 		return 0;
+	if (!(h / spacing <= 100))
+		return NAN; /* (2 h / spacing)^3 terms: a mistaken argument must not hang the host */
 	const int m = (int)ceil(h / spacing);
 	double sum = 0;
 	for (int i = -m; i <= m; ++i)
@@ -85,6 +87,8 @@ double eddy_sph_lattice_gradient_moment(eddy_sph_kernel k, double spacing, doubl
 {
 	if (!(spacing > 0) || !(h > 0))
 		return 0;
+	if (!(h / spacing <= 100))
+		return NAN; /* (2 h / spacing)^3 terms: a mistaken argument must not hang the host */
 	const int m = (int)ceil(h / spacing);
 	const double vol = spacing * spacing * spacing;
 	double sum = 0;

@@ -117,8 +117,8 @@ const eddy_system_vtable eddy__kind_collide_box = {
 eddy_system_id eddy_add_collide_box(eddy_world *w, const eddy_collide_box_def *def)
 {
 	const char *sys = "collide_box";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_box(w, sys, def->min, def->max) || !eddy__check_response(w, sys, def->response))
 		return EDDY_NULL_SYSTEM;
 	collide_box *b = calloc(1, sizeof *b);

@@ -65,8 +65,8 @@ const eddy_system_vtable eddy__kind_collide_plane = {
 eddy_system_id eddy_add_collide_plane(eddy_world *w, const eddy_collide_plane_def *def)
 {
 	const char *sys = "collide_plane";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	eddy_vec3 nrm = def->normal;
 	if (!eddy__check_vec3(w, sys, "point", def->point) || !eddy__check_unit(w, sys, "normal", &nrm) ||
 	    !eddy__check_response(w, sys, def->response))

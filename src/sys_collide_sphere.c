@@ -75,8 +75,8 @@ const eddy_system_vtable eddy__kind_collide_sphere = {
 eddy_system_id eddy_add_collide_sphere(eddy_world *w, const eddy_collide_sphere_def *def)
 {
 	const char *sys = "collide_sphere";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_vec3(w, sys, "center", def->center) || !eddy__check_positive(w, sys, "radius", def->radius) ||
 	    !eddy__check_response(w, sys, def->response))
 		return EDDY_NULL_SYSTEM;

@@ -144,20 +144,38 @@ static void *state(eddy_world *w, eddy_system *s, size_t *size)
 	return &e->done;
 }
 
+/* Preflight: an emitter starting when the run is over emits nothing. A
+ * warning: eddy run --duration may run longer than the scene's duration. */
+static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void *user)
+{
+	const emit_box *e = s->data;
+	const double duration = w->def.duration;
+	if (duration > 0 && e->def.start >= duration)
+		eddy__report(report, user, EDDY_CHECK_WARNING,
+		             "%s: 'start' is %g s, not before the end of the run (duration %g s): it emits nothing; set "
+		             "start < %g",
+		             s->label, e->def.start, duration, duration);
+	return 0;
+}
+
+static float spacing(const eddy_system *s) { return ((const emit_box *)s->data)->def.spacing; }
+
 const eddy_system_vtable eddy__kind_emit_box = {
 	.name = "emit_box",
 	.state = state,
 	.step = step,
 	.expected_particles = expected,
 	.sample = sample,
+	.spacing = spacing,
+	.check = check,
 	.default_writes = box_writes,
 };
 
 eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def)
 {
 	const char *sys = "emit_box";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_box(w, sys, def->min, def->max) || !eddy__check_positive(w, sys, "spacing", def->spacing) ||
 	    !eddy__check_range(w, sys, "jitter", def->jitter, 0, 0.5) ||
 	    !eddy__check_vec3(w, sys, "velocity", def->velocity) || !eddy__check_nonneg(w, sys, "start", def->start))

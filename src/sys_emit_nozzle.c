@@ -166,6 +166,22 @@ static void *state(eddy_world *w, eddy_system *s, size_t *size)
 	return &e->run;
 }
 
+/* Preflight: an emitter starting when the run is over emits nothing. A
+ * warning: eddy run --duration may run longer than the scene's duration. */
+static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void *user)
+{
+	const emit_nozzle *e = s->data;
+	const double duration = w->def.duration;
+	if (duration > 0 && e->def.start >= duration)
+		eddy__report(report, user, EDDY_CHECK_WARNING,
+		             "%s: 'start' is %g s, not before the end of the run (duration %g s): it emits nothing; set "
+		             "start < %g",
+		             s->label, e->def.start, duration, duration);
+	return 0;
+}
+
+static float spacing(const eddy_system *s) { return ((const emit_nozzle *)s->data)->def.spacing; }
+
 const eddy_system_vtable eddy__kind_emit_nozzle = {
 	.name = "emit_nozzle",
 	.state = state,
@@ -173,14 +189,16 @@ const eddy_system_vtable eddy__kind_emit_nozzle = {
 	.limit = limit,
 	.expected_particles = expected,
 	.sample = sample,
+	.spacing = spacing,
+	.check = check,
 	.default_writes = nozzle_writes,
 };
 
 eddy_system_id eddy_add_emit_nozzle(eddy_world *w, const eddy_emit_nozzle_def *def)
 {
 	const char *sys = "emit_nozzle";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	eddy_vec3 dir = def->direction;
 	if (!eddy__check_vec3(w, sys, "center", def->center) || !eddy__check_positive(w, sys, "radius", def->radius) ||
 	    !eddy__check_unit(w, sys, "direction", &dir) || !eddy__check_positive(w, sys, "speed", def->speed) ||

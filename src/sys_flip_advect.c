@@ -106,8 +106,8 @@ const eddy_system_vtable eddy__kind_flip_advect = {
 eddy_system_id eddy_add_flip_advect(eddy_world *w, const eddy_flip_advect_def *def)
 {
 	const char *sys = "flip_advect";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_range(w, sys, "wall_gap", def->wall_gap, 0, 0.5))
 		return EDDY_NULL_SYSTEM;
 	advect *ad = malloc(sizeof *ad);

@@ -113,8 +113,8 @@ const eddy_system_vtable eddy__kind_flip_boundary = {
 eddy_system_id eddy_add_flip_boundary(eddy_world *w, const eddy_flip_boundary_def *def)
 {
 	const char *sys = "flip_boundary";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_nonneg(w, sys, "margin", def->margin) || !eddy__check_finite(w, sys, "margin", def->margin))
 		return EDDY_NULL_SYSTEM;
 	boundary *b = malloc(sizeof *b);

@@ -168,8 +168,8 @@ const eddy_system_vtable eddy__kind_flip_extrapolate = {
 eddy_system_id eddy_add_flip_extrapolate(eddy_world *w, const eddy_flip_extrapolate_def *def)
 {
 	const char *sys = "flip_extrapolate";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (def->layers < 1 || def->layers > 64) {
 		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'layers' must be in [1, 64] (got %d)", sys, def->layers);
 		return EDDY_NULL_SYSTEM;

@@ -56,8 +56,8 @@ const eddy_system_vtable eddy__kind_flip_g2p = {
 eddy_system_id eddy_add_flip_g2p(eddy_world *w, const eddy_flip_g2p_def *def)
 {
 	const char *sys = "flip_g2p";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_range(w, sys, "flip_ratio", def->flip_ratio, 0, 1))
 		return EDDY_NULL_SYSTEM;
 	g2p *g = malloc(sizeof *g);

@@ -150,8 +150,8 @@ const eddy_system_vtable eddy__kind_flip_p2g = {
 eddy_system_id eddy_add_flip_p2g(eddy_world *w, const eddy_flip_p2g_def *def)
 {
 	const char *sys = "flip_p2g";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_range(w, sys, "mark_radius", def->mark_radius, 0, 1.5))
 		return EDDY_NULL_SYSTEM;
 	p2g *pg = malloc(sizeof *pg);

@@ -313,8 +313,8 @@ const eddy_system_vtable eddy__kind_flip_pressure = {
 eddy_system_id eddy_add_flip_pressure(eddy_world *w, const eddy_flip_pressure_def *def)
 {
 	const char *sys = "flip_pressure";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (def->solver != EDDY_FLIP_PCG && def->solver != EDDY_FLIP_CHOLMOD) {
 		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'solver' must be \"pcg\" or \"cholmod\" (got %d)", sys, (int)def->solver);
 		return EDDY_NULL_SYSTEM;

@@ -104,8 +104,8 @@ const eddy_system_vtable eddy__kind_flip_reseed = {
 eddy_system_id eddy_add_flip_reseed(eddy_world *w, const eddy_flip_reseed_def *def)
 {
 	const char *sys = "flip_reseed";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (def->min_per_cell < 1 || def->max_per_cell <= def->min_per_cell) {
 		eddy__fail(w, EDDY_ERR_INVALID, "%s: need 1 <= 'min_per_cell' < 'max_per_cell' (got %d, %d)", sys,
 		           def->min_per_cell, def->max_per_cell);

@@ -91,8 +91,8 @@ const eddy_system_vtable eddy__kind_flip_surface = {
 eddy_system_id eddy_add_flip_surface(eddy_world *w, const eddy_flip_surface_def *def)
 {
 	const char *sys = "flip_surface";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!(def->sigma > 0 && def->sigma <= 4)) {
 		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'sigma' must be in (0, 4] cells (got %g)", sys, (double)def->sigma);
 		return EDDY_NULL_SYSTEM;

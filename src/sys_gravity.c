@@ -44,8 +44,8 @@ const eddy_system_vtable eddy__kind_gravity = {
 eddy_system_id eddy_add_gravity(eddy_world *w, const eddy_gravity_def *def)
 {
 	const char *sys = "gravity";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_finite(w, sys, "scale", def->scale))
 		return EDDY_NULL_SYSTEM;
 	gravity *g = malloc(sizeof *g);

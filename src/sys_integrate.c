@@ -81,8 +81,8 @@ const eddy_system_vtable eddy__kind_integrate = {
 eddy_system_id eddy_add_integrate(eddy_world *w, const eddy_integrate_def *def)
 {
 	const char *sys = "integrate";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!(def->max_speed > 0)) {
 		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'max_speed' must be > 0 m/s (got %g)", sys, (double)def->max_speed);
 		return EDDY_NULL_SYSTEM;

@@ -68,8 +68,8 @@ const eddy_system_vtable eddy__kind_sph_boundary_box = {
 eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_boundary_box_def *def)
 {
 	const char *sys = "sph_boundary_box";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_box(w, sys, def->min, def->max) || !eddy__check_positive(w, sys, "spacing", def->spacing))
 		return EDDY_NULL_SYSTEM;
 	const float ext[3] = {def->max.x - def->min.x, def->max.y - def->min.y, def->max.z - def->min.z};

@@ -170,12 +170,54 @@ static void *state(eddy_world *w, eddy_system *s, size_t *size)
 	return sd->sh.nb.bp;
 }
 
+/* Preflight: the mass is calibrated on def.spacing, so every emitter must emit
+ * on that lattice; an emitter at spacing d starts the fluid at about
+ * (spacing / d)^3 times rho0, which the pressure then collapses or blows
+ * apart. h / spacing below 1.2 leaves the nearest neighbours almost outside
+ * the kernel (no pressure between them); above 4 it costs (h / spacing)^3
+ * neighbours for no accuracy. */
+static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void *user)
+{
+	const sph_density *sd = s->data;
+	const double dx = sd->def.spacing, h = sd->def.radius;
+	int errors = 0;
+	for (int k = 0; k < w->order_count; ++k) {
+		const eddy_system *e = &w->slots[w->order[k]];
+		if (!e->vt->spacing)
+			continue;
+		const double de = e->vt->spacing(e);
+		if (fabs(de / dx - 1) <= 1e-3)
+			continue;
+		const double start = pow(dx / de, 3);
+		eddy__report(report, user, EDDY_CHECK_ERROR,
+		             "%s: 'spacing' is %g m but %s emits at spacing %g m: the particle mass is calibrated on %g m, "
+		             "so the fluid starts at %.2f x rest density and %s; set %s's spacing = %g (and radius = %g)",
+		             s->label, dx, e->label, de, dx, start, start < 1 ? "collapses" : "blows apart", s->label, de,
+		             2 * de);
+		errors++;
+	}
+	if (h / dx < 1.2) {
+		eddy__report(report, user, EDDY_CHECK_ERROR,
+		             "%s: 'radius' %g m is %.2f x 'spacing' %g m, below 1.2: the nearest neighbours barely reach "
+		             "into the kernel and the pressure cannot hold the fluid; use radius = 2 x spacing = %g m",
+		             s->label, h, h / dx, dx, 2 * dx);
+		errors++;
+	} else if (h / dx > 4) {
+		eddy__report(report, user, EDDY_CHECK_WARNING,
+		             "%s: 'radius' %g m is %.2f x 'spacing' %g m, above 4: about %.0f neighbours per particle for "
+		             "no accuracy; radius = 2 x spacing = %g m is usual",
+		             s->label, h, h / dx, dx, 4.19 * pow(h / dx, 3), 2 * dx);
+	}
+	return errors;
+}
+
 const eddy_system_vtable eddy__kind_sph_density = {
 	.name = "sph_density",
 	.step = step,
 	.state = state,
 	.destroy = destroy,
 	.default_writes = density_writes,
+	.check = check,
 };
 
 float eddy_sph_particle_mass(const eddy_world *w, eddy_system_id id)
@@ -189,8 +231,8 @@ float eddy_sph_particle_mass(const eddy_world *w, eddy_system_id id)
 eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *def)
 {
 	const char *sys = "sph_density";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_positive(w, sys, "spacing", def->spacing) || !eddy__check_positive(w, sys, "radius", def->radius) ||
 	    !eddy__check_positive(w, sys, "rest_density", def->rest_density) ||
 	    !eddy__check_positive(w, sys, "stiffness", def->stiffness) ||

@@ -944,8 +944,8 @@ const eddy_system_vtable eddy__kind_sph_dfsph = {
 eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 {
 	const char *sys = "sph_dfsph";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_positive(w, sys, "max_density_error", def->max_density_error) ||
 	    !eddy__check_range(w, sys, "max_density_error", def->max_density_error, 0, 0.1) ||
 	    !eddy__check_positive(w, sys, "max_divergence_error", def->max_divergence_error) ||

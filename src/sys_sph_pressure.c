@@ -380,8 +380,8 @@ const eddy_system_vtable eddy__kind_sph_pressure = {
 eddy_system_id eddy_add_sph_pressure(eddy_world *w, const eddy_sph_pressure_def *def)
 {
 	const char *sys = "sph_pressure";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_positive(w, sys, "scale", def->scale))
 		return EDDY_NULL_SYSTEM;
 	sph_pressure *sp = malloc(sizeof *sp);

@@ -356,8 +356,8 @@ const eddy_system_vtable eddy__kind_sph_viscosity = {
 eddy_system_id eddy_add_sph_viscosity(eddy_world *w, const eddy_sph_viscosity_def *def)
 {
 	const char *sys = "sph_viscosity";
-	if (!def)
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_nonneg(w, sys, "viscosity", def->viscosity) || !eddy__check_finite(w, sys, "viscosity", def->viscosity) ||
 	    !eddy__check_range(w, sys, "artificial", def->artificial, 0, 2))
 		return EDDY_NULL_SYSTEM;

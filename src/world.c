@@ -6,6 +6,7 @@
  * then check that no particle left the bounds. */
 #define _POSIX_C_SOURCE 200809L
 #include "core.h"
+#include "systems.h"
 
 #include <float.h>
 #include <stdio.h>
@@ -55,6 +56,8 @@ eddy_status eddy__fail(eddy_world *w, eddy_status s, const char *fmt, ...)
 
 eddy_status eddy_world_fail(eddy_world *w, eddy_status status, const char *fmt, ...)
 {
+	if (!fmt)
+		return eddy__fail(w, status, "(no message)");
 	va_list ap;
 	va_start(ap, fmt);
 	vfail(w, status, fmt, ap);
@@ -63,6 +66,30 @@ eddy_status eddy_world_fail(eddy_world *w, eddy_status status, const char *fmt, 
 }
 
 const char *eddy_world_error(const eddy_world *w) { return w ? w->error : "no world"; }
+
+bool eddy__refuse_busy(eddy_world *w, const char *fn)
+{
+	if (!w->busy)
+		return false;
+	eddy__fail(w, EDDY_ERR_INVALID,
+	           "%s called from inside %s: a callback may read the world but not step it, load it or change its "
+	           "pipeline; do that after the step or frame returns",
+	           fn, w->busy);
+	return true;
+}
+
+bool eddy__add_args(eddy_world *w, const void *def, const char *sys)
+{
+	if (!w)
+		return false;
+	if (!def) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys);
+		return false;
+	}
+	char fn[EDDY_NAME_MAX + 16];
+	snprintf(fn, sizeof fn, "eddy_add_%s", sys);
+	return !eddy__refuse_busy(w, fn);
+}
 
 eddy_world_def eddy_default_world_def(void)
 {
@@ -154,6 +181,10 @@ void eddy_destroy_world(eddy_world *w)
 {
 	if (!w)
 		return;
+	/* the step running the callback still uses the world: refused (the world
+	 * lives on, and its error says why) rather than freed under the step */
+	if (eddy__refuse_busy(w, "eddy_destroy_world"))
+		return;
 	for (int i = w->order_count - 1; i >= 0; --i)
 		eddy__system_free(w, &w->slots[w->order[i]]);
 	eddy__columns_free(w);
@@ -161,21 +192,25 @@ void eddy_destroy_world(eddy_world *w)
 	free(w);
 }
 
-const eddy_world_def *eddy_world_get_def(const eddy_world *w) { return &w->def; }
+const eddy_world_def *eddy_world_get_def(const eddy_world *w) { return w ? &w->def : NULL; }
 
 eddy_status eddy_world_set_threads(eddy_world *w, int threads)
 {
+	if (!w)
+		return EDDY_ERR_INVALID;
+	if (eddy__refuse_busy(w, "eddy_world_set_threads"))
+		return EDDY_ERR_INVALID;
 	if (threads < 1 || threads > 256)
 		return eddy__fail(w, EDDY_ERR_INVALID, "world: 'threads' must be in [1, 256] (got %d)", threads);
 	w->def.threads = threads;
 	return EDDY_OK;
 }
 
-double eddy_world_time(const eddy_world *w) { return w->time; }
-double eddy_world_frame_time(const eddy_world *w) { return 1.0 / w->def.fps; }
-int eddy_world_frame(const eddy_world *w) { return w->frame; }
-int64_t eddy_world_steps(const eddy_world *w) { return w->step; }
-double eddy_world_last_dt(const eddy_world *w) { return w->last_dt; }
+double eddy_world_time(const eddy_world *w) { return w ? w->time : NAN; }
+double eddy_world_frame_time(const eddy_world *w) { return w ? 1.0 / w->def.fps : NAN; }
+int eddy_world_frame(const eddy_world *w) { return w ? w->frame : 0; }
+int64_t eddy_world_steps(const eddy_world *w) { return w ? w->step : 0; }
+double eddy_world_last_dt(const eddy_world *w) { return w ? w->last_dt : NAN; }
 
 void eddy__note_length_scale(eddy_world *w, float h)
 {
@@ -183,7 +218,11 @@ void eddy__note_length_scale(eddy_world *w, float h)
 		w->length_scale = h;
 }
 
-void eddy_world_set_rest_density(eddy_world *w, float rho0) { w->rest_density = rho0; }
+void eddy_world_set_rest_density(eddy_world *w, float rho0)
+{
+	if (w && isfinite(rho0) && rho0 >= 0)
+		w->rest_density = rho0;
+}
 
 /* ---- stepping ----------------------------------------------------------- */
 
@@ -192,6 +231,8 @@ static double step_limit(eddy_world *w, const char **reason)
 {
 	double lim = w->def.dt_max;
 	*reason = "dt_max";
+	const char *was = w->busy;
+	w->busy = "a time-step limit callback";
 	for (int k = 0; k < w->order_count; ++k) {
 		eddy_system *s = &w->slots[w->order[k]];
 		if (!s->vt->limit)
@@ -204,6 +245,7 @@ static double step_limit(eddy_world *w, const char **reason)
 			*reason = w->last_limit_buf;
 		}
 	}
+	w->busy = was;
 	return lim;
 }
 
@@ -229,20 +271,34 @@ static size_t first_nonfinite(const float *v, size_t n)
 	return n;
 }
 
-/* Scans the particle columns system s writes; the first non-finite value names
- * the system, step and particle. */
+/* Scans the float columns system s writes; the first non-finite value names
+ * the system, step and particle, or the grid cell or face (i, j, k), so a
+ * grid pass that goes wrong is blamed, not the particle pass that reads it. */
 static eddy_status check_written(eddy_world *w, const eddy_system *s)
 {
 	for (int k = 0; k < s->write_count; ++k) {
 		const eddy_column *c = &w->columns[s->writes[k]];
-		if (c->domain != EDDY_DOMAIN_PARTICLE || c->type != EDDY_F32 || !c->data)
+		if (c->type != EDDY_F32 || !c->data)
 			continue;
 		const float *v = c->data;
-		const size_t bad = first_nonfinite(v, w->n);
-		if (bad < w->n)
-			return eddy__fail(w, EDDY_ERR_NUMERIC,
-			                  "%s: non-finite %s = %g of particle %zu at step %lld (t = %.6g s)",
-			                  s->label, c->name, (double)v[bad], bad, (long long)w->step, w->time);
+		if (c->domain == EDDY_DOMAIN_PARTICLE) {
+			const size_t bad = first_nonfinite(v, w->n);
+			if (bad < w->n)
+				return eddy__fail(w, EDDY_ERR_NUMERIC,
+				                  "%s: non-finite %s = %g of particle %zu at step %lld (t = %.6g s)",
+				                  s->label, c->name, (double)v[bad], bad, (long long)w->step, w->time);
+			continue;
+		}
+		const size_t n = eddy__column_elems(w, c), bad = first_nonfinite(v, n);
+		if (bad == n)
+			continue;
+		/* x fastest; a face grid has one more layer along its axis */
+		const size_t nx = (size_t)w->nx + (c->domain == EDDY_DOMAIN_FACE_X),
+		             ny = (size_t)w->ny + (c->domain == EDDY_DOMAIN_FACE_Y);
+		const char *where = c->domain == EDDY_DOMAIN_CELL ? "cell" : "face";
+		return eddy__fail(w, EDDY_ERR_NUMERIC, "%s: non-finite %s = %g at %s (%zu, %zu, %zu) at step %lld (t = %.6g s)",
+		                  s->label, c->name, (double)v[bad], where, bad % nx, bad / nx % ny, bad / (nx * ny),
+		                  (long long)w->step, w->time);
 	}
 	return EDDY_OK;
 }
@@ -298,6 +354,7 @@ static eddy_status step_toward(eddy_world *w, double stop, bool *reached)
 	eddy__arena_reset(&w->arena);
 	eddy__clear_derived(w);
 	const eddy_step_context ctx = {dt, w->time, w->step, w->def.threads};
+	w->busy = "a step callback";
 	for (int k = 0; k < w->order_count; ++k) {
 		eddy_system *s = &w->slots[w->order[k]];
 		if (!s->vt->step)
@@ -359,6 +416,7 @@ void eddy__frame_reset(eddy_world *w)
 static eddy_status finish_frame(eddy_world *w)
 {
 	w->frame++;
+	w->busy = "a frame callback";
 	for (int k = 0; k < w->order_count; ++k) {
 		eddy_system *s = &w->slots[w->order[k]];
 		if (!s->vt->frame)
@@ -391,10 +449,8 @@ static eddy_status finish_frame(eddy_world *w)
 	return EDDY_OK;
 }
 
-eddy_status eddy_world_step(eddy_world *w)
+static eddy_status step_once(eddy_world *w)
 {
-	if (!w)
-		return EDDY_ERR_INVALID;
 	bool reached;
 	eddy_status st = step_toward(w, next_frame_time(w), &reached);
 	if (st == EDDY_OK && reached)
@@ -402,23 +458,48 @@ eddy_status eddy_world_step(eddy_world *w)
 	return st;
 }
 
+/* The stepping entry points run systems' and hosts' code, which must not
+ * re-enter them: w->busy is set below them and cleared when they return. */
+eddy_status eddy_world_step(eddy_world *w)
+{
+	if (!w)
+		return EDDY_ERR_INVALID;
+	if (eddy__refuse_busy(w, "eddy_world_step"))
+		return EDDY_ERR_INVALID;
+	eddy_status st = step_once(w);
+	w->busy = NULL;
+	return st;
+}
+
 eddy_status eddy_world_step_frame(eddy_world *w)
 {
 	if (!w)
 		return EDDY_ERR_INVALID;
+	if (eddy__refuse_busy(w, "eddy_world_step_frame"))
+		return EDDY_ERR_INVALID;
 	const int target = w->frame + 1;
-	while (w->frame < target) {
-		eddy_status st = eddy_world_step(w);
-		if (st != EDDY_OK)
-			return st;
-	}
-	return EDDY_OK;
+	eddy_status st = EDDY_OK;
+	while (st == EDDY_OK && w->frame < target)
+		st = step_once(w);
+	w->busy = NULL;
+	return st;
 }
+
+static eddy_status advance(eddy_world *w, double seconds);
 
 eddy_status eddy_world_advance(eddy_world *w, double seconds)
 {
 	if (!w)
 		return EDDY_ERR_INVALID;
+	if (eddy__refuse_busy(w, "eddy_world_advance"))
+		return EDDY_ERR_INVALID;
+	eddy_status st = advance(w, seconds);
+	w->busy = NULL;
+	return st;
+}
+
+static eddy_status advance(eddy_world *w, double seconds)
+{
 	if (!(seconds >= 0 && isfinite(seconds)))
 		return eddy__fail(w, EDDY_ERR_INVALID, "advance: 'seconds' must be >= 0 and finite (got %g)", seconds);
 	const double end = w->time + seconds;
@@ -444,6 +525,8 @@ eddy_status eddy_world_advance(eddy_world *w, double seconds)
 
 void eddy_world_publish(eddy_world *w, const char *name, double value)
 {
+	if (!w || !name)
+		return;
 	int k = 0;
 	while (k < w->extra_count && strcmp(w->extras[k].name, name) != 0)
 		++k;
@@ -458,6 +541,10 @@ void eddy_world_publish(eddy_world *w, const char *name, double value)
 
 void eddy_world_publish_text(eddy_world *w, const char *name, const char *text)
 {
+	if (!w || !name)
+		return;
+	if (!text)
+		text = "";
 	eddy_world_publish(w, name, NAN);
 	for (int k = 0; k < w->extra_count; ++k) {
 		if (strcmp(w->extras[k].name, name) == 0) {
@@ -573,6 +660,8 @@ static uint64_t fnv1a(uint64_t h, const void *data, size_t n)
 
 uint64_t eddy_world_state_hash(const eddy_world *w)
 {
+	if (!w)
+		return 0;
 	uint64_t h = 0xcbf29ce484222325ull;
 	uint64_t n = w->n;
 	h = fnv1a(h, &n, sizeof n);
@@ -589,12 +678,7 @@ uint64_t eddy_world_state_hash(const eddy_world *w)
 
 /* ---- preflight ---------------------------------------------------------- */
 
-static void reportf(eddy_check_fn report, void *user, eddy_check_level level, const char *fmt, ...)
-#if defined(__GNUC__)
-	__attribute__((format(printf, 4, 5)))
-#endif
-	;
-static void reportf(eddy_check_fn report, void *user, eddy_check_level level, const char *fmt, ...)
+void eddy__report(eddy_check_fn report, void *user, eddy_check_level level, const char *fmt, ...)
 {
 	char msg[512];
 	va_list ap;
@@ -604,8 +688,21 @@ static void reportf(eddy_check_fn report, void *user, eddy_check_level level, co
 	report(level, msg, user);
 }
 
+static void count_only(eddy_check_level level, const char *message, void *user)
+{
+	(void)level;
+	(void)message;
+	(void)user;
+}
+
 int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 {
+	if (!report)
+		report = count_only;
+	if (!w) {
+		report(EDDY_CHECK_ERROR, "world: no world to check (NULL)", user);
+		return 1;
+	}
 	int errors = 0;
 	/* memory: particle columns in use times the particles the emitters will make */
 	int64_t expected = 0;
@@ -632,47 +729,100 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 	long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
 	double avail = pages > 0 && page > 0 ? (double)pages * (double)page : 0;
 	if (unbounded)
-		reportf(report, user, EDDY_CHECK_WARNING,
+		eddy__report(report, user, EDDY_CHECK_WARNING,
 		        "memory: an emitter has no end (set duration or max_particles); %lld particles known, %zu bytes each",
 		        (long long)expected, per_particle);
 	else
-		reportf(report, user, EDDY_CHECK_INFO, "memory: %lld particles x %zu bytes, about %.1f MB in all",
+		eddy__report(report, user, EDDY_CHECK_INFO, "memory: %lld particles x %zu bytes, about %.1f MB in all",
 		        (long long)expected, per_particle, bytes / 1e6);
 	if (avail > 0 && bytes > 0.8 * avail) {
-		reportf(report, user, EDDY_CHECK_ERROR,
+		eddy__report(report, user, EDDY_CHECK_ERROR,
 		        "memory: the scene needs about %.1f GB but the machine has %.1f GB; use a coarser spacing",
 		        bytes / 1e9, avail / 1e9);
 		errors++;
 	}
 
-	/* particles per cell: a grid method wants 3 to 12 (docs/validation.md §A) */
+	/* frames: eddy run simulates ceil(duration * fps) whole frames, so a frame
+	 * longer than the run makes the run longer than asked */
+	const double fps = w->def.fps, duration = w->def.duration;
+	if (duration > 0 && fps * duration < 1 - 1e-9) {
+		eddy__report(report, user, EDDY_CHECK_ERROR,
+		             "world: 'fps' is %g but 'duration' is %g s: the first frame (%g s) is longer than the whole run, "
+		             "so a run would simulate %g s; set fps >= %g",
+		             fps, duration, 1 / fps, 1 / fps, 1 / duration);
+		errors++;
+	} else if (duration > 0) {
+		const double frames = ceil(duration * fps - 1e-9), simulated = frames / fps;
+		if (simulated > duration * 1.01)
+			eddy__report(report, user, EDDY_CHECK_WARNING,
+			             "world: 'duration' %g s is not a whole number of frames at %g fps; a run simulates %.0f "
+			             "frames = %g s",
+			             duration, fps, frames, simulated);
+	}
+
+	/* particles per cell: a grid method wants 3 to 12 (docs/validation.md §A);
+	 * FLIP with less than one leaves fluid cells holding no particle, which
+	 * the grid then takes for air */
+	bool flip = false;
+	for (int k = 0; k < w->order_count; ++k)
+		flip = flip || w->slots[w->order[k]].vt == &eddy__kind_flip_p2g;
 	if (w->grid_allocated && w->length_scale > 0) {
 		const double ppc = pow(w->def.cell_size / w->length_scale, 3);
-		if (ppc < 3 || ppc > 12) {
+		if (flip && ppc < 1) {
+			eddy__report(report, user, EDDY_CHECK_ERROR,
+			             "flip_p2g: %.2f particles per cell (world cell_size %g m, emitter spacing %g m), below 1: "
+			             "fluid cells would hold no particle; set spacing = cell_size / 2 = %g m",
+			             ppc, w->def.cell_size, (double)w->length_scale, w->def.cell_size / 2);
+			errors++;
+		} else if (ppc < 3 || ppc > 12) {
 			/* 8 per cell: spacing = cell_size / 2 */
-			reportf(report, user, EDDY_CHECK_WARNING,
+			eddy__report(report, user, EDDY_CHECK_WARNING,
 			        "particles per cell: %.1f (cell_size %g m, spacing %g m); 3 to 12 keep the grid resolved, e.g. "
 			        "spacing = %g m",
 			        ppc, w->def.cell_size, (double)w->length_scale, w->def.cell_size / 2);
 		} else {
-			reportf(report, user, EDDY_CHECK_INFO, "particles per cell: %.1f", ppc);
+			eddy__report(report, user, EDDY_CHECK_INFO, "particles per cell: %.1f", ppc);
 		}
+	}
+
+	/* emitted particles that nothing moves: a scene without integrate (or
+	 * flip_advect) runs, and its fluid hangs in the air */
+	bool emits = false, moves = false;
+	for (int k = 0; k < w->order_count; ++k) {
+		const eddy_system *s = &w->slots[w->order[k]];
+		if (s->vt->spacing) {
+			emits = true;
+			continue;
+		}
+		for (int j = 0; j < s->write_count; ++j)
+			moves = moves || s->writes[j] == COL_X_;
+	}
+	if (emits && !moves)
+		eddy__report(report, user, EDDY_CHECK_WARNING,
+		             "pipeline: no system moves the particles (none writes x after emitting); add integrate "
+		             "(flip_advect for FLIP)");
+
+	/* the kinds' own checks (SPH spacing against the emitters, ...) */
+	for (int k = 0; k < w->order_count; ++k) {
+		const eddy_system *s = &w->slots[w->order[k]];
+		if (s->vt->check)
+			errors += s->vt->check(w, s, report, user);
 	}
 
 	/* time step at the start */
 	const char *reason;
 	double lim = step_limit(w, &reason);
 	double frame_dt = 1.0 / w->def.fps;
-	reportf(report, user, EDDY_CHECK_INFO, "time step: %.3g s at the start, limited by %s (%.0f steps per frame)",
+	eddy__report(report, user, EDDY_CHECK_INFO, "time step: %.3g s at the start, limited by %s (%.0f steps per frame)",
 	        lim, reason, ceil(frame_dt / lim - 1e-9));
 	if (ceil(frame_dt / lim - 1e-9) > w->def.max_steps_per_frame) {
-		reportf(report, user, EDDY_CHECK_ERROR,
+		eddy__report(report, user, EDDY_CHECK_ERROR,
 		        "time step: a frame needs %.0f steps, more than max_steps_per_frame = %d; raise it or relax %s",
 		        ceil(frame_dt / lim - 1e-9), w->def.max_steps_per_frame, reason);
 		errors++;
 	}
 	if (lim < w->def.dt_min) {
-		reportf(report, user, EDDY_CHECK_ERROR, "time step: %s allows %.3g s, below dt_min = %.3g s", reason, lim, w->def.dt_min);
+		eddy__report(report, user, EDDY_CHECK_ERROR, "time step: %s allows %.3g s, below dt_min = %.3g s", reason, lim, w->def.dt_min);
 		errors++;
 	}
 
@@ -689,7 +839,7 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 			continue;
 		size_t np = e->vt->sample(w, e, pts, cap);
 		if (np == 0) {
-			reportf(report, user, EDDY_CHECK_ERROR, "%s: emits no particles; make its region larger than its spacing", e->label);
+			eddy__report(report, user, EDDY_CHECK_ERROR, "%s: emits no particles; make its region larger than its spacing", e->label);
 			errors++;
 		}
 		for (int j = 0; j < w->order_count; ++j) {
@@ -699,10 +849,17 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 			size_t inside = 0;
 			for (size_t i = 0; i < np; ++i)
 				inside += c->vt->distance(c, pts[i]) < 0;
-			if (inside)
-				reportf(report, user, EDDY_CHECK_WARNING,
+			if (inside && inside == np) {
+				eddy__report(report, user, EDDY_CHECK_ERROR,
+				             "%s: all %zu particles start inside the solid of %s; move the emitter or the collider "
+				             "(for a tank, set the collider's inside = true)",
+				             e->label, np, c->label);
+				errors++;
+			} else if (inside) {
+				eddy__report(report, user, EDDY_CHECK_WARNING,
 				        "%s: %zu of %zu particles start inside %s; they will be pushed out in the first step",
 				        e->label, inside, np, c->label);
+			}
 		}
 		size_t outside = 0;
 		const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
@@ -711,7 +868,7 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 			outside += !(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z);
 		}
 		if (outside) {
-			reportf(report, user, EDDY_CHECK_ERROR, "%s: %zu of %zu particles start outside the world bounds", e->label, outside, np);
+			eddy__report(report, user, EDDY_CHECK_ERROR, "%s: %zu of %zu particles start outside the world bounds", e->label, outside, np);
 			errors++;
 		}
 		free(pts);

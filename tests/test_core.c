@@ -430,8 +430,419 @@ static void preflight_findings(void)
 	eddy_destroy_world(w);
 }
 
+static bool is_null_system(eddy_system_id id) { return id.index == 0 && id.generation == 0; }
+
+/* Each eddy_add_* with a NULL world and with a NULL def. */
+#define CHECK_ADDER(kind) \
+	do { \
+		eddy_##kind##_def d_ = eddy_default_##kind##_def(); \
+		CHECK(is_null_system(eddy_add_##kind(NULL, &d_))); \
+		CHECK(is_null_system(eddy_add_##kind(NULL, NULL))); \
+		CHECK(is_null_system(eddy_add_##kind(w, NULL))); \
+		CHECK_HAS(eddy_world_error(w), "def is NULL"); \
+	} while (0)
+
+/* Every public function of eddy.h with NULL in each pointer argument: no
+ * crash, and the neutral value or status eddy.h's header comment documents. */
+static void null_arguments_are_refused(void)
+{
+	eddy_world *w = make_world();
+	eddy_world_def wd = eddy_default_world_def();
+	char err[64] = "untouched";
+	CHECK(eddy_create_world(NULL, err, sizeof err) == NULL);
+	CHECK_HAS(err, "def is NULL");
+	CHECK(eddy_create_world(NULL, NULL, 16) == NULL);
+	eddy_world *w2 = eddy_create_world(&wd, NULL, 16);
+	CHECK(w2 != NULL);
+	eddy_destroy_world(w2);
+	eddy_destroy_world(NULL);
+	CHECK(eddy_world_error(NULL) != NULL);
+	CHECK(eddy_world_fail(NULL, EDDY_ERR_EXTERNAL, "x %d", 1) == EDDY_ERR_EXTERNAL);
+	CHECK(eddy_world_fail(w, EDDY_ERR_EXTERNAL, NULL) == EDDY_ERR_EXTERNAL);
+	CHECK(eddy_world_get_def(NULL) == NULL);
+	CHECK(eddy_world_set_threads(NULL, 2) == EDDY_ERR_INVALID);
+	CHECK(isnan(eddy_world_time(NULL)));
+	CHECK(isnan(eddy_world_frame_time(NULL)));
+	CHECK(eddy_world_frame(NULL) == 0);
+	CHECK(eddy_world_steps(NULL) == 0);
+	CHECK(isnan(eddy_world_last_dt(NULL)));
+	CHECK(eddy_world_step(NULL) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_step_frame(NULL) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_advance(NULL, 0.1) == EDDY_ERR_INVALID);
+
+	/* columns */
+	eddy_column_info info;
+	CHECK(eddy_world_column_count(NULL) == 0);
+	CHECK(eddy_world_find_column(NULL, "x") < 0);
+	CHECK(eddy_world_find_column(w, NULL) < 0);
+	CHECK(eddy_world_column_info(NULL, 0, &info) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_column_info(w, 0, NULL) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_declare_column(NULL, "t", EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "K") < 0);
+	CHECK(eddy_world_declare_column(w, NULL, EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "K") < 0);
+	CHECK(eddy_world_declare_column(w, "t_no_unit", EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, NULL) >= 0);
+	size_t count = 7;
+	CHECK(eddy_world_channel(NULL, "x", &count) == NULL && count == 0);
+	CHECK(eddy_world_channel(w, NULL, &count) == NULL);
+	CHECK(eddy_world_channel(w, "x", NULL) == NULL);
+	CHECK(eddy_world_channel_mut(NULL, "x", &count) == NULL);
+	CHECK(eddy_world_channel_mut(w, NULL, NULL) == NULL);
+	CHECK(eddy_world_channel_u8(NULL, "cell_type", &count) == NULL);
+	CHECK(eddy_world_channel_u8(w, NULL, NULL) == NULL);
+	CHECK(eddy_world_particle_count(NULL) == 0);
+	eddy_vec3 p = {0.5f, 0.5f, 0.5f};
+	CHECK(eddy_world_add_particles(NULL, 1, &p, NULL) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_add_particles(w, 1, NULL, NULL) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_remove_particle(NULL, 0) == EDDY_ERR_INVALID);
+	CHECK(!eddy_world_grid(NULL).allocated);
+	CHECK(eddy_world_state_hash(NULL) == 0);
+
+	/* pipeline */
+	eddy_system_info si;
+	CHECK(eddy_world_system_count(NULL) == 0);
+	CHECK(is_null_system(eddy_world_system_at(NULL, 0)));
+	CHECK(eddy_world_system_info(NULL, EDDY_NULL_SYSTEM, &si) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_system_info(w, EDDY_NULL_SYSTEM, NULL) == EDDY_ERR_INVALID);
+	CHECK(!eddy_system_valid(NULL, EDDY_NULL_SYSTEM));
+	CHECK(eddy_world_remove_system(NULL, EDDY_NULL_SYSTEM) == EDDY_ERR_INVALID);
+	char plan[16] = "untouched";
+	CHECK(eddy_world_plan(NULL, plan, sizeof plan) == 0 && plan[0] == '\0');
+	CHECK(eddy_world_plan(w, NULL, 100) > 0);
+	CHECK(eddy_world_plan_dot(NULL, plan, sizeof plan) == 0);
+	CHECK(eddy_world_plan_dot(w, NULL, 100) > 0);
+
+	/* systems */
+	CHECK_ADDER(custom_system);
+	eddy_custom_system_def cd = eddy_default_custom_system_def();
+	cd.step = noop_step;
+	cd.name = NULL;
+	CHECK(is_null_system(eddy_add_custom_system(w, &cd)));
+	CHECK_HAS(eddy_world_error(w), "'name'");
+	cd.name = "c";
+	cd.step = NULL;
+	CHECK(is_null_system(eddy_add_custom_system(w, &cd)));
+	CHECK_HAS(eddy_world_error(w), "needs a step or a frame callback");
+	cd.step = noop_step;
+	cd.read_count = 1; /* reads is NULL */
+	CHECK(is_null_system(eddy_add_custom_system(w, &cd)));
+	CHECK_ADDER(emit_box);
+	CHECK_ADDER(emit_nozzle);
+	CHECK_ADDER(gravity);
+	CHECK_ADDER(integrate);
+	CHECK_ADDER(collide_box);
+	CHECK_ADDER(collide_sphere);
+	CHECK_ADDER(collide_plane);
+	CHECK_ADDER(sph_density);
+	CHECK_ADDER(sph_pressure);
+	CHECK_ADDER(sph_viscosity);
+	CHECK_ADDER(sph_surface_tension);
+	CHECK_ADDER(sph_boundary_box);
+	CHECK_ADDER(sph_dfsph);
+	CHECK_ADDER(flip_p2g);
+	CHECK_ADDER(flip_boundary);
+	CHECK_ADDER(flip_surface);
+	CHECK_ADDER(flip_pressure);
+	CHECK_ADDER(flip_extrapolate);
+	CHECK_ADDER(flip_g2p);
+	CHECK_ADDER(flip_advect);
+	CHECK_ADDER(flip_reseed);
+	CHECK_ADDER(render_points);
+	CHECK_ADDER(export_particles);
+	CHECK(eddy_sph_particle_mass(NULL, EDDY_NULL_SYSTEM) == 0);
+	/* not pointers, but a mistaken lattice must not hang the host */
+	CHECK(isnan(eddy_sph_lattice_sum(EDDY_SPH_POLY6, 1e-9, 1)));
+	CHECK(isnan(eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, 1e-9, 1)));
+
+	/* colliders */
+	eddy_collide_box_def bd = eddy_default_collide_box_def();
+	eddy_system_id box = eddy_add_collide_box(w, &bd);
+	CHECK(eddy_system_valid(w, box));
+	eddy_vec3 off;
+	float dist;
+	eddy_collider_shape shape;
+	CHECK(eddy_collider_set_offset(NULL, box, p) == EDDY_ERR_INVALID);
+	CHECK(eddy_collider_get_offset(NULL, box, &off) == EDDY_ERR_INVALID);
+	CHECK(eddy_collider_get_offset(w, box, NULL) == EDDY_ERR_INVALID);
+	CHECK(eddy_collider_distance(NULL, box, p, &dist) == EDDY_ERR_INVALID);
+	CHECK(eddy_collider_distance(w, box, p, NULL) == EDDY_ERR_INVALID);
+	CHECK(eddy_collider_shape_of(NULL, box, &shape) == EDDY_ERR_INVALID);
+	CHECK(eddy_collider_shape_of(w, box, NULL) == EDDY_ERR_INVALID);
+
+	/* statistics, checkpoints, preflight */
+	eddy_frame_stats fs;
+	CHECK(eddy_world_frame_stats(NULL, &fs) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_frame_stats(w, NULL) == EDDY_ERR_INVALID);
+	eddy_world_publish(NULL, "a", 1);
+	eddy_world_publish(w, NULL, 1);
+	eddy_world_publish_text(NULL, "a", "b");
+	eddy_world_publish_text(w, NULL, "b");
+	eddy_world_publish_text(w, "a", NULL);
+	eddy_world_set_rest_density(NULL, 1000);
+	CHECK(eddy_world_save(NULL, "/tmp/eddy_null.ckpt", 0) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_save(w, NULL, 0) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_load(NULL, "/tmp/eddy_null.ckpt", 0) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_load(w, NULL, 0) == EDDY_ERR_INVALID);
+	CHECK(eddy_world_check(NULL, NULL, NULL) == 1);
+	CHECK(eddy_world_check(w, NULL, NULL) == 0);
+
+	/* the world still works */
+	CHECK(eddy_world_step(w) == EDDY_OK);
+	eddy_destroy_world(w);
+}
+
+/* What a callback tried, and what each call returned. */
+typedef struct reentry {
+	eddy_status step, step_frame, advance, add, remove, load, threads;
+	bool added_valid;
+	char error[512];
+	double time_seen;
+	int calls;
+	eddy_system_id self;
+} reentry;
+
+static void try_reentry(eddy_world *w, reentry *r)
+{
+	if (r->calls++ > 0)
+		return;
+	r->step = eddy_world_step(w);
+	r->step_frame = eddy_world_step_frame(w);
+	r->advance = eddy_world_advance(w, 0.1);
+	snprintf(r->error, sizeof r->error, "%s", eddy_world_error(w));
+	eddy_gravity_def g = eddy_default_gravity_def();
+	r->added_valid = eddy_system_valid(w, eddy_add_gravity(w, &g));
+	r->remove = eddy_world_remove_system(w, r->self);
+	r->load = eddy_world_load(w, "/nonexistent/eddy.ckpt", 0);
+	r->threads = eddy_world_set_threads(w, 2);
+	eddy_destroy_world(w); /* refused: the step still uses the world */
+	/* reading stays allowed */
+	r->time_seen = eddy_world_time(w);
+	eddy_frame_stats fs;
+	CHECK(eddy_world_frame_stats(w, &fs) == EDDY_OK);
+}
+
+static eddy_status reenter_step(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	(void)ctx;
+	try_reentry(w, user);
+	return EDDY_OK;
+}
+
+static eddy_status reenter_frame(eddy_world *w, int frame, void *user)
+{
+	(void)frame;
+	try_reentry(w, user);
+	return EDDY_OK;
+}
+
+static void check_reentry_refused(const reentry *r, const char *where)
+{
+	CHECK(r->calls > 0);
+	CHECK(r->step == EDDY_ERR_INVALID);
+	CHECK(r->step_frame == EDDY_ERR_INVALID);
+	CHECK(r->advance == EDDY_ERR_INVALID);
+	CHECK(!r->added_valid);
+	CHECK(r->remove == EDDY_ERR_INVALID);
+	CHECK(r->load == EDDY_ERR_INVALID);
+	CHECK(r->threads == EDDY_ERR_INVALID);
+	char want[128];
+	snprintf(want, sizeof want, "eddy_world_advance called from inside %s", where);
+	CHECK_HAS(r->error, want);
+}
+
+/* A step or frame callback that steps the world again would run frames
+ * inside frames (0.3 s simulated for 0.2 asked); such calls are refused and
+ * the run keeps its clock. */
+static void callbacks_cannot_reenter(void)
+{
+	for (int frame_hook = 0; frame_hook < 2; ++frame_hook) {
+		eddy_world *w = make_world();
+		reentry r;
+		memset(&r, 0, sizeof r);
+		eddy_custom_system_def c = eddy_default_custom_system_def();
+		c.name = "reenter";
+		if (frame_hook)
+			c.frame = reenter_frame;
+		else
+			c.step = reenter_step;
+		c.user = &r;
+		r.self = eddy_add_custom_system(w, &c);
+		CHECK(eddy_system_valid(w, r.self));
+		CHECK(eddy_world_advance(w, 0.2) == EDDY_OK);
+		check_reentry_refused(&r, frame_hook ? "a frame callback" : "a step callback");
+		CHECK_NEAR(eddy_world_time(w), 0.2, 1e-12);
+		CHECK(eddy_world_frame(w) == 6);
+		CHECK(eddy_world_system_count(w) == 1);
+		CHECK(eddy_world_get_def(w)->threads == 1);
+		/* outside a callback the same calls work again */
+		CHECK(eddy_world_step_frame(w) == EDDY_OK);
+		CHECK(eddy_world_frame(w) == 7);
+		CHECK(eddy_world_set_threads(w, 2) == EDDY_OK);
+		eddy_destroy_world(w);
+	}
+}
+
+/* One emitter of the given spacing in [0.1, 0.3]^3 of a default world with
+ * fps and duration, the findings of eddy_world_check in f. */
+static eddy_world *spacing_world(float spacing, double fps, double duration)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.fps = fps;
+	d.duration = duration;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.min = (eddy_vec3){0.1f, 0.1f, 0.1f};
+	b.max = (eddy_vec3){0.3f, 0.3f, 0.3f};
+	b.spacing = spacing;
+	eddy_add_emit_box(w, &b);
+	return w;
+}
+
+/* Scene mistakes that run without an error but give a wrong answer are
+ * errors of the check (and so refused by eddy run). */
+static void check_catches_scene_mistakes(void)
+{
+	/* sph_density left at its default spacing (0.01 m) under an emitter at 0.02 m */
+	eddy_world *w = spacing_world(0.02f, 30, 2);
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	CHECK(eddy_system_valid(w, eddy_add_sph_density(w, &de)));
+	findings f = {"", 0};
+	CHECK(eddy_world_check(w, collect, &f) == 1);
+	CHECK_HAS(f.text, "sph_density: 'spacing' is 0.01 m but emit_box emits at spacing 0.02 m");
+	CHECK_HAS(f.text, "0.12 x rest density and collapses; set sph_density's spacing = 0.02 (and radius = 0.04)");
+	eddy_destroy_world(w);
+
+	/* the same with the spacings matched: no error */
+	w = spacing_world(0.01f, 30, 2);
+	CHECK(eddy_system_valid(w, eddy_add_sph_density(w, &de)));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 0);
+	/* a nozzle off the lattice */
+	eddy_emit_nozzle_def nz = eddy_default_emit_nozzle_def();
+	nz.center = (eddy_vec3){0.5f, 0.8f, 0.5f};
+	nz.spacing = 0.005f;
+	nz.max_particles = 1000;
+	CHECK(eddy_system_valid(w, eddy_add_emit_nozzle(w, &nz)));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 1);
+	CHECK_HAS(f.text, "emit_nozzle emits at spacing 0.005 m");
+	CHECK_HAS(f.text, "8.00 x rest density and blows apart");
+	eddy_destroy_world(w);
+
+	/* a kernel barely wider than the spacing */
+	w = spacing_world(0.01f, 30, 2);
+	de.radius = 0.011f;
+	CHECK(eddy_system_valid(w, eddy_add_sph_density(w, &de)));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 1);
+	CHECK_HAS(f.text, "sph_density: 'radius' 0.011 m is 1.10 x 'spacing' 0.01 m, below 1.2");
+	eddy_destroy_world(w);
+
+	/* a block emitted after the run, and nothing to move it */
+	w = spacing_world(0.01f, 30, 2);
+	eddy_emit_box_def late = eddy_default_emit_box_def();
+	late.start = 2.5;
+	CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &late)));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 0);
+	CHECK_HAS(f.text, "emit_box#2: 'start' is 2.5 s, not before the end of the run (duration 2 s): it emits nothing");
+	CHECK_HAS(f.text, "pipeline: no system moves the particles");
+	eddy_gravity_def gr = eddy_default_gravity_def();
+	eddy_add_gravity(w, &gr);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	CHECK(eddy_system_valid(w, eddy_add_integrate(w, &it)));
+	memset(&f, 0, sizeof f);
+	eddy_world_check(w, collect, &f);
+	CHECK(strstr(f.text, "no system moves") == NULL);
+	eddy_destroy_world(w);
+
+	/* fps 0.5 for a 0.2 s run: one 2 s frame, 10 times the run */
+	w = spacing_world(0.01f, 0.5, 0.2);
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 1);
+	CHECK_HAS(f.text, "world: 'fps' is 0.5 but 'duration' is 0.2 s: the first frame (2 s) is longer than the whole run");
+	CHECK_HAS(f.text, "set fps >= 5");
+	eddy_destroy_world(w);
+	w = spacing_world(0.01f, 30, 0.21);
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 0);
+	CHECK_HAS(f.text, "a run simulates 7 frames = 0.233333 s");
+	eddy_destroy_world(w);
+
+	/* FLIP cells smaller than the particle spacing */
+	eddy_world_def d = eddy_default_world_def();
+	d.cell_size = 0.01;
+	w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.min = (eddy_vec3){0.1f, 0.1f, 0.1f};
+	b.max = (eddy_vec3){0.3f, 0.3f, 0.3f};
+	b.spacing = 0.02f;
+	eddy_add_emit_box(w, &b);
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_flip_p2g_def pg = eddy_default_flip_p2g_def();
+	CHECKF(eddy_system_valid(w, eddy_add_flip_p2g(w, &pg)), "%s", eddy_world_error(w));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 1);
+	CHECK_HAS(f.text, "flip_p2g: 0.1");
+	CHECK_HAS(f.text, "particles per cell (world cell_size 0.01 m, emitter spacing 0.02 m), below 1");
+	eddy_destroy_world(w);
+
+	/* an emitter wholly inside a solid block */
+	w = spacing_world(0.02f, 30, 2);
+	eddy_collide_box_def cb = eddy_default_collide_box_def();
+	cb.min = (eddy_vec3){0.05f, 0.05f, 0.05f};
+	cb.max = (eddy_vec3){0.35f, 0.35f, 0.35f};
+	cb.inside = false;
+	CHECK(eddy_system_valid(w, eddy_add_collide_box(w, &cb)));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 1);
+	CHECK_HAS(f.text, "emit_box: all 1000 particles start inside the solid of collide_box");
+	eddy_destroy_world(w);
+	/* and a collider box with min > max never gets that far */
+	w = make_world();
+	cb.min.x = 0.5f;
+	cb.max.x = 0.4f;
+	CHECK(!eddy_system_valid(w, eddy_add_collide_box(w, &cb)));
+	CHECK_HAS(eddy_world_error(w), "collide_box: 'max' must exceed 'min' on every axis");
+	eddy_destroy_world(w);
+}
+
+static eddy_status poison_face(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	(void)ctx;
+	(void)user;
+	size_t n;
+	float *u = eddy_world_channel_mut(w, "u", &n);
+	eddy_grid_info g = eddy_world_grid(w);
+	/* face (2, 1, 3) of the x-face grid, (nx + 1) faces along x */
+	u[2 + (size_t)(g.nx + 1) * (1 + (size_t)g.ny * 3)] = NAN;
+	return EDDY_OK;
+}
+
+/* A grid pass that writes a non-finite value is blamed with the face or cell,
+ * not the particle pass that would read it next. */
+static void nonfinite_on_the_grid_names_the_face(void)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.cell_size = 0.1;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	const char *writes[] = {"u"};
+	eddy_custom_system_def c = eddy_default_custom_system_def();
+	c.name = "grid_pass";
+	c.writes = writes;
+	c.write_count = 1;
+	c.step = poison_face;
+	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &c)));
+	CHECK(eddy_world_step(w) == EDDY_ERR_NUMERIC);
+	CHECK_HAS(eddy_world_error(w), "grid_pass: non-finite u = nan at face (2, 1, 3) at step 0");
+	eddy_destroy_world(w);
+}
+
 void suite_core(void)
 {
+	RUN(nonfinite_on_the_grid_names_the_face);
+	RUN(check_catches_scene_mistakes);
+	RUN(null_arguments_are_refused);
+	RUN(callbacks_cannot_reenter);
 	RUN(preflight_findings);
 	RUN(world_def_rejects_bad_values);
 	RUN(absent_systems_allocate_nothing);

@@ -5,6 +5,7 @@
 #include "test.h"
 
 #include <signal.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/wait.h>
@@ -285,11 +286,132 @@ static void run_refuses_what_cannot_fit(void)
 	CHECK_HAS(out, "not run: 1 problem found by the preflight check");
 }
 
+/* Copies checkpoint src to dst with n bytes at payload offset at replaced by
+ * bytes, and the checksum recomputed: a crafted file that passes the
+ * integrity checks. Layout per src/checkpoint.c: a 40-byte header whose last
+ * 8 bytes are the FNV-1a of the payload; the payload opens with time (f64),
+ * frame (i32), step (i64), last dt (f64), random state (u64), length scale
+ * (f32), rest density (f32), particle count (u64), packed. */
+static void craft(const char *src, const char *dst, size_t at, const void *bytes, size_t n)
+{
+	FILE *f = fopen(src, "rb");
+	CHECK(f != NULL);
+	if (!f)
+		return;
+	fseek(f, 0, SEEK_END);
+	long len = ftell(f);
+	fseek(f, 0, SEEK_SET);
+	unsigned char *data = malloc((size_t)len);
+	CHECK(fread(data, 1, (size_t)len, f) == (size_t)len);
+	fclose(f);
+	memcpy(data + 40 + at, bytes, n);
+	uint64_t h = 0xcbf29ce484222325ull;
+	for (long i = 40; i < len; ++i) {
+		h ^= data[i];
+		h *= 0x100000001b3ull;
+	}
+	memcpy(data + 32, &h, 8);
+	f = fopen(dst, "wb");
+	CHECK(fwrite(data, 1, (size_t)len, f) == (size_t)len);
+	fclose(f);
+	free(data);
+}
+
+/* Red-team case: checkpoints with a valid checksum but an impossible clock
+ * (frame -5 ran negative frames, frame 2^31 - 1 ran nothing, a NaN time
+ * failed later in integrate) are refused, naming the file and the field. */
+static void crafted_checkpoints_are_rejected(void)
+{
+	eddy_system_id s;
+	eddy_world *w = stateful_world(&s);
+	run_frames(w, s, 3);
+	char path[512], copy[600];
+	ckpt_path(path, sizeof path, "t_craft.eddy");
+	snprintf(copy, sizeof copy, "%s.c", path);
+	CHECK(eddy_world_save(w, path, 1) == EDDY_OK);
+	const uint64_t before = eddy_world_state_hash(w);
+
+	/* the crafting itself keeps a file loadable */
+	double t = 0.1;
+	craft(path, copy, 0, &t, sizeof t);
+	CHECKF(eddy_world_load(w, copy, 1) == EDDY_OK, "%s", eddy_world_error(w));
+
+	const struct {
+		size_t at;
+		int kind; /* 0 f64, 1 i32, 2 i64, 3 f32, 4 u64 */
+		double value;
+		const char *field;
+	} cases[] = {
+		{8, 1, -5, "field 'frame' is -5"},
+		{8, 1, 2147483647.0, "field 'frame' is 2147483647"},
+		{8, 1, 4, "field 'frame' is 4, inconsistent with time 0.1 s at 30 fps (frame 3 expected)"},
+		{0, 0, NAN, "field 'time' is nan s"},
+		{0, 0, -1, "field 'time' is -1 s"},
+		{0, 0, 1e300, "field 'frame' is 3, inconsistent"},
+		{12, 2, -1, "field 'step' is -1"},
+		{20, 0, INFINITY, "field 'last_dt' is inf s"},
+		{20, 0, -1e-3, "field 'last_dt'"},
+		{36, 3, NAN, "field 'length_scale'"},
+		{40, 3, -1000, "field 'rest_density'"},
+		{44, 4, 1125899906842624.0, "field 'particles' is 1125899906842624"},
+	};
+	for (size_t k = 0; k < sizeof cases / sizeof cases[0]; ++k) {
+		unsigned char b[8];
+		size_t n = 8;
+		if (cases[k].kind == 0) {
+			memcpy(b, &cases[k].value, 8);
+		} else if (cases[k].kind == 1) {
+			int32_t v = (int32_t)cases[k].value;
+			memcpy(b, &v, n = 4);
+		} else if (cases[k].kind == 2) {
+			int64_t v = (int64_t)cases[k].value;
+			memcpy(b, &v, 8);
+		} else if (cases[k].kind == 3) {
+			float v = (float)cases[k].value;
+			memcpy(b, &v, n = 4);
+		} else {
+			uint64_t v = (uint64_t)cases[k].value;
+			memcpy(b, &v, 8);
+		}
+		craft(path, copy, cases[k].at, b, n);
+		CHECKF(eddy_world_load(w, copy, 1) == EDDY_ERR_IO, "case %zu (%s) loaded", k, cases[k].field);
+		CHECK_HAS(eddy_world_error(w), cases[k].field);
+		CHECK_HAS(eddy_world_error(w), copy);
+	}
+	CHECK(eddy_world_state_hash(w) == before);
+	eddy_destroy_world(w);
+}
+
+/* Red-team case: sph_density left at its default spacing (0.01 m) under an
+ * emitter at 0.02 m collapsed the tank silently; eddy run's preflight now
+ * refuses it, naming both systems, both spacings and the fix. */
+static void run_refuses_mismatched_sph_spacing(void)
+{
+	char path[512], cmd[1200], out[4096];
+	snprintf(path, sizeof path, "%s/t_spacing.lua", test_build_dir());
+	FILE *f = fopen(path, "w");
+	fputs("local eddy = require 'eddy'\nlocal w = eddy.world{ bounds = {{0,0,0},{1,1,1}} }\n"
+	      "w:add(eddy.emit_box{ min = {0.1,0.1,0.1}, max = {0.3,0.3,0.3}, spacing = 0.02 })\n"
+	      "w:add(eddy.sph_density{})\nw:add(eddy.gravity{})\nw:add(eddy.sph_pressure{})\n"
+	      "w:add(eddy.integrate{})\nreturn w\n", f);
+	fclose(f);
+	snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 1 --out %s/t_spacing_out", test_build_dir(), path,
+	         test_build_dir());
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
+	CHECK_HAS(out, "sph_density: 'spacing' is 0.01 m but emit_box emits at spacing 0.02 m");
+	CHECK_HAS(out, "not run: 1 problem found by the preflight check");
+	snprintf(cmd, sizeof cmd, "%s/eddy check %s", test_build_dir(), path);
+	CHECK(test_sh(cmd, out, sizeof out) != 0);
+	CHECK_HAS(out, "set sph_density's spacing = 0.02");
+}
+
 void suite_reliability(void)
 {
+	RUN(run_refuses_mismatched_sph_spacing);
 	RUN(run_refuses_what_cannot_fit);
 	RUN(checkpoint_resume_is_bit_identical);
 	RUN(bad_checkpoints_are_rejected);
+	RUN(crafted_checkpoints_are_rejected);
 	RUN(cli_resume_skips_a_corrupted_checkpoint);
 	RUN(interrupt_finishes_the_frame);
 	RUN(fluid_scenes_resume_bit_identical);
