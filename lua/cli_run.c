@@ -411,6 +411,17 @@ static int prepare(run *r)
 		return cli_fail(CLI_EXIT_USAGE, "%s", eddy_world_error(r->w));
 	double duration = o->duration >= 0 ? o->duration : def->duration;
 	r->frames = o->frames >= 0 ? o->frames : (int)ceil(duration * def->fps - 1e-9);
+	/* a run is whole frames: --duration below one frame would run a whole
+	 * frame, many times what was asked (the scene's own duration is checked
+	 * by the preflight) */
+	if (o->frames < 0 && o->duration > 0) {
+		const double ran = r->frames / def->fps;
+		if (ran > 2 * o->duration)
+			return cli_fail(CLI_EXIT_USAGE, "--duration %g s is shorter than one frame of the scene (%g s at %g fps): "
+			                                "give at least %g s or --frames", o->duration, 1 / def->fps, def->fps, 1 / def->fps);
+		if (ran > 1.01 * o->duration && !o->quiet)
+			fprintf(stderr, "eddy: warning: --duration %g s runs %d whole frames, %g s\n", o->duration, r->frames, ran);
+	}
 	snprintf(r->ckpt_dir, sizeof r->ckpt_dir, "%s/checkpoints", o->outdir);
 	int code = o->export_format ? add_export(r) : 0; /* before resume: it is part of the pipeline */
 	if (code == 0)

@@ -40,9 +40,9 @@ extern "C" {
 #endif
 
 #define EDDY_VERSION_MAJOR 0
-#define EDDY_VERSION_MINOR 1
+#define EDDY_VERSION_MINOR 2
 #define EDDY_VERSION_PATCH 0
-#define EDDY_VERSION_STRING "0.1.0"
+#define EDDY_VERSION_STRING "0.2.0"
 
 /* ---- status ------------------------------------------------------------ */
 

@@ -262,7 +262,7 @@ static void usage_and_errors(void)
 	char cmd[1024], out[8192];
 	snprintf(cmd, sizeof cmd, "%s --version", eddy());
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
-	CHECK_HAS(out, "eddy 0.1.0");
+	CHECK_HAS(out, "eddy " EDDY_VERSION_STRING);
 	snprintf(cmd, sizeof cmd, "%s --help", eddy());
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK_HAS(out, "usage: eddy <command> SCENE.lua");
@@ -285,6 +285,11 @@ static void usage_and_errors(void)
 	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --stats /dev/null/x/s.jsonl --frames 1", eddy());
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "eddy: cannot write stats file '/dev/null/x/s.jsonl'");
+	CHECK(one_line(out));
+	/* --duration under one frame (bounce runs at 30 fps) would run 30x what it asks */
+	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --duration 0.001 --quiet --out %s/t_dur", eddy(), test_build_dir());
+	CHECK(test_sh(cmd, out, sizeof out) == 2);
+	CHECK_HAS(out, "eddy: --duration 0.001 s is shorter than one frame");
 	CHECK(one_line(out));
 }
 
