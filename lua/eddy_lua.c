@@ -16,6 +16,7 @@
 #include <lauxlib.h>
 #include <lualib.h>
 
+#include <float.h>
 #include <math.h>
 #include <stddef.h>
 #include <stdio.h>
@@ -96,6 +97,17 @@ static double number_field(lua_State *L, const eddy_lua_kind *k, const char *nam
 	return lua_tonumber(L, idx);
 }
 
+/* A double as a float; beyond the float range it is the infinity of its sign
+ * (a C conversion out of range is undefined), which the add functions reject. */
+static float to_float(double d)
+{
+	if (d > FLT_MAX)
+		return INFINITY;
+	if (d < -FLT_MAX)
+		return -INFINITY;
+	return (float)d;
+}
+
 static eddy_vec3 vec3_field(lua_State *L, const eddy_lua_kind *k, const char *name, int idx)
 {
 	idx = lua_absindex(L, idx);
@@ -108,7 +120,7 @@ static eddy_vec3 vec3_field(lua_State *L, const eddy_lua_kind *k, const char *na
 		if (lua_type(L, -1) != LUA_TNUMBER)
 			luaL_error(L, "%s: '%s' must be a table of 3 numbers {x, y, z} (element %d is %s)", k->name, name, i + 1,
 			           luaL_typename(L, -1));
-		v[i] = (float)lua_tonumber(L, -1);
+		v[i] = to_float(lua_tonumber(L, -1));
 		lua_pop(L, 1);
 	}
 	return (eddy_vec3){v[0], v[1], v[2]};
@@ -156,7 +168,7 @@ static void read_fields(lua_State *L, const eddy_lua_kind *k, int idx, void *def
 			unknown_field(L, k, name);
 		void *p = base + f->offset;
 		switch (f->type) {
-		case EDDY_LUA_FLOAT: *(float *)p = (float)number_field(L, k, name, -1, "a number"); break;
+		case EDDY_LUA_FLOAT: *(float *)p = to_float(number_field(L, k, name, -1, "a number")); break;
 		case EDDY_LUA_DOUBLE: *(double *)p = number_field(L, k, name, -1, "a number"); break;
 		case EDDY_LUA_INT: *(int *)p = (int)integer_field(L, k, name, -1, -1000000000, 1000000000); break;
 		case EDDY_LUA_INT64: *(int64_t *)p = (int64_t)integer_field(L, k, name, -1, 0, LUA_MAXINTEGER); break;
@@ -284,7 +296,12 @@ static int l_make_def(lua_State *L)
 typedef struct lua_world {
 	eddy_world *w;
 	lua_State *L; /* main thread, for callbacks */
-	int busy;     /* inside a step: the world may not be stepped again */
+	int busy;     /* inside a step started from Lua */
+	/* While one of the world's callbacks runs, what it is ("on_frame", "an
+	 * offset function"), else NULL. The world is mid-step then, whoever
+	 * stepped it (Lua or the host in C): the step holds its systems and
+	 * columns, so the world may not be stepped, changed or closed. */
+	const char *inside;
 } lua_world;
 
 eddy_world *eddy_lua_toworld(lua_State *L, int idx)
@@ -296,6 +313,19 @@ eddy_world *eddy_lua_toworld(lua_State *L, int idx)
 static lua_world *check_world(lua_State *L, int idx)
 {
 	lua_world *lw = luaL_checkudata(L, idx, WORLD_MT);
+	if (!lw->w)
+		luaL_error(L, "world is closed");
+	return lw;
+}
+
+/* The world at idx for a call that steps, changes or closes it (world:<method>). */
+static lua_world *check_idle_world(lua_State *L, int idx, const char *method)
+{
+	lua_world *lw = luaL_checkudata(L, idx, WORLD_MT);
+	if (lw->inside)
+		luaL_error(L, "world:%s() cannot be called from inside %s", method, lw->inside);
+	if (lw->busy)
+		luaL_error(L, "world:%s() cannot be called while the world is stepping", method);
 	if (!lw->w)
 		luaL_error(L, "world is closed");
 	return lw;
@@ -341,9 +371,14 @@ static int l_world(lua_State *L)
 	return 1;
 }
 
+/* __gc, and world:close() / __close once the world is idle. A collected world
+ * is never mid-step (a step holds it on the stack); a scene calling __gc
+ * itself gets close's check. */
 static int l_world_gc(lua_State *L)
 {
 	lua_world *lw = luaL_checkudata(L, 1, WORLD_MT);
+	if (lw->inside || lw->busy)
+		check_idle_world(L, 1, "close");
 	if (lw->w) {
 		eddy_destroy_world(lw->w);
 		lw->w = NULL;
@@ -365,6 +400,7 @@ static eddy_status call_lua(lua_State *L, eddy_world *w, int nargs, int nresults
 
 typedef struct callback {
 	lua_State *L;
+	lua_world *owner;       /* outlives the callback: its __gc destroys the world */
 	int fn;                 /* registry reference */
 	eddy_system_id target;  /* animate: the collider */
 	char what[64];
@@ -386,7 +422,10 @@ static eddy_status on_frame_hook(eddy_world *w, int frame, void *user)
 	lua_rawgeti(L, LUA_REGISTRYINDEX, cb->fn);
 	push_world(L, w);
 	lua_pushinteger(L, frame);
+	const char *outer = cb->owner->inside;
+	cb->owner->inside = "on_frame";
 	eddy_status st = call_lua(L, w, 2, 1, "on_frame");
+	cb->owner->inside = outer;
 	if (st != EDDY_OK) {
 		lua_settop(L, top);
 		return st;
@@ -430,7 +469,10 @@ static eddy_status animate_step(eddy_world *w, const eddy_step_context *ctx, voi
 	int top = lua_gettop(L);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, cb->fn);
 	lua_pushnumber(L, ctx->time + ctx->dt);
+	const char *outer = cb->owner->inside;
+	cb->owner->inside = "an offset function";
 	eddy_status st = call_lua(L, w, 1, 1, cb->what);
+	cb->owner->inside = outer;
 	if (st != EDDY_OK)
 		return st;
 	float v[3];
@@ -438,7 +480,7 @@ static eddy_status animate_step(eddy_world *w, const eddy_step_context *ctx, voi
 	for (int i = 0; ok && i < 3; ++i) {
 		lua_rawgeti(L, -1, i + 1);
 		ok = lua_type(L, -1) == LUA_TNUMBER;
-		v[i] = (float)lua_tonumber(L, -1);
+		v[i] = to_float(lua_tonumber(L, -1));
 		lua_pop(L, 1);
 	}
 	lua_settop(L, top);
@@ -464,7 +506,7 @@ static void push_system(lua_State *L, int world_idx, eddy_system_id id)
 
 static int l_world_add(lua_State *L)
 {
-	lua_world *lw = check_world(L, 1);
+	lua_world *lw = check_idle_world(L, 1, "add");
 	lua_def *ld = luaL_testudata(L, 2, DEF_MT);
 	if (!ld)
 		return luaL_error(L, "add: expects a system made by eddy.<system>{...}, e.g. world:add(eddy.gravity{}) (got %s)",
@@ -479,6 +521,7 @@ static int l_world_add(lua_State *L)
 		if (!cb)
 			return luaL_error(L, "add: out of memory");
 		cb->L = lw->L;
+		cb->owner = lw;
 		lua_pushvalue(L, -1);
 		cb->fn = luaL_ref(L, LUA_REGISTRYINDEX);
 		snprintf(cb->what, sizeof cb->what, "animate %s offset", ld->k->name);
@@ -505,7 +548,11 @@ static int l_world_add(lua_State *L)
 		/* place the collider where the function puts it at t = now */
 		lua_getiuservalue(L, 2, 1);
 		lua_pushnumber(L, eddy_world_time(w));
-		lua_call(L, 1, 1);
+		lw->inside = "an offset function";
+		int rc = lua_pcall(L, 1, 1, 0);
+		lw->inside = NULL;
+		if (rc != LUA_OK)
+			return lua_error(L);
 		eddy_vec3 v = vec3_field(L, ld->k, "offset (returned by the function)", -1);
 		lua_pop(L, 1);
 		if (eddy_collider_set_offset(w, id, v) != EDDY_OK)
@@ -519,12 +566,13 @@ static int l_world_add(lua_State *L)
 
 static int l_world_on_frame(lua_State *L)
 {
-	lua_world *lw = check_world(L, 1);
+	lua_world *lw = check_idle_world(L, 1, "on_frame");
 	luaL_checktype(L, 2, LUA_TFUNCTION);
 	callback *cb = calloc(1, sizeof *cb);
 	if (!cb)
 		return luaL_error(L, "on_frame: out of memory");
 	cb->L = lw->L;
+	cb->owner = lw;
 	lua_pushvalue(L, 2);
 	cb->fn = luaL_ref(L, LUA_REGISTRYINDEX);
 	eddy_custom_system_def cd = eddy_default_custom_system_def();
@@ -543,8 +591,6 @@ static int l_world_on_frame(lua_State *L)
 
 static int stepping(lua_State *L, lua_world *lw, eddy_status (*fn)(eddy_world *, double), double arg)
 {
-	if (lw->busy)
-		return luaL_error(L, "the world cannot be stepped from inside its own callbacks");
 	lw->busy = 1;
 	eddy_status st = fn(lw->w, arg);
 	lw->busy = 0;
@@ -561,7 +607,7 @@ static eddy_status step_once(eddy_world *w, double unused)
 
 static int l_world_advance(lua_State *L)
 {
-	lua_world *lw = check_world(L, 1);
+	lua_world *lw = check_idle_world(L, 1, "advance");
 	double s = luaL_checknumber(L, 2);
 	if (!(s >= 0 && isfinite(s)))
 		return luaL_error(L, "advance: 'seconds' must be >= 0 and finite (got %f)", s);
@@ -572,7 +618,7 @@ static int l_world_advance(lua_State *L)
 
 static int l_world_step(lua_State *L)
 {
-	lua_world *lw = check_world(L, 1);
+	lua_world *lw = check_idle_world(L, 1, "step");
 	stepping(L, lw, step_once, 0);
 	lua_pushnumber(L, eddy_world_last_dt(lw->w));
 	return 1;
@@ -617,20 +663,26 @@ static int push_text(lua_State *L, size_t (*fn)(const eddy_world *, char *, size
 /* world:plan() -> text; world:plan{dot = true} -> Graphviz */
 static int l_world_plan(lua_State *L)
 {
-	lua_world *lw = check_world(L, 1);
+	check_world(L, 1);
 	bool dot = false;
 	if (lua_istable(L, 2)) {
-		lua_getfield(L, 2, "dot");
+		lua_getfield(L, 2, "dot"); /* may run an __index that closes the world */
 		dot = lua_toboolean(L, -1);
 		lua_pop(L, 1);
 	}
-	return push_text(L, dot ? eddy_world_plan_dot : eddy_world_plan, lw->w);
+	return push_text(L, dot ? eddy_world_plan_dot : eddy_world_plan, check_world(L, 1)->w);
 }
 
 static int l_world_remove(lua_State *L)
 {
-	lua_world *lw = check_world(L, 1);
+	lua_world *lw = check_idle_world(L, 1, "remove");
 	lua_system *ls = luaL_checkudata(L, 2, SYSTEM_MT);
+	/* ids are per world: another world's handle could name a system here */
+	lua_getiuservalue(L, 2, 1);
+	bool mine = lua_touserdata(L, -1) == lw;
+	lua_pop(L, 1);
+	if (!mine)
+		return luaL_error(L, "remove: the handle belongs to another world");
 	if (eddy_world_remove_system(lw->w, ls->id) != EDDY_OK)
 		return luaL_error(L, "%s", eddy_world_error(lw->w));
 	return 0;
@@ -675,8 +727,8 @@ static int l_world_stats(lua_State *L)
 static int l_world_close(lua_State *L)
 {
 	lua_world *lw = luaL_checkudata(L, 1, WORLD_MT);
-	if (lw->busy)
-		return luaL_error(L, "the world cannot be closed from inside its own callbacks");
+	if (lw->inside || lw->busy)
+		check_idle_world(L, 1, "close");
 	return l_world_gc(L);
 }
 
@@ -722,7 +774,7 @@ static int l_world_channel(lua_State *L)
 	lua_world *lw = check_world(L, 1);
 	const char *name = luaL_checkstring(L, 2);
 	eddy_column_id id = eddy_world_find_column(lw->w, name);
-	if (id < 0)
+	if (id < 0 || strlen(name) >= sizeof ((lua_channel *)0)->name)
 		return luaL_error(L, "channel: no column named '%s'", name);
 	eddy_column_info info;
 	eddy_world_column_info(lw->w, id, &info);
@@ -960,7 +1012,7 @@ int luaopen_eddy(lua_State *L)
 	new_metatable(L, WORLD_MT, world_methods);
 	lua_pushcfunction(L, l_world_gc);
 	lua_setfield(L, -2, "__gc");
-	lua_pushcfunction(L, l_world_gc);
+	lua_pushcfunction(L, l_world_close);
 	lua_setfield(L, -2, "__close");
 	lua_pushcfunction(L, l_world_tostring);
 	lua_setfield(L, -2, "__tostring");

@@ -166,7 +166,77 @@ static void on_frame_fields_merge(void)
 	e = run_fresh(HEAD "world:on_frame(function(w, f) return 42 end)\nworld:advance(0.1)\n", buf, sizeof buf);
 	CHECK_HAS(e, "on_frame: must return a table of stats fields or nothing (got number)");
 	e = run_fresh(HEAD "world:on_frame(function(w, f) w:advance(1) end)\nworld:advance(0.1)\n", buf, sizeof buf);
-	CHECK_HAS(e, "cannot be stepped from inside its own callbacks");
+	CHECK_HAS(e, "scenes/t.lua:3: world:advance() cannot be called from inside on_frame");
+}
+
+/* Runs src (which returns its world) and steps one frame from C, as the eddy
+ * command does; returns the frame's status, the world error in err. */
+static eddy_status step_frame_from_c(const char *src, char *err, size_t cap, double *time, int *frame)
+{
+	lua_State *L = new_state();
+	const char *e = run(L, src);
+	eddy_world *w = e ? NULL : eddy_lua_toworld(L, -1);
+	CHECKF(w != NULL, "%s", e ? e : "the scene returned no world");
+	eddy_status st = w ? eddy_world_step_frame(w) : EDDY_ERR_INVALID;
+	snprintf(err, cap, "%s", w && st != EDDY_OK ? eddy_world_error(w) : "");
+	*time = w ? eddy_world_time(w) : -1;
+	*frame = w ? eddy_world_frame(w) : -1;
+	lua_close(L);
+	return st;
+}
+
+/* A world's own callbacks may not step it, add to it, remove from it or close
+ * it, whoever steps the world (Lua or the host in C): the step in progress
+ * holds its systems and columns. The refused call leaves time and frame as
+ * they were; the error names the call and the callback at the scene's line. */
+static void callbacks_cannot_reenter_their_world(void)
+{
+	char err[512];
+	double t;
+	int frame;
+	eddy_status st = step_frame_from_c(HEAD "world:add(eddy.emit_box{ min = {0.1,0.1,0.1}, max = {0.2,0.2,0.2}, spacing = 0.05 })\n"
+	                                        "world:on_frame(function(w, f) w:advance(1) end)\n"
+	                                        "return world\n",
+	                                   err, sizeof err, &t, &frame);
+	CHECK(st == EDDY_ERR_EXTERNAL);
+	CHECK_HAS(err, "on_frame: scenes/t.lua:4: world:advance() cannot be called from inside on_frame");
+	CHECKF(frame <= 1 && t <= 1.0 / 30 + 1e-9, "frame %d, t %g: the refused advance ran", frame, t);
+
+	/* every refused call, caught: the frame completes as if none was made */
+	st = step_frame_from_c(HEAD "local g = world:add(eddy.gravity{})\n"
+	                            "world:on_frame(function(w, f)\n"
+	                            "  local t, n = w:time(), w:frame()\n"
+	                            "  local calls = {\n"
+	                            "    {'advance', function() w:advance(1) end}, {'step', function() w:step() end},\n"
+	                            "    {'add', function() w:add(eddy.integrate{}) end}, {'remove', function() w:remove(g) end},\n"
+	                            "    {'on_frame', function() w:on_frame(print) end}, {'close', function() w:close() end},\n"
+	                            "    {'close', function() local c <close> = w end},\n"
+	                            "    {'close', function() getmetatable(w).__gc(w) end},\n"
+	                            "  }\n"
+	                            "  for _, c in ipairs(calls) do\n"
+	                            "    local ok, e = pcall(c[2])\n"
+	                            "    assert(not ok and e:find('world:' .. c[1] .. '() cannot be called from inside on_frame', 1, true), e)\n"
+	                            "  end\n"
+	                            "  assert(w:time() == t and w:frame() == n and g:valid())\n"
+	                            "end)\n"
+	                            "return world\n",
+	                       err, sizeof err, &t, &frame);
+	CHECKF(st == EDDY_OK, "%s", err);
+	CHECK(frame == 1);
+	CHECK_NEAR(t, 1.0 / 30, 1e-9);
+
+	/* an animated offset function, during a step and when the collider is added */
+	st = step_frame_from_c(HEAD "world:add(eddy.collide_sphere{ offset = function(t)\n"
+	                            "  if t > 0 then world:step() end\n"
+	                            "  return {0, 0, 0} end })\n"
+	                            "return world\n",
+	                       err, sizeof err, &t, &frame);
+	CHECK(st == EDDY_ERR_EXTERNAL);
+	CHECK_HAS(err, "scenes/t.lua:4: world:step() cannot be called from inside an offset function");
+	char buf[512];
+	const char *e = run_fresh(HEAD "world:add(eddy.collide_sphere{ offset = function(t) world:close(); return {0, 0, 0} end })\n",
+	                          buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:3: world:close() cannot be called from inside an offset function");
 }
 
 static void params_convert_to_the_default_type(void)
@@ -218,6 +288,44 @@ static void animated_collider(void)
 
 static void every_field_rejects_nan_and_inf(void);
 
+/* Misuse through the API (handles of other worlds, views of closed worlds,
+ * metamethods that close the world mid-call, out-of-range numbers) is a Lua
+ * error or a harmless value, never a crash. */
+static void arguments_that_once_crashed(void)
+{
+	char buf[512];
+	const char *e = run_fresh(HEAD "local other = eddy.world{}\nlocal g = other:add(eddy.gravity{})\n"
+	                               "world:add(eddy.gravity{})\nworld:remove(g)\n",
+	                          buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:6: remove: the handle belongs to another world");
+	e = run_fresh(HEAD "local opts = setmetatable({}, { __index = function() world:close() end })\n"
+	                   "world:plan(opts)\n",
+	              buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:4: world is closed");
+	e = run_fresh(HEAD "world:add(eddy.emit_box{ min = {0.1,0.1,0.1}, max = {0.2,0.2,0.2}, spacing = 0.05 })\n"
+	                   "world:add(eddy.gravity{}); world:add(eddy.integrate{})\n"
+	                   "world:step()\n"
+	                   "local y = world:channel('y')\n"
+	                   "assert(#y == 8 and y[1] and y[math.maxinteger] == nil and y[math.mininteger] == nil)\n"
+	                   "assert(y[1.5] == nil and y.x == nil and y[0/0] == nil)\n"
+	                   "world:close()\n"
+	                   "assert(#y == 0 and y[1] == nil and tostring(world) == 'eddy world (closed)')\n"
+	                   "world:close()\n"
+	                   "local ok, err = pcall(world.time, world)\n"
+	                   "assert(not ok and err:find('world is closed', 1, true), err)\n"
+	                   "ok, err = pcall(world.channel, eddy.world{}, string.rep('y', 100))\n"
+	                   "assert(not ok and err:find('no column named', 1, true), err)\n"
+	                   "ok, err = pcall(world.add, eddy.gravity{}, eddy.gravity{})\n"
+	                   "assert(not ok and err:find('eddy.world expected', 1, true), err)\n",
+	              buf, sizeof buf);
+	CHECKF(e == NULL, "%s", e);
+	/* a float field beyond the float range is infinite, and rejected as such */
+	e = run_fresh(HEAD "world:add(eddy.emit_box{ spacing = 1e300 })\n", buf, sizeof buf);
+	CHECK_HAS(e, "'spacing' must be");
+	e = run_fresh(HEAD "world:add(eddy.emit_box{ min = {0, -1e300, 0} })\n", buf, sizeof buf);
+	CHECK_HAS(e, "'min'");
+}
+
 void suite_lua(void)
 {
 	RUN(unknown_field_names_file_line_and_fix);
@@ -227,6 +335,8 @@ void suite_lua(void)
 	RUN(sph_mass_from_the_handle);
 	RUN(world_api_and_channels);
 	RUN(on_frame_fields_merge);
+	RUN(callbacks_cannot_reenter_their_world);
+	RUN(arguments_that_once_crashed);
 	RUN(params_convert_to_the_default_type);
 	RUN(animated_collider);
 	RUN(every_field_rejects_nan_and_inf);
