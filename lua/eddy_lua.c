@@ -10,6 +10,7 @@
  * added), eddy.system (a handle: world + id), eddy.channel (a live view of a
  * column). Host callbacks (on_frame, animated collider offsets) are custom
  * systems, so they show in the plan like any other system. */
+#define _XOPEN_SOURCE 700 /* getcwd, lstat, realpath: safe mode's path checks */
 #include "eddy_lua.h"
 #include "bind.h"
 
@@ -22,6 +23,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #define WORLD_MT "eddy.world"
 #define DEF_MT "eddy.def"
@@ -31,6 +34,9 @@
 #define PARAMS_USED_KEY "eddy.params_used"
 #define WORLDS_KEY "eddy.worlds" /* weak: eddy_world* -> its userdata */
 #define OUT_DIR_KEY "eddy.out_dir"
+/* while scenes run in safe mode: a table {out = the output directory or nil};
+ * worlds made then keep it (as user value field "safe") */
+#define SAFE_KEY "eddy.safe"
 
 /* Every list of kinds the module exposes; each ends with EDDY_LUA_KIND_END. */
 static const eddy_lua_kind *const kind_lists[] = {
@@ -362,7 +368,11 @@ static int l_world(lua_State *L)
 	lua_rawgeti(L, LUA_REGISTRYINDEX, LUA_RIDX_MAINTHREAD);
 	lw->L = lua_tothread(L, -1);
 	lua_pop(L, 1);
-	lua_newtable(L); /* user value: frame fields and callbacks */
+	lua_newtable(L); /* user value: frame fields, callbacks, safe mode */
+	if (lua_getfield(L, LUA_REGISTRYINDEX, SAFE_KEY) == LUA_TTABLE)
+		lua_setfield(L, -2, "safe");
+	else
+		lua_pop(L, 1);
 	lua_setiuservalue(L, -2, 1);
 	lua_getfield(L, LUA_REGISTRYINDEX, WORLDS_KEY);
 	lua_pushvalue(L, -2);
@@ -504,6 +514,23 @@ static void push_system(lua_State *L, int world_idx, eddy_system_id id)
 	lua_setiuservalue(L, -2, 1);
 }
 
+static void check_writable(lua_State *L, const char *fn, const char *path, const char *dir);
+
+/* A world made in safe mode writes files (render_points, export_particles:
+ * their `path`) only where the scene itself may. */
+static void check_safe_paths(lua_State *L, int world_idx, const lua_def *ld)
+{
+	lua_getiuservalue(L, world_idx, 1);
+	if (lua_getfield(L, -1, "safe") == LUA_TTABLE) {
+		lua_getfield(L, -1, "out");
+		for (const eddy_lua_field *f = ld->k->fields; f->name; ++f)
+			if (f->type == EDDY_LUA_STRING && strcmp(f->name, "path") == 0)
+				check_writable(L, ld->k->name, (const char *)ld->def + f->offset, lua_tostring(L, -1));
+		lua_pop(L, 1);
+	}
+	lua_pop(L, 2);
+}
+
 static int l_world_add(lua_State *L)
 {
 	lua_world *lw = check_idle_world(L, 1, "add");
@@ -511,6 +538,7 @@ static int l_world_add(lua_State *L)
 	if (!ld)
 		return luaL_error(L, "add: expects a system made by eddy.<system>{...}, e.g. world:add(eddy.gravity{}) (got %s)",
 		                  luaL_typename(L, 2));
+	check_safe_paths(L, 1, ld);
 	eddy_world *w = lw->w;
 	callback *cb = NULL;
 	eddy_system_id anim = EDDY_NULL_SYSTEM;
@@ -870,6 +898,532 @@ static int l_system_offset(lua_State *L)
 	return 1;
 }
 
+/* ---- safe mode ------------------------------------------------------------
+ *
+ * A safe scene can compute, read files, write files under the output
+ * directory and require Lua modules; it cannot run commands, write elsewhere,
+ * load native code or bytecode (Lua does not verify bytecode: a crafted chunk
+ * corrupts memory), or reach the debug library. What it cannot use is
+ * replaced by a function raising "<name> is not available in safe mode", so a
+ * scene learns why at the line that tried. */
+
+#define SAFE_MODE "safe mode (--safe)"
+
+static int l_refused(lua_State *L)
+{
+	return luaL_error(L, "%s is not available in " SAFE_MODE, lua_tostring(L, lua_upvalueindex(1)));
+}
+
+static void set_refused(lua_State *L, int t, const char *lib, const char *name)
+{
+	lua_pushfstring(L, "%s.%s", lib, name);
+	lua_pushcclosure(L, l_refused, 1);
+	lua_setfield(L, t, name);
+}
+
+/* Writes into out (cap bytes) the absolute form of path with "." components
+ * and repeated slashes dropped; false if it has a ".." component (refused
+ * rather than resolved: with symbolic links, ".." is not lexical) or does not
+ * fit. */
+static bool absolute_path(const char *path, char *out, size_t cap)
+{
+	size_t n = 0;
+	if (path[0] != '/') {
+		if (!getcwd(out, cap))
+			return false;
+		n = strlen(out);
+	}
+	for (const char *p = path; *p;) {
+		while (*p == '/')
+			++p;
+		size_t len = strcspn(p, "/");
+		if (len == 2 && p[0] == '.' && p[1] == '.')
+			return false;
+		if (len && !(len == 1 && p[0] == '.')) {
+			if (n + 1 + len + 1 > cap)
+				return false;
+			out[n++] = '/';
+			memcpy(out + n, p, len);
+			n += len;
+		}
+		p += len;
+	}
+	if (n == 0 || (n == 1 && out[0] == '/')) {
+		if (cap < 2)
+			return false;
+		n = 0;
+		out[n++] = '/';
+	}
+	out[n] = '\0';
+	return true;
+}
+
+static bool below(const char *path, const char *dir)
+{
+	size_t n = strlen(dir);
+	if (n == 1 && dir[0] == '/')
+		return path[0] == '/' && path[1] != '\0';
+	return strncmp(path, dir, n) == 0 && path[n] == '/' && path[n + 1] != '\0';
+}
+
+/* Raises an error unless path may be opened for writing in safe mode: a file
+ * strictly below dir (the output directory; NULL for none), with no ".."
+ * component, whose directory is below dir or dir itself also with symbolic
+ * links resolved, and which is not itself a symbolic link. */
+static void check_writable(lua_State *L, const char *fn, const char *path, const char *dir)
+{
+	if (!dir)
+		luaL_error(L, "%s: cannot write '%s': " SAFE_MODE " has no output directory to write in", fn, path);
+	enum { CAP = 8192 };
+	char *buf = malloc(2 * CAP);
+	if (!buf)
+		luaL_error(L, "%s: out of memory", fn);
+	char *abs_path = buf, *abs_dir = buf + CAP;
+	const char *why = NULL;
+	if (!absolute_path(path, abs_path, CAP))
+		why = "a path with a '..' component is not written in " SAFE_MODE;
+	else if (!absolute_path(dir, abs_dir, CAP) || !below(abs_path, abs_dir))
+		why = "files are written only under the output directory in " SAFE_MODE;
+	else {
+		struct stat st;
+		char *slash = strrchr(abs_path, '/');
+		*slash = '\0';
+		char *real_parent = realpath(abs_path[0] ? abs_path : "/", NULL);
+		*slash = '/';
+		char *real_dir = realpath(abs_dir, NULL);
+		if (lstat(abs_path, &st) == 0 && S_ISLNK(st.st_mode))
+			why = "a symbolic link is not written through in " SAFE_MODE;
+		/* a parent that does not exist fails the open by itself */
+		else if (real_parent && (!real_dir || (strcmp(real_parent, real_dir) != 0 && !below(real_parent, real_dir))))
+			why = "files are written only under the output directory in " SAFE_MODE " (a symbolic link leads out of it)";
+		free(real_parent);
+		free(real_dir);
+	}
+	free(buf);
+	if (why)
+		luaL_error(L, "%s: cannot write '%s': %s ('%s')", fn, path, why, dir);
+}
+
+/* io.open(name, mode): any file for reading ("r", "rb"); other modes only
+ * under the output directory. Upvalues: io.open, the output directory. */
+static int l_safe_open(lua_State *L)
+{
+	const char *path = luaL_checkstring(L, 1);
+	const char *mode = luaL_optstring(L, 2, "r");
+	if (mode[0] != 'r' || strchr(mode, '+'))
+		check_writable(L, "io.open", path, lua_tostring(L, lua_upvalueindex(2)));
+	lua_settop(L, 2);
+	lua_pushvalue(L, lua_upvalueindex(1));
+	lua_insert(L, 1);
+	lua_call(L, 2, LUA_MULTRET);
+	return lua_gettop(L);
+}
+
+/* io.output(name) opens name for writing: the same rule as io.open. */
+static int l_safe_output(lua_State *L)
+{
+	if (lua_type(L, 1) == LUA_TSTRING)
+		check_writable(L, "io.output", lua_tostring(L, 1), lua_tostring(L, lua_upvalueindex(2)));
+	int n = lua_gettop(L);
+	lua_pushvalue(L, lua_upvalueindex(1));
+	lua_insert(L, 1);
+	lua_call(L, n, LUA_MULTRET);
+	return lua_gettop(L);
+}
+
+/* The environment a chunk gets when the caller names none: upvalue 2 (the
+ * sandbox's globals), or the argument at idx when given. */
+static void set_chunk_env(lua_State *L, int nargs, int idx)
+{
+	if (nargs >= idx)
+		lua_pushvalue(L, idx);
+	else
+		lua_pushvalue(L, lua_upvalueindex(2));
+	if (!lua_setupvalue(L, -2, 1))
+		lua_pop(L, 1);
+}
+
+/* load(chunk, name, mode, env) with mode forced to "t". Upvalues: load, the
+ * sandbox's globals. */
+static int l_safe_load(lua_State *L)
+{
+	int n = lua_gettop(L);
+	luaL_checkany(L, 1);
+	if (lua_type(L, 1) == LUA_TSTRING && lua_tostring(L, 1)[0] == LUA_SIGNATURE[0]) {
+		luaL_pushfail(L);
+		lua_pushliteral(L, "load: binary chunks (string.dump) cannot be loaded in " SAFE_MODE);
+		return 2;
+	}
+	lua_pushvalue(L, lua_upvalueindex(1));
+	lua_pushvalue(L, 1);
+	lua_pushvalue(L, 2);
+	lua_pushliteral(L, "t");
+	if (n >= 4)
+		lua_pushvalue(L, 4);
+	else
+		lua_pushvalue(L, lua_upvalueindex(2));
+	lua_call(L, 4, 2);
+	if (lua_isnil(L, -2))
+		return 2;
+	lua_pop(L, 1);
+	return 1;
+}
+
+/* loadfile(name, mode, env), text only. Upvalues: unused, the globals. */
+static int l_safe_loadfile(lua_State *L)
+{
+	int n = lua_gettop(L);
+	const char *name = luaL_optstring(L, 1, NULL);
+	if (luaL_loadfilex(L, name, "t") != LUA_OK) {
+		luaL_pushfail(L);
+		lua_insert(L, -2);
+		return 2;
+	}
+	set_chunk_env(L, n, 3);
+	return 1;
+}
+
+/* dofile(name), text only. */
+static int l_safe_dofile(lua_State *L)
+{
+	const char *name = luaL_optstring(L, 1, NULL);
+	lua_settop(L, 1);
+	if (luaL_loadfilex(L, name, "t") != LUA_OK)
+		return lua_error(L);
+	set_chunk_env(L, 0, 1);
+	lua_call(L, 0, LUA_MULTRET);
+	return lua_gettop(L) - 1;
+}
+
+/* package.searchers[1]: package.preload[name]. Upvalue 1: package. */
+static int l_search_preload(lua_State *L)
+{
+	const char *name = luaL_checkstring(L, 1);
+	lua_getfield(L, lua_upvalueindex(1), "preload");
+	if (!lua_istable(L, -1) || lua_getfield(L, -1, name) == LUA_TNIL) {
+		lua_pushfstring(L, "no field package.preload['%s']", name);
+		return 1;
+	}
+	lua_pushliteral(L, ":preload:");
+	return 2;
+}
+
+/* package.searchers[2]: a Lua file on package.path, loaded as text with the
+ * sandbox's globals. Upvalues: package, the globals. */
+static int l_search_text(lua_State *L)
+{
+	const char *name = luaL_checkstring(L, 1);
+	lua_settop(L, 1);
+	lua_getfield(L, lua_upvalueindex(1), "path");
+	const char *path = lua_tostring(L, -1);
+	if (!path)
+		return luaL_error(L, "'package.path' must be a string");
+	const char *file = luaL_gsub(L, name, ".", "/");
+	lua_pushliteral(L, ""); /* the files tried */
+	for (const char *p = path; *p;) {
+		size_t len = strcspn(p, ";");
+		if (len) {
+			lua_pushlstring(L, p, len);
+			const char *fn = luaL_gsub(L, lua_tostring(L, -1), "?", file);
+			lua_remove(L, -2);
+			FILE *f = fopen(fn, "r");
+			if (f) {
+				fclose(f);
+				if (luaL_loadfilex(L, fn, "t") != LUA_OK)
+					return luaL_error(L, "error loading module '%s' from file '%s':\n\t%s", name, fn,
+					                  lua_tostring(L, -1));
+				set_chunk_env(L, 0, 1);
+				lua_pushvalue(L, -2);
+				return 2;
+			}
+			lua_pushfstring(L, "%sno file '%s'", lua_rawlen(L, -2) ? "\n\t" : "", fn);
+			lua_remove(L, -2);
+			lua_concat(L, 2);
+		}
+		p += len + (p[len] == ';');
+	}
+	return 1;
+}
+
+static int l_search_native(lua_State *L)
+{
+	lua_pushliteral(L, "C modules (package.cpath) are not loaded in " SAFE_MODE);
+	return 1;
+}
+
+/* require(name) over package.loaded and package.searchers of upvalue 1. */
+static int l_safe_require(lua_State *L)
+{
+	const char *name = luaL_checkstring(L, 1);
+	lua_settop(L, 1);
+	if (lua_getfield(L, lua_upvalueindex(1), "loaded") != LUA_TTABLE) /* 2 */
+		return luaL_error(L, "'package.loaded' must be a table");
+	if (lua_getfield(L, 2, name) != LUA_TNIL && lua_toboolean(L, -1))
+		return 1;
+	lua_pop(L, 1);
+	if (lua_getfield(L, lua_upvalueindex(1), "searchers") != LUA_TTABLE) /* 3 */
+		return luaL_error(L, "'package.searchers' must be a table");
+	lua_pushliteral(L, ""); /* 4: why each searcher found nothing */
+	for (int i = 1;; ++i) {
+		if (lua_rawgeti(L, 3, i) == LUA_TNIL)
+			return luaL_error(L, "module '%s' not found:%s", name, lua_tostring(L, 4));
+		lua_pushstring(L, name);
+		lua_call(L, 1, 2); /* 5, 6 */
+		if (lua_isfunction(L, 5))
+			break;
+		if (lua_isstring(L, 5)) {
+			lua_pop(L, 1);
+			lua_pushliteral(L, "\n\t");
+			lua_insert(L, 5);
+			lua_concat(L, 3);
+		} else {
+			lua_pop(L, 2);
+		}
+	}
+	lua_remove(L, 4); /* 4: loader, 5: its data */
+	lua_pushvalue(L, 4);
+	lua_pushvalue(L, 1);
+	lua_pushvalue(L, 5);
+	lua_call(L, 2, 1);
+	if (!lua_isnil(L, -1))
+		lua_setfield(L, 2, name);
+	else
+		lua_pop(L, 1);
+	if (lua_getfield(L, 2, name) == LUA_TNIL) {
+		lua_pop(L, 1);
+		lua_pushboolean(L, 1);
+		lua_pushvalue(L, -1);
+		lua_setfield(L, 2, name);
+	}
+	lua_pushvalue(L, 5);
+	return 2;
+}
+
+/* Makes the globals env, with its os, io and package tables, safe; out (a
+ * string, or nil for none) is where files may be written. */
+static void make_safe(lua_State *L, int env, int os, int io, int pkg, int out)
+{
+	static const char *const os_kept[] = {"time", "clock", "date", "getenv", "difftime", NULL};
+	lua_pushnil(L);
+	while (lua_next(L, os)) {
+		lua_pop(L, 1);
+		bool kept = lua_type(L, -1) != LUA_TSTRING;
+		for (int i = 0; !kept && os_kept[i]; ++i)
+			kept = strcmp(lua_tostring(L, -1), os_kept[i]) == 0;
+		if (!kept)
+			set_refused(L, os, "os", lua_tostring(L, -1)); /* an existing field: next stays valid */
+	}
+
+	lua_getfield(L, io, "open");
+	lua_pushvalue(L, out);
+	lua_pushcclosure(L, l_safe_open, 2);
+	lua_setfield(L, io, "open");
+	lua_getfield(L, io, "output");
+	lua_pushvalue(L, out);
+	lua_pushcclosure(L, l_safe_output, 2);
+	lua_setfield(L, io, "output");
+	set_refused(L, io, "io", "popen");
+	set_refused(L, io, "io", "tmpfile");
+
+	set_refused(L, pkg, "package", "loadlib");
+	lua_pushliteral(L, "");
+	lua_setfield(L, pkg, "cpath");
+	lua_createtable(L, 3, 0);
+	lua_pushvalue(L, pkg);
+	lua_pushcclosure(L, l_search_preload, 1);
+	lua_rawseti(L, -2, 1);
+	lua_pushvalue(L, pkg);
+	lua_pushvalue(L, env);
+	lua_pushcclosure(L, l_search_text, 2);
+	lua_rawseti(L, -2, 2);
+	lua_pushcfunction(L, l_search_native);
+	lua_rawseti(L, -2, 3);
+	lua_setfield(L, pkg, "searchers");
+	lua_getfield(L, pkg, "loaded");
+	if (lua_istable(L, -1)) {
+		lua_pushnil(L);
+		lua_setfield(L, -2, "debug");
+	}
+	lua_pop(L, 1);
+
+	lua_pushvalue(L, pkg);
+	lua_pushcclosure(L, l_safe_require, 1);
+	lua_setfield(L, env, "require");
+	lua_getfield(L, env, "load");
+	lua_pushvalue(L, env);
+	lua_pushcclosure(L, l_safe_load, 2);
+	lua_setfield(L, env, "load");
+	lua_pushnil(L);
+	lua_pushvalue(L, env);
+	lua_pushcclosure(L, l_safe_loadfile, 2);
+	lua_setfield(L, env, "loadfile");
+	lua_pushnil(L);
+	lua_pushvalue(L, env);
+	lua_pushcclosure(L, l_safe_dofile, 2);
+	lua_setfield(L, env, "dofile");
+	lua_pushnil(L);
+	lua_setfield(L, env, "debug");
+}
+
+/* Pushes the standard library `name` as loaded in this state (a table). */
+static void push_loaded(lua_State *L, const char *name)
+{
+	luaL_getsubtable(L, LUA_REGISTRYINDEX, LUA_LOADED_TABLE);
+	if (lua_getfield(L, -1, name) != LUA_TTABLE)
+		luaL_error(L, "safe mode needs the standard library '%s' (luaL_openlibs)", name);
+	lua_remove(L, -2);
+}
+
+static int sandbox_in_place(lua_State *L)
+{
+	const int out = 1;
+	lua_pushglobaltable(L);
+	push_loaded(L, "os");
+	push_loaded(L, "io");
+	push_loaded(L, "package");
+	make_safe(L, out + 1, out + 2, out + 3, out + 4, out);
+	lua_createtable(L, 0, 1);
+	lua_pushvalue(L, out);
+	lua_setfield(L, -2, "out");
+	lua_setfield(L, LUA_REGISTRYINDEX, SAFE_KEY);
+	return 0;
+}
+
+int eddy_lua_sandbox(lua_State *L, const char *out_dir)
+{
+	lua_pushcfunction(L, sandbox_in_place);
+	if (out_dir)
+		lua_pushstring(L, out_dir);
+	else
+		lua_pushnil(L);
+	return lua_pcall(L, 1, 0, 0);
+}
+
+/* Pushes a shallow copy of the table on top, in place of it. */
+static void copy_table(lua_State *L)
+{
+	lua_newtable(L);
+	lua_pushnil(L);
+	while (lua_next(L, -3)) {
+		lua_pushvalue(L, -2);
+		lua_insert(L, -2);
+		lua_rawset(L, -4);
+	}
+	lua_remove(L, -2);
+}
+
+/* eddy.load_scene(path [, {safe = true, out = dir}]): runs the scene file
+ * (text only) in fresh globals and returns what it returns. safe (default
+ * true) gives those globals only what eddy run --safe gives a scene, writing
+ * under out (default eddy.out_dir()); out also becomes eddy.out_dir(). With
+ * safe = false the fresh globals fall back to this state's. */
+static int l_load_scene(lua_State *L)
+{
+	const char *path = luaL_checkstring(L, 1);
+	bool safe = true;
+	if (!lua_isnoneornil(L, 2)) {
+		luaL_checktype(L, 2, LUA_TTABLE);
+		lua_pushnil(L);
+		while (lua_next(L, 2)) {
+			lua_pop(L, 1);
+			const char *k = lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "";
+			if (strcmp(k, "safe") != 0 && strcmp(k, "out") != 0)
+				return luaL_error(L, "load_scene: unknown option '%s' (options: safe, out)", luaL_tolstring(L, -1, NULL));
+		}
+		if (lua_getfield(L, 2, "safe") != LUA_TNIL) {
+			if (!lua_isboolean(L, -1))
+				return luaL_error(L, "load_scene: 'safe' must be true or false (got %s)", luaL_typename(L, -1));
+			safe = lua_toboolean(L, -1);
+		}
+		lua_pop(L, 1);
+		if (lua_getfield(L, 2, "out") != LUA_TNIL) {
+			if (lua_type(L, -1) != LUA_TSTRING)
+				return luaL_error(L, "load_scene: 'out' must be a directory name (got %s)", luaL_typename(L, -1));
+			lua_pushvalue(L, -1);
+			lua_setfield(L, LUA_REGISTRYINDEX, OUT_DIR_KEY);
+		}
+		lua_pop(L, 1);
+	}
+	lua_settop(L, 1);
+	lua_getfield(L, LUA_REGISTRYINDEX, OUT_DIR_KEY); /* 2 */
+	lua_newtable(L);                                 /* 3: the scene's globals */
+	if (!safe) {
+		lua_createtable(L, 0, 1);
+		lua_pushglobaltable(L);
+		lua_setfield(L, -2, "__index");
+		lua_setmetatable(L, 3);
+	} else {
+		static const char *const base[] = {"assert", "collectgarbage", "error", "getmetatable", "ipairs", "next",
+		                                   "pairs", "pcall", "print", "rawequal", "rawget", "rawlen", "rawset",
+		                                   "select", "setmetatable", "tonumber", "tostring", "type", "xpcall",
+		                                   "warn", "_VERSION", NULL};
+		static const char *const libs[] = {"string", "math", "table", "utf8", "coroutine", "os", "io", NULL};
+		push_loaded(L, "_G");
+		for (int i = 0; base[i]; ++i) {
+			lua_getfield(L, -1, base[i]);
+			lua_setfield(L, 3, base[i]);
+		}
+		lua_pop(L, 1);
+		lua_newtable(L); /* 4: package.loaded */
+		for (int i = 0; libs[i]; ++i) {
+			push_loaded(L, libs[i]);
+			copy_table(L);
+			lua_pushvalue(L, -1);
+			lua_setfield(L, 3, libs[i]);
+			lua_setfield(L, 4, libs[i]);
+		}
+		luaL_getsubtable(L, LUA_REGISTRYINDEX, LUA_LOADED_TABLE);
+		lua_getfield(L, -1, "eddy");
+		lua_setfield(L, 4, "eddy");
+		lua_pop(L, 1);
+		lua_pushvalue(L, 3);
+		lua_setfield(L, 3, "_G");
+		lua_pushvalue(L, 3);
+		lua_setfield(L, 4, "_G");
+		push_loaded(L, "package"); /* 5: the host's, for path, config, searchpath */
+		lua_newtable(L);           /* 6 */
+		static const char *const pkg_fields[] = {"path", "config", "searchpath", NULL};
+		for (int i = 0; pkg_fields[i]; ++i) {
+			lua_getfield(L, 5, pkg_fields[i]);
+			lua_setfield(L, 6, pkg_fields[i]);
+		}
+		lua_newtable(L);
+		lua_setfield(L, 6, "preload");
+		lua_pushvalue(L, 4);
+		lua_setfield(L, 6, "loaded");
+		lua_pushvalue(L, 6);
+		lua_setfield(L, 3, "package");
+		lua_pushvalue(L, 6);
+		lua_setfield(L, 4, "package");
+		lua_getfield(L, 3, "os");  /* 7 */
+		lua_getfield(L, 3, "io");  /* 8 */
+		push_loaded(L, "_G");
+		lua_getfield(L, -1, "load");
+		lua_setfield(L, 3, "load"); /* make_safe wraps it */
+		lua_pop(L, 1);
+		make_safe(L, 3, 7, 8, 6, 2);
+		lua_settop(L, 3);
+	}
+	/* 4: the safe-mode marker to restore after the scene */
+	lua_getfield(L, LUA_REGISTRYINDEX, SAFE_KEY);
+	if (safe) {
+		lua_createtable(L, 0, 1);
+		lua_pushvalue(L, 2);
+		lua_setfield(L, -2, "out");
+		lua_setfield(L, LUA_REGISTRYINDEX, SAFE_KEY);
+	}
+	if (luaL_loadfilex(L, path, "t") != LUA_OK)
+		return lua_error(L);
+	lua_pushvalue(L, 3);
+	lua_setupvalue(L, -2, 1);
+	int rc = lua_pcall(L, 0, LUA_MULTRET, 0);
+	lua_pushvalue(L, 4);
+	lua_setfield(L, LUA_REGISTRYINDEX, SAFE_KEY);
+	if (rc != LUA_OK)
+		return lua_error(L);
+	return lua_gettop(L) - 4;
+}
+
 /* ---- module functions ---------------------------------------------------- */
 
 void eddy_lua_set_param(lua_State *L, const char *key, const char *value)
@@ -1055,6 +1609,8 @@ int luaopen_eddy(lua_State *L)
 	lua_setfield(L, -2, "param");
 	lua_pushcfunction(L, l_out_dir);
 	lua_setfield(L, -2, "out_dir");
+	lua_pushcfunction(L, l_load_scene);
+	lua_setfield(L, -2, "load_scene");
 	for (size_t l = 0; l < sizeof kind_lists / sizeof kind_lists[0]; ++l)
 		for (const eddy_lua_kind *k = kind_lists[l]; k->name; ++k) {
 			lua_pushlightuserdata(L, (void *)(uintptr_t)k);
