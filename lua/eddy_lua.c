@@ -1049,6 +1049,7 @@ static int l_safe_load(lua_State *L)
 {
 	int n = lua_gettop(L);
 	luaL_checkany(L, 1);
+	lua_settop(L, 4);
 	if (lua_type(L, 1) == LUA_TSTRING && lua_tostring(L, 1)[0] == LUA_SIGNATURE[0]) {
 		luaL_pushfail(L);
 		lua_pushliteral(L, "load: binary chunks (string.dump) cannot be loaded in " SAFE_MODE);
