@@ -1031,6 +1031,19 @@ static int l_safe_output(lua_State *L)
 	return lua_gettop(L);
 }
 
+/* luaL_loadfilex in text mode, with a message naming the file when it holds
+ * a binary chunk (Lua's says only "attempt to load a binary chunk"). */
+static int load_text_file(lua_State *L, const char *name)
+{
+	int rc = luaL_loadfilex(L, name, "t");
+	const char *msg = rc == LUA_OK ? NULL : lua_tostring(L, -1);
+	if (msg && strstr(msg, "attempt to load a binary chunk")) {
+		lua_pop(L, 1);
+		lua_pushfstring(L, "%s: a binary (precompiled) chunk: eddy loads Lua source only", name ? name : "stdin");
+	}
+	return rc;
+}
+
 /* The environment a chunk gets when the caller names none: upvalue 2 (the
  * sandbox's globals), or the argument at idx when given. */
 static void set_chunk_env(lua_State *L, int nargs, int idx)
@@ -1075,7 +1088,7 @@ static int l_safe_loadfile(lua_State *L)
 {
 	int n = lua_gettop(L);
 	const char *name = luaL_optstring(L, 1, NULL);
-	if (luaL_loadfilex(L, name, "t") != LUA_OK) {
+	if (load_text_file(L, name) != LUA_OK) {
 		luaL_pushfail(L);
 		lua_insert(L, -2);
 		return 2;
@@ -1089,7 +1102,7 @@ static int l_safe_dofile(lua_State *L)
 {
 	const char *name = luaL_optstring(L, 1, NULL);
 	lua_settop(L, 1);
-	if (luaL_loadfilex(L, name, "t") != LUA_OK)
+	if (load_text_file(L, name) != LUA_OK)
 		return lua_error(L);
 	set_chunk_env(L, 0, 1);
 	lua_call(L, 0, LUA_MULTRET);
@@ -1130,7 +1143,7 @@ static int l_search_text(lua_State *L)
 			FILE *f = fopen(fn, "r");
 			if (f) {
 				fclose(f);
-				if (luaL_loadfilex(L, fn, "t") != LUA_OK)
+				if (load_text_file(L, fn) != LUA_OK)
 					return luaL_error(L, "error loading module '%s' from file '%s':\n\t%s", name, fn,
 					                  lua_tostring(L, -1));
 				set_chunk_env(L, 0, 1);
@@ -1413,7 +1426,7 @@ static int l_load_scene(lua_State *L)
 		lua_setfield(L, -2, "out");
 		lua_setfield(L, LUA_REGISTRYINDEX, SAFE_KEY);
 	}
-	if (luaL_loadfilex(L, path, "t") != LUA_OK)
+	if (load_text_file(L, path) != LUA_OK)
 		return lua_error(L);
 	lua_pushvalue(L, 3);
 	lua_setupvalue(L, -2, 1);
