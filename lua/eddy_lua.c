@@ -34,9 +34,6 @@
 #define PARAMS_USED_KEY "eddy.params_used"
 #define WORLDS_KEY "eddy.worlds" /* weak: eddy_world* -> its userdata */
 #define OUT_DIR_KEY "eddy.out_dir"
-/* while scenes run in safe mode: a table {out = the output directory or nil};
- * worlds made then keep it (as user value field "safe") */
-#define SAFE_KEY "eddy.safe"
 
 /* Every list of kinds the module exposes; each ends with EDDY_LUA_KIND_END. */
 static const eddy_lua_kind *const kind_lists[] = {
@@ -369,10 +366,11 @@ static int l_world(lua_State *L)
 	lw->L = lua_tothread(L, -1);
 	lua_pop(L, 1);
 	lua_newtable(L); /* user value: frame fields, callbacks, safe mode */
-	if (lua_getfield(L, LUA_REGISTRYINDEX, SAFE_KEY) == LUA_TTABLE)
+	/* eddy.world of a sandbox carries {out = its output directory} */
+	if (lua_type(L, lua_upvalueindex(1)) == LUA_TTABLE) {
+		lua_pushvalue(L, lua_upvalueindex(1));
 		lua_setfield(L, -2, "safe");
-	else
-		lua_pop(L, 1);
+	}
 	lua_setiuservalue(L, -2, 1);
 	lua_getfield(L, LUA_REGISTRYINDEX, WORLDS_KEY);
 	lua_pushvalue(L, -2);
@@ -966,6 +964,24 @@ static bool below(const char *path, const char *dir)
 	return strncmp(path, dir, n) == 0 && path[n] == '/' && path[n + 1] != '\0';
 }
 
+/* Whether dir names path or a directory above it, lexically and with symbolic
+ * links resolved (where both exist). */
+static bool within(const char *path, const char *dir)
+{
+	char *buf = malloc(2 * 8192);
+	if (!buf)
+		return false;
+	bool ok = absolute_path(path, buf, 8192) && absolute_path(dir, buf + 8192, 8192) &&
+	          (strcmp(buf, buf + 8192) == 0 || below(buf, buf + 8192));
+	free(buf);
+	char *rp = ok ? realpath(path, NULL) : NULL, *rd = ok ? realpath(dir, NULL) : NULL;
+	if (rp && rd)
+		ok = strcmp(rp, rd) == 0 || below(rp, rd);
+	free(rp);
+	free(rd);
+	return ok;
+}
+
 /* Raises an error unless path may be opened for writing in safe mode: a file
  * strictly below dir (the output directory; NULL for none), with no ".."
  * component, whose directory is below dir or dir itself also with symbolic
@@ -1213,8 +1229,11 @@ static int l_safe_require(lua_State *L)
 	return 2;
 }
 
-/* Makes the globals env, with its os, io and package tables, safe; out (a
- * string, or nil for none) is where files may be written. */
+static int l_load_scene(lua_State *L);
+
+/* Makes the globals env, with its os, io and package tables and the eddy
+ * module in package.loaded, safe; out (a string, or nil for none) is where
+ * files may be written. */
 static void make_safe(lua_State *L, int env, int os, int io, int pkg, int out)
 {
 	static const char *const os_kept[] = {"time", "clock", "date", "getenv", "difftime", NULL};
@@ -1257,6 +1276,21 @@ static void make_safe(lua_State *L, int env, int os, int io, int pkg, int out)
 	if (lua_istable(L, -1)) {
 		lua_pushnil(L);
 		lua_setfield(L, -2, "debug");
+		/* the sandbox's eddy: worlds that write files only under out, and
+		 * load_scene only into sandboxes as narrow (as a closure may call
+		 * them after the scene has returned, the limit is in the functions,
+		 * not in a flag set while the scene runs) */
+		if (lua_getfield(L, -1, "eddy") == LUA_TTABLE) {
+			lua_createtable(L, 0, 1);
+			lua_pushvalue(L, out);
+			lua_setfield(L, -2, "out");
+			lua_pushvalue(L, -1);
+			lua_pushcclosure(L, l_world, 1);
+			lua_setfield(L, -3, "world");
+			lua_pushcclosure(L, l_load_scene, 1);
+			lua_setfield(L, -2, "load_scene");
+		}
+		lua_pop(L, 1);
 	}
 	lua_pop(L, 1);
 
@@ -1296,10 +1330,6 @@ static int sandbox_in_place(lua_State *L)
 	push_loaded(L, "io");
 	push_loaded(L, "package");
 	make_safe(L, out + 1, out + 2, out + 3, out + 4, out);
-	lua_createtable(L, 0, 1);
-	lua_pushvalue(L, out);
-	lua_setfield(L, -2, "out");
-	lua_setfield(L, LUA_REGISTRYINDEX, SAFE_KEY);
 	return 0;
 }
 
@@ -1335,7 +1365,11 @@ static int l_load_scene(lua_State *L)
 {
 	const char *path = luaL_checkstring(L, 1);
 	bool safe = true;
-	if (!lua_isnoneornil(L, 2)) {
+	/* called from a sandbox: upvalue 1 is {out = its output directory} */
+	const bool sandboxed = lua_type(L, lua_upvalueindex(1)) == LUA_TTABLE;
+	lua_settop(L, 2);
+	lua_pushnil(L); /* 3: the output directory */
+	if (!lua_isnil(L, 2)) {
 		luaL_checktype(L, 2, LUA_TTABLE);
 		lua_pushnil(L);
 		while (lua_next(L, 2)) {
@@ -1348,19 +1382,36 @@ static int l_load_scene(lua_State *L)
 			if (!lua_isboolean(L, -1))
 				return luaL_error(L, "load_scene: 'safe' must be true or false (got %s)", luaL_typename(L, -1));
 			safe = lua_toboolean(L, -1);
+			if (sandboxed && !safe)
+				return luaL_error(L, "load_scene: safe = false is not available in " SAFE_MODE);
 		}
 		lua_pop(L, 1);
 		if (lua_getfield(L, 2, "out") != LUA_TNIL) {
 			if (lua_type(L, -1) != LUA_TSTRING)
 				return luaL_error(L, "load_scene: 'out' must be a directory name (got %s)", luaL_typename(L, -1));
+			if (sandboxed) {
+				lua_getfield(L, lua_upvalueindex(1), "out");
+				const char *dir = lua_tostring(L, -1);
+				if (!dir || !within(lua_tostring(L, -2), dir))
+					return luaL_error(L, "load_scene: 'out' must be the output directory or below it in " SAFE_MODE);
+				lua_pop(L, 1);
+			}
 			lua_pushvalue(L, -1);
-			lua_setfield(L, LUA_REGISTRYINDEX, OUT_DIR_KEY);
+			lua_setfield(L, LUA_REGISTRYINDEX, OUT_DIR_KEY); /* the scene's eddy.out_dir() */
+			lua_replace(L, 3);
+		} else {
+			lua_pop(L, 1);
 		}
-		lua_pop(L, 1);
 	}
-	lua_settop(L, 1);
-	lua_getfield(L, LUA_REGISTRYINDEX, OUT_DIR_KEY); /* 2 */
-	lua_newtable(L);                                 /* 3: the scene's globals */
+	if (lua_isnil(L, 3)) {
+		if (sandboxed)
+			lua_getfield(L, lua_upvalueindex(1), "out");
+		else
+			lua_getfield(L, LUA_REGISTRYINDEX, OUT_DIR_KEY);
+		lua_replace(L, 3);
+	}
+	lua_remove(L, 2); /* 2: the output directory (or nil) */
+	lua_newtable(L); /* 3: the scene's globals */
 	if (!safe) {
 		lua_createtable(L, 0, 1);
 		lua_pushglobaltable(L);
@@ -1386,10 +1437,9 @@ static int l_load_scene(lua_State *L)
 			lua_setfield(L, 3, libs[i]);
 			lua_setfield(L, 4, libs[i]);
 		}
-		luaL_getsubtable(L, LUA_REGISTRYINDEX, LUA_LOADED_TABLE);
-		lua_getfield(L, -1, "eddy");
+		push_loaded(L, "eddy");
+		copy_table(L); /* make_safe replaces its world and load_scene */
 		lua_setfield(L, 4, "eddy");
-		lua_pop(L, 1);
 		lua_pushvalue(L, 3);
 		lua_setfield(L, 3, "_G");
 		lua_pushvalue(L, 3);
@@ -1418,24 +1468,12 @@ static int l_load_scene(lua_State *L)
 		make_safe(L, 3, 7, 8, 6, 2);
 		lua_settop(L, 3);
 	}
-	/* 4: the safe-mode marker to restore after the scene */
-	lua_getfield(L, LUA_REGISTRYINDEX, SAFE_KEY);
-	if (safe) {
-		lua_createtable(L, 0, 1);
-		lua_pushvalue(L, 2);
-		lua_setfield(L, -2, "out");
-		lua_setfield(L, LUA_REGISTRYINDEX, SAFE_KEY);
-	}
 	if (load_text_file(L, path) != LUA_OK)
 		return lua_error(L);
 	lua_pushvalue(L, 3);
 	lua_setupvalue(L, -2, 1);
-	int rc = lua_pcall(L, 0, LUA_MULTRET, 0);
-	lua_pushvalue(L, 4);
-	lua_setfield(L, LUA_REGISTRYINDEX, SAFE_KEY);
-	if (rc != LUA_OK)
-		return lua_error(L);
-	return lua_gettop(L) - 4;
+	lua_call(L, 0, LUA_MULTRET);
+	return lua_gettop(L) - 3;
 }
 
 /* ---- module functions ---------------------------------------------------- */

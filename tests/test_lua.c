@@ -354,6 +354,9 @@ static void safe_mode_refuses_escapes(void)
 		 "render_points: cannot write '/tmp/f_%04d.png'"},
 		{"local w = eddy.world{}; w:add(eddy.export_particles{ path = OUT .. '/../p_%04d.ply' })",
 		 "export_particles: cannot write"},
+		{"eddy.load_scene('scenes/bounce.lua', { safe = false })", "load_scene: safe = false is not available in safe mode"},
+		{"eddy.load_scene('scenes/bounce.lua', { out = '/tmp' })", "load_scene: 'out' must be the output directory or below it"},
+		{"eddy.load_scene('scenes/bounce.lua', { out = OUT .. '/../x' })", "load_scene: 'out' must be the output directory"},
 	};
 	lua_State *L = new_safe_state(out);
 	for (size_t i = 0; i < sizeof refused / sizeof refused[0]; ++i) {
@@ -407,7 +410,8 @@ static void load_scene_runs_a_scene_sandboxed(void)
 	                     "assert(not load(string.dump(function() end)))\n"
 	                     "local eddy = require 'eddy'\n"
 	                     "assert(eddy.out_dir() == eddy_out)\n"
-	                     "return eddy.world{}, 42\n";
+	                     "return eddy.world{}, 42, function() return eddy.world{} end,\n"
+	                     "  function() return eddy.load_scene('scenes/bounce.lua', { safe = false }) end\n";
 	/* the out option is the scene's eddy.out_dir() */
 	char scene[2048];
 	snprintf(scene, sizeof scene, "local eddy_out = require('eddy').out_dir()\n%s", escape);
@@ -418,11 +422,17 @@ static void load_scene_runs_a_scene_sandboxed(void)
 	lua_pushstring(L, out);
 	lua_setglobal(L, "OUT");
 	const char *e = run(L, "local eddy = require 'eddy'\n"
-	                       "local w, n = eddy.load_scene(SCENE, { safe = true, out = OUT })\n"
+	                       "local w, n, make_world, unsafe = eddy.load_scene(SCENE, { safe = true, out = OUT })\n"
 	                       "assert(eddy.world and tostring(w):find('eddy world', 1, true) and n == 42)\n"
+	                       /* the scene's functions stay sandboxed after it returned */
+	                       "local w2 = make_world()\n"
+	                       "local ok, err = pcall(w2.add, w2, eddy.render_points{ path = '/tmp/f_%04d.png' })\n"
+	                       "assert(not ok and err:find('render_points: cannot write', 1, true), err)\n"
+	                       "ok, err = pcall(unsafe)\n"
+	                       "assert(not ok and err:find('safe = false is not available in safe mode', 1, true), err)\n"
 	                       "assert(X_LEAKED == nil and type(os.execute) == 'function' and debug ~= nil)\n"
 	                       "assert(io.open(OUT .. '/ok.txt')):close()\n"
-	                       "local ok, err = pcall(eddy.load_scene, SCENE, { sfae = true })\n"
+	                       "ok, err = pcall(eddy.load_scene, SCENE, { sfae = true })\n"
 	                       "assert(not ok and err:find(\"unknown option 'sfae'\", 1, true), err)\n"
 	                       "w = eddy.load_scene('scenes/bounce.lua', { out = OUT })\n"
 	                       "w:advance(0.05)\n"
