@@ -18,6 +18,7 @@
 #include <lualib.h>
 
 #include <float.h>
+#include <limits.h>
 #include <math.h>
 #include <stddef.h>
 #include <stdio.h>
@@ -637,6 +638,10 @@ static int l_world_advance(lua_State *L)
 	double s = luaL_checknumber(L, 2);
 	if (!(s >= 0 && isfinite(s)))
 		return luaL_error(L, "advance: 'seconds' must be >= 0 and finite (got %f)", s);
+	/* frames are counted in an int */
+	const double frames = s / eddy_world_frame_time(lw->w);
+	if (!(frames <= (double)INT_MAX - eddy_world_frame(lw->w)))
+		return luaL_error(L, "advance: %f s is %f frames, past the last frame a world counts (%d)", s, frames, INT_MAX);
 	stepping(L, lw, eddy_world_advance, s);
 	lua_settop(L, 1);
 	return 1;

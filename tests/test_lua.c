@@ -514,6 +514,10 @@ static void arguments_that_once_crashed(void)
 	                   "assert(not ok and err:find('world is closed', 1, true), err)\n"
 	                   "ok, err = pcall(world.channel, eddy.world{}, string.rep('y', 100))\n"
 	                   "assert(not ok and err:find('no column named', 1, true), err)\n"
+	                   "local w2 = eddy.world{}\n"
+	                   "ok, err = pcall(w2.advance, w2, 1e300)\n"
+	                   "assert(not ok and err:find('past the last frame a world counts', 1, true), err)\n"
+	                   "assert(w2:frame() == 0 and w2:time() == 0)\n"
 	                   "ok, err = pcall(world.add, eddy.gravity{}, eddy.gravity{})\n"
 	                   "assert(not ok and err:find('eddy.world expected', 1, true), err)\n",
 	              buf, sizeof buf);
