@@ -935,6 +935,8 @@ static bool absolute_path(const char *path, char *out, size_t cap)
 		if (!getcwd(out, cap))
 			return false;
 		n = strlen(out);
+		if (n == 1)
+			n = 0; /* the root: its components follow a single '/' */
 	}
 	for (const char *p = path; *p;) {
 		while (*p == '/')
