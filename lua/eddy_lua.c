@@ -10,17 +10,22 @@
  * added), eddy.system (a handle: world + id), eddy.channel (a live view of a
  * column). Host callbacks (on_frame, animated collider offsets) are custom
  * systems, so they show in the plan like any other system. */
+#define _XOPEN_SOURCE 700 /* getcwd, lstat, realpath: safe mode's path checks */
 #include "eddy_lua.h"
 #include "bind.h"
 
 #include <lauxlib.h>
 #include <lualib.h>
 
+#include <float.h>
+#include <limits.h>
 #include <math.h>
 #include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #define WORLD_MT "eddy.world"
 #define DEF_MT "eddy.def"
@@ -96,6 +101,17 @@ static double number_field(lua_State *L, const eddy_lua_kind *k, const char *nam
 	return lua_tonumber(L, idx);
 }
 
+/* A double as a float; beyond the float range it is the infinity of its sign
+ * (a C conversion out of range is undefined), which the add functions reject. */
+static float to_float(double d)
+{
+	if (d > FLT_MAX)
+		return INFINITY;
+	if (d < -FLT_MAX)
+		return -INFINITY;
+	return (float)d;
+}
+
 static eddy_vec3 vec3_field(lua_State *L, const eddy_lua_kind *k, const char *name, int idx)
 {
 	idx = lua_absindex(L, idx);
@@ -108,7 +124,7 @@ static eddy_vec3 vec3_field(lua_State *L, const eddy_lua_kind *k, const char *na
 		if (lua_type(L, -1) != LUA_TNUMBER)
 			luaL_error(L, "%s: '%s' must be a table of 3 numbers {x, y, z} (element %d is %s)", k->name, name, i + 1,
 			           luaL_typename(L, -1));
-		v[i] = (float)lua_tonumber(L, -1);
+		v[i] = to_float(lua_tonumber(L, -1));
 		lua_pop(L, 1);
 	}
 	return (eddy_vec3){v[0], v[1], v[2]};
@@ -156,7 +172,7 @@ static void read_fields(lua_State *L, const eddy_lua_kind *k, int idx, void *def
 			unknown_field(L, k, name);
 		void *p = base + f->offset;
 		switch (f->type) {
-		case EDDY_LUA_FLOAT: *(float *)p = (float)number_field(L, k, name, -1, "a number"); break;
+		case EDDY_LUA_FLOAT: *(float *)p = to_float(number_field(L, k, name, -1, "a number")); break;
 		case EDDY_LUA_DOUBLE: *(double *)p = number_field(L, k, name, -1, "a number"); break;
 		case EDDY_LUA_INT: *(int *)p = (int)integer_field(L, k, name, -1, -1000000000, 1000000000); break;
 		case EDDY_LUA_INT64: *(int64_t *)p = (int64_t)integer_field(L, k, name, -1, 0, LUA_MAXINTEGER); break;
@@ -284,7 +300,12 @@ static int l_make_def(lua_State *L)
 typedef struct lua_world {
 	eddy_world *w;
 	lua_State *L; /* main thread, for callbacks */
-	int busy;     /* inside a step: the world may not be stepped again */
+	int busy;     /* inside a step started from Lua */
+	/* While one of the world's callbacks runs, what it is ("on_frame", "an
+	 * offset function"), else NULL. The world is mid-step then, whoever
+	 * stepped it (Lua or the host in C): the step holds its systems and
+	 * columns, so the world may not be stepped, changed or closed. */
+	const char *inside;
 } lua_world;
 
 eddy_world *eddy_lua_toworld(lua_State *L, int idx)
@@ -296,6 +317,19 @@ eddy_world *eddy_lua_toworld(lua_State *L, int idx)
 static lua_world *check_world(lua_State *L, int idx)
 {
 	lua_world *lw = luaL_checkudata(L, idx, WORLD_MT);
+	if (!lw->w)
+		luaL_error(L, "world is closed");
+	return lw;
+}
+
+/* The world at idx for a call that steps, changes or closes it (world:<method>). */
+static lua_world *check_idle_world(lua_State *L, int idx, const char *method)
+{
+	lua_world *lw = luaL_checkudata(L, idx, WORLD_MT);
+	if (lw->inside)
+		luaL_error(L, "world:%s() cannot be called from inside %s", method, lw->inside);
+	if (lw->busy)
+		luaL_error(L, "world:%s() cannot be called while the world is stepping", method);
 	if (!lw->w)
 		luaL_error(L, "world is closed");
 	return lw;
@@ -332,7 +366,12 @@ static int l_world(lua_State *L)
 	lua_rawgeti(L, LUA_REGISTRYINDEX, LUA_RIDX_MAINTHREAD);
 	lw->L = lua_tothread(L, -1);
 	lua_pop(L, 1);
-	lua_newtable(L); /* user value: frame fields and callbacks */
+	lua_newtable(L); /* user value: frame fields, callbacks, safe mode */
+	/* eddy.world of a sandbox carries {out = its output directory} */
+	if (lua_type(L, lua_upvalueindex(1)) == LUA_TTABLE) {
+		lua_pushvalue(L, lua_upvalueindex(1));
+		lua_setfield(L, -2, "safe");
+	}
 	lua_setiuservalue(L, -2, 1);
 	lua_getfield(L, LUA_REGISTRYINDEX, WORLDS_KEY);
 	lua_pushvalue(L, -2);
@@ -341,9 +380,14 @@ static int l_world(lua_State *L)
 	return 1;
 }
 
+/* __gc, and world:close() / __close once the world is idle. A collected world
+ * is never mid-step (a step holds it on the stack); a scene calling __gc
+ * itself gets close's check. */
 static int l_world_gc(lua_State *L)
 {
 	lua_world *lw = luaL_checkudata(L, 1, WORLD_MT);
+	if (lw->inside || lw->busy)
+		check_idle_world(L, 1, "close");
 	if (lw->w) {
 		eddy_destroy_world(lw->w);
 		lw->w = NULL;
@@ -365,6 +409,7 @@ static eddy_status call_lua(lua_State *L, eddy_world *w, int nargs, int nresults
 
 typedef struct callback {
 	lua_State *L;
+	lua_world *owner;       /* outlives the callback: its __gc destroys the world */
 	int fn;                 /* registry reference */
 	eddy_system_id target;  /* animate: the collider */
 	char what[64];
@@ -386,7 +431,10 @@ static eddy_status on_frame_hook(eddy_world *w, int frame, void *user)
 	lua_rawgeti(L, LUA_REGISTRYINDEX, cb->fn);
 	push_world(L, w);
 	lua_pushinteger(L, frame);
+	const char *outer = cb->owner->inside;
+	cb->owner->inside = "on_frame";
 	eddy_status st = call_lua(L, w, 2, 1, "on_frame");
+	cb->owner->inside = outer;
 	if (st != EDDY_OK) {
 		lua_settop(L, top);
 		return st;
@@ -430,7 +478,10 @@ static eddy_status animate_step(eddy_world *w, const eddy_step_context *ctx, voi
 	int top = lua_gettop(L);
 	lua_rawgeti(L, LUA_REGISTRYINDEX, cb->fn);
 	lua_pushnumber(L, ctx->time + ctx->dt);
+	const char *outer = cb->owner->inside;
+	cb->owner->inside = "an offset function";
 	eddy_status st = call_lua(L, w, 1, 1, cb->what);
+	cb->owner->inside = outer;
 	if (st != EDDY_OK)
 		return st;
 	float v[3];
@@ -438,7 +489,7 @@ static eddy_status animate_step(eddy_world *w, const eddy_step_context *ctx, voi
 	for (int i = 0; ok && i < 3; ++i) {
 		lua_rawgeti(L, -1, i + 1);
 		ok = lua_type(L, -1) == LUA_TNUMBER;
-		v[i] = (float)lua_tonumber(L, -1);
+		v[i] = to_float(lua_tonumber(L, -1));
 		lua_pop(L, 1);
 	}
 	lua_settop(L, top);
@@ -462,13 +513,31 @@ static void push_system(lua_State *L, int world_idx, eddy_system_id id)
 	lua_setiuservalue(L, -2, 1);
 }
 
+static void check_writable(lua_State *L, const char *fn, const char *path, const char *dir);
+
+/* A world made in safe mode writes files (render_points, export_particles:
+ * their `path`) only where the scene itself may. */
+static void check_safe_paths(lua_State *L, int world_idx, const lua_def *ld)
+{
+	lua_getiuservalue(L, world_idx, 1);
+	if (lua_getfield(L, -1, "safe") == LUA_TTABLE) {
+		lua_getfield(L, -1, "out");
+		for (const eddy_lua_field *f = ld->k->fields; f->name; ++f)
+			if (f->type == EDDY_LUA_STRING && strcmp(f->name, "path") == 0)
+				check_writable(L, ld->k->name, (const char *)ld->def + f->offset, lua_tostring(L, -1));
+		lua_pop(L, 1);
+	}
+	lua_pop(L, 2);
+}
+
 static int l_world_add(lua_State *L)
 {
-	lua_world *lw = check_world(L, 1);
+	lua_world *lw = check_idle_world(L, 1, "add");
 	lua_def *ld = luaL_testudata(L, 2, DEF_MT);
 	if (!ld)
 		return luaL_error(L, "add: expects a system made by eddy.<system>{...}, e.g. world:add(eddy.gravity{}) (got %s)",
 		                  luaL_typename(L, 2));
+	check_safe_paths(L, 1, ld);
 	eddy_world *w = lw->w;
 	callback *cb = NULL;
 	eddy_system_id anim = EDDY_NULL_SYSTEM;
@@ -479,6 +548,7 @@ static int l_world_add(lua_State *L)
 		if (!cb)
 			return luaL_error(L, "add: out of memory");
 		cb->L = lw->L;
+		cb->owner = lw;
 		lua_pushvalue(L, -1);
 		cb->fn = luaL_ref(L, LUA_REGISTRYINDEX);
 		snprintf(cb->what, sizeof cb->what, "animate %s offset", ld->k->name);
@@ -505,7 +575,11 @@ static int l_world_add(lua_State *L)
 		/* place the collider where the function puts it at t = now */
 		lua_getiuservalue(L, 2, 1);
 		lua_pushnumber(L, eddy_world_time(w));
-		lua_call(L, 1, 1);
+		lw->inside = "an offset function";
+		int rc = lua_pcall(L, 1, 1, 0);
+		lw->inside = NULL;
+		if (rc != LUA_OK)
+			return lua_error(L);
 		eddy_vec3 v = vec3_field(L, ld->k, "offset (returned by the function)", -1);
 		lua_pop(L, 1);
 		if (eddy_collider_set_offset(w, id, v) != EDDY_OK)
@@ -519,12 +593,13 @@ static int l_world_add(lua_State *L)
 
 static int l_world_on_frame(lua_State *L)
 {
-	lua_world *lw = check_world(L, 1);
+	lua_world *lw = check_idle_world(L, 1, "on_frame");
 	luaL_checktype(L, 2, LUA_TFUNCTION);
 	callback *cb = calloc(1, sizeof *cb);
 	if (!cb)
 		return luaL_error(L, "on_frame: out of memory");
 	cb->L = lw->L;
+	cb->owner = lw;
 	lua_pushvalue(L, 2);
 	cb->fn = luaL_ref(L, LUA_REGISTRYINDEX);
 	eddy_custom_system_def cd = eddy_default_custom_system_def();
@@ -543,8 +618,6 @@ static int l_world_on_frame(lua_State *L)
 
 static int stepping(lua_State *L, lua_world *lw, eddy_status (*fn)(eddy_world *, double), double arg)
 {
-	if (lw->busy)
-		return luaL_error(L, "the world cannot be stepped from inside its own callbacks");
 	lw->busy = 1;
 	eddy_status st = fn(lw->w, arg);
 	lw->busy = 0;
@@ -561,10 +634,14 @@ static eddy_status step_once(eddy_world *w, double unused)
 
 static int l_world_advance(lua_State *L)
 {
-	lua_world *lw = check_world(L, 1);
+	lua_world *lw = check_idle_world(L, 1, "advance");
 	double s = luaL_checknumber(L, 2);
 	if (!(s >= 0 && isfinite(s)))
 		return luaL_error(L, "advance: 'seconds' must be >= 0 and finite (got %f)", s);
+	/* frames are counted in an int */
+	const double frames = s / eddy_world_frame_time(lw->w);
+	if (!(frames <= (double)INT_MAX - eddy_world_frame(lw->w)))
+		return luaL_error(L, "advance: %f s is %f frames, past the last frame a world counts (%d)", s, frames, INT_MAX);
 	stepping(L, lw, eddy_world_advance, s);
 	lua_settop(L, 1);
 	return 1;
@@ -572,7 +649,7 @@ static int l_world_advance(lua_State *L)
 
 static int l_world_step(lua_State *L)
 {
-	lua_world *lw = check_world(L, 1);
+	lua_world *lw = check_idle_world(L, 1, "step");
 	stepping(L, lw, step_once, 0);
 	lua_pushnumber(L, eddy_world_last_dt(lw->w));
 	return 1;
@@ -617,20 +694,26 @@ static int push_text(lua_State *L, size_t (*fn)(const eddy_world *, char *, size
 /* world:plan() -> text; world:plan{dot = true} -> Graphviz */
 static int l_world_plan(lua_State *L)
 {
-	lua_world *lw = check_world(L, 1);
+	check_world(L, 1);
 	bool dot = false;
 	if (lua_istable(L, 2)) {
-		lua_getfield(L, 2, "dot");
+		lua_getfield(L, 2, "dot"); /* may run an __index that closes the world */
 		dot = lua_toboolean(L, -1);
 		lua_pop(L, 1);
 	}
-	return push_text(L, dot ? eddy_world_plan_dot : eddy_world_plan, lw->w);
+	return push_text(L, dot ? eddy_world_plan_dot : eddy_world_plan, check_world(L, 1)->w);
 }
 
 static int l_world_remove(lua_State *L)
 {
-	lua_world *lw = check_world(L, 1);
+	lua_world *lw = check_idle_world(L, 1, "remove");
 	lua_system *ls = luaL_checkudata(L, 2, SYSTEM_MT);
+	/* ids are per world: another world's handle could name a system here */
+	lua_getiuservalue(L, 2, 1);
+	bool mine = lua_touserdata(L, -1) == lw;
+	lua_pop(L, 1);
+	if (!mine)
+		return luaL_error(L, "remove: the handle belongs to another world");
 	if (eddy_world_remove_system(lw->w, ls->id) != EDDY_OK)
 		return luaL_error(L, "%s", eddy_world_error(lw->w));
 	return 0;
@@ -675,8 +758,8 @@ static int l_world_stats(lua_State *L)
 static int l_world_close(lua_State *L)
 {
 	lua_world *lw = luaL_checkudata(L, 1, WORLD_MT);
-	if (lw->busy)
-		return luaL_error(L, "the world cannot be closed from inside its own callbacks");
+	if (lw->inside || lw->busy)
+		check_idle_world(L, 1, "close");
 	return l_world_gc(L);
 }
 
@@ -722,7 +805,7 @@ static int l_world_channel(lua_State *L)
 	lua_world *lw = check_world(L, 1);
 	const char *name = luaL_checkstring(L, 2);
 	eddy_column_id id = eddy_world_find_column(lw->w, name);
-	if (id < 0)
+	if (id < 0 || strlen(name) >= sizeof ((lua_channel *)0)->name)
 		return luaL_error(L, "channel: no column named '%s'", name);
 	eddy_column_info info;
 	eddy_world_column_info(lw->w, id, &info);
@@ -816,6 +899,588 @@ static int l_system_offset(lua_State *L)
 	lua_pushnumber(L, v.z);
 	lua_rawseti(L, -2, 3);
 	return 1;
+}
+
+/* ---- safe mode ------------------------------------------------------------
+ *
+ * A safe scene can compute, read files, write files under the output
+ * directory and require Lua modules; it cannot run commands, write elsewhere,
+ * load native code or bytecode (Lua does not verify bytecode: a crafted chunk
+ * corrupts memory), or reach the debug library. What it cannot use is
+ * replaced by a function raising "<name> is not available in safe mode", so a
+ * scene learns why at the line that tried. */
+
+#define SAFE_MODE "safe mode (--safe)"
+
+static int l_refused(lua_State *L)
+{
+	return luaL_error(L, "%s is not available in " SAFE_MODE, lua_tostring(L, lua_upvalueindex(1)));
+}
+
+static void set_refused(lua_State *L, int t, const char *lib, const char *name)
+{
+	lua_pushfstring(L, "%s.%s", lib, name);
+	lua_pushcclosure(L, l_refused, 1);
+	lua_setfield(L, t, name);
+}
+
+/* Writes into out (cap bytes) the absolute form of path with "." components
+ * and repeated slashes dropped; false if it has a ".." component (refused
+ * rather than resolved: with symbolic links, ".." is not lexical) or does not
+ * fit. */
+static bool absolute_path(const char *path, char *out, size_t cap)
+{
+	size_t n = 0;
+	if (path[0] != '/') {
+		if (!getcwd(out, cap))
+			return false;
+		n = strlen(out);
+		if (n == 1)
+			n = 0; /* the root: its components follow a single '/' */
+	}
+	for (const char *p = path; *p;) {
+		while (*p == '/')
+			++p;
+		size_t len = strcspn(p, "/");
+		if (len == 2 && p[0] == '.' && p[1] == '.')
+			return false;
+		if (len && !(len == 1 && p[0] == '.')) {
+			if (n + 1 + len + 1 > cap)
+				return false;
+			out[n++] = '/';
+			memcpy(out + n, p, len);
+			n += len;
+		}
+		p += len;
+	}
+	if (n == 0 || (n == 1 && out[0] == '/')) {
+		if (cap < 2)
+			return false;
+		n = 0;
+		out[n++] = '/';
+	}
+	out[n] = '\0';
+	return true;
+}
+
+static bool below(const char *path, const char *dir)
+{
+	size_t n = strlen(dir);
+	if (n == 1 && dir[0] == '/')
+		return path[0] == '/' && path[1] != '\0';
+	return strncmp(path, dir, n) == 0 && path[n] == '/' && path[n + 1] != '\0';
+}
+
+/* Whether dir names path or a directory above it, lexically and with symbolic
+ * links resolved (where both exist). */
+static bool within(const char *path, const char *dir)
+{
+	char *buf = malloc(2 * 8192);
+	if (!buf)
+		return false;
+	bool ok = absolute_path(path, buf, 8192) && absolute_path(dir, buf + 8192, 8192) &&
+	          (strcmp(buf, buf + 8192) == 0 || below(buf, buf + 8192));
+	free(buf);
+	char *rp = ok ? realpath(path, NULL) : NULL, *rd = ok ? realpath(dir, NULL) : NULL;
+	if (rp && rd)
+		ok = strcmp(rp, rd) == 0 || below(rp, rd);
+	free(rp);
+	free(rd);
+	return ok;
+}
+
+/* Raises an error unless path may be opened for writing in safe mode: a file
+ * strictly below dir (the output directory; NULL for none), with no ".."
+ * component, whose directory is below dir or dir itself also with symbolic
+ * links resolved, and which is not itself a symbolic link. */
+static void check_writable(lua_State *L, const char *fn, const char *path, const char *dir)
+{
+	if (!dir)
+		luaL_error(L, "%s: cannot write '%s': " SAFE_MODE " has no output directory to write in", fn, path);
+	enum { CAP = 8192 };
+	char *buf = malloc(2 * CAP);
+	if (!buf)
+		luaL_error(L, "%s: out of memory", fn);
+	char *abs_path = buf, *abs_dir = buf + CAP;
+	const char *why = NULL;
+	if (!absolute_path(path, abs_path, CAP))
+		why = "a path with a '..' component is not written in " SAFE_MODE;
+	else if (!absolute_path(dir, abs_dir, CAP) || !below(abs_path, abs_dir))
+		why = "files are written only under the output directory in " SAFE_MODE;
+	else {
+		struct stat st;
+		char *slash = strrchr(abs_path, '/');
+		*slash = '\0';
+		char *real_parent = realpath(abs_path[0] ? abs_path : "/", NULL);
+		*slash = '/';
+		char *real_dir = realpath(abs_dir, NULL);
+		if (lstat(abs_path, &st) == 0 && S_ISLNK(st.st_mode))
+			why = "a symbolic link is not written through in " SAFE_MODE;
+		/* a parent that does not exist fails the open by itself */
+		else if (real_parent && (!real_dir || (strcmp(real_parent, real_dir) != 0 && !below(real_parent, real_dir))))
+			why = "files are written only under the output directory in " SAFE_MODE " (a symbolic link leads out of it)";
+		free(real_parent);
+		free(real_dir);
+	}
+	free(buf);
+	if (why)
+		luaL_error(L, "%s: cannot write '%s': %s ('%s')", fn, path, why, dir);
+}
+
+/* io.open(name, mode): any file for reading ("r", "rb"); other modes only
+ * under the output directory. Upvalues: io.open, the output directory. */
+static int l_safe_open(lua_State *L)
+{
+	const char *path = luaL_checkstring(L, 1);
+	const char *mode = luaL_optstring(L, 2, "r");
+	if (mode[0] != 'r' || strchr(mode, '+'))
+		check_writable(L, "io.open", path, lua_tostring(L, lua_upvalueindex(2)));
+	lua_settop(L, 2);
+	lua_pushvalue(L, lua_upvalueindex(1));
+	lua_insert(L, 1);
+	lua_call(L, 2, LUA_MULTRET);
+	return lua_gettop(L);
+}
+
+/* io.output(name) opens name for writing: the same rule as io.open. */
+static int l_safe_output(lua_State *L)
+{
+	if (lua_type(L, 1) == LUA_TSTRING)
+		check_writable(L, "io.output", lua_tostring(L, 1), lua_tostring(L, lua_upvalueindex(2)));
+	int n = lua_gettop(L);
+	lua_pushvalue(L, lua_upvalueindex(1));
+	lua_insert(L, 1);
+	lua_call(L, n, LUA_MULTRET);
+	return lua_gettop(L);
+}
+
+/* luaL_loadfilex in text mode, with a message naming the file when it holds
+ * a binary chunk (Lua's says only "attempt to load a binary chunk"). */
+static int load_text_file(lua_State *L, const char *name)
+{
+	int rc = luaL_loadfilex(L, name, "t");
+	const char *msg = rc == LUA_OK ? NULL : lua_tostring(L, -1);
+	if (msg && strstr(msg, "attempt to load a binary chunk")) {
+		lua_pop(L, 1);
+		lua_pushfstring(L, "%s: a binary (precompiled) chunk: eddy loads Lua source only", name ? name : "stdin");
+	}
+	return rc;
+}
+
+/* The environment a chunk gets when the caller names none: upvalue 2 (the
+ * sandbox's globals), or the argument at idx when given. */
+static void set_chunk_env(lua_State *L, int nargs, int idx)
+{
+	if (nargs >= idx)
+		lua_pushvalue(L, idx);
+	else
+		lua_pushvalue(L, lua_upvalueindex(2));
+	if (!lua_setupvalue(L, -2, 1))
+		lua_pop(L, 1);
+}
+
+/* load(chunk, name, mode, env) with mode forced to "t". Upvalues: load, the
+ * sandbox's globals. */
+static int l_safe_load(lua_State *L)
+{
+	int n = lua_gettop(L);
+	luaL_checkany(L, 1);
+	lua_settop(L, 4);
+	if (lua_type(L, 1) == LUA_TSTRING && lua_tostring(L, 1)[0] == LUA_SIGNATURE[0]) {
+		luaL_pushfail(L);
+		lua_pushliteral(L, "load: binary chunks (string.dump) cannot be loaded in " SAFE_MODE);
+		return 2;
+	}
+	lua_pushvalue(L, lua_upvalueindex(1));
+	lua_pushvalue(L, 1);
+	lua_pushvalue(L, 2);
+	lua_pushliteral(L, "t");
+	if (n >= 4)
+		lua_pushvalue(L, 4);
+	else
+		lua_pushvalue(L, lua_upvalueindex(2));
+	lua_call(L, 4, 2);
+	if (lua_isnil(L, -2))
+		return 2;
+	lua_pop(L, 1);
+	return 1;
+}
+
+/* loadfile(name, mode, env), text only. Upvalues: unused, the globals. */
+static int l_safe_loadfile(lua_State *L)
+{
+	int n = lua_gettop(L);
+	const char *name = luaL_optstring(L, 1, NULL);
+	if (load_text_file(L, name) != LUA_OK) {
+		luaL_pushfail(L);
+		lua_insert(L, -2);
+		return 2;
+	}
+	set_chunk_env(L, n, 3);
+	return 1;
+}
+
+/* dofile(name), text only. */
+static int l_safe_dofile(lua_State *L)
+{
+	const char *name = luaL_optstring(L, 1, NULL);
+	lua_settop(L, 1);
+	if (load_text_file(L, name) != LUA_OK)
+		return lua_error(L);
+	set_chunk_env(L, 0, 1);
+	lua_call(L, 0, LUA_MULTRET);
+	return lua_gettop(L) - 1;
+}
+
+/* package.searchers[1]: package.preload[name]. Upvalue 1: package. */
+static int l_search_preload(lua_State *L)
+{
+	const char *name = luaL_checkstring(L, 1);
+	lua_getfield(L, lua_upvalueindex(1), "preload");
+	if (!lua_istable(L, -1) || lua_getfield(L, -1, name) == LUA_TNIL) {
+		lua_pushfstring(L, "no field package.preload['%s']", name);
+		return 1;
+	}
+	lua_pushliteral(L, ":preload:");
+	return 2;
+}
+
+/* package.searchers[2]: a Lua file on package.path, loaded as text with the
+ * sandbox's globals. Upvalues: package, the globals. */
+static int l_search_text(lua_State *L)
+{
+	const char *name = luaL_checkstring(L, 1);
+	lua_settop(L, 1);
+	lua_getfield(L, lua_upvalueindex(1), "path");
+	const char *path = lua_tostring(L, -1);
+	if (!path)
+		return luaL_error(L, "'package.path' must be a string");
+	const char *file = luaL_gsub(L, name, ".", "/");
+	lua_pushliteral(L, ""); /* the files tried */
+	for (const char *p = path; *p;) {
+		size_t len = strcspn(p, ";");
+		if (len) {
+			lua_pushlstring(L, p, len);
+			const char *fn = luaL_gsub(L, lua_tostring(L, -1), "?", file);
+			lua_remove(L, -2);
+			FILE *f = fopen(fn, "r");
+			if (f) {
+				fclose(f);
+				if (load_text_file(L, fn) != LUA_OK)
+					return luaL_error(L, "error loading module '%s' from file '%s':\n\t%s", name, fn,
+					                  lua_tostring(L, -1));
+				set_chunk_env(L, 0, 1);
+				lua_pushvalue(L, -2);
+				return 2;
+			}
+			lua_pushfstring(L, "%sno file '%s'", lua_rawlen(L, -2) ? "\n\t" : "", fn);
+			lua_remove(L, -2);
+			lua_concat(L, 2);
+		}
+		p += len + (p[len] == ';');
+	}
+	return 1;
+}
+
+static int l_search_native(lua_State *L)
+{
+	lua_pushliteral(L, "C modules (package.cpath) are not loaded in " SAFE_MODE);
+	return 1;
+}
+
+/* require(name) over package.loaded and package.searchers of upvalue 1. */
+static int l_safe_require(lua_State *L)
+{
+	const char *name = luaL_checkstring(L, 1);
+	lua_settop(L, 1);
+	if (lua_getfield(L, lua_upvalueindex(1), "loaded") != LUA_TTABLE) /* 2 */
+		return luaL_error(L, "'package.loaded' must be a table");
+	if (lua_getfield(L, 2, name) != LUA_TNIL && lua_toboolean(L, -1))
+		return 1;
+	lua_pop(L, 1);
+	if (lua_getfield(L, lua_upvalueindex(1), "searchers") != LUA_TTABLE) /* 3 */
+		return luaL_error(L, "'package.searchers' must be a table");
+	lua_pushliteral(L, ""); /* 4: why each searcher found nothing */
+	for (int i = 1;; ++i) {
+		if (lua_rawgeti(L, 3, i) == LUA_TNIL)
+			return luaL_error(L, "module '%s' not found:%s", name, lua_tostring(L, 4));
+		lua_pushstring(L, name);
+		lua_call(L, 1, 2); /* 5, 6 */
+		if (lua_isfunction(L, 5))
+			break;
+		if (lua_isstring(L, 5)) {
+			lua_pop(L, 1);
+			lua_pushliteral(L, "\n\t");
+			lua_insert(L, 5);
+			lua_concat(L, 3);
+		} else {
+			lua_pop(L, 2);
+		}
+	}
+	lua_remove(L, 4); /* 4: loader, 5: its data */
+	lua_pushvalue(L, 4);
+	lua_pushvalue(L, 1);
+	lua_pushvalue(L, 5);
+	lua_call(L, 2, 1);
+	if (!lua_isnil(L, -1))
+		lua_setfield(L, 2, name);
+	else
+		lua_pop(L, 1);
+	if (lua_getfield(L, 2, name) == LUA_TNIL) {
+		lua_pop(L, 1);
+		lua_pushboolean(L, 1);
+		lua_pushvalue(L, -1);
+		lua_setfield(L, 2, name);
+	}
+	lua_pushvalue(L, 5);
+	return 2;
+}
+
+static int l_load_scene(lua_State *L);
+
+/* Makes the globals env, with its os, io and package tables and the eddy
+ * module in package.loaded, safe; out (a string, or nil for none) is where
+ * files may be written. */
+static void make_safe(lua_State *L, int env, int os, int io, int pkg, int out)
+{
+	static const char *const os_kept[] = {"time", "clock", "date", "getenv", "difftime", NULL};
+	lua_pushnil(L);
+	while (lua_next(L, os)) {
+		lua_pop(L, 1);
+		bool kept = lua_type(L, -1) != LUA_TSTRING;
+		for (int i = 0; !kept && os_kept[i]; ++i)
+			kept = strcmp(lua_tostring(L, -1), os_kept[i]) == 0;
+		if (!kept)
+			set_refused(L, os, "os", lua_tostring(L, -1)); /* an existing field: next stays valid */
+	}
+
+	lua_getfield(L, io, "open");
+	lua_pushvalue(L, out);
+	lua_pushcclosure(L, l_safe_open, 2);
+	lua_setfield(L, io, "open");
+	lua_getfield(L, io, "output");
+	lua_pushvalue(L, out);
+	lua_pushcclosure(L, l_safe_output, 2);
+	lua_setfield(L, io, "output");
+	set_refused(L, io, "io", "popen");
+	set_refused(L, io, "io", "tmpfile");
+
+	set_refused(L, pkg, "package", "loadlib");
+	lua_pushliteral(L, "");
+	lua_setfield(L, pkg, "cpath");
+	lua_createtable(L, 3, 0);
+	lua_pushvalue(L, pkg);
+	lua_pushcclosure(L, l_search_preload, 1);
+	lua_rawseti(L, -2, 1);
+	lua_pushvalue(L, pkg);
+	lua_pushvalue(L, env);
+	lua_pushcclosure(L, l_search_text, 2);
+	lua_rawseti(L, -2, 2);
+	lua_pushcfunction(L, l_search_native);
+	lua_rawseti(L, -2, 3);
+	lua_setfield(L, pkg, "searchers");
+	lua_getfield(L, pkg, "loaded");
+	if (lua_istable(L, -1)) {
+		lua_pushnil(L);
+		lua_setfield(L, -2, "debug");
+		/* the sandbox's eddy: worlds that write files only under out, and
+		 * load_scene only into sandboxes as narrow (as a closure may call
+		 * them after the scene has returned, the limit is in the functions,
+		 * not in a flag set while the scene runs) */
+		if (lua_getfield(L, -1, "eddy") == LUA_TTABLE) {
+			lua_createtable(L, 0, 1);
+			lua_pushvalue(L, out);
+			lua_setfield(L, -2, "out");
+			lua_pushvalue(L, -1);
+			lua_pushcclosure(L, l_world, 1);
+			lua_setfield(L, -3, "world");
+			lua_pushcclosure(L, l_load_scene, 1);
+			lua_setfield(L, -2, "load_scene");
+		}
+		lua_pop(L, 1);
+	}
+	lua_pop(L, 1);
+
+	lua_pushvalue(L, pkg);
+	lua_pushcclosure(L, l_safe_require, 1);
+	lua_setfield(L, env, "require");
+	lua_getfield(L, env, "load");
+	lua_pushvalue(L, env);
+	lua_pushcclosure(L, l_safe_load, 2);
+	lua_setfield(L, env, "load");
+	lua_pushnil(L);
+	lua_pushvalue(L, env);
+	lua_pushcclosure(L, l_safe_loadfile, 2);
+	lua_setfield(L, env, "loadfile");
+	lua_pushnil(L);
+	lua_pushvalue(L, env);
+	lua_pushcclosure(L, l_safe_dofile, 2);
+	lua_setfield(L, env, "dofile");
+	lua_pushnil(L);
+	lua_setfield(L, env, "debug");
+}
+
+/* Pushes the standard library `name` as loaded in this state (a table). */
+static void push_loaded(lua_State *L, const char *name)
+{
+	luaL_getsubtable(L, LUA_REGISTRYINDEX, LUA_LOADED_TABLE);
+	if (lua_getfield(L, -1, name) != LUA_TTABLE)
+		luaL_error(L, "safe mode needs the standard library '%s' (luaL_openlibs)", name);
+	lua_remove(L, -2);
+}
+
+static int sandbox_in_place(lua_State *L)
+{
+	const int out = 1;
+	lua_pushglobaltable(L);
+	push_loaded(L, "os");
+	push_loaded(L, "io");
+	push_loaded(L, "package");
+	make_safe(L, out + 1, out + 2, out + 3, out + 4, out);
+	return 0;
+}
+
+int eddy_lua_sandbox(lua_State *L, const char *out_dir)
+{
+	lua_pushcfunction(L, sandbox_in_place);
+	if (out_dir)
+		lua_pushstring(L, out_dir);
+	else
+		lua_pushnil(L);
+	return lua_pcall(L, 1, 0, 0);
+}
+
+/* Pushes a shallow copy of the table on top, in place of it. */
+static void copy_table(lua_State *L)
+{
+	lua_newtable(L);
+	lua_pushnil(L);
+	while (lua_next(L, -3)) {
+		lua_pushvalue(L, -2);
+		lua_insert(L, -2);
+		lua_rawset(L, -4);
+	}
+	lua_remove(L, -2);
+}
+
+/* eddy.load_scene(path [, {safe = true, out = dir}]): runs the scene file
+ * (text only) in fresh globals and returns what it returns. safe (default
+ * true) gives those globals only what eddy run --safe gives a scene, writing
+ * under out (default eddy.out_dir()); out also becomes eddy.out_dir(). With
+ * safe = false the fresh globals fall back to this state's. */
+static int l_load_scene(lua_State *L)
+{
+	const char *path = luaL_checkstring(L, 1);
+	bool safe = true;
+	/* called from a sandbox: upvalue 1 is {out = its output directory} */
+	const bool sandboxed = lua_type(L, lua_upvalueindex(1)) == LUA_TTABLE;
+	lua_settop(L, 2);
+	lua_pushnil(L); /* 3: the output directory */
+	if (!lua_isnil(L, 2)) {
+		luaL_checktype(L, 2, LUA_TTABLE);
+		lua_pushnil(L);
+		while (lua_next(L, 2)) {
+			lua_pop(L, 1);
+			const char *k = lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "";
+			if (strcmp(k, "safe") != 0 && strcmp(k, "out") != 0)
+				return luaL_error(L, "load_scene: unknown option '%s' (options: safe, out)", luaL_tolstring(L, -1, NULL));
+		}
+		if (lua_getfield(L, 2, "safe") != LUA_TNIL) {
+			if (!lua_isboolean(L, -1))
+				return luaL_error(L, "load_scene: 'safe' must be true or false (got %s)", luaL_typename(L, -1));
+			safe = lua_toboolean(L, -1);
+			if (sandboxed && !safe)
+				return luaL_error(L, "load_scene: safe = false is not available in " SAFE_MODE);
+		}
+		lua_pop(L, 1);
+		if (lua_getfield(L, 2, "out") != LUA_TNIL) {
+			if (lua_type(L, -1) != LUA_TSTRING)
+				return luaL_error(L, "load_scene: 'out' must be a directory name (got %s)", luaL_typename(L, -1));
+			if (sandboxed) {
+				lua_getfield(L, lua_upvalueindex(1), "out");
+				const char *dir = lua_tostring(L, -1);
+				if (!dir || !within(lua_tostring(L, -2), dir))
+					return luaL_error(L, "load_scene: 'out' must be the output directory or below it in " SAFE_MODE);
+				lua_pop(L, 1);
+			}
+			lua_pushvalue(L, -1);
+			lua_setfield(L, LUA_REGISTRYINDEX, OUT_DIR_KEY); /* the scene's eddy.out_dir() */
+			lua_replace(L, 3);
+		} else {
+			lua_pop(L, 1);
+		}
+	}
+	if (lua_isnil(L, 3)) {
+		if (sandboxed)
+			lua_getfield(L, lua_upvalueindex(1), "out");
+		else
+			lua_getfield(L, LUA_REGISTRYINDEX, OUT_DIR_KEY);
+		lua_replace(L, 3);
+	}
+	lua_remove(L, 2); /* 2: the output directory (or nil) */
+	lua_newtable(L); /* 3: the scene's globals */
+	if (!safe) {
+		lua_createtable(L, 0, 1);
+		lua_pushglobaltable(L);
+		lua_setfield(L, -2, "__index");
+		lua_setmetatable(L, 3);
+	} else {
+		static const char *const base[] = {"assert", "collectgarbage", "error", "getmetatable", "ipairs", "next",
+		                                   "pairs", "pcall", "print", "rawequal", "rawget", "rawlen", "rawset",
+		                                   "select", "setmetatable", "tonumber", "tostring", "type", "xpcall",
+		                                   "warn", "_VERSION", NULL};
+		static const char *const libs[] = {"string", "math", "table", "utf8", "coroutine", "os", "io", NULL};
+		push_loaded(L, "_G");
+		for (int i = 0; base[i]; ++i) {
+			lua_getfield(L, -1, base[i]);
+			lua_setfield(L, 3, base[i]);
+		}
+		lua_pop(L, 1);
+		lua_newtable(L); /* 4: package.loaded */
+		for (int i = 0; libs[i]; ++i) {
+			push_loaded(L, libs[i]);
+			copy_table(L);
+			lua_pushvalue(L, -1);
+			lua_setfield(L, 3, libs[i]);
+			lua_setfield(L, 4, libs[i]);
+		}
+		push_loaded(L, "eddy");
+		copy_table(L); /* make_safe replaces its world and load_scene */
+		lua_setfield(L, 4, "eddy");
+		lua_pushvalue(L, 3);
+		lua_setfield(L, 3, "_G");
+		lua_pushvalue(L, 3);
+		lua_setfield(L, 4, "_G");
+		push_loaded(L, "package"); /* 5: the host's, for path, config, searchpath */
+		lua_newtable(L);           /* 6 */
+		static const char *const pkg_fields[] = {"path", "config", "searchpath", NULL};
+		for (int i = 0; pkg_fields[i]; ++i) {
+			lua_getfield(L, 5, pkg_fields[i]);
+			lua_setfield(L, 6, pkg_fields[i]);
+		}
+		lua_newtable(L);
+		lua_setfield(L, 6, "preload");
+		lua_pushvalue(L, 4);
+		lua_setfield(L, 6, "loaded");
+		lua_pushvalue(L, 6);
+		lua_setfield(L, 3, "package");
+		lua_pushvalue(L, 6);
+		lua_setfield(L, 4, "package");
+		lua_getfield(L, 3, "os");  /* 7 */
+		lua_getfield(L, 3, "io");  /* 8 */
+		push_loaded(L, "_G");
+		lua_getfield(L, -1, "load");
+		lua_setfield(L, 3, "load"); /* make_safe wraps it */
+		lua_pop(L, 1);
+		make_safe(L, 3, 7, 8, 6, 2);
+		lua_settop(L, 3);
+	}
+	if (load_text_file(L, path) != LUA_OK)
+		return lua_error(L);
+	lua_pushvalue(L, 3);
+	lua_setupvalue(L, -2, 1);
+	lua_call(L, 0, LUA_MULTRET);
+	return lua_gettop(L) - 3;
 }
 
 /* ---- module functions ---------------------------------------------------- */
@@ -960,7 +1625,7 @@ int luaopen_eddy(lua_State *L)
 	new_metatable(L, WORLD_MT, world_methods);
 	lua_pushcfunction(L, l_world_gc);
 	lua_setfield(L, -2, "__gc");
-	lua_pushcfunction(L, l_world_gc);
+	lua_pushcfunction(L, l_world_close);
 	lua_setfield(L, -2, "__close");
 	lua_pushcfunction(L, l_world_tostring);
 	lua_setfield(L, -2, "__tostring");
@@ -1003,6 +1668,8 @@ int luaopen_eddy(lua_State *L)
 	lua_setfield(L, -2, "param");
 	lua_pushcfunction(L, l_out_dir);
 	lua_setfield(L, -2, "out_dir");
+	lua_pushcfunction(L, l_load_scene);
+	lua_setfield(L, -2, "load_scene");
 	for (size_t l = 0; l < sizeof kind_lists / sizeof kind_lists[0]; ++l)
 		for (const eddy_lua_kind *k = kind_lists[l]; k->name; ++k) {
 			lua_pushlightuserdata(L, (void *)(uintptr_t)k);

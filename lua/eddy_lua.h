@@ -19,6 +19,21 @@ void eddy_lua_push_unused_params(lua_State *L);
 /* The output directory for eddy.out_dir() (--out). */
 void eddy_lua_set_out_dir(lua_State *L, const char *dir);
 
+/* Safe mode (eddy run --safe). Call after luaL_openlibs, with "eddy" in
+ * package.loaded, before loading the scene. Afterwards Lua code in L cannot:
+ * run commands or change files through os (os.time, os.clock, os.date,
+ * os.getenv and os.difftime remain); open files for writing except strictly
+ * under out_dir (NULL: nowhere), and never through a path with a ".."
+ * component or a symbolic link leading out of out_dir (io.open and
+ * io.output; io.popen and io.tmpfile are refused; reading is unrestricted);
+ * load native code (package.loadlib, the C searchers, package.cpath); load
+ * binary chunks (load, loadfile, dofile and require load text only); use the
+ * debug library (removed). require keeps finding Lua modules on
+ * package.path, package.preload and package.loaded. A refused function raises
+ * "<name> is not available in safe mode (--safe)". Returns LUA_OK, or an error
+ * status with the message pushed (e.g. a standard library was not opened). */
+int eddy_lua_sandbox(lua_State *L, const char *out_dir);
+
 /* Pushes the table merged from this frame's on_frame returns (or nil) and
  * clears it for the next frame. */
 void eddy_lua_take_frame_fields(lua_State *L, int world_idx);

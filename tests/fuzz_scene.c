@@ -8,6 +8,11 @@
  * scene would be; if it yields a world, the world is stepped a little. Errors
  * are expected; crashes, sanitizer reports and hangs are bugs.
  *
+ * An input that starts with Lua's binary-chunk signature (ESC "Lua") is
+ * instead handed to the loader as it is, the way a precompiled scene file
+ * would be: eddy loads text only, so it must be refused with an error, never
+ * undumped (Lua does not verify bytecode; a corrupted chunk crashes it).
+ *
  * Built two ways: with clang -fsanitize=fuzzer (make fuzz) it is a libFuzzer
  * target; in the test runner, eddy_fuzz_one() replays the files under
  * tests/fuzz/ (seeds, and every input that ever found a bug) on each make test. */
@@ -21,6 +26,9 @@
 
 #include "eddy.h"
 #include "eddy_lua.h"
+
+/* Scenes are text: eddy never loads binary chunks. */
+#define LOAD_MODE "t"
 
 typedef struct input {
 	const uint8_t *p;
@@ -90,10 +98,37 @@ static const char *const fields[] = {"min", "max", "spacing", "jitter", "velocit
 static const char *const world_fields[] = {"bounds", "gravity", "fps", "cfl", "dt_max", "dt_min", "seed",
                                            "escape", "check_finite", "cell_size", "duration"};
 
+static lua_State *new_state(void)
+{
+	lua_State *L = luaL_newstate();
+	if (!L)
+		return NULL;
+	luaL_openlibs(L);
+	luaL_requiref(L, "eddy", luaopen_eddy, 0);
+	lua_pop(L, 1);
+	return L;
+}
+
+/* A binary chunk given as a scene: loading it in text mode must fail. */
+static int load_as_given(const uint8_t *data, size_t size)
+{
+	lua_State *L = new_state();
+	if (!L)
+		return 0;
+	if (luaL_loadbufferx(L, (const char *)data, size, "=fuzz", LOAD_MODE) == LUA_OK) {
+		fprintf(stderr, "fuzz: a binary chunk was accepted by the text-only loader\n");
+		abort();
+	}
+	lua_close(L);
+	return 0;
+}
+
 /* Runs one input; returns 0 (libFuzzer's convention). */
 int eddy_fuzz_one(const uint8_t *data, size_t size);
 int eddy_fuzz_one(const uint8_t *data, size_t size)
 {
+	if (size >= 4 && memcmp(data, LUA_SIGNATURE, 4) == 0)
+		return load_as_given(data, size);
 	input in = {data, size};
 	char src[8192], v[160];
 	size_t len = 0;
@@ -124,13 +159,10 @@ int eddy_fuzz_one(const uint8_t *data, size_t size)
 	EMIT("return w\n");
 #undef EMIT
 
-	lua_State *L = luaL_newstate();
+	lua_State *L = new_state();
 	if (!L)
 		return 0;
-	luaL_openlibs(L);
-	luaL_requiref(L, "eddy", luaopen_eddy, 0);
-	lua_pop(L, 1);
-	if (luaL_loadbuffer(L, src, len, "=fuzz") == LUA_OK && lua_pcall(L, 0, 1, 0) == LUA_OK) {
+	if (luaL_loadbufferx(L, src, len, "=fuzz", LOAD_MODE) == LUA_OK && lua_pcall(L, 0, 1, 0) == LUA_OK) {
 		eddy_world *w = eddy_lua_toworld(L, -1);
 		/* step only scenes of a size a fuzzer can afford */
 		int64_t expected = 0;

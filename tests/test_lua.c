@@ -8,6 +8,7 @@
 #include <lualib.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "bind.h"
 #include "eddy_lua.h"
@@ -166,7 +167,77 @@ static void on_frame_fields_merge(void)
 	e = run_fresh(HEAD "world:on_frame(function(w, f) return 42 end)\nworld:advance(0.1)\n", buf, sizeof buf);
 	CHECK_HAS(e, "on_frame: must return a table of stats fields or nothing (got number)");
 	e = run_fresh(HEAD "world:on_frame(function(w, f) w:advance(1) end)\nworld:advance(0.1)\n", buf, sizeof buf);
-	CHECK_HAS(e, "cannot be stepped from inside its own callbacks");
+	CHECK_HAS(e, "scenes/t.lua:3: world:advance() cannot be called from inside on_frame");
+}
+
+/* Runs src (which returns its world) and steps one frame from C, as the eddy
+ * command does; returns the frame's status, the world error in err. */
+static eddy_status step_frame_from_c(const char *src, char *err, size_t cap, double *time, int *frame)
+{
+	lua_State *L = new_state();
+	const char *e = run(L, src);
+	eddy_world *w = e ? NULL : eddy_lua_toworld(L, -1);
+	CHECKF(w != NULL, "%s", e ? e : "the scene returned no world");
+	eddy_status st = w ? eddy_world_step_frame(w) : EDDY_ERR_INVALID;
+	snprintf(err, cap, "%s", w && st != EDDY_OK ? eddy_world_error(w) : "");
+	*time = w ? eddy_world_time(w) : -1;
+	*frame = w ? eddy_world_frame(w) : -1;
+	lua_close(L);
+	return st;
+}
+
+/* A world's own callbacks may not step it, add to it, remove from it or close
+ * it, whoever steps the world (Lua or the host in C): the step in progress
+ * holds its systems and columns. The refused call leaves time and frame as
+ * they were; the error names the call and the callback at the scene's line. */
+static void callbacks_cannot_reenter_their_world(void)
+{
+	char err[512];
+	double t;
+	int frame;
+	eddy_status st = step_frame_from_c(HEAD "world:add(eddy.emit_box{ min = {0.1,0.1,0.1}, max = {0.2,0.2,0.2}, spacing = 0.05 })\n"
+	                                        "world:on_frame(function(w, f) w:advance(1) end)\n"
+	                                        "return world\n",
+	                                   err, sizeof err, &t, &frame);
+	CHECK(st == EDDY_ERR_EXTERNAL);
+	CHECK_HAS(err, "on_frame: scenes/t.lua:4: world:advance() cannot be called from inside on_frame");
+	CHECKF(frame <= 1 && t <= 1.0 / 30 + 1e-9, "frame %d, t %g: the refused advance ran", frame, t);
+
+	/* every refused call, caught: the frame completes as if none was made */
+	st = step_frame_from_c(HEAD "local g = world:add(eddy.gravity{})\n"
+	                            "world:on_frame(function(w, f)\n"
+	                            "  local t, n = w:time(), w:frame()\n"
+	                            "  local calls = {\n"
+	                            "    {'advance', function() w:advance(1) end}, {'step', function() w:step() end},\n"
+	                            "    {'add', function() w:add(eddy.integrate{}) end}, {'remove', function() w:remove(g) end},\n"
+	                            "    {'on_frame', function() w:on_frame(print) end}, {'close', function() w:close() end},\n"
+	                            "    {'close', function() local c <close> = w end},\n"
+	                            "    {'close', function() getmetatable(w).__gc(w) end},\n"
+	                            "  }\n"
+	                            "  for _, c in ipairs(calls) do\n"
+	                            "    local ok, e = pcall(c[2])\n"
+	                            "    assert(not ok and e:find('world:' .. c[1] .. '() cannot be called from inside on_frame', 1, true), e)\n"
+	                            "  end\n"
+	                            "  assert(w:time() == t and w:frame() == n and g:valid())\n"
+	                            "end)\n"
+	                            "return world\n",
+	                       err, sizeof err, &t, &frame);
+	CHECKF(st == EDDY_OK, "%s", err);
+	CHECK(frame == 1);
+	CHECK_NEAR(t, 1.0 / 30, 1e-9);
+
+	/* an animated offset function, during a step and when the collider is added */
+	st = step_frame_from_c(HEAD "world:add(eddy.collide_sphere{ offset = function(t)\n"
+	                            "  if t > 0 then world:step() end\n"
+	                            "  return {0, 0, 0} end })\n"
+	                            "return world\n",
+	                       err, sizeof err, &t, &frame);
+	CHECK(st == EDDY_ERR_EXTERNAL);
+	CHECK_HAS(err, "scenes/t.lua:4: world:step() cannot be called from inside an offset function");
+	char buf[512];
+	const char *e = run_fresh(HEAD "world:add(eddy.collide_sphere{ offset = function(t) world:close(); return {0, 0, 0} end })\n",
+	                          buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:3: world:close() cannot be called from inside an offset function");
 }
 
 static void params_convert_to_the_default_type(void)
@@ -218,6 +289,246 @@ static void animated_collider(void)
 
 static void every_field_rejects_nan_and_inf(void);
 
+/* A state as eddy run --safe makes it: eddy's Lua helpers on package.path,
+ * a C module reachable on package.cpath until the sandbox removes it, and the
+ * output directory in the global OUT. */
+static lua_State *new_safe_state(const char *out)
+{
+	lua_State *L = new_state();
+	char cpath[1024];
+	snprintf(cpath, sizeof cpath, "%s/?.so", test_build_dir());
+	lua_getglobal(L, "package");
+	lua_pushliteral(L, "lua/?.lua");
+	lua_setfield(L, -2, "path");
+	lua_pushstring(L, cpath);
+	lua_setfield(L, -2, "cpath");
+	lua_pop(L, 1);
+	eddy_lua_set_out_dir(L, out);
+	int rc = eddy_lua_sandbox(L, out);
+	CHECKF(rc == LUA_OK, "%s", lua_tostring(L, -1));
+	lua_pushstring(L, out);
+	lua_setglobal(L, "OUT");
+	return L;
+}
+
+/* Under eddy_lua_sandbox a scene cannot run commands, write outside its
+ * output directory, load native code or bytecode or reach the debug library;
+ * each refusal is a Lua error (or load's nil and message) that says why. */
+static void safe_mode_refuses_escapes(void)
+{
+	char out[] = "/tmp/eddy_safe_XXXXXX";
+	CHECK(mkdtemp(out) != NULL);
+	static const struct {
+		const char *code, *want;
+	} refused[] = {
+		{"os.execute('true')", "scenes/t.lua:1: os.execute is not available in safe mode (--safe)"},
+		{"os.remove(OUT .. '/x')", "os.remove is not available in safe mode"},
+		{"os.rename('a', 'b')", "os.rename is not available in safe mode"},
+		{"os.exit(3)", "os.exit is not available in safe mode"},
+		{"io.popen('ls')", "io.popen is not available in safe mode"},
+		{"io.tmpfile()", "io.tmpfile is not available in safe mode"},
+		{"io.open('/tmp/x', 'w')", "io.open: cannot write '/tmp/x': files are written only under the output directory"},
+		{"io.open('/tmp/x', 'r+')", "io.open: cannot write '/tmp/x'"},
+		{"io.open(OUT .. '/../x', 'w')", "a path with a '..' component is not written in safe mode"},
+		{"io.open(OUT .. '/a/../../x', 'a')", "a path with a '..' component"},
+		{"io.open(OUT, 'w')", "only under the output directory"},
+		{"io.open(OUT .. 'x/y', 'w')", "only under the output directory"},
+		{"io.open('x.txt', 'w')", "only under the output directory"},
+		{"io.output('/tmp/x')", "io.output: cannot write '/tmp/x'"},
+		{"package.loadlib('/lib/x.so', 'f')", "package.loadlib is not available in safe mode"},
+		{"package.loaded.eddy = nil; local ok, err = pcall(require, 'eddy'); package.loaded.eddy = eddy; error(err)",
+		 "C modules (package.cpath) are not loaded in safe mode"},
+		{"package.cpath = '/usr/lib/?.so'; require 'nosuchmodule'", "C modules (package.cpath) are not loaded"},
+		{"assert(load(string.dump(function() end)))", "load: binary chunks (string.dump) cannot be loaded in safe mode"},
+		{"assert(load(string.dump(function() end), 'x', 'b'))", "binary chunks (string.dump) cannot be loaded"},
+		{"local s = string.dump(function() end); assert(load(function() local r = s; s = nil; return r end))",
+		 "attempt to load a binary chunk (mode is 't')"},
+		{"local f = assert(io.open(OUT .. '/dumped.lua', 'wb')); f:write(string.dump(function() end)); f:close()\n"
+		 "assert(loadfile(OUT .. '/dumped.lua', 'b'))",
+		 "/dumped.lua: a binary (precompiled) chunk: eddy loads Lua source only"},
+		{"dofile(OUT .. '/dumped.lua')", "/dumped.lua: a binary (precompiled) chunk"},
+		{"package.path = OUT .. '/?.lua'; require 'dumped'", "error loading module 'dumped' from file"},
+		{"debug.getinfo(1)", "global 'debug'"},
+		{"require 'debug'", "module 'debug' not found"},
+		{"local w = eddy.world{}; w:add(eddy.render_points{ path = '/tmp/f_%04d.png' })",
+		 "render_points: cannot write '/tmp/f_%04d.png'"},
+		{"local w = eddy.world{}; w:add(eddy.export_particles{ path = OUT .. '/../p_%04d.ply' })",
+		 "export_particles: cannot write"},
+		{"eddy.load_scene('scenes/bounce.lua', { safe = false })", "load_scene: safe = false is not available in safe mode"},
+		{"eddy.load_scene('scenes/bounce.lua', { out = '/tmp' })", "load_scene: 'out' must be the output directory or below it"},
+		{"eddy.load_scene('scenes/bounce.lua', { out = OUT .. '/../x' })", "load_scene: 'out' must be the output directory"},
+	};
+	lua_State *L = new_safe_state(out);
+	for (size_t i = 0; i < sizeof refused / sizeof refused[0]; ++i) {
+		char src[1024];
+		snprintf(src, sizeof src, "local eddy = require 'eddy'; %s", refused[i].code);
+		int top = lua_gettop(L);
+		const char *e = run(L, src);
+		CHECKF(e && strstr(e, refused[i].want), "%s: expected \"%s\", got: %s", refused[i].code, refused[i].want,
+		       e ? e : "no error");
+		lua_settop(L, top);
+	}
+	/* a symbolic link in the output directory that leads out of it */
+	char link[512];
+	snprintf(link, sizeof link, "%s/away", out);
+	CHECK(symlink("/tmp", link) == 0);
+	const char *e = run(L, "io.open(OUT .. '/away/x', 'w')");
+	CHECK_HAS(e, "a symbolic link leads out of it");
+	unlink(link);
+	lua_close(L);
+	char cmd[600], buf[256];
+	snprintf(cmd, sizeof cmd, "rm -rf '%s'", out);
+	test_sh(cmd, buf, sizeof buf);
+}
+
+static void write_file(const char *path, const char *text, size_t len)
+{
+	FILE *f = fopen(path, "wb");
+	CHECK(f != NULL);
+	if (f) {
+		fwrite(text, 1, len, f);
+		fclose(f);
+	}
+}
+
+/* eddy.load_scene, from a state with every library (the stock interpreter's):
+ * the scene runs text-only in fresh sandboxed globals, with the refusals of
+ * eddy_lua_sandbox, and returns what it returns; the host's globals and
+ * libraries are untouched. */
+static void load_scene_runs_a_scene_sandboxed(void)
+{
+	char out[] = "/tmp/eddy_safe_XXXXXX";
+	CHECK(mkdtemp(out) != NULL);
+	char path[600], luac[600], cmd[2048], buf[512];
+	snprintf(path, sizeof path, "%s/escape.lua", out);
+	const char *escape = "X_LEAKED = true\nlocal ok, e = pcall(os.execute, 'true')\n"
+	                     "assert(not ok and e:find('os.execute is not available in safe mode', 1, true), e)\n"
+	                     "ok, e = pcall(io.open, '/tmp/x', 'w')\n"
+	                     "assert(not ok and e:find('only under the output directory', 1, true), e)\n"
+	                     "assert(io.open(eddy_out .. '/ok.txt', 'w')):close()\n"
+	                     "assert(debug == nil and package.loadlib ~= nil and not pcall(package.loadlib, 'x', 'y'))\n"
+	                     "assert(not load(string.dump(function() end)))\n"
+	                     "local eddy = require 'eddy'\n"
+	                     "assert(eddy.out_dir() == eddy_out)\n"
+	                     "return eddy.world{}, 42, function() return eddy.world{} end,\n"
+	                     "  function() return eddy.load_scene('scenes/bounce.lua', { safe = false }) end\n";
+	/* the out option is the scene's eddy.out_dir() */
+	char scene[2048];
+	snprintf(scene, sizeof scene, "local eddy_out = require('eddy').out_dir()\n%s", escape);
+	write_file(path, scene, strlen(scene));
+	lua_State *L = new_state();
+	lua_pushstring(L, path);
+	lua_setglobal(L, "SCENE");
+	lua_pushstring(L, out);
+	lua_setglobal(L, "OUT");
+	const char *e = run(L, "local eddy = require 'eddy'\n"
+	                       "local w, n, make_world, unsafe = eddy.load_scene(SCENE, { safe = true, out = OUT })\n"
+	                       "assert(eddy.world and tostring(w):find('eddy world', 1, true) and n == 42)\n"
+	                       /* the scene's functions stay sandboxed after it returned */
+	                       "local w2 = make_world()\n"
+	                       "local ok, err = pcall(w2.add, w2, eddy.render_points{ path = '/tmp/f_%04d.png' })\n"
+	                       "assert(not ok and err:find('render_points: cannot write', 1, true), err)\n"
+	                       "ok, err = pcall(unsafe)\n"
+	                       "assert(not ok and err:find('safe = false is not available in safe mode', 1, true), err)\n"
+	                       "assert(X_LEAKED == nil and type(os.execute) == 'function' and debug ~= nil)\n"
+	                       "assert(io.open(OUT .. '/ok.txt')):close()\n"
+	                       "ok, err = pcall(eddy.load_scene, SCENE, { sfae = true })\n"
+	                       "assert(not ok and err:find(\"unknown option 'sfae'\", 1, true), err)\n"
+	                       "w = eddy.load_scene('scenes/bounce.lua', { out = OUT })\n"
+	                       "w:advance(0.05)\n"
+	                       "assert(w:frame() == 1)\n"
+	                       "return true\n");
+	CHECKF(e == NULL, "%s", e);
+	/* a precompiled scene is refused, not undumped */
+	snprintf(luac, sizeof luac, "%s/bounce.luac", out);
+	snprintf(cmd, sizeof cmd, "cp tests/fuzz/regressions/luac_corrupt_segv_a.bin '%s'", luac);
+	CHECK(test_sh(cmd, buf, sizeof buf) == 0);
+	lua_pushstring(L, luac);
+	lua_setglobal(L, "SCENE");
+	e = run(L, "local eddy = require 'eddy'\nreturn eddy.load_scene(SCENE, { safe = false })\n");
+	CHECK_HAS(e, "/bounce.luac: a binary (precompiled) chunk: eddy loads Lua source only");
+	lua_close(L);
+	snprintf(cmd, sizeof cmd, "rm -rf '%s'", out);
+	test_sh(cmd, buf, sizeof buf);
+}
+
+/* What a scene needs still works under the sandbox: writing under the output
+ * directory, reading anywhere, the kept os functions, text chunks, eddy's Lua
+ * helpers, and a whole scene (bounce) that loads and steps. */
+static void safe_mode_keeps_what_scenes_use(void)
+{
+	char out[] = "/tmp/eddy_safe_XXXXXX";
+	CHECK(mkdtemp(out) != NULL);
+	lua_State *L = new_safe_state(out);
+	const char *e = run(L, "local f = assert(io.open(OUT .. '/ok.txt', 'w')); f:write('ok'); f:close()\n"
+	                       "assert(io.open(OUT .. '/./ok.txt', 'a')):close()\n"
+	                       "assert(io.open(OUT .. '//ok.txt', 'rb')):close()\n"
+	                       "assert(assert(io.open(OUT .. '/ok.txt')):read('a') == 'ok')\n"
+	                       "assert(io.open('scenes/bounce.lua'):read('a'):find('require \"eddy\"', 1, true))\n"
+	                       "local n = 0; for _ in io.lines('scenes/bounce.lua') do n = n + 1 end; assert(n > 10)\n"
+	                       "assert(os.time() and os.clock() and os.date('%Y') and os.difftime(2, 1) == 1)\n"
+	                       "assert(os.getenv('EDDY_NO_SUCH_VARIABLE') == nil)\n"
+	                       "assert(load('return 1 + 1')() == 2 and load('return x', 'c', 't', { x = 3 })() == 3)\n"
+	                       "local dam = require 'eddy.dam_break'\n"
+	                       "assert(type(dam) == 'table' and package.loaded['eddy.dam_break'] == dam)\n"
+	                       "assert(require 'string' == string)\n"
+	                       "local world = dofile('scenes/bounce.lua')\n"
+	                       "world:advance(0.1)\n"
+	                       "assert(world:frame() == 3 and world:count() > 0)\n"
+	                       "return world\n");
+	CHECKF(e == NULL, "%s", e);
+	lua_close(L);
+	char cmd[600], buf[256];
+	snprintf(cmd, sizeof cmd, "ls '%s'", out);
+	CHECK(test_sh(cmd, buf, sizeof buf) == 0);
+	CHECK_HAS(buf, "ok.txt");
+	CHECK_HAS(buf, "frame_0003.png"); /* bounce renders into eddy.out_dir() */
+	snprintf(cmd, sizeof cmd, "rm -rf '%s'", out);
+	test_sh(cmd, buf, sizeof buf);
+}
+
+/* Misuse through the API (handles of other worlds, views of closed worlds,
+ * metamethods that close the world mid-call, out-of-range numbers) is a Lua
+ * error or a harmless value, never a crash. */
+static void arguments_that_once_crashed(void)
+{
+	char buf[512];
+	const char *e = run_fresh(HEAD "local other = eddy.world{}\nlocal g = other:add(eddy.gravity{})\n"
+	                               "world:add(eddy.gravity{})\nworld:remove(g)\n",
+	                          buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:6: remove: the handle belongs to another world");
+	e = run_fresh(HEAD "local opts = setmetatable({}, { __index = function() world:close() end })\n"
+	                   "world:plan(opts)\n",
+	              buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:4: world is closed");
+	e = run_fresh(HEAD "world:add(eddy.emit_box{ min = {0.1,0.1,0.1}, max = {0.2,0.2,0.2}, spacing = 0.05 })\n"
+	                   "world:add(eddy.gravity{}); world:add(eddy.integrate{})\n"
+	                   "world:step()\n"
+	                   "local y = world:channel('y')\n"
+	                   "assert(#y == 8 and y[1] and y[math.maxinteger] == nil and y[math.mininteger] == nil)\n"
+	                   "assert(y[1.5] == nil and y.x == nil and y[0/0] == nil)\n"
+	                   "world:close()\n"
+	                   "assert(#y == 0 and y[1] == nil and tostring(world) == 'eddy world (closed)')\n"
+	                   "world:close()\n"
+	                   "local ok, err = pcall(world.time, world)\n"
+	                   "assert(not ok and err:find('world is closed', 1, true), err)\n"
+	                   "ok, err = pcall(world.channel, eddy.world{}, string.rep('y', 100))\n"
+	                   "assert(not ok and err:find('no column named', 1, true), err)\n"
+	                   "local w2 = eddy.world{}\n"
+	                   "ok, err = pcall(w2.advance, w2, 1e300)\n"
+	                   "assert(not ok and err:find('past the last frame a world counts', 1, true), err)\n"
+	                   "assert(w2:frame() == 0 and w2:time() == 0)\n"
+	                   "ok, err = pcall(world.add, eddy.gravity{}, eddy.gravity{})\n"
+	                   "assert(not ok and err:find('eddy.world expected', 1, true), err)\n",
+	              buf, sizeof buf);
+	CHECKF(e == NULL, "%s", e);
+	/* a float field beyond the float range is infinite, and rejected as such */
+	e = run_fresh(HEAD "world:add(eddy.emit_box{ spacing = 1e300 })\n", buf, sizeof buf);
+	CHECK_HAS(e, "'spacing' must be");
+	e = run_fresh(HEAD "world:add(eddy.emit_box{ min = {0, -1e300, 0} })\n", buf, sizeof buf);
+	CHECK_HAS(e, "'min'");
+}
+
 void suite_lua(void)
 {
 	RUN(unknown_field_names_file_line_and_fix);
@@ -227,9 +538,14 @@ void suite_lua(void)
 	RUN(sph_mass_from_the_handle);
 	RUN(world_api_and_channels);
 	RUN(on_frame_fields_merge);
+	RUN(callbacks_cannot_reenter_their_world);
+	RUN(arguments_that_once_crashed);
 	RUN(params_convert_to_the_default_type);
 	RUN(animated_collider);
 	RUN(every_field_rejects_nan_and_inf);
+	RUN(safe_mode_refuses_escapes);
+	RUN(safe_mode_keeps_what_scenes_use);
+	RUN(load_scene_runs_a_scene_sandboxed);
 }
 
 /* Every number a scene can give, for every def, rejects NaN, and infinity
