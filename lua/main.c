@@ -30,12 +30,6 @@
 #include "eddy_lua.h"
 #include "study.h" /* eddy study: lua/study.c */
 
-/* The sandbox of --safe, in lua/eddy_lua.c: removes os (but its clock and
- * time functions), io writes outside out_dir, package.loadlib and C module
- * searchers, binary chunks for load/loadfile/dofile. Weak, so the command
- * still links where it is not built in; --safe then refuses to run. */
-int eddy_lua_sandbox(lua_State *L, const char *out_dir) __attribute__((weak));
-
 /* The scene's name without directory and extension, for out/<scene>. */
 static void scene_name(const char *path, char *out, size_t cap)
 {
@@ -112,8 +106,6 @@ static int load_scene(lua_State *L, cli_options *o)
 	eddy_lua_set_out_dir(L, o->outdir);
 
 	char buf[1024];
-	if (o->safe && !eddy_lua_sandbox)
-		return cli_fail(CLI_EXIT_RUN, "--safe: this build of eddy has no sandbox (eddy_lua_sandbox)");
 	if (o->safe && eddy_lua_sandbox(L, o->outdir) != 0)
 		return cli_fail(CLI_EXIT_RUN, "--safe: %s", cli_first_line(lua_tostring(L, -1), buf, sizeof buf));
 	int code = load_chunk(L, o);
