@@ -26,7 +26,7 @@ SOMAJOR := $(firstword $(subst ., ,$(VERSION)))
 # Symbols are hidden unless the public header marks them EDDY_API.
 WARN    := -Wall -Wextra -Wpedantic -Wshadow -Wstrict-prototypes -Wmissing-prototypes \
            -Wformat=2 -Wvla -Wpointer-arith -Wcast-qual -Wundef -Werror
-BASE    := -std=c11 $(OPT) -g -fPIC -fopenmp $(WARN) $(SAN) -MMD -MP
+BASE    := -std=c11 $(OPT) -g -fPIC -fopenmp -fvisibility=hidden $(WARN) $(SAN) -MMD -MP
 LDBASE  := -fopenmp $(SAN)
 
 LUA_CFLAGS    := $(shell pkg-config --cflags lua5.4 2>/dev/null)

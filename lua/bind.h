@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* How the Lua binding describes a def: its fields (name, type, offset) and
  * the C functions that fill its defaults and add it to a world. Each area of
  * the engine lists its kinds in its own bind_*.c file; eddy_lua.c reads the

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Lua descriptions of the world def and the core systems' defs. */
 #include "bind.h"
 

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Lua descriptions of the FLIP systems' defs (sys_flip_*.c). */
 #include "bind.h"
 

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Lua descriptions of the renderer's and the exporters' defs (render/):
  * eddy.render_points{...} and eddy.export_particles{...}. */
 #include "bind.h"

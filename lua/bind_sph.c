@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Lua descriptions of the SPH systems' defs. */
 #include "bind.h"
 

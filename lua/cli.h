@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* The eddy command's parts (lua/main.c, lua/cli_*.c): options, one-line
  * failures, stats lines and the run loop. Only the command links these; the
  * Lua module (eddy.so) does not. */

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* The eddy command's arguments: getopt_long, so `--frames 3` and
  * `--frames=3` are the same, options may come before or after the scene,
  * and `eddy COMMAND --help` prints that command's options. */

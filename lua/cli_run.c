@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* eddy run: the frame loop with its stats lines, checkpoints, the lock on the
  * output folder, particle exports and the ffmpeg pipe. */
 #define _POSIX_C_SOURCE 200809L

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* The stats lines of eddy run (JSON, one object per frame) and the stats
  * file: every write checked, and on resume the record kept free of gaps. */
 #define _POSIX_C_SOURCE 200809L /* open_memstream */

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* The Lua binding: `local eddy = require "eddy"`.
  *
  * Every def starts from the C default function, so defaults live only in C;

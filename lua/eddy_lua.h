@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* The Lua binding's surface for hosts in lua/ (the eddy command, tests). */
 #ifndef EDDY_LUA_H
 #define EDDY_LUA_H
@@ -7,7 +8,7 @@
 #include "eddy.h"
 
 /* luaopen_eddy: `require "eddy"`. */
-int luaopen_eddy(lua_State *L);
+EDDY_API int luaopen_eddy(lua_State *L);
 
 /* The world in the userdata at idx, or NULL if idx holds no (open) world. */
 eddy_world *eddy_lua_toworld(lua_State *L, int idx);

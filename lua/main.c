@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* The eddy command: run, plan and check Lua scenes; study (lua/study.c).
  *
  *   eddy run SCENE.lua [--frames N] [--duration S] [--out DIR] [--threads N]

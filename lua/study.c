@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* `eddy study STUDY.lua [--out DIR] [--quick]`: the accuracy/time study.
  *
  * The sweep, the error metrics, the CSV and the chart are Lua

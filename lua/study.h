@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* The `eddy study` command (lua/study.c, driver in lua/eddy/study.lua). */
 #ifndef EDDY_STUDY_H
 #define EDDY_STUDY_H

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Colour maps: piecewise-linear in sRGB between 11 evenly spaced samples.
  * viridis and plasma are the matplotlib maps by van der Walt and Smith (2015),
  * sampled at t = 0, 0.1, ..., 1 from their published values; 11 samples keep

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* export_particles: writes the particles to one file per frame, for Blender,
  * Houdini, ParaView and MeshLab. A frame-only custom system.
  *

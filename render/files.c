@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Helpers for the renderer and the exporters: frame path patterns, parent
  * directories, particle values by channel name, and files written through a
  * temporary name so a reader never sees a partial one. */

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* The GL context: Mesa's off-screen renderer (OSMesa, llvmpipe on Debian 12),
  * the only file that includes OSMesa or GL. One context per renderer, drawing
  * into a buffer this file owns, so renderers never share GL state.

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* PNG writing: the one file that holds stb_image_write's implementation
  * (Debian's libstb-dev header). STATIC keeps its symbols private to this file;
  * its tuning globals are never written, so they stay at their defaults. The

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Internals shared by the renderer's files. render/ sees only eddy.h: these
  * are its own pieces (GL context, colour maps, PNG writing, file helpers). */
 #ifndef EDDY_RENDER_H

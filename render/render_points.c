@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* render_points: the headless particle renderer, a frame-only custom system.
  *
  * Reads: x y z, plus vx vy vz (color_by = "speed") or the color_by column.

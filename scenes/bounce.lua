@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- bounce: a block of particles falls into a box and splashes around a sphere
 -- that sweeps back and forth through the tank. No fluid forces: this scene
 -- shows the engine core (emitter, gravity, integrator, colliders, a moving

@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- dam_break (SPH): Martin & Moyce's collapsing column, a x 2a against the back
 -- wall of a tank 5.5 a long, in a slab 4 spacings thick with free-slip walls
 -- (2D-like flow). Reports Z = front / a and T = t sqrt(2 g / a) every frame,

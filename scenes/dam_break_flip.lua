@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- dam_break_flip: Martin & Moyce's dam break with FLIP (Zhu & Bridson 2005).
 -- The tank, column and front reporting (Z, T) are lua/eddy/dam_break.lua,
 -- shared with the SPH scene; only the method systems differ.

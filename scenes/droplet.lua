@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- droplet (SPH): a drop in zero gravity relaxing under surface tension. It
 -- starts as an ellipsoid stretched along x (by 1 + stretch, its volume that
 -- of the round drop of radius R), rounds off and rings in its l = 2 mode,

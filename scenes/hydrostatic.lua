@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- hydrostatic (SPH): a block of water at rest in a closed tank with boundary
 -- particles. Reports pressure_err = max |p - rho0 g d| / (rho0 g H) over
 -- layers one spacing thick, for the particles more than h from the walls,

@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- hydrostatic_flip: a tank of water at rest, FLIP. The pressure solve alone
 -- holds the column up, so the hydrostatic error measures the solver: CHOLMOD
 -- is exact, PCG stops at its tolerance. The water depth is a whole number of

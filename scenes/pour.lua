@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- pour (SPH): the scene of Mueller, Charypar & Gross 2003 - water poured
 -- into a box, 5625 particles in all. A round jet falls from a nozzle near
 -- the top into a box whose walls are boundary particles.

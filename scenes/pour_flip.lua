@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- pour_flip: the paper's pour scene with FLIP — a jet of 5625 particles
 -- poured into a box, splashing and settling.
 --

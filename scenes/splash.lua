@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- splash: a block of water collapses in a tank and runs into a ball, in full
 -- 3D, with FLIP (MAC grid, PCG pressure, ghost-fluid free surface). The
 -- default scene of `make run`: it renders into out/splash/frame_NNNN.png.

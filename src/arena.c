@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Per-step scratch: a chain of blocks handed out by bumping a pointer. Reset
  * keeps the largest block and drops the rest, so after the first steps a scene
  * settles on one block and a step allocates nothing from the system. */

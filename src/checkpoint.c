@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Checkpoints: the whole state of a world in one file, written atomically and
  * read back only when it is intact and belongs to the same scene.
  *

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* What the colliders share: moving them, their wall velocity, and the
  * restitution/friction check. The contact response itself is inline in core.h. */
 #include "systems.h"

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* eddy_collider_shape_of: what a collider looks like, for hosts that draw it
  * (the renderer's outlines). Signed distance alone cannot give edges cheaply,
  * so each built-in collider describes its own pose and size. */

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Shape descriptions of the built-in colliders, for eddy_collider_shape_of()
  * (collider_shape.c): each collider file describes its own private data. */
 #ifndef EDDY_COLLIDER_SHAPE_H

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Column storage: the particle table (one array per channel, swap-remove,
  * doubling growth) and the MAC grid (cell and face arrays).
  *

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* The component table: every column the engine knows, declared once.
  * X(ident, name, domain, type, lifetime, unit)
  *

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Internal structures shared by the engine's source files. Not installed: hosts
  * see only eddy.h. */
 #ifndef EDDY_CORE_H

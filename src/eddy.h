@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* eddy — a headless fluid engine.
  *
  * This is the one public header. A host creates a world from a def, adds systems
@@ -44,6 +45,14 @@ extern "C" {
 #define EDDY_VERSION_PATCH 0
 #define EDDY_VERSION_STRING "0.2.0"
 
+/* EDDY_API marks the public functions: the library is built with hidden
+ * visibility, so libeddy.so exports these and nothing else. */
+#if defined(__GNUC__) || defined(__clang__)
+#define EDDY_API __attribute__((visibility("default")))
+#else
+#define EDDY_API
+#endif
+
 /* ---- status ------------------------------------------------------------ */
 
 typedef enum eddy_status {
@@ -58,7 +67,7 @@ typedef enum eddy_status {
 	EDDY_ERR_EXTERNAL   /* a host callback or an external library reported failure */
 } eddy_status;
 
-const char *eddy_status_name(eddy_status s);
+EDDY_API const char *eddy_status_name(eddy_status s);
 
 /* ---- small value types ------------------------------------------------- */
 
@@ -101,38 +110,38 @@ typedef struct eddy_world_def {
 	bool check_finite;          /* scan written columns after each system */
 } eddy_world_def;
 
-eddy_world_def eddy_default_world_def(void);
+EDDY_API eddy_world_def eddy_default_world_def(void);
 
 /* NULL only when def is invalid or memory is short; the reason is written to
  * err (if err_size > 0). */
-eddy_world *eddy_create_world(const eddy_world_def *def, char *err, size_t err_size);
-void eddy_destroy_world(eddy_world *w);
+EDDY_API eddy_world *eddy_create_world(const eddy_world_def *def, char *err, size_t err_size);
+EDDY_API void eddy_destroy_world(eddy_world *w);
 
 /* The last error message of this world ("" if none). */
-const char *eddy_world_error(const eddy_world *w);
+EDDY_API const char *eddy_world_error(const eddy_world *w);
 /* Sets the world's error message (printf style) and returns status; for custom
  * systems that fail. */
-eddy_status eddy_world_fail(eddy_world *w, eddy_status status, const char *fmt, ...)
+EDDY_API eddy_status eddy_world_fail(eddy_world *w, eddy_status status, const char *fmt, ...)
 #if defined(__GNUC__)
 	__attribute__((format(printf, 3, 4)))
 #endif
 	;
 
-const eddy_world_def *eddy_world_get_def(const eddy_world *w);
-eddy_status eddy_world_set_threads(eddy_world *w, int threads);
+EDDY_API const eddy_world_def *eddy_world_get_def(const eddy_world *w);
+EDDY_API eddy_status eddy_world_set_threads(eddy_world *w, int threads);
 
-double eddy_world_time(const eddy_world *w);   /* s */
-double eddy_world_frame_time(const eddy_world *w); /* s, 1/fps */
-int eddy_world_frame(const eddy_world *w);     /* frames completed */
-int64_t eddy_world_steps(const eddy_world *w); /* steps taken */
-double eddy_world_last_dt(const eddy_world *w);/* s, 0 before the first step */
+EDDY_API double eddy_world_time(const eddy_world *w);   /* s */
+EDDY_API double eddy_world_frame_time(const eddy_world *w); /* s, 1/fps */
+EDDY_API int eddy_world_frame(const eddy_world *w);     /* frames completed */
+EDDY_API int64_t eddy_world_steps(const eddy_world *w); /* steps taken */
+EDDY_API double eddy_world_last_dt(const eddy_world *w);/* s, 0 before the first step */
 
 /* One adaptive step, never past the next frame time. */
-eddy_status eddy_world_step(eddy_world *w);
+EDDY_API eddy_status eddy_world_step(eddy_world *w);
 /* Steps up to the next frame time, then runs the frame hooks. */
-eddy_status eddy_world_step_frame(eddy_world *w);
+EDDY_API eddy_status eddy_world_step_frame(eddy_world *w);
 /* Advances by seconds (frame hooks run at every frame time crossed). */
-eddy_status eddy_world_advance(eddy_world *w, double seconds);
+EDDY_API eddy_status eddy_world_advance(eddy_world *w, double seconds);
 
 /* ---- columns ----------------------------------------------------------- */
 
@@ -166,30 +175,30 @@ typedef struct eddy_column_info {
 	size_t bytes;            /* bytes currently allocated */
 } eddy_column_info;
 
-int eddy_world_column_count(const eddy_world *w);
-eddy_column_id eddy_world_find_column(const eddy_world *w, const char *name);
-eddy_status eddy_world_column_info(const eddy_world *w, eddy_column_id id, eddy_column_info *out);
+EDDY_API int eddy_world_column_count(const eddy_world *w);
+EDDY_API eddy_column_id eddy_world_find_column(const eddy_world *w, const char *name);
+EDDY_API eddy_status eddy_world_column_info(const eddy_world *w, eddy_column_id id, eddy_column_info *out);
 /* Declares a new column for custom systems (e.g. "temperature"). Returns its id,
  * or < 0 with the world error set if the name is taken or invalid. */
-eddy_column_id eddy_world_declare_column(eddy_world *w, const char *name, eddy_domain domain,
+EDDY_API eddy_column_id eddy_world_declare_column(eddy_world *w, const char *name, eddy_domain domain,
                                          eddy_type type, eddy_lifetime lifetime, const char *unit);
 
 /* Read access by name: NULL if the column is unknown or not allocated. *count gets
  * the number of elements (particles, cells or faces). */
-const float *eddy_world_channel(const eddy_world *w, const char *name, size_t *count);
+EDDY_API const float *eddy_world_channel(const eddy_world *w, const char *name, size_t *count);
 /* Writable access for custom systems and hosts (same rules). */
-float *eddy_world_channel_mut(eddy_world *w, const char *name, size_t *count);
-const uint8_t *eddy_world_channel_u8(const eddy_world *w, const char *name, size_t *count);
+EDDY_API float *eddy_world_channel_mut(eddy_world *w, const char *name, size_t *count);
+EDDY_API const uint8_t *eddy_world_channel_u8(const eddy_world *w, const char *name, size_t *count);
 
-size_t eddy_world_particle_count(const eddy_world *w);
+EDDY_API size_t eddy_world_particle_count(const eddy_world *w);
 
 /* Appends count particles; each allocated particle column is zero-filled except
  * positions and velocities taken from the arrays (vel may be NULL). Positions
  * outside the bounds are rejected. */
-eddy_status eddy_world_add_particles(eddy_world *w, size_t count, const eddy_vec3 *pos,
+EDDY_API eddy_status eddy_world_add_particles(eddy_world *w, size_t count, const eddy_vec3 *pos,
                                      const eddy_vec3 *vel);
 /* Swap-remove: the last particle moves into slot i. Iterate backwards. */
-eddy_status eddy_world_remove_particle(eddy_world *w, size_t i);
+EDDY_API eddy_status eddy_world_remove_particle(eddy_world *w, size_t i);
 
 typedef struct eddy_grid_info {
 	bool allocated;
@@ -198,11 +207,11 @@ typedef struct eddy_grid_info {
 	eddy_vec3 origin;    /* m, corner of cell (0,0,0) */
 } eddy_grid_info;
 
-eddy_grid_info eddy_world_grid(const eddy_world *w);
+EDDY_API eddy_grid_info eddy_world_grid(const eddy_world *w);
 
 /* 64-bit FNV-1a over the state columns, particle count and clock: equal states
  * give equal hashes, so determinism and resume can be checked. */
-uint64_t eddy_world_state_hash(const eddy_world *w);
+EDDY_API uint64_t eddy_world_state_hash(const eddy_world *w);
 
 /* ---- pipeline ---------------------------------------------------------- */
 
@@ -223,18 +232,18 @@ typedef struct eddy_system_info {
 	int64_t expected_particles; /* emitters: particles it will create, -1 unbounded, 0 others */
 } eddy_system_info;
 
-int eddy_world_system_count(const eddy_world *w);
+EDDY_API int eddy_world_system_count(const eddy_world *w);
 /* i-th system in pipeline order. */
-eddy_system_id eddy_world_system_at(const eddy_world *w, int i);
-eddy_status eddy_world_system_info(const eddy_world *w, eddy_system_id id, eddy_system_info *out);
-bool eddy_system_valid(const eddy_world *w, eddy_system_id id);
-eddy_status eddy_world_remove_system(eddy_world *w, eddy_system_id id);
+EDDY_API eddy_system_id eddy_world_system_at(const eddy_world *w, int i);
+EDDY_API eddy_status eddy_world_system_info(const eddy_world *w, eddy_system_id id, eddy_system_info *out);
+EDDY_API bool eddy_system_valid(const eddy_world *w, eddy_system_id id);
+EDDY_API eddy_status eddy_world_remove_system(eddy_world *w, eddy_system_id id);
 
 /* The validated pipeline as text (systems in order, reads/writes, columns and
  * bytes) or as a Graphviz digraph. Returns the length that the full text needs,
  * like snprintf; buf may be NULL when cap is 0. */
-size_t eddy_world_plan(const eddy_world *w, char *buf, size_t cap);
-size_t eddy_world_plan_dot(const eddy_world *w, char *buf, size_t cap);
+EDDY_API size_t eddy_world_plan(const eddy_world *w, char *buf, size_t cap);
+EDDY_API size_t eddy_world_plan_dot(const eddy_world *w, char *buf, size_t cap);
 
 /* ---- custom systems: the public door for hosts and the renderer -------- */
 
@@ -256,8 +265,8 @@ typedef struct eddy_custom_system_def {
 	void *user;
 } eddy_custom_system_def;
 
-eddy_custom_system_def eddy_default_custom_system_def(void);
-eddy_system_id eddy_add_custom_system(eddy_world *w, const eddy_custom_system_def *def);
+EDDY_API eddy_custom_system_def eddy_default_custom_system_def(void);
+EDDY_API eddy_system_id eddy_add_custom_system(eddy_world *w, const eddy_custom_system_def *def);
 
 /* ---- built-in systems --------------------------------------------------- *
  * Each eddy_add_* returns EDDY_NULL_SYSTEM on failure with the reason in
@@ -282,8 +291,8 @@ typedef struct eddy_emit_box_def {
 	double start;        /* s, emission time */
 	eddy_emit_shape shape; /* block (default) or the inscribed ellipsoid */
 } eddy_emit_box_def;
-eddy_emit_box_def eddy_default_emit_box_def(void);
-eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def);
+EDDY_API eddy_emit_box_def eddy_default_emit_box_def(void);
+EDDY_API eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def);
 
 /* emit_nozzle: a continuous round jet. Discs of particles on a square lattice
  * leave the nozzle every spacing/speed seconds, so the jet has the lattice
@@ -298,23 +307,23 @@ typedef struct eddy_emit_nozzle_def {
 	double duration;     /* s, length of the pour; infinity = no end */
 	int64_t max_particles; /* 1, stop after this many; 0 = no limit */
 } eddy_emit_nozzle_def;
-eddy_emit_nozzle_def eddy_default_emit_nozzle_def(void);
-eddy_system_id eddy_add_emit_nozzle(eddy_world *w, const eddy_emit_nozzle_def *def);
+EDDY_API eddy_emit_nozzle_def eddy_default_emit_nozzle_def(void);
+EDDY_API eddy_system_id eddy_add_emit_nozzle(eddy_world *w, const eddy_emit_nozzle_def *def);
 
 /* gravity: adds the world's gravity times scale to the particle acceleration. */
 typedef struct eddy_gravity_def {
 	float scale; /* 1, multiplies eddy_world_def.gravity */
 } eddy_gravity_def;
-eddy_gravity_def eddy_default_gravity_def(void);
-eddy_system_id eddy_add_gravity(eddy_world *w, const eddy_gravity_def *def);
+EDDY_API eddy_gravity_def eddy_default_gravity_def(void);
+EDDY_API eddy_system_id eddy_add_gravity(eddy_world *w, const eddy_gravity_def *def);
 
 /* integrate: symplectic Euler, v += a dt, x += v dt. Reports the advection limit
  * dt <= length / max_speed, length being the smallest emitter spacing. */
 typedef struct eddy_integrate_def {
 	float max_speed; /* m/s, speeds are clamped to this (a safety valve); > 0 */
 } eddy_integrate_def;
-eddy_integrate_def eddy_default_integrate_def(void);
-eddy_system_id eddy_add_integrate(eddy_world *w, const eddy_integrate_def *def);
+EDDY_API eddy_integrate_def eddy_default_integrate_def(void);
+EDDY_API eddy_system_id eddy_add_integrate(eddy_world *w, const eddy_integrate_def *def);
 
 /* Shared by the colliders: a particle found in the solid is projected to its
  * surface; its velocity relative to the collider loses the inward normal part,
@@ -333,8 +342,8 @@ typedef struct eddy_collide_box_def {
 	bool inside;        /* particles are kept inside (true) or outside (false) */
 	eddy_collider_response response;
 } eddy_collide_box_def;
-eddy_collide_box_def eddy_default_collide_box_def(void);
-eddy_system_id eddy_add_collide_box(eddy_world *w, const eddy_collide_box_def *def);
+EDDY_API eddy_collide_box_def eddy_default_collide_box_def(void);
+EDDY_API eddy_system_id eddy_add_collide_box(eddy_world *w, const eddy_collide_box_def *def);
 
 /* collide_sphere: a solid ball (inside = false) or a spherical bowl (inside = true). */
 typedef struct eddy_collide_sphere_def {
@@ -343,8 +352,8 @@ typedef struct eddy_collide_sphere_def {
 	bool inside;
 	eddy_collider_response response;
 } eddy_collide_sphere_def;
-eddy_collide_sphere_def eddy_default_collide_sphere_def(void);
-eddy_system_id eddy_add_collide_sphere(eddy_world *w, const eddy_collide_sphere_def *def);
+EDDY_API eddy_collide_sphere_def eddy_default_collide_sphere_def(void);
+EDDY_API eddy_system_id eddy_add_collide_sphere(eddy_world *w, const eddy_collide_sphere_def *def);
 
 /* collide_plane: a half-space; particles stay on the side the normal points to. */
 typedef struct eddy_collide_plane_def {
@@ -352,17 +361,17 @@ typedef struct eddy_collide_plane_def {
 	eddy_vec3 normal; /* 1, normalised on add */
 	eddy_collider_response response;
 } eddy_collide_plane_def;
-eddy_collide_plane_def eddy_default_collide_plane_def(void);
-eddy_system_id eddy_add_collide_plane(eddy_world *w, const eddy_collide_plane_def *def);
+EDDY_API eddy_collide_plane_def eddy_default_collide_plane_def(void);
+EDDY_API eddy_system_id eddy_add_collide_plane(eddy_world *w, const eddy_collide_plane_def *def);
 
 /* Moves a collider by an offset from its def pose. The collider's velocity over
  * the next step is (new offset - offset at the last step) / dt, so animating the
  * offset every step gives moving walls that push particles. Before the
  * collider's first step this only places it. */
-eddy_status eddy_collider_set_offset(eddy_world *w, eddy_system_id id, eddy_vec3 offset);
-eddy_status eddy_collider_get_offset(const eddy_world *w, eddy_system_id id, eddy_vec3 *offset);
+EDDY_API eddy_status eddy_collider_set_offset(eddy_world *w, eddy_system_id id, eddy_vec3 offset);
+EDDY_API eddy_status eddy_collider_get_offset(const eddy_world *w, eddy_system_id id, eddy_vec3 *offset);
 /* Signed distance from p to the collider's solid (< 0 inside the solid). */
-eddy_status eddy_collider_distance(const eddy_world *w, eddy_system_id id, eddy_vec3 p, float *dist);
+EDDY_API eddy_status eddy_collider_distance(const eddy_world *w, eddy_system_id id, eddy_vec3 p, float *dist);
 
 /* ---- per-frame statistics ---------------------------------------------- */
 
@@ -402,15 +411,15 @@ typedef struct eddy_frame_stats {
 } eddy_frame_stats;
 
 /* Statistics of the frame completed last (call after eddy_world_step_frame). */
-eddy_status eddy_world_frame_stats(eddy_world *w, eddy_frame_stats *out);
+EDDY_API eddy_status eddy_world_frame_stats(eddy_world *w, eddy_frame_stats *out);
 
 /* Systems publish a frame value (solver iterations, residual, ...); a name
  * published twice in a frame keeps the last value. */
-void eddy_world_publish(eddy_world *w, const char *name, double value);
-void eddy_world_publish_text(eddy_world *w, const char *name, const char *text);
+EDDY_API void eddy_world_publish(eddy_world *w, const char *name, double value);
+EDDY_API void eddy_world_publish_text(eddy_world *w, const char *name, const char *text);
 
 /* Rest density the world compares densities against (set by density systems). */
-void eddy_world_set_rest_density(eddy_world *w, float rho0);
+EDDY_API void eddy_world_set_rest_density(eddy_world *w, float rho0);
 
 /* ---- checkpoints ------------------------------------------------------- */
 
@@ -419,14 +428,14 @@ void eddy_world_set_rest_density(eddy_world *w, float rho0);
  * fingerprint is mixed with the pipeline's own, so a checkpoint loads only into
  * the same scene with the same parameters (the eddy command passes a hash of
  * the scene file and its --set values). */
-eddy_status eddy_world_save(eddy_world *w, const char *path, uint64_t fingerprint);
+EDDY_API eddy_status eddy_world_save(eddy_world *w, const char *path, uint64_t fingerprint);
 /* Restores what eddy_world_save wrote into a world built by the same scene.
  * A truncated, corrupted, foreign or other-version file is rejected with
  * EDDY_ERR_IO and a message saying which, and the world is left unchanged;
  * so is one whose checksum holds but whose clock or counts no run of this
  * world reaches (a negative frame, a frame off time * fps, a non-finite time
  * or dt, ...): the message names the file and the field. */
-eddy_status eddy_world_load(eddy_world *w, const char *path, uint64_t fingerprint);
+EDDY_API eddy_status eddy_world_load(eddy_world *w, const char *path, uint64_t fingerprint);
 
 /* ---- preflight --------------------------------------------------------- */
 
@@ -439,7 +448,7 @@ typedef void (*eddy_check_fn)(eddy_check_level level, const char *message, void 
  * first frame longer than the run, ...); returns the number of
  * EDDY_CHECK_ERROR findings. report may be NULL to only count; a NULL world
  * counts as one error. */
-int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user);
+EDDY_API int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user);
 
 /* ---- SPH (sys_sph_*.c) ------------------------------------------------- */
 
@@ -455,20 +464,20 @@ typedef enum eddy_sph_kernel {
 	EDDY_SPH_VISCOSITY  /* 15/(2 pi h^3) (-r^3/2h^3 + r^2/h^2 + h/2r - 1): viscosity Laplacian */
 } eddy_sph_kernel;
 /* W(r, h) in 1/m^3, dW/dr in 1/m^4, Laplacian in 1/m^5; 0 for r >= h. */
-double eddy_sph_kernel_value(eddy_sph_kernel k, double r, double h);
-double eddy_sph_kernel_derivative(eddy_sph_kernel k, double r, double h);
-double eddy_sph_kernel_laplacian(eddy_sph_kernel k, double r, double h);
+EDDY_API double eddy_sph_kernel_value(eddy_sph_kernel k, double r, double h);
+EDDY_API double eddy_sph_kernel_derivative(eddy_sph_kernel k, double r, double h);
+EDDY_API double eddy_sph_kernel_laplacian(eddy_sph_kernel k, double r, double h);
 /* Sum of W over a simple cubic lattice of the given spacing around a lattice
  * point (itself included), 1/m^3: the calibrated particle mass is rho0 / sum.
  * This and the moment below return 0 for spacing or h <= 0 and NaN for
  * h > 100 spacings. */
-double eddy_sph_lattice_sum(eddy_sph_kernel k, double spacing, double h);
+EDDY_API double eddy_sph_lattice_sum(eddy_sph_kernel k, double spacing, double h);
 /* First moment of the kernel gradient over the same lattice (the point itself
  * excluded), sum_j spacing^3 x_j^2 |dW/dr|(r_j) / r_j, dimensionless: 1 in
  * the continuum, so that the SPH gradient of a linear field is exact; 0.956
  * for spiky at h = 2 spacings. With the calibrated mass in place of
  * rho0 spacing^3 the pressure force sees 0.947, and sph_pressure divides by it. */
-double eddy_sph_lattice_gradient_moment(eddy_sph_kernel k, double spacing, double h);
+EDDY_API double eddy_sph_lattice_gradient_moment(eddy_sph_kernel k, double spacing, double h);
 
 typedef enum eddy_sph_eos {
 	EDDY_SPH_EOS_LINEAR = 0, /* p = k (rho - rho0), the paper's */
@@ -484,17 +493,17 @@ typedef struct eddy_sph_density_def {
 	eddy_sph_eos eos;   /* equation of state: linear (the paper's) or Tait */
 	float tait_gamma;   /* 1, exponent of the Tait EOS; >= 1 */
 } eddy_sph_density_def;
-eddy_sph_density_def eddy_default_sph_density_def(void);
-eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *def);
+EDDY_API eddy_sph_density_def eddy_default_sph_density_def(void);
+EDDY_API eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *def);
 /* The particle mass sph_density calibrated (kg), 0 if id is not one. */
-float eddy_sph_particle_mass(const eddy_world *w, eddy_system_id id);
+EDDY_API float eddy_sph_particle_mass(const eddy_world *w, eddy_system_id id);
 
 /* sph_pressure: symmetric spiky-gradient pressure force. */
 typedef struct eddy_sph_pressure_def {
 	float scale; /* 1, multiplies the force (1 = the paper's); > 0 */
 } eddy_sph_pressure_def;
-eddy_sph_pressure_def eddy_default_sph_pressure_def(void);
-eddy_system_id eddy_add_sph_pressure(eddy_world *w, const eddy_sph_pressure_def *def);
+EDDY_API eddy_sph_pressure_def eddy_default_sph_pressure_def(void);
+EDDY_API eddy_system_id eddy_add_sph_pressure(eddy_world *w, const eddy_sph_pressure_def *def);
 
 /* sph_viscosity: viscosity-kernel Laplacian of the velocity, plus Monaghan's
  * artificial viscosity on approaching pairs, which damps the acoustic noise of
@@ -504,16 +513,16 @@ typedef struct eddy_sph_viscosity_def {
 	float viscosity;  /* Pa s, dynamic viscosity mu; >= 0 */
 	float artificial; /* 1, Monaghan's alpha (0.01-0.1 usual); >= 0 */
 } eddy_sph_viscosity_def;
-eddy_sph_viscosity_def eddy_default_sph_viscosity_def(void);
-eddy_system_id eddy_add_sph_viscosity(eddy_world *w, const eddy_sph_viscosity_def *def);
+EDDY_API eddy_sph_viscosity_def eddy_default_sph_viscosity_def(void);
+EDDY_API eddy_system_id eddy_add_sph_viscosity(eddy_world *w, const eddy_sph_viscosity_def *def);
 
 /* sph_surface_tension: colour-field (CSF) surface tension where |n| > threshold. */
 typedef struct eddy_sph_surface_tension_def {
 	float tension;   /* N/m, sigma; >= 0 */
 	float threshold; /* 1/m, |grad c| below this gets no force; >= 0 */
 } eddy_sph_surface_tension_def;
-eddy_sph_surface_tension_def eddy_default_sph_surface_tension_def(void);
-eddy_system_id eddy_add_sph_surface_tension(eddy_world *w, const eddy_sph_surface_tension_def *def);
+EDDY_API eddy_sph_surface_tension_def eddy_default_sph_surface_tension_def(void);
+EDDY_API eddy_system_id eddy_add_sph_surface_tension(eddy_world *w, const eddy_sph_surface_tension_def *def);
 
 /* sph_boundary_box: the six faces of a box sampled with boundary particles
  * (Akinci et al. 2012) that sph_density and sph_pressure see as fluid at rest,
@@ -524,8 +533,8 @@ typedef struct eddy_sph_boundary_box_def {
 	eddy_vec3 max;  /* m */
 	float spacing;  /* m, spacing of the boundary particles; > 0 (about the fluid's) */
 } eddy_sph_boundary_box_def;
-eddy_sph_boundary_box_def eddy_default_sph_boundary_box_def(void);
-eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_boundary_box_def *def);
+EDDY_API eddy_sph_boundary_box_def eddy_default_sph_boundary_box_def(void);
+EDDY_API eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_boundary_box_def *def);
 
 /* sph_dfsph: implicit pressure, divergence-free SPH (Bender & Koschier 2015),
  * in place of sph_pressure. Put it after the other forces (gravity,
@@ -545,8 +554,8 @@ typedef struct eddy_sph_dfsph_def {
 	                               solve stops at (per step); > 0 and <= 1 */
 	int max_divergence_iterations; /* 1, cap on divergence sweeps per step; 1 to 10000 */
 } eddy_sph_dfsph_def;
-eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void);
-eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def);
+EDDY_API eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void);
+EDDY_API eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def);
 
 /* ---- FLIP (sys_flip_*.c) ------------------------------------------------ */
 
@@ -564,24 +573,24 @@ typedef struct eddy_flip_p2g_def {
 	float mark_radius; /* 1, in cells: a cell whose centre lies within this of a particle is fluid
 	                      too (the cell holding it always is); [0, 1.5] */
 } eddy_flip_p2g_def;
-eddy_flip_p2g_def eddy_default_flip_p2g_def(void);
-eddy_system_id eddy_add_flip_p2g(eddy_world *w, const eddy_flip_p2g_def *def);
+EDDY_API eddy_flip_p2g_def eddy_default_flip_p2g_def(void);
+EDDY_API eddy_system_id eddy_add_flip_p2g(eddy_world *w, const eddy_flip_p2g_def *def);
 
 /* flip_boundary: the domain's sides and every collider in the pipeline become
  * solid; faces touching a solid cell carry the solid's normal velocity. */
 typedef struct eddy_flip_boundary_def {
 	float margin; /* m, cells whose centre is closer than this to a collider's solid are solid; >= 0 */
 } eddy_flip_boundary_def;
-eddy_flip_boundary_def eddy_default_flip_boundary_def(void);
-eddy_system_id eddy_add_flip_boundary(eddy_world *w, const eddy_flip_boundary_def *def);
+EDDY_API eddy_flip_boundary_def eddy_default_flip_boundary_def(void);
+EDDY_API eddy_system_id eddy_add_flip_boundary(eddy_world *w, const eddy_flip_boundary_def *def);
 
 /* flip_surface: the marker field smoothed by a 3D Gaussian (separable, solid
  * cells excluded); flip_pressure finds the surface at its zero crossing. */
 typedef struct eddy_flip_surface_def {
 	float sigma; /* 1, Gaussian standard deviation in cells; (0, 4] */
 } eddy_flip_surface_def;
-eddy_flip_surface_def eddy_default_flip_surface_def(void);
-eddy_system_id eddy_add_flip_surface(eddy_world *w, const eddy_flip_surface_def *def);
+EDDY_API eddy_flip_surface_def eddy_default_flip_surface_def(void);
+EDDY_API eddy_system_id eddy_add_flip_surface(eddy_world *w, const eddy_flip_surface_def *def);
 
 typedef enum eddy_flip_solver {
 	EDDY_FLIP_PCG = 0,  /* MIC(0)-preconditioned conjugate gradient, double precision */
@@ -599,31 +608,31 @@ typedef struct eddy_flip_pressure_def {
 	int max_iterations; /* 1, PCG cap; failure to converge is an error; >= 1 */
 	float theta_min;    /* 1, lower clamp of the ghost-fluid fraction; [1e-4, 0.5] */
 } eddy_flip_pressure_def;
-eddy_flip_pressure_def eddy_default_flip_pressure_def(void);
-eddy_system_id eddy_add_flip_pressure(eddy_world *w, const eddy_flip_pressure_def *def);
+EDDY_API eddy_flip_pressure_def eddy_default_flip_pressure_def(void);
+EDDY_API eddy_system_id eddy_add_flip_pressure(eddy_world *w, const eddy_flip_pressure_def *def);
 
 /* flip_extrapolate: face velocities copied outward from faces next to fluid
  * into the air, layer by layer; solid faces keep their velocity. */
 typedef struct eddy_flip_extrapolate_def {
 	int layers; /* 1, layers of faces filled; at least the CFL number + 1; [1, 64] */
 } eddy_flip_extrapolate_def;
-eddy_flip_extrapolate_def eddy_default_flip_extrapolate_def(void);
-eddy_system_id eddy_add_flip_extrapolate(eddy_world *w, const eddy_flip_extrapolate_def *def);
+EDDY_API eddy_flip_extrapolate_def eddy_default_flip_extrapolate_def(void);
+EDDY_API eddy_system_id eddy_add_flip_extrapolate(eddy_world *w, const eddy_flip_extrapolate_def *def);
 
 /* flip_g2p: v = r (v + interp(u - u_old)) + (1 - r) interp(u), r = flip_ratio. */
 typedef struct eddy_flip_g2p_def {
 	float flip_ratio; /* 1, 1 = pure FLIP, 0 = pure PIC; [0, 1] */
 } eddy_flip_g2p_def;
-eddy_flip_g2p_def eddy_default_flip_g2p_def(void);
-eddy_system_id eddy_add_flip_g2p(eddy_world *w, const eddy_flip_g2p_def *def);
+EDDY_API eddy_flip_g2p_def eddy_default_flip_g2p_def(void);
+EDDY_API eddy_system_id eddy_add_flip_g2p(eddy_world *w, const eddy_flip_g2p_def *def);
 
 /* flip_advect: midpoint (RK2) through the grid velocity; particles that end in
  * a solid (domain sides, colliders) are projected out. Limit dt <= dx / v. */
 typedef struct eddy_flip_advect_def {
 	float wall_gap; /* 1, in cells: projected particles stop this far from a solid; [0, 0.5] */
 } eddy_flip_advect_def;
-eddy_flip_advect_def eddy_default_flip_advect_def(void);
-eddy_system_id eddy_add_flip_advect(eddy_world *w, const eddy_flip_advect_def *def);
+EDDY_API eddy_flip_advect_def eddy_default_flip_advect_def(void);
+EDDY_API eddy_system_id eddy_add_flip_advect(eddy_world *w, const eddy_flip_advect_def *def);
 
 /* flip_reseed: keeps min..max particles in each fluid cell (new ones take the
  * grid velocity, surplus ones are removed). */
@@ -631,8 +640,8 @@ typedef struct eddy_flip_reseed_def {
 	int min_per_cell; /* 1, >= 1 */
 	int max_per_cell; /* 1, > min_per_cell */
 } eddy_flip_reseed_def;
-eddy_flip_reseed_def eddy_default_flip_reseed_def(void);
-eddy_system_id eddy_add_flip_reseed(eddy_world *w, const eddy_flip_reseed_def *def);
+EDDY_API eddy_flip_reseed_def eddy_default_flip_reseed_def(void);
+EDDY_API eddy_system_id eddy_add_flip_reseed(eddy_world *w, const eddy_flip_reseed_def *def);
 
 /* ---- renderer and particle exports (render/) ----------------------------- */
 
@@ -675,8 +684,8 @@ typedef struct eddy_render_points_def {
 	int every;             /* frames, render every N-th frame, >= 1 */
 } eddy_render_points_def;
 
-eddy_render_points_def eddy_default_render_points_def(void);
-eddy_system_id eddy_add_render_points(eddy_world *w, const eddy_render_points_def *def);
+EDDY_API eddy_render_points_def eddy_default_render_points_def(void);
+EDDY_API eddy_system_id eddy_add_render_points(eddy_world *w, const eddy_render_points_def *def);
 
 /* export_particles: writes the chosen particle channels to one file per frame:
  * binary little-endian PLY (vertex elements, float properties), legacy VTK
@@ -702,8 +711,8 @@ typedef struct eddy_export_particles_def {
 	int every;             /* frames, export every N-th frame, >= 1 */
 } eddy_export_particles_def;
 
-eddy_export_particles_def eddy_default_export_particles_def(void);
-eddy_system_id eddy_add_export_particles(eddy_world *w, const eddy_export_particles_def *def);
+EDDY_API eddy_export_particles_def eddy_default_export_particles_def(void);
+EDDY_API eddy_system_id eddy_add_export_particles(eddy_world *w, const eddy_export_particles_def *def);
 
 /* What a collider is, for drawing it: kind, pose (offset included) and size. */
 typedef enum eddy_collider_kind {
@@ -722,7 +731,7 @@ typedef struct eddy_collider_shape {
 } eddy_collider_shape;
 
 /* The collider's current shape (its offset applied). */
-eddy_status eddy_collider_shape_of(const eddy_world *w, eddy_system_id id, eddy_collider_shape *out);
+EDDY_API eddy_status eddy_collider_shape_of(const eddy_world *w, eddy_system_id id, eddy_collider_shape *out);
 
 #ifdef __cplusplus
 }

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Internals shared by the FLIP systems (sys_flip_*.c): MAC-grid indexing,
  * trilinear stencils on the staggered grids, and the linear-solver interface
  * (flip_pcg.c, flip_cholmod.c).

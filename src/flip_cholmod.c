@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* CHOLMOD for the FLIP pressure system: the only file that includes
  * cholmod.h. Supernodal Cholesky (LL^T) of the symmetric positive definite
  * matrix (singular components are pinned by flip_pressure before it gets

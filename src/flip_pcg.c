@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* MIC(0)-preconditioned conjugate gradient for the FLIP pressure system
  * (Bridson, "Fluid Simulation for Computer Graphics", 2nd ed., ch. 5.4:
  * modified incomplete Cholesky with tau = 0.97 and the safety factor

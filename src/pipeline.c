@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* The pipeline: systems in the order the scene added them, each with the
  * columns it reads and writes.
  *

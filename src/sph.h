@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Internals shared by the SPH systems (sys_sph_*.c): kernels as inline
  * functions of r^2 where possible, and the neighbour data that sph_density
  * builds once per step for the later SPH passes. */

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* The SPH kernels of Mueller, Charypar & Gross 2003 (3D) as public functions
  * of r, for hosts and tests; the systems use the inline forms in sph.h.
  *   poly6      W = 315/(64 pi h^9) (h^2 - r^2)^3

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* SPH neighbour lists: a Verlet list over a uniform grid, filtered every
  * step into exact lists.
  *

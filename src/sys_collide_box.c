@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* collide_box: an axis-aligned box, as a tank (inside = true: particles stay
  * in it) or as a solid block (inside = false: particles stay out of it).
  *

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* collide_plane: a half-space wall; particles stay on the side the normal
  * points to.
  *

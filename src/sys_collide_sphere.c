@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* collide_sphere: a solid ball (inside = false) or a spherical bowl that
  * particles stay inside (inside = true).
  *

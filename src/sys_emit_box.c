@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* emit_box: a block of particles on a simple cubic lattice, emitted once.
  *
  * Reads: nothing. Writes: x y z vx vy vz.

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* emit_nozzle: a continuous round jet ("pouring water into a box").
  *
  * Reads: nothing. Writes: x y z vx vy vz.

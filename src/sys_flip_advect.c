@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* flip_advect: particles move through the divergence-free grid velocity
  * (Zhu & Bridson 2005, section 4: advection through the grid field, RK2).
  *

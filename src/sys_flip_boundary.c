@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* flip_boundary: solid cells and solid face velocities (Bridson, "Fluid
  * Simulation for Computer Graphics", ch. 5: free-slip solid walls).
  *

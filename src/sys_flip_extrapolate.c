@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* flip_extrapolate: velocity extrapolation into the air (Bridson's book,
  * ch. 4.6; without it particles near the surface interpolate the zeros of
  * faces no particle reached and stall: docs/validation.md hard case 12).

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* flip_g2p: grid to particles, FLIP blended with PIC (Brackbill 1988; Zhu &
  * Bridson 2005, section 4: FLIP adds the grid's change, PIC takes the grid
  * value; PIC is stable but smooths the flow like a strong viscosity, FLIP

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* flip_p2g: particles to grid (Zhu & Bridson 2005, section 4; Brackbill 1988).
  *
  * Reads: x y z vx vy vz ax ay az. Writes: vx vy vz, u v w, u_old v_old w_old,

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* flip_pressure: pressure projection with a ghost-fluid free surface
  * (Zhu & Bridson 2005; Enright, Nguyen, Gibou & Fedkiw 2003 for the
  * ghost-fluid boundary; Bridson's book, ch. 5).

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* flip_reseed: keeps the particle density in fluid cells between min and max
  * per cell, against the clumping and thinning that make FLIP's volume drift
  * (docs/validation.md hard case 13; Zhu & Bridson keep about 8 per cell).

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* flip_surface: the free surface as the zero crossing of a smoothed marker
  * field (Guo & Li, after Zhu & Bridson 2005: marker -1 in fluid, +1 in empty
  * cells, blurred by a 3D Gaussian so the surface is not stair-stepped).

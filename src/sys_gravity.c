@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* gravity: the world's gravity as a body acceleration.
  *
  * Reads: nothing. Writes: ax ay az (accumulated; the world clears them each step).

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* integrate: symplectic (semi-implicit) Euler.
  *
  * Reads: ax ay az x y z vx vy vz. Writes: x y z vx vy vz.

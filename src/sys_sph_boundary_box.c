@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* sph_boundary_box: the walls of a box as frozen fluid (boundary particles,
  * after Akinci et al. 2012). It has no step of its own: sph_density gathers
  * the particles of every sph_boundary_box in the pipeline into its neighbour

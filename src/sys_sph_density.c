@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* sph_density: neighbour search, density and equation of state.
  *
  * Reads: x y z. Writes: density pressure neighbors (and reorders the

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* sph_dfsph: implicit (incompressible) SPH pressure, the divergence-free SPH
  * of Bender & Koschier (SCA 2015, TVCG 2017). It replaces sph_pressure: the
  * pressure is solved for each step so the fluid keeps its rest density, and

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* sph_pressure: the symmetric pressure force with the spiky kernel's gradient
  * (Mueller 2003, eq. 10, without its factor 1/2; see below); boundary
  * particles enter the same sum with the pressure sph_density extrapolated onto

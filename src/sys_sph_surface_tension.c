@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* sph_surface_tension: colour-field surface tension (Mueller 2003, sec. 3.3,
  * the continuum surface force of Morris 2000).
  *

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* sph_viscosity: viscous force from the Laplacian of the viscosity kernel
  * (Mueller 2003, eq. 14, with the symmetric velocity difference).
  *

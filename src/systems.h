@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* The built-in system kinds. Each lives in its own sys_*.c file and defines
  * eddy__kind_<name>; this list lets the pipeline name the systems that would
  * fix an order error. */

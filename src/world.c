@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* The world: clock, adaptive step, frames, errors, statistics and the state hash.
  *
  * A step: pick dt = min(dt_max, cfl * min over systems of their limit), shortened

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
 /* Benchmarks (not part of make test): nanoseconds per particle per step of
  * each core system, for several particle counts and thread counts, as JSON.

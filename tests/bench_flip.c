@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
 /* FLIP benchmarks (make bench; not part of make test), as JSON:
  *  - transfers and advection: ns per particle per step of flip_p2g, flip_g2p

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
 /* Renderer benchmark (make bench-render, part of make bench): milliseconds per
  * rendered frame at 1280x720 for 10k, 100k and 1M particles with 1 and 2

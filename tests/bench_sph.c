@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
 /* SPH benchmarks (make bench; not part of make test), as JSON:
  *  - ns per particle per step of sph_density (neighbour search included),

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* What every benchmark needs: a monotonic clock and the median of repeats
  * (the machines are shared: medians, not means, and ratios within one run). */
 #ifndef EDDY_BENCH_UTIL_H

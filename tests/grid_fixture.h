@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Shared by the FLIP tests and benchmarks: a reproducible velocity field on
  * the three face grids, uniform in [-0.5, 0.5) m/s from a 64-bit LCG, so a
  * pressure solve has real divergence to remove. */

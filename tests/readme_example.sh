@@ -1,4 +1,5 @@
 #!/bin/sh
+# SPDX-License-Identifier: MIT
 # Builds the README's C example against the header, library and pkg-config
 # file that `make install` puts under a staging prefix, then runs it.
 set -eu

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
 /* Runs every suite and ends with the summary line "N passed, N failed". */
 #include "test.h"

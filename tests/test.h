@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* A plain test runner: TEST functions register in suites, CHECK records a
  * failure (file, line, message) and carries on, so one run lists every broken
  * assertion. The runner prints "N passed, N failed". */

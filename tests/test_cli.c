@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
 /* The eddy command end to end: exit codes, one-line errors, the stats
  * contract (every line parses as JSON and carries the contract's fields),

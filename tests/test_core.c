@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* The engine core through the public API: worlds, columns, the pipeline rule,
  * handles, errors. */
 #include "test.h"

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
 /* FLIP validation (docs/validation.md §A, §C 9-14): the Poisson solve against
  * analytic answers, the two solvers against each other, still water in a

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
 /* Replays the fuzzing seeds and every input that once found a bug
  * (tests/fuzz/regressions/) through the same harness make fuzz runs, so a

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
 /* The Lua binding, run in an embedded state: errors name the scene file and
  * line, the system, the field and what is allowed; the API does what the

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* Physics sanity of the core systems against exact answers: the integrator's
  * discrete free fall, colliders that keep every particle out of solids, a
  * moving wall that pushes, the clock, emitters, determinism. */

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
 /* Losing nothing: checkpoints continue a run bit for bit, bad checkpoints are
  * rejected with the reason, an interrupted run ends its frame cleanly and says

@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
 /* The renderer and the particle exports: particles land on the pixels the
  * camera projects them to, nearer spheres hide farther ones whatever the draw

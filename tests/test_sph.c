@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 /* SPH (Mueller 2003) validation: kernels against their analytic integrals and
  * lattice sums, then whole scenes against physics (hydrostatic tank, dam
  * break vs Martin & Moyce, oscillating drop vs Rayleigh) and the hard cases

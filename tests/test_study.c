@@ -1,3 +1,4 @@
+/* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
 /* `eddy study` end to end: the quick sweeps of the shipped dam-break and
  * convergence studies (every run finishes, errors are finite, the CSV has

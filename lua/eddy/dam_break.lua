@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- The dam-break setup shared by scenes/dam_break.lua (SPH) and
 -- scenes/dam_break_flip.lua (FLIP): only the method systems differ.
 --

@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- The accuracy/time study driver behind `eddy study STUDY.lua [--out DIR] [--quick]`.
 --
 -- A study file is Lua. It calls two constructors, `study {}` and `method {}`,

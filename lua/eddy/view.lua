@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- How the shipped scenes render: one call adds eddy.render_points with the
 -- scene's output directory (out/<scene>, or --out), unless the run says
 -- --set render=false (benchmarks and studies time the physics alone).

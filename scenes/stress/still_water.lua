@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- still_water (SPH stress case): a 0.1 x 0.1 m column of water at rest in a
 -- closed box (boundary particles), depth a param, to see whether a pressure
 -- solve holds deep water still. At rest the bottom layer's pressure is the

@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- Convergence: the dam-break front Z(T), T in [1, 3], against each method's
 -- finest run (docs/validation.md's protocol: halve the spacing at fixed CFL and
 -- read the observed order p = log2(E(dx) / E(dx/2)) from the CSV's `order`).

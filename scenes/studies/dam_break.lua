@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- Dam break, SPH against FLIP: how close the surge front comes to Martin &
 -- Moyce's measurements (a = 2.25 in) for the wall time each resolution costs.
 -- error = mean |Z_sim - Z_exp| over T in [1, 3] (Z = front / a, T = t sqrt(2g/a)),

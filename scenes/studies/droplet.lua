@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- Oscillating drop (SPH, colour-field surface tension): the error of the l = 2
 -- frequency against Rayleigh's omega^2 = 8 sigma / (rho R^3) as the particles
 -- per diameter grow. The drop (scenes/droplet.lua) starts as an ellipsoid

@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- Hydrostatic tank, FLIP: CHOLMOD (exact) against MIC(0)-PCG at several
 -- tolerances. error = mean over frames of pressure_err, the largest
 -- |p - rho g d| / (rho g H) of the interior cells (scenes/hydrostatic_flip.lua);

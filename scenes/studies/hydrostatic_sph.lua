@@ -1,3 +1,4 @@
+-- SPDX-License-Identifier: MIT
 -- Hydrostatic tank, SPH: what stiffness (speed of sound) costs. The density
 -- error of weakly compressible SPH is about g H / k; a stiffer fluid needs a
 -- smaller acoustic time step (dt ~ h / sqrt(k)). error = mean over frames of
