@@ -216,6 +216,10 @@ void eddy__report(eddy_check_fn report, void *user, eddy_check_level level, cons
 #endif
 	;
 double eddy__now_ms(void);
+/* Preflight of an emitter: one starting when the run is over emits nothing.
+ * A warning, as eddy run --duration may run longer than the scene's duration. */
+void eddy__check_emitter_start(const eddy_world *w, const eddy_system *s, double start, eddy_check_fn report,
+                               void *user);
 
 /* collider helpers (collider.c) */
 typedef struct eddy_collider_motion {

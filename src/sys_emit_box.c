@@ -145,17 +145,9 @@ static void *state(eddy_world *w, eddy_system *s, size_t *size)
 	return &e->done;
 }
 
-/* Preflight: an emitter starting when the run is over emits nothing. A
- * warning: eddy run --duration may run longer than the scene's duration. */
 static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void *user)
 {
-	const emit_box *e = s->data;
-	const double duration = w->def.duration;
-	if (duration > 0 && e->def.start >= duration)
-		eddy__report(report, user, EDDY_CHECK_WARNING,
-		             "%s: 'start' is %g s, not before the end of the run (duration %g s): it emits nothing; set "
-		             "start < %g",
-		             s->label, e->def.start, duration, duration);
+	eddy__check_emitter_start(w, s, ((const emit_box *)s->data)->def.start, report, user);
 	return 0;
 }
 

@@ -689,6 +689,17 @@ void eddy__report(eddy_check_fn report, void *user, eddy_check_level level, cons
 	report(level, msg, user);
 }
 
+void eddy__check_emitter_start(const eddy_world *w, const eddy_system *s, double start, eddy_check_fn report,
+                               void *user)
+{
+	const double duration = w->def.duration;
+	if (duration > 0 && start >= duration)
+		eddy__report(report, user, EDDY_CHECK_WARNING,
+		             "%s: 'start' is %g s, not before the end of the run (duration %g s): it emits nothing; set "
+		             "start < %g",
+		             s->label, start, duration, duration);
+}
+
 static void count_only(eddy_check_level level, const char *message, void *user)
 {
 	(void)level;
