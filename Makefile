@@ -197,29 +197,29 @@ study: deps
 # The Lua module and helpers go where the stock lua5.4 looks (lib/lua/5.4/,
 # share/lua/5.4/); scenes, studies and their reference data under share/eddy/.
 
-LIBDIR   := $(DESTDIR)$(PREFIX)/lib
-SHAREDIR := $(DESTDIR)$(PREFIX)/share
+INST_LIB   := $(DESTDIR)$(PREFIX)/lib
+INST_SHARE := $(DESTDIR)$(PREFIX)/share
 LUA_CMOD ?= $(PREFIX)/lib/lua/5.4
 LUA_LMOD ?= $(PREFIX)/share/lua/5.4
 
 install: all
-	install -d $(DESTDIR)$(PREFIX)/include $(LIBDIR)/pkgconfig $(DESTDIR)$(PREFIX)/bin \
-		$(DESTDIR)$(LUA_CMOD) $(DESTDIR)$(LUA_LMOD)/eddy $(SHAREDIR)/eddy/scenes/studies $(SHAREDIR)/eddy/data \
-		$(SHAREDIR)/man/man1 $(SHAREDIR)/doc/eddy
+	install -d $(DESTDIR)$(PREFIX)/include $(INST_LIB)/pkgconfig $(DESTDIR)$(PREFIX)/bin \
+		$(DESTDIR)$(LUA_CMOD) $(DESTDIR)$(LUA_LMOD)/eddy $(INST_SHARE)/eddy/scenes/studies $(INST_SHARE)/eddy/data \
+		$(INST_SHARE)/man/man1 $(INST_SHARE)/doc/eddy
 	install -m 644 src/eddy.h $(DESTDIR)$(PREFIX)/include/eddy.h
-	install -m 644 $(BUILD)/libeddy.a $(LIBDIR)/libeddy.a
-	install -m 755 $(BUILD)/libeddy.so $(LIBDIR)/libeddy.so.$(VERSION)
-	ln -sf libeddy.so.$(VERSION) $(LIBDIR)/libeddy.so.$(SOMAJOR)
-	ln -sf libeddy.so.$(SOMAJOR) $(LIBDIR)/libeddy.so
+	install -m 644 $(BUILD)/libeddy.a $(INST_LIB)/libeddy.a
+	install -m 755 $(BUILD)/libeddy.so $(INST_LIB)/libeddy.so.$(VERSION)
+	ln -sf libeddy.so.$(VERSION) $(INST_LIB)/libeddy.so.$(SOMAJOR)
+	ln -sf libeddy.so.$(SOMAJOR) $(INST_LIB)/libeddy.so
 	install -m 755 $(BUILD)/eddy $(DESTDIR)$(PREFIX)/bin/eddy
 	install -m 755 $(BUILD)/eddy.so $(DESTDIR)$(LUA_CMOD)/eddy.so
 	install -m 644 lua/eddy/*.lua $(DESTDIR)$(LUA_LMOD)/eddy/
-	install -m 644 scenes/*.lua $(SHAREDIR)/eddy/scenes/
-	install -m 644 scenes/studies/*.lua $(SHAREDIR)/eddy/scenes/studies/
-	install -m 644 data/*.csv data/README.md $(SHAREDIR)/eddy/data/
-	install -m 644 docs/eddy.1 $(SHAREDIR)/man/man1/eddy.1
-	install -m 644 LICENSE README.md CHANGELOG.md $(SHAREDIR)/doc/eddy/
-	sed 's|^prefix=.*|prefix=$(PREFIX)|' $(BUILD)/eddy.pc > $(LIBDIR)/pkgconfig/eddy.pc
+	install -m 644 scenes/*.lua $(INST_SHARE)/eddy/scenes/
+	install -m 644 scenes/studies/*.lua $(INST_SHARE)/eddy/scenes/studies/
+	install -m 644 data/*.csv data/README.md $(INST_SHARE)/eddy/data/
+	install -m 644 docs/eddy.1 $(INST_SHARE)/man/man1/eddy.1
+	install -m 644 LICENSE README.md CHANGELOG.md $(INST_SHARE)/doc/eddy/
+	sed 's|^prefix=.*|prefix=$(PREFIX)|' $(BUILD)/eddy.pc > $(INST_LIB)/pkgconfig/eddy.pc
 
 clean:
 	rm -rf build out
