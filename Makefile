@@ -54,7 +54,7 @@ CLI_O   := $(call obj,$(CLI_C))
 TEST_O  := $(call obj,$(TEST_C))
 HEADER  := $(BUILD)/include/eddy.h
 
-.PHONY: all run test check-tests bench asan fuzz study install clean deps deps-test
+.PHONY: all run test test-long check-tests bench asan fuzz study install clean deps deps-test
 .DEFAULT_GOAL := all
 
 all: $(BUILD)/libeddy.a $(BUILD)/libeddy.so $(BUILD)/eddy.so $(BUILD)/eddy $(BUILD)/eddy.pc
@@ -134,6 +134,11 @@ test: deps-test
 
 check-tests:
 	EDDY_BUILD=$(BUILD) $(BUILD)/tests/run
+
+# the stress cases that take minutes rather than seconds (CI runs them too)
+test-long: deps-test
+	@$(MAKE) --no-print-directory all $(BUILD)/tests/run
+	EDDY_BUILD=$(BUILD) $(BUILD)/tests/run long
 
 # ---- benchmarks: JSON into build/, never part of make test ------------------------
 # bench: core systems; bench_flip: FLIP transfers and pressure; bench_sph: SPH

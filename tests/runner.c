@@ -4,6 +4,7 @@
 #include "test.h"
 
 #include <stdarg.h>
+#include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/wait.h>
@@ -62,35 +63,40 @@ const char *test_build_dir(void)
 
 int main(int argc, char **argv)
 {
+	/* build/tests/run: every suite but the long ones; run NAME: one suite;
+	 * run long: the long suites (make test-long). */
 	const char *only = argc > 1 ? argv[1] : NULL;
 	static const struct {
 		const char *name;
 		void (*fn)(void);
+		bool long_running; /* minutes, not seconds: make test-long, which CI also runs */
 	} suites[] = {
-		{"core", suite_core},
-		{"physics", suite_physics},
-		{"lua", suite_lua},
-		{"cli", suite_cli},
-		{"reliability", suite_reliability},
-		{"fuzz", suite_fuzz},
-		{"package", suite_package},
-		/* SPH suites */
-		{"sph", suite_sph},
-
-		/* FLIP suites */
-		{"flip", suite_flip},
-
-		/* renderer suites */
-		{"render", suite_render},
-
-		/* accuracy/time study */
-		{"study", suite_study},
+		{"core", suite_core, false},
+		{"physics", suite_physics, false},
+		{"lua", suite_lua, false},
+		{"cli", suite_cli, false},
+		{"reliability", suite_reliability, false},
+		{"fuzz", suite_fuzz, false},
+		{"package", suite_package, false},
+		{"sph", suite_sph, false},
+		{"flip", suite_flip, false},
+		{"render", suite_render, false},
+		{"study", suite_study, false},
+		/* stress: scenes one step beyond the validated ones (scenes/stress/) */
 	};
+	const bool want_long = only && strcmp(only, "long") == 0;
+	int ran = 0;
 	for (size_t i = 0; i < sizeof suites / sizeof suites[0]; ++i) {
-		if (only && strcmp(only, suites[i].name) != 0)
+		const bool named = only && strcmp(only, suites[i].name) == 0;
+		if (want_long ? !suites[i].long_running : only ? !named : suites[i].long_running)
 			continue;
 		printf("# %s\n", suites[i].name);
 		suites[i].fn();
+		ran++;
+	}
+	if (only && !ran && !want_long) {
+		fprintf(stderr, "run: no suite named '%s'\n", only);
+		return 2;
 	}
 	printf("%d passed, %d failed\n", passed, failed);
 	return failed ? 1 : 0;
