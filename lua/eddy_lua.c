@@ -534,9 +534,18 @@ static void check_safe_paths(lua_State *L, int world_idx, const lua_def *ld)
 static int l_world_add(lua_State *L)
 {
 	lua_world *lw = check_idle_world(L, 1, "add");
+	/* a node group (eddy.fluid{...}): plain Lua that adds its systems */
+	if (lua_istable(L, 2) && lua_getfield(L, 2, "expand") == LUA_TFUNCTION) {
+		lua_pushvalue(L, 2);
+		lua_pushvalue(L, 1);
+		lua_call(L, 2, 1);
+		return 1;
+	}
 	lua_def *ld = luaL_testudata(L, 2, DEF_MT);
 	if (!ld)
-		return luaL_error(L, "add: expects a system made by eddy.<system>{...}, e.g. world:add(eddy.gravity{}) (got %s)",
+		return luaL_error(L,
+		                  "add: expects a system made by eddy.<system>{...} or a group such as eddy.fluid{...}, e.g. "
+		                  "world:add(eddy.gravity{}) (got %s)",
 		                  luaL_typename(L, 2));
 	check_safe_paths(L, 1, ld);
 	eddy_world *w = lw->w;
@@ -851,6 +860,28 @@ static int l_system_name(lua_State *L)
 	if (eddy_world_system_info(w, ls->id, &info) != EDDY_OK)
 		return luaL_error(L, "stale system handle: the system was removed from the world");
 	lua_pushstring(L, info.label);
+	return 1;
+}
+
+/* h:set_group(text): tags the system with the node group that added it
+ * (plans show it); h:group() reads it back. */
+static int l_system_set_group(lua_State *L)
+{
+	lua_system *ls;
+	eddy_world *w = system_world(L, 1, &ls);
+	if (eddy_system_set_group(w, ls->id, luaL_optstring(L, 2, "")) != EDDY_OK)
+		return luaL_error(L, "%s", eddy_world_error(w));
+	return 0;
+}
+
+static int l_system_group(lua_State *L)
+{
+	lua_system *ls;
+	eddy_world *w = system_world(L, 1, &ls);
+	eddy_system_info info;
+	if (eddy_world_system_info(w, ls->id, &info) != EDDY_OK)
+		return luaL_error(L, "stale system handle: the system was removed from the world");
+	lua_pushstring(L, info.group);
 	return 1;
 }
 
@@ -1567,6 +1598,20 @@ static int l_param(lua_State *L)
 	}
 }
 
+/* eddy.fluid{...}: the fluid node group of lua/eddy/fluid.lua (plain Lua
+ * over the systems here), loaded on first use through require. */
+static int l_fluid(lua_State *L)
+{
+	lua_settop(L, 1);
+	lua_getglobal(L, "require");
+	lua_pushliteral(L, "eddy.fluid");
+	lua_call(L, 1, 1);
+	lua_getfield(L, -1, "new");
+	lua_pushvalue(L, 1);
+	lua_call(L, 1, 1);
+	return 1;
+}
+
 /* eddy.out_dir(default): the --out directory, or default. */
 static int l_out_dir(lua_State *L)
 {
@@ -1590,6 +1635,8 @@ static const luaL_Reg system_methods[] = {
 	{"mass", l_system_mass},
 	{"set_offset", l_system_set_offset},
 	{"offset", l_system_offset},
+	{"set_group", l_system_set_group},
+	{"group", l_system_group},
 	{NULL, NULL},
 };
 
@@ -1671,6 +1718,8 @@ int luaopen_eddy(lua_State *L)
 	lua_setfield(L, -2, "out_dir");
 	lua_pushcfunction(L, l_load_scene);
 	lua_setfield(L, -2, "load_scene");
+	lua_pushcfunction(L, l_fluid);
+	lua_setfield(L, -2, "fluid");
 	for (size_t l = 0; l < sizeof kind_lists / sizeof kind_lists[0]; ++l)
 		for (const eddy_lua_kind *k = kind_lists[l]; k->name; ++k) {
 			lua_pushlightuserdata(L, (void *)(uintptr_t)k);

@@ -14,6 +14,7 @@
 #define EDDY_MAX_SYSTEMS 256
 #define EDDY_MAX_IO 24
 #define EDDY_NAME_MAX 32
+#define EDDY_GROUP_MAX 96 /* a node group's text, as eddy_system_set_group takes it */
 #define EDDY_ERROR_MAX 512
 
 typedef struct eddy_system eddy_system;
@@ -50,6 +51,7 @@ struct eddy_system {
 	const eddy_system_vtable *vt;
 	char label[EDDY_NAME_MAX + 8];
 	char name[EDDY_NAME_MAX];
+	char group[EDDY_GROUP_MAX]; /* the node group that added it, "" if none (plans show it) */
 	uint16_t generation;
 	bool live;
 	int reads[EDDY_MAX_IO], read_count;

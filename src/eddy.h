@@ -230,6 +230,7 @@ typedef struct eddy_system_info {
 	double profile_ms;       /* total wall time spent in step, ms */
 	int64_t calls;           /* steps run */
 	int64_t expected_particles; /* emitters: particles it will create, -1 unbounded, 0 others */
+	const char *group;       /* the node group that added it ("" if none), see eddy_system_set_group */
 } eddy_system_info;
 
 EDDY_API int eddy_world_system_count(const eddy_world *w);
@@ -238,6 +239,12 @@ EDDY_API eddy_system_id eddy_world_system_at(const eddy_world *w, int i);
 EDDY_API eddy_status eddy_world_system_info(const eddy_world *w, eddy_system_id id, eddy_system_info *out);
 EDDY_API bool eddy_system_valid(const eddy_world *w, eddy_system_id id);
 EDDY_API eddy_status eddy_world_remove_system(eddy_world *w, eddy_system_id id);
+/* Node groups: a host that adds several systems as one unit (Lua's
+ * eddy.fluid{}, say) tags each with the group's text, e.g.
+ * "fluid{method = flip, resolution = 0.01 m}"; plans show the systems under
+ * it. The tag is a label only: the systems run and validate as any others.
+ * NULL or "" clears it; text longer than 95 bytes is an error. */
+EDDY_API eddy_status eddy_system_set_group(eddy_world *w, eddy_system_id id, const char *group);
 
 /* The validated pipeline as text (systems in order, reads/writes, columns and
  * bytes) or as a Graphviz digraph. Returns the length that the full text needs,

@@ -236,6 +236,27 @@ eddy_system_id eddy_world_system_at(const eddy_world *w, int i)
 	return (eddy_system_id){(uint16_t)slot, w->slots[slot].generation};
 }
 
+eddy_status eddy_system_set_group(eddy_world *w, eddy_system_id id, const char *group)
+{
+	if (!w)
+		return EDDY_ERR_INVALID;
+	eddy_system *s = eddy__system_get(w, id);
+	if (!s)
+		return eddy__fail(w, EDDY_ERR_STALE, "eddy_system_set_group: no such system");
+	group = group ? group : "";
+	const size_t n = strlen(group);
+	if (n >= sizeof s->group)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: a group's text must be under %zu bytes (got %zu)", s->label,
+		                  sizeof s->group, n);
+	/* plans print it as text and inside Graphviz's quoted labels */
+	for (size_t i = 0; i < n; ++i)
+		if ((unsigned char)group[i] < 0x20 || group[i] == '"' || group[i] == '\\')
+			return eddy__fail(w, EDDY_ERR_INVALID, "%s: a group's text may not hold control characters, '\"' or '\\'",
+			                  s->label);
+	memcpy(s->group, group, n + 1);
+	return EDDY_OK;
+}
+
 eddy_status eddy_world_system_info(const eddy_world *w, eddy_system_id id, eddy_system_info *out)
 {
 	if (!w || !out)
@@ -245,6 +266,7 @@ eddy_status eddy_world_system_info(const eddy_world *w, eddy_system_id id, eddy_
 		return EDDY_ERR_STALE;
 	out->name = s->name;
 	out->label = s->label;
+	out->group = s->group;
 	out->reads = s->read_names;
 	out->read_count = s->read_count;
 	out->writes = s->write_names;
@@ -405,6 +427,9 @@ size_t eddy_world_plan(const eddy_world *w, char *buf, size_t cap)
 	bool unbounded = false;
 	for (int k = 0; k < w->order_count; ++k) {
 		const eddy_system *s = &w->slots[w->order[k]];
+		const char *prev_group = k ? w->slots[w->order[k - 1]].group : "";
+		if (s->group[0] && strcmp(s->group, prev_group) != 0)
+			sb_printf(&b, "      group %s:\n", s->group);
 		sb_printf(&b, "  %2d  %-20s", k + 1, s->label);
 		if (s->read_count) {
 			sb_printf(&b, " reads");
@@ -518,8 +543,13 @@ size_t eddy_world_plan_dot(const eddy_world *w, char *buf, size_t cap)
 		return 0;
 	sb_printf(&b, "digraph eddy {\n  rankdir=LR;\n  node [shape=box, style=\"rounded,filled\", fillcolor=\"#eef4fb\", fontname=\"Helvetica\"];\n");
 	sb_printf(&b, "  edge [fontname=\"Helvetica\", fontsize=10];\n");
-	for (int k = 0; k < w->order_count; ++k)
-		sb_printf(&b, "  s%d [label=\"%d. %s\"];\n", k, k + 1, w->slots[w->order[k]].label);
+	for (int k = 0; k < w->order_count; ++k) {
+		const eddy_system *s = &w->slots[w->order[k]];
+		if (s->group[0])
+			sb_printf(&b, "  s%d [label=\"%d. %s\\n(%s)\"];\n", k, k + 1, s->label, s->group);
+		else
+			sb_printf(&b, "  s%d [label=\"%d. %s\"];\n", k, k + 1, s->label);
+	}
 	/* One edge per (producer, reader, same-or-previous step), labelled with columns. */
 	for (int r = 0; r < w->order_count; ++r) {
 		const eddy_system *s = &w->slots[w->order[r]];

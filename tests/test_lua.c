@@ -288,6 +288,85 @@ static void animated_collider(void)
 	CHECK_HAS(e, "scenes/t.lua:3: collide_sphere: 'offset (returned by the function)' must be a table of 3 numbers");
 }
 
+/* eddy.fluid{}: the group expands into each method's systems in its order,
+ * tagged with the group (plans show it), and it steps; fields that do not
+ * apply to the method, unknown fields and methods are errors at the scene's
+ * line. */
+static const char *run_group(const char *src, char *buf, size_t cap)
+{
+	lua_State *L = new_state();
+	lua_getglobal(L, "package");
+	lua_pushliteral(L, "lua/?.lua");
+	lua_setfield(L, -2, "path");
+	lua_pop(L, 1);
+	const char *err = run(L, src);
+	snprintf(buf, cap, "%s", err ? err : lua_tostring(L, -1));
+	lua_close(L);
+	return buf;
+}
+
+static void fluid_group_expands_per_method(void)
+{
+	static const struct {
+		const char *method, *systems;
+	} cases[] = {
+		{"wcsph", "sph_density sph_pressure sph_viscosity gravity sph_boundary_box integrate collide_box"},
+		{"dfsph", "sph_density gravity sph_viscosity sph_dfsph sph_boundary_box integrate collide_box"},
+		{"flip", "gravity flip_p2g flip_boundary flip_surface flip_pressure flip_extrapolate flip_g2p flip_advect "
+		         "flip_reseed"},
+		{"pic", "gravity flip_p2g flip_boundary flip_surface flip_pressure flip_extrapolate flip_g2p flip_advect "
+		        "flip_reseed"},
+	};
+	char src[1024], buf[4096];
+	for (size_t c = 0; c < sizeof cases / sizeof cases[0]; ++c) {
+		snprintf(src, sizeof src,
+		         "local eddy = require 'eddy'\n"
+		         "local fluid = eddy.fluid { method = '%s', resolution = 0.02 }\n"
+		         "local world = fluid:world { bounds = { {0, 0, 0}, {0.3, 0.3, 0.1} }, fps = 30, duration = 0.1 }\n"
+		         "world:add(eddy.emit_box { min = {0, 0, 0}, max = {0.1, 0.1, 0.1}, spacing = fluid.spacing })\n"
+		         "local h = world:add(fluid)\n"
+		         "world:advance(1 / 30)\n"
+		         "local names = {}\n"
+		         "for i, s in ipairs(h) do names[i] = s:name():gsub('#%%d+', '') end\n"
+		         "return table.concat(names, ' ') .. '|' .. h[1]:group() .. '|' .. world:plan() .. '|' .. world:count()\n",
+		         cases[c].method);
+		const char *out = run_group(src, buf, sizeof buf);
+		CHECKF(strncmp(out, cases[c].systems, strlen(cases[c].systems)) == 0, "%s: %s", cases[c].method, out);
+		char group[128];
+		snprintf(group, sizeof group, "|fluid{method = %s, resolution = 0.02 m}|", cases[c].method);
+		CHECK_HAS(out, group);
+		snprintf(group, sizeof group, "      group fluid{method = %s, resolution = 0.02 m}:\n", cases[c].method);
+		CHECK_HAS(out, group);
+		CHECK_HAS(out, "|125");
+	}
+	static const struct {
+		const char *fields, *error;
+	} bad[] = {
+		{"method = 'flip', resolution = 0.02, stiffness = 100",
+		 "scenes/t.lua:2: eddy.fluid: 'stiffness' does not apply to method 'flip' (it applies to wcsph; fields for "
+		 "flip: cell_size, flip_ratio,"},
+		{"method = 'sph', resolution = 0.02", "scenes/t.lua:2: eddy.fluid: 'method' must be one of wcsph, dfsph, flip, "
+		                                     "pic, apic (got sph)"},
+		{"method = 'dfsph', resolution = 0.02, tolerence = 0.01", "scenes/t.lua:2: eddy.fluid: unknown field 'tolerence'"},
+		{"method = 'wcsph', resolution = -1", "scenes/t.lua:2: eddy.fluid: 'resolution' (m, the particle spacing) must "
+		                                     "be a number > 0 (got -1)"},
+		{"method = 'dfsph', resolution = 0.02, tolerance = -1",
+		 "scenes/t.lua:4: eddy.fluid: sph_dfsph: 'max_density_error' must be > 0 (got -1)"},
+	};
+	for (size_t c = 0; c < sizeof bad / sizeof bad[0]; ++c) {
+		snprintf(src, sizeof src,
+		         "local eddy = require 'eddy'\nlocal fluid = eddy.fluid { %s }\n"
+		         "local world = fluid:world { bounds = { {0, 0, 0}, {0.3, 0.3, 0.1} } }\nworld:add(fluid)\n",
+		         bad[c].fields);
+		CHECK_HAS(run_group(src, buf, sizeof buf), bad[c].error);
+	}
+	/* SPH needs the tank: a world made without fluid:world and no tank field */
+	CHECK_HAS(run_group("local eddy = require 'eddy'\nlocal fluid = eddy.fluid { method = 'wcsph', resolution = 0.02 }\n"
+	                    "local world = eddy.world {}\nworld:add(fluid)\n",
+	                    buf, sizeof buf),
+	          "scenes/t.lua:4: eddy.fluid: an SPH method needs the tank's walls");
+}
+
 static void every_field_rejects_nan_and_inf(void);
 
 /* A state as eddy run --safe makes it: eddy's Lua helpers on package.path,
@@ -544,6 +623,7 @@ void suite_lua(void)
 	RUN(params_convert_to_the_default_type);
 	RUN(animated_collider);
 	RUN(every_field_rejects_nan_and_inf);
+	RUN(fluid_group_expands_per_method);
 	RUN(safe_mode_refuses_escapes);
 	RUN(safe_mode_keeps_what_scenes_use);
 	RUN(load_scene_runs_a_scene_sandboxed);

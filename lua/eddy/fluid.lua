@@ -1,0 +1,183 @@
+-- SPDX-License-Identifier: MIT
+-- eddy.fluid{...}: a node group that expands into one method's systems, in
+-- the order that method needs, with defaults derived from one resolution.
+-- It is plain Lua over the systems of the module: anything it does a scene
+-- can do by hand, and `eddy plan` shows what it expanded into.
+--
+--   local fluid = eddy.fluid { method = eddy.param("method", "dfsph"), resolution = 0.01 }
+--   local world = fluid:world { bounds = { {0, 0, 0}, {1, 0.5, 0.2} }, fps = 30, duration = 2 }
+--   world:add(eddy.emit_box { min = {0, 0, 0}, max = {0.3, 0.3, 0.2}, spacing = fluid.spacing })
+--   world:add(fluid)           -- the method's systems, the tank's walls
+--   world:add(eddy.collide_sphere { ... })   -- colliders after the group
+--
+-- Methods and what they expand into (h = resolution, the particle spacing):
+--   wcsph  sph_density (radius 2h) sph_pressure sph_viscosity [sph_surface_tension]
+--          gravity sph_boundary_box integrate collide_box
+--   dfsph  sph_density gravity sph_viscosity [sph_surface_tension] sph_dfsph
+--          sph_boundary_box integrate collide_box
+--   flip, pic, apic
+--          gravity flip_p2g flip_boundary flip_surface flip_pressure
+--          flip_extrapolate flip_g2p flip_advect [flip_reseed], on a MAC grid of
+--          cells 2h wide (8 particles per cell); pic is flip_ratio 0, apic the
+--          affine transfer; the tank is the world's box unless `tank` says
+--          otherwise (then a collide_box keeps the fluid in it)
+-- The world's CFL number and grid come from the group through fluid:world{}.
+-- A field that does not apply to the chosen method is an error naming it:
+-- a FLIP run ignoring 'stiffness' would silently be another experiment.
+
+local M = {}
+
+local METHODS = { "wcsph", "dfsph", "flip", "pic", "apic" }
+local SPH = { wcsph = true, dfsph = true }
+
+-- field -> the methods it applies to (nil: all)
+local FIELDS = {
+	method = false, resolution = false, rest_density = false, tank = false,
+	viscosity = { "wcsph", "dfsph" },       -- Pa s, dynamic
+	artificial = { "wcsph", "dfsph" },      -- 1, Monaghan's alpha
+	surface_tension = { "wcsph", "dfsph" }, -- N/m
+	stiffness = { "wcsph" },                -- m^2/s^2
+	tolerance = { "dfsph", "flip", "pic", "apic" },
+	divergence = { "dfsph" },
+	solver = { "flip", "pic", "apic" },
+	flip_ratio = { "flip" },
+	reseed = { "flip", "pic", "apic" },
+	cell_size = { "flip", "pic", "apic" },
+}
+
+-- the world's CFL number per method: the explicit acoustic limit binds
+-- WCSPH; the implicit solves take about one spacing a step
+local CFL = { wcsph = 0.4, dfsph = 1.0, flip = 1.0, pic = 1.0, apic = 1.0 }
+
+-- level: 4 from new() and expand() themselves (the scene's line, past the C
+-- function that called them), 5 from a helper they call
+local function fail(msg, level) error("eddy.fluid: " .. msg, level or 4) end
+
+local function sorted_keys(t)
+	local k = {}
+	for name in pairs(t) do k[#k + 1] = name end
+	table.sort(k)
+	return k
+end
+
+local function applies(field, method)
+	local where = FIELDS[field]
+	if not where then return true end
+	for _, m in ipairs(where) do if m == method then return true end end
+	return false
+end
+
+local function fields_of(method)
+	local list = {}
+	for _, name in ipairs(sorted_keys(FIELDS)) do
+		if applies(name, method) then list[#list + 1] = name end
+	end
+	return table.concat(list, ", ")
+end
+
+local Group = {}
+Group.__index = Group
+
+function M.new(def)
+	if type(def) ~= "table" then fail("expects a table of fields, e.g. eddy.fluid { method = \"flip\", resolution = 0.01 }") end
+	local method = def.method
+	local known = false
+	for _, m in ipairs(METHODS) do known = known or m == method end
+	if not known then
+		fail(string.format("'method' must be one of %s (got %s)", table.concat(METHODS, ", "), tostring(method)))
+	end
+	for _, name in ipairs(sorted_keys(def)) do
+		if FIELDS[name] == nil then
+			fail(string.format("unknown field '%s' (fields for %s: %s)", tostring(name), method, fields_of(method)))
+		elseif not applies(name, method) then
+			fail(string.format("'%s' does not apply to method '%s' (it applies to %s; fields for %s: %s)", name, method,
+			                   table.concat(FIELDS[name], ", "), method, fields_of(method)))
+		end
+	end
+	local h = def.resolution
+	if type(h) ~= "number" or not (h > 0) then
+		fail(string.format("'resolution' (m, the particle spacing) must be a number > 0 (got %s)", tostring(h)))
+	end
+	local g = setmetatable({ def = def, method = method, spacing = h, radius = 2 * h, cfl = CFL[method] }, Group)
+	if not SPH[method] then g.cell_size = def.cell_size or 2 * h end
+	return g
+end
+
+-- fluid:world{...}: eddy.world with the method's grid and CFL number filled
+-- in where the def leaves them out; remembers the bounds for the tank.
+function Group:world(wdef)
+	local d = {}
+	for k, v in pairs(wdef or {}) do d[k] = v end
+	if d.cfl == nil then d.cfl = self.cfl end
+	if self.cell_size and d.cell_size == nil then d.cell_size = self.cell_size end
+	self.bounds, self.cfl = d.bounds, d.cfl
+	local eddy = require "eddy"
+	local ok, world = pcall(eddy.world, d)
+	if not ok then error((tostring(world):gsub("^[^:]*:%d+: ", "")), 2) end
+	return world
+end
+
+function Group:label()
+	return string.format("fluid{method = %s, resolution = %g m}", self.method, self.spacing)
+end
+
+-- world:add(group) calls this: adds the systems and returns their handles in
+-- a table (by name; sph_density's handle has :mass()).
+function Group:expand(world)
+	local eddy = require "eddy"
+	local d, h, m = self.def, self.spacing, self.method
+	local tank = d.tank or (self.bounds and { min = self.bounds[1], max = self.bounds[2] })
+	local handles = {}
+	local function add(name, sdef)
+		local ok, sys = pcall(world.add, world, eddy[name](sdef))
+		if not ok then fail((tostring(sys):gsub("^[^:]*:%d+: ", "")), 5) end
+		sys:set_group(self:label())
+		handles[name] = sys
+		handles[#handles + 1] = sys
+	end
+	local function opt(t) -- drop nil fields so the system's defaults apply
+		local r = {}
+		for k, v in pairs(t) do r[k] = v end
+		return r
+	end
+	if SPH[m] then
+		if not tank then
+			fail("an SPH method needs the tank's walls: create the world with fluid:world{...} or give tank = {min = ..., max = ...}")
+		end
+		add("sph_density", { radius = 2 * h, spacing = h, rest_density = d.rest_density or 1000,
+		                     stiffness = d.stiffness })
+		local visc = opt { viscosity = d.viscosity or 1e-3, artificial = d.artificial or 0.05 }
+		if m == "wcsph" then
+			add("sph_pressure", {})
+			add("sph_viscosity", visc)
+			if d.surface_tension then add("sph_surface_tension", { tension = d.surface_tension }) end
+			add("gravity", {})
+		else
+			-- the pressure solve after every other force, before integrate
+			add("gravity", {})
+			add("sph_viscosity", visc)
+			if d.surface_tension then add("sph_surface_tension", { tension = d.surface_tension }) end
+			add("sph_dfsph", opt { max_density_error = d.tolerance, divergence_solver = d.divergence })
+		end
+		add("sph_boundary_box", { min = tank.min, max = tank.max, spacing = h })
+		add("integrate", {})
+		add("collide_box", { min = tank.min, max = tank.max, inside = true })
+	else
+		add("gravity", {})
+		add("flip_p2g", {})
+		add("flip_boundary", {})
+		add("flip_surface", {})
+		add("flip_pressure", opt { solver = d.solver, tolerance = d.tolerance, density = d.rest_density })
+		-- RK2 at CFL C samples up to C + 1 cells beyond the surface
+		add("flip_extrapolate", { layers = math.max(2, math.ceil((self.cfl or 1) + 2)) })
+		local g2p = { flip_ratio = m == "pic" and 0 or d.flip_ratio }
+		if m == "apic" then g2p = { transfer = "apic" } end
+		add("flip_g2p", opt(g2p))
+		add("flip_advect", {})
+		if d.reseed ~= false then add("flip_reseed", {}) end
+		if d.tank then add("collide_box", { min = tank.min, max = tank.max, inside = true }) end
+	end
+	return handles
+end
+
+return M
