@@ -11,21 +11,24 @@
 local eddy = require "eddy"
 
 local dx = eddy.param("spacing", 0.00125)      -- m: 16 spacings across
-local sigma = eddy.param("tension", 0.0728)    -- N/m, water-air
 local R = eddy.param("radius", 0.01)            -- m, radius of the round drop
 local stretch = eddy.param("stretch", 0.2)      -- 1, x semi-axis R (1 + stretch)
 local ax, ayz = R * (1 + stretch), R / math.sqrt(1 + stretch)
-local world = eddy.world {
+-- surface tension is SPH's (colour field): a grid method is refused by name
+local fluid = eddy.fluid {
+	method = eddy.param("method", "wcsph"),     -- wcsph or dfsph
+	resolution = dx, tank = false,
+	surface_tension = eddy.param("tension", 0.0728), -- N/m, water-air
+	-- alpha 0.1: also keeps the surface layer's pairs apart (docs/validation.md C.1)
+	viscosity = 1e-3, artificial = 0.1,
+	wcsph = { stiffness = 40 },
+}
+local world = fluid:world {
 	bounds = { {-0.03, -0.03, -0.03}, {0.03, 0.03, 0.03} },
 	gravity = {0, 0, 0}, fps = 200, duration = 0.6, cfl = 0.4,
 }
 world:add(eddy.emit_box { min = {-ax, -ayz, -ayz}, max = {ax, ayz, ayz}, spacing = dx, shape = "ellipsoid" })
-world:add(eddy.sph_density { radius = 2 * dx, spacing = dx, rest_density = 1000, stiffness = 40 })
-world:add(eddy.sph_pressure {})
--- alpha 0.1: also keeps the surface layer's pairs apart (docs/validation.md C.1)
-world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.1 })
-world:add(eddy.sph_surface_tension { tension = sigma, threshold = 0.5 })
-world:add(eddy.integrate {})
+world:add(fluid)
 world:add(eddy.collide_box { min = {-0.03, -0.03, -0.03}, max = {0.03, 0.03, 0.03}, inside = true })
 
 world:on_frame(function(w)

@@ -210,7 +210,7 @@ static void pressure(FILE *f, bool *first)
 			}
 }
 
-/* scenes/pour_flip.lua in C: the bench links only libeddy. */
+/* the FLIP pour (the paper's jet into a 0.5 m box) in C: the bench links only libeddy. */
 static void pour(FILE *f, bool *first)
 {
 	enum { REPS = 3 };

@@ -1017,7 +1017,7 @@ static void dam_break_scene_runs_both_solvers(void)
 	for (int sv = 0; sv < 2; ++sv) {
 		char cmd[512], out[8192];
 		snprintf(cmd, sizeof cmd,
-		         "%s/eddy run scenes/dam_break_flip.lua --frames 3 --set solver=%s --set cell_size=0.025 "
+		         "%s/eddy run scenes/dam_break.lua --set method=flip --frames 3 --set solver=%s --set spacing=0.0125 "
 		         "--stats /dev/stdout --quiet 2>&1",
 		         test_build_dir(), sv ? "cholmod" : "pcg");
 		FILE *f = popen(cmd, "r");
@@ -1038,7 +1038,7 @@ static void dam_break_scene_runs_both_solvers(void)
 static void scene_rejects_unknown_solver(void)
 {
 	char cmd[512], out[2048];
-	snprintf(cmd, sizeof cmd, "%s/eddy run scenes/dam_break_flip.lua --frames 1 --set solver=lu --quiet 2>&1",
+	snprintf(cmd, sizeof cmd, "%s/eddy run scenes/dam_break.lua --set method=flip --frames 1 --set solver=lu --quiet 2>&1",
 	         test_build_dir());
 	FILE *f = popen(cmd, "r");
 	CHECK(f != NULL);
@@ -1048,7 +1048,7 @@ static void scene_rejects_unknown_solver(void)
 	out[n] = 0;
 	int st = pclose(f);
 	CHECK(WIFEXITED(st) && WEXITSTATUS(st) != 0);
-	CHECK_HAS(out, "scenes/dam_break_flip.lua:");
+	CHECK_HAS(out, "scenes/dam_break.lua:");
 	CHECK_HAS(out, "'solver' must be \"pcg\" or \"cholmod\"");
 }
 

@@ -348,6 +348,8 @@ static void fluid_group_expands_per_method(void)
 		{"method = 'sph', resolution = 0.02", "scenes/t.lua:2: eddy.fluid: 'method' must be one of wcsph, dfsph, flip, "
 		                                     "pic, apic (got sph)"},
 		{"method = 'dfsph', resolution = 0.02, tolerence = 0.01", "scenes/t.lua:2: eddy.fluid: unknown field 'tolerence'"},
+		{"method = 'flip', resolution = 0.02, wcsph = { stiffness = 100 }, flip = { stiffness = 1 }",
+		 "scenes/t.lua:2: eddy.fluid: 'stiffness' in flip = {...} does not apply to method 'flip'"},
 		{"method = 'wcsph', resolution = -1", "scenes/t.lua:2: eddy.fluid: 'resolution' (m, the particle spacing) must "
 		                                     "be a number > 0 (got -1)"},
 		{"method = 'dfsph', resolution = 0.02, tolerance = -1",

@@ -188,7 +188,7 @@ static void cli_resume_skips_a_corrupted_checkpoint(void)
  * at frame 7 and resumed from its frame-6 checkpoint end in the same states. */
 static void fluid_scenes_resume_bit_identical(void)
 {
-	static const char *const scenes[] = {"scenes/dam_break_flip.lua --set render=false",
+	static const char *const scenes[] = {"scenes/dam_break.lua --set method=flip --set render=false --set spacing=0.005",
 	                                     "scenes/dam_break.lua --set render=false --set spacing=0.01", NULL};
 	const char *bin = test_build_dir();
 	for (int i = 0; scenes[i]; ++i) {

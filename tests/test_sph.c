@@ -1120,7 +1120,7 @@ static void dfsph_dam_break_matches_martin_moyce(void)
 	CHECK(read_reference("data/martin_moyce_1952_a2.25in.csv", &ref[0]));
 	CHECK(read_reference("data/martin_moyce_1952_a1.125in.csv", &ref[1]));
 	char last[16384] = "";
-	run_scene("scenes/dam_break.lua", "--set spacing=0.008333 --set fps=100 --set solver=dfsph --set cfl=0.8", "T",
+	run_scene("scenes/dam_break.lua", "--set spacing=0.008333 --set fps=100 --set method=dfsph --set cfl=0.8", "T",
 	          "Z", &sim, last, sizeof last);
 	CHECK(sim.n > 20);
 	if (sim.n <= 20 || ref[0].n < 2 || ref[1].n < 2)

@@ -1,6 +1,6 @@
 -- SPDX-License-Identifier: MIT
--- The dam-break setup shared by scenes/dam_break.lua (SPH) and
--- scenes/dam_break_flip.lua (FLIP): only the method systems differ.
+-- The dam-break setup of scenes/dam_break.lua, which runs with any fluid
+-- method, and of the studies that sweep it.
 --
 -- Martin & Moyce (1952): a column of square base a and height 2a stands against
 -- the back wall (x = 0) of a tank; the gate opens at t = 0. The surge front z
@@ -9,31 +9,32 @@
 -- long so the front runs free until T = 3 (Z(3) is about 3.7).
 --
 --   local dam = require "eddy.dam_break"
---   local world, geo = dam.world(eddy, { a = 0.1, spacing = 0.005 })
+--   local fluid = eddy.fluid { method = "flip", resolution = 0.005 }
+--   local world, geo = dam.world(eddy, fluid, { a = 0.1 })
 --   world:add(eddy.emit_box { min = geo.column_min, max = geo.column_max, spacing = geo.spacing })
---   ... method systems ...
---   world:add(eddy.collide_box { min = geo.tank_min, max = geo.tank_max, inside = true })
+--   world:add(fluid)
 --   dam.report(world, geo)
 
 local M = {}
 
--- Tank and column for base a and particle spacing h. Fields of p: a (m),
--- spacing (m), thickness (m, default 4 spacings), fps, duration (s; default
--- T = 3.2), cfl, cell_size (m, FLIP grids; 0 = none), g (m/s^2).
-function M.world(eddy, p)
+-- The tank and the column for a fluid group (eddy.fluid{}): the world comes
+-- from the group, so it carries the method's grid and CFL number, and the
+-- group takes the tank's walls from it. The slab is 4 particle spacings
+-- thick for SPH and 4 cells for a grid method. Fields of p: a (m), fps,
+-- duration (s; default T = 3.2), cfl (default the method's), g (m/s^2).
+function M.world(eddy, fluid, p)
 	local a = assert(p.a, "dam_break: 'a' (column base, m) is required")
-	local h = assert(p.spacing, "dam_break: 'spacing' (m) is required")
+	local h = fluid.spacing
 	local g = p.g or 9.81
-	local W = p.thickness or 4 * h
+	local W = 4 * (fluid.cell_size or h)
 	local L, H = 5.5 * a, 2.5 * a
 	local t_ref = math.sqrt(a / (2 * g)) -- t = T * t_ref
-	local world = eddy.world {
+	local world = fluid:world {
 		bounds = { {0, 0, 0}, {L, H, W} },
 		gravity = {0, -g, 0},
 		fps = p.fps or 200,
 		duration = p.duration or 3.2 * t_ref,
-		cfl = p.cfl or 0.4,
-		cell_size = p.cell_size or 0,
+		cfl = p.cfl,
 	}
 	return world, {
 		a = a, spacing = h, g = g, t_ref = t_ref,
@@ -42,9 +43,6 @@ function M.world(eddy, p)
 	}
 end
 
--- Surge front: the largest x of the particles near the floor (y < a/4, so
--- spray thrown ahead does not count), plus half a spacing for the particle's
--- own extent.
 function M.front(world, geo)
 	local x, y = world:channel("x"), world:channel("y")
 	local front, floor = 0, geo.a / 4

@@ -22,17 +22,28 @@
 --          affine transfer; the tank is the world's box unless `tank` says
 --          otherwise (then a collide_box keeps the fluid in it)
 -- The world's CFL number and grid come from the group through fluid:world{}.
+-- tank = {min, max} (default: the world's box, when made by fluid:world{})
+-- gives SPH its boundary particles and collider; tank = false gives none.
 -- A field that does not apply to the chosen method is an error naming it:
 -- a FLIP run ignoring 'stiffness' would silently be another experiment.
+-- Settings for one method only go in a table named after it, so one scene
+-- carries each method's tuning and runs with any of them:
+--   eddy.fluid { method = m, resolution = h,
+--                wcsph = { stiffness = 400 }, dfsph = { tolerance = 1e-3 },
+--                flip = { solver = "pcg", flip_ratio = 0.95 } }
+-- Each such table is checked against its own method whichever is chosen,
+-- and the chosen method's table overrides the fields beside it.
 
 local M = {}
 
 local METHODS = { "wcsph", "dfsph", "flip", "pic", "apic" }
 local SPH = { wcsph = true, dfsph = true }
+local METHOD_TABLE = { wcsph = true, dfsph = true, flip = true, pic = true, apic = true }
 
 -- field -> the methods it applies to (nil: all)
 local FIELDS = {
 	method = false, resolution = false, rest_density = false, tank = false,
+	wcsph = false, dfsph = false, flip = false, pic = false, apic = false,
 	viscosity = { "wcsph", "dfsph" },       -- Pa s, dynamic
 	artificial = { "wcsph", "dfsph" },      -- 1, Monaghan's alpha
 	surface_tension = { "wcsph", "dfsph" }, -- N/m
@@ -70,7 +81,7 @@ end
 local function fields_of(method)
 	local list = {}
 	for _, name in ipairs(sorted_keys(FIELDS)) do
-		if applies(name, method) then list[#list + 1] = name end
+		if applies(name, method) and not METHOD_TABLE[name] then list[#list + 1] = name end
 	end
 	return table.concat(list, ", ")
 end
@@ -86,14 +97,27 @@ function M.new(def)
 	if not known then
 		fail(string.format("'method' must be one of %s (got %s)", table.concat(METHODS, ", "), tostring(method)))
 	end
-	for _, name in ipairs(sorted_keys(def)) do
-		if FIELDS[name] == nil then
-			fail(string.format("unknown field '%s' (fields for %s: %s)", tostring(name), method, fields_of(method)))
-		elseif not applies(name, method) then
-			fail(string.format("'%s' does not apply to method '%s' (it applies to %s; fields for %s: %s)", name, method,
-			                   table.concat(FIELDS[name], ", "), method, fields_of(method)))
+	local function check(t, m, where)
+		for _, name in ipairs(sorted_keys(t)) do
+			if FIELDS[name] == nil or (where and (name == "method" or name == "resolution" or METHOD_TABLE[name])) then
+				fail(string.format("unknown field '%s'%s (fields for %s: %s)", tostring(name), where or "", m, fields_of(m)), 5)
+			elseif not applies(name, m) then
+				fail(string.format("'%s'%s does not apply to method '%s' (it applies to %s; fields for %s: %s)", name,
+				                   where or "", m, table.concat(FIELDS[name], ", "), m, fields_of(m)), 5)
+			end
 		end
 	end
+	check(def, method)
+	local merged = {}
+	for k, v in pairs(def) do if not METHOD_TABLE[k] then merged[k] = v end end
+	for _, m in ipairs(METHODS) do
+		if def[m] ~= nil then
+			if type(def[m]) ~= "table" then fail(string.format("'%s' must be a table of %s's settings", m, m)) end
+			check(def[m], m, " in " .. m .. " = {...}")
+		end
+	end
+	for k, v in pairs(def[method] or {}) do merged[k] = v end
+	def = merged
 	local h = def.resolution
 	if type(h) ~= "number" or not (h > 0) then
 		fail(string.format("'resolution' (m, the particle spacing) must be a number > 0 (got %s)", tostring(h)))
@@ -126,10 +150,12 @@ end
 function Group:expand(world)
 	local eddy = require "eddy"
 	local d, h, m = self.def, self.spacing, self.method
-	local tank = d.tank or (self.bounds and { min = self.bounds[1], max = self.bounds[2] })
+	-- tank = false: no walls of the group's own (a drop in free space)
+	local tank = d.tank
+	if tank == nil and self.bounds then tank = { min = self.bounds[1], max = self.bounds[2] } end
 	local handles = {}
 	local function add(name, sdef)
-		local ok, sys = pcall(world.add, world, eddy[name](sdef))
+		local ok, sys = pcall(function() return world:add(eddy[name](sdef)) end)
 		if not ok then fail((tostring(sys):gsub("^[^:]*:%d+: ", "")), 5) end
 		sys:set_group(self:label())
 		handles[name] = sys
@@ -141,8 +167,9 @@ function Group:expand(world)
 		return r
 	end
 	if SPH[m] then
-		if not tank then
-			fail("an SPH method needs the tank's walls: create the world with fluid:world{...} or give tank = {min = ..., max = ...}")
+		if tank == nil then
+			fail("an SPH method needs the tank's walls: create the world with fluid:world{...}, give tank = {min = ..., "
+			     .. "max = ...}, or tank = false for none")
 		end
 		add("sph_density", { radius = 2 * h, spacing = h, rest_density = d.rest_density or 1000,
 		                     stiffness = d.stiffness })
@@ -159,9 +186,9 @@ function Group:expand(world)
 			if d.surface_tension then add("sph_surface_tension", { tension = d.surface_tension }) end
 			add("sph_dfsph", opt { max_density_error = d.tolerance, divergence_solver = d.divergence })
 		end
-		add("sph_boundary_box", { min = tank.min, max = tank.max, spacing = h })
+		if tank then add("sph_boundary_box", { min = tank.min, max = tank.max, spacing = h }) end
 		add("integrate", {})
-		add("collide_box", { min = tank.min, max = tank.max, inside = true })
+		if tank then add("collide_box", { min = tank.min, max = tank.max, inside = true }) end
 	else
 		add("gravity", {})
 		add("flip_p2g", {})
@@ -175,7 +202,7 @@ function Group:expand(world)
 		add("flip_g2p", opt(g2p))
 		add("flip_advect", {})
 		if d.reseed ~= false then add("flip_reseed", {}) end
-		if d.tank then add("collide_box", { min = tank.min, max = tank.max, inside = true }) end
+		if d.tank then add("collide_box", { min = d.tank.min, max = d.tank.max, inside = true }) end
 	end
 	return handles
 end

@@ -7,7 +7,8 @@
 --
 --   build/eddy study scenes/studies/convergence.lua     (about 2 minutes)
 --
--- SPH spacing a/5 .. a/40 (reference a/40); FLIP cells a/4 .. a/32 (reference a/32).
+-- SPH spacing a/5 .. a/40 (reference a/40); FLIP cells a/4 .. a/32 (reference
+-- a/32), particle spacing half a cell.
 
 return study {
 	name = "convergence",
@@ -18,8 +19,8 @@ return study {
 		method { name = "SPH", scene = "scenes/dam_break.lua", resolution = "spacing",
 		         sweep = { spacing = { 0.02, 0.01, 0.005, 0.0025 } },
 		         quick = { spacing = { 0.04, 0.02, 0.01 } } },
-		method { name = "FLIP", scene = "scenes/dam_break_flip.lua", resolution = "cell_size",
-		         sweep = { cell_size = { 0.025, 0.0125, 0.00625, 0.003125 } },
-		         quick = { cell_size = { 0.05, 0.025, 0.0125 } } },
+		method { name = "FLIP", scene = "scenes/dam_break.lua", resolution = "spacing", set = { method = "flip" },
+		         sweep = { spacing = { 0.0125, 0.00625, 0.003125, 0.0015625 } },
+		         quick = { spacing = { 0.025, 0.0125, 0.00625 } } },
 	},
 }

@@ -11,8 +11,8 @@
 --
 -- Resolutions are fractions of the column base a = 0.1 m: SPH spacing a/10,
 -- a/15, a/20; FLIP cells a/8, a/12, a/16 with 2 x 2 x 2 particles per cell
--- (so FLIP's particle spacing is half its cell); PIC is the FLIP scene with
--- flip_ratio = 0.
+-- (particle spacing a/16, a/24, a/32: the scene's `spacing` is the particle
+-- spacing of every method); PIC is the same scene with method = pic.
 
 return study {
 	name = "dam_break",
@@ -25,11 +25,11 @@ return study {
 		method { name = "SPH", scene = "scenes/dam_break.lua", resolution = "spacing",
 		         sweep = { spacing = { 0.01, 0.1 / 15, 0.005 } },
 		         quick = { spacing = { 0.02, 0.01 } } },
-		method { name = "FLIP", scene = "scenes/dam_break_flip.lua", resolution = "cell_size",
-		         sweep = { cell_size = { 0.0125, 0.1 / 12, 0.00625 } },
-		         quick = { cell_size = { 0.025, 0.0125 } } },
-		-- PIC (flip_ratio 0): the dissipative end of the FLIP/PIC blend
-		method { name = "PIC", scene = "scenes/dam_break_flip.lua", resolution = "cell_size",
-		         set = { flip_ratio = 0 }, sweep = { cell_size = { 0.0125, 0.1 / 12, 0.00625 } }, quick = false },
+		method { name = "FLIP", scene = "scenes/dam_break.lua", resolution = "spacing", set = { method = "flip" },
+		         sweep = { spacing = { 0.00625, 0.1 / 24, 0.003125 } },
+		         quick = { spacing = { 0.0125, 0.00625 } } },
+		-- PIC: the dissipative end of the FLIP/PIC blend
+		method { name = "PIC", scene = "scenes/dam_break.lua", resolution = "spacing",
+		         set = { method = "pic" }, sweep = { spacing = { 0.00625, 0.1 / 24, 0.003125 } }, quick = false },
 	},
 }
