@@ -28,12 +28,9 @@ world:add(eddy.emit_box { min = {0, 0, 0}, max = {0.35, 0.5, W}, spacing = fluid
 world:add(fluid)
 world:add(eddy.collide_sphere { center = {0.7, 0.1, 0.25}, radius = 0.1 })
 
-world:add(eddy.render_points {
-	width = 960, height = 540,
+require("eddy.view").render(eddy, world, "splash", {
 	eye = {0.55, 0.95, 1.75}, target = {0.5, 0.18, 0.25},
-	radius = fluid.spacing * 0.9,
-	color_by = "speed", colormap = "viridis", value_min = 0, value_max = 2.5,
-	path = eddy.out_dir("out/splash") .. "/frame_%04d.png",
+	radius = fluid.spacing * 0.9, value_min = 0, value_max = 2.5,
 })
 
 return world
