@@ -143,9 +143,17 @@ static void free_names(char **names, int n)
 	free(names);
 }
 
-/* A save interrupted by a crash leaves frame-NNNNNN.eddy.tmp (src/checkpoint.c
- * writes the temp file, then renames it). Called with the lock held, so no
- * other run is writing one here. */
+/* A process killed mid-write leaves its temp files: a checkpoint's
+ * frame-NNNNNN.eddy.tmp (src/checkpoint.c writes it, then renames it) and a
+ * frame's or export's .NAME.PID-N.tmp (render/files.c). Called with the lock
+ * held, so no other run is writing one here. */
+static bool is_stale_temp(const char *name)
+{
+	if (strncmp(name, "frame-", 6) == 0 && has_suffix(name, ".eddy.tmp"))
+		return true;
+	return name[0] == '.' && has_suffix(name, ".tmp");
+}
+
 static void remove_stale_temps(const char *dir)
 {
 	DIR *d = opendir(dir);
@@ -154,7 +162,7 @@ static void remove_stale_temps(const char *dir)
 	struct dirent *e;
 	char path[2048];
 	while ((e = readdir(d))) {
-		if (strncmp(e->d_name, "frame-", 6) == 0 && has_suffix(e->d_name, ".eddy.tmp")) {
+		if (is_stale_temp(e->d_name)) {
 			snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
 			unlink(path);
 		}
@@ -430,6 +438,7 @@ static int prepare(run *r)
 	if (code)
 		return code;
 	remove_stale_temps(r->ckpt_dir);
+	remove_stale_temps(o->outdir);
 	if (o->resume && (code = resume(r)) != 0)
 		return code;
 	r->first = eddy_world_frame(r->w);

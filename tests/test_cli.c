@@ -535,10 +535,12 @@ static void checkpoints_are_pruned_and_temps_removed(void)
 	char cmd[2048], out[8192];
 	snprintf(cmd, sizeof cmd, "rm -rf %s/t_keep && mkdir -p %s/t_keep/checkpoints && "
 	         "echo junk > %s/t_keep/checkpoints/frame-000003.eddy.tmp && "
+	         "echo junk > %s/t_keep/.frame_0004.png.999-1.tmp && "
 	         "%s run scenes/bounce.lua --frames 10 --checkpoint-every 2 --quiet --out %s/t_keep && "
-	         "ls %s/t_keep/checkpoints", b, b, b, eddy(), b, b);
-	CHECK(test_sh(cmd, out, sizeof out) == 0);
-	CHECKF(strcmp(out, "frame-000006.eddy\nframe-000008.eddy\nframe-000010.eddy\n") == 0, "%s", out);
+	         "ls %s/t_keep/checkpoints && ls -A %s/t_keep | grep -c tmp",
+	         b, b, b, b, eddy(), b, b, b);
+	test_sh(cmd, out, sizeof out);
+	CHECKF(strcmp(out, "frame-000006.eddy\nframe-000008.eddy\nframe-000010.eddy\n0\n") == 0, "%s", out);
 	snprintf(cmd, sizeof cmd, "rm -rf %s/t_keep && %s run scenes/bounce.lua --frames 10 --checkpoint-every 2 --quiet "
 	         "--keep-checkpoints 0 --out %s/t_keep && ls %s/t_keep/checkpoints | wc -l", b, eddy(), b, b);
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
