@@ -169,6 +169,14 @@ static inline eddy_vec3 flip_velocity_at(const flip_grid *g, const float *u, con
 	return flip_velocity_axes(g, u, v, wv, &a);
 }
 
+/* Before the pressure solve (flip_p2g calls it once the cells are marked):
+ * every interior face with a fluid cell on a side and no particle weight
+ * (weight[a][wstride * f] == 0) takes the average of its known neighbours in
+ * its own face grid, round by round, so the solve sees a velocity on every
+ * face of every fluid cell (sys_flip_extrapolate.c, which says why). */
+eddy_status eddy__flip_fill_fluid_faces(eddy_world *w, float *const face[3], const float *const weight[3],
+                                        size_t wstride);
+
 /* ---- the Poisson system ---------------------------------------------------
  * Rows are fluid cells in cell-index order, so a row's -x, -y, -z neighbours
  * come before it (what MIC(0) and the upper-triangle CSC for CHOLMOD need).

@@ -8,6 +8,9 @@
  *   u_f  = sum_p W_fp v_p / sum_p W_fp  (W trilinear on each face grid; faces no
  *                                        particle reaches stay 0)
  *   u_old = u                           (pre-solve velocity for G2P's delta)
+ *   faces of fluid cells with no weight: the average of known neighbours
+ *   (eddy__flip_fill_fluid_faces in sys_flip_extrapolate.c), so a uniform
+ *   velocity has no divergence off the grid axes too
  *   cell_type = fluid where a particle is (or within mark_radius cells of a
  *   particle's position), air elsewhere; flip_phi = -1 fluid, +1 empty (the
  *   paper's marker field, smoothed later by flip_surface).
@@ -139,7 +142,10 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 					}
 				}
 	}
-	return EDDY_OK;
+	/* faces of fluid cells no particle reached get a velocity before the
+	 * solve; u_old keeps 0 there, but no particle's stencil weighs them */
+	const float *const weight[3] = {acc[0] + 1, acc[1] + 1, acc[2] + 1};
+	return eddy__flip_fill_fluid_faces(w, face, weight, 2);
 }
 
 const eddy_system_vtable eddy__kind_flip_p2g = {

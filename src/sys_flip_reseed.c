@@ -4,8 +4,11 @@
  * (docs/validation.md hard case 13; Zhu & Bridson keep about 8 per cell).
  *
  * Reads: x y z cell_type u v w. Writes: x y z vx vy vz.
- *   Interior fluid cells (no air neighbour; surface cells are partly empty by
- *   nature) with fewer than min particles get new ones at random positions
+ *   Interior fluid cells (no side empty: holding no particle after advection
+ *   and not solid; surface cells are partly empty by nature, and cell_type
+ *   predates flip_advect, so a cell a moving blob has just left still reads
+ *   fluid and must not be refilled) with fewer than min particles get new
+ *   ones at random positions
  *   in the cell (the world's random stream, so runs repeat), with the grid
  *   velocity there; cells with more than max lose the surplus (swap-remove,
  *   highest index first). Run it last, after flip_advect. */
@@ -35,6 +38,12 @@ static long cell_of(const eddy_world *w, float x, float y, float z)
 	const eddy_vec3 o = w->def.bounds_min;
 	return (long)flip_cell(w, flip_cell_index((x - o.x) * inv, w->nx), flip_cell_index((y - o.y) * inv, w->ny),
 	                       flip_cell_index((z - o.z) * inv, w->nz));
+}
+
+/* A cell with no particle after advection that is not solid. */
+static inline bool empty(const uint8_t *type, const int *count, size_t c)
+{
+	return count[c] == 0 && type[c] != EDDY_CELL_SOLID;
 }
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
@@ -72,8 +81,12 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 				if (type[c] != EDDY_CELL_FLUID || count[c] >= rs->def.min_per_cell)
 					continue;
 				const size_t sx = 1, sy = (size_t)nx, sz = (size_t)nx * ny;
-				if (type[c - sx] == EDDY_CELL_AIR || type[c + sx] == EDDY_CELL_AIR || type[c - sy] == EDDY_CELL_AIR ||
-				    type[c + sy] == EDDY_CELL_AIR || type[c - sz] == EDDY_CELL_AIR || type[c + sz] == EDDY_CELL_AIR)
+				/* interior now: cell_type was marked before flip_advect moved
+				 * the particles, so a cell the fluid has just left still
+				 * reads fluid; a side counts as empty when it holds no
+				 * particle now (and is not solid) */
+				if (empty(type, count, c - sx) || empty(type, count, c + sx) || empty(type, count, c - sy) ||
+				    empty(type, count, c + sy) || empty(type, count, c - sz) || empty(type, count, c + sz))
 					continue;
 				const size_t add = (size_t)(rs->def.min_per_cell - count[c]);
 				size_t first;
