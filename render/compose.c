@@ -126,6 +126,18 @@ static int wrap(const char *caption, int width, char lines[][256], int max_lines
 				snprintf(trial, sizeof trial, "%s%s%.*s", cur, used ? " " : "", (int)w, s);
 				if (used && text_width(trial) > width)
 					break;
+				if (!used && text_width(trial) > width) {
+					/* a word wider than the panel: as many characters as fit */
+					size_t k = w > 1 ? w - 1 : 1;
+					for (; k > 1; --k) {
+						snprintf(trial, sizeof trial, "%.*s", (int)k, s);
+						if (text_width(trial) <= width)
+							break;
+					}
+					snprintf(cur, sizeof cur, "%.*s", (int)k, s);
+					s += k;
+					break;
+				}
 				snprintf(cur, sizeof cur, "%s", trial);
 				used = strlen(cur);
 				s += w;
