@@ -9,7 +9,7 @@
  * eddy study), a folder listing, and the panels (eddy_compose_panels,
  * render/compose.c). Usage errors are checked here, before anything runs. */
 #define _POSIX_C_SOURCE 200809L
-#define _DEFAULT_SOURCE /* wait4, DIR */
+#define _DEFAULT_SOURCE /* wait4, DIR, siginfo_t */
 #define _GNU_SOURCE     /* getopt_long */
 #include "compare.h"
 
@@ -19,6 +19,7 @@
 #include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
+#include <signal.h>
 #include <stdarg.h>
 #include <getopt.h>
 #include <stdbool.h>
@@ -67,7 +68,8 @@ static const char compare_usage[] =
 	"\n"
 	"Exit status: 0 every method ran; 1 a method failed (its row says why; the\n"
 	"others still run and every file is still written) or the comparison could not\n"
-	"be written; 2 bad usage.\n";
+	"be written; 2 bad usage; 128+N stopped by signal N (Ctrl-C: the running method\n"
+	"ends after its frame, no further method runs, what ran is written).\n";
 
 static double now_s(void)
 {
@@ -76,10 +78,44 @@ static double now_s(void)
 	return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
 }
 
-/* spawn(argv, log_path) -> exit_code, wall_s, maxrss_kb: the contract of
- * lua/study.c's spawn. argv[1] is the program; its stdout and stderr go to
- * log_path. A program that cannot start exits with 127; a child killed by a
- * signal gives 128 + the signal. */
+/* SIGINT or SIGTERM while a child runs: Ctrl-C reaches the child too (the
+ * terminal signals the whole process group), and the child finishes its frame
+ * and exits with 128 + the signal; this process only remembers it, stops
+ * running methods and writes what it has. A signal sent to this process
+ * alone (kill PID: SI_USER) is passed on to the child. */
+static volatile sig_atomic_t stop_signal;
+static volatile pid_t running_child;
+
+static void on_signal(int sig, siginfo_t *info, void *context)
+{
+	(void)context;
+	stop_signal = sig;
+	if (info && info->si_code == SI_USER && running_child > 0 && info->si_pid != running_child)
+		kill(running_child, sig);
+}
+
+static void catch_signals(bool on, struct sigaction old[2])
+{
+	static const int sigs[2] = {SIGINT, SIGTERM};
+	for (int i = 0; i < 2; ++i) {
+		if (on) {
+			struct sigaction sa;
+			memset(&sa, 0, sizeof sa);
+			sa.sa_sigaction = on_signal;
+			sa.sa_flags = SA_SIGINFO | SA_RESTART;
+			sigemptyset(&sa.sa_mask);
+			sigaction(sigs[i], &sa, &old[i]);
+		} else {
+			sigaction(sigs[i], &old[i], NULL);
+		}
+	}
+}
+
+/* spawn(argv, log_path) -> exit_code, wall_s, maxrss_kb, signal: the contract
+ * of lua/study.c's spawn, plus the SIGINT or SIGTERM this process received
+ * while the child ran (0: none). argv[1] is the program; its stdout and
+ * stderr go to log_path. A program that cannot start exits with 127; a child
+ * killed by a signal gives 128 + the signal. */
 static int l_spawn(lua_State *L)
 {
 	luaL_checktype(L, 1, LUA_TTABLE);
@@ -101,32 +137,43 @@ static int l_spawn(lua_State *L)
 	if (fd < 0)
 		return luaL_error(L, "spawn: cannot write '%s': %s", log, strerror(errno));
 	fflush(NULL);
+	struct sigaction old[2];
+	catch_signals(true, old);
 	double t0 = now_s();
 	pid_t pid = fork();
 	if (pid < 0) {
+		catch_signals(false, old);
 		close(fd);
 		return luaL_error(L, "spawn: fork failed: %s", strerror(errno));
 	}
 	if (pid == 0) {
+		catch_signals(false, old); /* the child handles its own (eddy run) */
 		dup2(fd, 1);
 		dup2(fd, 2);
 		execv(argv[0], argv);
 		_exit(127);
 	}
+	running_child = pid;
 	close(fd);
 	int status = 0;
 	struct rusage ru;
 	memset(&ru, 0, sizeof ru);
 	while (wait4(pid, &status, 0, &ru) < 0) {
-		if (errno != EINTR)
+		if (errno != EINTR) {
+			running_child = 0;
+			catch_signals(false, old);
 			return luaL_error(L, "spawn: wait4 failed: %s", strerror(errno));
+		}
 	}
+	running_child = 0;
+	catch_signals(false, old);
 	double wall = now_s() - t0;
 	int code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
 	lua_pushinteger(L, code);
 	lua_pushnumber(L, wall);
 	lua_pushinteger(L, (lua_Integer)ru.ru_maxrss); /* KiB on Linux */
-	return 3;
+	lua_pushinteger(L, stop_signal);
+	return 4;
 }
 
 /* listdir(dir) -> { names } (no "." or ".."), or nil, message */

@@ -146,11 +146,16 @@ local function run_method(ctx, method)
 	if ctx.safe then argv[#argv + 1] = "--safe" end
 	io.stdout:write(string.format("%-10s", method))
 	io.stdout:flush()
-	local code, wall, rss = ctx.spawn(argv, log)
+	local code, wall, rss, signal = ctx.spawn(argv, log)
 	local frames, order = read_stats(stats)
 	local r = { method = method, dir = dir, code = code, wall_s = wall, peak_mb = rss / 1024, frames = frames,
 	            nframes = #frames, sys_order = order, systems = {}, steps = 0, images = {}, measure = {} }
 	if code ~= 0 then r.reason = failure_reason(log, code) end
+	-- Ctrl-C or SIGTERM: the child stopped after its frame (status 128 + the
+	-- signal); no further method runs
+	if (signal or 0) ~= 0 or code == 130 or code == 143 then
+		r.interrupted = (signal or 0) ~= 0 and signal or code - 128
+	end
 	local dt_min, dt_max
 	for _, f in ipairs(frames) do
 		r.steps = r.steps + (tonumber(f.steps) or 0)
@@ -485,10 +490,20 @@ function M.main(args)
 	mkdir_p(ctx.out .. "/runs")
 
 	local runs, failed, problems = {}, 0, 0
+	local interrupted
 	for _, method in ipairs(ctx.methods) do
-		local r = run_method(ctx, method)
-		runs[#runs + 1] = r
-		if r.code ~= 0 then failed = failed + 1 end
+		if interrupted then
+			-- a row all the same, so the tables list every method asked for
+			runs[#runs + 1] = { method = method, dir = ctx.out .. "/runs/" .. method, code = -1,
+			                    reason = "not run (interrupted)", wall_s = 0, peak_mb = nil, frames = {}, nframes = 0,
+			                    sys_order = {}, systems = {}, steps = 0, images = {}, measure = {}, physics_ms = 0 }
+			failed = failed + 1
+		else
+			local r = run_method(ctx, method)
+			runs[#runs + 1] = r
+			if r.code ~= 0 then failed = failed + 1 end
+			interrupted = r.interrupted
+		end
 	end
 	local sys, fields = keys_of(runs)
 	local csv, md = ctx.out .. "/compare.csv", ctx.out .. "/compare.md"
@@ -529,6 +544,11 @@ function M.main(args)
 	end
 	print(string.format("%d method%s, %d failed; wrote %s", #runs, #runs == 1 and "" or "s", failed,
 		table.concat(wrote, ", ")))
+	if interrupted then
+		io.stderr:write(string.format("eddy: compare: interrupted by signal %d; the tables hold the methods run so far\n",
+			interrupted))
+		return 128 + interrupted
+	end
 	return (failed > 0 or problems > 0) and 1 or 0
 end
 
