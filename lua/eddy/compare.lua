@@ -50,6 +50,12 @@ local function mkdir_p(dir)
 	if not (ok == true or ok == 0) then error("compare: cannot create folder '" .. dir .. "'", 0) end
 end
 
+-- One line on stderr, after whatever stdout holds (so the lines keep their order).
+local function note(msg)
+	io.stdout:flush()
+	io.stderr:write("eddy: compare: ", msg, "\n")
+end
+
 local function on_path(name)
 	local ok = os.execute("command -v " .. name .. " >/dev/null 2>&1")
 	return ok == true or ok == 0
@@ -194,6 +200,7 @@ local function run_method(ctx, method)
 		if not OUTPUT_SYSTEMS[name] then physics = physics + ms end
 	end
 	r.physics_ms = physics
+	io.stdout:flush()
 	if code == 0 then
 		io.stdout:write(string.format("  %.2f s, %d frames, %d steps, %.0f MB\n", wall, #frames, r.steps, r.peak_mb))
 	else
@@ -273,7 +280,7 @@ local function write_md(path, ctx, runs, sys, fields)
 		#ctx.set > 0 and (" with `--set " .. table.concat(ctx.set, " --set ") .. "`") or ""))
 	w(ctx.quick and "Quick: 6 frames each.\n\n" or "\n\n")
 	w("| method | status | wall (s) | frames | simulated (s) | steps | mean dt (ms) | min dt (ms) | max dt (ms) | ",
-	  "peak memory (MB) | particles | systems (ms) | systems without output (ms) |\n")
+	  "peak memory (MB) | particles | systems (ms) | physics (ms) |\n")
 	w("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n")
 	for _, r in ipairs(runs) do
 		local total = 0
@@ -284,6 +291,8 @@ local function write_md(path, ctx, runs, sys, fields)
 		  md_cell(r.dt_max and r.dt_max * 1000, "%.3g"), " | ", md_cell(r.peak_mb, "%.1f"), " | ",
 		  md_cell(r.particles), " | ", md_cell(total, "%.1f"), " | ", md_cell(r.physics_ms, "%.1f"), " |\n")
 	end
+	w("\nTimes are summed over the frames' stats lines; physics leaves out render_points, export_particles and ",
+	  "on_frame. Wall time and peak memory are the child process's (wait4).\n")
 	local function header(first)
 		w("| ", first)
 		for _, r in ipairs(runs) do w(" | ", md_cell(r.method)) end
@@ -513,31 +522,35 @@ function M.main(args)
 
 	local frames, fps, fw, fh = write_panels(ctx, runs)
 	if #frames == 0 then
-		io.stderr:write("eddy: compare: no method rendered a frame, no side-by-side frames (add eddy.render_points to the scene)\n")
+		note("no method rendered a frame, no side-by-side frames (add eddy.render_points to the scene)")
 	else
 		wrote[#wrote + 1] = string.format("%d side-by-side frames (%d x %d px) %s/frame_NNNN.png", #frames, fw, fh, ctx.out)
 		if not on_path("ffmpeg") then
-			io.stderr:write("eddy: compare: ffmpeg not found, no compare.mp4 (apt-get install ffmpeg)\n")
+			note("ffmpeg not found, no compare.mp4 (apt-get install ffmpeg)")
 		else
 			local mp4, err = write_video(ctx, frames, fps)
 			if mp4 then
 				wrote[#wrote + 1] = mp4
 			else
-				io.stderr:write("eddy: compare: compare.mp4: ", err, "\n")
+				note("compare.mp4: " .. err)
 				problems = problems + 1
 			end
 		end
 	end
 
-	if not on_path("gnuplot") then
-		io.stderr:write("eddy: compare: gnuplot not found, no charts (apt-get install gnuplot-nox)\n")
+	local any_frame = false
+	for _, r in ipairs(runs) do any_frame = any_frame or r.nframes > 0 end
+	if not any_frame then
+		note("no method ran a frame, no charts")
+	elseif not on_path("gnuplot") then
+		note("gnuplot not found, no charts (apt-get install gnuplot-nox)")
 	else
 		for _, chart in ipairs({ chart_field, chart_cost }) do
 			local png, err, fatal = chart(ctx, runs)
 			if png then
 				wrote[#wrote + 1] = png
 			else
-				io.stderr:write("eddy: compare: ", err, "\n")
+				note(err)
 				if fatal then problems = problems + 1 end
 			end
 		end
@@ -545,8 +558,7 @@ function M.main(args)
 	print(string.format("%d method%s, %d failed; wrote %s", #runs, #runs == 1 and "" or "s", failed,
 		table.concat(wrote, ", ")))
 	if interrupted then
-		io.stderr:write(string.format("eddy: compare: interrupted by signal %d; the tables hold the methods run so far\n",
-			interrupted))
+		note(string.format("interrupted by signal %d; the tables hold the methods run so far", interrupted))
 		return 128 + interrupted
 	end
 	return (failed > 0 or problems > 0) and 1 or 0
