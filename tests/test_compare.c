@@ -256,7 +256,9 @@ static void compare_all_ok_with_video(void)
 {
 	const char *b = test_build_dir();
 	char out[256], cmd[2048], buf[16384], path[512];
-	snprintf(out, sizeof out, "%s/t_compare_ok", b);
+	/* a folder name long enough that the runs' image paths are cut short in
+	 * their stats lines (63 characters): the frames are then found by number */
+	snprintf(out, sizeof out, "%s/t_compare_ok_in_a_folder_whose_name_is_longer_than_stats_texts", b);
 	snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s/bin && printf '#!/bin/sh\\nfor a; do last=$a; done\\n"
 	         "cat > \"$last\"\\n' > %s/bin/ffmpeg && chmod +x %s/bin/ffmpeg && PATH=%s/bin:$PATH %s/eddy compare "
 	         "tests/scenes/compare_tiny.lua --methods=flip,wcsph --quick --field top --set spacing=0.01 --out %s",
@@ -273,9 +275,16 @@ static void compare_all_ok_with_video(void)
 		snprintf(path, sizeof path, "%s/compare_top.png", out);
 		CHECKF(is_png(path), "%s is not a PNG", path);
 	}
-	/* the runs' own argv: the method first, then the user's --set */
 	snprintf(path, sizeof path, "%s/runs/flip/stats.jsonl", out);
 	CHECKF(file_has(path, "\"frame\":6,"), "%s: no sixth frame", path);
+	CHECKF(!file_has(path, "frame_0001.png"), "%s: the image path was not cut short; make the folder name longer", path);
+	for (int frame = 1; frame <= 6; ++frame) {
+		snprintf(path, sizeof path, "%s/frame_%04d.png", out, frame);
+		int w = 0, h = 0, comp = 0;
+		CHECKF(stbi_info(path, &w, &h, &comp) && w == 320 && h == 120, "%s: %d x %d, expected 320 x 120", path, w, h);
+	}
+	snprintf(path, sizeof path, "%s/compare.md", out);
+	CHECKF(!file_has(path, "failed"), "%s: a method failed", path);
 }
 
 /* Usage errors: one line, status 2, before anything runs; --help: status 0. */
