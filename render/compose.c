@@ -122,29 +122,36 @@ static int wrap(const char *caption, int width, char lines[][256], int max_lines
 			size_t used = 0;
 			while (*s) {
 				size_t w = strcspn(s, " ");
-				char trial[256];
-				snprintf(trial, sizeof trial, "%s%s%.*s", cur, used ? " " : "", (int)w, s);
+				/* trial = cur, a space, the word (each under 256 bytes) */
+				char trial[520];
+				size_t t = used;
+				memcpy(trial, cur, used);
+				if (used)
+					trial[t++] = ' ';
+				memcpy(trial + t, s, w);
+				trial[t + w] = '\0';
 				if (used && text_width(trial) > width)
 					break;
 				if (!used && text_width(trial) > width) {
 					/* a word wider than the panel: as many characters as fit */
 					size_t k = w > 1 ? w - 1 : 1;
 					for (; k > 1; --k) {
-						snprintf(trial, sizeof trial, "%.*s", (int)k, s);
+						trial[k] = '\0';
 						if (text_width(trial) <= width)
 							break;
 					}
-					snprintf(cur, sizeof cur, "%.*s", (int)k, s);
+					memcpy(cur, s, k);
+					cur[k] = '\0';
 					s += k;
 					break;
 				}
-				snprintf(cur, sizeof cur, "%s", trial);
+				copy_line(cur, trial);
 				used = strlen(cur);
 				s += w;
 				while (*s == ' ')
 					++s;
 			}
-			snprintf(lines[n++], 256, "%s", cur);
+			copy_line(lines[n++], cur);
 		} while (*s && n < max_lines);
 	}
 	return n;
