@@ -23,6 +23,8 @@ static const char usage_text[] =
 	"  plan   print the validated pipeline: systems in order, columns and their bytes\n"
 	"  check  preflight: time-step limits, particles starting in colliders, memory\n"
 	"  study  accuracy against wall time over a sweep: eddy study STUDY.lua [--out DIR] [--quick]\n"
+	"  compare one scene, several methods, side by side: eddy compare SCENE.lua\n"
+	"         [--methods wcsph,dfsph,flip] [--set K=V ...] [--out DIR] [--quick] [--field NAME]\n"
 	"\n"
 	"eddy COMMAND --help lists the options of one command. Options take their value\n"
 	"as the next argument or after '=' (--frames 3, --frames=3).\n"
@@ -340,9 +342,9 @@ int cli_parse(int argc, char **argv, cli_options *o, lua_State *L)
 		return -1;
 	}
 	if (!o->command)
-		return cli_fail(CLI_EXIT_USAGE, "no command: eddy run|plan|check|study SCENE.lua [options] (see eddy --help)");
+		return cli_fail(CLI_EXIT_USAGE, "no command: eddy run|plan|check|study|compare SCENE.lua [options] (see eddy --help)");
 	if (strcmp(o->command, "run") != 0 && strcmp(o->command, "plan") != 0 && strcmp(o->command, "check") != 0)
-		return cli_fail(CLI_EXIT_USAGE, "unknown command '%s': use run, plan, check or study (see eddy --help)",
+		return cli_fail(CLI_EXIT_USAGE, "unknown command '%s': use run, plan, check, study or compare (see eddy --help)",
 		                o->command);
 	if (!o->scene)
 		return cli_fail(CLI_EXIT_USAGE, "%s needs a scene file, e.g. eddy %s scenes/bounce.lua", o->command,

@@ -8,6 +8,8 @@
  *   eddy plan SCENE.lua [--dot] [--set K=V ...] [--safe]
  *   eddy check SCENE.lua [--set K=V ...] [--safe]
  *   eddy study STUDY.lua [--out DIR] [--quick] [--safe]
+ *   eddy compare SCENE.lua [--methods M1,M2,...] [--set K=V ...] [--out DIR]
+ *                          [--quick] [--field NAME] [--safe]
  *
  * Arguments: lua/cli_args.c; the run loop: lua/cli_run.c; stats lines:
  * lua/cli_stats.c; the manual: docs/eddy.1.
@@ -30,6 +32,7 @@
 
 #include "eddy_lua.h"
 #include "study.h" /* eddy study: lua/study.c */
+#include "compare.h" /* eddy compare: lua/compare.c */
 
 /* The scene's name without directory and extension, for out/<scene>. */
 static void scene_name(const char *path, char *out, size_t cap)
@@ -188,6 +191,9 @@ int main(int argc, char **argv)
 	/* eddy study has its own arguments and runs scenes as child processes */
 	if (argc > 1 && strcmp(argv[1], "study") == 0)
 		return finish_stdout(eddy_study_main(argc, argv));
+	/* so has eddy compare: one child eddy run per method */
+	if (argc > 1 && strcmp(argv[1], "compare") == 0)
+		return finish_stdout(eddy_compare_main(argc, argv));
 	lua_State *L = luaL_newstate();
 	if (!L)
 		return cli_fail(CLI_EXIT_RUN, "cannot create a Lua state (out of memory)");

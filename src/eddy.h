@@ -740,6 +740,19 @@ typedef struct eddy_collider_shape {
 /* The collider's current shape (its offset applied). */
 EDDY_API eddy_status eddy_collider_shape_of(const eddy_world *w, eddy_system_id id, eddy_collider_shape *out);
 
+/* Side-by-side panels (render/compose.c, for eddy compare): the PNG files
+ * images[0..panels-1] (NULL or "" for a panel with text only) in one row, each
+ * captioned top-left with captions[i] (lines separated by '\n', wrapped to the
+ * panel), written as one RGB PNG at path, whole or not at all (a temporary
+ * file renamed into place). panel_w and panel_h are each panel's size in px;
+ * 0 takes the largest image's (320 x 240 when none can be read). An image of
+ * another size is centred, and cropped if larger; one that cannot be read
+ * gets the reason in its caption. The panel size used goes to *out_w and
+ * *out_h (either may be NULL). Returns 0, or -1 with the reason in err. */
+EDDY_API int eddy_compose_panels(const char *path, int panels, const char *const *images,
+                                 const char *const *captions, int panel_w, int panel_h, int *out_w, int *out_h,
+                                 char *err, size_t cap);
+
 #ifdef __cplusplus
 }
 #endif

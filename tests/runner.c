@@ -82,6 +82,7 @@ int main(int argc, char **argv)
 		{"flip", suite_flip, false},
 		{"render", suite_render, false},
 		{"study", suite_study, false},
+		{"compare", suite_compare, false},
 		/* stress: scenes one step beyond the validated ones (scenes/stress/) */
 		{"stress_flip_flight", suite_stress_flip_flight, false},
 	};

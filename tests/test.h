@@ -69,5 +69,6 @@ void suite_render(void);
 
 /* accuracy/time study (eddy study) */
 void suite_study(void);
+void suite_compare(void); /* eddy compare */
 
 #endif

@@ -1,0 +1,487 @@
+/* SPDX-License-Identifier: MIT */
+/* `eddy compare SCENE.lua [--methods a,b,...] [--set K=V ...] [--out DIR]
+ * [--quick] [--field NAME] [--safe]`: one scene, several methods, side by side.
+ *
+ * The driver (lua/eddy/compare.lua) runs the scene once per method as a child
+ * `eddy run` (this very binary), one after another, and writes the tables,
+ * charts, side-by-side frames and video. C adds what Lua cannot do: the child
+ * process with its wall time and peak memory (wait4, as lua/study.c does for
+ * eddy study), a folder listing, and the panels (eddy_compose_panels,
+ * render/compose.c). Usage errors are checked here, before anything runs. */
+#define _POSIX_C_SOURCE 200809L
+#define _DEFAULT_SOURCE /* wait4, DIR, siginfo_t */
+#define _GNU_SOURCE     /* getopt_long */
+#include "compare.h"
+
+#include <lauxlib.h>
+#include <lualib.h>
+
+#include <dirent.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <getopt.h>
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <sys/time.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "eddy.h"
+
+static const char compare_usage[] =
+	"usage: eddy compare SCENE.lua [--methods M1,M2,...] [--set K=V ...] [--out DIR]\n"
+	"                    [--quick] [--field NAME] [--safe]\n"
+	"\n"
+	"Runs the scene once per method, one after another, each as a child process\n"
+	"  eddy run SCENE --set method=M [--set K=V ...] --out DIR/runs/M\n"
+	"           --stats DIR/runs/M/stats.jsonl --quiet [--frames 6] [--safe]\n"
+	"(the scene reads the method with eddy.param(\"method\", ...)), and writes into\n"
+	"DIR (default out/compare_<scene>):\n"
+	"  frame_NNNN.png     the methods' frames side by side, each panel stamped with\n"
+	"                     the method, the simulated time and the ms of that frame\n"
+	"  compare.mp4        those frames as a video (when ffmpeg is on PATH)\n"
+	"  compare.csv        one row per method: status, wall time, frames, steps, time\n"
+	"                     step, peak memory, particles, ms per system, and each\n"
+	"                     measurement of the stats at the end and at its worst\n"
+	"  compare.md         the same as Markdown tables\n"
+	"  compare_FIELD.png  the field against simulated time, one line per method\n"
+	"  compare_cost.png   wall time per simulated second, per method (gnuplot)\n"
+	"\n"
+	"options:\n"
+	"  --methods LIST  methods, comma-separated (default wcsph,dfsph,flip); names are\n"
+	"                  letters, digits, '_' and '-'\n"
+	"  --set K=V       a scene parameter for every run; repeatable, once per K\n"
+	"                  (not method: that is --methods)\n"
+	"  --out DIR       output folder\n"
+	"  --quick         a reduced run: 6 frames each (--frames 6); the scene keeps its\n"
+	"                  resolution\n"
+	"  --field NAME    the stats field charted against time (default max_speed)\n"
+	"  --safe          run every scene with eddy run --safe (sandboxed)\n"
+	"  -h, --help      this help\n"
+	"\n"
+	"Exit status: 0 every method ran; 1 a method failed (its row says why; the\n"
+	"others still run and every file is still written) or the comparison could not\n"
+	"be written; 2 bad usage; 128+N stopped by signal N (Ctrl-C: the running method\n"
+	"ends after its frame, no further method runs, what ran is written).\n";
+
+static double now_s(void)
+{
+	struct timespec t;
+	clock_gettime(CLOCK_MONOTONIC, &t);
+	return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+/* SIGINT or SIGTERM while a child runs: Ctrl-C reaches the child too (the
+ * terminal signals the whole process group), and the child finishes its frame
+ * and exits with 128 + the signal; this process only remembers it, stops
+ * running methods and writes what it has. A signal sent to this process
+ * alone (kill PID: SI_USER) is passed on to the child. */
+static volatile sig_atomic_t stop_signal;
+static volatile pid_t running_child;
+
+static void on_signal(int sig, siginfo_t *info, void *context)
+{
+	(void)context;
+	stop_signal = sig;
+	if (info && info->si_code == SI_USER && running_child > 0 && info->si_pid != running_child)
+		kill(running_child, sig);
+}
+
+static void catch_signals(bool on, struct sigaction old[2])
+{
+	static const int sigs[2] = {SIGINT, SIGTERM};
+	for (int i = 0; i < 2; ++i) {
+		if (on) {
+			struct sigaction sa;
+			memset(&sa, 0, sizeof sa);
+			sa.sa_sigaction = on_signal;
+			sa.sa_flags = SA_SIGINFO | SA_RESTART;
+			sigemptyset(&sa.sa_mask);
+			sigaction(sigs[i], &sa, &old[i]);
+		} else {
+			sigaction(sigs[i], &old[i], NULL);
+		}
+	}
+}
+
+/* spawn(argv, log_path) -> exit_code, wall_s, maxrss_kb, signal: the contract
+ * of lua/study.c's spawn, plus the SIGINT or SIGTERM this process received
+ * while the child ran (0: none). argv[1] is the program; its stdout and
+ * stderr go to log_path. A program that cannot start exits with 127; a child
+ * killed by a signal gives 128 + the signal. */
+static int l_spawn(lua_State *L)
+{
+	luaL_checktype(L, 1, LUA_TTABLE);
+	const char *log = luaL_checkstring(L, 2);
+	lua_Integer n = luaL_len(L, 1);
+	if (n < 1 || n > 4096)
+		return luaL_error(L, "spawn: argv must hold 1 to 4096 strings");
+	char **argv = lua_newuserdatauv(L, sizeof(char *) * (size_t)(n + 1), 0);
+	for (lua_Integer i = 1; i <= n; ++i) {
+		lua_geti(L, 1, i);
+		const char *s = lua_tostring(L, -1);
+		if (!s)
+			return luaL_error(L, "spawn: argv[%d] is not a string", (int)i);
+		argv[i - 1] = (char *)(uintptr_t)s; /* the table keeps it alive */
+		lua_pop(L, 1);
+	}
+	argv[n] = NULL;
+	int fd = open(log, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+	if (fd < 0)
+		return luaL_error(L, "spawn: cannot write '%s': %s", log, strerror(errno));
+	fflush(NULL);
+	struct sigaction old[2];
+	catch_signals(true, old);
+	double t0 = now_s();
+	pid_t pid = fork();
+	if (pid < 0) {
+		catch_signals(false, old);
+		close(fd);
+		return luaL_error(L, "spawn: fork failed: %s", strerror(errno));
+	}
+	if (pid == 0) {
+		catch_signals(false, old); /* the child handles its own (eddy run) */
+		dup2(fd, 1);
+		dup2(fd, 2);
+		execv(argv[0], argv);
+		_exit(127);
+	}
+	running_child = pid;
+	close(fd);
+	int status = 0;
+	struct rusage ru;
+	memset(&ru, 0, sizeof ru);
+	while (wait4(pid, &status, 0, &ru) < 0) {
+		if (errno != EINTR) {
+			running_child = 0;
+			catch_signals(false, old);
+			return luaL_error(L, "spawn: wait4 failed: %s", strerror(errno));
+		}
+	}
+	running_child = 0;
+	catch_signals(false, old);
+	double wall = now_s() - t0;
+	int code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+	lua_pushinteger(L, code);
+	lua_pushnumber(L, wall);
+	lua_pushinteger(L, (lua_Integer)ru.ru_maxrss); /* KiB on Linux */
+	lua_pushinteger(L, stop_signal);
+	return 4;
+}
+
+/* listdir(dir) -> { names } (no "." or ".."), or nil, message */
+static int l_listdir(lua_State *L)
+{
+	const char *dir = luaL_checkstring(L, 1);
+	DIR *d = opendir(dir);
+	if (!d) {
+		lua_pushnil(L);
+		lua_pushfstring(L, "%s: %s", dir, strerror(errno));
+		return 2;
+	}
+	lua_newtable(L);
+	lua_Integer n = 0;
+	struct dirent *e;
+	while ((e = readdir(d))) {
+		if (strcmp(e->d_name, ".") == 0 || strcmp(e->d_name, "..") == 0)
+			continue;
+		lua_pushstring(L, e->d_name);
+		lua_rawseti(L, -2, ++n);
+	}
+	closedir(d);
+	return 1;
+}
+
+/* compose(path, images, captions [, w, h]) -> w, h or nil, message.
+ * images[i] false or "" makes a panel of text only. */
+static int l_compose(lua_State *L)
+{
+	const char *path = luaL_checkstring(L, 1);
+	luaL_checktype(L, 2, LUA_TTABLE);
+	luaL_checktype(L, 3, LUA_TTABLE);
+	int w = (int)luaL_optinteger(L, 4, 0), h = (int)luaL_optinteger(L, 5, 0);
+	lua_Integer n = luaL_len(L, 3);
+	if (n < 1 || n > 64)
+		return luaL_error(L, "compose: 1 to 64 panels (got %d)", (int)n);
+	const char **images = lua_newuserdatauv(L, sizeof(char *) * (size_t)n, 0);
+	const char **captions = lua_newuserdatauv(L, sizeof(char *) * (size_t)n, 0);
+	for (lua_Integer i = 1; i <= n; ++i) {
+		lua_geti(L, 2, i); /* the tables keep the strings alive */
+		images[i - 1] = lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : NULL;
+		lua_pop(L, 1);
+		lua_geti(L, 3, i);
+		captions[i - 1] = lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "";
+		lua_pop(L, 1);
+	}
+	char err[512];
+	int ow = 0, oh = 0;
+	if (eddy_compose_panels(path, (int)n, images, captions, w, h, &ow, &oh, err, sizeof err) != 0) {
+		lua_pushnil(L);
+		lua_pushstring(L, err);
+		return 2;
+	}
+	lua_pushinteger(L, ow);
+	lua_pushinteger(L, oh);
+	return 2;
+}
+
+static void self_exe(char *out, size_t cap)
+{
+	ssize_t len = readlink("/proc/self/exe", out, cap - 1);
+	out[len > 0 ? (size_t)len : 0] = '\0';
+}
+
+static int error_message(lua_State *L)
+{
+	const char *msg = lua_tostring(L, 1);
+	lua_pushstring(L, msg ? msg : "(error object is not a string)");
+	return 1;
+}
+
+enum { OPT_METHODS = 256, OPT_SET, OPT_OUT, OPT_QUICK, OPT_FIELD, OPT_SAFE };
+
+static const struct option compare_options[] = {
+	{"methods", required_argument, NULL, OPT_METHODS},
+	{"set", required_argument, NULL, OPT_SET},
+	{"out", required_argument, NULL, OPT_OUT},
+	{"quick", no_argument, NULL, OPT_QUICK},
+	{"field", required_argument, NULL, OPT_FIELD},
+	{"safe", no_argument, NULL, OPT_SAFE},
+	{"help", no_argument, NULL, 'h'},
+	{NULL, 0, NULL, 0},
+};
+
+enum { MAX_METHODS = 16, MAX_SETS = 256 };
+
+typedef struct compare_args {
+	const char *scene, *out, *field;
+	char methods_buf[1024];
+	const char *methods[MAX_METHODS];
+	int nmethods;
+	const char *sets[MAX_SETS];
+	int nsets;
+	bool quick, safe, help;
+} compare_args;
+
+static int usage_error(const char *fmt, ...)
+#if defined(__GNUC__)
+	__attribute__((format(printf, 1, 2)))
+#endif
+	;
+
+/* One line "eddy: compare: ..." on stderr; returns 2, the usage status. */
+static int usage_error(const char *fmt, ...)
+{
+	va_list ap;
+	va_start(ap, fmt);
+	fputs("eddy: compare: ", stderr);
+	vfprintf(stderr, fmt, ap);
+	fputc('\n', stderr);
+	va_end(ap);
+	return 2;
+}
+
+static bool is_name(const char *s, bool dash)
+{
+	if (!*s)
+		return false;
+	for (; *s; ++s) {
+		unsigned char c = (unsigned char)*s;
+		if (!((c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' ||
+		      (dash && c == '-')))
+			return false;
+	}
+	return true;
+}
+
+/* --methods a,b,c: names of letters, digits, '_' and '-' (they name folders
+ * and go into --set method=), each once. */
+static int parse_methods(const char *list, compare_args *a)
+{
+	if (snprintf(a->methods_buf, sizeof a->methods_buf, "%s", list) >= (int)sizeof a->methods_buf)
+		return usage_error("--methods: the list is too long ('%.40s...')", list);
+	a->nmethods = 0;
+	char *save = NULL;
+	if (!list[0] || list[0] == ',' || list[strlen(list) - 1] == ',' || strstr(list, ",,"))
+		return usage_error("--methods expects names separated by commas, e.g. wcsph,dfsph,flip (got '%s')", list);
+	for (char *m = strtok_r(a->methods_buf, ",", &save); m; m = strtok_r(NULL, ",", &save)) {
+		if (!is_name(m, true))
+			return usage_error("--methods: '%s' is not a method name (letters, digits, '_' and '-' only)", m);
+		for (int i = 0; i < a->nmethods; ++i)
+			if (strcmp(a->methods[i], m) == 0)
+				return usage_error("--methods: '%s' is given twice", m);
+		if (a->nmethods == MAX_METHODS)
+			return usage_error("--methods: more than 16 methods ('%s')", list);
+		a->methods[a->nmethods++] = m;
+	}
+	return 0;
+}
+
+static int parse_set(const char *arg, compare_args *a)
+{
+	const char *eq = strchr(arg, '=');
+	if (!eq || eq == arg)
+		return usage_error("--set expects KEY=VALUE (got '%s')", arg);
+	const int klen = (int)(eq - arg);
+	if (klen == 6 && strncmp(arg, "method", 6) == 0)
+		return usage_error("--set %s: the method is chosen by --methods (e.g. --methods %s)", arg, eq + 1);
+	for (int i = 0; i < a->nsets; ++i)
+		if (strncmp(a->sets[i], arg, (size_t)klen) == 0 && a->sets[i][klen] == '=')
+			return usage_error("--set %.*s given twice ('%s' and '%s'); give each parameter once", klen, arg, a->sets[i], arg);
+	if (a->nsets == MAX_SETS)
+		return usage_error("more than 256 --set options");
+	a->sets[a->nsets++] = arg;
+	return 0;
+}
+
+/* "--name" of an argument "--name=value", for messages. */
+static const char *option_text(const char *arg, char name[128])
+{
+	snprintf(name, 128, "%.*s", (int)strcspn(arg ? arg : "?", "="), arg ? arg : "?");
+	return name;
+}
+
+/* getopt_long over argv[1..] ("compare" stands in for the program name). */
+static int parse_compare_args(int argc, char **argv, compare_args *a)
+{
+	memset(a, 0, sizeof *a);
+	a->field = "max_speed";
+	int code = parse_methods("wcsph,dfsph,flip", a);
+	opterr = 0;
+	optind = 1;
+	int opt;
+	char name[128];
+	while (code == 0 && (opt = getopt_long(argc - 1, argv + 1, ":h", compare_options, NULL)) != -1) {
+		const char *arg = argv[optind]; /* argv + 1's optind - 1 */
+		switch (opt) {
+		case OPT_METHODS: code = parse_methods(optarg, a); break;
+		case OPT_SET: code = parse_set(optarg, a); break;
+		case OPT_OUT:
+			if (!optarg[0])
+				code = usage_error("--out must not be empty");
+			a->out = optarg;
+			break;
+		case OPT_FIELD:
+			if (!is_name(optarg, false))
+				code = usage_error("--field: '%s' is not a stats field name (letters, digits and '_')", optarg);
+			a->field = optarg;
+			break;
+		case OPT_QUICK: a->quick = true; break;
+		case OPT_SAFE: a->safe = true; break;
+		case 'h': a->help = true; break;
+		case ':': code = usage_error("%s needs a value (see eddy compare --help)", option_text(arg, name)); break;
+		default:
+			if (optopt == OPT_QUICK || optopt == OPT_SAFE || optopt == 'h')
+				code = usage_error("option '%s' takes no value", option_text(arg, name));
+			else
+				code = usage_error("unknown option '%s' (see eddy compare --help)", option_text(arg, name));
+		}
+	}
+	if (code)
+		return code;
+	for (int i = optind + 1; i < argc; ++i) {
+		if (a->scene)
+			return usage_error("unexpected argument '%s' (see eddy compare --help)", argv[i]);
+		a->scene = argv[i];
+	}
+	return 0;
+}
+
+int eddy_compare_main(int argc, char **argv)
+{
+	compare_args a;
+	int usage = parse_compare_args(argc, argv, &a);
+	if (usage)
+		return usage;
+	if (a.help) {
+		fputs(compare_usage, stdout);
+		return 0;
+	}
+	if (!a.scene)
+		return usage_error("needs a scene file, e.g. eddy compare scenes/dam_break.lua --methods wcsph,flip");
+	lua_State *L = luaL_newstate();
+	if (!L) {
+		fputs("eddy: cannot create a Lua state (out of memory)\n", stderr);
+		return 1;
+	}
+	luaL_openlibs(L);
+	char exe[2048], dir[2048];
+	self_exe(exe, sizeof exe);
+	snprintf(dir, sizeof dir, "%s", exe);
+	char *cut = strrchr(dir, '/');
+	if (cut)
+		*cut = '\0';
+	/* lua/eddy/compare.lua of the source tree (build/eddy, build/asan/eddy)
+	 * or of an installed prefix (bin/eddy -> share/lua/5.4), as eddy study */
+	lua_getglobal(L, "package");
+	lua_getfield(L, -1, "path");
+	lua_pushfstring(L, "%s/../lua/?.lua;%s/../../lua/?.lua;%s/../share/lua/5.4/?.lua;%s", dir, dir, dir,
+	                lua_tostring(L, -1));
+	lua_setfield(L, -3, "path");
+	lua_pop(L, 2);
+
+	int code = 1;
+	lua_pushcfunction(L, error_message);
+	int handler = lua_gettop(L);
+	lua_getglobal(L, "require");
+	lua_pushstring(L, "eddy.compare");
+	if (lua_pcall(L, 1, 1, handler) != LUA_OK) {
+		const char *msg = lua_tostring(L, -1);
+		if (msg && strncmp(msg, "module 'eddy.", 13) == 0 && strstr(msg, "not found"))
+			fprintf(stderr, "eddy: compare: its Lua driver eddy/compare.lua (or eddy/study.lua) is not installed "
+			                "(looked in %s/../lua, %s/../../lua and %s/../share/lua/5.4)\n", dir, dir, dir);
+		else
+			fprintf(stderr, "eddy: %.*s\n", (int)strcspn(msg ? msg : "?", "\n"), msg ? msg : "?");
+		goto done;
+	}
+	lua_getfield(L, -1, "main");
+	lua_newtable(L);
+	lua_pushstring(L, a.scene);
+	lua_setfield(L, -2, "scene");
+	if (a.out) {
+		lua_pushstring(L, a.out);
+		lua_setfield(L, -2, "out");
+	}
+	lua_pushstring(L, a.field);
+	lua_setfield(L, -2, "field");
+	lua_createtable(L, a.nmethods, 0);
+	for (int i = 0; i < a.nmethods; ++i) {
+		lua_pushstring(L, a.methods[i]);
+		lua_rawseti(L, -2, i + 1);
+	}
+	lua_setfield(L, -2, "methods");
+	lua_createtable(L, a.nsets, 0);
+	for (int i = 0; i < a.nsets; ++i) {
+		lua_pushstring(L, a.sets[i]);
+		lua_rawseti(L, -2, i + 1);
+	}
+	lua_setfield(L, -2, "set");
+	lua_pushboolean(L, a.quick);
+	lua_setfield(L, -2, "quick");
+	lua_pushboolean(L, a.safe);
+	lua_setfield(L, -2, "safe");
+	lua_pushstring(L, exe);
+	lua_setfield(L, -2, "exe");
+	lua_pushcfunction(L, l_spawn);
+	lua_setfield(L, -2, "spawn");
+	lua_pushcfunction(L, l_listdir);
+	lua_setfield(L, -2, "listdir");
+	lua_pushcfunction(L, l_compose);
+	lua_setfield(L, -2, "compose");
+	if (lua_pcall(L, 1, 1, handler) != LUA_OK) {
+		const char *msg = lua_tostring(L, -1);
+		fprintf(stderr, "eddy: %.*s\n", (int)strcspn(msg ? msg : "?", "\n"), msg ? msg : "?");
+		goto done;
+	}
+	code = (int)lua_tointeger(L, -1);
+done:
+	lua_close(L);
+	return code;
+}
