@@ -10,6 +10,7 @@
 #define _POSIX_C_SOURCE 200809L
 #define _DEFAULT_SOURCE /* wait4 */
 #define _GNU_SOURCE     /* getopt_long */
+#include "spawn.h"
 #include "study.h"
 
 #include <lauxlib.h>
@@ -49,66 +50,6 @@ static const char study_usage[] =
 	"Shipped studies: scenes/studies/*.lua (the format is described in\n"
 	"lua/eddy/study.lua).\n";
 
-static double now_s(void)
-{
-	struct timespec t;
-	clock_gettime(CLOCK_MONOTONIC, &t);
-	return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
-
-/* spawn(argv, log_path) -> exit_code, wall_s, maxrss_kb
- * argv[1] is the program; its stdout and stderr go to log_path. A program
- * that cannot start exits with 127 (as a shell's would). exit_code is
- * 128 + signal for a child killed by a signal. */
-static int l_spawn(lua_State *L)
-{
-	luaL_checktype(L, 1, LUA_TTABLE);
-	const char *log = luaL_checkstring(L, 2);
-	lua_Integer n = luaL_len(L, 1);
-	if (n < 1 || n > 4096)
-		return luaL_error(L, "spawn: argv must hold 1 to 4096 strings");
-	/* argv strings stay alive in the table on the stack while the child starts */
-	char **argv = lua_newuserdatauv(L, sizeof(char *) * (size_t)(n + 1), 0);
-	for (lua_Integer i = 1; i <= n; ++i) {
-		lua_geti(L, 1, i);
-		const char *s = lua_tostring(L, -1);
-		if (!s)
-			return luaL_error(L, "spawn: argv[%d] is not a string", (int)i);
-		argv[i - 1] = (char *)(uintptr_t)s; /* execv's prototype is not const-correct */
-		lua_pop(L, 1);
-	}
-	argv[n] = NULL;
-	int fd = open(log, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-	if (fd < 0)
-		return luaL_error(L, "spawn: cannot write '%s': %s", log, strerror(errno));
-	fflush(NULL);
-	double t0 = now_s();
-	pid_t pid = fork();
-	if (pid < 0) {
-		close(fd);
-		return luaL_error(L, "spawn: fork failed: %s", strerror(errno));
-	}
-	if (pid == 0) {
-		dup2(fd, 1);
-		dup2(fd, 2);
-		execv(argv[0], argv);
-		_exit(127);
-	}
-	close(fd);
-	int status = 0;
-	struct rusage ru;
-	memset(&ru, 0, sizeof ru);
-	while (wait4(pid, &status, 0, &ru) < 0) {
-		if (errno != EINTR)
-			return luaL_error(L, "spawn: wait4 failed: %s", strerror(errno));
-	}
-	double wall = now_s() - t0;
-	int code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
-	lua_pushinteger(L, code);
-	lua_pushnumber(L, wall);
-	lua_pushinteger(L, (lua_Integer)ru.ru_maxrss); /* KiB on Linux */
-	return 3;
-}
 
 /* The path of the running eddy binary, so children run the same build. */
 static void self_exe(char *out, size_t cap)
@@ -247,7 +188,7 @@ int eddy_study_main(int argc, char **argv)
 	lua_setfield(L, -2, "safe");
 	lua_pushstring(L, exe);
 	lua_setfield(L, -2, "exe");
-	lua_pushcfunction(L, l_spawn);
+	lua_pushcfunction(L, eddy_cli_spawn);
 	lua_setfield(L, -2, "spawn");
 	if (lua_pcall(L, 1, 1, handler) != LUA_OK) {
 		report(lua_tostring(L, -1), dir); /* the driver's are "file:line: message" */

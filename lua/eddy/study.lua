@@ -488,7 +488,11 @@ local function run_one(ctx, s, m, params, index, quick)
 		argv[#argv + 1] = "--duration"
 		argv[#argv + 1] = fmt(duration)
 	end
-	local code, wall, rss = ctx.spawn(argv, log)
+	local code, wall, rss, signal = ctx.spawn(argv, log)
+	if signal ~= 0 then
+		-- Ctrl-C reached the run too: stop the sweep rather than time the rest
+		error(string.format("study: stopped by signal %d during %s (%s)", signal, m.name, log), 0)
+	end
 	local frames = read_stats(stats)
 	local row = { method = m.name, scene = m.scene, params = params, status = code, wall_s = wall,
 	              peak_mb = rss / 1024, frames = #frames, systems = {}, set = set }

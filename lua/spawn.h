@@ -1,0 +1,16 @@
+/* SPDX-License-Identifier: MIT */
+/* Child runs for the commands that sweep scenes (lua/spawn.c). */
+#ifndef EDDY_SPAWN_H
+#define EDDY_SPAWN_H
+
+#include <lua.h>
+
+/* spawn(argv, log_path) -> exit_code, wall_s, maxrss_kb, signal
+ * argv[1] is the program; its stdout and stderr go to log_path. A program
+ * that cannot start exits with 127 (as a shell's would); a child killed by a
+ * signal gives 128 + the signal. signal is the SIGINT or SIGTERM this process
+ * received while the child ran (0: none): Ctrl-C reaches the child too, which
+ * finishes its frame, and the driver stops running further configurations. */
+int eddy_cli_spawn(lua_State *L);
+
+#endif
