@@ -169,16 +169,60 @@ static inline eddy_vec3 flip_velocity_at(const flip_grid *g, const float *u, con
 	return flip_velocity_axes(g, u, v, wv, &a);
 }
 
+/* ---- fractional solid faces ----------------------------------------------
+ * Batty, Bertails & Bridson 2007, "A fast variational framework for accurate
+ * solid-fluid coupling": every face carries the fraction of its area open to
+ * the fluid, from the colliders' signed distance at its four corners (grid
+ * nodes; the union of the solids is the minimum distance), and the normal
+ * velocity of the collider covering it. Computed by flip_boundary (cell types,
+ * closed faces) and again by flip_pressure (weights, solid flux) from the same
+ * collider offsets, so both see the same geometry within a step. */
+typedef struct flip_solid {
+	bool any;      /* a collider is in the pipeline; if not, the arrays are NULL */
+	float *wt[3];  /* per face grid: open fraction in [0, 1]; 0 on the domain's sides */
+	float *vel[3]; /* per face grid: m/s, normal velocity of the covering collider */
+	float *open;   /* per cell: open volume fraction, clamp(1/2 + phi_s(centre) / dx, 0, 1) */
+	float *dist;   /* per cell: m, phi_s at the centre (signed distance to the nearest solid) */
+} flip_solid;
+
+/* Fills s from the colliders (margin m inflates them); arrays from the
+ * world's arena. Returns false when out of memory. */
+bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, flip_solid *s);
+/* The margin of the pipeline's flip_boundary; false if it has none (then
+ * flip_pressure sees no solids, as flip_boundary marks none). */
+bool eddy__flip_boundary_margin(const eddy_world *w, float *margin);
+
+/* Open fraction of face `axis` (i, j, k): 1 without colliders, 0 on the sides. */
+static inline float flip_face_weight(const eddy_world *w, const flip_solid *s, int axis, size_t f, int i, int j,
+                                     int k)
+{
+	const int c[3] = {i, j, k}, n[3] = {w->nx, w->ny, w->nz};
+	if (c[axis] == 0 || c[axis] == n[axis])
+		return 0.0f;
+	return s->any ? s->wt[axis][f] : 1.0f;
+}
+
+/* Particles per cell of the engine's seeding (2 x 2 x 2, Zhu & Bridson):
+ * flip_reseed's bounds and the volume correction's rest density refer to it. */
+enum { FLIP_SEED_PER_CELL = 8 };
+
 /* ---- the Poisson system ---------------------------------------------------
  * Rows are fluid cells in cell-index order, so a row's -x, -y, -z neighbours
  * come before it (what MIC(0) and the upper-triangle CSC for CHOLMOD need).
- * Off-diagonals are -1 between linked rows; nb[6*r + d] is the row across
- * side d (0 -x, 1 +x, 2 -y, 3 +y, 4 -z, 5 +z) or -1. */
+ * nb[6*r + d] is the row across side d (0 -x, 1 +x, 2 -y, 3 +y, 4 -z, 5 +z)
+ * or -1; the off-diagonal entry to it is -off[6*r + d] (the open fraction of
+ * the face between them, > 0 for a link; symmetric), or -1 when off is NULL. */
 typedef struct flip_matrix {
 	int n;
 	double *diag; /* n */
 	int *nb;      /* 6 n */
+	double *off;  /* 6 n, or NULL for all 1 */
 } flip_matrix;
+
+static inline double flip_off(const flip_matrix *A, int r, int d)
+{
+	return A->off ? A->off[6 * r + d] : 1.0;
+}
 
 /* MIC(0)-PCG (flip_pcg.c). Solves A x = b to max|r| <= tol max|b|; x starts
  * at 0. Scratch comes from the world's arena. Returns false if it did not

@@ -3,7 +3,9 @@
  * (Bridson, "Fluid Simulation for Computer Graphics", 2nd ed., ch. 5.4:
  * modified incomplete Cholesky with tau = 0.97 and the safety factor
  * sigma = 0.25). Every scalar is double: single-precision dot products stall
- * the iteration on large grids (docs/validation.md, hard case 14). Loops are
+ * the iteration on large grids (docs/validation.md, hard case 14). Off-diagonal
+ * entries are -a with a the open fraction of the face (flip.h), so the
+ * factorisation uses Bridson's general form, not the unit-coefficient one. Loops are
  * serial, so the result does not depend on the thread count. */
 #include "flip.h"
 
@@ -18,7 +20,7 @@ static void matvec(const flip_matrix *A, const double *s, double *q)
 		double t = A->diag[i] * s[i];
 		for (int d = 0; d < 6; ++d)
 			if (nb[d] >= 0)
-				t -= s[nb[d]];
+				t -= flip_off(A, i, d) * s[nb[d]];
 		q[i] = t;
 	}
 }
@@ -35,9 +37,12 @@ static void mic0(const flip_matrix *A, double *precon)
 			const int q = nb[d];
 			if (q < 0)
 				continue;
+			/* Bridson's MIC(0) with entries -a: (a_qi p_q)^2 + tau a_qi (a_q,o1 + a_q,o2) p_q^2 */
 			const int *nq = &A->nb[6 * q];
-			const double cnt = (nq[other[d][0]] >= 0) + (nq[other[d][1]] >= 0);
-			e -= precon[q] * precon[q] * (1.0 + tau * cnt);
+			const double a = flip_off(A, i, d);
+			const double o = (nq[other[d][0]] >= 0 ? flip_off(A, q, other[d][0]) : 0.0) +
+			                 (nq[other[d][1]] >= 0 ? flip_off(A, q, other[d][1]) : 0.0);
+			e -= precon[q] * precon[q] * (a * a + tau * a * o);
 		}
 		if (e < sigma * A->diag[i])
 			e = A->diag[i];
@@ -52,7 +57,7 @@ static void apply(const flip_matrix *A, const double *precon, const double *r, d
 		double t = r[i];
 		for (int d = 0; d < 6; d += 2)
 			if (nb[d] >= 0)
-				t += precon[nb[d]] * y[nb[d]];
+				t += flip_off(A, i, d) * precon[nb[d]] * y[nb[d]];
 		y[i] = t * precon[i];
 	}
 	for (int i = A->n; i-- > 0;) {
@@ -60,7 +65,7 @@ static void apply(const flip_matrix *A, const double *precon, const double *r, d
 		double t = 0;
 		for (int d = 1; d < 6; d += 2)
 			if (nb[d] >= 0)
-				t += z[nb[d]];
+				t += flip_off(A, i, d) * z[nb[d]];
 		z[i] = (y[i] + precon[i] * t) * precon[i];
 	}
 }

@@ -39,7 +39,6 @@ static long cell_of(const eddy_world *w, float x, float y, float z)
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
-	(void)ctx;
 	const reseed *rs = s->data;
 	const int nx = w->nx, ny = w->ny, nz = w->nz;
 	const size_t nc = (size_t)nx * ny * nz;
@@ -62,6 +61,13 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			eddy_world_remove_particle(w, i);
 		}
 	}
+	/* the solids now (after the colliders moved): a cut cell's fair share is
+	 * min_per_cell times its open fraction, and no particle is placed inside */
+	float margin = 0;
+	flip_solid sd;
+	memset(&sd, 0, sizeof sd);
+	if (eddy__flip_boundary_margin(w, &margin) && !eddy__flip_solid_faces(w, ctx->dt, margin, &sd))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_reseed: out of memory");
 	const double h = w->def.cell_size;
 	const flip_grid grid = flip_grid_of(w);
 	const eddy_vec3 o = w->def.bounds_min;
@@ -69,8 +75,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		for (int j = 1; j < ny - 1; ++j)
 			for (int i = 1; i < nx - 1; ++i) {
 				const size_t c = flip_cell(w, i, j, k);
-				if (type[c] != EDDY_CELL_FLUID || count[c] >= rs->def.min_per_cell)
-					continue;
+				const double share = sd.any ? (double)sd.open[c] : 1.0;
+				if (type[c] != EDDY_CELL_FLUID || share < 1 || count[c] >= rs->def.min_per_cell)
+					continue; /* cut cells are skipped: their open part is uncertain to a cell */
 				const size_t sx = 1, sy = (size_t)nx, sz = (size_t)nx * ny;
 				if (type[c - sx] == EDDY_CELL_AIR || type[c + sx] == EDDY_CELL_AIR || type[c - sy] == EDDY_CELL_AIR ||
 				    type[c + sy] == EDDY_CELL_AIR || type[c - sz] == EDDY_CELL_AIR || type[c + sz] == EDDY_CELL_AIR)
