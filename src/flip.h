@@ -11,6 +11,8 @@
 
 #include "systems.h"
 
+#include <string.h>
+
 static inline size_t flip_cell(const eddy_world *w, int i, int j, int k)
 {
 	return (size_t)i + (size_t)w->nx * ((size_t)j + (size_t)w->ny * (size_t)k);
@@ -200,6 +202,32 @@ static inline float flip_face_weight(const eddy_world *w, const flip_solid *s, i
 	if (c[axis] == 0 || c[axis] == n[axis])
 		return 0.0f;
 	return s->any ? s->wt[axis][f] : 1.0f;
+}
+
+/* Particle density per cell (nc floats): every particle's trilinear weights
+ * at the cell centres around it (constant extension at the domain's sides,
+ * so a cell at a wall sees the full rest density). Sum = particle count. */
+static inline void flip_particle_density(const eddy_world *w, const float *px, const float *py, const float *pz,
+                                         float *dens)
+{
+	const flip_grid g = flip_grid_of(w);
+	const size_t sy = (size_t)w->nx, sz = (size_t)w->nx * (size_t)w->ny;
+	memset(dens, 0, sz * (size_t)w->nz * sizeof *dens);
+	for (size_t p = 0; p < w->n; ++p) {
+		const flip_axes ax = flip_axes_at(&g, (eddy_vec3){px[p], py[p], pz[p]});
+		const size_t i0 = (size_t)ax.cx.i0, i1 = (size_t)ax.cx.i1;
+		const size_t j0 = (size_t)ax.cy.i0 * sy, j1 = (size_t)ax.cy.i1 * sy;
+		const size_t k0 = (size_t)ax.cz.i0 * sz, k1 = (size_t)ax.cz.i1 * sz;
+		const float wx = ax.cx.w1, wy = ax.cy.w1, wz = ax.cz.w1;
+		dens[k0 + j0 + i0] += (1 - wx) * (1 - wy) * (1 - wz);
+		dens[k0 + j0 + i1] += wx * (1 - wy) * (1 - wz);
+		dens[k0 + j1 + i0] += (1 - wx) * wy * (1 - wz);
+		dens[k0 + j1 + i1] += wx * wy * (1 - wz);
+		dens[k1 + j0 + i0] += (1 - wx) * (1 - wy) * wz;
+		dens[k1 + j0 + i1] += wx * (1 - wy) * wz;
+		dens[k1 + j1 + i0] += (1 - wx) * wy * wz;
+		dens[k1 + j1 + i1] += wx * wy * wz;
+	}
 }
 
 /* Particles per cell of the engine's seeding (2 x 2 x 2, Zhu & Bridson):

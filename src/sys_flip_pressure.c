@@ -248,31 +248,14 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	 * or spread (see the header) */
 	double dens_max = 0, dens_min = INFINITY;
 	int corrected = 0;
-	{
+	if (sd.any) { /* only near solids (VC_REACH): nothing to do without them */
 		float *dens = eddy__arena_alloc(&w->arena, nc * sizeof *dens);
 		if (!dens)
 			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory");
-		memset(dens, 0, nc * sizeof *dens);
-		const flip_grid g = flip_grid_of(w);
-		const float *px = eddy__col(w, COL_X_), *py = eddy__col(w, COL_Y_), *pz = eddy__col(w, COL_Z_);
-		for (size_t p = 0; p < w->n; ++p) {
-			const flip_axes ax = flip_axes_at(&g, (eddy_vec3){px[p], py[p], pz[p]});
-			const size_t i0 = (size_t)ax.cx.i0, i1 = (size_t)ax.cx.i1, sy = (size_t)nx, sz = (size_t)nx * ny;
-			const size_t j0 = (size_t)ax.cy.i0 * sy, j1 = (size_t)ax.cy.i1 * sy;
-			const size_t k0 = (size_t)ax.cz.i0 * sz, k1 = (size_t)ax.cz.i1 * sz;
-			const float wx = ax.cx.w1, wy = ax.cy.w1, wz = ax.cz.w1;
-			dens[k0 + j0 + i0] += (1 - wx) * (1 - wy) * (1 - wz);
-			dens[k0 + j0 + i1] += wx * (1 - wy) * (1 - wz);
-			dens[k0 + j1 + i0] += (1 - wx) * wy * (1 - wz);
-			dens[k0 + j1 + i1] += wx * wy * (1 - wz);
-			dens[k1 + j0 + i0] += (1 - wx) * (1 - wy) * wz;
-			dens[k1 + j0 + i1] += wx * (1 - wy) * wz;
-			dens[k1 + j1 + i0] += (1 - wx) * wy * wz;
-			dens[k1 + j1 + i1] += wx * wy * wz;
-		}
+		flip_particle_density(w, eddy__col(w, COL_X_), eddy__col(w, COL_Y_), eddy__col(w, COL_Z_), dens);
 		for (int r = 0; r < n; ++r) {
 			const int c = cell_of[r];
-			if (!sd.any || has_air[r] || sd.open[c] < 1 || sd.dist[c] > VC_REACH * h || type[c] != EDDY_CELL_FLUID)
+			if (has_air[r] || sd.open[c] < 1 || sd.dist[c] > VC_REACH * h || type[c] != EDDY_CELL_FLUID)
 				continue;
 			/* the kernel reaches one cell: every face neighbour must be an
 			 * interior fluid cell too, not cut, not air */

@@ -283,9 +283,120 @@ static void still_sphere_keeps_level(void)
 	CHECK(r.worst_inside > -0.1);
 }
 
+
+/* ---- volume with reseeding: a drop into a pool, a dam break ----------------- */
+
+typedef struct volume_result {
+	double worst, final; /* max |V - V0| / V0 over the frames, and at the end */
+	size_t n0, n1;
+	double ms;
+} volume_result;
+
+/* The standard pipeline in a closed tank (the domain's sides), reseeding on;
+ * a box collider as the tank when tank_collider (the solids' code path). */
+static eddy_world *volume_world(double h, eddy_vec3 hi, bool reseed)
+{
+	eddy_world_def wd = eddy_default_world_def();
+	wd.bounds_max = hi;
+	wd.cell_size = h;
+	wd.cfl = 1;
+	wd.dt_max = 1.0 / 60;
+	wd.fps = 30;
+	eddy_world *w = eddy_create_world(&wd, NULL, 0);
+	CHECK(w != NULL);
+	if (!w)
+		return NULL;
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_flip_p2g_def p = eddy_default_flip_p2g_def();
+	eddy_add_flip_p2g(w, &p);
+	eddy_flip_boundary_def b = eddy_default_flip_boundary_def();
+	eddy_add_flip_boundary(w, &b);
+	eddy_flip_surface_def sf = eddy_default_flip_surface_def();
+	eddy_add_flip_surface(w, &sf);
+	eddy_flip_pressure_def pr = eddy_default_flip_pressure_def();
+	eddy_add_flip_pressure(w, &pr);
+	eddy_flip_extrapolate_def ex = eddy_default_flip_extrapolate_def();
+	eddy_add_flip_extrapolate(w, &ex);
+	eddy_flip_g2p_def gp = eddy_default_flip_g2p_def();
+	eddy_add_flip_g2p(w, &gp);
+	eddy_flip_advect_def ad = eddy_default_flip_advect_def();
+	eddy_add_flip_advect(w, &ad);
+	if (reseed) {
+		eddy_flip_reseed_def rs = eddy_default_flip_reseed_def();
+		CHECK(eddy_system_valid(w, eddy_add_flip_reseed(w, &rs)));
+	}
+	return w;
+}
+
+static void run_volume(eddy_world *w, double v0, int frames, volume_result *r)
+{
+	r->n0 = eddy_world_particle_count(w);
+	r->worst = 0;
+	const double t0 = now_ms();
+	int f = 0;
+	for (; f < frames; ++f) {
+		if (!step_frames(w, 1))
+			break;
+		eddy_frame_stats fs;
+		eddy_world_frame_stats(w, &fs);
+		r->final = (fs.volume - v0) / v0;
+		r->worst = fmax(r->worst, fabs(r->final));
+		if (getenv("FS_TRACE"))
+			printf("      t %.2f volume %+.2f%% n %zu\n", eddy_world_time(w), 100 * r->final,
+			       eddy_world_particle_count(w));
+	}
+	r->ms = now_ms() - t0;
+	CHECK(f == frames);
+	r->n1 = eddy_world_particle_count(w);
+}
+
+/* A 5 cm cube of water falls 10 cm into a 8 cm pool (tank 0.2 x 0.3 x 0.1 m,
+ * dx = 1.25 cm), 2 s. */
+static void drop_into_pool_volume(void)
+{
+	const double h = 0.0125;
+	for (int rs = 0; rs < 2; ++rs) {
+		eddy_world *w = volume_world(h, (eddy_vec3){0.2f, 0.3f, 0.1f}, rs == 1);
+		if (!w)
+			return;
+		fill(w, h, (eddy_vec3){0, 0, 0}, (eddy_vec3){0.2f, 0.08f, 0.1f});
+		fill(w, h, (eddy_vec3){0.075f, 0.175f, 0.025f}, (eddy_vec3){0.125f, 0.225f, 0.075f});
+		volume_result r;
+		run_volume(w, 0.2 * 0.08 * 0.1 + 0.05 * 0.05 * 0.05, 60, &r);
+		printf("    drop into pool, reseed %s: max |V - V0| / V0 = %.2f%%, at 2 s %+.2f%%; particles %zu -> %zu "
+		       "(%+.1f%%); %.1f s\n",
+		       rs ? "on" : "off", 100 * r.worst, 100 * r.final, r.n0, r.n1,
+		       100.0 * ((double)r.n1 - (double)r.n0) / (double)r.n0, r.ms / 1000);
+		eddy_destroy_world(w);
+	}
+}
+
+/* Martin & Moyce's column (a = 5 cm, 2a high) in a 4a x 2.5a tank, dx = a/8,
+ * 1.5 s (several reflections off the far wall). */
+static void dam_break_volume(void)
+{
+	const double a = 0.05, h = a / 8;
+	for (int rs = 0; rs < 2; ++rs) {
+		eddy_world *w = volume_world(h, (eddy_vec3){(float)(4 * a), (float)(2.5 * a), (float)(4 * h)}, rs == 1);
+		if (!w)
+			return;
+		fill(w, h, (eddy_vec3){0, 0, 0}, (eddy_vec3){(float)a, (float)(2 * a), (float)(4 * h)});
+		volume_result r;
+		run_volume(w, a * 2 * a * 4 * h, 45, &r);
+		printf("    dam break, reseed %s: max |V - V0| / V0 = %.2f%%, at 1.5 s %+.2f%%; particles %zu -> %zu (%+.1f%%); "
+		       "%.1f s\n",
+		       rs ? "on" : "off", 100 * r.worst, 100 * r.final, r.n0, r.n1,
+		       100.0 * ((double)r.n1 - (double)r.n0) / (double)r.n0, r.ms / 1000);
+		eddy_destroy_world(w);
+	}
+}
+
 void suite_stress_flip_solids(void)
 {
 	RUN(still_sphere_keeps_level);
 	RUN(sphere_lowered_keeps_level);
 	RUN(sphere_lowered_and_oscillated_keeps_level);
+	RUN(drop_into_pool_volume);
+	RUN(dam_break_volume);
 }
