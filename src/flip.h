@@ -187,12 +187,15 @@ typedef struct flip_solid {
 	float *dist;   /* per cell: m, phi_s at the centre (signed distance to the nearest solid) */
 } flip_solid;
 
-/* Fills s from the colliders (margin m inflates them); arrays from the
- * world's arena. Returns false when out of memory. */
-bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, flip_solid *s);
-/* The margin of the pipeline's flip_boundary; false if it has none (then
+/* Fills s from the colliders (margin inflates them); arrays from the world's
+ * arena. velocities: per pipeline position, the solids' velocities of this
+ * step (flip_boundary's), or NULL for each collider's motion record. Returns
+ * false when out of memory. */
+bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_vec3 *velocities, flip_solid *s);
+/* The margin of the pipeline's flip_boundary and the solid velocities it used
+ * this step (NULL if it has not run this step); false if it has none (then
  * flip_pressure sees no solids, as flip_boundary marks none). */
-bool eddy__flip_boundary_margin(const eddy_world *w, float *margin);
+bool eddy__flip_boundary_info(const eddy_world *w, float *margin, const eddy_vec3 **vel);
 
 /* Open fraction of face `axis` (i, j, k): 1 without colliders, 0 on the sides. */
 static inline float flip_face_weight(const eddy_world *w, const flip_solid *s, int axis, size_t f, int i, int j,

@@ -34,6 +34,12 @@
 
 typedef struct boundary {
 	eddy_flip_boundary_def def;
+	/* per pipeline position: the collider offset this system saw at its last
+	 * step, and the solid velocities of the current step (see step) */
+	int cap;
+	bool *have;
+	eddy_vec3 *seen, *vel;
+	int64_t vel_step; /* the step vel belongs to, -1 for none */
 } boundary;
 
 static const int boundary_io[] = {COL_CELL_TYPE, COL_FACE_U, COL_FACE_V, COL_FACE_W, -1};
@@ -99,7 +105,7 @@ static float frac_inside(float p0, float p1, float p2, float p3)
 	return 0.5f * frac1(l[0], l[1]) * frac1(l[0], l[3]) + 0.5f * frac1(l[2], l[1]) * frac1(l[2], l[3]);
 }
 
-bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, flip_solid *s)
+bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_vec3 *velocities, flip_solid *s)
 {
 	memset(s, 0, sizeof *s);
 	int ncol = 0;
@@ -135,9 +141,13 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, flip_solid *
 		const eddy_system *c = &w->slots[w->order[q]];
 		if (!eddy__is_collider(c))
 			continue;
-		const eddy_collider_motion m = ((const eddy_collider_base *)c->data)->motion;
-		vel[q] = (eddy_vec3){(m.offset.x - m.last_offset.x) * inv_dt, (m.offset.y - m.last_offset.y) * inv_dt,
-		                     (m.offset.z - m.last_offset.z) * inv_dt};
+		if (velocities) {
+			vel[q] = velocities[q];
+		} else {
+			const eddy_collider_motion m = ((const eddy_collider_base *)c->data)->motion;
+			vel[q] = (eddy_vec3){(m.offset.x - m.last_offset.x) * inv_dt, (m.offset.y - m.last_offset.y) * inv_dt,
+			                     (m.offset.z - m.last_offset.z) * inv_dt};
+		}
 		size_t g = 0;
 		for (size_t k = 0; k < mz; ++k)
 			for (size_t j = 0; j < my; ++j)
@@ -204,26 +214,77 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, flip_solid *
 	return true;
 }
 
-bool eddy__flip_boundary_margin(const eddy_world *w, float *margin)
+bool eddy__flip_boundary_info(const eddy_world *w, float *margin, const eddy_vec3 **vel)
 {
 	for (int q = 0; q < w->order_count; ++q) {
 		const eddy_system *c = &w->slots[w->order[q]];
 		if (c->vt == &eddy__kind_flip_boundary) {
-			*margin = ((const boundary *)c->data)->def.margin;
+			const boundary *b = c->data;
+			*margin = b->def.margin;
+			if (vel)
+				*vel = b->vel_step == w->step && b->cap == w->order_count ? b->vel : NULL;
 			return true;
 		}
 	}
 	return false;
 }
 
+/* The solids' velocities for this step, per pipeline position. A collider's
+ * own motion record (offset - last offset) is its velocity only when the
+ * host set the offset before this system ran; an offset function in a scene
+ * (eddy_lua.c's animate step) sets it after flip_advect, just before the
+ * collider runs and marks it used, so here offset == last offset and the
+ * record says "still" while the solid moves by a cell a step (the issue's
+ * sphere scene lost 59% of its water that way). So this system remembers the
+ * offset it saw at its last step: velocity = (offset - seen) / dt. With the
+ * host setting the offset first that is (pos(t + dt) - pos(t)) / dt, exact;
+ * with an offset function it is the last step's displacement, a step late,
+ * while the geometry is the one at the start of the step. With no memory
+ * (first step, a changed pipeline) the motion record is used. */
+static bool solid_velocities(eddy_world *w, boundary *b, const eddy_step_context *ctx)
+{
+	const int n = w->order_count;
+	if (b->cap != n) {
+		free(b->have);
+		free(b->seen);
+		free(b->vel);
+		b->have = calloc((size_t)n + 1, sizeof *b->have);
+		b->seen = calloc((size_t)n + 1, sizeof *b->seen);
+		b->vel = calloc((size_t)n + 1, sizeof *b->vel);
+		b->cap = n;
+		if (!b->have || !b->seen || !b->vel) {
+			b->cap = -1;
+			return false;
+		}
+	}
+	const double inv_dt = ctx->dt > 0 ? 1.0 / ctx->dt : 0.0;
+	for (int q = 0; q < n; ++q) {
+		const eddy_system *c = &w->slots[w->order[q]];
+		if (!eddy__is_collider(c)) {
+			b->have[q] = false;
+			continue;
+		}
+		const eddy_collider_motion m = ((const eddy_collider_base *)c->data)->motion;
+		const eddy_vec3 ref = b->have[q] ? b->seen[q] : m.last_offset;
+		b->vel[q] = (eddy_vec3){(float)((m.offset.x - ref.x) * inv_dt), (float)((m.offset.y - ref.y) * inv_dt),
+		                        (float)((m.offset.z - ref.z) * inv_dt)};
+		b->seen[q] = m.offset;
+		b->have[q] = true;
+	}
+	b->vel_step = ctx->step;
+	return true;
+}
+
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
-	const boundary *b = s->data;
+	boundary *b = s->data;
 	const int nx = w->nx, ny = w->ny, nz = w->nz;
+	if (!solid_velocities(w, b, ctx))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_boundary: out of memory");
 	uint8_t *type = (uint8_t *)w->columns[COL_CELL_TYPE].data;
 	float *face[3] = {eddy__col(w, COL_FACE_U), eddy__col(w, COL_FACE_V), eddy__col(w, COL_FACE_W)};
 	flip_solid sd;
-	if (!eddy__flip_solid_faces(w, ctx->dt, b->def.margin, &sd))
+	if (!eddy__flip_solid_faces(w, ctx->dt, b->def.margin, b->vel, &sd))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_boundary: out of memory");
 	/* closed faces take the solid's normal velocity; domain sides are still */
 	for (int a = 0; a < 3; ++a) {
@@ -252,9 +313,20 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	return EDDY_OK;
 }
 
+static void destroy(eddy_system *s)
+{
+	boundary *b = s->data;
+	if (!b)
+		return;
+	free(b->have);
+	free(b->seen);
+	free(b->vel);
+}
+
 const eddy_system_vtable eddy__kind_flip_boundary = {
 	.name = "flip_boundary",
 	.step = step,
+	.destroy = destroy,
 	.default_writes = boundary_io,
 };
 
@@ -265,8 +337,10 @@ eddy_system_id eddy_add_flip_boundary(eddy_world *w, const eddy_flip_boundary_de
 		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_nonneg(w, sys, "margin", def->margin) || !eddy__check_finite(w, sys, "margin", def->margin))
 		return EDDY_NULL_SYSTEM;
-	boundary *b = malloc(sizeof *b);
-	if (b)
+	boundary *b = calloc(1, sizeof *b);
+	if (b) {
 		b->def = *def;
+		b->vel_step = -1;
+	}
 	return eddy__add_system(w, &eddy__kind_flip_boundary, b, boundary_io, 4, boundary_io, 4);
 }
