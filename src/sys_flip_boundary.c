@@ -16,17 +16,19 @@
  *   weights the faces by w_f, so nothing jumps when a centre crosses the
  *   solid's surface.
  *   Faces on the domain's sides: u.n = 0 (fixed walls, w_f = 0).
- *   Closed faces (w_f = 0): u.n = V_s.n, V_s = (offset - last offset) / dt of
- *   the collider nearest the face's corners; partly open faces keep the fluid
- *   velocity, and flip_pressure adds the solid's flux (1 - w_f) V_s.n.
+ *   Closed faces (w_f = 0): u.n = V_s.n, V_s = (offset - offset this system
+ *   saw at its last step) / dt of the collider most inside at the face's
+ *   corners (solid_velocities says why not the collider's own record);
+ *   partly open faces keep the fluid velocity, and flip_pressure adds the
+ *   solid's flux (1 - w_f) V_s.n with the same V_s.
  * Why fractional: with binary cells (solid when the centre is inside) a moving
  * collider flips cells between solid and fluid, the solid region jumps by
  * whole cells and the fluid it covers or uncovers is not accounted for; the
  * particles it projects out pack, and the level drops (measured: 6% lowering
  * a 4 cm sphere into a 15 cm pool, 44% moving it back and forth).
- * The collider's velocity is read, not consumed: add the colliders after
- * flip_advect (where they also keep particles out) so this system sees the
- * offset the host set for this step against the one of the last step. */
+ * Add the colliders after flip_advect (where they also keep particles out).
+ * State: the offsets seen at the last step (not checkpointed: after a
+ * restore the first step falls back to the collider's motion record). */
 #include "flip.h"
 
 #include <stdlib.h>
