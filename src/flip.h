@@ -11,6 +11,8 @@
 
 #include "systems.h"
 
+#include <string.h>
+
 static inline size_t flip_cell(const eddy_world *w, int i, int j, int k)
 {
 	return (size_t)i + (size_t)w->nx * ((size_t)j + (size_t)w->ny * (size_t)k);
@@ -177,16 +179,89 @@ static inline eddy_vec3 flip_velocity_at(const flip_grid *g, const float *u, con
 eddy_status eddy__flip_fill_fluid_faces(eddy_world *w, float *const face[3], const float *const weight[3],
                                         size_t wstride);
 
+/* ---- fractional solid faces ----------------------------------------------
+ * Batty, Bertails & Bridson 2007, "A fast variational framework for accurate
+ * solid-fluid coupling": every face carries the fraction of its area open to
+ * the fluid, from the colliders' signed distance at its four corners (grid
+ * nodes; the union of the solids is the minimum distance), and the normal
+ * velocity of the collider covering it. Computed by flip_boundary (cell types,
+ * closed faces) and again by flip_pressure (weights, solid flux) from the same
+ * collider offsets, so both see the same geometry within a step. */
+typedef struct flip_solid {
+	bool any;      /* a collider is in the pipeline; if not, the arrays are NULL */
+	float *wt[3];  /* per face grid: open fraction in [0, 1]; 0 on the domain's sides */
+	float *vel[3]; /* per face grid: m/s, normal velocity of the covering collider */
+	float *open;   /* per cell: open volume fraction, clamp(1/2 + phi_s(centre) / dx, 0, 1) */
+	float *dist;   /* per cell: m, phi_s at the centre (signed distance to the nearest solid) */
+} flip_solid;
+
+/* Fills s from the colliders (margin inflates them); arrays from the world's
+ * arena. velocities: per pipeline position, the solids' velocities of this
+ * step (flip_boundary's), or NULL for each collider's motion record. Returns
+ * false when out of memory. */
+bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_vec3 *velocities, flip_solid *s);
+/* The margin of the pipeline's flip_boundary and the solid velocities it used
+ * this step (NULL if it has not run this step); false if it has none (then
+ * flip_pressure sees no solids, as flip_boundary marks none). */
+bool eddy__flip_boundary_info(const eddy_world *w, float *margin, const eddy_vec3 **vel);
+
+/* Open fraction of face `axis` (i, j, k): 1 without colliders, 0 on the sides. */
+static inline float flip_face_weight(const eddy_world *w, const flip_solid *s, int axis, size_t f, int i, int j,
+                                     int k)
+{
+	const int c[3] = {i, j, k}, n[3] = {w->nx, w->ny, w->nz};
+	if (c[axis] == 0 || c[axis] == n[axis])
+		return 0.0f;
+	return s->any ? s->wt[axis][f] : 1.0f;
+}
+
+/* Particle density per cell (nc floats): every particle's trilinear weights
+ * at the cell centres around it (constant extension at the domain's sides,
+ * so a cell at a wall sees the full rest density). Sum = particle count. */
+static inline void flip_particle_density(const eddy_world *w, const float *px, const float *py, const float *pz,
+                                         float *dens)
+{
+	const flip_grid g = flip_grid_of(w);
+	const size_t sy = (size_t)w->nx, sz = (size_t)w->nx * (size_t)w->ny;
+	memset(dens, 0, sz * (size_t)w->nz * sizeof *dens);
+	for (size_t p = 0; p < w->n; ++p) {
+		const flip_axes ax = flip_axes_at(&g, (eddy_vec3){px[p], py[p], pz[p]});
+		const size_t i0 = (size_t)ax.cx.i0, i1 = (size_t)ax.cx.i1;
+		const size_t j0 = (size_t)ax.cy.i0 * sy, j1 = (size_t)ax.cy.i1 * sy;
+		const size_t k0 = (size_t)ax.cz.i0 * sz, k1 = (size_t)ax.cz.i1 * sz;
+		const float wx = ax.cx.w1, wy = ax.cy.w1, wz = ax.cz.w1;
+		dens[k0 + j0 + i0] += (1 - wx) * (1 - wy) * (1 - wz);
+		dens[k0 + j0 + i1] += wx * (1 - wy) * (1 - wz);
+		dens[k0 + j1 + i0] += (1 - wx) * wy * (1 - wz);
+		dens[k0 + j1 + i1] += wx * wy * (1 - wz);
+		dens[k1 + j0 + i0] += (1 - wx) * (1 - wy) * wz;
+		dens[k1 + j0 + i1] += wx * (1 - wy) * wz;
+		dens[k1 + j1 + i0] += (1 - wx) * wy * wz;
+		dens[k1 + j1 + i1] += wx * wy * wz;
+	}
+}
+
+/* Particles per cell of the engine's seeding (2 x 2 x 2, Zhu & Bridson):
+ * flip_reseed's bounds and the volume correction's rest density refer to it. */
+enum { FLIP_SEED_PER_CELL = 8 };
+
 /* ---- the Poisson system ---------------------------------------------------
  * Rows are fluid cells in cell-index order, so a row's -x, -y, -z neighbours
  * come before it (what MIC(0) and the upper-triangle CSC for CHOLMOD need).
- * Off-diagonals are -1 between linked rows; nb[6*r + d] is the row across
- * side d (0 -x, 1 +x, 2 -y, 3 +y, 4 -z, 5 +z) or -1. */
+ * nb[6*r + d] is the row across side d (0 -x, 1 +x, 2 -y, 3 +y, 4 -z, 5 +z)
+ * or -1; the off-diagonal entry to it is -off[6*r + d] (the open fraction of
+ * the face between them, > 0 for a link; symmetric), or -1 when off is NULL. */
 typedef struct flip_matrix {
 	int n;
 	double *diag; /* n */
 	int *nb;      /* 6 n */
+	double *off;  /* 6 n, or NULL for all 1 */
 } flip_matrix;
+
+static inline double flip_off(const flip_matrix *A, int r, int d)
+{
+	return A->off ? A->off[6 * r + d] : 1.0;
+}
 
 /* MIC(0)-PCG (flip_pcg.c). Solves A x = b to max|r| <= tol max|b|; x starts
  * at 0. Scratch comes from the world's arena. Returns false if it did not

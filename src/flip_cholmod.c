@@ -86,7 +86,7 @@ eddy_status eddy__flip_cholmod_solve(eddy_world *w, flip_cholmod *s, const flip_
 			const int q = A->nb[6 * j + lower[d]];
 			if (q >= 0) {
 				ri[k] = q;
-				val[k++] = -1.0;
+				val[k++] = -flip_off(A, j, lower[d]);
 			}
 		}
 		ri[k] = j;

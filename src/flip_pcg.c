@@ -3,7 +3,9 @@
  * (Bridson, "Fluid Simulation for Computer Graphics", 2nd ed., ch. 5.4:
  * modified incomplete Cholesky with tau = 0.97 and the safety factor
  * sigma = 0.25). Every scalar is double: single-precision dot products stall
- * the iteration on large grids (docs/validation.md, hard case 14). Loops are
+ * the iteration on large grids (docs/validation.md, hard case 14). Off-diagonal
+ * entries are -a with a the open fraction of the face (flip.h), so the
+ * factorisation uses Bridson's general form, not the unit-coefficient one. Loops are
  * serial, so the result does not depend on the thread count. */
 #include "flip.h"
 
@@ -11,19 +13,29 @@
 
 enum { NX_M, NX_P, NY_M, NY_P, NZ_M, NZ_P };
 
-static void matvec(const flip_matrix *A, const double *s, double *q)
+/* Each kernel is written once with W (weighted) a compile-time constant and
+ * instantiated twice: the unit-coefficient system (no solids) keeps the
+ * branch-free loops it had before face weights. */
+#define OFF(A, i, d) (W ? (A)->off[6 * (i) + (d)] : 1.0)
+#if defined(__GNUC__)
+#define KERNEL static inline __attribute__((always_inline))
+#else
+#define KERNEL static inline
+#endif
+
+KERNEL void matvec_w(const flip_matrix *A, const double *s, double *q, const bool W)
 {
 	for (int i = 0; i < A->n; ++i) {
 		const int *nb = &A->nb[6 * i];
 		double t = A->diag[i] * s[i];
 		for (int d = 0; d < 6; ++d)
 			if (nb[d] >= 0)
-				t -= s[nb[d]];
+				t -= OFF(A, i, d) * s[nb[d]];
 		q[i] = t;
 	}
 }
 
-static void mic0(const flip_matrix *A, double *precon)
+KERNEL void mic0_w(const flip_matrix *A, double *precon, const bool W)
 {
 	const double tau = 0.97, sigma = 0.25;
 	/* for a lower neighbour across side d: its two upper links other than this one */
@@ -35,9 +47,12 @@ static void mic0(const flip_matrix *A, double *precon)
 			const int q = nb[d];
 			if (q < 0)
 				continue;
+			/* Bridson's MIC(0) with entries -a: (a_qi p_q)^2 + tau a_qi (a_q,o1 + a_q,o2) p_q^2 */
 			const int *nq = &A->nb[6 * q];
-			const double cnt = (nq[other[d][0]] >= 0) + (nq[other[d][1]] >= 0);
-			e -= precon[q] * precon[q] * (1.0 + tau * cnt);
+			const double a = OFF(A, i, d);
+			const double o = (nq[other[d][0]] >= 0 ? OFF(A, q, other[d][0]) : 0.0) +
+			                 (nq[other[d][1]] >= 0 ? OFF(A, q, other[d][1]) : 0.0);
+			e -= precon[q] * precon[q] * (a * a + tau * a * o);
 		}
 		if (e < sigma * A->diag[i])
 			e = A->diag[i];
@@ -45,14 +60,15 @@ static void mic0(const flip_matrix *A, double *precon)
 	}
 }
 
-static void apply(const flip_matrix *A, const double *precon, const double *r, double *y, double *z)
+KERNEL void apply_w(const flip_matrix *A, const double *precon, const double *r, double *y,
+                                                         double *z, const bool W)
 {
 	for (int i = 0; i < A->n; ++i) {
 		const int *nb = &A->nb[6 * i];
 		double t = r[i];
 		for (int d = 0; d < 6; d += 2)
 			if (nb[d] >= 0)
-				t += precon[nb[d]] * y[nb[d]];
+				t += OFF(A, i, d) * precon[nb[d]] * y[nb[d]];
 		y[i] = t * precon[i];
 	}
 	for (int i = A->n; i-- > 0;) {
@@ -60,9 +76,33 @@ static void apply(const flip_matrix *A, const double *precon, const double *r, d
 		double t = 0;
 		for (int d = 1; d < 6; d += 2)
 			if (nb[d] >= 0)
-				t += z[nb[d]];
+				t += OFF(A, i, d) * z[nb[d]];
 		z[i] = (y[i] + precon[i] * t) * precon[i];
 	}
+}
+
+static void matvec(const flip_matrix *A, const double *s, double *q)
+{
+	if (A->off)
+		matvec_w(A, s, q, true);
+	else
+		matvec_w(A, s, q, false);
+}
+
+static void mic0(const flip_matrix *A, double *precon)
+{
+	if (A->off)
+		mic0_w(A, precon, true);
+	else
+		mic0_w(A, precon, false);
+}
+
+static void apply(const flip_matrix *A, const double *precon, const double *r, double *y, double *z)
+{
+	if (A->off)
+		apply_w(A, precon, r, y, z, true);
+	else
+		apply_w(A, precon, r, y, z, false);
 }
 
 static double dot(const double *a, const double *b, int n)

@@ -85,6 +85,7 @@ int main(int argc, char **argv)
 		{"compare", suite_compare, false},
 		/* stress: scenes one step beyond the validated ones (scenes/stress/) */
 		{"stress_flip_flight", suite_stress_flip_flight, false},
+		{"stress_flip_solids", suite_stress_flip_solids, false},
 	};
 	const bool want_long = only && strcmp(only, "long") == 0;
 	int ran = 0;

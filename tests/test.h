@@ -63,6 +63,7 @@ void suite_sph(void);
 /* FLIP suites */
 void suite_flip(void);
 void suite_stress_flip_flight(void);
+void suite_stress_flip_solids(void);
 
 /* renderer suites */
 void suite_render(void);
