@@ -408,6 +408,17 @@ typedef struct eddy_frame_stats {
 	double system_ms[EDDY_MAX_STAT_SYSTEMS];         /* ms this frame */
 	int extra_count;        /* values systems published this frame */
 	eddy_stat_value extra[EDDY_MAX_EXTRA_STATS];
+	/* Energy and momentum (appended: the fields above keep their places).
+	 * All NAN without a particle mass: sph_density's calibrated mass, or for
+	 * FLIP flip_pressure's density times spacing^3 of the emitters (all at
+	 * one spacing; flip_reseed adds and removes particles, so FLIP's totals
+	 * move with the count as well as with the flow). */
+	double particle_mass;      /* kg */
+	double kinetic_energy;     /* J, sum m |v|^2 / 2 */
+	double potential_energy;   /* J, -sum m g . (x - bounds_min), g the gravity systems apply (0 without) */
+	double compression_energy; /* J, WCSPH's stored elastic energy (sph_pressure in the pipeline); else NAN */
+	double energy;             /* J, kinetic + potential (+ compression where it applies) */
+	double momentum[3];        /* kg m/s, sum m v */
 } eddy_frame_stats;
 
 /* Statistics of the frame completed last (call after eddy_world_step_frame). */
