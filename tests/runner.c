@@ -83,6 +83,7 @@ int main(int argc, char **argv)
 		{"render", suite_render, false},
 		{"study", suite_study, false},
 		/* stress: scenes one step beyond the validated ones (scenes/stress/) */
+		{"stress_slosh", suite_stress_slosh, false},
 	};
 	const bool want_long = only && strcmp(only, "long") == 0;
 	int ran = 0;

@@ -69,4 +69,7 @@ void suite_render(void);
 /* accuracy/time study (eddy study) */
 void suite_study(void);
 
+/* stress scenes (scenes/stress/) */
+void suite_stress_slosh(void);
+
 #endif
