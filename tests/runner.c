@@ -84,6 +84,7 @@ int main(int argc, char **argv)
 		{"study", suite_study, false},
 		/* stress: scenes one step beyond the validated ones (scenes/stress/) */
 		{"stress_slosh", suite_stress_slosh, false},
+		{"long_slosh", suite_long_slosh, true},
 	};
 	const bool want_long = only && strcmp(only, "long") == 0;
 	int ran = 0;

@@ -71,5 +71,6 @@ void suite_study(void);
 
 /* stress scenes (scenes/stress/) */
 void suite_stress_slosh(void);
+void suite_long_slosh(void); /* minutes: make test-long */
 
 #endif
