@@ -3,6 +3,7 @@
 #include "bind.h"
 
 static const char *const solver_choices[] = {"pcg", "cholmod", NULL};
+static const char *const transfer_choices[] = {"flip", "pic", "apic", NULL};
 
 static const eddy_lua_field flip_p2g_fields[] = {
 	EDDY_LUA_FIELD(eddy_flip_p2g_def, mark_radius, EDDY_LUA_FLOAT),
@@ -30,6 +31,7 @@ static const eddy_lua_field flip_extrapolate_fields[] = {
 };
 static const eddy_lua_field flip_g2p_fields[] = {
 	EDDY_LUA_FIELD(eddy_flip_g2p_def, flip_ratio, EDDY_LUA_FLOAT),
+	EDDY_LUA_ENUM_FIELD(eddy_flip_g2p_def, transfer, transfer_choices),
 	EDDY_LUA_END,
 };
 static const eddy_lua_field flip_advect_fields[] = {

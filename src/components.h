@@ -30,7 +30,18 @@
 	X(SPH_NZ,    "color_nz", EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_DERIVED, "1/m") \
 	X(SPH_CURVATURE, "curvature", EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_DERIVED, "1/m") \
 	\
-	/* FLIP particle columns */ \
+	/* FLIP particle columns: APIC's affine velocity, one vector c_a per face \
+	 * grid a (x-faces carry u: apic_ux apic_uy apic_uz = grad u at the \
+	 * particle, and so on); allocated only by flip_g2p { transfer = "apic" } */ \
+	X(APIC_UX,   "apic_ux",  EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE,   "1/s") \
+	X(APIC_UY,   "apic_uy",  EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE,   "1/s") \
+	X(APIC_UZ,   "apic_uz",  EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE,   "1/s") \
+	X(APIC_VX,   "apic_vx",  EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE,   "1/s") \
+	X(APIC_VY,   "apic_vy",  EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE,   "1/s") \
+	X(APIC_VZ,   "apic_vz",  EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE,   "1/s") \
+	X(APIC_WX,   "apic_wx",  EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE,   "1/s") \
+	X(APIC_WY,   "apic_wy",  EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE,   "1/s") \
+	X(APIC_WZ,   "apic_wz",  EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE,   "1/s") \
 	\
 	/* MAC grid */ \
 	X(CELL_TYPE, "cell_type",     EDDY_DOMAIN_CELL,   EDDY_U8,  EDDY_DERIVED, "") \

@@ -415,6 +415,17 @@ typedef struct eddy_frame_stats {
 	double system_ms[EDDY_MAX_STAT_SYSTEMS];         /* ms this frame */
 	int extra_count;        /* values systems published this frame */
 	eddy_stat_value extra[EDDY_MAX_EXTRA_STATS];
+	/* Energy and momentum (appended: the fields above keep their places).
+	 * All NAN without a particle mass: sph_density's calibrated mass, or for
+	 * FLIP flip_pressure's density times spacing^3 of the emitters (all at
+	 * one spacing; flip_reseed adds and removes particles, so FLIP's totals
+	 * move with the count as well as with the flow). */
+	double particle_mass;      /* kg */
+	double kinetic_energy;     /* J, sum m |v|^2 / 2 */
+	double potential_energy;   /* J, -sum m g . (x - bounds_min), g the gravity systems apply (0 without) */
+	double compression_energy; /* J, WCSPH's stored elastic energy (sph_pressure in the pipeline); else NAN */
+	double energy;             /* J, kinetic + potential (+ compression where it applies) */
+	double momentum[3];        /* kg m/s, sum m v */
 } eddy_frame_stats;
 
 /* Statistics of the frame completed last (call after eddy_world_step_frame). */
@@ -575,7 +586,9 @@ enum { EDDY_CELL_AIR = 0, EDDY_CELL_FLUID = 1, EDDY_CELL_SOLID = 2 };
 /* flip_p2g: particle accelerations applied (v += a dt), then a trilinear splat
  * of particle velocity onto the three face grids (normalised weights), cells
  * holding a particle marked fluid, the marker field flip_phi (-1 fluid, +1
- * empty) and the pre-solve velocity (u_old, v_old, w_old) for the FLIP delta. */
+ * empty) and the pre-solve velocity (u_old, v_old, w_old) for the FLIP delta.
+ * With an APIC flip_g2p in the pipeline (its affine columns allocated) the
+ * splat carries each particle's affine velocity: v_a + c_a . (x_f - x_p). */
 typedef struct eddy_flip_p2g_def {
 	float mark_radius; /* 1, in cells: a cell whose centre lies within this of a particle is fluid
 	                      too (the cell holding it always is); [0, 1.5] */
@@ -626,9 +639,20 @@ typedef struct eddy_flip_extrapolate_def {
 EDDY_API eddy_flip_extrapolate_def eddy_default_flip_extrapolate_def(void);
 EDDY_API eddy_system_id eddy_add_flip_extrapolate(eddy_world *w, const eddy_flip_extrapolate_def *def);
 
-/* flip_g2p: v = r (v + interp(u - u_old)) + (1 - r) interp(u), r = flip_ratio. */
+/* flip_g2p: the grid's velocity back to the particles.
+ *   flip: v = r (v + interp(u - u_old)) + (1 - r) interp(u), r = flip_ratio
+ *   pic:  v = interp(u)                     (flip with r = 0)
+ *   apic: v = interp(u), c_a = grad interp(u_a) per face grid a (Jiang et al.
+ *         2015); flip_p2g then splats v_a + c_a . (x_f - x_p). Only apic
+ *         allocates the nine affine columns (apic_ux .. apic_wz). */
+typedef enum eddy_flip_transfer {
+	EDDY_FLIP_TRANSFER_FLIP = 0, /* FLIP/PIC blend by flip_ratio (the default) */
+	EDDY_FLIP_TRANSFER_PIC,      /* pure PIC; flip_ratio is not used */
+	EDDY_FLIP_TRANSFER_APIC      /* affine PIC; flip_ratio is not used */
+} eddy_flip_transfer;
 typedef struct eddy_flip_g2p_def {
-	float flip_ratio; /* 1, 1 = pure FLIP, 0 = pure PIC; [0, 1] */
+	float flip_ratio; /* 1, 0.95, 1 = pure FLIP, 0 = pure PIC; [0, 1]; transfer flip only */
+	eddy_flip_transfer transfer; /* flip */
 } eddy_flip_g2p_def;
 EDDY_API eddy_flip_g2p_def eddy_default_flip_g2p_def(void);
 EDDY_API eddy_system_id eddy_add_flip_g2p(eddy_world *w, const eddy_flip_g2p_def *def);

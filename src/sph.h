@@ -116,6 +116,10 @@ typedef struct sph_shared {
 	float *pq;
 } sph_shared;
 
+/* The def of sph_density system s (its EOS, for the stats' compression
+ * energy), or NULL if s is not one. */
+const eddy_sph_density_def *eddy__sph_density_def(const eddy_system *s);
+
 /* The sph_density system nearest before system s in the pipeline, or NULL. */
 sph_shared *eddy__sph_find(eddy_world *w, const eddy_system *s);
 

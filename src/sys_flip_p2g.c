@@ -1,7 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /* flip_p2g: particles to grid (Zhu & Bridson 2005, section 4; Brackbill 1988).
  *
- * Reads: x y z vx vy vz ax ay az. Writes: vx vy vz, u v w, u_old v_old w_old,
+ * Reads: x y z vx vy vz ax ay az (apic_ux .. apic_wz if allocated). Writes: vx vy vz, u v w, u_old v_old w_old,
  * cell_type, flip_phi.
  *   v_p += a_p dt                       (body forces act on the particles, so the
  *                                        FLIP delta below carries pressure only)
@@ -14,6 +14,17 @@
  *   cell_type = fluid where a particle is (or within mark_radius cells of a
  *   particle's position), air elsewhere; flip_phi = -1 fluid, +1 empty (the
  *   paper's marker field, smoothed later by flip_surface).
+ * APIC (Jiang, Schroeder, Selle, Teran & Stomakhin 2015, "The affine
+ * particle-in-cell method", SIGGRAPH, eq. 9 with the trilinear B D^-1 = C of
+ * section 5.3): each particle carries one vector c_a per face grid a
+ * (columns apic_ux .. apic_wz, written by flip_g2p { transfer = "apic" }),
+ * and the splat of component a at face f is
+ *   u_f = sum_p W_fp (v_p,a + c_p,a . (x_f - x_p)) / sum_p W_fp.
+ * The affine columns are read when they are allocated, which is exactly while
+ * an APIC flip_g2p is in the pipeline (their only writer; the columns hold
+ * state, so the order of the two systems needs no check): the choice lives
+ * in one place and p2g cannot disagree with g2p. They are not in p2g's
+ * declared reads, which would allocate them for every FLIP scene.
  * Cells holding a particle are always fluid, so a sheet one particle thick
  * stays on the grid (the role of the particle-radius rule r >= sqrt(3)/2 dx).
  * The splat is a serial scatter (no parallel region at all: idle OpenMP
@@ -68,6 +79,32 @@ static inline void splat(float *restrict acc, size_t sy, size_t sz, flip_axis ax
 		}
 }
 
+/* splat() for APIC: the value at a face is val + c . (x_f - x_p), with
+ * d0 = x_f - x_p (m) at each axis's i0 sample and h the spacing (i1 is one
+ * sample further; at the clamped top i1 = i0 with weight 0). */
+static inline void splat_affine(float *restrict acc, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az,
+                                float val, const float c[3], const float d0[3], float h)
+{
+	const size_t j[2] = {(size_t)ay.i0 * sy, (size_t)ay.i1 * sy}, k[2] = {(size_t)az.i0 * sz, (size_t)az.i1 * sz};
+	const float wy[2] = {1.0f - ay.w1, ay.w1}, wz[2] = {1.0f - az.w1, az.w1}, wx0 = 1.0f - ax.w1, wx1 = ax.w1;
+	const float ex[2] = {c[0] * d0[0], c[0] * (d0[0] + h)}, ey[2] = {c[1] * d0[1], c[1] * (d0[1] + h)},
+	            ez[2] = {c[2] * d0[2], c[2] * (d0[2] + h)};
+	for (int cc = 0; cc < 2; ++cc)
+		for (int b = 0; b < 2; ++b) {
+			float *row = acc + 2 * (k[cc] + j[b]);
+			const float wyz = wz[cc] * wy[b], w0 = wyz * wx0, w1 = wyz * wx1, v = val + ey[b] + ez[cc];
+			float *a0 = row + 2 * (size_t)ax.i0, *a1 = row + 2 * (size_t)ax.i1;
+			a0[0] += w0 * (v + ex[0]);
+			a0[1] += w0;
+			a1[0] += w1 * (v + ex[1]);
+			a1[1] += w1;
+		}
+}
+
+/* x_f - x_p (m) at the i0 sample of an axis with sample offset off (cells);
+ * t is the particle's grid coordinate (cells) */
+static inline float face_offset(flip_axis a, float off, float t, float h) { return ((float)a.i0 + off - t) * h; }
+
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	const p2g *pg = s->data;
@@ -93,7 +130,32 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const size_t sx = (size_t)nx, sy = (size_t)ny;
 	const flip_grid grid = flip_grid_of(w);
 	const size_t np = w->n;
-	for (size_t i = 0; i < np; ++i) {
+	const float *cu[9];
+	for (int q = 0; q < 9; ++q)
+		cu[q] = eddy__col(w, COL_APIC_UX + q);
+	if (cu[0]) {
+		const float h = (float)w->def.cell_size;
+		for (size_t i = 0; i < np; ++i) {
+			const float pvx = vx[i] + ax[i] * dt, pvy = vy[i] + ay[i] * dt, pvz = vz[i] + az[i] * dt;
+			vx[i] = pvx;
+			vy[i] = pvy;
+			vz[i] = pvz;
+			const flip_axes g = flip_axes_at(&grid, (eddy_vec3){x[i], y[i], z[i]});
+			const float tx = (x[i] - o.x) * inv, ty = (y[i] - o.y) * inv, tz = (z[i] - o.z) * inv;
+			const float cx[3] = {cu[0][i], cu[1][i], cu[2][i]}, cy[3] = {cu[3][i], cu[4][i], cu[5][i]},
+			            cz[3] = {cu[6][i], cu[7][i], cu[8][i]};
+			const float du[3] = {face_offset(g.fx, 0.0f, tx, h), face_offset(g.cy, 0.5f, ty, h),
+			                     face_offset(g.cz, 0.5f, tz, h)};
+			const float dv[3] = {face_offset(g.cx, 0.5f, tx, h), face_offset(g.fy, 0.0f, ty, h),
+			                     face_offset(g.cz, 0.5f, tz, h)};
+			const float dw[3] = {face_offset(g.cx, 0.5f, tx, h), face_offset(g.cy, 0.5f, ty, h),
+			                     face_offset(g.fz, 0.0f, tz, h)};
+			splat_affine(acc[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, pvx, cx, du, h);
+			splat_affine(acc[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, pvy, cy, dv, h);
+			splat_affine(acc[2], sx, sx * sy, g.cx, g.cy, g.fz, pvz, cz, dw, h);
+		}
+	}
+	for (size_t i = 0; i < np && !cu[0]; ++i) {
 		const float pvx = vx[i] + ax[i] * dt, pvy = vy[i] + ay[i] * dt, pvz = vz[i] + az[i] * dt;
 		vx[i] = pvx;
 		vy[i] = pvy;

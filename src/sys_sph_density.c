@@ -229,6 +229,11 @@ float eddy_sph_particle_mass(const eddy_world *w, eddy_system_id id)
 	return ((const sph_density *)s->data)->sh.mass;
 }
 
+const eddy_sph_density_def *eddy__sph_density_def(const eddy_system *s)
+{
+	return s && s->vt == &eddy__kind_sph_density ? &((const sph_density *)s->data)->def : NULL;
+}
+
 eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *def)
 {
 	const char *sys = "sph_density";

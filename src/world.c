@@ -7,6 +7,7 @@
  * then check that no particle left the bounds. */
 #define _POSIX_C_SOURCE 200809L
 #include "core.h"
+#include "sph.h"
 #include "systems.h"
 
 #include <float.h>
@@ -566,6 +567,100 @@ static bool inside_any_collider(const eddy_world *w, eddy_vec3 p)
 	return false;
 }
 
+/* The mass of one particle (kg), NAN when the pipeline does not define one:
+ * sph_density's calibrated mass (the first sph_density), else for FLIP
+ * rho * s^3, rho flip_pressure's density and s the spacing every emitter
+ * shares (FLIP has no particle mass of its own: its particles sample the
+ * fluid at the emitted lattice, s^3 of water each; emitters at different
+ * spacings, or particles added without an emitter, leave it undefined).
+ * Built-in kinds whose def is read here keep it as their data's first member
+ * (C11 6.7.2.1p15: a pointer to a struct converts to one to its first
+ * member); tests/test_stress_slosh.c checks non-default values come through. */
+static double particle_mass(const eddy_world *w)
+{
+	double rho = NAN, s = NAN;
+	for (int k = 0; k < w->order_count; ++k) {
+		const eddy_system *o = &w->slots[w->order[k]];
+		if (o->vt == &eddy__kind_sph_density)
+			return ((const sph_shared *)o->data)->mass;
+		if (o->vt == &eddy__kind_flip_pressure && isnan(rho))
+			rho = ((const eddy_flip_pressure_def *)o->data)->density;
+		if (o->vt->spacing) {
+			const double e = o->vt->spacing(o);
+			if (isnan(s))
+				s = e;
+			else if (e != s)
+				return NAN;
+		}
+	}
+	return rho * s * s * s; /* NAN if either is missing */
+}
+
+/* Energy and momentum of the particles into out (see eddy_frame_stats).
+ * The compression energy is the work done compressing each particle from
+ * rho0 along sph_density's equation of state, e = m int_rho0^rho p / r^2 dr
+ * (the specific internal energy of a barotropic fluid, de = p / rho^2 drho),
+ * with p clamped at 0 as sph_density clamps it (e = 0 for rho <= rho0):
+ *   linear, p = k (rho - rho0):  e = m k (ln(rho / rho0) + rho0 / rho - 1)
+ *   Tait, p = B ((rho/rho0)^gamma - 1), B = k rho0 / gamma:
+ *     e = m (B / rho0) (((rho/rho0)^(gamma-1) - 1) / (gamma - 1) + rho0 / rho - 1)
+ * It is the energy WCSPH's pressure force exchanges with the motion, so the
+ * total is the one a conservative WCSPH would keep; sph_dfsph solves for the
+ * pressure instead and has no such store (NAN there). */
+static void energy_stats(const eddy_world *w, eddy_frame_stats *out)
+{
+	const double m = particle_mass(w);
+	out->particle_mass = m;
+	out->kinetic_energy = out->potential_energy = out->compression_energy = out->energy = NAN;
+	out->momentum[0] = out->momentum[1] = out->momentum[2] = NAN;
+	const float *x = w->columns[COL_X_].data, *y = w->columns[COL_Y_].data, *z = w->columns[COL_Z_].data;
+	const float *vx = w->columns[COL_VX].data, *vy = w->columns[COL_VY].data, *vz = w->columns[COL_VZ].data;
+	if (!(m > 0) || !x || !vx)
+		return;
+	double gx = 0, gy = 0, gz = 0; /* m/s^2, what the gravity systems add up to */
+	const eddy_sph_density_def *eos = NULL;
+	float rho0 = 0;
+	bool wcsph = false;
+	for (int k = 0; k < w->order_count; ++k) {
+		const eddy_system *o = &w->slots[w->order[k]];
+		if (o->vt == &eddy__kind_gravity) {
+			const double sc = ((const eddy_gravity_def *)o->data)->scale;
+			gx += sc * w->def.gravity.x, gy += sc * w->def.gravity.y, gz += sc * w->def.gravity.z;
+		}
+		if (o->vt == &eddy__kind_sph_density && !eos) {
+			eos = eddy__sph_density_def(o);
+			rho0 = ((const sph_shared *)o->data)->rho0;
+		}
+		wcsph = wcsph || o->vt == &eddy__kind_sph_pressure;
+	}
+	const eddy_vec3 lo = w->def.bounds_min;
+	double ke = 0, pe = 0, px = 0, py = 0, pz = 0;
+	for (size_t i = 0; i < w->n; ++i) {
+		const double ux = vx[i], uy = vy[i], uz = vz[i];
+		ke += ux * ux + uy * uy + uz * uz;
+		pe -= gx * ((double)x[i] - lo.x) + gy * ((double)y[i] - lo.y) + gz * ((double)z[i] - lo.z);
+		px += ux, py += uy, pz += uz;
+	}
+	out->kinetic_energy = 0.5 * m * ke;
+	out->potential_energy = m * pe;
+	out->momentum[0] = m * px, out->momentum[1] = m * py, out->momentum[2] = m * pz;
+	out->energy = out->kinetic_energy + out->potential_energy;
+	const float *rho = w->columns[COL_DENSITY].data;
+	if (!wcsph || !eos || !rho || !(rho0 > 0))
+		return;
+	const double r0 = rho0, kk = eos->stiffness, gam = eos->tait_gamma, B = kk * r0 / gam;
+	const bool tait = eos->eos == EDDY_SPH_EOS_TAIT;
+	double ce = 0;
+	for (size_t i = 0; i < w->n; ++i) {
+		const double r = rho[i];
+		if (!(r > r0))
+			continue;
+		ce += tait ? (B / r0) * ((pow(r / r0, gam - 1) - 1) / (gam - 1) + r0 / r - 1) : kk * (log(r / r0) + r0 / r - 1);
+	}
+	out->compression_energy = m * ce;
+	out->energy += out->compression_energy;
+}
+
 eddy_status eddy_world_frame_stats(eddy_world *w, eddy_frame_stats *out)
 {
 	if (!w || !out)
@@ -630,6 +725,7 @@ eddy_status eddy_world_frame_stats(eddy_world *w, eddy_frame_stats *out)
 		out->density_compression_avg = NAN;
 	}
 	out->volume = NAN; /* a grid system publishes "volume" when a grid exists */
+	energy_stats(w, out);
 
 	out->state_hash = eddy_world_state_hash(w);
 	out->system_count = w->order_count < EDDY_MAX_STAT_SYSTEMS ? w->order_count : EDDY_MAX_STAT_SYSTEMS;

@@ -86,6 +86,8 @@ int main(int argc, char **argv)
 		/* stress: scenes one step beyond the validated ones (scenes/stress/) */
 		{"stress_flip_flight", suite_stress_flip_flight, false},
 		{"stress_flip_solids", suite_stress_flip_solids, false},
+		{"stress_slosh", suite_stress_slosh, false},
+		{"long_slosh", suite_long_slosh, true},
 	};
 	const bool want_long = only && strcmp(only, "long") == 0;
 	int ran = 0;

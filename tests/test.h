@@ -72,4 +72,8 @@ void suite_render(void);
 void suite_study(void);
 void suite_compare(void); /* eddy compare */
 
+/* stress scenes (scenes/stress/) */
+void suite_stress_slosh(void);
+void suite_long_slosh(void); /* minutes: make test-long */
+
 #endif

@@ -1,0 +1,172 @@
+-- SPDX-License-Identifier: MIT
+-- slosh (stress case): mode-1 sloshing in a closed tank L = 0.4 m long,
+-- water d = 0.1 m deep, thin in z (4 particle spacings), started at rest from
+-- a tilted surface eta = A cos(k x), k = pi / L. Linear theory (Lamb 1932,
+-- art. 227): a standing wave of frequency omega^2 = g k tanh(k d), here
+-- omega = 7.11 rad/s, T = 0.884 s; an inviscid method should keep the
+-- amplitude, and the damping it shows is the method's numerical dissipation
+-- (water's own, nu = 1e-6 m^2/s, damps this mode by zeta ~ 1e-4).
+--
+-- The surface elevation is measured from the particles at the top: the
+-- surface height of each bin two spacings wide (one FLIP cell) is the
+-- highest particle in it plus half a spacing, and eta is the mode-1
+-- amplitude of that profile, a = (2 / L) sum_b y_b cos(k x_b) dx_b (the
+-- still depth drops out: sum_b cos(k x_b) = 0 over the bins' centres). eta
+-- is the fundamental's elevation at the left wall; eta_wall, the top of the
+-- wall's own bin minus d, is reported too, but it steps by particle layers
+-- and carries the higher modes. A measure from particle counts (volume)
+-- would not do: FLIP's particles do not keep a uniform density. The first
+-- frame's eta differs from A: the initial surface is a staircase of whole
+-- particle layers.
+-- Per frame: eta (m), and as they become known, omega (rad/s, from eta's zero
+-- crossings, half a period apart), period_err = T / T_theory - 1, zeta (at
+-- the frame after each peak: the damping ratio from the log decrement
+-- delta = ln(|a_i-1| / |a_i|) of the last two peaks of |eta|, half a period
+-- apart, zeta = delta / sqrt(pi^2 + delta^2); their mean over a run is the
+-- fitted one) and damping_ratio (the same from the first and the latest
+-- peak: the run's fit so far). The peak of each half cycle between two zero
+-- crossings is refined by a parabola through its three samples; the first
+-- half cycle (from the start) is not used, since it starts at its peak.
+--
+--   build/eddy run scenes/stress/slosh.lua --set method=apic --stats - --quiet
+--   build/eddy run scenes/stress/slosh.lua --set method=wcsph --set spacing=0.005
+--
+-- Params: method (wcsph, dfsph, flip, pic, apic), spacing (m, particle
+-- spacing; FLIP's cell is 2 spacings, 8 particles per cell), amplitude (m),
+-- flip_ratio (method flip), solver (FLIP's pcg or cholmod), cfl, fps,
+-- duration (s), render.
+
+local eddy = require "eddy"
+
+local method = eddy.param("method", "flip")
+local s = eddy.param("spacing", 0.00625)   -- m, particle spacing
+local A = eddy.param("amplitude", 0.01)    -- m (kA = 0.079: the nonlinear
+                                            -- frequency shift, Tadjbakhsh & Keller 1960, is +0.16%)
+local L, d = 0.4, 0.1                       -- m, tank length and still depth
+local g, rho0 = 9.81, 1000
+local W = eddy.param("thickness", 4) * s      -- m, thickness (z), in spacings
+local H = 2 * d                             -- m, tank height
+local k = math.pi / L
+local omega_ref = math.sqrt(g * k * math.tanh(k * d))
+
+local flip = method == "flip" or method == "pic" or method == "apic"
+local sph = method == "wcsph" or method == "dfsph"
+assert(flip or sph, "slosh: 'method' must be wcsph, dfsph, flip, pic or apic (got " .. tostring(method) .. ")")
+
+local world = eddy.world {
+	bounds = { {0, 0, 0}, {L, H, W} }, gravity = {0, -g, 0},
+	fps = eddy.param("fps", 60), duration = eddy.param("duration", 4.0),
+	cfl = eddy.param("cfl", flip and 1.0 or 0.4), cell_size = flip and 2 * s or 0,
+}
+
+-- The tilted surface: columns one spacing wide, each of the whole number of
+-- layers nearest d + A cos(k x) at its centre; runs of equal height share
+-- one emitter.
+local ncol = math.floor(L / s + 0.5)
+local function layers(i) return math.floor((d + A * math.cos(k * (i + 0.5) * s)) / s + 0.5) end
+local i0 = 0
+for i = 1, ncol do
+	if i == ncol or layers(i) ~= layers(i0) then
+		-- max a quarter spacing past the last lattice cell: the count per axis
+		-- is floor((max - min) / spacing), which rounding must not cut short
+		world:add(eddy.emit_box { min = {i0 * s, 0, 0}, max = {math.min((i + 0.25) * s, L), (layers(i0) + 0.25) * s, W}, spacing = s })
+		i0 = i
+	end
+end
+
+if sph then
+	-- WCSPH: k = 100 g d puts the hydrostatic compression at 1% (still_water)
+	world:add(eddy.sph_density { radius = 2 * s, spacing = s, rest_density = rho0,
+	                             stiffness = eddy.param("stiffness", 100 * g * d) })
+	if method == "dfsph" then
+		world:add(eddy.gravity {})
+		world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.05 })
+		world:add(eddy.sph_dfsph {})
+	else
+		world:add(eddy.sph_pressure {})
+		world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.05 })
+		world:add(eddy.gravity {})
+	end
+	world:add(eddy.sph_boundary_box { min = {0, 0, 0}, max = {L, H, W}, spacing = s })
+	world:add(eddy.integrate {})
+	world:add(eddy.collide_box { min = {0, 0, 0}, max = {L, H, W}, inside = true })
+else
+	world:add(eddy.gravity {})
+	world:add(eddy.flip_p2g {})
+	world:add(eddy.flip_boundary {})
+	world:add(eddy.flip_surface {})
+	world:add(eddy.flip_pressure { solver = eddy.param("solver", "pcg"), density = rho0 })
+	world:add(eddy.flip_extrapolate {})
+	world:add(eddy.flip_g2p { transfer = method, flip_ratio = eddy.param("flip_ratio", 0.95) })
+	world:add(eddy.flip_advect {})
+	world:add(eddy.flip_reseed {})
+end
+
+local nbin = math.floor(L / (2 * s) + 0.5) -- surface bins
+local bw = L / nbin                          -- m, bin width
+
+-- the history the frame reports need
+local prev_t, prev_eta           -- last frame
+local crossings = {}             -- s, zero crossings of eta
+local seg = nil                  -- samples of the current half cycle: { {t, eta}, ... }
+local peaks = {}                 -- |eta| at the peaks of complete half cycles
+
+-- the peak of a half cycle: its largest |eta| sample, refined by the
+-- parabola through it and its neighbours (samples are one frame apart)
+local function seg_peak(samples)
+	local best = 1
+	for i = 2, #samples do
+		if math.abs(samples[i][2]) > math.abs(samples[best][2]) then best = i end
+	end
+	local e1 = math.abs(samples[best][2])
+	if best > 1 and best < #samples then
+		local e0, e2 = math.abs(samples[best - 1][2]), math.abs(samples[best + 1][2])
+		local a = (e0 - 2 * e1 + e2) / 2
+		if a < 0 then return e1 - (e2 - e0) ^ 2 / (16 * a) end
+	end
+	return e1
+end
+
+local function zeta_of(delta) return delta / math.sqrt(math.pi ^ 2 + delta ^ 2) end
+
+world:on_frame(function(w)
+	local x, y = w:channel("x"), w:channel("y")
+	local top = {}
+	for b = 1, nbin do top[b] = 0 end
+	for i = 1, #x do
+		local b = math.floor(x[i] / bw) + 1
+		b = b < 1 and 1 or b > nbin and nbin or b
+		if y[i] > top[b] then top[b] = y[i] end
+	end
+	local a = 0
+	for b = 1, nbin do a = a + (top[b] + s / 2) * math.cos(k * (b - 0.5) * bw) end
+	local eta = 2 * a * bw / L
+	local t = w:time()
+	local out = { eta = eta, eta_wall = top[1] + s / 2 - d, omega_ref = omega_ref }
+	if prev_eta and ((prev_eta > 0 and eta <= 0) or (prev_eta < 0 and eta >= 0)) and eta ~= prev_eta then
+		crossings[#crossings + 1] = prev_t + (t - prev_t) * prev_eta / (prev_eta - eta)
+		if seg then -- a complete half cycle ended
+			peaks[#peaks + 1] = seg_peak(seg)
+			if #peaks >= 2 then
+				out.zeta = zeta_of(math.log(peaks[#peaks - 1] / peaks[#peaks]))
+				out.damping_ratio = zeta_of(math.log(peaks[1] / peaks[#peaks]) / (#peaks - 1))
+			end
+		end
+		seg = {}
+	end
+	if seg then seg[#seg + 1] = { t, eta } end
+	if #crossings >= 2 then
+		out.omega = math.pi * (#crossings - 1) / (crossings[#crossings] - crossings[1])
+		out.period_err = omega_ref / out.omega - 1
+	end
+	if #peaks >= 2 then
+		out.damping_ratio = out.damping_ratio or zeta_of(math.log(peaks[1] / peaks[#peaks]) / (#peaks - 1))
+		out.peaks = #peaks
+	end
+	prev_t, prev_eta = t, eta
+	return out
+end)
+
+require("eddy.view").render(eddy, world, "slosh", { radius = 0.6 * s })
+
+return world
