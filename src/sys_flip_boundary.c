@@ -27,8 +27,8 @@
  * particles it projects out pack, and the level drops (measured: 6% lowering
  * a 4 cm sphere into a 15 cm pool, 44% moving it back and forth).
  * Add the colliders after flip_advect (where they also keep particles out).
- * State: the offsets seen at the last step (not checkpointed: after a
- * restore the first step falls back to the collider's motion record). */
+ * State: the offsets seen at the last step, per pipeline position
+ * (checkpointed, so a resumed run sees the same solid velocities). */
 #include "flip.h"
 
 #include <stdlib.h>
@@ -39,8 +39,11 @@ typedef struct boundary {
 	/* per pipeline position: the collider offset this system saw at its last
 	 * step, and the solid velocities of the current step (see step) */
 	int cap;
-	bool *have;
-	eddy_vec3 *seen, *vel;
+	struct seen_offset {
+		float x, y, z; /* m */
+		float have;    /* 1 when x y z hold a collider's offset (floats only: no padding in a checkpoint) */
+	} *seen;
+	eddy_vec3 *vel;
 	int64_t vel_step; /* the step vel belongs to, -1 for none */
 } boundary;
 
@@ -243,35 +246,41 @@ bool eddy__flip_boundary_info(const eddy_world *w, float *margin, const eddy_vec
  * with an offset function it is the last step's displacement, a step late,
  * while the geometry is the one at the start of the step. With no memory
  * (first step, a changed pipeline) the motion record is used. */
+/* Sizes the per-position arrays for the pipeline (a changed pipeline forgets
+ * what was seen). */
+static bool fit(boundary *b, int n)
+{
+	if (b->cap == n)
+		return true;
+	free(b->seen);
+	free(b->vel);
+	b->seen = calloc((size_t)n + 1, sizeof *b->seen);
+	b->vel = calloc((size_t)n + 1, sizeof *b->vel);
+	b->cap = n;
+	if (!b->seen || !b->vel) {
+		b->cap = -1;
+		return false;
+	}
+	return true;
+}
+
 static bool solid_velocities(eddy_world *w, boundary *b, const eddy_step_context *ctx)
 {
 	const int n = w->order_count;
-	if (b->cap != n) {
-		free(b->have);
-		free(b->seen);
-		free(b->vel);
-		b->have = calloc((size_t)n + 1, sizeof *b->have);
-		b->seen = calloc((size_t)n + 1, sizeof *b->seen);
-		b->vel = calloc((size_t)n + 1, sizeof *b->vel);
-		b->cap = n;
-		if (!b->have || !b->seen || !b->vel) {
-			b->cap = -1;
-			return false;
-		}
-	}
+	if (!fit(b, n))
+		return false;
 	const double inv_dt = ctx->dt > 0 ? 1.0 / ctx->dt : 0.0;
 	for (int q = 0; q < n; ++q) {
 		const eddy_system *c = &w->slots[w->order[q]];
 		if (!eddy__is_collider(c)) {
-			b->have[q] = false;
+			b->seen[q].have = 0;
 			continue;
 		}
 		const eddy_collider_motion m = ((const eddy_collider_base *)c->data)->motion;
-		const eddy_vec3 ref = b->have[q] ? b->seen[q] : m.last_offset;
+		const eddy_vec3 ref = b->seen[q].have != 0 ? (eddy_vec3){b->seen[q].x, b->seen[q].y, b->seen[q].z} : m.last_offset;
 		b->vel[q] = (eddy_vec3){(float)((m.offset.x - ref.x) * inv_dt), (float)((m.offset.y - ref.y) * inv_dt),
 		                        (float)((m.offset.z - ref.z) * inv_dt)};
-		b->seen[q] = m.offset;
-		b->have[q] = true;
+		b->seen[q] = (struct seen_offset){m.offset.x, m.offset.y, m.offset.z, 1};
 	}
 	b->vel_step = ctx->step;
 	return true;
@@ -320,13 +329,24 @@ static void destroy(eddy_system *s)
 	boundary *b = s->data;
 	if (!b)
 		return;
-	free(b->have);
 	free(b->seen);
 	free(b->vel);
 }
 
+static void *state(eddy_world *w, eddy_system *s, size_t *size)
+{
+	boundary *b = s->data;
+	if (!fit(b, w->order_count)) {
+		*size = 0;
+		return NULL;
+	}
+	*size = (size_t)b->cap * sizeof *b->seen;
+	return b->seen;
+}
+
 const eddy_system_vtable eddy__kind_flip_boundary = {
 	.name = "flip_boundary",
+	.state = state,
 	.step = step,
 	.destroy = destroy,
 	.default_writes = boundary_io,
