@@ -76,4 +76,6 @@ void suite_compare(void); /* eddy compare */
 void suite_stress_slosh(void);
 void suite_long_slosh(void); /* minutes: make test-long */
 
+void suite_stress_dfsph(void);
+
 #endif

@@ -14,7 +14,8 @@
 --   build/eddy run scenes/stress/still_water.lua --set depth=0.5 --set solver=dfsph --stats - --quiet
 --
 -- Params: depth (m, 0.5 = 40 layers at the default spacing), spacing (m),
--- solver ("dfsph" or "wcsph"), tolerance (sph_dfsph's max_density_error),
+-- solver ("dfsph" or "wcsph"), tolerance and max_iterations (sph_dfsph's
+-- max_density_error and max_iterations),
 -- stiffness (sph_pressure's, m^2/s^2), cfl, duration (s).
 
 local eddy = require "eddy"
@@ -37,8 +38,9 @@ local density = world:add(eddy.sph_density { radius = 2 * dx, spacing = dx, rest
 if solver == "dfsph" then
 	world:add(eddy.gravity {})
 	world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.05 })
-	local tol = eddy.param("tolerance", nil)
-	world:add(eddy.sph_dfsph(tol and { max_density_error = tol } or {}))
+	-- params arrive as strings: the solver's fields are numbers
+	world:add(eddy.sph_dfsph { max_density_error = tonumber(eddy.param("tolerance", nil)),
+	                           max_iterations = tonumber(eddy.param("max_iterations", nil)) })
 else
 	world:add(eddy.sph_pressure {})
 	world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.05 })
