@@ -310,12 +310,10 @@ static void fluid_group_expands_per_method(void)
 	static const struct {
 		const char *method, *systems;
 	} cases[] = {
-		{"wcsph", "sph_density sph_pressure sph_viscosity gravity sph_boundary_box integrate collide_box"},
-		{"dfsph", "sph_density gravity sph_viscosity sph_dfsph sph_boundary_box integrate collide_box"},
-		{"flip", "gravity flip_p2g flip_boundary flip_surface flip_pressure flip_extrapolate flip_g2p flip_advect "
-		         "flip_reseed"},
-		{"pic", "gravity flip_p2g flip_boundary flip_surface flip_pressure flip_extrapolate flip_g2p flip_advect "
-		        "flip_reseed"},
+		{"wcsph", "sph_density sph_pressure sph_viscosity gravity sph_boundary_box integrate collide_box|"},
+		{"dfsph", "sph_density gravity sph_viscosity sph_dfsph sph_boundary_box integrate collide_box|"},
+		{"flip", "gravity flip_p2g flip_boundary flip_surface flip_pressure flip_extrapolate flip_g2p flip_advect|"},
+		{"pic", "gravity flip_p2g flip_boundary flip_surface flip_pressure flip_extrapolate flip_g2p flip_advect|"},
 	};
 	char src[1024], buf[4096];
 	for (size_t c = 0; c < sizeof cases / sizeof cases[0]; ++c) {

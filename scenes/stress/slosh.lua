@@ -49,14 +49,20 @@ local H = 2 * d                             -- m, tank height
 local k = math.pi / L
 local omega_ref = math.sqrt(g * k * math.tanh(k * d))
 
-local flip = method == "flip" or method == "pic" or method == "apic"
-local sph = method == "wcsph" or method == "dfsph"
-assert(flip or sph, "slosh: 'method' must be wcsph, dfsph, flip, pic or apic (got " .. tostring(method) .. ")")
+local grid = { solver = eddy.param("solver", "pcg"), rest_density = rho0, reseed = true }
+local fluid = eddy.fluid {
+	method = method, resolution = s, rest_density = rho0,
+	-- WCSPH: k = 100 g d puts the hydrostatic compression at 1% (still_water)
+	wcsph = { stiffness = eddy.param("stiffness", 100 * g * d) },
+	flip = { solver = grid.solver, reseed = true, flip_ratio = eddy.param("flip_ratio", 0.95) },
+	pic = grid, apic = grid,
+}
+local flip = fluid.cell_size ~= nil
 
-local world = eddy.world {
+local world = fluid:world {
 	bounds = { {0, 0, 0}, {L, H, W} }, gravity = {0, -g, 0},
 	fps = eddy.param("fps", 60), duration = eddy.param("duration", 4.0),
-	cfl = eddy.param("cfl", flip and 1.0 or 0.4), cell_size = flip and 2 * s or 0,
+	cfl = eddy.param("cfl", flip and 1.0 or 0.4),
 }
 
 -- The tilted surface: columns one spacing wide, each of the whole number of
@@ -74,33 +80,7 @@ for i = 1, ncol do
 	end
 end
 
-if sph then
-	-- WCSPH: k = 100 g d puts the hydrostatic compression at 1% (still_water)
-	world:add(eddy.sph_density { radius = 2 * s, spacing = s, rest_density = rho0,
-	                             stiffness = eddy.param("stiffness", 100 * g * d) })
-	if method == "dfsph" then
-		world:add(eddy.gravity {})
-		world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.05 })
-		world:add(eddy.sph_dfsph {})
-	else
-		world:add(eddy.sph_pressure {})
-		world:add(eddy.sph_viscosity { viscosity = 1e-3, artificial = 0.05 })
-		world:add(eddy.gravity {})
-	end
-	world:add(eddy.sph_boundary_box { min = {0, 0, 0}, max = {L, H, W}, spacing = s })
-	world:add(eddy.integrate {})
-	world:add(eddy.collide_box { min = {0, 0, 0}, max = {L, H, W}, inside = true })
-else
-	world:add(eddy.gravity {})
-	world:add(eddy.flip_p2g {})
-	world:add(eddy.flip_boundary {})
-	world:add(eddy.flip_surface {})
-	world:add(eddy.flip_pressure { solver = eddy.param("solver", "pcg"), density = rho0 })
-	world:add(eddy.flip_extrapolate {})
-	world:add(eddy.flip_g2p { transfer = method, flip_ratio = eddy.param("flip_ratio", 0.95) })
-	world:add(eddy.flip_advect {})
-	world:add(eddy.flip_reseed {})
-end
+world:add(fluid)
 
 local nbin = math.floor(L / (2 * s) + 0.5) -- surface bins
 local bw = L / nbin                          -- m, bin width
