@@ -89,6 +89,7 @@ int main(int argc, char **argv)
 		{"stress_slosh", suite_stress_slosh, false},
 		{"long_slosh", suite_long_slosh, true},
 		{"stress_dfsph", suite_stress_dfsph, false},
+		{"stress_energy", suite_stress_energy, false},
 	};
 	const bool want_long = only && strcmp(only, "long") == 0;
 	int ran = 0;

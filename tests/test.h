@@ -77,5 +77,6 @@ void suite_stress_slosh(void);
 void suite_long_slosh(void); /* minutes: make test-long */
 
 void suite_stress_dfsph(void);
+void suite_stress_energy(void);
 
 #endif
