@@ -129,12 +129,6 @@ static int l_compose(lua_State *L)
 	return 2;
 }
 
-static void self_exe(char *out, size_t cap)
-{
-	ssize_t len = readlink("/proc/self/exe", out, cap - 1);
-	out[len > 0 ? (size_t)len : 0] = '\0';
-}
-
 static int error_message(lua_State *L)
 {
 	const char *msg = lua_tostring(L, 1);
@@ -303,26 +297,10 @@ int eddy_compare_main(int argc, char **argv)
 	}
 	if (!a.scene)
 		return usage_error("needs a scene file, e.g. eddy compare scenes/dam_break.lua --methods wcsph,flip");
-	lua_State *L = luaL_newstate();
-	if (!L) {
-		fputs("eddy: cannot create a Lua state (out of memory)\n", stderr);
+	char exe[EDDY_CLI_PATH_MAX], dir[EDDY_CLI_PATH_MAX];
+	lua_State *L = eddy_cli_driver_state(exe, dir);
+	if (!L)
 		return 1;
-	}
-	luaL_openlibs(L);
-	char exe[2048], dir[2048];
-	self_exe(exe, sizeof exe);
-	snprintf(dir, sizeof dir, "%s", exe);
-	char *cut = strrchr(dir, '/');
-	if (cut)
-		*cut = '\0';
-	/* lua/eddy/compare.lua of the source tree (build/eddy, build/asan/eddy)
-	 * or of an installed prefix (bin/eddy -> share/lua/5.4), as eddy study */
-	lua_getglobal(L, "package");
-	lua_getfield(L, -1, "path");
-	lua_pushfstring(L, "%s/../lua/?.lua;%s/../../lua/?.lua;%s/../share/lua/5.4/?.lua;%s", dir, dir, dir,
-	                lua_tostring(L, -1));
-	lua_setfield(L, -3, "path");
-	lua_pop(L, 2);
 
 	int code = 1;
 	lua_pushcfunction(L, error_message);

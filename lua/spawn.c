@@ -9,6 +9,7 @@
 #include "spawn.h"
 
 #include <lauxlib.h>
+#include <lualib.h>
 
 #include <errno.h>
 #include <fcntl.h>
@@ -124,3 +125,26 @@ int eddy_cli_spawn(lua_State *L)
 	return 4;
 }
 
+
+lua_State *eddy_cli_driver_state(char exe[EDDY_CLI_PATH_MAX], char dir[EDDY_CLI_PATH_MAX])
+{
+	ssize_t len = readlink("/proc/self/exe", exe, EDDY_CLI_PATH_MAX - 1);
+	exe[len > 0 ? (size_t)len : 0] = '\0';
+	snprintf(dir, EDDY_CLI_PATH_MAX, "%s", exe);
+	char *cut = strrchr(dir, '/');
+	if (cut)
+		*cut = '\0';
+	lua_State *L = luaL_newstate();
+	if (!L) {
+		fputs("eddy: cannot create a Lua state (out of memory)\n", stderr);
+		return NULL;
+	}
+	luaL_openlibs(L);
+	lua_getglobal(L, "package");
+	lua_getfield(L, -1, "path");
+	lua_pushfstring(L, "%s/../lua/?.lua;%s/../../lua/?.lua;%s/../share/lua/5.4/?.lua;%s", dir, dir, dir,
+	                lua_tostring(L, -1));
+	lua_setfield(L, -3, "path");
+	lua_pop(L, 2);
+	return L;
+}

@@ -13,4 +13,14 @@
  * finishes its frame, and the driver stops running further configurations. */
 int eddy_cli_spawn(lua_State *L);
 
+#define EDDY_CLI_PATH_MAX 2048
+
+/* A Lua state for a command's driver (lua/eddy/<command>.lua): the standard
+ * libraries, and package.path reaching the helpers of the source tree
+ * (build/eddy, build/asan/eddy) or of an installed prefix (bin/eddy ->
+ * share/lua/5.4). exe receives this executable's path (the children run the
+ * same build), dir its folder (for messages). NULL, said on stderr, when out
+ * of memory. */
+lua_State *eddy_cli_driver_state(char exe[EDDY_CLI_PATH_MAX], char dir[EDDY_CLI_PATH_MAX]);
+
 #endif

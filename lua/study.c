@@ -51,13 +51,6 @@ static const char study_usage[] =
 	"lua/eddy/study.lua).\n";
 
 
-/* The path of the running eddy binary, so children run the same build. */
-static void self_exe(char *out, size_t cap)
-{
-	ssize_t len = readlink("/proc/self/exe", out, cap - 1);
-	out[len > 0 ? (size_t)len : 0] = '\0';
-}
-
 /* Message handler: errors from the driver are already "file:line: message";
  * a non-string error object still gets a line. */
 static int error_message(lua_State *L)
@@ -143,27 +136,10 @@ int eddy_study_main(int argc, char **argv)
 		fputs("eddy: study needs a study file, e.g. eddy study scenes/studies/dam_break.lua\n", stderr);
 		return 2;
 	}
-	lua_State *L = luaL_newstate();
-	if (!L) {
-		fputs("eddy: cannot create a Lua state (out of memory)\n", stderr);
+	char exe[EDDY_CLI_PATH_MAX], dir[EDDY_CLI_PATH_MAX];
+	lua_State *L = eddy_cli_driver_state(exe, dir);
+	if (!L)
 		return 1;
-	}
-	luaL_openlibs(L);
-	char exe[2048];
-	self_exe(exe, sizeof exe);
-	char dir[2048];
-	snprintf(dir, sizeof dir, "%s", exe);
-	char *cut = strrchr(dir, '/');
-	if (cut)
-		*cut = '\0';
-	/* lua/eddy/study.lua of the source tree (build/eddy or build/asan/eddy)
-	 * or of an installed prefix (bin/eddy -> share/lua/5.4) */
-	lua_getglobal(L, "package");
-	lua_getfield(L, -1, "path");
-	lua_pushfstring(L, "%s/../lua/?.lua;%s/../../lua/?.lua;%s/../share/lua/5.4/?.lua;%s", dir, dir, dir,
-	                lua_tostring(L, -1));
-	lua_setfield(L, -3, "path");
-	lua_pop(L, 2);
 
 	int code = 1;
 	lua_pushcfunction(L, error_message);
