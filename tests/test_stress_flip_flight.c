@@ -87,7 +87,7 @@ static eddy_system_id add_probe(eddy_world *w, const char *name, eddy_step_fn fn
 	return eddy_add_custom_system(w, &cs);
 }
 
-/* The standard pipeline (scenes/dam_break_flip.lua's order, reseed included)
+/* The standard pipeline (eddy.fluid's order for FLIP, reseed included)
  * with the probes around the solve, in a box holding the flight with
  * 0.05 m + 3 cells to spare (extrapolation and RK2 stay clear of the walls). */
 static eddy_world *flight_world(const flight *f, probe *pr, eddy_vec3 *start)

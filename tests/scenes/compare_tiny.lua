@@ -2,7 +2,7 @@
 -- compare_tiny: a small block of water falling into a small tank, for the
 -- test of `eddy compare` (tests/test_compare.c). The method is a parameter:
 -- "wcsph" (weakly compressible SPH, as scenes/hydrostatic.lua) or "flip" (the
--- FLIP systems in the order of scenes/dam_break_flip.lua); "broken" fails on
+-- FLIP systems in the order lua/eddy/fluid.lua uses); "broken" fails on
 -- purpose, as a scene error for one method. Frames are 160 x 120.
 --
 --   build/eddy compare tests/scenes/compare_tiny.lua --methods wcsph,flip,broken --quick
