@@ -68,7 +68,7 @@ local function fail(msg, level) error("eddy.fluid: " .. msg, level or 4) end
 local function sorted_keys(t)
 	local k = {}
 	for name in pairs(t) do k[#k + 1] = name end
-	table.sort(k)
+	table.sort(k, function(a, b) return tostring(a) < tostring(b) end) -- a stray list entry is a number
 	return k
 end
 
