@@ -1,6 +1,6 @@
 /* SPDX-License-Identifier: MIT */
 /* `eddy compare SCENE.lua [--methods a,b,...] [--set K=V ...] [--out DIR]
- * [--quick] [--field NAME] [--safe]`: one scene, several methods, side by side.
+ * [--quick] [--field NAME] [--safe] [--threads N]`: one scene, several methods, side by side.
  *
  * The driver (lua/eddy/compare.lua) runs the scene once per method as a child
  * `eddy run` (this very binary), one after another, and writes the tables,
@@ -38,11 +38,11 @@
 
 static const char compare_usage[] =
 	"usage: eddy compare SCENE.lua [--methods M1,M2,...] [--set K=V ...] [--out DIR]\n"
-	"                    [--quick] [--field NAME] [--safe]\n"
+	"                    [--quick] [--field NAME] [--safe] [--threads N]\n"
 	"\n"
 	"Runs the scene once per method, one after another, each as a child process\n"
 	"  eddy run SCENE --set method=M [--set K=V ...] --out DIR/runs/M\n"
-	"           --stats DIR/runs/M/stats.jsonl --quiet [--frames 6] [--safe]\n"
+	"           --stats DIR/runs/M/stats.jsonl --quiet [--frames 6] [--safe] [--threads N]\n"
 	"(the scene reads the method with eddy.param(\"method\", ...)), and writes into\n"
 	"DIR (default out/compare_<scene>):\n"
 	"  frame_NNNN.png     the methods' frames side by side, each panel stamped with\n"
@@ -65,6 +65,8 @@ static const char compare_usage[] =
 	"                  resolution\n"
 	"  --field NAME    the stats field charted against time (default max_speed)\n"
 	"  --safe          run every scene with eddy run --safe (sandboxed)\n"
+	"  --threads N     worker threads of every run (default: eddy run's, all cores);\n"
+	"                  --threads 1 for the single-thread figures of a paper\n"
 	"  -h, --help      this help\n"
 	"\n"
 	"Exit status: 0 every method ran; 1 a method failed (its row says why; the\n"
@@ -136,7 +138,7 @@ static int error_message(lua_State *L)
 	return 1;
 }
 
-enum { OPT_METHODS = 256, OPT_SET, OPT_OUT, OPT_QUICK, OPT_FIELD, OPT_SAFE };
+enum { OPT_METHODS = 256, OPT_SET, OPT_OUT, OPT_QUICK, OPT_FIELD, OPT_SAFE, OPT_THREADS };
 
 static const struct option compare_options[] = {
 	{"methods", required_argument, NULL, OPT_METHODS},
@@ -145,6 +147,7 @@ static const struct option compare_options[] = {
 	{"quick", no_argument, NULL, OPT_QUICK},
 	{"field", required_argument, NULL, OPT_FIELD},
 	{"safe", no_argument, NULL, OPT_SAFE},
+	{"threads", required_argument, NULL, OPT_THREADS},
 	{"help", no_argument, NULL, 'h'},
 	{NULL, 0, NULL, 0},
 };
@@ -153,6 +156,7 @@ enum { MAX_METHODS = 16, MAX_SETS = 256 };
 
 typedef struct compare_args {
 	const char *scene, *out, *field;
+	int threads; /* --threads for every run, 0: eddy run's default */
 	char methods_buf[1024];
 	const char *methods[MAX_METHODS];
 	int nmethods;
@@ -264,6 +268,14 @@ static int parse_compare_args(int argc, char **argv, compare_args *a)
 				code = usage_error("--field: '%s' is not a stats field name (letters, digits and '_')", optarg);
 			a->field = optarg;
 			break;
+		case OPT_THREADS: {
+			char *end;
+			const long t = strtol(optarg, &end, 10);
+			if (end == optarg || *end || t < 1 || t > 1024)
+				code = usage_error("--threads must be an integer from 1 to 1024 (got '%s')", optarg);
+			a->threads = (int)t;
+			break;
+		}
 		case OPT_QUICK: a->quick = true; break;
 		case OPT_SAFE: a->safe = true; break;
 		case 'h': a->help = true; break;
@@ -342,6 +354,8 @@ int eddy_compare_main(int argc, char **argv)
 	lua_setfield(L, -2, "quick");
 	lua_pushboolean(L, a.safe);
 	lua_setfield(L, -2, "safe");
+	lua_pushinteger(L, a.threads);
+	lua_setfield(L, -2, "threads");
 	lua_pushstring(L, exe);
 	lua_setfield(L, -2, "exe");
 	lua_pushcfunction(L, eddy_cli_spawn);

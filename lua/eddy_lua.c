@@ -762,6 +762,26 @@ static int l_world_stats(lua_State *L)
 	char hash[24];
 	snprintf(hash, sizeof hash, "%016llx", (unsigned long long)s.state_hash);
 	lua_pushstring(L, hash); lua_setfield(L, -2, "state_hash");
+	/* energy and momentum: nil without a particle mass (see eddy_frame_stats) */
+	const struct {
+		const char *name;
+		double v;
+	} energies[] = {{"particle_mass", s.particle_mass},       {"kinetic_energy", s.kinetic_energy},
+	                {"potential_energy", s.potential_energy}, {"compression_energy", s.compression_energy},
+	                {"energy", s.energy}};
+	for (size_t i = 0; i < sizeof energies / sizeof energies[0]; ++i)
+		if (isfinite(energies[i].v)) {
+			lua_pushnumber(L, energies[i].v);
+			lua_setfield(L, -2, energies[i].name);
+		}
+	if (isfinite(s.momentum[0])) {
+		lua_createtable(L, 3, 0);
+		for (int a = 0; a < 3; ++a) {
+			lua_pushnumber(L, s.momentum[a]);
+			lua_rawseti(L, -2, a + 1);
+		}
+		lua_setfield(L, -2, "momentum");
+	}
 	return 1;
 }
 

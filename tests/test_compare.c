@@ -303,6 +303,7 @@ static void compare_usage_errors(void)
 		{"tests/scenes/compare_tiny.lua --fast", "unknown option '--fast'"},
 		{"tests/scenes/compare_tiny.lua --quick=yes", "option '--quick' takes no value"},
 		{"tests/scenes/compare_tiny.lua --field", "--field needs a value"},
+		{"tests/scenes/compare_tiny.lua --threads 0", "--threads must be an integer from 1 to 1024 (got '0')"},
 		{"tests/scenes/compare_tiny.lua other.lua", "unexpected argument 'other.lua'"},
 	};
 	char cmd[1024], buf[4096];

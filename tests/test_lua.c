@@ -326,6 +326,8 @@ static void fluid_group_expands_per_method(void)
 		         "world:advance(1 / 30)\n"
 		         "local names = {}\n"
 		         "for i, s in ipairs(h) do names[i] = s:name():gsub('#%%d+', '') end\n"
+		         "local st = world:stats()\n"
+		         "assert(type(st.energy) == 'number' and st.kinetic_energy >= 0 and #st.momentum == 3, 'energy stats')\n"
 		         "return table.concat(names, ' ') .. '|' .. h[1]:group() .. '|' .. world:plan() .. '|' .. world:count()\n",
 		         cases[c].method);
 		const char *out = run_group(src, buf, sizeof buf);

@@ -150,6 +150,10 @@ local function run_method(ctx, method)
 		argv[#argv + 1] = "6"
 	end
 	if ctx.safe then argv[#argv + 1] = "--safe" end
+	if ctx.threads > 0 then
+		argv[#argv + 1] = "--threads"
+		argv[#argv + 1] = tostring(ctx.threads)
+	end
 	io.stdout:write(string.format("%-10s", method))
 	io.stdout:flush()
 	local code, wall, rss, signal = ctx.spawn(argv, log)
@@ -487,12 +491,13 @@ end
 
 -- ---- entry point -------------------------------------------------------------------
 
--- args: scene, methods, set, out, quick, field, safe, exe, spawn, listdir,
+-- args: scene, methods, set, out, quick, field, safe, threads, exe, spawn, listdir,
 -- compose (lua/compare.c). Returns the exit status.
 function M.main(args)
 	if not exists(args.scene) then error("compare: cannot read scene '" .. args.scene .. "'", 0) end
 	local name = args.scene:match("([^/]*)$"):match("^[^.]*")
 	local ctx = { scene = args.scene, methods = args.methods, set = args.set, quick = args.quick, safe = args.safe,
+	              threads = args.threads or 0,
 	              field = args.field, exe = args.exe, spawn = args.spawn, listdir = args.listdir,
 	              compose = args.compose, out = args.out or ("out/compare_" .. name), measured_set = {} }
 	for _, k in ipairs(MEASURED) do ctx.measured_set[k] = true end
