@@ -131,13 +131,6 @@ static int l_compose(lua_State *L)
 	return 2;
 }
 
-static int error_message(lua_State *L)
-{
-	const char *msg = lua_tostring(L, 1);
-	lua_pushstring(L, msg ? msg : "(error object is not a string)");
-	return 1;
-}
-
 enum { OPT_METHODS = 256, OPT_SET, OPT_OUT, OPT_QUICK, OPT_FIELD, OPT_SAFE, OPT_THREADS };
 
 static const struct option compare_options[] = {
@@ -315,7 +308,7 @@ int eddy_compare_main(int argc, char **argv)
 		return 1;
 
 	int code = 1;
-	lua_pushcfunction(L, error_message);
+	lua_pushcfunction(L, eddy_cli_error_message);
 	int handler = lua_gettop(L);
 	lua_getglobal(L, "require");
 	lua_pushstring(L, "eddy.compare");
@@ -329,7 +322,7 @@ int eddy_compare_main(int argc, char **argv)
 		goto done;
 	}
 	lua_getfield(L, -1, "main");
-	lua_newtable(L);
+	eddy_cli_push_driver_args(L, exe);
 	lua_pushstring(L, a.scene);
 	lua_setfield(L, -2, "scene");
 	if (a.out) {
@@ -356,10 +349,6 @@ int eddy_compare_main(int argc, char **argv)
 	lua_setfield(L, -2, "safe");
 	lua_pushinteger(L, a.threads);
 	lua_setfield(L, -2, "threads");
-	lua_pushstring(L, exe);
-	lua_setfield(L, -2, "exe");
-	lua_pushcfunction(L, eddy_cli_spawn);
-	lua_setfield(L, -2, "spawn");
 	lua_pushcfunction(L, l_listdir);
 	lua_setfield(L, -2, "listdir");
 	lua_pushcfunction(L, l_compose);

@@ -148,3 +148,19 @@ lua_State *eddy_cli_driver_state(char exe[EDDY_CLI_PATH_MAX], char dir[EDDY_CLI_
 	lua_pop(L, 2);
 	return L;
 }
+
+int eddy_cli_error_message(lua_State *L)
+{
+	const char *msg = lua_tostring(L, 1);
+	lua_pushstring(L, msg ? msg : "(error object is not a string)");
+	return 1;
+}
+
+void eddy_cli_push_driver_args(lua_State *L, const char *exe)
+{
+	lua_newtable(L);
+	lua_pushstring(L, exe);
+	lua_setfield(L, -2, "exe");
+	lua_pushcfunction(L, eddy_cli_spawn);
+	lua_setfield(L, -2, "spawn");
+}

@@ -23,4 +23,12 @@ int eddy_cli_spawn(lua_State *L);
  * of memory. */
 lua_State *eddy_cli_driver_state(char exe[EDDY_CLI_PATH_MAX], char dir[EDDY_CLI_PATH_MAX]);
 
+/* Message handler for the driver's pcall: the driver's errors are already
+ * "file:line: message", so no traceback is added. */
+int eddy_cli_error_message(lua_State *L);
+
+/* Pushes the driver's argument table with what every driver gets: exe (the
+ * binary its runs use) and spawn; the command adds its own options. */
+void eddy_cli_push_driver_args(lua_State *L, const char *exe);
+
 #endif

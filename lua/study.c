@@ -50,16 +50,6 @@ static const char study_usage[] =
 	"Shipped studies: scenes/studies/*.lua (the format is described in\n"
 	"lua/eddy/study.lua).\n";
 
-
-/* Message handler: errors from the driver are already "file:line: message";
- * a non-string error object still gets a line. */
-static int error_message(lua_State *L)
-{
-	const char *msg = lua_tostring(L, 1);
-	lua_pushstring(L, msg ? msg : "(error object is not a string)");
-	return 1;
-}
-
 static const struct option study_options[] = {
 	{"out", required_argument, NULL, 'o'},
 	{"quick", no_argument, NULL, 'q'},
@@ -142,7 +132,7 @@ int eddy_study_main(int argc, char **argv)
 		return 1;
 
 	int code = 1;
-	lua_pushcfunction(L, error_message);
+	lua_pushcfunction(L, eddy_cli_error_message);
 	int handler = lua_gettop(L);
 	lua_getglobal(L, "require");
 	lua_pushstring(L, "eddy.study");
@@ -151,7 +141,7 @@ int eddy_study_main(int argc, char **argv)
 		goto done;
 	}
 	lua_getfield(L, -1, "main");
-	lua_newtable(L);
+	eddy_cli_push_driver_args(L, exe);
 	lua_pushstring(L, a.file);
 	lua_setfield(L, -2, "file");
 	if (a.out) {
@@ -162,10 +152,6 @@ int eddy_study_main(int argc, char **argv)
 	lua_setfield(L, -2, "quick");
 	lua_pushboolean(L, a.safe);
 	lua_setfield(L, -2, "safe");
-	lua_pushstring(L, exe);
-	lua_setfield(L, -2, "exe");
-	lua_pushcfunction(L, eddy_cli_spawn);
-	lua_setfield(L, -2, "spawn");
 	if (lua_pcall(L, 1, 1, handler) != LUA_OK) {
 		report(lua_tostring(L, -1), dir); /* the driver's are "file:line: message" */
 		goto done;
