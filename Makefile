@@ -35,8 +35,11 @@ OSMESA_CFLAGS := $(shell pkg-config --cflags osmesa 2>/dev/null)
 OSMESA_LIBS   := $(shell pkg-config --libs osmesa 2>/dev/null || echo -lOSMesa)
 # CHOLMOD pulls libblas.so.3, which Debian points at OpenBLAS when it is
 # installed (reference BLAS is about 7x slower for the factorisation). Only
-# src/flip_cholmod.c includes CHOLMOD, only render/gl_osmesa.c OSMesa.
-LIBS          := -lcholmod $(OSMESA_LIBS) -lm
+# src/flip_cholmod.c includes CHOLMOD, only render/gl_osmesa.c OSMesa, only
+# render/png.c libpng. render_points draws on a thread of its own (-pthread).
+PNG_CFLAGS    := $(shell pkg-config --cflags libpng 2>/dev/null)
+PNG_LIBS      := $(shell pkg-config --libs libpng 2>/dev/null || echo -lpng16)
+LIBS          := -lcholmod $(OSMESA_LIBS) $(PNG_LIBS) -lz -pthread -lm
 
 # The command-line host: main.c and the files named cli_*.c are the command's
 # own and stay out of the Lua module.
@@ -71,7 +74,7 @@ $(BUILD)/obj/src/%.o: src/%.c
 
 $(BUILD)/obj/render/%.o: render/%.c $(HEADER)
 	@mkdir -p $(dir $@)
-	$(CC) $(BASE) -I$(BUILD)/include $(OSMESA_CFLAGS) -c $< -o $@
+	$(CC) $(BASE) -pthread -I$(BUILD)/include $(OSMESA_CFLAGS) $(PNG_CFLAGS) -c $< -o $@
 
 $(BUILD)/obj/lua/%.o: lua/%.c $(HEADER)
 	@mkdir -p $(dir $@)
@@ -104,7 +107,7 @@ $(BUILD)/eddy: $(CLI_O) $(LUA_O) $(BUILD)/libeddy.a
 
 $(BUILD)/eddy.pc: Makefile src/eddy.h
 	@mkdir -p $(BUILD)
-	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lm -fopenmp\n' '$(PREFIX)' '$(VERSION)' > $@
+	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lpng16 -lz -lm -fopenmp -pthread\n' '$(PREFIX)' '$(VERSION)' > $@
 
 $(BUILD)/tests/run: $(TEST_O) $(LUA_O) $(BUILD)/libeddy.a
 	@mkdir -p $(dir $@)

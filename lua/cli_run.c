@@ -1,6 +1,14 @@
 /* SPDX-License-Identifier: MIT */
 /* eddy run: the frame loop with its stats lines, checkpoints, the lock on the
- * output folder, particle exports and the ffmpeg pipe. */
+ * output folder, particle exports and the ffmpeg pipe.
+ *
+ * Frames are drawn and written in the background (eddy_world_set_background_
+ * output): the renderer's thread finishes frame N while frame N + 1 steps.
+ * The run syncs where it must see the files: before a checkpoint (inside
+ * eddy_world_save), before passing a frame to ffmpeg, and at the end, where a
+ * failed write still stops the run with status 1 and the message naming the
+ * frame and its file. EDDY_SYNC_FRAMES=1 writes every frame before the next
+ * one steps, as eddy did before (the tests compare the two). */
 #define _POSIX_C_SOURCE 200809L
 #define _DEFAULT_SOURCE /* flock, DIR */
 #include "cli.h"
@@ -361,6 +369,10 @@ static bool send_frame(FILE *pipe, const char *path)
 /* The image the renderer published in this frame's stats, into ffmpeg. */
 static int video_frame(run *r)
 {
+	char buf[1024];
+	/* the image is on disk only once the renderer's thread has written it */
+	if (eddy_world_sync(r->w) != EDDY_OK)
+		return cli_fail(CLI_EXIT_RUN, "%s", cli_first_line(eddy_world_error(r->w), buf, sizeof buf));
 	eddy_frame_stats s;
 	eddy_world_frame_stats(r->w, &s);
 	const eddy_stat_value *img = cli_find_extra(&s, "image");
@@ -418,6 +430,9 @@ static int prepare(run *r)
 	const eddy_world_def *def = eddy_world_get_def(r->w);
 	if (o->threads && eddy_world_set_threads(r->w, o->threads) != EDDY_OK)
 		return cli_fail(CLI_EXIT_USAGE, "%s", eddy_world_error(r->w));
+	/* --threads counts the simulation's threads; a renderer's writer is its own */
+	const char *sync = getenv("EDDY_SYNC_FRAMES");
+	eddy_world_set_background_output(r->w, !(sync && sync[0] && strcmp(sync, "0") != 0));
 	double duration = o->duration >= 0 ? o->duration : def->duration;
 	r->frames = o->frames >= 0 ? o->frames : (int)ceil(duration * def->fps - 1e-9);
 	/* a run is whole frames: --duration below one frame would run a whole
@@ -522,6 +537,13 @@ static void catch_signals(void)
 
 static int finish(run *r, int code)
 {
+	/* the frames still being written: all on disk (or failed) before the end */
+	char buf[1024];
+	if (eddy_world_sync(r->w) != EDDY_OK && code == 0) {
+		if (r->bar)
+			fputc('\n', stderr);
+		code = cli_fail(CLI_EXIT_RUN, "%s", cli_first_line(eddy_world_error(r->w), buf, sizeof buf));
+	}
 	if (r->bar && code == 0)
 		fputc('\n', stderr);
 	if (r->stats && r->stats != stdout) {

@@ -9,6 +9,7 @@
 #include <fcntl.h>
 #include <math.h>
 #include <stdarg.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -108,10 +109,12 @@ int eddy_file_begin(eddy_file *o, const char *path)
 	 * system is atomic, and file-series readers never list it */
 	const char *slash = strrchr(path, '/');
 	const int dir_len = slash ? (int)(slash - path) + 1 : 0;
-	static unsigned counter; /* frame hooks run on the stepping thread only */
+	/* frame hooks on the stepping thread and renderers' writer threads all
+	 * take names from it */
+	static atomic_uint counter;
 	for (int attempt = 0; attempt < 100; ++attempt) {
 		int n = snprintf(o->tmp, sizeof o->tmp, "%.*s.%s.%ld-%u.tmp", dir_len, path, path + dir_len, (long)getpid(),
-		                 counter++);
+		                 atomic_fetch_add(&counter, 1u));
 		if (n < 0 || (size_t)n >= sizeof o->tmp)
 			return o->err = ENAMETOOLONG;
 		/* O_EXCL: never write through a file (or link) someone else made */

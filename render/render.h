@@ -57,7 +57,7 @@ int eddy_frame_path(const char *pattern, int frame, char *out, size_t cap);
 /* Creates the parent directories of path (like mkdir -p); 0 or -1 (errno). */
 int eddy_make_parent_dirs(const char *path);
 /* Writes RGB rows (top row first) as PNG, whole or not at all (eddy_file);
- * 0 or an errno value. (png.c: stb_image_write) */
+ * 0 or an errno value. (png.c: libpng, fast settings) */
 int eddy_write_png(const char *path, int width, int height, const uint8_t *rgb);
 
 /* A file written whole or not at all: the bytes go to a hidden temporary file

@@ -16,6 +16,7 @@
 
 #include <errno.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -24,16 +25,11 @@
 #define CIRCLE_SEGMENTS 96
 #define PI_F 3.14159265358979f
 
-typedef struct renderer {
-	eddy_render_points_def def;
-	eddy_gl *gl;
-	float *values;    /* scratch for derived channels (speed) */
-	uint8_t *rgb;     /* per-particle colours, RGBA (4-byte aligned fetches are llvmpipe's fast path) */
-	size_t cap;       /* particles the scratch holds */
-	uint8_t *image;   /* the final RGB image, top row first */
-	float *lines;     /* outline segments, 6 floats each */
-	size_t line_cap;  /* segments */
-} renderer;
+/* Outline segments, 6 floats (two world points, m) each. */
+typedef struct line_buf {
+	float *xyz;
+	size_t cap; /* segments */
+} line_buf;
 
 eddy_render_points_def eddy_default_render_points_def(void)
 {
@@ -168,15 +164,15 @@ static void make_camera(const eddy_render_points_def *d, const eddy_world_def *w
 
 /* ---- outlines ---- */
 
-static bool reserve_lines(renderer *r, size_t segments)
+static bool reserve_lines(line_buf *b, size_t segments)
 {
-	if (segments <= r->line_cap)
+	if (segments <= b->cap)
 		return true;
-	float *l = realloc(r->lines, segments * 6 * sizeof *l);
+	float *l = realloc(b->xyz, segments * 6 * sizeof *l);
 	if (!l)
 		return false;
-	r->lines = l;
-	r->line_cap = segments;
+	b->xyz = l;
+	b->cap = segments;
 	return true;
 }
 
@@ -223,16 +219,15 @@ static int sphere_silhouette(float *out, eddy_vec3 c, float rad, const camera *c
 	return CIRCLE_SEGMENTS;
 }
 
-/* Fills r->lines; returns the segment count or -1 when out of memory. */
-static long build_outlines(renderer *r, eddy_world *w, const camera *cam)
+/* Fills b; returns the segment count or -1 when out of memory. */
+static long build_outlines(line_buf *b, const eddy_render_points_def *d, eddy_world *w, const camera *cam)
 {
-	const eddy_render_points_def *d = &r->def;
 	size_t n = 0;
 	if (d->outline_domain) {
-		if (!reserve_lines(r, 12))
+		if (!reserve_lines(b, 12))
 			return -1;
 		const eddy_world_def *wd = eddy_world_get_def(w);
-		box_edges(r->lines, wd->bounds_min, wd->bounds_max);
+		box_edges(b->xyz, wd->bounds_min, wd->bounds_max);
 		n = 12;
 	}
 	if (!d->outline_colliders)
@@ -242,12 +237,12 @@ static long build_outlines(renderer *r, eddy_world *w, const camera *cam)
 		eddy_collider_shape shape;
 		if (eddy_collider_shape_of(w, eddy_world_system_at(w, i), &shape) != EDDY_OK)
 			continue; /* not a collider */
-		if (!reserve_lines(r, n + CIRCLE_SEGMENTS))
+		if (!reserve_lines(b, n + CIRCLE_SEGMENTS))
 			return -1;
 		if (shape.kind == EDDY_COLLIDER_BOX)
-			box_edges(r->lines + 6 * n, shape.a, shape.b), n += 12;
+			box_edges(b->xyz + 6 * n, shape.a, shape.b), n += 12;
 		else if (shape.kind == EDDY_COLLIDER_SPHERE)
-			n += (size_t)sphere_silhouette(r->lines + 6 * n, shape.a, shape.radius, cam,
+			n += (size_t)sphere_silhouette(b->xyz + 6 * n, shape.a, shape.radius, cam,
 			                               d->projection == EDDY_PROJECTION_ORTHOGRAPHIC);
 		/* planes are unbounded and other shapes undescribed: no outline */
 	}
@@ -263,36 +258,31 @@ static double now_ms(void)
 	return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
 }
 
-static bool reserve_particles(renderer *r, size_t n)
+/* Grows a buffer to hold n elements of size bytes; false when out of memory
+ * (the old buffer stays). */
+static bool reserve(void **p, size_t *cap, size_t n, size_t size)
 {
-	if (n <= r->cap)
+	if (n <= *cap)
 		return true;
-	size_t cap = n + n / 4;
-	float *v = realloc(r->values, cap * sizeof *v);
-	if (v)
-		r->values = v;
-	uint8_t *c = realloc(r->rgb, cap * 4);
-	if (c)
-		r->rgb = c;
-	if (!v || !c)
+	size_t c = n + n / 4;
+	void *q = realloc(*p, c * size);
+	if (!q)
 		return false;
-	r->cap = cap;
+	*p = q;
+	*cap = c;
 	return true;
 }
 
-static eddy_status colour_particles(renderer *r, eddy_world *w, size_t n)
+/* Colours from the snapshot's values (NULL: the constant colour), RGBA. */
+static void colour_particles(const eddy_render_points_def *d, const float *v, size_t n, uint8_t *rgb)
 {
-	const eddy_render_points_def *d = &r->def;
-	if (!d->color_by[0]) {
+	if (!v) {
 		const uint8_t c[4] = {(uint8_t)lrintf(d->color.x * 255), (uint8_t)lrintf(d->color.y * 255),
 		                      (uint8_t)lrintf(d->color.z * 255), 255};
 		for (size_t i = 0; i < n; ++i)
-			memcpy(r->rgb + 4 * i, c, 4);
-		return EDDY_OK;
+			memcpy(rgb + 4 * i, c, 4);
+		return;
 	}
-	const float *v = eddy_particle_values(w, d->color_by, r->values, n);
-	if (!v)
-		return eddy_world_fail(w, EDDY_ERR_INVALID, "color_by '%s' is not available", d->color_by);
 	float lo = d->value_min, hi = d->value_max;
 	if (isnan(lo) || isnan(hi)) {
 		float mn = INFINITY, mx = -INFINITY;
@@ -309,112 +299,381 @@ static eddy_status colour_particles(renderer *r, eddy_world *w, size_t n)
 	/* a uniform field gets the bottom colour instead of a division by zero */
 	const float inv = hi > lo ? 1.0f / (hi - lo) : 0.0f;
 	for (size_t i = 0; i < n; ++i) {
-		eddy_colormap_rgb(d->colormap, (v[i] - lo) * inv, r->rgb + 4 * i);
-		r->rgb[4 * i + 3] = 255;
+		eddy_colormap_rgb(d->colormap, (v[i] - lo) * inv, rgb + 4 * i);
+		rgb[4 * i + 3] = 255;
 	}
-	return EDDY_OK;
 }
 
+/* The supersampled RGBA image (GL rows bottom-up) box-filtered into RGB rows
+ * top-down. */
 static void downsample(const uint8_t *rgba, int W, int H, int s, uint8_t *out)
 {
 	const int sw = W * s, sh = H * s, area = s * s;
-	for (int y = 0; y < H; ++y)
+	for (int y = 0; y < H; ++y) {
+		uint8_t *o = out + (size_t)y * (size_t)W * 3;
+		if (s == 1) {
+			const uint8_t *row = rgba + (size_t)(sh - 1 - y) * (size_t)sw * 4;
+			for (int x = 0; x < W; ++x)
+				o[3 * x] = row[4 * x], o[3 * x + 1] = row[4 * x + 1], o[3 * x + 2] = row[4 * x + 2];
+			continue;
+		}
+		if (s == 2) {
+			/* the default supersample: two rows, two pixels each */
+			const uint8_t *r0 = rgba + (size_t)(sh - 1 - 2 * y) * (size_t)sw * 4, *r1 = r0 - (size_t)sw * 4;
+			for (int x = 0; x < W; ++x, r0 += 8, r1 += 8)
+				for (int c = 0; c < 3; ++c)
+					o[3 * x + c] = (uint8_t)((unsigned)(r0[c] + r0[4 + c] + r1[c] + r1[4 + c] + 2) / 4);
+			continue;
+		}
 		for (int x = 0; x < W; ++x) {
 			unsigned sum[3] = {0, 0, 0};
 			for (int j = 0; j < s; ++j) {
-				/* GL rows run bottom-up, PNG rows top-down */
 				const uint8_t *row = rgba + (size_t)(sh - 1 - (y * s + j)) * (size_t)sw * 4;
 				for (int i = 0; i < s; ++i)
 					for (int c = 0; c < 3; ++c)
 						sum[c] += row[(size_t)(x * s + i) * 4 + (size_t)c];
 			}
-			uint8_t *o = out + ((size_t)y * (size_t)W + (size_t)x) * 3;
 			for (int c = 0; c < 3; ++c)
-				o[c] = (uint8_t)((sum[c] + (unsigned)area / 2) / (unsigned)area);
+				o[3 * x + c] = (uint8_t)((sum[c] + (unsigned)area / 2) / (unsigned)area);
 		}
+	}
+}
+
+/* ---- the writer thread -------------------------------------------------------
+ *
+ * Frames are drawn and written on a thread of the renderer's own, which alone
+ * creates and uses the GL context. The frame hook (the stepping thread) fills
+ * a job with copies of what the frame needs (positions, colour values, camera,
+ * outlines, the path) and queues it; with background output off it then waits
+ * for that job, so the files are on disk when the step returns; on, it
+ * returns at once and the job is drawn while the next frames step. The queue
+ * holds JOBS jobs; the hook waits for a free one, so a slow disk slows the
+ * run instead of filling memory. Jobs are done in order, so files appear in
+ * frame order. A failed job's message is kept until the hook or the sync
+ * returns it (one failure is returned once; later frames go on being written).
+ *
+ * Locking: mu guards head, queued, busy-state and the result fields; a job
+ * between head and head + queued belongs to the writer, the others to the
+ * stepping thread. */
+
+#define JOBS 2
+
+typedef struct job {
+	int frame;
+	char path[1024];
+	size_t count, count_cap;
+	float *x, *y, *z;       /* m, copies of the positions */
+	float *values;          /* color_by's values, or NULL for the constant colour */
+	size_t values_cap;
+	line_buf lines;
+	size_t segments;
+	float view[16], proj[16];
+	bool has_values;
+} job;
+
+typedef struct renderer {
+	eddy_render_points_def def;
+	/* the stepping thread's */
+	eddy_system_id id;      /* this system, for its label */
+	bool started;           /* the writer thread runs */
+	float *speed;           /* scratch for the speed of the newest job */
+	size_t speed_cap;
+	int published;          /* the newest frame whose times went into the stats */
+	/* shared, under mu */
+	pthread_t thread;
+	pthread_mutex_t mu;
+	pthread_cond_t cv;
+	job jobs[JOBS];
+	int head, queued;       /* jobs[head .. head + queued) wait or are being drawn */
+	bool quit;
+	int ready;              /* 0 while the context is being made, 1 made, -1 failed (msg holds why) */
+	eddy_status failed;     /* a failure not yet returned, EDDY_OK if none */
+	int failed_frame;       /* its frame */
+	char msg[512];          /* its reason (or the context's, ready < 0) */
+	int done;               /* the newest frame written */
+	double render_ms, png_ms; /* its times */
+	/* the writer thread's */
+	eddy_gl *gl;
+	uint8_t *rgb;           /* per-particle colours, RGBA (4-byte fetches are llvmpipe's fast path) */
+	size_t rgb_cap;
+	uint8_t *image;         /* the final RGB image, top row first */
+} renderer;
+
+/* Draws and writes one job; 0, or -1 with the status in st and the reason in err. */
+static int draw_job(renderer *r, const job *j, double *render_ms, double *png_ms, eddy_status *st, char *err,
+                    size_t cap)
+{
+	const eddy_render_points_def *d = &r->def;
+	const int s = d->supersample;
+	char why[512];
+	if (j->count > 0) {
+		if (!reserve((void **)&r->rgb, &r->rgb_cap, j->count, 4)) {
+			*st = EDDY_ERR_NOMEM;
+			snprintf(err, cap, "out of memory for %zu particle colours", j->count);
+			return -1;
+		}
+		colour_particles(d, j->has_values ? j->values : NULL, j->count, r->rgb);
+	}
+	eddy_gl_lines lines = {j->lines.xyz, j->segments, {d->outline_color.x, d->outline_color.y, d->outline_color.z},
+	                       1.5f * (float)s};
+	eddy_gl_scene scene;
+	memset(&scene, 0, sizeof scene);
+	memcpy(scene.view, j->view, sizeof scene.view);
+	memcpy(scene.proj, j->proj, sizeof scene.proj);
+	scene.background[0] = d->background.x, scene.background[1] = d->background.y, scene.background[2] = d->background.z;
+	/* key light from the upper left, in front of the camera */
+	const float lx = -0.38f, ly = 0.62f, lz = 0.69f, ll = sqrtf(lx * lx + ly * ly + lz * lz);
+	scene.light[0] = lx / ll, scene.light[1] = ly / ll, scene.light[2] = lz / ll;
+	scene.radius = d->radius;
+	scene.count = j->count;
+	scene.x = j->x, scene.y = j->y, scene.z = j->z;
+	scene.rgb = r->rgb;
+	scene.lines = &lines;
+	scene.line_sets = j->segments > 0 ? 1 : 0;
+
+	const double t0 = now_ms();
+	if (eddy_gl_draw(r->gl, &scene, why, sizeof why) != 0) {
+		*st = EDDY_ERR_EXTERNAL;
+		snprintf(err, cap, "%s", why);
+		return -1;
+	}
+	const double t1 = now_ms();
+	if (!r->image) {
+		r->image = malloc((size_t)d->width * (size_t)d->height * 3);
+		if (!r->image) {
+			*st = EDDY_ERR_NOMEM;
+			snprintf(err, cap, "out of memory for a %dx%d image", d->width, d->height);
+			return -1;
+		}
+	}
+	downsample(eddy_gl_pixels(r->gl), d->width, d->height, s, r->image);
+	/* creates the folders too; a failure leaves no file under path */
+	const int werr = eddy_write_png(j->path, d->width, d->height, r->image);
+	if (werr != 0) {
+		*st = EDDY_ERR_IO;
+		snprintf(err, cap, "cannot write '%s': %s", j->path, strerror(werr));
+		return -1;
+	}
+	*render_ms = t1 - t0;
+	*png_ms = now_ms() - t1;
+	return 0;
+}
+
+static void *writer_main(void *arg)
+{
+	renderer *r = arg;
+	const int s = r->def.supersample;
+	char err[512];
+	eddy_gl *gl = eddy_gl_create(r->def.width * s, r->def.height * s, err, sizeof err);
+	pthread_mutex_lock(&r->mu);
+	r->gl = gl;
+	r->ready = gl ? 1 : -1;
+	if (!gl)
+		snprintf(r->msg, sizeof r->msg, "%s", err);
+	pthread_cond_broadcast(&r->cv);
+	for (;;) {
+		while (r->queued == 0 && !r->quit)
+			pthread_cond_wait(&r->cv, &r->mu);
+		if (r->queued == 0)
+			break; /* quit with nothing left to write */
+		const job *j = &r->jobs[r->head];
+		pthread_mutex_unlock(&r->mu);
+		double render_ms = 0, png_ms = 0;
+		eddy_status st = EDDY_OK;
+		int rc = -1;
+		if (gl)
+			rc = draw_job(r, j, &render_ms, &png_ms, &st, err, sizeof err);
+		else
+			st = EDDY_ERR_EXTERNAL, snprintf(err, sizeof err, "%s", r->msg);
+		pthread_mutex_lock(&r->mu);
+		if (rc == 0) {
+			r->done = j->frame;
+			r->render_ms = render_ms;
+			r->png_ms = png_ms;
+		} else if (r->failed == EDDY_OK) {
+			r->failed = st;
+			r->failed_frame = j->frame;
+			snprintf(r->msg, sizeof r->msg, "%s", err);
+		}
+		r->head = (r->head + 1) % JOBS;
+		r->queued--;
+		pthread_cond_broadcast(&r->cv);
+	}
+	pthread_mutex_unlock(&r->mu);
+	/* the context was made on this thread and is destroyed on it */
+	eddy_gl_destroy(gl);
+	return NULL;
+}
+
+/* Returns a failure the writer kept, once; call with mu held. */
+static eddy_status take_failure(renderer *r, eddy_world *w)
+{
+	eddy_status st = r->failed;
+	if (st == EDDY_OK)
+		return EDDY_OK;
+	r->failed = EDDY_OK;
+	/* the message names the failed frame, which may be earlier than the
+	 * world's, and starts with the label, so the world adds no other */
+	char msg[512];
+	snprintf(msg, sizeof msg, "%s", r->msg);
+	const int frame = r->failed_frame;
+	pthread_mutex_unlock(&r->mu);
+	eddy_system_info info;
+	const char *label = eddy_world_system_info(w, r->id, &info) == EDDY_OK ? info.label : "render_points";
+	eddy_world_fail(w, st, "%s: frame %d: %s", label, frame, msg);
+	pthread_mutex_lock(&r->mu);
+	return st;
+}
+
+/* Starts the writer and waits for its GL context: a context that cannot be
+ * made is the first rendered frame's failure, as it always was. */
+static eddy_status start_writer(renderer *r, eddy_world *w)
+{
+	if (pthread_create(&r->thread, NULL, writer_main, r) != 0)
+		return eddy_world_fail(w, EDDY_ERR_NOMEM, "cannot start the frame writer thread");
+	r->started = true;
+	pthread_mutex_lock(&r->mu);
+	while (r->ready == 0)
+		pthread_cond_wait(&r->cv, &r->mu);
+	pthread_mutex_unlock(&r->mu);
+	return EDDY_OK;
+}
+
+/* Fills a job with copies of what the frame needs (the stepping thread). */
+static eddy_status fill_job(renderer *r, eddy_world *w, job *j, int frame)
+{
+	const eddy_render_points_def *d = &r->def;
+	j->frame = frame;
+	if (eddy_frame_path(d->path, frame, j->path, sizeof j->path) != 0)
+		return eddy_world_fail(w, EDDY_ERR_IO, "the image path for frame %d is too long", frame);
+	const size_t n = eddy_world_particle_count(w);
+	size_t cnt = 0;
+	j->count = n;
+	j->has_values = false;
+	if (n > 0) {
+		const float *x = eddy_world_channel(w, "x", &cnt), *y = eddy_world_channel(w, "y", &cnt),
+		            *z = eddy_world_channel(w, "z", &cnt);
+		if (!x || !y || !z)
+			return eddy_world_fail(w, EDDY_ERR_INVALID, "the positions x y z are not allocated");
+		size_t cap = j->count_cap;
+		bool ok = reserve((void **)&j->x, &cap, n, sizeof(float));
+		cap = j->count_cap;
+		ok = ok && reserve((void **)&j->y, &cap, n, sizeof(float));
+		cap = j->count_cap;
+		ok = ok && reserve((void **)&j->z, &cap, n, sizeof(float));
+		if (!ok)
+			return eddy_world_fail(w, EDDY_ERR_NOMEM, "out of memory for %zu particle positions", n);
+		j->count_cap = cap;
+		memcpy(j->x, x, n * sizeof(float));
+		memcpy(j->y, y, n * sizeof(float));
+		memcpy(j->z, z, n * sizeof(float));
+		if (d->color_by[0]) {
+			if (!reserve((void **)&r->speed, &r->speed_cap, n, sizeof(float)) ||
+			    !reserve((void **)&j->values, &j->values_cap, n, sizeof(float)))
+				return eddy_world_fail(w, EDDY_ERR_NOMEM, "out of memory for %zu particle values", n);
+			const float *v = eddy_particle_values(w, d->color_by, r->speed, n);
+			if (!v)
+				return eddy_world_fail(w, EDDY_ERR_INVALID, "color_by '%s' is not available", d->color_by);
+			memcpy(j->values, v, n * sizeof(float));
+			j->has_values = true;
+		}
+	}
+	camera cam;
+	make_camera(d, eddy_world_get_def(w), &cam);
+	memcpy(j->view, cam.view, sizeof j->view);
+	memcpy(j->proj, cam.proj, sizeof j->proj);
+	long segments = build_outlines(&j->lines, d, w, &cam);
+	if (segments < 0)
+		return eddy_world_fail(w, EDDY_ERR_NOMEM, "out of memory for outlines");
+	j->segments = (size_t)segments;
+	return EDDY_OK;
+}
+
+/* The newest finished frame's times into the stats, once per frame drawn;
+ * call with mu held. */
+static void publish_times(renderer *r, eddy_world *w)
+{
+	if (r->done <= r->published)
+		return;
+	r->published = r->done;
+	eddy_world_publish(w, "render_ms", r->render_ms);
+	eddy_world_publish(w, "png_ms", r->png_ms);
 }
 
 static eddy_status render_frame(eddy_world *w, int frame, void *user)
 {
 	renderer *r = user;
 	const eddy_render_points_def *d = &r->def;
-	if (frame % d->every != 0)
-		return EDDY_OK;
-	const int s = d->supersample;
-	char err[512];
-	if (!r->gl) {
-		r->gl = eddy_gl_create(d->width * s, d->height * s, err, sizeof err);
-		if (!r->gl)
-			return eddy_world_fail(w, EDDY_ERR_EXTERNAL, "%s", err);
+	pthread_mutex_lock(&r->mu);
+	eddy_status st = take_failure(r, w);
+	pthread_mutex_unlock(&r->mu);
+	if (st != EDDY_OK || frame % d->every != 0)
+		return st;
+	if (!r->started && (st = start_writer(r, w)) != EDDY_OK)
+		return st;
+	pthread_mutex_lock(&r->mu);
+	if (r->ready < 0) {
+		/* no context: every rendered frame fails as the first did */
+		char msg[512];
+		snprintf(msg, sizeof msg, "%s", r->msg);
+		pthread_mutex_unlock(&r->mu);
+		return eddy_world_fail(w, EDDY_ERR_EXTERNAL, "%s", msg);
 	}
-	size_t n = eddy_world_particle_count(w), cnt = 0;
-	const float *x = NULL, *y = NULL, *z = NULL;
-	if (n > 0) {
-		x = eddy_world_channel(w, "x", &cnt);
-		y = eddy_world_channel(w, "y", &cnt);
-		z = eddy_world_channel(w, "z", &cnt);
-		if (!x || !y || !z)
-			return eddy_world_fail(w, EDDY_ERR_INVALID, "the positions x y z are not allocated");
-		if (!reserve_particles(r, n))
-			return eddy_world_fail(w, EDDY_ERR_NOMEM, "out of memory for %zu particle colours", n);
-		eddy_status st = colour_particles(r, w, n);
-		if (st != EDDY_OK)
-			return st;
+	/* a free job: the writer is at most JOBS frames behind */
+	while (r->queued == JOBS)
+		pthread_cond_wait(&r->cv, &r->mu);
+	job *j = &r->jobs[(r->head + r->queued) % JOBS];
+	pthread_mutex_unlock(&r->mu);
+	/* the job is outside the queue: the writer does not touch it */
+	if ((st = fill_job(r, w, j, frame)) != EDDY_OK)
+		return st;
+	eddy_world_publish_text(w, "image", j->path);
+	pthread_mutex_lock(&r->mu);
+	r->queued++;
+	pthread_cond_broadcast(&r->cv);
+	if (!eddy_world_background_output(w)) {
+		/* this frame's files are on disk when the step returns */
+		while (r->queued > 0)
+			pthread_cond_wait(&r->cv, &r->mu);
+		st = take_failure(r, w);
 	}
-	camera cam;
-	make_camera(d, eddy_world_get_def(w), &cam);
-	long segments = build_outlines(r, w, &cam);
-	if (segments < 0)
-		return eddy_world_fail(w, EDDY_ERR_NOMEM, "out of memory for outlines");
-	eddy_gl_lines lines = {r->lines, (size_t)segments, {d->outline_color.x, d->outline_color.y, d->outline_color.z},
-	                       1.5f * (float)s};
-	eddy_gl_scene scene;
-	memset(&scene, 0, sizeof scene);
-	memcpy(scene.view, cam.view, sizeof scene.view);
-	memcpy(scene.proj, cam.proj, sizeof scene.proj);
-	scene.background[0] = d->background.x, scene.background[1] = d->background.y, scene.background[2] = d->background.z;
-	/* key light from the upper left, in front of the camera */
-	const float lx = -0.38f, ly = 0.62f, lz = 0.69f, ll = sqrtf(lx * lx + ly * ly + lz * lz);
-	scene.light[0] = lx / ll, scene.light[1] = ly / ll, scene.light[2] = lz / ll;
-	scene.radius = d->radius;
-	scene.count = n;
-	scene.x = x, scene.y = y, scene.z = z;
-	scene.rgb = r->rgb;
-	scene.lines = &lines;
-	scene.line_sets = segments > 0 ? 1 : 0;
+	if (st == EDDY_OK)
+		publish_times(r, w);
+	pthread_mutex_unlock(&r->mu);
+	return st;
+}
 
-	const double t0 = now_ms();
-	if (eddy_gl_draw(r->gl, &scene, err, sizeof err) != 0)
-		return eddy_world_fail(w, EDDY_ERR_EXTERNAL, "%s", err);
-	const double t1 = now_ms();
-	if (!r->image) {
-		r->image = malloc((size_t)d->width * (size_t)d->height * 3);
-		if (!r->image)
-			return eddy_world_fail(w, EDDY_ERR_NOMEM, "out of memory for a %dx%d image", d->width, d->height);
-	}
-	downsample(eddy_gl_pixels(r->gl), d->width, d->height, s, r->image);
-	char path[1024];
-	if (eddy_frame_path(d->path, frame, path, sizeof path) != 0)
-		return eddy_world_fail(w, EDDY_ERR_IO, "the image path for frame %d is too long", frame);
-	/* creates the folders too; a failure leaves no file under path */
-	const int werr = eddy_write_png(path, d->width, d->height, r->image);
-	if (werr != 0)
-		return eddy_world_fail(w, EDDY_ERR_IO, "cannot write '%s': %s", path, strerror(werr));
-	const double t2 = now_ms();
-	eddy_world_publish(w, "render_ms", t1 - t0);
-	eddy_world_publish(w, "png_ms", t2 - t1);
-	eddy_world_publish_text(w, "image", path);
-	return EDDY_OK;
+static eddy_status sync_frames(eddy_world *w, void *user)
+{
+	renderer *r = user;
+	pthread_mutex_lock(&r->mu);
+	while (r->queued > 0)
+		pthread_cond_wait(&r->cv, &r->mu);
+	eddy_status st = take_failure(r, w);
+	pthread_mutex_unlock(&r->mu);
+	return st;
 }
 
 static void destroy(void *user)
 {
 	renderer *r = user;
-	eddy_gl_destroy(r->gl);
-	free(r->values);
+	if (r->started) {
+		/* the queued frames are written (whole) before the thread ends */
+		pthread_mutex_lock(&r->mu);
+		r->quit = true;
+		pthread_cond_broadcast(&r->cv);
+		pthread_mutex_unlock(&r->mu);
+		pthread_join(r->thread, NULL);
+	}
+	pthread_cond_destroy(&r->cv);
+	pthread_mutex_destroy(&r->mu);
+	for (int k = 0; k < JOBS; ++k) {
+		job *j = &r->jobs[k];
+		free(j->x), free(j->y), free(j->z), free(j->values), free(j->lines.xyz);
+	}
+	free(r->speed);
 	free(r->rgb);
 	free(r->image);
-	free(r->lines);
 	free(r);
 }
 
@@ -498,15 +757,23 @@ eddy_system_id eddy_add_render_points(eddy_world *w, const eddy_render_points_de
 	r->def = *d;
 	if (!by[0])
 		r->def.color_by[0] = '\0';
+	if (pthread_mutex_init(&r->mu, NULL) != 0 || pthread_cond_init(&r->cv, NULL) != 0) {
+		free(r);
+		eddy_world_fail(w, EDDY_ERR_NOMEM, "%s: cannot make the frame writer's lock", sys);
+		return EDDY_NULL_SYSTEM;
+	}
 	eddy_custom_system_def cd = eddy_default_custom_system_def();
 	cd.name = sys;
 	cd.reads = reads;
 	cd.read_count = nreads;
 	cd.frame = render_frame;
 	cd.destroy = destroy;
+	cd.sync = sync_frames;
 	cd.user = r;
 	eddy_system_id id = eddy_add_custom_system(w, &cd);
 	if (!eddy_system_valid(w, id))
 		destroy(r);
+	else
+		r->id = id;
 	return id;
 }

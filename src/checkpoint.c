@@ -118,6 +118,10 @@ eddy_status eddy_world_save(eddy_world *w, const char *path, uint64_t fingerprin
 {
 	if (!w || !path)
 		return eddy__fail(w, EDDY_ERR_INVALID, "checkpoint: world or path is NULL");
+	/* the frames before this one are on disk before the state that follows them */
+	eddy_status synced = eddy_world_sync(w);
+	if (synced != EDDY_OK)
+		return synced;
 	buf b = {0};
 	PUT(&b, w->time);
 	PUT(&b, w->frame);
@@ -300,6 +304,10 @@ eddy_status eddy_world_load(eddy_world *w, const char *path, uint64_t fingerprin
 		return eddy__fail(w, EDDY_ERR_INVALID, "checkpoint: world or path is NULL");
 	if (eddy__refuse_busy(w, "eddy_world_load"))
 		return EDDY_ERR_INVALID;
+	/* frames of the timeline being left are written before it is replaced */
+	eddy_status synced = eddy_world_sync(w);
+	if (synced != EDDY_OK)
+		return synced;
 	FILE *f = fopen(path, "rb");
 	if (!f)
 		return eddy__fail(w, EDDY_ERR_IO, "checkpoint '%s': cannot open: %s", path, strerror(errno));

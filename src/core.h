@@ -45,6 +45,9 @@ typedef struct eddy_system_vtable {
 	 * what the block lives in (the same way for the same scene), so a world
 	 * that has not stepped yet can take a saved state. */
 	void *(*state)(eddy_world *w, eddy_system *s, size_t *size);
+	/* output systems: waits for frame work left running in the background
+	 * (eddy_world_sync); EDDY_OK or its first failure */
+	eddy_status (*sync)(eddy_world *w, eddy_system *s);
 } eddy_system_vtable;
 
 struct eddy_system {
@@ -99,6 +102,7 @@ struct eddy_world {
 	 * names what runs ("a step callback", "a frame callback", ...). Calls that
 	 * would change the clock or the pipeline under that code are refused. */
 	const char *busy;
+	bool background_output; /* eddy_world_set_background_output */
 
 	/* clock */
 	double time;

@@ -143,6 +143,22 @@ EDDY_API eddy_status eddy_world_step_frame(eddy_world *w);
 /* Advances by seconds (frame hooks run at every frame time crossed). */
 EDDY_API eddy_status eddy_world_advance(eddy_world *w, double seconds);
 
+/* Frame output in the background. Off (the default), every file a frame hook
+ * writes (render_points' PNG) is complete when the step that ran the hook
+ * returns, and a failed write is that call's status. On, the hook copies what
+ * the frame needs and a thread of the system's own draws and writes it while
+ * the next frames step: at most 2 frames wait per renderer, and the stepping
+ * blocks while they do. Files are still written whole, in frame order; a
+ * failed write is returned, naming the frame and its file, by the next
+ * stepping call or by eddy_world_sync. eddy_world_save and eddy_world_load
+ * sync first, so a checkpoint never gets ahead of the frames on disk. The
+ * background threads are not counted in eddy_world_set_threads. */
+EDDY_API eddy_status eddy_world_set_background_output(eddy_world *w, bool on);
+EDDY_API bool eddy_world_background_output(const eddy_world *w);
+/* Waits until every frame handed to the background is on disk (or failed);
+ * returns EDDY_OK or the first failure not yet returned, with its message. */
+EDDY_API eddy_status eddy_world_sync(eddy_world *w);
+
 /* ---- columns ----------------------------------------------------------- */
 
 typedef enum eddy_domain {
@@ -270,6 +286,10 @@ typedef struct eddy_custom_system_def {
 	eddy_limit_fn limit;            /* may be NULL */
 	void (*destroy)(void *user);    /* called when the system is removed */
 	void *user;
+	/* may be NULL; for systems whose frame hook leaves work running
+	 * (eddy_world_set_background_output): waits for it and returns its first
+	 * failure not yet returned (eddy_world_sync) */
+	eddy_status (*sync)(eddy_world *w, void *user);
 } eddy_custom_system_def;
 
 EDDY_API eddy_custom_system_def eddy_default_custom_system_def(void);

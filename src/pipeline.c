@@ -301,6 +301,12 @@ static double custom_limit(eddy_world *w, eddy_system *s, const char **reason)
 	return d->def.limit(w, d->def.user, reason);
 }
 
+static eddy_status custom_sync(eddy_world *w, eddy_system *s)
+{
+	custom_data *d = s->data;
+	return d->def.sync ? d->def.sync(w, d->def.user) : EDDY_OK;
+}
+
 static void custom_destroy(eddy_system *s)
 {
 	custom_data *d = s->data;
@@ -310,7 +316,8 @@ static void custom_destroy(eddy_system *s)
 
 /* One vtable per feature set, so the world skips the hooks a custom system lacks
  * (a frame-only system is not timed as a step). Index: step + 2*frame + 4*limit. */
-#define CUSTOM_KIND(st, f, l) {.name = "custom", .step = (st), .frame = (f), .limit = (l), .destroy = custom_destroy}
+#define CUSTOM_KIND(st, f, l) \
+	{.name = "custom", .step = (st), .frame = (f), .limit = (l), .destroy = custom_destroy, .sync = custom_sync}
 static const eddy_system_vtable custom_kinds[8] = {
 	CUSTOM_KIND(NULL, NULL, NULL),         CUSTOM_KIND(custom_step, NULL, NULL),
 	CUSTOM_KIND(NULL, custom_frame, NULL), CUSTOM_KIND(custom_step, custom_frame, NULL),

@@ -208,6 +208,41 @@ eddy_status eddy_world_set_threads(eddy_world *w, int threads)
 	return EDDY_OK;
 }
 
+eddy_status eddy_world_set_background_output(eddy_world *w, bool on)
+{
+	if (!w)
+		return EDDY_ERR_INVALID;
+	if (eddy__refuse_busy(w, "eddy_world_set_background_output"))
+		return EDDY_ERR_INVALID;
+	w->background_output = on;
+	return EDDY_OK;
+}
+
+bool eddy_world_background_output(const eddy_world *w) { return w && w->background_output; }
+
+/* Every system's background work, in pipeline order; all are waited for even
+ * after a failure, so nothing is still writing when this returns. */
+eddy_status eddy_world_sync(eddy_world *w)
+{
+	if (!w)
+		return EDDY_ERR_INVALID;
+	eddy_status first = EDDY_OK;
+	char msg[EDDY_ERROR_MAX] = "";
+	for (int k = 0; k < w->order_count; ++k) {
+		eddy_system *s = &w->slots[w->order[k]];
+		if (!s->vt->sync)
+			continue;
+		eddy_status st = s->vt->sync(w, s);
+		if (st != EDDY_OK && first == EDDY_OK) {
+			first = st;
+			snprintf(msg, sizeof msg, "%s", w->error);
+		}
+	}
+	if (first != EDDY_OK)
+		eddy__fail(w, first, "%s", msg);
+	return first;
+}
+
 double eddy_world_time(const eddy_world *w) { return w ? w->time : NAN; }
 double eddy_world_frame_time(const eddy_world *w) { return w ? 1.0 / w->def.fps : NAN; }
 int eddy_world_frame(const eddy_world *w) { return w ? w->frame : 0; }
