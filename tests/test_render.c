@@ -7,7 +7,9 @@
  * is a clear eddy_status, not a crash; PLY, VTK and VTP files parse back to
  * the values written (VTP and its .pvd through VTK's own Python reader); a
  * write that fails leaves neither a partial file nor a temporary one; NULL
- * worlds and defs are refused; the Lua binding and the eddy command's --video. */
+ * worlds and defs are refused; the Lua binding and the eddy command's --video;
+ * frames written in the background match those written at once, arrive whole
+ * and in order, and a failed one is still its frame's error. */
 #include "test.h"
 
 #include <dirent.h>
@@ -1037,6 +1039,183 @@ static void failed_png_leaves_no_file(void)
 	eddy_destroy_world(w);
 }
 
+/* ---- frames written in the background (eddy_world_set_background_output) ---- */
+
+/* Whether two PNG files decode to the same pixels; what differs goes to why. */
+static bool same_pixels(const char *a, const char *b, char *why, size_t cap)
+{
+	int wa = 0, ha = 0, wb = 0, hb = 0, c;
+	unsigned char *pa = stbi_load(a, &wa, &ha, &c, 3), *pb = stbi_load(b, &wb, &hb, &c, 3);
+	bool same = pa && pb && wa == wb && ha == hb && memcmp(pa, pb, (size_t)wa * (size_t)ha * 3) == 0;
+	if (!same)
+		snprintf(why, cap, "%s (%s, %dx%d) and %s (%s, %dx%d) differ", a, pa ? "read" : "unreadable", wa, ha, b,
+		         pb ? "read" : "unreadable", wb, hb);
+	stbi_image_free(pa);
+	stbi_image_free(pb);
+	return same;
+}
+
+/* A falling, spreading cloud drawn at every frame by two worlds, one writing
+ * in the background, one not: the background world's frames are copies taken
+ * at the frame (the particles move on while the writer draws), so every
+ * frame is identical pixel for pixel; the files exist once eddy_world_sync
+ * returns, and the stats carry each frame's image path. */
+static void background_frames_match_synchronous_ones(void)
+{
+	enum { FRAMES = 8, N = 400 };
+	char why[1400] = "";
+	for (int bg = 0; bg < 2; ++bg) {
+		eddy_world *w = make_world();
+		if (!w)
+			return;
+		eddy_render_points_def d = base_def(bg ? "bg_%d.png" : "fg_%d.png");
+		d.width = 160, d.height = 120, d.supersample = 2;
+		d.projection = EDDY_PROJECTION_PERSPECTIVE;
+		d.eye = d.target; /* framed automatically */
+		strcpy(d.color_by, "speed");
+		d.outline_domain = true;
+		CHECK(eddy_system_valid(w, eddy_add_render_points(w, &d)));
+		eddy_gravity_def g = eddy_default_gravity_def();
+		CHECK(eddy_system_valid(w, eddy_add_gravity(w, &g)));
+		eddy_integrate_def in = eddy_default_integrate_def();
+		CHECK(eddy_system_valid(w, eddy_add_integrate(w, &in)));
+		eddy_vec3 p[N], v[N];
+		for (int i = 0; i < N; ++i) {
+			p[i] = (eddy_vec3){0.3f + 0.02f * (float)(i % 20), 0.9f, 0.3f + 0.02f * (float)(i / 20)};
+			v[i] = (eddy_vec3){0.2f * (float)(i % 7) - 0.6f, 0.2f * (float)(i % 5), 0.3f * (float)(i % 3) - 0.3f};
+		}
+		add_particles(w, N, p, v);
+		CHECK(eddy_world_set_background_output(w, bg) == EDDY_OK);
+		CHECK(eddy_world_background_output(w) == (bool)bg);
+		for (int f = 1; f <= FRAMES; ++f) {
+			CHECKF(eddy_world_step_frame(w) == EDDY_OK, "frame %d: %s", f, eddy_world_error(w));
+			eddy_frame_stats st;
+			eddy_world_frame_stats(w, &st);
+			char path[600];
+			frame_file(path, sizeof path, d.path, f);
+			bool named = false;
+			for (int k = 0; k < st.extra_count; ++k)
+				named |= strcmp(st.extra[k].name, "image") == 0 && st.extra[k].text && !strcmp(st.extra[k].text, path);
+			CHECKF(named, "frame %d's stats do not name %s", f, path);
+		}
+		CHECKF(eddy_world_sync(w) == EDDY_OK, "sync: %s", eddy_world_error(w));
+		eddy_destroy_world(w);
+	}
+	for (int f = 1; f <= FRAMES && !why[0]; ++f) {
+		char a[600], b[600];
+		out_path(a, sizeof a, "fg_%d.png");
+		out_path(b, sizeof b, "bg_%d.png");
+		char fa[600], fb[600];
+		frame_file(fa, sizeof fa, a, f);
+		frame_file(fb, sizeof fb, b, f);
+		same_pixels(fa, fb, why, sizeof why);
+	}
+	CHECKF(why[0] == '\0', "%s", why);
+}
+
+/* In the background a failed write is still the failed frame's error: with
+ * writes limited to 64 bytes (RLIMIT_FSIZE, as in failed_png_leaves_no_file)
+ * frame 2 is queued, and eddy_world_sync returns EDDY_ERR_IO naming frame 2
+ * and its file, leaving neither it nor a temporary file; the failure is
+ * returned once, and frame 3 is written again once writes are allowed. */
+static void background_write_failure_names_its_frame(void)
+{
+	const char *b = test_build_dir();
+	char cmd[1024], out[256], dir[300], file[400], why[2048] = "";
+	snprintf(dir, sizeof dir, "%s/t_render/bgfull", b);
+	snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
+	test_sh(cmd, out, sizeof out);
+	eddy_world *w = make_world();
+	if (!w)
+		return;
+	const eddy_vec3 p = {0.5f, 0.5f, 0.5f};
+	eddy_render_points_def d = base_def("unused_%d.png");
+	snprintf(d.path, sizeof d.path, "%s/f_%%d.png", dir);
+	CHECK(eddy_system_valid(w, eddy_add_render_points(w, &d)));
+	add_particles(w, 1, &p, NULL);
+	CHECK(eddy_world_set_background_output(w, true) == EDDY_OK);
+	CHECK(eddy_world_step_frame(w) == EDDY_OK);
+	CHECK(eddy_world_sync(w) == EDDY_OK);
+	snprintf(file, sizeof file, "%s/f_1.png", dir);
+	CHECKF(unlink(file) == 0, "frame 1 was not written: %s", file);
+	struct rlimit old, lim;
+	CHECK(getrlimit(RLIMIT_FSIZE, &old) == 0);
+	lim = old;
+	lim.rlim_cur = 64;
+	fflush(stdout), fflush(stderr);
+	void (*handler)(int) = signal(SIGXFSZ, SIG_IGN);
+	const bool limited = setrlimit(RLIMIT_FSIZE, &lim) == 0;
+	const eddy_status stepped = eddy_world_step_frame(w);
+	const eddy_status synced = eddy_world_sync(w);
+	const bool restored = setrlimit(RLIMIT_FSIZE, &old) == 0;
+	signal(SIGXFSZ, handler);
+	CHECK(limited && restored);
+	CHECKF(stepped == EDDY_OK, "frame 2's step waited for its write: %s", eddy_world_error(w));
+	snprintf(file, sizeof file, "%s/f_2.png", dir);
+	expect_clean_failure(w, synced, dir, file, why, sizeof why);
+	CHECKF(why[0] == '\0', "%s", why);
+	CHECK_HAS(eddy_world_error(w), "render_points: frame 2: cannot write");
+	CHECK(eddy_world_sync(w) == EDDY_OK); /* returned once */
+	CHECKF(eddy_world_step_frame(w) == EDDY_OK, "frame 3: %s", eddy_world_error(w));
+	CHECK(eddy_world_sync(w) == EDDY_OK);
+	snprintf(file, sizeof file, "%s/f_3.png", dir);
+	struct stat sb;
+	CHECKF(stat(file, &sb) == 0, "frame 3 was not written: %s", file);
+	eddy_destroy_world(w);
+}
+
+/* eddy run writes frames in the background (EDDY_SYNC_FRAMES=1: not): the
+ * bounce scene (particles, a moving sphere's outline) gives the same pixels
+ * either way, every frame is there, written in frame order (modification
+ * times never go backwards); a run resumed from a checkpoint gives the same
+ * frames as one that was not stopped; a write that fails (RLIMIT_FSIZE from
+ * the shell, SIGXFSZ ignored) stops the run with status 1 and one line
+ * naming the frame and its file. */
+static void command_frames_in_the_background(void)
+{
+	enum { FRAMES = 6 };
+	const char *b = test_build_dir();
+	char cmd[2048], out[4096], why[1400] = "";
+	snprintf(cmd, sizeof cmd,
+	         "rm -rf %s/t_render/bgrun && "
+	         "EDDY_SYNC_FRAMES=1 %s/eddy run scenes/bounce.lua --frames %d --out %s/t_render/bgrun/sync --quiet && "
+	         "%s/eddy run scenes/bounce.lua --frames %d --out %s/t_render/bgrun/async --quiet --threads 1 && "
+	         "%s/eddy run scenes/bounce.lua --frames 3 --out %s/t_render/bgrun/resumed --quiet --checkpoint-every 3 && "
+	         "%s/eddy run scenes/bounce.lua --frames %d --out %s/t_render/bgrun/resumed --quiet "
+	         "--resume %s/t_render/bgrun/resumed",
+	         b, b, FRAMES, b, b, FRAMES, b, b, b, b, FRAMES, b, b);
+	CHECKF(test_sh(cmd, out, sizeof out) == 0, "%s", out);
+	struct timespec last = {0, 0};
+	for (int f = 1; f <= FRAMES && !why[0]; ++f) {
+		char a[600], s[600], r[600];
+		snprintf(s, sizeof s, "%s/t_render/bgrun/sync/frame_%04d.png", b, f);
+		snprintf(a, sizeof a, "%s/t_render/bgrun/async/frame_%04d.png", b, f);
+		snprintf(r, sizeof r, "%s/t_render/bgrun/resumed/frame_%04d.png", b, f);
+		if (same_pixels(s, a, why, sizeof why))
+			same_pixels(s, r, why, sizeof why);
+		struct stat st;
+		if (!why[0] && stat(a, &st) == 0) {
+			if (st.st_mtim.tv_sec < last.tv_sec || (st.st_mtim.tv_sec == last.tv_sec && st.st_mtim.tv_nsec < last.tv_nsec))
+				snprintf(why, sizeof why, "%s was written before frame %d", a, f - 1);
+			last = st.st_mtim;
+		}
+	}
+	CHECKF(why[0] == '\0', "%s", why);
+
+	snprintf(cmd, sizeof cmd,
+	         "trap '' XFSZ; ulimit -f 8; %s/eddy run scenes/bounce.lua --frames 3 --out %s/t_render/bgrun/full --quiet",
+	         b, b);
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
+	CHECK_HAS(out, "eddy: render_points: frame 1: cannot write '");
+	CHECK_HAS(out, "t_render/bgrun/full/frame_0001.png': ");
+	CHECK_HAS(out, strerror(EFBIG));
+	CHECK(strchr(out, '\n') == strrchr(out, '\n')); /* one line */
+	char ls[1024], dir[400];
+	snprintf(dir, sizeof dir, "%s/t_render/bgrun/full", b);
+	list_dir(dir, ls, sizeof ls);
+	CHECKF(strcmp(ls, ".eddy.lock") == 0, "left in %s: %s", dir, ls);
+}
+
 /* NULL world or def: an invalid id and no crash (with a world, the error
  * says which); an unknown format, "all" mixed with names. */
 static void null_world_or_def_is_an_invalid_id(void)
@@ -1184,4 +1363,7 @@ void suite_render(void)
 	RUN(null_world_or_def_is_an_invalid_id);
 	RUN(lua_scene_renders_and_exports);
 	RUN(command_renders_and_pipes_video);
+	RUN(background_frames_match_synchronous_ones);
+	RUN(background_write_failure_names_its_frame);
+	RUN(command_frames_in_the_background);
 }
