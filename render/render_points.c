@@ -3,14 +3,26 @@
  *
  * Reads: x y z, plus vx vy vz (color_by = "speed") or the color_by column.
  * Writes: nothing; a PNG per rendered frame, and the frame stats values
- * render_ms (GL draw), png_ms (encoding and writing) and image (the path).
+ * render_ms (GL draw), png_ms (downsample, encoding and writing) and image
+ * (the path).
  *
- * At every `every`-th frame time: colour each particle (colour map of its
- * value, t = (v - min) / (max - min), range fixed or the frame's own), build
- * the camera (look-at view; perspective or orthographic projection with near
- * and far planes fitted to the world's bounds), draw the spheres and outlines
- * at supersample times the size, box-filter down and write the PNG. The GL
- * context is made at the first frame, so plans and checks never need one. */
+ * At every `every`-th frame time the frame hook copies what the frame needs:
+ * positions, the colour values, the camera (look-at view; perspective or
+ * orthographic projection with near and far planes fitted to the world's
+ * bounds) and the outlines. A writer thread of the renderer's own then colours
+ * each particle (colour map of its value, t = (v - min) / (max - min), range
+ * fixed or the frame's own), draws the spheres and outlines at supersample
+ * times the size, box-filters down and writes the PNG (render/png.c). The GL
+ * context is made on that thread, at the first rendered frame, so plans and
+ * checks never need one, and only that thread ever uses it.
+ *
+ * With the world's background output off the hook waits for its frame, so
+ * the PNG is on disk when the step returns and a failure is that frame's
+ * status. On, the hook returns once the copy is queued (at most JOBS frames
+ * wait; the hook blocks while they do) and the drawing overlaps the next
+ * frames' steps; a failure is returned by the next hook or by
+ * eddy_world_sync, naming its frame. render_ms and png_ms are then the
+ * newest finished frame's, published once each. */
 #define _POSIX_C_SOURCE 200809L
 #include "render.h"
 

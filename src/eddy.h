@@ -151,7 +151,9 @@ EDDY_API eddy_status eddy_world_advance(eddy_world *w, double seconds);
  * blocks while they do. Files are still written whole, in frame order; a
  * failed write is returned, naming the frame and its file, by the next
  * stepping call or by eddy_world_sync. eddy_world_save and eddy_world_load
- * sync first, so a checkpoint never gets ahead of the frames on disk. The
+ * sync first, so a checkpoint never gets ahead of the frames on disk.
+ * Destroying the world (or removing the system) still writes the frames in
+ * flight but cannot report their failures: sync first to learn of them. The
  * background threads are not counted in eddy_world_set_threads. */
 EDDY_API eddy_status eddy_world_set_background_output(eddy_world *w, bool on);
 EDDY_API bool eddy_world_background_output(const eddy_world *w);

@@ -1,9 +1,14 @@
 /* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
 /* Renderer benchmark (make bench-render, part of make bench): milliseconds per
- * rendered frame at 1280x720 for 10k, 100k and 1M particles with 1 and 2
- * llvmpipe threads, as JSON. llvmpipe reads LP_NUM_THREADS once per process,
- * so each thread count runs in a child process (this program, with --child).
+ * rendered frame at 1280x720 for 10k, 100k and 1M particles, and at the pour
+ * scene's 960x540 (supersample 2) for its 5625, with 1 and 2 llvmpipe
+ * threads, as JSON. llvmpipe reads LP_NUM_THREADS once per process, so each
+ * thread count runs in a child process (this program, with --child). Then the
+ * PNG encoders on the pour-sized frame: CPU ms per encode (median of 15) and
+ * bytes for stb_image_write at its default level (eddy's encoder before
+ * libpng), libpng at its defaults (level 6, adaptive filters), and libpng as
+ * render/png.c sets it (level 1, Z_RLE, the up filter).
  *
  *   bench_render OUT.json            all thread counts, JSON to OUT.json
  *   bench_render --child [SS]        this process's LP_NUM_THREADS, JSON lines
@@ -19,6 +24,16 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+
+#include <png.h>
+#include <zlib.h>
+
+#define STB_IMAGE_IMPLEMENTATION
+#define STBI_ONLY_PNG
+#include <stb/stb_image.h>
+#define STB_IMAGE_WRITE_IMPLEMENTATION
+#define STB_IMAGE_WRITE_STATIC
+#include <stb/stb_image_write.h>
 
 #include "eddy.h"
 #include "bench_util.h"
@@ -44,7 +59,7 @@ static double extra(const eddy_frame_stats *s, const char *name)
 
 /* n particles filling the lower half of the unit box (a resting pool, the
  * common case), jittered, with random velocities to colour by speed. */
-static int run(int n, int supersample, const char *threads)
+static int run(int n, int width, int height, int supersample, const char *threads)
 {
 	eddy_world_def wd = eddy_default_world_def();
 	char err[256];
@@ -54,12 +69,12 @@ static int run(int n, int supersample, const char *threads)
 		return 1;
 	}
 	eddy_render_points_def d = eddy_default_render_points_def();
-	d.width = 1280;
-	d.height = 720;
+	d.width = width;
+	d.height = height;
 	d.supersample = supersample;
 	const float spacing = cbrtf(0.5f / (float)n);
 	d.radius = 0.6f * spacing;
-	snprintf(d.path, sizeof d.path, "build/bench_render/frame_%%d.png");
+	snprintf(d.path, sizeof d.path, "build/bench_render/frame_%dx%d_%d_%%d.png", width, height, n);
 	if (!eddy_system_valid(w, eddy_add_render_points(w, &d))) {
 		fprintf(stderr, "bench_render: %s\n", eddy_world_error(w));
 		return 1;
@@ -103,13 +118,106 @@ static int run(int n, int supersample, const char *threads)
 		gl_ms[f - 1] = extra(&st, "render_ms");
 		png_ms[f - 1] = extra(&st, "png_ms");
 	}
-	printf("{\"particles\":%d,\"width\":1280,\"height\":720,\"supersample\":%d,\"lp_num_threads\":%s,\"frames\":%d,"
+	printf("{\"particles\":%d,\"width\":%d,\"height\":%d,\"supersample\":%d,\"lp_num_threads\":%s,\"frames\":%d,"
 	       "\"frame_ms_median\":%.1f,\"gl_ms_median\":%.1f,\"png_ms_median\":%.1f,\"cpu_ms_median\":%.1f,"
 	       "\"first_frame_ms\":%.1f}\n",
-	       n, supersample, threads, frames, median(frame_ms, frames), median(gl_ms, frames), median(png_ms, frames),
+	       n, width, height, supersample, threads, frames, median(frame_ms, frames), median(gl_ms, frames), median(png_ms, frames),
 	       median(cpu, frames), first);
 	fflush(stdout);
 	eddy_destroy_world(w);
+	return 0;
+}
+
+/* ---- PNG encoders on one frame ---- */
+
+static double thread_cpu_ms(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+	return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
+}
+
+typedef struct membuf {
+	unsigned char *p;
+	size_t n, cap;
+} membuf;
+
+static void membuf_put(membuf *b, const void *data, size_t n)
+{
+	if (b->n + n > b->cap) {
+		size_t cap = 2 * (b->n + n);
+		unsigned char *p = realloc(b->p, cap);
+		if (!p)
+			abort(); /* a benchmark: no recovery */
+		b->p = p, b->cap = cap;
+	}
+	memcpy(b->p + b->n, data, n);
+	b->n += n;
+}
+
+static void stb_put(void *ctx, void *data, int n) { membuf_put(ctx, data, (size_t)n); }
+static void png_put(png_structp p, png_bytep data, size_t n) { membuf_put(png_get_io_ptr(p), data, n); }
+static void png_flush_none(png_structp p) { (void)p; }
+
+/* fast: render/png.c's settings; otherwise libpng's defaults. Returns bytes. */
+static size_t libpng_encode(const unsigned char *rgb, int w, int h, bool fast)
+{
+	membuf b = {NULL, 0, 0};
+	png_structp p = png_create_write_struct(PNG_LIBPNG_VER_STRING, NULL, NULL, NULL);
+	png_infop info = png_create_info_struct(p);
+	if (setjmp(png_jmpbuf(p)))
+		abort();
+	png_set_write_fn(p, &b, png_put, png_flush_none);
+	png_set_IHDR(p, info, (png_uint_32)w, (png_uint_32)h, 8, PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE,
+	             PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+	if (fast) {
+		png_set_compression_level(p, 1);
+		png_set_compression_strategy(p, Z_RLE);
+		png_set_filter(p, PNG_FILTER_TYPE_BASE, PNG_FILTER_UP);
+	}
+	png_write_info(p, info);
+	for (int y = 0; y < h; ++y)
+		png_write_row(p, rgb + (size_t)y * (size_t)w * 3);
+	png_write_end(p, info);
+	png_destroy_write_struct(&p, &info);
+	free(b.p);
+	return b.n;
+}
+
+static size_t stb_encode(const unsigned char *rgb, int w, int h)
+{
+	membuf b = {NULL, 0, 0};
+	stbi_write_png_to_func(stb_put, &b, w, h, 3, rgb, w * 3);
+	free(b.p);
+	return b.n;
+}
+
+static int encoders(FILE *f, const char *frame)
+{
+	int w = 0, h = 0, comp = 0;
+	unsigned char *rgb = stbi_load(frame, &w, &h, &comp, 3);
+	if (!rgb) {
+		fprintf(stderr, "bench_render: cannot read %s back\n", frame);
+		return 1;
+	}
+	const char *names[3] = {"stb_image_write level 8", "libpng defaults (level 6, adaptive filters)",
+	                        "libpng level 1, Z_RLE, up (eddy)"};
+	enum { REPS = 15 };
+	for (int e = 0; e < 3; ++e) {
+		double ms[REPS];
+		size_t bytes = 0;
+		for (int r = 0; r < REPS; ++r) {
+			const double t0 = thread_cpu_ms();
+			bytes = e == 0 ? stb_encode(rgb, w, h) : libpng_encode(rgb, w, h, e == 2);
+			ms[r] = thread_cpu_ms() - t0;
+		}
+		char line[256];
+		snprintf(line, sizeof line, "{\"encoder\":\"%s\",\"width\":%d,\"height\":%d,\"cpu_ms_median\":%.2f,\"bytes\":%zu}",
+		         names[e], w, h, median(ms, REPS), bytes);
+		fprintf(f, "%s\n  %s", e ? "," : "", line);
+		printf("%s\n", line);
+	}
+	stbi_image_free(rgb);
 	return 0;
 }
 
@@ -118,11 +226,14 @@ int main(int argc, char **argv)
 	if (argc >= 2 && strcmp(argv[1], "--child") == 0) {
 		const char *t = getenv("LP_NUM_THREADS");
 		const int sizes[3] = {10000, 100000, 1000000};
+		/* the pour scene's frames: 5625 particles, 960x540, supersample 2 */
+		if (run(5625, 960, 540, 2, t ? t : "null") != 0)
+			return 1;
 		for (int i = 0; i < 3; ++i)
-			if (run(sizes[i], 1, t ? t : "null") != 0)
+			if (run(sizes[i], 1280, 720, 1, t ? t : "null") != 0)
 				return 1;
 		/* the default supersample 2 (an internal 2560x1440) at the largest size */
-		return run(1000000, 2, t ? t : "null");
+		return run(1000000, 1280, 720, 2, t ? t : "null");
 	}
 	const char *out = argc >= 2 ? argv[1] : "build/bench_render.json";
 	FILE *f = fopen(out, "w");
@@ -152,6 +263,9 @@ int main(int argc, char **argv)
 			return 1;
 		}
 	}
+	fprintf(f, "\n],\"encoders\":[");
+	if (encoders(f, "build/bench_render/frame_960x540_5625_9.png") != 0)
+		return 1;
 	fprintf(f, "\n]}\n");
 	fclose(f);
 	printf("bench_render: results in %s\n", out);
