@@ -36,7 +36,13 @@ OSMESA_LIBS   := $(shell pkg-config --libs osmesa 2>/dev/null || echo -lOSMesa)
 # CHOLMOD pulls libblas.so.3, which Debian points at OpenBLAS when it is
 # installed (reference BLAS is about 7x slower for the factorisation). Only
 # src/flip_cholmod.c includes CHOLMOD, only render/gl_osmesa.c OSMesa.
-LIBS          := -lcholmod $(OSMESA_LIBS) -lm
+# HYPRE (Debian's libhypre-dev) is built against Open MPI: only
+# src/flip_hypre.c includes HYPRE and MPI, and everything links both.
+MPI_CFLAGS    := $(shell pkg-config --cflags ompi-c 2>/dev/null || mpicc --showme:compile 2>/dev/null)
+MPI_LIBS      := $(shell pkg-config --libs ompi-c 2>/dev/null || mpicc --showme:link 2>/dev/null || echo -lmpi)
+# as system headers: HYPRE's are not -Wstrict-prototypes clean
+HYPRE_CFLAGS  := -isystem /usr/include/hypre $(patsubst -I%,-isystem %,$(MPI_CFLAGS))
+LIBS          := -lcholmod -lHYPRE $(MPI_LIBS) $(OSMESA_LIBS) -lm
 
 # The command-line host: main.c and the files named cli_*.c are the command's
 # own and stay out of the Lua module.
@@ -85,6 +91,7 @@ $(BUILD)/obj/tests/%.o: tests/%.c $(HEADER)
 # and a branch to libm's sqrtf (to set errno for a negative argument, which r^2
 # never is). -fno-math-errno drops only that; results are bit-identical.
 $(BUILD)/obj/src/sys_sph_pressure.o $(BUILD)/obj/src/sys_sph_viscosity.o: BASE += -fno-math-errno
+$(BUILD)/obj/src/flip_hypre.o: BASE += $(HYPRE_CFLAGS)
 
 # ---- linking --------------------------------------------------------------------
 
@@ -104,7 +111,7 @@ $(BUILD)/eddy: $(CLI_O) $(LUA_O) $(BUILD)/libeddy.a
 
 $(BUILD)/eddy.pc: Makefile src/eddy.h
 	@mkdir -p $(BUILD)
-	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lm -fopenmp\n' '$(PREFIX)' '$(VERSION)' > $@
+	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lHYPRE -lmpi -lm -fopenmp\n' '$(PREFIX)' '$(VERSION)' > $@
 
 $(BUILD)/tests/run: $(TEST_O) $(LUA_O) $(BUILD)/libeddy.a
 	@mkdir -p $(dir $@)
@@ -179,7 +186,7 @@ FUZZ_SRC     := $(SRC_C) $(LUA_C) $(RENDER_C) tests/fuzz_scene.c
 
 $(BUILD)/fuzz/fuzz_scene: $(FUZZ_SRC) $(HEADER)
 	@mkdir -p $(dir $@)
-	clang $(FUZZ_CFLAGS) -Isrc -Ilua $(LUA_CFLAGS) $(OSMESA_CFLAGS) $(FUZZ_SRC) -o $@ $(LUA_LIBS) $(LIBS)
+	clang $(FUZZ_CFLAGS) -Isrc -Ilua $(LUA_CFLAGS) $(OSMESA_CFLAGS) $(HYPRE_CFLAGS) $(FUZZ_SRC) -o $@ $(LUA_LIBS) $(LIBS)
 
 fuzz: deps
 	@$(MAKE) --no-print-directory $(BUILD)/fuzz/fuzz_scene
