@@ -6,7 +6,7 @@
  * fluids simulation on large grids": CG on the fluid unknowns, one V-cycle as
  * the preconditioner). The only file that includes HYPRE or MPI headers.
  *
- * The CG loop is eddy's own (as flip_pcg.c, with one PFMG V(1,1)-cycle in
+ * The CG loop is eddy's own (as flip_pcg.c, with one PFMG V(2,2)-cycle in
  * place of MIC(0)): it stops on the same criterion as the other solvers,
  * max|r| <= tol max|b|, which HYPRE's own PCG (2-norm or preconditioned norm)
  * cannot express. The preconditioner works on HYPRE's Struct interface over
@@ -15,20 +15,25 @@
  * unknown, and an identity row for each such cell. Those rows are decoupled
  * (zero in both directions), so the box matrix is symmetric positive definite
  * and its fluid block is exactly A; the right-hand side is zero there, so the
- * V-cycle's output there is ignored. PFMG: semicoarsening, symmetric red-black
- * Gauss-Seidel (red then black before, black then red after: a symmetric
- * preconditioner, as CG needs), non-Galerkin 7-point coarse operators
- * (RAP type 1).
+ * V-cycle's output there is ignored. PFMG: semicoarsening, two sweeps of
+ * symmetric red-black Gauss-Seidel before and after (red then black before,
+ * black then red after: a symmetric preconditioner, as CG needs),
+ * non-Galerkin 7-point coarse operators (RAP type 1).
  *
  * Why PFMG on the box and not BoomerAMG on the fluid unknowns (IJ interface),
- * measured on a sloshed pool with a free surface (ghost-fluid diagonals with
- * theta down to 0.01) and a droplet, tolerance 1e-6, HYPRE 2.26 (Debian),
- * one rank: PFMG-PCG took 10, 10, 10 iterations at 32^3, 64^3, 128^3 (16k,
- * 131k, 1.05M unknowns); BoomerAMG-PCG (HMIS, ext+i, l1-Jacobi) 8, 10, 12
- * with a setup alone 5 to 6 times the whole PFMG solve (11 s at 128^3). The
- * Galerkin coarse operators (RAP type 0) took the same iterations with a
- * 5x costlier setup and 27-point coarse stencils. The air cells cost the box
- * about twice the unknowns of a half-full tank; each costs one identity row.
+ * measured on a pool with a wavy free surface (ghost-fluid diagonals with
+ * theta down to 0.01) and a drop above it (tests/grid_fixture.h), tolerance
+ * 1e-6, HYPRE 2.26 (Debian), one rank: PFMG-PCG took 10, 10, 10 iterations at
+ * 32^3, 64^3, 128^3 (16k, 131k, 1.05M unknowns) with V(1,1) cycles;
+ * BoomerAMG-PCG (HMIS, ext+i, l1-Jacobi) 8, 10, 12, with a setup alone 5 to 6
+ * times the whole PFMG solve (11 s at 128^3). Galerkin coarse operators (RAP
+ * type 0) took the same iterations with a 5x costlier setup (27-point coarse
+ * stencils); weighted Jacobi 14 iterations and 20% more time; V(2,2) 7
+ * iterations at every size and 10-15% less time at 128^3 than V(1,1). The
+ * air cells in the box cost one identity row each (about as many again as the
+ * unknowns for a half-full tank). Against MIC(0)-PCG (CPU time per step of
+ * flip_pressure, one thread): 32^3 about 1.2x slower (setup dominates), 64^3
+ * even, 128^3 1.6x faster (7 iterations against 81); the gap grows with n.
  *
  * Debian's HYPRE is built without OpenMP: the V-cycle runs on one thread. The
  * CG's matrix-vector product and vector updates use the world's threads, and
@@ -246,8 +251,8 @@ static eddy_status solve(eddy_world *w, const flip_matrix *A, const int *cell_of
 	e |= HYPRE_StructPFMGSetZeroGuess(H.pfmg);
 	e |= HYPRE_StructPFMGSetRelaxType(H.pfmg, 2); /* symmetric red-black Gauss-Seidel */
 	e |= HYPRE_StructPFMGSetRAPType(H.pfmg, 1);   /* non-Galerkin 7-point coarse operators */
-	e |= HYPRE_StructPFMGSetNumPreRelax(H.pfmg, 1);
-	e |= HYPRE_StructPFMGSetNumPostRelax(H.pfmg, 1);
+	e |= HYPRE_StructPFMGSetNumPreRelax(H.pfmg, 2);
+	e |= HYPRE_StructPFMGSetNumPostRelax(H.pfmg, 2);
 	e |= HYPRE_StructPFMGSetSkipRelax(H.pfmg, 1);
 	e |= HYPRE_StructPFMGSetLogging(H.pfmg, 0);
 	e |= HYPRE_StructPFMGSetup(H.pfmg, H.mat, H.rv, H.zv);
