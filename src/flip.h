@@ -271,14 +271,13 @@ bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double
 
 /* PFMG-preconditioned CG (flip_hypre.c, the only file including HYPRE or
  * MPI). Solves A x = b to max|r| <= tol max|b| as eddy__flip_pcg; cell_of[r]
- * is row r's cell (the preconditioner works on the grid box around them);
- * threads for the CG's vector work (the result does not depend on it).
- * *converged false: no convergence in max_it (EDDY_OK returned; *it, *res
- * set). Any other failure (MPI or HYPRE unavailable, out of memory) returns
- * an error with the world error set. */
+ * is row r's cell (the preconditioner works on the grid box around them).
+ * Serial, so the result does not depend on the thread count. *converged
+ * false: no convergence in max_it (EDDY_OK returned; *it, *res set). Any
+ * other failure (MPI or HYPRE unavailable, out of memory) returns an error
+ * with the world error set. */
 eddy_status eddy__flip_hypre_solve(eddy_world *w, const flip_matrix *A, const int *cell_of, const double *b,
-                                   double *x, double tol, int max_it, int threads, int *it, double *res,
-                                   bool *converged);
+                                   double *x, double tol, int max_it, int *it, double *res, bool *converged);
 
 /* CHOLMOD (flip_cholmod.c, the only file including cholmod.h). One solver
  * per flip_pressure system, keeping the symbolic analysis while the pattern

@@ -35,10 +35,12 @@
  * flip_pressure, one thread): 32^3 about 1.2x slower (setup dominates), 64^3
  * even, 128^3 1.6x faster (7 iterations against 81); the gap grows with n.
  *
- * Debian's HYPRE is built without OpenMP: the V-cycle runs on one thread. The
- * CG's matrix-vector product and vector updates use the world's threads, and
- * its dot products sum fixed chunks in a fixed order, so the result is the
- * same bit for bit for every thread count. MPI: HYPRE needs MPI_COMM_WORLD;
+ * Debian's HYPRE is built without OpenMP: the V-cycle runs on one thread, and
+ * so does the CG around it (a few percent of the work; threading it left the
+ * idle OpenMP workers spinning through every V-cycle, which cost more CPU and
+ * wall time than it saved on a shared machine). The result is therefore the
+ * same bit for bit for every thread count; threads come with the distributed
+ * solve (MPI ranks) or a HYPRE built with OpenMP. MPI: HYPRE needs MPI_COMM_WORLD;
  * if the host has not initialised MPI, the first solve does (MPI_Init_thread,
  * serialized: one solve at a time talks to HYPRE) and never finalises it
  * (MPI cannot be initialised twice in a process). A host that finalised MPI
@@ -84,22 +86,11 @@ static void init_libraries(void)
 		init_error = "HYPRE_Init failed";
 }
 
-#define CHUNK 4096 /* rows per partial sum: fixed, so sums do not depend on the thread count */
-
-static double dot(const double *a, const double *b, int n, double *part, int threads)
+static double dot(const double *a, const double *b, int n)
 {
-	const int nch = (n + CHUNK - 1) / CHUNK;
-#pragma omp parallel for num_threads(threads) schedule(static)
-	for (int c = 0; c < nch; ++c) {
-		const int e = (c + 1) * CHUNK < n ? (c + 1) * CHUNK : n;
-		double s = 0;
-		for (int i = c * CHUNK; i < e; ++i)
-			s += a[i] * b[i];
-		part[c] = s;
-	}
 	double s = 0;
-	for (int c = 0; c < nch; ++c)
-		s += part[c];
+	for (int i = 0; i < n; ++i)
+		s += a[i] * b[i];
 	return s;
 }
 
@@ -111,9 +102,8 @@ static double maxabs(const double *a, int n)
 	return m;
 }
 
-static void matvec(const flip_matrix *A, const double *s, double *q, int threads)
+static void matvec(const flip_matrix *A, const double *s, double *q)
 {
-#pragma omp parallel for num_threads(threads) schedule(static)
 	for (int i = 0; i < A->n; ++i) {
 		const int *nb = &A->nb[6 * i];
 		double t = A->diag[i] * s[i];
@@ -168,7 +158,7 @@ static bool precondition(hyp *H, const double *r, double *z, const int *bidx, in
 }
 
 static eddy_status solve(eddy_world *w, const flip_matrix *A, const int *cell_of, const double *b, double *x,
-                         double tol, int max_it, int threads, int *it, double *res, bool *converged)
+                         double tol, int max_it, int *it, double *res, bool *converged)
 {
 	const int n = A->n;
 	memset(x, 0, (size_t)n * sizeof *x);
@@ -191,15 +181,14 @@ static eddy_status solve(eddy_world *w, const flip_matrix *A, const int *cell_of
 	}
 	const int bx = hi[0] - lo[0] + 1, by = hi[1] - lo[1] + 1, bz = hi[2] - lo[2] + 1;
 	const size_t nbox = (size_t)bx * (size_t)by * (size_t)bz;
-	const int nch = (n + CHUNK - 1) / CHUNK;
 	double *vals = eddy__arena_alloc(&w->arena, 4 * nbox * sizeof *vals + 8);
 	double *rb = eddy__arena_alloc(&w->arena, nbox * sizeof *rb + 8);
 	double *zb = eddy__arena_alloc(&w->arena, nbox * sizeof *zb + 8);
 	int *bidx = eddy__arena_alloc(&w->arena, (size_t)n * sizeof *bidx + 8);
-	double *mem = eddy__arena_alloc(&w->arena, (4 * (size_t)n + (size_t)nch) * sizeof *mem + 8);
+	double *mem = eddy__arena_alloc(&w->arena, 4 * (size_t)n * sizeof *mem + 8);
 	if (!vals || !rb || !zb || !bidx || !mem)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory for the HYPRE box (%zu cells)", nbox);
-	double *r = mem, *z = mem + n, *s = mem + 2 * (size_t)n, *y = mem + 3 * (size_t)n, *part = mem + 4 * (size_t)n;
+	double *r = mem, *z = mem + n, *s = mem + 2 * (size_t)n, *y = mem + 3 * (size_t)n;
 
 	/* box matrix, symmetric storage: centre, -x, -y, -z; identity rows off the unknowns */
 	for (size_t q = 0; q < nbox; ++q) {
@@ -266,18 +255,17 @@ static eddy_status solve(eddy_world *w, const flip_matrix *A, const int *cell_of
 	memcpy(r, b, (size_t)n * sizeof *r);
 	bool ok = precondition(&H, r, z, bidx, n, rb, zb, nbox);
 	memcpy(s, z, (size_t)n * sizeof *s);
-	double rho = dot(r, z, n, part, threads);
+	double rho = dot(r, z, n);
 	*converged = false;
 	for (int k = 1; k <= max_it && ok; ++k) {
-		matvec(A, s, y, threads);
-		const double sq = dot(s, y, n, part, threads);
+		matvec(A, s, y);
+		const double sq = dot(s, y, n);
 		*it = k;
 		if (!(sq > 0)) { /* breakdown: A is not positive definite on s */
 			*res = maxabs(r, n) / bmax;
 			break;
 		}
 		const double alpha = rho / sq;
-#pragma omp parallel for num_threads(threads) schedule(static)
 		for (int i = 0; i < n; ++i) {
 			x[i] += alpha * s[i];
 			r[i] -= alpha * y[i];
@@ -288,10 +276,9 @@ static eddy_status solve(eddy_world *w, const flip_matrix *A, const int *cell_of
 			break;
 		}
 		ok = precondition(&H, r, z, bidx, n, rb, zb, nbox);
-		const double rho_new = dot(r, z, n, part, threads);
+		const double rho_new = dot(r, z, n);
 		const double beta = rho_new / rho;
 		rho = rho_new;
-#pragma omp parallel for num_threads(threads) schedule(static)
 		for (int i = 0; i < n; ++i)
 			s[i] = z[i] + beta * s[i];
 	}
@@ -302,8 +289,7 @@ static eddy_status solve(eddy_world *w, const flip_matrix *A, const int *cell_of
 }
 
 eddy_status eddy__flip_hypre_solve(eddy_world *w, const flip_matrix *A, const int *cell_of, const double *b,
-                                   double *x, double tol, int max_it, int threads, int *it, double *res,
-                                   bool *converged)
+                                   double *x, double tol, int max_it, int *it, double *res, bool *converged)
 {
 	pthread_once(&init_once, init_libraries);
 	if (init_error) {
@@ -314,7 +300,7 @@ eddy_status eddy__flip_hypre_solve(eddy_world *w, const flip_matrix *A, const in
 		return eddy__fail(w, EDDY_ERR_SOLVER, "flip_pressure: HYPRE unavailable: %s", init_error);
 	}
 	pthread_mutex_lock(&solve_lock);
-	const eddy_status st = solve(w, A, cell_of, b, x, tol, max_it, threads, it, res, converged);
+	const eddy_status st = solve(w, A, cell_of, b, x, tol, max_it, it, res, converged);
 	pthread_mutex_unlock(&solve_lock);
 	return st;
 }

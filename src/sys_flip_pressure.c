@@ -339,7 +339,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	} else if (ps->def.solver == EDDY_FLIP_HYPRE) {
 		bool converged = false;
 		const eddy_status st = eddy__flip_hypre_solve(w, &A, cell_of, b, q, ps->def.tolerance, ps->def.max_iterations,
-		                                              ctx->threads, &iterations, &residual, &converged);
+		                                              &iterations, &residual, &converged);
 		if (st != EDDY_OK)
 			return st;
 		if (!converged)

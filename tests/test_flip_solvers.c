@@ -233,9 +233,9 @@ static void hypre_iterations_flat_in_grid_size(void)
 
 /* ---- determinism and failure ----------------------------------------------------- */
 
-/* The same run on 1 and 2 threads gives the same state (the CG's dot products
- * sum fixed chunks in a fixed order; the V-cycle is serial). 4800 unknowns:
- * more than one chunk of 4096. */
+/* The same run on 1 and 2 threads gives the same state: the solve is serial,
+ * and the systems around it keep their own guarantee (test_flip.c). Five
+ * steps, so the pressures feed back into the particles and the next solve. */
 static void hypre_same_result_on_one_and_two_threads(void)
 {
 	uint64_t hash[2] = {0, 1};
