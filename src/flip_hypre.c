@@ -40,12 +40,15 @@
  * idle OpenMP workers spinning through every V-cycle, which cost more CPU and
  * wall time than it saved on a shared machine). The result is therefore the
  * same bit for bit for every thread count; threads come with the distributed
- * solve (MPI ranks) or a HYPRE built with OpenMP. MPI: HYPRE needs MPI_COMM_WORLD;
- * if the host has not initialised MPI, the first solve does (MPI_Init_thread,
- * serialized: one solve at a time talks to HYPRE) and never finalises it
- * (MPI cannot be initialised twice in a process). A host that finalised MPI
- * gets an error, not an abort. One rank: the distributed solve is a later
- * issue, and every call here takes the communicator so it can grow into it. */
+ * solve (MPI ranks) or a HYPRE built with OpenMP.
+ * MPI: HYPRE needs MPI_COMM_WORLD. If the host has not initialised MPI, the
+ * first solve does (MPI_Init_thread, serialized: one solve at a time talks
+ * to HYPRE) and finalises it at exit (glibc runs a shared library's atexit
+ * handlers when it is unloaded, so also then). MPI cannot be initialised
+ * twice in a process: after a finalisation, by the host or by an unloaded
+ * copy of eddy, a HYPRE solve is an error, not an abort. One rank: the
+ * distributed solve is a later issue, and every call here takes the
+ * communicator so it can grow into it. */
 #include "flip.h"
 
 #include <pthread.h>
@@ -64,6 +67,16 @@ static pthread_once_t init_once = PTHREAD_ONCE_INIT;
 static const char *init_error; /* set once inside init_once, read after it */
 static pthread_mutex_t solve_lock = PTHREAD_MUTEX_INITIALIZER;
 
+static void finalize_mpi(void)
+{
+	int finalised = 0;
+	MPI_Finalized(&finalised);
+	if (!finalised) {
+		HYPRE_Finalize();
+		MPI_Finalize();
+	}
+}
+
 static void init_libraries(void)
 {
 	int initialised = 0, finalised = 0;
@@ -79,8 +92,11 @@ static void init_libraries(void)
 			init_error = "MPI_Init_thread failed";
 			return;
 		}
-		/* ours: report MPI errors as codes rather than aborting the host */
+		/* ours: report MPI errors as codes rather than aborting the host,
+		 * and finalise at exit (or when this library is unloaded), as
+		 * mpirun expects of every rank */
 		MPI_Comm_set_errhandler(MPI_COMM_WORLD, MPI_ERRORS_RETURN);
+		atexit(finalize_mpi);
 	}
 	if (HYPRE_Init() != 0)
 		init_error = "HYPRE_Init failed";
