@@ -157,11 +157,10 @@ static void hyp_free(hyp *H)
 	HYPRE_ClearAllErrors();
 }
 
-/* z = one PFMG V-cycle applied to r (box-ordered arrays rb, zb). */
-static bool precondition(hyp *H, const double *r, double *z, const int *bidx, int n, double *rb, double *zb,
-                         size_t nbox)
+/* z = one PFMG V-cycle applied to r (box-ordered arrays rb, zb; rb is zero
+ * off the unknowns, where only the caller's first clearing writes). */
+static bool precondition(hyp *H, const double *r, double *z, const int *bidx, int n, double *rb, double *zb)
 {
-	memset(rb, 0, nbox * sizeof *rb);
 	for (int i = 0; i < n; ++i)
 		rb[bidx[i]] = r[i];
 	int e = HYPRE_StructVectorSetBoxValues(H->rv, H->lo, H->hi, rb);
@@ -269,7 +268,8 @@ static eddy_status solve(eddy_world *w, const flip_matrix *A, const int *cell_of
 
 	/* CG, as flip_pcg.c */
 	memcpy(r, b, (size_t)n * sizeof *r);
-	bool ok = precondition(&H, r, z, bidx, n, rb, zb, nbox);
+	memset(rb, 0, nbox * sizeof *rb);
+	bool ok = precondition(&H, r, z, bidx, n, rb, zb);
 	memcpy(s, z, (size_t)n * sizeof *s);
 	double rho = dot(r, z, n);
 	*converged = false;
@@ -291,7 +291,7 @@ static eddy_status solve(eddy_world *w, const flip_matrix *A, const int *cell_of
 			*converged = true;
 			break;
 		}
-		ok = precondition(&H, r, z, bidx, n, rb, zb, nbox);
+		ok = precondition(&H, r, z, bidx, n, rb, zb);
 		const double rho_new = dot(r, z, n);
 		const double beta = rho_new / rho;
 		rho = rho_new;
