@@ -161,19 +161,18 @@ bench-%: deps
 	$(BUILD)/tests/bench_$* $(BUILD)/bench_$*.json
 
 # ---- sanitizers ---------------------------------------------------------------------
-# Mesa's and Open MPI's process-wide allocations are not eddy's leaks (see the
-# suppressions file); full malloc stacks let the MPI ones be recognised.
+# Mesa's process-wide allocations are not eddy's leaks (see the suppressions file).
 
 asan: deps-test
 	@$(MAKE) --no-print-directory BUILD=build/asan OPT=-O1 \
 		SAN="-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer" \
 		all build/asan/tests/run
 	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan_mesa.supp:print_suppressions=0 \
-	ASAN_OPTIONS=detect_leaks=1:abort_on_error=0:fast_unwind_on_malloc=0 UBSAN_OPTIONS=print_stacktrace=1 \
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1 \
 		EDDY_BUILD=build/asan build/asan/tests/run
 	@echo "asan: a full run of the default scene, leaks checked at exit"
 	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan_mesa.supp:print_suppressions=0 \
-	ASAN_OPTIONS=detect_leaks=1:fast_unwind_on_malloc=0 build/asan/eddy run scenes/bounce.lua --quiet --out build/asan/out
+	ASAN_OPTIONS=detect_leaks=1 build/asan/eddy run scenes/bounce.lua --quiet --out build/asan/out
 
 # ---- fuzzing (clang libFuzzer): scene loading and stepping ------------------------
 # Everything is rebuilt with clang, libFuzzer, ASan and UBSan. OpenMP is left out
