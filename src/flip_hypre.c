@@ -31,9 +31,13 @@
  * stencils); weighted Jacobi 14 iterations and 20% more time; V(2,2) 7
  * iterations at every size and 10-15% less time at 128^3 than V(1,1). The
  * air cells in the box cost one identity row each (about as many again as the
- * unknowns for a half-full tank). Against MIC(0)-PCG (CPU time per step of
- * flip_pressure, one thread): 32^3 about 1.2x slower (setup dominates), 64^3
- * even, 128^3 1.6x faster (7 iterations against 81); the gap grows with n.
+ * unknowns for a half-full tank). Against MIC(0)-PCG on that pool (process
+ * CPU time per flip_pressure step, make bench-flip's sweep): 1.3x slower at
+ * 32^3 (setup and a V-cycle cost more than 18 MIC(0) iterations save),
+ * 1.2x faster at 64^3 (8 iterations against 44), 1.8x at 128^3 (7 against
+ * 81); the gap grows with n, as PCG's work grows by about 16 per doubling
+ * and this solve's by 8. HYPRE is kept over an own MGPCG because it is as
+ * fast from 64^3 up, and the distributed solve will need it.
  *
  * Debian's HYPRE is built without OpenMP: the V-cycle runs on one thread, and
  * so does the CG around it (a few percent of the work; threading it left the
