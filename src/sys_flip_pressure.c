@@ -50,9 +50,10 @@
  * Solvers: MIC(0)-PCG (flip_pcg.c), CG with a HYPRE PFMG multigrid
  * preconditioner (flip_hypre.c, iterations flat in grid size) or supernodal
  * CHOLMOD (flip_cholmod.c), all with the weighted off-diagonals -w_f.
- * Every solve is checked: a non-converged PCG or HYPRE solve, a CHOLMOD status other than OK
- * or a relative residual max|b - A q| / max|b| above tolerance (CHOLMOD:
- * 1e-8) is an error and the velocities are left as they were.
+ * Every solve is checked: a non-converged PCG or HYPRE solve, a CHOLMOD
+ * status other than OK or a relative residual max|b - A q| / max|b| above
+ * tolerance (CHOLMOD: 1e-8) is an error and the velocities are left as they
+ * were.
  * Published: solver, iterations, residual, divergence = max_i |D_i| dt / dx
  * after projection, volume = dx^3 sum clamp((1 - phi) / 2, 0, 1) open_i (m^3;
  * open_i the cell's open volume fraction), density_error_max/min (the largest
