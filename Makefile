@@ -111,7 +111,7 @@ $(BUILD)/eddy: $(CLI_O) $(LUA_O) $(BUILD)/libeddy.a
 
 $(BUILD)/eddy.pc: Makefile src/eddy.h
 	@mkdir -p $(BUILD)
-	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lHYPRE -lmpi -lm -fopenmp\n' '$(PREFIX)' '$(VERSION)' > $@
+	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lHYPRE $(MPI_LIBS) -lm -fopenmp\n' '$(PREFIX)' '$(VERSION)' > $@
 
 $(BUILD)/tests/run: $(TEST_O) $(LUA_O) $(BUILD)/libeddy.a
 	@mkdir -p $(dir $@)
