@@ -37,9 +37,15 @@ OSMESA_LIBS   := $(shell pkg-config --libs osmesa 2>/dev/null || echo -lOSMesa)
 # installed (reference BLAS is about 7x slower for the factorisation). Only
 # src/flip_cholmod.c includes CHOLMOD, only render/gl_osmesa.c OSMesa, only
 # render/png.c libpng. render_points draws on a thread of its own (-pthread).
+# HYPRE (Debian's libhypre-dev) is built against Open MPI: only
+# src/flip_hypre.c includes HYPRE and MPI, and everything links both.
 PNG_CFLAGS    := $(shell pkg-config --cflags libpng 2>/dev/null)
 PNG_LIBS      := $(shell pkg-config --libs libpng 2>/dev/null || echo -lpng16)
-LIBS          := -lcholmod $(OSMESA_LIBS) $(PNG_LIBS) -lz -pthread -lm
+MPI_CFLAGS    := $(shell pkg-config --cflags ompi-c 2>/dev/null || mpicc --showme:compile 2>/dev/null)
+MPI_LIBS      := $(shell pkg-config --libs ompi-c 2>/dev/null || mpicc --showme:link 2>/dev/null || echo -lmpi)
+# as system headers: HYPRE's are not -Wstrict-prototypes clean
+HYPRE_CFLAGS  := -isystem /usr/include/hypre $(patsubst -I%,-isystem %,$(MPI_CFLAGS))
+LIBS          := -lcholmod -lHYPRE $(MPI_LIBS) $(OSMESA_LIBS) $(PNG_LIBS) -lz -pthread -lm
 
 # The command-line host: main.c and the files named cli_*.c are the command's
 # own and stay out of the Lua module.
@@ -88,6 +94,7 @@ $(BUILD)/obj/tests/%.o: tests/%.c $(HEADER)
 # and a branch to libm's sqrtf (to set errno for a negative argument, which r^2
 # never is). -fno-math-errno drops only that; results are bit-identical.
 $(BUILD)/obj/src/sys_sph_pressure.o $(BUILD)/obj/src/sys_sph_viscosity.o: BASE += -fno-math-errno
+$(BUILD)/obj/src/flip_hypre.o: BASE += $(HYPRE_CFLAGS)
 
 # ---- linking --------------------------------------------------------------------
 
@@ -107,7 +114,7 @@ $(BUILD)/eddy: $(CLI_O) $(LUA_O) $(BUILD)/libeddy.a
 
 $(BUILD)/eddy.pc: Makefile src/eddy.h
 	@mkdir -p $(BUILD)
-	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lpng16 -lz -lm -fopenmp -pthread\n' '$(PREFIX)' '$(VERSION)' > $@
+	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lHYPRE $(MPI_LIBS) -lpng16 -lz -lm -fopenmp -pthread\n' '$(PREFIX)' '$(VERSION)' > $@
 
 $(BUILD)/tests/run: $(TEST_O) $(LUA_O) $(BUILD)/libeddy.a
 	@mkdir -p $(dir $@)
@@ -182,7 +189,7 @@ FUZZ_SRC     := $(SRC_C) $(LUA_C) $(RENDER_C) tests/fuzz_scene.c
 
 $(BUILD)/fuzz/fuzz_scene: $(FUZZ_SRC) $(HEADER)
 	@mkdir -p $(dir $@)
-	clang $(FUZZ_CFLAGS) -Isrc -Ilua $(LUA_CFLAGS) $(OSMESA_CFLAGS) $(FUZZ_SRC) -o $@ $(LUA_LIBS) $(LIBS)
+	clang $(FUZZ_CFLAGS) -Isrc -Ilua $(LUA_CFLAGS) $(OSMESA_CFLAGS) $(HYPRE_CFLAGS) $(FUZZ_SRC) -o $@ $(LUA_LIBS) $(LIBS)
 
 fuzz: deps
 	@$(MAKE) --no-print-directory $(BUILD)/fuzz/fuzz_scene

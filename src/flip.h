@@ -1,7 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /* Internals shared by the FLIP systems (sys_flip_*.c): MAC-grid indexing,
  * trilinear stencils on the staggered grids, and the linear-solver interface
- * (flip_pcg.c, flip_cholmod.c).
+ * (flip_pcg.c, flip_hypre.c, flip_cholmod.c).
  *
  * Grid layout: cell (i, j, k) spans [i, i+1] dx from the world's lower corner;
  * u lives on x-faces at (i, j+1/2, k+1/2) dx, v on y-faces, w on z-faces.
@@ -268,6 +268,16 @@ static inline double flip_off(const flip_matrix *A, int r, int d)
  * converge in max_it; *it and *res (max|r| / max|b|) are always set. */
 bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double *x, double tol, int max_it,
                     int *it, double *res);
+
+/* PFMG-preconditioned CG (flip_hypre.c, the only file including HYPRE or
+ * MPI). Solves A x = b to max|r| <= tol max|b| as eddy__flip_pcg; cell_of[r]
+ * is row r's cell (the preconditioner works on the grid box around them).
+ * Serial, so the result does not depend on the thread count. *converged
+ * false: no convergence in max_it (EDDY_OK returned; *it, *res set). Any
+ * other failure (MPI or HYPRE unavailable, out of memory) returns an error
+ * with the world error set. */
+eddy_status eddy__flip_hypre_solve(eddy_world *w, const flip_matrix *A, const int *cell_of, const double *b,
+                                   double *x, double tol, int max_it, int *it, double *res, bool *converged);
 
 /* CHOLMOD (flip_cholmod.c, the only file including cholmod.h). One solver
  * per flip_pressure system, keeping the symbolic analysis while the pattern

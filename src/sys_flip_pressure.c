@@ -47,11 +47,13 @@
  * cell) makes A singular: its right-hand side is made zero-mean and its first
  * cell pinned (q = 0, links to it dropped), which solves the singular system
  * exactly because its rows sum to zero.
- * Solvers: MIC(0)-PCG (flip_pcg.c) or supernodal CHOLMOD (flip_cholmod.c),
- * both with the weighted off-diagonals -w_f.
- * Every solve is checked: a non-converged PCG, a CHOLMOD status other than OK
- * or a relative residual max|b - A q| / max|b| above tolerance (CHOLMOD:
- * 1e-8) is an error and the velocities are left as they were.
+ * Solvers: MIC(0)-PCG (flip_pcg.c), CG with a HYPRE PFMG multigrid
+ * preconditioner (flip_hypre.c, iterations flat in grid size) or supernodal
+ * CHOLMOD (flip_cholmod.c), all with the weighted off-diagonals -w_f.
+ * Every solve is checked: a non-converged PCG or HYPRE solve, a CHOLMOD
+ * status other than OK or a relative residual max|b - A q| / max|b| above
+ * tolerance (CHOLMOD: 1e-8) is an error and the velocities are left as they
+ * were.
  * Published: solver, iterations, residual, divergence = max_i |D_i| dt / dx
  * after projection, volume = dx^3 sum clamp((1 - phi) / 2, 0, 1) open_i (m^3;
  * open_i the cell's open volume fraction), density_error_max/min (the largest
@@ -90,6 +92,10 @@ eddy_flip_pressure_def eddy_default_flip_pressure_def(void)
 	d.theta_min = 0.01f;
 	return d;
 }
+
+/* per eddy_flip_solver: the published name and the one in messages */
+static const char *const solver_name[] = {"pcg", "cholmod", "hypre"};
+static const char *const solver_label[] = {"PCG", "CHOLMOD", "HYPRE PFMG-PCG"};
 
 /* Fraction of the way from fluid centre i to air centre j where phi = 0. */
 static double theta(float pi, float pj, double tmin)
@@ -331,6 +337,18 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			                  "flip_pressure: PCG did not converge: relative residual %.3g after %d iterations "
 			                  "(tolerance %.3g, %d unknowns); raise max_iterations or use solver = \"cholmod\"",
 			                  residual, iterations, ps->def.tolerance, n);
+	} else if (ps->def.solver == EDDY_FLIP_HYPRE) {
+		bool converged = false;
+		const eddy_status st = eddy__flip_hypre_solve(w, &A, cell_of, b, q, ps->def.tolerance, ps->def.max_iterations,
+		                                              &iterations, &residual, &converged);
+		if (st != EDDY_OK)
+			return st;
+		if (!converged)
+			return eddy__fail(w, EDDY_ERR_SOLVER,
+			                  "flip_pressure: HYPRE PFMG-PCG did not converge at step %lld: relative residual %.3g after "
+			                  "%d iterations (tolerance %.3g, %d unknowns); raise max_iterations or use solver = "
+			                  "\"cholmod\"",
+			                  (long long)ctx->step, residual, iterations, ps->def.tolerance, n);
 	} else {
 		/* created at the first solve, not in add: a failed add frees the
 		 * system's data without its destroy hook */
@@ -357,11 +375,11 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		bmax = fabs(b[r]) > bmax ? fabs(b[r]) : bmax;
 	}
 	residual = bmax > 0 ? rmax / bmax : rmax;
-	const double allowed = ps->def.solver == EDDY_FLIP_PCG ? ps->def.tolerance * 1.0001 : 1e-8;
+	const double allowed = ps->def.solver == EDDY_FLIP_CHOLMOD ? 1e-8 : ps->def.tolerance * 1.0001;
 	if (!finite || !(residual <= allowed))
 		return eddy__fail(w, EDDY_ERR_SOLVER,
-		                  "flip_pressure: %s solution rejected: relative residual %.3g > %.3g (%d unknowns, %s)",
-		                  ps->def.solver == EDDY_FLIP_PCG ? "PCG" : "CHOLMOD", residual, allowed, n,
+		                  "flip_pressure: %s solution rejected at step %lld: relative residual %.3g > %.3g (%d unknowns, %s)",
+		                  solver_label[ps->def.solver], (long long)ctx->step, residual, allowed, n,
 		                  finite ? "finite" : "non-finite values");
 
 	/* velocity update on faces with fluid on a side and no solid */
@@ -433,7 +451,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		}
 		dmax = fabs(div) > dmax ? fabs(div) : dmax;
 	}
-	eddy_world_publish_text(w, "solver", ps->def.solver == EDDY_FLIP_PCG ? "pcg" : "cholmod");
+	eddy_world_publish_text(w, "solver", solver_name[ps->def.solver]);
 	eddy_world_publish(w, "iterations", iterations);
 	eddy_world_publish(w, "residual", residual);
 	eddy_world_publish(w, "divergence", dmax / h * ctx->dt);
@@ -464,8 +482,9 @@ eddy_system_id eddy_add_flip_pressure(eddy_world *w, const eddy_flip_pressure_de
 	const char *sys = "flip_pressure";
 	if (!eddy__add_args(w, def, sys))
 		return EDDY_NULL_SYSTEM;
-	if (def->solver != EDDY_FLIP_PCG && def->solver != EDDY_FLIP_CHOLMOD) {
-		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'solver' must be \"pcg\" or \"cholmod\" (got %d)", sys, (int)def->solver);
+	if (def->solver != EDDY_FLIP_PCG && def->solver != EDDY_FLIP_CHOLMOD && def->solver != EDDY_FLIP_HYPRE) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'solver' must be \"pcg\", \"cholmod\" or \"hypre\" (got %d)", sys,
+		           (int)def->solver);
 		return EDDY_NULL_SYSTEM;
 	}
 	if (!eddy__check_positive(w, sys, "density", def->density) || !eddy__check_finite(w, sys, "density", def->density))

@@ -6,7 +6,10 @@
  *  - pressure: seconds per solve on n^3 half full (n = 32, 64) for PCG at
  *    1e-2 / 1e-5 / 1e-8 and CHOLMOD (first solve = analyse + factor + solve,
  *    repeat = factor + solve with the analysis reused), 1 and 2 threads;
- *  - the pour scene (5625 particles) on one thread: simulated s per wall s.
+ *  - the pour scene (5625 particles) on one thread: simulated s per wall s;
+ *  - pressure sweep: PCG against HYPRE's PFMG-PCG (solver = "hypre") on a
+ *    pool with a wavy surface at 32^3, 64^3, 128^3: iterations and s per
+ *    solve ("bench_flip FILE sweep" runs only this).
  * Every figure is the median of repeats: the machine is shared and noisy. */
 #include <math.h>
 #include <stdio.h>
@@ -210,6 +213,94 @@ static void pressure(FILE *f, bool *first)
 			}
 }
 
+/* Grid-size sweep (eddy issue 17): the pool with a wavy surface and a drop
+ * (fixture_wavy_pool, about half the box liquid) at n^3, n = 32, 64, 128,
+ * solved by MIC(0)-PCG and by HYPRE's PFMG-preconditioned CG to 1e-6, on 1
+ * and 2 threads: iterations and seconds per flip_pressure step (assembly,
+ * solve, velocity update), the median of the repeats; and the process CPU
+ * time per frame (the solve plus the setup system's fill, the same for both
+ * solvers), the steadier figure on a shared machine. */
+/* Process CPU seconds: on a shared machine a one-thread run's CPU time moves
+ * far less than its wall time (it counts all threads: compare 1-thread rows). */
+static double cpu_s(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+static eddy_status wavy_setup(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	(void)ctx;
+	(void)user;
+	fixture_random_faces(w, 99);
+	fixture_wavy_pool(w);
+	return EDDY_OK;
+}
+
+static void pressure_sweep(FILE *f, bool *first)
+{
+	const int sizes[] = {32, 64, 128};
+	const eddy_flip_solver solvers[] = {EDDY_FLIP_PCG, EDDY_FLIP_HYPRE};
+	const char *const names[] = {"pcg", "hypre"};
+	for (int si = 0; si < 3; ++si)
+		for (int threads = 1; threads <= 2; ++threads)
+			for (int sv = 0; sv < 2; ++sv) {
+				const int n = sizes[si], reps = n >= 128 ? 3 : 5;
+				eddy_world_def d = eddy_default_world_def();
+				d.cell_size = 1.0 / n;
+				d.threads = threads;
+				d.fps = 100;
+				d.dt_max = 0.01;
+				eddy_world *w = eddy_create_world(&d, NULL, 0);
+				static const char *const writes[] = {"u", "v", "w", "cell_type", "flip_phi"};
+				eddy_custom_system_def cs = eddy_default_custom_system_def();
+				cs.name = "wavy_setup";
+				cs.writes = writes;
+				cs.write_count = 5;
+				cs.step = wavy_setup;
+				eddy_add_custom_system(w, &cs);
+				eddy_flip_pressure_def pr = eddy_default_flip_pressure_def();
+				pr.solver = solvers[sv];
+				pr.tolerance = 1e-6;
+				eddy_add_flip_pressure(w, &pr);
+				/* one solve first: HYPRE's first initialises MPI (once per process) */
+				bool ok = eddy_world_step_frame(w) == EDDY_OK;
+				double t[5], cpu[5], iters = 0;
+				for (int r = 0; r < reps && ok; ++r) {
+					const double before = profile_ms(w, "flip_pressure"), c0 = cpu_s();
+					ok = eddy_world_step_frame(w) == EDDY_OK;
+					cpu[r] = cpu_s() - c0;
+					t[r] = (profile_ms(w, "flip_pressure") - before) / 1e3;
+					eddy_frame_stats fs;
+					eddy_world_frame_stats(w, &fs);
+					for (int k = 0; k < fs.extra_count; ++k)
+						if (strcmp(fs.extra[k].name, "iterations") == 0)
+							iters = fs.extra[k].value;
+				}
+				if (!ok) {
+					printf("pressure sweep %d^3 %s: %s\n", n, names[sv], eddy_world_error(w));
+					eddy_destroy_world(w);
+					continue;
+				}
+				size_t nc;
+				const uint8_t *type = eddy_world_channel_u8(w, "cell_type", &nc);
+				int unknowns = 0;
+				for (size_t c = 0; c < nc; ++c)
+					unknowns += type[c] == EDDY_CELL_FLUID;
+				const double sec = median(t, reps), csec = median(cpu, reps);
+				fprintf(f, "%s\n {\"kind\":\"pressure_sweep\",\"scene\":\"wavy_pool\",\"grid\":%d,\"unknowns\":%d,\"solver\":\"%s\","
+				        "\"tolerance\":1e-06,\"threads\":%d,\"iterations\":%.0f,\"s_per_solve\":%.4f,\"cpu_s_per_frame\":%.4f}",
+				        *first ? "" : ",", n, unknowns, names[sv], threads, iters, sec, csec);
+				*first = false;
+				printf("pressure sweep, wavy pool %d^3 (%d unknowns), %s(1e-6), %d thread%s: %.0f iterations, %.4f s per solve "
+				       "(process CPU per frame %.4f s)\n",
+				       n, unknowns, names[sv], threads, threads > 1 ? "s" : "", iters, sec, csec);
+				fflush(stdout);
+				eddy_destroy_world(w);
+			}
+}
+
 /* the FLIP pour (the paper's jet into a 0.5 m box) in C: the bench links only libeddy. */
 static void pour(FILE *f, bool *first)
 {
@@ -266,6 +357,8 @@ static const char *blas_in_use(void)
 int main(int argc, char **argv)
 {
 	const char *path = argc > 1 ? argv[1] : "build/bench_flip.json";
+	/* bench_flip FILE sweep: only the pressure grid-size sweep */
+	const bool sweep_only = argc > 2 && strcmp(argv[2], "sweep") == 0;
 	FILE *f = fopen(path, "w");
 	if (!f) {
 		fprintf(stderr, "bench_flip: cannot write %s\n", path);
@@ -275,9 +368,12 @@ int main(int argc, char **argv)
 	const char *blas = blas_in_use();
 	printf("BLAS behind CHOLMOD: %s\n", blas);
 	fprintf(f, "{\"benchmark\":\"flip\",\"note\":\"medians; shared, noisy machine\",\"blas\":\"%s\",\"results\":[", blas);
-	transfers(f, &first);
-	pour(f, &first);
-	pressure(f, &first);
+	if (!sweep_only) {
+		transfers(f, &first);
+		pour(f, &first);
+		pressure(f, &first);
+	}
+	pressure_sweep(f, &first);
 	fprintf(f, "\n]}\n");
 	fclose(f);
 	printf("bench_flip: wrote %s\n", path);

@@ -80,6 +80,7 @@ int main(int argc, char **argv)
 		{"package", suite_package, false},
 		{"sph", suite_sph, false},
 		{"flip", suite_flip, false},
+		{"flip_solvers", suite_flip_solvers, false},
 		{"render", suite_render, false},
 		{"study", suite_study, false},
 		{"compare", suite_compare, false},

@@ -62,6 +62,7 @@ void suite_sph(void);
 
 /* FLIP suites */
 void suite_flip(void);
+void suite_flip_solvers(void);
 void suite_stress_flip_flight(void);
 void suite_stress_flip_solids(void);
 

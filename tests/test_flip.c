@@ -1,7 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
 /* FLIP validation (docs/validation.md §A, §C 9-14): the Poisson solve against
- * analytic answers, the two solvers against each other, still water in a
+ * analytic answers, the solvers against each other, still water in a
  * closed box and in a tank, a ballistic blob, the dam break against Martin &
  * Moyce, volume over a long slosh, Taylor-Green decay for PIC vs FLIP, and
  * the hard cases. Small grids: the suite runs in seconds. */
@@ -270,12 +270,14 @@ static poisson_result poisson_run(int n, eddy_flip_solver solver, double tol, bo
 
 static void poisson_matches_analytic_second_order(void)
 {
-	for (int sv = 0; sv < 2; ++sv) {
-		const eddy_flip_solver solver = sv ? EDDY_FLIP_CHOLMOD : EDDY_FLIP_PCG;
+	static const eddy_flip_solver solvers[3] = {EDDY_FLIP_PCG, EDDY_FLIP_CHOLMOD, EDDY_FLIP_HYPRE};
+	static const char *const names[3] = {"pcg", "cholmod", "hypre"};
+	for (int sv = 0; sv < 3; ++sv) {
+		const eddy_flip_solver solver = solvers[sv];
 		poisson_case pc;
 		poisson_result a = poisson_run(8, solver, 1e-10, false, &pc);
 		poisson_result b = poisson_run(16, solver, 1e-10, false, &pc);
-		printf("    poisson %s: error %.3g (8^3), %.3g (16^3), order %.2f\n", sv ? "cholmod" : "pcg", a.err, b.err,
+		printf("    poisson %s: error %.3g (8^3), %.3g (16^3), order %.2f\n", names[sv], a.err, b.err,
 		       log2(a.err / b.err));
 		CHECK(a.err < 0.05);
 		CHECK(b.err < 0.015);
@@ -285,31 +287,34 @@ static void poisson_matches_analytic_second_order(void)
 	}
 }
 
-/* Both solvers on the same non-trivial field: pressures agree to the PCG
- * tolerance; divergence after projection <= 1e-6 (CHOLMOD) and <= tolerance
- * times the divergence before (PCG). */
+/* The solvers on the same non-trivial field: pressures agree to the
+ * iterative tolerance; divergence after projection <= 1e-6 (CHOLMOD) and <=
+ * tolerance times the divergence before (PCG, HYPRE). */
 static void solvers_agree_and_remove_divergence(void)
 {
 	poisson_case pc, pc2;
 	const double tol = 1e-6;
 	poisson_result c = poisson_run(12, EDDY_FLIP_CHOLMOD, tol, true, &pc);
-	poisson_result p = poisson_run(12, EDDY_FLIP_PCG, tol, true, &pc2);
-	CHECK(c.n == p.n && c.n == 12 * 12 * 12);
-	double dmax = 0, pmax = 0;
-	for (size_t i = 0; i < c.n && i < p.n; ++i) {
-		dmax = fmax(dmax, fabs((double)c.p[i] - p.p[i]));
-		pmax = fmax(pmax, fabs((double)c.p[i]));
-	}
-	printf("    12^3: |p_pcg - p_cholmod| / max|p| = %.3g (PCG %g iterations); divergence before %.3g, after %.3g "
-	       "(cholmod) %.3g (pcg)\n",
-	       dmax / pmax, p.iterations, pc.max_div0, c.divergence, p.divergence);
-	CHECK(dmax / pmax < 20 * tol); /* the PCG stop is on max|r| / max|b| */
-	CHECK(c.divergence <= 1e-6);
-	CHECK(p.divergence <= 2 * tol * pc.max_div0);
 	CHECK(c.residual <= 1e-10);
-	CHECK(p.residual <= tol);
+	CHECK(c.divergence <= 1e-6);
+	for (int sv = 0; sv < 2; ++sv) {
+		poisson_result p = poisson_run(12, sv ? EDDY_FLIP_HYPRE : EDDY_FLIP_PCG, tol, true, &pc2);
+		CHECK(c.n == p.n && c.n == 12 * 12 * 12);
+		double dmax = 0, pmax = 0;
+		for (size_t i = 0; i < c.n && i < p.n; ++i) {
+			dmax = fmax(dmax, fabs((double)c.p[i] - p.p[i]));
+			pmax = fmax(pmax, fabs((double)c.p[i]));
+		}
+		printf("    12^3: |p_%s - p_cholmod| / max|p| = %.3g (%g iterations); divergence before %.3g, after %.3g "
+		       "(cholmod) %.3g (%s)\n",
+		       sv ? "hypre" : "pcg", dmax / pmax, p.iterations, pc.max_div0, c.divergence, p.divergence,
+		       sv ? "hypre" : "pcg");
+		CHECK(dmax / pmax < 20 * tol); /* both stop on max|r| / max|b| */
+		CHECK(p.divergence <= 2 * tol * pc.max_div0);
+		CHECK(p.residual <= tol);
+		free(p.p);
+	}
 	free(c.p);
-	free(p.p);
 }
 
 /* Hard case 14: the PCG reaches 1e-10 on 24^3 in double precision. */
@@ -401,10 +406,11 @@ static void thin_theta_is_clamped_consistently(void)
  * with hydrostatic pressure, both solvers. */
 static void closed_box_stays_still(void)
 {
-	for (int sv = 0; sv < 2; ++sv) {
+	static const char *const names[3] = {"pcg", "cholmod", "hypre"};
+	for (int sv = 0; sv < 3; ++sv) {
 		flip_setup s = setup_default();
 		s.hi = (eddy_vec3){0.6f, 0.6f, 0.4f};
-		s.solver = sv ? EDDY_FLIP_CHOLMOD : EDDY_FLIP_PCG;
+		s.solver = sv == 2 ? EDDY_FLIP_HYPRE : sv ? EDDY_FLIP_CHOLMOD : EDDY_FLIP_PCG;
 		s.tolerance = 1e-8;
 		eddy_world *w = flip_world(&s);
 		fill(w, s.h, s.lo, s.hi, NULL, (eddy_vec3){0, 0, 0});
@@ -414,9 +420,9 @@ static void closed_box_stays_still(void)
 			const double vmax = max_speed(w);
 			CHECK(fs.nonfinite == 0);
 			CHECK(stat(&fs, "pinned") == 1);
-			if (sv) /* the fluid-cell pattern never changed: one symbolic analysis */
+			if (sv == 1) /* the fluid-cell pattern never changed: one symbolic analysis */
 				CHECKF(stat(&fs, "analyses") == 1, "analyses %g", stat(&fs, "analyses"));
-			CHECKF(vmax < 1e-4, "%s: max speed %g", sv ? "cholmod" : "pcg", vmax);
+			CHECKF(vmax < 1e-4, "%s: max speed %g", names[sv], vmax);
 			const eddy_grid_info g = eddy_world_grid(w);
 			const float *p = eddy_world_channel(w, "cell_pressure", NULL);
 			double emax = 0;
@@ -427,8 +433,8 @@ static void closed_box_stays_still(void)
 						emax = fmax(emax, fabs(p[c] - p[c + (size_t)g.nx] - RHO * G * s.h));
 						CHECK(isfinite(p[c]));
 					}
-			printf("    closed box (%s): max speed %.2g m/s, max |dp - rho g dx| %.3g Pa of %.0f\n",
-			       sv ? "cholmod" : "pcg", vmax, emax, RHO * G * s.h);
+			printf("    closed box (%s): max speed %.2g m/s, max |dp - rho g dx| %.3g Pa of %.0f\n", names[sv], vmax,
+			       emax, RHO * G * s.h);
 			CHECK(emax < 1e-3 * RHO * G * s.h);
 		}
 		eddy_destroy_world(w);
@@ -439,35 +445,38 @@ static void closed_box_stays_still(void)
  * no spurious currents. */
 static void hydrostatic_tank_with_surface(void)
 {
-	flip_setup s = setup_default();
-	s.hi = (eddy_vec3){0.8f, 1.2f, 0.4f};
-	eddy_world *w = flip_world(&s);
-	const double H = 0.6;
-	fill(w, s.h, s.lo, (eddy_vec3){0.8f, (float)H, 0.4f}, NULL, (eddy_vec3){0, 0, 0});
-	if (step_frames(w, 15)) {
-		const eddy_grid_info g = eddy_world_grid(w);
-		const float *p = eddy_world_channel(w, "cell_pressure", NULL);
-		const uint8_t *t = eddy_world_channel_u8(w, "cell_type", NULL);
-		double emax = 0;
-		int cells = 0;
-		for (int k = 0; k < g.nz; ++k)
-			for (int j = 0; j < g.ny; ++j)
-				for (int i = 0; i < g.nx; ++i) {
-					const size_t c = (size_t)i + (size_t)g.nx * ((size_t)j + (size_t)g.ny * k);
-					const double y = (j + 0.5) * s.h;
-					if (t[c] != EDDY_CELL_FLUID || y > H - s.h)
-						continue;
-					emax = fmax(emax, fabs(p[c] - RHO * G * (H - y)));
-					cells++;
-				}
-		const double vmax = max_speed(w);
-		printf("    tank: %d interior cells, max |p - rho g d| = %.3g Pa (one cell: %.0f Pa), max speed %.2g m/s\n",
-		       cells, emax, RHO * G * s.h, vmax);
-		CHECK(cells == 8 * 5 * 4);
-		CHECK(emax <= RHO * G * s.h);
-		CHECK(vmax < 1e-3);
+	for (int sv = 0; sv < 2; ++sv) {
+		flip_setup s = setup_default();
+		s.hi = (eddy_vec3){0.8f, 1.2f, 0.4f};
+		s.solver = sv ? EDDY_FLIP_HYPRE : EDDY_FLIP_PCG;
+		eddy_world *w = flip_world(&s);
+		const double H = 0.6;
+		fill(w, s.h, s.lo, (eddy_vec3){0.8f, (float)H, 0.4f}, NULL, (eddy_vec3){0, 0, 0});
+		if (step_frames(w, 15)) {
+			const eddy_grid_info g = eddy_world_grid(w);
+			const float *p = eddy_world_channel(w, "cell_pressure", NULL);
+			const uint8_t *t = eddy_world_channel_u8(w, "cell_type", NULL);
+			double emax = 0;
+			int cells = 0;
+			for (int k = 0; k < g.nz; ++k)
+				for (int j = 0; j < g.ny; ++j)
+					for (int i = 0; i < g.nx; ++i) {
+						const size_t c = (size_t)i + (size_t)g.nx * ((size_t)j + (size_t)g.ny * k);
+						const double y = (j + 0.5) * s.h;
+						if (t[c] != EDDY_CELL_FLUID || y > H - s.h)
+							continue;
+						emax = fmax(emax, fabs(p[c] - RHO * G * (H - y)));
+						cells++;
+					}
+			const double vmax = max_speed(w);
+			printf("    tank (%s): %d interior cells, max |p - rho g d| = %.3g Pa (one cell: %.0f Pa), max speed %.2g m/s\n",
+			       sv ? "hypre" : "pcg", cells, emax, RHO * G * s.h, vmax);
+			CHECK(cells == 8 * 5 * 4);
+			CHECK(emax <= RHO * G * s.h);
+			CHECK(vmax < 1e-3);
+		}
+		eddy_destroy_world(w);
 	}
-	eddy_destroy_world(w);
 }
 
 /* Two fluid regions: a sealed chamber (singular: pinned) beside an open pool,
@@ -590,12 +599,13 @@ static void dam_break_matches_martin_moyce(void)
 	if (!probe)
 		return;
 	fclose(probe);
-	for (int sv = 0; sv < 3; ++sv) {
+	static const char *const names[4] = {"pcg", "cholmod", "pcg", "hypre"};
+	for (int sv = 0; sv < 4; ++sv) {
 		const double a = 0.1, h = a / 8, tref = sqrt(a / (2 * G));
 		flip_setup s = setup_default();
 		s.h = h;
 		s.hi = (eddy_vec3){(float)(5.5 * a), (float)(2.5 * a), (float)(4 * h)};
-		s.solver = sv == 1 ? EDDY_FLIP_CHOLMOD : EDDY_FLIP_PCG;
+		s.solver = sv == 1 ? EDDY_FLIP_CHOLMOD : sv == 3 ? EDDY_FLIP_HYPRE : EDDY_FLIP_PCG;
 		s.cfl = sv == 2 ? 4 : 1; /* the third run: large steps (extrapolation reaches 6 layers) */
 		s.fps = 1 / (0.1 * tref); /* a frame every 0.1 in T */
 		s.dt_max = 0.1 * tref;
@@ -632,7 +642,7 @@ static void dam_break_matches_martin_moyce(void)
 			eddy_world_frame_stats(w, &fs);
 			printf("    dam break (%s, CFL %g): Z(T=1) %.2f, Z(1.5) %.2f, Z(2) %.2f, Z(2.5) %.2f, Z(3) %.2f; worst error %.1f%% "
 			       "with shift %.1f; %lld steps\n",
-			       sv == 1 ? "cholmod" : "pcg", s.cfl, Z[9], Z[14], Z[19], Z[24], Z[29], 100 * best, best_shift,
+			       names[sv], s.cfl, Z[9], Z[14], Z[19], Z[24], Z[29], 100 * best, best_shift,
 			       (long long)eddy_world_steps(w));
 			CHECK(best <= 0.10);
 			CHECK(fs.leaked == 0 && fs.nonfinite == 0);
@@ -1112,16 +1122,17 @@ static void defs_and_order_are_checked(void)
 	eddy_destroy_world(w);
 }
 
-/* The scene runs from the command line with either solver and reports the
+/* The scene runs from the command line with every solver and reports the
  * solver's stats. */
-static void dam_break_scene_runs_both_solvers(void)
+static void dam_break_scene_runs_every_solver(void)
 {
-	for (int sv = 0; sv < 2; ++sv) {
+	static const char *const names[3] = {"pcg", "cholmod", "hypre"};
+	for (int sv = 0; sv < 3; ++sv) {
 		char cmd[512], out[8192];
 		snprintf(cmd, sizeof cmd,
 		         "%s/eddy run scenes/dam_break.lua --set method=flip --frames 3 --set solver=%s --set spacing=0.0125 "
 		         "--stats /dev/stdout --quiet 2>&1",
-		         test_build_dir(), sv ? "cholmod" : "pcg");
+		         test_build_dir(), names[sv]);
 		FILE *f = popen(cmd, "r");
 		CHECK(f != NULL);
 		if (!f)
@@ -1130,7 +1141,9 @@ static void dam_break_scene_runs_both_solvers(void)
 		out[n] = 0;
 		int st = pclose(f);
 		CHECKF(WIFEXITED(st) && WEXITSTATUS(st) == 0, "exit %d: %s", st, out);
-		CHECK_HAS(out, sv ? "\"solver\":\"cholmod\"" : "\"solver\":\"pcg\"");
+		char want[64];
+		snprintf(want, sizeof want, "\"solver\":\"%s\"", names[sv]);
+		CHECK_HAS(out, want);
 		CHECK_HAS(out, "\"divergence\":");
 		CHECK_HAS(out, "\"Z\":");
 	}
@@ -1151,7 +1164,7 @@ static void scene_rejects_unknown_solver(void)
 	int st = pclose(f);
 	CHECK(WIFEXITED(st) && WEXITSTATUS(st) != 0);
 	CHECK_HAS(out, "scenes/dam_break.lua:");
-	CHECK_HAS(out, "'solver' must be \"pcg\" or \"cholmod\"");
+	CHECK_HAS(out, "'solver' must be \"pcg\", \"cholmod\" or \"hypre\"");
 }
 
 void suite_flip(void)
@@ -1177,6 +1190,6 @@ void suite_flip(void)
 	RUN(reseed_keeps_counts);
 	RUN(mark_radius_marks_neighbours);
 	RUN(defs_and_order_are_checked);
-	RUN(dam_break_scene_runs_both_solvers);
+	RUN(dam_break_scene_runs_every_solver);
 	RUN(scene_rejects_unknown_solver);
 }
