@@ -14,6 +14,7 @@
 BUILD   ?= build
 PREFIX  ?= /usr/local
 CC      ?= cc
+CXX     ?= g++
 SAN     ?=
 OPT     ?= -O3
 
@@ -28,6 +29,8 @@ WARN    := -Wall -Wextra -Wpedantic -Wshadow -Wstrict-prototypes -Wmissing-proto
            -Wformat=2 -Wvla -Wpointer-arith -Wcast-qual -Wundef -Werror
 BASE    := -std=c11 $(OPT) -g -fPIC -fopenmp -fvisibility=hidden $(WARN) $(SAN) -MMD -MP
 LDBASE  := -fopenmp $(SAN)
+# The one C++ file (src/surface_vdb.cpp, OpenVDB): same warnings and sanitizers.
+CXXBASE := -std=c++17 $(OPT) -g -fPIC -fvisibility=hidden -Wall -Wextra -Wpedantic -Wshadow -Werror $(SAN) -MMD -MP
 
 LUA_CFLAGS    := $(shell pkg-config --cflags lua5.4 2>/dev/null)
 LUA_LIBS      := $(shell pkg-config --libs lua5.4 2>/dev/null)
@@ -36,19 +39,23 @@ OSMESA_LIBS   := $(shell pkg-config --libs osmesa 2>/dev/null || echo -lOSMesa)
 # CHOLMOD pulls libblas.so.3, which Debian points at OpenBLAS when it is
 # installed (reference BLAS is about 7x slower for the factorisation). Only
 # src/flip_cholmod.c includes CHOLMOD, only render/gl_osmesa.c OSMesa.
-LIBS          := -lcholmod $(OSMESA_LIBS) -lm
+# Only src/surface_vdb.cpp includes OpenVDB (with TBB and Imath, which its
+# headers use).
+VDB_LIBS      := -lopenvdb $(shell pkg-config --libs Imath tbb 2>/dev/null || echo -lImath-3_1 -ltbb) -lstdc++
+LIBS          := -lcholmod $(OSMESA_LIBS) $(VDB_LIBS) -lm
 
 # The command-line host: main.c and the files named cli_*.c are the command's
 # own and stay out of the Lua module.
 CLI_C    := lua/main.c $(wildcard lua/cli_*.c)
 SRC_C    := $(wildcard src/*.c)
+SRC_CXX  := $(wildcard src/*.cpp)
 RENDER_C := $(wildcard render/*.c)
 LUA_C    := $(filter-out $(CLI_C),$(wildcard lua/*.c))
 TEST_C   := $(wildcard tests/test_*.c) tests/runner.c tests/fuzz_scene.c
 BENCHES  := bench bench_flip bench_sph bench_render
 
 obj = $(1:%.c=$(BUILD)/obj/%.o)
-LIB_O   := $(call obj,$(SRC_C) $(RENDER_C))
+LIB_O   := $(call obj,$(SRC_C) $(RENDER_C)) $(SRC_CXX:%.cpp=$(BUILD)/obj/%.o)
 LUA_O   := $(call obj,$(LUA_C))
 CLI_O   := $(call obj,$(CLI_C))
 TEST_O  := $(call obj,$(TEST_C))
@@ -68,6 +75,10 @@ $(HEADER): src/eddy.h
 $(BUILD)/obj/src/%.o: src/%.c
 	@mkdir -p $(dir $@)
 	$(CC) $(BASE) -Isrc -c $< -o $@
+
+$(BUILD)/obj/src/%.o: src/%.cpp
+	@mkdir -p $(dir $@)
+	$(CXX) $(CXXBASE) -Isrc -c $< -o $@
 
 $(BUILD)/obj/render/%.o: render/%.c $(HEADER)
 	@mkdir -p $(dir $@)
@@ -104,7 +115,7 @@ $(BUILD)/eddy: $(CLI_O) $(LUA_O) $(BUILD)/libeddy.a
 
 $(BUILD)/eddy.pc: Makefile src/eddy.h
 	@mkdir -p $(BUILD)
-	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lm -fopenmp\n' '$(PREFIX)' '$(VERSION)' > $@
+	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod %s -lm -fopenmp\n' '$(PREFIX)' '$(VERSION)' '$(VDB_LIBS)' > $@
 
 $(BUILD)/tests/run: $(TEST_O) $(LUA_O) $(BUILD)/libeddy.a
 	@mkdir -p $(dir $@)
