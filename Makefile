@@ -30,7 +30,10 @@ WARN    := -Wall -Wextra -Wpedantic -Wshadow -Wstrict-prototypes -Wmissing-proto
 BASE    := -std=c11 $(OPT) -g -fPIC -fopenmp -fvisibility=hidden $(WARN) $(SAN) -MMD -MP
 LDBASE  := -fopenmp $(SAN)
 # The one C++ file (src/surface_vdb.cpp, OpenVDB): same warnings and sanitizers.
-CXXBASE := -std=c++17 $(OPT) -g -fPIC -fvisibility=hidden -Wall -Wextra -Wpedantic -Wshadow -Werror $(SAN) -MMD -MP
+# Not -fvisibility=hidden: OpenVDB's templates instantiated here must share
+# libopenvdb's type identities (hidden copies crash openvdb::initialize());
+# the file hides its own functions with a visibility pragma instead.
+CXXBASE := -std=c++17 $(OPT) -g -fPIC -Wall -Wextra -Wpedantic -Wshadow -Werror $(SAN) -MMD -MP
 
 LUA_CFLAGS    := $(shell pkg-config --cflags lua5.4 2>/dev/null)
 LUA_LIBS      := $(shell pkg-config --libs lua5.4 2>/dev/null)

@@ -57,6 +57,9 @@
 #include <string>
 #include <vector>
 
+/* this file's own symbols stay inside the library (see the Makefile) */
+#pragma GCC visibility push(hidden)
+
 namespace {
 
 using openvdb::FloatGrid;
@@ -173,15 +176,15 @@ extern "C" int eddy__surface_build(const float *x, const float *y, const float *
 		for (size_t v = 0; v < nv; ++v)
 			for (int c = 0; c < 3; ++c)
 				mesh->xyz[3 * v + size_t(c)] = points[v][c];
-		/* volumeToMesh winds polygons clockwise seen from the side where the
-		 * field is above the isovalue (outside here); reversed to the usual
-		 * counter-clockwise-from-outside of PLY, OBJ and GL */
+		/* volumeToMesh winds polygons counter-clockwise seen from the side
+		 * where the field is above the isovalue (outside here), as PLY, OBJ
+		 * and GL expect; a quad (a b c d) becomes (a b c) and (a c d) */
 		uint32_t *t = mesh->tri;
 		for (const openvdb::Vec3I &f : tris)
-			*t++ = f[0], *t++ = f[2], *t++ = f[1];
+			*t++ = f[0], *t++ = f[1], *t++ = f[2];
 		for (const openvdb::Vec4I &f : quads) {
-			*t++ = f[0], *t++ = f[2], *t++ = f[1];
-			*t++ = f[0], *t++ = f[3], *t++ = f[2];
+			*t++ = f[0], *t++ = f[1], *t++ = f[2];
+			*t++ = f[0], *t++ = f[2], *t++ = f[3];
 		}
 		mesh->vertex_count = nv;
 		mesh->triangle_count = nt;
@@ -272,3 +275,5 @@ extern "C" int eddy__surface_write_vdb(const eddy_mesh *mesh, const char *path, 
 }
 
 extern "C" void eddy__surface_free_field(void *field) { delete static_cast<Field *>(field); }
+
+#pragma GCC visibility pop

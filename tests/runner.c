@@ -81,6 +81,7 @@ int main(int argc, char **argv)
 		{"sph", suite_sph, false},
 		{"flip", suite_flip, false},
 		{"render", suite_render, false},
+		{"surface", suite_surface, false},
 		{"study", suite_study, false},
 		{"compare", suite_compare, false},
 		/* stress: scenes one step beyond the validated ones (scenes/stress/) */
