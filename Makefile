@@ -191,9 +191,17 @@ FUZZ_CFLAGS  := -std=c11 -O1 -g -fsanitize=fuzzer,address,undefined -fno-sanitiz
                 -Wall -Wextra -Wno-unknown-pragmas -DEDDY_LIBFUZZER
 FUZZ_SRC     := $(SRC_C) $(LUA_C) $(RENDER_C) tests/fuzz_scene.c
 
-$(BUILD)/fuzz/fuzz_scene: $(FUZZ_SRC) $(HEADER)
+# the C++ file (OpenVDB) with the sanitizers but without libFuzzer's main
+FUZZ_CXXFLAGS := -std=c++17 -O1 -g -fsanitize=address,undefined -fno-sanitize-recover=undefined -Wall -Wextra
+
+$(BUILD)/fuzz/surface_vdb.o: $(SRC_CXX) src/surface.h src/eddy.h
 	@mkdir -p $(dir $@)
-	clang $(FUZZ_CFLAGS) -Isrc -Ilua $(LUA_CFLAGS) $(OSMESA_CFLAGS) $(FUZZ_SRC) -o $@ $(LUA_LIBS) $(LIBS)
+	clang++ $(FUZZ_CXXFLAGS) -Isrc -c $(SRC_CXX) -o $@
+
+$(BUILD)/fuzz/fuzz_scene: $(FUZZ_SRC) $(HEADER) $(BUILD)/fuzz/surface_vdb.o
+	@mkdir -p $(dir $@)
+	clang $(FUZZ_CFLAGS) -Isrc -Ilua $(LUA_CFLAGS) $(OSMESA_CFLAGS) $(FUZZ_SRC) $(BUILD)/fuzz/surface_vdb.o -o $@ \
+		$(LUA_LIBS) $(LIBS)
 
 fuzz: deps
 	@$(MAKE) --no-print-directory $(BUILD)/fuzz/fuzz_scene
