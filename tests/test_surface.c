@@ -414,6 +414,30 @@ static void bad_defs_are_refused(void)
 	eddy_destroy_world(w);
 }
 
+/* scenes/surface.lua through the eddy command: the Lua binding's fields,
+ * the list-valued format, and the files of one frame where the scene puts them. */
+static void scene_writes_meshes_and_images(void)
+{
+	char cmd[4096], out[4096], dir[300];
+	out_path(dir, sizeof dir, "scene");
+	snprintf(cmd, sizeof cmd,
+	         "rm -rf %s && %s/eddy run scenes/surface.lua --frames 1 --set spacing=0.025 --set vdb=true "
+	         "--set points=false --out %s --quiet && ls %s",
+	         dir, test_build_dir(), dir, dir);
+	CHECKF(test_sh(cmd, out, sizeof out) == 0, "%s", out);
+	CHECK_HAS(out, "surface_0001.ply");
+	CHECK_HAS(out, "surface_0001.obj");
+	CHECK_HAS(out, "surface_0001.vdb");
+	CHECK_HAS(out, "liquid_0001.png");
+	/* a misspelt format is refused where the scene wrote it */
+	snprintf(cmd, sizeof cmd,
+	         "printf 'local eddy = require \"eddy\"\nlocal w = eddy.world{}\nw:add(eddy.surface_mesh{spacing = 0.01, "
+	         "format = {\"ply\", \"stl\"}})\nreturn w\n' > %s.lua; %s/eddy run %s.lua --frames 1 --out %s --quiet",
+	         dir, test_build_dir(), dir, dir);
+	CHECK(test_sh(cmd, out, sizeof out) != 0);
+	CHECK_HAS(out, "'format' must list ply, obj and/or vdb (got 'stl')");
+}
+
 void suite_surface(void)
 {
 	RUN(block_mesh_is_closed_and_holds_the_particles_volume);
@@ -421,4 +445,5 @@ void suite_surface(void)
 	RUN(mesh_files_parse_back);
 	RUN(render_surface_draws_the_liquid);
 	RUN(bad_defs_are_refused);
+	RUN(scene_writes_meshes_and_images);
 }
