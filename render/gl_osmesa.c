@@ -33,7 +33,7 @@ struct eddy_gl {
 	GLint sp_ax, sp_ay, sp_az, sp_color;
 	GLint ln_view, ln_proj, ln_color, ln_pos;
 	GLuint mesh_prog; /* triangle meshes (render_surface), made at the first mesh drawn */
-	GLint ms_view, ms_proj, ms_light, ms_color, ms_spec, ms_fresnel, ms_pos, ms_normal;
+	GLint ms_view, ms_proj, ms_light, ms_color, ms_spec, ms_fresnel, ms_ortho, ms_pos, ms_normal;
 };
 
 static const char sprite_vs[] =
@@ -91,7 +91,8 @@ static const char line_fs[] =
 
 /* Meshes (render_surface): per-pixel Phong in eye space with a Schlick
  * Fresnel term F = (1 - n.v)^5 that brightens grazing angles towards the
- * sky colour, the look of water; the view vector is exact (-p). */
+ * sky colour, the look of water; the view vector is exact (towards the
+ * eye, or the view axis when orthographic). */
 static const char mesh_vs[] =
 	"#version 120\n"
 	"attribute vec3 pos, normal;\n"
@@ -107,11 +108,11 @@ static const char mesh_vs[] =
 static const char mesh_fs[] =
 	"#version 120\n"
 	"uniform vec3 light, color;\n"
-	"uniform float spec, fresnel;\n"
+	"uniform float spec, fresnel, ortho;\n"
 	"varying vec3 v_p, v_n;\n"
 	"void main() {\n"
 	"  vec3 n = normalize(v_n);\n"
-	"  vec3 v = normalize(-v_p);\n"
+	"  vec3 v = normalize(mix(-v_p, vec3(0.0, 0.0, 1.0), ortho));\n"
 	"  if (dot(n, v) < 0.0) n = -n;\n"
 	"  float diffuse = max(dot(n, light), 0.0);\n"
 	"  float s = pow(max(dot(n, normalize(light + v)), 0.0), 60.0);\n"
@@ -313,6 +314,7 @@ int eddy_gl_draw(eddy_gl *g, const eddy_gl_scene *s, char *err, size_t cap)
 		g->ms_color = glGetUniformLocation(g->mesh_prog, "color");
 		g->ms_spec = glGetUniformLocation(g->mesh_prog, "spec");
 		g->ms_fresnel = glGetUniformLocation(g->mesh_prog, "fresnel");
+		g->ms_ortho = glGetUniformLocation(g->mesh_prog, "ortho");
 		g->ms_pos = glGetAttribLocation(g->mesh_prog, "pos");
 		g->ms_normal = glGetAttribLocation(g->mesh_prog, "normal");
 	}
@@ -327,6 +329,7 @@ int eddy_gl_draw(eddy_gl *g, const eddy_gl_scene *s, char *err, size_t cap)
 		glUniform3fv(g->ms_color, 1, m->rgb);
 		glUniform1f(g->ms_spec, m->specular);
 		glUniform1f(g->ms_fresnel, m->fresnel);
+		glUniform1f(g->ms_ortho, s->proj[15]); /* 1 for orthographic, 0 for perspective */
 		if (m->cull_back) {
 			glEnable(GL_CULL_FACE);
 			glCullFace(GL_BACK);
