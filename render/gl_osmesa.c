@@ -32,6 +32,8 @@ struct eddy_gl {
 	GLint sp_view, sp_proj, sp_radius, sp_half_height, sp_light, sp_halfway, sp_depth_a, sp_depth_b, sp_ortho;
 	GLint sp_ax, sp_ay, sp_az, sp_color;
 	GLint ln_view, ln_proj, ln_color, ln_pos;
+	GLuint mesh_prog; /* triangle meshes (render_surface), made at the first mesh drawn */
+	GLint ms_view, ms_proj, ms_light, ms_color, ms_spec, ms_fresnel, ms_ortho, ms_pos, ms_normal;
 };
 
 static const char sprite_vs[] =
@@ -86,6 +88,40 @@ static const char line_fs[] =
 	"#version 120\n"
 	"uniform vec3 color;\n"
 	"void main() { gl_FragColor = vec4(color, 1.0); }\n";
+
+/* Meshes (render_surface): per-pixel Phong in eye space with a Schlick
+ * Fresnel term F = (1 - n.v)^5 that brightens grazing angles towards the
+ * sky colour, the look of water; the view vector is exact (towards the
+ * eye, or the view axis when orthographic). */
+static const char mesh_vs[] =
+	"#version 120\n"
+	"attribute vec3 pos, normal;\n"
+	"uniform mat4 view, proj;\n"
+	"varying vec3 v_p, v_n;\n"
+	"void main() {\n"
+	"  vec4 e = view * vec4(pos, 1.0);\n"
+	"  v_p = e.xyz;\n"
+	"  v_n = mat3(view) * normal;\n"
+	"  gl_Position = proj * e;\n"
+	"}\n";
+
+static const char mesh_fs[] =
+	"#version 120\n"
+	"uniform vec3 light, color;\n"
+	"uniform float spec, fresnel, ortho;\n"
+	"varying vec3 v_p, v_n;\n"
+	"void main() {\n"
+	"  vec3 n = normalize(v_n);\n"
+	"  vec3 v = normalize(mix(-v_p, vec3(0.0, 0.0, 1.0), ortho));\n"
+	"  if (dot(n, v) < 0.0) n = -n;\n"
+	"  float diffuse = max(dot(n, light), 0.0);\n"
+	"  float s = pow(max(dot(n, normalize(light + v)), 0.0), 60.0);\n"
+	"  float f = pow(1.0 - max(dot(n, v), 0.0), 5.0);\n"
+	"  vec3 sky = vec3(0.75, 0.85, 0.95);\n"
+	"  vec3 c = color * (0.30 + 0.70 * diffuse);\n"
+	"  c = mix(c, sky, fresnel * (0.04 + 0.96 * f)) + vec3(spec * s);\n"
+	"  gl_FragColor = vec4(min(c, vec3(1.0)), 1.0);\n"
+	"}\n";
 
 static GLuint compile(GLenum type, const char *src, char *err, size_t cap)
 {
@@ -268,6 +304,52 @@ int eddy_gl_draw(eddy_gl *g, const eddy_gl_scene *s, char *err, size_t cap)
 		for (int i = 0; i < 3; ++i)
 			glDisableVertexAttribArray((GLuint)loc[i]);
 		glDisableVertexAttribArray((GLuint)g->sp_color);
+	}
+	if (s->mesh_sets > 0 && !g->mesh_prog) {
+		if (!(g->mesh_prog = program(mesh_vs, mesh_fs, err, cap)))
+			return -1;
+		g->ms_view = glGetUniformLocation(g->mesh_prog, "view");
+		g->ms_proj = glGetUniformLocation(g->mesh_prog, "proj");
+		g->ms_light = glGetUniformLocation(g->mesh_prog, "light");
+		g->ms_color = glGetUniformLocation(g->mesh_prog, "color");
+		g->ms_spec = glGetUniformLocation(g->mesh_prog, "spec");
+		g->ms_fresnel = glGetUniformLocation(g->mesh_prog, "fresnel");
+		g->ms_ortho = glGetUniformLocation(g->mesh_prog, "ortho");
+		g->ms_pos = glGetAttribLocation(g->mesh_prog, "pos");
+		g->ms_normal = glGetAttribLocation(g->mesh_prog, "normal");
+	}
+	for (int k = 0; k < s->mesh_sets; ++k) {
+		const eddy_gl_mesh *m = &s->meshes[k];
+		if (!m->triangles)
+			continue;
+		glUseProgram(g->mesh_prog);
+		glUniformMatrix4fv(g->ms_view, 1, GL_FALSE, s->view);
+		glUniformMatrix4fv(g->ms_proj, 1, GL_FALSE, s->proj);
+		glUniform3fv(g->ms_light, 1, s->light);
+		glUniform3fv(g->ms_color, 1, m->rgb);
+		glUniform1f(g->ms_spec, m->specular);
+		glUniform1f(g->ms_fresnel, m->fresnel);
+		glUniform1f(g->ms_ortho, s->proj[15]); /* 1 for orthographic, 0 for perspective */
+		if (m->cull_back) {
+			glEnable(GL_CULL_FACE);
+			glCullFace(GL_BACK);
+			glFrontFace(GL_CCW);
+		}
+		glBindBuffer(GL_ARRAY_BUFFER, 0);
+		glEnableVertexAttribArray((GLuint)g->ms_pos);
+		glEnableVertexAttribArray((GLuint)g->ms_normal);
+		glVertexAttribPointer((GLuint)g->ms_pos, 3, GL_FLOAT, GL_FALSE, 0, m->xyz);
+		glVertexAttribPointer((GLuint)g->ms_normal, 3, GL_FLOAT, GL_FALSE, 0, m->normal);
+		for (size_t first = 0; first < m->triangles;) {
+			size_t n = m->triangles - first;
+			if (n > (size_t)1 << 22)
+				n = (size_t)1 << 22;
+			glDrawElements(GL_TRIANGLES, (GLsizei)(3 * n), GL_UNSIGNED_INT, m->tri + 3 * first);
+			first += n;
+		}
+		glDisableVertexAttribArray((GLuint)g->ms_pos);
+		glDisableVertexAttribArray((GLuint)g->ms_normal);
+		glDisable(GL_CULL_FACE);
 	}
 	if (s->line_sets > 0) {
 		glUseProgram(g->line_prog);

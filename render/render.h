@@ -22,6 +22,21 @@ typedef struct eddy_gl_lines {
 	float width;        /* px */
 } eddy_gl_lines;
 
+/* A triangle mesh lit per pixel (Phong, plus a Schlick Fresnel rim of
+ * `fresnel` strength: 0 for matte grey, about 1 for water). Vertices and
+ * normals 3 floats each; with cull_back only faces wound counter-clockwise
+ * towards the camera are drawn. */
+typedef struct eddy_gl_mesh {
+	const float *xyz;      /* m */
+	const float *normal;   /* 1, unit */
+	const uint32_t *tri;   /* 3 per triangle */
+	size_t triangles;
+	float rgb[3];          /* 1, albedo */
+	float specular;        /* 1, highlight strength */
+	float fresnel;         /* 1, rim strength */
+	int cull_back;
+} eddy_gl_mesh;
+
 typedef struct eddy_gl_scene {
 	float view[16], proj[16]; /* column-major, world to eye and eye to clip */
 	float background[3];      /* 1, RGB */
@@ -32,6 +47,8 @@ typedef struct eddy_gl_scene {
 	const uint8_t *rgb;       /* colours, RGBA bytes per particle */
 	const eddy_gl_lines *lines;
 	int line_sets;
+	const eddy_gl_mesh *meshes; /* depth-tested with the particles and lines */
+	int mesh_sets;
 } eddy_gl_scene;
 
 /* NULL with the reason in err when no context can be made. */
@@ -92,5 +109,12 @@ void eddy_file_abort(eddy_file *o);
 /* Particle values by channel name: "speed" is computed into scratch (count
  * floats), other names are columns. NULL if the channel is missing. */
 const float *eddy_particle_values(const eddy_world *w, const char *name, float *scratch, size_t count);
+
+/* ---- the liquid surface (surface_mesh.c) ---- */
+
+/* NULL when spacing, support and voxel are in range, else what is wrong (in buf). */
+const char *eddy_check_surface_fields(float spacing, float support, float voxel, char *buf, size_t cap);
+/* Monotonic clock, ms. */
+double eddy_now_ms(void);
 
 #endif

@@ -788,6 +788,93 @@ typedef struct eddy_collider_shape {
 /* The collider's current shape (its offset applied). */
 EDDY_API eddy_status eddy_collider_shape_of(const eddy_world *w, eddy_system_id id, eddy_collider_shape *out);
 
+/* ---- the liquid surface (src/surface.c, OpenVDB) ------------------------ *
+ * The isosurface c = 1/2 of the particles' colour field
+ *   c(x) = sum_j spacing^3 W(|x - x_j|, support * spacing)
+ * (cubic spline kernel): the volume fraction, 1 inside resting fluid, 0 away
+ * from it, 1/2 halfway between the outer particles and the next layer out.
+ * Works on any particles (SPH, or FLIP's with spacing = cell_size / 2 for 8
+ * per cell). The mesh is closed (every edge shared by two triangles). */
+typedef struct eddy_surface_def {
+	float spacing;   /* m, the particles' rest spacing (each stands for spacing^3 of liquid); > 0 */
+	float support;   /* 1, kernel support radius in spacings; [1, 4] */
+	float voxel;     /* 1, voxel size in spacings; [0.1, 1] */
+} eddy_surface_def;
+EDDY_API eddy_surface_def eddy_default_surface_def(void);
+
+/* A triangle mesh; start from {0} and reuse it frame after frame (its
+ * buffers grow as needed), then eddy_mesh_free. */
+typedef struct eddy_mesh {
+	size_t vertex_count, triangle_count;
+	float *xyz;       /* m, 3 per vertex */
+	float *normal;    /* 1, 3 per vertex: the field's outward unit normal */
+	uint32_t *tri;    /* 3 vertex indices per triangle, counter-clockwise seen from outside */
+	size_t vertex_cap, normal_cap, triangle_cap; /* floats / indices allocated */
+	void *field;      /* the field it came from (for eddy_mesh_write_vdb) */
+} eddy_mesh;
+
+/* Meshes the world's particles now (x y z). No particles: an empty mesh. */
+EDDY_API eddy_status eddy_world_surface(eddy_world *w, const eddy_surface_def *def, eddy_mesh *mesh);
+/* Writes the mesh, whole or not at all, as binary little-endian PLY (vertex
+ * x y z nx ny nz floats, face uchar/uint index lists), Wavefront OBJ (v, vn,
+ * f a//a b//b c//c) or OpenVDB (.vdb: the field's 1/2 level as a narrow-band
+ * level set grid "surface", signed distance in m, which Blender and Houdini
+ * read). Failures are EDDY_ERR_IO naming the file. */
+typedef enum eddy_mesh_format {
+	EDDY_MESH_PLY = 0,
+	EDDY_MESH_OBJ,
+	EDDY_MESH_VDB
+} eddy_mesh_format;
+EDDY_API eddy_status eddy_world_write_mesh(eddy_world *w, const eddy_mesh *mesh, eddy_mesh_format format,
+                                           const char *path);
+EDDY_API void eddy_mesh_free(eddy_mesh *mesh);
+
+/* surface_mesh: at every `every`-th frame time, the surface of the particles
+ * written to path (a printf pattern with one integer conversion, the frame,
+ * and no extension) plus ".ply", ".obj" and/or ".vdb", e.g.
+ * out/surface_0001.ply. A frame-only system; reads x y z. Publishes
+ * surface_ms (meshing), surface_vertices and surface_triangles. */
+typedef struct eddy_surface_mesh_def {
+	float spacing;   /* m, as eddy_surface_def; > 0 */
+	float support;   /* 1, as eddy_surface_def; [1, 4] */
+	float voxel;     /* 1, as eddy_surface_def; [0.1, 1] */
+	char format[32]; /* "ply", "obj", "vdb", or several separated by spaces or commas */
+	char path[512];  /* printf pattern with one integer conversion (the frame), no extension */
+	int every;       /* frames, write every N-th frame, >= 1 */
+} eddy_surface_mesh_def;
+EDDY_API eddy_surface_mesh_def eddy_default_surface_mesh_def(void);
+EDDY_API eddy_system_id eddy_add_surface_mesh(eddy_world *w, const eddy_surface_mesh_def *def);
+
+/* render_surface: the liquid surface drawn shaded (OSMesa, Phong with a
+ * Fresnel rim: a simple water material), the colliders as grey meshes (box
+ * and sphere colliders; a tank's walls are seen from inside, so the near
+ * ones never hide the liquid), the domain's edges as lines; a PNG every
+ * `every`-th frame. The camera fields mean what they mean in render_points.
+ * Publishes render_ms, surface_ms and image. */
+typedef struct eddy_render_surface_def {
+	int width, height;     /* px, image size, [1, 8192] */
+	int supersample;       /* 1, samples per pixel along each axis, [1, 4] */
+	eddy_vec3 eye;         /* m, camera position; eye == target frames the world's bounds */
+	eddy_vec3 target;      /* m */
+	eddy_vec3 up;          /* 1 */
+	float fov;             /* degrees, (0, 180) */
+	eddy_projection projection;
+	float ortho_height;    /* m, 0 = fit the bounds */
+	eddy_vec3 background;  /* 1, RGB in [0, 1] */
+	float spacing;         /* m, as eddy_surface_def; > 0 */
+	float support;         /* 1, as eddy_surface_def; [1, 4] */
+	float voxel;           /* 1, as eddy_surface_def; [0.1, 1] */
+	eddy_vec3 color;       /* 1, the water's RGB in [0, 1] */
+	bool draw_colliders;   /* box and sphere colliders as meshes */
+	eddy_vec3 collider_color; /* 1, RGB in [0, 1] */
+	bool outline_domain;   /* the world's bounds as lines */
+	eddy_vec3 outline_color; /* 1, RGB in [0, 1] */
+	char path[512];        /* printf pattern with one integer conversion (the frame), e.g. "out/s_%04d.png" */
+	int every;             /* frames, >= 1 */
+} eddy_render_surface_def;
+EDDY_API eddy_render_surface_def eddy_default_render_surface_def(void);
+EDDY_API eddy_system_id eddy_add_render_surface(eddy_world *w, const eddy_render_surface_def *def);
+
 /* Side-by-side panels (render/compose.c, for eddy compare): the PNG files
  * images[0..panels-1] (NULL or "" for a panel with text only) in one row, each
  * captioned top-left with captions[i] (lines separated by '\n', wrapped to the

@@ -82,6 +82,7 @@ int main(int argc, char **argv)
 		{"flip", suite_flip, false},
 		{"flip_solvers", suite_flip_solvers, false},
 		{"render", suite_render, false},
+		{"surface", suite_surface, false},
 		{"study", suite_study, false},
 		{"compare", suite_compare, false},
 		/* stress: scenes one step beyond the validated ones (scenes/stress/) */

@@ -68,6 +68,7 @@ void suite_stress_flip_solids(void);
 
 /* renderer suites */
 void suite_render(void);
+void suite_surface(void); /* liquid surface meshes and render_surface */
 
 /* accuracy/time study (eddy study) */
 void suite_study(void);
