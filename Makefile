@@ -36,7 +36,9 @@ OSMESA_LIBS   := $(shell pkg-config --libs osmesa 2>/dev/null || echo -lOSMesa)
 # CHOLMOD pulls libblas.so.3, which Debian points at OpenBLAS when it is
 # installed (reference BLAS is about 7x slower for the factorisation). Only
 # src/flip_cholmod.c includes CHOLMOD, only render/gl_osmesa.c OSMesa.
-LIBS          := -lcholmod $(OSMESA_LIBS) -lm
+# Meshes are read through assimp's C API; only src/mesh.c includes it.
+ASSIMP_LIBS   := $(shell pkg-config --libs assimp 2>/dev/null || echo -lassimp)
+LIBS          := -lcholmod $(OSMESA_LIBS) $(ASSIMP_LIBS) -lm
 
 # The command-line host: main.c and the files named cli_*.c are the command's
 # own and stay out of the Lua module.
@@ -104,7 +106,7 @@ $(BUILD)/eddy: $(CLI_O) $(LUA_O) $(BUILD)/libeddy.a
 
 $(BUILD)/eddy.pc: Makefile src/eddy.h
 	@mkdir -p $(BUILD)
-	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lm -fopenmp\n' '$(PREFIX)' '$(VERSION)' > $@
+	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lassimp -lm -fopenmp\n' '$(PREFIX)' '$(VERSION)' > $@
 
 $(BUILD)/tests/run: $(TEST_O) $(LUA_O) $(BUILD)/libeddy.a
 	@mkdir -p $(dir $@)
