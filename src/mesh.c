@@ -484,22 +484,23 @@ done:;
 	return sqrt(dx * dx + dy * dy + dz * dz);
 }
 
-/* One sweep direction: each node tries the closest triangles of its three
- * upwind neighbours. */
+/* One sweep direction: each node tries the closest triangles of its seven
+ * upwind neighbours (the octant the sweep comes from, as SDFGen). */
 static void sweep(const eddy_mesh *m, eddy_sdf *s, int *tri, int di, int dj, int dk)
 {
 	const int nx = s->n[0], ny = s->n[1], nz = s->n[2];
 	const int i0 = di > 0 ? 1 : nx - 2, i1 = di > 0 ? nx : -1;
 	const int j0 = dj > 0 ? 1 : ny - 2, j1 = dj > 0 ? ny : -1;
 	const int k0 = dk > 0 ? 1 : nz - 2, k1 = dk > 0 ? nz : -1;
+	const long sx = di, sy = (long)dj * nx, sz = (long)dk * nx * ny;
+	const long back[7] = {sx, sy, sz, sx + sy, sx + sz, sy + sz, sx + sy + sz};
 	for (int k = k0; k != k1; k += dk)
 		for (int j = j0; j != j1; j += dj)
 			for (int i = i0; i != i1; i += di) {
-				const size_t q = (size_t)i + (size_t)nx * ((size_t)j + (size_t)ny * (size_t)k);
-				const size_t nb[3] = {q - (size_t)di, q - (size_t)(dj * nx), q - (size_t)(dk * nx * ny)};
+				const long q = (long)i + (long)nx * ((long)j + (long)ny * (long)k);
 				const double p[3] = {s->origin[0] + i * s->h, s->origin[1] + j * s->h, s->origin[2] + k * s->h};
-				for (int e = 0; e < 3; ++e) {
-					const int t = tri[nb[e]];
+				for (int e = 0; e < 7; ++e) {
+					const int t = tri[q - back[e]];
 					if (t < 0 || t == tri[q])
 						continue;
 					const double d = eddy__mesh_triangle_distance(m, t, p);

@@ -77,6 +77,9 @@ void suite_stress_slosh(void);
 void suite_long_slosh(void); /* minutes: make test-long */
 
 void suite_stress_dfsph(void);
+
+/* meshes and particle files (issue 16) */
+void suite_mesh(void);
 void suite_stress_energy(void);
 
 #endif
