@@ -211,7 +211,7 @@ LUA_LMOD ?= $(PREFIX)/share/lua/5.4
 
 install: all
 	install -d $(DESTDIR)$(PREFIX)/include $(INST_LIB)/pkgconfig $(DESTDIR)$(PREFIX)/bin \
-		$(DESTDIR)$(LUA_CMOD) $(DESTDIR)$(LUA_LMOD)/eddy $(INST_SHARE)/eddy/scenes/studies $(INST_SHARE)/eddy/data \
+		$(DESTDIR)$(LUA_CMOD) $(DESTDIR)$(LUA_LMOD)/eddy $(INST_SHARE)/eddy/scenes/studies $(INST_SHARE)/eddy/scenes/meshes $(INST_SHARE)/eddy/data \
 		$(INST_SHARE)/man/man1 $(INST_SHARE)/doc/eddy
 	install -m 644 src/eddy.h $(DESTDIR)$(PREFIX)/include/eddy.h
 	install -m 644 $(BUILD)/libeddy.a $(INST_LIB)/libeddy.a
@@ -223,6 +223,7 @@ install: all
 	install -m 644 lua/eddy/*.lua $(DESTDIR)$(LUA_LMOD)/eddy/
 	install -m 644 scenes/*.lua $(INST_SHARE)/eddy/scenes/
 	install -m 644 scenes/studies/*.lua $(INST_SHARE)/eddy/scenes/studies/
+	install -m 644 scenes/meshes/*.obj scenes/meshes/*.stl $(INST_SHARE)/eddy/scenes/meshes/
 	install -m 644 data/*.csv data/README.md $(INST_SHARE)/eddy/data/
 	install -m 644 docs/eddy.1 $(INST_SHARE)/man/man1/eddy.1
 	install -m 644 LICENSE README.md CHANGELOG.md $(INST_SHARE)/doc/eddy/

@@ -121,8 +121,11 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		const eddy_vec3 c = {x[i] - off.x, y[i] - off.y, z[i] - off.z};
 		const eddy_vec3 dp = {(vx[i] - vw.x) * dt, (vy[i] - vw.y) * dt, (vz[i] - vw.z) * dt};
 		float d = body_distance(b, c);
-		const bool fast = dp.x * dp.x + dp.y * dp.y + dp.z * dp.z > walk * walk;
-		if (!(d < 0) && !fast)
+		const float len2 = dp.x * dp.x + dp.y * dp.y + dp.z * dp.z;
+		const bool fast = len2 > walk * walk;
+		/* trilinear values of a distance change by at most sqrt 3 times the
+		 * distance moved: a path ending further out never touched the solid */
+		if (!(d < 0) && (!fast || d * d > 3 * len2))
 			continue;
 		eddy_vec3 q = c, hit;
 		/* a path that entered the solid (or crossed a wall thinner than it)
