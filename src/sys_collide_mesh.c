@@ -30,6 +30,7 @@ typedef struct collide_mesh {
 	eddy_collide_mesh_def def;
 	eddy_sdf sdf;
 	double volume; /* m^3 */
+	float depth;   /* m, the deepest node inside the solid: half its thickest part */
 	float field[]; /* the distance grid's values (sdf.d) */
 } collide_mesh;
 
@@ -149,8 +150,24 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	return EDDY_OK;
 }
 
+/* Preflight: FLIP types a cell solid by its centre and weights faces by
+ * their open area, so a solid nowhere two grid cells thick has cells that
+ * straddle it, and the grid's velocity can carry particles through. */
+static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void *user)
+{
+	const collide_mesh *b = s->data;
+	const double h = w->def.cell_size;
+	if (h > 0 && !b->def.inside && 2 * b->depth < 2 * h)
+		eddy__report(report, user, EDDY_CHECK_WARNING,
+		             "%s: %s is nowhere thicker than %.2g m, %.2g grid cells: FLIP can carry particles through "
+		             "walls under two cells thick; use cell_size <= %.2g m or thicker walls",
+		             s->label, b->def.path, 2.0 * b->depth, 2.0 * b->depth / h, (double)b->depth);
+	return 0;
+}
+
 const eddy_system_vtable eddy__kind_collide_mesh = {
 	.name = "collide_mesh",
+	.check = check,
 	.step = step,
 	.state = eddy__collider_state,
 	.distance = distance,
@@ -250,6 +267,8 @@ eddy_system_id eddy_add_collide_mesh(eddy_world *w, const eddy_collide_mesh_def 
 		free(b);
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory building the distance field", sys), EDDY_NULL_SYSTEM;
 	}
+	for (size_t q = 0; q < nodes; ++q)
+		b->depth = fmaxf(b->depth, -b->field[q]);
 	eddy_system_id id = eddy__add_system(w, &eddy__kind_collide_mesh, b, mesh_io, 6, mesh_io, 6);
 	return id;
 }

@@ -175,6 +175,7 @@ static eddy_system_id add_mesh(eddy_world *w, const char *path, bool open, float
 	d.scale = (eddy_vec3){s, s, s};
 	d.translate = (eddy_vec3){0.25f, 0.25f, 0.25f};
 	d.open = open;
+	d.cell_size = 0.02f * s; /* 25 cells across the cube, 5 across the cup */
 	return eddy_add_collide_mesh(w, &d);
 }
 
@@ -242,6 +243,44 @@ static void closed_and_open_meshes(void)
 	eddy_destroy_world(w);
 	remove(open_p), remove(fin_p), remove(flip_p), remove(bad_p);
 	rmdir(dir);
+}
+
+/* The preflight warns when FLIP's cells are too coarse for a mesh's walls:
+ * the cup's thickest part is the ring where floor and wall meet, an
+ * inscribed circle of 0.01 sqrt 2 / (1 + sqrt 2) = 5.86 mm radius, so cells
+ * of 5 mm pass and 8 mm are warned about. */
+static void gather(eddy_check_level level, const char *message, void *user)
+{
+	char *buf = user;
+	if (level == EDDY_CHECK_WARNING && strlen(buf) + strlen(message) + 2 < 2048) {
+		strcat(buf, message);
+		strcat(buf, "\n");
+	}
+}
+
+static void flip_wall_warning(void)
+{
+	const double cells[2] = {0.005, 0.008};
+	for (int k = 0; k < 2; ++k) {
+		eddy_world_def wd = eddy_default_world_def();
+		wd.bounds_max = (eddy_vec3){0.14f, 0.12f, 0.14f};
+		wd.cell_size = cells[k];
+		eddy_world *w = eddy_create_world(&wd, NULL, 0);
+		CHECK(w != NULL);
+		if (!w)
+			continue;
+		eddy_collide_mesh_def d = eddy_default_collide_mesh_def();
+		strcpy(d.path, "scenes/meshes/cup.obj");
+		d.translate = (eddy_vec3){0.07f, 0, 0.07f}; /* auto cell: 1.6 mm, depth sampled to 0.3 mm */
+		CHECKF(eddy_system_valid(w, eddy_add_collide_mesh(w, &d)), "%s", eddy_world_error(w));
+		char buf[2048] = "";
+		eddy_world_check(w, gather, buf);
+		if (k == 0)
+			CHECKF(strstr(buf, "is nowhere thicker than") == NULL, "%s", buf);
+		else
+			CHECK_HAS(buf, "collide_mesh: scenes/meshes/cup.obj is nowhere thicker than 0.011 m, 1.4 grid cells: FLIP can carry");
+		eddy_destroy_world(w);
+	}
 }
 
 /* ---- emit_mesh counts ---------------------------------------------------------- */
@@ -708,6 +747,7 @@ void suite_mesh(void)
 	RUN(sdf_matches_sphere);
 	RUN(sdf_pose);
 	RUN(closed_and_open_meshes);
+	RUN(flip_wall_warning);
 	RUN(emit_mesh_counts);
 	RUN(falling_block_flip);
 	RUN(falling_block_dfsph);
