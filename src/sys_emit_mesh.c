@@ -166,9 +166,11 @@ eddy_system_id eddy_add_emit_mesh(eddy_world *w, const eddy_emit_mesh_def *def)
 		origin[a] = m.lo[a] + 0.5 * def->spacing;
 		N *= c;
 	}
-	if (N > (double)(1ll << 31)) {
+	/* the inside test needs 9 bytes a lattice point while it runs */
+	if (N > (double)(1ll << 27)) {
 		eddy__mesh_free(&m);
-		eddy__fail(w, EDDY_ERR_NOMEM, "%s: %.3g lattice points is more than eddy can hold; use a larger spacing", sys, N);
+		eddy__fail(w, EDDY_ERR_NOMEM, "%s: %s: %.3g lattice points in the mesh's box is more than eddy fills (2^27); use a "
+		           "larger spacing", sys, def->path, N);
 		return EDDY_NULL_SYSTEM;
 	}
 	emit_mesh *e = calloc(1, sizeof *e + (size_t)N);
