@@ -54,7 +54,9 @@ HYPRE_CFLAGS  := -isystem /usr/include/hypre $(patsubst -I%,-isystem %,$(MPI_CFL
 # Only src/surface_vdb.cpp includes OpenVDB (with TBB and Imath, which its
 # headers use).
 VDB_LIBS      := -lopenvdb $(shell pkg-config --libs Imath tbb 2>/dev/null || echo -lImath-3_1 -ltbb) -lstdc++
-LIBS          := -lcholmod -lHYPRE $(MPI_LIBS) $(OSMESA_LIBS) $(PNG_LIBS) $(VDB_LIBS) -lz -pthread -lm
+# Meshes are read through assimp's C API; only src/mesh.c includes it.
+ASSIMP_LIBS   := $(shell pkg-config --libs assimp 2>/dev/null || echo -lassimp)
+LIBS          := -lcholmod -lHYPRE $(MPI_LIBS) $(OSMESA_LIBS) $(PNG_LIBS) $(ASSIMP_LIBS) $(VDB_LIBS) -lz -pthread -lm
 
 # The command-line host: main.c and the files named cli_*.c are the command's
 # own and stay out of the Lua module.
@@ -128,7 +130,7 @@ $(BUILD)/eddy: $(CLI_O) $(LUA_O) $(BUILD)/libeddy.a
 
 $(BUILD)/eddy.pc: Makefile src/eddy.h
 	@mkdir -p $(BUILD)
-	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lHYPRE %s -lpng16 -lz %s -lm -fopenmp -pthread\n' '$(PREFIX)' '$(VERSION)' '$(MPI_LIBS)' '$(VDB_LIBS)' > $@
+	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lassimp -lHYPRE %s -lpng16 -lz %s -lm -fopenmp -pthread\n' '$(PREFIX)' '$(VERSION)' '$(MPI_LIBS)' '$(VDB_LIBS)' > $@
 
 $(BUILD)/tests/run: $(TEST_O) $(LUA_O) $(BUILD)/libeddy.a
 	@mkdir -p $(dir $@)
@@ -241,7 +243,7 @@ LUA_LMOD ?= $(PREFIX)/share/lua/5.4
 
 install: all
 	install -d $(DESTDIR)$(PREFIX)/include $(INST_LIB)/pkgconfig $(DESTDIR)$(PREFIX)/bin \
-		$(DESTDIR)$(LUA_CMOD) $(DESTDIR)$(LUA_LMOD)/eddy $(INST_SHARE)/eddy/scenes/studies $(INST_SHARE)/eddy/data \
+		$(DESTDIR)$(LUA_CMOD) $(DESTDIR)$(LUA_LMOD)/eddy $(INST_SHARE)/eddy/scenes/studies $(INST_SHARE)/eddy/scenes/meshes $(INST_SHARE)/eddy/data \
 		$(INST_SHARE)/man/man1 $(INST_SHARE)/doc/eddy
 	install -m 644 src/eddy.h $(DESTDIR)$(PREFIX)/include/eddy.h
 	install -m 644 $(BUILD)/libeddy.a $(INST_LIB)/libeddy.a
@@ -253,6 +255,7 @@ install: all
 	install -m 644 lua/eddy/*.lua $(DESTDIR)$(LUA_LMOD)/eddy/
 	install -m 644 scenes/*.lua $(INST_SHARE)/eddy/scenes/
 	install -m 644 scenes/studies/*.lua $(INST_SHARE)/eddy/scenes/studies/
+	install -m 644 scenes/meshes/*.obj scenes/meshes/*.stl $(INST_SHARE)/eddy/scenes/meshes/
 	install -m 644 data/*.csv data/README.md $(INST_SHARE)/eddy/data/
 	install -m 644 docs/eddy.1 $(INST_SHARE)/man/man1/eddy.1
 	install -m 644 LICENSE README.md CHANGELOG.md $(INST_SHARE)/doc/eddy/

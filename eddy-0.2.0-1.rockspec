@@ -17,6 +17,7 @@ dependencies = { "lua >= 5.4, < 5.5" }
 external_dependencies = {
 	CHOLMOD = { header = "suitesparse/cholmod.h" },
 	OSMESA = { header = "GL/osmesa.h" },
+	ASSIMP = { header = "assimp/cimport.h" },
 }
 build = {
 	type = "make",

@@ -23,7 +23,9 @@ typedef enum eddy_lua_field_type {
 	EDDY_LUA_ENUM,   /* int from one of the strings in choices (index) */
 	EDDY_LUA_STRING, /* char[size] from a string */
 	EDDY_LUA_STRING_LIST, /* char[size]: a table of strings (or one string), joined by spaces */
-	EDDY_LUA_OFFSET  /* collider offset: a vector or a function of time */
+	EDDY_LUA_OFFSET, /* collider offset: a vector or a function of time */
+	EDDY_LUA_INPUT_PATH /* char[size] from a string: a file the system reads (safe mode
+	                       reads anywhere, and checks only EDDY_LUA_STRING paths as outputs) */
 } eddy_lua_field_type;
 
 typedef struct eddy_lua_field {
@@ -66,6 +68,9 @@ extern const eddy_lua_kind eddy_lua_flip_kinds[];
 
 /* renderer: eddy_lua_render_kinds (bind_render.c) */
 extern const eddy_lua_kind eddy_lua_render_kinds[];
+
+/* meshes and particle files: eddy_lua_mesh_kinds (bind_mesh.c) */
+extern const eddy_lua_kind eddy_lua_mesh_kinds[];
 
 extern const eddy_lua_kind eddy_lua_world_kind;
 

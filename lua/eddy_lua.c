@@ -50,6 +50,9 @@ static const eddy_lua_kind *const kind_lists[] = {
 
 	/* renderer */
 	eddy_lua_render_kinds,
+
+	/* meshes and particle files */
+	eddy_lua_mesh_kinds,
 };
 
 /* ---- reading fields ------------------------------------------------------ */
@@ -215,7 +218,8 @@ static void read_fields(lua_State *L, const eddy_lua_kind *k, int idx, void *def
 			*(int *)p = i;
 			break;
 		}
-		case EDDY_LUA_STRING: {
+		case EDDY_LUA_STRING:
+		case EDDY_LUA_INPUT_PATH: {
 			size_t len = 0;
 			const char *s = lua_type(L, -1) == LUA_TSTRING ? lua_tolstring(L, -1, &len) : NULL;
 			if (!s)

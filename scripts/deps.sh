@@ -7,7 +7,7 @@
 #                             (VTK's own reader, python3-vtk9)
 set -eu
 
-PKGS="make gcc g++ pkg-config liblua5.4-dev lua5.4 libsuitesparse-dev libhypre-dev libopenmpi-dev libopenblas-dev libosmesa6-dev libpng-dev libstb-dev libopenvdb-dev libtbb-dev libboost-dev graphviz gnuplot-nox clang libclang-rt-14-dev"
+PKGS="make gcc g++ pkg-config liblua5.4-dev lua5.4 libsuitesparse-dev libhypre-dev libopenmpi-dev libopenblas-dev libosmesa6-dev libpng-dev libstb-dev libassimp-dev libopenvdb-dev libtbb-dev libboost-dev graphviz gnuplot-nox clang libclang-rt-14-dev"
 [ "${1:-}" = test ] && PKGS="$PKGS python3-vtk9"
 
 missing=""

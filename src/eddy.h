@@ -393,6 +393,67 @@ typedef struct eddy_collide_plane_def {
 EDDY_API eddy_collide_plane_def eddy_default_collide_plane_def(void);
 EDDY_API eddy_system_id eddy_add_collide_plane(eddy_world *w, const eddy_collide_plane_def *def);
 
+/* Meshes from files (mesh.c, through assimp: OBJ, STL, PLY, glTF, FBX and
+ * the other formats it reads). A mesh is placed by scale, then rotate, then
+ * translate: x' = R (scale * x) + translate. Relative paths are taken from
+ * the current directory. A file that cannot be used is a one-line error
+ * naming it and why. */
+
+/* collide_mesh: a triangle mesh as a solid the particles stay out of
+ * (inside = false: a cup, a rock, a sphere), or as a closed tank the fluid
+ * stays inside (inside = true: everything outside the mesh is solid). Its
+ * signed distance field is built once when added (exact near the surface,
+ * trilinear between nodes); particles in the solid are projected out along
+ * its gradient and get the contact response; flip_boundary and flip_advect
+ * see it as any collider. Moves with eddy_collider_set_offset. The mesh must
+ * be closed (every edge in two triangles, consistently wound) unless open =
+ * true, which decides inside by six rays' vote. */
+typedef struct eddy_collide_mesh_def {
+	char path[512];       /* the mesh file */
+	eddy_vec3 scale;      /* 1, per axis; each > 0 */
+	eddy_vec3 rotate;     /* degrees, rotation vector: |rotate| degrees about rotate / |rotate| */
+	eddy_vec3 translate;  /* m */
+	float cell_size;      /* m, distance grid spacing; 0 = auto: the finest of the mesh's longest side / 64,
+	                         half the world's cell_size and half the spacing of emitters added before it */
+	bool inside;          /* particles are kept inside (true) or outside (false) the mesh */
+	bool open;            /* accept a mesh that is not closed */
+	eddy_collider_response response;
+} eddy_collide_mesh_def;
+EDDY_API eddy_collide_mesh_def eddy_default_collide_mesh_def(void);
+EDDY_API eddy_system_id eddy_add_collide_mesh(eddy_world *w, const eddy_collide_mesh_def *def);
+
+/* emit_mesh: fills a closed mesh with particles on a cubic lattice, once, at
+ * time `start`: the lattice points min + (i + 1/2) spacing (min the mesh's
+ * box corner) that lie inside, as emit_box places them. The mesh's box must
+ * lie in the world's bounds. */
+typedef struct eddy_emit_mesh_def {
+	char path[512];      /* the mesh file (closed) */
+	eddy_vec3 scale;     /* 1, per axis; each > 0 */
+	eddy_vec3 rotate;    /* degrees, rotation vector */
+	eddy_vec3 translate; /* m */
+	float spacing;       /* m, lattice spacing; > 0 */
+	float jitter;        /* 1, random offset as a fraction of spacing, [0, 0.5] */
+	eddy_vec3 velocity;  /* m/s, initial velocity */
+	double start;        /* s, emission time */
+} eddy_emit_mesh_def;
+EDDY_API eddy_emit_mesh_def eddy_default_emit_mesh_def(void);
+EDDY_API eddy_system_id eddy_add_emit_mesh(eddy_world *w, const eddy_emit_mesh_def *def);
+
+/* emit_particles: the particles of a PLY file (ascii, binary_little_endian
+ * or binary_big_endian; a `vertex` element with x y z and optionally vx vy
+ * vz, as export_particles writes them), once, at time `start`. Particles
+ * without vx vy vz take `velocity`. Every particle must lie in the world's
+ * bounds. */
+typedef struct eddy_emit_particles_def {
+	char path[512];      /* the PLY file */
+	float spacing;       /* m, the spacing the particles sample the fluid at (the advection limit's length,
+	                        SPH's mass calibration); > 0 */
+	eddy_vec3 velocity;  /* m/s, for particles the file gives no velocity */
+	double start;        /* s, emission time */
+} eddy_emit_particles_def;
+EDDY_API eddy_emit_particles_def eddy_default_emit_particles_def(void);
+EDDY_API eddy_system_id eddy_add_emit_particles(eddy_world *w, const eddy_emit_particles_def *def);
+
 /* Moves a collider by an offset from its def pose. The collider's velocity over
  * the next step is (new offset - offset at the last step) / dt, so animating the
  * offset every step gives moving walls that push particles. Before the

@@ -15,6 +15,10 @@
 	X(collide_box) \
 	X(collide_sphere) \
 	X(collide_plane) \
+	/* meshes (mesh.c) */ \
+	X(collide_mesh) \
+	X(emit_mesh) \
+	X(emit_particles) \
 	/* SPH */ \
 	X(sph_density) \
 	X(sph_pressure) \

@@ -92,6 +92,8 @@ int main(int argc, char **argv)
 		{"long_slosh", suite_long_slosh, true},
 		{"stress_dfsph", suite_stress_dfsph, false},
 		{"stress_energy", suite_stress_energy, false},
+		{"mesh", suite_mesh, false},
+		{"long_mesh", suite_long_mesh, true},
 	};
 	const bool want_long = only && strcmp(only, "long") == 0;
 	int ran = 0;

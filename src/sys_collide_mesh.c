@@ -1,0 +1,274 @@
+/* SPDX-License-Identifier: MIT */
+/* collide_mesh: a triangle mesh from a file as a solid (inside = false) or as
+ * a closed tank the fluid stays in (inside = true).
+ *
+ * Reads: x y z vx vy vz. Writes: x y z vx vy vz.
+ * The mesh is loaded, checked and turned into a signed distance field phi
+ * once, when the system is added (mesh.c): phi < 0 in the mesh, trilinear
+ * between nodes. The collider's distance is phi(p - offset), negated for a
+ * tank. Meshes have thin walls (a cup's is a few particles thick), which a
+ * particle can cross, or pass more than half through, in one step; so a
+ * particle that moved more than a quarter cell this step (relative to the
+ * collider) has its path x - v dt -> x walked half a cell at a time, and
+ * if it entered the solid it goes back to where it entered (bisection).
+ * Otherwise, a particle with distance d < 0 stays where it is. It then
+ * moves along n = grad d / |grad d| (central differences half a cell wide)
+ * to d = 2e-3 cells (so rounding cannot leave it inside), repeated up to
+ * four times where the field bends, and gets the contact response (core.h)
+ * with normal n and the collider's velocity. x - v dt is exactly the last
+ * position after integrate (v the velocity it moved with) and close to it
+ * after flip_advect. The field is the only state besides the motion; a
+ * scene without collide_mesh allocates none of it. */
+#include "mesh.h"
+#include "systems.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct collide_mesh {
+	eddy_collider_base base; /* first: shared offset handling */
+	eddy_collide_mesh_def def;
+	eddy_sdf sdf;
+	double volume; /* m^3 */
+	float depth;   /* m, the deepest node inside the solid: half its thickest part */
+	float field[]; /* the distance grid's values (sdf.d) */
+} collide_mesh;
+
+static const int mesh_io[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, -1};
+
+eddy_collide_mesh_def eddy_default_collide_mesh_def(void)
+{
+	eddy_collide_mesh_def d;
+	memset(&d, 0, sizeof d);
+	d.scale = eddy__v3(1, 1, 1);
+	d.inside = false;
+	d.open = false;
+	d.cell_size = 0;
+	return d;
+}
+
+static float sdistance(const collide_mesh *b, eddy_vec3 q)
+{
+	const eddy_vec3 o = b->base.motion.offset;
+	const float d = eddy__sdf_value(&b->sdf, eddy__v3(q.x - o.x, q.y - o.y, q.z - o.z));
+	return b->def.inside ? -d : d;
+}
+
+static float distance(const eddy_system *s, eddy_vec3 q) { return sdistance(s->data, q); }
+
+/* Unit normal out of the solid at q, (0, 1, 0) where the field is flat. */
+static eddy_vec3 normal(const collide_mesh *b, eddy_vec3 q)
+{
+	const float e = 0.5f * (float)b->sdf.h;
+	eddy_vec3 g = {sdistance(b, eddy__v3(q.x + e, q.y, q.z)) - sdistance(b, eddy__v3(q.x - e, q.y, q.z)),
+	               sdistance(b, eddy__v3(q.x, q.y + e, q.z)) - sdistance(b, eddy__v3(q.x, q.y - e, q.z)),
+	               sdistance(b, eddy__v3(q.x, q.y, q.z + e)) - sdistance(b, eddy__v3(q.x, q.y, q.z - e))};
+	const float len = sqrtf(g.x * g.x + g.y * g.y + g.z * g.z);
+	if (!(len > 0))
+		return eddy__v3(0, 1, 0);
+	return eddy__v3(g.x / len, g.y / len, g.z / len);
+}
+
+/* Field value in the collider's own frame (no offset). */
+static float body_distance(const collide_mesh *b, eddy_vec3 q)
+{
+	const float d = eddy__sdf_value(&b->sdf, q);
+	return b->def.inside ? -d : d;
+}
+
+/* Where the segment a -> c (collider frame) first enters the solid, when a
+ * is outside: samples half a cell apart, then bisection; false if it never
+ * does. */
+static bool first_entry(const collide_mesh *b, eddy_vec3 a, eddy_vec3 c, eddy_vec3 *hit)
+{
+	if (!(body_distance(b, a) >= 0))
+		return false;
+	const eddy_vec3 dv = {c.x - a.x, c.y - a.y, c.z - a.z};
+	const float len = sqrtf(dv.x * dv.x + dv.y * dv.y + dv.z * dv.z);
+	const int n = (int)fminf(ceilf(len / (0.5f * (float)b->sdf.h)), 256.0f);
+	float t0 = 0;
+	for (int k = 1; k <= n; ++k) {
+		float t1 = (float)k / (float)n;
+		if (body_distance(b, eddy__v3(a.x + t1 * dv.x, a.y + t1 * dv.y, a.z + t1 * dv.z)) < 0) {
+			for (int it = 0; it < 24; ++it) {
+				const float tm = 0.5f * (t0 + t1);
+				if (body_distance(b, eddy__v3(a.x + tm * dv.x, a.y + tm * dv.y, a.z + tm * dv.z)) < 0)
+					t1 = tm;
+				else
+					t0 = tm;
+			}
+			*hit = eddy__v3(a.x + t0 * dv.x, a.y + t0 * dv.y, a.z + t0 * dv.z);
+			return true;
+		}
+		t0 = t1;
+	}
+	return false;
+}
+
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	collide_mesh *b = s->data;
+	const eddy_vec3 vw = eddy__collider_step_velocity(&b->base, ctx->dt);
+	const eddy_vec3 off = b->base.motion.offset;
+	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	const eddy_collider_response r = b->def.response;
+	const float hair = 1e-3f * (float)b->sdf.h, dt = (float)ctx->dt, walk = 0.25f * (float)b->sdf.h;
+	const long n = (long)w->n;
+#pragma omp parallel for num_threads(ctx->threads) if (n > 8192) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		/* this step's path in the collider's frame: from where the particle
+		 * was (x - v dt, the collider then at off - vw dt) to where it is */
+		const eddy_vec3 c = {x[i] - off.x, y[i] - off.y, z[i] - off.z};
+		const eddy_vec3 dp = {(vx[i] - vw.x) * dt, (vy[i] - vw.y) * dt, (vz[i] - vw.z) * dt};
+		float d = body_distance(b, c);
+		const float len2 = dp.x * dp.x + dp.y * dp.y + dp.z * dp.z;
+		const bool fast = len2 > walk * walk;
+		/* trilinear values of a distance change by at most sqrt 3 times the
+		 * distance moved: a path ending further out never touched the solid */
+		if (!(d < 0) && (!fast || d * d > 3 * len2))
+			continue;
+		eddy_vec3 q = c, hit;
+		/* a path that entered the solid (or crossed a wall thinner than it)
+		 * ends where it entered: projection to the nearest surface would put
+		 * a particle that went more than half through on the far side */
+		if (fast && first_entry(b, eddy__v3(c.x - dp.x, c.y - dp.y, c.z - dp.z), c, &hit))
+			q = hit, d = body_distance(b, q);
+		else if (!(d < 0))
+			continue;
+		eddy_vec3 nrm = normal(b, eddy__add3(q, off));
+		for (int it = 0; it < 4 && d < hair; ++it) {
+			if (it > 0)
+				nrm = normal(b, eddy__add3(q, off));
+			const float k = 2 * hair - d;
+			q = eddy__v3(q.x + nrm.x * k, q.y + nrm.y * k, q.z + nrm.z * k);
+			d = body_distance(b, q);
+		}
+		x[i] = q.x + off.x, y[i] = q.y + off.y, z[i] = q.z + off.z;
+		eddy__collide_response(vx, vy, vz, (size_t)i, nrm, vw, r);
+	}
+	return EDDY_OK;
+}
+
+/* Preflight: FLIP types a cell solid by its centre and weights faces by
+ * their open area, so a solid nowhere two grid cells thick has cells that
+ * straddle it, and the grid's velocity can carry particles through. */
+static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void *user)
+{
+	const collide_mesh *b = s->data;
+	const double h = w->def.cell_size;
+	if (h > 0 && !b->def.inside && 2 * b->depth < 2 * h)
+		eddy__report(report, user, EDDY_CHECK_WARNING,
+		             "%s: %s is nowhere thicker than %.2g m, %.2g grid cells: FLIP can carry particles through "
+		             "walls under two cells thick; use cell_size <= %.2g m or thicker walls",
+		             s->label, b->def.path, 2.0 * b->depth, 2.0 * b->depth / h, (double)b->depth);
+	return 0;
+}
+
+const eddy_system_vtable eddy__kind_collide_mesh = {
+	.name = "collide_mesh",
+	.check = check,
+	.step = step,
+	.state = eddy__collider_state,
+	.distance = distance,
+	.default_writes = mesh_io,
+};
+
+static bool check_pose(eddy_world *w, const char *sys, eddy_vec3 scale, eddy_vec3 rotate, eddy_vec3 translate)
+{
+	if (!eddy__check_vec3(w, sys, "scale", scale) || !eddy__check_vec3(w, sys, "rotate", rotate) ||
+	    !eddy__check_vec3(w, sys, "translate", translate))
+		return false;
+	if (!(scale.x > 0 && scale.y > 0 && scale.z > 0)) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'scale' must be > 0 on every axis (got {%g, %g, %g})", sys,
+		           (double)scale.x, (double)scale.y, (double)scale.z);
+		return false;
+	}
+	return true;
+}
+
+bool eddy__mesh_from_def(eddy_world *w, const char *sys, const char *path, eddy_vec3 scale, eddy_vec3 rotate,
+                         eddy_vec3 translate, eddy_mesh *m)
+{
+	if (!memchr(path, '\0', 512) || !path[0]) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'path' must name a mesh file", sys);
+		return false;
+	}
+	if (!check_pose(w, sys, scale, rotate, translate))
+		return false;
+	char err[EDDY_ERROR_MAX - 64];
+	if (!eddy__mesh_load(m, path, (eddy_mesh_pose){scale, rotate, translate}, err, sizeof err)) {
+		eddy__fail(w, EDDY_ERR_IO, "%s: %s", sys, err);
+		return false;
+	}
+	return true;
+}
+
+eddy_system_id eddy_add_collide_mesh(eddy_world *w, const eddy_collide_mesh_def *def)
+{
+	const char *sys = "collide_mesh";
+	if (!eddy__add_args(w, def, sys))
+		return EDDY_NULL_SYSTEM;
+	if (!eddy__check_nonneg(w, sys, "cell_size", def->cell_size) || !eddy__check_response(w, sys, def->response))
+		return EDDY_NULL_SYSTEM;
+	eddy_mesh m;
+	if (!eddy__mesh_from_def(w, sys, def->path, def->scale, def->rotate, def->translate, &m))
+		return EDDY_NULL_SYSTEM;
+	char err[EDDY_ERROR_MAX - 64];
+	if (!def->open && !eddy__mesh_closed(&m)) {
+		eddy__mesh_describe_open(&m, def->path, err, sizeof err);
+		eddy__mesh_free(&m);
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: %s", sys, err);
+		return EDDY_NULL_SYSTEM;
+	}
+	/* the grid: explicit, or fine enough for the mesh and for the fluid */
+	const double ext = fmax(m.hi[0] - m.lo[0], fmax(m.hi[1] - m.lo[1], m.hi[2] - m.lo[2]));
+	double h = def->cell_size;
+	const int margin = 3;
+	if (h <= 0) {
+		h = ext / 64;
+		if (w->def.cell_size > 0)
+			h = fmin(h, 0.5 * w->def.cell_size);
+		if (w->length_scale > 0)
+			h = fmin(h, 0.5 * w->length_scale);
+		/* at most 2^24 nodes (64 MB): coarser for a mesh far larger than the fluid's scale */
+		for (;;) {
+			double nodes = 1;
+			for (int a = 0; a < 3; ++a)
+				nodes *= ceil((m.hi[a] - m.lo[a]) / h) + 2 * margin + 1;
+			if (nodes <= (double)(1 << 24))
+				break;
+			h *= 1.25;
+		}
+	}
+	eddy_sdf sdf;
+	const size_t nodes = eddy__sdf_plan(&sdf, &m, h, margin);
+	if (nodes == 0) {
+		eddy__mesh_free(&m);
+		eddy__fail(w, EDDY_ERR_INVALID,
+		           "%s: %s: a distance grid of %d x %d x %d nodes is more than eddy builds (2^26); use a larger "
+		           "cell_size", sys, def->path, sdf.n[0], sdf.n[1], sdf.n[2]);
+		return EDDY_NULL_SYSTEM;
+	}
+	/* one block with the field, so every path that frees the data frees it */
+	collide_mesh *b = malloc(sizeof *b + nodes * sizeof(float));
+	if (!b) {
+		eddy__mesh_free(&m);
+		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory for %zu distance nodes", sys, nodes), EDDY_NULL_SYSTEM;
+	}
+	memset(b, 0, sizeof *b);
+	b->def = *def;
+	b->volume = m.volume;
+	b->sdf = sdf;
+	b->sdf.d = b->field;
+	const bool ok = eddy__sdf_fill(&b->sdf, &m, def->open);
+	eddy__mesh_free(&m);
+	if (!ok) {
+		free(b);
+		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory building the distance field", sys), EDDY_NULL_SYSTEM;
+	}
+	for (size_t q = 0; q < nodes; ++q)
+		b->depth = fmaxf(b->depth, -b->field[q]);
+	eddy_system_id id = eddy__add_system(w, &eddy__kind_collide_mesh, b, mesh_io, 6, mesh_io, 6);
+	return id;
+}
