@@ -97,7 +97,7 @@ static int cmp_ekey(const void *p, const void *q)
 }
 
 /* Counts open, non-manifold and inconsistently wound edges. */
-static bool topology(eddy_mesh *m)
+static bool topology(eddy_trimesh *m)
 {
 	const size_t ne = 3 * (size_t)m->nt;
 	ekey *e = malloc(ne * sizeof *e);
@@ -128,7 +128,7 @@ static bool topology(eddy_mesh *m)
 	return true;
 }
 
-static double signed_volume(const eddy_mesh *m)
+static double signed_volume(const eddy_trimesh *m)
 {
 	double v = 0;
 	for (int t = 0; t < m->nt; ++t) {
@@ -138,12 +138,12 @@ static double signed_volume(const eddy_mesh *m)
 	return v / 6.0;
 }
 
-bool eddy__mesh_closed(const eddy_mesh *m)
+bool eddy__mesh_closed(const eddy_trimesh *m)
 {
 	return m->open_edges == 0 && m->nonmanifold_edges == 0 && m->flipped_edges == 0;
 }
 
-void eddy__mesh_describe_open(const eddy_mesh *m, const char *path, char *err, size_t cap)
+void eddy__mesh_describe_open(const eddy_trimesh *m, const char *path, char *err, size_t cap)
 {
 	if (eddy__mesh_closed(m)) {
 		if (cap)
@@ -157,7 +157,7 @@ void eddy__mesh_describe_open(const eddy_mesh *m, const char *path, char *err, s
 	         path, m->open_edges, m->nonmanifold_edges, m->flipped_edges);
 }
 
-void eddy__mesh_free(eddy_mesh *m)
+void eddy__mesh_free(eddy_trimesh *m)
 {
 	if (!m)
 		return;
@@ -166,7 +166,7 @@ void eddy__mesh_free(eddy_mesh *m)
 	memset(m, 0, sizeof *m);
 }
 
-bool eddy__mesh_load(eddy_mesh *m, const char *path, eddy_mesh_pose pose, char *err, size_t cap)
+bool eddy__mesh_load(eddy_trimesh *m, const char *path, eddy_mesh_pose pose, char *err, size_t cap)
 {
 	memset(m, 0, sizeof *m);
 	const struct aiScene *sc = aiImportFile(path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
@@ -343,7 +343,7 @@ static bool point_in_triangle_2d(double x0, double y0, double x1, double y1, dou
 
 /* Winding numbers of the samples along axis a: from the low end into wlo,
  * from the high end into whi (either may be NULL), indexed x fastest. */
-static bool winding_axis(const eddy_mesh *m, const double origin[3], double h, const int n[3], int a, int *wlo, int *whi)
+static bool winding_axis(const eddy_trimesh *m, const double origin[3], double h, const int n[3], int a, int *wlo, int *whi)
 {
 	const int b = (a + 1) % 3, c = (a + 2) % 3, na = n[a], nb = n[b], nc = n[c];
 	const size_t rows = (size_t)nb * (size_t)nc;
@@ -395,7 +395,7 @@ static bool winding_axis(const eddy_mesh *m, const double origin[3], double h, c
 	return true;
 }
 
-bool eddy__mesh_inside(const eddy_mesh *m, const double origin[3], double h, const int n[3], bool vote, uint8_t *inside)
+bool eddy__mesh_inside(const eddy_trimesh *m, const double origin[3], double h, const int n[3], bool vote, uint8_t *inside)
 {
 	const size_t N = (size_t)n[0] * (size_t)n[1] * (size_t)n[2];
 	int *wlo = malloc(N * sizeof *wlo), *whi = vote ? malloc(N * sizeof *whi) : NULL;
@@ -426,7 +426,7 @@ bool eddy__mesh_inside(const eddy_mesh *m, const double origin[3], double h, con
 
 static double dot3(const double *a, const double *b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
-double eddy__mesh_triangle_distance(const eddy_mesh *m, int t, const double p[3])
+double eddy__mesh_triangle_distance(const eddy_trimesh *m, int t, const double p[3])
 {
 	const double *a = m->v[m->t[t][0]], *b = m->v[m->t[t][1]], *c = m->v[m->t[t][2]];
 	double ab[3], ac[3], ap[3], q[3];
@@ -486,7 +486,7 @@ done:;
 
 /* One sweep direction: each node tries the closest triangles of its seven
  * upwind neighbours (the octant the sweep comes from, as SDFGen). */
-static void sweep(const eddy_mesh *m, eddy_sdf *s, int *tri, int di, int dj, int dk)
+static void sweep(const eddy_trimesh *m, eddy_sdf *s, int *tri, int di, int dj, int dk)
 {
 	const int nx = s->n[0], ny = s->n[1], nz = s->n[2];
 	const int i0 = di > 0 ? 1 : nx - 2, i1 = di > 0 ? nx : -1;
@@ -512,7 +512,7 @@ static void sweep(const eddy_mesh *m, eddy_sdf *s, int *tri, int di, int dj, int
 			}
 }
 
-size_t eddy__sdf_plan(eddy_sdf *s, const eddy_mesh *m, double h, int margin)
+size_t eddy__sdf_plan(eddy_sdf *s, const eddy_trimesh *m, double h, int margin)
 {
 	memset(s, 0, sizeof *s);
 	s->h = h;
@@ -525,7 +525,7 @@ size_t eddy__sdf_plan(eddy_sdf *s, const eddy_mesh *m, double h, int margin)
 	return N > (double)(1 << 26) ? 0 : (size_t)N;
 }
 
-bool eddy__sdf_fill(eddy_sdf *s, const eddy_mesh *m, bool vote)
+bool eddy__sdf_fill(eddy_sdf *s, const eddy_trimesh *m, bool vote)
 {
 	const double h = s->h;
 	const size_t n = (size_t)s->n[0] * (size_t)s->n[1] * (size_t)s->n[2];

@@ -188,7 +188,7 @@ static bool check_pose(eddy_world *w, const char *sys, eddy_vec3 scale, eddy_vec
 }
 
 bool eddy__mesh_from_def(eddy_world *w, const char *sys, const char *path, eddy_vec3 scale, eddy_vec3 rotate,
-                         eddy_vec3 translate, eddy_mesh *m)
+                         eddy_vec3 translate, eddy_trimesh *m)
 {
 	if (!memchr(path, '\0', 512) || !path[0]) {
 		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'path' must name a mesh file", sys);
@@ -211,7 +211,7 @@ eddy_system_id eddy_add_collide_mesh(eddy_world *w, const eddy_collide_mesh_def 
 		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_nonneg(w, sys, "cell_size", def->cell_size) || !eddy__check_response(w, sys, def->response))
 		return EDDY_NULL_SYSTEM;
-	eddy_mesh m;
+	eddy_trimesh m;
 	if (!eddy__mesh_from_def(w, sys, def->path, def->scale, def->rotate, def->translate, &m))
 		return EDDY_NULL_SYSTEM;
 	char err[EDDY_ERROR_MAX - 64];

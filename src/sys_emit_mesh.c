@@ -136,7 +136,7 @@ eddy_system_id eddy_add_emit_mesh(eddy_world *w, const eddy_emit_mesh_def *def)
 	if (!eddy__check_positive(w, sys, "spacing", def->spacing) || !eddy__check_range(w, sys, "jitter", def->jitter, 0, 0.5) ||
 	    !eddy__check_vec3(w, sys, "velocity", def->velocity) || !eddy__check_nonneg(w, sys, "start", def->start))
 		return EDDY_NULL_SYSTEM;
-	eddy_mesh m;
+	eddy_trimesh m;
 	if (!eddy__mesh_from_def(w, sys, def->path, def->scale, def->rotate, def->translate, &m))
 		return EDDY_NULL_SYSTEM;
 	char err[EDDY_ERROR_MAX - 64];
