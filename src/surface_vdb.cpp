@@ -201,8 +201,10 @@ extern "C" int eddy__surface_build(const float *x, const float *y, const float *
 					face[3 * q[k] + size_t(c3)] += nrm[c3];
 		}
 		const float h = 0.5f * dx;
+		/* the sampler keeps a reference to the accessor: it must outlive it */
+		const FloatGrid::ConstAccessor acc = splat.grid->getConstAccessor();
 		openvdb::tools::GridSampler<FloatGrid::ConstAccessor, openvdb::tools::BoxSampler> sampler(
-			splat.grid->getConstAccessor(), splat.grid->transform());
+			acc, splat.grid->transform());
 		for (size_t v = 0; v < nv; ++v) {
 			const float *P = mesh->xyz + 3 * v;
 			float g[3];
