@@ -64,6 +64,8 @@ void suite_sph(void);
 void suite_flip(void);
 void suite_stress_flip_flight(void);
 void suite_stress_flip_solids(void);
+void suite_stress_sph_solids(void);
+void suite_long_sph_solids(void);
 
 /* renderer suites */
 void suite_render(void);
