@@ -107,9 +107,15 @@ typedef struct sph_neighbors {
 		eddy_vec3 normal;    /* a plane's: only the offset along it moves them; 0 otherwise */
 		eddy_vec3 disp;      /* m, their displacement from the def pose now */
 		eddy_vec3 at_search; /* m, ... at the last Verlet search */
-		eddy_vec3 seen;      /* m, the offset at the previous step (velocity = change / time) */
-		double seen_time;    /* s, when it was seen; < 0: never */
 	} *col;
+	/* per collider, the offset seen at the previous step (velocity = its
+	 * change over the time since); part of sph_density's checkpointed
+	 * state, which is the block bp, brho, seen (bstate_size bytes) */
+	struct sph_collider_seen {
+		float x, y, z, have; /* m; have = 1 once seen (floats: no padding in a checkpoint) */
+		double time;         /* s */
+	} *seen;
+	size_t bstate_size;
 } sph_neighbors;
 
 /* Verlet skin as a fraction of h: larger means rarer searches but more

@@ -186,7 +186,7 @@ static void boundary_free(sph_neighbors *nb)
 	free(nb->by);
 	free(nb->bz);
 	free(nb->bvol);
-	free(nb->bp); /* brho lives in the same block */
+	free(nb->bp); /* brho and seen live in the same block */
 	free(nb->border);
 	free(nb->blx); /* bly, blz in the same block */
 	free(nb->bvx); /* bvy, bvz in the same block */
@@ -195,6 +195,8 @@ static void boundary_free(sph_neighbors *nb)
 	nb->blx = nb->bly = nb->blz = nb->bvx = nb->bvy = nb->bvz = NULL;
 	nb->border = NULL;
 	nb->col = NULL;
+	nb->seen = NULL;
+	nb->bstate_size = 0;
 	nb->ncol = 0;
 	nb->nb = nb->nbs = 0;
 }
@@ -221,11 +223,12 @@ static float boundary_move(const eddy_world *w, sph_neighbors *nb)
 			}
 			cs->disp = d;
 		}
-		if (w->time != cs->seen_time) {
+		struct sph_collider_seen *sn = &nb->seen[c];
+		if (sn->have == 0 || w->time != sn->time) {
 			eddy_vec3 v = {0, 0, 0};
-			if (cs->seen_time >= 0 && w->time > cs->seen_time) {
-				const float inv = (float)(1.0 / (w->time - cs->seen_time));
-				v = eddy__v3((off.x - cs->seen.x) * inv, (off.y - cs->seen.y) * inv, (off.z - cs->seen.z) * inv);
+			if (sn->have != 0 && w->time > sn->time) {
+				const float inv = (float)(1.0 / (w->time - sn->time));
+				v = eddy__v3((off.x - sn->x) * inv, (off.y - sn->y) * inv, (off.z - sn->z) * inv);
 				if (plane) {
 					const float vn = v.x * n.x + v.y * n.y + v.z * n.z;
 					v = eddy__v3(vn * n.x, vn * n.y, vn * n.z);
@@ -236,8 +239,7 @@ static float boundary_move(const eddy_world *w, sph_neighbors *nb)
 				nb->bvy[b] = v.y;
 				nb->bvz[b] = v.z;
 			}
-			cs->seen = off;
-			cs->seen_time = w->time;
+			*sn = (struct sph_collider_seen){off.x, off.y, off.z, 1, w->time};
 		}
 		const float ex = d.x - cs->at_search.x, ey = d.y - cs->at_search.y, ez = d.z - cs->at_search.z;
 		const float m2 = ex * ex + ey * ey + ez * ez;
@@ -295,9 +297,13 @@ static eddy_status boundary_build(eddy_world *w, sph_shared *sh)
 	      *v = malloc(alloc * sizeof *v);
 	uint32_t *key = calloc(alloc, sizeof *key), *order = calloc(alloc, sizeof *order);
 	boundary_free(nb);
-	/* one block, bp then brho: it is sph_density's checkpointed state */
-	nb->bp = calloc(2 * alloc, sizeof *nb->bp);
+	/* one block, bp, brho, then each collider's seen offset: it is
+	 * sph_density's checkpointed state (after 2 total floats the records
+	 * are 8-byte aligned; with colliders, alloc = total) */
+	nb->bstate_size = 2 * total * sizeof *nb->bp + ncol * sizeof *nb->seen;
+	nb->bp = calloc(1, 2 * alloc * sizeof *nb->bp + ncol * sizeof *nb->seen);
 	nb->brho = nb->bp ? nb->bp + alloc : NULL;
+	nb->seen = nb->bp && ncol ? (struct sph_collider_seen *)(void *)(nb->bp + 2 * alloc) : NULL;
 	/* positions padded by three for the search's groups of four */
 	nb->bx = malloc((alloc + 3) * sizeof *nb->bx);
 	nb->by = malloc((alloc + 3) * sizeof *nb->by);
@@ -363,7 +369,6 @@ static eddy_status boundary_build(eddy_world *w, sph_shared *sh)
 		cs->count = got;
 		cs->normal = normal;
 		cs->disp = eddy__v3(NAN, NAN, NAN); /* placed by boundary_move */
-		cs->seen_time = -1;
 		at += got;
 	}
 	for (size_t i = 0; i < total; ++i)

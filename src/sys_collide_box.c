@@ -170,11 +170,12 @@ size_t eddy__sph_box_points(const eddy_world *w, const eddy_system *s, float spa
 	const float v = (float)(1.0 / eddy_sph_lattice_sum(EDDY_SPH_POLY6, spacing, h));
 	size_t k = 0;
 	for (long iz = 0; iz < n[2]; ++iz)
-		for (long iy = 0; iy < n[1]; ++iy)
+		for (long iy = 0; iy < n[1]; ++iy) {
+			/* a row through the inside keeps only its ends */
+			const bool edge = iy < L || iz < L || iy >= n[1] - L || iz >= n[2] - L;
 			for (long ix = 0; ix < n[0]; ++ix) {
-				const bool shell = ix < L || iy < L || iz < L || ix >= n[0] - L || iy >= n[1] - L || iz >= n[2] - L;
-				if (!shell)
-					continue;
+				if (!edge && ix == L && n[0] - L > L)
+					ix = n[0] - L;
 				if (x) {
 					x[k] = (float)(lo[0] + (ix + 0.5) * sp[0]);
 					y[k] = (float)(lo[1] + (iy + 0.5) * sp[1]);
@@ -183,5 +184,6 @@ size_t eddy__sph_box_points(const eddy_world *w, const eddy_system *s, float spa
 				}
 				k++;
 			}
+		}
 	return k;
 }
