@@ -38,9 +38,23 @@
  * own lists, so they are identical for any thread count. The filter has an
  * AVX2 path (chosen at run time) giving the same lists as the SSE one.
  *
- * Boundary particles (sph_boundary_box systems) are static: they are gathered
- * and cell-sorted once, and again only when the set of boundary systems
- * changes. */
+ * Boundary particles: those of the sph_boundary_box systems are static:
+ * gathered and cell-sorted once, and again only when the set of boundary
+ * systems changes. Those of the colliders (sphere, plane, block box: Akinci,
+ * Ihmsen, Akinci, Solenthaler & Teschner, "Versatile rigid-fluid coupling for
+ * incompressible SPH", SIGGRAPH 2012; each collider file samples its own,
+ * see sph.h) follow them after, made once in the collider's def pose and
+ * moved every step by its offset (a plane's patch only along its normal),
+ * with the velocity (offset - offset seen at the last step) / time since,
+ * as sys_flip_boundary.c takes it. Their motion since the last search
+ * counts in the Verlet displacement test like a particle's; at each search
+ * every boundary particle is cell-sorted anew (border), and each particle's
+ * boundary hits are sorted by index, so the lists and sums are the same
+ * whenever the search ran (a resumed run stays bit-identical; the seen
+ * offsets are sph_density's checkpointed state). bdiv, the density change
+ * the moving walls add, is made here for sph_dfsph. sph_density's wall
+ * pressure (Adami et al. 2012, eq. 27) leaves out the wall's acceleration.
+ * A scene with no collider particles takes the static path unchanged. */
 #include "sph.h"
 #include "systems.h"
 

@@ -6,7 +6,11 @@
  * Tank: each coordinate is clamped to [min, max] (+ offset); a clamped axis
  * gets the contact response with that wall's inward normal. Block: a particle
  * inside is moved to the nearest face and responds with its outward normal.
- * The response (core.h) works on velocity relative to the moving wall. */
+ * The response (core.h) works on velocity relative to the moving wall.
+ * With SPH a block also carries boundary particles that move with it
+ * (eddy__sph_box_points below; Akinci et al., "Versatile rigid-fluid
+ * coupling for incompressible SPH", SIGGRAPH 2012); a tank's walls are an
+ * sph_boundary_box's. The clamping here is the last guard. */
 #include "sph.h"
 #include "systems.h"
 

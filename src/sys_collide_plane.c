@@ -4,7 +4,11 @@
  *
  * Reads: x y z vx vy vz. Writes: x y z vx vy vz.
  * d = (p - point) . n; a particle with d < 0 moves by -d n onto the plane and
- * gets the contact response with normal n. */
+ * gets the contact response with normal n.
+ * With SPH the plane also carries boundary particles that move with it
+ * (eddy__sph_plane_points below; Akinci et al., "Versatile rigid-fluid
+ * coupling for incompressible SPH", SIGGRAPH 2012); the projection here is
+ * the last guard. */
 #include "sph.h"
 #include "systems.h"
 
