@@ -264,20 +264,20 @@ static float boundary_move(const eddy_world *w, sph_neighbors *nb)
 
 /* The cell order of every boundary particle now (with collider particles
  * only: the static ones are stored in cell order), for the search. */
-static void boundary_sort(eddy_world *w, sph_neighbors *nb)
+static eddy_status boundary_sort(eddy_world *w, sph_neighbors *nb)
 {
 	if (!nb->border)
-		return;
+		return EDDY_OK;
 	const size_t total = nb->nb, cells = (size_t)nb->gx * (size_t)nb->gy * (size_t)nb->gz;
 	uint32_t *key = eddy__arena_alloc(&w->arena, (total ? total : 1) * sizeof *key);
-	if (!key) { /* the arena only grows by what the step asked for before: keep the last order */
-		return;
-	}
+	if (!key)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", total);
 	for (size_t i = 0; i < total; ++i)
 		key[i] = cell_index(nb, nb->bx[i], nb->by[i], nb->bz[i]);
 	counting_sort(key, total, cells, nb->bcell_start, nb->border);
 	for (int c = 0; c < nb->ncol; ++c)
 		nb->col[c].at_search = nb->col[c].disp;
+	return EDDY_OK;
 }
 
 static eddy_status boundary_build(eddy_world *w, sph_shared *sh)
@@ -299,10 +299,11 @@ static eddy_status boundary_build(eddy_world *w, sph_shared *sh)
 			ncol += c > 0;
 		}
 	}
-	if ((double)total + (double)tcol > 2e9)
+	/* a plane's patch spans the world bounds: 5e7 particles is about 2 GB */
+	if ((double)tcol > 5e7)
 		return eddy__fail(w, EDDY_ERR_NOMEM,
-		                  "sph_density: the colliders need %.0f boundary particles; shrink the world bounds or use a "
-		                  "larger spacing",
+		                  "sph_density: the colliders need %.0f boundary particles (at most 5e7); shrink the world "
+		                  "bounds or the colliders, or use a larger spacing",
 		                  (double)tcol);
 	const size_t nstat = total;
 	total += tcol;
@@ -1164,7 +1165,9 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		ranges = true;
 	}
 	if (!valid) {
-		boundary_sort(w, nb);
+		st = boundary_sort(w, nb);
+		if (st != EDDY_OK)
+			return st;
 		/* The skin pays only if the list outlives a few steps: when particles
 		 * move a good part of the skin per step (DFSPH's steps are ten times
 		 * WCSPH's) or the count changes every step (an emitter), a skin only
