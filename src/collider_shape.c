@@ -1,7 +1,8 @@
 /* SPDX-License-Identifier: MIT */
 /* eddy_collider_shape_of: what a collider looks like, for hosts that draw it
  * (the renderer's outlines). Signed distance alone cannot give edges cheaply,
- * so each built-in collider describes its own pose and size. */
+ * so each built-in collider describes its own pose and size. Also the
+ * dispatch to the colliders' SPH boundary particles (eddy__sph_collider_points). */
 #include "collider_shape.h"
 #include "systems.h"
 
@@ -26,4 +27,20 @@ eddy_status eddy_collider_shape_of(const eddy_world *w, eddy_system_id id, eddy_
 	else
 		out->kind = EDDY_COLLIDER_OTHER;
 	return EDDY_OK;
+}
+
+/* ---- SPH boundary particles of the built-in colliders (sph.h) ---- */
+#include "sph.h"
+
+size_t eddy__sph_collider_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
+                                 float *z, float *vol, eddy_vec3 *normal)
+{
+	*normal = eddy__v3(0, 0, 0);
+	if (s->vt == &eddy__kind_collide_sphere)
+		return eddy__sph_sphere_points(s, spacing, h, x, y, z, vol);
+	if (s->vt == &eddy__kind_collide_plane)
+		return eddy__sph_plane_points(w, s, spacing, h, x, y, z, vol, normal);
+	if (s->vt == &eddy__kind_collide_box)
+		return eddy__sph_box_points(w, s, spacing, h, x, y, z, vol);
+	return 0;
 }

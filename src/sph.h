@@ -83,12 +83,39 @@ typedef struct sph_neighbors {
 	bool count_changed;               /* the search was forced by a new particle count */
 	int64_t searches;                 /* statistics: Verlet searches so far */
 
-	/* boundary particles of every sph_boundary_box, cell-sorted */
-	size_t nb;
+	/* boundary particles: those of every sph_boundary_box first (static,
+	 * cell-sorted, nbs of them), then those of the colliders (moving with
+	 * them, in the order they were made: see sph_collider_points) */
+	size_t nb, nbs;
 	float *bx, *by, *bz, *bvol; /* m, m^3 (volume each boundary particle stands for) */
 	float *bp, *brho;           /* Pa, kg/m^3: extrapolated from the fluid each step */
-	uint32_t *bcell_start;
+	uint32_t *bcell_start;      /* over the boundary particles in cell order at the last search */
 	uint64_t bsig; /* which boundary systems the arrays were built from */
+	/* With collider particles (nb > nbs), else NULL: */
+	uint32_t *border;           /* boundary indices in cell order at the last search */
+	float *blx, *bly, *blz;     /* m, collider particles in their collider's def pose */
+	float *bvx, *bvy, *bvz;     /* m/s, each boundary particle's velocity this step (0 for the static ones) */
+	/* 1/s, sum_b V_b rho0 v_b . grad W_spiky(x_i - x_b) per fluid row: the
+	 * rate of density change the moving walls add (sph_dfsph subtracts it
+	 * from v_i . B_i); NULL while every wall is at rest */
+	float *bdiv;
+	size_t bdiv_alloc;
+	int ncol;
+	struct sph_collider_set {
+		int slot;            /* pipeline slot of the collider */
+		size_t first, count; /* its particles */
+		eddy_vec3 normal;    /* a plane's: only the offset along it moves them; 0 otherwise */
+		eddy_vec3 disp;      /* m, their displacement from the def pose now */
+		eddy_vec3 at_search; /* m, ... at the last Verlet search */
+	} *col;
+	/* per collider, the offset seen at the previous step (velocity = its
+	 * change over the time since); part of sph_density's checkpointed
+	 * state, which is the block bp, brho, seen (bstate_size bytes) */
+	struct sph_collider_seen {
+		float x, y, z, have; /* m; have = 1 once seen (floats: no padding in a checkpoint) */
+		double time;         /* s */
+	} *seen;
+	size_t bstate_size;
 } sph_neighbors;
 
 /* Verlet skin as a fraction of h: larger means rarer searches but more
@@ -133,6 +160,26 @@ void eddy__sph_neighbors_free(sph_neighbors *nb);
 /* Boundary particle access for sph_density's builder. */
 /* With x == NULL only counts; h sets how many layers the shell has. */
 size_t eddy__sph_boundary_box_points(const eddy_system *s, float h, float *x, float *y, float *z, float *vol);
+/* s is an sph_boundary_box over exactly [min, max]. */
+bool eddy__sph_boundary_box_covers(const eddy_system *s, eddy_vec3 min, eddy_vec3 max);
+
+/* A collider's boundary particles (Akinci et al. 2012) for a fluid of the
+ * given spacing and support h, in the collider's def pose (offset 0): a
+ * shell ceil(h / spacing) layers deep on the solid side of its surface.
+ * With x == NULL only counts. *normal gets the direction along which the
+ * offset moves them (a plane: its normal, the sampled patch staying put in
+ * the plane) or 0 (they move with the whole offset). Colliders that get
+ * none: a tank box (its walls are an sph_boundary_box's), a block box that
+ * an sph_boundary_box already samples (the same min and max), and any
+ * collider that is not one of the built-in three. Implemented beside each
+ * collider (sys_collide_*.c), dispatched in collider_shape.c. */
+size_t eddy__sph_collider_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
+                                 float *z, float *vol, eddy_vec3 *normal);
+size_t eddy__sph_sphere_points(const eddy_system *s, float spacing, float h, float *x, float *y, float *z, float *vol);
+size_t eddy__sph_plane_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
+                              float *z, float *vol, eddy_vec3 *normal);
+size_t eddy__sph_box_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
+                            float *z, float *vol);
 
 /* Deterministic antisymmetric direction for a coincident pair (i, j): the
  * gradient has no direction at r = 0, so an arbitrary fixed one (not along a

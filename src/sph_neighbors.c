@@ -38,9 +38,23 @@
  * own lists, so they are identical for any thread count. The filter has an
  * AVX2 path (chosen at run time) giving the same lists as the SSE one.
  *
- * Boundary particles (sph_boundary_box systems) are static: they are gathered
- * and cell-sorted once, and again only when the set of boundary systems
- * changes. */
+ * Boundary particles: those of the sph_boundary_box systems are static:
+ * gathered and cell-sorted once, and again only when the set of boundary
+ * systems changes. Those of the colliders (sphere, plane, block box: Akinci,
+ * Ihmsen, Akinci, Solenthaler & Teschner, "Versatile rigid-fluid coupling for
+ * incompressible SPH", SIGGRAPH 2012; each collider file samples its own,
+ * see sph.h) follow them after, made once in the collider's def pose and
+ * moved every step by its offset (a plane's patch only along its normal),
+ * with the velocity (offset - offset seen at the last step) / time since,
+ * as sys_flip_boundary.c takes it. Their motion since the last search
+ * counts in the Verlet displacement test like a particle's; at each search
+ * every boundary particle is cell-sorted anew (border), and each particle's
+ * boundary hits are sorted by index, so the lists and sums are the same
+ * whenever the search ran (a resumed run stays bit-identical; the seen
+ * offsets are sph_density's checkpointed state). bdiv, the density change
+ * the moving walls add, is made here for sph_dfsph. sph_density's wall
+ * pressure (Adami et al. 2012, eq. 27) leaves out the wall's acceleration.
+ * A scene with no collider particles takes the static path unchanged. */
 #include "sph.h"
 #include "systems.h"
 
@@ -49,6 +63,8 @@
 #ifdef __SSE2__
 #include <emmintrin.h>
 #endif
+
+static void boundary_free(sph_neighbors *nb);
 
 void eddy__sph_neighbors_free(sph_neighbors *nb)
 {
@@ -69,11 +85,8 @@ void eddy__sph_neighbors_free(sph_neighbors *nb)
 	free(nb->vz);
 	free(nb->slot_of);
 	free(nb->now_of);
-	free(nb->bx);
-	free(nb->by);
-	free(nb->bz);
-	free(nb->bvol);
-	free(nb->bp); /* brho lives in the same block */
+	boundary_free(nb);
+	free(nb->bdiv);
 	free(nb->bcell_start);
 	memset(nb, 0, sizeof *nb);
 }
@@ -157,15 +170,114 @@ static void cell_ranges(const uint32_t *key, size_t n, size_t cells, uint32_t *s
 		start[c++] = (uint32_t)n;
 }
 
+/* Which boundary systems there are: every sph_boundary_box and every
+ * collider (a collider without particles changes nothing but this). */
 static uint64_t boundary_signature(const eddy_world *w)
 {
 	uint64_t sig = 0x9E3779B97F4A7C15ull;
 	for (int k = 0; k < w->order_count; ++k) {
 		const eddy_system *o = &w->slots[w->order[k]];
-		if (o->vt == &eddy__kind_sph_boundary_box)
+		if (o->vt == &eddy__kind_sph_boundary_box || eddy__is_collider(o))
 			sig = (sig ^ ((uint64_t)w->order[k] << 16 | o->generation)) * 0x100000001b3ull;
 	}
 	return sig;
+}
+
+/* The fluid spacing: that of the sph_density that owns sh. */
+static float fluid_spacing(const eddy_world *w, const sph_shared *sh)
+{
+	for (int k = 0; k < w->order_count; ++k) {
+		const eddy_system *o = &w->slots[w->order[k]];
+		if (o->data == sh && eddy__sph_density_def(o))
+			return eddy__sph_density_def(o)->spacing;
+	}
+	return sh->h / 2;
+}
+
+static void boundary_free(sph_neighbors *nb)
+{
+	free(nb->bx);
+	free(nb->by);
+	free(nb->bz);
+	free(nb->bvol);
+	free(nb->bp); /* brho and seen live in the same block */
+	free(nb->border);
+	free(nb->blx); /* bly, blz in the same block */
+	free(nb->bvx); /* bvy, bvz in the same block */
+	free(nb->col);
+	nb->bx = nb->by = nb->bz = nb->bvol = nb->bp = nb->brho = NULL;
+	nb->blx = nb->bly = nb->blz = nb->bvx = nb->bvy = nb->bvz = NULL;
+	nb->border = NULL;
+	nb->col = NULL;
+	nb->seen = NULL;
+	nb->bstate_size = 0;
+	nb->ncol = 0;
+	nb->nb = nb->nbs = 0;
+}
+
+/* The collider particles where their colliders are now (a displacement
+ * changed: positions; the time moved on: velocities, the offset's change
+ * over the time since it was last seen, as sys_flip_boundary.c takes it).
+ * Returns the largest squared displacement since the last search. */
+static float boundary_move(const eddy_world *w, sph_neighbors *nb)
+{
+	float moved2 = 0;
+	for (int c = 0; c < nb->ncol; ++c) {
+		struct sph_collider_set *cs = &nb->col[c];
+		const eddy_system *o = &w->slots[cs->slot];
+		const eddy_vec3 off = ((const eddy_collider_base *)o->data)->motion.offset, n = cs->normal;
+		const bool plane = n.x != 0 || n.y != 0 || n.z != 0;
+		const float along = off.x * n.x + off.y * n.y + off.z * n.z;
+		const eddy_vec3 d = plane ? eddy__v3(along * n.x, along * n.y, along * n.z) : off;
+		if (d.x != cs->disp.x || d.y != cs->disp.y || d.z != cs->disp.z) {
+			for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
+				nb->bx[b] = nb->blx[b] + d.x;
+				nb->by[b] = nb->bly[b] + d.y;
+				nb->bz[b] = nb->blz[b] + d.z;
+			}
+			cs->disp = d;
+		}
+		struct sph_collider_seen *sn = &nb->seen[c];
+		if (sn->have == 0 || w->time != sn->time) {
+			eddy_vec3 v = {0, 0, 0};
+			if (sn->have != 0 && w->time > sn->time) {
+				const float inv = (float)(1.0 / (w->time - sn->time));
+				v = eddy__v3((off.x - sn->x) * inv, (off.y - sn->y) * inv, (off.z - sn->z) * inv);
+				if (plane) {
+					const float vn = v.x * n.x + v.y * n.y + v.z * n.z;
+					v = eddy__v3(vn * n.x, vn * n.y, vn * n.z);
+				}
+			}
+			for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
+				nb->bvx[b] = v.x;
+				nb->bvy[b] = v.y;
+				nb->bvz[b] = v.z;
+			}
+			*sn = (struct sph_collider_seen){off.x, off.y, off.z, 1, w->time};
+		}
+		const float ex = d.x - cs->at_search.x, ey = d.y - cs->at_search.y, ez = d.z - cs->at_search.z;
+		const float m2 = ex * ex + ey * ey + ez * ez;
+		moved2 = m2 > moved2 ? m2 : moved2;
+	}
+	return moved2;
+}
+
+/* The cell order of every boundary particle now (with collider particles
+ * only: the static ones are stored in cell order), for the search. */
+static eddy_status boundary_sort(eddy_world *w, sph_neighbors *nb)
+{
+	if (!nb->border)
+		return EDDY_OK;
+	const size_t total = nb->nb, cells = (size_t)nb->gx * (size_t)nb->gy * (size_t)nb->gz;
+	uint32_t *key = eddy__arena_alloc(&w->arena, (total ? total : 1) * sizeof *key);
+	if (!key)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", total);
+	for (size_t i = 0; i < total; ++i)
+		key[i] = cell_index(nb, nb->bx[i], nb->by[i], nb->bz[i]);
+	counting_sort(key, total, cells, nb->bcell_start, nb->border);
+	for (int c = 0; c < nb->ncol; ++c)
+		nb->col[c].at_search = nb->col[c].disp;
+	return EDDY_OK;
 }
 
 static eddy_status boundary_build(eddy_world *w, sph_shared *sh)
@@ -174,32 +286,62 @@ static eddy_status boundary_build(eddy_world *w, sph_shared *sh)
 	const uint64_t sig = boundary_signature(w);
 	if (sig == nb->bsig && nb->bx)
 		return EDDY_OK;
-	size_t total = 0;
+	const float spacing = fluid_spacing(w, sh);
+	size_t total = 0, ncol = 0, tcol = 0;
+	eddy_vec3 normal;
 	for (int k = 0; k < w->order_count; ++k) {
 		const eddy_system *o = &w->slots[w->order[k]];
 		if (o->vt == &eddy__kind_sph_boundary_box)
 			total += eddy__sph_boundary_box_points(o, sh->h, NULL, NULL, NULL, NULL);
+		else if (eddy__is_collider(o)) {
+			const size_t c = eddy__sph_collider_points(w, o, spacing, sh->h, NULL, NULL, NULL, NULL, &normal);
+			tcol += c;
+			ncol += c > 0;
+		}
 	}
+	/* a plane's patch spans the world bounds: 5e7 particles is about 2 GB */
+	if ((double)tcol > 5e7)
+		return eddy__fail(w, EDDY_ERR_NOMEM,
+		                  "sph_density: the colliders need %.0f boundary particles (at most 5e7); shrink the world "
+		                  "bounds or the colliders, or use a larger spacing",
+		                  (double)tcol);
+	const size_t nstat = total;
+	total += tcol;
 	const size_t alloc = total ? total : 1;
 	float *x = malloc(alloc * sizeof *x), *y = malloc(alloc * sizeof *y), *z = malloc(alloc * sizeof *z),
 	      *v = malloc(alloc * sizeof *v);
 	uint32_t *key = calloc(alloc, sizeof *key), *order = calloc(alloc, sizeof *order);
-	free(nb->bx);
-	free(nb->by);
-	free(nb->bz);
-	free(nb->bvol);
-	free(nb->bp); /* brho lives in the same block */
-	/* one block, bp then brho: it is sph_density's checkpointed state */
-	nb->bp = calloc(2 * alloc, sizeof *nb->bp);
+	boundary_free(nb);
+	/* one block, bp, brho, then each collider's seen offset: it is
+	 * sph_density's checkpointed state (after 2 total floats the records
+	 * are 8-byte aligned; with colliders, alloc = total) */
+	nb->bstate_size = 2 * total * sizeof *nb->bp + ncol * sizeof *nb->seen;
+	nb->bp = calloc(1, 2 * alloc * sizeof *nb->bp + ncol * sizeof *nb->seen);
 	nb->brho = nb->bp ? nb->bp + alloc : NULL;
+	nb->seen = nb->bp && ncol ? (struct sph_collider_seen *)(void *)(nb->bp + 2 * alloc) : NULL;
 	/* positions padded by three for the search's groups of four */
 	nb->bx = malloc((alloc + 3) * sizeof *nb->bx);
 	nb->by = malloc((alloc + 3) * sizeof *nb->by);
 	nb->bz = malloc((alloc + 3) * sizeof *nb->bz);
 	nb->bvol = malloc(alloc * sizeof *nb->bvol);
+	bool ok = x && y && z && v && key && order && nb->bx && nb->by && nb->bz && nb->bvol && nb->bp && nb->brho;
+	if (ok && ncol) {
+		nb->border = malloc(alloc * sizeof *nb->border);
+		nb->blx = malloc(3 * alloc * sizeof *nb->blx);
+		nb->bvx = calloc(3 * alloc, sizeof *nb->bvx);
+		nb->col = calloc(ncol, sizeof *nb->col);
+		ok = nb->border && nb->blx && nb->bvx && nb->col;
+		if (ok) {
+			nb->bly = nb->blx + alloc;
+			nb->blz = nb->bly + alloc;
+			nb->bvy = nb->bvx + alloc;
+			nb->bvz = nb->bvy + alloc;
+		}
+	}
 	eddy_status st = EDDY_OK;
-	if (!x || !y || !z || !v || !key || !order || !nb->bx || !nb->by || !nb->bz || !nb->bvol || !nb->bp || !nb->brho) {
+	if (!ok) {
 		st = eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu boundary particles", total);
+		boundary_free(nb);
 		goto done;
 	}
 	size_t at = 0;
@@ -208,20 +350,51 @@ static eddy_status boundary_build(eddy_world *w, sph_shared *sh)
 		if (o->vt == &eddy__kind_sph_boundary_box)
 			at += eddy__sph_boundary_box_points(o, sh->h, x + at, y + at, z + at, v + at);
 	}
-	for (size_t i = 0; i < total; ++i)
+	for (size_t i = 0; i < nstat; ++i)
 		key[i] = cell_index(nb, x[i], y[i], z[i]);
 	const size_t cells = (size_t)nb->gx * (size_t)nb->gy * (size_t)nb->gz;
-	counting_sort(key, total, cells, nb->bcell_start, order);
+	counting_sort(key, nstat, cells, nb->bcell_start, order);
 	for (size_t i = total; i < total + 3; ++i)
 		nb->bx[i] = nb->by[i] = nb->bz[i] = 0; /* read, always masked */
-	for (size_t i = 0; i < total; ++i) {
+	for (size_t i = 0; i < nstat; ++i) {
 		nb->bx[i] = x[order[i]];
 		nb->by[i] = y[order[i]];
 		nb->bz[i] = z[order[i]];
 		nb->bvol[i] = v[order[i]];
-		nb->brho[i] = sh->rho0;
 	}
+	/* the colliders' particles after them, in the order they are made */
+	at = nstat;
+	for (int k = 0; k < w->order_count && ncol; ++k) {
+		const eddy_system *o = &w->slots[w->order[k]];
+		if (o->vt == &eddy__kind_sph_boundary_box || !eddy__is_collider(o))
+			continue;
+		const size_t want = eddy__sph_collider_points(w, o, spacing, sh->h, NULL, NULL, NULL, NULL, &normal);
+		if (!want)
+			continue;
+		const size_t got =
+			eddy__sph_collider_points(w, o, spacing, sh->h, nb->blx + at, nb->bly + at, nb->blz + at, nb->bvol + at, &normal);
+		if (got != want) {
+			st = eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for the boundary particles of %s", o->label);
+			boundary_free(nb);
+			goto done;
+		}
+		struct sph_collider_set *cs = &nb->col[nb->ncol++];
+		cs->slot = w->order[k];
+		cs->first = at;
+		cs->count = got;
+		cs->normal = normal;
+		cs->disp = eddy__v3(NAN, NAN, NAN); /* placed by boundary_move */
+		at += got;
+	}
+	for (size_t i = 0; i < total; ++i)
+		nb->brho[i] = sh->rho0;
 	nb->nb = total;
+	nb->nbs = nstat;
+	if (nb->ncol) {
+		boundary_move(w, nb);
+		for (size_t i = 0; i < total; ++i)
+			nb->border[i] = (uint32_t)i; /* the first search sorts them */
+	}
 	nb->bsig = sig;
 done:
 	free(x);
@@ -403,6 +576,23 @@ static inline float cube_sum(const float *d, uint32_t cnt)
 	return ws;
 }
 
+/* Sorts hits (and their d) by index: insertion, a particle has a few
+ * dozen boundary neighbours at most, nearly in order. */
+static void sort_hits(uint32_t *hit, float *d, uint32_t cnt)
+{
+	for (uint32_t a = 1; a < cnt; ++a) {
+		const uint32_t j = hit[a];
+		const float dj = d[a];
+		uint32_t k = a;
+		for (; k > 0 && hit[k - 1] > j; --k) {
+			hit[k] = hit[k - 1];
+			d[k] = d[k - 1];
+		}
+		hit[k] = j;
+		d[k] = dj;
+	}
+}
+
 /* The grid search. Verlet mode (exact false): the pairs closer than
  * sqrt(r2max) into the Verlet list with the current strides. Exact mode (a
  * skin of 0, r2max = h^2): straight into the exact lists and kernel sums,
@@ -420,6 +610,10 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 	const size_t cap = exact ? nb->cap : nb->vcap, bcap = exact ? nb->bcap : nb->vbcap;
 	uint32_t *const lists = exact ? nb->nbr : nb->vnbr, *const blists = exact ? nb->bnbr : nb->vbnbr;
 	uint32_t *const counts = exact ? nb->count : nb->vcount, *const bcounts = exact ? nb->bcount : nb->vbcount;
+	/* with moving (collider) boundary particles the cells hold them out of
+	 * index order: each particle's hits are sorted by index, so that the
+	 * lists, and the sums over them, do not depend on when the search ran */
+	const uint32_t *const border = nb->border;
 	/* how many cells along x a run at cell offsets (dy, dz) needs: a cell k
 	 * cells away is at least (k - 1) cells of h/2 from the particle, so the
 	 * corners of the block are beyond the radius; -1: none */
@@ -523,10 +717,11 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 					fb.j[nc] = j;
 				}
 				for (uint32_t j = run[r][2]; j < run[r][3]; ++j, ++nbc) {
-					bb.x[nbc] = nb->bx[j];
-					bb.y[nbc] = nb->by[j];
-					bb.z[nbc] = nb->bz[j];
-					bb.j[nbc] = j;
+					const uint32_t jb = border ? border[j] : j;
+					bb.x[nbc] = nb->bx[jb];
+					bb.y[nbc] = nb->by[jb];
+					bb.z[nbc] = nb->bz[jb];
+					bb.j[nbc] = jb;
 				}
 			}
 			for (; layer <= 2 * R + bz1 - bz0 + 1; ++layer) {
@@ -565,6 +760,8 @@ static bool search(eddy_world *w, sph_neighbors *nb, float r2max, bool exact, in
 					bcnt = hits_sse(&bb, zb[l0], zb[l1], xi, yi, zi, r2max, bb.hit, bb.d);
 				}
 				fb.x[s] = xi;
+				if (border)
+					sort_hits(bb.hit, bb.d, bcnt);
 				if (cnt <= cap)
 					memcpy(lists + (size_t)i * cap, fb.hit, cnt * sizeof *fb.hit);
 				if (bcnt <= bcap)
@@ -766,7 +963,8 @@ static bool filter(const sph_neighbors *nb, const float *p4, float h2, long n, i
 		nb->count[i] = cnt;
 		nb->wsum[i] = ws;
 
-		/* boundary particles never move: their candidates stay in order */
+		/* the boundary candidates are in index order (the search sorted
+		 * them), and filtering keeps it */
 		const uint32_t *bcand = nb->vbnbr + (size_t)b * vbcap;
 		const uint32_t vbc = nb->vbcount[b];
 		uint32_t *blist = nb->bnbr + (size_t)i * bcap;
@@ -803,6 +1001,48 @@ eddy_status eddy__sph_boundary_ready(eddy_world *w, sph_shared *sh)
 	return st == EDDY_OK ? boundary_build(w, sh) : st;
 }
 
+/* nb->bdiv: sum_b V_b rho0 v_b . grad W_spiky(x_i - x_b) per row, the
+ * density change rate the moving walls add (Akinci et al. 2012, eq. 6 with
+ * the wall's velocity; sph_dfsph's Drho/Dt), with sph_dfsph's kernel
+ * gradient and cut-offs; NULL while no wall moves. */
+static eddy_status boundary_divergence(eddy_world *w, sph_shared *sh, int threads)
+{
+	sph_neighbors *nb = &sh->nb;
+	bool moving = false;
+	for (size_t b = nb->nbs; b < nb->nb && !moving; ++b)
+		moving = nb->bvx[b] != 0 || nb->bvy[b] != 0 || nb->bvz[b] != 0;
+	if (!moving || !sh->pq) {
+		free(nb->bdiv);
+		nb->bdiv = NULL;
+		nb->bdiv_alloc = 0;
+		return EDDY_OK;
+	}
+	const size_t n = nb->n;
+	if (!grow((void **)&nb->bdiv, &nb->bdiv_alloc, n, sizeof *nb->bdiv))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
+	const float h = sh->k.h, eps2 = 1e-6f * sh->k.h2, c0 = sh->rho0 * sh->k.spiky_grad;
+	const float *p4 = sh->pq;
+	const long ln = (long)n;
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (long i = 0; i < ln; ++i) {
+		const uint32_t *bl = nb->bnbr + (size_t)i * nb->bcap;
+		float u = 0;
+		for (uint32_t q = 0; q < nb->bcount[i]; ++q) {
+			const uint32_t b = bl[q];
+			if (b < nb->nbs)
+				continue; /* at rest */
+			const float rx = p4[4 * i] - nb->bx[b], ry = p4[4 * i + 1] - nb->by[b], rz = p4[4 * i + 2] - nb->bz[b];
+			const float r2 = rx * rx + ry * ry + rz * rz, r = sqrtf(r2), hr = h - r;
+			if (!(r2 > eps2 && hr > 0))
+				continue;
+			const float c = nb->bvol[b] * c0 * hr * hr / r;
+			u += c * (rx * nb->bvx[b] + ry * nb->bvy[b] + rz * nb->bvz[b]);
+		}
+		nb->bdiv[i] = u;
+	}
+	return EDDY_OK;
+}
+
 /* Grows every per-particle array to n. */
 static bool grow_rows(sph_neighbors *nb, size_t n)
 {
@@ -828,6 +1068,9 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	st = boundary_build(w, sh);
 	if (st != EDDY_OK)
 		return st;
+	/* the collider particles where the colliders are now; how far they are
+	 * from where the last search saw them counts as a particle's motion */
+	const float bmove2 = nb->ncol ? boundary_move(w, nb) : 0.0f;
 	const size_t n = w->n;
 	nb->n = n;
 	sh->pq = NULL;
@@ -914,6 +1157,7 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	}
 	/* the Verlet list is good while every particle is within skin/2 of its
 	 * build slot's position */
+	d2max = bmove2 > d2max ? bmove2 : d2max;
 	bool valid = prevalid && nb->vlist && d2max < lim2; /* false for NaN too */
 	/* the search and the boundary pressure walk cells */
 	if (!ranges && (!valid || nb->nb > 0)) {
@@ -921,6 +1165,9 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		ranges = true;
 	}
 	if (!valid) {
+		st = boundary_sort(w, nb);
+		if (st != EDDY_OK)
+			return st;
 		/* The skin pays only if the list outlives a few steps: when particles
 		 * move a good part of the skin per step (DFSPH's steps are ten times
 		 * WCSPH's) or the count changes every step (an emitter), a skin only
@@ -1012,5 +1259,5 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		if (mb > nb->bcap)
 			nb->bcap = (mb + 7) / 8 * 8 + 8;
 	}
-	return EDDY_OK;
+	return boundary_divergence(w, sh, threads);
 }

@@ -6,7 +6,12 @@
  * Tank: each coordinate is clamped to [min, max] (+ offset); a clamped axis
  * gets the contact response with that wall's inward normal. Block: a particle
  * inside is moved to the nearest face and responds with its outward normal.
- * The response (core.h) works on velocity relative to the moving wall. */
+ * The response (core.h) works on velocity relative to the moving wall.
+ * With SPH a block also carries boundary particles that move with it
+ * (eddy__sph_box_points below; Akinci et al., "Versatile rigid-fluid
+ * coupling for incompressible SPH", SIGGRAPH 2012); a tank's walls are an
+ * sph_boundary_box's. The clamping here is the last guard. */
+#include "sph.h"
 #include "systems.h"
 
 #include <stdlib.h>
@@ -138,4 +143,51 @@ void eddy__shape_collide_box(const eddy_system *s, eddy_collider_shape *out)
 	bounds(b, &out->a, &out->b);
 	out->radius = 0.0f;
 	out->inside = b->def.inside;
+}
+
+/* ---- boundary particles, for SPH (sph_neighbors.c) ----
+ * A block (inside = false): the lattice inside it, min + (i + 1/2) s_a on
+ * each axis (s_a the spacing adjusted to a whole number of cells, at least
+ * one), keeping the points within L = ceil(h / s) layers of a face: a shell
+ * as thick as the kernel support, each point standing for the lattice cell
+ * V_b = 1 / sum_lattice W, as sph_boundary_box does (Akinci et al. 2012).
+ * A tank (inside = true) gets none: an sph_boundary_box is its walls; nor
+ * does a block an sph_boundary_box already samples (the same min and max:
+ * a thin plate is made that way). */
+size_t eddy__sph_box_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
+                            float *z, float *vol)
+{
+	const collide_box *b = s->data;
+	if (b->def.inside)
+		return 0;
+	for (int k = 0; k < w->order_count; ++k)
+		if (eddy__sph_boundary_box_covers(&w->slots[w->order[k]], b->def.min, b->def.max))
+			return 0;
+	const float lo[3] = {b->def.min.x, b->def.min.y, b->def.min.z}, hi[3] = {b->def.max.x, b->def.max.y, b->def.max.z};
+	long n[3];
+	double sp[3];
+	for (int a = 0; a < 3; ++a) {
+		n[a] = (long)fmax(1.0, round((hi[a] - lo[a]) / spacing));
+		sp[a] = (hi[a] - lo[a]) / (double)n[a];
+	}
+	const long L = (long)ceil(h / spacing - 1e-4);
+	const float v = (float)(1.0 / eddy_sph_lattice_sum(EDDY_SPH_POLY6, spacing, h));
+	size_t k = 0;
+	for (long iz = 0; iz < n[2]; ++iz)
+		for (long iy = 0; iy < n[1]; ++iy) {
+			/* a row through the inside keeps only its ends */
+			const bool edge = iy < L || iz < L || iy >= n[1] - L || iz >= n[2] - L;
+			for (long ix = 0; ix < n[0]; ++ix) {
+				if (!edge && ix == L && n[0] - L > L)
+					ix = n[0] - L;
+				if (x) {
+					x[k] = (float)(lo[0] + (ix + 0.5) * sp[0]);
+					y[k] = (float)(lo[1] + (iy + 0.5) * sp[1]);
+					z[k] = (float)(lo[2] + (iz + 0.5) * sp[2]);
+					vol[k] = v;
+				}
+				k++;
+			}
+		}
+	return k;
 }

@@ -4,7 +4,12 @@
  *
  * Reads: x y z vx vy vz. Writes: x y z vx vy vz.
  * d = (p - point) . n; a particle with d < 0 moves by -d n onto the plane and
- * gets the contact response with normal n. */
+ * gets the contact response with normal n.
+ * With SPH the plane also carries boundary particles that move with it
+ * (eddy__sph_plane_points below; Akinci et al., "Versatile rigid-fluid
+ * coupling for incompressible SPH", SIGGRAPH 2012); the projection here is
+ * the last guard. */
+#include "sph.h"
 #include "systems.h"
 
 #include <stdlib.h>
@@ -91,4 +96,59 @@ void eddy__shape_collide_plane(const eddy_system *s, eddy_collider_shape *out)
 	out->b = b->def.normal;
 	out->radius = 0.0f;
 	out->inside = false;
+}
+
+/* ---- boundary particles, for SPH (sph_neighbors.c) ----
+ * Akinci et al. 2012, laid out as sph_boundary_box lays out its walls: L =
+ * ceil(h / s) layers behind the plane at depths (k + 1/2) s, each a square
+ * lattice of spacing s in the plane, covering the world bounds' shadow on
+ * the plane plus h. The patch stays where it is in the plane and moves only
+ * along the normal (a plane sliding along itself is the same plane), so it
+ * covers the bounds whatever the offset. On a lattice continued by the fluid
+ * each particle stands for V_b = 1 / sum_lattice W, the lattice cell. */
+static void plane_basis(eddy_vec3 n, eddy_vec3 *t1, eddy_vec3 *t2)
+{
+	/* the axis least along n, crossed with n */
+	const float ax = fabsf(n.x), ay = fabsf(n.y), az = fabsf(n.z);
+	eddy_vec3 a = ax <= ay && ax <= az ? eddy__v3(1, 0, 0) : ay <= az ? eddy__v3(0, 1, 0) : eddy__v3(0, 0, 1);
+	eddy_vec3 u = {a.y * n.z - a.z * n.y, a.z * n.x - a.x * n.z, a.x * n.y - a.y * n.x};
+	const float l = sqrtf(u.x * u.x + u.y * u.y + u.z * u.z);
+	u = eddy__v3(u.x / l, u.y / l, u.z / l);
+	*t1 = u;
+	*t2 = eddy__v3(n.y * u.z - n.z * u.y, n.z * u.x - n.x * u.z, n.x * u.y - n.y * u.x);
+}
+
+size_t eddy__sph_plane_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
+                              float *z, float *vol, eddy_vec3 *normal)
+{
+	const collide_plane *b = s->data;
+	const eddy_vec3 n = b->def.normal, o = b->def.point;
+	eddy_vec3 t1, t2;
+	plane_basis(n, &t1, &t2);
+	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
+	double u0 = INFINITY, u1 = -INFINITY, v0 = INFINITY, v1 = -INFINITY;
+	for (int c = 0; c < 8; ++c) {
+		const eddy_vec3 q = {c & 1 ? hi.x : lo.x, c & 2 ? hi.y : lo.y, c & 4 ? hi.z : lo.z};
+		const double u = (q.x - o.x) * t1.x + (q.y - o.y) * t1.y + (q.z - o.z) * t1.z,
+		             v = (q.x - o.x) * t2.x + (q.y - o.y) * t2.y + (q.z - o.z) * t2.z;
+		u0 = fmin(u0, u), u1 = fmax(u1, u), v0 = fmin(v0, v), v1 = fmax(v1, v);
+	}
+	const double sp = spacing;
+	const long nu = (long)ceil((u1 - u0 + 2 * h) / sp), nv = (long)ceil((v1 - v0 + 2 * h) / sp);
+	const int L = (int)ceil(h / spacing - 1e-4);
+	*normal = n;
+	if (!x)
+		return (size_t)nu * (size_t)nv * (size_t)L;
+	const float v = (float)(1.0 / eddy_sph_lattice_sum(EDDY_SPH_POLY6, sp, h));
+	size_t k = 0;
+	for (int l = 0; l < L; ++l)
+		for (long j = 0; j < nv; ++j)
+			for (long i = 0; i < nu; ++i, ++k) {
+				const double du = u0 - h + (i + 0.5) * sp, dv = v0 - h + (j + 0.5) * sp, dn = -(l + 0.5) * sp;
+				x[k] = (float)(o.x + du * t1.x + dv * t2.x + dn * n.x);
+				y[k] = (float)(o.y + du * t1.y + dv * t2.y + dn * n.y);
+				z[k] = (float)(o.z + du * t1.z + dv * t2.z + dn * n.z);
+				vol[k] = v;
+			}
+	return k;
 }

@@ -5,10 +5,19 @@
  * Reads: x y z vx vy vz. Writes: x y z vx vy vz.
  * A particle on the solid side is projected radially onto the sphere and gets
  * the contact response with the normal pointing out of the solid. A particle
- * exactly at the centre of a ball leaves along +y. */
+ * exactly at the centre of a ball leaves along +y.
+ * With SPH the sphere also carries boundary particles that move with it
+ * (eddy__sph_sphere_points below; Akinci et al., "Versatile rigid-fluid
+ * coupling for incompressible SPH", SIGGRAPH 2012): the fluid beside it then
+ * has a full neighbourhood, and the projection here is the last guard. */
+#include "sph.h"
 #include "systems.h"
 
 #include <stdlib.h>
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
 
 typedef struct collide_sphere {
 	eddy_collider_base base;
@@ -98,4 +107,114 @@ void eddy__shape_collide_sphere(const eddy_system *s, eddy_collider_shape *out)
 	out->b = eddy__v3(0, 0, 0);
 	out->radius = b->def.radius;
 	out->inside = b->def.inside;
+}
+
+/* ---- boundary particles, for SPH (sph_neighbors.c) ----
+ * Akinci et al. 2012: the solid's surface sampled at about the fluid
+ * spacing s, each particle standing for the volume V_b = 1 / sum_k W_bk.
+ * Layers of radius R -+ (k + 1/2) s, k = 0 .. L - 1, L = ceil(h / s) (inward
+ * for a ball, outward for a bowl): a shell as thick as the kernel support,
+ * so a fluid particle at the surface sees a full neighbourhood, as at an
+ * sph_boundary_box. Each layer is a Fibonacci sphere of round(4 pi r^2 / s^2)
+ * points (a near-uniform spread at any radius). The sum in V_b runs over the
+ * shell and its continuation by L more layers into the fluid (where a fluid
+ * at rest would be): over the shell alone (Akinci's single layer) the outer
+ * layer's half-empty neighbourhood would over-weight it, as
+ * sys_sph_boundary_box.c explains. The sum is the mean over up to 16 points
+ * of the layer (the spread is uniform, so the layer shares one volume). */
+static size_t fib_layer(double rk, double s, double *px, double *py, double *pz)
+{
+	const size_t nk = (size_t)fmax(1.0, round(4 * M_PI * rk * rk / (s * s)));
+	if (px) {
+		const double golden = M_PI * (3.0 - sqrt(5.0));
+		for (size_t j = 0; j < nk; ++j) {
+			const double zz = 1.0 - (2.0 * (double)j + 1.0) / (double)nk, rr = sqrt(fmax(0.0, 1.0 - zz * zz)),
+			             ph = golden * (double)j;
+			px[j] = rk * rr * cos(ph);
+			py[j] = rk * zz;
+			pz[j] = rk * rr * sin(ph);
+		}
+	}
+	return nk;
+}
+
+size_t eddy__sph_sphere_points(const eddy_system *s, float spacing, float h, float *x, float *y, float *z, float *vol)
+{
+	const collide_sphere *b = s->data;
+	const double R = b->def.radius, sp = spacing, hh = h;
+	const int L = (int)ceil(h / spacing - 1e-4);
+	const double dir = b->def.inside ? 1.0 : -1.0; /* toward the solid */
+	/* layer k >= 0: solid (kept); k < 0: the fluid's continuation (for V_b) */
+	size_t real = 0, all = 0;
+	int kmax = L; /* the solid layers that fit (a small ball holds fewer) */
+	for (int k = -L; k < L; ++k) {
+		const double rk = R + dir * (k + 0.5) * sp;
+		if (rk <= 0) {
+			if (k >= 0 && k < kmax)
+				kmax = k;
+			continue;
+		}
+		const size_t nk = fib_layer(rk, sp, NULL, NULL, NULL);
+		all += nk;
+		if (k >= 0)
+			real += nk;
+	}
+	if (!x)
+		return real;
+	double *px = malloc((all + 1) * sizeof *px), *py = malloc((all + 1) * sizeof *py),
+	       *pz = malloc((all + 1) * sizeof *pz);
+	size_t *start = malloc((size_t)(2 * L + 1) * sizeof *start);
+	if (!px || !py || !pz || !start) {
+		/* no memory for the volume sums: the lattice cell's volume instead */
+		free(px), free(py), free(pz), free(start);
+		px = py = pz = NULL;
+		start = NULL;
+	}
+	size_t at = 0, out = 0;
+	for (int k = -L; k < L; ++k) {
+		const double rk = R + dir * (k + 0.5) * sp;
+		if (start)
+			start[k + L] = at;
+		if (rk <= 0)
+			continue;
+		if (px)
+			at += fib_layer(rk, sp, px + at, py + at, pz + at);
+	}
+	if (start)
+		start[2 * L] = at;
+	const double lattice_v = 1.0 / eddy_sph_lattice_sum(EDDY_SPH_POLY6, sp, hh);
+	const eddy_vec3 c = b->def.center;
+	for (int k = 0; k < kmax; ++k) {
+		const double rk = R + dir * (k + 0.5) * sp;
+		const size_t nk = fib_layer(rk, sp, NULL, NULL, NULL);
+		double v = lattice_v;
+		if (px) {
+			/* the mean kernel sum at up to 16 points spread over the layer */
+			const size_t s0 = start[k + L], probes = nk < 16 ? nk : 16;
+			double sum = 0;
+			for (size_t q = 0; q < probes; ++q) {
+				const size_t i = s0 + (2 * q + 1) * nk / (2 * probes);
+				for (size_t j = 0; j < at; ++j) {
+					const double dx = px[i] - px[j], dy = py[i] - py[j], dz = pz[i] - pz[j];
+					sum += eddy_sph_kernel_value(EDDY_SPH_POLY6, sqrt(dx * dx + dy * dy + dz * dz), hh);
+				}
+			}
+			v = (double)probes / sum;
+		}
+		double *lx = malloc(nk * sizeof *lx), *ly = malloc(nk * sizeof *ly), *lz = malloc(nk * sizeof *lz);
+		if (!lx || !ly || !lz) {
+			free(lx), free(ly), free(lz);
+			break; /* the caller sees fewer points than it counted */
+		}
+		fib_layer(rk, sp, lx, ly, lz);
+		for (size_t j = 0; j < nk; ++j, ++out) {
+			x[out] = (float)(c.x + lx[j]);
+			y[out] = (float)(c.y + ly[j]);
+			z[out] = (float)(c.z + lz[j]);
+			vol[out] = (float)v;
+		}
+		free(lx), free(ly), free(lz);
+	}
+	free(px), free(py), free(pz), free(start);
+	return out;
 }

@@ -62,6 +62,15 @@ size_t eddy__sph_boundary_box_points(const eddy_system *s, float h, float *x, fl
 	return k;
 }
 
+bool eddy__sph_boundary_box_covers(const eddy_system *s, eddy_vec3 min, eddy_vec3 max)
+{
+	if (!s || s->vt != &eddy__kind_sph_boundary_box)
+		return false;
+	const eddy_sph_boundary_box_def *d = &((const sph_boundary_box *)s->data)->def;
+	return d->min.x == min.x && d->min.y == min.y && d->min.z == min.z && d->max.x == max.x && d->max.y == max.y &&
+	       d->max.z == max.z;
+}
+
 const eddy_system_vtable eddy__kind_sph_boundary_box = {
 	.name = "sph_boundary_box",
 };

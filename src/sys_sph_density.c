@@ -160,14 +160,15 @@ static void destroy(eddy_system *s)
 
 /* Checkpointed state: the boundary particles' pressure and density, which the
  * next step's density sum reads before this step's extrapolation replaces
- * them (a lag of one step). */
+ * them (a lag of one step), and the collider offsets the moving boundary
+ * particles' velocities are taken against. */
 static void *state(eddy_world *w, eddy_system *s, size_t *size)
 {
 	sph_density *sd = s->data;
 	*size = 0;
 	if (eddy__sph_boundary_ready(w, &sd->sh) != EDDY_OK || !sd->sh.nb.bp)
 		return NULL;
-	*size = 2 * sd->sh.nb.nb * sizeof *sd->sh.nb.bp;
+	*size = sd->sh.nb.bstate_size; /* bp, brho and the colliders' seen offsets (sph.h) */
 	return sd->sh.nb.bp;
 }
 

@@ -20,7 +20,9 @@
  * |rho - rho0| 1.4% against 0.15% now) at no gain in iterations.
  * With B_i = sum_b m_b grad W(x_i - x_b) and the pressure written as
  * k_i = p_i / rho_i^2:
- *   Drho_i/Dt = sum_j (v_i - v_j) . G_ij + v_i . B_i
+ *   Drho_i/Dt = sum_j (v_i - v_j) . G_ij + v_i . B_i - sum_b m_b v_b . grad W(x_i - x_b)
+ * (the last term: boundary particles of moving colliders, sph_neighbors.c's
+ * bdiv; 0 for walls at rest)
  *   a_i^p     = -sum_j (k_i + k_j) G_ij - 2 k_i B_i + h_i
  * The boundary particles mirror the particle's pressure (p_b = p_i, so the
  * wall term counts twice: with a single k_i the wall could not hold a
@@ -625,6 +627,7 @@ static inline float positive(float e)
  * at a time where SSE is (the scalar loop does the same per particle). */
 static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, const float *t)
 {
+	const float *bdiv = wk->ga->nb->bdiv; /* NULL while no wall moves */
 	long q = 0;
 #ifdef __SSE2__
 	const __m128 vdt = _mm_set1_ps(a->dt), vrho0 = _mm_set1_ps(a->rho0), zero = _mm_setzero_ps(),
@@ -637,8 +640,10 @@ static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, 
 		__m128 vx, vy, vz, vw, bx, by, bz, bw;
 		load4(wk->v + i, &vx, &vy, &vz, &vw);
 		load4(wk->b + i, &bx, &by, &bz, &bw);
-		const __m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)),
-		                            _mm_add_ps(_mm_add_ps(_mm_mul_ps(vx, bx), _mm_mul_ps(vy, by)), _mm_mul_ps(vz, bz)));
+		__m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)),
+		                      _mm_add_ps(_mm_add_ps(_mm_mul_ps(vx, bx), _mm_mul_ps(vy, by)), _mm_mul_ps(vz, bz)));
+		if (bdiv) /* moving walls: (v_i - v_b) . grad, the v_b part (sph.h) */
+			r = _mm_sub_ps(r, _mm_loadu_ps(bdiv + i));
 		__m128 e;
 		if (a->divergence) {
 			const __m128 d = _mm_max_ps(r, zero);
@@ -655,7 +660,7 @@ static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, 
 	for (; q < cnt; ++q) {
 		const long i = i0 + q;
 		const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
-		const float r = sph_sum4(t + RATE_T * q) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z);
+		const float r = sph_sum4(t + RATE_T * q) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z) - (bdiv ? bdiv[i] : 0.0f);
 		if (a->divergence) {
 			const float d = positive(r);
 			wk->err[i] = d * a->dt;

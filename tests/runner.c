@@ -88,6 +88,8 @@ int main(int argc, char **argv)
 		/* stress: scenes one step beyond the validated ones (scenes/stress/) */
 		{"stress_flip_flight", suite_stress_flip_flight, false},
 		{"stress_flip_solids", suite_stress_flip_solids, false},
+		{"stress_sph_solids", suite_stress_sph_solids, false},
+		{"long_sph_solids", suite_long_sph_solids, true},
 		{"stress_slosh", suite_stress_slosh, false},
 		{"long_slosh", suite_long_slosh, true},
 		{"stress_dfsph", suite_stress_dfsph, false},

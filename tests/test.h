@@ -65,6 +65,8 @@ void suite_flip(void);
 void suite_flip_solvers(void);
 void suite_stress_flip_flight(void);
 void suite_stress_flip_solids(void);
+void suite_stress_sph_solids(void);
+void suite_long_sph_solids(void);
 
 /* renderer suites */
 void suite_render(void);
