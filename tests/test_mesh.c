@@ -685,7 +685,9 @@ static void ply_formats_and_errors(void)
 		FILE *f = fopen(p, "wb");
 		if (!f)
 			continue;
-		const size_t head = strlen(cases[k].text);
+		/* binary data may hold NUL bytes: the length is the header's plus bytes */
+		const char *end = strstr(cases[k].text, "end_header\n");
+		const size_t head = cases[k].bytes && end ? (size_t)(end - cases[k].text) + 11 : strlen(cases[k].text);
 		fwrite(cases[k].text, 1, head + cases[k].bytes, f);
 		fclose(f);
 		eddy_system_id id = add_ply(w, p);
