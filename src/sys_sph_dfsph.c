@@ -4,8 +4,9 @@
  * pressure is solved for each step so the fluid keeps its rest density, and
  * the time step is limited by the flow speed, not by a speed of sound.
  *
- * Reads: x y z vx vy vz density ax ay az. Writes: pressure ax ay az
- * (accumulated). Runs after the non-pressure forces (gravity, sph_viscosity,
+ * Reads: x y z vx vy vz density ax ay az, and with the divergence solver
+ * dfsph_k dfsph_kd (state columns it declares: each solve's k of the last
+ * step). Writes: pressure ax ay az (accumulated), dfsph_k dfsph_kd. Runs after the non-pressure forces (gravity, sph_viscosity,
  * sph_surface_tension) and before integrate, whose v += dt a then gives the
  * corrected velocity. It uses sph_density's neighbour lists.
  *
@@ -30,24 +31,57 @@
  * (up, away from a floor),
  * known before the solve and added to the forces; without it the fluid
  * beside the walls lacks support and circulates.
- * A change k_i alone moves Drho_i/Dt by -dt k_i D_i, with
- *   D_i = (S_i + 2 B_i) . (S_i + B_i) + sum_j |G_ij|^2,   S_i = sum_j G_ij
- * (the paper's rho_i / alpha_i with the mirrored wall), so each Jacobi sweep
- * sets, from the current predicted velocities v*,
- *   constant density:  k_i = max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
- *   divergence-free:   k_i = max(Drho_i/Dt, 0) / (dt D_i)
- * and moves v*_i by dt a_i^p(k). The divergence solver runs first, on the
- * velocity at the start of the step (positions are new, velocities not yet
- * consistent with them); then v* = v + dt (a + h) and the constant-density
- * solver runs until the mean predicted compression max(rho*_i - rho0, 0) / rho0
- * is at most max_density_error (at least one sweep). Only
- * compression is corrected: the free surface has too few neighbours to reach
- * rho0 and must not be pulled together. (Tried and dropped: the paper's warm
- * start from last step's k, which with sweeps that only add pressure pushed
- * the free surface apart (mean density error 2% -> 4.5% in the pour), and a
- * projected Jacobi that could take pressure back, which diverged.)
+ * Each step first sets v* = v + dt (a + h), the velocity the non-pressure
+ * forces give, then solves for k on it, by sweeps that each set k from the
+ * current v* and move v* by dt a^p of the change.
+ *
+ * With the divergence solver (the default) there are two solves, the
+ * paper's pair (Alg. 1) folded into one step, both on the symmetric
+ * operator, warm-started and projected:
+ *   velocity (divergence-free) solve:  Drho_i/Dt(v*) = 0
+ *   density solve:                     rho_i + dt Drho_i/Dt(v*) = rho0
+ * In both the rate counts the wall as the force does,
+ *   R_i(v) = sum_j (v_i - v_j) . G_ij + 2 v_i . B_i,
+ * so that a change of k moves the predicted density by -(A k)_i with
+ * A = dt^2 grad^T grad symmetric positive semi-definite, of diagonal
+ * dt^2 D'_i,   D'_i = |S_i + 2 B_i|^2 + sum_j |G_ij|^2,   S_i = sum_j G_ij.
+ * (The true wall rate is v_i . B_i: counted twice, the solve over-predicts
+ * compression at a wall and is only stiffer there; at rest the constraint
+ * is the same. With the true rate, Jacobi sweeps run to a tight tolerance
+ * diverged in a 40-layer column.) Each sweep is a projected, relaxed Jacobi
+ * step on the residual res_i (Drho_i/Dt, or the predicted rho_i - rho0):
+ *   k_i <- max(k_i + omega res_i / (dt^n D'_i), 0),   omega = DFSPH_OMEGA,
+ * n = 1 for the velocity solve, 2 for the density one (Ihmsen et al.'s
+ * relaxed Jacobi, with the projection of unilateral pressure: a particle
+ * may lose pressure it no longer needs but never goes below 0, so the free
+ * surface is not pulled together). Each solve starts from its own k of the
+ * last step (the state columns DFSPH_K_COLUMN and DFSPH_KD_COLUMN, which
+ * move with the particles and are checkpointed), applied as one
+ * correction: the velocity solve's k is the pressure that carries the
+ * weight of the water above (it balances gravity over a step whatever dt
+ * is), the density solve's the one that holds the compression the velocity
+ * solve leaves. Cold, each step had to rebuild the hydrostatic pressure from
+ * the compression it allowed, which Jacobi sweeps cannot do through deep
+ * water (their error in the column-wide mode falls by about 1 - c / N^2 a
+ * sweep for N layers): a 40-layer column rang and threw water to the lid.
+ * A sweep's error is |res_i| where k_i > 0 (too much pressure counts, as
+ * too little) and max(res_i, 0) where k_i = 0, averaged over all particles:
+ * the velocity solve stops once that times dt / rho0 is at most
+ * max_divergence_error (the density change per step it leaves: it must be
+ * well below max_density_error, or the water compresses by it every step),
+ * the density solve once it is at most max_density_error (at least one
+ * sweep each).
+ *
+ * Without the divergence solver the density solve runs alone, cold, with
+ * the paper's sweeps that only add pressure, on the true wall rate and
+ * D_i = (S_i + 2 B_i) . (S_i + B_i) + sum_j |G_ij|^2:
+ *   k_i += max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
+ * until the mean predicted compression is at most max_density_error. It is
+ * the cheaper choice for shallow, splashing scenes (scenes/pour.lua), and
+ * does not hold still water much deeper than 10 layers (at 40 it blows up).
+ *
  * The result, a^p = (v* - (v + dt a)) / dt, is added to ax ay az. The pressure
- * column gets p_i = M k_i rho_i^2, k_i summed over both solvers, M the
+ * column gets p_i = M k_i rho_i^2, k_i summed over both solves, M the
  * force's lattice moment (1 / grad_cal, see sph_pressure): the force of a
  * linear field is M grad p / rho, so this is the pressure in Pa (M = 0.947
  * at h = 2 spacings).
@@ -65,14 +99,19 @@
  *
  * Published per frame: solver = "dfsph", iterations (mean constant-density
  * sweeps per step), residual (largest final mean density error of a step),
- * divergence_iterations (mean), unconverged (steps that hit max_iterations).
- * A step whose final mean density error is above 5% fails: the time step is
- * far too long for the solver.
+ * residual_max (largest final error of one particle, / rho0),
+ * divergence_iterations (mean), unconverged (steps in which a solve hit its
+ * cap above its tolerance). A step whose final mean density error is above
+ * DFSPH_FAIL_ERROR, or one particle's above DFSPH_FAIL_PARTICLE, fails
+ * naming the step and the particle: the solve has lost the fluid (a time
+ * step far too long, or water deeper than the solver holds).
  * Time-step limits (the world multiplies them by its CFL number): velocity,
  * dt <= h / max|v|; gravity, dt <= 0.18 sqrt(h / |g|) (see below). There is
  * no acoustic limit: that is sph_pressure's, which a scene with this lacks.
  * Source: Bender & Koschier, "Divergence-free smoothed particle hydrodynamics",
- * SCA 2015 (eqs. 8-9, 12, Alg. 2-3); Akinci et al., "Versatile rigid-fluid
+ * SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and "Divergence-free SPH
+ * for incompressible and viscous fluids", TVCG 2017; Ihmsen et al.,
+ * "Implicit incompressible SPH", TVCG 2014 (relaxed Jacobi); Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012; Adami, Hu & Adams, "A
  * generalized wall boundary condition for SPH", JCP 2012 (eq. 27). */
 #include "sph.h"
@@ -90,6 +129,8 @@ typedef struct sph_dfsph {
 	bool avx2; /* the passes' AVX2 path (else SSE, the same bits) */
 	int kcol;  /* the state column DFSPH_K_COLUMN */
 	int kdcol; /* the state column DFSPH_KD_COLUMN */
+	int capped; /* consecutive steps whose velocity solve stopped at its cap
+	             * above DFSPH_FAIL_CAPPED_ERROR times its tolerance */
 } sph_dfsph;
 
 static const int dfsph_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, COL_AX, COL_AY, COL_AZ};
@@ -107,8 +148,17 @@ static const int no_hint_writes[] = {-1};
 #define DFSPH_FAIL_ERROR 0.05
 
 /* above this predicted density error at one particle a step fails: the
- * solve has lost it (PLACEHOLDER) */
+ * particles overlap (the pour's largest is 0.42) */
 #define DFSPH_FAIL_PARTICLE 1.0
+
+/* The velocity solve warm-starts, so a step stopped at its cap hands the
+ * rest on to the next (a 40-layer column at rest: once, in its first step,
+ * at 1.8 times the tolerance). Stopped at the cap above DFSPH_FAIL_CAPPED_ERROR
+ * times the tolerance in DFSPH_FAIL_CAPPED steps in a row, it is not
+ * catching up, and the step fails (an 80-layer column: steps 0-2 at 2.5-3.6
+ * times, before it threw water to the lid at step 26). */
+#define DFSPH_FAIL_CAPPED_ERROR 2.0
+#define DFSPH_FAIL_CAPPED 3
 
 /* constant-density sweeps a step makes at least (the paper: 2; 1 gives the
  * same errors in the pour, tank and drop and saves 10% of the solve) */
@@ -935,6 +985,21 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		const sweep_args wa = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true};
 		pass(&wk, PASS_CORRECT, &wa, ctx->threads);
 		div_it = divergence_solve(&wk, sd, rho0, dt, ctx->threads, &div_residual);
+		const bool capped = div_it >= sd->def.max_divergence_iterations &&
+		                    div_residual > DFSPH_FAIL_CAPPED_ERROR * sd->def.max_divergence_error;
+		sd->capped = capped ? sd->capped + 1 : 0;
+		if (sd->capped >= DFSPH_FAIL_CAPPED) {
+			long wi = 0;
+			for (long i = 0; i < n; ++i)
+				wi = wk.err[i] > wk.err[wi] ? i : wi;
+			return eddy__fail(w, EDDY_ERR_NUMERIC,
+			                  "%s: the velocity solve did not converge at step %lld: mean error %.3g after %d "
+			                  "iterations in %d steps in a row (max_divergence_error %g), worst at particle %ld "
+			                  "(%.3g); the water may be too deep for it: raise max_divergence_iterations or lower "
+			                  "the world's cfl",
+			                  s->label, (long long)ctx->step, div_residual, div_it, sd->capped,
+			                  (double)sd->def.max_divergence_error, wi, wk.err[wi] / rho0);
+		}
 		memcpy(kcol, wk.ksum, un * sizeof *kcol);
 		memcpy(wk.kp, wk.ksum, un * sizeof *wk.kp);
 		memset(wk.ksum, 0, un * sizeof *wk.ksum);
