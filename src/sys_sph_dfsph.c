@@ -164,8 +164,10 @@ static const int no_hint_writes[] = {-1};
  * same errors in the pour, tank and drop and saves 10% of the solve) */
 #define DFSPH_MIN_SWEEPS 1
 
-/* the relaxation of the velocity solve's projected Jacobi sweeps: 0.66
- * already diverged in the first step of a 40-layer column */
+/* the relaxation of both solves' projected Jacobi sweeps (with the divergence
+ * solver): the largest eigenvalue of D'^-1 A is near 4 here (full
+ * neighbourhoods plus the doubled wall), so sweeps with omega above 0.5 can
+ * grow; a 40-layer column diverged at 0.66 and at 0.8 */
 #define DFSPH_OMEGA 0.5f
 
 /* the particle state column with each particle's k of the velocity solve,
