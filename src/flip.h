@@ -245,6 +245,20 @@ static inline void flip_particle_density(const eddy_world *w, const float *px, c
  * flip_reseed's bounds and the volume correction's rest density refer to it. */
 enum { FLIP_SEED_PER_CELL = 8 };
 
+/* The rest particle count per cell n0 the volume bookkeeping refers to (p2g's
+ * fill fraction, flip_pressure's volume correction, flip_reseed): the
+ * emitters' lattice, (cell_size / spacing)^3, or FLIP_SEED_PER_CELL when no
+ * emitter set a spacing (particles added through the API). One particle is
+ * dx^3 / n0 of liquid. */
+static inline double flip_rest_count(const eddy_world *w)
+{
+	if (w->length_scale > 0) {
+		const double r = w->def.cell_size / (double)w->length_scale;
+		return r * r * r;
+	}
+	return FLIP_SEED_PER_CELL;
+}
+
 /* ---- the Poisson system ---------------------------------------------------
  * Rows are fluid cells in cell-index order, so a row's -x, -y, -z neighbours
  * come before it (what MIC(0) and the upper-triangle CSC for CHOLMOD need).

@@ -103,6 +103,21 @@ static inline void splat_affine(float *restrict acc, size_t sy, size_t sz, flip_
 
 /* x_f - x_p (m) at the i0 sample of an axis with sample offset off (cells);
  * t is the particle's grid coordinate (cells) */
+/* The particle's trilinear weights at the cell centres around it (the tent
+ * of flip_particle_density in flip.h, constant extension at the sides). */
+static inline void splat_density(float *restrict dens, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az)
+{
+	const size_t j[2] = {(size_t)ay.i0 * sy, (size_t)ay.i1 * sy}, k[2] = {(size_t)az.i0 * sz, (size_t)az.i1 * sz};
+	const float wy[2] = {1.0f - ay.w1, ay.w1}, wz[2] = {1.0f - az.w1, az.w1}, wx0 = 1.0f - ax.w1, wx1 = ax.w1;
+	for (int c = 0; c < 2; ++c)
+		for (int b = 0; b < 2; ++b) {
+			float *row = dens + k[c] + j[b];
+			const float wyz = wz[c] * wy[b];
+			row[ax.i0] += wyz * wx0;
+			row[ax.i1] += wyz * wx1;
+		}
+}
+
 static inline float face_offset(flip_axis a, float off, float t, float h) { return ((float)a.i0 + off - t) * h; }
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
@@ -125,6 +140,11 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_p2g: out of memory for splat weights");
 		memset(acc[a], 0, 2 * nf[a] * sizeof *acc[a]);
 	}
+	const size_t nc = (size_t)nx * ny * nz;
+	float *dens = eddy__arena_alloc(&w->arena, nc * sizeof *dens); /* particles per cell, trilinear */
+	if (!dens)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_p2g: out of memory for the particle density");
+	memset(dens, 0, nc * sizeof *dens);
 	/* one pass over the particles, three face grids: the particle columns are
 	 * read once; the scatter is serial so the sums do not depend on threads */
 	const size_t sx = (size_t)nx, sy = (size_t)ny;
@@ -153,6 +173,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			splat_affine(acc[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, pvx, cx, du, h);
 			splat_affine(acc[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, pvy, cy, dv, h);
 			splat_affine(acc[2], sx, sx * sy, g.cx, g.cy, g.fz, pvz, cz, dw, h);
+			splat_density(dens, sx, sx * sy, g.cx, g.cy, g.cz);
 		}
 	}
 	for (size_t i = 0; i < np && !cu[0]; ++i) {
@@ -164,6 +185,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		splat(acc[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, pvx);
 		splat(acc[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, pvy);
 		splat(acc[2], sx, sx * sy, g.cx, g.cy, g.fz, pvz);
+		splat_density(dens, sx, sx * sy, g.cx, g.cy, g.cz);
 	}
 	for (int a = 0; a < 3; ++a) {
 		float *f = face[a];
@@ -175,15 +197,21 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 
 	uint8_t *type = (uint8_t *)w->columns[COL_CELL_TYPE].data;
 	float *phi = eddy__col(w, COL_FLIP_PHI);
-	const size_t nc = (size_t)nx * ny * nz;
-	for (size_t c = 0; c < nc; ++c)
-		phi[c] = 1.0f;
+	/* the fill fraction of every cell from the particle density: one
+	 * particle is 1 / FLIP_SEED_PER_CELL of a cell, so sum (1 - phi) / 2
+	 * over the cells is the particles' volume (up to cells above rest
+	 * density, which flip_pressure's volume correction drains) */
+	const float inv_n0 = (float)(1.0 / flip_rest_count(w));
+	for (size_t c = 0; c < nc; ++c) {
+		const float f = dens[c] * inv_n0;
+		phi[c] = 1.0f - 2.0f * (f < 1.0f ? f : 1.0f);
+		type[c] = EDDY_CELL_AIR;
+	}
 	const float r = pg->def.mark_radius, r2 = r * r;
 	for (size_t i = 0; i < np; ++i) {
 		const float gx = (x[i] - o.x) * inv, gy = (y[i] - o.y) * inv, gz = (z[i] - o.z) * inv;
 		const size_t c = flip_cell(w, flip_cell_index(gx, nx), flip_cell_index(gy, ny), flip_cell_index(gz, nz));
 		type[c] = EDDY_CELL_FLUID;
-		phi[c] = -1.0f;
 		/* cells whose centre (i + 1/2) is within r of the particle; at r = 0
 		 * that is at most the particle's own cell, marked above */
 		if (r <= 0)
@@ -200,7 +228,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 					if (dx * dx + dy * dy + dz * dz <= r2) {
 						const size_t q = flip_cell(w, ii, jj, kk);
 						type[q] = EDDY_CELL_FLUID;
-						phi[q] = -1.0f;
+						phi[q] = -1.0f; /* the radius marks the cell full */
 					}
 				}
 	}

@@ -249,30 +249,36 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	 * or spread (see the header) */
 	double dens_max = 0, dens_min = INFINITY;
 	int corrected = 0;
-	if (sd.any) { /* only near solids (VC_REACH): nothing to do without them */
+	{
 		float *dens = eddy__arena_alloc(&w->arena, nc * sizeof *dens);
 		if (!dens)
 			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory");
 		flip_particle_density(w, eddy__col(w, COL_X_), eddy__col(w, COL_Y_), eddy__col(w, COL_Z_), dens);
+		const double n0 = flip_rest_count(w);
 		for (int r = 0; r < n; ++r) {
 			const int c = cell_of[r];
-			if (has_air[r] || sd.open[c] < 1 || sd.dist[c] > VC_REACH * h || type[c] != EDDY_CELL_FLUID)
+			if (has_air[r] || type[c] != EDDY_CELL_FLUID || (sd.any && sd.open[c] < 1))
 				continue;
 			/* the kernel reaches one cell: every face neighbour must be an
-			 * interior fluid cell too, not cut, not air */
+			 * interior fluid cell too (not cut, not air) or the domain's
+			 * side (the density extends constantly there) */
+			const int i = c % nx, j = (c / nx) % ny, k = c / (nx * ny);
 			bool deep = true;
 			for (int d = 0; d < 6 && deep; ++d) {
 				const int o = A.nb[6 * r + d];
-				deep = o >= 0 && !has_air[o] && sd.open[cell_of[o]] >= 1;
+				if (o < 0) {
+					size_t f;
+					deep = across(w, i, j, k, d, &f) < 0;
+				} else {
+					deep = !has_air[o] && (!sd.any || sd.open[cell_of[o]] >= 1);
+				}
 			}
 			if (!deep)
 				continue;
-			double e = (double)dens[c] / FLIP_SEED_PER_CELL - 1.0;
+			double e = (double)dens[c] / n0 - 1.0;
 			dens_max = e > dens_max ? e : dens_max;
 			dens_min = e < dens_min ? e : dens_min;
-			if (e <= 0)
-				continue; /* under-full cells: flip_reseed's business (see the header) */
-			e = e > VC_CLAMP ? VC_CLAMP : e;
+			e = e > VC_CLAMP ? VC_CLAMP : e < -VC_CLAMP ? -VC_CLAMP : e;
 			b[r] += VC_RATE * e * h / ctx->dt; /* + dx s_i, s_i = rate e / dt */
 			corrected++;
 		}

@@ -42,6 +42,11 @@ eddy_flip_reseed_def eddy_default_flip_reseed_def(void)
 	return d;
 }
 
+/* A cell gives particles only above this multiple of the rest count n0 in
+ * trilinear density as well as above max_per_cell in count: at rest density
+ * sampling noise alone puts cells above 12. */
+#define PACKED 1.125
+
 static long cell_of(const eddy_world *w, float x, float y, float z)
 {
 	const float inv = (float)(1.0 / w->def.cell_size);
@@ -72,18 +77,24 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			count[cell_of(w, x[i], y[i], z[i])]++;
 	}
 	float *dens = eddy__arena_alloc(&w->arena, nc * sizeof *dens);
-	if (!dens)
+	size_t *spare = eddy__arena_alloc(&w->arena, (w->n + 1) * sizeof *spare);
+	if (!dens || !spare)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_reseed: out of memory");
 	flip_particle_density(w, eddy__col(w, COL_X_), eddy__col(w, COL_Y_), eddy__col(w, COL_Z_), dens);
-	/* surplus: remove from the highest index down, so indices still to visit stay valid */
-	for (size_t i = w->n; i-- > 0;) {
+	/* surplus: particles a packed cell can give (counted, not removed) */
+	const double n0 = flip_rest_count(w);
+	size_t nspare = 0;
+	{
 		const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
-		const long c = cell_of(w, x[i], y[i], z[i]);
-		if (count[c] > rs->def.max_per_cell && dens[c] > FLIP_SEED_PER_CELL + 1) {
-			count[c]--;
-			eddy_world_remove_particle(w, i);
+		for (size_t i = 0; i < w->n; ++i) {
+			const long c = cell_of(w, x[i], y[i], z[i]);
+			if (count[c] > rs->def.max_per_cell && dens[c] > PACKED * n0) {
+				count[c]--;
+				spare[nspare++] = i;
+			}
 		}
 	}
+	size_t used = 0;
 	/* the solids now (after the colliders moved): a cut cell's fair share is
 	 * min_per_cell times its open fraction, and no particle is placed inside */
 	float margin = 0;
@@ -110,21 +121,26 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 				if (empty(type, count, c - sx) || empty(type, count, c + sx) || empty(type, count, c - sy) ||
 				    empty(type, count, c + sy) || empty(type, count, c - sz) || empty(type, count, c + sz))
 					continue;
-				const size_t add = (size_t)(rs->def.min_per_cell - count[c]);
-				size_t first;
-				eddy_status st = eddy__append_particles(w, add, &first);
-				if (st != EDDY_OK)
-					return st;
+				size_t add = (size_t)(rs->def.min_per_cell - count[c]);
+				add = add < nspare - used ? add : nspare - used;
+				if (add == 0)
+					continue; /* no spare particle: flip_pressure's correction closes the gap */
 				float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 				float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 				const float *u = eddy__col(w, COL_FACE_U), *v = eddy__col(w, COL_FACE_V), *wv = eddy__col(w, COL_FACE_W);
-				for (size_t q = first; q < first + add; ++q) {
+				for (size_t a = 0; a < add; ++a) {
+					const size_t q = spare[used++];
 					const eddy_vec3 p = {(float)(o.x + (i + eddy__rand01(&w->rng)) * h),
 					                     (float)(o.y + (j + eddy__rand01(&w->rng)) * h),
 					                     (float)(o.z + (k + eddy__rand01(&w->rng)) * h)};
 					const eddy_vec3 gv = flip_velocity_at(&grid, u, v, wv, p);
 					x[q] = p.x, y[q] = p.y, z[q] = p.z;
 					vx[q] = gv.x, vy[q] = gv.y, vz[q] = gv.z;
+					for (int m = 0; m < 9; ++m) {
+						float *cm = eddy__col(w, COL_APIC_UX + m); /* NULL unless APIC's g2p runs */
+						if (cm)
+							cm[q] = 0; /* the affine velocity of the old place is not the new one's */
+					}
 				}
 				count[c] += (int)add;
 			}
