@@ -12,8 +12,25 @@
  *   (eddy__flip_fill_fluid_faces in sys_flip_extrapolate.c), so a uniform
  *   velocity has no divergence off the grid axes too
  *   cell_type = fluid where a particle is (or within mark_radius cells of a
- *   particle's position), air elsewhere; flip_phi = -1 fluid, +1 empty (the
- *   paper's marker field, smoothed later by flip_surface).
+ *   particle's position), air elsewhere;
+ *   flip_phi = 1 - 2 min(rho_c / n0, 2), rho_c = sum_p W_cp the trilinear
+ *   particle count at the cell centre (flip.h's flip_particle_density) and
+ *   n0 = flip_rest_count, the count the seeding put in a cell: -1 in a cell
+ *   at rest density, +1 with no particle near, 1 - 2 f in between, f the
+ *   cell's fill fraction (a marker field after Zhu & Bridson, smoothed later
+ *   by flip_surface). With mark_radius > 0 the marker is the binary one of
+ *   the particle-radius rule instead (-1 in every cell holding or within r of
+ *   a particle): the thickened blob is what that option asks for, and a fill
+ *   fraction inside a -1 halo would make phi non-monotone there. One particle is
+ *   dx^3 / n0 of liquid and the weights W_cp sum to 1, so sum_c (1 - phi_c)/2
+ *   dx^3, the volume flip_pressure publishes, is the particles' volume
+ *   N dx^3 / n0 (cells above 2 n0 excepted): the surface carries exactly the
+ *   liquid the particles do, where a binary marker (-1 in every cell holding
+ *   a particle) counts a surface cell holding one particle as full. Values
+ *   below -1 (packed cells) are kept down to -3 (f = 2) so that the blur
+ *   averages the sampling noise out before the volume's clamp to [0, 1]:
+ *   clamping every cell at f = 1 would cut each cell's positive noise and
+ *   bias the volume low by a fraction of the noise.
  * APIC (Jiang, Schroeder, Selle, Teran & Stomakhin 2015, "The affine
  * particle-in-cell method", SIGGRAPH, eq. 9 with the trilinear B D^-1 = C of
  * section 5.3): each particle carries one vector c_a per face grid a
@@ -204,7 +221,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const float inv_n0 = (float)(1.0 / flip_rest_count(w));
 	for (size_t c = 0; c < nc; ++c) {
 		const float f = dens[c] * inv_n0;
-		phi[c] = 1.0f - 2.0f * (f < 1.0f ? f : 1.0f);
+		phi[c] = 1.0f - 2.0f * (f < 2.0f ? f : 2.0f);
 		type[c] = EDDY_CELL_AIR;
 	}
 	const float r = pg->def.mark_radius, r2 = r * r;
@@ -216,6 +233,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		 * that is at most the particle's own cell, marked above */
 		if (r <= 0)
 			continue;
+		phi[c] = -1.0f; /* the radius rule's binary marker (see the header) */
 		int i0 = ceil_int(gx - r - 0.5f), i1 = floor_int(gx + r - 0.5f);
 		int j0 = ceil_int(gy - r - 0.5f), j1 = floor_int(gy + r - 0.5f);
 		int k0 = ceil_int(gz - r - 0.5f), k1 = floor_int(gz + r - 0.5f);

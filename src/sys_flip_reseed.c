@@ -1,27 +1,27 @@
 /* SPDX-License-Identifier: MIT */
-/* flip_reseed: keeps the particle density in fluid cells between min and max
- * per cell, against the clumping and thinning that make FLIP's volume drift
- * (docs/validation.md hard case 13; Zhu & Bridson keep about 8 per cell).
+/* flip_reseed: keeps the particle count in fluid cells between min and max
+ * per cell, against the clumping and thinning that leave FLIP's grid cells
+ * under-sampled (docs/validation.md hard case 13; Zhu & Bridson keep about 8
+ * per cell), without changing the number of particles: a particle is
+ * dx^3 / n0 of liquid (n0 = flip_rest_count, flip.h), so creating or deleting
+ * one creates or deletes volume, and reseeding moves particles instead.
  *
- * Reads: x y z cell_type u v w. Writes: x y z vx vy vz.
- *   Interior fluid cells (no side empty: holding no particle after advection
- *   and not solid; surface cells are partly empty by nature, and cell_type
- *   predates flip_advect, so a cell a moving blob has just left still reads
- *   fluid and must not be refilled) with fewer than min particles get new
- *   ones at random positions
- *   in the cell (the world's random stream, so runs repeat), with the grid
- *   velocity there; cells a collider cuts get none (their open part is known
- *   to a cell only, and a particle placed in the solid would be projected out
- *   and pile up). Cells with more than max lose the surplus (swap-remove,
- *   highest index first) only when the trilinear particle density at their
- *   centre (flip.h) is also above the rest density FLIP_SEED_PER_CELL + 1:
- *   the particle count is FLIP's volume, and a fluid at rest density has
- *   cells above 12 by sampling noise alone, so deleting on the raw count was
- *   a steady volume sink (measured, tests/test_stress_flip_solids.c: a dam
- *   break lost 27% of its particles in 1.5 s, a drop into a pool 8%; a
- *   sphere moved through a pool 15%). Packing at moving solids is undone by
- *   flip_pressure's volume correction instead. Run it last, after the
- *   colliders. */
+ * Reads: x y z cell_type u v w. Writes: x y z vx vy vz (and zeroes the APIC
+ * columns of a moved particle when they exist).
+ *   Spare particles: in a cell holding more than max whose trilinear density
+ *   (flip.h) is also above PACKED n0 (a fluid at rest density has cells
+ *   above 12 by sampling noise alone), the surplus over max, in index order.
+ *   Holes: interior fluid cells (no side empty: holding no particle after
+ *   advection and not solid; surface cells are partly empty by nature, and
+ *   cell_type predates flip_advect, so a cell a moving blob has just left
+ *   still reads fluid) with fewer than min particles, in cell order; cells a
+ *   collider cuts are skipped (their open part is known to a cell only, and
+ *   a particle placed in the solid would be projected out and pile up).
+ *   Each hole takes spare particles, while there are any, to random
+ *   positions in the cell (the world's random stream, so runs repeat), with
+ *   the grid velocity there. Holes left over are closed and surpluses left
+ *   over spread by flip_pressure's volume correction, which acts on the same
+ *   density. Run it last, after the colliders. */
 #include "flip.h"
 
 #include <stdlib.h>

@@ -90,6 +90,8 @@ int main(int argc, char **argv)
 		{"long_slosh", suite_long_slosh, true},
 		{"stress_dfsph", suite_stress_dfsph, false},
 		{"stress_energy", suite_stress_energy, false},
+		{"stress_flip_volume", suite_stress_flip_volume, false},
+		{"long_flip_volume", suite_long_flip_volume, true},
 	};
 	const bool want_long = only && strcmp(only, "long") == 0;
 	int ran = 0;

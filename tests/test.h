@@ -78,5 +78,7 @@ void suite_long_slosh(void); /* minutes: make test-long */
 
 void suite_stress_dfsph(void);
 void suite_stress_energy(void);
+void suite_stress_flip_volume(void);
+void suite_long_flip_volume(void); /* minutes: make test-long */
 
 #endif
