@@ -293,8 +293,10 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 					deep = false; /* air */
 				}
 			}
+			if (walled || (e <= 0 && !deep))
+				continue;
 			/* the kernel's reach: all 27 cells around hold particles */
-			for (int dk = -1; dk <= 1 && deep; ++dk)
+			for (int dk = -1; dk <= 1 && deep && e <= 0; ++dk)
 				for (int dj = -1; dj <= 1 && deep; ++dj)
 					for (int di = -1; di <= 1 && deep; ++di) {
 						const int a = i + di, bb = j + dj, cc = k + dk;
