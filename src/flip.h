@@ -205,6 +205,13 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
  * flip_pressure sees no solids, as flip_boundary marks none). */
 bool eddy__flip_boundary_info(const eddy_world *w, float *margin, const eddy_vec3 **vel);
 
+/* The trilinear particle density (flip_particle_density) and the cells
+ * holding a particle (nc each) as the pipeline's flip_p2g computed them this
+ * step, for a system after it (self): false when there is no such p2g, it
+ * has not run this step, the particle count changed, or a system between
+ * them declares a write of x, y or z. */
+bool eddy__flip_p2g_density(const eddy_world *w, const eddy_system *self, const float **dens, const uint8_t **held);
+
 /* Open fraction of face `axis` (i, j, k): 1 without colliders, 0 on the sides. */
 static inline float flip_face_weight(const eddy_world *w, const flip_solid *s, int axis, size_t f, int i, int j,
                                      int k)

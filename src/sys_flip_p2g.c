@@ -54,6 +54,13 @@
 
 typedef struct p2g {
 	eddy_flip_p2g_def def;
+	/* this step's trilinear particle density and which cells hold a
+	 * particle, kept for flip_pressure (eddy__flip_p2g_density) */
+	float *dens;
+	uint8_t *held;
+	size_t cap;        /* cells allocated */
+	int64_t step;      /* the world step they were computed at, -1 never */
+	size_t particles;  /* the particle count they were computed with */
 } p2g;
 
 static const int p2g_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_AX, COL_AY, COL_AZ};
@@ -158,10 +165,21 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		memset(acc[a], 0, 2 * nf[a] * sizeof *acc[a]);
 	}
 	const size_t nc = (size_t)nx * ny * nz;
-	float *dens = eddy__arena_alloc(&w->arena, nc * sizeof *dens); /* particles per cell, trilinear */
-	if (!dens)
-		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_p2g: out of memory for the particle density");
+	p2g *pm = s->data;
+	pm->step = -1;
+	if (pm->cap < nc) {
+		free(pm->dens);
+		free(pm->held);
+		pm->dens = malloc(nc * sizeof *pm->dens);
+		pm->held = malloc(nc);
+		pm->cap = pm->dens && pm->held ? nc : 0;
+		if (!pm->cap)
+			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_p2g: out of memory for the particle density");
+	}
+	float *dens = pm->dens; /* particles per cell, trilinear */
+	uint8_t *held = pm->held;
 	memset(dens, 0, nc * sizeof *dens);
+	memset(held, 0, nc);
 	/* one pass over the particles, three face grids: the particle columns are
 	 * read once; the scatter is serial so the sums do not depend on threads */
 	const size_t sx = (size_t)nx, sy = (size_t)ny;
@@ -229,6 +247,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		const float gx = (x[i] - o.x) * inv, gy = (y[i] - o.y) * inv, gz = (z[i] - o.z) * inv;
 		const size_t c = flip_cell(w, flip_cell_index(gx, nx), flip_cell_index(gy, ny), flip_cell_index(gz, nz));
 		type[c] = EDDY_CELL_FLUID;
+		held[c] = 1;
 		/* cells whose centre (i + 1/2) is within r of the particle; at r = 0
 		 * that is at most the particle's own cell, marked above */
 		if (r <= 0)
@@ -250,17 +269,53 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 					}
 				}
 	}
+	pm->step = w->step;
+	pm->particles = np;
 	/* faces of fluid cells no particle reached get a velocity before the
 	 * solve; u_old keeps 0 there, but no particle's stencil weighs them */
 	const float *const weight[3] = {acc[0] + 1, acc[1] + 1, acc[2] + 1};
 	return eddy__flip_fill_fluid_faces(w, face, weight, 2);
 }
 
+static void destroy(eddy_system *s)
+{
+	p2g *pg = s->data;
+	if (pg) {
+		free(pg->dens);
+		free(pg->held);
+	}
+}
+
 const eddy_system_vtable eddy__kind_flip_p2g = {
 	.name = "flip_p2g",
 	.step = step,
+	.destroy = destroy,
 	.default_writes = p2g_writes,
 };
+
+bool eddy__flip_p2g_density(const eddy_world *w, const eddy_system *self, const float **dens, const uint8_t **held)
+{
+	const p2g *pg = NULL;
+	for (int q = 0; q < w->order_count; ++q) {
+		const eddy_system *c = &w->slots[w->order[q]];
+		if (c == self)
+			break;
+		if (c->vt == &eddy__kind_flip_p2g) {
+			pg = c->data;
+			continue;
+		}
+		/* a system between p2g and the caller that moves particles
+		 * invalidates them */
+		for (int k = 0; pg && k < c->write_count; ++k)
+			if (c->writes[k] == COL_X_ || c->writes[k] == COL_Y_ || c->writes[k] == COL_Z_)
+				pg = NULL;
+	}
+	if (!pg || pg->step != w->step || pg->particles != w->n)
+		return false;
+	*dens = pg->dens;
+	*held = pg->held;
+	return true;
+}
 
 eddy_system_id eddy_add_flip_p2g(eddy_world *w, const eddy_flip_p2g_def *def)
 {
@@ -269,8 +324,10 @@ eddy_system_id eddy_add_flip_p2g(eddy_world *w, const eddy_flip_p2g_def *def)
 		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_range(w, sys, "mark_radius", def->mark_radius, 0, 1.5))
 		return EDDY_NULL_SYSTEM;
-	p2g *pg = malloc(sizeof *pg);
-	if (pg)
+	p2g *pg = calloc(1, sizeof *pg);
+	if (pg) {
 		pg->def = *def;
+		pg->step = -1;
+	}
 	return eddy__add_system(w, &eddy__kind_flip_p2g, pg, p2g_reads, 9, p2g_writes, 11);
 }

@@ -76,6 +76,11 @@
  * should not turn into a burst of velocity) */
 #define VC_RATE 1.0
 #define VC_CLAMP 0.5
+/* outside the deep liquid only an excess above this counts as packing: a
+ * cell's sampling noise (8 particles under the tent kernel) is about +-0.1,
+ * and expanding the positive half of it with no contraction of the negative
+ * half would inflate a shallow layer */
+#define VC_PACKED 0.2
 
 typedef struct pressure {
 	eddy_flip_pressure_def def;
@@ -257,19 +262,24 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	double dens_max = 0, dens_min = INFINITY;
 	int corrected = 0;
 	{
-		float *dens = eddy__arena_alloc(&w->arena, nc * sizeof *dens);
-		uint8_t *held = eddy__arena_alloc(&w->arena, nc);
-		if (!dens || !held)
-			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory");
-		const float *px = eddy__col(w, COL_X_), *py = eddy__col(w, COL_Y_), *pz = eddy__col(w, COL_Z_);
-		flip_particle_density(w, px, py, pz, dens);
-		memset(held, 0, nc);
-		{
+		const float *dens;
+		const uint8_t *held;
+		if (!eddy__flip_p2g_density(w, s, &dens, &held)) {
+			/* no p2g result valid for these particles: measure here */
+			float *d = eddy__arena_alloc(&w->arena, nc * sizeof *d);
+			uint8_t *hc = eddy__arena_alloc(&w->arena, nc);
+			if (!d || !hc)
+				return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory");
+			const float *px = eddy__col(w, COL_X_), *py = eddy__col(w, COL_Y_), *pz = eddy__col(w, COL_Z_);
+			flip_particle_density(w, px, py, pz, d);
+			memset(hc, 0, nc);
 			const flip_grid g = flip_grid_of(w);
 			for (size_t p = 0; p < w->n; ++p)
-				held[flip_cell(w, flip_cell_index((px[p] - g.o.x) * g.inv, nx),
-				               flip_cell_index((py[p] - g.o.y) * g.inv, ny),
-				               flip_cell_index((pz[p] - g.o.z) * g.inv, nz))] = 1;
+				hc[flip_cell(w, flip_cell_index((px[p] - g.o.x) * g.inv, nx),
+				             flip_cell_index((py[p] - g.o.y) * g.inv, ny),
+				             flip_cell_index((pz[p] - g.o.z) * g.inv, nz))] = 1;
+			dens = d;
+			held = hc;
 		}
 		const double n0 = flip_rest_count(w);
 		for (int r = 0; r < n; ++r) {
@@ -293,7 +303,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 					deep = false; /* air */
 				}
 			}
-			if (walled || (e <= 0 && !deep))
+			if (walled || (!deep && e <= VC_PACKED))
 				continue;
 			/* the kernel's reach: all 27 cells around hold particles */
 			for (int dk = -1; dk <= 1 && deep && e <= 0; ++dk)
@@ -303,7 +313,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 						if (a >= 0 && a < nx && bb >= 0 && bb < ny && cc >= 0 && cc < nz)
 							deep = held[flip_cell(w, a, bb, cc)] != 0;
 					}
-			if (walled || (!deep && e <= 0))
+			if (walled || (!deep && e <= VC_PACKED))
 				continue;
 			dens_max = e > dens_max ? e : dens_max;
 			dens_min = e < dens_min ? e : dens_min;

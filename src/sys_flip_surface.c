@@ -121,6 +121,15 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			}
 			const int pos = (int)((c / st) % (size_t)len);
 			float sum = g[0] * in[c];
+			bool clear = pos - r >= 0 && pos + r < len;
+			for (int d = 1; d <= r && clear; ++d)
+				clear = type[c + (size_t)d * st] != EDDY_CELL_SOLID && type[c - (size_t)d * st] != EDDY_CELL_SOLID;
+			if (clear) { /* nothing to reflect at: the plain stencil */
+				for (int d = 1; d <= r; ++d)
+					sum += g[d] * (in[c + (size_t)d * st] + in[c - (size_t)d * st]);
+				out[c] = sum / gsum;
+				continue;
+			}
 			/* outward each way, reflected at a solid or the domain's side
 			 * (fluid behind a wall is not near): the mirror image of the
 			 * cell beyond a face is the cell before it */

@@ -176,8 +176,8 @@ static void check_drop(const drop_result *r, double h)
 	CHECK(fabs(r->level - r->level_expected) <= 0.15 * h);
 }
 
-/* dx = 1.25 cm (12 cells of pool, 7168 particles... 6400 + 512), 2 s: the
- * splash settles. */
+/* dx = 1.25 cm (a pool 6 cells deep, a cube 4 cells wide: 6656 particles),
+ * 2 s: the splash settles. */
 static void drop_into_pool_keeps_volume(void)
 {
 	for (int rs = 0; rs < 2; ++rs) {
@@ -187,7 +187,7 @@ static void drop_into_pool_keeps_volume(void)
 }
 
 /* One step beyond, coarser: dx = 2.5 cm, the pool 3 cells deep and the cube
- * 2 cells wide (a surface cell is a third of the depth). */
+ * 2 cells wide (a surface cell is a third of the depth; 832 particles). */
 static void drop_into_pool_coarse(void)
 {
 	for (int rs = 0; rs < 2; ++rs) {
@@ -196,7 +196,7 @@ static void drop_into_pool_coarse(void)
 	}
 }
 
-/* One step beyond, finer and longer: dx = 6.25 mm (57k particles), 4 s. */
+/* One step beyond, finer and longer: dx = 6.25 mm (53k particles), 4 s. */
 static void drop_into_pool_fine_long(void)
 {
 	for (int rs = 0; rs < 2; ++rs) {
@@ -276,9 +276,9 @@ static void check_dam(const dam_result *r, double seconds)
 	CHECK(r->n1 == r->n0);
 }
 
-/* spacing 5 mm (6400 particles, cells 1 cm), 1 s: the surge hits the far
- * wall (T = 2.9 at 0.2 s... the front reaches 5.5 a near T = 4.5) and
- * rebounds. */
+/* spacing 5 mm (6400 particles, cells 1 cm), 1 s: the surge runs the tank
+ * (5.5 a) in about 0.35 s, climbs the far wall and falls back, the most
+ * violent phase of the run. */
 static void dam_break_keeps_volume(void)
 {
 	for (int rs = 0; rs < 2; ++rs) {
@@ -288,8 +288,8 @@ static void dam_break_keeps_volume(void)
 }
 
 /* One step beyond: the issue's 25600-particle dam break (spacing 2.5 mm) for
- * 2 s, and the 5 mm one for 6 s (the water settles into a layer half a
- * column wide... a/2.75 deep). */
+ * 2 s, and the 5 mm one for 6 s (the water sloshing in a layer 2a/5.5 deep,
+ * under 4 cells). */
 static void dam_break_fine_and_long(void)
 {
 	for (int rs = 0; rs < 2; ++rs) {
