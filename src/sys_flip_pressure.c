@@ -305,14 +305,17 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			}
 			if (walled || (!deep && e <= VC_PACKED))
 				continue;
-			/* the kernel's reach: all 27 cells around hold particles */
-			for (int dk = -1; dk <= 1 && deep && e <= 0; ++dk)
-				for (int dj = -1; dj <= 1 && deep; ++dj)
-					for (int di = -1; di <= 1 && deep; ++di) {
-						const int a = i + di, bb = j + dj, cc = k + dk;
-						if (a >= 0 && a < nx && bb >= 0 && bb < ny && cc >= 0 && cc < nz)
-							deep = held[flip_cell(w, a, bb, cc)] != 0;
-					}
+			/* the kernel's reach: all 27 cells around hold particles (those
+			 * beyond the domain's sides excepted) */
+			if (deep && e <= 0) {
+				const int i0 = i > 0 ? -1 : 0, i1 = i + 1 < nx ? 1 : 0, j0 = j > 0 ? -1 : 0, j1 = j + 1 < ny ? 1 : 0,
+				          k0 = k > 0 ? -1 : 0, k1 = k + 1 < nz ? 1 : 0;
+				const long sy = nx, sz = (long)nx * ny;
+				for (int dk = k0; dk <= k1 && deep; ++dk)
+					for (int dj = j0; dj <= j1 && deep; ++dj)
+						for (int di = i0; di <= i1 && deep; ++di)
+							deep = held[c + di + dj * sy + dk * sz] != 0;
+			}
 			if (walled || (!deep && e <= VC_PACKED))
 				continue;
 			dens_max = e > dens_max ? e : dens_max;

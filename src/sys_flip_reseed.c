@@ -94,6 +94,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			}
 		}
 	}
+	if (nspare == 0)
+		return EDDY_OK; /* nothing to move: holes are flip_pressure's to close */
 	size_t used = 0;
 	/* the solids now (after the colliders moved): a cut cell's fair share is
 	 * min_per_cell times its open fraction, and no particle is placed inside */

@@ -105,6 +105,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		g[d] = expf(-(float)(d * d) / (2.0f * sf->def.sigma * sf->def.sigma));
 		gsum += d ? 2 * g[d] : g[d];
 	}
+	bool any_solid = false; /* without solid cells only the domain's sides reflect */
+	for (size_t c = 0; c < nc && !any_solid; ++c)
+		any_solid = type[c] == EDDY_CELL_SOLID;
 	float *src = phi, *dst = tmp;
 	for (int a = 0; a < 3; ++a) {
 		const int len = n[a];
@@ -122,7 +125,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			const int pos = (int)((c / st) % (size_t)len);
 			float sum = g[0] * in[c];
 			bool clear = pos - r >= 0 && pos + r < len;
-			for (int d = 1; d <= r && clear; ++d)
+			for (int d = 1; d <= r && clear && any_solid; ++d)
 				clear = type[c + (size_t)d * st] != EDDY_CELL_SOLID && type[c - (size_t)d * st] != EDDY_CELL_SOLID;
 			if (clear) { /* nothing to reflect at: the plain stencil */
 				for (int d = 1; d <= r; ++d)
