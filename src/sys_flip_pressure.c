@@ -287,6 +287,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			if (type[c] != EDDY_CELL_FLUID || (sd.any && sd.open[c] < 1))
 				continue;
 			double e = (double)dens[c] / n0 - 1.0;
+			if (has_air[r] && e <= VC_PACKED)
+				continue; /* not deep, not packed: no source, whatever the neighbours */
 			/* next to a solid the kernel reaches into it; deep: no air side
 			 * on the cell or a face neighbour, a particle in all 27 cells of
 			 * the kernel's reach (see the header) */
