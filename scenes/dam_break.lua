@@ -24,7 +24,8 @@ local fluid = eddy.fluid {
 	-- c = 20 m/s, 10 x the front speed
 	wcsph = { stiffness = eddy.param("stiffness", 400), artificial = eddy.param("alpha", 0.05) },
 	dfsph = { tolerance = eddy.param("tolerance", 0.001), artificial = eddy.param("alpha", 0.05) },
-	flip = { solver = solver, tolerance = eddy.param("tolerance", 1e-6), flip_ratio = eddy.param("flip_ratio", 0.95) },
+	flip = { solver = solver, tolerance = eddy.param("tolerance", 1e-6), flip_ratio = eddy.param("flip_ratio", 0.95),
+	         reseed = eddy.param("reseed", false) },
 	pic = { solver = solver, tolerance = eddy.param("tolerance", 1e-6) },
 	apic = { solver = solver, tolerance = eddy.param("tolerance", 1e-6) },
 }

@@ -205,6 +205,13 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
  * flip_pressure sees no solids, as flip_boundary marks none). */
 bool eddy__flip_boundary_info(const eddy_world *w, float *margin, const eddy_vec3 **vel);
 
+/* The trilinear particle density (flip_particle_density) and the cells
+ * holding a particle (nc each) as the pipeline's flip_p2g computed them this
+ * step, for a system after it (self): false when there is no such p2g, it
+ * has not run this step, the particle count changed, or a system between
+ * them declares a write of x, y or z. */
+bool eddy__flip_p2g_density(const eddy_world *w, const eddy_system *self, const float **dens, const uint8_t **held);
+
 /* Open fraction of face `axis` (i, j, k): 1 without colliders, 0 on the sides. */
 static inline float flip_face_weight(const eddy_world *w, const flip_solid *s, int axis, size_t f, int i, int j,
                                      int k)
@@ -244,6 +251,20 @@ static inline void flip_particle_density(const eddy_world *w, const float *px, c
 /* Particles per cell of the engine's seeding (2 x 2 x 2, Zhu & Bridson):
  * flip_reseed's bounds and the volume correction's rest density refer to it. */
 enum { FLIP_SEED_PER_CELL = 8 };
+
+/* The rest particle count per cell n0 the volume bookkeeping refers to (p2g's
+ * fill fraction, flip_pressure's volume correction, flip_reseed): the
+ * emitters' lattice, (cell_size / spacing)^3, or FLIP_SEED_PER_CELL when no
+ * emitter set a spacing (particles added through the API). One particle is
+ * dx^3 / n0 of liquid. */
+static inline double flip_rest_count(const eddy_world *w)
+{
+	if (w->length_scale > 0) {
+		const double r = w->def.cell_size / (double)w->length_scale;
+		return r * r * r;
+	}
+	return FLIP_SEED_PER_CELL;
+}
 
 /* ---- the Poisson system ---------------------------------------------------
  * Rows are fluid cells in cell-index order, so a row's -x, -y, -z neighbours

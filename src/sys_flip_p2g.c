@@ -12,8 +12,25 @@
  *   (eddy__flip_fill_fluid_faces in sys_flip_extrapolate.c), so a uniform
  *   velocity has no divergence off the grid axes too
  *   cell_type = fluid where a particle is (or within mark_radius cells of a
- *   particle's position), air elsewhere; flip_phi = -1 fluid, +1 empty (the
- *   paper's marker field, smoothed later by flip_surface).
+ *   particle's position), air elsewhere;
+ *   flip_phi = 1 - 2 min(rho_c / n0, 2), rho_c = sum_p W_cp the trilinear
+ *   particle count at the cell centre (flip.h's flip_particle_density) and
+ *   n0 = flip_rest_count, the count the seeding put in a cell: -1 in a cell
+ *   at rest density, +1 with no particle near, 1 - 2 f in between, f the
+ *   cell's fill fraction (a marker field after Zhu & Bridson, smoothed later
+ *   by flip_surface). With mark_radius > 0 the marker is the binary one of
+ *   the particle-radius rule instead (-1 in every cell holding or within r of
+ *   a particle): the thickened blob is what that option asks for, and a fill
+ *   fraction inside a -1 halo would make phi non-monotone there. One particle is
+ *   dx^3 / n0 of liquid and the weights W_cp sum to 1, so sum_c (1 - phi_c)/2
+ *   dx^3, the volume flip_pressure publishes, is the particles' volume
+ *   N dx^3 / n0 (cells above 2 n0 excepted): the surface carries exactly the
+ *   liquid the particles do, where a binary marker (-1 in every cell holding
+ *   a particle) counts a surface cell holding one particle as full. Values
+ *   below -1 (packed cells) are kept down to -3 (f = 2) so that the blur
+ *   averages the sampling noise out before the volume's clamp to [0, 1]:
+ *   clamping every cell at f = 1 would cut each cell's positive noise and
+ *   bias the volume low by a fraction of the noise.
  * APIC (Jiang, Schroeder, Selle, Teran & Stomakhin 2015, "The affine
  * particle-in-cell method", SIGGRAPH, eq. 9 with the trilinear B D^-1 = C of
  * section 5.3): each particle carries one vector c_a per face grid a
@@ -37,6 +54,13 @@
 
 typedef struct p2g {
 	eddy_flip_p2g_def def;
+	/* this step's trilinear particle density and which cells hold a
+	 * particle, kept for flip_pressure (eddy__flip_p2g_density) */
+	float *dens;
+	uint8_t *held;
+	size_t cap;        /* cells allocated */
+	int64_t step;      /* the world step they were computed at, -1 never */
+	size_t particles;  /* the particle count they were computed with */
 } p2g;
 
 static const int p2g_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_AX, COL_AY, COL_AZ};
@@ -103,6 +127,21 @@ static inline void splat_affine(float *restrict acc, size_t sy, size_t sz, flip_
 
 /* x_f - x_p (m) at the i0 sample of an axis with sample offset off (cells);
  * t is the particle's grid coordinate (cells) */
+/* The particle's trilinear weights at the cell centres around it (the tent
+ * of flip_particle_density in flip.h, constant extension at the sides). */
+static inline void splat_density(float *restrict dens, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az)
+{
+	const size_t j[2] = {(size_t)ay.i0 * sy, (size_t)ay.i1 * sy}, k[2] = {(size_t)az.i0 * sz, (size_t)az.i1 * sz};
+	const float wy[2] = {1.0f - ay.w1, ay.w1}, wz[2] = {1.0f - az.w1, az.w1}, wx0 = 1.0f - ax.w1, wx1 = ax.w1;
+	for (int c = 0; c < 2; ++c)
+		for (int b = 0; b < 2; ++b) {
+			float *row = dens + k[c] + j[b];
+			const float wyz = wz[c] * wy[b];
+			row[ax.i0] += wyz * wx0;
+			row[ax.i1] += wyz * wx1;
+		}
+}
+
 static inline float face_offset(flip_axis a, float off, float t, float h) { return ((float)a.i0 + off - t) * h; }
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
@@ -125,6 +164,22 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_p2g: out of memory for splat weights");
 		memset(acc[a], 0, 2 * nf[a] * sizeof *acc[a]);
 	}
+	const size_t nc = (size_t)nx * ny * nz;
+	p2g *pm = s->data;
+	pm->step = -1;
+	if (pm->cap < nc) {
+		free(pm->dens);
+		free(pm->held);
+		pm->dens = malloc(nc * sizeof *pm->dens);
+		pm->held = malloc(nc);
+		pm->cap = pm->dens && pm->held ? nc : 0;
+		if (!pm->cap)
+			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_p2g: out of memory for the particle density");
+	}
+	float *dens = pm->dens; /* particles per cell, trilinear */
+	uint8_t *held = pm->held;
+	memset(dens, 0, nc * sizeof *dens);
+	memset(held, 0, nc);
 	/* one pass over the particles, three face grids: the particle columns are
 	 * read once; the scatter is serial so the sums do not depend on threads */
 	const size_t sx = (size_t)nx, sy = (size_t)ny;
@@ -153,6 +208,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			splat_affine(acc[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, pvx, cx, du, h);
 			splat_affine(acc[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, pvy, cy, dv, h);
 			splat_affine(acc[2], sx, sx * sy, g.cx, g.cy, g.fz, pvz, cz, dw, h);
+			splat_density(dens, sx, sx * sy, g.cx, g.cy, g.cz);
 		}
 	}
 	for (size_t i = 0; i < np && !cu[0]; ++i) {
@@ -164,6 +220,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		splat(acc[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, pvx);
 		splat(acc[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, pvy);
 		splat(acc[2], sx, sx * sy, g.cx, g.cy, g.fz, pvz);
+		splat_density(dens, sx, sx * sy, g.cx, g.cy, g.cz);
 	}
 	for (int a = 0; a < 3; ++a) {
 		float *f = face[a];
@@ -175,19 +232,27 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 
 	uint8_t *type = (uint8_t *)w->columns[COL_CELL_TYPE].data;
 	float *phi = eddy__col(w, COL_FLIP_PHI);
-	const size_t nc = (size_t)nx * ny * nz;
-	for (size_t c = 0; c < nc; ++c)
-		phi[c] = 1.0f;
+	/* the fill fraction of every cell from the particle density: one
+	 * particle is 1 / FLIP_SEED_PER_CELL of a cell, so sum (1 - phi) / 2
+	 * over the cells is the particles' volume (up to cells above rest
+	 * density, which flip_pressure's volume correction drains) */
+	const float inv_n0 = (float)(1.0 / flip_rest_count(w));
+	for (size_t c = 0; c < nc; ++c) {
+		const float f = dens[c] * inv_n0;
+		phi[c] = 1.0f - 2.0f * (f < 2.0f ? f : 2.0f);
+		type[c] = EDDY_CELL_AIR;
+	}
 	const float r = pg->def.mark_radius, r2 = r * r;
 	for (size_t i = 0; i < np; ++i) {
 		const float gx = (x[i] - o.x) * inv, gy = (y[i] - o.y) * inv, gz = (z[i] - o.z) * inv;
 		const size_t c = flip_cell(w, flip_cell_index(gx, nx), flip_cell_index(gy, ny), flip_cell_index(gz, nz));
 		type[c] = EDDY_CELL_FLUID;
-		phi[c] = -1.0f;
+		held[c] = 1;
 		/* cells whose centre (i + 1/2) is within r of the particle; at r = 0
 		 * that is at most the particle's own cell, marked above */
 		if (r <= 0)
 			continue;
+		phi[c] = -1.0f; /* the radius rule's binary marker (see the header) */
 		int i0 = ceil_int(gx - r - 0.5f), i1 = floor_int(gx + r - 0.5f);
 		int j0 = ceil_int(gy - r - 0.5f), j1 = floor_int(gy + r - 0.5f);
 		int k0 = ceil_int(gz - r - 0.5f), k1 = floor_int(gz + r - 0.5f);
@@ -200,21 +265,57 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 					if (dx * dx + dy * dy + dz * dz <= r2) {
 						const size_t q = flip_cell(w, ii, jj, kk);
 						type[q] = EDDY_CELL_FLUID;
-						phi[q] = -1.0f;
+						phi[q] = -1.0f; /* the radius marks the cell full */
 					}
 				}
 	}
+	pm->step = w->step;
+	pm->particles = np;
 	/* faces of fluid cells no particle reached get a velocity before the
 	 * solve; u_old keeps 0 there, but no particle's stencil weighs them */
 	const float *const weight[3] = {acc[0] + 1, acc[1] + 1, acc[2] + 1};
 	return eddy__flip_fill_fluid_faces(w, face, weight, 2);
 }
 
+static void destroy(eddy_system *s)
+{
+	p2g *pg = s->data;
+	if (pg) {
+		free(pg->dens);
+		free(pg->held);
+	}
+}
+
 const eddy_system_vtable eddy__kind_flip_p2g = {
 	.name = "flip_p2g",
 	.step = step,
+	.destroy = destroy,
 	.default_writes = p2g_writes,
 };
+
+bool eddy__flip_p2g_density(const eddy_world *w, const eddy_system *self, const float **dens, const uint8_t **held)
+{
+	const p2g *pg = NULL;
+	for (int q = 0; q < w->order_count; ++q) {
+		const eddy_system *c = &w->slots[w->order[q]];
+		if (c == self)
+			break;
+		if (c->vt == &eddy__kind_flip_p2g) {
+			pg = c->data;
+			continue;
+		}
+		/* a system between p2g and the caller that moves particles
+		 * invalidates them */
+		for (int k = 0; pg && k < c->write_count; ++k)
+			if (c->writes[k] == COL_X_ || c->writes[k] == COL_Y_ || c->writes[k] == COL_Z_)
+				pg = NULL;
+	}
+	if (!pg || pg->step != w->step || pg->particles != w->n)
+		return false;
+	*dens = pg->dens;
+	*held = pg->held;
+	return true;
+}
 
 eddy_system_id eddy_add_flip_p2g(eddy_world *w, const eddy_flip_p2g_def *def)
 {
@@ -223,8 +324,10 @@ eddy_system_id eddy_add_flip_p2g(eddy_world *w, const eddy_flip_p2g_def *def)
 		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_range(w, sys, "mark_radius", def->mark_radius, 0, 1.5))
 		return EDDY_NULL_SYSTEM;
-	p2g *pg = malloc(sizeof *pg);
-	if (pg)
+	p2g *pg = calloc(1, sizeof *pg);
+	if (pg) {
 		pg->def = *def;
+		pg->step = -1;
+	}
 	return eddy__add_system(w, &eddy__kind_flip_p2g, pg, p2g_reads, 9, p2g_writes, 11);
 }

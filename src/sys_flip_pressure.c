@@ -30,19 +30,29 @@
  * coupled SPH and particle level set fluid simulation", and Kugelstadt et al.
  * 2019, "Implicit density projection for volume conserving liquids", which
  * both drive the particle density back to rest through the pressure solve):
- * FLIP's particle density is its volume, and colliders that project particles
- * out of a moving solid pack them against it. Where a fluid cell and its six
- * neighbours are interior (no air side, not cut) and within VC_REACH dx of a
- * solid, the trilinear particle density rho_i (particles per cell) above the
- * rest density n0 = FLIP_SEED_PER_CELL adds the source
- *   s_i = VC_RATE min(rho_i / n0 - 1, VC_CLAMP) / dt,
- * so a packed cell expands by a fraction of its excess per step instead of
- * flip_reseed deleting the surplus (which loses the volume for good). Under-
- * full cells get no sink: flip_reseed fills them. The reach is limited because
- * away from solids the same source raised the 5 s slosh's volume error from
- * 3.5% to 5.5% (the marker volume there is not the particle count), and a
- * wider reach pushed a particle through a sphere collider out of the domain in
- * the sphere-and-plane test.
+ * FLIP's particles are its volume (flip_p2g's marker counts dx^3 / n0 per
+ * particle, n0 = flip_rest_count), but a discretely divergence-free grid
+ * velocity does not keep them evenly spread: advection and the colliders'
+ * projection pack them in places and thin them in others. With rho_i the
+ * trilinear particle count at the centre of fluid cell i (not cut by a
+ * solid), e_i = rho_i / n0 - 1 adds the source
+ *   s_i = VC_RATE clamp(e_i, -VC_CLAMP, VC_CLAMP) / dt
+ * where e_i > 0 in any such cell (a partly filled cell cannot be above rest
+ * density, so an excess is packing wherever it is), and where e_i < 0 only in
+ * deep cells: neither the cell nor a face neighbour has an air side, and all
+ * 27 cells of the kernel's reach hold a particle (cells beyond the domain's
+ * side do not count: the density extends constantly there). Near the
+ * surface a low count is a partly filled cell, not a thinned one; a cell
+ * marked fluid without particles (mark_radius) or a blob's edge is not
+ * liquid at rest density either. Cells a solid cuts, and cells with a face
+ * to a cut or solid-typed cell, get no source either way: their open part is
+ * known to a cell only and the kernel reaches into the solid. A packed cell
+ * expands and a thinned one contracts by their whole error per step
+ * (VC_RATE 1, the implicit density projection's target), moving particles
+ * rather than creating or deleting them, so with flip_reseed relocating
+ * instead of deleting (sys_flip_reseed.c) the particle count, and with it the
+ * volume, is conserved. The clamp keeps a splash or a pile-up from turning
+ * into a burst of velocity.
  * A fluid component with no air side (closed box, sealed pocket, one walled-in
  * cell) makes A singular: its right-hand side is made zero-mean and its first
  * cell pinned (q = 0, links to it dropped), which solves the singular system
@@ -66,11 +76,13 @@
 /* volume correction: fraction of the density error removed per step, and the
  * largest error acted on (beyond it a cell is a splash or a pile-up the source
  * should not turn into a burst of velocity) */
-#define VC_RATE 0.5
+#define VC_RATE 1.0
 #define VC_CLAMP 0.5
-/* cells nearer a solid than this many dx get the correction: the packing it
- * undoes is the colliders' projection of particles onto their surface */
-#define VC_REACH 2.0
+/* outside the deep liquid only an excess above this counts as packing: a
+ * cell's sampling noise (8 particles under the tent kernel) is about +-0.1,
+ * and expanding the positive half of it with no contraction of the negative
+ * half would inflate a shallow layer */
+#define VC_PACKED 0.2
 
 typedef struct pressure {
 	eddy_flip_pressure_def def;
@@ -252,33 +264,71 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			}
 
 	/* volume correction: a divergence source where the particles are packed
-	 * or spread (see the header) */
+	 * or thinned (see the header) */
 	double dens_max = 0, dens_min = INFINITY;
 	int corrected = 0;
-	if (sd.any) { /* only near solids (VC_REACH): nothing to do without them */
-		float *dens = eddy__arena_alloc(&w->arena, nc * sizeof *dens);
-		if (!dens)
-			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory");
-		flip_particle_density(w, eddy__col(w, COL_X_), eddy__col(w, COL_Y_), eddy__col(w, COL_Z_), dens);
+	{
+		const float *dens;
+		const uint8_t *held;
+		if (!eddy__flip_p2g_density(w, s, &dens, &held)) {
+			/* no p2g result valid for these particles: measure here */
+			float *d = eddy__arena_alloc(&w->arena, nc * sizeof *d);
+			uint8_t *hc = eddy__arena_alloc(&w->arena, nc);
+			if (!d || !hc)
+				return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory");
+			const float *px = eddy__col(w, COL_X_), *py = eddy__col(w, COL_Y_), *pz = eddy__col(w, COL_Z_);
+			flip_particle_density(w, px, py, pz, d);
+			memset(hc, 0, nc);
+			const flip_grid g = flip_grid_of(w);
+			for (size_t p = 0; p < w->n; ++p)
+				hc[flip_cell(w, flip_cell_index((px[p] - g.o.x) * g.inv, nx),
+				             flip_cell_index((py[p] - g.o.y) * g.inv, ny),
+				             flip_cell_index((pz[p] - g.o.z) * g.inv, nz))] = 1;
+			dens = d;
+			held = hc;
+		}
+		const double n0 = flip_rest_count(w);
 		for (int r = 0; r < n; ++r) {
 			const int c = cell_of[r];
-			if (has_air[r] || sd.open[c] < 1 || sd.dist[c] > VC_REACH * h || type[c] != EDDY_CELL_FLUID)
+			if (type[c] != EDDY_CELL_FLUID || (sd.any && sd.open[c] < 1))
 				continue;
-			/* the kernel reaches one cell: every face neighbour must be an
-			 * interior fluid cell too, not cut, not air */
-			bool deep = true;
-			for (int d = 0; d < 6 && deep; ++d) {
+			double e = (double)dens[c] / n0 - 1.0;
+			if (has_air[r] && e <= VC_PACKED)
+				continue; /* not deep, not packed: no source, whatever the neighbours */
+			/* next to a solid the kernel reaches into it; deep: no air side
+			 * on the cell or a face neighbour, a particle in all 27 cells of
+			 * the kernel's reach (see the header) */
+			const int i = c % nx, j = (c / nx) % ny, k = c / (nx * ny);
+			bool deep = !has_air[r], walled = false;
+			for (int d = 0; d < 6; ++d) {
 				const int o = A.nb[6 * r + d];
-				deep = o >= 0 && !has_air[o] && sd.open[cell_of[o]] >= 1;
+				size_t f;
+				if (o >= 0) {
+					walled |= sd.any && sd.open[cell_of[o]] < 1;
+					deep &= !has_air[o];
+				} else if (across(w, i, j, k, d, &f) >= 0) {
+					walled |= type[across(w, i, j, k, d, &f)] == EDDY_CELL_SOLID;
+					deep = false; /* air */
+				}
 			}
-			if (!deep)
+			if (walled || (!deep && e <= VC_PACKED))
 				continue;
-			double e = (double)dens[c] / FLIP_SEED_PER_CELL - 1.0;
+			/* the kernel's reach: all 27 cells around hold particles (those
+			 * beyond the domain's sides excepted) */
+			if (deep && e <= 0) {
+				const int i0 = i > 0 ? -1 : 0, i1 = i + 1 < nx ? 1 : 0, j0 = j > 0 ? -1 : 0, j1 = j + 1 < ny ? 1 : 0,
+				          k0 = k > 0 ? -1 : 0, k1 = k + 1 < nz ? 1 : 0;
+				const long sy = nx, sz = (long)nx * ny;
+				for (int dk = k0; dk <= k1 && deep; ++dk)
+					for (int dj = j0; dj <= j1 && deep; ++dj)
+						for (int di = i0; di <= i1 && deep; ++di)
+							deep = held[c + di + dj * sy + dk * sz] != 0;
+			}
+			if (walled || (!deep && e <= VC_PACKED))
+				continue;
 			dens_max = e > dens_max ? e : dens_max;
 			dens_min = e < dens_min ? e : dens_min;
-			if (e <= 0)
-				continue; /* under-full cells: flip_reseed's business (see the header) */
-			e = e > VC_CLAMP ? VC_CLAMP : e;
+			e = e > VC_CLAMP ? VC_CLAMP : e < -VC_CLAMP ? -VC_CLAMP : e;
 			b[r] += VC_RATE * e * h / ctx->dt; /* + dx s_i, s_i = rate e / dt */
 			corrected++;
 		}

@@ -1,27 +1,27 @@
 /* SPDX-License-Identifier: MIT */
-/* flip_reseed: keeps the particle density in fluid cells between min and max
- * per cell, against the clumping and thinning that make FLIP's volume drift
- * (docs/validation.md hard case 13; Zhu & Bridson keep about 8 per cell).
+/* flip_reseed: keeps the particle count in fluid cells between min and max
+ * per cell, against the clumping and thinning that leave FLIP's grid cells
+ * under-sampled (docs/validation.md hard case 13; Zhu & Bridson keep about 8
+ * per cell), without changing the number of particles: a particle is
+ * dx^3 / n0 of liquid (n0 = flip_rest_count, flip.h), so creating or deleting
+ * one creates or deletes volume, and reseeding moves particles instead.
  *
- * Reads: x y z cell_type u v w. Writes: x y z vx vy vz.
- *   Interior fluid cells (no side empty: holding no particle after advection
- *   and not solid; surface cells are partly empty by nature, and cell_type
- *   predates flip_advect, so a cell a moving blob has just left still reads
- *   fluid and must not be refilled) with fewer than min particles get new
- *   ones at random positions
- *   in the cell (the world's random stream, so runs repeat), with the grid
- *   velocity there; cells a collider cuts get none (their open part is known
- *   to a cell only, and a particle placed in the solid would be projected out
- *   and pile up). Cells with more than max lose the surplus (swap-remove,
- *   highest index first) only when the trilinear particle density at their
- *   centre (flip.h) is also above the rest density FLIP_SEED_PER_CELL + 1:
- *   the particle count is FLIP's volume, and a fluid at rest density has
- *   cells above 12 by sampling noise alone, so deleting on the raw count was
- *   a steady volume sink (measured, tests/test_stress_flip_solids.c: a dam
- *   break lost 27% of its particles in 1.5 s, a drop into a pool 8%; a
- *   sphere moved through a pool 15%). Packing at moving solids is undone by
- *   flip_pressure's volume correction instead. Run it last, after the
- *   colliders. */
+ * Reads: x y z cell_type u v w. Writes: x y z vx vy vz (and zeroes the APIC
+ * columns of a moved particle when they exist).
+ *   Spare particles: in a cell holding more than max whose trilinear density
+ *   (flip.h) is also above PACKED n0 (a fluid at rest density has cells
+ *   above 12 by sampling noise alone), the surplus over max, in index order.
+ *   Holes: interior fluid cells (no side empty: holding no particle after
+ *   advection and not solid; surface cells are partly empty by nature, and
+ *   cell_type predates flip_advect, so a cell a moving blob has just left
+ *   still reads fluid) with fewer than min particles, in cell order; cells a
+ *   collider cuts are skipped (their open part is known to a cell only, and
+ *   a particle placed in the solid would be projected out and pile up).
+ *   Each hole takes spare particles, while there are any, to random
+ *   positions in the cell (the world's random stream, so runs repeat), with
+ *   the grid velocity there. Holes left over are closed and surpluses left
+ *   over spread by flip_pressure's volume correction, which acts on the same
+ *   density. Run it last, after the colliders. */
 #include "flip.h"
 
 #include <stdlib.h>
@@ -41,6 +41,11 @@ eddy_flip_reseed_def eddy_default_flip_reseed_def(void)
 	d.max_per_cell = 12;
 	return d;
 }
+
+/* A cell gives particles only above this multiple of the rest count n0 in
+ * trilinear density as well as above max_per_cell in count: at rest density
+ * sampling noise alone puts cells above 12. */
+#define PACKED 1.125
 
 static long cell_of(const eddy_world *w, float x, float y, float z)
 {
@@ -72,18 +77,26 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			count[cell_of(w, x[i], y[i], z[i])]++;
 	}
 	float *dens = eddy__arena_alloc(&w->arena, nc * sizeof *dens);
-	if (!dens)
+	size_t *spare = eddy__arena_alloc(&w->arena, (w->n + 1) * sizeof *spare);
+	if (!dens || !spare)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_reseed: out of memory");
 	flip_particle_density(w, eddy__col(w, COL_X_), eddy__col(w, COL_Y_), eddy__col(w, COL_Z_), dens);
-	/* surplus: remove from the highest index down, so indices still to visit stay valid */
-	for (size_t i = w->n; i-- > 0;) {
+	/* surplus: particles a packed cell can give (counted, not removed) */
+	const double n0 = flip_rest_count(w);
+	size_t nspare = 0;
+	{
 		const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
-		const long c = cell_of(w, x[i], y[i], z[i]);
-		if (count[c] > rs->def.max_per_cell && dens[c] > FLIP_SEED_PER_CELL + 1) {
-			count[c]--;
-			eddy_world_remove_particle(w, i);
+		for (size_t i = 0; i < w->n; ++i) {
+			const long c = cell_of(w, x[i], y[i], z[i]);
+			if (count[c] > rs->def.max_per_cell && dens[c] > PACKED * n0) {
+				count[c]--;
+				spare[nspare++] = i;
+			}
 		}
 	}
+	if (nspare == 0)
+		return EDDY_OK; /* nothing to move: holes are flip_pressure's to close */
+	size_t used = 0;
 	/* the solids now (after the colliders moved): a cut cell's fair share is
 	 * min_per_cell times its open fraction, and no particle is placed inside */
 	float margin = 0;
@@ -110,21 +123,26 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 				if (empty(type, count, c - sx) || empty(type, count, c + sx) || empty(type, count, c - sy) ||
 				    empty(type, count, c + sy) || empty(type, count, c - sz) || empty(type, count, c + sz))
 					continue;
-				const size_t add = (size_t)(rs->def.min_per_cell - count[c]);
-				size_t first;
-				eddy_status st = eddy__append_particles(w, add, &first);
-				if (st != EDDY_OK)
-					return st;
+				size_t add = (size_t)(rs->def.min_per_cell - count[c]);
+				add = add < nspare - used ? add : nspare - used;
+				if (add == 0)
+					continue; /* no spare particle: flip_pressure's correction closes the gap */
 				float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 				float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 				const float *u = eddy__col(w, COL_FACE_U), *v = eddy__col(w, COL_FACE_V), *wv = eddy__col(w, COL_FACE_W);
-				for (size_t q = first; q < first + add; ++q) {
+				for (size_t a = 0; a < add; ++a) {
+					const size_t q = spare[used++];
 					const eddy_vec3 p = {(float)(o.x + (i + eddy__rand01(&w->rng)) * h),
 					                     (float)(o.y + (j + eddy__rand01(&w->rng)) * h),
 					                     (float)(o.z + (k + eddy__rand01(&w->rng)) * h)};
 					const eddy_vec3 gv = flip_velocity_at(&grid, u, v, wv, p);
 					x[q] = p.x, y[q] = p.y, z[q] = p.z;
 					vx[q] = gv.x, vy[q] = gv.y, vz[q] = gv.z;
+					for (int m = 0; m < 9; ++m) {
+						float *cm = eddy__col(w, COL_APIC_UX + m); /* NULL unless APIC's g2p runs */
+						if (cm)
+							cm[q] = 0; /* the affine velocity of the old place is not the new one's */
+					}
 				}
 				count[c] += (int)add;
 			}

@@ -96,6 +96,8 @@ int main(int argc, char **argv)
 		{"stress_energy", suite_stress_energy, false},
 		{"mesh", suite_mesh, false},
 		{"long_mesh", suite_long_mesh, true},
+		{"stress_flip_volume", suite_stress_flip_volume, false},
+		{"long_flip_volume", suite_long_flip_volume, true},
 	};
 	const bool want_long = only && strcmp(only, "long") == 0;
 	int ran = 0;

@@ -86,5 +86,7 @@ void suite_stress_dfsph(void);
 void suite_mesh(void);
 void suite_long_mesh(void); /* minutes: make test-long */
 void suite_stress_energy(void);
+void suite_stress_flip_volume(void);
+void suite_long_flip_volume(void); /* minutes: make test-long */
 
 #endif

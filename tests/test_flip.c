@@ -1024,7 +1024,10 @@ static void threads_do_not_change_results(void)
 	CHECK(hash[0] == hash[1]);
 }
 
-/* Reseeding keeps interior cells within [3, 12] particles. */
+/* Reseeding fills interior cells below 3 particles from a packed cell's
+ * surplus over 12, moving particles rather than creating them: the 7 inner
+ * cells holding 1 take 2 each from the cell holding 28, and the count (the
+ * liquid's volume, dx^3 / 8 a particle) is unchanged. */
 static void reseed_keeps_counts(void)
 {
 	flip_setup s = setup_default();
@@ -1039,8 +1042,8 @@ static void reseed_keeps_counts(void)
 		for (int j = 1; j < 5; ++j)
 			for (int i = 1; i < 5; ++i)
 				p[n++] = (eddy_vec3){(float)((i + 0.5) * 0.1), (float)((j + 0.5) * 0.1), (float)((k + 0.5) * 0.1)};
-	for (int q = 0; q < 27; ++q)
-		p[n++] = (eddy_vec3){0.21f + 0.002f * q, 0.21f, 0.21f};
+	for (int q = 0; q < 27; ++q) /* a 3 x 3 x 3 clump at the centre of cell (2, 2, 2) */
+		p[n++] = (eddy_vec3){0.24f + 0.01f * (q % 3), 0.24f + 0.01f * (q / 3 % 3), 0.24f + 0.01f * (q / 9)};
 	CHECK(eddy_world_add_particles(w, (size_t)n, p, NULL) == EDDY_OK);
 	if (step_frames(w, 1)) {
 		size_t m;
@@ -1056,8 +1059,9 @@ static void reseed_keeps_counts(void)
 					lo = count[i + 6 * (j + 6 * k)] < lo ? count[i + 6 * (j + 6 * k)] : lo;
 					hi = count[i + 6 * (j + 6 * k)] > hi ? count[i + 6 * (j + 6 * k)] : hi;
 				}
-		printf("    reseed: interior cells hold %d..%d particles, %zu in all\n", lo, hi, m);
-		CHECK(lo >= 3 && hi <= 12);
+		printf("    reseed: interior cells hold %d..%d particles, %zu in all (%d before)\n", lo, hi, m, n);
+		CHECK(lo >= 3 && hi <= 28 - 7 * 2);
+		CHECK(m == (size_t)n);
 	}
 	eddy_destroy_world(w);
 }

@@ -73,15 +73,19 @@ static slosh_result run_slosh(const char *method, const char *spacing, const cha
 }
 
 /* FLIP 0.95 and APIC at 3.125 mm, 3 s (3.4 periods, 6 peaks): the period
- * within 3% (measured: +0.7% for both); the damping ratios printed. The
- * measured ratios are close (0.037 each, here one cell thick; 0.042 FLIP,
- * 0.037 APIC four cells thick): at this resolution the damping comes from
+ * within 3% (measured: +0.2% for both); the damping ratios printed. The
+ * measured ratios are small (0.000 to 0.005 FLIP, 0.005 to 0.007 APIC
+ * since flip_p2g's marker is the particles' fill fraction; 0.04 each with a
+ * binary marker, whose surface moved by whole cells): the damping comes from
  * the free surface's capture on the grid and the staircase start more than
- * from the transfer, so what is asserted is that APIC is not materially more
- * dissipative than FLIP (within 20%, the scatter between runs of different
- * thickness), not that it is less. On the Taylor-Green vortex, where the
- * transfer is all there is, APIC's effective viscosity is below FLIP 0.95's
- * (tests/test_flip.c). */
+ * from the transfer, so what is asserted is that FLIP does not gain
+ * amplitude and APIC is not materially more dissipative than FLIP: within
+ * 20% (the scatter between runs of different thickness) plus 0.006, twice
+ * the resolution of zeta here (eta is read from the top particles, whose
+ * heights step by particle layers: an error of a few % of A per peak over 5
+ * half cycles is about 0.003 in zeta), not that it is less. On the
+ * Taylor-Green vortex, where the transfer is all there is, APIC's effective
+ * viscosity is below FLIP 0.95's (tests/test_flip.c). */
 static void slosh_flip_apic(void)
 {
 	const slosh_result flip = run_slosh("flip", "0.003125", "2", 3.0);
@@ -93,8 +97,8 @@ static void slosh_flip_apic(void)
 	CHECK(flip.peaks >= 4 && apic.peaks >= 4);
 	CHECK(fabs(flip.period_err) <= 0.03);
 	CHECK(fabs(apic.period_err) <= 0.03);
-	CHECK(flip.damping > 0 && flip.damping < 0.1);
-	CHECK(apic.damping > 0 && apic.damping <= 1.2 * flip.damping);
+	CHECK(flip.damping > -0.003 && flip.damping < 0.1); /* no growth beyond the resolution */
+	CHECK(apic.damping > -0.003 && apic.damping <= 1.2 * fmax(flip.damping, 0) + 0.006);
 }
 
 /* APIC's g2p runs in parallel above 16384 particles (25600 here) and its

@@ -202,9 +202,10 @@ function Group:expand(world)
 		if m == "apic" then g2p = { transfer = "apic" } end
 		add("flip_g2p", opt(g2p))
 		add("flip_advect", {})
-		-- reseeding only on request: in a splashing flow on a coarse grid it
-		-- fills thinning jets and adds volume (the FLIP pour: +85% with it,
-		-- +14% without, the rest being surface cells counted whole)
+		-- reseeding only on request: it moves particles from packed cells
+		-- into holes inside the liquid and keeps their count, so the volume
+		-- is kept either way (the FLIP pour ends within 0.1% of its
+		-- particles' volume with it and without)
 		if d.reseed then add("flip_reseed", {}) end
 		if d.tank then add("collide_box", { min = d.tank.min, max = d.tank.max, inside = true }) end
 	end
