@@ -297,8 +297,14 @@ static void slosh_all_methods(void)
 	CHECK(fabs(pic.period_err) <= 0.03);
 	CHECK(fabs(apic.period_err) <= 0.03);
 	CHECK(fabs(wcsph.period_err) <= 0.03);
-	CHECK(apic.damping > 0 && apic.damping <= flip.damping);
-	CHECK(pic.damping > 1.5 * apic.damping);
+	/* The grid methods conserve the wave's volume since the fill-fraction
+	 * marker (flip_p2g): all three measure a damping ratio within a few
+	 * resolutions (about 0.003, the fast test's) of water's 0.001, PIC no
+	 * longer clearly above APIC. None may grow, and none may damp like the
+	 * SPH methods (0.03-0.06). */
+	CHECK(flip.damping > -0.003 && flip.damping < 0.01);
+	CHECK(pic.damping > -0.003 && pic.damping < 0.01);
+	CHECK(apic.damping > -0.003 && apic.damping < 0.01);
 }
 
 void suite_long_slosh(void)
