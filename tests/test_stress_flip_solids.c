@@ -18,6 +18,7 @@
 #include <time.h>
 
 #include "eddy.h"
+#include "flip_pool.h"
 
 static double now_ms(void)
 {
@@ -36,48 +37,6 @@ static bool step_frames(eddy_world *w, int frames)
 		}
 	}
 	return true;
-}
-
-/* 2 x 2 x 2 particles per cell over [lo, hi] (cell aligned). */
-static void fill(eddy_world *w, double h, eddy_vec3 lo, eddy_vec3 hi)
-{
-	const int nx = (int)lround((hi.x - lo.x) / h * 2), ny = (int)lround((hi.y - lo.y) / h * 2),
-	          nz = (int)lround((hi.z - lo.z) / h * 2);
-	const size_t n = (size_t)nx * ny * nz;
-	eddy_vec3 *p = malloc(n * sizeof *p);
-	size_t q = 0;
-	for (int k = 0; k < nz; ++k)
-		for (int j = 0; j < ny; ++j)
-			for (int i = 0; i < nx; ++i, ++q)
-				p[q] = (eddy_vec3){(float)(lo.x + (i + 0.5) * h / 2), (float)(lo.y + (j + 0.5) * h / 2),
-				                   (float)(lo.z + (k + 0.5) * h / 2)};
-	CHECK(eddy_world_add_particles(w, n, p, NULL) == EDDY_OK);
-	free(p);
-}
-
-/* Mean height (m) of the free surface over the columns: the top crossing of
- * flip_phi from < 0 to >= 0 between cell centres. */
-static double mean_level(eddy_world *w)
-{
-	const eddy_grid_info g = eddy_world_grid(w);
-	const float *phi = eddy_world_channel(w, "flip_phi", NULL);
-	if (!phi)
-		return NAN;
-	double sum = 0;
-	for (int k = 0; k < g.nz; ++k)
-		for (int i = 0; i < g.nx; ++i) {
-			double lev = 0;
-			for (int j = g.ny - 1; j >= 0; --j) {
-				const float p = phi[i + (size_t)g.nx * ((size_t)j + (size_t)g.ny * k)];
-				if (p < 0) {
-					const float pa = j + 1 < g.ny ? phi[i + (size_t)g.nx * ((size_t)(j + 1) + (size_t)g.ny * k)] : 1.0f;
-					lev = (j + 0.5 + (double)p / ((double)p - (double)pa)) * g.cell_size;
-					break;
-				}
-			}
-			sum += lev;
-		}
-	return sum / ((double)g.nx * g.nz); /* the tank floor is at y = 0 */
 }
 
 /* ---- the moving sphere -------------------------------------------------------
@@ -201,7 +160,7 @@ static void run_sphere(int kind, bool reseed, eddy_flip_solver solver, double se
 		CHECK(eddy_world_add_particles(w, n, q, NULL) == EDDY_OK);
 		free(q);
 	} else {
-		fill(w, h, lo, (eddy_vec3){0.2f, (float)depth, 0.125f});
+		CHECK(pool_fill(w, h, lo, (eddy_vec3){0.2f, (float)depth, 0.125f}));
 	}
 	res->n0 = eddy_world_particle_count(w);
 	res->worst_inside = 0;
@@ -224,7 +183,7 @@ static void run_sphere(int kind, bool reseed, eddy_flip_solver solver, double se
 	}
 	res->ms = now_ms() - t0;
 	CHECK(f == frames);
-	res->level = mean_level(w);
+	res->level = pool_mean_level(w);
 	/* pool plus submerged sphere over the tank area (the still sphere's pool
 	 * was filled to that level around it) */
 	res->expected = depth + 4.0 / 3 * 3.14159265358979 * SPH_R * SPH_R * SPH_R / (0.2 * 0.125);
@@ -399,8 +358,8 @@ static void drop_into_pool_volume(void)
 		eddy_world *w = volume_world(h, (eddy_vec3){0.2f, 0.3f, 0.1f}, rs == 1);
 		if (!w)
 			return;
-		fill(w, h, (eddy_vec3){0, 0, 0}, (eddy_vec3){0.2f, 0.08f, 0.1f});
-		fill(w, h, (eddy_vec3){0.075f, 0.175f, 0.025f}, (eddy_vec3){0.125f, 0.225f, 0.075f});
+		CHECK(pool_fill(w, h, (eddy_vec3){0, 0, 0}, (eddy_vec3){0.2f, 0.08f, 0.1f}));
+		CHECK(pool_fill(w, h, (eddy_vec3){0.075f, 0.175f, 0.025f}, (eddy_vec3){0.125f, 0.225f, 0.075f}));
 		volume_result r;
 		run_volume(w, 0.2 * 0.08 * 0.1 + 0.05 * 0.05 * 0.05, 60, &r);
 		printf("    drop into pool, reseed %s: max |V - V0| / V0 = %.2f%%, at 2 s %+.2f%%; particles %zu -> %zu "
@@ -428,7 +387,7 @@ static void dam_break_volume(void)
 		eddy_world *w = volume_world(h, (eddy_vec3){(float)(4 * a), (float)(2.5 * a), (float)(4 * h)}, rs == 1);
 		if (!w)
 			return;
-		fill(w, h, (eddy_vec3){0, 0, 0}, (eddy_vec3){(float)a, (float)(2 * a), (float)(4 * h)});
+		CHECK(pool_fill(w, h, (eddy_vec3){0, 0, 0}, (eddy_vec3){(float)a, (float)(2 * a), (float)(4 * h)}));
 		volume_result r;
 		run_volume(w, a * 2 * a * 4 * h, 45, &r);
 		printf("    dam break, reseed %s: max |V - V0| / V0 = %.2f%%, at 1.5 s %+.2f%%; particles %zu -> %zu (%+.1f%%); "

@@ -37,57 +37,13 @@
 #include <time.h>
 
 #include "eddy.h"
+#include "flip_pool.h"
 
 static double now_s(void)
 {
 	struct timespec t;
 	clock_gettime(CLOCK_MONOTONIC, &t);
 	return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
-
-/* 2 x 2 x 2 particles per cell over [lo, hi] (cell aligned). */
-static void fill(eddy_world *w, double h, eddy_vec3 lo, eddy_vec3 hi)
-{
-	const int nx = (int)lround((hi.x - lo.x) / h * 2), ny = (int)lround((hi.y - lo.y) / h * 2),
-	          nz = (int)lround((hi.z - lo.z) / h * 2);
-	const size_t n = (size_t)nx * ny * nz;
-	eddy_vec3 *p = malloc(n * sizeof *p);
-	CHECK(p != NULL);
-	if (!p)
-		return;
-	size_t q = 0;
-	for (int k = 0; k < nz; ++k)
-		for (int j = 0; j < ny; ++j)
-			for (int i = 0; i < nx; ++i, ++q)
-				p[q] = (eddy_vec3){(float)(lo.x + (i + 0.5) * h / 2), (float)(lo.y + (j + 0.5) * h / 2),
-				                   (float)(lo.z + (k + 0.5) * h / 2)};
-	CHECK(eddy_world_add_particles(w, n, p, NULL) == EDDY_OK);
-	free(p);
-}
-
-/* Mean height (m) of the free surface over the columns: the top crossing of
- * flip_phi from < 0 to >= 0 between cell centres (the floor at y = 0). */
-static double mean_level(eddy_world *w)
-{
-	const eddy_grid_info g = eddy_world_grid(w);
-	const float *phi = eddy_world_channel(w, "flip_phi", NULL);
-	if (!phi)
-		return NAN;
-	double sum = 0;
-	for (int k = 0; k < g.nz; ++k)
-		for (int i = 0; i < g.nx; ++i) {
-			double lev = 0;
-			for (int j = g.ny - 1; j >= 0; --j) {
-				const float p = phi[i + (size_t)g.nx * ((size_t)j + (size_t)g.ny * k)];
-				if (p < 0) {
-					const float pa = j + 1 < g.ny ? phi[i + (size_t)g.nx * ((size_t)(j + 1) + (size_t)g.ny * k)] : 1.0f;
-					lev = (j + 0.5 + (double)p / ((double)p - (double)pa)) * g.cell_size;
-					break;
-				}
-			}
-			sum += lev;
-		}
-	return sum / ((double)g.nx * g.nz);
 }
 
 /* ---- a drop into a pool (C API) ------------------------------------------- */
@@ -138,8 +94,8 @@ static drop_result drop_into_pool(double h, bool reseed, double seconds)
 		CHECK(eddy_system_valid(w, eddy_add_flip_reseed(w, &rs)));
 	}
 	const double pool = 0.075, cube = 0.05, area = 0.2 * 0.1;
-	fill(w, h, (eddy_vec3){0, 0, 0}, (eddy_vec3){0.2f, (float)pool, 0.1f});
-	fill(w, h, (eddy_vec3){0.075f, 0.175f, 0.025f}, (eddy_vec3){0.125f, 0.225f, 0.075f});
+	CHECK(pool_fill(w, h, (eddy_vec3){0, 0, 0}, (eddy_vec3){0.2f, (float)pool, 0.1f}));
+	CHECK(pool_fill(w, h, (eddy_vec3){0.075f, 0.175f, 0.025f}, (eddy_vec3){0.125f, 0.225f, 0.075f}));
 	const double v0 = area * pool + cube * cube * cube;
 	r.level_expected = v0 / area;
 	r.n0 = eddy_world_particle_count(w);
@@ -159,7 +115,7 @@ static drop_result drop_into_pool(double h, bool reseed, double seconds)
 	r.wall_s = now_s() - t0;
 	r.ok = f == frames;
 	r.n1 = eddy_world_particle_count(w);
-	r.level = mean_level(w);
+	r.level = pool_mean_level(w);
 	eddy_destroy_world(w);
 	printf("    drop into pool, dx %.4g m, reseed %-3s %.0f s: max |V - V0| / V0 %.2f%%, at the end %+.2f%%; level "
 	       "%.5f m, expected %.5f m (%+.3f dx); particles %zu -> %zu; %.1f s\n",
