@@ -30,37 +30,27 @@
 #define CKPT_VERSION 1u
 #define HEADER_BYTES 40
 
-static uint64_t fnv(uint64_t h, const void *data, size_t n)
-{
-	const unsigned char *p = data;
-	for (size_t i = 0; i < n; ++i) {
-		h ^= p[i];
-		h *= 0x100000001b3ull;
-	}
-	return h;
-}
-
 /* The pipeline's own fingerprint: what must match for a state to make sense.
  * Thread count is left out: a run may resume on another machine. */
 static uint64_t pipeline_fingerprint(const eddy_world *w, uint64_t host)
 {
 	const eddy_world_def *d = &w->def;
-	uint64_t h = fnv(0xcbf29ce484222325ull, &host, sizeof host);
-	h = fnv(h, &d->bounds_min, sizeof d->bounds_min);
-	h = fnv(h, &d->bounds_max, sizeof d->bounds_max);
-	h = fnv(h, &d->gravity, sizeof d->gravity);
-	h = fnv(h, &d->fps, sizeof d->fps);
-	h = fnv(h, &d->cfl, sizeof d->cfl);
-	h = fnv(h, &d->dt_max, sizeof d->dt_max);
-	h = fnv(h, &d->cell_size, sizeof d->cell_size);
-	h = fnv(h, &d->seed, sizeof d->seed);
+	uint64_t h = eddy__fnv1a(EDDY__FNV_BASIS, &host, sizeof host);
+	h = eddy__fnv1a(h, &d->bounds_min, sizeof d->bounds_min);
+	h = eddy__fnv1a(h, &d->bounds_max, sizeof d->bounds_max);
+	h = eddy__fnv1a(h, &d->gravity, sizeof d->gravity);
+	h = eddy__fnv1a(h, &d->fps, sizeof d->fps);
+	h = eddy__fnv1a(h, &d->cfl, sizeof d->cfl);
+	h = eddy__fnv1a(h, &d->dt_max, sizeof d->dt_max);
+	h = eddy__fnv1a(h, &d->cell_size, sizeof d->cell_size);
+	h = eddy__fnv1a(h, &d->seed, sizeof d->seed);
 	for (int k = 0; k < w->order_count; ++k) {
 		const eddy_system *s = &w->slots[w->order[k]];
-		h = fnv(h, s->label, strlen(s->label) + 1);
+		h = eddy__fnv1a(h, s->label, strlen(s->label) + 1);
 	}
 	for (int c = 0; c < w->column_count; ++c)
 		if (w->columns[c].data)
-			h = fnv(h, w->columns[c].name, strlen(w->columns[c].name) + 1);
+			h = eddy__fnv1a(h, w->columns[c].name, strlen(w->columns[c].name) + 1);
 	return h;
 }
 
@@ -168,7 +158,7 @@ eddy_status eddy_world_save(eddy_world *w, const char *path, uint64_t fingerprin
 	unsigned char header[HEADER_BYTES] = {0};
 	const uint32_t version = CKPT_VERSION;
 	const uint64_t fp = pipeline_fingerprint(w, fingerprint), size = b.len,
-	               sum = fnv(0xcbf29ce484222325ull, b.p, b.len);
+	               sum = eddy__fnv1a(EDDY__FNV_BASIS, b.p, b.len);
 	memcpy(header, CKPT_MAGIC, 8);
 	memcpy(header + 8, &version, 4);
 	memcpy(header + 16, &fp, 8);
@@ -345,7 +335,7 @@ eddy_status eddy_world_load(eddy_world *w, const char *path, uint64_t fingerprin
 		return eddy__fail(w, EDDY_ERR_IO, "checkpoint '%s': truncated (%zu of %llu payload bytes)%s", path, got,
 		                  (unsigned long long)size, extra != EOF ? " or followed by garbage" : "");
 	}
-	if (fnv(0xcbf29ce484222325ull, payload, size) != sum) {
+	if (eddy__fnv1a(EDDY__FNV_BASIS, payload, size) != sum) {
 		free(payload);
 		return eddy__fail(w, EDDY_ERR_IO, "checkpoint '%s': checksum mismatch (corrupted)", path);
 	}

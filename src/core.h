@@ -191,6 +191,19 @@ eddy_system_id eddy__add_system(eddy_world *w, const eddy_system_vtable *vt, voi
                                 int write_count);
 void eddy__system_free(eddy_world *w, eddy_system *s);
 
+/* FNV-1a over bytes, for the state hash and the checkpoint checksums: start
+ * from EDDY__FNV_BASIS and feed the pieces in order. */
+#define EDDY__FNV_BASIS 0xcbf29ce484222325ull
+static inline uint64_t eddy__fnv1a(uint64_t h, const void *data, size_t n)
+{
+	const unsigned char *p = data;
+	for (size_t i = 0; i < n; ++i) {
+		h ^= p[i];
+		h *= 0x100000001b3ull;
+	}
+	return h;
+}
+
 /* random numbers: splitmix64, deterministic per world seed */
 static inline uint64_t eddy__rand_u64(uint64_t *state)
 {

@@ -780,30 +780,20 @@ eddy_status eddy_world_frame_stats(eddy_world *w, eddy_frame_stats *out)
 	return EDDY_OK;
 }
 
-static uint64_t fnv1a(uint64_t h, const void *data, size_t n)
-{
-	const unsigned char *p = data;
-	for (size_t i = 0; i < n; ++i) {
-		h ^= p[i];
-		h *= 0x100000001b3ull;
-	}
-	return h;
-}
-
 uint64_t eddy_world_state_hash(const eddy_world *w)
 {
 	if (!w)
 		return 0;
-	uint64_t h = 0xcbf29ce484222325ull;
+	uint64_t h = EDDY__FNV_BASIS;
 	uint64_t n = w->n;
-	h = fnv1a(h, &n, sizeof n);
-	h = fnv1a(h, &w->time, sizeof w->time);
+	h = eddy__fnv1a(h, &n, sizeof n);
+	h = eddy__fnv1a(h, &w->time, sizeof w->time);
 	for (int c = 0; c < w->column_count; ++c) {
 		const eddy_column *col = &w->columns[c];
 		if (!col->data || col->lifetime != EDDY_STATE)
 			continue;
-		h = fnv1a(h, col->name, strlen(col->name));
-		h = fnv1a(h, col->data, eddy__column_bytes(w, col));
+		h = eddy__fnv1a(h, col->name, strlen(col->name));
+		h = eddy__fnv1a(h, col->data, eddy__column_bytes(w, col));
 	}
 	return h;
 }
