@@ -107,12 +107,16 @@ typedef struct sph_neighbors {
 		eddy_vec3 normal;    /* a plane's: only the offset along it moves them; 0 otherwise */
 		eddy_vec3 disp;      /* m, their displacement from the def pose now */
 		eddy_vec3 at_search; /* m, ... at the last Verlet search */
+		eddy_vec3 rot;       /* degrees, the collider's rotation they were placed with */
+		eddy_vec3 rot_at_search; /* degrees, ... at the last Verlet search */
+		float reach;         /* m, the farthest particle from the collider's pivot (bounds a rotation's sweep) */
 	} *col;
 	/* per collider, the offset seen at the previous step (velocity = its
 	 * change over the time since); part of sph_density's checkpointed
 	 * state, which is the block bp, brho, seen (bstate_size bytes) */
 	struct sph_collider_seen {
 		float x, y, z, have; /* m; have = 1 once seen (floats: no padding in a checkpoint) */
+		float rx, ry, rz, unused; /* degrees, the rotation seen */
 		double time;         /* s */
 	} *seen;
 	size_t bstate_size;

@@ -17,7 +17,10 @@
  * four times where the field bends, and gets the contact response (core.h)
  * with normal n and the collider's velocity. x - v dt is exactly the last
  * position after integrate (v the velocity it moved with) and close to it
- * after flip_advect. The field is the only state besides the motion; a
+ * after flip_advect. A rotating mesh does the same in its own frame (x_b =
+ * pivot + R^T (x - pivot - offset)), the path's start taken in the pose of
+ * the last step, the normal turned back by R, and the wall velocity
+ * v + omega x (x - pivot - offset). The field is the only state besides the motion; a
  * scene without collide_mesh allocates none of it. */
 #include "mesh.h"
 #include "systems.h"
@@ -49,6 +52,11 @@ eddy_collide_mesh_def eddy_default_collide_mesh_def(void)
 
 static float sdistance(const collide_mesh *b, eddy_vec3 q)
 {
+	if (eddy__motion_rotates(&b->base.motion)) {
+		const eddy_collider_pose pose = eddy__collider_pose(&b->base.motion);
+		const float d = eddy__sdf_value(&b->sdf, eddy__pose_to_body(&pose, q));
+		return b->def.inside ? -d : d;
+	}
 	const eddy_vec3 o = b->base.motion.offset;
 	const float d = eddy__sdf_value(&b->sdf, eddy__v3(q.x - o.x, q.y - o.y, q.z - o.z));
 	return b->def.inside ? -d : d;
@@ -105,9 +113,70 @@ static bool first_entry(const collide_mesh *b, eddy_vec3 a, eddy_vec3 c, eddy_ve
 	return false;
 }
 
+/* Unit normal out of the solid at body-frame q, (0, 1, 0) where flat. */
+static eddy_vec3 body_normal(const collide_mesh *b, eddy_vec3 q)
+{
+	const float e = 0.5f * (float)b->sdf.h;
+	eddy_vec3 g = {body_distance(b, eddy__v3(q.x + e, q.y, q.z)) - body_distance(b, eddy__v3(q.x - e, q.y, q.z)),
+	               body_distance(b, eddy__v3(q.x, q.y + e, q.z)) - body_distance(b, eddy__v3(q.x, q.y - e, q.z)),
+	               body_distance(b, eddy__v3(q.x, q.y, q.z + e)) - body_distance(b, eddy__v3(q.x, q.y, q.z - e))};
+	const float len = sqrtf(g.x * g.x + g.y * g.y + g.z * g.z);
+	if (!(len > 0))
+		return eddy__v3(0, 1, 0);
+	return eddy__v3(g.x / len, g.y / len, g.z / len);
+}
+
+/* A rotating mesh: as step below, in the mesh's own frame. The path starts
+ * at x - v dt seen in the pose of the collider's last step and ends at x in
+ * the current pose, so a wall sweeping over a particle is caught as a
+ * particle crossing it. */
+static void step_rotated(eddy_world *w, collide_mesh *b, const eddy_collider_motion *then,
+                         const eddy_collider_velocity *mv, double dt_step, int threads)
+{
+	const eddy_collider_pose pose = eddy__collider_pose(&b->base.motion), pose0 = eddy__collider_pose(then);
+	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	const eddy_collider_response r = b->def.response;
+	const float hair = 1e-3f * (float)b->sdf.h, dt = (float)dt_step, walk = 0.25f * (float)b->sdf.h;
+	const long n = (long)w->n;
+#pragma omp parallel for num_threads(threads) if (n > 8192) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		const eddy_vec3 c = eddy__pose_to_body(&pose, eddy__v3(x[i], y[i], z[i]));
+		const eddy_vec3 c0 =
+			eddy__pose_to_body(&pose0, eddy__v3(x[i] - vx[i] * dt, y[i] - vy[i] * dt, z[i] - vz[i] * dt));
+		const eddy_vec3 dp = {c.x - c0.x, c.y - c0.y, c.z - c0.z};
+		float d = body_distance(b, c);
+		const float len2 = dp.x * dp.x + dp.y * dp.y + dp.z * dp.z;
+		const bool fast = len2 > walk * walk;
+		if (!(d < 0) && (!fast || d * d > 3 * len2))
+			continue;
+		eddy_vec3 q = c, hit;
+		if (fast && first_entry(b, c0, c, &hit))
+			q = hit, d = body_distance(b, q);
+		else if (!(d < 0))
+			continue;
+		eddy_vec3 nrm = body_normal(b, q);
+		for (int it = 0; it < 4 && d < hair; ++it) {
+			if (it > 0)
+				nrm = body_normal(b, q);
+			const float k = 2 * hair - d;
+			q = eddy__v3(q.x + nrm.x * k, q.y + nrm.y * k, q.z + nrm.z * k);
+			d = body_distance(b, q);
+		}
+		eddy__collide_rotated(x, y, z, vx, vy, vz, (size_t)i, &pose, mv, q, nrm, r);
+	}
+}
+
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	collide_mesh *b = s->data;
+	if (eddy__motion_rotates(&b->base.motion)) {
+		eddy_collider_motion then = b->base.motion;
+		then.offset = then.last_offset, then.rotation = then.last_rotation;
+		const eddy_collider_velocity mv = eddy__collider_step_motion(&b->base, ctx->dt);
+		step_rotated(w, b, &then, &mv, ctx->dt, ctx->threads);
+		return EDDY_OK;
+	}
 	const eddy_vec3 vw = eddy__collider_step_velocity(&b->base, ctx->dt);
 	const eddy_vec3 off = b->base.motion.offset;
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
@@ -269,6 +338,7 @@ eddy_system_id eddy_add_collide_mesh(eddy_world *w, const eddy_collide_mesh_def 
 	}
 	for (size_t q = 0; q < nodes; ++q)
 		b->depth = fmaxf(b->depth, -b->field[q]);
+	eddy__collider_init_pivot(&b->base, def->translate);
 	eddy_system_id id = eddy__add_system(w, &eddy__kind_collide_mesh, b, mesh_io, 6, mesh_io, 6);
 	return id;
 }
