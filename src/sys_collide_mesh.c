@@ -23,6 +23,7 @@
  * v + omega x (x - pivot - offset). The field is the only state besides the motion; a
  * scene without collide_mesh allocates none of it. */
 #include "mesh.h"
+#include "sph.h"
 #include "systems.h"
 
 #include <stdlib.h>
@@ -341,4 +342,70 @@ eddy_system_id eddy_add_collide_mesh(eddy_world *w, const eddy_collide_mesh_def 
 	eddy__collider_init_pivot(&b->base, def->translate);
 	eddy_system_id id = eddy__add_system(w, &eddy__kind_collide_mesh, b, mesh_io, 6, mesh_io, 6);
 	return id;
+}
+
+/* ---- shape, for drawing (eddy_collider_shape_of) ----
+ * The distance grid's box (the mesh's box plus the grid's margin), with the
+ * offset; a drawer turns it by rotation about pivot and loads the mesh file
+ * for the triangles. */
+#include "collider_shape.h"
+
+void eddy__shape_collide_mesh(const eddy_system *s, eddy_collider_shape *out)
+{
+	const collide_mesh *b = s->data;
+	const eddy_vec3 o = b->base.motion.offset;
+	out->kind = EDDY_COLLIDER_MESH;
+	out->a = eddy__v3((float)b->sdf.origin[0] + o.x, (float)b->sdf.origin[1] + o.y, (float)b->sdf.origin[2] + o.z);
+	out->b = eddy__v3((float)(b->sdf.origin[0] + (b->sdf.n[0] - 1) * b->sdf.h) + o.x,
+	                  (float)(b->sdf.origin[1] + (b->sdf.n[1] - 1) * b->sdf.h) + o.y,
+	                  (float)(b->sdf.origin[2] + (b->sdf.n[2] - 1) * b->sdf.h) + o.z);
+	out->radius = 0.0f;
+	out->inside = b->def.inside;
+	out->rotation = b->base.motion.rotation;
+	out->pivot = eddy__add3(b->base.motion.pivot, o);
+}
+
+/* ---- boundary particles, for SPH (sph_neighbors.c) ----
+ * Akinci et al. 2012 on the mesh, laid out as a block box lays out its own:
+ * the points of a cubic lattice of the fluid's spacing s (over the distance
+ * grid's box grown by the shell, at min + (i + 1/2) s) that lie on the solid
+ * side of the surface within L = ceil(h / s) spacings of it, -L s <= d < 0
+ * with d the collider's signed distance in its def pose: a shell as thick as
+ * the kernel support (a wall thinner than that is sampled whole), so a fluid
+ * particle at the surface sees a full neighbourhood. Each stands for the
+ * lattice cell, V_b = 1 / sum_lattice W, the volume sph_boundary_box gives
+ * its own: where the fluid continues the lattice, the boundary and fluid
+ * sums together are a full lattice's. A tank mesh (inside = true) gets its
+ * shell outside the mesh. The lattice ignores the surface's curvature (a
+ * layer's points are up to a spacing from where a conforming sampling would
+ * put them), which shifts where the fluid stops by a fraction of s. */
+size_t eddy__sph_mesh_points(const eddy_system *s, float spacing, float h, float *x, float *y, float *z, float *vol)
+{
+	const collide_mesh *b = s->data;
+	const int L = (int)ceil(h / spacing - 1e-4);
+	const double sp = spacing, grow = (L + 1) * sp;
+	double lo[3];
+	long n[3];
+	for (int a = 0; a < 3; ++a) {
+		lo[a] = b->sdf.origin[a] - grow;
+		const double ext = (b->sdf.n[a] - 1) * b->sdf.h + 2 * grow;
+		n[a] = (long)ceil(ext / sp);
+	}
+	const float v = (float)(1.0 / eddy_sph_lattice_sum(EDDY_SPH_POLY6, spacing, h)), shell = (float)(L * sp);
+	size_t k = 0;
+	for (long iz = 0; iz < n[2]; ++iz)
+		for (long iy = 0; iy < n[1]; ++iy)
+			for (long ix = 0; ix < n[0]; ++ix) {
+				const eddy_vec3 q = {(float)(lo[0] + (ix + 0.5) * sp), (float)(lo[1] + (iy + 0.5) * sp),
+				                     (float)(lo[2] + (iz + 0.5) * sp)};
+				const float d = body_distance(b, q);
+				if (!(d < 0 && d >= -shell))
+					continue;
+				if (x) {
+					x[k] = q.x, y[k] = q.y, z[k] = q.z;
+					vol[k] = v;
+				}
+				k++;
+			}
+	return k;
 }
