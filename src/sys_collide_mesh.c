@@ -14,7 +14,9 @@
  * Otherwise, a particle with distance d < 0 stays where it is. It then
  * moves along n = grad d / |grad d| (central differences half a cell wide)
  * to d = 2e-3 cells (so rounding cannot leave it inside), repeated up to
- * four times where the field bends, and gets the contact response (core.h)
+ * four times where the field bends (still inside after that, in a crease
+ * where the steps bounce between two faces, it goes back to where its path
+ * entered the solid, when the path started outside), and gets the contact response (core.h)
  * with normal n and the collider's velocity. x - v dt is exactly the last
  * position after integrate (v the velocity it moved with) and close to it
  * after flip_advect. A rotating mesh does the same in its own frame (x_b =
@@ -164,6 +166,8 @@ static void step_rotated(eddy_world *w, collide_mesh *b, const eddy_collider_mot
 			q = eddy__v3(q.x + nrm.x * k, q.y + nrm.y * k, q.z + nrm.z * k);
 			d = body_distance(b, q);
 		}
+		if (d < 0 && first_entry(b, c0, c, &hit))
+			q = hit; /* in a crease the steps did not get out: where the path entered */
 		eddy__collide_rotated(x, y, z, vx, vy, vz, (size_t)i, &pose, mv, q, nrm, r);
 	}
 }
@@ -214,6 +218,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			q = eddy__v3(q.x + nrm.x * k, q.y + nrm.y * k, q.z + nrm.z * k);
 			d = body_distance(b, q);
 		}
+		if (d < 0 && first_entry(b, eddy__v3(c.x - dp.x, c.y - dp.y, c.z - dp.z), c, &hit))
+			q = hit; /* in a crease the steps did not get out: where the path entered */
 		x[i] = q.x + off.x, y[i] = q.y + off.y, z[i] = q.z + off.z;
 		eddy__collide_response(vx, vy, vz, (size_t)i, nrm, vw, r);
 	}
@@ -375,10 +381,14 @@ void eddy__shape_collide_mesh(const eddy_system *s, eddy_collider_shape *out)
  * particle at the surface sees a full neighbourhood. Each stands for the
  * lattice cell, V_b = 1 / sum_lattice W, the volume sph_boundary_box gives
  * its own: where the fluid continues the lattice, the boundary and fluid
- * sums together are a full lattice's. A tank mesh (inside = true) gets its
- * shell outside the mesh. The lattice ignores the surface's curvature (a
- * layer's points are up to a spacing from where a conforming sampling would
- * put them), which shifts where the fluid stops by a fraction of s. */
+ * sums together are a full lattice's. Each point then moves along the
+ * field's normal onto the layer at depth (j + 1/2) s it falls in, j = 0 ..
+ * L - 1, as the sphere's and box's layers lie: left on the lattice, points
+ * a hair under the surface would sit closer to the fluid than any wall
+ * particle of theirs and kick it (the cup's water then threw dozens of
+ * particles over the rim). A layer keeps the lattice's s^-2 points per unit
+ * area on average. A tank mesh (inside = true) gets its shell outside the
+ * mesh. */
 size_t eddy__sph_mesh_points(const eddy_system *s, float spacing, float h, float *x, float *y, float *z, float *vol)
 {
 	const collide_mesh *b = s->data;
@@ -402,7 +412,11 @@ size_t eddy__sph_mesh_points(const eddy_system *s, float spacing, float h, float
 				if (!(d < 0 && d >= -shell))
 					continue;
 				if (x) {
-					x[k] = q.x, y[k] = q.y, z[k] = q.z;
+					/* onto the layer at depth (j + 1/2) s it falls in (one
+					 * step along the field's normal) */
+					const float target = -((float)floor(-d / sp) + 0.5f) * (float)sp;
+					const eddy_vec3 nrm = body_normal(b, q);
+					x[k] = q.x + nrm.x * (target - d), y[k] = q.y + nrm.y * (target - d), z[k] = q.z + nrm.z * (target - d);
 					vol[k] = v;
 				}
 				k++;
