@@ -551,7 +551,7 @@ static void cup_holds_water_at_rest(void)
  * cavity's area at 4 mm: the mesh carries SPH boundary particles (Akinci
  * 2012, sys_collide_mesh.c), so the fluid meets the walls with a full
  * neighbourhood; without them it packed against the walls and stood about
- * 30% low. At 3 mm it reads -2.0% to -2.1% from 0.3 s to 1.5 s (measured),
+ * 30% low. At 3 mm it reads -1.9% to -2.1% from 0.3 s to 1.5 s (measured),
  * held to 3%: besides DFSPH's compression (0.5% on the mean here), an SPH
  * free surface reads low on its own, its top layer settling into the one
  * below by a fraction of a spacing (test_stress_sph_solids.c: a box tank
