@@ -46,7 +46,12 @@
  * see sph.h) follow them after, made once in the collider's def pose and
  * moved every step by its offset (a plane's patch only along its normal),
  * with the velocity (offset - offset seen at the last step) / time since,
- * as sys_flip_boundary.c takes it. Their motion since the last search
+ * as sys_flip_boundary.c takes it. A rotating collider's particles are
+ * placed by its whole pose, pivot + offset + R (x_b0 - pivot), and carry
+ * the point velocity v + omega x (x_b - pivot - offset), omega the rotation
+ * from the orientation seen at the last step over the time since; their
+ * Verlet displacement is bounded by the pivot's move plus the set's reach
+ * from the pivot times the angle turned. Their motion since the last search
  * counts in the Verlet displacement test like a particle's; at each search
  * every boundary particle is cell-sorted anew (border), and each particle's
  * boundary hits are sorted by index, so the lists and sums are the same
