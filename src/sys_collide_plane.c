@@ -4,7 +4,10 @@
  *
  * Reads: x y z vx vy vz. Writes: x y z vx vy vz.
  * d = (p - point) . n; a particle with d < 0 moves by -d n onto the plane and
- * gets the contact response with normal n.
+ * gets the contact response with normal n. A rotating plane has its point
+ * and normal turned about the pivot (by default the point) and the wall
+ * velocity v + omega x (x - pivot - offset) at the contact; its SPH patch
+ * then turns with it whole.
  * With SPH the plane also carries boundary particles that move with it
  * (eddy__sph_plane_points below; Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012); the projection here is

@@ -5,7 +5,11 @@
  * Reads: x y z vx vy vz. Writes: x y z vx vy vz.
  * A particle on the solid side is projected radially onto the sphere and gets
  * the contact response with the normal pointing out of the solid. A particle
- * exactly at the centre of a ball leaves along +y.
+ * exactly at the centre of a ball leaves along +y. A rotating sphere
+ * (eddy_collider_set_rotation) has its centre turned about the pivot and a
+ * surface moving at v + omega x (x - pivot - offset), which the response
+ * takes as the wall's velocity (a ball spinning about its centre drags
+ * particles with friction > 0).
  * With SPH the sphere also carries boundary particles that move with it
  * (eddy__sph_sphere_points below; Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012): the fluid beside it then
