@@ -24,6 +24,8 @@ typedef enum eddy_lua_field_type {
 	EDDY_LUA_STRING, /* char[size] from a string */
 	EDDY_LUA_STRING_LIST, /* char[size]: a table of strings (or one string), joined by spaces */
 	EDDY_LUA_OFFSET, /* collider offset: a vector or a function of time */
+	EDDY_LUA_ROTATION, /* collider rotation: an axis-angle vector (degrees) or a function of time */
+	EDDY_LUA_PIVOT,  /* collider pivot: a vector (eddy_collider_set_pivot) */
 	EDDY_LUA_INPUT_PATH /* char[size] from a string: a file the system reads (safe mode
 	                       reads anywhere, and checks only EDDY_LUA_STRING paths as outputs) */
 } eddy_lua_field_type;

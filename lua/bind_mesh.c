@@ -18,6 +18,8 @@ static const eddy_lua_field collide_mesh_fields[] = {
 	{"friction", EDDY_LUA_FLOAT, offsetof(eddy_collide_mesh_def, response) + offsetof(eddy_collider_response, friction),
 	 NULL, 0},
 	{"offset", EDDY_LUA_OFFSET, 0, NULL, 0},
+	{"rotation", EDDY_LUA_ROTATION, 0, NULL, 0},
+	{"pivot", EDDY_LUA_PIVOT, 0, NULL, 0},
 	EDDY_LUA_END,
 };
 static const eddy_lua_field emit_mesh_fields[] = {

@@ -147,7 +147,12 @@ typedef struct lua_def {
 	const eddy_lua_kind *k;
 	bool has_offset;    /* a constant offset in `offset` */
 	eddy_vec3 offset;
-	/* an offset function, if any, is the userdata's user value 1 */
+	bool has_rotation;  /* a constant rotation in `rotation` */
+	eddy_vec3 rotation; /* degrees, axis-angle */
+	bool has_pivot;
+	eddy_vec3 pivot;
+	/* an offset function, if any, is the userdata's user value 1; a
+	 * rotation function user value 2 */
 	/* k->def_size bytes: the C def. Lua aligns userdata to 8 bytes, not to
 	 * max_align_t; defs hold nothing wider than double, int64 or pointers. */
 	union {
@@ -276,6 +281,23 @@ static void read_fields(lua_State *L, const eddy_lua_kind *k, int idx, void *def
 				ld->has_offset = true;
 			}
 			break;
+		case EDDY_LUA_ROTATION:
+			if (!ld)
+				luaL_error(L, "%s: '%s' is not allowed here", k->name, name);
+			if (lua_isfunction(L, -1)) {
+				lua_pushvalue(L, -1);
+				lua_setiuservalue(L, ud, 2);
+			} else {
+				ld->rotation = vec3_field(L, k, name, -1);
+				ld->has_rotation = true;
+			}
+			break;
+		case EDDY_LUA_PIVOT:
+			if (!ld)
+				luaL_error(L, "%s: '%s' is not allowed here", k->name, name);
+			ld->pivot = vec3_field(L, k, name, -1);
+			ld->has_pivot = true;
+			break;
 		}
 		lua_pop(L, 1);
 	}
@@ -291,7 +313,7 @@ static int l_make_def(lua_State *L)
 	if (!lua_istable(L, 1))
 		return luaL_error(L, "%s: expects a table of fields, e.g. eddy.%s{...} (got %s)", k->name, k->name,
 		                  luaL_typename(L, 1));
-	lua_def *ld = lua_newuserdatauv(L, sizeof *ld + k->def_size, 1);
+	lua_def *ld = lua_newuserdatauv(L, sizeof *ld + k->def_size, 2);
 	memset(ld, 0, sizeof *ld + k->def_size);
 	ld->k = k;
 	k->defaults(ld->def);
@@ -417,6 +439,7 @@ typedef struct callback {
 	lua_world *owner;       /* outlives the callback: its __gc destroys the world */
 	int fn;                 /* registry reference */
 	eddy_system_id target;  /* animate: the collider */
+	bool rotation;          /* animate: the function gives the rotation (else the offset) */
 	char what[64];
 } callback;
 
@@ -484,7 +507,7 @@ static eddy_status animate_step(eddy_world *w, const eddy_step_context *ctx, voi
 	lua_rawgeti(L, LUA_REGISTRYINDEX, cb->fn);
 	lua_pushnumber(L, ctx->time + ctx->dt);
 	const char *outer = cb->owner->inside;
-	cb->owner->inside = "an offset function";
+	cb->owner->inside = cb->rotation ? "a rotation function" : "an offset function";
 	eddy_status st = call_lua(L, w, 1, 1, cb->what);
 	cb->owner->inside = outer;
 	if (st != EDDY_OK)
@@ -498,8 +521,13 @@ static eddy_status animate_step(eddy_world *w, const eddy_step_context *ctx, voi
 		lua_pop(L, 1);
 	}
 	lua_settop(L, top);
+	if (!ok && cb->rotation)
+		return eddy_world_fail(w, EDDY_ERR_EXTERNAL,
+		                       "%s: the rotation function must return an axis-angle {x, y, z} in degrees", cb->what);
 	if (!ok)
 		return eddy_world_fail(w, EDDY_ERR_EXTERNAL, "%s: the offset function must return {x, y, z}", cb->what);
+	if (cb->rotation)
+		return eddy_collider_set_rotation(w, cb->target, (eddy_vec3){v[0], v[1], v[2]});
 	return eddy_collider_set_offset(w, cb->target, (eddy_vec3){v[0], v[1], v[2]});
 }
 
@@ -553,53 +581,69 @@ static int l_world_add(lua_State *L)
 		                  luaL_typename(L, 2));
 	check_safe_paths(L, 1, ld);
 	eddy_world *w = lw->w;
-	callback *cb = NULL;
-	eddy_system_id anim = EDDY_NULL_SYSTEM;
-	lua_getiuservalue(L, 2, 1);
-	if (lua_isfunction(L, -1)) {
-		/* The animator must run before its collider, so it goes in first. */
-		cb = calloc(1, sizeof *cb);
-		if (!cb)
-			return luaL_error(L, "add: out of memory");
-		cb->L = lw->L;
-		cb->owner = lw;
-		lua_pushvalue(L, -1);
-		cb->fn = luaL_ref(L, LUA_REGISTRYINDEX);
-		snprintf(cb->what, sizeof cb->what, "animate %s offset", ld->k->name);
-		eddy_custom_system_def cd = eddy_default_custom_system_def();
-		cd.name = "animate";
-		cd.step = animate_step;
-		cd.destroy = callback_destroy;
-		cd.user = cb;
-		anim = eddy_add_custom_system(w, &cd);
-		if (!eddy_system_valid(w, anim)) {
-			callback_destroy(cb);
-			return luaL_error(L, "%s", eddy_world_error(w));
+	/* animators (offset, rotation): each must run before its collider, so
+	 * they go in first */
+	callback *cb[2] = {NULL, NULL};
+	eddy_system_id anim[2] = {EDDY_NULL_SYSTEM, EDDY_NULL_SYSTEM};
+	for (int u = 0; u < 2; ++u) {
+		lua_getiuservalue(L, 2, u + 1);
+		if (lua_isfunction(L, -1)) {
+			cb[u] = calloc(1, sizeof *cb[u]);
+			if (!cb[u]) {
+				if (u)
+					eddy_world_remove_system(w, anim[0]);
+				return luaL_error(L, "add: out of memory");
+			}
+			cb[u]->L = lw->L;
+			cb[u]->owner = lw;
+			cb[u]->rotation = u == 1;
+			lua_pushvalue(L, -1);
+			cb[u]->fn = luaL_ref(L, LUA_REGISTRYINDEX);
+			snprintf(cb[u]->what, sizeof cb[u]->what, "animate %s %s", ld->k->name, u ? "rotation" : "offset");
+			eddy_custom_system_def cd = eddy_default_custom_system_def();
+			cd.name = "animate";
+			cd.step = animate_step;
+			cd.destroy = callback_destroy;
+			cd.user = cb[u];
+			anim[u] = eddy_add_custom_system(w, &cd);
+			if (!eddy_system_valid(w, anim[u])) {
+				callback_destroy(cb[u]);
+				if (u && cb[0])
+					eddy_world_remove_system(w, anim[0]);
+				return luaL_error(L, "%s", eddy_world_error(w));
+			}
 		}
+		lua_pop(L, 1);
 	}
-	lua_pop(L, 1);
 	eddy_system_id id = ld->k->add(w, ld->def);
 	if (!eddy_system_valid(w, id)) {
-		if (cb)
-			eddy_world_remove_system(w, anim);
+		for (int u = 0; u < 2; ++u)
+			if (cb[u])
+				eddy_world_remove_system(w, anim[u]);
 		return luaL_error(L, "%s", eddy_world_error(w));
 	}
-	if (cb) {
-		cb->target = id;
-		/* place the collider where the function puts it at t = now */
-		lua_getiuservalue(L, 2, 1);
-		lua_pushnumber(L, eddy_world_time(w));
-		lw->inside = "an offset function";
-		int rc = lua_pcall(L, 1, 1, 0);
-		lw->inside = NULL;
-		if (rc != LUA_OK)
-			return lua_error(L);
-		eddy_vec3 v = vec3_field(L, ld->k, "offset (returned by the function)", -1);
-		lua_pop(L, 1);
-		if (eddy_collider_set_offset(w, id, v) != EDDY_OK)
-			return luaL_error(L, "%s", eddy_world_error(w));
-	} else if (ld->has_offset && eddy_collider_set_offset(w, id, ld->offset) != EDDY_OK) {
+	if (ld->has_pivot && eddy_collider_set_pivot(w, id, ld->pivot) != EDDY_OK)
 		return luaL_error(L, "%s", eddy_world_error(w));
+	for (int u = 0; u < 2; ++u) {
+		if (cb[u]) {
+			cb[u]->target = id;
+			/* place the collider where the function puts it at t = now */
+			lua_getiuservalue(L, 2, u + 1);
+			lua_pushnumber(L, eddy_world_time(w));
+			lw->inside = u ? "a rotation function" : "an offset function";
+			int rc = lua_pcall(L, 1, 1, 0);
+			lw->inside = NULL;
+			if (rc != LUA_OK)
+				return lua_error(L);
+			eddy_vec3 v = vec3_field(L, ld->k, u ? "rotation (returned by the function)" : "offset (returned by the function)", -1);
+			lua_pop(L, 1);
+			if ((u ? eddy_collider_set_rotation(w, id, v) : eddy_collider_set_offset(w, id, v)) != EDDY_OK)
+				return luaL_error(L, "%s", eddy_world_error(w));
+		} else if (u == 0 && ld->has_offset && eddy_collider_set_offset(w, id, ld->offset) != EDDY_OK) {
+			return luaL_error(L, "%s", eddy_world_error(w));
+		} else if (u == 1 && ld->has_rotation && eddy_collider_set_rotation(w, id, ld->rotation) != EDDY_OK) {
+			return luaL_error(L, "%s", eddy_world_error(w));
+		}
 	}
 	push_system(L, 1, id);
 	return 1;
@@ -947,6 +991,38 @@ static int l_system_offset(lua_State *L)
 		return luaL_error(L, "stale system handle: the system was removed from the world");
 	if (eddy_collider_get_offset(w, ls->id, &v) != EDDY_OK)
 		return luaL_error(L, "offset: this system is not a collider");
+	lua_createtable(L, 3, 0);
+	lua_pushnumber(L, v.x);
+	lua_rawseti(L, -2, 1);
+	lua_pushnumber(L, v.y);
+	lua_rawseti(L, -2, 2);
+	lua_pushnumber(L, v.z);
+	lua_rawseti(L, -2, 3);
+	return 1;
+}
+
+static int l_system_set_rotation(lua_State *L)
+{
+	lua_system *ls;
+	eddy_world *w = system_world(L, 1, &ls);
+	static const eddy_lua_kind k = {"set_rotation", 0, NULL, NULL, NULL};
+	eddy_vec3 v = vec3_field(L, &k, "rotation", 2);
+	if (!eddy_system_valid(w, ls->id))
+		return luaL_error(L, "stale system handle: the system was removed from the world");
+	if (eddy_collider_set_rotation(w, ls->id, v) != EDDY_OK)
+		return luaL_error(L, "%s", eddy_world_error(w));
+	return 0;
+}
+
+static int l_system_rotation(lua_State *L)
+{
+	lua_system *ls;
+	eddy_world *w = system_world(L, 1, &ls);
+	eddy_vec3 v;
+	if (!eddy_system_valid(w, ls->id))
+		return luaL_error(L, "stale system handle: the system was removed from the world");
+	if (eddy_collider_get_rotation(w, ls->id, &v) != EDDY_OK)
+		return luaL_error(L, "rotation: this system is not a collider");
 	lua_createtable(L, 3, 0);
 	lua_pushnumber(L, v.x);
 	lua_rawseti(L, -2, 1);
@@ -1659,6 +1735,8 @@ static const luaL_Reg system_methods[] = {
 	{"mass", l_system_mass},
 	{"set_offset", l_system_set_offset},
 	{"offset", l_system_offset},
+	{"set_rotation", l_system_set_rotation},
+	{"rotation", l_system_rotation},
 	{"set_group", l_system_set_group},
 	{"group", l_system_group},
 	{NULL, NULL},

@@ -13,9 +13,9 @@
 -- out. Paths are taken from the current directory (run from the checkout).
 -- FLIP needs walls at least two of its cells thick (cells are two spacings
 -- wide: spacing <= 2.5 mm for these 1 cm walls); thinner walls let the
--- grid's velocity carry particles through. SPH has no boundary particles on
--- the mesh yet, so its water stands lower against the walls than it should
--- (see README, Meshes).
+-- grid's velocity carry particles through. With SPH the mesh carries
+-- boundary particles (Akinci 2012), so the water meets the walls with a full
+-- neighbourhood (see README, Meshes).
 
 local eddy = require "eddy"
 

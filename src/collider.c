@@ -1,6 +1,7 @@
 /* SPDX-License-Identifier: MIT */
-/* What the colliders share: moving them, their wall velocity, and the
- * restitution/friction check. The contact response itself is inline in core.h. */
+/* What the colliders share: moving and rotating them, their wall velocity
+ * (v + omega x (x - pivot), omega from consecutive orientations over the
+ * step), and the restitution/friction check. The contact response itself is inline in core.h. */
 #include "systems.h"
 
 bool eddy__is_collider(const eddy_system *s) { return s && s->vt && s->vt->distance != NULL; }
@@ -24,9 +25,93 @@ eddy_vec3 eddy__collider_step_velocity(eddy_collider_base *b, double dt)
 	const eddy_collider_motion m = b->motion;
 	const float inv = dt > 0 ? (float)(1.0 / dt) : 0.0f;
 	b->motion.last_offset = m.offset;
-	b->motion.stepped = true;
+	b->motion.last_rotation = m.rotation;
+	b->motion.stepped = 1;
 	return (eddy_vec3){(m.offset.x - m.last_offset.x) * inv, (m.offset.y - m.last_offset.y) * inv,
 	                   (m.offset.z - m.last_offset.z) * inv};
+}
+
+/* ---- rotation ----
+ * Rotation vectors in degrees become unit quaternions (double) for the
+ * relative rotation between two orientations, and a float matrix for
+ * transforming points. */
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+
+static void quat_of(eddy_vec3 rv, double q[4])
+{
+	const double ang = sqrt((double)rv.x * rv.x + (double)rv.y * rv.y + (double)rv.z * rv.z) * (M_PI / 180.0);
+	if (!(ang > 0)) {
+		q[0] = 1, q[1] = q[2] = q[3] = 0;
+		return;
+	}
+	const double s = sin(0.5 * ang) / (ang * (180.0 / M_PI));
+	q[0] = cos(0.5 * ang), q[1] = rv.x * s, q[2] = rv.y * s, q[3] = rv.z * s;
+}
+
+void eddy__rotation_matrix(eddy_vec3 rv, float r[9])
+{
+	double q[4];
+	quat_of(rv, q);
+	const double w = q[0], x = q[1], y = q[2], z = q[3];
+	r[0] = (float)(1 - 2 * (y * y + z * z)), r[1] = (float)(2 * (x * y - w * z)), r[2] = (float)(2 * (x * z + w * y));
+	r[3] = (float)(2 * (x * y + w * z)), r[4] = (float)(1 - 2 * (x * x + z * z)), r[5] = (float)(2 * (y * z - w * x));
+	r[6] = (float)(2 * (x * z - w * y)), r[7] = (float)(2 * (y * z + w * x)), r[8] = (float)(1 - 2 * (x * x + y * y));
+}
+
+eddy_vec3 eddy__rotation_rate(eddy_vec3 from, eddy_vec3 to, double dt)
+{
+	if (!(dt > 0) || (from.x == to.x && from.y == to.y && from.z == to.z))
+		return (eddy_vec3){0, 0, 0};
+	double a[4], b[4];
+	quat_of(to, a);
+	quat_of(from, b);
+	/* q = a * conj(b) */
+	double q[4] = {a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3],
+	               -a[0] * b[1] + a[1] * b[0] - a[2] * b[3] + a[3] * b[2],
+	               -a[0] * b[2] + a[1] * b[3] + a[2] * b[0] - a[3] * b[1],
+	               -a[0] * b[3] - a[1] * b[2] + a[2] * b[1] + a[3] * b[0]};
+	if (q[0] < 0)
+		for (int k = 0; k < 4; ++k)
+			q[k] = -q[k];
+	const double sn = sqrt(q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+	if (!(sn > 0))
+		return (eddy_vec3){0, 0, 0};
+	const double ang = 2 * atan2(sn, q[0]), k = ang / (sn * dt);
+	return (eddy_vec3){(float)(q[1] * k), (float)(q[2] * k), (float)(q[3] * k)};
+}
+
+eddy_collider_pose eddy__collider_pose(const eddy_collider_motion *m)
+{
+	eddy_collider_pose p;
+	eddy__rotation_matrix(m->rotation, p.r);
+	p.pivot = m->pivot;
+	p.center = eddy__add3(m->pivot, m->offset);
+	p.rotated = m->rotation.x != 0 || m->rotation.y != 0 || m->rotation.z != 0;
+	return p;
+}
+
+eddy_collider_velocity eddy__collider_motion_since(const eddy_collider_motion *m, eddy_vec3 off0, eddy_vec3 rot0,
+                                                   double dt)
+{
+	const double inv = dt > 0 ? 1.0 / dt : 0.0;
+	eddy_collider_velocity v;
+	v.v = (eddy_vec3){(float)((m->offset.x - off0.x) * inv), (float)((m->offset.y - off0.y) * inv),
+	                  (float)((m->offset.z - off0.z) * inv)};
+	v.omega = eddy__rotation_rate(rot0, m->rotation, dt);
+	v.center = eddy__add3(m->pivot, m->offset);
+	return v;
+}
+
+eddy_collider_velocity eddy__collider_step_motion(eddy_collider_base *b, double dt)
+{
+	const eddy_collider_velocity v = eddy__collider_motion_since(&b->motion, b->motion.last_offset,
+	                                                             b->motion.last_rotation, dt);
+	b->motion.last_offset = b->motion.offset;
+	b->motion.last_rotation = b->motion.rotation;
+	b->motion.stepped = 1;
+	return v;
 }
 
 /* The collider behind id, or NULL; errors go to err (NULL for const callers). */
@@ -57,6 +142,71 @@ eddy_status eddy_collider_set_offset(eddy_world *w, eddy_system_id id, eddy_vec3
 	m->offset = offset;
 	if (!m->stepped)
 		m->last_offset = offset; /* placing it before it ever ran is not motion */
+	return EDDY_OK;
+}
+
+/* The collider behind id for a setter, with the world error set otherwise. */
+static eddy_collider_motion *motion_for_set(eddy_world *w, eddy_system_id id, const char *fn, const char *field,
+                                            eddy_vec3 v)
+{
+	if (!w)
+		return NULL;
+	if (!collider(w, id, fn, w))
+		return NULL;
+	eddy_system *s = eddy__system_get(w, id);
+	if (!eddy__check_vec3(w, s->label, field, v))
+		return NULL;
+	return &((eddy_collider_base *)s->data)->motion;
+}
+
+eddy_status eddy_collider_set_rotation(eddy_world *w, eddy_system_id id, eddy_vec3 axis_angle)
+{
+	eddy_collider_motion *m = motion_for_set(w, id, "collider_set_rotation", "rotation", axis_angle);
+	if (!m)
+		return w && !eddy_system_valid(w, id) ? EDDY_ERR_STALE : EDDY_ERR_INVALID;
+	/* beyond 1e6 degrees a float angle has lost whole degrees */
+	const double deg2 = (double)axis_angle.x * axis_angle.x + (double)axis_angle.y * axis_angle.y +
+	                    (double)axis_angle.z * axis_angle.z;
+	if (!(deg2 <= 1e12)) {
+		eddy__fail(w, EDDY_ERR_INVALID,
+		           "%s: 'rotation' must be an axis-angle vector in degrees of length at most 1e6 (got {%g, %g, %g})",
+		           eddy__system_get(w, id)->label, (double)axis_angle.x, (double)axis_angle.y, (double)axis_angle.z);
+		return EDDY_ERR_INVALID;
+	}
+	m->rotation = axis_angle;
+	if (!m->stepped)
+		m->last_rotation = axis_angle; /* placing it before it ever ran is not motion */
+	return EDDY_OK;
+}
+
+eddy_status eddy_collider_get_rotation(const eddy_world *w, eddy_system_id id, eddy_vec3 *axis_angle)
+{
+	if (!w || !axis_angle)
+		return EDDY_ERR_INVALID;
+	const eddy_system *s = collider(w, id, "collider_get_rotation", NULL);
+	if (!s)
+		return eddy_system_valid(w, id) ? EDDY_ERR_INVALID : EDDY_ERR_STALE;
+	*axis_angle = ((const eddy_collider_base *)s->data)->motion.rotation;
+	return EDDY_OK;
+}
+
+eddy_status eddy_collider_set_pivot(eddy_world *w, eddy_system_id id, eddy_vec3 pivot)
+{
+	eddy_collider_motion *m = motion_for_set(w, id, "collider_set_pivot", "pivot", pivot);
+	if (!m)
+		return w && !eddy_system_valid(w, id) ? EDDY_ERR_STALE : EDDY_ERR_INVALID;
+	m->pivot = pivot;
+	return EDDY_OK;
+}
+
+eddy_status eddy_collider_get_pivot(const eddy_world *w, eddy_system_id id, eddy_vec3 *pivot)
+{
+	if (!w || !pivot)
+		return EDDY_ERR_INVALID;
+	const eddy_system *s = collider(w, id, "collider_get_pivot", NULL);
+	if (!s)
+		return eddy_system_valid(w, id) ? EDDY_ERR_INVALID : EDDY_ERR_STALE;
+	*pivot = ((const eddy_collider_base *)s->data)->motion.pivot;
 	return EDDY_OK;
 }
 

@@ -24,6 +24,8 @@ eddy_status eddy_collider_shape_of(const eddy_world *w, eddy_system_id id, eddy_
 		eddy__shape_collide_sphere(s, out);
 	else if (s->vt == &eddy__kind_collide_plane)
 		eddy__shape_collide_plane(s, out);
+	else if (s->vt == &eddy__kind_collide_mesh)
+		eddy__shape_collide_mesh(s, out);
 	else
 		out->kind = EDDY_COLLIDER_OTHER;
 	return EDDY_OK;
@@ -42,5 +44,7 @@ size_t eddy__sph_collider_points(const eddy_world *w, const eddy_system *s, floa
 		return eddy__sph_plane_points(w, s, spacing, h, x, y, z, vol, normal);
 	if (s->vt == &eddy__kind_collide_box)
 		return eddy__sph_box_points(w, s, spacing, h, x, y, z, vol);
+	if (s->vt == &eddy__kind_collide_mesh)
+		return eddy__sph_mesh_points(s, spacing, h, x, y, z, vol);
 	return 0;
 }

@@ -9,5 +9,6 @@
 void eddy__shape_collide_box(const eddy_system *s, eddy_collider_shape *out);
 void eddy__shape_collide_sphere(const eddy_system *s, eddy_collider_shape *out);
 void eddy__shape_collide_plane(const eddy_system *s, eddy_collider_shape *out);
+void eddy__shape_collide_mesh(const eddy_system *s, eddy_collider_shape *out);
 
 #endif

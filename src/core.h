@@ -241,11 +241,78 @@ void eddy__check_emitter_start(const eddy_world *w, const eddy_system *s, double
                                void *user);
 
 /* collider helpers (collider.c) */
+/* The collider's pose: a point q of the def pose is at
+ *   x = pivot + offset + R(rotation) (q - pivot)
+ * with R the rotation by |rotation| degrees about rotation / |rotation| (the
+ * unit of collide_mesh's static `rotate`). The pivot is in the def pose:
+ * each kind sets its centre when added (box centre, sphere centre, plane
+ * point, mesh translate), eddy_collider_set_pivot another. A collider whose
+ * rotation and last rotation are zero takes the translating code paths
+ * unchanged (the same bits as before rotation existed). */
 typedef struct eddy_collider_motion {
-	eddy_vec3 offset;      /* m, current displacement from the def pose */
-	eddy_vec3 last_offset; /* m, displacement at the collider's last step */
-	bool stepped;          /* it has run: from now on offsets are motion */
+	eddy_vec3 offset;        /* m, current displacement from the def pose */
+	eddy_vec3 last_offset;   /* m, displacement at the collider's last step */
+	eddy_vec3 rotation;      /* degrees, axis-angle about the pivot, now */
+	eddy_vec3 last_rotation; /* degrees, ... at the collider's last step */
+	eddy_vec3 pivot;         /* m, the centre of rotation in the def pose */
+	float stepped;           /* 1 once it has run: from now on offsets are motion (a float: no padding in a checkpoint) */
 } eddy_collider_motion;
+
+/* A rotation as a row-major 3x3 matrix, and the rigid transform of a pose. */
+typedef struct eddy_collider_pose {
+	float r[9];       /* def pose -> world, row-major */
+	eddy_vec3 pivot;  /* m, in the def pose */
+	eddy_vec3 center; /* m, the pivot in the world: pivot + offset */
+	bool rotated;     /* r is not the identity */
+} eddy_collider_pose;
+
+/* A rigid motion over one step: the velocity at x is v + omega x (x - center). */
+typedef struct eddy_collider_velocity {
+	eddy_vec3 v;      /* m/s, the pivot's */
+	eddy_vec3 omega;  /* rad/s */
+	eddy_vec3 center; /* m */
+} eddy_collider_velocity;
+
+/* Rotation matrix of a rotation vector in degrees (Rodrigues). */
+void eddy__rotation_matrix(eddy_vec3 rotvec_deg, float r[9]);
+/* The angular velocity (rad/s) taking orientation `from` to `to` (rotation
+ * vectors in degrees) over dt: the rotation vector of R(to) R(from)^T / dt,
+ * the shorter way round; 0 for dt <= 0. */
+eddy_vec3 eddy__rotation_rate(eddy_vec3 from_deg, eddy_vec3 to_deg, double dt);
+eddy_collider_pose eddy__collider_pose(const eddy_collider_motion *m);
+static inline bool eddy__motion_rotates(const eddy_collider_motion *m)
+{
+	return m->rotation.x != 0 || m->rotation.y != 0 || m->rotation.z != 0 || m->last_rotation.x != 0 ||
+	       m->last_rotation.y != 0 || m->last_rotation.z != 0;
+}
+static inline eddy_vec3 eddy__mat_mul(const float r[9], eddy_vec3 v)
+{
+	return (eddy_vec3){r[0] * v.x + r[1] * v.y + r[2] * v.z, r[3] * v.x + r[4] * v.y + r[5] * v.z,
+	                   r[6] * v.x + r[7] * v.y + r[8] * v.z};
+}
+static inline eddy_vec3 eddy__mat_tmul(const float r[9], eddy_vec3 v)
+{
+	return (eddy_vec3){r[0] * v.x + r[3] * v.y + r[6] * v.z, r[1] * v.x + r[4] * v.y + r[7] * v.z,
+	                   r[2] * v.x + r[5] * v.y + r[8] * v.z};
+}
+/* World point -> def pose, and back. */
+static inline eddy_vec3 eddy__pose_to_body(const eddy_collider_pose *p, eddy_vec3 x)
+{
+	const eddy_vec3 d = eddy__mat_tmul(p->r, (eddy_vec3){x.x - p->center.x, x.y - p->center.y, x.z - p->center.z});
+	return (eddy_vec3){p->pivot.x + d.x, p->pivot.y + d.y, p->pivot.z + d.z};
+}
+static inline eddy_vec3 eddy__pose_to_world(const eddy_collider_pose *p, eddy_vec3 q)
+{
+	const eddy_vec3 d = eddy__mat_mul(p->r, (eddy_vec3){q.x - p->pivot.x, q.y - p->pivot.y, q.z - p->pivot.z});
+	return (eddy_vec3){p->center.x + d.x, p->center.y + d.y, p->center.z + d.z};
+}
+/* The velocity of the solid's point at x. */
+static inline eddy_vec3 eddy__rigid_velocity(const eddy_collider_velocity *m, eddy_vec3 x)
+{
+	const float rx = x.x - m->center.x, ry = x.y - m->center.y, rz = x.z - m->center.z;
+	return (eddy_vec3){m->v.x + m->omega.y * rz - m->omega.z * ry, m->v.y + m->omega.z * rx - m->omega.x * rz,
+	                   m->v.z + m->omega.x * ry - m->omega.y * rx};
+}
 
 /* Every collider's data block starts with this, so offset setting is shared. */
 typedef struct eddy_collider_base {
@@ -284,6 +351,28 @@ void *eddy__collider_state(eddy_world *w, eddy_system *s, size_t *size);
 
 /* Wall velocity of a collider over a step of dt, then marks the offset as used. */
 eddy_vec3 eddy__collider_step_velocity(eddy_collider_base *b, double dt);
+/* The rigid motion over a step of dt (offset and rotation against those of
+ * the last step), then marks both as used. */
+eddy_collider_velocity eddy__collider_step_motion(eddy_collider_base *b, double dt);
+/* The motion between a remembered pose (offset, rotation) and the current
+ * one over dt, for systems that keep their own memory (flip_boundary, SPH's
+ * boundary particles). */
+eddy_collider_velocity eddy__collider_motion_since(const eddy_collider_motion *m, eddy_vec3 offset_then,
+                                                   eddy_vec3 rotation_then, double dt);
+/* Sets a newly added collider's pivot (its kind's centre); a pivot given
+ * with eddy_collider_set_pivot later replaces it. */
+static inline void eddy__collider_init_pivot(eddy_collider_base *b, eddy_vec3 pivot) { b->motion.pivot = pivot; }
+/* Contact of particle i found at body-frame point q_body (moved there), with
+ * body-frame normal n_body, on a rotated collider: writes the world position
+ * and applies the response against the surface's velocity there. */
+static inline void eddy__collide_rotated(float *x, float *y, float *z, float *vx, float *vy, float *vz, size_t i,
+                                         const eddy_collider_pose *p, const eddy_collider_velocity *mv,
+                                         eddy_vec3 q_body, eddy_vec3 n_body, eddy_collider_response r)
+{
+	const eddy_vec3 xw = eddy__pose_to_world(p, q_body);
+	x[i] = xw.x, y[i] = xw.y, z[i] = xw.z;
+	eddy__collide_response(vx, vy, vz, i, eddy__mat_mul(p->r, n_body), eddy__rigid_velocity(mv, xw), r);
+}
 
 static inline eddy_vec3 eddy__v3(float x, float y, float z) { return (eddy_vec3){x, y, z}; }
 static inline eddy_vec3 eddy__add3(eddy_vec3 a, eddy_vec3 b) { return (eddy_vec3){a.x + b.x, a.y + b.y, a.z + b.z}; }

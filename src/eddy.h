@@ -460,6 +460,21 @@ EDDY_API eddy_system_id eddy_add_emit_particles(eddy_world *w, const eddy_emit_p
  * collider's first step this only places it. */
 EDDY_API eddy_status eddy_collider_set_offset(eddy_world *w, eddy_system_id id, eddy_vec3 offset);
 EDDY_API eddy_status eddy_collider_get_offset(const eddy_world *w, eddy_system_id id, eddy_vec3 *offset);
+/* Rotates a collider about its pivot: axis_angle is a rotation vector in
+ * degrees (|axis_angle| degrees about axis_angle / |axis_angle|, the unit of
+ * collide_mesh's `rotate`), the orientation relative to the def pose, finite
+ * and at most 1e6 degrees long. The pose is x = pivot + offset + R (q - pivot)
+ * for a point q of the def pose. As with the offset, the collider's angular
+ * velocity over the next step is the rotation from the orientation at its
+ * last step to this one over dt, and particles meet the surface's velocity
+ * v + omega x (x - pivot - offset). Before the collider's first step this
+ * only places it. */
+EDDY_API eddy_status eddy_collider_set_rotation(eddy_world *w, eddy_system_id id, eddy_vec3 axis_angle);
+EDDY_API eddy_status eddy_collider_get_rotation(const eddy_world *w, eddy_system_id id, eddy_vec3 *axis_angle);
+/* The point the collider rotates about, in its def pose (m): by default the
+ * box's centre, the sphere's centre, the plane's point, the mesh's translate. */
+EDDY_API eddy_status eddy_collider_set_pivot(eddy_world *w, eddy_system_id id, eddy_vec3 pivot);
+EDDY_API eddy_status eddy_collider_get_pivot(const eddy_world *w, eddy_system_id id, eddy_vec3 *pivot);
 /* Signed distance from p to the collider's solid (< 0 inside the solid). */
 EDDY_API eddy_status eddy_collider_distance(const eddy_world *w, eddy_system_id id, eddy_vec3 p, float *dist);
 
@@ -835,18 +850,23 @@ typedef enum eddy_collider_kind {
 	EDDY_COLLIDER_BOX = 0,
 	EDDY_COLLIDER_SPHERE,
 	EDDY_COLLIDER_PLANE,
-	EDDY_COLLIDER_OTHER    /* a collider whose shape has no description */
+	EDDY_COLLIDER_OTHER,   /* a collider whose shape has no description */
+	EDDY_COLLIDER_MESH     /* a collide_mesh: a, b its distance grid's box (a drawer needs the mesh file) */
 } eddy_collider_kind;
 
 typedef struct eddy_collider_shape {
 	eddy_collider_kind kind; /* which of the fields below apply */
-	eddy_vec3 a;           /* m, box min, sphere centre or a point on the plane */
-	eddy_vec3 b;           /* m, box max; 1, the plane's unit normal */
+	eddy_vec3 a;           /* m, box min, sphere centre or a point on the plane (before the rotation) */
+	eddy_vec3 b;           /* m, box max; 1, the plane's unit normal (rotation applied) */
 	float radius;          /* m, sphere radius */
 	bool inside;           /* particles live inside the box or sphere (a tank or bowl) */
+	eddy_vec3 rotation;    /* degrees, rotation vector turning a box or mesh about `pivot` (0: none) */
+	eddy_vec3 pivot;       /* m, the centre of that rotation, offset applied */
 } eddy_collider_shape;
 
-/* The collider's current shape (its offset applied). */
+/* The collider's current shape (its offset applied; a box's corners a, b are
+ * before `rotation` about `pivot`, a sphere's centre and a plane's point and
+ * normal after it). */
 EDDY_API eddy_status eddy_collider_shape_of(const eddy_world *w, eddy_system_id id, eddy_collider_shape *out);
 
 /* ---- the liquid surface (src/surface.c, OpenVDB) ------------------------ *

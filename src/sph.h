@@ -107,12 +107,16 @@ typedef struct sph_neighbors {
 		eddy_vec3 normal;    /* a plane's: only the offset along it moves them; 0 otherwise */
 		eddy_vec3 disp;      /* m, their displacement from the def pose now */
 		eddy_vec3 at_search; /* m, ... at the last Verlet search */
+		eddy_vec3 rot;       /* degrees, the collider's rotation they were placed with */
+		eddy_vec3 rot_at_search; /* degrees, ... at the last Verlet search */
+		float reach;         /* m, the farthest particle from the collider's pivot (bounds a rotation's sweep) */
 	} *col;
 	/* per collider, the offset seen at the previous step (velocity = its
 	 * change over the time since); part of sph_density's checkpointed
 	 * state, which is the block bp, brho, seen (bstate_size bytes) */
 	struct sph_collider_seen {
 		float x, y, z, have; /* m; have = 1 once seen (floats: no padding in a checkpoint) */
+		float rx, ry, rz, unused; /* degrees, the rotation seen */
 		double time;         /* s */
 	} *seen;
 	size_t bstate_size;
@@ -171,11 +175,12 @@ bool eddy__sph_boundary_box_covers(const eddy_system *s, eddy_vec3 min, eddy_vec
  * the plane) or 0 (they move with the whole offset). Colliders that get
  * none: a tank box (its walls are an sph_boundary_box's), a block box that
  * an sph_boundary_box already samples (the same min and max), and any
- * collider that is not one of the built-in three. Implemented beside each
+ * collider that is not one of the built-in four (box, sphere, plane, mesh). Implemented beside each
  * collider (sys_collide_*.c), dispatched in collider_shape.c. */
 size_t eddy__sph_collider_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
                                  float *z, float *vol, eddy_vec3 *normal);
 size_t eddy__sph_sphere_points(const eddy_system *s, float spacing, float h, float *x, float *y, float *z, float *vol);
+size_t eddy__sph_mesh_points(const eddy_system *s, float spacing, float h, float *x, float *y, float *z, float *vol);
 size_t eddy__sph_plane_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
                               float *z, float *vol, eddy_vec3 *normal);
 size_t eddy__sph_box_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,

@@ -46,7 +46,12 @@
  * see sph.h) follow them after, made once in the collider's def pose and
  * moved every step by its offset (a plane's patch only along its normal),
  * with the velocity (offset - offset seen at the last step) / time since,
- * as sys_flip_boundary.c takes it. Their motion since the last search
+ * as sys_flip_boundary.c takes it. A rotating collider's particles are
+ * placed by its whole pose, pivot + offset + R (x_b0 - pivot), and carry
+ * the point velocity v + omega x (x_b - pivot - offset), omega the rotation
+ * from the orientation seen at the last step over the time since; their
+ * Verlet displacement is bounded by the pivot's move plus the set's reach
+ * from the pivot times the angle turned. Their motion since the last search
  * counts in the Verlet displacement test like a particle's; at each search
  * every boundary particle is cell-sorted anew (border), and each particle's
  * boundary hits are sorted by index, so the lists and sums are the same
@@ -219,12 +224,60 @@ static void boundary_free(sph_neighbors *nb)
  * changed: positions; the time moved on: velocities, the offset's change
  * over the time since it was last seen, as sys_flip_boundary.c takes it).
  * Returns the largest squared displacement since the last search. */
+/* A rotating collider's particles (or one that rotated since it was last
+ * seen): x_b = pivot + offset + R (x_b0 - pivot), whole (a plane's patch
+ * turns with it too), with the rigid velocity v + omega x (x_b - pivot -
+ * offset), v and omega from the pose seen at the last step. Returns the
+ * bound on any particle's displacement since the search: the pivot's move
+ * plus the reach times the angle turned. */
+static float boundary_move_rotating(const eddy_world *w, sph_neighbors *nb, int c)
+{
+	struct sph_collider_set *cs = &nb->col[c];
+	const eddy_collider_motion *m = &((const eddy_collider_base *)w->slots[cs->slot].data)->motion;
+	const eddy_vec3 off = m->offset, rot = m->rotation;
+	if (off.x != cs->disp.x || off.y != cs->disp.y || off.z != cs->disp.z || rot.x != cs->rot.x ||
+	    rot.y != cs->rot.y || rot.z != cs->rot.z) {
+		const eddy_collider_pose pose = eddy__collider_pose(m);
+		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
+			const eddy_vec3 q = eddy__pose_to_world(&pose, eddy__v3(nb->blx[b], nb->bly[b], nb->blz[b]));
+			nb->bx[b] = q.x, nb->by[b] = q.y, nb->bz[b] = q.z;
+		}
+		cs->disp = off;
+		cs->rot = rot;
+	}
+	struct sph_collider_seen *sn = &nb->seen[c];
+	if (sn->have == 0 || w->time != sn->time) {
+		eddy_collider_velocity mv = {{0, 0, 0}, {0, 0, 0}, eddy__add3(m->pivot, off)};
+		if (sn->have != 0 && w->time > sn->time)
+			mv = eddy__collider_motion_since(m, eddy__v3(sn->x, sn->y, sn->z), eddy__v3(sn->rx, sn->ry, sn->rz),
+			                                 w->time - sn->time);
+		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
+			const eddy_vec3 v = eddy__rigid_velocity(&mv, eddy__v3(nb->bx[b], nb->by[b], nb->bz[b]));
+			nb->bvx[b] = v.x, nb->bvy[b] = v.y, nb->bvz[b] = v.z;
+		}
+		*sn = (struct sph_collider_seen){off.x, off.y, off.z, 1, rot.x, rot.y, rot.z, 0, w->time};
+	}
+	const eddy_vec3 om = eddy__rotation_rate(cs->rot_at_search, rot, 1.0);
+	const float ex = off.x - cs->at_search.x, ey = off.y - cs->at_search.y, ez = off.z - cs->at_search.z;
+	const float ang = sqrtf(om.x * om.x + om.y * om.y + om.z * om.z);
+	const float m1 = sqrtf(ex * ex + ey * ey + ez * ez) + cs->reach * ang;
+	return m1 * m1;
+}
+
 static float boundary_move(const eddy_world *w, sph_neighbors *nb)
 {
 	float moved2 = 0;
 	for (int c = 0; c < nb->ncol; ++c) {
 		struct sph_collider_set *cs = &nb->col[c];
 		const eddy_system *o = &w->slots[cs->slot];
+		const struct sph_collider_seen *sn0 = &nb->seen[c];
+		if (eddy__motion_rotates(&((const eddy_collider_base *)o->data)->motion) || sn0->rx != 0 || sn0->ry != 0 ||
+		    sn0->rz != 0 || cs->rot.x != 0 || cs->rot.y != 0 || cs->rot.z != 0 || cs->rot_at_search.x != 0 ||
+		    cs->rot_at_search.y != 0 || cs->rot_at_search.z != 0) {
+			const float m2 = boundary_move_rotating(w, nb, c);
+			moved2 = m2 > moved2 ? m2 : moved2;
+			continue;
+		}
 		const eddy_vec3 off = ((const eddy_collider_base *)o->data)->motion.offset, n = cs->normal;
 		const bool plane = n.x != 0 || n.y != 0 || n.z != 0;
 		const float along = off.x * n.x + off.y * n.y + off.z * n.z;
@@ -253,7 +306,7 @@ static float boundary_move(const eddy_world *w, sph_neighbors *nb)
 				nb->bvy[b] = v.y;
 				nb->bvz[b] = v.z;
 			}
-			*sn = (struct sph_collider_seen){off.x, off.y, off.z, 1, w->time};
+			*sn = (struct sph_collider_seen){off.x, off.y, off.z, 1, 0, 0, 0, 0, w->time};
 		}
 		const float ex = d.x - cs->at_search.x, ey = d.y - cs->at_search.y, ez = d.z - cs->at_search.z;
 		const float m2 = ex * ex + ey * ey + ez * ez;
@@ -275,8 +328,10 @@ static eddy_status boundary_sort(eddy_world *w, sph_neighbors *nb)
 	for (size_t i = 0; i < total; ++i)
 		key[i] = cell_index(nb, nb->bx[i], nb->by[i], nb->bz[i]);
 	counting_sort(key, total, cells, nb->bcell_start, nb->border);
-	for (int c = 0; c < nb->ncol; ++c)
+	for (int c = 0; c < nb->ncol; ++c) {
 		nb->col[c].at_search = nb->col[c].disp;
+		nb->col[c].rot_at_search = nb->col[c].rot;
+	}
 	return EDDY_OK;
 }
 
@@ -384,6 +439,11 @@ static eddy_status boundary_build(eddy_world *w, sph_shared *sh)
 		cs->count = got;
 		cs->normal = normal;
 		cs->disp = eddy__v3(NAN, NAN, NAN); /* placed by boundary_move */
+		const eddy_vec3 pv = ((const eddy_collider_base *)o->data)->motion.pivot;
+		for (size_t b = at; b < at + got; ++b) {
+			const float dx = nb->blx[b] - pv.x, dy = nb->bly[b] - pv.y, dz = nb->blz[b] - pv.z;
+			cs->reach = fmaxf(cs->reach, sqrtf(dx * dx + dy * dy + dz * dz));
+		}
 		at += got;
 	}
 	for (size_t i = 0; i < total; ++i)

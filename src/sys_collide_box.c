@@ -7,6 +7,9 @@
  * gets the contact response with that wall's inward normal. Block: a particle
  * inside is moved to the nearest face and responds with its outward normal.
  * The response (core.h) works on velocity relative to the moving wall.
+ * A rotated box (eddy_collider_set_rotation) does the same in its own frame:
+ * x_b = pivot + R^T (x - pivot - offset), the normal turned back by R and
+ * the wall velocity v + omega x (x - pivot - offset) at the contact point.
  * With SPH a block also carries boundary particles that move with it
  * (eddy__sph_box_points below; Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012); a tank's walls are an
@@ -40,9 +43,64 @@ static void bounds(const collide_box *b, eddy_vec3 *lo, eddy_vec3 *hi)
 	*hi = eddy__add3(b->def.max, b->base.motion.offset);
 }
 
+/* A rotated box: each particle in the box's own frame (the def pose), the
+ * same clamp or push there, back to the world with the normal rotated and
+ * the wall velocity of the surface point it ends at. */
+static void step_rotated(eddy_world *w, collide_box *b, const eddy_collider_velocity *mv, int threads)
+{
+	const eddy_collider_pose pose = eddy__collider_pose(&b->base.motion);
+	const float l[3] = {b->def.min.x, b->def.min.y, b->def.min.z}, h[3] = {b->def.max.x, b->def.max.y, b->def.max.z};
+	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	const eddy_collider_response r = b->def.response;
+	const bool tank = b->def.inside;
+	const long n = (long)w->n;
+#pragma omp parallel for num_threads(threads) if (n > 32768) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		const eddy_vec3 qb = eddy__pose_to_body(&pose, eddy__v3(x[i], y[i], z[i]));
+		float q[3] = {qb.x, qb.y, qb.z};
+		if (tank) {
+			for (int a = 0; a < 3; ++a) {
+				if (q[a] >= l[a] && q[a] <= h[a])
+					continue;
+				eddy_vec3 nrm = {0, 0, 0};
+				float *c = a == 0 ? &nrm.x : a == 1 ? &nrm.y : &nrm.z;
+				*c = q[a] < l[a] ? 1.0f : -1.0f;
+				q[a] = q[a] < l[a] ? l[a] : h[a];
+				eddy__collide_rotated(x, y, z, vx, vy, vz, (size_t)i, &pose, mv, eddy__v3(q[0], q[1], q[2]), nrm, r);
+			}
+			continue;
+		}
+		int best = -1;
+		float depth = INFINITY, sign = 0;
+		for (int a = 0; a < 3; ++a) {
+			if (!(q[a] > l[a] && q[a] < h[a])) {
+				best = -1;
+				break;
+			}
+			if (q[a] - l[a] < depth)
+				depth = q[a] - l[a], best = a, sign = -1;
+			if (h[a] - q[a] < depth)
+				depth = h[a] - q[a], best = a, sign = 1;
+		}
+		if (best < 0)
+			continue;
+		eddy_vec3 nrm = {0, 0, 0};
+		float *c = best == 0 ? &nrm.x : best == 1 ? &nrm.y : &nrm.z;
+		*c = sign;
+		q[best] = sign > 0 ? h[best] : l[best];
+		eddy__collide_rotated(x, y, z, vx, vy, vz, (size_t)i, &pose, mv, eddy__v3(q[0], q[1], q[2]), nrm, r);
+	}
+}
+
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	collide_box *b = s->data;
+	if (eddy__motion_rotates(&b->base.motion)) {
+		const eddy_collider_velocity mv = eddy__collider_step_motion(&b->base, ctx->dt);
+		step_rotated(w, b, &mv, ctx->threads);
+		return EDDY_OK;
+	}
 	const eddy_vec3 vw = eddy__collider_step_velocity(&b->base, ctx->dt);
 	eddy_vec3 lo, hi;
 	bounds(b, &lo, &hi);
@@ -103,7 +161,13 @@ static float distance(const eddy_system *s, eddy_vec3 q)
 {
 	const collide_box *b = s->data;
 	eddy_vec3 lo, hi;
-	bounds(b, &lo, &hi);
+	if (eddy__motion_rotates(&b->base.motion)) {
+		const eddy_collider_pose pose = eddy__collider_pose(&b->base.motion);
+		q = eddy__pose_to_body(&pose, q);
+		lo = b->def.min, hi = b->def.max;
+	} else {
+		bounds(b, &lo, &hi);
+	}
 	/* distance to the box surface, negative inside the box */
 	const float dx = fmaxf(lo.x - q.x, q.x - hi.x), dy = fmaxf(lo.y - q.y, q.y - hi.y), dz = fmaxf(lo.z - q.z, q.z - hi.z);
 	const float ox = fmaxf(dx, 0), oy = fmaxf(dy, 0), oz = fmaxf(dz, 0);
@@ -128,8 +192,11 @@ eddy_system_id eddy_add_collide_box(eddy_world *w, const eddy_collide_box_def *d
 	if (!eddy__check_box(w, sys, def->min, def->max) || !eddy__check_response(w, sys, def->response))
 		return EDDY_NULL_SYSTEM;
 	collide_box *b = calloc(1, sizeof *b);
-	if (b)
+	if (b) {
 		b->def = *def;
+		eddy__collider_init_pivot(&b->base, eddy__v3(0.5f * (def->min.x + def->max.x), 0.5f * (def->min.y + def->max.y),
+		                                             0.5f * (def->min.z + def->max.z)));
+	}
 	return eddy__add_system(w, &eddy__kind_collide_box, b, box_io, 6, box_io, 6);
 }
 
@@ -143,6 +210,8 @@ void eddy__shape_collide_box(const eddy_system *s, eddy_collider_shape *out)
 	bounds(b, &out->a, &out->b);
 	out->radius = 0.0f;
 	out->inside = b->def.inside;
+	out->rotation = b->base.motion.rotation;
+	out->pivot = eddy__add3(b->base.motion.pivot, b->base.motion.offset);
 }
 
 /* ---- boundary particles, for SPH (sph_neighbors.c) ----

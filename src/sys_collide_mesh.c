@@ -14,12 +14,18 @@
  * Otherwise, a particle with distance d < 0 stays where it is. It then
  * moves along n = grad d / |grad d| (central differences half a cell wide)
  * to d = 2e-3 cells (so rounding cannot leave it inside), repeated up to
- * four times where the field bends, and gets the contact response (core.h)
+ * four times where the field bends (still inside after that, in a crease
+ * where the steps bounce between two faces, it goes back to where its path
+ * entered the solid, when the path started outside), and gets the contact response (core.h)
  * with normal n and the collider's velocity. x - v dt is exactly the last
  * position after integrate (v the velocity it moved with) and close to it
- * after flip_advect. The field is the only state besides the motion; a
+ * after flip_advect. A rotating mesh does the same in its own frame (x_b =
+ * pivot + R^T (x - pivot - offset)), the path's start taken in the pose of
+ * the last step, the normal turned back by R, and the wall velocity
+ * v + omega x (x - pivot - offset). The field is the only state besides the motion; a
  * scene without collide_mesh allocates none of it. */
 #include "mesh.h"
+#include "sph.h"
 #include "systems.h"
 
 #include <stdlib.h>
@@ -49,6 +55,11 @@ eddy_collide_mesh_def eddy_default_collide_mesh_def(void)
 
 static float sdistance(const collide_mesh *b, eddy_vec3 q)
 {
+	if (eddy__motion_rotates(&b->base.motion)) {
+		const eddy_collider_pose pose = eddy__collider_pose(&b->base.motion);
+		const float d = eddy__sdf_value(&b->sdf, eddy__pose_to_body(&pose, q));
+		return b->def.inside ? -d : d;
+	}
 	const eddy_vec3 o = b->base.motion.offset;
 	const float d = eddy__sdf_value(&b->sdf, eddy__v3(q.x - o.x, q.y - o.y, q.z - o.z));
 	return b->def.inside ? -d : d;
@@ -105,9 +116,72 @@ static bool first_entry(const collide_mesh *b, eddy_vec3 a, eddy_vec3 c, eddy_ve
 	return false;
 }
 
+/* Unit normal out of the solid at body-frame q, (0, 1, 0) where flat. */
+static eddy_vec3 body_normal(const collide_mesh *b, eddy_vec3 q)
+{
+	const float e = 0.5f * (float)b->sdf.h;
+	eddy_vec3 g = {body_distance(b, eddy__v3(q.x + e, q.y, q.z)) - body_distance(b, eddy__v3(q.x - e, q.y, q.z)),
+	               body_distance(b, eddy__v3(q.x, q.y + e, q.z)) - body_distance(b, eddy__v3(q.x, q.y - e, q.z)),
+	               body_distance(b, eddy__v3(q.x, q.y, q.z + e)) - body_distance(b, eddy__v3(q.x, q.y, q.z - e))};
+	const float len = sqrtf(g.x * g.x + g.y * g.y + g.z * g.z);
+	if (!(len > 0))
+		return eddy__v3(0, 1, 0);
+	return eddy__v3(g.x / len, g.y / len, g.z / len);
+}
+
+/* A rotating mesh: as step below, in the mesh's own frame. The path starts
+ * at x - v dt seen in the pose of the collider's last step and ends at x in
+ * the current pose, so a wall sweeping over a particle is caught as a
+ * particle crossing it. */
+static void step_rotated(eddy_world *w, collide_mesh *b, const eddy_collider_motion *then,
+                         const eddy_collider_velocity *mv, double dt_step, int threads)
+{
+	const eddy_collider_pose pose = eddy__collider_pose(&b->base.motion), pose0 = eddy__collider_pose(then);
+	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	const eddy_collider_response r = b->def.response;
+	const float hair = 1e-3f * (float)b->sdf.h, dt = (float)dt_step, walk = 0.25f * (float)b->sdf.h;
+	const long n = (long)w->n;
+#pragma omp parallel for num_threads(threads) if (n > 8192) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		const eddy_vec3 c = eddy__pose_to_body(&pose, eddy__v3(x[i], y[i], z[i]));
+		const eddy_vec3 c0 =
+			eddy__pose_to_body(&pose0, eddy__v3(x[i] - vx[i] * dt, y[i] - vy[i] * dt, z[i] - vz[i] * dt));
+		const eddy_vec3 dp = {c.x - c0.x, c.y - c0.y, c.z - c0.z};
+		float d = body_distance(b, c);
+		const float len2 = dp.x * dp.x + dp.y * dp.y + dp.z * dp.z;
+		const bool fast = len2 > walk * walk;
+		if (!(d < 0) && (!fast || d * d > 3 * len2))
+			continue;
+		eddy_vec3 q = c, hit;
+		if (fast && first_entry(b, c0, c, &hit))
+			q = hit, d = body_distance(b, q);
+		else if (!(d < 0))
+			continue;
+		eddy_vec3 nrm = body_normal(b, q);
+		for (int it = 0; it < 4 && d < hair; ++it) {
+			if (it > 0)
+				nrm = body_normal(b, q);
+			const float k = 2 * hair - d;
+			q = eddy__v3(q.x + nrm.x * k, q.y + nrm.y * k, q.z + nrm.z * k);
+			d = body_distance(b, q);
+		}
+		if (d < 0 && first_entry(b, c0, c, &hit))
+			q = hit; /* in a crease the steps did not get out: where the path entered */
+		eddy__collide_rotated(x, y, z, vx, vy, vz, (size_t)i, &pose, mv, q, nrm, r);
+	}
+}
+
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	collide_mesh *b = s->data;
+	if (eddy__motion_rotates(&b->base.motion)) {
+		eddy_collider_motion then = b->base.motion;
+		then.offset = then.last_offset, then.rotation = then.last_rotation;
+		const eddy_collider_velocity mv = eddy__collider_step_motion(&b->base, ctx->dt);
+		step_rotated(w, b, &then, &mv, ctx->dt, ctx->threads);
+		return EDDY_OK;
+	}
 	const eddy_vec3 vw = eddy__collider_step_velocity(&b->base, ctx->dt);
 	const eddy_vec3 off = b->base.motion.offset;
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
@@ -144,6 +218,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			q = eddy__v3(q.x + nrm.x * k, q.y + nrm.y * k, q.z + nrm.z * k);
 			d = body_distance(b, q);
 		}
+		if (d < 0 && first_entry(b, eddy__v3(c.x - dp.x, c.y - dp.y, c.z - dp.z), c, &hit))
+			q = hit; /* in a crease the steps did not get out: where the path entered */
 		x[i] = q.x + off.x, y[i] = q.y + off.y, z[i] = q.z + off.z;
 		eddy__collide_response(vx, vy, vz, (size_t)i, nrm, vw, r);
 	}
@@ -269,6 +345,81 @@ eddy_system_id eddy_add_collide_mesh(eddy_world *w, const eddy_collide_mesh_def 
 	}
 	for (size_t q = 0; q < nodes; ++q)
 		b->depth = fmaxf(b->depth, -b->field[q]);
+	eddy__collider_init_pivot(&b->base, def->translate);
 	eddy_system_id id = eddy__add_system(w, &eddy__kind_collide_mesh, b, mesh_io, 6, mesh_io, 6);
 	return id;
+}
+
+/* ---- shape, for drawing (eddy_collider_shape_of) ----
+ * The distance grid's box (the mesh's box plus the grid's margin), with the
+ * offset; a drawer turns it by rotation about pivot and loads the mesh file
+ * for the triangles. */
+#include "collider_shape.h"
+
+void eddy__shape_collide_mesh(const eddy_system *s, eddy_collider_shape *out)
+{
+	const collide_mesh *b = s->data;
+	const eddy_vec3 o = b->base.motion.offset;
+	out->kind = EDDY_COLLIDER_MESH;
+	out->a = eddy__v3((float)b->sdf.origin[0] + o.x, (float)b->sdf.origin[1] + o.y, (float)b->sdf.origin[2] + o.z);
+	out->b = eddy__v3((float)(b->sdf.origin[0] + (b->sdf.n[0] - 1) * b->sdf.h) + o.x,
+	                  (float)(b->sdf.origin[1] + (b->sdf.n[1] - 1) * b->sdf.h) + o.y,
+	                  (float)(b->sdf.origin[2] + (b->sdf.n[2] - 1) * b->sdf.h) + o.z);
+	out->radius = 0.0f;
+	out->inside = b->def.inside;
+	out->rotation = b->base.motion.rotation;
+	out->pivot = eddy__add3(b->base.motion.pivot, o);
+}
+
+/* ---- boundary particles, for SPH (sph_neighbors.c) ----
+ * Akinci et al. 2012 on the mesh, laid out as a block box lays out its own:
+ * the points of a cubic lattice of the fluid's spacing s (over the distance
+ * grid's box grown by the shell, at min + (i + 1/2) s) that lie on the solid
+ * side of the surface within L = ceil(h / s) spacings of it, -L s <= d < 0
+ * with d the collider's signed distance in its def pose: a shell as thick as
+ * the kernel support (a wall thinner than that is sampled whole), so a fluid
+ * particle at the surface sees a full neighbourhood. Each stands for the
+ * lattice cell, V_b = 1 / sum_lattice W, the volume sph_boundary_box gives
+ * its own: where the fluid continues the lattice, the boundary and fluid
+ * sums together are a full lattice's. Each point then moves along the
+ * field's normal onto the layer at depth (j + 1/2) s it falls in, j = 0 ..
+ * L - 1, as the sphere's and box's layers lie: left on the lattice, points
+ * a hair under the surface would sit closer to the fluid than any wall
+ * particle of theirs and kick it (the cup's water then threw dozens of
+ * particles over the rim). A layer keeps the lattice's s^-2 points per unit
+ * area on average. A tank mesh (inside = true) gets its shell outside the
+ * mesh. */
+size_t eddy__sph_mesh_points(const eddy_system *s, float spacing, float h, float *x, float *y, float *z, float *vol)
+{
+	const collide_mesh *b = s->data;
+	const int L = (int)ceil(h / spacing - 1e-4);
+	const double sp = spacing, grow = (L + 1) * sp;
+	double lo[3];
+	long n[3];
+	for (int a = 0; a < 3; ++a) {
+		lo[a] = b->sdf.origin[a] - grow;
+		const double ext = (b->sdf.n[a] - 1) * b->sdf.h + 2 * grow;
+		n[a] = (long)ceil(ext / sp);
+	}
+	const float v = (float)(1.0 / eddy_sph_lattice_sum(EDDY_SPH_POLY6, spacing, h)), shell = (float)(L * sp);
+	size_t k = 0;
+	for (long iz = 0; iz < n[2]; ++iz)
+		for (long iy = 0; iy < n[1]; ++iy)
+			for (long ix = 0; ix < n[0]; ++ix) {
+				const eddy_vec3 q = {(float)(lo[0] + (ix + 0.5) * sp), (float)(lo[1] + (iy + 0.5) * sp),
+				                     (float)(lo[2] + (iz + 0.5) * sp)};
+				const float d = body_distance(b, q);
+				if (!(d < 0 && d >= -shell))
+					continue;
+				if (x) {
+					/* onto the layer at depth (j + 1/2) s it falls in (one
+					 * step along the field's normal) */
+					const float target = -((float)floor(-d / sp) + 0.5f) * (float)sp;
+					const eddy_vec3 nrm = body_normal(b, q);
+					x[k] = q.x + nrm.x * (target - d), y[k] = q.y + nrm.y * (target - d), z[k] = q.z + nrm.z * (target - d);
+					vol[k] = v;
+				}
+				k++;
+			}
+	return k;
 }

@@ -4,7 +4,10 @@
  *
  * Reads: x y z vx vy vz. Writes: x y z vx vy vz.
  * d = (p - point) . n; a particle with d < 0 moves by -d n onto the plane and
- * gets the contact response with normal n.
+ * gets the contact response with normal n. A rotating plane has its point
+ * and normal turned about the pivot (by default the point) and the wall
+ * velocity v + omega x (x - pivot - offset) at the contact; its SPH patch
+ * then turns with it whole.
  * With SPH the plane also carries boundary particles that move with it
  * (eddy__sph_plane_points below; Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012); the projection here is
@@ -31,11 +34,33 @@ eddy_collide_plane_def eddy_default_collide_plane_def(void)
 	return d;
 }
 
+/* The plane's point and normal in the world now. */
+static void plane_now(const collide_plane *b, eddy_vec3 *o, eddy_vec3 *nrm)
+{
+	if (!eddy__motion_rotates(&b->base.motion)) {
+		*o = eddy__add3(b->def.point, b->base.motion.offset);
+		*nrm = b->def.normal;
+		return;
+	}
+	const eddy_collider_pose pose = eddy__collider_pose(&b->base.motion);
+	*o = eddy__pose_to_world(&pose, b->def.point);
+	*nrm = eddy__mat_mul(pose.r, b->def.normal);
+}
+
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	collide_plane *b = s->data;
-	const eddy_vec3 vw = eddy__collider_step_velocity(&b->base, ctx->dt);
-	const eddy_vec3 o = eddy__add3(b->def.point, b->base.motion.offset), nrm = b->def.normal;
+	/* a rotating plane: its point and normal turn about the pivot, and the
+	 * surface moves with v + omega x (x - pivot - offset) */
+	const bool rot = eddy__motion_rotates(&b->base.motion);
+	eddy_collider_velocity mv = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
+	eddy_vec3 vw = {0, 0, 0};
+	if (rot)
+		mv = eddy__collider_step_motion(&b->base, ctx->dt);
+	else
+		vw = eddy__collider_step_velocity(&b->base, ctx->dt);
+	eddy_vec3 o, nrm;
+	plane_now(b, &o, &nrm);
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const eddy_collider_response r = b->def.response;
@@ -48,7 +73,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		x[i] -= d * nrm.x;
 		y[i] -= d * nrm.y;
 		z[i] -= d * nrm.z;
-		eddy__collide_response(vx, vy, vz, (size_t)i, nrm, vw, r);
+		eddy__collide_response(vx, vy, vz, (size_t)i, nrm, rot ? eddy__rigid_velocity(&mv, eddy__v3(x[i], y[i], z[i])) : vw,
+		                       r);
 	}
 	return EDDY_OK;
 }
@@ -56,7 +82,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 static float distance(const eddy_system *s, eddy_vec3 q)
 {
 	const collide_plane *b = s->data;
-	const eddy_vec3 o = eddy__add3(b->def.point, b->base.motion.offset), nrm = b->def.normal;
+	eddy_vec3 o, nrm;
+	plane_now(b, &o, &nrm);
 	return (q.x - o.x) * nrm.x + (q.y - o.y) * nrm.y + (q.z - o.z) * nrm.z;
 }
 
@@ -81,6 +108,7 @@ eddy_system_id eddy_add_collide_plane(eddy_world *w, const eddy_collide_plane_de
 	if (b) {
 		b->def = *def;
 		b->def.normal = nrm;
+		eddy__collider_init_pivot(&b->base, def->point);
 	}
 	return eddy__add_system(w, &eddy__kind_collide_plane, b, plane_io, 6, plane_io, 6);
 }
@@ -92,10 +120,11 @@ void eddy__shape_collide_plane(const eddy_system *s, eddy_collider_shape *out)
 {
 	const collide_plane *b = s->data;
 	out->kind = EDDY_COLLIDER_PLANE;
-	out->a = eddy__add3(b->def.point, b->base.motion.offset);
-	out->b = b->def.normal;
+	plane_now(b, &out->a, &out->b);
 	out->radius = 0.0f;
 	out->inside = false;
+	out->rotation = b->base.motion.rotation;
+	out->pivot = eddy__add3(b->base.motion.pivot, b->base.motion.offset);
 }
 
 /* ---- boundary particles, for SPH (sph_neighbors.c) ----

@@ -5,7 +5,11 @@
  * Reads: x y z vx vy vz. Writes: x y z vx vy vz.
  * A particle on the solid side is projected radially onto the sphere and gets
  * the contact response with the normal pointing out of the solid. A particle
- * exactly at the centre of a ball leaves along +y.
+ * exactly at the centre of a ball leaves along +y. A rotating sphere
+ * (eddy_collider_set_rotation) has its centre turned about the pivot and a
+ * surface moving at v + omega x (x - pivot - offset), which the response
+ * takes as the wall's velocity (a ball spinning about its centre drags
+ * particles with friction > 0).
  * With SPH the sphere also carries boundary particles that move with it
  * (eddy__sph_sphere_points below; Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012): the fluid beside it then
@@ -40,8 +44,17 @@ eddy_collide_sphere_def eddy_default_collide_sphere_def(void)
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	collide_sphere *b = s->data;
-	const eddy_vec3 vw = eddy__collider_step_velocity(&b->base, ctx->dt);
-	const eddy_vec3 c = eddy__add3(b->def.center, b->base.motion.offset);
+	/* a rotating sphere: its centre turns about the pivot, and the surface
+	 * moves with v + omega x (x - pivot - offset) */
+	const bool rot = eddy__motion_rotates(&b->base.motion);
+	const eddy_collider_pose pose = eddy__collider_pose(&b->base.motion);
+	eddy_collider_velocity mv = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
+	eddy_vec3 vw = {0, 0, 0};
+	if (rot)
+		mv = eddy__collider_step_motion(&b->base, ctx->dt);
+	else
+		vw = eddy__collider_step_velocity(&b->base, ctx->dt);
+	const eddy_vec3 c = rot ? eddy__pose_to_world(&pose, b->def.center) : eddy__add3(b->def.center, b->base.motion.offset);
 	const float rad = b->def.radius;
 	const bool bowl = b->def.inside;
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
@@ -60,15 +73,25 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		y[i] = c.y + u.y * rad;
 		z[i] = c.z + u.z * rad;
 		const eddy_vec3 nrm = bowl ? eddy__v3(-u.x, -u.y, -u.z) : u;
-		eddy__collide_response(vx, vy, vz, (size_t)i, nrm, vw, r);
+		eddy__collide_response(vx, vy, vz, (size_t)i, nrm, rot ? eddy__rigid_velocity(&mv, eddy__v3(x[i], y[i], z[i])) : vw,
+		                       r);
 	}
 	return EDDY_OK;
+}
+
+/* The centre in the world: turned about the pivot when the sphere rotates. */
+static eddy_vec3 center_now(const collide_sphere *b)
+{
+	if (!eddy__motion_rotates(&b->base.motion))
+		return eddy__add3(b->def.center, b->base.motion.offset);
+	const eddy_collider_pose pose = eddy__collider_pose(&b->base.motion);
+	return eddy__pose_to_world(&pose, b->def.center);
 }
 
 static float distance(const eddy_system *s, eddy_vec3 q)
 {
 	const collide_sphere *b = s->data;
-	const eddy_vec3 c = eddy__add3(b->def.center, b->base.motion.offset);
+	const eddy_vec3 c = center_now(b);
 	const float dx = q.x - c.x, dy = q.y - c.y, dz = q.z - c.z;
 	const float d = sqrtf(dx * dx + dy * dy + dz * dz) - b->def.radius;
 	return b->def.inside ? -d : d;
@@ -91,8 +114,10 @@ eddy_system_id eddy_add_collide_sphere(eddy_world *w, const eddy_collide_sphere_
 	    !eddy__check_response(w, sys, def->response))
 		return EDDY_NULL_SYSTEM;
 	collide_sphere *b = calloc(1, sizeof *b);
-	if (b)
+	if (b) {
 		b->def = *def;
+		eddy__collider_init_pivot(&b->base, def->center);
+	}
 	return eddy__add_system(w, &eddy__kind_collide_sphere, b, sphere_io, 6, sphere_io, 6);
 }
 
@@ -103,9 +128,11 @@ void eddy__shape_collide_sphere(const eddy_system *s, eddy_collider_shape *out)
 {
 	const collide_sphere *b = s->data;
 	out->kind = EDDY_COLLIDER_SPHERE;
-	out->a = eddy__add3(b->def.center, b->base.motion.offset);
+	out->a = center_now(b);
 	out->b = eddy__v3(0, 0, 0);
 	out->radius = b->def.radius;
+	out->rotation = b->base.motion.rotation;
+	out->pivot = eddy__add3(b->base.motion.pivot, b->base.motion.offset);
 	out->inside = b->def.inside;
 }
 

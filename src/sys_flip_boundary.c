@@ -20,7 +20,10 @@
  *   saw at its last step) / dt of the collider most inside at the face's
  *   corners (solid_velocities says why not the collider's own record);
  *   partly open faces keep the fluid velocity, and flip_pressure adds the
- *   solid's flux (1 - w_f) V_s.n with the same V_s.
+ *   solid's flux (1 - w_f) V_s.n with the same V_s. A rotating collider's
+ *   V_s is its point velocity at the face's centre, v + omega x (x_f - c)
+ *   (c its pivot in the world), omega the rotation from the orientation
+ *   seen at the last step to this one over dt.
  * Why fractional: with binary cells (solid when the centre is inside) a moving
  * collider flips cells between solid and fluid, the solid region jumps by
  * whole cells and the fluid it covers or uncovers is not accounted for; the
@@ -42,8 +45,11 @@ typedef struct boundary {
 	struct seen_offset {
 		float x, y, z; /* m */
 		float have;    /* 1 when x y z hold a collider's offset (floats only: no padding in a checkpoint) */
+		float rx, ry, rz, unused; /* degrees, the collider's rotation */
 	} *seen;
 	eddy_vec3 *vel;
+	eddy_vec3 *omega;  /* rad/s, per pipeline position, this step's (with vel) */
+	eddy_vec3 *center; /* m, the pivot each omega turns about */
 	int64_t vel_step; /* the step vel belongs to, -1 for none */
 } boundary;
 
@@ -142,6 +148,34 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 	for (size_t g = 0; g < nn; ++g)
 		phi[g] = INFINITY, own[g] = 0;
 	const float inv_dt = dt > 0 ? (float)(1.0 / dt) : 0.0f;
+	/* the rotating solids' angular velocities: flip_boundary's of this step
+	 * with its velocities, else from each motion record; NULL while none turns */
+	const eddy_vec3 *omega = NULL, *center = NULL;
+	eddy_vec3 *own_omega = NULL, *own_center = NULL;
+	for (int q = 0; q < w->order_count; ++q) {
+		const eddy_system *c = &w->slots[w->order[q]];
+		if (velocities && c->vt == &eddy__kind_flip_boundary && ((const boundary *)c->data)->vel == velocities) {
+			omega = ((const boundary *)c->data)->omega, center = ((const boundary *)c->data)->center;
+			break;
+		}
+		if (!velocities && eddy__is_collider(c) && eddy__motion_rotates(&((const eddy_collider_base *)c->data)->motion)) {
+			own_omega = eddy__arena_alloc(&w->arena, (size_t)w->order_count * sizeof *own_omega + 1);
+			own_center = eddy__arena_alloc(&w->arena, (size_t)w->order_count * sizeof *own_center + 1);
+			if (!own_omega || !own_center)
+				return false;
+			for (int r = 0; r < w->order_count; ++r) {
+				const eddy_system *cr = &w->slots[w->order[r]];
+				own_omega[r] = own_center[r] = (eddy_vec3){0, 0, 0};
+				if (!eddy__is_collider(cr))
+					continue;
+				const eddy_collider_motion *m = &((const eddy_collider_base *)cr->data)->motion;
+				own_omega[r] = eddy__rotation_rate(m->last_rotation, m->rotation, dt);
+				own_center[r] = eddy__add3(m->pivot, m->offset);
+			}
+			omega = own_omega, center = own_center;
+			break;
+		}
+	}
 	for (int q = 0; q < w->order_count; ++q) {
 		const eddy_system *c = &w->slots[w->order[q]];
 		if (!eddy__is_collider(c))
@@ -204,7 +238,14 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 						if (phi[g[c]] < phi[g[best]])
 							best = c;
 					const uint16_t ow = own[g[best]];
-					const eddy_vec3 v = ow ? vel[ow - 1] : (eddy_vec3){0, 0, 0};
+					eddy_vec3 v = ow ? vel[ow - 1] : (eddy_vec3){0, 0, 0};
+					if (ow && omega && (omega[ow - 1].x != 0 || omega[ow - 1].y != 0 || omega[ow - 1].z != 0)) {
+						/* a turning solid: its point velocity at the face's centre */
+						const eddy_collider_velocity rv = {v, omega[ow - 1], center[ow - 1]};
+						const eddy_vec3 fc = {(float)(o.x + (i + 0.5 * (a != 0)) * h), (float)(o.y + (j + 0.5 * (a != 1)) * h),
+						                      (float)(o.z + (k + 0.5 * (a != 2)) * h)};
+						v = eddy__rigid_velocity(&rv, fc);
+					}
 					s->vel[a][f] = comp == 0 ? v.x : comp == 1 ? v.y : v.z;
 				}
 	}
@@ -254,10 +295,14 @@ static bool fit(boundary *b, int n)
 		return true;
 	free(b->seen);
 	free(b->vel);
+	free(b->omega);
+	free(b->center);
 	b->seen = calloc((size_t)n + 1, sizeof *b->seen);
 	b->vel = calloc((size_t)n + 1, sizeof *b->vel);
+	b->omega = calloc((size_t)n + 1, sizeof *b->omega);
+	b->center = calloc((size_t)n + 1, sizeof *b->center);
 	b->cap = n;
-	if (!b->seen || !b->vel) {
+	if (!b->seen || !b->vel || !b->omega || !b->center) {
 		b->cap = -1;
 		return false;
 	}
@@ -278,9 +323,13 @@ static bool solid_velocities(eddy_world *w, boundary *b, const eddy_step_context
 		}
 		const eddy_collider_motion m = ((const eddy_collider_base *)c->data)->motion;
 		const eddy_vec3 ref = b->seen[q].have != 0 ? (eddy_vec3){b->seen[q].x, b->seen[q].y, b->seen[q].z} : m.last_offset;
+		const eddy_vec3 rref =
+			b->seen[q].have != 0 ? (eddy_vec3){b->seen[q].rx, b->seen[q].ry, b->seen[q].rz} : m.last_rotation;
 		b->vel[q] = (eddy_vec3){(float)((m.offset.x - ref.x) * inv_dt), (float)((m.offset.y - ref.y) * inv_dt),
 		                        (float)((m.offset.z - ref.z) * inv_dt)};
-		b->seen[q] = (struct seen_offset){m.offset.x, m.offset.y, m.offset.z, 1};
+		b->omega[q] = eddy__rotation_rate(rref, m.rotation, ctx->dt);
+		b->center[q] = eddy__add3(m.pivot, m.offset);
+		b->seen[q] = (struct seen_offset){m.offset.x, m.offset.y, m.offset.z, 1, m.rotation.x, m.rotation.y, m.rotation.z, 0};
 	}
 	b->vel_step = ctx->step;
 	return true;
@@ -331,6 +380,8 @@ static void destroy(eddy_system *s)
 		return;
 	free(b->seen);
 	free(b->vel);
+	free(b->omega);
+	free(b->center);
 }
 
 static void *state(eddy_world *w, eddy_system *s, size_t *size)

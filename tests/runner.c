@@ -96,6 +96,8 @@ int main(int argc, char **argv)
 		{"stress_energy", suite_stress_energy, false},
 		{"mesh", suite_mesh, false},
 		{"long_mesh", suite_long_mesh, true},
+		{"rotate", suite_rotate, false},
+		{"long_rotate", suite_long_rotate, true},
 		{"stress_flip_volume", suite_stress_flip_volume, false},
 		{"long_flip_volume", suite_long_flip_volume, true},
 	};

@@ -85,6 +85,8 @@ void suite_stress_dfsph(void);
 /* meshes and particle files (issue 16) */
 void suite_mesh(void);
 void suite_long_mesh(void); /* minutes: make test-long */
+void suite_rotate(void);    /* rotating colliders (issue 16) */
+void suite_long_rotate(void);
 void suite_stress_energy(void);
 void suite_stress_flip_volume(void);
 void suite_long_flip_volume(void); /* minutes: make test-long */

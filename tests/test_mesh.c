@@ -542,13 +542,21 @@ static void cup_holds_water_at_rest(void)
 }
 
 /* Minutes (make test-long): the cup one step further. Water dropped 1 cm
- * into it (FLIP) must stay in the cavity for 1 s; the cup filled at rest
- * with DFSPH must never have a particle in its walls (the frame stats'
- * leak count: distance < -1e-5 spacings). Levels are printed, not asserted:
- * FLIP's splash gains volume on a coarse grid (README: +14% in the pour),
- * and SPH has no boundary particles on the mesh, so its water packs against
- * the walls, stands low (about -30% at 4 mm, README) and throws a particle
- * or two over the rim. */
+ * into it (FLIP) must stay in the cavity for 1 s (its level is printed, not
+ * asserted: FLIP's splash gains volume on a coarse grid, README: +14% in the
+ * pour). The cup filled at rest with DFSPH, at 4 mm and one step finer at
+ * 3 mm, must never have a particle in its walls (the frame stats' leak
+ * count: distance < -1e-5 spacings) nor over the rim, and its level must be
+ * within 2% (the issue's bound) of the particles' lattice volume over the
+ * cavity's area at 4 mm: the mesh carries SPH boundary particles (Akinci
+ * 2012, sys_collide_mesh.c), so the fluid meets the walls with a full
+ * neighbourhood; without them it packed against the walls and stood about
+ * 30% low. At 3 mm it reads -1.9% to -2.1% from 0.3 s to 1.5 s (measured),
+ * held to 3%: besides DFSPH's compression (0.5% on the mean here), an SPH
+ * free surface reads low on its own, its top layer settling into the one
+ * below by a fraction of a spacing (test_stress_sph_solids.c: a box tank
+ * with no solid at all reads -2.7% to -2.9% with DFSPH), and a 6 cm column
+ * is 20 layers at 3 mm. */
 static void cup_holds_dropped_and_sph_water(void)
 {
 	const double vol = 32 * sin(2 * 3.14159265358979 / 64); /* the 64-gon's area / r^2 */
@@ -556,11 +564,17 @@ static void cup_holds_dropped_and_sph_water(void)
 	printf("    FLIP, dropped 1 cm: %zu particles, level %.5f m against %.5f m geometric, widest %.5f m, lowest %.5f m\n",
 	       f.n, f.level, 0.06 * 0.035 * 0.035 / (0.04 * 0.04), f.rmax, f.ymin);
 	CHECK(f.ok && f.rmax <= 0.04 + 1e-4 && f.ymin >= 0.02 - 1e-4 && f.leaked == 0);
-	const cup_result s = run_cup("dfsph", "0.004", "0", 30);
-	printf("    DFSPH at rest, 4 mm: %zu particles, level %.5f m against %.5f m for their lattice volume, %zu over the "
-	       "rim, none in the walls in any frame: %s\n",
-	       s.n, s.level, (double)s.n * 0.004 * 0.004 * 0.004 / (vol * 0.04 * 0.04), s.outside, s.leaked ? "no" : "yes");
-	CHECK(s.ok && s.leaked == 0);
+	const char *const spacings[] = {"0.004", "0.003"};
+	for (int k = 0; k < 2; ++k) {
+		const double sp = atof(spacings[k]);
+		const cup_result s = run_cup("dfsph", spacings[k], "0", 30);
+		const double expect = (double)s.n * sp * sp * sp / (vol * 0.04 * 0.04);
+		printf("    DFSPH at rest, %.0f mm: %zu particles, level %.5f m against %.5f m for their lattice volume (%+.2f%%), "
+		       "%zu over the rim, none in the walls in any frame: %s\n",
+		       sp * 1e3, s.n, s.level, expect, 100 * (s.level / expect - 1), s.outside, s.leaked ? "no" : "yes");
+		CHECK(s.ok && s.leaked == 0 && s.outside == 0);
+		CHECK(fabs(s.level / expect - 1) <= (k == 0 ? 0.02 : 0.03));
+	}
 }
 
 /* ---- PLY ------------------------------------------------------------------------------ */
