@@ -64,3 +64,32 @@ void eddy__arena_free(eddy_arena *a)
 	}
 	a->head = NULL;
 }
+
+eddy_arena_mark eddy__arena_mark(const eddy_arena *a)
+{
+	eddy_arena_mark m = {a->head, a->head ? a->head->used : 0};
+	return m;
+}
+
+void eddy__arena_release(eddy_arena *a, eddy_arena_mark m)
+{
+	eddy_arena_block *b = a->head;
+	if (!b)
+		return;
+	if (b == m.head) {
+		b->used = m.used;
+		return;
+	}
+	/* blocks chained since the mark: keep the newest (the largest) empty in
+	 * front of the marked one, free those between */
+	eddy_arena_block *rest = b->next;
+	while (rest && rest != m.head) {
+		eddy_arena_block *n = rest->next;
+		free(rest);
+		rest = n;
+	}
+	b->next = rest;
+	b->used = 0;
+	if (rest)
+		rest->used = m.used;
+}

@@ -144,7 +144,7 @@ static inline void splat_density(float *restrict dens, size_t sy, size_t sz, fli
 
 static inline float face_offset(flip_axis a, float off, float t, float h) { return ((float)a.i0 + off - t) * h; }
 
-static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	const p2g *pg = s->data;
 	const float dt = (float)ctx->dt;
@@ -284,6 +284,16 @@ static void destroy(eddy_system *s)
 		free(pg->dens);
 		free(pg->held);
 	}
+}
+
+/* The scratch is this step's own: released on return, so the pipeline's
+ * peak is the largest system's scratch, not their sum. */
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	const eddy_arena_mark m = eddy__arena_mark(&w->arena);
+	const eddy_status st = step_body(w, s, ctx);
+	eddy__arena_release(&w->arena, m);
+	return st;
 }
 
 const eddy_system_vtable eddy__kind_flip_p2g = {

@@ -146,7 +146,7 @@ static long across(const eddy_world *w, int i, int j, int k, int d, size_t *f)
 	return (long)flip_cell(w, c[0], c[1], c[2]);
 }
 
-static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	pressure *ps = s->data;
 	const int nx = w->nx, ny = w->ny, nz = w->nz;
@@ -518,6 +518,16 @@ static void destroy(eddy_system *s)
 	pressure *ps = s->data;
 	if (ps)
 		eddy__flip_cholmod_free(ps->chol);
+}
+
+/* The scratch is this step's own: released on return, so the pipeline's
+ * peak is the largest system's scratch, not their sum. */
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	const eddy_arena_mark m = eddy__arena_mark(&w->arena);
+	const eddy_status st = step_body(w, s, ctx);
+	eddy__arena_release(&w->arena, m);
+	return st;
 }
 
 const eddy_system_vtable eddy__kind_flip_pressure = {

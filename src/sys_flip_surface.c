@@ -39,7 +39,7 @@ eddy_flip_surface_def eddy_default_flip_surface_def(void)
 
 enum { MAX_R = 8 };
 
-static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	const surface *sf = s->data;
 	const int n[3] = {w->nx, w->ny, w->nz};
@@ -159,6 +159,16 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	/* three passes end in tmp */
 	memcpy(phi, src, nc * sizeof *phi);
 	return EDDY_OK;
+}
+
+/* The scratch is this step's own: released on return, so the pipeline's
+ * peak is the largest system's scratch, not their sum. */
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	const eddy_arena_mark m = eddy__arena_mark(&w->arena);
+	const eddy_status st = step_body(w, s, ctx);
+	eddy__arena_release(&w->arena, m);
+	return st;
 }
 
 const eddy_system_vtable eddy__kind_flip_surface = {

@@ -137,6 +137,8 @@ static eddy_world *block(const char *method, long n, int threads)
  * timed steps. Prints one JSON object. */
 static int child_block(const char *method, long n, int threads, int steps)
 {
+	if (getenv("EDDY_SCALE_COLUMNS"))
+		fprintf(stderr, "peak RSS before the world: %.1f MB\n", (double)maxrss_kb() / 1e3);
 	eddy_world *w = block(method, n, threads);
 	if (!w) {
 		fprintf(stderr, "bench_scale: cannot create the world\n");
@@ -180,6 +182,12 @@ static int child_block(const char *method, long n, int threads, int steps)
 		printf("%s\"%s\":%.2f", k ? "," : "", info.name, (info.profile_ms - before[k]) * 1e6 / ((double)np * steps));
 	}
 	printf("}}\n");
+	if (getenv("EDDY_SCALE_COLUMNS")) /* where the memory is: the columns, largest first as listed */
+		for (int c = 0; c < eddy_world_column_count(w); ++c) {
+			eddy_column_info ci;
+			if (eddy_world_column_info(w, c, &ci) == EDDY_OK && ci.bytes > 0)
+				fprintf(stderr, "column %-20s %8.1f MB\n", ci.name, (double)ci.bytes / 1e6);
+		}
 	free(before);
 	eddy_destroy_world(w);
 	return 0;
