@@ -161,7 +161,8 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	flip_solid sd;
 	memset(&sd, 0, sizeof sd);
 	const eddy_vec3 *svel = NULL;
-	if (eddy__flip_boundary_info(w, &margin, &svel) && !eddy__flip_solid_faces(w, ctx->dt, margin, svel, &sd))
+	if (!eddy__flip_surface_solid(w, s, &sd) && eddy__flip_boundary_info(w, &margin, &svel) &&
+	    !eddy__flip_solid_faces(w, ctx->dt, margin, svel, &sd))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory");
 	int *row = eddy__arena_alloc(&w->arena, nc * sizeof *row);
 	if (!row)

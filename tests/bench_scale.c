@@ -173,9 +173,9 @@ static int child_block(const char *method, long n, int threads, int steps)
 		iters += isnan(it) ? 0 : it;
 	}
 	printf("{\"method\":\"%s\",\"particles\":%zu,\"threads\":%d,\"steps\":%d,\"ns_per_particle_step\":%.2f,"
-	       "\"setup_s\":%.3f,\"peak_rss_bytes\":%ld,\"iterations_per_step\":%.2f,\"systems_ns\":{",
+	       "\"setup_s\":%.3f,\"peak_rss_bytes\":%ld,\"iterations_per_step\":%.2f,\"state_hash\":\"%016llx\",\"systems_ns\":{",
 	       method, np, threads, steps, median(ms, steps) * 1e6 / (double)np, setup_s, maxrss_kb() * 1024L,
-	       iters / steps);
+	       iters / steps, (unsigned long long)eddy_world_state_hash(w));
 	for (int k = 0; k < ns; ++k) {
 		eddy_system_info info;
 		eddy_world_system_info(w, eddy_world_system_at(w, k), &info);
