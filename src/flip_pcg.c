@@ -76,18 +76,25 @@ KERNEL void apply_w(const flip_matrix *A, const double *precon, const double *r,
 
 enum { CHUNK = 4096 };
 
-/* q = A s over the rows [lo, hi); returns the chunk's s . q */
-KERNEL double matvec_dot_w(const flip_matrix *A, const double *s, double *q, int lo, int hi, const bool W)
+/* Over the rows [lo, hi): s = z + beta s_old (the search direction's update,
+ * fused in so that an iteration opens two parallel regions, not four: each
+ * row's neighbours are recomputed from z and s_old, read-only here, with the
+ * same operations, so the values are those of a separate update), q = A s;
+ * returns the chunk's s . q. */
+KERNEL double matvec_dot_w(const flip_matrix *A, const double *z, const double *s_old, double beta, double *s,
+                           double *q, int lo, int hi, const bool W)
 {
 	double sq = 0;
 	for (int i = lo; i < hi; ++i) {
 		const int *nb = &A->nb[6 * i];
-		double t = A->diag[i] * s[i];
+		const double si = z[i] + beta * s_old[i];
+		double t = A->diag[i] * si;
 		for (int d = 0; d < 6; ++d)
 			if (nb[d] >= 0)
-				t -= OFF(A, i, d) * s[nb[d]];
+				t -= OFF(A, i, d) * (z[nb[d]] + beta * s_old[nb[d]]);
+		s[i] = si;
 		q[i] = t;
-		sq += s[i] * t;
+		sq += si * t;
 	}
 	return sq;
 }
@@ -104,14 +111,16 @@ static double sum_chunks(const double *part, int nch)
 	return s;
 }
 
-/* q = A s; returns s . q (chunked, see the header) */
-static double matvec_dot(const flip_matrix *A, const double *s, double *q, double *part, int nt)
+/* s = z + beta s_old, q = A s; returns s . q (chunked, see the header) */
+static double matvec_dot(const flip_matrix *A, const double *z, const double *s_old, double beta, double *s, double *q,
+                         double *part, int nt)
 {
 	const int n = A->n, nch = (n + CHUNK - 1) / CHUNK;
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (int c = 0; c < nch; ++c) {
 		const int lo = c * CHUNK, hi = lo + CHUNK < n ? lo + CHUNK : n;
-		part[c] = A->off ? matvec_dot_w(A, s, q, lo, hi, true) : matvec_dot_w(A, s, q, lo, hi, false);
+		part[c] = A->off ? matvec_dot_w(A, z, s_old, beta, s, q, lo, hi, true)
+		                 : matvec_dot_w(A, z, s_old, beta, s, q, lo, hi, false);
 	}
 	return sum_chunks(part, nch);
 }
@@ -165,18 +174,21 @@ bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double
 	if (n == 0 || bmax == 0)
 		return true;
 	const int nt = pcg_threads(w, n), nch = (n + CHUNK - 1) / CHUNK;
-	double *mem = eddy__arena_alloc(&w->arena, (5 * (size_t)n + (size_t)nch) * sizeof *mem);
+	double *mem = eddy__arena_alloc(&w->arena, (6 * (size_t)n + (size_t)nch) * sizeof *mem);
 	if (!mem)
 		return false;
-	double *part = mem + 5 * (size_t)n; /* chunk sums */
-	double *precon = mem, *r = mem + n, *y = mem + 2 * (size_t)n, *z = mem + 3 * (size_t)n, *s = mem + 4 * (size_t)n;
+	double *part = mem + 6 * (size_t)n; /* chunk sums */
+	double *precon = mem, *r = mem + n, *y = mem + 2 * (size_t)n, *z = mem + 3 * (size_t)n;
+	double *s = mem + 4 * (size_t)n, *s_old = mem + 5 * (size_t)n;
 	mic0(A, precon);
 	memcpy(r, b, (size_t)n * sizeof *r);
 	apply(A, precon, r, y, z);
-	memcpy(s, z, (size_t)n * sizeof *s);
-	double rho = dot(r, z, n, part, nt);
+	/* r . z next to the serial apply: chunked all the same, on one thread
+	 * (too short to pay for a parallel region) */
+	double rho = dot(r, z, n, part, 1), beta = 0;
+	const double *prev = z; /* s_old of the first iteration: s = z + 0 z = z */
 	for (int k = 1; k <= max_it; ++k) {
-		const double sq = matvec_dot(A, s, y, part, nt); /* y doubles as q = A s */
+		const double sq = matvec_dot(A, z, prev, beta, s, y, part, nt); /* y doubles as q = A s */
 		if (!(sq > 0)) { /* breakdown: A is not positive definite on s */
 			*it = k;
 			*res = maxabs(r, n) / bmax;
@@ -195,12 +207,13 @@ bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double
 		if (*res <= tol)
 			return true;
 		apply(A, precon, r, y, z);
-		const double rho_new = dot(r, z, n, part, nt);
-		const double beta = rho_new / rho;
+		const double rho_new = dot(r, z, n, part, 1);
+		beta = rho_new / rho;
 		rho = rho_new;
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-		for (int i = 0; i < n; ++i)
-			s[i] = z[i] + beta * s[i];
+		double *t = s_old; /* this s is the next iteration's s_old */
+		s_old = s;
+		s = t;
+		prev = s_old;
 	}
 	return false;
 }
