@@ -6,7 +6,10 @@
  *    step of the whole step (median of the timed steps), on 1 and 2 threads,
  *    the 2-thread speed-up as the median of paired ratios (1- and 2-thread
  *    runs alternate, as bench_sph's do: the host's load drifts), and the peak
- *    resident memory per particle (libraries' baseline included);
+ *    resident memory per particle (libraries' baseline included); also the
+ *    process CPU time per particle per step, the steadier figure for 1-thread
+ *    runs on a loaded host (for 2 threads it counts both, and OpenMP's
+ *    spinning);
  *  - FLIP's pressure solve on the wavy pool of tests/grid_fixture.h at 64^3,
  *    128^3 and 256^3 cells: iterations and seconds per solve for PCG and
  *    HYPRE on 1 and 2 threads.
@@ -39,6 +42,15 @@ static long maxrss_kb(void)
 	struct rusage ru;
 	getrusage(RUSAGE_SELF, &ru);
 	return ru.ru_maxrss;
+}
+
+/* Process CPU ms (all threads): on a loaded host a 1-thread run's CPU time
+ * moves far less than its wall time. */
+static double cpu_ms(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+	return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
 }
 
 static double profile_ms(eddy_world *w, const char *name)
@@ -153,7 +165,7 @@ static int child_block(const char *method, long n, int threads, int steps)
 	const double setup_s = (now_ms() - t0) / 1e3;
 	const size_t np = eddy_world_particle_count(w);
 	const int ns = eddy_world_system_count(w);
-	double *before = calloc((size_t)ns, sizeof *before), ms[64], iters = 0;
+	double *before = calloc((size_t)ns, sizeof *before), ms[64], cpu[64], iters = 0;
 	steps = steps < 1 ? 1 : steps > 64 ? 64 : steps;
 	for (int k = 0; k < ns; ++k) {
 		eddy_system_info info;
@@ -161,20 +173,21 @@ static int child_block(const char *method, long n, int threads, int steps)
 		before[k] = info.profile_ms;
 	}
 	for (int s = 0; s < steps; ++s) {
-		const double a = now_ms();
+		const double a = now_ms(), c = cpu_ms();
 		if (eddy_world_step(w) != EDDY_OK) {
 			fprintf(stderr, "bench_scale: %s %ld: %s\n", method, n, eddy_world_error(w));
 			return 1;
 		}
 		ms[s] = now_ms() - a;
+		cpu[s] = cpu_ms() - c;
 		eddy_frame_stats st;
 		eddy_world_frame_stats(w, &st);
 		const double it = extra_stat(&st, "iterations");
 		iters += isnan(it) ? 0 : it;
 	}
 	printf("{\"method\":\"%s\",\"particles\":%zu,\"threads\":%d,\"steps\":%d,\"ns_per_particle_step\":%.2f,"
-	       "\"setup_s\":%.3f,\"peak_rss_bytes\":%ld,\"iterations_per_step\":%.2f,\"state_hash\":\"%016llx\",\"systems_ns\":{",
-	       method, np, threads, steps, median(ms, steps) * 1e6 / (double)np, setup_s, maxrss_kb() * 1024L,
+	       "\"cpu_ns_per_particle_step\":%.2f,\"setup_s\":%.3f,\"peak_rss_bytes\":%ld,\"iterations_per_step\":%.2f,\"state_hash\":\"%016llx\",\"systems_ns\":{",
+	       method, np, threads, steps, median(ms, steps) * 1e6 / (double)np, median(cpu, steps) * 1e6 / (double)np, setup_s, maxrss_kb() * 1024L,
 	       iters / steps, (unsigned long long)eddy_world_state_hash(w));
 	for (int k = 0; k < ns; ++k) {
 		eddy_system_info info;
@@ -402,7 +415,7 @@ int main(int argc, char **argv)
 				first = false;
 				continue;
 			}
-			double ns[2][15], ratio[15], rss[2] = {0, 0}, it = NAN;
+			double ns[2][15], cpu[2][15], ratio[15], rss[2] = {0, 0}, it = NAN;
 			size_t np = 0;
 			int ok = 0;
 			char sys2[2][4096] = {"", ""};
@@ -417,6 +430,7 @@ int main(int argc, char **argv)
 					if (!good)
 						break;
 					ns[t][ok] = json_num(out, "ns_per_particle_step");
+					cpu[t][ok] = json_num(out, "cpu_ns_per_particle_step");
 					rss[t] = fmax(rss[t], json_num(out, "peak_rss_bytes"));
 					np = (size_t)json_num(out, "particles");
 					it = json_num(out, "iterations_per_step");
@@ -438,13 +452,15 @@ int main(int argc, char **argv)
 				continue;
 			const double l = load1();
 			for (int t = 0; t < 2; ++t) {
-				const double med = median(ns[t], ok);
+				const double med = median(ns[t], ok), cmed = median(cpu[t], ok);
 				fprintf(f, "%s\n {\"method\":\"%s\",\"particles\":%zu,\"threads\":%d,\"ns_per_particle_step\":%.1f,"
-				           "\"peak_rss_bytes_per_particle\":%.1f,\"iterations_per_step\":%.2f,\"runs\":%d,%s",
-				        first ? "" : ",", methods[m], np, t + 1, med, rss[t] / (double)np, it, ok, sys2[t]);
+				           "\"cpu_ns_per_particle_step\":%.1f,\"peak_rss_bytes_per_particle\":%.1f,\"iterations_per_step\":%.2f,"
+				           "\"runs\":%d,%s",
+				        first ? "" : ",", methods[m], np, t + 1, med, cmed, rss[t] / (double)np, it, ok, sys2[t]);
 				first = false;
-				printf("%s %zu particles, %d thread%s: %.1f ns per particle per step, %.0f B per particle peak RSS\n",
-				       methods[m], np, t + 1, t ? "s" : " ", med, rss[t] / (double)np);
+				printf("%s %zu particles, %d thread%s: %.1f ns per particle per step (process CPU %.1f), %.0f B per particle "
+				       "peak RSS\n",
+				       methods[m], np, t + 1, t ? "s" : " ", med, cmed, rss[t] / (double)np);
 			}
 			const double sp = median(ratio, ok);
 			fprintf(f, ",\n {\"method\":\"%s\",\"particles\":%zu,\"speedup_2_threads\":%.2f,\"load\":%.2f}", methods[m], np, sp,
