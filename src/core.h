@@ -82,6 +82,7 @@ typedef struct eddy_arena_block eddy_arena_block;
 typedef struct eddy_arena {
 	eddy_arena_block *head;
 	size_t high_water;
+	size_t step_peak; /* most in use at once since the last reset */
 } eddy_arena;
 
 void *eddy__arena_alloc(eddy_arena *a, size_t bytes);
