@@ -175,7 +175,7 @@ bench: deps
 	@for b in $(BENCHES); do $(BUILD)/tests/$$b $(BUILD)/$$b.json || exit 1; done
 
 # one of them: make bench-sph, bench-flip, bench-render; make bench-scale (not in
-# make bench: 100k to 10M particles of each method, about an hour) passes
+# make bench: 100k to 10M particles of each method, long) passes
 # SCALE_ARGS, e.g. SCALE_ARGS="--sizes 100000,1000000 --grids 64,128"
 bench-%: deps
 	@$(MAKE) --no-print-directory $(BUILD)/tests/bench_$*

@@ -210,11 +210,12 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	 * bit-identical on any number of threads, and no sample has two writers.
 	 * A particle reaches rows floor(gz - 1/2) .. floor(gz) + 1, so a slab
 	 * skips those with gz outside [klo - 1.5, khi + 1.5) (NaN and positions
-	 * off the grid clamp to the bottom or top slab, which take all). */
+	 * off the grid clamp to the slabs holding row 0 or the top row, which take
+	 * all below or above; a slab is empty when nz < threads). */
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static, 1)
 	for (int t = 0; t < nt; ++t) {
 		const int klo = nz * t / nt, khi = t == nt - 1 ? nz + 1 : nz * (t + 1) / nt;
-		const float zlo = t == 0 ? -INFINITY : (float)klo - 1.5f, zhi = t == nt - 1 ? INFINITY : (float)khi + 1.5f;
+		const float zlo = klo == 0 ? -INFINITY : (float)klo - 1.5f, zhi = t == nt - 1 ? INFINITY : (float)khi + 1.5f;
 		size_t q0[3], q1[3];
 		for (int a = 0; a < 3; ++a) {
 			const size_t row = a == 0 ? (sx + 1) * sy : a == 1 ? sx * (sy + 1) : sx * sy;
