@@ -26,11 +26,6 @@ void *eddy__arena_alloc(eddy_arena *a, size_t bytes)
 			used += q->used;
 		size_t size = bytes > used / 4 ? bytes : used / 4;
 		size = size < 64 * 1024 ? 64 * 1024 : (size + 65535) & ~(size_t)65535;
-		if (b && b->used == 0) { /* an empty head holds nothing: replace it */
-			eddy_arena_block *next = b->next;
-			free(b);
-			a->head = b = next;
-		}
 		eddy_arena_block *nb = malloc(sizeof *nb + size);
 		if (!nb)
 			return NULL;
@@ -88,6 +83,8 @@ void eddy__arena_free(eddy_arena *a)
 	a->head = NULL;
 }
 
+/* Blocks are only ever added in front of the marked one until the release,
+ * which therefore finds it in the chain. */
 eddy_arena_mark eddy__arena_mark(const eddy_arena *a)
 {
 	eddy_arena_mark m = {a->head, a->head ? a->head->used : 0};
@@ -103,8 +100,9 @@ void eddy__arena_release(eddy_arena *a, eddy_arena_mark m)
 		b->used = m.used;
 		return;
 	}
-	/* blocks chained since the mark: keep the newest (the largest) empty in
-	 * front of the marked one, free those between */
+	/* blocks chained since the mark: keep the newest (it was sized for
+	 * this system's requests) empty in front of the marked one, free those
+	 * between */
 	eddy_arena_block *rest = b->next;
 	while (rest && rest != m.head) {
 		eddy_arena_block *n = rest->next;
