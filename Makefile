@@ -136,7 +136,7 @@ $(BUILD)/tests/run: $(TEST_O) $(LUA_O) $(BUILD)/libeddy.a
 	@mkdir -p $(dir $@)
 	$(CC) $(LDBASE) $(TEST_O) $(LUA_O) $(BUILD)/libeddy.a -o $@ $(LUA_LIBS) $(LIBS)
 
-$(BENCHES:%=$(BUILD)/tests/%): $(BUILD)/tests/%: $(BUILD)/obj/tests/%.o $(BUILD)/libeddy.a
+$(BENCHES:%=$(BUILD)/tests/%) $(BUILD)/tests/bench_scale: $(BUILD)/tests/%: $(BUILD)/obj/tests/%.o $(BUILD)/libeddy.a
 	@mkdir -p $(dir $@)
 	$(CC) $(LDBASE) $< $(BUILD)/libeddy.a -o $@ $(LIBS)
 
@@ -174,10 +174,12 @@ bench: deps
 	@$(MAKE) --no-print-directory all $(BENCHES:%=$(BUILD)/tests/%)
 	@for b in $(BENCHES); do $(BUILD)/tests/$$b $(BUILD)/$$b.json || exit 1; done
 
-# one of them: make bench-sph, bench-flip, bench-render
+# one of them: make bench-sph, bench-flip, bench-render; make bench-scale (not in
+# make bench: 100k to 10M particles of each method, long) passes
+# SCALE_ARGS, e.g. SCALE_ARGS="--sizes 100000,1000000 --grids 64,128"
 bench-%: deps
 	@$(MAKE) --no-print-directory $(BUILD)/tests/bench_$*
-	$(BUILD)/tests/bench_$* $(BUILD)/bench_$*.json
+	$(BUILD)/tests/bench_$* $(BUILD)/bench_$*.json $(if $(filter scale,$*),$(SCALE_ARGS))
 
 # ---- sanitizers ---------------------------------------------------------------------
 # Mesa's process-wide allocations are not eddy's leaks (see the suppressions file).

@@ -82,11 +82,22 @@ typedef struct eddy_arena_block eddy_arena_block;
 typedef struct eddy_arena {
 	eddy_arena_block *head;
 	size_t high_water;
+	size_t step_peak; /* most in use at once since the last reset */
 } eddy_arena;
 
 void *eddy__arena_alloc(eddy_arena *a, size_t bytes);
 void eddy__arena_reset(eddy_arena *a);
 void eddy__arena_free(eddy_arena *a);
+/* A point in the arena to return to: a system whose scratch dies with its own
+ * step releases it there, so the step's peak is the largest system's scratch
+ * rather than the sum over the pipeline (what is allocated before the mark
+ * stays valid). */
+typedef struct eddy_arena_mark {
+	eddy_arena_block *head;
+	size_t used;
+} eddy_arena_mark;
+eddy_arena_mark eddy__arena_mark(const eddy_arena *a);
+void eddy__arena_release(eddy_arena *a, eddy_arena_mark m);
 
 typedef struct eddy_extra_stat {
 	char name[EDDY_NAME_MAX];

@@ -205,6 +205,13 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
  * flip_pressure sees no solids, as flip_boundary marks none). */
 bool eddy__flip_boundary_info(const eddy_world *w, float *margin, const eddy_vec3 **vel);
 
+/* The solid faces flip_surface computed this step, for the flip_pressure
+ * right after it in the pipeline (self): the same geometry (same step, same
+ * boundary margin and velocities, no system between them to move a
+ * collider), so the pressure solve need not compute it again. false when
+ * self does not directly follow a flip_surface that ran this step. */
+bool eddy__flip_surface_solid(const eddy_world *w, const eddy_system *self, flip_solid *sd);
+
 /* The trilinear particle density (flip_particle_density) and the cells
  * holding a particle (nc each) as the pipeline's flip_p2g computed them this
  * step, for a system after it (self): false when there is no such p2g, it

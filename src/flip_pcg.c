@@ -5,8 +5,13 @@
  * sigma = 0.25). Every scalar is double: single-precision dot products stall
  * the iteration on large grids (docs/validation.md, hard case 14). Off-diagonal
  * entries are -a with a the open fraction of the face (flip.h), so the
- * factorisation uses Bridson's general form, not the unit-coefficient one. Loops are
- * serial, so the result does not depend on the thread count. */
+ * factorisation uses Bridson's general form, not the unit-coefficient one.
+ * Threads: the matrix-vector product and the vector updates run on all
+ * threads (each row written by one); a dot product is summed in fixed chunks
+ * of CHUNK rows, the chunk sums added in chunk order, so it is the same on
+ * any number of threads; max|r| is order-free. The MIC(0) factorisation and
+ * its two triangular solves are sequential by nature (row i needs the rows
+ * before it) and stay serial. The result does not depend on the thread count. */
 #include "flip.h"
 
 #include <string.h>
@@ -22,18 +27,6 @@ enum { NX_M, NX_P, NY_M, NY_P, NZ_M, NZ_P };
 #else
 #define KERNEL static inline
 #endif
-
-KERNEL void matvec_w(const flip_matrix *A, const double *s, double *q, const bool W)
-{
-	for (int i = 0; i < A->n; ++i) {
-		const int *nb = &A->nb[6 * i];
-		double t = A->diag[i] * s[i];
-		for (int d = 0; d < 6; ++d)
-			if (nb[d] >= 0)
-				t -= OFF(A, i, d) * s[nb[d]];
-		q[i] = t;
-	}
-}
 
 KERNEL void mic0_w(const flip_matrix *A, double *precon, const bool W)
 {
@@ -81,12 +74,55 @@ KERNEL void apply_w(const flip_matrix *A, const double *precon, const double *r,
 	}
 }
 
-static void matvec(const flip_matrix *A, const double *s, double *q)
+enum { CHUNK = 4096 };
+
+/* Over the rows [lo, hi): s = z + beta s_old (the search direction's update,
+ * fused in so that an iteration opens two parallel regions, not four: each
+ * row's neighbours are recomputed from z and s_old, read-only here, with the
+ * same operations, so the values are those of a separate update), q = A s;
+ * returns the chunk's s . q. */
+KERNEL double matvec_dot_w(const flip_matrix *A, const double *z, const double *s_old, double beta, double *s,
+                           double *q, int lo, int hi, const bool W)
 {
-	if (A->off)
-		matvec_w(A, s, q, true);
-	else
-		matvec_w(A, s, q, false);
+	double sq = 0;
+	for (int i = lo; i < hi; ++i) {
+		const int *nb = &A->nb[6 * i];
+		const double si = z[i] + beta * s_old[i];
+		double t = A->diag[i] * si;
+		for (int d = 0; d < 6; ++d)
+			if (nb[d] >= 0)
+				t -= OFF(A, i, d) * (z[nb[d]] + beta * s_old[nb[d]]);
+		s[i] = si;
+		q[i] = t;
+		sq += si * t;
+	}
+	return sq;
+}
+
+/* Threads for n rows: one below a size where a parallel region costs more
+ * than it saves (the results are the same either way). */
+static int pcg_threads(const eddy_world *w, int n) { return n > 4 * CHUNK ? w->def.threads : 1; }
+
+static double sum_chunks(const double *part, int nch)
+{
+	double s = 0;
+	for (int c = 0; c < nch; ++c)
+		s += part[c];
+	return s;
+}
+
+/* s = z + beta s_old, q = A s; returns s . q (chunked, see the header) */
+static double matvec_dot(const flip_matrix *A, const double *z, const double *s_old, double beta, double *s, double *q,
+                         double *part, int nt)
+{
+	const int n = A->n, nch = (n + CHUNK - 1) / CHUNK;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (int c = 0; c < nch; ++c) {
+		const int lo = c * CHUNK, hi = lo + CHUNK < n ? lo + CHUNK : n;
+		part[c] = A->off ? matvec_dot_w(A, z, s_old, beta, s, q, lo, hi, true)
+		                 : matvec_dot_w(A, z, s_old, beta, s, q, lo, hi, false);
+	}
+	return sum_chunks(part, nch);
 }
 
 static void mic0(const flip_matrix *A, double *precon)
@@ -105,12 +141,18 @@ static void apply(const flip_matrix *A, const double *precon, const double *r, d
 		apply_w(A, precon, r, y, z, false);
 }
 
-static double dot(const double *a, const double *b, int n)
+static double dot(const double *a, const double *b, int n, double *part, int nt)
 {
-	double s = 0;
-	for (int i = 0; i < n; ++i)
-		s += a[i] * b[i];
-	return s;
+	const int nch = (n + CHUNK - 1) / CHUNK;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (int c = 0; c < nch; ++c) {
+		const int lo = c * CHUNK, hi = lo + CHUNK < n ? lo + CHUNK : n;
+		double s = 0;
+		for (int i = lo; i < hi; ++i)
+			s += a[i] * b[i];
+		part[c] = s;
+	}
+	return sum_chunks(part, nch);
 }
 
 static double maxabs(const double *a, int n)
@@ -131,38 +173,47 @@ bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double
 	const double bmax = maxabs(b, n);
 	if (n == 0 || bmax == 0)
 		return true;
-	double *mem = eddy__arena_alloc(&w->arena, 5 * (size_t)n * sizeof *mem);
+	const int nt = pcg_threads(w, n), nch = (n + CHUNK - 1) / CHUNK;
+	double *mem = eddy__arena_alloc(&w->arena, (6 * (size_t)n + (size_t)nch) * sizeof *mem);
 	if (!mem)
 		return false;
-	double *precon = mem, *r = mem + n, *y = mem + 2 * (size_t)n, *z = mem + 3 * (size_t)n, *s = mem + 4 * (size_t)n;
+	double *part = mem + 6 * (size_t)n; /* chunk sums */
+	double *precon = mem, *r = mem + n, *y = mem + 2 * (size_t)n, *z = mem + 3 * (size_t)n;
+	double *s = mem + 4 * (size_t)n, *s_old = mem + 5 * (size_t)n;
 	mic0(A, precon);
 	memcpy(r, b, (size_t)n * sizeof *r);
 	apply(A, precon, r, y, z);
-	memcpy(s, z, (size_t)n * sizeof *s);
-	double rho = dot(r, z, n);
+	/* r . z next to the serial apply: chunked all the same, on one thread
+	 * (too short to pay for a parallel region) */
+	double rho = dot(r, z, n, part, 1), beta = 0;
+	const double *prev = z; /* s_old of the first iteration: s = z + 0 z = z */
 	for (int k = 1; k <= max_it; ++k) {
-		matvec(A, s, y); /* y doubles as q = A s */
-		const double sq = dot(s, y, n);
+		const double sq = matvec_dot(A, z, prev, beta, s, y, part, nt); /* y doubles as q = A s */
 		if (!(sq > 0)) { /* breakdown: A is not positive definite on s */
 			*it = k;
 			*res = maxabs(r, n) / bmax;
 			return false;
 		}
 		const double alpha = rho / sq;
+		double rmax = 0;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(max : rmax)
 		for (int i = 0; i < n; ++i) {
 			x[i] += alpha * s[i];
 			r[i] -= alpha * y[i];
+			rmax = fabs(r[i]) > rmax ? fabs(r[i]) : rmax;
 		}
 		*it = k;
-		*res = maxabs(r, n) / bmax;
+		*res = rmax / bmax;
 		if (*res <= tol)
 			return true;
 		apply(A, precon, r, y, z);
-		const double rho_new = dot(r, z, n);
-		const double beta = rho_new / rho;
+		const double rho_new = dot(r, z, n, part, 1);
+		beta = rho_new / rho;
 		rho = rho_new;
-		for (int i = 0; i < n; ++i)
-			s[i] = z[i] + beta * s[i];
+		double *t = s_old; /* this s is the next iteration's s_old */
+		s_old = s;
+		s = t;
+		prev = s_old;
 	}
 	return false;
 }

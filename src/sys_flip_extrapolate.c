@@ -254,7 +254,7 @@ eddy_status eddy__flip_fill_fluid_faces(eddy_world *w, float *const face[3], con
 	return EDDY_OK;
 }
 
-static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	const extrapolate *ex = s->data;
 	const int n[3] = {w->nx, w->ny, w->nz};
@@ -298,6 +298,16 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		extrapolate_grid(face[a], layer[a], buf[a], buf[a] + nf, m[a], st[a], ex->def.layers);
 	}
 	return EDDY_OK;
+}
+
+/* The scratch is this step's own: released on return, so the pipeline's
+ * peak is the largest system's scratch, not their sum. */
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	const eddy_arena_mark m = eddy__arena_mark(&w->arena);
+	const eddy_status st = step_body(w, s, ctx);
+	eddy__arena_release(&w->arena, m);
+	return st;
 }
 
 const eddy_system_vtable eddy__kind_flip_extrapolate = {

@@ -44,9 +44,9 @@
  * declared reads, which would allocate them for every FLIP scene.
  * Cells holding a particle are always fluid, so a sheet one particle thick
  * stays on the grid (the role of the particle-radius rule r >= sqrt(3)/2 dx).
- * The splat is a serial scatter (no parallel region at all: idle OpenMP
- * workers would spin against it): summation order is fixed, so results do
- * not depend on the thread count. */
+ * The splat runs on all threads in slabs of z rows, each slab summing its
+ * own samples over the particles in index order (see the loop): results are
+ * bit-identical on any number of threads. */
 #include "flip.h"
 
 #include <stdlib.h>
@@ -87,12 +87,14 @@ static inline int ceil_int(float t) { return -floor_int(-t); }
 /* Adds weight * val and weight to the 8 samples around a point of one face
  * grid. acc interleaves the two sums per face (acc[2q] = sum W v, acc[2q+1]
  * = sum W): each update touches one cache line instead of two. */
-static inline void splat(float *restrict acc, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az, float val)
+static inline void splat(float *restrict acc, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az, float val,
+                         int klo, int khi)
 {
 	const size_t j[2] = {(size_t)ay.i0 * sy, (size_t)ay.i1 * sy}, k[2] = {(size_t)az.i0 * sz, (size_t)az.i1 * sz};
 	const float wy[2] = {1.0f - ay.w1, ay.w1}, wz[2] = {1.0f - az.w1, az.w1}, wx0 = 1.0f - ax.w1, wx1 = ax.w1;
+	const int kk[2] = {az.i0, az.i1};
 	for (int c = 0; c < 2; ++c)
-		for (int b = 0; b < 2; ++b) {
+		for (int b = 0; b < 2 && kk[c] >= klo && kk[c] < khi; ++b) {
 			float *row = acc + 2 * (k[c] + j[b]);
 			const float wyz = wz[c] * wy[b], w0 = wyz * wx0, w1 = wyz * wx1;
 			float *a0 = row + 2 * (size_t)ax.i0, *a1 = row + 2 * (size_t)ax.i1;
@@ -107,14 +109,15 @@ static inline void splat(float *restrict acc, size_t sy, size_t sz, flip_axis ax
  * d0 = x_f - x_p (m) at each axis's i0 sample and h the spacing (i1 is one
  * sample further; at the clamped top i1 = i0 with weight 0). */
 static inline void splat_affine(float *restrict acc, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az,
-                                float val, const float c[3], const float d0[3], float h)
+                                float val, const float c[3], const float d0[3], float h, int klo, int khi)
 {
+	const int kk[2] = {az.i0, az.i1};
 	const size_t j[2] = {(size_t)ay.i0 * sy, (size_t)ay.i1 * sy}, k[2] = {(size_t)az.i0 * sz, (size_t)az.i1 * sz};
 	const float wy[2] = {1.0f - ay.w1, ay.w1}, wz[2] = {1.0f - az.w1, az.w1}, wx0 = 1.0f - ax.w1, wx1 = ax.w1;
 	const float ex[2] = {c[0] * d0[0], c[0] * (d0[0] + h)}, ey[2] = {c[1] * d0[1], c[1] * (d0[1] + h)},
 	            ez[2] = {c[2] * d0[2], c[2] * (d0[2] + h)};
 	for (int cc = 0; cc < 2; ++cc)
-		for (int b = 0; b < 2; ++b) {
+		for (int b = 0; b < 2 && kk[cc] >= klo && kk[cc] < khi; ++b) {
 			float *row = acc + 2 * (k[cc] + j[b]);
 			const float wyz = wz[cc] * wy[b], w0 = wyz * wx0, w1 = wyz * wx1, v = val + ey[b] + ez[cc];
 			float *a0 = row + 2 * (size_t)ax.i0, *a1 = row + 2 * (size_t)ax.i1;
@@ -129,12 +132,14 @@ static inline void splat_affine(float *restrict acc, size_t sy, size_t sz, flip_
  * t is the particle's grid coordinate (cells) */
 /* The particle's trilinear weights at the cell centres around it (the tent
  * of flip_particle_density in flip.h, constant extension at the sides). */
-static inline void splat_density(float *restrict dens, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az)
+static inline void splat_density(float *restrict dens, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az,
+                                 int klo, int khi)
 {
 	const size_t j[2] = {(size_t)ay.i0 * sy, (size_t)ay.i1 * sy}, k[2] = {(size_t)az.i0 * sz, (size_t)az.i1 * sz};
 	const float wy[2] = {1.0f - ay.w1, ay.w1}, wz[2] = {1.0f - az.w1, az.w1}, wx0 = 1.0f - ax.w1, wx1 = ax.w1;
+	const int kk[2] = {az.i0, az.i1};
 	for (int c = 0; c < 2; ++c)
-		for (int b = 0; b < 2; ++b) {
+		for (int b = 0; b < 2 && kk[c] >= klo && kk[c] < khi; ++b) {
 			float *row = dens + k[c] + j[b];
 			const float wyz = wz[c] * wy[b];
 			row[ax.i0] += wyz * wx0;
@@ -144,7 +149,7 @@ static inline void splat_density(float *restrict dens, size_t sy, size_t sz, fli
 
 static inline float face_offset(flip_axis a, float off, float t, float h) { return ((float)a.i0 + off - t) * h; }
 
-static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	const p2g *pg = s->data;
 	const float dt = (float)ctx->dt;
@@ -162,7 +167,6 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		acc[a] = eddy__arena_alloc(&w->arena, 2 * nf[a] * sizeof *acc[a]);
 		if (!acc[a])
 			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_p2g: out of memory for splat weights");
-		memset(acc[a], 0, 2 * nf[a] * sizeof *acc[a]);
 	}
 	const size_t nc = (size_t)nx * ny * nz;
 	p2g *pm = s->data;
@@ -178,96 +182,128 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	}
 	float *dens = pm->dens; /* particles per cell, trilinear */
 	uint8_t *held = pm->held;
-	memset(dens, 0, nc * sizeof *dens);
-	memset(held, 0, nc);
 	/* one pass over the particles, three face grids: the particle columns are
-	 * read once; the scatter is serial so the sums do not depend on threads */
+	 * read once per slab (below) */
 	const size_t sx = (size_t)nx, sy = (size_t)ny;
 	const flip_grid grid = flip_grid_of(w);
 	const size_t np = w->n;
 	const float *cu[9];
 	for (int q = 0; q < 9; ++q)
 		cu[q] = eddy__col(w, COL_APIC_UX + q);
-	if (cu[0]) {
-		const float h = (float)w->def.cell_size;
-		for (size_t i = 0; i < np; ++i) {
-			const float pvx = vx[i] + ax[i] * dt, pvy = vy[i] + ay[i] * dt, pvz = vz[i] + az[i] * dt;
-			vx[i] = pvx;
-			vy[i] = pvy;
-			vz[i] = pvz;
-			const flip_axes g = flip_axes_at(&grid, (eddy_vec3){x[i], y[i], z[i]});
-			const float tx = (x[i] - o.x) * inv, ty = (y[i] - o.y) * inv, tz = (z[i] - o.z) * inv;
-			const float cx[3] = {cu[0][i], cu[1][i], cu[2][i]}, cy[3] = {cu[3][i], cu[4][i], cu[5][i]},
-			            cz[3] = {cu[6][i], cu[7][i], cu[8][i]};
-			const float du[3] = {face_offset(g.fx, 0.0f, tx, h), face_offset(g.cy, 0.5f, ty, h),
-			                     face_offset(g.cz, 0.5f, tz, h)};
-			const float dv[3] = {face_offset(g.cx, 0.5f, tx, h), face_offset(g.fy, 0.0f, ty, h),
-			                     face_offset(g.cz, 0.5f, tz, h)};
-			const float dw[3] = {face_offset(g.cx, 0.5f, tx, h), face_offset(g.cy, 0.5f, ty, h),
-			                     face_offset(g.fz, 0.0f, tz, h)};
-			splat_affine(acc[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, pvx, cx, du, h);
-			splat_affine(acc[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, pvy, cy, dv, h);
-			splat_affine(acc[2], sx, sx * sy, g.cx, g.cy, g.fz, pvz, cz, dw, h);
-			splat_density(dens, sx, sx * sy, g.cx, g.cy, g.cz);
-		}
+	/* body forces first, per particle (the splat reads the result) */
+	const int nt = np > 16384 ? ctx->threads : 1;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (size_t i = 0; i < np; ++i) {
+		vx[i] += ax[i] * dt;
+		vy[i] += ay[i] * dt;
+		vz[i] += az[i] * dt;
 	}
-	for (size_t i = 0; i < np && !cu[0]; ++i) {
-		const float pvx = vx[i] + ax[i] * dt, pvy = vy[i] + ay[i] * dt, pvz = vz[i] + az[i] * dt;
-		vx[i] = pvx;
-		vy[i] = pvy;
-		vz[i] = pvz;
-		const flip_axes g = flip_axes_at(&grid, (eddy_vec3){x[i], y[i], z[i]});
-		splat(acc[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, pvx);
-		splat(acc[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, pvy);
-		splat(acc[2], sx, sx * sy, g.cx, g.cy, g.fz, pvz);
-		splat_density(dens, sx, sx * sy, g.cx, g.cy, g.cz);
-	}
-	for (int a = 0; a < 3; ++a) {
-		float *f = face[a];
-		const float *s2 = acc[a];
-		for (size_t q = 0; q < nf[a]; ++q)
-			f[q] = s2[2 * q + 1] > 0 ? s2[2 * q] / s2[2 * q + 1] : 0.0f;
-		memcpy(old[a], f, nf[a] * sizeof *f);
-	}
-
 	uint8_t *type = (uint8_t *)w->columns[COL_CELL_TYPE].data;
 	float *phi = eddy__col(w, COL_FLIP_PHI);
-	/* the fill fraction of every cell from the particle density: one
-	 * particle is 1 / FLIP_SEED_PER_CELL of a cell, so sum (1 - phi) / 2
-	 * over the cells is the particles' volume (up to cells above rest
-	 * density, which flip_pressure's volume correction drains) */
 	const float inv_n0 = (float)(1.0 / flip_rest_count(w));
-	for (size_t c = 0; c < nc; ++c) {
-		const float f = dens[c] * inv_n0;
-		phi[c] = 1.0f - 2.0f * (f < 2.0f ? f : 2.0f);
-		type[c] = EDDY_CELL_AIR;
-	}
 	const float r = pg->def.mark_radius, r2 = r * r;
-	for (size_t i = 0; i < np; ++i) {
-		const float gx = (x[i] - o.x) * inv, gy = (y[i] - o.y) * inv, gz = (z[i] - o.z) * inv;
-		const size_t c = flip_cell(w, flip_cell_index(gx, nx), flip_cell_index(gy, ny), flip_cell_index(gz, nz));
-		type[c] = EDDY_CELL_FLUID;
-		held[c] = 1;
-		/* cells whose centre (i + 1/2) is within r of the particle; at r = 0
-		 * that is at most the particle's own cell, marked above */
-		if (r <= 0)
-			continue;
-		phi[c] = -1.0f; /* the radius rule's binary marker (see the header) */
-		int i0 = ceil_int(gx - r - 0.5f), i1 = floor_int(gx + r - 0.5f);
-		int j0 = ceil_int(gy - r - 0.5f), j1 = floor_int(gy + r - 0.5f);
-		int k0 = ceil_int(gz - r - 0.5f), k1 = floor_int(gz + r - 0.5f);
-		i0 = i0 < 0 ? 0 : i0, j0 = j0 < 0 ? 0 : j0, k0 = k0 < 0 ? 0 : k0;
-		i1 = i1 >= nx ? nx - 1 : i1, j1 = j1 >= ny ? ny - 1 : j1, k1 = k1 >= nz ? nz - 1 : k1;
-		for (int kk = k0; kk <= k1; ++kk)
-			for (int jj = j0; jj <= j1; ++jj)
-				for (int ii = i0; ii <= i1; ++ii) {
-					const float dx = (float)ii + 0.5f - gx, dy = (float)jj + 0.5f - gy, dz = (float)kk + 0.5f - gz;
-					if (dx * dx + dy * dy + dz * dz <= r2) {
-						const size_t q = flip_cell(w, ii, jj, kk);
-						type[q] = EDDY_CELL_FLUID;
-						phi[q] = -1.0f; /* the radius marks the cell full */
+	const float h = (float)w->def.cell_size;
+	/* The scatter in slabs of z rows: slab t owns the face and cell rows k in
+	 * [klo, khi) of every grid and takes, from each particle in index order,
+	 * only the weights landing there. Every sample thus sums the same
+	 * particles in the same order whatever the slab count, so the grids are
+	 * bit-identical on any number of threads, and no sample has two writers.
+	 * A particle reaches rows floor(gz - 1/2) .. floor(gz) + 1, so a slab
+	 * skips those with gz outside [klo - 1.5, khi + 1.5) (NaN and positions
+	 * off the grid clamp to the slabs holding row 0 or the top row, which take
+	 * all below or above; a slab is empty when nz < threads). */
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static, 1)
+	for (int t = 0; t < nt; ++t) {
+		const int klo = nz * t / nt, khi = t == nt - 1 ? nz + 1 : nz * (t + 1) / nt;
+		const float zlo = klo == 0 ? -INFINITY : (float)klo - 1.5f, zhi = t == nt - 1 ? INFINITY : (float)khi + 1.5f;
+		size_t q0[3], q1[3];
+		for (int a = 0; a < 3; ++a) {
+			const size_t row = a == 0 ? (sx + 1) * sy : a == 1 ? sx * (sy + 1) : sx * sy;
+			const int top = nz + (a == 2);
+			q0[a] = (size_t)klo * row;
+			q1[a] = (size_t)(khi < top ? khi : top) * row;
+			memset(acc[a] + 2 * q0[a], 0, 2 * (q1[a] - q0[a]) * sizeof *acc[a]);
+		}
+		const size_t c0 = (size_t)klo * sx * sy, c1 = (size_t)(khi < nz ? khi : nz) * sx * sy;
+		memset(dens + c0, 0, (c1 - c0) * sizeof *dens);
+		memset(held + c0, 0, c1 - c0);
+		for (size_t i = 0; i < np; ++i) {
+			const float gz = (z[i] - o.z) * inv;
+			if (gz < zlo || gz >= zhi)
+				continue;
+			const float pvx = vx[i], pvy = vy[i], pvz = vz[i];
+			const flip_axes g = flip_axes_at(&grid, (eddy_vec3){x[i], y[i], z[i]});
+			if (cu[0]) {
+				const float tx = (x[i] - o.x) * inv, ty = (y[i] - o.y) * inv, tz = gz;
+				const float cx[3] = {cu[0][i], cu[1][i], cu[2][i]}, cy[3] = {cu[3][i], cu[4][i], cu[5][i]},
+				            cz[3] = {cu[6][i], cu[7][i], cu[8][i]};
+				const float du[3] = {face_offset(g.fx, 0.0f, tx, h), face_offset(g.cy, 0.5f, ty, h),
+				                     face_offset(g.cz, 0.5f, tz, h)};
+				const float dv[3] = {face_offset(g.cx, 0.5f, tx, h), face_offset(g.fy, 0.0f, ty, h),
+				                     face_offset(g.cz, 0.5f, tz, h)};
+				const float dw[3] = {face_offset(g.cx, 0.5f, tx, h), face_offset(g.cy, 0.5f, ty, h),
+				                     face_offset(g.fz, 0.0f, tz, h)};
+				splat_affine(acc[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, pvx, cx, du, h, klo, khi);
+				splat_affine(acc[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, pvy, cy, dv, h, klo, khi);
+				splat_affine(acc[2], sx, sx * sy, g.cx, g.cy, g.fz, pvz, cz, dw, h, klo, khi);
+			} else {
+				splat(acc[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, pvx, klo, khi);
+				splat(acc[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, pvy, klo, khi);
+				splat(acc[2], sx, sx * sy, g.cx, g.cy, g.fz, pvz, klo, khi);
+			}
+			splat_density(dens, sx, sx * sy, g.cx, g.cy, g.cz, klo, khi);
+		}
+		/* this slab's faces, then its cells */
+		for (int a = 0; a < 3; ++a) {
+			float *f = face[a];
+			const float *s2 = acc[a];
+			for (size_t q = q0[a]; q < q1[a]; ++q)
+				f[q] = s2[2 * q + 1] > 0 ? s2[2 * q] / s2[2 * q + 1] : 0.0f;
+			memcpy(old[a] + q0[a], f + q0[a], (q1[a] - q0[a]) * sizeof *f);
+		}
+		/* the fill fraction of every cell from the particle density: one
+		 * particle is 1 / n0 of a cell, so sum (1 - phi) / 2 over the cells
+		 * is the particles' volume (up to cells above rest density, which
+		 * flip_pressure's volume correction drains) */
+		for (size_t c = c0; c < c1; ++c) {
+			const float f = dens[c] * inv_n0;
+			phi[c] = 1.0f - 2.0f * (f < 2.0f ? f : 2.0f);
+			type[c] = EDDY_CELL_AIR;
+		}
+		for (size_t i = 0; i < np; ++i) {
+			const float gz = (z[i] - o.z) * inv;
+			if (gz < zlo || gz >= zhi)
+				continue;
+			const float gx = (x[i] - o.x) * inv, gy = (y[i] - o.y) * inv;
+			const int kc = flip_cell_index(gz, nz);
+			if (kc >= klo && kc < khi) {
+				const size_t c = flip_cell(w, flip_cell_index(gx, nx), flip_cell_index(gy, ny), kc);
+				type[c] = EDDY_CELL_FLUID;
+				held[c] = 1;
+				if (r > 0)
+					phi[c] = -1.0f; /* the radius rule's binary marker (see the header) */
+			}
+			/* cells whose centre (i + 1/2) is within r of the particle; at r = 0
+			 * that is at most the particle's own cell, marked above */
+			if (r <= 0)
+				continue;
+			int i0 = ceil_int(gx - r - 0.5f), i1 = floor_int(gx + r - 0.5f);
+			int j0 = ceil_int(gy - r - 0.5f), j1 = floor_int(gy + r - 0.5f);
+			int k0 = ceil_int(gz - r - 0.5f), k1 = floor_int(gz + r - 0.5f);
+			i0 = i0 < 0 ? 0 : i0, j0 = j0 < 0 ? 0 : j0, k0 = k0 < klo ? klo : k0;
+			i1 = i1 >= nx ? nx - 1 : i1, j1 = j1 >= ny ? ny - 1 : j1, k1 = k1 >= nz ? nz - 1 : k1;
+			k1 = k1 >= khi ? khi - 1 : k1;
+			for (int kk = k0; kk <= k1; ++kk)
+				for (int jj = j0; jj <= j1; ++jj)
+					for (int ii = i0; ii <= i1; ++ii) {
+						const float ddx = (float)ii + 0.5f - gx, ddy = (float)jj + 0.5f - gy, ddz = (float)kk + 0.5f - gz;
+						if (ddx * ddx + ddy * ddy + ddz * ddz <= r2) {
+							const size_t q = flip_cell(w, ii, jj, kk);
+							type[q] = EDDY_CELL_FLUID;
+							phi[q] = -1.0f; /* the radius marks the cell full */
+						}
 					}
-				}
+		}
 	}
 	pm->step = w->step;
 	pm->particles = np;
@@ -284,6 +320,16 @@ static void destroy(eddy_system *s)
 		free(pg->dens);
 		free(pg->held);
 	}
+}
+
+/* The scratch is this step's own: released on return, so the pipeline's
+ * peak is the largest system's scratch, not their sum. */
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	const eddy_arena_mark m = eddy__arena_mark(&w->arena);
+	const eddy_status st = step_body(w, s, ctx);
+	eddy__arena_release(&w->arena, m);
+	return st;
 }
 
 const eddy_system_vtable eddy__kind_flip_p2g = {

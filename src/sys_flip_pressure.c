@@ -146,7 +146,7 @@ static long across(const eddy_world *w, int i, int j, int k, int d, size_t *f)
 	return (long)flip_cell(w, c[0], c[1], c[2]);
 }
 
-static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	pressure *ps = s->data;
 	const int nx = w->nx, ny = w->ny, nz = w->nz;
@@ -161,7 +161,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	flip_solid sd;
 	memset(&sd, 0, sizeof sd);
 	const eddy_vec3 *svel = NULL;
-	if (eddy__flip_boundary_info(w, &margin, &svel) && !eddy__flip_solid_faces(w, ctx->dt, margin, svel, &sd))
+	if (!eddy__flip_surface_solid(w, s, &sd) && eddy__flip_boundary_info(w, &margin, &svel) &&
+	    !eddy__flip_solid_faces(w, ctx->dt, margin, svel, &sd))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory");
 	int *row = eddy__arena_alloc(&w->arena, nc * sizeof *row);
 	if (!row)
@@ -221,7 +222,12 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory for %d unknowns", n);
 
 	/* assemble: diagonal, links weighted by the open fraction w_f, and the
-	 * right-hand side -D with D = sum_f +-(w_f u_f + (1 - w_f) u_solid,f) */
+	 * right-hand side -D with D = sum_f +-(w_f u_f + (1 - w_f) u_solid,f).
+	 * Each row is written by one thread from read-only inputs, so this and
+	 * the loops below marked "on all threads" give the same values on any
+	 * thread count (the max reductions are order-free). */
+	const int nt = nc > 65536 ? ctx->threads : 1;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (int k = 0; k < nz; ++k)
 		for (int j = 0; j < ny; ++j)
 			for (int i = 0; i < nx; ++i) {
@@ -414,13 +420,14 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	/* the residual, measured rather than trusted */
 	double rmax = 0, bmax = 0;
 	bool finite = true;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(max : rmax, bmax) reduction(&& : finite)
 	for (int r = 0; r < n; ++r) {
 		const int *nb = &A.nb[6 * r];
 		double t = b[r] - A.diag[r] * q[r];
 		for (int d = 0; d < 6; ++d)
 			if (nb[d] >= 0)
 				t += flip_off(&A, r, d) * q[nb[d]];
-		finite &= isfinite(q[r]) != 0;
+		finite = finite && isfinite(q[r]);
 		rmax = fabs(t) > rmax ? fabs(t) : rmax;
 		bmax = fabs(b[r]) > bmax ? fabs(b[r]) : bmax;
 	}
@@ -434,11 +441,14 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 
 	/* velocity update on faces with fluid on a side and no solid */
 	const double pscale = ps->def.density * h / ctx->dt;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (size_t c = 0; c < nc; ++c)
 		pcell[c] = row[c] >= 0 ? (float)(q[row[c]] * pscale) : 0.0f;
 	for (int a = 0; a < 3; ++a) {
 		const int fx = nx + (a == 0), fy = ny + (a == 1), fz = nz + (a == 2);
 		float *f = face[a];
+		/* on all threads: each face written once */
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 		for (int k = 0; k < fz; ++k)
 			for (int j = 0; j < fy; ++j)
 				for (int i = 0; i < fx; ++i) {
@@ -479,6 +489,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	}
 	/* divergence left over, as volume change per step */
 	double dmax = 0;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(max : dmax)
 	for (int r = 0; r < n; ++r) {
 		const int c = cell_of[r];
 		const int i = c % nx, j = (c / nx) % ny, k = c / (nx * ny);
@@ -518,6 +529,16 @@ static void destroy(eddy_system *s)
 	pressure *ps = s->data;
 	if (ps)
 		eddy__flip_cholmod_free(ps->chol);
+}
+
+/* The scratch is this step's own: released on return, so the pipeline's
+ * peak is the largest system's scratch, not their sum. */
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	const eddy_arena_mark m = eddy__arena_mark(&w->arena);
+	const eddy_status st = step_body(w, s, ctx);
+	eddy__arena_release(&w->arena, m);
+	return st;
 }
 
 const eddy_system_vtable eddy__kind_flip_pressure = {

@@ -61,7 +61,7 @@ static inline bool empty(const uint8_t *type, const int *count, size_t c)
 	return count[c] == 0 && type[c] != EDDY_CELL_SOLID;
 }
 
-static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	const reseed *rs = s->data;
 	const int nx = w->nx, ny = w->ny, nz = w->nz;
@@ -147,6 +147,16 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 				count[c] += (int)add;
 			}
 	return EDDY_OK;
+}
+
+/* The scratch is this step's own: released on return, so the pipeline's
+ * peak is the largest system's scratch, not their sum. */
+static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	const eddy_arena_mark m = eddy__arena_mark(&w->arena);
+	const eddy_status st = step_body(w, s, ctx);
+	eddy__arena_release(&w->arena, m);
+	return st;
 }
 
 const eddy_system_vtable eddy__kind_flip_reseed = {

@@ -669,13 +669,29 @@ static void energy_stats(const eddy_world *w, eddy_frame_stats *out)
 		wcsph = wcsph || o->vt == &eddy__kind_sph_pressure;
 	}
 	const eddy_vec3 lo = w->def.bounds_min;
-	double ke = 0, pe = 0, px = 0, py = 0, pz = 0;
-	for (size_t i = 0; i < w->n; ++i) {
-		const double ux = vx[i], uy = vy[i], uz = vz[i];
-		ke += ux * ux + uy * uy + uz * uz;
-		pe -= gx * ((double)x[i] - lo.x) + gy * ((double)y[i] - lo.y) + gz * ((double)z[i] - lo.z);
-		px += ux, py += uy, pz += uz;
+	/* On all threads, summed in fixed chunks whose sums are added in chunk
+	 * order: the same figures on any number of threads. At most STAT_CHUNKS
+	 * chunks of at least STAT_CHUNK particles (the chunking depends on the
+	 * particle count only). */
+	enum { STAT_CHUNK = 16384, STAT_CHUNKS = 256 };
+	const size_t n = w->n, csize = n / STAT_CHUNKS + 1 > STAT_CHUNK ? n / STAT_CHUNKS + 1 : STAT_CHUNK;
+	const int nch = (int)((n + csize - 1) / csize), nt = nch > 1 ? w->def.threads : 1;
+	double part[STAT_CHUNKS][5];
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (int c = 0; c < nch; ++c) {
+		const size_t i0 = (size_t)c * csize, i1 = i0 + csize < n ? i0 + csize : n;
+		double cke = 0, cpe = 0, cpx = 0, cpy = 0, cpz = 0;
+		for (size_t i = i0; i < i1; ++i) {
+			const double ux = vx[i], uy = vy[i], uz = vz[i];
+			cke += ux * ux + uy * uy + uz * uz;
+			cpe -= gx * ((double)x[i] - lo.x) + gy * ((double)y[i] - lo.y) + gz * ((double)z[i] - lo.z);
+			cpx += ux, cpy += uy, cpz += uz;
+		}
+		part[c][0] = cke, part[c][1] = cpe, part[c][2] = cpx, part[c][3] = cpy, part[c][4] = cpz;
 	}
+	double ke = 0, pe = 0, px = 0, py = 0, pz = 0;
+	for (int c = 0; c < nch; ++c)
+		ke += part[c][0], pe += part[c][1], px += part[c][2], py += part[c][3], pz += part[c][4];
 	out->kinetic_energy = 0.5 * m * ke;
 	out->potential_energy = m * pe;
 	out->momentum[0] = m * px, out->momentum[1] = m * py, out->momentum[2] = m * pz;
@@ -685,13 +701,21 @@ static void energy_stats(const eddy_world *w, eddy_frame_stats *out)
 		return;
 	const double r0 = rho0, kk = eos->stiffness, gam = eos->tait_gamma, B = kk * r0 / gam;
 	const bool tait = eos->eos == EDDY_SPH_EOS_TAIT;
-	double ce = 0;
-	for (size_t i = 0; i < w->n; ++i) {
-		const double r = rho[i];
-		if (!(r > r0))
-			continue;
-		ce += tait ? (B / r0) * ((pow(r / r0, gam - 1) - 1) / (gam - 1) + r0 / r - 1) : kk * (log(r / r0) + r0 / r - 1);
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (int c = 0; c < nch; ++c) {
+		const size_t i0 = (size_t)c * csize, i1 = i0 + csize < n ? i0 + csize : n;
+		double cce = 0;
+		for (size_t i = i0; i < i1; ++i) {
+			const double r = rho[i];
+			if (!(r > r0))
+				continue;
+			cce += tait ? (B / r0) * ((pow(r / r0, gam - 1) - 1) / (gam - 1) + r0 / r - 1) : kk * (log(r / r0) + r0 / r - 1);
+		}
+		part[c][0] = cce;
 	}
+	double ce = 0;
+	for (int c = 0; c < nch; ++c)
+		ce += part[c][0];
 	out->compression_energy = m * ce;
 	out->energy += out->compression_energy;
 }
