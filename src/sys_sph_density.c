@@ -59,12 +59,24 @@ eddy_sph_density_def eddy_default_sph_density_def(void)
 
 /* Adami et al. 2012, eq. 27, with the wall at rest: each boundary particle
  * takes the Shepard average of the fluid pressure near it plus the hydrostatic
- * difference, and the EOS density for that pressure. */
+ * difference, and the EOS density for that pressure. The wall densities enter
+ * the fluid's density sums, which set the fluid pressure the walls copy: a
+ * loop. Closed with the previous step's wall densities (as the neighbour
+ * search summed them), it is a one-step-lagged positive feedback that pumps
+ * energy into the fluid at the walls (a still column never came to rest).
+ * So the loop is iterated within the step: WALL_PASSES times the walls are
+ * extrapolated and the density of every fluid particle near them corrected
+ * by sum_b V_b (rho_b new - rho_b old) W_poly6, its pressure with it; a last
+ * extrapolation then gives the walls the pressure of the corrected fluid.
+ * Each pass shrinks the lag's error by the walls' share of a particle's
+ * kernel sum (at most about 1/2 at a corner). */
+#define WALL_PASSES 3
 static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads)
 {
 	sph_neighbors *nb = &sd->sh.nb;
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
-	const float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
+	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
+	float *inv_rho = sd->sh.inv_rho, *pq = sd->sh.pq;
 	const sph_kernel_consts kc = sd->sh.k;
 	const float gx = w->def.gravity.x, gy = w->def.gravity.y, gz = w->def.gravity.z;
 	const float rho0 = sd->sh.rho0, k = sd->def.stiffness, gamma = sd->def.tait_gamma;
@@ -78,7 +90,8 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 	 * was most of a walled scene's step): rows ascending, as a walk over the
 	 * cell-ordered table would give them */
 	uint32_t *start = eddy__arena_alloc(&w->arena, (nbound + 1) * sizeof *start);
-	if (!start)
+	float *old = eddy__arena_alloc(&w->arena, nbound * sizeof *old);
+	if (!start || !old)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", nbound);
 	memset(start, 0, (nbound + 1) * sizeof *start);
 	for (size_t i = 0; i < n; ++i) {
@@ -98,24 +111,47 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 		for (uint32_t q = 0; q < nb->bcount[i]; ++q)
 			fluid[at[bl[q]]++] = (uint32_t)i;
 	}
-	const long lb = (long)nbound;
+	const long lb = (long)nbound, ln = (long)n;
+	for (int pass = 0;; ++pass) {
+		memcpy(old, nb->brho, nbound * sizeof *old);
 #pragma omp parallel for num_threads(threads) schedule(static)
-	for (long b = 0; b < lb; ++b) {
-		const float xb = nb->bx[b], yb = nb->by[b], zb = nb->bz[b];
-		float sw = 0, sp = 0;
-		for (uint32_t q = start[b]; q < start[b + 1]; ++q) {
-			const uint32_t j = fluid[q];
-			const float rx = xb - x[j], ry = yb - y[j], rz = zb - z[j];
-			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
-			const float wgt = d * d * d;
-			sw += wgt;
-			sp += wgt * (p[j] + rho[j] * (gx * rx + gy * ry + gz * rz));
+		for (long b = 0; b < lb; ++b) {
+			const float xb = nb->bx[b], yb = nb->by[b], zb = nb->bz[b];
+			float sw = 0, sp = 0;
+			for (uint32_t q = start[b]; q < start[b + 1]; ++q) {
+				const uint32_t j = fluid[q];
+				const float rx = xb - x[j], ry = yb - y[j], rz = zb - z[j];
+				const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
+				const float wgt = d * d * d;
+				sw += wgt;
+				sp += wgt * (p[j] + rho[j] * (gx * rx + gy * ry + gz * rz));
+			}
+			const float pb = sw > 0 ? fmaxf(sp / sw, 0.0f) : 0.0f;
+			nb->bp[b] = pb;
+			nb->brho[b] = tait ? rho0 * powf(pb / B + 1.0f, 1.0f / gamma) : rho0 + pb / k;
 		}
-		const float pb = sw > 0 ? fmaxf(sp / sw, 0.0f) : 0.0f;
-		nb->bp[b] = pb;
-		nb->brho[b] = tait ? rho0 * powf(pb / B + 1.0f, 1.0f / gamma) : rho0 + pb / k;
+		if (pass == WALL_PASSES)
+			return EDDY_OK;
+#pragma omp parallel for num_threads(threads) schedule(static)
+		for (long i = 0; i < ln; ++i) {
+			const uint32_t *bl = nb->bnbr + (size_t)i * nb->bcap, bc = nb->bcount[i];
+			if (bc == 0)
+				continue;
+			float dr = 0;
+			for (uint32_t q = 0; q < bc; ++q) {
+				const uint32_t b = bl[q];
+				const float rx = x[i] - nb->bx[b], ry = y[i] - nb->by[b], rz = z[i] - nb->bz[b];
+				const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
+				dr += nb->bvol[b] * (nb->brho[b] - old[b]) * d * d * d;
+			}
+			const float r = rho[i] + kc.poly6 * dr;
+			rho[i] = r;
+			inv_rho[i] = 1.0f / r;
+			pq[4 * i + 3] = inv_rho[i];
+			const float pr = tait ? B * (powf(r / rho0, gamma) - 1.0f) : k * (r - rho0);
+			p[i] = pr > 0 ? pr : 0;
+		}
 	}
-	return EDDY_OK;
 }
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)

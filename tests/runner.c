@@ -98,6 +98,8 @@ int main(int argc, char **argv)
 		{"long_mesh", suite_long_mesh, true},
 		{"stress_flip_volume", suite_stress_flip_volume, false},
 		{"long_flip_volume", suite_long_flip_volume, true},
+		{"stress_wcsph", suite_stress_wcsph, false},
+		{"long_stress_wcsph", suite_long_stress_wcsph, true},
 	};
 	const bool want_long = only && strcmp(only, "long") == 0;
 	int ran = 0;
