@@ -12,8 +12,10 @@
  * Boundary particles carry a pressure extrapolated from the fluid near them
  * with the hydrostatic correction (Adami, Hu & Adams 2012, eq. 27),
  *   p_b = max(0, sum_f (p_f + rho_f g . (x_b - x_f)) W_bf / sum_f W_bf),
- * and the density rho_b the EOS gives for it; computed after the fluid pass,
- * used in the next step. Frozen at rho0 (plain Akinci et al. 2012) the walls
+ * and the density rho_b the EOS gives for it; computed after the fluid pass
+ * and iterated with the fluid density near the walls within the step (see
+ * boundary_pressure: lagged by a step, the loop pumped energy into the fluid),
+ * the last values also starting the next step's sums. Frozen at rho0 (plain Akinci et al. 2012) the walls
  * would leave the fluid beside them less compressed than the fluid away from
  * them, their pressure short of hydrostatic, and the fluid would sink along
  * the walls in a steady circulation.
