@@ -118,6 +118,8 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 		memcpy(old, nb->brho, nbound * sizeof *old);
 #pragma omp parallel for num_threads(threads) schedule(static)
 		for (long b = 0; b < lb; ++b) {
+			if (pass > 0 && start[b] == start[b + 1])
+				continue; /* no fluid near it: the first pass's 0 and rho0 stand */
 			const float xb = nb->bx[b], yb = nb->by[b], zb = nb->bz[b];
 			float sw = 0, sp = 0;
 			for (uint32_t q = start[b]; q < start[b + 1]; ++q) {
