@@ -12,27 +12,7 @@
  * at the centre, (min + max) / 2 + (i + 1/2) * spacing: the drop is then
  * mirror-symmetric about its centre on every axis, and it stands on the
  * simple cubic lattice the SPH mass calibration assumes.
- * The spacing becomes the world's length scale for the advection limit.
- * Hydrostatic start (weakly compressible SPH): in a world with sph_pressure,
- * a block emitted at rest on the world's floor, gravity along an axis, is
- * emitted compressed as it is at rest, not at uniform rest density. From a
- * uniform lattice the column would first fall until its pressure carried its
- * weight and then ring at its acoustic frequency c / 4H, which the artificial
- * viscosity (a rate of alpha c h k^2) hardly damps at that wavelength: a
- * still column kept 0.1 sqrt(g H) = Mach x sqrt(g H) of sound-wave motion.
- * The pressure at mass depth s below the block's top is the weight above,
- * p = (m / spacing^3) g s; the sph_density EOS gives the density rho(s) for
- * it, and the lattice layers are moved toward the floor (the bottom layer
- * stays) by the strain that makes the summation density read rho(s): a
- * lattice strained along one axis by e reads rho0 (1 + R e), R the poly6
- * gradient moment over the lattice sum (1.05 at h = 2 spacings, 1 in the
- * continuum), so dz/ds = 1 - (rho(s) / rho0 - 1) / R, integrated in closed
- * form for the linear and the Tait EOS (first order in g D / k, which is
- * 1% at the usual stiffness). The summation density then reads rho(p)
- * and the wall pressure (Adami et al. 2012) follows it. Practice in WCSPH
- * (e.g. Monaghan 1994; Antuono et al. 2012, the hydrostatic tank) is to start
- * from the hydrostatic density; with summation density that means positions. */
-#include "sph.h"
+ * The spacing becomes the world's length scale for the advection limit. */
 #include "systems.h"
 
 #include <stdlib.h>
@@ -102,73 +82,6 @@ static eddy_vec3 jittered(const emit_box *e, eddy_vec3 p, uint64_t *rng)
 	return p;
 }
 
-/* The hydrostatic start (see the header): on which axis and how far the
- * layers move. axis < 0: no compression (no sph_pressure, no axis-aligned
- * gravity, the block moving or not on the floor). */
-typedef struct hydro {
-	int axis;
-	double sign, top;
-	double a, ginv; /* rho(s) / rho0 = 1 + a s (linear) or (1 + a s)^ginv (Tait, ginv = 1 / gamma) */
-	double resp;    /* the summation density's response to a strain: d(rho / rho0) / d(strain) */
-	double shift_bottom; /* m, D - z(D) */
-} hydro;
-
-/* Depth z (m) of the layer at mass depth s (m): dz/ds = 1 - (rho(s) / rho0 - 1) / resp. */
-static double hydro_depth(const hydro *h, double s)
-{
-	const double u = h->a * s;
-	const double excess = h->ginv == 0 ? 0.5 * u * s
-	                                   : (pow(1 + u, 1 + h->ginv) - 1) / (h->a * (1 + h->ginv)) - s;
-	return s - excess / h->resp;
-}
-
-static hydro hydro_of(const eddy_world *w, const emit_box *e)
-{
-	hydro h = {.axis = -1};
-	const eddy_emit_box_def *d = &e->def;
-	const eddy_sph_density_def *sd = NULL;
-	bool wcsph = false;
-	for (int k = 0; k < w->order_count; ++k) {
-		const eddy_system *o = &w->slots[w->order[k]];
-		if (!sd)
-			sd = eddy__sph_density_def(o);
-		wcsph = wcsph || o->vt == &eddy__kind_sph_pressure;
-	}
-	const float gv[3] = {w->def.gravity.x, w->def.gravity.y, w->def.gravity.z};
-	const float vel[3] = {d->velocity.x, d->velocity.y, d->velocity.z};
-	int axis = -1, nonzero = 0;
-	for (int a = 0; a < 3; ++a)
-		if (gv[a] != 0) {
-			axis = a;
-			nonzero++;
-		}
-	if (!sd || !wcsph || nonzero != 1 || vel[0] != 0 || vel[1] != 0 || vel[2] != 0 || d->shape != EDDY_EMIT_BLOCK)
-		return h;
-	const float lo[3] = {w->def.bounds_min.x, w->def.bounds_min.y, w->def.bounds_min.z},
-	            hi[3] = {w->def.bounds_max.x, w->def.bounds_max.y, w->def.bounds_max.z},
-	            org[3] = {e->origin.x, e->origin.y, e->origin.z};
-	const int cnt[3] = {e->nx, e->ny, e->nz};
-	const double dx = d->spacing, D = cnt[axis] * dx, sign = gv[axis] < 0 ? -1 : 1;
-	const double floor_gap = sign < 0 ? org[axis] - lo[axis] : hi[axis] - (org[axis] + D);
-	if (!(fabs(floor_gap) <= 0.5 * dx))
-		return h;
-	/* the lattice's mass density over rho0: m / (rho0 spacing^3) */
-	const double L = 1.0 / (eddy_sph_lattice_sum(EDDY_SPH_POLY6, dx, sd->radius) * dx * dx * dx);
-	const double g = fabs((double)gv[axis]), k = sd->stiffness;
-	h.axis = axis;
-	h.sign = sign;
-	h.top = sign < 0 ? org[axis] + D : org[axis];
-	const bool tait = sd->eos == EDDY_SPH_EOS_TAIT;
-	h.a = (tait ? sd->tait_gamma : 1.0) * g * L / k;
-	h.ginv = tait ? 1.0 / sd->tait_gamma : 0;
-	/* a lattice strained along one axis by e reads rho0 (1 + resp e): the
-	 * poly6 gradient moment over the lattice sum (1 in the continuum) */
-	h.resp = eddy_sph_lattice_gradient_moment(EDDY_SPH_POLY6, dx, sd->radius) /
-	         (eddy_sph_lattice_sum(EDDY_SPH_POLY6, dx, sd->radius) * dx * dx * dx);
-	h.shift_bottom = D - hydro_depth(&h, D);
-	return h;
-}
-
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	emit_box *e = s->data;
@@ -183,19 +96,12 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
-	const hydro hs = hydro_of(w, e);
 	size_t k = 0;
 	for (size_t q = 0; q < lattice && k < count; ++q) {
 		const eddy_vec3 l = lattice_point(e, q);
 		if (!emitted(&e->def, l))
 			continue;
-		eddy_vec3 p = jittered(e, l, &w->rng);
-		if (hs.axis >= 0) {
-			float *c = hs.axis == 0 ? &p.x : hs.axis == 1 ? &p.y : &p.z;
-			const double depth = hs.sign < 0 ? hs.top - *c : *c - hs.top;
-			const double sd = depth > 0 ? depth : 0;
-			*c = (float)(*c + hs.sign * (hs.shift_bottom - (sd - hydro_depth(&hs, sd))));
-		}
+		const eddy_vec3 p = jittered(e, l, &w->rng);
 		/* jitter must not push a particle out of the world */
 		x[first + k] = fminf(fmaxf(p.x, lo.x), hi.x);
 		y[first + k] = fminf(fmaxf(p.y, lo.y), hi.y);

@@ -13,9 +13,10 @@
  * with the hydrostatic correction (Adami, Hu & Adams 2012, eq. 27),
  *   p_b = max(0, sum_f (p_f + rho_f g . (x_b - x_f)) W_bf / sum_f W_bf),
  * and the density rho_b the EOS gives for it; computed after the fluid pass
- * and iterated with the fluid density near the walls within the step (see
- * boundary_pressure: lagged by a step, the loop pumped energy into the fluid),
- * the last values also starting the next step's sums. Frozen at rho0 (plain Akinci et al. 2012) the walls
+ * and, with sph_pressure, iterated with the fluid density near the walls
+ * within the step (see boundary_pressure: lagged by a step, the loop pumped
+ * energy into the fluid), the last values also starting the next step's
+ * sums. Frozen at rho0 (plain Akinci et al. 2012) the walls
  * would leave the fluid beside them less compressed than the fluid away from
  * them, their pressure short of hydrostatic, and the fluid would sink along
  * the walls in a steady circulation.
@@ -66,16 +67,21 @@ eddy_sph_density_def eddy_default_sph_density_def(void)
  * loop. Closed with the previous step's wall densities (as the neighbour
  * search summed them), it is a one-step-lagged positive feedback that pumps
  * energy into the fluid at the walls (a still column never came to rest).
- * So the loop is iterated within the step: WALL_PASSES times the walls are
- * extrapolated and the density of every fluid particle near them corrected
- * by sum_b V_b (rho_b new - rho_b old) W_poly6, its pressure with it; a last
- * extrapolation then gives the walls the pressure of the corrected fluid.
- * Each pass shrinks the lag's error by the walls' share of a particle's
- * kernel sum (at most about 1/2 at a corner). Only for the EOS pressure
- * (a world with sph_pressure): sph_dfsph solves for its own pressure, and
- * with the iterated wall densities its closed-tank collapse at a/20 gained
- * 355% of the released energy instead of 20%. */
-#define WALL_PASSES 3
+ * With the EOS pressure (a world with sph_pressure) the loop is therefore
+ * iterated within the step: the walls are extrapolated, the density of every
+ * fluid particle near them corrected by sum_b V_b (rho_b new - rho_b old)
+ * W_poly6 (its pressure with it), and the walls extrapolated again, until a
+ * pass changes no wall density by more than WALL_TOL of what the first pass
+ * changed (the lag), or WALL_PASSES_MAX passes. Each pass shrinks the error
+ * by the walls' share of a particle's kernel sum (about 1/4 at a flat wall,
+ * at most about 1/2 at a corner), so 2 to 4 passes. The kernel weights and
+ * g . (x_b - x_f) of the wall-fluid pairs are made once, in the first pass;
+ * the later passes are sums over stored pairs.
+ * sph_dfsph solves for its own pressure: with the iterated wall densities its
+ * closed-tank collapse at a/20 gained 355% of the released energy instead of
+ * 20%, so there the walls keep the one-step lag. */
+#define WALL_PASSES_MAX 3
+#define WALL_TOL 1e-3f
 static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads)
 {
 	sph_neighbors *nb = &sd->sh.nb;
@@ -90,13 +96,15 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 	const size_t n = w->n, nbound = nb->nb;
 	if (n == 0 || nbound == 0)
 		return EDDY_OK;
+	bool iterate = false;
+	for (int q = 0; q < w->order_count; ++q)
+		iterate = iterate || w->slots[w->order[q]].vt == &eddy__kind_sph_pressure;
 	/* the fluid near each boundary particle, from the fluid's boundary lists
 	 * turned around (most wall particles have none, and a grid walk for each
 	 * was most of a walled scene's step): rows ascending, as a walk over the
 	 * cell-ordered table would give them */
 	uint32_t *start = eddy__arena_alloc(&w->arena, (nbound + 1) * sizeof *start);
-	float *old = eddy__arena_alloc(&w->arena, nbound * sizeof *old);
-	if (!start || !old)
+	if (!start)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", nbound);
 	memset(start, 0, (nbound + 1) * sizeof *start);
 	for (size_t i = 0; i < n; ++i) {
@@ -106,55 +114,93 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 	}
 	for (size_t b = 0; b < nbound; ++b)
 		start[b + 1] += start[b];
-	uint32_t *fluid = eddy__arena_alloc(&w->arena, (start[nbound] ? start[nbound] : 1) * sizeof *fluid),
+	const size_t pairs = start[nbound] ? start[nbound] : 1;
+	uint32_t *fluid = eddy__arena_alloc(&w->arena, pairs * sizeof *fluid),
 	         *at = eddy__arena_alloc(&w->arena, nbound * sizeof *at);
+	/* for the iteration: each pair's weight (h^2 - r^2)^3 and g . (x_b - x_f)
+	 * in the boundary-major order, and, in the order of the fluid's boundary
+	 * lists (rows with walls only, from fstart), where the pair sits in it */
+	float *wq = NULL, *gq = NULL, *inv_sw = NULL, *old = NULL;
+	uint32_t *pos = NULL, *fstart = NULL;
 	if (!fluid || !at)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", nbound);
+	if (iterate) {
+		wq = eddy__arena_alloc(&w->arena, pairs * sizeof *wq);
+		gq = eddy__arena_alloc(&w->arena, pairs * sizeof *gq);
+		pos = eddy__arena_alloc(&w->arena, pairs * sizeof *pos);
+		inv_sw = eddy__arena_alloc(&w->arena, nbound * sizeof *inv_sw);
+		old = eddy__arena_alloc(&w->arena, nbound * sizeof *old);
+		fstart = eddy__arena_alloc(&w->arena, (n + 1) * sizeof *fstart);
+		if (!wq || !gq || !pos || !inv_sw || !old || !fstart)
+			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles",
+			                  nbound);
+		fstart[0] = 0;
+		for (size_t i = 0; i < n; ++i)
+			fstart[i + 1] = fstart[i] + nb->bcount[i];
+		memcpy(old, nb->brho, nbound * sizeof *old); /* the last step's: what the fluid sums hold */
+	}
 	memcpy(at, start, nbound * sizeof *at);
 	for (size_t i = 0; i < n; ++i) {
 		const uint32_t *bl = nb->bnbr + i * nb->bcap;
-		for (uint32_t q = 0; q < nb->bcount[i]; ++q)
+		for (uint32_t q = 0; q < nb->bcount[i]; ++q) {
+			if (pos)
+				pos[fstart[i] + q] = at[bl[q]];
 			fluid[at[bl[q]]++] = (uint32_t)i;
+		}
 	}
 	const long lb = (long)nbound, ln = (long)n;
-	int passes = 0;
-	for (int q = 0; q < w->order_count; ++q)
-		if (w->slots[w->order[q]].vt == &eddy__kind_sph_pressure)
-			passes = WALL_PASSES;
-	for (int pass = 0;; ++pass) {
-		memcpy(old, nb->brho, nbound * sizeof *old);
+	/* first pass: the walls from this step's fluid (the weights made and, when
+	 * iterating, kept) */
 #pragma omp parallel for num_threads(threads) schedule(static)
-		for (long b = 0; b < lb; ++b) {
-			if (pass > 0 && start[b] == start[b + 1])
-				continue; /* no fluid near it: the first pass's 0 and rho0 stand */
-			const float xb = nb->bx[b], yb = nb->by[b], zb = nb->bz[b];
-			float sw = 0, sp = 0;
-			for (uint32_t q = start[b]; q < start[b + 1]; ++q) {
-				const uint32_t j = fluid[q];
-				const float rx = xb - x[j], ry = yb - y[j], rz = zb - z[j];
-				const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
-				const float wgt = d * d * d;
-				sw += wgt;
-				sp += wgt * (p[j] + rho[j] * (gx * rx + gy * ry + gz * rz));
+	for (long b = 0; b < lb; ++b) {
+		const float xb = nb->bx[b], yb = nb->by[b], zb = nb->bz[b];
+		float sw = 0, sp = 0;
+		for (uint32_t q = start[b]; q < start[b + 1]; ++q) {
+			const uint32_t j = fluid[q];
+			const float rx = xb - x[j], ry = yb - y[j], rz = zb - z[j];
+			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
+			const float wgt = d * d * d, gr = gx * rx + gy * ry + gz * rz;
+			sw += wgt;
+			sp += wgt * (p[j] + rho[j] * gr);
+			if (wq) {
+				wq[q] = wgt;
+				gq[q] = gr;
 			}
-			const float pb = sw > 0 ? fmaxf(sp / sw, 0.0f) : 0.0f;
-			nb->bp[b] = pb;
-			nb->brho[b] = tait ? rho0 * powf(pb / B + 1.0f, 1.0f / gamma) : rho0 + pb / k;
 		}
-		if (pass == passes)
+		const float pb = sw > 0 ? fmaxf(sp / sw, 0.0f) : 0.0f;
+		if (inv_sw)
+			inv_sw[b] = sw > 0 ? 1.0f / sw : 0.0f;
+		nb->bp[b] = pb;
+		nb->brho[b] = tait ? rho0 * powf(pb / B + 1.0f, 1.0f / gamma) : rho0 + pb / k;
+	}
+	if (!iterate)
+		return EDDY_OK;
+	float first = 0; /* the largest change of the first pass: the lag */
+	for (int pass = 1; pass <= WALL_PASSES_MAX; ++pass) {
+		float change = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : change)
+		for (long b = 0; b < lb; ++b) {
+			const float dv = fabsf(nb->brho[b] - old[b]);
+			change = dv > change ? dv : change;
+		}
+		if (pass == 1)
+			first = change;
+		else if (!(change > WALL_TOL * first))
 			return EDDY_OK;
+		/* the fluid near the walls takes the walls' new densities */
 #pragma omp parallel for num_threads(threads) schedule(static)
 		for (long i = 0; i < ln; ++i) {
-			const uint32_t *bl = nb->bnbr + (size_t)i * nb->bcap, bc = nb->bcount[i];
+			const uint32_t bc = nb->bcount[i];
 			if (bc == 0)
 				continue;
+			const uint32_t *bl = nb->bnbr + (size_t)i * nb->bcap, *ps = pos + fstart[i];
 			float dr = 0;
 			for (uint32_t q = 0; q < bc; ++q) {
 				const uint32_t b = bl[q];
-				const float rx = x[i] - nb->bx[b], ry = y[i] - nb->by[b], rz = z[i] - nb->bz[b];
-				const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
-				dr += nb->bvol[b] * (nb->brho[b] - old[b]) * d * d * d;
+				dr += nb->bvol[b] * (nb->brho[b] - old[b]) * wq[ps[q]];
 			}
+			if (dr == 0)
+				continue;
 			const float r = rho[i] + kc.poly6 * dr;
 			rho[i] = r;
 			inv_rho[i] = 1.0f / r;
@@ -162,7 +208,23 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 			const float pr = tait ? B * (powf(r / rho0, gamma) - 1.0f) : k * (r - rho0);
 			p[i] = pr > 0 ? pr : 0;
 		}
+		memcpy(old, nb->brho, nbound * sizeof *old);
+		/* ... and the walls that fluid's pressure */
+#pragma omp parallel for num_threads(threads) schedule(static)
+		for (long b = 0; b < lb; ++b) {
+			if (start[b] == start[b + 1])
+				continue; /* no fluid near it: the first pass's 0 and rho0 stand */
+			float sp = 0;
+			for (uint32_t q = start[b]; q < start[b + 1]; ++q) {
+				const uint32_t j = fluid[q];
+				sp += wq[q] * (p[j] + rho[j] * gq[q]);
+			}
+			const float pb = fmaxf(sp * inv_sw[b], 0.0f);
+			nb->bp[b] = pb;
+			nb->brho[b] = tait ? rho0 * powf(pb / B + 1.0f, 1.0f / gamma) : rho0 + pb / k;
+		}
 	}
+	return EDDY_OK;
 }
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
