@@ -137,7 +137,6 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 		fstart[0] = 0;
 		for (size_t i = 0; i < n; ++i)
 			fstart[i + 1] = fstart[i] + nb->bcount[i];
-		memcpy(old, nb->brho, nbound * sizeof *old); /* the last step's: what the fluid sums hold */
 	}
 	memcpy(at, start, nbound * sizeof *at);
 	for (size_t i = 0; i < n; ++i) {
@@ -148,7 +147,7 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 			fluid[at[bl[q]]++] = (uint32_t)i;
 		}
 	}
-	const long lb = (long)nbound, ln = (long)n;
+	const long lb = (long)nbound;
 	/* first pass: the walls from this step's fluid (the weights made and, when
 	 * iterating, kept) */
 #pragma omp parallel for num_threads(threads) schedule(static)
@@ -168,20 +167,42 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 			}
 		}
 		const float pb = sw > 0 ? fmaxf(sp / sw, 0.0f) : 0.0f;
-		if (inv_sw)
+		if (inv_sw) {
 			inv_sw[b] = sw > 0 ? 1.0f / sw : 0.0f;
+			old[b] = nb->brho[b]; /* the last step's: what the fluid sums hold */
+		}
 		nb->bp[b] = pb;
 		nb->brho[b] = tait ? rho0 * powf(pb / B + 1.0f, 1.0f / gamma) : rho0 + pb / k;
 	}
 	if (!iterate)
 		return EDDY_OK;
+	/* the later passes touch only the walls with fluid near them (act) and
+	 * the fluid rows with walls near them (rows), the latter with the pairs'
+	 * weights in the order of their lists (wf) */
+	uint32_t *act = eddy__arena_alloc(&w->arena, nbound * sizeof *act),
+	         *rows = eddy__arena_alloc(&w->arena, n * sizeof *rows);
+	float *wf = eddy__arena_alloc(&w->arena, pairs * sizeof *wf),
+	      *dv = eddy__arena_alloc(&w->arena, nbound * sizeof *dv);
+	if (!act || !rows || !wf || !dv)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", nbound);
+	long na = 0, nr = 0;
+	for (size_t b = 0; b < nbound; ++b)
+		if (start[b] < start[b + 1])
+			act[na++] = (uint32_t)b;
+	for (size_t i = 0; i < n; ++i)
+		if (nb->bcount[i])
+			rows[nr++] = (uint32_t)i;
+	for (size_t q = 0; q < fstart[n]; ++q)
+		wf[q] = wq[pos[q]];
 	float first = 0; /* the largest change of the first pass: the lag */
 	for (int pass = 1; pass <= WALL_PASSES_MAX; ++pass) {
 		float change = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : change)
-		for (long b = 0; b < lb; ++b) {
-			const float dv = fabsf(nb->brho[b] - old[b]);
-			change = dv > change ? dv : change;
+		for (long a = 0; a < na; ++a) {
+			const uint32_t b = act[a];
+			const float d = nb->brho[b] - old[b];
+			dv[b] = nb->bvol[b] * d;
+			change = fabsf(d) > change ? fabsf(d) : change;
 		}
 		if (pass == 1)
 			first = change;
@@ -189,37 +210,33 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 			return EDDY_OK;
 		/* the fluid near the walls takes the walls' new densities */
 #pragma omp parallel for num_threads(threads) schedule(static)
-		for (long i = 0; i < ln; ++i) {
-			const uint32_t bc = nb->bcount[i];
-			if (bc == 0)
-				continue;
-			const uint32_t *bl = nb->bnbr + (size_t)i * nb->bcap, *ps = pos + fstart[i];
+		for (long r = 0; r < nr; ++r) {
+			const uint32_t i = rows[r], bc = nb->bcount[i];
+			const uint32_t *bl = nb->bnbr + (size_t)i * nb->bcap;
+			const float *wi = wf + fstart[i];
 			float dr = 0;
-			for (uint32_t q = 0; q < bc; ++q) {
-				const uint32_t b = bl[q];
-				dr += nb->bvol[b] * (nb->brho[b] - old[b]) * wq[ps[q]];
-			}
+			for (uint32_t q = 0; q < bc; ++q)
+				dr += dv[bl[q]] * wi[q];
 			if (dr == 0)
 				continue;
-			const float r = rho[i] + kc.poly6 * dr;
-			rho[i] = r;
-			inv_rho[i] = 1.0f / r;
+			const float rr = rho[i] + kc.poly6 * dr;
+			rho[i] = rr;
+			inv_rho[i] = 1.0f / rr;
 			pq[4 * i + 3] = inv_rho[i];
-			const float pr = tait ? B * (powf(r / rho0, gamma) - 1.0f) : k * (r - rho0);
+			const float pr = tait ? B * (powf(rr / rho0, gamma) - 1.0f) : k * (rr - rho0);
 			p[i] = pr > 0 ? pr : 0;
 		}
-		memcpy(old, nb->brho, nbound * sizeof *old);
 		/* ... and the walls that fluid's pressure */
 #pragma omp parallel for num_threads(threads) schedule(static)
-		for (long b = 0; b < lb; ++b) {
-			if (start[b] == start[b + 1])
-				continue; /* no fluid near it: the first pass's 0 and rho0 stand */
+		for (long a = 0; a < na; ++a) {
+			const uint32_t b = act[a];
 			float sp = 0;
 			for (uint32_t q = start[b]; q < start[b + 1]; ++q) {
 				const uint32_t j = fluid[q];
 				sp += wq[q] * (p[j] + rho[j] * gq[q]);
 			}
 			const float pb = fmaxf(sp * inv_sw[b], 0.0f);
+			old[b] = nb->brho[b];
 			nb->bp[b] = pb;
 			nb->brho[b] = tait ? rho0 * powf(pb / B + 1.0f, 1.0f / gamma) : rho0 + pb / k;
 		}
