@@ -70,13 +70,14 @@ eddy_sph_density_def eddy_default_sph_density_def(void)
  * With the EOS pressure (a world with sph_pressure) the loop is therefore
  * iterated within the step: the walls are extrapolated, the density of every
  * fluid particle near them corrected by sum_b V_b (rho_b new - rho_b old)
- * W_poly6 (its pressure with it), and the walls extrapolated again, until a
- * pass changes no wall density by more than WALL_TOL of what the first pass
- * changed (the lag), or WALL_PASSES_MAX passes. Each pass shrinks the error
- * by the walls' share of a particle's kernel sum (about 1/4 at a flat wall,
- * at most about 1/2 at a corner), so 2 to 4 passes. The kernel weights and
- * g . (x_b - x_f) of the wall-fluid pairs are made once, in the first pass;
- * the later passes are sums over stored pairs.
+ * W_poly6 (its pressure with it), and the walls extrapolated again:
+ * WALL_PASSES_MAX times, or fewer once a pass changes no wall density by
+ * more than WALL_TOL of what the first pass changed (the lag). Each pass
+ * shrinks the error by the walls' share of a particle's kernel sum (about
+ * 1/4 at a flat wall, at most about 1/2 at a corner): three passes leave
+ * 1/64 to 1/8 of the lag. The kernel weights and g . (x_b - x_f) of the
+ * wall-fluid pairs are made once, in the first pass; the later passes are
+ * sums over the stored pairs of the walls with fluid near them.
  * sph_dfsph solves for its own pressure: with the iterated wall densities its
  * closed-tank collapse at a/20 gained 355% of the released energy instead of
  * 20%, so there the walls keep the one-step lag. */
