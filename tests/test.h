@@ -90,5 +90,7 @@ void suite_long_rotate(void);
 void suite_stress_energy(void);
 void suite_stress_flip_volume(void);
 void suite_long_flip_volume(void); /* minutes: make test-long */
+void suite_stress_wcsph(void);
+void suite_long_stress_wcsph(void);
 
 #endif

@@ -25,12 +25,12 @@ static double field(const char *line, const char *key)
 
 /* Largest rise of the total energy above its start and the potential energy
  * released (start minus lowest), J, over a run of the dam break. */
-static bool energy_rise(const char *method, double *rise, double *released)
+static bool energy_rise(const char *method, const char *spacing, double *rise, double *released)
 {
 	char cmd[512];
 	snprintf(cmd, sizeof cmd,
-	         "%s/eddy run scenes/dam_break.lua --set method=%s --set spacing=0.005 --set render=false --quiet --stats -",
-	         test_build_dir(), method);
+	         "%s/eddy run scenes/dam_break.lua --set method=%s --set spacing=%s --set render=false --quiet --stats -",
+	         test_build_dir(), method, spacing);
 	FILE *f = popen(cmd, "r");
 	if (!f)
 		return false;
@@ -59,7 +59,7 @@ static void collapse_makes_no_energy(void)
 	static const char *const methods[] = {"wcsph", "flip", "pic", "apic", "dfsph"};
 	for (size_t i = 0; i < sizeof methods / sizeof methods[0]; ++i) {
 		double rise, released;
-		const bool ran = energy_rise(methods[i], &rise, &released);
+		const bool ran = energy_rise(methods[i], "0.005", &rise, &released);
 		CHECKF(ran, "%s: the dam break did not run to its end with energy stats", methods[i]);
 		const double frac = released > 0 ? rise / released : INFINITY;
 		printf("    %s: energy rise %.3f%% of the %.3f J released%s\n", methods[i], 100 * frac, released,
@@ -70,7 +70,22 @@ static void collapse_makes_no_energy(void)
 	}
 }
 
+/* WCSPH one resolution coarser too, a/10 (issue 13 reported a 1.8% gain
+ * there; measured 0.000% on this scene both before and after the
+ * hydrostatic start and the lag-free wall density), held to the same 1%. */
+static void wcsph_collapse_makes_no_energy_at_a_10(void)
+{
+	double rise, released;
+	const bool ran = energy_rise("wcsph", "0.01", &rise, &released);
+	CHECKF(ran, "wcsph a/10: the dam break did not run to its end with energy stats");
+	const double frac = released > 0 ? rise / released : INFINITY;
+	printf("    wcsph a/10: energy rise %.3f%% of the %.3f J released\n", 100 * frac, released);
+	CHECKF(released > 0.1 && frac <= 0.01, "wcsph a/10: energy rose by %.2f%% of the released %.3f J", 100 * frac,
+	       released);
+}
+
 void suite_stress_energy(void)
 {
 	RUN(collapse_makes_no_energy);
+	RUN(wcsph_collapse_makes_no_energy_at_a_10);
 }
