@@ -115,7 +115,12 @@ int eddy_color_ok(eddy_vec3 c);
 typedef struct eddy_splat {
 	int width, height;  /* px */
 	uint8_t *rgba;      /* bottom row first, as eddy_gl_pixels */
-	float *depth;       /* window depth, [0, 1] */
+	float *depth;       /* distance along the view axis, m: the depth test's key */
+	/* the particles sorted near to far (splat.c), reused between frames */
+	float *sx, *sy, *sz;
+	uint8_t *srgb;
+	uint32_t *bin;
+	size_t sorted_cap;
 } eddy_splat;
 
 /* 0, or -1 when out of memory. */

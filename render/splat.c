@@ -14,14 +14,26 @@
  *   front of the near or behind the far plane;
  * - per pixel, p = 2 (centre - (xw, yw)) / S; outside the unit disc nothing;
  *   else the sphere's normal n = (p, sqrt(1 - p.p)) in eye space, the surface
- *   point's eye depth z = z_c + r n_z, window depth 0.5 (a z + b) / (-z) + 0.5
- *   (a, b the projection's z row; / 1 when orthographic), tested with LESS;
+ *   point's eye depth z = z_c + r n_z, tested with LESS (GL tests the window
+ *   depth 0.5 (a z + b) / (-z) + 0.5, a, b the projection's z row, / 1 when
+ *   orthographic: a decreasing function of z between the near and far planes,
+ *   so the distance -z orders fragments the same way; the buffer keeps it,
+ *   cleared to the far plane's);
  *   colour = albedo (0.32 + 0.68 max(n.l, 0)) + 0.28 max(n.h, 0)^32, clamped;
  * - a line of width w is the parallelogram its segment sweeps when moved by
  *   +-w/2 across its major axis (llvmpipe's wide lines), depth linear along
  *   it in window space, clipped to the near and far planes first.
  * Not multisampled: render_points' supersampling and box filter are the
  * anti-aliasing, as with GL.
+ *
+ * A fragment is first tested with the sphere's nearest point (-z_c - r): when
+ * that is not nearer than what the pixel holds, no point of the sphere there
+ * is, and the square root and shading are skipped (most of a pool's spheres
+ * are hidden behind its front layer). For that the particles are first
+ * sorted near to far by their centres' distance, in SORT_BINS bins between
+ * the nearest and the farthest (a stable counting sort: O(n), and the order
+ * within a bin stays the particles' own, so the image is deterministic; only
+ * exact depth ties can resolve differently from GL's draw order).
  *
  * Why not llvmpipe: it spends most of a small frame on fixed costs (its
  * threads' set-up per draw, the clear and read-back of the supersampled
@@ -35,12 +47,15 @@
 #define _POSIX_C_SOURCE 200809L
 #include "render.h"
 
+#include <assert.h>
 #include <math.h>
 #include <pthread.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #define MAX_THREADS 64
+#define SORT_BINS 4096
 
 int eddy_splat_init(eddy_splat *s, int width, int height)
 {
@@ -61,6 +76,7 @@ void eddy_splat_free(eddy_splat *s)
 {
 	free(s->rgba);
 	free(s->depth);
+	free(s->sx), free(s->sy), free(s->sz), free(s->srgb), free(s->bin);
 	memset(s, 0, sizeof *s);
 }
 
@@ -74,6 +90,7 @@ typedef struct band {
 	eddy_splat *s;
 	const eddy_gl_scene *sc;
 	float halfway[3];
+	float far_key;  /* m, the far plane's distance */
 	int r0, r1;     /* the buffer rows this band draws, bottom-up */
 	int ss, y0, y1; /* output rows (top-down) it filters */
 	uint8_t *out;
@@ -87,7 +104,7 @@ static void clear_rows(const band *b)
 	const size_t first = (size_t)b->r0 * (size_t)s->width, last = (size_t)b->r1 * (size_t)s->width;
 	for (size_t i = first; i < last; ++i) {
 		memcpy(s->rgba + 4 * i, bg, 4);
-		s->depth[i] = 1.0f;
+		s->depth[i] = b->far_key;
 	}
 }
 
@@ -98,7 +115,6 @@ static void draw_sprites(const band *b)
 	const float *v = sc->view, *p = sc->proj;
 	const float W = (float)s->width, H = (float)s->height;
 	const float size_k = 2.0f * sc->radius * p[5] * (0.5f * H);
-	const float a = p[10], bz = p[14], ortho = p[15];
 	const float *L = sc->light, *Hw = b->halfway;
 	const float r = sc->radius;
 	const int r0 = b->r0, r1 = b->r1, width = s->width;
@@ -128,6 +144,7 @@ static void draw_sprites(const band *b)
 		j0 = j0 < r0 ? r0 : j0;
 		j1 = j1 > r1 ? r1 : j1;
 		const float inv = 2.0f / size;
+		const float front = -ez - r; /* the sphere's nearest distance */
 		const uint8_t *c8 = sc->rgb + 4 * k;
 		const float cr = c8[0] * (1.0f / 255), cg = c8[1] * (1.0f / 255), cb = c8[2] * (1.0f / 255);
 		for (int j = j0; j < j1; ++j) {
@@ -138,19 +155,21 @@ static void draw_sprites(const band *b)
 			float *drow = s->depth + (size_t)j * (size_t)width;
 			uint8_t *crow = s->rgba + (size_t)j * (size_t)width * 4;
 			for (int i = i0; i < i1; ++i) {
+				if (!(front < drow[i]))
+					continue;
 				const float px = ((float)i + 0.5f - xw) * inv;
 				const float r2 = px * px + py2;
 				if (r2 > 1.0f)
 					continue;
 				const float nz = sqrtf(1.0f - r2);
-				const float zz = ez + r * nz;
-				float d = 0.5f * (a * zz + bz) / (ortho != 0 ? 1.0f : -zz) + 0.5f;
-				d = d < 0 ? 0 : d > 1 ? 1 : d;
-				if (!(d < drow[i]))
+				const float key = -ez - r * nz;
+				if (!(key < drow[i]))
 					continue;
-				drow[i] = d;
-				const float diffuse = fmaxf(px * L[0] + py * L[1] + nz * L[2], 0.0f);
-				float sp = fmaxf(px * Hw[0] + py * Hw[1] + nz * Hw[2], 0.0f);
+				drow[i] = key;
+				const float dl = px * L[0] + py * L[1] + nz * L[2];
+				const float diffuse = dl > 0 ? dl : 0;
+				const float dh = px * Hw[0] + py * Hw[1] + nz * Hw[2];
+				float sp = dh > 0 ? dh : 0;
 				sp *= sp, sp *= sp, sp *= sp, sp *= sp, sp *= sp;
 				const float shade = 0.32f + 0.68f * diffuse, hl = 0.28f * sp;
 				uint8_t *o = crow + 4 * (size_t)i;
@@ -190,6 +209,8 @@ static void draw_lines(const band *b)
 	eddy_splat *s = b->s;
 	const float *v = sc->view, *p = sc->proj;
 	const float W = (float)s->width, H = (float)s->height;
+	const float pa = p[10], pb = p[14];
+	const int ortho = p[15] != 0;
 	for (int set = 0; set < sc->line_sets; ++set) {
 		const eddy_gl_lines *l = &sc->lines[set];
 		const uint8_t col[4] = {unorm8(l->rgb[0]), unorm8(l->rgb[1]), unorm8(l->rgb[2]), 255};
@@ -210,7 +231,7 @@ static void draw_lines(const band *b)
 			for (int e = 0; e < 2; ++e) {
 				wx[e] = (c[e][0] / c[e][3] + 1.0f) * 0.5f * W;
 				wy[e] = (c[e][1] / c[e][3] + 1.0f) * 0.5f * H;
-				wz[e] = 0.5f * c[e][2] / c[e][3] + 0.5f;
+				wz[e] = c[e][2] / c[e][3]; /* z_ndc, linear along the line on screen */
 			}
 			const float dx = wx[1] - wx[0], dy = wy[1] - wy[0];
 			const int xmajor = fabsf(dx) >= fabsf(dy);
@@ -227,7 +248,9 @@ static void draw_lines(const band *b)
 			k1 = k1 > ulim ? ulim : k1;
 			for (int k = k0; k < k1; ++k) {
 				const float t = ((float)k + 0.5f - u0) / du;
-				const float wc = w0 + t * (w1 - w0), z = wz[0] + t * (wz[1] - wz[0]);
+				const float wc = w0 + t * (w1 - w0), zn = wz[0] + t * (wz[1] - wz[0]);
+				/* back to the distance: z_ndc = (a z + b) / (-z), or a z + b */
+				const float z = ortho ? (pb - zn) / pa : pb / (zn + pa);
 				int m0 = (int)ceilf(wc - hw - 0.5f), m1 = (int)ceilf(wc + hw - 0.5f);
 				const int wlo = xmajor ? b->r0 : 0, whi = xmajor ? b->r1 : s->width;
 				m0 = m0 < wlo ? wlo : m0;
@@ -259,8 +282,72 @@ static void *band_main(void *arg)
 	return NULL;
 }
 
-int eddy_splat_draw(eddy_splat *s, const eddy_gl_scene *sc, int threads, int ss, uint8_t *out, char *err, size_t cap)
+/* Copies the particles into s->sx.. near to far; -1 when out of memory. */
+static int sort_near_to_far(eddy_splat *s, const eddy_gl_scene *sc)
 {
+	const size_t n = sc->count;
+	if (n > s->sorted_cap) {
+		const size_t c = n + n / 4;
+		float *x = realloc(s->sx, c * sizeof *x);
+		if (x)
+			s->sx = x;
+		float *y = realloc(s->sy, c * sizeof *y);
+		if (y)
+			s->sy = y;
+		float *z = realloc(s->sz, c * sizeof *z);
+		if (z)
+			s->sz = z;
+		uint8_t *rgb = realloc(s->srgb, c * 4);
+		if (rgb)
+			s->srgb = rgb;
+		uint32_t *bin = realloc(s->bin, c * sizeof *bin);
+		if (bin)
+			s->bin = bin;
+		if (!x || !y || !z || !rgb || !bin)
+			return -1;
+		s->sorted_cap = c;
+	}
+	const float *v = sc->view;
+	float lo = INFINITY, hi = -INFINITY;
+	for (size_t k = 0; k < n; ++k) {
+		const float d = -(v[2] * sc->x[k] + v[6] * sc->y[k] + v[10] * sc->z[k] + v[14]);
+		lo = d < lo ? d : lo;
+		hi = d > hi ? d : hi;
+	}
+	const float scale = hi > lo ? (float)(SORT_BINS - 1) / (hi - lo) : 0.0f;
+	static_assert(SORT_BINS <= 65536, "bins fit the counts below");
+	size_t count[SORT_BINS + 1];
+	memset(count, 0, sizeof count);
+	for (size_t k = 0; k < n; ++k) {
+		const float d = -(v[2] * sc->x[k] + v[6] * sc->y[k] + v[10] * sc->z[k] + v[14]);
+		const float f = (d - lo) * scale;
+		/* NaN and out-of-range distances go last (the draw culls them) */
+		const uint32_t b = f >= 0 && f <= (float)(SORT_BINS - 1) ? (uint32_t)f : SORT_BINS - 1;
+		s->bin[k] = b;
+		count[b + 1]++;
+	}
+	for (int b = 0; b < SORT_BINS; ++b)
+		count[b + 1] += count[b];
+	for (size_t k = 0; k < n; ++k) {
+		const size_t at = count[s->bin[k]]++;
+		s->sx[at] = sc->x[k], s->sy[at] = sc->y[k], s->sz[at] = sc->z[k];
+		memcpy(s->srgb + 4 * at, sc->rgb + 4 * k, 4);
+	}
+	return 0;
+}
+
+int eddy_splat_draw(eddy_splat *s, const eddy_gl_scene *sc_in, int threads, int ss, uint8_t *out, char *err,
+                    size_t cap)
+{
+	eddy_gl_scene sorted = *sc_in;
+	const eddy_gl_scene *sc = &sorted;
+	if (sc->count > 0) {
+		if (sort_near_to_far(s, sc_in) != 0) {
+			snprintf(err, cap, "out of memory for %zu sorted particles", sc->count);
+			return -1;
+		}
+		sorted.x = s->sx, sorted.y = s->sy, sorted.z = s->sz, sorted.rgb = s->srgb;
+	}
 	if (sc->mesh_sets > 0) {
 		snprintf(err, cap, "the CPU renderer draws particles and lines only, not meshes");
 		return -1;
@@ -275,8 +362,12 @@ int eddy_splat_draw(eddy_splat *s, const eddy_gl_scene *sc, int threads, int ss,
 	band bands[MAX_THREADS];
 	const float h[3] = {sc->light[0], sc->light[1], sc->light[2] + 1.0f};
 	const float hl = sqrtf(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);
+	/* the far plane's distance: z_ndc = 1 */
+	const float pa = sc->proj[10], pb = sc->proj[14];
+	const float far_key = sc->proj[15] != 0 ? (pb - 1.0f) / pa : pb / (1.0f + pa);
 	for (int t = 0; t < threads; ++t) {
 		band *b = &bands[t];
+		b->far_key = far_key;
 		b->s = s;
 		b->sc = sc;
 		for (int k = 0; k < 3; ++k)
