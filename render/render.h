@@ -185,6 +185,27 @@ const float *eddy_particle_values(const eddy_world *w, const char *name, float *
 
 /* ---- the liquid surface (surface_mesh.c) ---- */
 
+/* A surface system's mesh and the state it was meshed from. surface_mesh's
+ * and render_surface's user data start with one, so a frame's surface is
+ * meshed once when both are in a world with the same fields. */
+typedef struct eddy_surface_cache {
+	eddy_surface_def def;
+	eddy_mesh mesh;
+	bool valid;         /* mesh is of the state stamped below */
+	int frame;
+	int64_t steps;
+	double time;        /* s */
+	size_t particles;
+} eddy_surface_cache;
+
+/* The surface of w's current state: another surface system's mesh when one
+ * meshed this very state with the same def this frame, else c's own, meshed
+ * now. *ms is the meshing time, ms, or -1 when the mesh was shared. */
+eddy_status eddy_surface_of_frame(eddy_world *w, eddy_surface_cache *c, int frame, const eddy_mesh **out, double *ms);
+/* The systems' frame hooks, by which eddy_surface_of_frame finds their data. */
+eddy_status eddy_surface_mesh_frame(eddy_world *w, int frame, void *user);
+eddy_status eddy_render_surface_frame(eddy_world *w, int frame, void *user);
+
 /* NULL when spacing, support and voxel are in range, else what is wrong (in buf). */
 const char *eddy_check_surface_fields(float spacing, float support, float voxel, char *buf, size_t cap);
 /* Monotonic clock, ms. */

@@ -28,9 +28,9 @@
 #define SPHERE_SEGS 48  /* longitude segments */
 
 typedef struct surface_renderer {
+	eddy_surface_cache cache; /* first: the liquid, reused every frame, or shared with a surface_mesh */
 	eddy_render_surface_def def;
 	eddy_gl *gl;
-	eddy_mesh mesh;       /* the liquid, reused every frame */
 	float *cxyz, *cnormal; /* colliders' vertices and normals */
 	uint32_t *ctri;
 	size_t cv_cap, ct_cap; /* vertices, triangles */
@@ -182,7 +182,7 @@ static long build_colliders(surface_renderer *r, eddy_world *w)
 
 /* ---- the frame ---- */
 
-static eddy_status render_frame(eddy_world *w, int frame, void *user)
+eddy_status eddy_render_surface_frame(eddy_world *w, int frame, void *user)
 {
 	surface_renderer *r = user;
 	const eddy_render_surface_def *d = &r->def;
@@ -195,9 +195,9 @@ static eddy_status render_frame(eddy_world *w, int frame, void *user)
 		if (!r->gl)
 			return eddy_world_fail(w, EDDY_ERR_EXTERNAL, "%s", err);
 	}
-	const eddy_surface_def sd = {d->spacing, d->support, d->voxel};
-	const double t0 = eddy_now_ms();
-	eddy_status st = eddy_world_surface(w, &sd, &r->mesh);
+	const eddy_mesh *mesh = NULL;
+	double mesh_ms = 0;
+	eddy_status st = eddy_surface_of_frame(w, &r->cache, frame, &mesh, &mesh_ms);
 	if (st != EDDY_OK)
 		return st;
 	const double t1 = eddy_now_ms();
@@ -211,7 +211,7 @@ static eddy_status render_frame(eddy_world *w, int frame, void *user)
 	eddy_gl_lines lines = {edges, 12, {d->outline_color.x, d->outline_color.y, d->outline_color.z}, 1.5f * (float)s};
 	eddy_gl_mesh meshes[2];
 	memset(meshes, 0, sizeof meshes);
-	meshes[0] = (eddy_gl_mesh){r->mesh.xyz, r->mesh.normal, r->mesh.tri, r->mesh.triangle_count,
+	meshes[0] = (eddy_gl_mesh){mesh->xyz, mesh->normal, mesh->tri, mesh->triangle_count,
 	                           {d->color.x, d->color.y, d->color.z}, 0.6f, 1.0f, 0};
 	meshes[1] = (eddy_gl_mesh){r->cxyz, r->cnormal, r->ctri, (size_t)ctris,
 	                           {d->collider_color.x, d->collider_color.y, d->collider_color.z}, 0.1f, 0.0f, 1};
@@ -244,7 +244,8 @@ static eddy_status render_frame(eddy_world *w, int frame, void *user)
 	const int werr = eddy_write_png(path, d->width, d->height, r->image);
 	if (werr != 0)
 		return eddy_world_fail(w, EDDY_ERR_IO, "render_surface: cannot write '%s': %s", path, strerror(werr));
-	eddy_world_publish(w, "surface_ms", t1 - t0);
+	if (mesh_ms >= 0)
+		eddy_world_publish(w, "surface_ms", mesh_ms);
 	eddy_world_publish(w, "render_ms", t2 - t1);
 	eddy_world_publish_text(w, "image", path);
 	return EDDY_OK;
@@ -254,7 +255,7 @@ static void destroy(void *user)
 {
 	surface_renderer *r = user;
 	eddy_gl_destroy(r->gl);
-	eddy_mesh_free(&r->mesh);
+	eddy_mesh_free(&r->cache.mesh);
 	free(r->cxyz);
 	free(r->cnormal);
 	free(r->ctri);
@@ -300,12 +301,13 @@ eddy_system_id eddy_add_render_surface(eddy_world *w, const eddy_render_surface_
 	if (!r)
 		return eddy_world_fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
 	r->def = *d;
+	r->cache.def = (eddy_surface_def){d->spacing, d->support, d->voxel};
 	const char *reads[3] = {"x", "y", "z"};
 	eddy_custom_system_def cd = eddy_default_custom_system_def();
 	cd.name = sys;
 	cd.reads = reads;
 	cd.read_count = 3;
-	cd.frame = render_frame;
+	cd.frame = eddy_render_surface_frame;
 	cd.destroy = destroy;
 	cd.user = r;
 	eddy_system_id id = eddy_add_custom_system(w, &cd);

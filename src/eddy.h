@@ -296,6 +296,11 @@ typedef struct eddy_custom_system_def {
 
 EDDY_API eddy_custom_system_def eddy_default_custom_system_def(void);
 EDDY_API eddy_system_id eddy_add_custom_system(eddy_world *w, const eddy_custom_system_def *def);
+/* The user pointer of custom system id when its frame hook is `frame` (so a
+ * caller gets only pointers whose type it knows), else NULL. Systems that
+ * share work within a frame find each other with it (render/: the surface
+ * mesh, meshed once for surface_mesh and render_surface). */
+EDDY_API void *eddy_world_custom_user(const eddy_world *w, eddy_system_id id, eddy_frame_fn frame);
 
 /* ---- built-in systems --------------------------------------------------- *
  * Each eddy_add_* returns EDDY_NULL_SYSTEM on failure with the reason in

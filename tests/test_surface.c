@@ -16,6 +16,7 @@
 #include <sys/stat.h>
 
 #include "eddy.h"
+#include "../render/render.h" /* the surface systems' caches */
 
 /* declarations only: test_render.c holds stb_image's implementation */
 #include <stb/stb_image.h>
@@ -438,12 +439,67 @@ static void scene_writes_meshes_and_images(void)
 	CHECK_HAS(out, "'format' must list ply, obj and/or vdb (got 'stl')");
 }
 
+/* surface_mesh and render_surface with the same fields mesh a frame once:
+ * whichever runs first meshes and publishes surface_ms, the other draws or
+ * writes that mesh (its own cache stays unbuilt). Either order; and with a
+ * different support each meshes its own. */
+static void surface_meshed_once_per_frame(void)
+{
+	const float s = 0.02f;
+	for (int order = 0; order < 3; ++order) {
+		eddy_world *w = emitted((eddy_vec3){0.4f, 0.4f, 0.4f}, (eddy_vec3){0.6f, 0.6f, 0.6f}, s, 0, EDDY_EMIT_BLOCK);
+		if (!w)
+			return;
+		eddy_surface_mesh_def m = eddy_default_surface_mesh_def();
+		m.spacing = s;
+		char dir[400];
+		out_path(dir, sizeof dir, "shared");
+		snprintf(m.path, sizeof m.path, "%s_%d_%%04d", dir, order);
+		eddy_render_surface_def r = render_def(order == 0 ? "shared_a" : order == 1 ? "shared_b" : "shared_c", s);
+		if (order == 2)
+			r.support = 3; /* a different field: meshed apart */
+		eddy_system_id a, b;
+		if (order == 1) {
+			b = eddy_add_render_surface(w, &r);
+			a = eddy_add_surface_mesh(w, &m);
+		} else {
+			a = eddy_add_surface_mesh(w, &m);
+			b = eddy_add_render_surface(w, &r);
+		}
+		CHECKF(eddy_system_valid(w, a) && eddy_system_valid(w, b), "%s", eddy_world_error(w));
+		for (int f = 0; f < 2; ++f) {
+			CHECKF(eddy_world_step_frame(w) == EDDY_OK, "%s", eddy_world_error(w));
+			const eddy_surface_cache *ca = eddy_world_custom_user(w, a, eddy_surface_mesh_frame);
+			const eddy_surface_cache *cb = eddy_world_custom_user(w, b, eddy_render_surface_frame);
+			CHECK(ca && cb);
+			if (!ca || !cb)
+				break;
+			/* the one that ran first meshed; the other did only when its field differs */
+			const eddy_surface_cache *first = order == 1 ? cb : ca, *second = order == 1 ? ca : cb;
+			CHECK(first->valid && first->frame == eddy_world_frame(w) && first->mesh.triangle_count > 0);
+			CHECKF(second->valid == (order == 2), "order %d frame %d: the second system %s", order, f,
+			       second->valid ? "meshed again" : "did not mesh");
+			eddy_frame_stats st;
+			eddy_world_frame_stats(w, &st);
+			double tris = -1;
+			for (int k = 0; k < st.extra_count; ++k)
+				if (strcmp(st.extra[k].name, "surface_triangles") == 0)
+					tris = st.extra[k].value;
+			/* surface_mesh wrote the mesh it used: its own, or the shared one */
+			CHECK(tris == (double)(ca->valid ? ca : cb)->mesh.triangle_count);
+			CHECK(lit_pixels(&r, eddy_world_frame(w)) > 100);
+		}
+		eddy_destroy_world(w);
+	}
+}
+
 void suite_surface(void)
 {
 	RUN(block_mesh_is_closed_and_holds_the_particles_volume);
 	RUN(sphere_mesh_has_the_spheres_radius);
 	RUN(mesh_files_parse_back);
 	RUN(render_surface_draws_the_liquid);
+	RUN(surface_meshed_once_per_frame);
 	RUN(bad_defs_are_refused);
 	RUN(scene_writes_meshes_and_images);
 }
