@@ -168,7 +168,8 @@ test-long: deps-test
 
 # ---- benchmarks: JSON into build/, never part of make test ------------------------
 # bench: core systems; bench_flip: FLIP transfers and pressure; bench_sph: SPH
-# blocks and the pour; bench_render: 1280x720 frames of 10k/100k/1M particles.
+# blocks and the pour; bench_render: 1280x720 frames of 10k/100k/1M/10M particles
+# and the surface mesher against the pour's step (it runs $(BUILD)/eddy).
 
 bench: deps
 	@$(MAKE) --no-print-directory all $(BENCHES:%=$(BUILD)/tests/%)
@@ -176,7 +177,7 @@ bench: deps
 
 # one of them: make bench-sph, bench-flip, bench-render
 bench-%: deps
-	@$(MAKE) --no-print-directory $(BUILD)/tests/bench_$*
+	@$(MAKE) --no-print-directory $(BUILD)/tests/bench_$* $(BUILD)/eddy
 	$(BUILD)/tests/bench_$* $(BUILD)/bench_$*.json
 
 # ---- sanitizers ---------------------------------------------------------------------

@@ -8,7 +8,10 @@
  * normalisation of SPlisHSPlasH's CubicKernel), rasterised into a sparse
  * openvdb::FloatGrid of voxel size dx, stored as -c (inside lower, as in a
  * level set). Each particle adds to the voxels within R of it; the particles
- * are split into fixed chunks, each chunk into its own grid, and the grids
+ * are split into fixed chunks, each chunk into its own grid (through a dense
+ * block over the chunk's voxel box when that box is at most 8 times the
+ * voxels its kernels touch: a packed pool, where the tree's accessor would
+ * cost most of the meshing; else voxel by voxel into the tree), and the grids
  * summed pairwise in a fixed order (tbb::parallel_deterministic_reduce), so
  * a frame's mesh does not depend on the thread count.
  *
@@ -39,6 +42,7 @@
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Composite.h>
+#include <openvdb/tools/Dense.h>
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/LevelSetRebuild.h>
 #include <openvdb/tools/VolumeToMesh.h>
@@ -48,7 +52,9 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <climits>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -71,6 +77,8 @@ struct Field {
 
 /* Chunk of particles one grid accumulates; fixed, so the summation order is. */
 const size_t CHUNK = 2048;
+/* Largest dense block a chunk is splatted into, voxels (64 MB of floats). */
+const double DENSE_MAX = double(1 << 24);
 
 struct Splat {
 	const float *x, *y, *z;
@@ -90,11 +98,11 @@ struct Splat {
 		grid->setTransform(xform);
 	}
 
-	void operator()(const tbb::blocked_range<size_t> &r)
+	/* Adds the kernels of particles [b, e) to the voxels, through add(i, j, k, value). */
+	template <typename Add> void splat(size_t b, size_t e, Add add) const
 	{
-		FloatGrid::Accessor acc = grid->getAccessor();
 		const float k = 8.0f / (float(M_PI) * R * R * R), inv_R = 1.0f / R, inv_dx = 1.0f / dx;
-		for (size_t p = r.begin(); p != r.end(); ++p) {
+		for (size_t p = b; p != e; ++p) {
 			const float px = x[p], py = y[p], pz = z[p];
 			/* voxel (i, j, k) has its centre at (i, j, k) dx */
 			const int i0 = int(std::ceil((px - R) * inv_dx)), i1 = int(std::floor((px + R) * inv_dx));
@@ -114,12 +122,44 @@ struct Splat {
 							continue;
 						const float W = q <= 0.5f ? k * (6.0f * q * q * (q - 1.0f) + 1.0f)
 						                          : k * 2.0f * (1.0f - q) * (1.0f - q) * (1.0f - q);
-						const float add = -V * W;
-						acc.modifyValue(openvdb::Coord(i, j, kk), [add](float &v) { v += add; });
+						add(i, j, kk, -V * W);
 					}
 				}
 			}
 		}
+	}
+
+	void operator()(const tbb::blocked_range<size_t> &r)
+	{
+		/* the voxel box of the range's kernels */
+		const float inv_dx = 1.0f / dx;
+		int lo[3] = {INT32_MAX, INT32_MAX, INT32_MAX}, hi[3] = {INT32_MIN, INT32_MIN, INT32_MIN};
+		for (size_t p = r.begin(); p != r.end(); ++p) {
+			const float q[3] = {x[p], y[p], z[p]};
+			for (int c = 0; c < 3; ++c) {
+				lo[c] = std::min(lo[c], int(std::ceil((q[c] - R) * inv_dx)));
+				hi[c] = std::max(hi[c], int(std::floor((q[c] + R) * inv_dx)));
+			}
+		}
+		const double box = double(hi[0] - lo[0] + 1) * double(hi[1] - lo[1] + 1) * double(hi[2] - lo[2] + 1);
+		const double kernel = std::pow(2.0 * double(R * inv_dx) + 1.0, 3.0);
+		if (grid->empty() && box > 0 && box <= DENSE_MAX && box <= 8.0 * kernel * double(r.size())) {
+			/* a dense block when the particles are packed: plain adds instead of
+			 * the tree's accessor, the same sums in the same order, then the
+			 * nonzero voxels (every voxel a kernel reached) into the tree */
+			const openvdb::CoordBBox bbox(openvdb::Coord(lo[0], lo[1], lo[2]), openvdb::Coord(hi[0], hi[1], hi[2]));
+			openvdb::tools::Dense<float, openvdb::tools::LayoutZYX> dense(bbox, 0.0f);
+			float *d = dense.data();
+			const size_t sx = dense.xStride(), sy = dense.yStride();
+			splat(r.begin(), r.end(), [&](int i, int j, int kk, float v) {
+				d[size_t(i - lo[0]) * sx + size_t(j - lo[1]) * sy + size_t(kk - lo[2])] += v;
+			});
+			openvdb::tools::copyFromDense(dense, *grid, 0.0f);
+			return;
+		}
+		FloatGrid::Accessor acc = grid->getAccessor();
+		splat(r.begin(), r.end(),
+		      [&](int i, int j, int kk, float v) { acc.modifyValue(openvdb::Coord(i, j, kk), [v](float &u) { u += v; }); });
 	}
 
 	void join(Splat &o) { openvdb::tools::compSum(*grid, *o.grid); }

@@ -9,6 +9,12 @@
  * libpng), libpng at its defaults (level 6, adaptive filters), and libpng as
  * render/png.c sets it (level 1, Z_RLE, the up filter).
  *
+ * Then the surface mesher on the pour (tests/scenes/pour_surface.lua through
+ * the eddy command beside this program, 1 thread, no images): the medians
+ * over its 120 frames of surface_ms and of the simulation's own time per
+ * frame (the frame's wall_ms less the surface_mesh system's), and their
+ * ratio (issue 16's target: below 1).
+ *
  *   bench_render OUT.json            everything, JSON to OUT.json
  *   bench_render --quick             the pour-sized and 1M frames only, to stdout
  *
@@ -227,6 +233,65 @@ static int encoders(FILE *f, const char *frame)
 	return 0;
 }
 
+/* The number after "key": in a JSON line, NAN if absent. */
+static double json_number(const char *line, const char *key)
+{
+	char pat[64];
+	snprintf(pat, sizeof pat, "\"%s\":", key);
+	const char *p = strstr(line, pat);
+	return p ? strtod(p + strlen(pat), NULL) : NAN;
+}
+
+/* The pour with surface_mesh: medians of the mesher's and the simulation's
+ * ms per frame. */
+static int surface_vs_step(FILE *json, const char *argv0)
+{
+	char eddy[1024], cmd[2400];
+	snprintf(eddy, sizeof eddy, "%s", argv0);
+	char *slash = strrchr(eddy, '/');
+	if (slash)
+		*slash = '\0'; /* build/tests */
+	slash = strrchr(eddy, '/');
+	snprintf(slash ? slash + 1 : eddy, sizeof eddy - (size_t)(slash ? slash + 1 - eddy : 0), "eddy");
+	if (!slash)
+		snprintf(eddy, sizeof eddy, "build/eddy");
+	snprintf(cmd, sizeof cmd,
+	         "'%s' run tests/scenes/pour_surface.lua --threads 1 --set render=false --quiet "
+	         "--out build/bench_render/pour_surface --stats -",
+	         eddy);
+	FILE *p = popen(cmd, "r");
+	if (!p) {
+		perror("popen");
+		return 1;
+	}
+	static double mesh[4096], sim[4096];
+	int n = 0;
+	static char line[1 << 16];
+	while (fgets(line, sizeof line, p) && n < 4096) {
+		const double m = json_number(line, "surface_ms"), wall = json_number(line, "wall_ms"),
+		             sys = json_number(line, "surface_mesh");
+		if (isnan(m) || isnan(wall) || isnan(sys))
+			continue;
+		mesh[n] = m;
+		sim[n] = wall - sys;
+		++n;
+	}
+	if (pclose(p) != 0 || n == 0) {
+		fprintf(stderr, "bench_render: %s failed\n", cmd);
+		return 1;
+	}
+	const double mm = median(mesh, n), sm = median(sim, n);
+	char out[512];
+	snprintf(out, sizeof out,
+	         "{\"scene\":\"tests/scenes/pour_surface.lua\",\"threads\":1,\"frames\":%d,\"surface_ms_median\":%.1f,"
+	         "\"step_ms_median\":%.1f,\"surface_over_step\":%.2f}",
+	         n, mm, sm, mm / sm);
+	printf("%s\n", out);
+	if (json)
+		fprintf(json, "\n  %s", out);
+	return 0;
+}
+
 int main(int argc, char **argv)
 {
 	const bool quick = argc >= 2 && strcmp(argv[1], "--quick") == 0;
@@ -255,6 +320,9 @@ int main(int argc, char **argv)
 		return 0;
 	fprintf(f, "\n],\"encoders\":[");
 	if (encoders(f, "build/bench_render/frame_960x540_5625_9.png") != 0)
+		return 1;
+	fprintf(f, "\n],\"surface\":[");
+	if (surface_vs_step(f, argv[0]) != 0)
 		return 1;
 	fprintf(f, "\n]}\n");
 	fclose(f);
