@@ -147,7 +147,26 @@ static long build_outlines(line_buf *b, const eddy_render_points_def *d, eddy_wo
 		else if (shape.kind == EDDY_COLLIDER_SPHERE)
 			n += (size_t)sphere_silhouette(b->xyz + 6 * n, shape.a, shape.radius, cam,
 			                               d->projection == EDDY_PROJECTION_ORTHOGRAPHIC);
-		/* planes are unbounded and other shapes undescribed: no outline */
+		else if (shape.kind != EDDY_COLLIDER_PLANE) {
+			/* any other kind (a mesh collider): the box around the zero level
+			 * of its distance, sampled coarsely (1/32 of the bounds); one that
+			 * cannot be meshed gets no outline rather than failing the frame */
+			eddy_mesh m = {0};
+			const eddy_world_def *wd = eddy_world_get_def(w);
+			const eddy_vec3 ext = eddy_v3_sub(wd->bounds_max, wd->bounds_min);
+			const float cell = fmaxf(ext.x, fmaxf(ext.y, ext.z)) / 32;
+			if (eddy_collider_mesh(w, eddy_world_system_at(w, i), cell, &m) == EDDY_OK && m.vertex_count > 0) {
+				eddy_vec3 lo = {INFINITY, INFINITY, INFINITY}, hi = {-INFINITY, -INFINITY, -INFINITY};
+				for (size_t v = 0; v < m.vertex_count; ++v) {
+					const float *q = m.xyz + 3 * v;
+					lo = (eddy_vec3){fminf(lo.x, q[0]), fminf(lo.y, q[1]), fminf(lo.z, q[2])};
+					hi = (eddy_vec3){fmaxf(hi.x, q[0]), fmaxf(hi.y, q[1]), fmaxf(hi.z, q[2])};
+				}
+				eddy_box_edges(b->xyz + 6 * n, lo, hi), n += 12;
+			}
+			eddy_mesh_free(&m);
+		}
+		/* planes are unbounded: no outline */
 	}
 	return (long)n;
 }

@@ -8,7 +8,9 @@
  * At every `every`-th frame time: eddy_world_surface (the 1/2 level of the
  * particles' colour field, closed, with the field's gradient as per-vertex
  * normals), box and sphere colliders tessellated into triangles whose
- * normals face the liquid's side (a tank's walls inward, a ball's outward)
+ * normals face the liquid's side (a tank's walls inward, a ball's outward),
+ * any other collider (a mesh) as the zero level of its signed distance
+ * (eddy_collider_mesh),
  * and drawn with back faces culled, so the near walls of a tank never hide
  * the liquid; the domain's edges as lines. The camera is render_points'
  * (eye == target frames the world's bounds). Drawn at supersample times the
@@ -35,6 +37,7 @@ typedef struct surface_renderer {
 	uint32_t *ctri;
 	size_t cv_cap, ct_cap; /* vertices, triangles */
 	uint8_t *image;       /* RGB, top row first */
+	eddy_mesh other;      /* scratch: a collider of no described shape, meshed from its distance */
 } surface_renderer;
 
 eddy_render_surface_def eddy_default_render_surface_def(void)
@@ -168,6 +171,23 @@ static long build_colliders(surface_renderer *r, eddy_world *w)
 		if (eddy_collider_shape_of(w, eddy_world_system_at(w, i), &shape) != EDDY_OK)
 			continue;
 		const float sign = shape.inside ? -1.0f : 1.0f;
+		if (shape.kind != EDDY_COLLIDER_BOX && shape.kind != EDDY_COLLIDER_SPHERE && shape.kind != EDDY_COLLIDER_PLANE) {
+			/* any other kind (a mesh collider): the zero level of its distance,
+			 * whose normals already face the liquid; one that cannot be meshed
+			 * is left out rather than failing the frame */
+			if (eddy_collider_mesh(w, eddy_world_system_at(w, i), 0.0f, &r->other) != EDDY_OK)
+				continue;
+			const eddy_mesh *m = &r->other;
+			if (m->vertex_count > UINT32_MAX - nv || !reserve_colliders(r, nv + m->vertex_count, nt + m->triangle_count))
+				return -1;
+			memcpy(r->cxyz + 3 * nv, m->xyz, 3 * m->vertex_count * sizeof *m->xyz);
+			memcpy(r->cnormal + 3 * nv, m->normal, 3 * m->vertex_count * sizeof *m->normal);
+			for (size_t t = 0; t < 3 * m->triangle_count; ++t)
+				r->ctri[3 * nt + t] = (uint32_t)nv + m->tri[t];
+			nv += m->vertex_count;
+			nt += m->triangle_count;
+			continue;
+		}
 		const size_t sv = (SPHERE_RINGS + 1) * (SPHERE_SEGS + 1), st = 2 * SPHERE_RINGS * SPHERE_SEGS;
 		if (!reserve_colliders(r, nv + sv, nt + st))
 			return -1;
@@ -175,7 +195,7 @@ static long build_colliders(surface_renderer *r, eddy_world *w)
 			box_mesh(r, &nv, &nt, shape.a, shape.b, sign);
 		else if (shape.kind == EDDY_COLLIDER_SPHERE)
 			sphere_mesh(r, &nv, &nt, shape.a, shape.radius, sign);
-		/* planes are unbounded and other shapes undescribed: not drawn */
+		/* planes are unbounded: not drawn */
 	}
 	return (long)nt;
 }
@@ -256,6 +276,7 @@ static void destroy(void *user)
 	surface_renderer *r = user;
 	eddy_gl_destroy(r->gl);
 	eddy_mesh_free(&r->cache.mesh);
+	eddy_mesh_free(&r->other);
 	free(r->cxyz);
 	free(r->cnormal);
 	free(r->ctri);

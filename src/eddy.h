@@ -881,6 +881,13 @@ typedef struct eddy_mesh {
 
 /* Meshes the world's particles now (x y z). No particles: an empty mesh. */
 EDDY_API eddy_status eddy_world_surface(eddy_world *w, const eddy_surface_def *def, eddy_mesh *mesh);
+/* A drawable mesh of any collider: the zero level of its signed distance
+ * (eddy_collider_distance) sampled every `cell` m over the world's bounds
+ * (cell <= 0: the bounds' longest side / 64; at most 256 samples a side),
+ * meshed like the surface, normals out of the solid, closed where the solid
+ * leaves the bounds. For colliders eddy_collider_shape_of describes as
+ * EDDY_COLLIDER_OTHER (a mesh collider, say); render_surface draws them so. */
+EDDY_API eddy_status eddy_collider_mesh(eddy_world *w, eddy_system_id id, float cell, eddy_mesh *out);
 /* Writes the mesh, whole or not at all, as binary little-endian PLY (vertex
  * x y z nx ny nz floats, face uchar/uint index lists), Wavefront OBJ (v, vn,
  * f a//a b//b c//c) or OpenVDB (.vdb: the field's 1/2 level as a narrow-band

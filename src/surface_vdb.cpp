@@ -184,6 +184,71 @@ void set_err(char *err, size_t cap, const char *what, const char *detail)
 		std::snprintf(err, cap, "%s%s%s", what, detail ? ": " : "", detail ? detail : "");
 }
 
+/* The mesh volumeToMesh gave (quads split in two) into mesh, with the
+ * normals of the field grid (its gradient, else the faces'): 0 or -1. */
+int fill_mesh(const FloatGrid &grid, float dx, const std::vector<openvdb::Vec3s> &points,
+              const std::vector<openvdb::Vec3I> &tris, const std::vector<openvdb::Vec4I> &quads, eddy_mesh *mesh,
+              char *err, size_t cap)
+{
+	const size_t nv = points.size(), nt = tris.size() + 2 * quads.size();
+	if (nv > UINT32_MAX)
+		return set_err(err, cap, "the surface has more than 2^32 vertices", nullptr), -1;
+	if (!grow(&mesh->xyz, &mesh->vertex_cap, 3 * nv) || !grow(&mesh->normal, &mesh->normal_cap, 3 * nv) ||
+	    !grow(&mesh->tri, &mesh->triangle_cap, 3 * nt))
+		return set_err(err, cap, "out of memory for the surface mesh", nullptr), -1;
+	for (size_t v = 0; v < nv; ++v)
+		for (int c = 0; c < 3; ++c)
+			mesh->xyz[3 * v + size_t(c)] = points[v][c];
+	/* volumeToMesh winds polygons counter-clockwise seen from the side
+	 * where the field is above the isovalue (outside here), as PLY, OBJ
+	 * and GL expect; a quad (a b c d) becomes (a b c) and (a c d) */
+	uint32_t *t = mesh->tri;
+	for (const openvdb::Vec3I &f : tris)
+		*t++ = f[0], *t++ = f[1], *t++ = f[2];
+	for (const openvdb::Vec4I &f : quads) {
+		*t++ = f[0], *t++ = f[1], *t++ = f[2];
+		*t++ = f[0], *t++ = f[2], *t++ = f[3];
+	}
+	mesh->vertex_count = nv;
+	mesh->triangle_count = nt;
+
+	/* normals: the field's gradient, else the faces' */
+	std::vector<float> face(3 * nv, 0.0f);
+	for (size_t f = 0; f < nt; ++f) {
+		const uint32_t *q = mesh->tri + 3 * f;
+		const float *a = mesh->xyz + 3 * q[0], *b = mesh->xyz + 3 * q[1], *c = mesh->xyz + 3 * q[2];
+		const float u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+		const float nrm[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]};
+		for (int k = 0; k < 3; ++k)
+			for (int c3 = 0; c3 < 3; ++c3)
+				face[3 * q[k] + size_t(c3)] += nrm[c3];
+	}
+	const float h = 0.5f * dx;
+	/* the sampler keeps a reference to the accessor: it must outlive it */
+	const FloatGrid::ConstAccessor acc = grid.getConstAccessor();
+	openvdb::tools::GridSampler<FloatGrid::ConstAccessor, openvdb::tools::BoxSampler> sampler(
+		acc, grid.transform());
+	for (size_t v = 0; v < nv; ++v) {
+		const float *P = mesh->xyz + 3 * v;
+		float g[3];
+		for (int c = 0; c < 3; ++c) {
+			openvdb::Vec3d a(P[0], P[1], P[2]), b(P[0], P[1], P[2]);
+			a[c] += h, b[c] -= h;
+			g[c] = float(sampler.wsSample(a) - sampler.wsSample(b));
+		}
+		float len = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+		if (!(len > 1e-12f)) {
+			for (int c = 0; c < 3; ++c)
+				g[c] = face[3 * v + size_t(c)];
+			len = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+		}
+		for (int c = 0; c < 3; ++c)
+			mesh->normal[3 * v + size_t(c)] = len > 0 ? g[c] / len : (c == 2 ? 1.0f : 0.0f);
+	}
+
+	return 0;
+}
+
 } // namespace
 
 extern "C" int eddy__surface_build(const float *x, const float *y, const float *z, size_t n,
@@ -207,61 +272,8 @@ extern "C" int eddy__surface_build(const float *x, const float *y, const float *
 			openvdb::tools::volumeToMesh(*splat.grid, points, tris, quads, double(iso), 0.0, true);
 		});
 
-		const size_t nv = points.size(), nt = tris.size() + 2 * quads.size();
-		if (nv > UINT32_MAX)
-			return set_err(err, cap, "the surface has more than 2^32 vertices", nullptr), -1;
-		if (!grow(&mesh->xyz, &mesh->vertex_cap, 3 * nv) || !grow(&mesh->normal, &mesh->normal_cap, 3 * nv) ||
-		    !grow(&mesh->tri, &mesh->triangle_cap, 3 * nt))
-			return set_err(err, cap, "out of memory for the surface mesh", nullptr), -1;
-		for (size_t v = 0; v < nv; ++v)
-			for (int c = 0; c < 3; ++c)
-				mesh->xyz[3 * v + size_t(c)] = points[v][c];
-		/* volumeToMesh winds polygons counter-clockwise seen from the side
-		 * where the field is above the isovalue (outside here), as PLY, OBJ
-		 * and GL expect; a quad (a b c d) becomes (a b c) and (a c d) */
-		uint32_t *t = mesh->tri;
-		for (const openvdb::Vec3I &f : tris)
-			*t++ = f[0], *t++ = f[1], *t++ = f[2];
-		for (const openvdb::Vec4I &f : quads) {
-			*t++ = f[0], *t++ = f[1], *t++ = f[2];
-			*t++ = f[0], *t++ = f[2], *t++ = f[3];
-		}
-		mesh->vertex_count = nv;
-		mesh->triangle_count = nt;
-
-		/* normals: the field's gradient, else the faces' */
-		std::vector<float> face(3 * nv, 0.0f);
-		for (size_t f = 0; f < nt; ++f) {
-			const uint32_t *q = mesh->tri + 3 * f;
-			const float *a = mesh->xyz + 3 * q[0], *b = mesh->xyz + 3 * q[1], *c = mesh->xyz + 3 * q[2];
-			const float u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-			const float nrm[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]};
-			for (int k = 0; k < 3; ++k)
-				for (int c3 = 0; c3 < 3; ++c3)
-					face[3 * q[k] + size_t(c3)] += nrm[c3];
-		}
-		const float h = 0.5f * dx;
-		/* the sampler keeps a reference to the accessor: it must outlive it */
-		const FloatGrid::ConstAccessor acc = splat.grid->getConstAccessor();
-		openvdb::tools::GridSampler<FloatGrid::ConstAccessor, openvdb::tools::BoxSampler> sampler(
-			acc, splat.grid->transform());
-		for (size_t v = 0; v < nv; ++v) {
-			const float *P = mesh->xyz + 3 * v;
-			float g[3];
-			for (int c = 0; c < 3; ++c) {
-				openvdb::Vec3d a(P[0], P[1], P[2]), b(P[0], P[1], P[2]);
-				a[c] += h, b[c] -= h;
-				g[c] = float(sampler.wsSample(a) - sampler.wsSample(b));
-			}
-			float len = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
-			if (!(len > 1e-12f)) {
-				for (int c = 0; c < 3; ++c)
-					g[c] = face[3 * v + size_t(c)];
-				len = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
-			}
-			for (int c = 0; c < 3; ++c)
-				mesh->normal[3 * v + size_t(c)] = len > 0 ? g[c] / len : (c == 2 ? 1.0f : 0.0f);
-		}
+		if (fill_mesh(*splat.grid, dx, points, tris, quads, mesh, err, cap) != 0)
+			return -1;
 
 		Field *fld = static_cast<Field *>(mesh->field);
 		if (!fld)
@@ -271,6 +283,42 @@ extern "C" int eddy__surface_build(const float *x, const float *y, const float *
 		return 0;
 	} catch (const std::bad_alloc &) {
 		set_err(err, cap, "out of memory for the surface field", nullptr);
+	} catch (const std::exception &e) {
+		set_err(err, cap, "OpenVDB failed", e.what());
+	} catch (...) {
+		set_err(err, cap, "OpenVDB failed", "unknown exception");
+	}
+	return -1;
+}
+
+extern "C" int eddy__surface_from_samples(const float *d, const int dims[3], const float origin[3], float dx,
+                                          eddy_mesh *mesh, char *err, size_t cap)
+{
+	try {
+		openvdb::initialize();
+		/* background: outside, three cells away; every sample nearer or inside
+		 * is stored, so the solid's interior is never background and the
+		 * surface closes where the solid leaves the sampled box */
+		const float far = 3.0f * dx;
+		FloatGrid::Ptr grid = FloatGrid::create(far);
+		openvdb::math::Transform::Ptr xform = openvdb::math::Transform::createLinearTransform(double(dx));
+		xform->postTranslate(openvdb::Vec3d(origin[0], origin[1], origin[2]));
+		grid->setTransform(xform);
+		FloatGrid::Accessor acc = grid->getAccessor();
+		for (int i = 0; i < dims[0]; ++i)
+			for (int j = 0; j < dims[1]; ++j)
+				for (int k = 0; k < dims[2]; ++k) {
+					const float v = d[(size_t(i) * size_t(dims[1]) + size_t(j)) * size_t(dims[2]) + size_t(k)];
+					if (v < far)
+						acc.setValue(openvdb::Coord(i, j, k), v);
+				}
+		std::vector<openvdb::Vec3s> points;
+		std::vector<openvdb::Vec3I> tris;
+		std::vector<openvdb::Vec4I> quads;
+		openvdb::tools::volumeToMesh(*grid, points, tris, quads, 0.0, 0.0, true);
+		return fill_mesh(*grid, dx, points, tris, quads, mesh, err, cap);
+	} catch (const std::bad_alloc &) {
+		set_err(err, cap, "out of memory for the collider's mesh", nullptr);
 	} catch (const std::exception &e) {
 		set_err(err, cap, "OpenVDB failed", e.what());
 	} catch (...) {

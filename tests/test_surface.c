@@ -10,6 +10,7 @@
  * background) and nothing where there is none; bad defs are refused. */
 #include "test.h"
 
+#include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -493,6 +494,69 @@ static void surface_meshed_once_per_frame(void)
 	}
 }
 
+/* A collider eddy_collider_shape_of cannot describe (a mesh sphere of radius
+ * 0.2 m from scenes/meshes/icosphere.obj): eddy_collider_mesh gives a closed
+ * mesh whose vertices lie on the sphere within a sampling cell (1/64 of the
+ * 1 m bounds: 0.016 m; trilinear sampling of the distance is exact to well
+ * under that), normals pointing out; render_surface draws it (a disc of
+ * radius 0.2 m seen from 2.5 m at 40 degrees, 120 px high: about
+ * pi (0.2 / 1.82 * 120)^2 / 4 = 140 px; asserted > 60, where a world with no
+ * collider lights none), and render_points outlines its box (> 40 px of
+ * lines). */
+static void mesh_collider_is_drawn(void)
+{
+	eddy_world_def wd = eddy_default_world_def();
+	char err[256];
+	eddy_world *w = eddy_create_world(&wd, err, sizeof err);
+	CHECKF(w != NULL, "%s", err);
+	if (!w)
+		return;
+	eddy_collide_mesh_def c = eddy_default_collide_mesh_def();
+	strcpy(c.path, "scenes/meshes/icosphere.obj");
+	c.scale = (eddy_vec3){0.2f, 0.2f, 0.2f};
+	c.translate = (eddy_vec3){0.5f, 0.5f, 0.5f};
+	eddy_system_id id = eddy_add_collide_mesh(w, &c);
+	CHECKF(eddy_system_valid(w, id), "%s", eddy_world_error(w));
+	eddy_collider_shape shape;
+	CHECK(eddy_collider_shape_of(w, id, &shape) == EDDY_OK);
+	eddy_mesh m = {0};
+	CHECKF(eddy_collider_mesh(w, id, 0, &m) == EDDY_OK, "%s", eddy_world_error(w));
+	CHECK(m.vertex_count > 100);
+	double worst = 0, dot_min = 1;
+	for (size_t v = 0; v < m.vertex_count; ++v) {
+		const float *p = m.xyz + 3 * v, *n = m.normal + 3 * v;
+		const double d[3] = {p[0] - 0.5, p[1] - 0.5, p[2] - 0.5};
+		const double r = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+		worst = fmax(worst, fabs(r - 0.2));
+		dot_min = fmin(dot_min, (d[0] * n[0] + d[1] * n[1] + d[2] * n[2]) / r);
+	}
+	printf("    collider mesh: %zu vertices, %zu triangles, |r - R| <= %.4f m, min n.r %.3f\n", m.vertex_count,
+	       m.triangle_count, worst, dot_min);
+	CHECKF(worst < 1.0 / 64, "a vertex %.4f m off the sphere", worst);
+	CHECK(dot_min > 0.9);
+	eddy_mesh_free(&m);
+
+	eddy_render_surface_def r = render_def("mesh_collider", 0.02f);
+	CHECKF(eddy_system_valid(w, eddy_add_render_surface(w, &r)), "%s", eddy_world_error(w));
+	eddy_render_points_def pd = eddy_default_render_points_def();
+	pd.width = 160, pd.height = 120, pd.supersample = 1;
+	pd.eye = r.eye, pd.target = r.target;
+	pd.background = (eddy_vec3){0, 0, 0};
+	pd.outline_domain = false;
+	char dir[400];
+	out_path(dir, sizeof dir, "mesh_collider_points");
+	snprintf(pd.path, sizeof pd.path, "%s_%%04d.png", dir);
+	CHECKF(eddy_system_valid(w, eddy_add_render_points(w, &pd)), "%s", eddy_world_error(w));
+	CHECKF(eddy_world_step_frame(w) == EDDY_OK, "%s", eddy_world_error(w));
+	const long lit = lit_pixels(&r, 1);
+	CHECKF(lit > 60, "the mesh collider lights %ld pixels", lit);
+	eddy_render_surface_def as_points = r;
+	memcpy(as_points.path, pd.path, sizeof pd.path);
+	const long outline = lit_pixels(&as_points, 1);
+	CHECKF(outline > 40, "the mesh collider's outline lights %ld pixels", outline);
+	eddy_destroy_world(w);
+}
+
 void suite_surface(void)
 {
 	RUN(block_mesh_is_closed_and_holds_the_particles_volume);
@@ -500,6 +564,7 @@ void suite_surface(void)
 	RUN(mesh_files_parse_back);
 	RUN(render_surface_draws_the_liquid);
 	RUN(surface_meshed_once_per_frame);
+	RUN(mesh_collider_is_drawn);
 	RUN(bad_defs_are_refused);
 	RUN(scene_writes_meshes_and_images);
 }
