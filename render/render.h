@@ -75,7 +75,8 @@ eddy_vec3 eddy_v3_norm(eddy_vec3 a); /* a / |a|, or a when zero */
 
 /* What a camera is asked for: the fields render_points and render_surface share. */
 typedef struct eddy_view_def {
-	int width, height;          /* px */
+	int width, height;          /* px, [1, 8192] */
+	int supersample;            /* 1, [1, 4]; width and height times it <= 16384 */
 	eddy_vec3 eye, target, up;  /* m; eye == target frames the world's bounds */
 	float fov;                  /* degrees, vertical */
 	eddy_projection projection;
@@ -89,8 +90,9 @@ typedef struct eddy_camera {
 	float view[16], proj[16];     /* column-major, world to eye and eye to clip */
 } eddy_camera;
 
-/* NULL when eye, target, up, fov, projection and ortho_height are in range,
- * else what is wrong (in buf, without the system's name). */
+/* NULL when the image size, supersample, eye, target, up, fov, projection
+ * and ortho_height are in range, else what is wrong (in buf, without the
+ * system's name). */
 const char *eddy_view_check(const eddy_view_def *d, char *buf, size_t cap);
 /* The look-at view and the perspective or orthographic projection, near and
  * far planes fitted to the world's bounds. */

@@ -68,7 +68,7 @@ eddy_render_surface_def eddy_default_render_surface_def(void)
 static eddy_view_def view_def(const eddy_render_surface_def *d)
 {
 	/* the surface reaches about a support radius past the particles */
-	return (eddy_view_def){d->width, d->height, d->eye, d->target, d->up, d->fov, d->projection, d->ortho_height,
+	return (eddy_view_def){d->width, d->height, d->supersample, d->eye, d->target, d->up, d->fov, d->projection, d->ortho_height,
 	                       2.0f * d->spacing, 4.0f * d->support * d->spacing};
 }
 
@@ -295,14 +295,6 @@ eddy_system_id eddy_add_render_surface(eddy_world *w, const eddy_render_surface_
 		return BAD("%s: def is NULL", sys);
 	const eddy_render_surface_def *d = def;
 	char why[160];
-	if (d->width < 1 || d->width > 8192)
-		return BAD("%s: 'width' must be in [1, 8192] px (got %d)", sys, d->width);
-	if (d->height < 1 || d->height > 8192)
-		return BAD("%s: 'height' must be in [1, 8192] px (got %d)", sys, d->height);
-	if (d->supersample < 1 || d->supersample > 4)
-		return BAD("%s: 'supersample' must be in [1, 4] (got %d)", sys, d->supersample);
-	if ((long)d->width * d->supersample > 16384 || (long)d->height * d->supersample > 16384)
-		return BAD("%s: 'width' and 'height' times 'supersample' must be <= 16384 px", sys);
 	const eddy_view_def vd = view_def(d);
 	if (eddy_view_check(&vd, why, sizeof why))
 		return BAD("%s: %s", sys, why);

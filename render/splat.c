@@ -160,6 +160,13 @@ static void draw_sprites(const band *b)
 				continue;
 			float *drow = s->depth + (size_t)j * (size_t)width;
 			uint8_t *crow = s->rgba + (size_t)j * (size_t)width * 4;
+			/* the whole row hidden (the common case behind a pool's front
+			 * layer): one vectorised pass instead of a branch per pixel */
+			int open = 0;
+			for (int i = i0; i < i1; ++i)
+				open |= front < drow[i];
+			if (!open)
+				continue;
 			for (int i = i0; i < i1; ++i) {
 				if (!(front < drow[i]))
 					continue;

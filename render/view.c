@@ -32,7 +32,15 @@ int eddy_color_ok(eddy_vec3 c) { return c.x >= 0 && c.x <= 1 && c.y >= 0 && c.y 
 
 const char *eddy_view_check(const eddy_view_def *d, char *buf, size_t cap)
 {
-	if (!finite3(d->eye) || !finite3(d->target) || !finite3(d->up))
+	if (d->width < 1 || d->width > 8192)
+		snprintf(buf, cap, "'width' must be in [1, 8192] px (got %d)", d->width);
+	else if (d->height < 1 || d->height > 8192)
+		snprintf(buf, cap, "'height' must be in [1, 8192] px (got %d)", d->height);
+	else if (d->supersample < 1 || d->supersample > 4)
+		snprintf(buf, cap, "'supersample' must be in [1, 4] (got %d)", d->supersample);
+	else if ((long)d->width * d->supersample > 16384 || (long)d->height * d->supersample > 16384)
+		snprintf(buf, cap, "'width' and 'height' times 'supersample' must be <= 16384 px");
+	else if (!finite3(d->eye) || !finite3(d->target) || !finite3(d->up))
 		snprintf(buf, cap, "'eye', 'target' and 'up' must be finite");
 	else if (!(d->fov > 0 && d->fov < 180))
 		snprintf(buf, cap, "'fov' must be in (0, 180) degrees (got %g)", (double)d->fov);

@@ -1422,7 +1422,7 @@ static void splat_matches_gl(void)
 	memcpy(lines + 12 * 6, extra, sizeof extra);
 	eddy_world_def wd = eddy_default_world_def();
 	for (int ortho = 0; ortho < 2; ++ortho) {
-		eddy_view_def vd = {W, H, {0, 0, 0}, {0, 0, 0}, {0, 1, 0}, 40.0f,
+		eddy_view_def vd = {W, H, S, {0, 0, 0}, {0, 0, 0}, {0, 1, 0}, 40.0f,
 		                    ortho ? EDDY_PROJECTION_ORTHOGRAPHIC : EDDY_PROJECTION_PERSPECTIVE, 0.0f, 0.024f, 0.024f};
 		eddy_camera cam;
 		eddy_camera_make(&vd, &wd, &cam);
