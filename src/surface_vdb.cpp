@@ -75,8 +75,10 @@ struct Field {
 	float isovalue; /* -1/2 */
 };
 
-/* Chunk of particles one grid accumulates; fixed, so the summation order is. */
-const size_t CHUNK = 2048;
+/* Most particles one grid accumulates (ranges are halved down to this);
+ * fixed, so the summation order is. Large enough that a pool of thousands
+ * is one dense block and needs no joining of grids. */
+const size_t CHUNK = 8192;
 /* Largest dense block a chunk is splatted into, voxels (64 MB of floats). */
 const double DENSE_MAX = double(1 << 24);
 
