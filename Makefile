@@ -168,7 +168,8 @@ test-long: deps-test
 
 # ---- benchmarks: JSON into build/, never part of make test ------------------------
 # bench: core systems; bench_flip: FLIP transfers and pressure; bench_sph: SPH
-# blocks and the pour; bench_render: 1280x720 frames of 10k/100k/1M particles.
+# blocks and the pour; bench_render: 1280x720 frames of 10k/100k/1M/10M particles
+# and the surface mesher against the pour's step (it runs $(BUILD)/eddy).
 
 bench: deps
 	@$(MAKE) --no-print-directory all $(BENCHES:%=$(BUILD)/tests/%)
@@ -178,7 +179,7 @@ bench: deps
 # make bench: 100k to 10M particles of each method, long) passes
 # SCALE_ARGS, e.g. SCALE_ARGS="--sizes 100000,1000000 --grids 64,128"
 bench-%: deps
-	@$(MAKE) --no-print-directory $(BUILD)/tests/bench_$*
+	@$(MAKE) --no-print-directory $(BUILD)/tests/bench_$* $(BUILD)/eddy
 	$(BUILD)/tests/bench_$* $(BUILD)/bench_$*.json $(if $(filter scale,$*),$(SCALE_ARGS))
 
 # ---- sanitizers ---------------------------------------------------------------------

@@ -3,6 +3,10 @@
  * the only file that includes OSMesa or GL. One context per renderer, drawing
  * into a buffer this file owns, so renderers never share GL state.
  *
+ * render_surface draws through it. render_points draws on the CPU
+ * (render/splat.c), pixel for pixel as the sprite program here, which stays
+ * as the reference tests/test_render.c compares that against.
+ *
  * Particles are point sprites shaded as spheres: the vertex shader sizes each
  * point to the projected diameter 2 r P11 (h/2) / w_clip (exact for
  * orthographic views, the sphere's centre scale for perspective ones); the

@@ -59,6 +59,81 @@ void eddy_gl_destroy(eddy_gl *g);
 int eddy_gl_draw(eddy_gl *g, const eddy_gl_scene *s, char *err, size_t cap);
 const uint8_t *eddy_gl_pixels(const eddy_gl *g);
 
+/* ---- the camera and the frame around the scene (view.c), shared by
+ * render_points and render_surface ---- */
+
+static inline eddy_vec3 eddy_v3_sub(eddy_vec3 a, eddy_vec3 b) { return (eddy_vec3){a.x - b.x, a.y - b.y, a.z - b.z}; }
+static inline eddy_vec3 eddy_v3_add(eddy_vec3 a, eddy_vec3 b) { return (eddy_vec3){a.x + b.x, a.y + b.y, a.z + b.z}; }
+static inline eddy_vec3 eddy_v3_scale(eddy_vec3 a, float s) { return (eddy_vec3){a.x * s, a.y * s, a.z * s}; }
+static inline float eddy_v3_dot(eddy_vec3 a, eddy_vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+static inline eddy_vec3 eddy_v3_cross(eddy_vec3 a, eddy_vec3 b)
+{
+	return (eddy_vec3){a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+float eddy_v3_len(eddy_vec3 a);
+eddy_vec3 eddy_v3_norm(eddy_vec3 a); /* a / |a|, or a when zero */
+
+/* What a camera is asked for: the fields render_points and render_surface share. */
+typedef struct eddy_view_def {
+	int width, height;          /* px, [1, 8192] */
+	int supersample;            /* 1, [1, 4]; width and height times it <= 16384 */
+	eddy_vec3 eye, target, up;  /* m; eye == target frames the world's bounds */
+	float fov;                  /* degrees, vertical */
+	eddy_projection projection;
+	float ortho_height;         /* m, 0 = fit the bounds */
+	float eye_pad;              /* m, extra distance of an automatic eye from the bounds */
+	float depth_pad;            /* m, how far drawn things reach out of the bounds (near and far planes) */
+} eddy_view_def;
+
+typedef struct eddy_camera {
+	eddy_vec3 eye, fwd, side, up; /* orthonormal frame */
+	float view[16], proj[16];     /* column-major, world to eye and eye to clip */
+} eddy_camera;
+
+/* NULL when the image size, supersample, eye, target, up, fov, projection
+ * and ortho_height are in range, else what is wrong (in buf, without the
+ * system's name). */
+const char *eddy_view_check(const eddy_view_def *d, char *buf, size_t cap);
+/* The look-at view and the perspective or orthographic projection, near and
+ * far planes fitted to the world's bounds. */
+void eddy_camera_make(const eddy_view_def *d, const eddy_world_def *wd, eddy_camera *c);
+/* The key light: a unit direction in eye space, from the upper left, in front. */
+void eddy_key_light(float light[3]);
+/* The 12 edges of a box, 6 floats each. */
+void eddy_box_edges(float *out, eddy_vec3 lo, eddy_vec3 hi);
+/* Box-filters RGBA rows (bottom row first, W*s by H*s) down to RGB (top row
+ * first, W by H), output rows [y0, y1) only. */
+void eddy_downsample_rows(const uint8_t *rgba, int W, int H, int s, uint8_t *out, int y0, int y1);
+/* 1 when the colour components are all in [0, 1]. */
+int eddy_color_ok(eddy_vec3 c);
+
+/* ---- CPU point sprites and lines (splat.c) ---- */
+
+/* A colour and depth buffer drawn on the CPU: render_points' sprites shaded
+ * exactly as gl_osmesa.c's sprite shader does, and its lines, without GL.
+ * The rows are split into `threads` bands, each drawn by its own thread
+ * through every particle in order, so the image does not depend on the
+ * thread count. */
+typedef struct eddy_splat {
+	int width, height;  /* px */
+	uint8_t *rgba;      /* bottom row first, as eddy_gl_pixels */
+	float *depth;       /* distance along the view axis, m: the depth test's key */
+	/* the particles sorted near to far (splat.c), reused between frames */
+	float *sx, *sy, *sz;
+	uint8_t *srgb;
+	uint32_t *bin;
+	size_t sorted_cap;
+} eddy_splat;
+
+/* 0, or -1 when out of memory. */
+int eddy_splat_init(eddy_splat *s, int width, int height);
+void eddy_splat_free(eddy_splat *s);
+/* Draws the scene's particles and lines (meshes are GL's alone: mesh_sets
+ * must be 0) and, with out != NULL, box-filters by ss into out (RGB, top row
+ * first, width/ss by height/ss). 0, or -1 with the reason in err. */
+int eddy_splat_draw(eddy_splat *s, const eddy_gl_scene *scene, int threads, int ss, uint8_t *out, char *err,
+                    size_t cap);
+
 /* ---- colour maps (colormap.c) ---- */
 
 /* RGB bytes of t in [0, 1] (clamped; NaN gives the bottom colour). */
@@ -111,6 +186,27 @@ void eddy_file_abort(eddy_file *o);
 const float *eddy_particle_values(const eddy_world *w, const char *name, float *scratch, size_t count);
 
 /* ---- the liquid surface (surface_mesh.c) ---- */
+
+/* A surface system's mesh and the state it was meshed from. surface_mesh's
+ * and render_surface's user data start with one, so a frame's surface is
+ * meshed once when both are in a world with the same fields. */
+typedef struct eddy_surface_cache {
+	eddy_surface_def def;
+	eddy_mesh mesh;
+	bool valid;         /* mesh is of the state stamped below */
+	int frame;
+	int64_t steps;
+	double time;        /* s */
+	size_t particles;
+} eddy_surface_cache;
+
+/* The surface of w's current state: another surface system's mesh when one
+ * meshed this very state with the same def this frame, else c's own, meshed
+ * now. *ms is the meshing time, ms, or -1 when the mesh was shared. */
+eddy_status eddy_surface_of_frame(eddy_world *w, eddy_surface_cache *c, int frame, const eddy_mesh **out, double *ms);
+/* The systems' frame hooks, by which eddy_surface_of_frame finds their data. */
+eddy_status eddy_surface_mesh_frame(eddy_world *w, int frame, void *user);
+eddy_status eddy_render_surface_frame(eddy_world *w, int frame, void *user);
 
 /* NULL when spacing, support and voxel are in range, else what is wrong (in buf). */
 const char *eddy_check_surface_fields(float spacing, float support, float voxel, char *buf, size_t cap);

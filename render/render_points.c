@@ -3,18 +3,20 @@
  *
  * Reads: x y z, plus vx vy vz (color_by = "speed") or the color_by column.
  * Writes: nothing; a PNG per rendered frame, and the frame stats values
- * render_ms (GL draw), png_ms (downsample, encoding and writing) and image
- * (the path).
+ * render_ms (colouring, drawing and the box filter), png_ms (encoding and
+ * writing) and image (the path).
  *
  * At every `every`-th frame time the frame hook copies what the frame needs:
- * positions, the colour values, the camera (look-at view; perspective or
- * orthographic projection with near and far planes fitted to the world's
- * bounds) and the outlines. A writer thread of the renderer's own then colours
- * each particle (colour map of its value, t = (v - min) / (max - min), range
- * fixed or the frame's own), draws the spheres and outlines at supersample
- * times the size, box-filters down and writes the PNG (render/png.c). The GL
- * context is made on that thread, at the first rendered frame, so plans and
- * checks never need one, and only that thread ever uses it.
+ * positions, the colour values, the camera (render/view.c: look-at view;
+ * perspective or orthographic projection with near and far planes fitted to
+ * the world's bounds), the outlines and the world's thread count. A writer
+ * thread of the renderer's own then colours each particle (colour map of its
+ * value, t = (v - min) / (max - min), range fixed or the frame's own), draws
+ * the spheres and outlines at supersample times the size on the CPU
+ * (render/splat.c, the same pixels as the GL sprite shader of gl_osmesa.c,
+ * in as many row bands as the world has threads), box-filters down and writes
+ * the PNG (render/png.c). The buffers are made on that thread at the first
+ * rendered frame, so plans and checks never need them.
  *
  * With the world's background output off the hook waits for its frame, so
  * the PNG is on disk when the step returns and a failure is that frame's
@@ -71,107 +73,11 @@ eddy_render_points_def eddy_default_render_points_def(void)
 	return d;
 }
 
-/* ---- small vector and matrix helpers (column-major 4x4) ---- */
-
-static eddy_vec3 sub3(eddy_vec3 a, eddy_vec3 b) { return (eddy_vec3){a.x - b.x, a.y - b.y, a.z - b.z}; }
-static eddy_vec3 add3(eddy_vec3 a, eddy_vec3 b) { return (eddy_vec3){a.x + b.x, a.y + b.y, a.z + b.z}; }
-static eddy_vec3 scale3(eddy_vec3 a, float s) { return (eddy_vec3){a.x * s, a.y * s, a.z * s}; }
-static float dot3(eddy_vec3 a, eddy_vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-static float len3(eddy_vec3 a) { return sqrtf(dot3(a, a)); }
-static eddy_vec3 cross3(eddy_vec3 a, eddy_vec3 b)
+static eddy_view_def view_def(const eddy_render_points_def *d)
 {
-	return (eddy_vec3){a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
-}
-static eddy_vec3 norm3(eddy_vec3 a)
-{
-	float l = len3(a);
-	return l > 0 ? scale3(a, 1.0f / l) : a;
-}
-
-typedef struct camera {
-	eddy_vec3 eye, fwd, side, up; /* orthonormal frame */
-	float view[16], proj[16];
-} camera;
-
-static bool finite3(eddy_vec3 v) { return isfinite(v.x) && isfinite(v.y) && isfinite(v.z); }
-static bool color_ok(eddy_vec3 c)
-{
-	return c.x >= 0 && c.x <= 1 && c.y >= 0 && c.y <= 1 && c.z >= 0 && c.z <= 1;
-}
-
-/* The camera the def asks for; eye == target frames the world's bounds from
- * the front, a little right and above, so a scene needs no camera to look right. */
-static void make_camera(const eddy_render_points_def *d, const eddy_world_def *wd, camera *c)
-{
-	const eddy_vec3 lo = wd->bounds_min, hi = wd->bounds_max;
-	const eddy_vec3 center = scale3(add3(lo, hi), 0.5f);
-	const float R = 0.5f * len3(sub3(hi, lo));
-	const float aspect = (float)d->width / (float)d->height;
-	const float half_fov = 0.5f * d->fov * (PI_F / 180.0f);
-	eddy_vec3 eye = d->eye, target = d->target;
-	const bool automatic = eye.x == target.x && eye.y == target.y && eye.z == target.z;
-	if (automatic) {
-		/* back off along a fixed direction until every corner of the bounds is
-		 * inside the frustum: corner q (from the centre) at depth D + q.f needs
-		 * |q.s| <= (D + q.f) tan(half width angle), the same for q.u vertically */
-		target = center;
-		const eddy_vec3 back = norm3((eddy_vec3){0.42f, 0.38f, 1.0f});
-		const eddy_vec3 f = scale3(back, -1.0f), sd = norm3(cross3(f, d->up)), u = cross3(sd, f);
-		const float tv = tanf(half_fov), th = tv * aspect;
-		float D = 0;
-		for (int k = 0; k < 8; ++k) {
-			eddy_vec3 q = sub3((eddy_vec3){(k & 1) ? hi.x : lo.x, (k & 2) ? hi.y : lo.y, (k & 4) ? hi.z : lo.z}, center);
-			float qf = dot3(q, f), need_s = fabsf(dot3(q, sd)) / th - qf, need_u = fabsf(dot3(q, u)) / tv - qf;
-			D = need_s > D ? need_s : D;
-			D = need_u > D ? need_u : D;
-		}
-		eye = add3(center, scale3(back, 1.06f * D + 2.0f * d->radius));
-	}
-	c->eye = eye;
-	c->fwd = norm3(sub3(target, eye));
-	c->side = norm3(cross3(c->fwd, d->up));
-	c->up = cross3(c->side, c->fwd);
-	float *v = c->view;
-	memset(v, 0, 16 * sizeof *v);
-	v[0] = c->side.x, v[4] = c->side.y, v[8] = c->side.z, v[12] = -dot3(c->side, eye);
-	v[1] = c->up.x, v[5] = c->up.y, v[9] = c->up.z, v[13] = -dot3(c->up, eye);
-	v[2] = -c->fwd.x, v[6] = -c->fwd.y, v[10] = -c->fwd.z, v[14] = dot3(c->fwd, eye);
-	v[15] = 1;
-	/* near and far planes around the bounds (particles live inside them) */
-	float dmin = INFINITY, dmax = -INFINITY, smax = 0, umax = 0;
-	for (int k = 0; k < 8; ++k) {
-		eddy_vec3 p = {(k & 1) ? hi.x : lo.x, (k & 2) ? hi.y : lo.y, (k & 4) ? hi.z : lo.z};
-		eddy_vec3 q = sub3(p, eye);
-		float depth = dot3(q, c->fwd);
-		dmin = depth < dmin ? depth : dmin;
-		dmax = depth > dmax ? depth : dmax;
-		float s = fabsf(dot3(sub3(p, target), c->side)), u = fabsf(dot3(sub3(p, target), c->up));
-		smax = s > smax ? s : smax;
-		umax = u > umax ? u : umax;
-	}
-	const float margin = 0.05f * (dmax - dmin) + 2.0f * d->radius + 1e-3f * R;
-	float farp = dmax + margin, nearp = dmin - margin;
-	float *p = c->proj;
-	memset(p, 0, 16 * sizeof *p);
-	if (d->projection == EDDY_PROJECTION_ORTHOGRAPHIC) {
-		float hh = 0.5f * d->ortho_height;
-		if (!(hh > 0))
-			hh = 1.05f * (umax > smax / aspect ? umax : smax / aspect);
-		p[0] = 1.0f / (hh * aspect);
-		p[5] = 1.0f / hh;
-		p[10] = -2.0f / (farp - nearp);
-		p[14] = -(farp + nearp) / (farp - nearp);
-		p[15] = 1;
-	} else {
-		if (nearp < 1e-3f * farp)
-			nearp = 1e-3f * farp; /* the camera is inside the bounds */
-		const float f = 1.0f / tanf(half_fov);
-		p[0] = f / aspect;
-		p[5] = f;
-		p[10] = (farp + nearp) / (nearp - farp);
-		p[11] = -1;
-		p[14] = 2 * farp * nearp / (nearp - farp);
-	}
+	/* a sphere reaches a radius out of the bounds; the eye keeps two away */
+	return (eddy_view_def){d->width, d->height, d->supersample, d->eye, d->target, d->up, d->fov, d->projection, d->ortho_height,
+	                       2.0f * d->radius, 2.0f * d->radius};
 }
 
 /* ---- outlines ---- */
@@ -188,43 +94,28 @@ static bool reserve_lines(line_buf *b, size_t segments)
 	return true;
 }
 
-static void box_edges(float *out, eddy_vec3 lo, eddy_vec3 hi)
-{
-	/* corner k has x from bit 0, y from bit 1, z from bit 2; an edge flips one bit */
-	int e = 0;
-	for (int k = 0; k < 8; ++k)
-		for (int bit = 1; bit < 8; bit <<= 1) {
-			if (k & bit)
-				continue;
-			int k2 = k | bit;
-			float *o = out + 6 * e++;
-			o[0] = (k & 1) ? hi.x : lo.x, o[1] = (k & 2) ? hi.y : lo.y, o[2] = (k & 4) ? hi.z : lo.z;
-			o[3] = (k2 & 1) ? hi.x : lo.x, o[4] = (k2 & 2) ? hi.y : lo.y, o[5] = (k2 & 4) ? hi.z : lo.z;
-		}
-}
-
 /* The sphere's silhouette: the circle where the cone from the eye touches it
  * (centre c - (r^2/d) u, radius r sqrt(1 - r^2/d^2)); a plain great circle
  * facing the camera for orthographic views. */
-static int sphere_silhouette(float *out, eddy_vec3 c, float rad, const camera *cam, bool ortho)
+static int sphere_silhouette(float *out, eddy_vec3 c, float rad, const eddy_camera *cam, bool ortho)
 {
 	eddy_vec3 u = cam->fwd, center = c;
 	float rr = rad;
 	if (!ortho) {
-		eddy_vec3 to = sub3(c, cam->eye);
-		float d = len3(to);
+		eddy_vec3 to = eddy_v3_sub(c, cam->eye);
+		float d = eddy_v3_len(to);
 		if (d <= rad)
 			return 0; /* the eye is inside the sphere */
-		u = scale3(to, 1.0f / d);
-		center = sub3(c, scale3(u, rad * rad / d));
+		u = eddy_v3_scale(to, 1.0f / d);
+		center = eddy_v3_sub(c, eddy_v3_scale(u, rad * rad / d));
 		rr = rad * sqrtf(1.0f - rad * rad / (d * d));
 	}
-	eddy_vec3 a = norm3(cross3(u, fabsf(u.y) < 0.9f ? (eddy_vec3){0, 1, 0} : (eddy_vec3){1, 0, 0}));
-	eddy_vec3 b = cross3(u, a);
+	eddy_vec3 a = eddy_v3_norm(eddy_v3_cross(u, fabsf(u.y) < 0.9f ? (eddy_vec3){0, 1, 0} : (eddy_vec3){1, 0, 0}));
+	eddy_vec3 b = eddy_v3_cross(u, a);
 	for (int i = 0; i < CIRCLE_SEGMENTS; ++i) {
 		float t0 = (2.0f * PI_F) * (float)i / CIRCLE_SEGMENTS, t1 = (2.0f * PI_F) * (float)(i + 1) / CIRCLE_SEGMENTS;
-		eddy_vec3 p0 = add3(center, add3(scale3(a, rr * cosf(t0)), scale3(b, rr * sinf(t0))));
-		eddy_vec3 p1 = add3(center, add3(scale3(a, rr * cosf(t1)), scale3(b, rr * sinf(t1))));
+		eddy_vec3 p0 = eddy_v3_add(center, eddy_v3_add(eddy_v3_scale(a, rr * cosf(t0)), eddy_v3_scale(b, rr * sinf(t0))));
+		eddy_vec3 p1 = eddy_v3_add(center, eddy_v3_add(eddy_v3_scale(a, rr * cosf(t1)), eddy_v3_scale(b, rr * sinf(t1))));
 		float *o = out + 6 * i;
 		o[0] = p0.x, o[1] = p0.y, o[2] = p0.z, o[3] = p1.x, o[4] = p1.y, o[5] = p1.z;
 	}
@@ -232,14 +123,14 @@ static int sphere_silhouette(float *out, eddy_vec3 c, float rad, const camera *c
 }
 
 /* Fills b; returns the segment count or -1 when out of memory. */
-static long build_outlines(line_buf *b, const eddy_render_points_def *d, eddy_world *w, const camera *cam)
+static long build_outlines(line_buf *b, const eddy_render_points_def *d, eddy_world *w, const eddy_camera *cam)
 {
 	size_t n = 0;
 	if (d->outline_domain) {
 		if (!reserve_lines(b, 12))
 			return -1;
 		const eddy_world_def *wd = eddy_world_get_def(w);
-		box_edges(b->xyz, wd->bounds_min, wd->bounds_max);
+		eddy_box_edges(b->xyz, wd->bounds_min, wd->bounds_max);
 		n = 12;
 	}
 	if (!d->outline_colliders)
@@ -252,11 +143,30 @@ static long build_outlines(line_buf *b, const eddy_render_points_def *d, eddy_wo
 		if (!reserve_lines(b, n + CIRCLE_SEGMENTS))
 			return -1;
 		if (shape.kind == EDDY_COLLIDER_BOX)
-			box_edges(b->xyz + 6 * n, shape.a, shape.b), n += 12;
+			eddy_box_edges(b->xyz + 6 * n, shape.a, shape.b), n += 12;
 		else if (shape.kind == EDDY_COLLIDER_SPHERE)
 			n += (size_t)sphere_silhouette(b->xyz + 6 * n, shape.a, shape.radius, cam,
 			                               d->projection == EDDY_PROJECTION_ORTHOGRAPHIC);
-		/* planes are unbounded and other shapes undescribed: no outline */
+		else if (shape.kind != EDDY_COLLIDER_PLANE) {
+			/* any other kind (a mesh collider): the box around the zero level
+			 * of its distance, sampled coarsely (1/32 of the bounds); one that
+			 * cannot be meshed gets no outline rather than failing the frame */
+			eddy_mesh m = {0};
+			const eddy_world_def *wd = eddy_world_get_def(w);
+			const eddy_vec3 ext = eddy_v3_sub(wd->bounds_max, wd->bounds_min);
+			const float cell = fmaxf(ext.x, fmaxf(ext.y, ext.z)) / 32;
+			if (eddy_collider_mesh(w, eddy_world_system_at(w, i), cell, &m) == EDDY_OK && m.vertex_count > 0) {
+				eddy_vec3 lo = {INFINITY, INFINITY, INFINITY}, hi = {-INFINITY, -INFINITY, -INFINITY};
+				for (size_t v = 0; v < m.vertex_count; ++v) {
+					const float *q = m.xyz + 3 * v;
+					lo = (eddy_vec3){fminf(lo.x, q[0]), fminf(lo.y, q[1]), fminf(lo.z, q[2])};
+					hi = (eddy_vec3){fmaxf(hi.x, q[0]), fmaxf(hi.y, q[1]), fmaxf(hi.z, q[2])};
+				}
+				eddy_box_edges(b->xyz + 6 * n, lo, hi), n += 12;
+			}
+			eddy_mesh_free(&m);
+		}
+		/* planes are unbounded: no outline */
 	}
 	return (long)n;
 }
@@ -316,41 +226,6 @@ static void colour_particles(const eddy_render_points_def *d, const float *v, si
 	}
 }
 
-/* The supersampled RGBA image (GL rows bottom-up) box-filtered into RGB rows
- * top-down. */
-static void downsample(const uint8_t *rgba, int W, int H, int s, uint8_t *out)
-{
-	const int sw = W * s, sh = H * s, area = s * s;
-	for (int y = 0; y < H; ++y) {
-		uint8_t *o = out + (size_t)y * (size_t)W * 3;
-		if (s == 1) {
-			const uint8_t *row = rgba + (size_t)(sh - 1 - y) * (size_t)sw * 4;
-			for (int x = 0; x < W; ++x)
-				o[3 * x] = row[4 * x], o[3 * x + 1] = row[4 * x + 1], o[3 * x + 2] = row[4 * x + 2];
-			continue;
-		}
-		if (s == 2) {
-			/* the default supersample: two rows, two pixels each */
-			const uint8_t *r0 = rgba + (size_t)(sh - 1 - 2 * y) * (size_t)sw * 4, *r1 = r0 - (size_t)sw * 4;
-			for (int x = 0; x < W; ++x, r0 += 8, r1 += 8)
-				for (int c = 0; c < 3; ++c)
-					o[3 * x + c] = (uint8_t)((unsigned)(r0[c] + r0[4 + c] + r1[c] + r1[4 + c] + 2) / 4);
-			continue;
-		}
-		for (int x = 0; x < W; ++x) {
-			unsigned sum[3] = {0, 0, 0};
-			for (int j = 0; j < s; ++j) {
-				const uint8_t *row = rgba + (size_t)(sh - 1 - (y * s + j)) * (size_t)sw * 4;
-				for (int i = 0; i < s; ++i)
-					for (int c = 0; c < 3; ++c)
-						sum[c] += row[(size_t)(x * s + i) * 4 + (size_t)c];
-			}
-			for (int c = 0; c < 3; ++c)
-				o[3 * x + c] = (uint8_t)((sum[c] + (unsigned)area / 2) / (unsigned)area);
-		}
-	}
-}
-
 /* ---- the writer thread -------------------------------------------------------
  *
  * Frames are drawn and written on a thread of the renderer's own, which alone
@@ -380,6 +255,7 @@ typedef struct job {
 	line_buf lines;
 	size_t segments;
 	float view[16], proj[16];
+	int threads;            /* the world's thread count: the drawing's bands */
 	bool has_values;
 } job;
 
@@ -398,15 +274,15 @@ typedef struct renderer {
 	job jobs[JOBS];
 	int head, queued;       /* jobs[head .. head + queued) wait or are being drawn */
 	bool quit;
-	int ready;              /* 0 while the context is being made, 1 made, -1 failed (msg holds why) */
+	int ready;              /* 0 while the buffers are being made, 1 made, -1 failed (msg holds why) */
 	eddy_status failed;     /* a failure not yet returned, EDDY_OK if none */
 	int failed_frame;       /* its frame */
-	char msg[512];          /* its reason (or the context's, ready < 0) */
+	char msg[512];          /* its reason (or the buffers', ready < 0) */
 	int done;               /* the newest frame written */
 	double render_ms, png_ms; /* its times */
 	/* the writer thread's */
-	eddy_gl *gl;
-	uint8_t *rgb;           /* per-particle colours, RGBA (4-byte fetches are llvmpipe's fast path) */
+	eddy_splat splat;       /* the supersampled colour and depth buffers */
+	uint8_t *rgb;           /* per-particle colours, RGBA */
 	size_t rgb_cap;
 	uint8_t *image;         /* the final RGB image, top row first */
 } renderer;
@@ -418,6 +294,7 @@ static int draw_job(renderer *r, const job *j, double *render_ms, double *png_ms
 	const eddy_render_points_def *d = &r->def;
 	const int s = d->supersample;
 	char why[512];
+	const double t0 = now_ms();
 	if (j->count > 0) {
 		if (!reserve((void **)&r->rgb, &r->rgb_cap, j->count, 4)) {
 			*st = EDDY_ERR_NOMEM;
@@ -433,9 +310,7 @@ static int draw_job(renderer *r, const job *j, double *render_ms, double *png_ms
 	memcpy(scene.view, j->view, sizeof scene.view);
 	memcpy(scene.proj, j->proj, sizeof scene.proj);
 	scene.background[0] = d->background.x, scene.background[1] = d->background.y, scene.background[2] = d->background.z;
-	/* key light from the upper left, in front of the camera */
-	const float lx = -0.38f, ly = 0.62f, lz = 0.69f, ll = sqrtf(lx * lx + ly * ly + lz * lz);
-	scene.light[0] = lx / ll, scene.light[1] = ly / ll, scene.light[2] = lz / ll;
+	eddy_key_light(scene.light);
 	scene.radius = d->radius;
 	scene.count = j->count;
 	scene.x = j->x, scene.y = j->y, scene.z = j->z;
@@ -443,22 +318,12 @@ static int draw_job(renderer *r, const job *j, double *render_ms, double *png_ms
 	scene.lines = &lines;
 	scene.line_sets = j->segments > 0 ? 1 : 0;
 
-	const double t0 = now_ms();
-	if (eddy_gl_draw(r->gl, &scene, why, sizeof why) != 0) {
-		*st = EDDY_ERR_EXTERNAL;
+	if (eddy_splat_draw(&r->splat, &scene, j->threads, s, r->image, why, sizeof why) != 0) {
+		*st = EDDY_ERR_INVALID;
 		snprintf(err, cap, "%s", why);
 		return -1;
 	}
 	const double t1 = now_ms();
-	if (!r->image) {
-		r->image = malloc((size_t)d->width * (size_t)d->height * 3);
-		if (!r->image) {
-			*st = EDDY_ERR_NOMEM;
-			snprintf(err, cap, "out of memory for a %dx%d image", d->width, d->height);
-			return -1;
-		}
-	}
-	downsample(eddy_gl_pixels(r->gl), d->width, d->height, s, r->image);
 	/* creates the folders too; a failure leaves no file under path */
 	const int werr = eddy_write_png(j->path, d->width, d->height, r->image);
 	if (werr != 0) {
@@ -476,12 +341,14 @@ static void *writer_main(void *arg)
 	renderer *r = arg;
 	const int s = r->def.supersample;
 	char err[512];
-	eddy_gl *gl = eddy_gl_create(r->def.width * s, r->def.height * s, err, sizeof err);
+	const int W = r->def.width, H = r->def.height;
+	bool ok = eddy_splat_init(&r->splat, W * s, H * s) == 0;
+	r->image = ok ? malloc((size_t)W * (size_t)H * 3) : NULL;
+	ok = ok && r->image;
 	pthread_mutex_lock(&r->mu);
-	r->gl = gl;
-	r->ready = gl ? 1 : -1;
-	if (!gl)
-		snprintf(r->msg, sizeof r->msg, "%s", err);
+	r->ready = ok ? 1 : -1;
+	if (!ok)
+		snprintf(r->msg, sizeof r->msg, "out of memory for a %dx%d image (supersample %d)", W, H, s);
 	pthread_cond_broadcast(&r->cv);
 	for (;;) {
 		while (r->queued == 0 && !r->quit)
@@ -493,10 +360,10 @@ static void *writer_main(void *arg)
 		double render_ms = 0, png_ms = 0;
 		eddy_status st = EDDY_OK;
 		int rc = -1;
-		if (gl)
+		if (ok)
 			rc = draw_job(r, j, &render_ms, &png_ms, &st, err, sizeof err);
 		else
-			st = EDDY_ERR_EXTERNAL, snprintf(err, sizeof err, "%s", r->msg);
+			st = EDDY_ERR_NOMEM, snprintf(err, sizeof err, "%s", r->msg);
 		pthread_mutex_lock(&r->mu);
 		if (rc == 0) {
 			r->done = j->frame;
@@ -512,8 +379,6 @@ static void *writer_main(void *arg)
 		pthread_cond_broadcast(&r->cv);
 	}
 	pthread_mutex_unlock(&r->mu);
-	/* the context was made on this thread and is destroyed on it */
-	eddy_gl_destroy(gl);
 	return NULL;
 }
 
@@ -590,8 +455,10 @@ static eddy_status fill_job(renderer *r, eddy_world *w, job *j, int frame)
 			j->has_values = true;
 		}
 	}
-	camera cam;
-	make_camera(d, eddy_world_get_def(w), &cam);
+	eddy_camera cam;
+	const eddy_view_def vd = view_def(d);
+	eddy_camera_make(&vd, eddy_world_get_def(w), &cam);
+	j->threads = eddy_world_get_def(w)->threads;
 	memcpy(j->view, cam.view, sizeof j->view);
 	memcpy(j->proj, cam.proj, sizeof j->proj);
 	long segments = build_outlines(&j->lines, d, w, &cam);
@@ -625,11 +492,11 @@ static eddy_status render_frame(eddy_world *w, int frame, void *user)
 		return st;
 	pthread_mutex_lock(&r->mu);
 	if (r->ready < 0) {
-		/* no context: every rendered frame fails as the first did */
+		/* no buffers: every rendered frame fails as the first did */
 		char msg[512];
 		snprintf(msg, sizeof msg, "%s", r->msg);
 		pthread_mutex_unlock(&r->mu);
-		return eddy_world_fail(w, EDDY_ERR_EXTERNAL, "%s", msg);
+		return eddy_world_fail(w, EDDY_ERR_NOMEM, "%s", msg);
 	}
 	/* a free job: the writer is at most JOBS frames behind */
 	while (r->queued == JOBS)
@@ -684,6 +551,7 @@ static void destroy(void *user)
 		free(j->x), free(j->y), free(j->z), free(j->values), free(j->lines.xyz);
 	}
 	free(r->speed);
+	eddy_splat_free(&r->splat);
 	free(r->rgb);
 	free(r->image);
 	free(r);
@@ -700,29 +568,17 @@ eddy_system_id eddy_add_render_points(eddy_world *w, const eddy_render_points_de
 	if (!def)
 		return BAD("%s: def is NULL", sys);
 	const eddy_render_points_def *d = def;
-	if (d->width < 1 || d->width > 8192)
-		return BAD("%s: 'width' must be in [1, 8192] px (got %d)", sys, d->width);
-	if (d->height < 1 || d->height > 8192)
-		return BAD("%s: 'height' must be in [1, 8192] px (got %d)", sys, d->height);
-	if (d->supersample < 1 || d->supersample > 4)
-		return BAD("%s: 'supersample' must be in [1, 4] (got %d)", sys, d->supersample);
-	if ((long)d->width * d->supersample > 16384 || (long)d->height * d->supersample > 16384)
-		return BAD("%s: 'width' and 'height' times 'supersample' must be <= 16384 px", sys);
-	if (!finite3(d->eye) || !finite3(d->target) || !finite3(d->up))
-		return BAD("%s: 'eye', 'target' and 'up' must be finite", sys);
-	if (!(d->fov > 0 && d->fov < 180))
-		return BAD("%s: 'fov' must be in (0, 180) degrees (got %g)", sys, (double)d->fov);
-	if (d->projection != EDDY_PROJECTION_PERSPECTIVE && d->projection != EDDY_PROJECTION_ORTHOGRAPHIC)
-		return BAD("%s: 'projection' must be perspective or orthographic", sys);
-	if (!(d->ortho_height >= 0) || !isfinite(d->ortho_height))
-		return BAD("%s: 'ortho_height' must be >= 0 m (got %g)", sys, (double)d->ortho_height);
+	char why_view[160];
+	const eddy_view_def vd = view_def(d);
+	if (eddy_view_check(&vd, why_view, sizeof why_view))
+		return BAD("%s: %s", sys, why_view);
 	if (!(d->radius > 0) || !isfinite(d->radius))
 		return BAD("%s: 'radius' must be > 0 m (got %g)", sys, (double)d->radius);
-	if (!color_ok(d->background))
+	if (!eddy_color_ok(d->background))
 		return BAD("%s: 'background' must be an RGB colour with components in [0, 1]", sys);
-	if (!color_ok(d->color))
+	if (!eddy_color_ok(d->color))
 		return BAD("%s: 'color' must be an RGB colour with components in [0, 1]", sys);
-	if (!color_ok(d->outline_color))
+	if (!eddy_color_ok(d->outline_color))
 		return BAD("%s: 'outline_color' must be an RGB colour with components in [0, 1]", sys);
 	if ((unsigned)d->colormap > EDDY_COLORMAP_GRAY)
 		return BAD("%s: 'colormap' must be viridis, plasma or gray", sys);
@@ -736,14 +592,6 @@ eddy_system_id eddy_add_render_points(eddy_world *w, const eddy_render_points_de
 	const char *why = eddy_check_frame_pattern(d->path);
 	if (why)
 		return BAD("%s: 'path' %s (got \"%s\")", sys, why, d->path);
-	if (d->eye.x != d->target.x || d->eye.y != d->target.y || d->eye.z != d->target.z) {
-		eddy_vec3 f = norm3(sub3(d->target, d->eye));
-		if (len3(cross3(f, norm3(d->up))) < 1e-4f)
-			return BAD("%s: 'up' must not be parallel to the view direction (eye to target)", sys);
-	} else if (len3(d->up) == 0) {
-		return BAD("%s: 'up' must not be zero", sys);
-	}
-
 	/* the columns it reads, so the plan shows them and they are allocated */
 	const char *reads[6] = {"x", "y", "z", "vx", "vy", "vz"};
 	int nreads = 3;

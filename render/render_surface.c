@@ -8,7 +8,9 @@
  * At every `every`-th frame time: eddy_world_surface (the 1/2 level of the
  * particles' colour field, closed, with the field's gradient as per-vertex
  * normals), box and sphere colliders tessellated into triangles whose
- * normals face the liquid's side (a tank's walls inward, a ball's outward)
+ * normals face the liquid's side (a tank's walls inward, a ball's outward),
+ * any other collider (a mesh) as the zero level of its signed distance
+ * (eddy_collider_mesh),
  * and drawn with back faces culled, so the near walls of a tank never hide
  * the liquid; the domain's edges as lines. The camera is render_points'
  * (eye == target frames the world's bounds). Drawn at supersample times the
@@ -28,13 +30,14 @@
 #define SPHERE_SEGS 48  /* longitude segments */
 
 typedef struct surface_renderer {
+	eddy_surface_cache cache; /* first: the liquid, reused every frame, or shared with a surface_mesh */
 	eddy_render_surface_def def;
 	eddy_gl *gl;
-	eddy_mesh mesh;       /* the liquid, reused every frame */
 	float *cxyz, *cnormal; /* colliders' vertices and normals */
 	uint32_t *ctri;
 	size_t cv_cap, ct_cap; /* vertices, triangles */
 	uint8_t *image;       /* RGB, top row first */
+	eddy_mesh other;      /* scratch: a collider of no described shape, meshed from its distance */
 } surface_renderer;
 
 eddy_render_surface_def eddy_default_render_surface_def(void)
@@ -62,89 +65,11 @@ eddy_render_surface_def eddy_default_render_surface_def(void)
 	return d;
 }
 
-/* ---- vectors and the camera (the same camera as render_points) ---- */
-
-static eddy_vec3 sub3(eddy_vec3 a, eddy_vec3 b) { return (eddy_vec3){a.x - b.x, a.y - b.y, a.z - b.z}; }
-static eddy_vec3 add3(eddy_vec3 a, eddy_vec3 b) { return (eddy_vec3){a.x + b.x, a.y + b.y, a.z + b.z}; }
-static eddy_vec3 scale3(eddy_vec3 a, float s) { return (eddy_vec3){a.x * s, a.y * s, a.z * s}; }
-static float dot3(eddy_vec3 a, eddy_vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-static float len3(eddy_vec3 a) { return sqrtf(dot3(a, a)); }
-static eddy_vec3 cross3(eddy_vec3 a, eddy_vec3 b)
+static eddy_view_def view_def(const eddy_render_surface_def *d)
 {
-	return (eddy_vec3){a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
-}
-static eddy_vec3 norm3(eddy_vec3 a)
-{
-	float l = len3(a);
-	return l > 0 ? scale3(a, 1.0f / l) : a;
-}
-static bool finite3(eddy_vec3 v) { return isfinite(v.x) && isfinite(v.y) && isfinite(v.z); }
-static bool color_ok(eddy_vec3 c) { return c.x >= 0 && c.x <= 1 && c.y >= 0 && c.y <= 1 && c.z >= 0 && c.z <= 1; }
-
-static void make_camera(const eddy_render_surface_def *d, const eddy_world_def *wd, float view[16], float proj[16])
-{
-	const eddy_vec3 lo = wd->bounds_min, hi = wd->bounds_max;
-	const eddy_vec3 center = scale3(add3(lo, hi), 0.5f);
-	const float R = 0.5f * len3(sub3(hi, lo));
-	const float aspect = (float)d->width / (float)d->height;
-	const float half_fov = 0.5f * d->fov * (PI_F / 180.0f);
-	eddy_vec3 eye = d->eye, target = d->target;
-	if (eye.x == target.x && eye.y == target.y && eye.z == target.z) {
-		/* back off until every corner of the bounds is inside the frustum */
-		target = center;
-		const eddy_vec3 back = norm3((eddy_vec3){0.42f, 0.38f, 1.0f});
-		const eddy_vec3 f = scale3(back, -1.0f), sd = norm3(cross3(f, d->up)), u = cross3(sd, f);
-		const float tv = tanf(half_fov), th = tv * aspect;
-		float D = 0;
-		for (int k = 0; k < 8; ++k) {
-			eddy_vec3 q = sub3((eddy_vec3){(k & 1) ? hi.x : lo.x, (k & 2) ? hi.y : lo.y, (k & 4) ? hi.z : lo.z}, center);
-			float qf = dot3(q, f), need_s = fabsf(dot3(q, sd)) / th - qf, need_u = fabsf(dot3(q, u)) / tv - qf;
-			D = need_s > D ? need_s : D;
-			D = need_u > D ? need_u : D;
-		}
-		eye = add3(center, scale3(back, 1.06f * D + 2.0f * d->spacing));
-	}
-	const eddy_vec3 fwd = norm3(sub3(target, eye)), side = norm3(cross3(fwd, d->up)), up = cross3(side, fwd);
-	float *v = view;
-	memset(v, 0, 16 * sizeof *v);
-	v[0] = side.x, v[4] = side.y, v[8] = side.z, v[12] = -dot3(side, eye);
-	v[1] = up.x, v[5] = up.y, v[9] = up.z, v[13] = -dot3(up, eye);
-	v[2] = -fwd.x, v[6] = -fwd.y, v[10] = -fwd.z, v[14] = dot3(fwd, eye);
-	v[15] = 1;
-	float dmin = INFINITY, dmax = -INFINITY, smax = 0, umax = 0;
-	for (int k = 0; k < 8; ++k) {
-		eddy_vec3 p = {(k & 1) ? hi.x : lo.x, (k & 2) ? hi.y : lo.y, (k & 4) ? hi.z : lo.z};
-		float depth = dot3(sub3(p, eye), fwd);
-		dmin = depth < dmin ? depth : dmin;
-		dmax = depth > dmax ? depth : dmax;
-		float s = fabsf(dot3(sub3(p, target), side)), u = fabsf(dot3(sub3(p, target), up));
-		smax = s > smax ? s : smax;
-		umax = u > umax ? u : umax;
-	}
 	/* the surface reaches about a support radius past the particles */
-	const float margin = 0.05f * (dmax - dmin) + 4.0f * d->support * d->spacing + 1e-3f * R;
-	float farp = dmax + margin, nearp = dmin - margin;
-	float *p = proj;
-	memset(p, 0, 16 * sizeof *p);
-	if (d->projection == EDDY_PROJECTION_ORTHOGRAPHIC) {
-		float hh = 0.5f * d->ortho_height;
-		if (!(hh > 0))
-			hh = 1.05f * (umax > smax / aspect ? umax : smax / aspect);
-		p[0] = 1.0f / (hh * aspect);
-		p[5] = 1.0f / hh;
-		p[10] = -2.0f / (farp - nearp);
-		p[14] = -(farp + nearp) / (farp - nearp);
-		p[15] = 1;
-	} else {
-		if (nearp < 1e-3f * farp)
-			nearp = 1e-3f * farp;
-		const float f = 1.0f / tanf(half_fov);
-		p[0] = f / aspect;
-		p[5] = f;
-		p[10] = (farp + nearp) / (nearp - farp);
-		p[11] = -1;
-		p[14] = 2 * farp * nearp / (nearp - farp);
-	}
+	return (eddy_view_def){d->width, d->height, d->supersample, d->eye, d->target, d->up, d->fov, d->projection, d->ortho_height,
+	                       2.0f * d->spacing, 4.0f * d->support * d->spacing};
 }
 
 /* ---- colliders as triangles ---- */
@@ -223,7 +148,7 @@ static void sphere_mesh(surface_renderer *r, size_t *nv, size_t *nt, eddy_vec3 c
 		for (int j = 0; j <= SPHERE_SEGS; ++j) {
 			const float ph = 2.0f * PI_F * (float)j / SPHERE_SEGS;
 			const eddy_vec3 d = {sinf(th) * cosf(ph), cosf(th), sinf(th) * sinf(ph)};
-			put_vertex(r, (*nv)++, add3(c, scale3(d, rad)), scale3(d, sign));
+			put_vertex(r, (*nv)++, eddy_v3_add(c, eddy_v3_scale(d, rad)), eddy_v3_scale(d, sign));
 		}
 	}
 	const uint32_t row = SPHERE_SEGS + 1;
@@ -246,6 +171,23 @@ static long build_colliders(surface_renderer *r, eddy_world *w)
 		if (eddy_collider_shape_of(w, eddy_world_system_at(w, i), &shape) != EDDY_OK)
 			continue;
 		const float sign = shape.inside ? -1.0f : 1.0f;
+		if (shape.kind != EDDY_COLLIDER_BOX && shape.kind != EDDY_COLLIDER_SPHERE && shape.kind != EDDY_COLLIDER_PLANE) {
+			/* any other kind (a mesh collider): the zero level of its distance,
+			 * whose normals already face the liquid; one that cannot be meshed
+			 * is left out rather than failing the frame */
+			if (eddy_collider_mesh(w, eddy_world_system_at(w, i), 0.0f, &r->other) != EDDY_OK)
+				continue;
+			const eddy_mesh *m = &r->other;
+			if (m->vertex_count > UINT32_MAX - nv || !reserve_colliders(r, nv + m->vertex_count, nt + m->triangle_count))
+				return -1;
+			memcpy(r->cxyz + 3 * nv, m->xyz, 3 * m->vertex_count * sizeof *m->xyz);
+			memcpy(r->cnormal + 3 * nv, m->normal, 3 * m->vertex_count * sizeof *m->normal);
+			for (size_t t = 0; t < 3 * m->triangle_count; ++t)
+				r->ctri[3 * nt + t] = (uint32_t)nv + m->tri[t];
+			nv += m->vertex_count;
+			nt += m->triangle_count;
+			continue;
+		}
 		const size_t sv = (SPHERE_RINGS + 1) * (SPHERE_SEGS + 1), st = 2 * SPHERE_RINGS * SPHERE_SEGS;
 		if (!reserve_colliders(r, nv + sv, nt + st))
 			return -1;
@@ -253,46 +195,14 @@ static long build_colliders(surface_renderer *r, eddy_world *w)
 			box_mesh(r, &nv, &nt, shape.a, shape.b, sign);
 		else if (shape.kind == EDDY_COLLIDER_SPHERE)
 			sphere_mesh(r, &nv, &nt, shape.a, shape.radius, sign);
-		/* planes are unbounded and other shapes undescribed: not drawn */
+		/* planes are unbounded: not drawn */
 	}
 	return (long)nt;
 }
 
 /* ---- the frame ---- */
 
-static void downsample(const uint8_t *rgba, int W, int H, int s, uint8_t *out)
-{
-	const int sw = W * s, sh = H * s, area = s * s;
-	for (int y = 0; y < H; ++y)
-		for (int x = 0; x < W; ++x) {
-			unsigned sum[3] = {0, 0, 0};
-			for (int j = 0; j < s; ++j) {
-				const uint8_t *row = rgba + (size_t)(sh - 1 - (y * s + j)) * (size_t)sw * 4; /* GL rows bottom-up */
-				for (int i = 0; i < s; ++i)
-					for (int c = 0; c < 3; ++c)
-						sum[c] += row[(size_t)(x * s + i) * 4 + (size_t)c];
-			}
-			uint8_t *o = out + ((size_t)y * (size_t)W + (size_t)x) * 3;
-			for (int c = 0; c < 3; ++c)
-				o[c] = (uint8_t)((sum[c] + (unsigned)area / 2) / (unsigned)area);
-		}
-}
-
-static void box_edges(float *out, eddy_vec3 lo, eddy_vec3 hi)
-{
-	int e = 0;
-	for (int k = 0; k < 8; ++k)
-		for (int bit = 1; bit < 8; bit <<= 1) {
-			if (k & bit)
-				continue;
-			int k2 = k | bit;
-			float *o = out + 6 * e++;
-			o[0] = (k & 1) ? hi.x : lo.x, o[1] = (k & 2) ? hi.y : lo.y, o[2] = (k & 4) ? hi.z : lo.z;
-			o[3] = (k2 & 1) ? hi.x : lo.x, o[4] = (k2 & 2) ? hi.y : lo.y, o[5] = (k2 & 4) ? hi.z : lo.z;
-		}
-}
-
-static eddy_status render_frame(eddy_world *w, int frame, void *user)
+eddy_status eddy_render_surface_frame(eddy_world *w, int frame, void *user)
 {
 	surface_renderer *r = user;
 	const eddy_render_surface_def *d = &r->def;
@@ -305,9 +215,9 @@ static eddy_status render_frame(eddy_world *w, int frame, void *user)
 		if (!r->gl)
 			return eddy_world_fail(w, EDDY_ERR_EXTERNAL, "%s", err);
 	}
-	const eddy_surface_def sd = {d->spacing, d->support, d->voxel};
-	const double t0 = eddy_now_ms();
-	eddy_status st = eddy_world_surface(w, &sd, &r->mesh);
+	const eddy_mesh *mesh = NULL;
+	double mesh_ms = 0;
+	eddy_status st = eddy_surface_of_frame(w, &r->cache, frame, &mesh, &mesh_ms);
 	if (st != EDDY_OK)
 		return st;
 	const double t1 = eddy_now_ms();
@@ -317,21 +227,23 @@ static eddy_status render_frame(eddy_world *w, int frame, void *user)
 
 	float edges[12 * 6];
 	const eddy_world_def *wd = eddy_world_get_def(w);
-	box_edges(edges, wd->bounds_min, wd->bounds_max);
+	eddy_box_edges(edges, wd->bounds_min, wd->bounds_max);
 	eddy_gl_lines lines = {edges, 12, {d->outline_color.x, d->outline_color.y, d->outline_color.z}, 1.5f * (float)s};
 	eddy_gl_mesh meshes[2];
 	memset(meshes, 0, sizeof meshes);
-	meshes[0] = (eddy_gl_mesh){r->mesh.xyz, r->mesh.normal, r->mesh.tri, r->mesh.triangle_count,
+	meshes[0] = (eddy_gl_mesh){mesh->xyz, mesh->normal, mesh->tri, mesh->triangle_count,
 	                           {d->color.x, d->color.y, d->color.z}, 0.6f, 1.0f, 0};
 	meshes[1] = (eddy_gl_mesh){r->cxyz, r->cnormal, r->ctri, (size_t)ctris,
 	                           {d->collider_color.x, d->collider_color.y, d->collider_color.z}, 0.1f, 0.0f, 1};
 	eddy_gl_scene scene;
 	memset(&scene, 0, sizeof scene);
-	make_camera(d, wd, scene.view, scene.proj);
+	eddy_camera cam;
+	const eddy_view_def vd = view_def(d);
+	eddy_camera_make(&vd, wd, &cam);
+	memcpy(scene.view, cam.view, sizeof scene.view);
+	memcpy(scene.proj, cam.proj, sizeof scene.proj);
 	scene.background[0] = d->background.x, scene.background[1] = d->background.y, scene.background[2] = d->background.z;
-	/* key light from the upper left, in front of the camera (render_points') */
-	const float lx = -0.38f, ly = 0.62f, lz = 0.69f, ll = sqrtf(lx * lx + ly * ly + lz * lz);
-	scene.light[0] = lx / ll, scene.light[1] = ly / ll, scene.light[2] = lz / ll;
+	eddy_key_light(scene.light);
 	scene.radius = d->spacing;
 	scene.lines = &lines;
 	scene.line_sets = d->outline_domain ? 1 : 0;
@@ -345,14 +257,15 @@ static eddy_status render_frame(eddy_world *w, int frame, void *user)
 		if (!r->image)
 			return eddy_world_fail(w, EDDY_ERR_NOMEM, "out of memory for a %dx%d image", d->width, d->height);
 	}
-	downsample(eddy_gl_pixels(r->gl), d->width, d->height, s, r->image);
+	eddy_downsample_rows(eddy_gl_pixels(r->gl), d->width, d->height, s, r->image, 0, d->height);
 	char path[1024];
 	if (eddy_frame_path(d->path, frame, path, sizeof path) != 0)
 		return eddy_world_fail(w, EDDY_ERR_IO, "render_surface: the image path for frame %d is too long", frame);
 	const int werr = eddy_write_png(path, d->width, d->height, r->image);
 	if (werr != 0)
 		return eddy_world_fail(w, EDDY_ERR_IO, "render_surface: cannot write '%s': %s", path, strerror(werr));
-	eddy_world_publish(w, "surface_ms", t1 - t0);
+	if (mesh_ms >= 0)
+		eddy_world_publish(w, "surface_ms", mesh_ms);
 	eddy_world_publish(w, "render_ms", t2 - t1);
 	eddy_world_publish_text(w, "image", path);
 	return EDDY_OK;
@@ -362,7 +275,8 @@ static void destroy(void *user)
 {
 	surface_renderer *r = user;
 	eddy_gl_destroy(r->gl);
-	eddy_mesh_free(&r->mesh);
+	eddy_mesh_free(&r->cache.mesh);
+	eddy_mesh_free(&r->other);
 	free(r->cxyz);
 	free(r->cnormal);
 	free(r->ctri);
@@ -381,25 +295,12 @@ eddy_system_id eddy_add_render_surface(eddy_world *w, const eddy_render_surface_
 		return BAD("%s: def is NULL", sys);
 	const eddy_render_surface_def *d = def;
 	char why[160];
-	if (d->width < 1 || d->width > 8192)
-		return BAD("%s: 'width' must be in [1, 8192] px (got %d)", sys, d->width);
-	if (d->height < 1 || d->height > 8192)
-		return BAD("%s: 'height' must be in [1, 8192] px (got %d)", sys, d->height);
-	if (d->supersample < 1 || d->supersample > 4)
-		return BAD("%s: 'supersample' must be in [1, 4] (got %d)", sys, d->supersample);
-	if ((long)d->width * d->supersample > 16384 || (long)d->height * d->supersample > 16384)
-		return BAD("%s: 'width' and 'height' times 'supersample' must be <= 16384 px", sys);
-	if (!finite3(d->eye) || !finite3(d->target) || !finite3(d->up))
-		return BAD("%s: 'eye', 'target' and 'up' must be finite", sys);
-	if (!(d->fov > 0 && d->fov < 180))
-		return BAD("%s: 'fov' must be in (0, 180) degrees (got %g)", sys, (double)d->fov);
-	if (d->projection != EDDY_PROJECTION_PERSPECTIVE && d->projection != EDDY_PROJECTION_ORTHOGRAPHIC)
-		return BAD("%s: 'projection' must be perspective or orthographic", sys);
-	if (!(d->ortho_height >= 0) || !isfinite(d->ortho_height))
-		return BAD("%s: 'ortho_height' must be >= 0 m (got %g)", sys, (double)d->ortho_height);
+	const eddy_view_def vd = view_def(d);
+	if (eddy_view_check(&vd, why, sizeof why))
+		return BAD("%s: %s", sys, why);
 	if (eddy_check_surface_fields(d->spacing, d->support, d->voxel, why, sizeof why))
 		return BAD("%s: %s", sys, why);
-	if (!color_ok(d->background) || !color_ok(d->color) || !color_ok(d->collider_color) || !color_ok(d->outline_color))
+	if (!eddy_color_ok(d->background) || !eddy_color_ok(d->color) || !eddy_color_ok(d->collider_color) || !eddy_color_ok(d->outline_color))
 		return BAD("%s: 'background', 'color', 'collider_color' and 'outline_color' must be RGB colours with "
 		           "components in [0, 1]", sys);
 	if (d->every < 1)
@@ -409,23 +310,17 @@ eddy_system_id eddy_add_render_surface(eddy_world *w, const eddy_render_surface_
 	const char *bad = eddy_check_frame_pattern(d->path);
 	if (bad)
 		return BAD("%s: 'path' %s (got \"%s\")", sys, bad, d->path);
-	if (d->eye.x != d->target.x || d->eye.y != d->target.y || d->eye.z != d->target.z) {
-		eddy_vec3 f = norm3(sub3(d->target, d->eye));
-		if (len3(cross3(f, norm3(d->up))) < 1e-4f)
-			return BAD("%s: 'up' must not be parallel to the view direction (eye to target)", sys);
-	} else if (len3(d->up) == 0) {
-		return BAD("%s: 'up' must not be zero", sys);
-	}
 	surface_renderer *r = calloc(1, sizeof *r);
 	if (!r)
 		return eddy_world_fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
 	r->def = *d;
+	r->cache.def = (eddy_surface_def){d->spacing, d->support, d->voxel};
 	const char *reads[3] = {"x", "y", "z"};
 	eddy_custom_system_def cd = eddy_default_custom_system_def();
 	cd.name = sys;
 	cd.reads = reads;
 	cd.read_count = 3;
-	cd.frame = render_frame;
+	cd.frame = eddy_render_surface_frame;
 	cd.destroy = destroy;
 	cd.user = r;
 	eddy_system_id id = eddy_add_custom_system(w, &cd);

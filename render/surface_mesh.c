@@ -7,7 +7,13 @@
  * path + ".ply" (binary little-endian), ".obj" and/or ".vdb" (an OpenVDB
  * level set), each whole or not at all (a temporary file renamed into
  * place). The mesh buffers are made at the first frame and reused. Publishes
- * surface_ms (the meshing, ms), surface_vertices and surface_triangles. */
+ * surface_ms (the meshing, ms), surface_vertices and surface_triangles.
+ *
+ * Meshed once per frame: with a render_surface of the same spacing, support
+ * and voxel in the world, whichever runs first meshes and the other takes its
+ * mesh (eddy_surface_of_frame; the state is stamped by frame, step count,
+ * time and particle count, which no frame hook changes), and surface_ms is
+ * published by the one that meshed. */
 #define _POSIX_C_SOURCE 200809L
 #include "render.h"
 
@@ -21,9 +27,9 @@
 static const char *const mesh_ext[] = {"ply", "obj", "vdb"}; /* eddy_mesh_format order */
 
 typedef struct surface_writer {
+	eddy_surface_cache cache; /* first: eddy_surface_of_frame reads it from either system */
 	eddy_surface_mesh_def def;
 	bool want[3]; /* by eddy_mesh_format */
-	eddy_mesh mesh;
 } surface_writer;
 
 eddy_surface_mesh_def eddy_default_surface_mesh_def(void)
@@ -60,17 +66,52 @@ double eddy_now_ms(void)
 	return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
 }
 
-static eddy_status write_frame(eddy_world *w, int frame, void *user)
+static bool same_state(const eddy_surface_cache *c, const eddy_world *w, int frame)
+{
+	return c->valid && c->frame == frame && c->steps == eddy_world_steps(w) && c->time == eddy_world_time(w) &&
+	       c->particles == eddy_world_particle_count(w);
+}
+
+eddy_status eddy_surface_of_frame(eddy_world *w, eddy_surface_cache *c, int frame, const eddy_mesh **out, double *ms)
+{
+	const int systems = eddy_world_system_count(w);
+	for (int i = 0; i < systems; ++i) {
+		const eddy_system_id id = eddy_world_system_at(w, i);
+		eddy_surface_cache *o = eddy_world_custom_user(w, id, eddy_surface_mesh_frame);
+		if (!o)
+			o = eddy_world_custom_user(w, id, eddy_render_surface_frame);
+		if (!o || o == c || !same_state(o, w, frame) || o->def.spacing != c->def.spacing ||
+		    o->def.support != c->def.support || o->def.voxel != c->def.voxel)
+			continue;
+		*out = &o->mesh;
+		*ms = -1;
+		return EDDY_OK;
+	}
+	const double t0 = eddy_now_ms();
+	c->valid = false;
+	eddy_status st = eddy_world_surface(w, &c->def, &c->mesh);
+	if (st != EDDY_OK)
+		return st;
+	*ms = eddy_now_ms() - t0;
+	c->valid = true;
+	c->frame = frame;
+	c->steps = eddy_world_steps(w);
+	c->time = eddy_world_time(w);
+	c->particles = eddy_world_particle_count(w);
+	*out = &c->mesh;
+	return EDDY_OK;
+}
+
+eddy_status eddy_surface_mesh_frame(eddy_world *w, int frame, void *user)
 {
 	surface_writer *s = user;
 	if (frame % s->def.every != 0)
 		return EDDY_OK;
-	const eddy_surface_def sd = {s->def.spacing, s->def.support, s->def.voxel};
-	const double t0 = eddy_now_ms();
-	eddy_status st = eddy_world_surface(w, &sd, &s->mesh);
+	const eddy_mesh *mesh = NULL;
+	double ms = 0;
+	eddy_status st = eddy_surface_of_frame(w, &s->cache, frame, &mesh, &ms);
 	if (st != EDDY_OK)
 		return st;
-	const double t1 = eddy_now_ms();
 	char stem[1024], path[1100];
 	if (eddy_frame_path(s->def.path, frame, stem, sizeof stem) != 0)
 		return eddy_world_fail(w, EDDY_ERR_IO, "surface_mesh: the path for frame %d is too long", frame);
@@ -81,20 +122,21 @@ static eddy_status write_frame(eddy_world *w, int frame, void *user)
 		if (eddy_make_parent_dirs(path) != 0)
 			return eddy_world_fail(w, EDDY_ERR_IO, "surface_mesh: cannot create the folder of '%s': %s", path,
 			                       strerror(errno));
-		st = eddy_world_write_mesh(w, &s->mesh, (eddy_mesh_format)f, path);
+		st = eddy_world_write_mesh(w, mesh, (eddy_mesh_format)f, path);
 		if (st != EDDY_OK)
 			return st;
 	}
-	eddy_world_publish(w, "surface_ms", t1 - t0);
-	eddy_world_publish(w, "surface_vertices", (double)s->mesh.vertex_count);
-	eddy_world_publish(w, "surface_triangles", (double)s->mesh.triangle_count);
+	if (ms >= 0)
+		eddy_world_publish(w, "surface_ms", ms);
+	eddy_world_publish(w, "surface_vertices", (double)mesh->vertex_count);
+	eddy_world_publish(w, "surface_triangles", (double)mesh->triangle_count);
 	return EDDY_OK;
 }
 
 static void destroy(void *user)
 {
 	surface_writer *s = user;
-	eddy_mesh_free(&s->mesh);
+	eddy_mesh_free(&s->cache.mesh);
 	free(s);
 }
 
@@ -139,13 +181,14 @@ eddy_system_id eddy_add_surface_mesh(eddy_world *w, const eddy_surface_mesh_def 
 	if (!s)
 		return eddy_world_fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
 	s->def = *def;
+	s->cache.def = (eddy_surface_def){def->spacing, def->support, def->voxel};
 	memcpy(s->want, want, sizeof want);
 	const char *reads[3] = {"x", "y", "z"};
 	eddy_custom_system_def cd = eddy_default_custom_system_def();
 	cd.name = sys;
 	cd.reads = reads;
 	cd.read_count = 3;
-	cd.frame = write_frame;
+	cd.frame = eddy_surface_mesh_frame;
 	cd.destroy = destroy;
 	cd.user = s;
 	eddy_system_id id = eddy_add_custom_system(w, &cd);

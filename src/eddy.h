@@ -296,6 +296,11 @@ typedef struct eddy_custom_system_def {
 
 EDDY_API eddy_custom_system_def eddy_default_custom_system_def(void);
 EDDY_API eddy_system_id eddy_add_custom_system(eddy_world *w, const eddy_custom_system_def *def);
+/* The user pointer of custom system id when its frame hook is `frame` (so a
+ * caller gets only pointers whose type it knows), else NULL. Systems that
+ * share work within a frame find each other with it (render/: the surface
+ * mesh, meshed once for surface_mesh and render_surface). */
+EDDY_API void *eddy_world_custom_user(const eddy_world *w, eddy_system_id id, eddy_frame_fn frame);
 
 /* ---- built-in systems --------------------------------------------------- *
  * Each eddy_add_* returns EDDY_NULL_SYSTEM on failure with the reason in
@@ -896,6 +901,13 @@ typedef struct eddy_mesh {
 
 /* Meshes the world's particles now (x y z). No particles: an empty mesh. */
 EDDY_API eddy_status eddy_world_surface(eddy_world *w, const eddy_surface_def *def, eddy_mesh *mesh);
+/* A drawable mesh of any collider: the zero level of its signed distance
+ * (eddy_collider_distance) sampled every `cell` m over the world's bounds
+ * (cell <= 0: the bounds' longest side / 64; at most 256 samples a side),
+ * meshed like the surface, normals out of the solid, closed where the solid
+ * leaves the bounds. For colliders eddy_collider_shape_of describes as
+ * EDDY_COLLIDER_OTHER (a mesh collider, say); render_surface draws them so. */
+EDDY_API eddy_status eddy_collider_mesh(eddy_world *w, eddy_system_id id, float cell, eddy_mesh *out);
 /* Writes the mesh, whole or not at all, as binary little-endian PLY (vertex
  * x y z nx ny nz floats, face uchar/uint index lists), Wavefront OBJ (v, vn,
  * f a//a b//b c//c) or OpenVDB (.vdb: the field's 1/2 level as a narrow-band

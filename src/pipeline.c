@@ -326,6 +326,15 @@ static const eddy_system_vtable custom_kinds[8] = {
 };
 #undef CUSTOM_KIND
 
+void *eddy_world_custom_user(const eddy_world *w, eddy_system_id id, eddy_frame_fn frame)
+{
+	const eddy_system *s = w ? eddy__system_peek(w, id) : NULL;
+	if (!s || !frame || s->vt->frame != custom_frame)
+		return NULL;
+	const custom_data *d = s->data;
+	return d->def.frame == frame ? d->def.user : NULL;
+}
+
 eddy_custom_system_def eddy_default_custom_system_def(void)
 {
 	eddy_custom_system_def d;

@@ -71,6 +71,46 @@ eddy_status eddy_world_surface(eddy_world *w, const eddy_surface_def *def, eddy_
 	return EDDY_OK;
 }
 
+eddy_status eddy_collider_mesh(eddy_world *w, eddy_system_id id, float cell, eddy_mesh *out)
+{
+	if (!w)
+		return EDDY_ERR_INVALID;
+	if (!out || !isfinite(cell))
+		return eddy__fail(w, EDDY_ERR_INVALID, "eddy_collider_mesh: out must not be NULL and cell finite");
+	float d0 = 0;
+	eddy_status st = eddy_collider_distance(w, id, (eddy_vec3){0, 0, 0}, &d0);
+	if (st != EDDY_OK)
+		return st;
+	const eddy_world_def *wd = eddy_world_get_def(w);
+	const float ext[3] = {wd->bounds_max.x - wd->bounds_min.x, wd->bounds_max.y - wd->bounds_min.y,
+	                      wd->bounds_max.z - wd->bounds_min.z};
+	const float longest = fmaxf(ext[0], fmaxf(ext[1], ext[2]));
+	const float dx = fmaxf(cell > 0 ? cell : longest / 64, longest / 255);
+	/* one cell of margin each side, so a solid inside the bounds is closed */
+	const float origin[3] = {wd->bounds_min.x - dx, wd->bounds_min.y - dx, wd->bounds_min.z - dx};
+	int dims[3];
+	for (int c = 0; c < 3; ++c)
+		dims[c] = (int)ceilf(ext[c] / dx) + 3;
+	const size_t n = (size_t)dims[0] * (size_t)dims[1] * (size_t)dims[2];
+	float *d = malloc(n * sizeof *d);
+	if (!d)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "eddy_collider_mesh: out of memory for %zu samples", n);
+	for (int i = 0; i < dims[0]; ++i)
+		for (int j = 0; j < dims[1]; ++j)
+			for (int k = 0; k < dims[2]; ++k) {
+				const eddy_vec3 p = {origin[0] + (float)i * dx, origin[1] + (float)j * dx, origin[2] + (float)k * dx};
+				float v = 0;
+				eddy_collider_distance(w, id, p, &v);
+				d[((size_t)i * (size_t)dims[1] + (size_t)j) * (size_t)dims[2] + (size_t)k] = isfinite(v) ? v : 3 * dx;
+			}
+	char err[512];
+	const int rc = eddy__surface_from_samples(d, dims, origin, dx, out, err, sizeof err);
+	free(d);
+	if (rc != 0)
+		return eddy__fail(w, strstr(err, "memory") ? EDDY_ERR_NOMEM : EDDY_ERR_EXTERNAL, "collider mesh: %s", err);
+	return EDDY_OK;
+}
+
 void eddy_mesh_free(eddy_mesh *mesh)
 {
 	if (!mesh)

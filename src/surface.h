@@ -27,6 +27,11 @@ typedef struct eddy__surface_params {
  * the field kept in mesh->field for eddy__surface_write_vdb). 0 or -1. */
 int eddy__surface_build(const float *x, const float *y, const float *z, size_t n, const eddy__surface_params *p,
                         eddy_mesh *mesh, char *err, size_t cap);
+/* Meshes the zero level of signed distances d sampled at origin + (i, j, k)
+ * dx (d[(i ny + j) nz + k], dims = nx ny nz; negative inside), normals
+ * pointing out (up the distance). 0 or -1. */
+int eddy__surface_from_samples(const float *d, const int dims[3], const float origin[3], float dx, eddy_mesh *mesh,
+                               char *err, size_t cap);
 /* Writes the field of the last build as a narrow-band level set (signed
  * distance, m) named "surface" to path, whole or not at all. 0 or -1. */
 int eddy__surface_write_vdb(const eddy_mesh *mesh, const char *path, char *err, size_t cap);

@@ -8,7 +8,10 @@
  * normalisation of SPlisHSPlasH's CubicKernel), rasterised into a sparse
  * openvdb::FloatGrid of voxel size dx, stored as -c (inside lower, as in a
  * level set). Each particle adds to the voxels within R of it; the particles
- * are split into fixed chunks, each chunk into its own grid, and the grids
+ * are split into fixed chunks, each chunk into its own grid (through a dense
+ * block over the chunk's voxel box when that box is at most 8 times the
+ * voxels its kernels touch: a packed pool, where the tree's accessor would
+ * cost most of the meshing; else voxel by voxel into the tree), and the grids
  * summed pairwise in a fixed order (tbb::parallel_deterministic_reduce), so
  * a frame's mesh does not depend on the thread count.
  *
@@ -39,6 +42,7 @@
 
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Composite.h>
+#include <openvdb/tools/Dense.h>
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/LevelSetRebuild.h>
 #include <openvdb/tools/VolumeToMesh.h>
@@ -48,7 +52,9 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <climits>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -69,8 +75,12 @@ struct Field {
 	float isovalue; /* -1/2 */
 };
 
-/* Chunk of particles one grid accumulates; fixed, so the summation order is. */
-const size_t CHUNK = 2048;
+/* Most particles one grid accumulates (ranges are halved down to this);
+ * fixed, so the summation order is. Large enough that a pool of thousands
+ * is one dense block and needs no joining of grids. */
+const size_t CHUNK = 8192;
+/* Largest dense block a chunk is splatted into, voxels (64 MB of floats). */
+const double DENSE_MAX = double(1 << 24);
 
 struct Splat {
 	const float *x, *y, *z;
@@ -90,11 +100,11 @@ struct Splat {
 		grid->setTransform(xform);
 	}
 
-	void operator()(const tbb::blocked_range<size_t> &r)
+	/* Adds the kernels of particles [b, e) to the voxels, through add(i, j, k, value). */
+	template <typename Add> void splat(size_t b, size_t e, Add add) const
 	{
-		FloatGrid::Accessor acc = grid->getAccessor();
 		const float k = 8.0f / (float(M_PI) * R * R * R), inv_R = 1.0f / R, inv_dx = 1.0f / dx;
-		for (size_t p = r.begin(); p != r.end(); ++p) {
+		for (size_t p = b; p != e; ++p) {
 			const float px = x[p], py = y[p], pz = z[p];
 			/* voxel (i, j, k) has its centre at (i, j, k) dx */
 			const int i0 = int(std::ceil((px - R) * inv_dx)), i1 = int(std::floor((px + R) * inv_dx));
@@ -114,12 +124,44 @@ struct Splat {
 							continue;
 						const float W = q <= 0.5f ? k * (6.0f * q * q * (q - 1.0f) + 1.0f)
 						                          : k * 2.0f * (1.0f - q) * (1.0f - q) * (1.0f - q);
-						const float add = -V * W;
-						acc.modifyValue(openvdb::Coord(i, j, kk), [add](float &v) { v += add; });
+						add(i, j, kk, -V * W);
 					}
 				}
 			}
 		}
+	}
+
+	void operator()(const tbb::blocked_range<size_t> &r)
+	{
+		/* the voxel box of the range's kernels */
+		const float inv_dx = 1.0f / dx;
+		int lo[3] = {INT32_MAX, INT32_MAX, INT32_MAX}, hi[3] = {INT32_MIN, INT32_MIN, INT32_MIN};
+		for (size_t p = r.begin(); p != r.end(); ++p) {
+			const float q[3] = {x[p], y[p], z[p]};
+			for (int c = 0; c < 3; ++c) {
+				lo[c] = std::min(lo[c], int(std::ceil((q[c] - R) * inv_dx)));
+				hi[c] = std::max(hi[c], int(std::floor((q[c] + R) * inv_dx)));
+			}
+		}
+		const double box = double(hi[0] - lo[0] + 1) * double(hi[1] - lo[1] + 1) * double(hi[2] - lo[2] + 1);
+		const double kernel = std::pow(2.0 * double(R * inv_dx) + 1.0, 3.0);
+		if (grid->empty() && box > 0 && box <= DENSE_MAX && box <= 8.0 * kernel * double(r.size())) {
+			/* a dense block when the particles are packed: plain adds instead of
+			 * the tree's accessor, the same sums in the same order, then the
+			 * nonzero voxels (every voxel a kernel reached) into the tree */
+			const openvdb::CoordBBox bbox(openvdb::Coord(lo[0], lo[1], lo[2]), openvdb::Coord(hi[0], hi[1], hi[2]));
+			openvdb::tools::Dense<float, openvdb::tools::LayoutZYX> dense(bbox, 0.0f);
+			float *d = dense.data();
+			const size_t sx = dense.xStride(), sy = dense.yStride();
+			splat(r.begin(), r.end(), [&](int i, int j, int kk, float v) {
+				d[size_t(i - lo[0]) * sx + size_t(j - lo[1]) * sy + size_t(kk - lo[2])] += v;
+			});
+			openvdb::tools::copyFromDense(dense, *grid, 0.0f);
+			return;
+		}
+		FloatGrid::Accessor acc = grid->getAccessor();
+		splat(r.begin(), r.end(),
+		      [&](int i, int j, int kk, float v) { acc.modifyValue(openvdb::Coord(i, j, kk), [v](float &u) { u += v; }); });
 	}
 
 	void join(Splat &o) { openvdb::tools::compSum(*grid, *o.grid); }
@@ -142,6 +184,71 @@ void set_err(char *err, size_t cap, const char *what, const char *detail)
 {
 	if (cap)
 		std::snprintf(err, cap, "%s%s%s", what, detail ? ": " : "", detail ? detail : "");
+}
+
+/* The mesh volumeToMesh gave (quads split in two) into mesh, with the
+ * normals of the field grid (its gradient, else the faces'): 0 or -1. */
+int fill_mesh(const FloatGrid &grid, float dx, const std::vector<openvdb::Vec3s> &points,
+              const std::vector<openvdb::Vec3I> &tris, const std::vector<openvdb::Vec4I> &quads, eddy_mesh *mesh,
+              char *err, size_t cap)
+{
+	const size_t nv = points.size(), nt = tris.size() + 2 * quads.size();
+	if (nv > UINT32_MAX)
+		return set_err(err, cap, "the surface has more than 2^32 vertices", nullptr), -1;
+	if (!grow(&mesh->xyz, &mesh->vertex_cap, 3 * nv) || !grow(&mesh->normal, &mesh->normal_cap, 3 * nv) ||
+	    !grow(&mesh->tri, &mesh->triangle_cap, 3 * nt))
+		return set_err(err, cap, "out of memory for the surface mesh", nullptr), -1;
+	for (size_t v = 0; v < nv; ++v)
+		for (int c = 0; c < 3; ++c)
+			mesh->xyz[3 * v + size_t(c)] = points[v][c];
+	/* volumeToMesh winds polygons counter-clockwise seen from the side
+	 * where the field is above the isovalue (outside here), as PLY, OBJ
+	 * and GL expect; a quad (a b c d) becomes (a b c) and (a c d) */
+	uint32_t *t = mesh->tri;
+	for (const openvdb::Vec3I &f : tris)
+		*t++ = f[0], *t++ = f[1], *t++ = f[2];
+	for (const openvdb::Vec4I &f : quads) {
+		*t++ = f[0], *t++ = f[1], *t++ = f[2];
+		*t++ = f[0], *t++ = f[2], *t++ = f[3];
+	}
+	mesh->vertex_count = nv;
+	mesh->triangle_count = nt;
+
+	/* normals: the field's gradient, else the faces' */
+	std::vector<float> face(3 * nv, 0.0f);
+	for (size_t f = 0; f < nt; ++f) {
+		const uint32_t *q = mesh->tri + 3 * f;
+		const float *a = mesh->xyz + 3 * q[0], *b = mesh->xyz + 3 * q[1], *c = mesh->xyz + 3 * q[2];
+		const float u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+		const float nrm[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]};
+		for (int k = 0; k < 3; ++k)
+			for (int c3 = 0; c3 < 3; ++c3)
+				face[3 * q[k] + size_t(c3)] += nrm[c3];
+	}
+	const float h = 0.5f * dx;
+	/* the sampler keeps a reference to the accessor: it must outlive it */
+	const FloatGrid::ConstAccessor acc = grid.getConstAccessor();
+	openvdb::tools::GridSampler<FloatGrid::ConstAccessor, openvdb::tools::BoxSampler> sampler(
+		acc, grid.transform());
+	for (size_t v = 0; v < nv; ++v) {
+		const float *P = mesh->xyz + 3 * v;
+		float g[3];
+		for (int c = 0; c < 3; ++c) {
+			openvdb::Vec3d a(P[0], P[1], P[2]), b(P[0], P[1], P[2]);
+			a[c] += h, b[c] -= h;
+			g[c] = float(sampler.wsSample(a) - sampler.wsSample(b));
+		}
+		float len = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+		if (!(len > 1e-12f)) {
+			for (int c = 0; c < 3; ++c)
+				g[c] = face[3 * v + size_t(c)];
+			len = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+		}
+		for (int c = 0; c < 3; ++c)
+			mesh->normal[3 * v + size_t(c)] = len > 0 ? g[c] / len : (c == 2 ? 1.0f : 0.0f);
+	}
+
+	return 0;
 }
 
 } // namespace
@@ -167,61 +274,8 @@ extern "C" int eddy__surface_build(const float *x, const float *y, const float *
 			openvdb::tools::volumeToMesh(*splat.grid, points, tris, quads, double(iso), 0.0, true);
 		});
 
-		const size_t nv = points.size(), nt = tris.size() + 2 * quads.size();
-		if (nv > UINT32_MAX)
-			return set_err(err, cap, "the surface has more than 2^32 vertices", nullptr), -1;
-		if (!grow(&mesh->xyz, &mesh->vertex_cap, 3 * nv) || !grow(&mesh->normal, &mesh->normal_cap, 3 * nv) ||
-		    !grow(&mesh->tri, &mesh->triangle_cap, 3 * nt))
-			return set_err(err, cap, "out of memory for the surface mesh", nullptr), -1;
-		for (size_t v = 0; v < nv; ++v)
-			for (int c = 0; c < 3; ++c)
-				mesh->xyz[3 * v + size_t(c)] = points[v][c];
-		/* volumeToMesh winds polygons counter-clockwise seen from the side
-		 * where the field is above the isovalue (outside here), as PLY, OBJ
-		 * and GL expect; a quad (a b c d) becomes (a b c) and (a c d) */
-		uint32_t *t = mesh->tri;
-		for (const openvdb::Vec3I &f : tris)
-			*t++ = f[0], *t++ = f[1], *t++ = f[2];
-		for (const openvdb::Vec4I &f : quads) {
-			*t++ = f[0], *t++ = f[1], *t++ = f[2];
-			*t++ = f[0], *t++ = f[2], *t++ = f[3];
-		}
-		mesh->vertex_count = nv;
-		mesh->triangle_count = nt;
-
-		/* normals: the field's gradient, else the faces' */
-		std::vector<float> face(3 * nv, 0.0f);
-		for (size_t f = 0; f < nt; ++f) {
-			const uint32_t *q = mesh->tri + 3 * f;
-			const float *a = mesh->xyz + 3 * q[0], *b = mesh->xyz + 3 * q[1], *c = mesh->xyz + 3 * q[2];
-			const float u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, w[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
-			const float nrm[3] = {u[1] * w[2] - u[2] * w[1], u[2] * w[0] - u[0] * w[2], u[0] * w[1] - u[1] * w[0]};
-			for (int k = 0; k < 3; ++k)
-				for (int c3 = 0; c3 < 3; ++c3)
-					face[3 * q[k] + size_t(c3)] += nrm[c3];
-		}
-		const float h = 0.5f * dx;
-		/* the sampler keeps a reference to the accessor: it must outlive it */
-		const FloatGrid::ConstAccessor acc = splat.grid->getConstAccessor();
-		openvdb::tools::GridSampler<FloatGrid::ConstAccessor, openvdb::tools::BoxSampler> sampler(
-			acc, splat.grid->transform());
-		for (size_t v = 0; v < nv; ++v) {
-			const float *P = mesh->xyz + 3 * v;
-			float g[3];
-			for (int c = 0; c < 3; ++c) {
-				openvdb::Vec3d a(P[0], P[1], P[2]), b(P[0], P[1], P[2]);
-				a[c] += h, b[c] -= h;
-				g[c] = float(sampler.wsSample(a) - sampler.wsSample(b));
-			}
-			float len = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
-			if (!(len > 1e-12f)) {
-				for (int c = 0; c < 3; ++c)
-					g[c] = face[3 * v + size_t(c)];
-				len = std::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
-			}
-			for (int c = 0; c < 3; ++c)
-				mesh->normal[3 * v + size_t(c)] = len > 0 ? g[c] / len : (c == 2 ? 1.0f : 0.0f);
-		}
+		if (fill_mesh(*splat.grid, dx, points, tris, quads, mesh, err, cap) != 0)
+			return -1;
 
 		Field *fld = static_cast<Field *>(mesh->field);
 		if (!fld)
@@ -231,6 +285,42 @@ extern "C" int eddy__surface_build(const float *x, const float *y, const float *
 		return 0;
 	} catch (const std::bad_alloc &) {
 		set_err(err, cap, "out of memory for the surface field", nullptr);
+	} catch (const std::exception &e) {
+		set_err(err, cap, "OpenVDB failed", e.what());
+	} catch (...) {
+		set_err(err, cap, "OpenVDB failed", "unknown exception");
+	}
+	return -1;
+}
+
+extern "C" int eddy__surface_from_samples(const float *d, const int dims[3], const float origin[3], float dx,
+                                          eddy_mesh *mesh, char *err, size_t cap)
+{
+	try {
+		openvdb::initialize();
+		/* background: outside, three cells away; every sample nearer or inside
+		 * is stored, so the solid's interior is never background and the
+		 * surface closes where the solid leaves the sampled box */
+		const float far = 3.0f * dx;
+		FloatGrid::Ptr grid = FloatGrid::create(far);
+		openvdb::math::Transform::Ptr xform = openvdb::math::Transform::createLinearTransform(double(dx));
+		xform->postTranslate(openvdb::Vec3d(origin[0], origin[1], origin[2]));
+		grid->setTransform(xform);
+		FloatGrid::Accessor acc = grid->getAccessor();
+		for (int i = 0; i < dims[0]; ++i)
+			for (int j = 0; j < dims[1]; ++j)
+				for (int k = 0; k < dims[2]; ++k) {
+					const float v = d[(size_t(i) * size_t(dims[1]) + size_t(j)) * size_t(dims[2]) + size_t(k)];
+					if (v < far)
+						acc.setValue(openvdb::Coord(i, j, k), v);
+				}
+		std::vector<openvdb::Vec3s> points;
+		std::vector<openvdb::Vec3I> tris;
+		std::vector<openvdb::Vec4I> quads;
+		openvdb::tools::volumeToMesh(*grid, points, tris, quads, 0.0, 0.0, true);
+		return fill_mesh(*grid, dx, points, tris, quads, mesh, err, cap);
+	} catch (const std::bad_alloc &) {
+		set_err(err, cap, "out of memory for the collider's mesh", nullptr);
 	} catch (const std::exception &e) {
 		set_err(err, cap, "OpenVDB failed", e.what());
 	} catch (...) {

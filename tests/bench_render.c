@@ -1,22 +1,27 @@
 /* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
 /* Renderer benchmark (make bench-render, part of make bench): milliseconds per
- * rendered frame at 1280x720 for 10k, 100k and 1M particles, and at the pour
- * scene's 960x540 (supersample 2) for its 5625, with 1 and 2 llvmpipe
- * threads, as JSON. llvmpipe reads LP_NUM_THREADS once per process, so each
- * thread count runs in a child process (this program, with --child). Then the
+ * rendered frame at 1280x720 for 10k, 100k, 1M and 10M particles, and at the
+ * pour scene's 960x540 (supersample 2) for its 5625, with the world on 1 and
+ * 2 threads (render_points draws in as many row bands), as JSON. Then the
  * PNG encoders on the pour-sized frame: CPU ms per encode (median of 15) and
  * bytes for stb_image_write at its default level (eddy's encoder before
  * libpng), libpng at its defaults (level 6, adaptive filters), and libpng as
  * render/png.c sets it (level 1, Z_RLE, the up filter).
  *
- *   bench_render OUT.json            all thread counts, JSON to OUT.json
- *   bench_render --child [SS]        this process's LP_NUM_THREADS, JSON lines
+ * Then the surface mesher on the pour (tests/scenes/pour_surface.lua through
+ * the eddy command beside this program, 1 thread, no images): the medians
+ * over its 120 frames of surface_ms and of the simulation's own time per
+ * frame (the frame's wall_ms less the surface_mesh system's), and their
+ * ratio (issue 16's target: below 1).
  *
- * A frame is the whole render_points frame hook: colouring by speed, the GL
- * draw (gl_ms), the downsample and the PNG (png_ms); cpu_ms is the process
- * CPU time of the frame, all threads. Medians over repeated frames; the first
- * frame (context and shader set-up) is reported apart. */
+ *   bench_render OUT.json            everything, JSON to OUT.json
+ *   bench_render --quick             the pour-sized and 1M frames only, to stdout
+ *
+ * A frame is the whole render_points frame hook: colouring by speed, the
+ * drawing and box filter (draw_ms), the PNG encoding and writing (png_ms);
+ * cpu_ms is the process CPU time of the frame, all threads. Medians over
+ * repeated frames; the first * frame (context and shader set-up) is reported apart. */
 #include <math.h>
 #include <stdbool.h>
 #include <stdint.h>
@@ -59,9 +64,10 @@ static double extra(const eddy_frame_stats *s, const char *name)
 
 /* n particles filling the lower half of the unit box (a resting pool, the
  * common case), jittered, with random velocities to colour by speed. */
-static int run(int n, int width, int height, int supersample, const char *threads)
+static int run(FILE *json, bool *first_row, int n, int width, int height, int supersample, int threads)
 {
 	eddy_world_def wd = eddy_default_world_def();
+	wd.threads = threads;
 	char err[256];
 	eddy_world *w = eddy_create_world(&wd, err, sizeof err);
 	if (!w) {
@@ -93,7 +99,7 @@ static int run(int n, int width, int height, int supersample, const char *thread
 	eddy_world_add_particles(w, (size_t)n, p, v);
 	free(p);
 	free(v);
-	const int frames = n >= 1000000 ? 5 : 9;
+	const int frames = n >= 10000000 ? 3 : n >= 1000000 ? 5 : 9;
 	double frame_ms[16], gl_ms[16], png_ms[16], cpu[16], first = 0;
 	for (int f = 0; f <= frames; ++f) {
 		const double c0 = cpu_ms();
@@ -118,12 +124,18 @@ static int run(int n, int width, int height, int supersample, const char *thread
 		gl_ms[f - 1] = extra(&st, "render_ms");
 		png_ms[f - 1] = extra(&st, "png_ms");
 	}
-	printf("{\"particles\":%d,\"width\":%d,\"height\":%d,\"supersample\":%d,\"lp_num_threads\":%s,\"frames\":%d,"
-	       "\"frame_ms_median\":%.1f,\"gl_ms_median\":%.1f,\"png_ms_median\":%.1f,\"cpu_ms_median\":%.1f,"
-	       "\"first_frame_ms\":%.1f}\n",
-	       n, width, height, supersample, threads, frames, median(frame_ms, frames), median(gl_ms, frames), median(png_ms, frames),
-	       median(cpu, frames), first);
+	char line[512];
+	snprintf(line, sizeof line,
+	         "{\"particles\":%d,\"width\":%d,\"height\":%d,\"supersample\":%d,\"threads\":%d,\"frames\":%d,"
+	         "\"frame_ms_median\":%.1f,\"draw_ms_median\":%.1f,\"png_ms_median\":%.1f,\"cpu_ms_median\":%.1f,"
+	         "\"first_frame_ms\":%.1f}",
+	         n, width, height, supersample, threads, frames, median(frame_ms, frames), median(gl_ms, frames),
+	         median(png_ms, frames), median(cpu, frames), first);
+	printf("%s\n", line);
 	fflush(stdout);
+	if (json)
+		fprintf(json, "%s\n  %s", *first_row ? "" : ",", line);
+	*first_row = false;
 	eddy_destroy_world(w);
 	return 0;
 }
@@ -221,50 +233,96 @@ static int encoders(FILE *f, const char *frame)
 	return 0;
 }
 
+/* The number after "key": in a JSON line, NAN if absent. */
+static double json_number(const char *line, const char *key)
+{
+	char pat[64];
+	snprintf(pat, sizeof pat, "\"%s\":", key);
+	const char *p = strstr(line, pat);
+	return p ? strtod(p + strlen(pat), NULL) : NAN;
+}
+
+/* The pour with surface_mesh: medians of the mesher's and the simulation's
+ * ms per frame. */
+static int surface_vs_step(FILE *json, const char *argv0)
+{
+	char eddy[1024], cmd[2400];
+	snprintf(eddy, sizeof eddy, "%s", argv0);
+	char *slash = strrchr(eddy, '/');
+	if (slash)
+		*slash = '\0'; /* build/tests */
+	slash = strrchr(eddy, '/');
+	snprintf(slash ? slash + 1 : eddy, sizeof eddy - (size_t)(slash ? slash + 1 - eddy : 0), "eddy");
+	if (!slash)
+		snprintf(eddy, sizeof eddy, "build/eddy");
+	snprintf(cmd, sizeof cmd,
+	         "'%s' run tests/scenes/pour_surface.lua --threads 1 --set render=false --quiet "
+	         "--out build/bench_render/pour_surface --stats -",
+	         eddy);
+	FILE *p = popen(cmd, "r");
+	if (!p) {
+		perror("popen");
+		return 1;
+	}
+	static double mesh[4096], sim[4096];
+	int n = 0;
+	static char line[1 << 16];
+	while (fgets(line, sizeof line, p) && n < 4096) {
+		const double m = json_number(line, "surface_ms"), wall = json_number(line, "wall_ms"),
+		             sys = json_number(line, "surface_mesh");
+		if (isnan(m) || isnan(wall) || isnan(sys))
+			continue;
+		mesh[n] = m;
+		sim[n] = wall - sys;
+		++n;
+	}
+	if (pclose(p) != 0 || n == 0) {
+		fprintf(stderr, "bench_render: %s failed\n", cmd);
+		return 1;
+	}
+	const double mm = median(mesh, n), sm = median(sim, n);
+	char out[512];
+	snprintf(out, sizeof out,
+	         "{\"scene\":\"tests/scenes/pour_surface.lua\",\"threads\":1,\"frames\":%d,\"surface_ms_median\":%.1f,"
+	         "\"step_ms_median\":%.1f,\"surface_over_step\":%.2f}",
+	         n, mm, sm, mm / sm);
+	printf("%s\n", out);
+	if (json)
+		fprintf(json, "\n  %s", out);
+	return 0;
+}
+
 int main(int argc, char **argv)
 {
-	if (argc >= 2 && strcmp(argv[1], "--child") == 0) {
-		const char *t = getenv("LP_NUM_THREADS");
-		const int sizes[3] = {10000, 100000, 1000000};
-		/* the pour scene's frames: 5625 particles, 960x540, supersample 2 */
-		if (run(5625, 960, 540, 2, t ? t : "null") != 0)
-			return 1;
-		for (int i = 0; i < 3; ++i)
-			if (run(sizes[i], 1280, 720, 1, t ? t : "null") != 0)
-				return 1;
-		/* the default supersample 2 (an internal 2560x1440) at the largest size */
-		return run(1000000, 1280, 720, 2, t ? t : "null");
-	}
-	const char *out = argc >= 2 ? argv[1] : "build/bench_render.json";
-	FILE *f = fopen(out, "w");
-	if (!f) {
+	const bool quick = argc >= 2 && strcmp(argv[1], "--quick") == 0;
+	const char *out = argc >= 2 && !quick ? argv[1] : "build/bench_render.json";
+	FILE *f = quick ? NULL : fopen(out, "w");
+	if (!quick && !f) {
 		perror(out);
 		return 1;
 	}
-	fprintf(f, "{\"benchmark\":\"render_points\",\"unit\":\"ms per frame (median)\",\"results\":[");
+	if (f)
+		fprintf(f, "{\"benchmark\":\"render_points\",\"unit\":\"ms per frame (median)\",\"results\":[");
 	bool first = true;
+	const int sizes[4] = {10000, 100000, 1000000, 10000000};
 	for (int t = 1; t <= 2; ++t) {
-		char cmd[1024];
-		snprintf(cmd, sizeof cmd, "LP_NUM_THREADS=%d '%s' --child", t, argv[0]);
-		FILE *p = popen(cmd, "r");
-		if (!p) {
-			perror("popen");
+		/* the pour scene's frames: 5625 particles, 960x540, supersample 2 */
+		if (run(f, &first, 5625, 960, 540, 2, t) != 0)
 			return 1;
-		}
-		char line[1024];
-		while (fgets(line, sizeof line, p)) {
-			line[strcspn(line, "\n")] = '\0';
-			fprintf(f, "%s\n  %s", first ? "" : ",", line);
-			printf("%s\n", line);
-			first = false;
-		}
-		if (pclose(p) != 0) {
-			fprintf(stderr, "bench_render: the child with LP_NUM_THREADS=%d failed\n", t);
+		for (int i = quick ? 2 : 0; i < (quick ? 3 : 4); ++i)
+			if (run(f, &first, sizes[i], 1280, 720, 1, t) != 0)
+				return 1;
+		/* the default supersample 2 (an internal 2560x1440) at 1M */
+		if (!quick && run(f, &first, 1000000, 1280, 720, 2, t) != 0)
 			return 1;
-		}
 	}
+	if (quick)
+		return 0;
 	fprintf(f, "\n],\"encoders\":[");
 	if (encoders(f, "build/bench_render/frame_960x540_5625_9.png") != 0)
+		return 1;
+	fprintf(f, "\n],\"surface\":[");
+	if (surface_vs_step(f, argv[0]) != 0)
 		return 1;
 	fprintf(f, "\n]}\n");
 	fclose(f);

@@ -10,12 +10,14 @@
  * background) and nothing where there is none; bad defs are refused. */
 #include "test.h"
 
+#include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 
 #include "eddy.h"
+#include "../render/render.h" /* the surface systems' caches */
 
 /* declarations only: test_render.c holds stb_image's implementation */
 #include <stb/stb_image.h>
@@ -438,12 +440,131 @@ static void scene_writes_meshes_and_images(void)
 	CHECK_HAS(out, "'format' must list ply, obj and/or vdb (got 'stl')");
 }
 
+/* surface_mesh and render_surface with the same fields mesh a frame once:
+ * whichever runs first meshes and publishes surface_ms, the other draws or
+ * writes that mesh (its own cache stays unbuilt). Either order; and with a
+ * different support each meshes its own. */
+static void surface_meshed_once_per_frame(void)
+{
+	const float s = 0.02f;
+	for (int order = 0; order < 3; ++order) {
+		eddy_world *w = emitted((eddy_vec3){0.4f, 0.4f, 0.4f}, (eddy_vec3){0.6f, 0.6f, 0.6f}, s, 0, EDDY_EMIT_BLOCK);
+		if (!w)
+			return;
+		eddy_surface_mesh_def m = eddy_default_surface_mesh_def();
+		m.spacing = s;
+		char dir[400];
+		out_path(dir, sizeof dir, "shared");
+		snprintf(m.path, sizeof m.path, "%s_%d_%%04d", dir, order);
+		eddy_render_surface_def r = render_def(order == 0 ? "shared_a" : order == 1 ? "shared_b" : "shared_c", s);
+		if (order == 2)
+			r.support = 3; /* a different field: meshed apart */
+		eddy_system_id a, b;
+		if (order == 1) {
+			b = eddy_add_render_surface(w, &r);
+			a = eddy_add_surface_mesh(w, &m);
+		} else {
+			a = eddy_add_surface_mesh(w, &m);
+			b = eddy_add_render_surface(w, &r);
+		}
+		CHECKF(eddy_system_valid(w, a) && eddy_system_valid(w, b), "%s", eddy_world_error(w));
+		for (int f = 0; f < 2; ++f) {
+			CHECKF(eddy_world_step_frame(w) == EDDY_OK, "%s", eddy_world_error(w));
+			const eddy_surface_cache *ca = eddy_world_custom_user(w, a, eddy_surface_mesh_frame);
+			const eddy_surface_cache *cb = eddy_world_custom_user(w, b, eddy_render_surface_frame);
+			CHECK(ca && cb);
+			if (!ca || !cb)
+				break;
+			/* the one that ran first meshed; the other did only when its field differs */
+			const eddy_surface_cache *first = order == 1 ? cb : ca, *second = order == 1 ? ca : cb;
+			CHECK(first->valid && first->frame == eddy_world_frame(w) && first->mesh.triangle_count > 0);
+			CHECKF(second->valid == (order == 2), "order %d frame %d: the second system %s", order, f,
+			       second->valid ? "meshed again" : "did not mesh");
+			eddy_frame_stats st;
+			eddy_world_frame_stats(w, &st);
+			double tris = -1;
+			for (int k = 0; k < st.extra_count; ++k)
+				if (strcmp(st.extra[k].name, "surface_triangles") == 0)
+					tris = st.extra[k].value;
+			/* surface_mesh wrote the mesh it used: its own, or the shared one */
+			CHECK(tris == (double)(ca->valid ? ca : cb)->mesh.triangle_count);
+			CHECK(lit_pixels(&r, eddy_world_frame(w)) > 100);
+		}
+		eddy_destroy_world(w);
+	}
+}
+
+/* A collider eddy_collider_shape_of cannot describe (a mesh sphere of radius
+ * 0.2 m from scenes/meshes/icosphere.obj): eddy_collider_mesh gives a closed
+ * mesh whose vertices lie on the sphere within a sampling cell (1/64 of the
+ * 1 m bounds: 0.016 m; trilinear sampling of the distance is exact to well
+ * under that), normals pointing out; render_surface draws it (a disc of
+ * radius 0.2 m seen from 2.5 m at 40 degrees, 120 px high: about
+ * pi (0.2 / 1.82 * 120)^2 / 4 = 140 px; asserted > 60, where a world with no
+ * collider lights none), and render_points outlines its box (> 40 px of
+ * lines). */
+static void mesh_collider_is_drawn(void)
+{
+	eddy_world_def wd = eddy_default_world_def();
+	char err[256];
+	eddy_world *w = eddy_create_world(&wd, err, sizeof err);
+	CHECKF(w != NULL, "%s", err);
+	if (!w)
+		return;
+	eddy_collide_mesh_def c = eddy_default_collide_mesh_def();
+	strcpy(c.path, "scenes/meshes/icosphere.obj");
+	c.scale = (eddy_vec3){0.2f, 0.2f, 0.2f};
+	c.translate = (eddy_vec3){0.5f, 0.5f, 0.5f};
+	eddy_system_id id = eddy_add_collide_mesh(w, &c);
+	CHECKF(eddy_system_valid(w, id), "%s", eddy_world_error(w));
+	eddy_collider_shape shape;
+	CHECK(eddy_collider_shape_of(w, id, &shape) == EDDY_OK);
+	eddy_mesh m = {0};
+	CHECKF(eddy_collider_mesh(w, id, 0, &m) == EDDY_OK, "%s", eddy_world_error(w));
+	CHECK(m.vertex_count > 100);
+	double worst = 0, dot_min = 1;
+	for (size_t v = 0; v < m.vertex_count; ++v) {
+		const float *p = m.xyz + 3 * v, *n = m.normal + 3 * v;
+		const double d[3] = {p[0] - 0.5, p[1] - 0.5, p[2] - 0.5};
+		const double r = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+		worst = fmax(worst, fabs(r - 0.2));
+		dot_min = fmin(dot_min, (d[0] * n[0] + d[1] * n[1] + d[2] * n[2]) / r);
+	}
+	printf("    collider mesh: %zu vertices, %zu triangles, |r - R| <= %.4f m, min n.r %.3f\n", m.vertex_count,
+	       m.triangle_count, worst, dot_min);
+	CHECKF(worst < 1.0 / 64, "a vertex %.4f m off the sphere", worst);
+	CHECK(dot_min > 0.9);
+	eddy_mesh_free(&m);
+
+	eddy_render_surface_def r = render_def("mesh_collider", 0.02f);
+	CHECKF(eddy_system_valid(w, eddy_add_render_surface(w, &r)), "%s", eddy_world_error(w));
+	eddy_render_points_def pd = eddy_default_render_points_def();
+	pd.width = 160, pd.height = 120, pd.supersample = 1;
+	pd.eye = r.eye, pd.target = r.target;
+	pd.background = (eddy_vec3){0, 0, 0};
+	pd.outline_domain = false;
+	char dir[400];
+	out_path(dir, sizeof dir, "mesh_collider_points");
+	snprintf(pd.path, sizeof pd.path, "%s_%%04d.png", dir);
+	CHECKF(eddy_system_valid(w, eddy_add_render_points(w, &pd)), "%s", eddy_world_error(w));
+	CHECKF(eddy_world_step_frame(w) == EDDY_OK, "%s", eddy_world_error(w));
+	const long lit = lit_pixels(&r, 1);
+	CHECKF(lit > 60, "the mesh collider lights %ld pixels", lit);
+	eddy_render_surface_def as_points = r;
+	memcpy(as_points.path, pd.path, sizeof pd.path);
+	const long outline = lit_pixels(&as_points, 1);
+	CHECKF(outline > 40, "the mesh collider's outline lights %ld pixels", outline);
+	eddy_destroy_world(w);
+}
+
 void suite_surface(void)
 {
 	RUN(block_mesh_is_closed_and_holds_the_particles_volume);
 	RUN(sphere_mesh_has_the_spheres_radius);
 	RUN(mesh_files_parse_back);
 	RUN(render_surface_draws_the_liquid);
+	RUN(surface_meshed_once_per_frame);
+	RUN(mesh_collider_is_drawn);
 	RUN(bad_defs_are_refused);
 	RUN(scene_writes_meshes_and_images);
 }
