@@ -101,6 +101,9 @@ void eddy_camera_make(const eddy_view_def *d, const eddy_world_def *wd, eddy_cam
 void eddy_key_light(float light[3]);
 /* The 12 edges of a box, 6 floats each. */
 void eddy_box_edges(float *out, eddy_vec3 lo, eddy_vec3 hi);
+/* Turns n points (3 floats each) by a rotation vector in degrees about pivot
+ * (a collider shape's rotation); a direction turns with pivot 0. */
+void eddy_rotate_points(float *xyz, size_t n, eddy_vec3 rotation, eddy_vec3 pivot);
 /* Box-filters RGBA rows (bottom row first, W*s by H*s) down to RGB (top row
  * first, W by H), output rows [y0, y1) only. */
 void eddy_downsample_rows(const uint8_t *rgba, int W, int H, int s, uint8_t *out, int y0, int y1);

@@ -142,8 +142,11 @@ static long build_outlines(line_buf *b, const eddy_render_points_def *d, eddy_wo
 			continue; /* not a collider */
 		if (!reserve_lines(b, n + CIRCLE_SEGMENTS))
 			return -1;
-		if (shape.kind == EDDY_COLLIDER_BOX)
-			eddy_box_edges(b->xyz + 6 * n, shape.a, shape.b), n += 12;
+		if (shape.kind == EDDY_COLLIDER_BOX) {
+			eddy_box_edges(b->xyz + 6 * n, shape.a, shape.b);
+			eddy_rotate_points(b->xyz + 6 * n, 24, shape.rotation, shape.pivot);
+			n += 12;
+		}
 		else if (shape.kind == EDDY_COLLIDER_SPHERE)
 			n += (size_t)sphere_silhouette(b->xyz + 6 * n, shape.a, shape.radius, cam,
 			                               d->projection == EDDY_PROJECTION_ORTHOGRAPHIC);

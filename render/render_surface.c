@@ -191,8 +191,12 @@ static long build_colliders(surface_renderer *r, eddy_world *w)
 		const size_t sv = (SPHERE_RINGS + 1) * (SPHERE_SEGS + 1), st = 2 * SPHERE_RINGS * SPHERE_SEGS;
 		if (!reserve_colliders(r, nv + sv, nt + st))
 			return -1;
-		if (shape.kind == EDDY_COLLIDER_BOX)
+		if (shape.kind == EDDY_COLLIDER_BOX) {
+			const size_t first = nv;
 			box_mesh(r, &nv, &nt, shape.a, shape.b, sign);
+			eddy_rotate_points(r->cxyz + 3 * first, nv - first, shape.rotation, shape.pivot);
+			eddy_rotate_points(r->cnormal + 3 * first, nv - first, shape.rotation, (eddy_vec3){0, 0, 0});
+		}
 		else if (shape.kind == EDDY_COLLIDER_SPHERE)
 			sphere_mesh(r, &nv, &nt, shape.a, shape.radius, sign);
 		/* planes are unbounded: not drawn */

@@ -155,6 +155,26 @@ void eddy_box_edges(float *out, eddy_vec3 lo, eddy_vec3 hi)
 		}
 }
 
+void eddy_rotate_points(float *xyz, size_t n, eddy_vec3 rotation, eddy_vec3 pivot)
+{
+	/* Rodrigues: R v = v cos t + (k x v) sin t + k (k . v)(1 - cos t), with k
+	 * the unit axis and t the angle (the rotation vector is in degrees) */
+	const double len = sqrt((double)rotation.x * rotation.x + (double)rotation.y * rotation.y +
+	                        (double)rotation.z * rotation.z);
+	if (!(len > 0))
+		return;
+	const double kx = rotation.x / len, ky = rotation.y / len, kz = rotation.z / len;
+	const double t = len * 3.14159265358979323846 / 180, c = cos(t), sn = sin(t);
+	for (size_t i = 0; i < n; ++i) {
+		float *p = xyz + 3 * i;
+		const double vx = p[0] - pivot.x, vy = p[1] - pivot.y, vz = p[2] - pivot.z;
+		const double kv = kx * vx + ky * vy + kz * vz;
+		p[0] = (float)(pivot.x + vx * c + (ky * vz - kz * vy) * sn + kx * kv * (1 - c));
+		p[1] = (float)(pivot.y + vy * c + (kz * vx - kx * vz) * sn + ky * kv * (1 - c));
+		p[2] = (float)(pivot.z + vz * c + (kx * vy - ky * vx) * sn + kz * kv * (1 - c));
+	}
+}
+
 void eddy_downsample_rows(const uint8_t *rgba, int W, int H, int s, uint8_t *out, int y0, int y1)
 {
 	const int sw = W * s, sh = H * s;

@@ -1462,12 +1462,37 @@ done:
 	eddy_gl_destroy(gl);
 }
 
+/* A collider's rotation (degrees about an axis through its pivot) turns its
+ * drawn outline and mesh: 90 degrees about z takes pivot + (1, 0, 0) to
+ * pivot + (0, 1, 0), 120 degrees about (1, 1, 1) cycles the axes, and a zero
+ * rotation leaves points where they are. */
+static void collider_rotation_turns_drawn_points(void)
+{
+	float p[9] = {2, 1, 1, 1, 0, 0, 0, 1, 0};
+	eddy_rotate_points(p, 1, (eddy_vec3){0, 0, 90}, (eddy_vec3){1, 1, 1});
+	CHECK_NEAR(p[0], 1, 1e-6);
+	CHECK_NEAR(p[1], 2, 1e-6);
+	CHECK_NEAR(p[2], 1, 1e-6);
+	const float d = 120.0f / sqrtf(3.0f);
+	eddy_rotate_points(p + 3, 2, (eddy_vec3){d, d, d}, (eddy_vec3){0, 0, 0});
+	CHECK_NEAR(p[3], 0, 1e-6);
+	CHECK_NEAR(p[4], 1, 1e-6);
+	CHECK_NEAR(p[5], 0, 1e-6);
+	CHECK_NEAR(p[6], 0, 1e-6);
+	CHECK_NEAR(p[7], 0, 1e-6);
+	CHECK_NEAR(p[8], 1, 1e-6);
+	float q[3] = {0.25f, -3, 7};
+	eddy_rotate_points(q, 1, (eddy_vec3){0, 0, 0}, (eddy_vec3){5, 5, 5});
+	CHECK(q[0] == 0.25f && q[1] == -3 && q[2] == 7);
+}
+
 void suite_render(void)
 {
 	char dir[512];
 	snprintf(dir, sizeof dir, "%s/t_render", test_build_dir());
 	mkdir(dir, 0777);
 	RUN(splat_matches_gl);
+	RUN(collider_rotation_turns_drawn_points);
 	RUN(particle_lands_on_its_projected_pixel);
 	RUN(nearer_spheres_occlude_farther_ones);
 	RUN(colour_map_is_applied);
