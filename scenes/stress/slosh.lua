@@ -19,7 +19,7 @@
 -- frame's eta differs from A: the initial surface is a staircase of whole
 -- particle layers.
 -- Per frame: eta (m), and as they become known, omega (rad/s, from eta's zero
--- crossings, half a period apart), period_err = T / T_theory - 1, zeta (at
+-- crossings, half a period apart, from the second crossing on), period_err = T / T_theory - 1, zeta (at
 -- the frame after each peak: the damping ratio from the log decrement
 -- delta = ln(|a_i-1| / |a_i|) of the last two peaks of |eta|, half a period
 -- apart, zeta = delta / sqrt(pi^2 + delta^2); their mean over a run is the
@@ -135,8 +135,12 @@ world:on_frame(function(w)
 		seg = {}
 	end
 	if seg then seg[#seg + 1] = { t, eta } end
+	-- the period from the second crossing on once there are three: the
+	-- first quarter cycle starts from a staircase surface at rest and
+	-- carries the higher modes' start-up, which shifts the first crossing
 	if #crossings >= 2 then
-		out.omega = math.pi * (#crossings - 1) / (crossings[#crossings] - crossings[1])
+		local c0 = #crossings >= 3 and 2 or 1
+		out.omega = math.pi * (#crossings - c0) / (crossings[#crossings] - crossings[c0])
 		out.period_err = omega_ref / out.omega - 1
 	end
 	if #peaks >= 2 then
