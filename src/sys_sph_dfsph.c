@@ -4,8 +4,9 @@
  * pressure is solved for each step so the fluid keeps its rest density, and
  * the time step is limited by the flow speed, not by a speed of sound.
  *
- * Reads: x y z vx vy vz density ax ay az. Writes: pressure ax ay az
- * (accumulated). Runs after the non-pressure forces (gravity, sph_viscosity,
+ * Reads: x y z vx vy vz density ax ay az, and with the divergence solver
+ * dfsph_k dfsph_kd (state columns it declares: each solve's k of the last
+ * step). Writes: pressure ax ay az (accumulated), dfsph_k dfsph_kd. Runs after the non-pressure forces (gravity, sph_viscosity,
  * sph_surface_tension) and before integrate, whose v += dt a then gives the
  * corrected velocity. It uses sph_density's neighbour lists.
  *
@@ -32,24 +33,57 @@
  * (up, away from a floor),
  * known before the solve and added to the forces; without it the fluid
  * beside the walls lacks support and circulates.
- * A change k_i alone moves Drho_i/Dt by -dt k_i D_i, with
- *   D_i = (S_i + 2 B_i) . (S_i + B_i) + sum_j |G_ij|^2,   S_i = sum_j G_ij
- * (the paper's rho_i / alpha_i with the mirrored wall), so each Jacobi sweep
- * sets, from the current predicted velocities v*,
- *   constant density:  k_i = max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
- *   divergence-free:   k_i = max(Drho_i/Dt, 0) / (dt D_i)
- * and moves v*_i by dt a_i^p(k). The divergence solver runs first, on the
- * velocity at the start of the step (positions are new, velocities not yet
- * consistent with them); then v* = v + dt (a + h) and the constant-density
- * solver runs until the mean predicted compression max(rho*_i - rho0, 0) / rho0
- * is at most max_density_error (at least one sweep). Only
- * compression is corrected: the free surface has too few neighbours to reach
- * rho0 and must not be pulled together. (Tried and dropped: the paper's warm
- * start from last step's k, which with sweeps that only add pressure pushed
- * the free surface apart (mean density error 2% -> 4.5% in the pour), and a
- * projected Jacobi that could take pressure back, which diverged.)
+ * Each step first sets v* = v + dt (a + h), the velocity the non-pressure
+ * forces give, then solves for k on it, by sweeps that each set k from the
+ * current v* and move v* by dt a^p of the change.
+ *
+ * With the divergence solver (the default) there are two solves, the
+ * paper's pair (Alg. 1) folded into one step, both on the symmetric
+ * operator, warm-started and projected:
+ *   velocity (divergence-free) solve:  Drho_i/Dt(v*) = 0
+ *   density solve:                     rho_i + dt Drho_i/Dt(v*) = rho0
+ * In both the rate counts the wall as the force does,
+ *   R_i(v) = sum_j (v_i - v_j) . G_ij + 2 v_i . B_i,
+ * so that a change of k moves the predicted density by -(A k)_i with
+ * A = dt^2 grad^T grad symmetric positive semi-definite, of diagonal
+ * dt^2 D'_i,   D'_i = |S_i + 2 B_i|^2 + sum_j |G_ij|^2,   S_i = sum_j G_ij.
+ * (The true wall rate is v_i . B_i: counted twice, the solve over-predicts
+ * compression at a wall and is only stiffer there; at rest the constraint
+ * is the same. With the true rate, Jacobi sweeps run to a tight tolerance
+ * diverged in a 40-layer column.) Each sweep is a projected, relaxed Jacobi
+ * step on the residual res_i (Drho_i/Dt, or the predicted rho_i - rho0):
+ *   k_i <- max(k_i + omega res_i / (dt^n D'_i), 0),   omega = DFSPH_OMEGA,
+ * n = 1 for the velocity solve, 2 for the density one (Ihmsen et al.'s
+ * relaxed Jacobi, with the projection of unilateral pressure: a particle
+ * may lose pressure it no longer needs but never goes below 0, so the free
+ * surface is not pulled together). Each solve starts from its own k of the
+ * last step (the state columns DFSPH_K_COLUMN and DFSPH_KD_COLUMN, which
+ * move with the particles and are checkpointed), applied as one
+ * correction: the velocity solve's k is the pressure that carries the
+ * weight of the water above (it balances gravity over a step whatever dt
+ * is), the density solve's the one that holds the compression the velocity
+ * solve leaves. Cold, each step had to rebuild the hydrostatic pressure from
+ * the compression it allowed, which Jacobi sweeps cannot do through deep
+ * water (their error in the column-wide mode falls by about 1 - c / N^2 a
+ * sweep for N layers): a 40-layer column rang and threw water to the lid.
+ * A sweep's error is |res_i| where k_i > 0 (too much pressure counts, as
+ * too little) and max(res_i, 0) where k_i = 0, averaged over all particles:
+ * the velocity solve stops once that times dt / rho0 is at most
+ * max_divergence_error (the density change per step it leaves: it must be
+ * well below max_density_error, or the water compresses by it every step),
+ * the density solve once it is at most max_density_error (at least one
+ * sweep each).
+ *
+ * Without the divergence solver the density solve runs alone, cold, with
+ * the paper's sweeps that only add pressure, on the true wall rate and
+ * D_i = (S_i + 2 B_i) . (S_i + B_i) + sum_j |G_ij|^2:
+ *   k_i += max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
+ * until the mean predicted compression is at most max_density_error. It is
+ * the cheaper choice for shallow, splashing scenes (scenes/pour.lua), and
+ * does not hold still water much deeper than 10 layers (at 40 it blows up).
+ *
  * The result, a^p = (v* - (v + dt a)) / dt, is added to ax ay az. The pressure
- * column gets p_i = M k_i rho_i^2, k_i summed over both solvers, M the
+ * column gets p_i = M k_i rho_i^2, k_i summed over both solves, M the
  * force's lattice moment (1 / grad_cal, see sph_pressure): the force of a
  * linear field is M grad p / rho, so this is the pressure in Pa (M = 0.947
  * at h = 2 spacings).
@@ -67,14 +101,19 @@
  *
  * Published per frame: solver = "dfsph", iterations (mean constant-density
  * sweeps per step), residual (largest final mean density error of a step),
- * divergence_iterations (mean), unconverged (steps that hit max_iterations).
- * A step whose final mean density error is above 5% fails: the time step is
- * far too long for the solver.
+ * residual_max (largest final error of one particle, / rho0),
+ * divergence_iterations (mean), unconverged (steps in which a solve hit its
+ * cap above its tolerance). A step whose final mean density error is above
+ * DFSPH_FAIL_ERROR, or one particle's above DFSPH_FAIL_PARTICLE, fails
+ * naming the step and the particle: the solve has lost the fluid (a time
+ * step far too long, or water deeper than the solver holds).
  * Time-step limits (the world multiplies them by its CFL number): velocity,
  * dt <= h / max|v|; gravity, dt <= 0.18 sqrt(h / |g|) (see below). There is
  * no acoustic limit: that is sph_pressure's, which a scene with this lacks.
  * Source: Bender & Koschier, "Divergence-free smoothed particle hydrodynamics",
- * SCA 2015 (eqs. 8-9, 12, Alg. 2-3); Akinci et al., "Versatile rigid-fluid
+ * SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and "Divergence-free SPH
+ * for incompressible and viscous fluids", TVCG 2017; Ihmsen et al.,
+ * "Implicit incompressible SPH", TVCG 2014 (relaxed Jacobi); Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012; Adami, Hu & Adams, "A
  * generalized wall boundary condition for SPH", JCP 2012 (eq. 27). */
 #include "sph.h"
@@ -88,8 +127,12 @@ typedef struct sph_dfsph {
 	/* statistics of the current frame */
 	int frame;
 	int64_t steps, sweeps, div_sweeps, unconverged;
-	double residual;
+	double residual, worst;
 	bool avx2; /* the passes' AVX2 path (else SSE, the same bits) */
+	int kcol;  /* the state column DFSPH_K_COLUMN */
+	int kdcol; /* the state column DFSPH_KD_COLUMN */
+	int capped; /* consecutive steps whose velocity solve stopped at its cap
+	             * above DFSPH_FAIL_CAPPED_ERROR times its tolerance */
 } sph_dfsph;
 
 static const int dfsph_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, COL_AX, COL_AY, COL_AZ};
@@ -106,9 +149,33 @@ static const int no_hint_writes[] = {-1};
 /* above this final mean density error a step fails instead of going on */
 #define DFSPH_FAIL_ERROR 0.05
 
+/* above this predicted density error at one particle a step fails: the
+ * particles overlap (the pour's largest is 0.42) */
+#define DFSPH_FAIL_PARTICLE 1.0
+
+/* The velocity solve warm-starts, so a step stopped at its cap hands the
+ * rest on to the next (a 40-layer column at rest: once, in its first step,
+ * at 1.8 times the tolerance). Stopped at the cap above DFSPH_FAIL_CAPPED_ERROR
+ * times the tolerance in DFSPH_FAIL_CAPPED steps in a row, it is not
+ * catching up, and the step fails (an 80-layer column: steps 0-2 at 2.5-3.6
+ * times, before it threw water to the lid at step 26). */
+#define DFSPH_FAIL_CAPPED_ERROR 2.0
+#define DFSPH_FAIL_CAPPED 3
+
 /* constant-density sweeps a step makes at least (the paper: 2; 1 gives the
  * same errors in the pour, tank and drop and saves 10% of the solve) */
 #define DFSPH_MIN_SWEEPS 1
+
+/* the relaxation of both solves' projected Jacobi sweeps (with the divergence
+ * solver): the largest eigenvalue of D'^-1 A is near 4 here (full
+ * neighbourhoods plus the doubled wall), so sweeps with omega above 0.5 can
+ * grow; a 40-layer column diverged at 0.66 and at 0.8 */
+#define DFSPH_OMEGA 0.5f
+
+/* the particle state column with each particle's k of the velocity solve,
+ * its warm start in the next step */
+#define DFSPH_K_COLUMN "dfsph_k"
+#define DFSPH_KD_COLUMN "dfsph_kd"
 
 eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 {
@@ -116,8 +183,8 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	d.max_density_error = 0.005f;
 	d.max_iterations = 100;
 	d.divergence_solver = true;
-	d.max_divergence_error = 0.01f;
-	d.max_divergence_iterations = 100;
+	d.max_divergence_error = 5e-5f;
+	d.max_divergence_iterations = 1000;
 	return d;
 }
 
@@ -184,12 +251,15 @@ typedef struct dfsph_work {
 	size_t *goff;   /* particle i's groups are goff[i] .. goff[i + 1] */
 	dfsph_group *g;
 	dfsph_f4 *b;    /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
+	float *dsym;    /* 1 / D'_i, the diagonal of the symmetric operator (0 likewise) */
 	dfsph_f4 *v;    /* v*_i (w unused: a neighbour's velocity is one 16-byte load) */
 	dfsph_f4 *h;    /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
 	float *k;       /* the k_i a correction applies, apart from v: correct
 	                 * gathers it from 4 bytes a particle (22 KB in the pour,
 	                 * within L1) */
-	float *ksum;    /* the sum of k_i over the sweeps */
+	float *ksum;    /* the sum of k_i over the sweeps: the current solve's k
+	                 * (with its warm start) */
+	float *kp;      /* the pressure's k_i: the sum over both solves */
 	float *err;     /* per particle: the error the sweep measured */
 	const grad_args *ga;
 	uint32_t *owner; /* the particle of each group (the AVX2 gradient pass) */
@@ -200,6 +270,8 @@ typedef struct dfsph_work {
 typedef struct sweep_args {
 	float dt, inv_dt, inv_dt2, rho0;
 	bool divergence; /* the divergence-free solve, else the constant-density one */
+	bool projected;  /* the velocity solve: projected relaxed Jacobi on the
+	                  * symmetric operator (else sweeps that add pressure) */
 } sweep_args;
 
 /* The passes go in blocks of particles: first the sums over the groups
@@ -609,6 +681,11 @@ static void grads_finish(dfsph_work *wk, long i0, long cnt, const float *t)
 		 * the acceleration counts twice (pressure mirroring) */
 		const float d = (sx + 2 * bx) * (sx + bx) + (sy + 2 * by) * (sy + by) + (sz + 2 * bz) * (sz + bz) + s2;
 		wk->b[i] = (dfsph_f4){bx, by, bz, d > a.dmin ? 1.0f / d : 0.0f};
+		if (wk->dsym) { /* the symmetric operator's: |S + 2B|^2 + sum |G|^2 */
+			const float ds =
+				(sx + 2 * bx) * (sx + 2 * bx) + (sy + 2 * by) * (sy + 2 * by) + (sz + 2 * bz) * (sz + 2 * bz) + s2;
+			wk->dsym[i] = ds > a.dmin ? 1.0f / ds : 0.0f;
+		}
 	}
 }
 
@@ -631,7 +708,7 @@ static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, 
 	long q = 0;
 #ifdef __SSE2__
 	const __m128 vdt = _mm_set1_ps(a->dt), vrho0 = _mm_set1_ps(a->rho0), zero = _mm_setzero_ps(),
-	             vinv = _mm_set1_ps(a->divergence ? a->inv_dt : a->inv_dt2);
+	             vinv = _mm_set1_ps(a->divergence ? a->inv_dt : a->inv_dt2), vom = _mm_set1_ps(DFSPH_OMEGA);
 	for (; q + 4 <= cnt; q += 4) {
 		const long i = i0 + q;
 		__m128 s0 = _mm_loadu_ps(t + RATE_T * q), s1 = _mm_loadu_ps(t + RATE_T * (q + 1)),
@@ -640,16 +717,37 @@ static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, 
 		__m128 vx, vy, vz, vw, bx, by, bz, bw;
 		load4(wk->v + i, &vx, &vy, &vz, &vw);
 		load4(wk->b + i, &bx, &by, &bz, &bw);
-		__m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)),
-		                      _mm_add_ps(_mm_add_ps(_mm_mul_ps(vx, bx), _mm_mul_ps(vy, by)), _mm_mul_ps(vz, bz)));
-		if (bdiv) /* moving walls: (v_i - v_b) . grad, the v_b part (sph.h) */
-			r = _mm_sub_ps(r, _mm_loadu_ps(bdiv + i));
+		/* the wall's part (v_i - v_b) . B_i: bdiv holds the moving walls'
+		 * v_b part (sph.h), NULL while no wall moves */
+		__m128 vb = _mm_add_ps(_mm_add_ps(_mm_mul_ps(vx, bx), _mm_mul_ps(vy, by)), _mm_mul_ps(vz, bz));
+		if (bdiv)
+			vb = _mm_sub_ps(vb, _mm_loadu_ps(bdiv + i));
 		__m128 e;
-		if (a->divergence) {
+		if (a->projected) {
+			/* the wall's rate counted twice, as its force: the symmetric operator */
+			const __m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)), _mm_add_ps(vb, vb));
+			const __m128 res =
+				a->divergence ? r
+				              : _mm_sub_ps(_mm_add_ps(_mm_setr_ps(wk->h[i].w, wk->h[i + 1].w, wk->h[i + 2].w, wk->h[i + 3].w),
+				                                      _mm_mul_ps(vdt, r)),
+				                           vrho0);
+			/* k_i = max(k_i + omega res_i / (dt^n D'_i), 0); correct applies the change */
+			const __m128 ks = _mm_loadu_ps(wk->ksum + i);
+			const __m128 kn = _mm_max_ps(
+				_mm_add_ps(ks, _mm_mul_ps(_mm_mul_ps(_mm_mul_ps(res, vom), vinv), _mm_loadu_ps(wk->dsym + i))), zero);
+			_mm_storeu_ps(wk->k + i, _mm_sub_ps(kn, ks));
+			/* |res| under pressure, the compression max(res, 0) without */
+			const __m128 on = _mm_cmpgt_ps(kn, zero);
+			e = _mm_or_ps(_mm_and_ps(on, _mm_andnot_ps(_mm_set1_ps(-0.0f), res)), _mm_andnot_ps(on, _mm_max_ps(res, zero)));
+			if (a->divergence)
+				e = _mm_mul_ps(e, vdt);
+		} else if (a->divergence) {
+			const __m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)), vb);
 			const __m128 d = _mm_max_ps(r, zero);
 			e = _mm_mul_ps(d, vdt);
 			_mm_storeu_ps(wk->k + i, _mm_mul_ps(_mm_mul_ps(d, vinv), bw));
 		} else {
+			const __m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)), vb);
 			const __m128 rho = _mm_setr_ps(wk->h[i].w, wk->h[i + 1].w, wk->h[i + 2].w, wk->h[i + 3].w);
 			e = _mm_max_ps(_mm_sub_ps(_mm_add_ps(rho, _mm_mul_ps(vdt, r)), vrho0), zero);
 			_mm_storeu_ps(wk->k + i, _mm_mul_ps(_mm_mul_ps(e, vinv), bw));
@@ -660,7 +758,18 @@ static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, 
 	for (; q < cnt; ++q) {
 		const long i = i0 + q;
 		const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
-		const float r = sph_sum4(t + RATE_T * q) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z) - (bdiv ? bdiv[i] : 0.0f);
+		const float vb = (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z) - (bdiv ? bdiv[i] : 0.0f);
+		if (a->projected) {
+			const float r = sph_sum4(t + RATE_T * q) + (vb + vb);
+			const float res = a->divergence ? r : (wk->h[i].w + a->dt * r) - a->rho0;
+			const float ks = wk->ksum[i];
+			const float kn = positive(ks + ((res * DFSPH_OMEGA) * (a->divergence ? a->inv_dt : a->inv_dt2)) * wk->dsym[i]);
+			wk->k[i] = kn - ks;
+			const float e = kn > 0 ? fabsf(res) : positive(res);
+			wk->err[i] = a->divergence ? e * a->dt : e;
+			continue;
+		}
+		const float r = sph_sum4(t + RATE_T * q) + vb;
 		if (a->divergence) {
 			const float d = positive(r);
 			wk->err[i] = d * a->dt;
@@ -755,15 +864,16 @@ static double mean_of(const float *e, long n)
 	return n > 0 ? s / (double)n : 0;
 }
 
-/* Divergence-free solve: sweeps until mean max(Drho/Dt, 0) dt / rho0 <= tol. */
-static int divergence_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float dt, int threads)
+/* The velocity solve (divergence-free, on v*): projected sweeps until the
+ * mean error (see rate_finish) times dt / rho0 is at most tol. */
+static int divergence_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float dt, int threads, double *residual)
 {
-	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true};
+	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true};
 	int it = 0;
 	for (;;) {
 		pass(wk, PASS_RATE, &a, threads);
-		const double e = mean_of(wk->err, wk->n) / rho0;
-		if ((it >= 1 && e <= sd->def.max_divergence_error) || it >= sd->def.max_divergence_iterations)
+		*residual = mean_of(wk->err, wk->n) / rho0;
+		if ((it >= 1 && *residual <= sd->def.max_divergence_error) || it >= sd->def.max_divergence_iterations)
 			break;
 		pass(wk, PASS_CORRECT, &a, threads);
 		++it;
@@ -774,7 +884,7 @@ static int divergence_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, flo
 /* Constant-density solve: sweeps until mean max(rho* - rho0, 0) / rho0 <= tol. */
 static int density_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float dt, int threads, double *residual)
 {
-	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, false};
+	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, false, sd->def.divergence_solver};
 	int it = 0;
 	for (;;) {
 		pass(wk, PASS_RATE, &a, threads);
@@ -808,7 +918,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	if (sd->frame != w->frame) {
 		sd->frame = w->frame;
 		sd->steps = sd->sweeps = sd->div_sweeps = sd->unconverged = 0;
-		sd->residual = 0;
+		sd->residual = sd->worst = 0;
 	}
 	const sph_neighbors *nb = &sh->nb;
 	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
@@ -846,7 +956,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		wk.goff[i + 1] = wk.goff[i] + (nb->count[i] + 7) / 8;
 	wk.g = eddy__arena_alloc(&w->arena, (wk.goff[n] ? wk.goff[n] : 1) * sizeof *wk.g);
 	wk.owner = eddy__arena_alloc(&w->arena, (wk.goff[n] ? wk.goff[n] : 1) * sizeof *wk.owner);
-	dfsph_f4 *block = eddy__arena_alloc(&w->arena, 3 * un * sizeof(dfsph_f4) + 3 * un * sizeof(float));
+	dfsph_f4 *block = eddy__arena_alloc(&w->arena, 3 * un * sizeof(dfsph_f4) + 5 * un * sizeof(float));
 	if (!wk.g || !wk.owner || !block)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
 	wk.b = block;
@@ -855,6 +965,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	wk.k = (float *)(wk.h + un);
 	wk.ksum = wk.k + un;
 	wk.err = wk.ksum + un;
+	wk.kp = wk.err + un;
+	wk.dsym = sd->def.divergence_solver ? wk.kp + un : NULL;
 	for (long i = 0; i < n; ++i)
 		for (size_t gi = wk.goff[i]; gi < wk.goff[i + 1]; ++gi)
 			wk.owner[gi] = (uint32_t)i;
@@ -868,18 +980,61 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	pass(&wk, PASS_GRADIENTS, NULL, ctx->threads);
 	memset(wk.ksum, 0, un * sizeof *wk.ksum);
 
+	/* v* = v + dt (a + h) */
 	for (long i = 0; i < n; ++i)
-		wk.v[i] = (dfsph_f4){vx[i], vy[i], vz[i], 0};
-	const int div_it = sd->def.divergence_solver ? divergence_solve(&wk, sd, rho0, dt, ctx->threads) : 0;
-	/* v* = v (divergence-free) + dt (a + h) */
-	for (long i = 0; i < n; ++i) {
-		wk.v[i].x += dt * (ax[i] + wk.h[i].x);
-		wk.v[i].y += dt * (ay[i] + wk.h[i].y);
-		wk.v[i].z += dt * (az[i] + wk.h[i].z);
+		wk.v[i] = (dfsph_f4){vx[i] + dt * (ax[i] + wk.h[i].x), vy[i] + dt * (ay[i] + wk.h[i].y),
+		                     vz[i] + dt * (az[i] + wk.h[i].z), 0};
+	int div_it = 0;
+	double div_residual = 0;
+	if (sd->def.divergence_solver) {
+		/* the velocity solve, from last step's k (a correction with it) */
+		float *kcol = eddy__col(w, sd->kcol);
+		for (long i = 0; i < n; ++i)
+			wk.k[i] = kcol[i] > 0 ? kcol[i] : 0.0f;
+		const sweep_args wa = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true};
+		pass(&wk, PASS_CORRECT, &wa, ctx->threads);
+		div_it = divergence_solve(&wk, sd, rho0, dt, ctx->threads, &div_residual);
+		const bool capped = div_it >= sd->def.max_divergence_iterations &&
+		                    div_residual > DFSPH_FAIL_CAPPED_ERROR * sd->def.max_divergence_error;
+		sd->capped = capped ? sd->capped + 1 : 0;
+		if (sd->capped >= DFSPH_FAIL_CAPPED) {
+			long wi = 0;
+			for (long i = 0; i < n; ++i)
+				wi = wk.err[i] > wk.err[wi] ? i : wi;
+			return eddy__fail(w, EDDY_ERR_NUMERIC,
+			                  "%s: the velocity solve did not converge at step %lld: mean error %.3g after %d "
+			                  "iterations in %d steps in a row (max_divergence_error %g), worst at particle %ld "
+			                  "(%.3g); the water may be too deep for it: raise max_divergence_iterations or lower "
+			                  "the world's cfl",
+			                  s->label, (long long)ctx->step, div_residual, div_it, sd->capped,
+			                  (double)sd->def.max_divergence_error, wi, wk.err[wi] / rho0);
+		}
+		memcpy(kcol, wk.ksum, un * sizeof *kcol);
+		memcpy(wk.kp, wk.ksum, un * sizeof *wk.kp);
+		memset(wk.ksum, 0, un * sizeof *wk.ksum);
+	} else {
+		memset(wk.kp, 0, un * sizeof *wk.kp);
+	}
+	float *kdcol = sd->def.divergence_solver ? eddy__col(w, sd->kdcol) : NULL;
+	if (kdcol) {
+		/* the density solve, from last step's k likewise */
+		for (long i = 0; i < n; ++i)
+			wk.k[i] = kdcol[i] > 0 ? kdcol[i] : 0.0f;
+		const sweep_args wa = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, false, true};
+		pass(&wk, PASS_CORRECT, &wa, ctx->threads);
 	}
 
 	double residual = 0;
 	const int it = density_solve(&wk, sd, rho0, dt, ctx->threads, &residual);
+	/* the particle the solve left furthest off (the last sweep's errors) */
+	long worst = 0;
+	for (long i = 0; i < n; ++i) {
+		wk.kp[i] += wk.ksum[i];
+		worst = wk.err[i] > wk.err[worst] ? i : worst;
+	}
+	const double worst_err = wk.err[worst] / rho0;
+	if (kdcol)
+		memcpy(kdcol, wk.ksum, un * sizeof *kdcol);
 
 	/* a += (v* - (v + dt a)) / dt; p = k rho^2 */
 	const float inv_dt = 1.0f / dt;
@@ -890,7 +1045,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		ax[i] += ux;
 		ay[i] += uy;
 		az[i] += uz;
-		p[i] = wk.ksum[i] * wk.h[i].w * wk.h[i].w / sh->grad_cal;
+		p[i] = wk.kp[i] * wk.h[i].w * wk.h[i].w / sh->grad_cal;
 		if (bad < 0 && !(isfinite(ux) && isfinite(uy) && isfinite(uz) && isfinite(p[i])))
 			bad = i;
 	}
@@ -902,19 +1057,24 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	sd->steps++;
 	sd->sweeps += it;
 	sd->div_sweeps += div_it;
-	sd->unconverged += it >= sd->def.max_iterations && residual > sd->def.max_density_error;
+	sd->unconverged += (it >= sd->def.max_iterations && residual > sd->def.max_density_error) ||
+	                   (div_it >= sd->def.max_divergence_iterations && div_residual > sd->def.max_divergence_error);
 	sd->residual = residual > sd->residual ? residual : sd->residual;
+	sd->worst = worst_err > sd->worst ? worst_err : sd->worst;
 	eddy_world_publish_text(w, "solver", "dfsph");
 	eddy_world_publish(w, "iterations", (double)sd->sweeps / (double)sd->steps);
 	eddy_world_publish(w, "residual", sd->residual);
 	if (sd->def.divergence_solver)
 		eddy_world_publish(w, "divergence_iterations", (double)sd->div_sweeps / (double)sd->steps);
 	eddy_world_publish(w, "unconverged", (double)sd->unconverged);
-	if (!(residual <= DFSPH_FAIL_ERROR))
+	eddy_world_publish(w, "residual_max", sd->worst);
+	if (!(residual <= DFSPH_FAIL_ERROR) || !(worst_err <= DFSPH_FAIL_PARTICLE))
 		return eddy__fail(w, EDDY_ERR_NUMERIC,
 		                  "%s: did not converge at step %lld: mean density error %.3g after %d iterations "
-		                  "(max_density_error %g); lower the world's cfl or raise max_iterations",
-		                  s->label, (long long)ctx->step, residual, it, (double)sd->def.max_density_error);
+		                  "(max_density_error %g), particle %ld off by %.3g; lower the world's cfl or raise "
+		                  "max_iterations",
+		                  s->label, (long long)ctx->step, residual, it, (double)sd->def.max_density_error, worst,
+		                  worst_err);
 	return EDDY_OK;
 }
 
@@ -975,5 +1135,25 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 #ifdef SPH_AVX2
 	sd->avx2 = sph_use_avx2();
 #endif
-	return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, dfsph_reads, 10, dfsph_writes, 4);
+	if (!def->divergence_solver) /* the warm starts are the velocity solve's */
+		return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, dfsph_reads, 10, dfsph_writes, 4);
+	/* the warm starts' state columns (shared by the sph_dfsph systems of a
+	 * world: each writes its own fluid's rows) */
+	const char *names[2] = {DFSPH_K_COLUMN, DFSPH_KD_COLUMN};
+	int *cols[2] = {&sd->kcol, &sd->kdcol};
+	for (int c = 0; c < 2; ++c) {
+		*cols[c] = eddy_world_find_column(w, names[c]);
+		if (*cols[c] < 0)
+			*cols[c] = eddy_world_declare_column(w, names[c], EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "m^5/(kg s^2)");
+		if (*cols[c] < 0) {
+			free(sd);
+			return EDDY_NULL_SYSTEM;
+		}
+	}
+	int reads[12], writes[6];
+	memcpy(reads, dfsph_reads, sizeof dfsph_reads);
+	memcpy(writes, dfsph_writes, sizeof dfsph_writes);
+	reads[10] = writes[4] = sd->kcol;
+	reads[11] = writes[5] = sd->kdcol;
+	return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, reads, 12, writes, 6);
 }
