@@ -162,6 +162,17 @@ static const int no_hint_writes[] = {-1};
 #define DFSPH_FAIL_CAPPED_ERROR 2.0
 #define DFSPH_FAIL_CAPPED 3
 
+/* projected Jacobi sweeps the velocity solve makes after its conjugate
+ * gradients: they damp the particle-scale part of the error, which the
+ * Krylov solve leaves (with none, single particles at the surface of still
+ * water kept jittering at a few % of sqrt(g H)) */
+#define DFSPH_SMOOTH 2
+
+/* the depth (in kernel radii) up to which the velocity solve stops at its
+ * requested tolerance; deeper, the tolerance falls with the square of the
+ * depth (divergence_tolerance) */
+#define DFSPH_DEPTH_REF 5.0
+
 /* constant-density sweeps a step makes at least (the paper: 2; 1 gives the
  * same errors in the pour, tank and drop and saves 10% of the solve) */
 #define DFSPH_MIN_SWEEPS 1
@@ -272,7 +283,13 @@ typedef struct sweep_args {
 	bool divergence; /* the divergence-free solve, else the constant-density one */
 	bool projected;  /* the velocity solve: projected relaxed Jacobi on the
 	                  * symmetric operator (else sweeps that add pressure) */
+	int rate_only;   /* RATE_SIGNED or RATE_LINEAR: the rate pass only writes
+	                  * R_i(v) to err (the conjugate gradient's products) */
 } sweep_args;
+
+/* sweep_args.rate_only: R_i(v) with the moving walls' part (the residual),
+ * or without it (the linear operator's product) */
+enum { RATE_SWEEP = 0, RATE_SIGNED = 1, RATE_LINEAR = 2 };
 
 /* The passes go in blocks of particles: first the sums over the groups
  * (sums_fn), then the rest for the block. Finishing each particle right
@@ -705,6 +722,18 @@ static inline float positive(float e)
 static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, const float *t)
 {
 	const float *bdiv = wk->ga->nb->bdiv; /* NULL while no wall moves */
+	if (a->rate_only) {
+		/* R_i(v) = sum_j (v_i - v_j) . G_ij + 2 (v_i . B_i - bdiv_i), the wall
+		 * counted as in the projected sweeps */
+		for (long q = 0; q < cnt; ++q) {
+			const long i = i0 + q;
+			const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
+			const float vb = (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z) -
+			                 (bdiv && a->rate_only == RATE_SIGNED ? bdiv[i] : 0.0f);
+			wk->err[i] = sph_sum4(t + RATE_T * q) + (vb + vb);
+		}
+		return;
+	}
 	long q = 0;
 #ifdef __SSE2__
 	const __m128 vdt = _mm_set1_ps(a->dt), vrho0 = _mm_set1_ps(a->rho0), zero = _mm_setzero_ps(),
@@ -864,32 +893,164 @@ static double mean_of(const float *e, long n)
 	return n > 0 ? s / (double)n : 0;
 }
 
+/* The conjugate gradient's vectors (see divergence_cg). */
+typedef struct dfsph_cg {
+	dfsph_f4 *u;    /* the velocity change of a direction: -dt grad p */
+	float *p;       /* the search direction (a change of k) */
+	float *r;       /* the residual on the active set */
+	float *mask;    /* 1 on the active set, else 0 */
+	float *scratch; /* the correct pass's sum of k, not kept */
+} dfsph_cg;
+
+/* The velocity solve's bulk: Jacobi-preconditioned conjugate gradients
+ * (Hestenes & Stiefel 1952; Saad, "Iterative methods for sparse linear
+ * systems", 2003, Alg. 9.1) on A k = R(v*), A = dt grad^T grad the
+ * symmetric operator of the projected sweeps, restricted to the particles
+ * that hold pressure (k_i > 0 from the warm start) or are compressing
+ * (R_i > 0): there the unilateral constraint is an equality. Jacobi sweeps
+ * shrink the column-wide error mode of N layers by about 1 - c / N^2 a
+ * sweep, conjugate gradients by about 1 - c / N, so a deep column converges
+ * in a number of products that grows with the depth, not its square. A
+ * product A p is one correct pass onto a zero velocity (u = -dt grad p) and
+ * one rate pass of u. The iteration stops when the mean |r_i| dt / rho0 is
+ * at most max_divergence_error (the projected sweeps' measure) or when a
+ * direction has no positive curvature. The particles whose k ends below 0
+ * are then set to 0 (the projection), and the projected sweeps that follow
+ * settle what the fixed set got wrong: particles that left or entered it.
+ * Every sum is serial in row order: the same bits for any thread count. */
+static int divergence_cg(dfsph_work *wk, dfsph_cg *cg, float rho0, float dt, int threads, int cap, bool density,
+                         double tol, double *residual)
+{
+	const long n = wk->n;
+	const sweep_args as = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true, RATE_SIGNED};
+	const sweep_args al = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true, RATE_LINEAR};
+	const double scale = (double)dt / ((double)rho0 * (double)n);
+	pass(wk, PASS_RATE, &as, threads);
+	double rz = 0, esum = 0;
+	for (long i = 0; i < n; ++i) {
+		/* the density solve: the rate that brings rho_i to rho0 in a step */
+		const float res = density ? wk->err[i] + (wk->h[i].w - rho0) / dt : wk->err[i];
+		const bool on = wk->ksum[i] > 0 || res > 0;
+		cg->mask[i] = on ? 1.0f : 0.0f;
+		cg->r[i] = on ? res : 0.0f;
+		cg->p[i] = wk->dsym[i] * cg->r[i];
+		rz += (double)cg->r[i] * cg->p[i];
+		esum += fabsf(cg->r[i]);
+	}
+	*residual = esum * scale;
+	int it = 0;
+	dfsph_f4 *const v = wk->v;
+	float *const k = wk->k, *const ksum = wk->ksum;
+	while (*residual > tol && it < cap && rz > 0) {
+		/* err = R(u), u = -dt grad p: the passes read and write wk's arrays */
+		memset(cg->u, 0, (size_t)n * sizeof *cg->u);
+		wk->v = cg->u;
+		wk->k = cg->p;
+		wk->ksum = cg->scratch;
+		pass(wk, PASS_CORRECT, &as, threads);
+		pass(wk, PASS_RATE, &al, threads);
+		wk->v = v;
+		wk->k = k;
+		wk->ksum = ksum;
+		double pq = 0;
+		for (long i = 0; i < n; ++i)
+			pq -= (double)cg->p[i] * (cg->mask[i] * wk->err[i]);
+		if (!(pq > 0))
+			break;
+		const float alpha = (float)(rz / pq);
+		double rz1 = 0;
+		esum = 0;
+		for (long i = 0; i < n; ++i) {
+			v[i].x += alpha * cg->u[i].x;
+			v[i].y += alpha * cg->u[i].y;
+			v[i].z += alpha * cg->u[i].z;
+			ksum[i] += alpha * cg->p[i];
+			cg->r[i] += alpha * (cg->mask[i] * wk->err[i]);
+			rz1 += (double)cg->r[i] * (wk->dsym[i] * cg->r[i]);
+			esum += fabsf(cg->r[i]);
+		}
+		++it;
+		*residual = esum * scale;
+		const float beta = (float)(rz1 / rz);
+		rz = rz1;
+		for (long i = 0; i < n; ++i)
+			cg->p[i] = wk->dsym[i] * cg->r[i] + beta * cg->p[i];
+	}
+	/* the projection: k_i < 0 back to 0, as one correction */
+	bool neg = false;
+	for (long i = 0; i < n; ++i) {
+		k[i] = ksum[i] < 0 ? -ksum[i] : 0.0f;
+		neg |= ksum[i] < 0;
+	}
+	if (neg)
+		pass(wk, PASS_CORRECT, &as, threads);
+	return it;
+}
+
+/* The velocity solve's stopping tolerance in water `depth` deep (m, the
+ * hydrostatic head of the last step's largest pressure) for a kernel radius
+ * h: the requested one down to DFSPH_DEPTH_REF h, and below that scaled by
+ * (DFSPH_DEPTH_REF h / depth)^2. The operator's smallest eigenvalue, that of
+ * the column-wide mode, falls relative to its diagonal as (h / depth)^2, so
+ * a mean residual eps leaves that mode an error of eps (depth / h)^2: with
+ * the tolerance scaled so, the pressure that carries the column is held to
+ * the same fraction at any depth. */
+static double divergence_tolerance(double tol, float h, double depth)
+{
+	const double ref = DFSPH_DEPTH_REF * (double)h;
+	return depth > ref ? tol * (ref / depth) * (ref / depth) : tol;
+}
+
+/* The fluid's extent along gravity (m): the depth of water at rest, more
+ * (so the solve is stricter) while parts of it fly or splash; 0 without
+ * gravity. */
+static double fluid_depth(eddy_world *w, eddy_vec3 g)
+{
+	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
+	if (!(g1 > 0) || !x || !y || !z || w->n == 0)
+		return 0;
+	double lo = INFINITY, hi = -INFINITY;
+	for (size_t i = 0; i < w->n; ++i) {
+		const double e = ((double)g.x * x[i] + (double)g.y * y[i] + (double)g.z * z[i]) / g1;
+		lo = e < lo ? e : lo;
+		hi = e > hi ? e : hi;
+	}
+	return hi - lo;
+}
+
 /* The velocity solve (divergence-free, on v*): projected sweeps until the
  * mean error (see rate_finish) times dt / rho0 is at most tol. */
-static int divergence_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float dt, int threads, double *residual)
+static int divergence_solve(dfsph_work *wk, dfsph_cg *cg, const sph_dfsph *sd, float rho0, float dt, int threads,
+                            double tol, double *residual)
 {
-	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true};
-	int it = 0;
+	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true, RATE_SWEEP};
+	int it = 0, sweeps = 0;
 	for (;;) {
+		it += divergence_cg(wk, cg, rho0, dt, threads, sd->def.max_divergence_iterations - it, false, tol, residual);
 		pass(wk, PASS_RATE, &a, threads);
 		*residual = mean_of(wk->err, wk->n) / rho0;
-		if ((it >= 1 && *residual <= sd->def.max_divergence_error) || it >= sd->def.max_divergence_iterations)
+		if ((sweeps >= DFSPH_SMOOTH && *residual <= tol) || it >= sd->def.max_divergence_iterations)
 			break;
 		pass(wk, PASS_CORRECT, &a, threads);
 		++it;
+		++sweeps;
 	}
 	return it;
 }
 
 /* Constant-density solve: sweeps until mean max(rho* - rho0, 0) / rho0 <= tol. */
-static int density_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float dt, int threads, double *residual)
+static int density_solve(dfsph_work *wk, dfsph_cg *cg, const sph_dfsph *sd, float rho0, float dt, int threads,
+                         double tol, double *residual)
 {
-	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, false, sd->def.divergence_solver};
+	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, false, sd->def.divergence_solver, RATE_SWEEP};
 	int it = 0;
 	for (;;) {
+		if (cg)
+			it += divergence_cg(wk, cg, rho0, dt, threads, sd->def.max_iterations - it, true, tol, residual);
 		pass(wk, PASS_RATE, &a, threads);
 		*residual = mean_of(wk->err, wk->n) / rho0;
-		if ((it >= DFSPH_MIN_SWEEPS && *residual <= sd->def.max_density_error) || it >= sd->def.max_iterations)
+		if ((it >= DFSPH_MIN_SWEEPS && *residual <= tol) || it >= sd->def.max_iterations)
 			break;
 		pass(wk, PASS_CORRECT, &a, threads);
 		++it;
@@ -967,6 +1128,16 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	wk.err = wk.ksum + un;
 	wk.kp = wk.err + un;
 	wk.dsym = sd->def.divergence_solver ? wk.kp + un : NULL;
+	dfsph_cg cg = {NULL, NULL, NULL, NULL, NULL};
+	if (sd->def.divergence_solver) {
+		cg.u = eddy__arena_alloc(&w->arena, un * sizeof(dfsph_f4) + 4 * un * sizeof(float));
+		if (!cg.u)
+			return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
+		cg.p = (float *)(cg.u + un);
+		cg.r = cg.p + un;
+		cg.mask = cg.r + un;
+		cg.scratch = cg.mask + un;
+	}
 	for (long i = 0; i < n; ++i)
 		for (size_t gi = wk.goff[i]; gi < wk.goff[i + 1]; ++gi)
 			wk.owner[gi] = (uint32_t)i;
@@ -985,17 +1156,20 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		wk.v[i] = (dfsph_f4){vx[i] + dt * (ax[i] + wk.h[i].x), vy[i] + dt * (ay[i] + wk.h[i].y),
 		                     vz[i] + dt * (az[i] + wk.h[i].z), 0};
 	int div_it = 0;
-	double div_residual = 0;
+	double div_residual = 0, dtol = sd->def.max_divergence_error, ddtol = sd->def.max_density_error;
 	if (sd->def.divergence_solver) {
 		/* the velocity solve, from last step's k (a correction with it) */
 		float *kcol = eddy__col(w, sd->kcol);
 		for (long i = 0; i < n; ++i)
 			wk.k[i] = kcol[i] > 0 ? kcol[i] : 0.0f;
-		const sweep_args wa = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true};
+		const double depth = fluid_depth(w, g);
+		dtol = divergence_tolerance(sd->def.max_divergence_error, kc.h, depth);
+		ddtol = divergence_tolerance(sd->def.max_density_error, kc.h, depth);
+		const sweep_args wa = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true, RATE_SWEEP};
 		pass(&wk, PASS_CORRECT, &wa, ctx->threads);
-		div_it = divergence_solve(&wk, sd, rho0, dt, ctx->threads, &div_residual);
+		div_it = divergence_solve(&wk, &cg, sd, rho0, dt, ctx->threads, dtol, &div_residual);
 		const bool capped = div_it >= sd->def.max_divergence_iterations &&
-		                    div_residual > DFSPH_FAIL_CAPPED_ERROR * sd->def.max_divergence_error;
+		                    div_residual > DFSPH_FAIL_CAPPED_ERROR * dtol;
 		sd->capped = capped ? sd->capped + 1 : 0;
 		if (sd->capped >= DFSPH_FAIL_CAPPED) {
 			long wi = 0;
@@ -1020,12 +1194,12 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		/* the density solve, from last step's k likewise */
 		for (long i = 0; i < n; ++i)
 			wk.k[i] = kdcol[i] > 0 ? kdcol[i] : 0.0f;
-		const sweep_args wa = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, false, true};
+		const sweep_args wa = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, false, true, RATE_SWEEP};
 		pass(&wk, PASS_CORRECT, &wa, ctx->threads);
 	}
 
 	double residual = 0;
-	const int it = density_solve(&wk, sd, rho0, dt, ctx->threads, &residual);
+	const int it = density_solve(&wk, sd->def.divergence_solver ? &cg : NULL, sd, rho0, dt, ctx->threads, ddtol, &residual);
 	/* the particle the solve left furthest off (the last sweep's errors) */
 	long worst = 0;
 	for (long i = 0; i < n; ++i) {
@@ -1093,7 +1267,14 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	const double lv = v2 > 0 ? (double)sh->h / sqrt((double)v2) : INFINITY;
 	const eddy_vec3 g = w->def.gravity;
 	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
-	const double la = g1 > 0 ? DFSPH_GRAVITY_LIMIT * sqrt((double)sh->h / g1) : INFINITY;
+	double la = g1 > 0 ? DFSPH_GRAVITY_LIMIT * sqrt((double)sh->h / g1) : INFINITY;
+	const sph_dfsph *sd = s->data;
+	if (g1 > 0 && sd->def.divergence_solver) {
+		/* deeper than DFSPH_DEPTH_REF h: dt <= (that) sqrt(DFSPH_DEPTH_REF h / H) */
+		const double H = fluid_depth(w, g), ref = DFSPH_DEPTH_REF * (double)sh->h;
+		if (H > ref)
+			la *= sqrt(ref / H);
+	}
 	if (la < lv)
 		*reason = "gravity";
 	return la < lv ? la : lv;
