@@ -66,13 +66,26 @@
  * the compression it allowed, which Jacobi sweeps cannot do through deep
  * water (their error in the column-wide mode falls by about 1 - c / N^2 a
  * sweep for N layers): a 40-layer column rang and threw water to the lid.
+ * Each solve first runs Jacobi-preconditioned conjugate gradients on the
+ * particles that hold pressure or are compressing (divergence_cg: they
+ * reduce the column-wide mode about N times faster than the sweeps), then
+ * the projected sweeps above settle the particles that entered or left that
+ * set; the velocity solve makes at least DFSPH_SMOOTH of them, which damp
+ * the particle-scale error the Krylov solve leaves. In the velocity solve a
+ * particle whose kernel sum is below DFSPH_SURFACE rho0 (the outermost
+ * layer of a free surface) holds no pressure (k = 0 and no constraint: a
+ * Dirichlet surface, as SPlisHSPlasH's DFSPH leaves out particles with few
+ * neighbours), so water a moving solid stirred apart below it is not held
+ * at its expanded density; the density solve still covers every particle.
  * A sweep's error is |res_i| where k_i > 0 (too much pressure counts, as
  * too little) and max(res_i, 0) where k_i = 0, averaged over all particles:
  * the velocity solve stops once that times dt / rho0 is at most
  * max_divergence_error (the density change per step it leaves: it must be
  * well below max_density_error, or the water compresses by it every step),
- * the density solve once it is at most max_density_error (at least one
- * sweep each).
+ * the density solve once it is at most max_density_error, both scaled by
+ * (DFSPH_DEPTH_REF h / H)^2 in a fluid H deep along gravity beyond
+ * DFSPH_DEPTH_REF kernel radii (divergence_tolerance: the mean residual of
+ * the column-wide mode shrinks so against its error).
  *
  * Without the divergence solver the density solve runs alone, cold, with
  * the paper's sweeps that only add pressure, on the true wall rate and
@@ -108,11 +121,19 @@
  * naming the step and the particle: the solve has lost the fluid (a time
  * step far too long, or water deeper than the solver holds).
  * Time-step limits (the world multiplies them by its CFL number): velocity,
- * dt <= h / max|v|; gravity, dt <= 0.18 sqrt(h / |g|) (see below). There is
+ * dt <= h / max|v|; gravity, dt <= 0.18 sqrt(h / |g|) (see below), and with
+ * the divergence solver in a fluid H deep beyond DFSPH_DEPTH_REF h, that
+ * times sqrt(DFSPH_DEPTH_REF h / H), i.e. dt ~ h / sqrt(|g| H): the first-
+ * order prediction's error in a step grows with the hydrostatic pressure
+ * p ~ rho0 |g| H it moves (a 60-layer column rang at the shallow limit and
+ * held at half of it). There is
  * no acoustic limit: that is sph_pressure's, which a scene with this lacks.
  * Source: Bender & Koschier, "Divergence-free smoothed particle hydrodynamics",
  * SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and "Divergence-free SPH
- * for incompressible and viscous fluids", TVCG 2017; Ihmsen et al.,
+ * for incompressible and viscous fluids", TVCG 2017; Hestenes & Stiefel,
+ * "Methods of conjugate gradients for solving linear systems", J. Res. NBS
+ * 1952, and Saad, "Iterative methods for sparse linear systems", 2003 (Alg.
+ * 9.1, preconditioned CG); Ihmsen et al.,
  * "Implicit incompressible SPH", TVCG 2014 (relaxed Jacobi); Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012; Adami, Hu & Adams, "A
  * generalized wall boundary condition for SPH", JCP 2012 (eq. 27). */
@@ -167,6 +188,16 @@ static const int no_hint_writes[] = {-1};
  * Krylov solve leaves (with none, single particles at the surface of still
  * water kept jittering at a few % of sqrt(g H)) */
 #define DFSPH_SMOOTH 2
+
+/* the velocity solve leaves out a particle whose kernel sum (its density,
+ * walls included) is below DFSPH_SURFACE rho0: the outermost layer of a
+ * free surface (0.75-0.9 rho0 in water at rest, every other particle
+ * 0.95-1.05). Held there too, the velocity solve kept water a moving solid
+ * had stirred apart at its expanded density (0.97 rho0: a lowered block
+ * stood 2.5% high); leaving out particles up to 0.95 rho0 let still water's
+ * surface jitter at 4-8% of sqrt(g H), up to 0.85 at under 1%, with the
+ * lowered block then 1.0% high against the still pool. */
+#define DFSPH_SURFACE 0.875f
 
 /* the depth (in kernel radii) up to which the velocity solve stops at its
  * requested tolerance; deeper, the tolerance falls with the square of the
@@ -272,6 +303,8 @@ typedef struct dfsph_work {
 	                 * (with its warm start) */
 	float *kp;      /* the pressure's k_i: the sum over both solves */
 	float *err;     /* per particle: the error the sweep measured */
+	float *full;    /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the
+	                 * velocity solve's particles (divergence solver only) */
 	const grad_args *ga;
 	uint32_t *owner; /* the particle of each group (the AVX2 gradient pass) */
 	sums_fn *grads, *rate, *correct; /* the path's sums (AVX2 or SSE) */
@@ -756,7 +789,7 @@ static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, 
 			/* the wall's rate counted twice, as its force: the symmetric operator */
 			const __m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)), _mm_add_ps(vb, vb));
 			const __m128 res =
-				a->divergence ? r
+				a->divergence ? _mm_mul_ps(r, _mm_loadu_ps(wk->full + i))
 				              : _mm_sub_ps(_mm_add_ps(_mm_setr_ps(wk->h[i].w, wk->h[i + 1].w, wk->h[i + 2].w, wk->h[i + 3].w),
 				                                      _mm_mul_ps(vdt, r)),
 				                           vrho0);
@@ -790,7 +823,7 @@ static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, 
 		const float vb = (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z) - (bdiv ? bdiv[i] : 0.0f);
 		if (a->projected) {
 			const float r = sph_sum4(t + RATE_T * q) + (vb + vb);
-			const float res = a->divergence ? r : (wk->h[i].w + a->dt * r) - a->rho0;
+			const float res = a->divergence ? r * wk->full[i] : (wk->h[i].w + a->dt * r) - a->rho0;
 			const float ks = wk->ksum[i];
 			const float kn = positive(ks + ((res * DFSPH_OMEGA) * (a->divergence ? a->inv_dt : a->inv_dt2)) * wk->dsym[i]);
 			wk->k[i] = kn - ks;
@@ -930,7 +963,7 @@ static int divergence_cg(dfsph_work *wk, dfsph_cg *cg, float rho0, float dt, int
 	for (long i = 0; i < n; ++i) {
 		/* the density solve: the rate that brings rho_i to rho0 in a step */
 		const float res = density ? wk->err[i] + (wk->h[i].w - rho0) / dt : wk->err[i];
-		const bool on = wk->ksum[i] > 0 || res > 0;
+		const bool on = (density || wk->full[i] > 0) && (wk->ksum[i] > 0 || res > 0);
 		cg->mask[i] = on ? 1.0f : 0.0f;
 		cg->r[i] = on ? res : 0.0f;
 		cg->p[i] = wk->dsym[i] * cg->r[i];
@@ -1130,13 +1163,16 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	wk.dsym = sd->def.divergence_solver ? wk.kp + un : NULL;
 	dfsph_cg cg = {NULL, NULL, NULL, NULL, NULL};
 	if (sd->def.divergence_solver) {
-		cg.u = eddy__arena_alloc(&w->arena, un * sizeof(dfsph_f4) + 4 * un * sizeof(float));
+		cg.u = eddy__arena_alloc(&w->arena, un * sizeof(dfsph_f4) + 5 * un * sizeof(float));
 		if (!cg.u)
 			return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
 		cg.p = (float *)(cg.u + un);
 		cg.r = cg.p + un;
 		cg.mask = cg.r + un;
 		cg.scratch = cg.mask + un;
+		wk.full = cg.scratch + un;
+	} else {
+		wk.full = NULL;
 	}
 	for (long i = 0; i < n; ++i)
 		for (size_t gi = wk.goff[i]; gi < wk.goff[i + 1]; ++gi)
@@ -1160,8 +1196,10 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	if (sd->def.divergence_solver) {
 		/* the velocity solve, from last step's k (a correction with it) */
 		float *kcol = eddy__col(w, sd->kcol);
-		for (long i = 0; i < n; ++i)
-			wk.k[i] = kcol[i] > 0 ? kcol[i] : 0.0f;
+		for (long i = 0; i < n; ++i) {
+			wk.full[i] = rho[i] >= DFSPH_SURFACE * rho0 ? 1.0f : 0.0f;
+			wk.k[i] = kcol[i] > 0 && wk.full[i] > 0 ? kcol[i] : 0.0f;
+		}
 		const double depth = fluid_depth(w, g);
 		dtol = divergence_tolerance(sd->def.max_divergence_error, kc.h, depth);
 		ddtol = divergence_tolerance(sd->def.max_density_error, kc.h, depth);
