@@ -197,9 +197,9 @@ static const int no_hint_writes[] = {-1};
  * stood 2.6% high); leaving out every particle up to 0.95 rho0 let still
  * water's surface jitter at 4-8% of sqrt(g H), up to 0.875 let a dropped
  * block compress 1.6% at impact (three times the density solve's
- * tolerance). At 0.8 still water rests under 0.5% of sqrt(g H) at 10-40
- * layers, a dropped block compresses 0.46%, and the lowered block stands
- * 1.3% high. */
+ * tolerance). At 0.8 still water rests under 0.5% of sqrt(g H) at 10-20
+ * layers and 1.1% at 40, a dropped block compresses 0.46%, and the lowered
+ * block stands 1.3% high. */
 #define DFSPH_SURFACE 0.8f
 
 /* the depth (in kernel radii) up to which the velocity solve stops at its
