@@ -645,8 +645,10 @@ EDDY_API eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_
  * to the 'pressure' column. The time step is then limited by the flow speed
  * (h / max|v|, and 0.18 sqrt(h / |g|), times the CFL number; CFL <= 1), not by
  * sph_density's speed of sound. With divergence_solver both solves start from
- * each particle's pressure of the last step (state columns dfsph_k, dfsph_kd):
- * what holds deep water still. Publishes solver, iterations, residual,
+ * each particle's pressure of the last step (state columns dfsph_k, dfsph_kd)
+ * and run conjugate gradients, their tolerances and the gravity limit
+ * tightened in water deeper than 5 kernel radii: what holds deep water
+ * still. Publishes solver, iterations, residual,
  * residual_max, divergence_iterations and unconverged in the frame stats. */
 typedef struct eddy_sph_dfsph_def {
 	float max_density_error;    /* 1, mean density error rho/rho0 - 1 the solve
