@@ -664,15 +664,22 @@ EDDY_API eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_
  * at rest density, adds the pressure acceleration and writes the pressure (Pa)
  * to the 'pressure' column. The time step is then limited by the flow speed
  * (h / max|v|, and 0.18 sqrt(h / |g|), times the CFL number; CFL <= 1), not by
- * sph_density's speed of sound. Publishes solver, iterations, residual,
- * divergence_iterations and unconverged in the frame stats. */
+ * sph_density's speed of sound. With divergence_solver both solves start from
+ * each particle's pressure of the last step (state columns dfsph_k, dfsph_kd)
+ * and run conjugate gradients, their tolerances and the gravity limit
+ * tightened in water deeper than 5 kernel radii: what holds deep water
+ * still. Publishes solver, iterations, residual,
+ * residual_max, divergence_iterations and unconverged in the frame stats. */
 typedef struct eddy_sph_dfsph_def {
-	float max_density_error;    /* 1, mean compression max(rho - rho0, 0)/rho0 the
-	                               solve stops at; > 0 and <= 0.1 (0.001-0.01 usual) */
+	float max_density_error;    /* 1, mean density error rho/rho0 - 1 the solve
+	                               stops at (compression only without the divergence
+	                               solver); > 0 and <= 0.1 (0.001-0.01 usual) */
 	int max_iterations;         /* 1, cap on constant-density sweeps per step; 2 to 10000 */
-	bool divergence_solver;     /* also make the velocity divergence-free each step */
-	float max_divergence_error; /* 1, mean max(Drho/Dt, 0) dt / rho0 the divergence
-	                               solve stops at (per step); > 0 and <= 1 */
+	bool divergence_solver;     /* also make the velocity divergence-free each step
+	                               (default; off: a cheaper cold solve that holds
+	                               shallow water only) */
+	float max_divergence_error; /* 1, mean |Drho/Dt| dt / rho0 the velocity solve
+	                               leaves per step (default 5e-5); > 0 and <= 1 */
 	int max_divergence_iterations; /* 1, cap on divergence sweeps per step; 1 to 10000 */
 } eddy_sph_dfsph_def;
 EDDY_API eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void);

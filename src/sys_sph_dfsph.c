@@ -4,8 +4,9 @@
  * pressure is solved for each step so the fluid keeps its rest density, and
  * the time step is limited by the flow speed, not by a speed of sound.
  *
- * Reads: x y z vx vy vz density ax ay az. Writes: pressure ax ay az
- * (accumulated). Runs after the non-pressure forces (gravity, sph_viscosity,
+ * Reads: x y z vx vy vz density ax ay az, and with the divergence solver
+ * dfsph_k dfsph_kd (state columns it declares: each solve's k of the last
+ * step). Writes: pressure ax ay az (accumulated), dfsph_k dfsph_kd. Runs after the non-pressure forces (gravity, sph_viscosity,
  * sph_surface_tension) and before integrate, whose v += dt a then gives the
  * corrected velocity. It uses sph_density's neighbour lists.
  *
@@ -32,24 +33,70 @@
  * (up, away from a floor),
  * known before the solve and added to the forces; without it the fluid
  * beside the walls lacks support and circulates.
- * A change k_i alone moves Drho_i/Dt by -dt k_i D_i, with
- *   D_i = (S_i + 2 B_i) . (S_i + B_i) + sum_j |G_ij|^2,   S_i = sum_j G_ij
- * (the paper's rho_i / alpha_i with the mirrored wall), so each Jacobi sweep
- * sets, from the current predicted velocities v*,
- *   constant density:  k_i = max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
- *   divergence-free:   k_i = max(Drho_i/Dt, 0) / (dt D_i)
- * and moves v*_i by dt a_i^p(k). The divergence solver runs first, on the
- * velocity at the start of the step (positions are new, velocities not yet
- * consistent with them); then v* = v + dt (a + h) and the constant-density
- * solver runs until the mean predicted compression max(rho*_i - rho0, 0) / rho0
- * is at most max_density_error (at least one sweep). Only
- * compression is corrected: the free surface has too few neighbours to reach
- * rho0 and must not be pulled together. (Tried and dropped: the paper's warm
- * start from last step's k, which with sweeps that only add pressure pushed
- * the free surface apart (mean density error 2% -> 4.5% in the pour), and a
- * projected Jacobi that could take pressure back, which diverged.)
+ * Each step first sets v* = v + dt (a + h), the velocity the non-pressure
+ * forces give, then solves for k on it, by sweeps that each set k from the
+ * current v* and move v* by dt a^p of the change.
+ *
+ * With the divergence solver (the default) there are two solves, the
+ * paper's pair (Alg. 1) folded into one step, both on the symmetric
+ * operator, warm-started and projected:
+ *   velocity (divergence-free) solve:  Drho_i/Dt(v*) = 0
+ *   density solve:                     rho_i + dt Drho_i/Dt(v*) = rho0
+ * In both the rate counts the wall as the force does,
+ *   R_i(v) = sum_j (v_i - v_j) . G_ij + 2 v_i . B_i,
+ * so that a change of k moves the predicted density by -(A k)_i with
+ * A = dt^2 grad^T grad symmetric positive semi-definite, of diagonal
+ * dt^2 D'_i,   D'_i = |S_i + 2 B_i|^2 + sum_j |G_ij|^2,   S_i = sum_j G_ij.
+ * (The true wall rate is v_i . B_i: counted twice, the solve over-predicts
+ * compression at a wall and is only stiffer there; at rest the constraint
+ * is the same. With the true rate, Jacobi sweeps run to a tight tolerance
+ * diverged in a 40-layer column.) Each sweep is a projected, relaxed Jacobi
+ * step on the residual res_i (Drho_i/Dt, or the predicted rho_i - rho0):
+ *   k_i <- max(k_i + omega res_i / (dt^n D'_i), 0),   omega = DFSPH_OMEGA,
+ * n = 1 for the velocity solve, 2 for the density one (Ihmsen et al.'s
+ * relaxed Jacobi, with the projection of unilateral pressure: a particle
+ * may lose pressure it no longer needs but never goes below 0, so the free
+ * surface is not pulled together). Each solve starts from its own k of the
+ * last step (the state columns DFSPH_K_COLUMN and DFSPH_KD_COLUMN, which
+ * move with the particles and are checkpointed), applied as one
+ * correction: the velocity solve's k is the pressure that carries the
+ * weight of the water above (it balances gravity over a step whatever dt
+ * is), the density solve's the one that holds the compression the velocity
+ * solve leaves. Cold, each step had to rebuild the hydrostatic pressure from
+ * the compression it allowed, which Jacobi sweeps cannot do through deep
+ * water (their error in the column-wide mode falls by about 1 - c / N^2 a
+ * sweep for N layers): a 40-layer column rang and threw water to the lid.
+ * Each solve first runs Jacobi-preconditioned conjugate gradients on the
+ * particles that hold pressure or are compressing (divergence_cg: they
+ * reduce the column-wide mode about N times faster than the sweeps), then
+ * the projected sweeps above settle the particles that entered or left that
+ * set; the velocity solve makes at least DFSPH_SMOOTH of them, which damp
+ * the particle-scale error the Krylov solve leaves. In the velocity solve a
+ * particle whose kernel sum is below DFSPH_SURFACE rho0 (the outermost
+ * layer of a free surface) holds no pressure (k = 0 and no constraint: a
+ * Dirichlet surface, as SPlisHSPlasH's DFSPH leaves out particles with few
+ * neighbours), so water a moving solid stirred apart below it is not held
+ * at its expanded density; the density solve still covers every particle.
+ * A sweep's error is |res_i| where k_i > 0 (too much pressure counts, as
+ * too little) and max(res_i, 0) where k_i = 0, averaged over all particles:
+ * the velocity solve stops once that times dt / rho0 is at most
+ * max_divergence_error (the density change per step it leaves: it must be
+ * well below max_density_error, or the water compresses by it every step),
+ * the density solve once it is at most max_density_error, both scaled by
+ * (DFSPH_DEPTH_REF h / H)^2 in a fluid H deep along gravity beyond
+ * DFSPH_DEPTH_REF kernel radii (divergence_tolerance: the mean residual of
+ * the column-wide mode shrinks so against its error).
+ *
+ * Without the divergence solver the density solve runs alone, cold, with
+ * the paper's sweeps that only add pressure, on the true wall rate and
+ * D_i = (S_i + 2 B_i) . (S_i + B_i) + sum_j |G_ij|^2:
+ *   k_i += max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
+ * until the mean predicted compression is at most max_density_error. It is
+ * the cheaper choice for shallow, splashing scenes (scenes/pour.lua), and
+ * does not hold still water much deeper than 10 layers (at 40 it blows up).
+ *
  * The result, a^p = (v* - (v + dt a)) / dt, is added to ax ay az. The pressure
- * column gets p_i = M k_i rho_i^2, k_i summed over both solvers, M the
+ * column gets p_i = M k_i rho_i^2, k_i summed over both solves, M the
  * force's lattice moment (1 / grad_cal, see sph_pressure): the force of a
  * linear field is M grad p / rho, so this is the pressure in Pa (M = 0.947
  * at h = 2 spacings).
@@ -67,14 +114,27 @@
  *
  * Published per frame: solver = "dfsph", iterations (mean constant-density
  * sweeps per step), residual (largest final mean density error of a step),
- * divergence_iterations (mean), unconverged (steps that hit max_iterations).
- * A step whose final mean density error is above 5% fails: the time step is
- * far too long for the solver.
+ * residual_max (largest final error of one particle, / rho0),
+ * divergence_iterations (mean), unconverged (steps in which a solve hit its
+ * cap above its tolerance). A step whose final mean density error is above
+ * DFSPH_FAIL_ERROR, or one particle's above DFSPH_FAIL_PARTICLE, fails
+ * naming the step and the particle: the solve has lost the fluid (a time
+ * step far too long, or water deeper than the solver holds).
  * Time-step limits (the world multiplies them by its CFL number): velocity,
- * dt <= h / max|v|; gravity, dt <= 0.18 sqrt(h / |g|) (see below). There is
+ * dt <= h / max|v|; gravity, dt <= 0.18 sqrt(h / |g|) (see below), and with
+ * the divergence solver in a fluid H deep beyond DFSPH_DEPTH_REF h, that
+ * times sqrt(DFSPH_DEPTH_REF h / H), i.e. dt ~ h / sqrt(|g| H): the first-
+ * order prediction's error in a step grows with the hydrostatic pressure
+ * p ~ rho0 |g| H it moves (a 60-layer column rang at the shallow limit and
+ * held at half of it). There is
  * no acoustic limit: that is sph_pressure's, which a scene with this lacks.
  * Source: Bender & Koschier, "Divergence-free smoothed particle hydrodynamics",
- * SCA 2015 (eqs. 8-9, 12, Alg. 2-3); Akinci et al., "Versatile rigid-fluid
+ * SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and "Divergence-free SPH
+ * for incompressible and viscous fluids", TVCG 2017; Hestenes & Stiefel,
+ * "Methods of conjugate gradients for solving linear systems", J. Res. NBS
+ * 1952, and Saad, "Iterative methods for sparse linear systems", 2003 (Alg.
+ * 9.1, preconditioned CG); Ihmsen et al.,
+ * "Implicit incompressible SPH", TVCG 2014 (relaxed Jacobi); Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012; Adami, Hu & Adams, "A
  * generalized wall boundary condition for SPH", JCP 2012 (eq. 27). */
 #include "sph.h"
@@ -88,8 +148,12 @@ typedef struct sph_dfsph {
 	/* statistics of the current frame */
 	int frame;
 	int64_t steps, sweeps, div_sweeps, unconverged;
-	double residual;
+	double residual, worst;
 	bool avx2; /* the passes' AVX2 path (else SSE, the same bits) */
+	int kcol;  /* the state column DFSPH_K_COLUMN */
+	int kdcol; /* the state column DFSPH_KD_COLUMN */
+	int capped; /* consecutive steps whose velocity solve stopped at its cap
+	             * above DFSPH_FAIL_CAPPED_ERROR times its tolerance */
 } sph_dfsph;
 
 static const int dfsph_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, COL_AX, COL_AY, COL_AZ};
@@ -106,9 +170,57 @@ static const int no_hint_writes[] = {-1};
 /* above this final mean density error a step fails instead of going on */
 #define DFSPH_FAIL_ERROR 0.05
 
+/* above this predicted density error at one particle a step fails: the
+ * particles overlap (the pour's largest is 0.42) */
+#define DFSPH_FAIL_PARTICLE 1.0
+
+/* The velocity solve warm-starts, so a step stopped at its cap hands the
+ * rest on to the next (a 40-layer column at rest: once, in its first step,
+ * at 1.8 times the tolerance). Stopped at the cap above DFSPH_FAIL_CAPPED_ERROR
+ * times the tolerance in DFSPH_FAIL_CAPPED steps in a row, it is not
+ * catching up, and the step fails (an 80-layer column: steps 0-2 at 2.5-3.6
+ * times, before it threw water to the lid at step 26). */
+#define DFSPH_FAIL_CAPPED_ERROR 2.0
+#define DFSPH_FAIL_CAPPED 3
+
+/* projected Jacobi sweeps the velocity solve makes after its conjugate
+ * gradients: they damp the particle-scale part of the error, which the
+ * Krylov solve leaves (with none, single particles at the surface of still
+ * water kept jittering at a few % of sqrt(g H)) */
+#define DFSPH_SMOOTH 2
+
+/* the velocity solve leaves out a particle whose kernel sum (its density,
+ * walls included) is below DFSPH_SURFACE rho0: the outermost particles of a
+ * free surface (0.75-0.9 rho0 in water at rest, every other particle
+ * 0.95-1.05). Held there too, the velocity solve keeps water a moving solid
+ * has stirred apart at its expanded density (0.972 rho0: a lowered block
+ * stood 2.6% high); leaving out every particle up to 0.95 rho0 let still
+ * water's surface jitter at 4-8% of sqrt(g H), up to 0.875 let a dropped
+ * block compress 1.6% at impact (three times the density solve's
+ * tolerance). At 0.8 still water rests under 0.5% of sqrt(g H) at 10-20
+ * layers and 1.1% at 40, a dropped block compresses 0.46%, and the lowered
+ * block stands 1.3% high. */
+#define DFSPH_SURFACE 0.8f
+
+/* the depth (in kernel radii) up to which the velocity solve stops at its
+ * requested tolerance; deeper, the tolerance falls with the square of the
+ * depth (divergence_tolerance) */
+#define DFSPH_DEPTH_REF 5.0
+
 /* constant-density sweeps a step makes at least (the paper: 2; 1 gives the
  * same errors in the pour, tank and drop and saves 10% of the solve) */
 #define DFSPH_MIN_SWEEPS 1
+
+/* the relaxation of both solves' projected Jacobi sweeps (with the divergence
+ * solver): the largest eigenvalue of D'^-1 A is near 4 here (full
+ * neighbourhoods plus the doubled wall), so sweeps with omega above 0.5 can
+ * grow; a 40-layer column diverged at 0.66 and at 0.8 */
+#define DFSPH_OMEGA 0.5f
+
+/* the particle state column with each particle's k of the velocity solve,
+ * its warm start in the next step */
+#define DFSPH_K_COLUMN "dfsph_k"
+#define DFSPH_KD_COLUMN "dfsph_kd"
 
 eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 {
@@ -116,8 +228,8 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	d.max_density_error = 0.005f;
 	d.max_iterations = 100;
 	d.divergence_solver = true;
-	d.max_divergence_error = 0.01f;
-	d.max_divergence_iterations = 100;
+	d.max_divergence_error = 5e-5f;
+	d.max_divergence_iterations = 1000;
 	return d;
 }
 
@@ -184,13 +296,18 @@ typedef struct dfsph_work {
 	size_t *goff;   /* particle i's groups are goff[i] .. goff[i + 1] */
 	dfsph_group *g;
 	dfsph_f4 *b;    /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
+	float *dsym;    /* 1 / D'_i, the diagonal of the symmetric operator (0 likewise) */
 	dfsph_f4 *v;    /* v*_i (w unused: a neighbour's velocity is one 16-byte load) */
 	dfsph_f4 *h;    /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
 	float *k;       /* the k_i a correction applies, apart from v: correct
 	                 * gathers it from 4 bytes a particle (22 KB in the pour,
 	                 * within L1) */
-	float *ksum;    /* the sum of k_i over the sweeps */
+	float *ksum;    /* the sum of k_i over the sweeps: the current solve's k
+	                 * (with its warm start) */
+	float *kp;      /* the pressure's k_i: the sum over both solves */
 	float *err;     /* per particle: the error the sweep measured */
+	float *full;    /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the
+	                 * velocity solve's particles (divergence solver only) */
 	const grad_args *ga;
 	uint32_t *owner; /* the particle of each group (the AVX2 gradient pass) */
 	sums_fn *grads, *rate, *correct; /* the path's sums (AVX2 or SSE) */
@@ -200,7 +317,15 @@ typedef struct dfsph_work {
 typedef struct sweep_args {
 	float dt, inv_dt, inv_dt2, rho0;
 	bool divergence; /* the divergence-free solve, else the constant-density one */
+	bool projected;  /* the velocity solve: projected relaxed Jacobi on the
+	                  * symmetric operator (else sweeps that add pressure) */
+	int rate_only;   /* RATE_SIGNED or RATE_LINEAR: the rate pass only writes
+	                  * R_i(v) to err (the conjugate gradient's products) */
 } sweep_args;
+
+/* sweep_args.rate_only: R_i(v) with the moving walls' part (the residual),
+ * or without it (the linear operator's product) */
+enum { RATE_SWEEP = 0, RATE_SIGNED = 1, RATE_LINEAR = 2 };
 
 /* The passes go in blocks of particles: first the sums over the groups
  * (sums_fn), then the rest for the block. Finishing each particle right
@@ -609,6 +734,11 @@ static void grads_finish(dfsph_work *wk, long i0, long cnt, const float *t)
 		 * the acceleration counts twice (pressure mirroring) */
 		const float d = (sx + 2 * bx) * (sx + bx) + (sy + 2 * by) * (sy + by) + (sz + 2 * bz) * (sz + bz) + s2;
 		wk->b[i] = (dfsph_f4){bx, by, bz, d > a.dmin ? 1.0f / d : 0.0f};
+		if (wk->dsym) { /* the symmetric operator's: |S + 2B|^2 + sum |G|^2 */
+			const float ds =
+				(sx + 2 * bx) * (sx + 2 * bx) + (sy + 2 * by) * (sy + 2 * by) + (sz + 2 * bz) * (sz + 2 * bz) + s2;
+			wk->dsym[i] = ds > a.dmin ? 1.0f / ds : 0.0f;
+		}
 	}
 }
 
@@ -628,10 +758,22 @@ static inline float positive(float e)
 static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, const float *t)
 {
 	const float *bdiv = wk->ga->nb->bdiv; /* NULL while no wall moves */
+	if (a->rate_only) {
+		/* R_i(v) = sum_j (v_i - v_j) . G_ij + 2 (v_i . B_i - bdiv_i), the wall
+		 * counted as in the projected sweeps */
+		for (long q = 0; q < cnt; ++q) {
+			const long i = i0 + q;
+			const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
+			const float vb = (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z) -
+			                 (bdiv && a->rate_only == RATE_SIGNED ? bdiv[i] : 0.0f);
+			wk->err[i] = sph_sum4(t + RATE_T * q) + (vb + vb);
+		}
+		return;
+	}
 	long q = 0;
 #ifdef __SSE2__
 	const __m128 vdt = _mm_set1_ps(a->dt), vrho0 = _mm_set1_ps(a->rho0), zero = _mm_setzero_ps(),
-	             vinv = _mm_set1_ps(a->divergence ? a->inv_dt : a->inv_dt2);
+	             vinv = _mm_set1_ps(a->divergence ? a->inv_dt : a->inv_dt2), vom = _mm_set1_ps(DFSPH_OMEGA);
 	for (; q + 4 <= cnt; q += 4) {
 		const long i = i0 + q;
 		__m128 s0 = _mm_loadu_ps(t + RATE_T * q), s1 = _mm_loadu_ps(t + RATE_T * (q + 1)),
@@ -640,16 +782,37 @@ static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, 
 		__m128 vx, vy, vz, vw, bx, by, bz, bw;
 		load4(wk->v + i, &vx, &vy, &vz, &vw);
 		load4(wk->b + i, &bx, &by, &bz, &bw);
-		__m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)),
-		                      _mm_add_ps(_mm_add_ps(_mm_mul_ps(vx, bx), _mm_mul_ps(vy, by)), _mm_mul_ps(vz, bz)));
-		if (bdiv) /* moving walls: (v_i - v_b) . grad, the v_b part (sph.h) */
-			r = _mm_sub_ps(r, _mm_loadu_ps(bdiv + i));
+		/* the wall's part (v_i - v_b) . B_i: bdiv holds the moving walls'
+		 * v_b part (sph.h), NULL while no wall moves */
+		__m128 vb = _mm_add_ps(_mm_add_ps(_mm_mul_ps(vx, bx), _mm_mul_ps(vy, by)), _mm_mul_ps(vz, bz));
+		if (bdiv)
+			vb = _mm_sub_ps(vb, _mm_loadu_ps(bdiv + i));
 		__m128 e;
-		if (a->divergence) {
+		if (a->projected) {
+			/* the wall's rate counted twice, as its force: the symmetric operator */
+			const __m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)), _mm_add_ps(vb, vb));
+			const __m128 res =
+				a->divergence ? _mm_mul_ps(r, _mm_loadu_ps(wk->full + i))
+				              : _mm_sub_ps(_mm_add_ps(_mm_setr_ps(wk->h[i].w, wk->h[i + 1].w, wk->h[i + 2].w, wk->h[i + 3].w),
+				                                      _mm_mul_ps(vdt, r)),
+				                           vrho0);
+			/* k_i = max(k_i + omega res_i / (dt^n D'_i), 0); correct applies the change */
+			const __m128 ks = _mm_loadu_ps(wk->ksum + i);
+			const __m128 kn = _mm_max_ps(
+				_mm_add_ps(ks, _mm_mul_ps(_mm_mul_ps(_mm_mul_ps(res, vom), vinv), _mm_loadu_ps(wk->dsym + i))), zero);
+			_mm_storeu_ps(wk->k + i, _mm_sub_ps(kn, ks));
+			/* |res| under pressure, the compression max(res, 0) without */
+			const __m128 on = _mm_cmpgt_ps(kn, zero);
+			e = _mm_or_ps(_mm_and_ps(on, _mm_andnot_ps(_mm_set1_ps(-0.0f), res)), _mm_andnot_ps(on, _mm_max_ps(res, zero)));
+			if (a->divergence)
+				e = _mm_mul_ps(e, vdt);
+		} else if (a->divergence) {
+			const __m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)), vb);
 			const __m128 d = _mm_max_ps(r, zero);
 			e = _mm_mul_ps(d, vdt);
 			_mm_storeu_ps(wk->k + i, _mm_mul_ps(_mm_mul_ps(d, vinv), bw));
 		} else {
+			const __m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)), vb);
 			const __m128 rho = _mm_setr_ps(wk->h[i].w, wk->h[i + 1].w, wk->h[i + 2].w, wk->h[i + 3].w);
 			e = _mm_max_ps(_mm_sub_ps(_mm_add_ps(rho, _mm_mul_ps(vdt, r)), vrho0), zero);
 			_mm_storeu_ps(wk->k + i, _mm_mul_ps(_mm_mul_ps(e, vinv), bw));
@@ -660,7 +823,18 @@ static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, 
 	for (; q < cnt; ++q) {
 		const long i = i0 + q;
 		const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
-		const float r = sph_sum4(t + RATE_T * q) + (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z) - (bdiv ? bdiv[i] : 0.0f);
+		const float vb = (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z) - (bdiv ? bdiv[i] : 0.0f);
+		if (a->projected) {
+			const float r = sph_sum4(t + RATE_T * q) + (vb + vb);
+			const float res = a->divergence ? r * wk->full[i] : (wk->h[i].w + a->dt * r) - a->rho0;
+			const float ks = wk->ksum[i];
+			const float kn = positive(ks + ((res * DFSPH_OMEGA) * (a->divergence ? a->inv_dt : a->inv_dt2)) * wk->dsym[i]);
+			wk->k[i] = kn - ks;
+			const float e = kn > 0 ? fabsf(res) : positive(res);
+			wk->err[i] = a->divergence ? e * a->dt : e;
+			continue;
+		}
+		const float r = sph_sum4(t + RATE_T * q) + vb;
 		if (a->divergence) {
 			const float d = positive(r);
 			wk->err[i] = d * a->dt;
@@ -755,31 +929,164 @@ static double mean_of(const float *e, long n)
 	return n > 0 ? s / (double)n : 0;
 }
 
-/* Divergence-free solve: sweeps until mean max(Drho/Dt, 0) dt / rho0 <= tol. */
-static int divergence_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float dt, int threads)
+/* The conjugate gradient's vectors (see divergence_cg). */
+typedef struct dfsph_cg {
+	dfsph_f4 *u;    /* the velocity change of a direction: -dt grad p */
+	float *p;       /* the search direction (a change of k) */
+	float *r;       /* the residual on the active set */
+	float *mask;    /* 1 on the active set, else 0 */
+	float *scratch; /* the correct pass's sum of k, not kept */
+} dfsph_cg;
+
+/* The velocity solve's bulk: Jacobi-preconditioned conjugate gradients
+ * (Hestenes & Stiefel 1952; Saad, "Iterative methods for sparse linear
+ * systems", 2003, Alg. 9.1) on A k = R(v*), A = dt grad^T grad the
+ * symmetric operator of the projected sweeps, restricted to the particles
+ * that hold pressure (k_i > 0 from the warm start) or are compressing
+ * (R_i > 0): there the unilateral constraint is an equality. Jacobi sweeps
+ * shrink the column-wide error mode of N layers by about 1 - c / N^2 a
+ * sweep, conjugate gradients by about 1 - c / N, so a deep column converges
+ * in a number of products that grows with the depth, not its square. A
+ * product A p is one correct pass onto a zero velocity (u = -dt grad p) and
+ * one rate pass of u. The iteration stops when the mean |r_i| dt / rho0 is
+ * at most max_divergence_error (the projected sweeps' measure) or when a
+ * direction has no positive curvature. The particles whose k ends below 0
+ * are then set to 0 (the projection), and the projected sweeps that follow
+ * settle what the fixed set got wrong: particles that left or entered it.
+ * Every sum is serial in row order: the same bits for any thread count. */
+static int divergence_cg(dfsph_work *wk, dfsph_cg *cg, float rho0, float dt, int threads, int cap, bool density,
+                         double tol, double *residual)
 {
-	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true};
+	const long n = wk->n;
+	const sweep_args as = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true, RATE_SIGNED};
+	const sweep_args al = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true, RATE_LINEAR};
+	const double scale = (double)dt / ((double)rho0 * (double)n);
+	pass(wk, PASS_RATE, &as, threads);
+	double rz = 0, esum = 0;
+	for (long i = 0; i < n; ++i) {
+		/* the density solve: the rate that brings rho_i to rho0 in a step */
+		const float res = density ? wk->err[i] + (wk->h[i].w - rho0) / dt : wk->err[i];
+		const bool on = (density || wk->full[i] > 0) && (wk->ksum[i] > 0 || res > 0);
+		cg->mask[i] = on ? 1.0f : 0.0f;
+		cg->r[i] = on ? res : 0.0f;
+		cg->p[i] = wk->dsym[i] * cg->r[i];
+		rz += (double)cg->r[i] * cg->p[i];
+		esum += fabsf(cg->r[i]);
+	}
+	*residual = esum * scale;
 	int it = 0;
+	dfsph_f4 *const v = wk->v;
+	float *const k = wk->k, *const ksum = wk->ksum;
+	while (*residual > tol && it < cap && rz > 0) {
+		/* err = R(u), u = -dt grad p: the passes read and write wk's arrays */
+		memset(cg->u, 0, (size_t)n * sizeof *cg->u);
+		wk->v = cg->u;
+		wk->k = cg->p;
+		wk->ksum = cg->scratch;
+		pass(wk, PASS_CORRECT, &as, threads);
+		pass(wk, PASS_RATE, &al, threads);
+		wk->v = v;
+		wk->k = k;
+		wk->ksum = ksum;
+		double pq = 0;
+		for (long i = 0; i < n; ++i)
+			pq -= (double)cg->p[i] * (cg->mask[i] * wk->err[i]);
+		if (!(pq > 0))
+			break;
+		const float alpha = (float)(rz / pq);
+		double rz1 = 0;
+		esum = 0;
+		for (long i = 0; i < n; ++i) {
+			v[i].x += alpha * cg->u[i].x;
+			v[i].y += alpha * cg->u[i].y;
+			v[i].z += alpha * cg->u[i].z;
+			ksum[i] += alpha * cg->p[i];
+			cg->r[i] += alpha * (cg->mask[i] * wk->err[i]);
+			rz1 += (double)cg->r[i] * (wk->dsym[i] * cg->r[i]);
+			esum += fabsf(cg->r[i]);
+		}
+		++it;
+		*residual = esum * scale;
+		const float beta = (float)(rz1 / rz);
+		rz = rz1;
+		for (long i = 0; i < n; ++i)
+			cg->p[i] = wk->dsym[i] * cg->r[i] + beta * cg->p[i];
+	}
+	/* the projection: k_i < 0 back to 0, as one correction */
+	bool neg = false;
+	for (long i = 0; i < n; ++i) {
+		k[i] = ksum[i] < 0 ? -ksum[i] : 0.0f;
+		neg |= ksum[i] < 0;
+	}
+	if (neg)
+		pass(wk, PASS_CORRECT, &as, threads);
+	return it;
+}
+
+/* The velocity solve's stopping tolerance in water `depth` deep (m, the
+ * hydrostatic head of the last step's largest pressure) for a kernel radius
+ * h: the requested one down to DFSPH_DEPTH_REF h, and below that scaled by
+ * (DFSPH_DEPTH_REF h / depth)^2. The operator's smallest eigenvalue, that of
+ * the column-wide mode, falls relative to its diagonal as (h / depth)^2, so
+ * a mean residual eps leaves that mode an error of eps (depth / h)^2: with
+ * the tolerance scaled so, the pressure that carries the column is held to
+ * the same fraction at any depth. */
+static double divergence_tolerance(double tol, float h, double depth)
+{
+	const double ref = DFSPH_DEPTH_REF * (double)h;
+	return depth > ref ? tol * (ref / depth) * (ref / depth) : tol;
+}
+
+/* The fluid's extent along gravity (m): the depth of water at rest, more
+ * (so the solve is stricter) while parts of it fly or splash; 0 without
+ * gravity. */
+static double fluid_depth(eddy_world *w, eddy_vec3 g)
+{
+	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
+	if (!(g1 > 0) || !x || !y || !z || w->n == 0)
+		return 0;
+	double lo = INFINITY, hi = -INFINITY;
+	for (size_t i = 0; i < w->n; ++i) {
+		const double e = ((double)g.x * x[i] + (double)g.y * y[i] + (double)g.z * z[i]) / g1;
+		lo = e < lo ? e : lo;
+		hi = e > hi ? e : hi;
+	}
+	return hi - lo;
+}
+
+/* The velocity solve (divergence-free, on v*): projected sweeps until the
+ * mean error (see rate_finish) times dt / rho0 is at most tol. */
+static int divergence_solve(dfsph_work *wk, dfsph_cg *cg, const sph_dfsph *sd, float rho0, float dt, int threads,
+                            double tol, double *residual)
+{
+	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true, RATE_SWEEP};
+	int it = 0, sweeps = 0;
 	for (;;) {
+		it += divergence_cg(wk, cg, rho0, dt, threads, sd->def.max_divergence_iterations - it, false, tol, residual);
 		pass(wk, PASS_RATE, &a, threads);
-		const double e = mean_of(wk->err, wk->n) / rho0;
-		if ((it >= 1 && e <= sd->def.max_divergence_error) || it >= sd->def.max_divergence_iterations)
+		*residual = mean_of(wk->err, wk->n) / rho0;
+		if ((sweeps >= DFSPH_SMOOTH && *residual <= tol) || it >= sd->def.max_divergence_iterations)
 			break;
 		pass(wk, PASS_CORRECT, &a, threads);
 		++it;
+		++sweeps;
 	}
 	return it;
 }
 
 /* Constant-density solve: sweeps until mean max(rho* - rho0, 0) / rho0 <= tol. */
-static int density_solve(dfsph_work *wk, const sph_dfsph *sd, float rho0, float dt, int threads, double *residual)
+static int density_solve(dfsph_work *wk, dfsph_cg *cg, const sph_dfsph *sd, float rho0, float dt, int threads,
+                         double tol, double *residual)
 {
-	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, false};
+	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, false, sd->def.divergence_solver, RATE_SWEEP};
 	int it = 0;
 	for (;;) {
+		if (cg)
+			it += divergence_cg(wk, cg, rho0, dt, threads, sd->def.max_iterations - it, true, tol, residual);
 		pass(wk, PASS_RATE, &a, threads);
 		*residual = mean_of(wk->err, wk->n) / rho0;
-		if ((it >= DFSPH_MIN_SWEEPS && *residual <= sd->def.max_density_error) || it >= sd->def.max_iterations)
+		if ((it >= DFSPH_MIN_SWEEPS && *residual <= tol) || it >= sd->def.max_iterations)
 			break;
 		pass(wk, PASS_CORRECT, &a, threads);
 		++it;
@@ -808,7 +1115,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	if (sd->frame != w->frame) {
 		sd->frame = w->frame;
 		sd->steps = sd->sweeps = sd->div_sweeps = sd->unconverged = 0;
-		sd->residual = 0;
+		sd->residual = sd->worst = 0;
 	}
 	const sph_neighbors *nb = &sh->nb;
 	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
@@ -846,7 +1153,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		wk.goff[i + 1] = wk.goff[i] + (nb->count[i] + 7) / 8;
 	wk.g = eddy__arena_alloc(&w->arena, (wk.goff[n] ? wk.goff[n] : 1) * sizeof *wk.g);
 	wk.owner = eddy__arena_alloc(&w->arena, (wk.goff[n] ? wk.goff[n] : 1) * sizeof *wk.owner);
-	dfsph_f4 *block = eddy__arena_alloc(&w->arena, 3 * un * sizeof(dfsph_f4) + 3 * un * sizeof(float));
+	dfsph_f4 *block = eddy__arena_alloc(&w->arena, 3 * un * sizeof(dfsph_f4) + 5 * un * sizeof(float));
 	if (!wk.g || !wk.owner || !block)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
 	wk.b = block;
@@ -855,6 +1162,21 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	wk.k = (float *)(wk.h + un);
 	wk.ksum = wk.k + un;
 	wk.err = wk.ksum + un;
+	wk.kp = wk.err + un;
+	wk.dsym = sd->def.divergence_solver ? wk.kp + un : NULL;
+	dfsph_cg cg = {NULL, NULL, NULL, NULL, NULL};
+	if (sd->def.divergence_solver) {
+		cg.u = eddy__arena_alloc(&w->arena, un * sizeof(dfsph_f4) + 5 * un * sizeof(float));
+		if (!cg.u)
+			return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
+		cg.p = (float *)(cg.u + un);
+		cg.r = cg.p + un;
+		cg.mask = cg.r + un;
+		cg.scratch = cg.mask + un;
+		wk.full = cg.scratch + un;
+	} else {
+		wk.full = NULL;
+	}
 	for (long i = 0; i < n; ++i)
 		for (size_t gi = wk.goff[i]; gi < wk.goff[i + 1]; ++gi)
 			wk.owner[gi] = (uint32_t)i;
@@ -868,18 +1190,66 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	pass(&wk, PASS_GRADIENTS, NULL, ctx->threads);
 	memset(wk.ksum, 0, un * sizeof *wk.ksum);
 
+	/* v* = v + dt (a + h) */
 	for (long i = 0; i < n; ++i)
-		wk.v[i] = (dfsph_f4){vx[i], vy[i], vz[i], 0};
-	const int div_it = sd->def.divergence_solver ? divergence_solve(&wk, sd, rho0, dt, ctx->threads) : 0;
-	/* v* = v (divergence-free) + dt (a + h) */
-	for (long i = 0; i < n; ++i) {
-		wk.v[i].x += dt * (ax[i] + wk.h[i].x);
-		wk.v[i].y += dt * (ay[i] + wk.h[i].y);
-		wk.v[i].z += dt * (az[i] + wk.h[i].z);
+		wk.v[i] = (dfsph_f4){vx[i] + dt * (ax[i] + wk.h[i].x), vy[i] + dt * (ay[i] + wk.h[i].y),
+		                     vz[i] + dt * (az[i] + wk.h[i].z), 0};
+	int div_it = 0;
+	double div_residual = 0, dtol = sd->def.max_divergence_error, ddtol = sd->def.max_density_error;
+	if (sd->def.divergence_solver) {
+		/* the velocity solve, from last step's k (a correction with it) */
+		float *kcol = eddy__col(w, sd->kcol);
+		for (long i = 0; i < n; ++i) {
+			wk.full[i] = rho[i] >= DFSPH_SURFACE * rho0 ? 1.0f : 0.0f;
+			wk.k[i] = kcol[i] > 0 && wk.full[i] > 0 ? kcol[i] : 0.0f;
+		}
+		const double depth = fluid_depth(w, g);
+		dtol = divergence_tolerance(sd->def.max_divergence_error, kc.h, depth);
+		ddtol = divergence_tolerance(sd->def.max_density_error, kc.h, depth);
+		const sweep_args wa = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true, RATE_SWEEP};
+		pass(&wk, PASS_CORRECT, &wa, ctx->threads);
+		div_it = divergence_solve(&wk, &cg, sd, rho0, dt, ctx->threads, dtol, &div_residual);
+		const bool capped = div_it >= sd->def.max_divergence_iterations &&
+		                    div_residual > DFSPH_FAIL_CAPPED_ERROR * dtol;
+		sd->capped = capped ? sd->capped + 1 : 0;
+		if (sd->capped >= DFSPH_FAIL_CAPPED) {
+			long wi = 0;
+			for (long i = 0; i < n; ++i)
+				wi = wk.err[i] > wk.err[wi] ? i : wi;
+			return eddy__fail(w, EDDY_ERR_NUMERIC,
+			                  "%s: the velocity solve did not converge at step %lld: mean error %.3g after %d "
+			                  "iterations in %d steps in a row (max_divergence_error %g), worst at particle %ld "
+			                  "(%.3g); the water may be too deep for it: raise max_divergence_iterations or lower "
+			                  "the world's cfl",
+			                  s->label, (long long)ctx->step, div_residual, div_it, sd->capped,
+			                  (double)sd->def.max_divergence_error, wi, wk.err[wi] / rho0);
+		}
+		memcpy(kcol, wk.ksum, un * sizeof *kcol);
+		memcpy(wk.kp, wk.ksum, un * sizeof *wk.kp);
+		memset(wk.ksum, 0, un * sizeof *wk.ksum);
+	} else {
+		memset(wk.kp, 0, un * sizeof *wk.kp);
+	}
+	float *kdcol = sd->def.divergence_solver ? eddy__col(w, sd->kdcol) : NULL;
+	if (kdcol) {
+		/* the density solve, from last step's k likewise */
+		for (long i = 0; i < n; ++i)
+			wk.k[i] = kdcol[i] > 0 ? kdcol[i] : 0.0f;
+		const sweep_args wa = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, false, true, RATE_SWEEP};
+		pass(&wk, PASS_CORRECT, &wa, ctx->threads);
 	}
 
 	double residual = 0;
-	const int it = density_solve(&wk, sd, rho0, dt, ctx->threads, &residual);
+	const int it = density_solve(&wk, sd->def.divergence_solver ? &cg : NULL, sd, rho0, dt, ctx->threads, ddtol, &residual);
+	/* the particle the solve left furthest off (the last sweep's errors) */
+	long worst = 0;
+	for (long i = 0; i < n; ++i) {
+		wk.kp[i] += wk.ksum[i];
+		worst = wk.err[i] > wk.err[worst] ? i : worst;
+	}
+	const double worst_err = wk.err[worst] / rho0;
+	if (kdcol)
+		memcpy(kdcol, wk.ksum, un * sizeof *kdcol);
 
 	/* a += (v* - (v + dt a)) / dt; p = k rho^2 */
 	const float inv_dt = 1.0f / dt;
@@ -890,7 +1260,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		ax[i] += ux;
 		ay[i] += uy;
 		az[i] += uz;
-		p[i] = wk.ksum[i] * wk.h[i].w * wk.h[i].w / sh->grad_cal;
+		p[i] = wk.kp[i] * wk.h[i].w * wk.h[i].w / sh->grad_cal;
 		if (bad < 0 && !(isfinite(ux) && isfinite(uy) && isfinite(uz) && isfinite(p[i])))
 			bad = i;
 	}
@@ -902,19 +1272,24 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	sd->steps++;
 	sd->sweeps += it;
 	sd->div_sweeps += div_it;
-	sd->unconverged += it >= sd->def.max_iterations && residual > sd->def.max_density_error;
+	sd->unconverged += (it >= sd->def.max_iterations && residual > sd->def.max_density_error) ||
+	                   (div_it >= sd->def.max_divergence_iterations && div_residual > sd->def.max_divergence_error);
 	sd->residual = residual > sd->residual ? residual : sd->residual;
+	sd->worst = worst_err > sd->worst ? worst_err : sd->worst;
 	eddy_world_publish_text(w, "solver", "dfsph");
 	eddy_world_publish(w, "iterations", (double)sd->sweeps / (double)sd->steps);
 	eddy_world_publish(w, "residual", sd->residual);
 	if (sd->def.divergence_solver)
 		eddy_world_publish(w, "divergence_iterations", (double)sd->div_sweeps / (double)sd->steps);
 	eddy_world_publish(w, "unconverged", (double)sd->unconverged);
-	if (!(residual <= DFSPH_FAIL_ERROR))
+	eddy_world_publish(w, "residual_max", sd->worst);
+	if (!(residual <= DFSPH_FAIL_ERROR) || !(worst_err <= DFSPH_FAIL_PARTICLE))
 		return eddy__fail(w, EDDY_ERR_NUMERIC,
 		                  "%s: did not converge at step %lld: mean density error %.3g after %d iterations "
-		                  "(max_density_error %g); lower the world's cfl or raise max_iterations",
-		                  s->label, (long long)ctx->step, residual, it, (double)sd->def.max_density_error);
+		                  "(max_density_error %g), particle %ld off by %.3g; lower the world's cfl or raise "
+		                  "max_iterations",
+		                  s->label, (long long)ctx->step, residual, it, (double)sd->def.max_density_error, worst,
+		                  worst_err);
 	return EDDY_OK;
 }
 
@@ -933,7 +1308,14 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	const double lv = v2 > 0 ? (double)sh->h / sqrt((double)v2) : INFINITY;
 	const eddy_vec3 g = w->def.gravity;
 	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
-	const double la = g1 > 0 ? DFSPH_GRAVITY_LIMIT * sqrt((double)sh->h / g1) : INFINITY;
+	double la = g1 > 0 ? DFSPH_GRAVITY_LIMIT * sqrt((double)sh->h / g1) : INFINITY;
+	const sph_dfsph *sd = s->data;
+	if (g1 > 0 && sd->def.divergence_solver) {
+		/* deeper than DFSPH_DEPTH_REF h: dt <= (that) sqrt(DFSPH_DEPTH_REF h / H) */
+		const double H = fluid_depth(w, g), ref = DFSPH_DEPTH_REF * (double)sh->h;
+		if (H > ref)
+			la *= sqrt(ref / H);
+	}
 	if (la < lv)
 		*reason = "gravity";
 	return la < lv ? la : lv;
@@ -975,5 +1357,25 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 #ifdef SPH_AVX2
 	sd->avx2 = sph_use_avx2();
 #endif
-	return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, dfsph_reads, 10, dfsph_writes, 4);
+	if (!def->divergence_solver) /* the warm starts are the velocity solve's */
+		return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, dfsph_reads, 10, dfsph_writes, 4);
+	/* the warm starts' state columns (shared by the sph_dfsph systems of a
+	 * world: each writes its own fluid's rows) */
+	const char *names[2] = {DFSPH_K_COLUMN, DFSPH_KD_COLUMN};
+	int *cols[2] = {&sd->kcol, &sd->kdcol};
+	for (int c = 0; c < 2; ++c) {
+		*cols[c] = eddy_world_find_column(w, names[c]);
+		if (*cols[c] < 0)
+			*cols[c] = eddy_world_declare_column(w, names[c], EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "m^5/(kg s^2)");
+		if (*cols[c] < 0) {
+			free(sd);
+			return EDDY_NULL_SYSTEM;
+		}
+	}
+	int reads[12], writes[6];
+	memcpy(reads, dfsph_reads, sizeof dfsph_reads);
+	memcpy(writes, dfsph_writes, sizeof dfsph_writes);
+	reads[10] = writes[4] = sd->kcol;
+	reads[11] = writes[5] = sd->kdcol;
+	return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, reads, 12, writes, 6);
 }

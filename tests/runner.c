@@ -97,6 +97,7 @@ int main(int argc, char **argv)
 		{"stress_slosh", suite_stress_slosh, false},
 		{"long_slosh", suite_long_slosh, true},
 		{"stress_dfsph", suite_stress_dfsph, false},
+		{"long_dfsph", suite_long_dfsph, true},
 		{"stress_energy", suite_stress_energy, false},
 		{"mesh", suite_mesh, false},
 		{"long_mesh", suite_long_mesh, true},

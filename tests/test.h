@@ -81,6 +81,7 @@ void suite_stress_slosh(void);
 void suite_long_slosh(void); /* minutes: make test-long */
 
 void suite_stress_dfsph(void);
+void suite_long_dfsph(void);
 
 /* meshes and particle files (issue 16) */
 void suite_mesh(void);
