@@ -7,6 +7,9 @@
 --   build/eddy run scenes/cup.lua --set method=dfsph     (DFSPH)
 --   build/eddy run scenes/cup.lua --set mesh=my_cup.stl  (any mesh assimp reads, closed)
 --
+-- Output in out/cup/ (or --out): frame_NNNN.png (sprites coloured by speed)
+-- and liquid_NNNN.png (render_surface: the liquid's surface and the cup).
+--
 -- The cup is an eddy.collide_mesh: a signed distance field built from the
 -- mesh when the scene loads (exact near the surface), which FLIP's boundary
 -- sees as solid cells with fractional faces and which keeps SPH particles
@@ -37,7 +40,13 @@ world:add(eddy.emit_nozzle { center = {0.07, 0.18, 0.07}, radius = 0.015, direct
 world:add(fluid)
 world:add(eddy.collide_mesh { path = eddy.param("mesh", "scenes/meshes/cup.obj"), translate = {0.07, 0, 0.07} })
 
-require("eddy.view").render(eddy, world, "cup", { radius = 0.6 * spacing, eye = {0.07, 0.25, 0.3},
-                                                  target = {0.07, 0.06, 0.07} })
+local eye, target = {0.07, 0.25, 0.3}, {0.07, 0.06, 0.07}
+require("eddy.view").render(eddy, world, "cup", { radius = 0.6 * spacing, eye = eye, target = target })
+-- the liquid's surface, shaded, with the cup drawn as the zero level of its
+-- distance field (liquid_NNNN.png beside the sprite frames); --set surface=false skips it
+if eddy.param("render", true) and eddy.param("surface", true) then
+	world:add(eddy.render_surface { spacing = spacing, support = fluid.cell_size and 4 or 2, eye = eye, target = target,
+	                                path = eddy.out_dir("out/cup") .. "/liquid_%04d.png" })
+end
 
 return world

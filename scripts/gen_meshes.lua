@@ -10,7 +10,10 @@
 --                       outer radius 0.05 m, cavity radius 0.04 m, height
 --                       0.1 m, floor 0.01 m thick, standing on y = 0, axis x = z = 0
 --
---   lua5.4 scripts/gen_meshes.lua [folder]     (default scenes/meshes)
+--   lua5.4 scripts/gen_meshes.lua [folder [cup_sides]]   (default scenes/meshes, 64)
+--
+-- The cup has 8 triangles per side: cup_sides = 12500 gives the
+-- 100,000-triangle cup the README's distance-field cost is measured on.
 
 local dir = arg[1] or "scenes/meshes"
 
@@ -123,6 +126,8 @@ local cv, cf = revolve({ { 0, 0 }, { 1, 0 }, { 1, 1 }, { 0, 1 } }, N)
 write_obj(dir .. "/cylinder.obj", "a cylinder: radius 1, y from 0 to 1, 64 sides", cv, cf)
 
 local R, r, H, floor_t = 0.05, 0.04, 0.1, 0.01
-cv, cf = revolve({ { 0, 0 }, { R, 0 }, { R, H }, { r, H }, { r, floor_t }, { 0, floor_t } }, N)
+local cup_sides = math.tointeger(tonumber(arg[2] or "64"))
+assert(cup_sides and cup_sides >= 3, "gen_meshes.lua: cup_sides must be a whole number >= 3")
+cv, cf = revolve({ { 0, 0 }, { R, 0 }, { R, H }, { r, H }, { r, floor_t }, { 0, floor_t } }, cup_sides)
 write_obj(dir .. "/cup.obj", string.format("a cup: outer radius %g m, cavity radius %g m, height %g m, floor %g m, %d sides",
-	R, r, H, floor_t, N), cv, cf)
+	R, r, H, floor_t, cup_sides), cv, cf)

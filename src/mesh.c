@@ -525,7 +525,7 @@ size_t eddy__sdf_plan(eddy_sdf *s, const eddy_trimesh *m, double h, int margin)
 	return N > (double)(1 << 26) ? 0 : (size_t)N;
 }
 
-bool eddy__sdf_fill(eddy_sdf *s, const eddy_trimesh *m, bool vote)
+bool eddy__sdf_fill(eddy_sdf *s, const eddy_trimesh *m, bool vote, int threads)
 {
 	const double h = s->h;
 	const size_t n = (size_t)s->n[0] * (size_t)s->n[1] * (size_t)s->n[2];
@@ -539,25 +539,35 @@ bool eddy__sdf_fill(eddy_sdf *s, const eddy_trimesh *m, bool vote)
 		s->d[q] = FLT_MAX, tri[q] = -1;
 	const int band = 2;
 	const int nx = s->n[0], ny = s->n[1];
-	for (int t = 0; t < m->nt; ++t) {
-		int lo[3], hi[3];
-		for (int a = 0; a < 3; ++a) {
-			const double *P0 = m->v[m->t[t][0]], *P1 = m->v[m->t[t][1]], *P2 = m->v[m->t[t][2]];
-			const double tlo = fmin(P0[a], fmin(P1[a], P2[a])), thi = fmax(P0[a], fmax(P1[a], P2[a]));
-			lo[a] = (int)fmax(0, floor((tlo - s->origin[a]) / h) - band);
-			hi[a] = (int)fmin(s->n[a] - 1, ceil((thi - s->origin[a]) / h) + band);
-		}
-		for (int k = lo[2]; k <= hi[2]; ++k)
-			for (int j = lo[1]; j <= hi[1]; ++j)
-				for (int i = lo[0]; i <= hi[0]; ++i) {
-					const size_t q = (size_t)i + (size_t)nx * ((size_t)j + (size_t)ny * (size_t)k);
-					const double p[3] = {s->origin[0] + i * h, s->origin[1] + j * h, s->origin[2] + k * h};
-					const double d = eddy__mesh_triangle_distance(m, t, p);
-					if (d < s->d[q]) {
-						s->d[q] = (float)d;
-						tri[q] = t;
+	/* The narrow band in z slabs, one thread a slab: every slab visits the
+	 * triangles in index order, so a node keeps the first of its nearest
+	 * triangles whatever the thread count. */
+	const int nslab = threads > 1 ? 4 * threads : 1;
+#pragma omp parallel for num_threads(threads) if (threads > 1) schedule(dynamic, 1)
+	for (int slab = 0; slab < nslab; ++slab) {
+		const int k0 = (int)((long)s->n[2] * slab / nslab), k1 = (int)((long)s->n[2] * (slab + 1) / nslab) - 1;
+		for (int t = 0; t < m->nt; ++t) {
+			int lo[3], hi[3];
+			for (int a = 0; a < 3; ++a) {
+				const double *P0 = m->v[m->t[t][0]], *P1 = m->v[m->t[t][1]], *P2 = m->v[m->t[t][2]];
+				const double tlo = fmin(P0[a], fmin(P1[a], P2[a])), thi = fmax(P0[a], fmax(P1[a], P2[a]));
+				lo[a] = (int)fmax(0, floor((tlo - s->origin[a]) / h) - band);
+				hi[a] = (int)fmin(s->n[a] - 1, ceil((thi - s->origin[a]) / h) + band);
+			}
+			lo[2] = lo[2] > k0 ? lo[2] : k0;
+			hi[2] = hi[2] < k1 ? hi[2] : k1;
+			for (int k = lo[2]; k <= hi[2]; ++k)
+				for (int j = lo[1]; j <= hi[1]; ++j)
+					for (int i = lo[0]; i <= hi[0]; ++i) {
+						const size_t q = (size_t)i + (size_t)nx * ((size_t)j + (size_t)ny * (size_t)k);
+						const double p[3] = {s->origin[0] + i * h, s->origin[1] + j * h, s->origin[2] + k * h};
+						const double d = eddy__mesh_triangle_distance(m, t, p);
+						if (d < s->d[q]) {
+							s->d[q] = (float)d;
+							tri[q] = t;
+						}
 					}
-				}
+		}
 	}
 	for (int pass = 0; pass < 2; ++pass)
 		for (int dir = 0; dir < 8; ++dir)

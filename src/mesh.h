@@ -64,8 +64,9 @@ size_t eddy__sdf_plan(eddy_sdf *s, const eddy_trimesh *m, double h, int margin);
 /* Fills s->d (allocated by the caller, eddy__sdf_plan's count): exact
  * point-triangle distances within two cells of every triangle's box, then
  * fast sweeping of each node's closest triangle (Batty's SDFGen); sign from
- * eddy__mesh_inside. False when scratch memory is short. */
-bool eddy__sdf_fill(eddy_sdf *s, const eddy_trimesh *m, bool vote);
+ * eddy__mesh_inside. The band is filled on `threads` threads with the same
+ * result on any count. False when scratch memory is short. */
+bool eddy__sdf_fill(eddy_sdf *s, const eddy_trimesh *m, bool vote, int threads);
 /* Trilinear value at p; outside the grid, the value at the nearest grid
  * point plus the distance to it (outside the mesh there, so still a
  * distance bound with the right sign). */

@@ -337,7 +337,7 @@ eddy_system_id eddy_add_collide_mesh(eddy_world *w, const eddy_collide_mesh_def 
 	b->volume = m.volume;
 	b->sdf = sdf;
 	b->sdf.d = b->field;
-	const bool ok = eddy__sdf_fill(&b->sdf, &m, def->open);
+	const bool ok = eddy__sdf_fill(&b->sdf, &m, def->open, w->def.threads);
 	eddy__mesh_free(&m);
 	if (!ok) {
 		free(b);

@@ -139,6 +139,45 @@ static void sdf_pose(void)
 	eddy_destroy_world(w);
 }
 
+/* The distance field is built on the world's threads in z slabs; every
+ * node keeps the first of its nearest triangles, so the field is the same
+ * bits on 1, 2 and 3 threads (sampled at random points in and around the
+ * rotated, scaled icosphere). */
+static void sdf_same_on_any_thread_count(void)
+{
+	float first[64];
+	for (int threads = 1; threads <= 3; ++threads) {
+		eddy_world_def wd = eddy_default_world_def();
+		wd.bounds_max = (eddy_vec3){1, 1, 1};
+		wd.threads = threads;
+		eddy_world *w = eddy_create_world(&wd, NULL, 0);
+		CHECK(w != NULL);
+		if (!w)
+			return;
+		eddy_collide_mesh_def d = eddy_default_collide_mesh_def();
+		strcpy(d.path, "scenes/meshes/icosphere.obj");
+		d.scale = (eddy_vec3){0.2f, 0.3f, 0.25f};
+		d.rotate = (eddy_vec3){10, 30, 0};
+		d.translate = (eddy_vec3){0.5f, 0.5f, 0.5f};
+		d.cell_size = 0.01f;
+		const eddy_system_id id = eddy_add_collide_mesh(w, &d);
+		CHECKF(eddy_system_valid(w, id), "%s", eddy_world_error(w));
+		uint64_t s = 11;
+		int differ = 0;
+		for (int q = 0; q < 64; ++q) {
+			const eddy_vec3 p = {(float)(0.15 + 0.7 * u01(&s)), (float)(0.1 + 0.8 * u01(&s)), (float)(0.15 + 0.7 * u01(&s))};
+			float dist = NAN;
+			CHECK(eddy_collider_distance(w, id, p, &dist) == EDDY_OK);
+			if (threads == 1)
+				first[q] = dist;
+			else
+				differ += memcmp(&dist, &first[q], sizeof dist) != 0;
+		}
+		CHECKF(differ == 0, "%d of 64 distances differ on %d threads from 1 thread", differ, threads);
+		eddy_destroy_world(w);
+	}
+}
+
 /* ---- topology ---------------------------------------------------------------- */
 
 static const char *CUBE_V = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 0 0 1\nv 1 0 1\nv 0 1 1\nv 1 1 1\n";
@@ -762,6 +801,7 @@ void suite_mesh(void)
 {
 	RUN(sdf_matches_sphere);
 	RUN(sdf_pose);
+	RUN(sdf_same_on_any_thread_count);
 	RUN(closed_and_open_meshes);
 	RUN(flip_wall_warning);
 	RUN(emit_mesh_counts);
