@@ -969,28 +969,32 @@ static int l_system_mass(lua_State *L)
 	return 1;
 }
 
-static int l_system_set_offset(lua_State *L)
+/* A collider's pose vector (offset or rotation) from Lua, and back. */
+typedef eddy_status (*pose_set_fn)(eddy_world *, eddy_system_id, eddy_vec3);
+typedef eddy_status (*pose_get_fn)(const eddy_world *, eddy_system_id, eddy_vec3 *);
+
+static int set_pose(lua_State *L, const char *method, const char *field, pose_set_fn set)
 {
 	lua_system *ls;
 	eddy_world *w = system_world(L, 1, &ls);
-	static const eddy_lua_kind k = {"set_offset", 0, NULL, NULL, NULL};
-	eddy_vec3 v = vec3_field(L, &k, "offset", 2);
+	const eddy_lua_kind k = {method, 0, NULL, NULL, NULL};
+	eddy_vec3 v = vec3_field(L, &k, field, 2);
 	if (!eddy_system_valid(w, ls->id))
 		return luaL_error(L, "stale system handle: the system was removed from the world");
-	if (eddy_collider_set_offset(w, ls->id, v) != EDDY_OK)
+	if (set(w, ls->id, v) != EDDY_OK)
 		return luaL_error(L, "%s", eddy_world_error(w));
 	return 0;
 }
 
-static int l_system_offset(lua_State *L)
+static int get_pose(lua_State *L, const char *field, pose_get_fn get)
 {
 	lua_system *ls;
 	eddy_world *w = system_world(L, 1, &ls);
 	eddy_vec3 v;
 	if (!eddy_system_valid(w, ls->id))
 		return luaL_error(L, "stale system handle: the system was removed from the world");
-	if (eddy_collider_get_offset(w, ls->id, &v) != EDDY_OK)
-		return luaL_error(L, "offset: this system is not a collider");
+	if (get(w, ls->id, &v) != EDDY_OK)
+		return luaL_error(L, "%s: this system is not a collider", field);
 	lua_createtable(L, 3, 0);
 	lua_pushnumber(L, v.x);
 	lua_rawseti(L, -2, 1);
@@ -1001,37 +1005,13 @@ static int l_system_offset(lua_State *L)
 	return 1;
 }
 
+static int l_system_set_offset(lua_State *L) { return set_pose(L, "set_offset", "offset", eddy_collider_set_offset); }
+static int l_system_offset(lua_State *L) { return get_pose(L, "offset", eddy_collider_get_offset); }
 static int l_system_set_rotation(lua_State *L)
 {
-	lua_system *ls;
-	eddy_world *w = system_world(L, 1, &ls);
-	static const eddy_lua_kind k = {"set_rotation", 0, NULL, NULL, NULL};
-	eddy_vec3 v = vec3_field(L, &k, "rotation", 2);
-	if (!eddy_system_valid(w, ls->id))
-		return luaL_error(L, "stale system handle: the system was removed from the world");
-	if (eddy_collider_set_rotation(w, ls->id, v) != EDDY_OK)
-		return luaL_error(L, "%s", eddy_world_error(w));
-	return 0;
+	return set_pose(L, "set_rotation", "rotation", eddy_collider_set_rotation);
 }
-
-static int l_system_rotation(lua_State *L)
-{
-	lua_system *ls;
-	eddy_world *w = system_world(L, 1, &ls);
-	eddy_vec3 v;
-	if (!eddy_system_valid(w, ls->id))
-		return luaL_error(L, "stale system handle: the system was removed from the world");
-	if (eddy_collider_get_rotation(w, ls->id, &v) != EDDY_OK)
-		return luaL_error(L, "rotation: this system is not a collider");
-	lua_createtable(L, 3, 0);
-	lua_pushnumber(L, v.x);
-	lua_rawseti(L, -2, 1);
-	lua_pushnumber(L, v.y);
-	lua_rawseti(L, -2, 2);
-	lua_pushnumber(L, v.z);
-	lua_rawseti(L, -2, 3);
-	return 1;
-}
+static int l_system_rotation(lua_State *L) { return get_pose(L, "rotation", eddy_collider_get_rotation); }
 
 /* ---- safe mode ------------------------------------------------------------
  *
