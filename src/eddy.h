@@ -863,7 +863,7 @@ typedef enum eddy_collider_kind {
 	EDDY_COLLIDER_SPHERE,
 	EDDY_COLLIDER_PLANE,
 	EDDY_COLLIDER_OTHER,   /* a collider whose shape has no description */
-	EDDY_COLLIDER_MESH     /* a collide_mesh: a, b its distance grid's box (a drawer needs the mesh file) */
+	EDDY_COLLIDER_MESH     /* a collide_mesh: a, b its distance grid's box (eddy_collider_mesh draws it) */
 } eddy_collider_kind;
 
 typedef struct eddy_collider_shape {
@@ -912,8 +912,9 @@ EDDY_API eddy_status eddy_world_surface(eddy_world *w, const eddy_surface_def *d
  * (eddy_collider_distance) sampled every `cell` m over the world's bounds
  * (cell <= 0: the bounds' longest side / 64; at most 256 samples a side),
  * meshed like the surface, normals out of the solid, closed where the solid
- * leaves the bounds. For colliders eddy_collider_shape_of describes as
- * EDDY_COLLIDER_OTHER (a mesh collider, say); render_surface draws them so. */
+ * leaves the bounds. For colliders eddy_collider_shape_of gives no
+ * primitive for (EDDY_COLLIDER_MESH, EDDY_COLLIDER_OTHER); both renderers
+ * draw them so. */
 EDDY_API eddy_status eddy_collider_mesh(eddy_world *w, eddy_system_id id, float cell, eddy_mesh *out);
 /* Writes the mesh, whole or not at all, as binary little-endian PLY (vertex
  * x y z nx ny nz floats, face uchar/uint index lists), Wavefront OBJ (v, vn,
