@@ -61,7 +61,7 @@ LIBS          := -lcholmod -lHYPRE $(MPI_LIBS) $(OSMESA_LIBS) $(PNG_LIBS) $(ASSI
 # The command-line host: main.c and the files named cli_*.c are the command's
 # own and stay out of the Lua module.
 CLI_C    := lua/main.c $(wildcard lua/cli_*.c)
-SRC_C    := $(wildcard src/*.c)
+SRC_C    := $(wildcard src/*.c src/sph/*.c)
 SRC_CXX  := $(wildcard src/*.cpp)
 RENDER_C := $(wildcard render/*.c)
 LUA_C    := $(filter-out $(CLI_C),$(wildcard lua/*.c))
@@ -109,7 +109,7 @@ $(BUILD)/obj/tests/%.o: tests/%.c $(HEADER)
 # SPH pair loops: with errno semantics GCC follows every sqrtss with a compare
 # and a branch to libm's sqrtf (to set errno for a negative argument, which r^2
 # never is). -fno-math-errno drops only that; results are bit-identical.
-$(BUILD)/obj/src/sys_sph_pressure.o $(BUILD)/obj/src/sys_sph_viscosity.o: BASE += -fno-math-errno
+$(BUILD)/obj/src/sph/pressure.o $(BUILD)/obj/src/sph/viscosity.o: BASE += -fno-math-errno
 $(BUILD)/obj/src/flip_hypre.o: BASE += $(HYPRE_CFLAGS)
 
 # ---- linking --------------------------------------------------------------------

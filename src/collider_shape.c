@@ -32,7 +32,7 @@ eddy_status eddy_collider_shape_of(const eddy_world *w, eddy_system_id id, eddy_
 }
 
 /* ---- SPH boundary particles of the built-in colliders (sph.h) ---- */
-#include "sph.h"
+#include "sph/sph.h"
 
 size_t eddy__sph_collider_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
                                  float *z, float *vol, eddy_vec3 *normal)

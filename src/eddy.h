@@ -571,7 +571,7 @@ typedef void (*eddy_check_fn)(eddy_check_level level, const char *message, void 
  * counts as one error. */
 EDDY_API int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user);
 
-/* ---- SPH (sys_sph_*.c) ------------------------------------------------- */
+/* ---- SPH (src/sph/) ------------------------------------------------- */
 
 /* SPH after Mueller, Charypar & Gross 2003, with the fixes docs/validation.md lists.
  * sph_density builds the neighbour lists (uniform grid, cells of radius/2) once

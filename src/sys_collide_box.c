@@ -14,7 +14,7 @@
  * (eddy__sph_box_points below; Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012); a tank's walls are an
  * sph_boundary_box's. The clamping here is the last guard. */
-#include "sph.h"
+#include "sph/sph.h"
 #include "systems.h"
 
 #include <stdlib.h>
@@ -214,7 +214,7 @@ void eddy__shape_collide_box(const eddy_system *s, eddy_collider_shape *out)
 	out->pivot = eddy__add3(b->base.motion.pivot, b->base.motion.offset);
 }
 
-/* ---- boundary particles, for SPH (sph_neighbors.c) ----
+/* ---- boundary particles, for SPH (src/sph/neighbors.c) ----
  * A block (inside = false): the lattice inside it, min + (i + 1/2) s_a on
  * each axis (s_a the spacing adjusted to a whole number of cells, at least
  * one), keeping the points within L = ceil(h / s) layers of a face: a shell

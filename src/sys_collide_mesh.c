@@ -25,7 +25,7 @@
  * v + omega x (x - pivot - offset). The field is the only state besides the motion; a
  * scene without collide_mesh allocates none of it. */
 #include "mesh.h"
-#include "sph.h"
+#include "sph/sph.h"
 #include "systems.h"
 
 #include <stdlib.h>
@@ -371,7 +371,7 @@ void eddy__shape_collide_mesh(const eddy_system *s, eddy_collider_shape *out)
 	out->pivot = eddy__add3(b->base.motion.pivot, o);
 }
 
-/* ---- boundary particles, for SPH (sph_neighbors.c) ----
+/* ---- boundary particles, for SPH (src/sph/neighbors.c) ----
  * Akinci et al. 2012 on the mesh, laid out as a block box lays out its own:
  * the points of a cubic lattice of the fluid's spacing s (over the distance
  * grid's box grown by the shell, at min + (i + 1/2) s) that lie on the solid

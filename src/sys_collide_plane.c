@@ -12,7 +12,7 @@
  * (eddy__sph_plane_points below; Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012); the projection here is
  * the last guard. */
-#include "sph.h"
+#include "sph/sph.h"
 #include "systems.h"
 
 #include <stdlib.h>
@@ -127,7 +127,7 @@ void eddy__shape_collide_plane(const eddy_system *s, eddy_collider_shape *out)
 	out->pivot = eddy__add3(b->base.motion.pivot, b->base.motion.offset);
 }
 
-/* ---- boundary particles, for SPH (sph_neighbors.c) ----
+/* ---- boundary particles, for SPH (src/sph/neighbors.c) ----
  * Akinci et al. 2012, laid out as sph_boundary_box lays out its walls: L =
  * ceil(h / s) layers behind the plane at depths (k + 1/2) s, each a square
  * lattice of spacing s in the plane, covering the world bounds' shadow on

@@ -14,7 +14,7 @@
  * (eddy__sph_sphere_points below; Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012): the fluid beside it then
  * has a full neighbourhood, and the projection here is the last guard. */
-#include "sph.h"
+#include "sph/sph.h"
 #include "systems.h"
 
 #include <stdlib.h>
@@ -136,7 +136,7 @@ void eddy__shape_collide_sphere(const eddy_system *s, eddy_collider_shape *out)
 	out->inside = b->def.inside;
 }
 
-/* ---- boundary particles, for SPH (sph_neighbors.c) ----
+/* ---- boundary particles, for SPH (src/sph/neighbors.c) ----
  * Akinci et al. 2012: the solid's surface sampled at about the fluid
  * spacing s, each particle standing for the volume V_b = 1 / sum_k W_bk.
  * Layers of radius R -+ (k + 1/2) s, k = 0 .. L - 1, L = ceil(h / s) (inward
@@ -147,7 +147,7 @@ void eddy__shape_collide_sphere(const eddy_system *s, eddy_collider_shape *out)
  * shell and its continuation by L more layers into the fluid (where a fluid
  * at rest would be): over the shell alone (Akinci's single layer) the outer
  * layer's half-empty neighbourhood would over-weight it, as
- * sys_sph_boundary_box.c explains. The sum is the mean over up to 16 points
+ * src/sph/boundary_box.c explains. The sum is the mean over up to 16 points
  * of the layer (the spread is uniform, so the layer shares one volume). */
 static size_t fib_layer(double rk, double s, double *px, double *py, double *pz)
 {

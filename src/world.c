@@ -7,7 +7,7 @@
  * then check that no particle left the bounds. */
 #define _POSIX_C_SOURCE 200809L
 #include "core.h"
-#include "sph.h"
+#include "sph/sph.h"
 #include "systems.h"
 
 #include <float.h>

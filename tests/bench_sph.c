@@ -26,7 +26,7 @@
 /* A cube of about n particles on the lattice, resting on the floor of a tank
  * twice as wide, with gravity: the neighbourhoods of a real fluid. A block
  * this calm seldom moves a particle by half the Verlet skin, so this times
- * mostly the filtered-list path (sph_neighbors.c); a dam break runs the grid
+ * mostly the filtered-list path (src/sph/neighbors.c); a dam break runs the grid
  * search every few steps. */
 static eddy_world *block(int n, int threads)
 {

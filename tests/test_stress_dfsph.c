@@ -7,7 +7,7 @@
  * (bottom_p_ratio = 1) and nothing moves. The warm-started solves carry that
  * weight from step to step, their conjugate gradients and depth-scaled
  * tolerances converge through the column, and the time step shrinks with
- * the depth (see src/sys_sph_dfsph.c); before, a 40-layer column at the
+ * the depth (see src/sph/dfsph.c); before, a 40-layer column at the
  * defaults blew up (23 m/s, 409 of 2560 particles thrown to the lid, bottom
  * pressure 1.84 rho0 g D) and an 80-layer one could not be held at all.
  *

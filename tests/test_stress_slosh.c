@@ -278,7 +278,7 @@ static void energy_stats_wcsph(void)
  * halves (it did: -0.024 with a +4.3% period error, the slosh gaining
  * energy) and must be positive, each within 0.003 (zeta's resolution here,
  * see slosh_flip_apic), and the 5 mm period within 3%. Measured with the
- * conjugate-gradient solves (src/sys_sph_dfsph.c): zeta 0.0423 at 10 mm and
+ * conjugate-gradient solves (src/sph/dfsph.c): zeta 0.0423 at 10 mm and
  * 0.0393 at 5 mm, period error -1.5% and -2.5%. */
 static void slosh_all_methods(void)
 {

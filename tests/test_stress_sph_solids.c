@@ -5,7 +5,7 @@
  * lowered into a pool and moved through it, a faster and larger one, and a
  * plane driven in as a piston, with WCSPH (sph_pressure) and DFSPH
  * (sph_dfsph). The colliders carry boundary particles (Akinci et al. 2012,
- * sph_neighbors.c) that move with them, so the fluid beside a solid has a full
+ * src/sph/neighbors.c) that move with them, so the fluid beside a solid has a full
  * neighbourhood: without them it packed against the sphere and the level
  * ended about 5% low.
  *

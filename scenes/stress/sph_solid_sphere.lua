@@ -3,7 +3,7 @@
 -- lowered into a 15 cm pool, then moved back and forth through it at up to
 -- 0.63 m/s for 1.5 s (issue "Stable and conservative one step beyond the
 -- tested scenes", item 2). The sphere collider carries boundary particles
--- (Akinci et al. 2012, src/sph_neighbors.c) that move with it, so the fluid
+-- (Akinci et al. 2012, src/sph/neighbors.c) that move with it, so the fluid
 -- beside it has a full neighbourhood; the level should end at (fluid volume +
 -- sphere volume) / tank area = 0.1612 m at the default spacing.
 -- tests/test_stress_sph_solids.c runs the same case.

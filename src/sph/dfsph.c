@@ -22,7 +22,7 @@
  * With B_i = sum_b m_b grad W(x_i - x_b) and the pressure written as
  * k_i = p_i / rho_i^2:
  *   Drho_i/Dt = sum_j (v_i - v_j) . G_ij + v_i . B_i - sum_b m_b v_b . grad W(x_i - x_b)
- * (the last term: boundary particles of moving colliders, sph_neighbors.c's
+ * (the last term: boundary particles of moving colliders, neighbors.c's
  * bdiv; 0 for walls at rest)
  *   a_i^p     = -sum_j (k_i + k_j) G_ij - 2 k_i B_i + h_i
  * The boundary particles mirror the particle's pressure (p_b = p_i, so the

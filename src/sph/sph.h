@@ -43,7 +43,7 @@ static inline sph_kernel_consts sph_consts(float h)
  * indexing the boundary arrays. Valid for the step in which sph_density built
  * them (the particle table is in that order, sorted by grid cell).
  *
- * Behind them, private to sph_neighbors.c, a Verlet list: the pairs closer
+ * Behind them, private to neighbors.c, a Verlet list: the pairs closer
  * than h (1 + skin) when it was last searched, in the indices of that time
  * ("build slots"), reused while no particle has moved more than half the
  * skin. The skin follows the motion (see SPH_SKIN), and is 0 while a list

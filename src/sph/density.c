@@ -2,7 +2,7 @@
 /* sph_density: neighbour search, density and equation of state.
  *
  * Reads: x y z. Writes: density pressure neighbors (and reorders the
- * particle table into grid-cell order, see sph_neighbors.c, where the exact
+ * particle table into grid-cell order, see neighbors.c, where the exact
  * neighbour lists are filtered each step from a Verlet list and the kernel
  * sums below are made on the way, in ascending neighbour order with four
  * partial sums). Shares with the later SPH systems (sph.h, sph_shared): the
