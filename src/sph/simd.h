@@ -20,7 +20,9 @@
  * compile sees only the kernels: the file keeps its system glue under
  * #ifndef EDDY_SIMD_VARIANT. Kernels the glue calls are named SIMD_NAME(x)
  * (x_avx2 in the variant, x_base otherwise), declared with
- * SIMD_DECLARE(x, (params)) and picked at run time with SIMD_PICK(x). The
+ * SIMD_DECLARE(ret, x, (params)) and picked at run time with SIMD_PICK(x).
+ * Both are extern (hidden, as the whole library), so x carries the file's
+ * prefix (visc_pair_sums, pressure_pair_sums). The
  * Makefile defines EDDY_SIMD_HAVE_AVX2 for the normal compile when it builds
  * the variant; without it (another build, the fuzzer's single compile)
  * SIMD_PICK always gives x_base.

@@ -32,7 +32,7 @@
 #include <stdlib.h>
 
 /* The pass goes in blocks of particles: first the sums over the pairs of the
- * block (pair_sums), then a loop adding each particle's totals to ax ay az.
+ * block (visc_pair_sums), then a loop adding each particle's totals to ax ay az.
  * Finishing each particle right after its groups put the adds of its six
  * totals behind every (often mispredicted) exit of the loop over its groups;
  * the particles of the second loop are independent (as in sph_dfsph). */
@@ -53,7 +53,7 @@ typedef struct pair_args {
  * at a time, each particle's as four lanes per component (lane l holding
  * lanes l and l + 4 of the groups) at t + VISC_T q. */
 typedef void pair_sums_fn(const pair_args *a, long i0, long cnt, float *t);
-SIMD_DECLARE(void, pair_sums, (const pair_args *a, long i0, long cnt, float *t));
+SIMD_DECLARE(void, visc_pair_sums, (const pair_args *a, long i0, long cnt, float *t));
 
 /* One group (neighbours l[0..7]; with masked, only the first left count).
  * The differences are taken on the quads before the transpose:
@@ -92,7 +92,7 @@ static inline void group(const pair_args *a, const uint32_t *l, bool masked, uin
 	s[5] = sf8_add(s[5], sf8_mul(g, rz));
 }
 
-void SIMD_NAME(pair_sums)(const pair_args *a, long i0, long cnt, float *t)
+void SIMD_NAME(visc_pair_sums)(const pair_args *a, long i0, long cnt, float *t)
 {
 	const sph_neighbors *nb = a->nb;
 	for (long b = 0; b < cnt; ++b) {
@@ -168,7 +168,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		pv[4 * i + 3] = -rho[i]; /* negated: see group */
 	}
 	const pair_args pa = {nb, pq, pv, kc.h, eps, rmin};
-	pair_sums_fn *sums = SIMD_PICK(pair_sums);
+	pair_sums_fn *sums = SIMD_PICK(visc_pair_sums);
 	const int threads = ctx->threads;
 	/* the threads take equal shares in order; a particle's result does not
 	 * depend on the blocks, so it is the same for any thread count */
