@@ -30,6 +30,8 @@
  * Beyond the shared contract (simd_spec.md) this file adds:
  *   sf8_load_quad2(p)      a quad p[0..3] in lanes 0-3 and again in 4-7;
  *   sf8_gather(base, idx)  lane k = base[idx[k]];
+ *   sf8_quad_lanes_below(n) mask of the lanes k with k mod 4 < n (a quad's
+ *                          first n floats, with sf8_load_quad2);
  *   sf8_sub_gather_quads(q, base, idx, c0..c3)
  *                          as sf8_gather_quads, each quad subtracted from
  *                          q's lanes 0-3 first: c0 lane k = q0 - base[4 idx[k]],
@@ -112,10 +114,19 @@ static inline sf8 sf8_or(sf8 a, sf8 b) { return _mm256_or_ps(a, b); }
 static inline sf8 sf8_xor(sf8 a, sf8 b) { return _mm256_xor_ps(a, b); }
 static inline sf8 sf8_andnot(sf8 m, sf8 a) { return _mm256_andnot_ps(m, a); }
 static inline sf8 sf8_select(sf8 m, sf8 a, sf8 b) { return _mm256_blendv_ps(b, a, m); }
+/* unsigned n > k as a signed compare of both with the sign bit flipped (no
+ * clamp, no branch) */
 static inline sf8 sf8_lanes_below(uint32_t n)
 {
-	const int c = n < 8 ? (int)n : 8;
-	return _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(c), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7)));
+	const __m256i f = _mm256_set1_epi32(INT32_MIN);
+	return _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_xor_si256(_mm256_set1_epi32((int32_t)n), f),
+	                                              _mm256_xor_si256(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), f)));
+}
+static inline sf8 sf8_quad_lanes_below(int n)
+{
+	const __m128i c = _mm_set1_epi32(n);
+	const __m128 m = _mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_setr_epi32(0, 1, 2, 3)));
+	return _mm256_set_m128(m, m);
 }
 static inline int sf8_mask_bits(sf8 m) { return _mm256_movemask_ps(m); }
 
@@ -212,9 +223,14 @@ static inline sf8 sf8_select(sf8 m, sf8 a, sf8 b)
 }
 static inline sf8 sf8_lanes_below(uint32_t n)
 {
-	const __m128i c = _mm_set1_epi32(n < 8 ? (int)n : 8);
-	return simd_pair_(_mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_setr_epi32(0, 1, 2, 3))),
-	                  _mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_setr_epi32(4, 5, 6, 7))));
+	const __m128i f = _mm_set1_epi32(INT32_MIN), c = _mm_xor_si128(_mm_set1_epi32((int32_t)n), f);
+	return simd_pair_(_mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_xor_si128(_mm_setr_epi32(0, 1, 2, 3), f))),
+	                  _mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_xor_si128(_mm_setr_epi32(4, 5, 6, 7), f))));
+}
+static inline sf8 sf8_quad_lanes_below(int n)
+{
+	const __m128 m = _mm_castsi128_ps(_mm_cmpgt_epi32(_mm_set1_epi32(n), _mm_setr_epi32(0, 1, 2, 3)));
+	return simd_pair_(m, m);
 }
 static inline int sf8_mask_bits(sf8 m) { return _mm_movemask_ps(m.lo) | _mm_movemask_ps(m.hi) << 4; }
 
@@ -354,6 +370,13 @@ static inline sf8 sf8_lanes_below(uint32_t n)
 	sf8 r;
 	for (uint32_t k = 0; k < 8; ++k)
 		r.l[k] = SIMD_MASK_(k < n);
+	return r;
+}
+static inline sf8 sf8_quad_lanes_below(int n)
+{
+	sf8 r;
+	for (int k = 0; k < 8; ++k)
+		r.l[k] = SIMD_MASK_((k & 3) < n);
 	return r;
 }
 static inline int sf8_mask_bits(sf8 m)

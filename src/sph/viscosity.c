@@ -98,9 +98,12 @@ void SIMD_NAME(visc_pair_sums)(const pair_args *a, long i0, long cnt, float *t)
 	for (long b = 0; b < cnt; ++b) {
 		const long i = i0 + b;
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
-		const float *pi = a->pq + 4 * i, *vi = a->pv + 4 * i;
-		const float own_p[4] = {pi[0], pi[1], pi[2], 0.0f}, own_v[4] = {vi[0], vi[1], vi[2], -vi[3]};
-		const sf8 qp = sf8_load_quad2(own_p), qv = sf8_load_quad2(own_v);
+		/* (x_i y_i z_i 0) and (v_i rho_i) from i's quads, in registers (a
+		 * quad written to memory as floats and loaded back whole would
+		 * stall on store forwarding) */
+		const sf8 xyz = sf8_quad_lanes_below(3);
+		const sf8 qp = sf8_and(sf8_load_quad2(a->pq + 4 * i), xyz);
+		const sf8 qv = sf8_xor(sf8_load_quad2(a->pv + 4 * i), sf8_andnot(xyz, sf8_set1(-0.0f)));
 		sf8 s[6];
 		for (int k = 0; k < 6; ++k)
 			s[k] = sf8_zero();
