@@ -315,7 +315,38 @@ static void passes_match_double_reference(void)
 	free(saved);
 }
 
+/* Every back-end gives the bits the passes gave before they were written
+ * once against simd.h: the state after two frames of the WCSPH dam break
+ * (pressure, viscosity, boundary particles) and of the droplet (surface
+ * tension), pinned from main's build of that time, on the build's back-end
+ * and with EDDY_NO_AVX2=1. make test SIMD=scalar runs this too, so the
+ * scalar back-end is held to the same bits. GCC on x86-64 (no FMA
+ * contraction under -std=c11); another compiler or libm may round
+ * differently, and the message says so. */
+static void backends_give_the_pinned_bits(void)
+{
+	static const struct {
+		const char *scene, *hash;
+	} pinned[] = {{"dam_break", "6ab42b7ac7bb6e47"}, {"droplet", "9ee8bd34d66bdf0a"}};
+	for (int k = 0; k < 2; ++k)
+		for (int path = 0; path < 2; ++path) {
+			char cmd[512], out[4096];
+			snprintf(cmd, sizeof cmd,
+			         "%s %s/eddy run scenes/%s.lua --frames 2 --stats - --quiet | tail -1 | "
+			         "grep -o '\"state_hash\":\"[0-9a-f]*\"'",
+			         path ? "EDDY_NO_AVX2=1" : "env -u EDDY_NO_AVX2", test_build_dir(), pinned[k].scene);
+			CHECK(test_sh(cmd, out, sizeof out) == 0);
+			char want[64];
+			snprintf(want, sizeof want, "\"state_hash\":\"%s\"", pinned[k].hash);
+			printf("    %s, 2 frames%s: %s", pinned[k].scene, path ? ", EDDY_NO_AVX2" : "", out);
+			CHECKF(strstr(out, want) != NULL,
+			       "%s: %s, pinned %s (another compiler or libm may round differently)", pinned[k].scene, out,
+			       pinned[k].hash);
+		}
+}
+
 void suite_sph_reference(void)
 {
 	RUN(passes_match_double_reference);
+	RUN(backends_give_the_pinned_bits);
 }
