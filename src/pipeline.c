@@ -185,10 +185,13 @@ void *eddy__provided(const eddy_world *w, const eddy_system *s, uint32_t cap)
 	return p && p->vt->shared ? p->vt->shared(p, cap) : NULL;
 }
 
+/* A list's length up to its -1; past EDDY_MAX_IO it stops looking (the add
+ * then fails with the limit), so a list missing its -1 is caught, not read
+ * without end. */
 static int column_list_length(const int *cols)
 {
 	int n = 0;
-	while (cols && cols[n] >= 0)
+	while (cols && n <= EDDY_MAX_IO && cols[n] >= 0)
 		++n;
 	return n;
 }

@@ -83,6 +83,7 @@ int main(int argc, char **argv)
 		{"fuzz", suite_fuzz, false},
 		{"package", suite_package, false},
 		{"sph", suite_sph, false},
+		{"sph_reference", suite_sph_reference, false},
 		{"flip", suite_flip, false},
 		{"flip_solvers", suite_flip_solvers, false},
 		{"render", suite_render, false},
