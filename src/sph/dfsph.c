@@ -219,7 +219,7 @@ typedef struct dfsph_work {
 /* One block of a pass, particles i0 .. i0 + cnt - 1 (cnt <= DFSPH_BLOCK),
  * on one SIMD back-end (a is NULL for the gradient pass). */
 typedef void dfsph_block_fn(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sweep *a, long i0, long cnt);
-dfsph_block_fn dfsph_block_base, dfsph_block_avx2;
+SIMD_DECLARE(void, dfsph_block, (dfsph_work * wk, enum dfsph_pass kind, const dfsph_sweep *a, long i0, long cnt));
 
 /* ---- the passes, compiled once per SIMD back-end ---------------------------- */
 
@@ -253,11 +253,8 @@ static void gradient_sums(dfsph_work *wk, long i0, long cnt, float *t)
 	          zero = sf8_zero();
 	for (size_t gi = wk->goff[i0], ge = wk->goff[i0 + cnt]; gi < ge; ++gi) {
 		dfsph_group *g = wk->g + gi;
-		const float *pi = a->pq + 4 * (size_t)wk->owner[gi];
-		sf8 xj, yj, zj, wj;
-		sf8_gather_quads(a->pq, g->j, &xj, &yj, &zj, &wj);
-		const sf8 rx = sf8_sub(sf8_set1(pi[0]), xj), ry = sf8_sub(sf8_set1(pi[1]), yj),
-		          rz = sf8_sub(sf8_set1(pi[2]), zj);
+		sf8 rx, ry, rz, rw; /* x_i - x_j */
+		sf8_sub_gather_quads(sf8_load_quad2(a->pq + 4 * (size_t)wk->owner[gi]), a->pq, g->j, &rx, &ry, &rz, &rw);
 		const sf8 r2 = sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz));
 		const sf8 r = sf8_sqrt(r2), hr = sf8_sub(h, r);
 		const sf8 ok = sf8_and(sf8_gt(r2, eps2), sf8_gt(hr, zero));
@@ -344,15 +341,14 @@ static void rate_sums(const dfsph_work *wk, long i0, long cnt, float *t)
 {
 	const float *v = &wk->v->x;
 	for (long q = 0; q < cnt; ++q) {
-		const float *vi = v + 4 * (i0 + q);
-		const sf8 vix = sf8_set1(vi[0]), viy = sf8_set1(vi[1]), viz = sf8_set1(vi[2]);
+		const sf8 vi = sf8_load_quad2(v + 4 * (i0 + q));
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
 		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
-			sf8 vx, vy, vz, vw;
-			sf8_gather_quads(v, g->j, &vx, &vy, &vz, &vw);
-			sx = sf8_add(sx, sf8_mul(sf8_sub(vix, vx), sf8_load(g->gx)));
-			sy = sf8_add(sy, sf8_mul(sf8_sub(viy, vy), sf8_load(g->gy)));
-			sz = sf8_add(sz, sf8_mul(sf8_sub(viz, vz), sf8_load(g->gz)));
+			sf8 dx, dy, dz, dw; /* v_i - v_j */
+			sf8_sub_gather_quads(vi, v, g->j, &dx, &dy, &dz, &dw);
+			sx = sf8_add(sx, sf8_mul(dx, sf8_load(g->gx)));
+			sy = sf8_add(sy, sf8_mul(dy, sf8_load(g->gy)));
+			sz = sf8_add(sz, sf8_mul(dz, sf8_load(g->gz)));
 		}
 		t[q] = sf8_sum(sf8_add(sf8_add(sx, sy), sz));
 	}
@@ -405,10 +401,7 @@ static void correct_sums(const dfsph_work *wk, long i0, long cnt, float *t)
 		const sf8 ki = sf8_set1(k[i0 + q]);
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
 		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
-			float kj[8];
-			for (int l = 0; l < 8; ++l)
-				kj[l] = k[g->j[l]];
-			const sf8 c = sf8_add(ki, sf8_load(kj));
+			const sf8 c = sf8_add(ki, sf8_gather(k, g->j));
 			sx = sf8_add(sx, sf8_mul(c, sf8_load(g->gx)));
 			sy = sf8_add(sy, sf8_mul(c, sf8_load(g->gy)));
 			sz = sf8_add(sz, sf8_mul(c, sf8_load(g->gz)));
