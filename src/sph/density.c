@@ -45,7 +45,7 @@ typedef struct sph_density {
 	eddy_sph_density_def def;
 } sph_density;
 
-static const int density_reads[] = {COL_X_, COL_Y_, COL_Z_};
+static const int density_reads[] = {COL_X_, COL_Y_, COL_Z_, -1};
 static const int density_writes[] = {COL_DENSITY, COL_PRESSURE, COL_SPH_NEIGHBORS, -1};
 
 eddy_sph_density_def eddy_default_sph_density_def(void)
@@ -97,9 +97,7 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 	const size_t n = w->n, nbound = nb->nb;
 	if (n == 0 || nbound == 0)
 		return EDDY_OK;
-	bool iterate = false;
-	for (int q = 0; q < w->order_count; ++q)
-		iterate = iterate || w->slots[w->order[q]].vt == &eddy__kind_sph_pressure;
+	const bool iterate = eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL;
 	/* the fluid near each boundary particle, from the fluid's boundary lists
 	 * turned around (most wall particles have none, and a grid walk for each
 	 * was most of a walled scene's step): rows ascending, as a walk over the
@@ -310,8 +308,8 @@ static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void
 	const sph_density *sd = s->data;
 	const double dx = sd->def.spacing, h = sd->def.radius;
 	int errors = 0;
-	for (int k = 0; k < w->order_count; ++k) {
-		const eddy_system *e = &w->slots[w->order[k]];
+	const eddy_system *e;
+	for (eddy_system_iter it = eddy__systems(w, 0); (e = eddy__systems_next(&it));) {
 		if (!e->vt->spacing)
 			continue;
 		const double de = e->vt->spacing(e);
@@ -340,8 +338,15 @@ static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void
 	return errors;
 }
 
+static void *shared(const eddy_system *s, uint32_t cap)
+{
+	return cap == EDDY_CAP_SPH_NEIGHBORS ? &((sph_density *)s->data)->sh : NULL;
+}
+
 const eddy_system_vtable eddy__kind_sph_density = {
 	.name = "sph_density",
+	.provides = EDDY_CAP_SPH_NEIGHBORS,
+	.shared = shared,
 	.step = step,
 	.state = state,
 	.destroy = destroy,
@@ -397,7 +402,7 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	const double vol = (double)def->spacing * def->spacing * def->spacing;
 	sd->sh.grad_cal = (float)(eddy_sph_lattice_sum(EDDY_SPH_POLY6, def->spacing, def->radius) * vol /
 	                          eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, def->spacing, def->radius));
-	eddy_system_id id = eddy__add_system(w, &eddy__kind_sph_density, sd, density_reads, 3, density_writes, 3);
+	eddy_system_id id = eddy__add_system(w, &eddy__kind_sph_density, sd, density_reads, density_writes);
 	if (eddy_system_valid(w, id))
 		eddy_world_set_rest_density(w, def->rest_density);
 	return id;

@@ -98,15 +98,7 @@ void eddy__sph_neighbors_free(sph_neighbors *nb)
 
 sph_shared *eddy__sph_find(eddy_world *w, const eddy_system *s)
 {
-	sph_shared *found = NULL;
-	for (int k = 0; k < w->order_count; ++k) {
-		eddy_system *o = &w->slots[w->order[k]];
-		if (o == s)
-			break;
-		if (o->vt == &eddy__kind_sph_density)
-			found = o->data;
-	}
-	return found;
+	return eddy__provided(w, s, EDDY_CAP_SPH_NEIGHBORS);
 }
 
 static inline int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
@@ -180,22 +172,19 @@ static void cell_ranges(const uint32_t *key, size_t n, size_t cells, uint32_t *s
 static uint64_t boundary_signature(const eddy_world *w)
 {
 	uint64_t sig = 0x9E3779B97F4A7C15ull;
-	for (int k = 0; k < w->order_count; ++k) {
-		const eddy_system *o = &w->slots[w->order[k]];
-		if (o->vt == &eddy__kind_sph_boundary_box || eddy__is_collider(o))
-			sig = (sig ^ ((uint64_t)w->order[k] << 16 | o->generation)) * 0x100000001b3ull;
-	}
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS | EDDY_CAP_COLLIDER); (o = eddy__systems_next(&it));)
+		sig = (sig ^ ((uint64_t)(o - w->slots) << 16 | o->generation)) * 0x100000001b3ull;
 	return sig;
 }
 
 /* The fluid spacing: that of the sph_density that owns sh. */
 static float fluid_spacing(const eddy_world *w, const sph_shared *sh)
 {
-	for (int k = 0; k < w->order_count; ++k) {
-		const eddy_system *o = &w->slots[w->order[k]];
-		if (o->data == sh && eddy__sph_density_def(o))
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_NEIGHBORS); (o = eddy__systems_next(&it));)
+		if (o->vt->shared(o, EDDY_CAP_SPH_NEIGHBORS) == sh && eddy__sph_density_def(o))
 			return eddy__sph_density_def(o)->spacing;
-	}
 	return sh->h / 2;
 }
 
@@ -344,11 +333,11 @@ static eddy_status boundary_build(eddy_world *w, sph_shared *sh)
 	const float spacing = fluid_spacing(w, sh);
 	size_t total = 0, ncol = 0, tcol = 0;
 	eddy_vec3 normal;
-	for (int k = 0; k < w->order_count; ++k) {
-		const eddy_system *o = &w->slots[w->order[k]];
-		if (o->vt == &eddy__kind_sph_boundary_box)
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS | EDDY_CAP_COLLIDER); (o = eddy__systems_next(&it));) {
+		if (o->vt->provides & EDDY_CAP_SPH_WALLS)
 			total += eddy__sph_boundary_box_points(o, sh->h, NULL, NULL, NULL, NULL);
-		else if (eddy__is_collider(o)) {
+		else {
 			const size_t c = eddy__sph_collider_points(w, o, spacing, sh->h, NULL, NULL, NULL, NULL, &normal);
 			tcol += c;
 			ncol += c > 0;
@@ -400,11 +389,8 @@ static eddy_status boundary_build(eddy_world *w, sph_shared *sh)
 		goto done;
 	}
 	size_t at = 0;
-	for (int k = 0; k < w->order_count; ++k) {
-		const eddy_system *o = &w->slots[w->order[k]];
-		if (o->vt == &eddy__kind_sph_boundary_box)
-			at += eddy__sph_boundary_box_points(o, sh->h, x + at, y + at, z + at, v + at);
-	}
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS); (o = eddy__systems_next(&it));)
+		at += eddy__sph_boundary_box_points(o, sh->h, x + at, y + at, z + at, v + at);
 	for (size_t i = 0; i < nstat; ++i)
 		key[i] = cell_index(nb, x[i], y[i], z[i]);
 	const size_t cells = (size_t)nb->gx * (size_t)nb->gy * (size_t)nb->gz;
@@ -419,10 +405,7 @@ static eddy_status boundary_build(eddy_world *w, sph_shared *sh)
 	}
 	/* the colliders' particles after them, in the order they are made */
 	at = nstat;
-	for (int k = 0; k < w->order_count && ncol; ++k) {
-		const eddy_system *o = &w->slots[w->order[k]];
-		if (o->vt == &eddy__kind_sph_boundary_box || !eddy__is_collider(o))
-			continue;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_COLLIDER); ncol && (o = eddy__systems_next(&it));) {
 		const size_t want = eddy__sph_collider_points(w, o, spacing, sh->h, NULL, NULL, NULL, NULL, &normal);
 		if (!want)
 			continue;
@@ -434,7 +417,7 @@ static eddy_status boundary_build(eddy_world *w, sph_shared *sh)
 			goto done;
 		}
 		struct sph_collider_set *cs = &nb->col[nb->ncol++];
-		cs->slot = w->order[k];
+		cs->slot = (int)(o - w->slots);
 		cs->first = at;
 		cs->count = got;
 		cs->normal = normal;
