@@ -6,19 +6,17 @@
  *
  * Reads: x y z vx vy vz density ax ay az, and with the divergence solver
  * dfsph_k dfsph_kd (state columns it declares: each solve's k of the last
- * step). Writes: pressure ax ay az (accumulated), dfsph_k dfsph_kd. Runs after the non-pressure forces (gravity, sph_viscosity,
- * sph_surface_tension) and before integrate, whose v += dt a then gives the
- * corrected velocity. It uses sph_density's neighbour lists.
+ * step). Writes: pressure ax ay az (accumulated), dfsph_k dfsph_kd. Runs
+ * after the non-pressure forces (gravity, sph_viscosity, sph_surface_tension)
+ * and before integrate, whose v += dt a then gives the corrected velocity. It
+ * uses sph_density's neighbour lists.
  *
  * Kernel: the density is sph_density's (poly6, the 'density' column the
  * stats report) and G_ij = m grad W_spiky(x_i - x_j), the gradient and mass
  * sph_pressure uses; boundary particles (Akinci et al. 2012) have mass
- * m_b = V_b rho0. The spiky gradient stays repulsive as particles close in:
- * with the poly6 gradient (exact for the poly6 density, but zero at r = 0) a
- * tank at rest kept churning at 0.1 m/s as particles clustered. A spiky
- * density of its own (exact for the spiky gradient) made the solve consistent
- * but left the poly6 column 1% under rho0 in a tank at rest (mean
- * |rho - rho0| 1.4% against 0.15% now) at no gain in iterations.
+ * m_b = V_b rho0. The spiky gradient stays repulsive as particles close in
+ * (the poly6 gradient, exact for the poly6 density, vanishes at r = 0 and
+ * lets a tank at rest cluster and churn).
  * With B_i = sum_b m_b grad W(x_i - x_b) and the pressure written as
  * k_i = p_i / rho_i^2:
  *   Drho_i/Dt = sum_j (v_i - v_j) . G_ij + v_i . B_i - sum_b m_b v_b . grad W(x_i - x_b)
@@ -30,9 +28,8 @@
  * particle whose neighbourhood is full, as sum_j G_ij + B_i ~ 0 there), plus
  * Adami et al.'s (2012) hydrostatic part p_b - p_i = rho_i g . (x_b - x_i):
  *   h_i = -(1/rho_i) sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b)
- * (up, away from a floor),
- * known before the solve and added to the forces; without it the fluid
- * beside the walls lacks support and circulates.
+ * (up, away from a floor), known before the solve and added to the forces;
+ * without it the fluid beside the walls lacks support and circulates.
  * Each step first sets v* = v + dt (a + h), the velocity the non-pressure
  * forces give, then solves for k on it, by sweeps that each set k from the
  * current v* and move v* by dt a^p of the change.
@@ -49,9 +46,10 @@
  * dt^2 D'_i,   D'_i = |S_i + 2 B_i|^2 + sum_j |G_ij|^2,   S_i = sum_j G_ij.
  * (The true wall rate is v_i . B_i: counted twice, the solve over-predicts
  * compression at a wall and is only stiffer there; at rest the constraint
- * is the same. With the true rate, Jacobi sweeps run to a tight tolerance
- * diverged in a 40-layer column.) Each sweep is a projected, relaxed Jacobi
- * step on the residual res_i (Drho_i/Dt, or the predicted rho_i - rho0):
+ * is the same. The true rate makes the operator non-symmetric, and Jacobi
+ * sweeps on it can diverge in a deep column.) Each sweep is a projected,
+ * relaxed Jacobi step on the residual res_i (Drho_i/Dt, or the predicted
+ * rho_i - rho0):
  *   k_i <- max(k_i + omega res_i / (dt^n D'_i), 0),   omega = DFSPH_OMEGA,
  * n = 1 for the velocity solve, 2 for the density one (Ihmsen et al.'s
  * relaxed Jacobi, with the projection of unilateral pressure: a particle
@@ -62,10 +60,10 @@
  * correction: the velocity solve's k is the pressure that carries the
  * weight of the water above (it balances gravity over a step whatever dt
  * is), the density solve's the one that holds the compression the velocity
- * solve leaves. Cold, each step had to rebuild the hydrostatic pressure from
- * the compression it allowed, which Jacobi sweeps cannot do through deep
- * water (their error in the column-wide mode falls by about 1 - c / N^2 a
- * sweep for N layers): a 40-layer column rang and threw water to the lid.
+ * solve leaves. Cold, each step would have to rebuild the hydrostatic
+ * pressure from the compression it allowed, which Jacobi sweeps cannot do
+ * through deep water (their error in the column-wide mode falls by about
+ * 1 - c / N^2 a sweep for N layers).
  * Each solve first runs Jacobi-preconditioned conjugate gradients on the
  * particles that hold pressure or are compressing (divergence_cg: they
  * reduce the column-wide mode about N times faster than the sweeps), then
@@ -93,24 +91,25 @@
  *   k_i += max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
  * until the mean predicted compression is at most max_density_error. It is
  * the cheaper choice for shallow, splashing scenes (scenes/pour.lua), and
- * does not hold still water much deeper than 10 layers (at 40 it blows up).
+ * does not hold still water much deeper than 10 layers.
  *
  * The result, a^p = (v* - (v + dt a)) / dt, is added to ax ay az. The pressure
  * column gets p_i = M k_i rho_i^2, k_i summed over both solves, M the
  * force's lattice moment (1 / grad_cal, see sph_pressure): the force of a
  * linear field is M grad p / rho, so this is the pressure in Pa (M = 0.947
  * at h = 2 spacings).
- * The pairs are packed once a step into groups of eight (the neighbours and
- * G_ij by component, a particle's last group padded with G = 0), which the
- * sweeps stream; positions come from sph_density's (x y z 1/rho) quads. The
- * sums over a particle's groups go eight lanes at a time, with AVX2 when the
- * CPU has it, else SSE doing each group as two halves with the same
- * operations per lane, and end in a fixed order (lane l + 4 onto lane l,
- * then sph_hsum4's); each particle writes only its own results, and the mean
- * errors are summed serially in row order. So the result is the same, bit
- * for bit, on either path and for any thread count. EDDY_NO_AVX2 (set and
- * not empty when the system is added) makes it take the SSE path, to compare
- * the two.
+ *
+ * The passes: the pairs are packed once a step into groups of eight
+ * (dfsph_group: the neighbours and G_ij by component), which the sweeps
+ * stream; positions come from sph_density's (x y z 1/rho) quads. A pass
+ * goes in blocks of particles (dfsph_block): first the pair sums of the
+ * block's particles, written once against the SIMD vocabulary (simd.h) and
+ * compiled for each back-end, then the per-particle rest of the pass. Each
+ * pair sum keeps eight lanes and ends in simd.h's fixed order (sf8_sum);
+ * each particle writes only its own results, and the mean errors are summed
+ * serially in row order. So the result is the same, bit for bit, on every
+ * back-end and for any thread count. The AVX2 back-end is taken when the
+ * CPU has it and EDDY_NO_AVX2 is unset or empty when the system is added.
  *
  * Published per frame: solver = "dfsph", iterations (mean constant-density
  * sweeps per step), residual (largest final mean density error of a step),
@@ -121,50 +120,337 @@
  * naming the step and the particle: the solve has lost the fluid (a time
  * step far too long, or water deeper than the solver holds).
  * Time-step limits (the world multiplies them by its CFL number): velocity,
- * dt <= h / max|v|; gravity, dt <= 0.18 sqrt(h / |g|) (see below), and with
- * the divergence solver in a fluid H deep beyond DFSPH_DEPTH_REF h, that
- * times sqrt(DFSPH_DEPTH_REF h / H), i.e. dt ~ h / sqrt(|g| H): the first-
- * order prediction's error in a step grows with the hydrostatic pressure
- * p ~ rho0 |g| H it moves (a 60-layer column rang at the shallow limit and
- * held at half of it). There is
- * no acoustic limit: that is sph_pressure's, which a scene with this lacks.
+ * dt <= h / max|v|; gravity, dt <= DFSPH_GRAVITY_LIMIT sqrt(h / |g|), and
+ * with the divergence solver in a fluid H deep beyond DFSPH_DEPTH_REF h,
+ * that times sqrt(DFSPH_DEPTH_REF h / H), i.e. dt ~ h / sqrt(|g| H): the
+ * first-order prediction's error in a step grows with the hydrostatic
+ * pressure p ~ rho0 |g| H it moves. There is no acoustic limit: that is
+ * sph_pressure's, which a scene with this lacks.
  * Source: Bender & Koschier, "Divergence-free smoothed particle hydrodynamics",
  * SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and "Divergence-free SPH
  * for incompressible and viscous fluids", TVCG 2017; Hestenes & Stiefel,
  * "Methods of conjugate gradients for solving linear systems", J. Res. NBS
  * 1952, and Saad, "Iterative methods for sparse linear systems", 2003 (Alg.
- * 9.1, preconditioned CG); Ihmsen et al.,
- * "Implicit incompressible SPH", TVCG 2014 (relaxed Jacobi); Akinci et al., "Versatile rigid-fluid
+ * 9.1, preconditioned CG); Ihmsen et al., "Implicit incompressible SPH",
+ * TVCG 2014 (relaxed Jacobi); Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012; Adami, Hu & Adams, "A
  * generalized wall boundary condition for SPH", JCP 2012 (eq. 27). */
+#include "simd.h"
 #include "sph.h"
-#include "systems.h"
 
 #include <stdlib.h>
 #include <string.h>
 
-typedef struct sph_dfsph {
-	eddy_sph_dfsph_def def;
-	/* statistics of the current frame */
-	int frame;
-	int64_t steps, sweeps, div_sweeps, unconverged;
-	double residual, worst;
-	bool avx2; /* the passes' AVX2 path (else SSE, the same bits) */
-	int kcol;  /* the state column DFSPH_K_COLUMN */
-	int kdcol; /* the state column DFSPH_KD_COLUMN */
-	int capped; /* consecutive steps whose velocity solve stopped at its cap
-	             * above DFSPH_FAIL_CAPPED_ERROR times its tolerance */
-} sph_dfsph;
+/* The relaxation of both solves' projected Jacobi sweeps (with the
+ * divergence solver): the largest eigenvalue of D'^-1 A is near 4 here (full
+ * neighbourhoods plus the doubled wall), so sweeps with omega above 0.5 can
+ * grow. */
+#define DFSPH_OMEGA 0.5f
 
-static const int dfsph_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, COL_AX, COL_AY, COL_AZ, -1};
-static const int dfsph_writes[] = {COL_PRESSURE, COL_AX, COL_AY, COL_AZ, -1};
-static const int no_hint_writes[] = {-1};
+/* Particles per block of a pass: the pair sums of a block first, then the
+ * rest per particle, whose particles are independent (finishing each
+ * particle right after its pairs puts a long chain of dependent operations
+ * behind every exit of the loop over its groups). */
+#define DFSPH_BLOCK 64
+
+typedef struct dfsph_vec4 {
+	float x, y, z, w;
+} dfsph_vec4;
+
+/* Eight pairs of one particle: the neighbours and G_ij by component. A
+ * particle's pairs are whole groups, the last one padded with the particle
+ * itself and G = 0 (exact zeros in every sum), so the sweeps stream through
+ * one array with neither a scalar tail nor a mask. */
+typedef struct dfsph_group {
+	uint32_t j[8];
+	float gx[8], gy[8], gz[8];
+} dfsph_group;
+
+/* What the gradient pass reads. */
+typedef struct dfsph_geometry {
+	const sph_neighbors *nb;
+	const float *pq;       /* (x y z 1/rho) quads of sph_density */
+	const float *rho;      /* kg/m^3 */
+	float h;               /* m, kernel radius */
+	float eps2;            /* m^2: a pair closer than sqrt(eps2) has no direction, G = 0 */
+	float mg;              /* m spiky_grad: G_ij = mg (h - r)^2 / r r_vec */
+	float rho0, spiky_grad;
+	float gx, gy, gz;      /* m/s^2, gravity */
+	float dmin;            /* D_i below this is negligible */
+} dfsph_geometry;
+
+/* What the rate pass computes (dfsph_sweep.rate). */
+enum dfsph_rate {
+	RATE_SWEEP,  /* a sweep: the residual, the error and the change of k */
+	RATE_SIGNED, /* only R_i(v) to err, the moving walls' part included (a residual) */
+	RATE_LINEAR, /* only R_i(v) to err without it (the linear operator's product) */
+};
+
+/* What a sweep needs beside the work arrays. */
+typedef struct dfsph_sweep {
+	float dt, inv_dt, inv_dt2, rho0;
+	bool divergence;     /* the divergence-free solve, else the constant-density one */
+	bool projected;      /* projected relaxed Jacobi on the symmetric operator
+	                      * (with the divergence solver), else sweeps that add pressure */
+	enum dfsph_rate rate;
+} dfsph_sweep;
+
+enum dfsph_pass { PASS_GRADIENTS, PASS_RATE, PASS_CORRECT };
+
+/* The solver's per-step scratch, all in the world's arena. */
+typedef struct dfsph_work {
+	long n;
+	size_t *goff;     /* particle i's groups are g[goff[i] .. goff[i + 1]) */
+	dfsph_group *g;
+	uint32_t *owner;  /* the particle of each group */
+	dfsph_vec4 *b;    /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
+	float *dsym;      /* 1 / D'_i, the symmetric operator's diagonal (0 likewise); divergence solver only */
+	dfsph_vec4 *v;    /* v*_i (w unused: a neighbour's velocity is one quad) */
+	dfsph_vec4 *h;    /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
+	float *k;         /* the k_i a correction applies */
+	float *ksum;      /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
+	float *kp;        /* the pressure's k_i: the sum over both solves */
+	float *err;       /* per particle: the error the sweep measured */
+	float *full;      /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the
+	                   * velocity solve's particles (divergence solver only) */
+	const dfsph_geometry *geo;
+} dfsph_work;
+
+/* One block of a pass, particles i0 .. i0 + cnt - 1 (cnt <= DFSPH_BLOCK),
+ * on one SIMD back-end (a is NULL for the gradient pass). */
+typedef void dfsph_block_fn(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sweep *a, long i0, long cnt);
+SIMD_DECLARE(void, dfsph_block, (dfsph_work * wk, enum dfsph_pass kind, const dfsph_sweep *a, long i0, long cnt));
+
+/* ---- the passes, compiled once per SIMD back-end ---------------------------- */
+
+/* The neighbours of the block's groups, each particle's last group padded
+ * with the particle itself. */
+static void fill_groups(dfsph_work *wk, long i0, long cnt)
+{
+	const sph_neighbors *nb = wk->geo->nb;
+	for (long i = i0; i < i0 + cnt; ++i) {
+		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
+		dfsph_group *g = wk->g + wk->goff[i];
+		uint32_t p = 0;
+		for (; p + 8 <= c; p += 8, ++g)
+			memcpy(g->j, list + p, sizeof g->j);
+		if (p < c)
+			for (uint32_t l = 0; l < 8; ++l)
+				g->j[l] = p + l < c ? list[p + l] : (uint32_t)i;
+	}
+}
+
+/* G_ij of the block's groups, with G = 0 for a pair closer than
+ * sqrt(eps2), at r >= h (the list's margin) and for the padding; then each
+ * particle's sums: t[4 q ..] = S_i by component and sum_j |G_ij|^2. The
+ * groups go in one loop over the block, so that the square roots and
+ * divisions of several particles overlap. */
+static void gradient_sums(dfsph_work *wk, long i0, long cnt, float *t)
+{
+	const dfsph_geometry *a = wk->geo;
+	fill_groups(wk, i0, cnt);
+	const sf8 h = sf8_set1(a->h), eps2 = sf8_set1(a->eps2), mg = sf8_set1(a->mg), one = sf8_set1(1.0f),
+	          zero = sf8_zero();
+	for (size_t gi = wk->goff[i0], ge = wk->goff[i0 + cnt]; gi < ge; ++gi) {
+		dfsph_group *g = wk->g + gi;
+		sf8 rx, ry, rz, rw; /* x_i - x_j */
+		sf8_sub_gather_quads(sf8_load_quad2(a->pq + 4 * (size_t)wk->owner[gi]), a->pq, g->j, &rx, &ry, &rz, &rw);
+		const sf8 r2 = sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz));
+		const sf8 r = sf8_sqrt(r2), hr = sf8_sub(h, r);
+		const sf8 ok = sf8_and(sf8_gt(r2, eps2), sf8_gt(hr, zero));
+		/* r is at least sqrt(eps2) where ok; elsewhere divide by 1 */
+		const sf8 f = sf8_and(ok, sf8_div(sf8_mul(sf8_mul(mg, hr), hr), sf8_select(ok, r, one)));
+		sf8_store(g->gx, sf8_mul(f, rx));
+		sf8_store(g->gy, sf8_mul(f, ry));
+		sf8_store(g->gz, sf8_mul(f, rz));
+	}
+	for (long q = 0; q < cnt; ++q) {
+		sf8 sx = zero, sy = zero, sz = zero, s2 = zero;
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
+			const sf8 gx = sf8_load(g->gx), gy = sf8_load(g->gy), gz = sf8_load(g->gz);
+			sx = sf8_add(sx, gx);
+			sy = sf8_add(sy, gy);
+			sz = sf8_add(sz, gz);
+			s2 = sf8_add(s2, sf8_add(sf8_add(sf8_mul(gx, gx), sf8_mul(gy, gy)), sf8_mul(gz, gz)));
+		}
+		t[4 * q] = sf8_sum(sx);
+		t[4 * q + 1] = sf8_sum(sy);
+		t[4 * q + 2] = sf8_sum(sz);
+		t[4 * q + 3] = sf8_sum(s2);
+	}
+}
+
+/* The wall sums of particle i: B_i (out[0..2]) and the hydrostatic sum
+ * sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b) (out[3..5]). Four partial
+ * sums each (boundary neighbour q onto sum q mod 4), ended as sph_sum4
+ * ends them: most particles have no boundary neighbours and those at a wall
+ * a few, too few to fill eight lanes. */
+static void wall_sums(const dfsph_geometry *a, long i, float out[6])
+{
+	const sph_neighbors *nb = a->nb;
+	const float *pi = a->pq + 4 * i;
+	const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
+	float s[6][4] = {{0}};
+	for (uint32_t q = 0; q < nb->bcount[i]; ++q) {
+		const uint32_t b = blist[q], l = q % 4;
+		const float rx = pi[0] - nb->bx[b], ry = pi[1] - nb->by[b], rz = pi[2] - nb->bz[b];
+		const float r2 = rx * rx + ry * ry + rz * rz;
+		const float mb = nb->bvol[b] * a->rho0; /* Akinci: the wall at rest density */
+		const float r = sqrtf(r2), hr = a->h - r;
+		const float c = r2 > a->eps2 && hr > 0 ? mb * a->spiky_grad * hr * hr / r : 0.0f;
+		s[0][l] += c * rx;
+		s[1][l] += c * ry;
+		s[2][l] += c * rz;
+		const float gh = -(a->gx * rx + a->gy * ry + a->gz * rz) * c; /* g . (x_b - x_i) */
+		s[3][l] += gh * rx;
+		s[4][l] += gh * ry;
+		s[5][l] += gh * rz;
+	}
+	for (int k = 0; k < 6; ++k)
+		out[k] = sph_sum4(s[k]);
+}
+
+/* The gradient pass's rest: the walls' sums, h_i and 1 / D_i (and 1 / D'_i). */
+static void gradient_finish(dfsph_work *wk, long i0, long cnt, const float *t)
+{
+	/* a copy the stores below cannot alias: the constants stay in registers */
+	const dfsph_geometry a = *wk->geo;
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		const float sx = t[4 * q], sy = t[4 * q + 1], sz = t[4 * q + 2], s2 = t[4 * q + 3];
+		float w[6] = {0, 0, 0, 0, 0, 0};
+		if (a.nb->bcount[i])
+			wall_sums(&a, i, w);
+		const float bx = w[0], by = w[1], bz = w[2];
+		const float ir = a.pq[4 * i + 3]; /* 1 / rho_i */
+		wk->h[i] = (dfsph_vec4){-w[3] * ir, -w[4] * ir, -w[5] * ir, a.rho[i]};
+		/* (S + 2B) . (S + B) + sum |G|^2: the boundary term of the
+		 * acceleration counts twice (pressure mirroring) */
+		const float d = (sx + 2 * bx) * (sx + bx) + (sy + 2 * by) * (sy + by) + (sz + 2 * bz) * (sz + bz) + s2;
+		wk->b[i] = (dfsph_vec4){bx, by, bz, d > a.dmin ? 1.0f / d : 0.0f};
+		if (wk->dsym) { /* the symmetric operator's: |S + 2B|^2 + sum |G|^2 */
+			const float ds =
+				(sx + 2 * bx) * (sx + 2 * bx) + (sy + 2 * by) * (sy + 2 * by) + (sz + 2 * bz) * (sz + 2 * bz) + s2;
+			wk->dsym[i] = ds > a.dmin ? 1.0f / ds : 0.0f;
+		}
+	}
+}
+
+/* t[q] = sum_j (v_i - v_j) . G_ij over the block's particles. */
+static void rate_sums(const dfsph_work *wk, long i0, long cnt, float *t)
+{
+	const float *v = &wk->v->x;
+	for (long q = 0; q < cnt; ++q) {
+		const sf8 vi = sf8_load_quad2(v + 4 * (i0 + q));
+		sf8 sx = sf8_zero(), sy = sx, sz = sx;
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
+			sf8 dx, dy, dz, dw; /* v_i - v_j */
+			sf8_sub_gather_quads(vi, v, g->j, &dx, &dy, &dz, &dw);
+			sx = sf8_add(sx, sf8_mul(dx, sf8_load(g->gx)));
+			sy = sf8_add(sy, sf8_mul(dy, sf8_load(g->gy)));
+			sz = sf8_add(sz, sf8_mul(dz, sf8_load(g->gz)));
+		}
+		t[q] = sf8_sum(sf8_add(sf8_add(sx, sy), sz));
+	}
+}
+
+/* max(e, 0), and 0 for NaN */
+static inline float positive(float e)
+{
+	return e > 0 ? e : 0.0f;
+}
+
+/* The rate pass's rest: Drho_i/Dt, and for a sweep its error and change of k. */
+static void rate_finish(dfsph_work *wk, const dfsph_sweep *a, long i0, long cnt, const float *t)
+{
+	/* bdiv: the moving walls' v_b part of the rate (sph.h), NULL while no wall moves */
+	const float *bdiv = a->rate == RATE_LINEAR ? NULL : wk->geo->nb->bdiv;
+	const float inv = a->divergence ? a->inv_dt : a->inv_dt2;
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		const dfsph_vec4 vi = wk->v[i], bi = wk->b[i];
+		const float vb = (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z) - (bdiv ? bdiv[i] : 0.0f);
+		if (a->rate != RATE_SWEEP) { /* R_i(v), the wall counted as in the projected sweeps */
+			wk->err[i] = t[q] + (vb + vb);
+		} else if (a->projected) {
+			/* the wall's rate counted twice, as its force: the symmetric operator */
+			const float r = t[q] + (vb + vb);
+			const float res = a->divergence ? r * wk->full[i] : (wk->h[i].w + a->dt * r) - a->rho0;
+			/* k_i = max(k_i + omega res_i / (dt^n D'_i), 0); correct applies the change */
+			const float ks = wk->ksum[i];
+			const float kn = positive(ks + ((res * DFSPH_OMEGA) * inv) * wk->dsym[i]);
+			wk->k[i] = kn - ks;
+			/* |res| under pressure, the compression max(res, 0) without */
+			const float e = kn > 0 ? fabsf(res) : positive(res);
+			wk->err[i] = a->divergence ? e * a->dt : e;
+		} else {
+			/* the paper's sweeps: only compression adds pressure */
+			const float r = t[q] + vb;
+			const float e = a->divergence ? positive(r) : positive((wk->h[i].w + a->dt * r) - a->rho0);
+			wk->err[i] = a->divergence ? e * a->dt : e;
+			wk->k[i] = (e * inv) * bi.w;
+		}
+	}
+}
+
+/* t[3 q ..] = sum_j (k_i + k_j) G_ij by component over the block's particles. */
+static void correct_sums(const dfsph_work *wk, long i0, long cnt, float *t)
+{
+	const float *k = wk->k;
+	for (long q = 0; q < cnt; ++q) {
+		const sf8 ki = sf8_set1(k[i0 + q]);
+		sf8 sx = sf8_zero(), sy = sx, sz = sx;
+		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
+			const sf8 c = sf8_add(ki, sf8_gather(k, g->j));
+			sx = sf8_add(sx, sf8_mul(c, sf8_load(g->gx)));
+			sy = sf8_add(sy, sf8_mul(c, sf8_load(g->gy)));
+			sz = sf8_add(sz, sf8_mul(c, sf8_load(g->gz)));
+		}
+		t[3 * q] = sf8_sum(sx);
+		t[3 * q + 1] = sf8_sum(sy);
+		t[3 * q + 2] = sf8_sum(sz);
+	}
+}
+
+/* The correction's rest: v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i),
+ * and k_i added to its sum. */
+static void correct_finish(dfsph_work *wk, const dfsph_sweep *a, long i0, long cnt, const float *t)
+{
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		const dfsph_vec4 bi = wk->b[i];
+		const float ki = wk->k[i], kb = 2 * ki; /* the boundary particles mirror k_i */
+		wk->v[i].x -= a->dt * (kb * bi.x + t[3 * q]);
+		wk->v[i].y -= a->dt * (kb * bi.y + t[3 * q + 1]);
+		wk->v[i].z -= a->dt * (kb * bi.z + t[3 * q + 2]);
+		wk->ksum[i] += ki;
+	}
+}
+
+void SIMD_NAME(dfsph_block)(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sweep *a, long i0, long cnt)
+{
+	float t[DFSPH_BLOCK * 4];
+	if (kind == PASS_GRADIENTS) {
+		gradient_sums(wk, i0, cnt, t);
+		gradient_finish(wk, i0, cnt, t);
+	} else if (kind == PASS_RATE) {
+		rate_sums(wk, i0, cnt, t);
+		rate_finish(wk, a, i0, cnt, t);
+	} else {
+		correct_sums(wk, i0, cnt, t);
+		correct_finish(wk, a, i0, cnt, t);
+	}
+}
+
+#ifndef EDDY_SIMD_VARIANT
+/* ---- the system: solves, step, limits, registration ---------------------------- */
+#include "systems.h"
 
 /* dt <= DFSPH_GRAVITY_LIMIT sqrt(h / |g|) (times the CFL number): gravity
  * compresses the fluid by g dt^2 each step, which the first-order prediction
  * of the solve must absorb; a tank at rest rings up from dt = 0.19 sqrt(h / g)
- * on (h = 2 cm, dt 8.5 ms) and stays quiet below it. Transient forces
- * (viscosity, impacts) do not need it: the velocity limit covers them. */
+ * on and stays quiet below it. Transient forces (viscosity, impacts) do not
+ * need it: the velocity limit covers them. */
 #define DFSPH_GRAVITY_LIMIT 0.18
 
 /* above this final mean density error a step fails instead of going on */
@@ -175,31 +461,29 @@ static const int no_hint_writes[] = {-1};
 #define DFSPH_FAIL_PARTICLE 1.0
 
 /* The velocity solve warm-starts, so a step stopped at its cap hands the
- * rest on to the next (a 40-layer column at rest: once, in its first step,
- * at 1.8 times the tolerance). Stopped at the cap above DFSPH_FAIL_CAPPED_ERROR
- * times the tolerance in DFSPH_FAIL_CAPPED steps in a row, it is not
- * catching up, and the step fails (an 80-layer column: steps 0-2 at 2.5-3.6
- * times, before it threw water to the lid at step 26). */
+ * rest on to the next (a 40-layer column at rest stops there once, in its
+ * first step, at 1.8 times the tolerance). Stopped at the cap above
+ * DFSPH_FAIL_CAPPED_ERROR times the tolerance in DFSPH_FAIL_CAPPED steps in
+ * a row, it is not catching up (an 80-layer column: 2.5-3.6 times in its
+ * first steps, before it threw water to the lid), and the step fails. */
 #define DFSPH_FAIL_CAPPED_ERROR 2.0
 #define DFSPH_FAIL_CAPPED 3
 
 /* projected Jacobi sweeps the velocity solve makes after its conjugate
  * gradients: they damp the particle-scale part of the error, which the
- * Krylov solve leaves (with none, single particles at the surface of still
- * water kept jittering at a few % of sqrt(g H)) */
+ * Krylov solve leaves (without them single particles at the surface of
+ * still water jitter at a few % of sqrt(g H)) */
 #define DFSPH_SMOOTH 2
 
-/* the velocity solve leaves out a particle whose kernel sum (its density,
+/* The velocity solve leaves out a particle whose kernel sum (its density,
  * walls included) is below DFSPH_SURFACE rho0: the outermost particles of a
  * free surface (0.75-0.9 rho0 in water at rest, every other particle
  * 0.95-1.05). Held there too, the velocity solve keeps water a moving solid
- * has stirred apart at its expanded density (0.972 rho0: a lowered block
- * stood 2.6% high); leaving out every particle up to 0.95 rho0 let still
- * water's surface jitter at 4-8% of sqrt(g H), up to 0.875 let a dropped
- * block compress 1.6% at impact (three times the density solve's
- * tolerance). At 0.8 still water rests under 0.5% of sqrt(g H) at 10-20
- * layers and 1.1% at 40, a dropped block compresses 0.46%, and the lowered
- * block stands 1.3% high. */
+ * has stirred apart at its expanded density; a higher threshold leaves out
+ * enough of the surface to let still water jitter, a lower one lets a
+ * dropped block compress at impact beyond the density solve's tolerance.
+ * At 0.8 still water rests under 0.5% of sqrt(g H) at 10-20 layers and
+ * 1.1% at 40, and a dropped block compresses 0.46%. */
 #define DFSPH_SURFACE 0.8f
 
 /* the depth (in kernel radii) up to which the velocity solve stops at its
@@ -207,20 +491,31 @@ static const int no_hint_writes[] = {-1};
  * depth (divergence_tolerance) */
 #define DFSPH_DEPTH_REF 5.0
 
-/* constant-density sweeps a step makes at least (the paper: 2; 1 gives the
- * same errors in the pour, tank and drop and saves 10% of the solve) */
+/* constant-density sweeps a step makes at least (the paper makes 2; one
+ * gives the same errors in the pour, tank and drop) */
 #define DFSPH_MIN_SWEEPS 1
 
-/* the relaxation of both solves' projected Jacobi sweeps (with the divergence
- * solver): the largest eigenvalue of D'^-1 A is near 4 here (full
- * neighbourhoods plus the doubled wall), so sweeps with omega above 0.5 can
- * grow; a 40-layer column diverged at 0.66 and at 0.8 */
-#define DFSPH_OMEGA 0.5f
-
-/* the particle state column with each particle's k of the velocity solve,
- * its warm start in the next step */
+/* the particle state columns with each particle's k of the velocity and of
+ * the density solve, their warm starts in the next step */
 #define DFSPH_K_COLUMN "dfsph_k"
 #define DFSPH_KD_COLUMN "dfsph_kd"
+
+typedef struct sph_dfsph {
+	eddy_sph_dfsph_def def;
+	/* statistics of the current frame */
+	int frame;
+	int64_t steps, sweeps, div_sweeps, unconverged;
+	double residual, worst;
+	dfsph_block_fn *block; /* the passes on the SIMD back-end chosen when added */
+	int kcol;              /* the state column DFSPH_K_COLUMN (divergence solver only) */
+	int kdcol;             /* the state column DFSPH_KD_COLUMN (likewise) */
+	int capped;            /* consecutive steps whose velocity solve stopped at its cap
+	                        * above DFSPH_FAIL_CAPPED_ERROR times its tolerance */
+} sph_dfsph;
+
+static const int dfsph_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, COL_AX, COL_AY, COL_AZ, -1};
+static const int dfsph_writes[] = {COL_PRESSURE, COL_AX, COL_AY, COL_AZ, -1};
+static const int no_hint_writes[] = {-1};
 
 eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 {
@@ -233,691 +528,33 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	return d;
 }
 
-/* The solver's per-step scratch, all in the world's arena. */
-typedef struct dfsph_f4 {
-	float x, y, z, w;
-} dfsph_f4;
-
-#ifdef __SSE2__
-/* Four consecutive particles' quads as four vectors of their x, y, z, w. */
-static inline void load4(const dfsph_f4 *p, __m128 *x, __m128 *y, __m128 *z, __m128 *w)
-{
-	__m128 a = _mm_loadu_ps(&p[0].x), b = _mm_loadu_ps(&p[1].x), c = _mm_loadu_ps(&p[2].x), d = _mm_loadu_ps(&p[3].x);
-	_MM_TRANSPOSE4_PS(a, b, c, d);
-	*x = a;
-	*y = b;
-	*z = c;
-	*w = d;
-}
-#endif
-
-/* Eight pairs of one particle: the neighbours and G_ij by component. A
- * particle's pairs are whole groups, the last one padded with the particle
- * itself and G = 0 (exact zeros in every sum), so the sweeps stream through
- * one array with neither a scalar tail nor a mask, and a group is what one
- * AVX2 register or two SSE ones hold. */
-typedef struct dfsph_group {
-	uint32_t j2[8]; /* 2 j: address modes of scale 8 and 2 then reach the 16-byte
-	                 * v[j] and pq[j] and the 4-byte k[j] without a shift */
-	float gx[8], gy[8], gz[8];
-} dfsph_group;
-
-/* v[j] or pq[j] (four floats), and k[j], of 2 j */
-static inline const float *quad_of(const float *base, uint32_t j2)
-{
-	return base + 2 * (size_t)j2;
-}
-
-static inline float k_of(const float *k, uint32_t j2)
-{
-	return *(const float *)((const char *)k + 2 * (size_t)j2);
-}
-
-/* What the gradient pass reads. */
-typedef struct grad_args {
-	const sph_neighbors *nb;
-	const float *pq;  /* (x y z 1/rho) quads of sph_density */
-	const float *rho;
-	float h, eps2;
-	float mg;         /* m spiky_grad: G_ij = mg (h - r)^2 / r r_vec */
-	float rho0, spiky_grad;
-	float gx, gy, gz; /* gravity */
-	float dmin;       /* D_i below this is negligible */
-} grad_args;
-
-struct dfsph_work;
-/* A pass's sums over the groups of particles i0 .. i0 + cnt - 1, written
- * as four lanes each (lane l holding lanes l and l + 4 of the groups) to
- * t: the part of a pass that has an SSE and an AVX2 path. */
-typedef void sums_fn(struct dfsph_work *wk, long i0, long cnt, float *t);
-
-typedef struct dfsph_work {
-	long n;
-	size_t *goff;   /* particle i's groups are goff[i] .. goff[i + 1] */
-	dfsph_group *g;
-	dfsph_f4 *b;    /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
-	float *dsym;    /* 1 / D'_i, the diagonal of the symmetric operator (0 likewise) */
-	dfsph_f4 *v;    /* v*_i (w unused: a neighbour's velocity is one 16-byte load) */
-	dfsph_f4 *h;    /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
-	float *k;       /* the k_i a correction applies, apart from v: correct
-	                 * gathers it from 4 bytes a particle (22 KB in the pour,
-	                 * within L1) */
-	float *ksum;    /* the sum of k_i over the sweeps: the current solve's k
-	                 * (with its warm start) */
-	float *kp;      /* the pressure's k_i: the sum over both solves */
-	float *err;     /* per particle: the error the sweep measured */
-	float *full;    /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the
-	                 * velocity solve's particles (divergence solver only) */
-	const grad_args *ga;
-	uint32_t *owner; /* the particle of each group (the AVX2 gradient pass) */
-	sums_fn *grads, *rate, *correct; /* the path's sums (AVX2 or SSE) */
-} dfsph_work;
-
-/* What a sweep needs beside the work arrays. */
-typedef struct sweep_args {
-	float dt, inv_dt, inv_dt2, rho0;
-	bool divergence; /* the divergence-free solve, else the constant-density one */
-	bool projected;  /* the velocity solve: projected relaxed Jacobi on the
-	                  * symmetric operator (else sweeps that add pressure) */
-	int rate_only;   /* RATE_SIGNED or RATE_LINEAR: the rate pass only writes
-	                  * R_i(v) to err (the conjugate gradient's products) */
-} sweep_args;
-
-/* sweep_args.rate_only: R_i(v) with the moving walls' part (the residual),
- * or without it (the linear operator's product) */
-enum { RATE_SWEEP = 0, RATE_SIGNED = 1, RATE_LINEAR = 2 };
-
-/* The passes go in blocks of particles: first the sums over the groups
- * (sums_fn), then the rest for the block. Finishing each particle right
- * after its groups put a long chain of dependent adds and multiplies behind
- * every (often mispredicted) exit of the loop over its groups; the
- * particles of the second loop are independent, and the passes took 10%
- * less time. */
-#define DFSPH_BLOCK 64
-
-/* floats of t per particle */
-#define GRAD_T 16 /* sum G_ij by component, sum |G_ij|^2 */
-#define RATE_T 4  /* sum (v_i - v_j) . G_ij */
-#define CORR_T 12 /* sum (k_i + k_j) G_ij by component */
-
-/* The neighbours of group q, padded with i itself, as 2 j. */
-static inline void group_rows_self(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t i, uint32_t l2[8])
-{
-	for (uint32_t k = 0; k < 8; ++k)
-		l2[k] = 2 * (q + k < cnt ? list[q + k] : i);
-}
-
-/* The gradient pass's sums: each particle's groups from its list, with
- * G_ij = 0 for a pair closer than sqrt(eps2) (no direction), at r >= h
- * (the list's margin) and for the padding. */
-#ifdef __SSE2__
-static void grads_sse(struct dfsph_work *wk, long i0, long cnt, float *t)
-{
-	const grad_args *a = wk->ga;
-	const sph_neighbors *nb = a->nb;
-	const __m128 vh = _mm_set1_ps(a->h), veps2 = _mm_set1_ps(a->eps2), vmg = _mm_set1_ps(a->mg),
-	             one = _mm_set1_ps(1.0f), zero = _mm_setzero_ps();
-	for (long q = 0; q < cnt; ++q) {
-		const long i = i0 + q;
-		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
-		const float *pi = a->pq + 4 * i;
-		const __m128 vxi = _mm_set1_ps(pi[0]), vyi = _mm_set1_ps(pi[1]), vzi = _mm_set1_ps(pi[2]);
-		__m128 sx[2] = {zero, zero}, sy[2] = {zero, zero}, sz[2] = {zero, zero}, s2[2] = {zero, zero};
-		dfsph_group *g = wk->g + wk->goff[i];
-		for (uint32_t p = 0; p < c; p += 8, ++g) {
-			if (p + 8 <= c) {
-				const __m128i l0 = _mm_loadu_si128((const __m128i *)(list + p)),
-				              l1 = _mm_loadu_si128((const __m128i *)(list + p + 4));
-				_mm_storeu_si128((__m128i *)g->j2, _mm_add_epi32(l0, l0));
-				_mm_storeu_si128((__m128i *)(g->j2 + 4), _mm_add_epi32(l1, l1));
-			} else {
-				group_rows_self(list, c, p, (uint32_t)i, g->j2);
-			}
-			for (int k = 0; k < 2; ++k) {
-				const uint32_t *l = g->j2 + 4 * k;
-				__m128 px = _mm_loadu_ps(quad_of(a->pq, l[0])), py = _mm_loadu_ps(quad_of(a->pq, l[1])),
-				       pz = _mm_loadu_ps(quad_of(a->pq, l[2])), pw = _mm_loadu_ps(quad_of(a->pq, l[3]));
-				_MM_TRANSPOSE4_PS(px, py, pz, pw);
-				const __m128 rx = _mm_sub_ps(vxi, px), ry = _mm_sub_ps(vyi, py), rz = _mm_sub_ps(vzi, pz);
-				const __m128 r2 =
-					_mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
-				const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
-				const __m128 ok = _mm_and_ps(_mm_cmpgt_ps(r2, veps2), _mm_cmpgt_ps(hr, zero));
-				/* r is at least sqrt(eps2) where ok; elsewhere divide by 1 */
-				const __m128 rs = _mm_or_ps(_mm_and_ps(ok, r), _mm_andnot_ps(ok, one));
-				const __m128 f = _mm_and_ps(ok, _mm_div_ps(_mm_mul_ps(_mm_mul_ps(vmg, hr), hr), rs));
-				const __m128 gx = _mm_mul_ps(f, rx), gy = _mm_mul_ps(f, ry), gz = _mm_mul_ps(f, rz);
-				_mm_storeu_ps(g->gx + 4 * k, gx);
-				_mm_storeu_ps(g->gy + 4 * k, gy);
-				_mm_storeu_ps(g->gz + 4 * k, gz);
-				sx[k] = _mm_add_ps(sx[k], gx);
-				sy[k] = _mm_add_ps(sy[k], gy);
-				sz[k] = _mm_add_ps(sz[k], gz);
-				s2[k] = _mm_add_ps(
-					s2[k], _mm_add_ps(_mm_add_ps(_mm_mul_ps(gx, gx), _mm_mul_ps(gy, gy)), _mm_mul_ps(gz, gz)));
-			}
-		}
-		float *ti = t + GRAD_T * q;
-		_mm_storeu_ps(ti, _mm_add_ps(sx[0], sx[1]));
-		_mm_storeu_ps(ti + 4, _mm_add_ps(sy[0], sy[1]));
-		_mm_storeu_ps(ti + 8, _mm_add_ps(sz[0], sz[1]));
-		_mm_storeu_ps(ti + 12, _mm_add_ps(s2[0], s2[1]));
-	}
-}
-
-static void rate_sse(struct dfsph_work *wk, long i0, long cnt, float *t)
-{
-	const float *vf = &wk->v->x;
-	for (long q = 0; q < cnt; ++q) {
-		const float *vi = vf + 4 * (i0 + q);
-		const __m128 vix = _mm_set1_ps(vi[0]), viy = _mm_set1_ps(vi[1]), viz = _mm_set1_ps(vi[2]);
-		__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
-		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
-			for (int k = 0; k < 2; ++k) {
-				const uint32_t *l = g->j2 + 4 * k;
-				/* four neighbours' velocities are four loads and a transpose */
-				__m128 vx = _mm_loadu_ps(quad_of(vf, l[0])), vy = _mm_loadu_ps(quad_of(vf, l[1])),
-				       vz = _mm_loadu_ps(quad_of(vf, l[2])), vw = _mm_loadu_ps(quad_of(vf, l[3]));
-				_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
-				sx[k] = _mm_add_ps(sx[k], _mm_mul_ps(_mm_sub_ps(vix, vx), _mm_loadu_ps(g->gx + 4 * k)));
-				sy[k] = _mm_add_ps(sy[k], _mm_mul_ps(_mm_sub_ps(viy, vy), _mm_loadu_ps(g->gy + 4 * k)));
-				sz[k] = _mm_add_ps(sz[k], _mm_mul_ps(_mm_sub_ps(viz, vz), _mm_loadu_ps(g->gz + 4 * k)));
-			}
-		_mm_storeu_ps(t + RATE_T * q, _mm_add_ps(_mm_add_ps(_mm_add_ps(sx[0], sy[0]), sz[0]),
-		                                         _mm_add_ps(_mm_add_ps(sx[1], sy[1]), sz[1])));
-	}
-}
-
-static void correct_sse(struct dfsph_work *wk, long i0, long cnt, float *t)
-{
-	const float *k = wk->k;
-	for (long q = 0; q < cnt; ++q) {
-		const __m128 vki = _mm_set1_ps(k[i0 + q]);
-		__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
-		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
-			for (int h = 0; h < 2; ++h) {
-				const uint32_t *l = g->j2 + 4 * h;
-				const __m128 c =
-					_mm_add_ps(vki, _mm_setr_ps(k_of(k, l[0]), k_of(k, l[1]), k_of(k, l[2]), k_of(k, l[3])));
-				sx[h] = _mm_add_ps(sx[h], _mm_mul_ps(c, _mm_loadu_ps(g->gx + 4 * h)));
-				sy[h] = _mm_add_ps(sy[h], _mm_mul_ps(c, _mm_loadu_ps(g->gy + 4 * h)));
-				sz[h] = _mm_add_ps(sz[h], _mm_mul_ps(c, _mm_loadu_ps(g->gz + 4 * h)));
-			}
-		float *ti = t + CORR_T * q;
-		_mm_storeu_ps(ti, _mm_add_ps(sx[0], sx[1]));
-		_mm_storeu_ps(ti + 4, _mm_add_ps(sy[0], sy[1]));
-		_mm_storeu_ps(ti + 8, _mm_add_ps(sz[0], sz[1]));
-	}
-}
-#else
-/* Without SSE the vector paths' lanes one by one, folded as they fold. */
-static void fold(const float s[8], float *t)
-{
-	for (int l = 0; l < 4; ++l)
-		t[l] = s[l] + s[l + 4];
-}
-
-static void grads_scalar(struct dfsph_work *wk, long i0, long cnt, float *t)
-{
-	const grad_args *a = wk->ga;
-	const sph_neighbors *nb = a->nb;
-	for (long q = 0; q < cnt; ++q) {
-		const long i = i0 + q;
-		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
-		const float *pi = a->pq + 4 * i;
-		float sx[8] = {0}, sy[8] = {0}, sz[8] = {0}, s2[8] = {0};
-		dfsph_group *g = wk->g + wk->goff[i];
-		for (uint32_t p = 0; p < c; p += 8, ++g) {
-			group_rows_self(list, c, p, (uint32_t)i, g->j2);
-			for (int l = 0; l < 8; ++l) {
-				const float *pj = quad_of(a->pq, g->j2[l]);
-				const float rx = pi[0] - pj[0], ry = pi[1] - pj[1], rz = pi[2] - pj[2];
-				const float r2 = rx * rx + ry * ry + rz * rz;
-				const float r = sqrtf(r2), hr = a->h - r;
-				const float f = r2 > a->eps2 && hr > 0 ? a->mg * hr * hr / r : 0.0f;
-				g->gx[l] = f * rx;
-				g->gy[l] = f * ry;
-				g->gz[l] = f * rz;
-				sx[l] += g->gx[l];
-				sy[l] += g->gy[l];
-				sz[l] += g->gz[l];
-				s2[l] += g->gx[l] * g->gx[l] + g->gy[l] * g->gy[l] + g->gz[l] * g->gz[l];
-			}
-		}
-		float *ti = t + GRAD_T * q;
-		fold(sx, ti);
-		fold(sy, ti + 4);
-		fold(sz, ti + 8);
-		fold(s2, ti + 12);
-	}
-}
-
-static void rate_scalar(struct dfsph_work *wk, long i0, long cnt, float *t)
-{
-	const float *vf = &wk->v->x;
-	for (long q = 0; q < cnt; ++q) {
-		const float *vi = vf + 4 * (i0 + q);
-		float sx[8] = {0}, sy[8] = {0}, sz[8] = {0}, s[8];
-		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
-			for (int l = 0; l < 8; ++l) {
-				const float *vj = quad_of(vf, g->j2[l]);
-				sx[l] += (vi[0] - vj[0]) * g->gx[l];
-				sy[l] += (vi[1] - vj[1]) * g->gy[l];
-				sz[l] += (vi[2] - vj[2]) * g->gz[l];
-			}
-		for (int l = 0; l < 8; ++l)
-			s[l] = (sx[l] + sy[l]) + sz[l];
-		fold(s, t + RATE_T * q);
-	}
-}
-
-static void correct_scalar(struct dfsph_work *wk, long i0, long cnt, float *t)
-{
-	const float *k = wk->k;
-	for (long q = 0; q < cnt; ++q) {
-		const float ki = k[i0 + q];
-		float sx[8] = {0}, sy[8] = {0}, sz[8] = {0};
-		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g)
-			for (int l = 0; l < 8; ++l) {
-				const float c = ki + k_of(k, g->j2[l]);
-				sx[l] += c * g->gx[l];
-				sy[l] += c * g->gy[l];
-				sz[l] += c * g->gz[l];
-			}
-		float *ti = t + CORR_T * q;
-		fold(sx, ti);
-		fold(sy, ti + 4);
-		fold(sz, ti + 8);
-	}
-}
-#endif
-
-#ifdef SPH_AVX2
-/* lanes l and l + 4 added, as the SSE path adds its halves */
-__attribute__((target("avx2"))) static inline __m128 fold8(__m256 v)
-{
-	return _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
-}
-
-__attribute__((target("avx2"))) static void grads_avx2(struct dfsph_work *wk, long i0, long cnt, float *t)
-{
-	const grad_args *a = wk->ga;
-	const sph_neighbors *nb = a->nb;
-	const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-	for (long q = 0; q < cnt; ++q) {
-		const long i = i0 + q;
-		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
-		dfsph_group *g = wk->g + wk->goff[i];
-		uint32_t p = 0;
-		for (; p + 8 <= c; p += 8, ++g) {
-			const __m256i l = _mm256_loadu_si256((const __m256i *)(list + p));
-			_mm256_storeu_si256((__m256i *)g->j2, _mm256_add_epi32(l, l));
-		}
-		if (p < c) { /* the last group: lanes past the count (not read) get i */
-			const __m256i in = _mm256_cmpgt_epi32(_mm256_set1_epi32((int)(c - p)), lane);
-			const __m256i l = _mm256_blendv_epi8(_mm256_set1_epi32((int)i),
-			                                     _mm256_maskload_epi32((const int *)(list + p), in), in);
-			_mm256_storeu_si256((__m256i *)g->j2, _mm256_add_epi32(l, l));
-		}
-	}
-	/* the block's groups in one loop: the square roots and divisions of
-	 * several particles overlap */
-	const __m256 vh = _mm256_set1_ps(a->h), veps2 = _mm256_set1_ps(a->eps2), vmg = _mm256_set1_ps(a->mg),
-	             one = _mm256_set1_ps(1.0f), zero = _mm256_setzero_ps();
-	for (size_t gi = wk->goff[i0], ge = wk->goff[i0 + cnt]; gi < ge; ++gi) {
-		dfsph_group *g = wk->g + gi;
-		const float *pi = a->pq + 4 * (size_t)wk->owner[gi];
-		const __m256 vxi = _mm256_broadcast_ss(pi), vyi = _mm256_broadcast_ss(pi + 1), vzi = _mm256_broadcast_ss(pi + 2);
-		const uint32_t *l = g->j2;
-		const float *const quad[8] = {quad_of(a->pq, l[0]), quad_of(a->pq, l[1]), quad_of(a->pq, l[2]),
-		                              quad_of(a->pq, l[3]), quad_of(a->pq, l[4]), quad_of(a->pq, l[5]),
-		                              quad_of(a->pq, l[6]), quad_of(a->pq, l[7])};
-		__m256 px, py, pz, pw;
-		sph_transpose8(quad, &px, &py, &pz, &pw);
-		const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
-		const __m256 r2 =
-			_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz));
-		const __m256 r = _mm256_sqrt_ps(r2), hr = _mm256_sub_ps(vh, r);
-		const __m256 ok = _mm256_and_ps(_mm256_cmp_ps(r2, veps2, _CMP_GT_OQ), _mm256_cmp_ps(hr, zero, _CMP_GT_OQ));
-		const __m256 rs = _mm256_blendv_ps(one, r, ok);
-		const __m256 f = _mm256_and_ps(ok, _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(vmg, hr), hr), rs));
-		_mm256_storeu_ps(g->gx, _mm256_mul_ps(f, rx));
-		_mm256_storeu_ps(g->gy, _mm256_mul_ps(f, ry));
-		_mm256_storeu_ps(g->gz, _mm256_mul_ps(f, rz));
-	}
-	for (long q = 0; q < cnt; ++q) {
-		__m256 sx = zero, sy = zero, sz = zero, s2 = zero;
-		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
-			const __m256 gx = _mm256_loadu_ps(g->gx), gy = _mm256_loadu_ps(g->gy), gz = _mm256_loadu_ps(g->gz);
-			sx = _mm256_add_ps(sx, gx);
-			sy = _mm256_add_ps(sy, gy);
-			sz = _mm256_add_ps(sz, gz);
-			s2 = _mm256_add_ps(s2, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(gx, gx), _mm256_mul_ps(gy, gy)),
-			                                     _mm256_mul_ps(gz, gz)));
-		}
-		float *ti = t + GRAD_T * q;
-		_mm_storeu_ps(ti, fold8(sx));
-		_mm_storeu_ps(ti + 4, fold8(sy));
-		_mm_storeu_ps(ti + 8, fold8(sz));
-		_mm_storeu_ps(ti + 12, fold8(s2));
-	}
-}
-
-__attribute__((target("avx2"))) static void rate_avx2(struct dfsph_work *wk, long i0, long cnt, float *t)
-{
-	const float *vf = &wk->v->x;
-	for (long q = 0; q < cnt; ++q) {
-		const float *vi = vf + 4 * (i0 + q);
-		const __m256 vix = _mm256_set1_ps(vi[0]), viy = _mm256_set1_ps(vi[1]), viz = _mm256_set1_ps(vi[2]);
-		__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
-		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
-			const uint32_t *l = g->j2;
-			const float *const quad[8] = {quad_of(vf, l[0]), quad_of(vf, l[1]), quad_of(vf, l[2]), quad_of(vf, l[3]),
-			                              quad_of(vf, l[4]), quad_of(vf, l[5]), quad_of(vf, l[6]), quad_of(vf, l[7])};
-			__m256 vx, vy, vz, vw;
-			sph_transpose8(quad, &vx, &vy, &vz, &vw);
-			sx = _mm256_add_ps(sx, _mm256_mul_ps(_mm256_sub_ps(vix, vx), _mm256_loadu_ps(g->gx)));
-			sy = _mm256_add_ps(sy, _mm256_mul_ps(_mm256_sub_ps(viy, vy), _mm256_loadu_ps(g->gy)));
-			sz = _mm256_add_ps(sz, _mm256_mul_ps(_mm256_sub_ps(viz, vz), _mm256_loadu_ps(g->gz)));
-		}
-		_mm_storeu_ps(t + RATE_T * q, fold8(_mm256_add_ps(_mm256_add_ps(sx, sy), sz)));
-	}
-}
-
-__attribute__((target("avx2"))) static void correct_avx2(struct dfsph_work *wk, long i0, long cnt, float *t)
-{
-	const float *k = wk->k;
-	for (long q = 0; q < cnt; ++q) {
-		const __m256 vki = _mm256_set1_ps(k[i0 + q]);
-		__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
-		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
-			/* eight scalar loads: faster here than vgatherdps */
-			const uint32_t *l = g->j2;
-			const __m256 kj = _mm256_setr_ps(k_of(k, l[0]), k_of(k, l[1]), k_of(k, l[2]), k_of(k, l[3]),
-			                                 k_of(k, l[4]), k_of(k, l[5]), k_of(k, l[6]), k_of(k, l[7]));
-			const __m256 c = _mm256_add_ps(vki, kj);
-			sx = _mm256_add_ps(sx, _mm256_mul_ps(c, _mm256_loadu_ps(g->gx)));
-			sy = _mm256_add_ps(sy, _mm256_mul_ps(c, _mm256_loadu_ps(g->gy)));
-			sz = _mm256_add_ps(sz, _mm256_mul_ps(c, _mm256_loadu_ps(g->gz)));
-		}
-		float *ti = t + CORR_T * q;
-		_mm_storeu_ps(ti, fold8(sx));
-		_mm_storeu_ps(ti + 4, fold8(sy));
-		_mm_storeu_ps(ti + 8, fold8(sz));
-	}
-}
-#endif
-
-/* The wall sums of particle i: B_i (out[0..2]) and the hydrostatic sum
- * sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b) (out[3..5]). Four boundary
- * particles at a time (the last four padded with copies of the last one,
- * masked out), the same code for either path: most particles have none and
- * those at a wall a few, a small part of the pass. */
-static void wall_sums(const grad_args *a, long i, float out[6])
-{
-	const sph_neighbors *nb = a->nb;
-	const float *pi = a->pq + 4 * i;
-	const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
-	const uint32_t bcnt = nb->bcount[i];
-#ifdef __SSE2__
-	const __m128 vxi = _mm_set1_ps(pi[0]), vyi = _mm_set1_ps(pi[1]), vzi = _mm_set1_ps(pi[2]), vh = _mm_set1_ps(a->h),
-	             veps2 = _mm_set1_ps(a->eps2), vrho0 = _mm_set1_ps(a->rho0), vsg = _mm_set1_ps(a->spiky_grad),
-	             vgx = _mm_set1_ps(a->gx), vgy = _mm_set1_ps(a->gy), vgz = _mm_set1_ps(a->gz),
-	             one = _mm_set1_ps(1.0f), zero = _mm_setzero_ps(), sign = _mm_set1_ps(-0.0f);
-	__m128 s[6] = {zero, zero, zero, zero, zero, zero};
-	for (uint32_t q = 0; q < bcnt; q += 4) {
-		uint32_t l[4];
-		for (uint32_t k = 0; k < 4; ++k)
-			l[k] = blist[q + k < bcnt ? q + k : bcnt - 1];
-		const __m128 in = _mm_castsi128_ps(_mm_cmpgt_epi32(_mm_set1_epi32((int)(bcnt - q)), _mm_setr_epi32(0, 1, 2, 3)));
-		const __m128 rx = _mm_sub_ps(vxi, _mm_setr_ps(nb->bx[l[0]], nb->bx[l[1]], nb->bx[l[2]], nb->bx[l[3]])),
-		             ry = _mm_sub_ps(vyi, _mm_setr_ps(nb->by[l[0]], nb->by[l[1]], nb->by[l[2]], nb->by[l[3]])),
-		             rz = _mm_sub_ps(vzi, _mm_setr_ps(nb->bz[l[0]], nb->bz[l[1]], nb->bz[l[2]], nb->bz[l[3]]));
-		/* Akinci: the wall at rest density */
-		const __m128 mb =
-			_mm_mul_ps(_mm_setr_ps(nb->bvol[l[0]], nb->bvol[l[1]], nb->bvol[l[2]], nb->bvol[l[3]]), vrho0);
-		const __m128 r2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx, rx), _mm_mul_ps(ry, ry)), _mm_mul_ps(rz, rz));
-		const __m128 r = _mm_sqrt_ps(r2), hr = _mm_sub_ps(vh, r);
-		const __m128 ok = _mm_and_ps(in, _mm_and_ps(_mm_cmpgt_ps(r2, veps2), _mm_cmpgt_ps(hr, zero)));
-		const __m128 rs = _mm_or_ps(_mm_and_ps(ok, r), _mm_andnot_ps(ok, one));
-		const __m128 c = _mm_and_ps(ok, _mm_div_ps(_mm_mul_ps(_mm_mul_ps(_mm_mul_ps(mb, vsg), hr), hr), rs));
-		s[0] = _mm_add_ps(s[0], _mm_mul_ps(c, rx));
-		s[1] = _mm_add_ps(s[1], _mm_mul_ps(c, ry));
-		s[2] = _mm_add_ps(s[2], _mm_mul_ps(c, rz));
-		/* g . (x_b - x_i) */
-		const __m128 gh = _mm_mul_ps(
-			_mm_xor_ps(sign, _mm_add_ps(_mm_add_ps(_mm_mul_ps(vgx, rx), _mm_mul_ps(vgy, ry)), _mm_mul_ps(vgz, rz))), c);
-		s[3] = _mm_add_ps(s[3], _mm_mul_ps(gh, rx));
-		s[4] = _mm_add_ps(s[4], _mm_mul_ps(gh, ry));
-		s[5] = _mm_add_ps(s[5], _mm_mul_ps(gh, rz));
-	}
-	for (int k = 0; k < 6; ++k)
-		out[k] = sph_hsum4(s[k]);
-#else
-	float s[6][4] = {{0}};
-	for (uint32_t q = 0; q < bcnt; ++q) {
-		const uint32_t b = blist[q], l = q % 4;
-		const float rx = pi[0] - nb->bx[b], ry = pi[1] - nb->by[b], rz = pi[2] - nb->bz[b];
-		const float r2 = rx * rx + ry * ry + rz * rz;
-		const float mb = nb->bvol[b] * a->rho0;
-		const float r = sqrtf(r2), hr = a->h - r;
-		const float c = r2 > a->eps2 && hr > 0 ? mb * a->spiky_grad * hr * hr / r : 0.0f;
-		s[0][l] += c * rx;
-		s[1][l] += c * ry;
-		s[2][l] += c * rz;
-		const float gh = -(a->gx * rx + a->gy * ry + a->gz * rz) * c;
-		s[3][l] += gh * rx;
-		s[4][l] += gh * ry;
-		s[5][l] += gh * rz;
-	}
-	for (int k = 0; k < 6; ++k)
-		out[k] = sph_sum4(s[k]);
-#endif
-}
-
-/* The gradient pass's second loop: the walls' sums, h_i and 1 / D_i. */
-static void grads_finish(dfsph_work *wk, long i0, long cnt, const float *t)
-{
-	/* a copy the stores below cannot alias: the constants stay in registers */
-	const grad_args a = *wk->ga;
-	for (long q = 0; q < cnt; ++q) {
-		const long i = i0 + q;
-		const float *ti = t + GRAD_T * q;
-		const float sx = sph_sum4(ti), sy = sph_sum4(ti + 4), sz = sph_sum4(ti + 8), s2 = sph_sum4(ti + 12);
-		float w[6] = {0, 0, 0, 0, 0, 0};
-		if (a.nb->bcount[i]) /* most particles are away from the walls */
-			wall_sums(&a, i, w);
-		const float bx = w[0], by = w[1], bz = w[2];
-		const float ir = a.pq[4 * i + 3]; /* 1 / rho_i */
-		wk->h[i] = (dfsph_f4){-w[3] * ir, -w[4] * ir, -w[5] * ir, a.rho[i]};
-		/* (S + 2B) . (S + B) + sum |G|^2, S = sum_j G_ij: the boundary term of
-		 * the acceleration counts twice (pressure mirroring) */
-		const float d = (sx + 2 * bx) * (sx + bx) + (sy + 2 * by) * (sy + by) + (sz + 2 * bz) * (sz + bz) + s2;
-		wk->b[i] = (dfsph_f4){bx, by, bz, d > a.dmin ? 1.0f / d : 0.0f};
-		if (wk->dsym) { /* the symmetric operator's: |S + 2B|^2 + sum |G|^2 */
-			const float ds =
-				(sx + 2 * bx) * (sx + 2 * bx) + (sy + 2 * by) * (sy + 2 * by) + (sz + 2 * bz) * (sz + 2 * bz) + s2;
-			wk->dsym[i] = ds > a.dmin ? 1.0f / ds : 0.0f;
-		}
-	}
-}
-
-/* max(e, 0), 0 for NaN: without the explicit maxss the compiler made a
- * branch of it, mispredicted for about every other particle */
-static inline float positive(float e)
-{
-#ifdef __SSE2__
-	return _mm_cvtss_f32(_mm_max_ss(_mm_set_ss(e), _mm_setzero_ps()));
-#else
-	return e > 0 ? e : 0;
-#endif
-}
-
-/* rate's second loop: Drho_i/Dt, the sweep's error and k_i. Four particles
- * at a time where SSE is (the scalar loop does the same per particle). */
-static void rate_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, const float *t)
-{
-	const float *bdiv = wk->ga->nb->bdiv; /* NULL while no wall moves */
-	if (a->rate_only) {
-		/* R_i(v) = sum_j (v_i - v_j) . G_ij + 2 (v_i . B_i - bdiv_i), the wall
-		 * counted as in the projected sweeps */
-		for (long q = 0; q < cnt; ++q) {
-			const long i = i0 + q;
-			const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
-			const float vb = (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z) -
-			                 (bdiv && a->rate_only == RATE_SIGNED ? bdiv[i] : 0.0f);
-			wk->err[i] = sph_sum4(t + RATE_T * q) + (vb + vb);
-		}
-		return;
-	}
-	long q = 0;
-#ifdef __SSE2__
-	const __m128 vdt = _mm_set1_ps(a->dt), vrho0 = _mm_set1_ps(a->rho0), zero = _mm_setzero_ps(),
-	             vinv = _mm_set1_ps(a->divergence ? a->inv_dt : a->inv_dt2), vom = _mm_set1_ps(DFSPH_OMEGA);
-	for (; q + 4 <= cnt; q += 4) {
-		const long i = i0 + q;
-		__m128 s0 = _mm_loadu_ps(t + RATE_T * q), s1 = _mm_loadu_ps(t + RATE_T * (q + 1)),
-		       s2 = _mm_loadu_ps(t + RATE_T * (q + 2)), s3 = _mm_loadu_ps(t + RATE_T * (q + 3));
-		_MM_TRANSPOSE4_PS(s0, s1, s2, s3);
-		__m128 vx, vy, vz, vw, bx, by, bz, bw;
-		load4(wk->v + i, &vx, &vy, &vz, &vw);
-		load4(wk->b + i, &bx, &by, &bz, &bw);
-		/* the wall's part (v_i - v_b) . B_i: bdiv holds the moving walls'
-		 * v_b part (sph.h), NULL while no wall moves */
-		__m128 vb = _mm_add_ps(_mm_add_ps(_mm_mul_ps(vx, bx), _mm_mul_ps(vy, by)), _mm_mul_ps(vz, bz));
-		if (bdiv)
-			vb = _mm_sub_ps(vb, _mm_loadu_ps(bdiv + i));
-		__m128 e;
-		if (a->projected) {
-			/* the wall's rate counted twice, as its force: the symmetric operator */
-			const __m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)), _mm_add_ps(vb, vb));
-			const __m128 res =
-				a->divergence ? _mm_mul_ps(r, _mm_loadu_ps(wk->full + i))
-				              : _mm_sub_ps(_mm_add_ps(_mm_setr_ps(wk->h[i].w, wk->h[i + 1].w, wk->h[i + 2].w, wk->h[i + 3].w),
-				                                      _mm_mul_ps(vdt, r)),
-				                           vrho0);
-			/* k_i = max(k_i + omega res_i / (dt^n D'_i), 0); correct applies the change */
-			const __m128 ks = _mm_loadu_ps(wk->ksum + i);
-			const __m128 kn = _mm_max_ps(
-				_mm_add_ps(ks, _mm_mul_ps(_mm_mul_ps(_mm_mul_ps(res, vom), vinv), _mm_loadu_ps(wk->dsym + i))), zero);
-			_mm_storeu_ps(wk->k + i, _mm_sub_ps(kn, ks));
-			/* |res| under pressure, the compression max(res, 0) without */
-			const __m128 on = _mm_cmpgt_ps(kn, zero);
-			e = _mm_or_ps(_mm_and_ps(on, _mm_andnot_ps(_mm_set1_ps(-0.0f), res)), _mm_andnot_ps(on, _mm_max_ps(res, zero)));
-			if (a->divergence)
-				e = _mm_mul_ps(e, vdt);
-		} else if (a->divergence) {
-			const __m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)), vb);
-			const __m128 d = _mm_max_ps(r, zero);
-			e = _mm_mul_ps(d, vdt);
-			_mm_storeu_ps(wk->k + i, _mm_mul_ps(_mm_mul_ps(d, vinv), bw));
-		} else {
-			const __m128 r = _mm_add_ps(_mm_add_ps(_mm_add_ps(s0, s1), _mm_add_ps(s2, s3)), vb);
-			const __m128 rho = _mm_setr_ps(wk->h[i].w, wk->h[i + 1].w, wk->h[i + 2].w, wk->h[i + 3].w);
-			e = _mm_max_ps(_mm_sub_ps(_mm_add_ps(rho, _mm_mul_ps(vdt, r)), vrho0), zero);
-			_mm_storeu_ps(wk->k + i, _mm_mul_ps(_mm_mul_ps(e, vinv), bw));
-		}
-		_mm_storeu_ps(wk->err + i, e);
-	}
-#endif
-	for (; q < cnt; ++q) {
-		const long i = i0 + q;
-		const dfsph_f4 vi = wk->v[i], bi = wk->b[i];
-		const float vb = (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z) - (bdiv ? bdiv[i] : 0.0f);
-		if (a->projected) {
-			const float r = sph_sum4(t + RATE_T * q) + (vb + vb);
-			const float res = a->divergence ? r * wk->full[i] : (wk->h[i].w + a->dt * r) - a->rho0;
-			const float ks = wk->ksum[i];
-			const float kn = positive(ks + ((res * DFSPH_OMEGA) * (a->divergence ? a->inv_dt : a->inv_dt2)) * wk->dsym[i]);
-			wk->k[i] = kn - ks;
-			const float e = kn > 0 ? fabsf(res) : positive(res);
-			wk->err[i] = a->divergence ? e * a->dt : e;
-			continue;
-		}
-		const float r = sph_sum4(t + RATE_T * q) + vb;
-		if (a->divergence) {
-			const float d = positive(r);
-			wk->err[i] = d * a->dt;
-			wk->k[i] = d * a->inv_dt * bi.w;
-		} else {
-			const float e = positive(wk->h[i].w + a->dt * r - a->rho0);
-			wk->err[i] = e;
-			wk->k[i] = e * a->inv_dt2 * bi.w;
-		}
-	}
-}
-
-/* correct's second loop: v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i),
- * and k_i added to its sum. Four particles at a time where SSE is. */
-static void correct_finish(dfsph_work *wk, const sweep_args *a, long i0, long cnt, const float *t)
-{
-	long q = 0;
-#ifdef __SSE2__
-	const __m128 vdt = _mm_set1_ps(a->dt), two = _mm_set1_ps(2.0f);
-	for (; q + 4 <= cnt; q += 4) {
-		const long i = i0 + q;
-		const float *t0 = t + CORR_T * q, *t1 = t0 + CORR_T, *t2 = t1 + CORR_T, *t3 = t2 + CORR_T;
-		__m128 f[3];
-		for (int c = 0; c < 3; ++c) {
-			__m128 l0 = _mm_loadu_ps(t0 + 4 * c), l1 = _mm_loadu_ps(t1 + 4 * c), l2 = _mm_loadu_ps(t2 + 4 * c),
-			       l3 = _mm_loadu_ps(t3 + 4 * c);
-			_MM_TRANSPOSE4_PS(l0, l1, l2, l3);
-			f[c] = _mm_add_ps(_mm_add_ps(l0, l1), _mm_add_ps(l2, l3));
-		}
-		__m128 vx, vy, vz, vw, bx, by, bz, bw;
-		load4(wk->v + i, &vx, &vy, &vz, &vw);
-		load4(wk->b + i, &bx, &by, &bz, &bw);
-		const __m128 ki = _mm_loadu_ps(wk->k + i), kb = _mm_mul_ps(two, ki); /* the boundary particles mirror k_i */
-		vx = _mm_sub_ps(vx, _mm_mul_ps(vdt, _mm_add_ps(_mm_mul_ps(kb, bx), f[0])));
-		vy = _mm_sub_ps(vy, _mm_mul_ps(vdt, _mm_add_ps(_mm_mul_ps(kb, by), f[1])));
-		vz = _mm_sub_ps(vz, _mm_mul_ps(vdt, _mm_add_ps(_mm_mul_ps(kb, bz), f[2])));
-		_MM_TRANSPOSE4_PS(vx, vy, vz, vw);
-		_mm_storeu_ps(&wk->v[i].x, vx);
-		_mm_storeu_ps(&wk->v[i + 1].x, vy);
-		_mm_storeu_ps(&wk->v[i + 2].x, vz);
-		_mm_storeu_ps(&wk->v[i + 3].x, vw);
-		_mm_storeu_ps(wk->ksum + i, _mm_add_ps(_mm_loadu_ps(wk->ksum + i), ki));
-	}
-#endif
-	for (; q < cnt; ++q) {
-		const long i = i0 + q;
-		const float *ti = t + CORR_T * q;
-		const dfsph_f4 bi = wk->b[i];
-		const float ki = wk->k[i], kb = 2 * ki; /* the boundary particles mirror k_i */
-		wk->v[i].x -= a->dt * (kb * bi.x + sph_sum4(ti));
-		wk->v[i].y -= a->dt * (kb * bi.y + sph_sum4(ti + 4));
-		wk->v[i].z -= a->dt * (kb * bi.z + sph_sum4(ti + 8));
-		wk->ksum[i] += ki;
-	}
-}
-
-enum pass_kind { PASS_GRADIENTS, PASS_RATE, PASS_CORRECT };
+/* The step's pass runner: the work arrays and the chosen back-end. */
+typedef struct dfsph_solver {
+	dfsph_work wk;
+	dfsph_block_fn *block;
+	int threads;
+	float rho0, dt;
+} dfsph_solver;
 
 /* A pass over all particles, the threads taking equal shares in order.
  * Each particle writes only its own values (rate its err and k, correct its
- * velocity: the others read k) from inputs no other particle of the pass
- * changes, so the result is the same for any thread count. (Tried: fusing a
- * correction with the next rates, rating a particle as soon as its
- * neighbours were corrected while its groups were in cache; the same bits,
- * but no faster: the passes are not bound by streaming the groups.) */
-static void pass(dfsph_work *wk, enum pass_kind kind, const sweep_args *a, int threads)
+ * velocity and k sum: the others read k) from inputs no other particle of
+ * the pass changes, so the result is the same for any thread count. */
+static void pass(dfsph_solver *s, enum dfsph_pass kind, const dfsph_sweep *a)
 {
-	sums_fn *sums = kind == PASS_GRADIENTS ? wk->grads : kind == PASS_RATE ? wk->rate : wk->correct;
-	const long n = wk->n;
+	const long n = s->wk.n;
+	const int threads = s->threads;
 #pragma omp parallel for num_threads(threads) schedule(static)
-	for (int th = 0; th < threads; ++th) {
-		float t[DFSPH_BLOCK * GRAD_T];
-		for (long i0 = n * th / threads, hi = n * (th + 1) / threads; i0 < hi; i0 += DFSPH_BLOCK) {
-			const long cnt = hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK;
-			sums(wk, i0, cnt, t);
-			if (kind == PASS_GRADIENTS)
-				grads_finish(wk, i0, cnt, t);
-			else if (kind == PASS_RATE)
-				rate_finish(wk, a, i0, cnt, t);
-			else
-				correct_finish(wk, a, i0, cnt, t);
-		}
-	}
+	for (int th = 0; th < threads; ++th)
+		for (long i0 = n * th / threads, hi = n * (th + 1) / threads; i0 < hi; i0 += DFSPH_BLOCK)
+			s->block(&s->wk, kind, a, i0, hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK);
+}
+
+/* The sweep of one solve: the velocity (divergence) solve or the density
+ * one, projected (the divergence solver) or not; rate as given. */
+static dfsph_sweep sweep_of(const dfsph_solver *s, bool divergence, bool projected, enum dfsph_rate rate)
+{
+	return (dfsph_sweep){s->dt, 1.0f / s->dt, 1.0f / (s->dt * s->dt), s->rho0, divergence, projected, rate};
 }
 
 /* Serial sum in row order: the same for any thread count. */
@@ -931,40 +568,57 @@ static double mean_of(const float *e, long n)
 
 /* The conjugate gradient's vectors (see divergence_cg). */
 typedef struct dfsph_cg {
-	dfsph_f4 *u;    /* the velocity change of a direction: -dt grad p */
+	dfsph_vec4 *u;  /* the velocity change of a direction: -dt grad p */
 	float *p;       /* the search direction (a change of k) */
 	float *r;       /* the residual on the active set */
 	float *mask;    /* 1 on the active set, else 0 */
 	float *scratch; /* the correct pass's sum of k, not kept */
 } dfsph_cg;
 
-/* The velocity solve's bulk: Jacobi-preconditioned conjugate gradients
- * (Hestenes & Stiefel 1952; Saad, "Iterative methods for sparse linear
- * systems", 2003, Alg. 9.1) on A k = R(v*), A = dt grad^T grad the
+/* err = R(u) for u = -dt grad p, from zero: A p up to the factor -dt. The
+ * passes read and write the work arrays, which stand in for the time. */
+static void operator_product(dfsph_solver *s, dfsph_cg *cg)
+{
+	dfsph_work *wk = &s->wk;
+	dfsph_vec4 *const v = wk->v;
+	float *const k = wk->k, *const ksum = wk->ksum;
+	memset(cg->u, 0, (size_t)wk->n * sizeof *cg->u);
+	wk->v = cg->u;
+	wk->k = cg->p;
+	wk->ksum = cg->scratch;
+	const dfsph_sweep as = sweep_of(s, true, true, RATE_SIGNED), al = sweep_of(s, true, true, RATE_LINEAR);
+	pass(s, PASS_CORRECT, &as);
+	pass(s, PASS_RATE, &al);
+	wk->v = v;
+	wk->k = k;
+	wk->ksum = ksum;
+}
+
+/* The solves' bulk: Jacobi-preconditioned conjugate gradients (Hestenes &
+ * Stiefel 1952; Saad 2003, Alg. 9.1) on A k = R(v*), A = dt grad^T grad the
  * symmetric operator of the projected sweeps, restricted to the particles
  * that hold pressure (k_i > 0 from the warm start) or are compressing
  * (R_i > 0): there the unilateral constraint is an equality. Jacobi sweeps
  * shrink the column-wide error mode of N layers by about 1 - c / N^2 a
  * sweep, conjugate gradients by about 1 - c / N, so a deep column converges
- * in a number of products that grows with the depth, not its square. A
- * product A p is one correct pass onto a zero velocity (u = -dt grad p) and
- * one rate pass of u. The iteration stops when the mean |r_i| dt / rho0 is
- * at most max_divergence_error (the projected sweeps' measure) or when a
- * direction has no positive curvature. The particles whose k ends below 0
- * are then set to 0 (the projection), and the projected sweeps that follow
- * settle what the fixed set got wrong: particles that left or entered it.
- * Every sum is serial in row order: the same bits for any thread count. */
-static int divergence_cg(dfsph_work *wk, dfsph_cg *cg, float rho0, float dt, int threads, int cap, bool density,
-                         double tol, double *residual)
+ * in a number of products that grows with the depth, not its square. The
+ * density solve's right side is the rate that brings rho_i to rho0 in a
+ * step. The iteration stops when the mean |r_i| dt / rho0 is at most tol
+ * (the projected sweeps' measure) or when a direction has no positive
+ * curvature. The particles whose k ends below 0 are then set to 0 (the
+ * projection), and the projected sweeps that follow settle what the fixed
+ * set got wrong: particles that left or entered it. Every sum is serial in
+ * row order: the same bits for any thread count. */
+static int divergence_cg(dfsph_solver *s, dfsph_cg *cg, int cap, bool density, double tol, double *residual)
 {
+	dfsph_work *wk = &s->wk;
 	const long n = wk->n;
-	const sweep_args as = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true, RATE_SIGNED};
-	const sweep_args al = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true, RATE_LINEAR};
+	const float dt = s->dt, rho0 = s->rho0;
+	const dfsph_sweep as = sweep_of(s, true, true, RATE_SIGNED);
 	const double scale = (double)dt / ((double)rho0 * (double)n);
-	pass(wk, PASS_RATE, &as, threads);
+	pass(s, PASS_RATE, &as);
 	double rz = 0, esum = 0;
 	for (long i = 0; i < n; ++i) {
-		/* the density solve: the rate that brings rho_i to rho0 in a step */
 		const float res = density ? wk->err[i] + (wk->h[i].w - rho0) / dt : wk->err[i];
 		const bool on = (density || wk->full[i] > 0) && (wk->ksum[i] > 0 || res > 0);
 		cg->mask[i] = on ? 1.0f : 0.0f;
@@ -975,19 +629,8 @@ static int divergence_cg(dfsph_work *wk, dfsph_cg *cg, float rho0, float dt, int
 	}
 	*residual = esum * scale;
 	int it = 0;
-	dfsph_f4 *const v = wk->v;
-	float *const k = wk->k, *const ksum = wk->ksum;
 	while (*residual > tol && it < cap && rz > 0) {
-		/* err = R(u), u = -dt grad p: the passes read and write wk's arrays */
-		memset(cg->u, 0, (size_t)n * sizeof *cg->u);
-		wk->v = cg->u;
-		wk->k = cg->p;
-		wk->ksum = cg->scratch;
-		pass(wk, PASS_CORRECT, &as, threads);
-		pass(wk, PASS_RATE, &al, threads);
-		wk->v = v;
-		wk->k = k;
-		wk->ksum = ksum;
+		operator_product(s, cg);
 		double pq = 0;
 		for (long i = 0; i < n; ++i)
 			pq -= (double)cg->p[i] * (cg->mask[i] * wk->err[i]);
@@ -997,10 +640,10 @@ static int divergence_cg(dfsph_work *wk, dfsph_cg *cg, float rho0, float dt, int
 		double rz1 = 0;
 		esum = 0;
 		for (long i = 0; i < n; ++i) {
-			v[i].x += alpha * cg->u[i].x;
-			v[i].y += alpha * cg->u[i].y;
-			v[i].z += alpha * cg->u[i].z;
-			ksum[i] += alpha * cg->p[i];
+			wk->v[i].x += alpha * cg->u[i].x;
+			wk->v[i].y += alpha * cg->u[i].y;
+			wk->v[i].z += alpha * cg->u[i].z;
+			wk->ksum[i] += alpha * cg->p[i];
 			cg->r[i] += alpha * (cg->mask[i] * wk->err[i]);
 			rz1 += (double)cg->r[i] * (wk->dsym[i] * cg->r[i]);
 			esum += fabsf(cg->r[i]);
@@ -1015,22 +658,21 @@ static int divergence_cg(dfsph_work *wk, dfsph_cg *cg, float rho0, float dt, int
 	/* the projection: k_i < 0 back to 0, as one correction */
 	bool neg = false;
 	for (long i = 0; i < n; ++i) {
-		k[i] = ksum[i] < 0 ? -ksum[i] : 0.0f;
-		neg |= ksum[i] < 0;
+		wk->k[i] = wk->ksum[i] < 0 ? -wk->ksum[i] : 0.0f;
+		neg |= wk->ksum[i] < 0;
 	}
 	if (neg)
-		pass(wk, PASS_CORRECT, &as, threads);
+		pass(s, PASS_CORRECT, &as);
 	return it;
 }
 
-/* The velocity solve's stopping tolerance in water `depth` deep (m, the
- * hydrostatic head of the last step's largest pressure) for a kernel radius
- * h: the requested one down to DFSPH_DEPTH_REF h, and below that scaled by
- * (DFSPH_DEPTH_REF h / depth)^2. The operator's smallest eigenvalue, that of
- * the column-wide mode, falls relative to its diagonal as (h / depth)^2, so
- * a mean residual eps leaves that mode an error of eps (depth / h)^2: with
- * the tolerance scaled so, the pressure that carries the column is held to
- * the same fraction at any depth. */
+/* The velocity solve's stopping tolerance in water `depth` deep (m) for a
+ * kernel radius h: the requested one down to DFSPH_DEPTH_REF h, and below
+ * that scaled by (DFSPH_DEPTH_REF h / depth)^2. The operator's smallest
+ * eigenvalue, that of the column-wide mode, falls relative to its diagonal
+ * as (h / depth)^2, so a mean residual eps leaves that mode an error of
+ * eps (depth / h)^2: with the tolerance scaled so, the pressure that
+ * carries the column is held to the same fraction at any depth. */
 static double divergence_tolerance(double tol, float h, double depth)
 {
 	const double ref = DFSPH_DEPTH_REF * (double)h;
@@ -1055,208 +697,151 @@ static double fluid_depth(eddy_world *w, eddy_vec3 g)
 	return hi - lo;
 }
 
-/* The velocity solve (divergence-free, on v*): projected sweeps until the
- * mean error (see rate_finish) times dt / rho0 is at most tol. */
-static int divergence_solve(dfsph_work *wk, dfsph_cg *cg, const sph_dfsph *sd, float rho0, float dt, int threads,
-                            double tol, double *residual)
+/* One solve: conjugate gradients (with the divergence solver), then sweeps
+ * of a rate and a correction until the mean error / rho0 is at most tol, or
+ * the iteration cap. Returns the iterations (conjugate gradient steps and
+ * sweeps). The velocity solve stops no earlier than DFSPH_SMOOTH sweeps,
+ * the density solve no earlier than DFSPH_MIN_SWEEPS iterations. */
+static int solve(dfsph_solver *s, dfsph_cg *cg, bool divergence, bool projected, int cap, double tol,
+                 double *residual)
 {
-	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true, RATE_SWEEP};
+	const dfsph_sweep a = sweep_of(s, divergence, projected, RATE_SWEEP);
 	int it = 0, sweeps = 0;
 	for (;;) {
-		it += divergence_cg(wk, cg, rho0, dt, threads, sd->def.max_divergence_iterations - it, false, tol, residual);
-		pass(wk, PASS_RATE, &a, threads);
-		*residual = mean_of(wk->err, wk->n) / rho0;
-		if ((sweeps >= DFSPH_SMOOTH && *residual <= tol) || it >= sd->def.max_divergence_iterations)
+		if (cg)
+			it += divergence_cg(s, cg, cap - it, !divergence, tol, residual);
+		pass(s, PASS_RATE, &a);
+		*residual = mean_of(s->wk.err, s->wk.n) / s->rho0;
+		const bool enough = divergence ? sweeps >= DFSPH_SMOOTH : it >= DFSPH_MIN_SWEEPS;
+		if ((enough && *residual <= tol) || it >= cap)
 			break;
-		pass(wk, PASS_CORRECT, &a, threads);
+		pass(s, PASS_CORRECT, &a);
 		++it;
 		++sweeps;
 	}
 	return it;
 }
 
-/* Constant-density solve: sweeps until mean max(rho* - rho0, 0) / rho0 <= tol. */
-static int density_solve(dfsph_work *wk, dfsph_cg *cg, const sph_dfsph *sd, float rho0, float dt, int threads,
-                         double tol, double *residual)
+/* The step's scratch in the world's arena; false when out of memory. */
+static bool work_alloc(eddy_world *w, dfsph_work *wk, dfsph_cg *cg, const sph_neighbors *nb, long n, bool divergence)
 {
-	const sweep_args a = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, false, sd->def.divergence_solver, RATE_SWEEP};
-	int it = 0;
-	for (;;) {
-		if (cg)
-			it += divergence_cg(wk, cg, rho0, dt, threads, sd->def.max_iterations - it, true, tol, residual);
-		pass(wk, PASS_RATE, &a, threads);
-		*residual = mean_of(wk->err, wk->n) / rho0;
-		if ((it >= DFSPH_MIN_SWEEPS && *residual <= tol) || it >= sd->def.max_iterations)
-			break;
-		pass(wk, PASS_CORRECT, &a, threads);
-		++it;
-	}
-	return it;
+	const size_t un = (size_t)n;
+	memset(wk, 0, sizeof *wk);
+	memset(cg, 0, sizeof *cg);
+	wk->n = n;
+	wk->goff = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk->goff);
+	if (!wk->goff)
+		return false;
+	wk->goff[0] = 0;
+	for (long i = 0; i < n; ++i)
+		wk->goff[i + 1] = wk->goff[i] + (nb->count[i] + 7) / 8;
+	const size_t groups = wk->goff[n] ? wk->goff[n] : 1;
+	wk->g = eddy__arena_alloc(&w->arena, groups * sizeof *wk->g);
+	wk->owner = eddy__arena_alloc(&w->arena, groups * sizeof *wk->owner);
+	dfsph_vec4 *quads = eddy__arena_alloc(&w->arena, 3 * un * sizeof(dfsph_vec4) + 5 * un * sizeof(float));
+	if (!wk->g || !wk->owner || !quads)
+		return false;
+	for (long i = 0; i < n; ++i)
+		for (size_t gi = wk->goff[i]; gi < wk->goff[i + 1]; ++gi)
+			wk->owner[gi] = (uint32_t)i;
+	wk->b = quads;
+	wk->v = wk->b + un;
+	wk->h = wk->v + un;
+	wk->k = (float *)(wk->h + un);
+	wk->ksum = wk->k + un;
+	wk->err = wk->ksum + un;
+	wk->kp = wk->err + un;
+	if (!divergence)
+		return true;
+	wk->dsym = wk->kp + un;
+	cg->u = eddy__arena_alloc(&w->arena, un * sizeof(dfsph_vec4) + 5 * un * sizeof(float));
+	if (!cg->u)
+		return false;
+	cg->p = (float *)(cg->u + un);
+	cg->r = cg->p + un;
+	cg->mask = cg->r + un;
+	cg->scratch = cg->mask + un;
+	wk->full = cg->scratch + un;
+	return true;
 }
 
-static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+/* The index of the largest of e[0 .. n) (the first of equals). */
+static long argmax(const float *e, long n)
 {
-	sph_dfsph *sd = s->data;
-	sph_shared *sh = eddy__sph_find(w, s);
-	if (!sh)
-		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)", s->label);
-	if (sd->frame != w->frame) {
-		sd->frame = w->frame;
-		sd->steps = sd->sweeps = sd->div_sweeps = sd->unconverged = 0;
-		sd->residual = sd->worst = 0;
-	}
-	const sph_neighbors *nb = &sh->nb;
-	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
-	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	long m = 0;
+	for (long i = 0; i < n; ++i)
+		m = e[i] > e[m] ? i : m;
+	return m;
+}
+
+/* The velocity solve, from last step's k (applied as one correction); its
+ * k goes to the state column and into the pressure's kp. Fails when it
+ * stopped at its cap far above its tolerance too many steps in a row. */
+static eddy_status velocity_solve(eddy_world *w, eddy_system *sys, dfsph_solver *s, dfsph_cg *cg,
+                                  const eddy_step_context *ctx, double tol, int *iterations, double *residual)
+{
+	sph_dfsph *sd = sys->data;
+	dfsph_work *wk = &s->wk;
+	const long n = wk->n;
 	const float *rho = eddy__col(w, COL_DENSITY);
-	float *p = eddy__col(w, COL_PRESSURE);
-	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
-	const float dt = (float)ctx->dt, rho0 = sh->rho0;
-	if (n == 0 || !(dt > 0))
-		return EDDY_OK;
-	if ((uint64_t)n > (uint64_t)INT32_MAX) /* the groups hold 2 j in 32 bits */
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: too many particles (%ld)", s->label, n);
-
-	dfsph_work wk;
-	wk.n = n;
-#if defined(SPH_AVX2)
-	wk.grads = sd->avx2 ? grads_avx2 : grads_sse;
-	wk.rate = sd->avx2 ? rate_avx2 : rate_sse;
-	wk.correct = sd->avx2 ? correct_avx2 : correct_sse;
-#elif defined(__SSE2__)
-	wk.grads = grads_sse;
-	wk.rate = rate_sse;
-	wk.correct = correct_sse;
-#else
-	wk.grads = grads_scalar;
-	wk.rate = rate_scalar;
-	wk.correct = correct_scalar;
-#endif
-	const size_t un = (size_t)n;
-	wk.goff = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk.goff);
-	if (!wk.goff)
-		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
-	wk.goff[0] = 0;
-	for (long i = 0; i < n; ++i)
-		wk.goff[i + 1] = wk.goff[i] + (nb->count[i] + 7) / 8;
-	wk.g = eddy__arena_alloc(&w->arena, (wk.goff[n] ? wk.goff[n] : 1) * sizeof *wk.g);
-	wk.owner = eddy__arena_alloc(&w->arena, (wk.goff[n] ? wk.goff[n] : 1) * sizeof *wk.owner);
-	dfsph_f4 *block = eddy__arena_alloc(&w->arena, 3 * un * sizeof(dfsph_f4) + 5 * un * sizeof(float));
-	if (!wk.g || !wk.owner || !block)
-		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
-	wk.b = block;
-	wk.v = wk.b + un;
-	wk.h = wk.v + un;
-	wk.k = (float *)(wk.h + un);
-	wk.ksum = wk.k + un;
-	wk.err = wk.ksum + un;
-	wk.kp = wk.err + un;
-	wk.dsym = sd->def.divergence_solver ? wk.kp + un : NULL;
-	dfsph_cg cg = {NULL, NULL, NULL, NULL, NULL};
-	if (sd->def.divergence_solver) {
-		cg.u = eddy__arena_alloc(&w->arena, un * sizeof(dfsph_f4) + 5 * un * sizeof(float));
-		if (!cg.u)
-			return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
-		cg.p = (float *)(cg.u + un);
-		cg.r = cg.p + un;
-		cg.mask = cg.r + un;
-		cg.scratch = cg.mask + un;
-		wk.full = cg.scratch + un;
-	} else {
-		wk.full = NULL;
-	}
-	for (long i = 0; i < n; ++i)
-		for (size_t gi = wk.goff[i]; gi < wk.goff[i + 1]; ++gi)
-			wk.owner[gi] = (uint32_t)i;
-
-	const sph_kernel_consts kc = sh->k;
-	const float dref = sh->mass * kc.spiky_grad * kc.h2; /* |G| scale */
-	const eddy_vec3 g = w->def.gravity;
-	const grad_args ga = {nb,  sh->pq, rho, kc.h, 1e-6f * kc.h2, sh->mass * kc.spiky_grad, rho0, kc.spiky_grad,
-	                      g.x, g.y,    g.z, 1e-6f * dref * dref};
-	wk.ga = &ga;
-	pass(&wk, PASS_GRADIENTS, NULL, ctx->threads);
-	memset(wk.ksum, 0, un * sizeof *wk.ksum);
-
-	/* v* = v + dt (a + h) */
-	for (long i = 0; i < n; ++i)
-		wk.v[i] = (dfsph_f4){vx[i] + dt * (ax[i] + wk.h[i].x), vy[i] + dt * (ay[i] + wk.h[i].y),
-		                     vz[i] + dt * (az[i] + wk.h[i].z), 0};
-	int div_it = 0;
-	double div_residual = 0, dtol = sd->def.max_divergence_error, ddtol = sd->def.max_density_error;
-	if (sd->def.divergence_solver) {
-		/* the velocity solve, from last step's k (a correction with it) */
-		float *kcol = eddy__col(w, sd->kcol);
-		for (long i = 0; i < n; ++i) {
-			wk.full[i] = rho[i] >= DFSPH_SURFACE * rho0 ? 1.0f : 0.0f;
-			wk.k[i] = kcol[i] > 0 && wk.full[i] > 0 ? kcol[i] : 0.0f;
-		}
-		const double depth = fluid_depth(w, g);
-		dtol = divergence_tolerance(sd->def.max_divergence_error, kc.h, depth);
-		ddtol = divergence_tolerance(sd->def.max_density_error, kc.h, depth);
-		const sweep_args wa = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, true, true, RATE_SWEEP};
-		pass(&wk, PASS_CORRECT, &wa, ctx->threads);
-		div_it = divergence_solve(&wk, &cg, sd, rho0, dt, ctx->threads, dtol, &div_residual);
-		const bool capped = div_it >= sd->def.max_divergence_iterations &&
-		                    div_residual > DFSPH_FAIL_CAPPED_ERROR * dtol;
-		sd->capped = capped ? sd->capped + 1 : 0;
-		if (sd->capped >= DFSPH_FAIL_CAPPED) {
-			long wi = 0;
-			for (long i = 0; i < n; ++i)
-				wi = wk.err[i] > wk.err[wi] ? i : wi;
-			return eddy__fail(w, EDDY_ERR_NUMERIC,
-			                  "%s: the velocity solve did not converge at step %lld: mean error %.3g after %d "
-			                  "iterations in %d steps in a row (max_divergence_error %g), worst at particle %ld "
-			                  "(%.3g); the water may be too deep for it: raise max_divergence_iterations or lower "
-			                  "the world's cfl",
-			                  s->label, (long long)ctx->step, div_residual, div_it, sd->capped,
-			                  (double)sd->def.max_divergence_error, wi, wk.err[wi] / rho0);
-		}
-		memcpy(kcol, wk.ksum, un * sizeof *kcol);
-		memcpy(wk.kp, wk.ksum, un * sizeof *wk.kp);
-		memset(wk.ksum, 0, un * sizeof *wk.ksum);
-	} else {
-		memset(wk.kp, 0, un * sizeof *wk.kp);
-	}
-	float *kdcol = sd->def.divergence_solver ? eddy__col(w, sd->kdcol) : NULL;
-	if (kdcol) {
-		/* the density solve, from last step's k likewise */
-		for (long i = 0; i < n; ++i)
-			wk.k[i] = kdcol[i] > 0 ? kdcol[i] : 0.0f;
-		const sweep_args wa = {dt, 1.0f / dt, 1.0f / (dt * dt), rho0, false, true, RATE_SWEEP};
-		pass(&wk, PASS_CORRECT, &wa, ctx->threads);
-	}
-
-	double residual = 0;
-	const int it = density_solve(&wk, sd->def.divergence_solver ? &cg : NULL, sd, rho0, dt, ctx->threads, ddtol, &residual);
-	/* the particle the solve left furthest off (the last sweep's errors) */
-	long worst = 0;
+	float *kcol = eddy__col(w, sd->kcol);
 	for (long i = 0; i < n; ++i) {
-		wk.kp[i] += wk.ksum[i];
-		worst = wk.err[i] > wk.err[worst] ? i : worst;
+		wk->full[i] = rho[i] >= DFSPH_SURFACE * s->rho0 ? 1.0f : 0.0f;
+		wk->k[i] = kcol[i] > 0 && wk->full[i] > 0 ? kcol[i] : 0.0f;
 	}
-	const double worst_err = wk.err[worst] / rho0;
-	if (kdcol)
-		memcpy(kdcol, wk.ksum, un * sizeof *kdcol);
+	const dfsph_sweep warm = sweep_of(s, true, true, RATE_SWEEP);
+	pass(s, PASS_CORRECT, &warm);
+	const int cap = sd->def.max_divergence_iterations;
+	*iterations = solve(s, cg, true, true, cap, tol, residual);
+	const bool capped = *iterations >= cap && *residual > DFSPH_FAIL_CAPPED_ERROR * tol;
+	sd->capped = capped ? sd->capped + 1 : 0;
+	if (sd->capped >= DFSPH_FAIL_CAPPED) {
+		const long wi = argmax(wk->err, n);
+		return eddy__fail(w, EDDY_ERR_NUMERIC,
+		                  "%s: the velocity solve did not converge at step %lld: mean error %.3g after %d "
+		                  "iterations in %d steps in a row (max_divergence_error %g), worst at particle %ld "
+		                  "(%.3g); the water may be too deep for it: raise max_divergence_iterations or lower "
+		                  "the world's cfl",
+		                  sys->label, (long long)ctx->step, *residual, *iterations, sd->capped,
+		                  (double)sd->def.max_divergence_error, wi, wk->err[wi] / s->rho0);
+	}
+	memcpy(kcol, wk->ksum, (size_t)n * sizeof *kcol);
+	memcpy(wk->kp, wk->ksum, (size_t)n * sizeof *wk->kp);
+	memset(wk->ksum, 0, (size_t)n * sizeof *wk->ksum);
+	return EDDY_OK;
+}
 
-	/* a += (v* - (v + dt a)) / dt; p = k rho^2 */
+/* a += (v* - (v + dt a)) / dt and p = M kp rho^2; fails naming the first
+ * particle whose result is not finite. */
+static eddy_status apply_result(eddy_world *w, const eddy_system *sys, const dfsph_work *wk, const sph_shared *sh,
+                                float dt, const eddy_step_context *ctx)
+{
+	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
+	float *p = eddy__col(w, COL_PRESSURE);
 	const float inv_dt = 1.0f / dt;
 	long bad = -1;
-	for (long i = 0; i < n; ++i) {
-		const float ux = (wk.v[i].x - (vx[i] + dt * ax[i])) * inv_dt, uy = (wk.v[i].y - (vy[i] + dt * ay[i])) * inv_dt,
-		            uz = (wk.v[i].z - (vz[i] + dt * az[i])) * inv_dt;
+	for (long i = 0; i < wk->n; ++i) {
+		const float ux = (wk->v[i].x - (vx[i] + dt * ax[i])) * inv_dt, uy = (wk->v[i].y - (vy[i] + dt * ay[i])) * inv_dt,
+		            uz = (wk->v[i].z - (vz[i] + dt * az[i])) * inv_dt;
 		ax[i] += ux;
 		ay[i] += uy;
 		az[i] += uz;
-		p[i] = wk.kp[i] * wk.h[i].w * wk.h[i].w / sh->grad_cal;
+		p[i] = wk->kp[i] * wk->h[i].w * wk->h[i].w / sh->grad_cal;
 		if (bad < 0 && !(isfinite(ux) && isfinite(uy) && isfinite(uz) && isfinite(p[i])))
 			bad = i;
 	}
 	if (bad >= 0)
 		return eddy__fail(w, EDDY_ERR_NUMERIC,
 		                  "%s: non-finite pressure acceleration at step %lld, particle %ld (density %g kg/m^3, %u neighbours)",
-		                  s->label, (long long)ctx->step, bad, (double)rho[bad], nb->count[bad]);
+		                  sys->label, (long long)ctx->step, bad, (double)wk->h[bad].w, sh->nb.count[bad]);
+	return EDDY_OK;
+}
 
+/* The frame's statistics after a step, published. */
+static void publish(eddy_world *w, sph_dfsph *sd, int it, double residual, int div_it, double div_residual,
+                    double worst_err)
+{
 	sd->steps++;
 	sd->sweeps += it;
 	sd->div_sweeps += div_it;
@@ -1271,16 +856,89 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		eddy_world_publish(w, "divergence_iterations", (double)sd->div_sweeps / (double)sd->steps);
 	eddy_world_publish(w, "unconverged", (double)sd->unconverged);
 	eddy_world_publish(w, "residual_max", sd->worst);
+}
+
+/* The gradients, h and v* = v + dt (a + h); the warm-started velocity solve
+ * (divergence solver); the density solve; the result. */
+static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context *ctx)
+{
+	sph_dfsph *sd = sys->data;
+	sph_shared *sh = eddy__sph_find(w, sys);
+	if (!sh)
+		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)", sys->label);
+	if (sd->frame != w->frame) {
+		sd->frame = w->frame;
+		sd->steps = sd->sweeps = sd->div_sweeps = sd->unconverged = 0;
+		sd->residual = sd->worst = 0;
+	}
+	const sph_neighbors *nb = &sh->nb;
+	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
+	const float dt = (float)ctx->dt, rho0 = sh->rho0;
+	if (n == 0 || !(dt > 0))
+		return EDDY_OK;
+	if ((uint64_t)n > (uint64_t)UINT32_MAX) /* the groups hold j in 32 bits */
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: too many particles (%ld)", sys->label, n);
+	const bool divergence = sd->def.divergence_solver;
+	dfsph_solver s = {.block = sd->block, .threads = ctx->threads, .rho0 = rho0, .dt = dt};
+	dfsph_work *wk = &s.wk;
+	dfsph_cg cg;
+	if (!work_alloc(w, wk, &cg, nb, n, divergence))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
+
+	const sph_kernel_consts kc = sh->k;
+	const float dref = sh->mass * kc.spiky_grad * kc.h2; /* |G| scale */
+	const eddy_vec3 g = w->def.gravity;
+	const dfsph_geometry geo = {nb,  sh->pq, eddy__col(w, COL_DENSITY), kc.h, 1e-6f * kc.h2, sh->mass * kc.spiky_grad,
+	                            rho0, kc.spiky_grad, g.x, g.y, g.z, 1e-6f * dref * dref};
+	wk->geo = &geo;
+	pass(&s, PASS_GRADIENTS, NULL);
+	memset(wk->ksum, 0, (size_t)n * sizeof *wk->ksum);
+	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
+	for (long i = 0; i < n; ++i)
+		wk->v[i] = (dfsph_vec4){vx[i] + dt * (ax[i] + wk->h[i].x), vy[i] + dt * (ay[i] + wk->h[i].y),
+		                        vz[i] + dt * (az[i] + wk->h[i].z), 0};
+
+	int div_it = 0;
+	double div_residual = 0, tol = sd->def.max_density_error;
+	if (divergence) {
+		const double depth = fluid_depth(w, g);
+		tol = divergence_tolerance(sd->def.max_density_error, kc.h, depth);
+		const double dtol = divergence_tolerance(sd->def.max_divergence_error, kc.h, depth);
+		const eddy_status st = velocity_solve(w, sys, &s, &cg, ctx, dtol, &div_it, &div_residual);
+		if (st != EDDY_OK)
+			return st;
+		/* the density solve, from last step's k likewise */
+		const float *kdcol = eddy__col(w, sd->kdcol);
+		for (long i = 0; i < n; ++i)
+			wk->k[i] = kdcol[i] > 0 ? kdcol[i] : 0.0f;
+		const dfsph_sweep warm = sweep_of(&s, false, true, RATE_SWEEP);
+		pass(&s, PASS_CORRECT, &warm);
+	} else {
+		memset(wk->kp, 0, (size_t)n * sizeof *wk->kp);
+	}
+	double residual = 0;
+	const int it = solve(&s, divergence ? &cg : NULL, false, divergence, sd->def.max_iterations, tol, &residual);
+	for (long i = 0; i < n; ++i)
+		wk->kp[i] += wk->ksum[i];
+	if (divergence)
+		memcpy(eddy__col(w, sd->kdcol), wk->ksum, (size_t)n * sizeof(float));
+	/* the particle the solve left furthest off (the last sweep's errors) */
+	const long worst = argmax(wk->err, n);
+	const double worst_err = wk->err[worst] / rho0;
+	const eddy_status st = apply_result(w, sys, wk, sh, dt, ctx);
+	if (st != EDDY_OK)
+		return st;
+	publish(w, sd, it, residual, div_it, div_residual, worst_err);
 	if (!(residual <= DFSPH_FAIL_ERROR) || !(worst_err <= DFSPH_FAIL_PARTICLE))
 		return eddy__fail(w, EDDY_ERR_NUMERIC,
 		                  "%s: did not converge at step %lld: mean density error %.3g after %d iterations "
 		                  "(max_density_error %g), particle %ld off by %.3g; lower the world's cfl or raise "
 		                  "max_iterations",
-		                  s->label, (long long)ctx->step, residual, it, (double)sd->def.max_density_error, worst,
+		                  sys->label, (long long)ctx->step, residual, it, (double)sd->def.max_density_error, worst,
 		                  worst_err);
 	return EDDY_OK;
 }
-
 static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
 	const sph_shared *sh = eddy__sph_find(w, s);
@@ -1345,9 +1003,7 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
 	sd->def = *def;
 	sd->frame = -1;
-#ifdef SPH_AVX2
-	sd->avx2 = sph_use_avx2();
-#endif
+	sd->block = SIMD_PICK(dfsph_block);
 	if (!def->divergence_solver) /* the warm starts are the velocity solve's */
 		return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, dfsph_reads, dfsph_writes);
 	/* the warm starts' state columns (shared by the sph_dfsph systems of a
@@ -1374,3 +1030,4 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 	reads[nr + 2] = writes[nw + 2] = -1;
 	return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, reads, writes);
 }
+#endif /* EDDY_SIMD_VARIANT */
