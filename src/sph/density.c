@@ -94,7 +94,7 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 	const float rho0 = sd->sh.rho0, k = sd->def.stiffness, gamma = sd->def.tait_gamma;
 	const bool tait = sd->def.eos == EDDY_SPH_EOS_TAIT;
 	const float B = k * rho0 / gamma;
-	const size_t n = w->n, nbound = nb->nb;
+	const size_t n = w->n, nbound = nb->nbound;
 	if (n == 0 || nbound == 0)
 		return EDDY_OK;
 	bool iterate = false;
@@ -170,10 +170,10 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 		const float pb = sw > 0 ? fmaxf(sp / sw, 0.0f) : 0.0f;
 		if (inv_sw) {
 			inv_sw[b] = sw > 0 ? 1.0f / sw : 0.0f;
-			old[b] = nb->brho[b]; /* the last step's: what the fluid sums hold */
+			old[b] = nb->bnd.rho[b]; /* the last step's: what the fluid sums hold */
 		}
 		nb->bp[b] = pb;
-		nb->brho[b] = tait ? rho0 * powf(pb / B + 1.0f, 1.0f / gamma) : rho0 + pb / k;
+		nb->bnd.rho[b] = tait ? rho0 * powf(pb / B + 1.0f, 1.0f / gamma) : rho0 + pb / k;
 	}
 	if (!iterate)
 		return EDDY_OK;
@@ -201,7 +201,7 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : change)
 		for (long a = 0; a < na; ++a) {
 			const uint32_t b = act[a];
-			const float d = nb->brho[b] - old[b];
+			const float d = nb->bnd.rho[b] - old[b];
 			dv[b] = nb->bvol[b] * d;
 			change = fabsf(d) > change ? fabsf(d) : change;
 		}
@@ -237,9 +237,9 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 				sp += wq[q] * (p[j] + rho[j] * gq[q]);
 			}
 			const float pb = fmaxf(sp * inv_sw[b], 0.0f);
-			old[b] = nb->brho[b];
+			old[b] = nb->bnd.rho[b];
 			nb->bp[b] = pb;
-			nb->brho[b] = tait ? rho0 * powf(pb / B + 1.0f, 1.0f / gamma) : rho0 + pb / k;
+			nb->bnd.rho[b] = tait ? rho0 * powf(pb / B + 1.0f, 1.0f / gamma) : rho0 + pb / k;
 		}
 	}
 	return EDDY_OK;
@@ -295,7 +295,7 @@ static void *state(eddy_world *w, eddy_system *s, size_t *size)
 	*size = 0;
 	if (eddy__sph_boundary_ready(w, &sd->sh) != EDDY_OK || !sd->sh.nb.bp)
 		return NULL;
-	*size = sd->sh.nb.bstate_size; /* bp, brho and the colliders' seen offsets (sph.h) */
+	*size = sd->sh.nb.bnd.state_size; /* bp, rho and the colliders' seen offsets (sph.h) */
 	return sd->sh.nb.bp;
 }
 

@@ -1,0 +1,410 @@
+/* SPDX-License-Identifier: MIT */
+/* The SIMD vocabulary of the SPH pair passes: sf8, eight float lanes, and
+ * the operations the passes need, with three back-ends that give the same
+ * bits lane for lane:
+ *   AVX2    (the file is compiled with -mavx2 -mbmi2): sf8 is an __m256;
+ *   SSE     (__SSE2__, EDDY_SIMD_SCALAR not defined): two __m128, lo = lanes
+ *           0-3 and hi = lanes 4-7, every operation done on both halves;
+ *   scalar  (anything else): float l[8], every operation a plain loop over
+ *           the lanes, no intrinsics.
+ * Every operation is one IEEE operation per lane (no FMA: -std=c11 keeps
+ * -ffp-contract=off), so a pass written once gives the same results on all
+ * three. Masks are sf8 values whose lanes are all ones or zero, as the
+ * SSE/AVX compares give. Sums over lanes end in one fixed order (sf8_fold4,
+ * sf8_sum) for the same reason.
+ *
+ * One pass, several back-ends: a file in src/sph/ that includes this header
+ * is compiled normally (SSE, or scalar in a SIMD=scalar build) and, on x86
+ * unless SIMD=scalar, once more with -mavx2 -mbmi2 -DEDDY_SIMD_VARIANT (the
+ * Makefile finds such files by grepping for the include). The variant
+ * compile sees only the kernels: the file keeps its system glue under
+ * #ifndef EDDY_SIMD_VARIANT. Kernels the glue calls are named SIMD_NAME(x)
+ * (x_avx2 in the variant, x_base otherwise), declared with
+ * SIMD_DECLARE(x, (params)) and picked at run time with SIMD_PICK(x). The
+ * Makefile defines EDDY_SIMD_HAVE_AVX2 for the normal compile when it builds
+ * the variant; without it (another build, the fuzzer's single compile)
+ * SIMD_PICK always gives x_base. */
+#ifndef EDDY_SIMD_H
+#define EDDY_SIMD_H
+
+#include <stdbool.h>
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#if defined(__AVX2__)
+#define SIMD_AVX2 1
+#include <immintrin.h>
+#elif defined(__SSE2__) && !defined(EDDY_SIMD_SCALAR)
+#define SIMD_SSE 1
+#include <emmintrin.h>
+#else
+#define SIMD_SCALAR 1
+#endif
+
+#ifdef EDDY_SIMD_VARIANT
+#define SIMD_NAME(x) x##_avx2
+#else
+#define SIMD_NAME(x) x##_base
+#endif
+/* Both names' prototypes: params in parentheses, e.g.
+ * SIMD_DECLARE(void, pair_sums, (const pair_args *a, long i0, long cnt)); */
+#define SIMD_DECLARE(ret, x, params) \
+	ret x##_base params;             \
+	ret x##_avx2 params
+
+#if defined(EDDY_SIMD_HAVE_AVX2) && !defined(EDDY_SIMD_VARIANT) && !defined(EDDY_SIMD_SCALAR) && \
+	defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__))
+#include <stdlib.h>
+/* The CPU has AVX2 and BMI2 (every AVX2 CPU from Haswell and Zen on has
+ * both) and EDDY_NO_AVX2 is unset or empty. EDDY_NO_AVX2=1 takes the base
+ * path on such a machine: the test that both give the same bits, and a way
+ * around a suspect CPU. */
+static inline bool simd_use_avx2(void)
+{
+	const char *off = getenv("EDDY_NO_AVX2");
+	return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("bmi2") && !(off && *off);
+}
+#define SIMD_PICK(x) (simd_use_avx2() ? x##_avx2 : x##_base)
+#else
+static inline bool simd_use_avx2(void)
+{
+	return false;
+}
+#define SIMD_PICK(x) x##_base
+#endif
+
+/* ---- AVX2 ---------------------------------------------------------------- */
+#ifdef SIMD_AVX2
+
+typedef __m256 sf8;
+
+static inline sf8 sf8_zero(void) { return _mm256_setzero_ps(); }
+static inline sf8 sf8_set1(float a) { return _mm256_set1_ps(a); }
+static inline sf8 sf8_load(const float *p) { return _mm256_loadu_ps(p); }
+static inline void sf8_store(float *p, sf8 a) { _mm256_storeu_ps(p, a); }
+static inline sf8 sf8_add(sf8 a, sf8 b) { return _mm256_add_ps(a, b); }
+static inline sf8 sf8_sub(sf8 a, sf8 b) { return _mm256_sub_ps(a, b); }
+static inline sf8 sf8_mul(sf8 a, sf8 b) { return _mm256_mul_ps(a, b); }
+static inline sf8 sf8_div(sf8 a, sf8 b) { return _mm256_div_ps(a, b); }
+static inline sf8 sf8_max(sf8 a, sf8 b) { return _mm256_max_ps(a, b); }
+static inline sf8 sf8_min(sf8 a, sf8 b) { return _mm256_min_ps(a, b); }
+static inline sf8 sf8_sqrt(sf8 a) { return _mm256_sqrt_ps(a); }
+static inline sf8 sf8_lt(sf8 a, sf8 b) { return _mm256_cmp_ps(a, b, _CMP_LT_OQ); }
+static inline sf8 sf8_gt(sf8 a, sf8 b) { return _mm256_cmp_ps(a, b, _CMP_GT_OQ); }
+static inline sf8 sf8_le(sf8 a, sf8 b) { return _mm256_cmp_ps(a, b, _CMP_LE_OQ); }
+static inline sf8 sf8_ge(sf8 a, sf8 b) { return _mm256_cmp_ps(a, b, _CMP_GE_OQ); }
+static inline sf8 sf8_and(sf8 a, sf8 b) { return _mm256_and_ps(a, b); }
+static inline sf8 sf8_or(sf8 a, sf8 b) { return _mm256_or_ps(a, b); }
+static inline sf8 sf8_xor(sf8 a, sf8 b) { return _mm256_xor_ps(a, b); }
+static inline sf8 sf8_andnot(sf8 m, sf8 a) { return _mm256_andnot_ps(m, a); }
+static inline sf8 sf8_select(sf8 m, sf8 a, sf8 b) { return _mm256_blendv_ps(b, a, m); }
+static inline sf8 sf8_lanes_below(uint32_t n)
+{
+	const int c = n < 8 ? (int)n : 8;
+	return _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(c), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7)));
+}
+static inline int sf8_mask_bits(sf8 m) { return _mm256_movemask_ps(m); }
+
+/* Lanes 0-3 from the quads of idx[0..3], 4-7 from idx[4..7]: two 4x4
+ * transposes side by side (pure moves, so the lanes hold the same bits as
+ * the SSE back-end's). */
+static inline void simd_transpose8_(__m256 v0, __m256 v1, __m256 v2, __m256 v3, sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
+{
+	const __m256 t0 = _mm256_unpacklo_ps(v0, v1), t1 = _mm256_unpacklo_ps(v2, v3), t2 = _mm256_unpackhi_ps(v0, v1),
+	             t3 = _mm256_unpackhi_ps(v2, v3);
+	*c0 = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(1, 0, 1, 0));
+	*c1 = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(3, 2, 3, 2));
+	*c2 = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(1, 0, 1, 0));
+	*c3 = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(3, 2, 3, 2));
+}
+static inline __m256 simd_quad_pair_(const float *base, uint32_t a, uint32_t b)
+{
+	return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(base + 4 * (size_t)a)),
+	                            _mm_loadu_ps(base + 4 * (size_t)b), 1);
+}
+static inline void sf8_gather_quads(const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
+{
+	simd_transpose8_(simd_quad_pair_(base, idx[0], idx[4]), simd_quad_pair_(base, idx[1], idx[5]),
+	                 simd_quad_pair_(base, idx[2], idx[6]), simd_quad_pair_(base, idx[3], idx[7]), c0, c1, c2, c3);
+}
+/* q minus each quad, then transposed: c0 lane k = q[0] - base[4 idx[k]],
+ * c1 lane k = q[1] - base[4 idx[k] + 1], ... The same per-lane results as
+ * gathering first and subtracting q's broadcasts, but the particle's own
+ * values take one register instead of four. */
+static inline void sf8_sub_gather_quads(const float q[4], const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1,
+                                        sf8 *c2, sf8 *c3)
+{
+	const __m128 q4 = _mm_loadu_ps(q);
+	const __m256 qq = _mm256_set_m128(q4, q4);
+	simd_transpose8_(_mm256_sub_ps(qq, simd_quad_pair_(base, idx[0], idx[4])),
+	                 _mm256_sub_ps(qq, simd_quad_pair_(base, idx[1], idx[5])),
+	                 _mm256_sub_ps(qq, simd_quad_pair_(base, idx[2], idx[6])),
+	                 _mm256_sub_ps(qq, simd_quad_pair_(base, idx[3], idx[7])), c0, c1, c2, c3);
+}
+static inline void sf8_fold4(sf8 a, float out[4])
+{
+	_mm_storeu_ps(out, _mm_add_ps(_mm256_castps256_ps128(a), _mm256_extractf128_ps(a, 1)));
+}
+
+/* ---- SSE: two halves ------------------------------------------------------ */
+#elif defined(SIMD_SSE)
+
+typedef struct sf8 {
+	__m128 lo, hi;
+} sf8;
+
+static inline sf8 simd_pair_(__m128 lo, __m128 hi)
+{
+	sf8 r;
+	r.lo = lo;
+	r.hi = hi;
+	return r;
+}
+#define SIMD_SSE_OP2_(name, op) \
+	static inline sf8 name(sf8 a, sf8 b) { return simd_pair_(op(a.lo, b.lo), op(a.hi, b.hi)); }
+
+static inline sf8 sf8_zero(void) { return simd_pair_(_mm_setzero_ps(), _mm_setzero_ps()); }
+static inline sf8 sf8_set1(float a) { return simd_pair_(_mm_set1_ps(a), _mm_set1_ps(a)); }
+static inline sf8 sf8_load(const float *p) { return simd_pair_(_mm_loadu_ps(p), _mm_loadu_ps(p + 4)); }
+static inline void sf8_store(float *p, sf8 a)
+{
+	_mm_storeu_ps(p, a.lo);
+	_mm_storeu_ps(p + 4, a.hi);
+}
+SIMD_SSE_OP2_(sf8_add, _mm_add_ps)
+SIMD_SSE_OP2_(sf8_sub, _mm_sub_ps)
+SIMD_SSE_OP2_(sf8_mul, _mm_mul_ps)
+SIMD_SSE_OP2_(sf8_div, _mm_div_ps)
+SIMD_SSE_OP2_(sf8_max, _mm_max_ps)
+SIMD_SSE_OP2_(sf8_min, _mm_min_ps)
+SIMD_SSE_OP2_(sf8_lt, _mm_cmplt_ps)
+SIMD_SSE_OP2_(sf8_gt, _mm_cmpgt_ps)
+SIMD_SSE_OP2_(sf8_le, _mm_cmple_ps)
+SIMD_SSE_OP2_(sf8_ge, _mm_cmpge_ps)
+SIMD_SSE_OP2_(sf8_and, _mm_and_ps)
+SIMD_SSE_OP2_(sf8_or, _mm_or_ps)
+SIMD_SSE_OP2_(sf8_xor, _mm_xor_ps)
+SIMD_SSE_OP2_(sf8_andnot, _mm_andnot_ps)
+static inline sf8 sf8_sqrt(sf8 a) { return simd_pair_(_mm_sqrt_ps(a.lo), _mm_sqrt_ps(a.hi)); }
+static inline sf8 sf8_select(sf8 m, sf8 a, sf8 b)
+{
+	return simd_pair_(_mm_or_ps(_mm_and_ps(m.lo, a.lo), _mm_andnot_ps(m.lo, b.lo)),
+	                  _mm_or_ps(_mm_and_ps(m.hi, a.hi), _mm_andnot_ps(m.hi, b.hi)));
+}
+static inline sf8 sf8_lanes_below(uint32_t n)
+{
+	const __m128i c = _mm_set1_epi32(n < 8 ? (int)n : 8);
+	return simd_pair_(_mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_setr_epi32(0, 1, 2, 3))),
+	                  _mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_setr_epi32(4, 5, 6, 7))));
+}
+static inline int sf8_mask_bits(sf8 m) { return _mm_movemask_ps(m.lo) | _mm_movemask_ps(m.hi) << 4; }
+
+static inline void sf8_gather_quads(const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
+{
+	__m128 a[2][4];
+	for (int k = 0; k < 2; ++k) {
+		a[k][0] = _mm_loadu_ps(base + 4 * (size_t)idx[4 * k]);
+		a[k][1] = _mm_loadu_ps(base + 4 * (size_t)idx[4 * k + 1]);
+		a[k][2] = _mm_loadu_ps(base + 4 * (size_t)idx[4 * k + 2]);
+		a[k][3] = _mm_loadu_ps(base + 4 * (size_t)idx[4 * k + 3]);
+		_MM_TRANSPOSE4_PS(a[k][0], a[k][1], a[k][2], a[k][3]);
+	}
+	*c0 = simd_pair_(a[0][0], a[1][0]);
+	*c1 = simd_pair_(a[0][1], a[1][1]);
+	*c2 = simd_pair_(a[0][2], a[1][2]);
+	*c3 = simd_pair_(a[0][3], a[1][3]);
+}
+static inline void sf8_sub_gather_quads(const float q[4], const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1,
+                                        sf8 *c2, sf8 *c3)
+{
+	const __m128 q4 = _mm_loadu_ps(q);
+	__m128 a[2][4];
+	for (int k = 0; k < 2; ++k) {
+		a[k][0] = _mm_sub_ps(q4, _mm_loadu_ps(base + 4 * (size_t)idx[4 * k]));
+		a[k][1] = _mm_sub_ps(q4, _mm_loadu_ps(base + 4 * (size_t)idx[4 * k + 1]));
+		a[k][2] = _mm_sub_ps(q4, _mm_loadu_ps(base + 4 * (size_t)idx[4 * k + 2]));
+		a[k][3] = _mm_sub_ps(q4, _mm_loadu_ps(base + 4 * (size_t)idx[4 * k + 3]));
+		_MM_TRANSPOSE4_PS(a[k][0], a[k][1], a[k][2], a[k][3]);
+	}
+	*c0 = simd_pair_(a[0][0], a[1][0]);
+	*c1 = simd_pair_(a[0][1], a[1][1]);
+	*c2 = simd_pair_(a[0][2], a[1][2]);
+	*c3 = simd_pair_(a[0][3], a[1][3]);
+}
+static inline void sf8_fold4(sf8 a, float out[4]) { _mm_storeu_ps(out, _mm_add_ps(a.lo, a.hi)); }
+
+/* ---- scalar: plain loops over the lanes ----------------------------------- */
+#else
+
+typedef struct sf8 {
+	float l[8];
+} sf8;
+
+/* A mask lane as bits and back (all ones is a quiet NaN: copying it as a
+ * float keeps the bits). */
+static inline uint32_t simd_bits_(float f)
+{
+	uint32_t u;
+	memcpy(&u, &f, sizeof u);
+	return u;
+}
+static inline float simd_float_(uint32_t u)
+{
+	float f;
+	memcpy(&f, &u, sizeof f);
+	return f;
+}
+#define SIMD_SCALAR_OP2_(name, expr)             \
+	static inline sf8 name(sf8 a, sf8 b)         \
+	{                                            \
+		sf8 r;                                   \
+		for (int k = 0; k < 8; ++k) {            \
+			const float x = a.l[k], y = b.l[k];  \
+			r.l[k] = (expr);                     \
+		}                                        \
+		return r;                                \
+	}
+#define SIMD_MASK_(c) simd_float_((c) ? 0xffffffffu : 0u)
+
+static inline sf8 sf8_zero(void)
+{
+	sf8 r;
+	for (int k = 0; k < 8; ++k)
+		r.l[k] = 0.0f;
+	return r;
+}
+static inline sf8 sf8_set1(float a)
+{
+	sf8 r;
+	for (int k = 0; k < 8; ++k)
+		r.l[k] = a;
+	return r;
+}
+static inline sf8 sf8_load(const float *p)
+{
+	sf8 r;
+	memcpy(r.l, p, sizeof r.l);
+	return r;
+}
+static inline void sf8_store(float *p, sf8 a) { memcpy(p, a.l, sizeof a.l); }
+SIMD_SCALAR_OP2_(sf8_add, x + y)
+SIMD_SCALAR_OP2_(sf8_sub, x - y)
+SIMD_SCALAR_OP2_(sf8_mul, x * y)
+SIMD_SCALAR_OP2_(sf8_div, x / y)
+/* as maxps/minps: the second operand unless the first is strictly greater
+ * (smaller), so b when either is NaN or both are zeros */
+SIMD_SCALAR_OP2_(sf8_max, x > y ? x : y)
+SIMD_SCALAR_OP2_(sf8_min, x < y ? x : y)
+/* ordered compares: false when either is NaN */
+SIMD_SCALAR_OP2_(sf8_lt, SIMD_MASK_(x < y))
+SIMD_SCALAR_OP2_(sf8_gt, SIMD_MASK_(x > y))
+SIMD_SCALAR_OP2_(sf8_le, SIMD_MASK_(x <= y))
+SIMD_SCALAR_OP2_(sf8_ge, SIMD_MASK_(x >= y))
+SIMD_SCALAR_OP2_(sf8_and, simd_float_(simd_bits_(x) & simd_bits_(y)))
+SIMD_SCALAR_OP2_(sf8_or, simd_float_(simd_bits_(x) | simd_bits_(y)))
+SIMD_SCALAR_OP2_(sf8_xor, simd_float_(simd_bits_(x) ^ simd_bits_(y)))
+SIMD_SCALAR_OP2_(sf8_andnot, simd_float_(~simd_bits_(x) & simd_bits_(y)))
+static inline sf8 sf8_sqrt(sf8 a)
+{
+	sf8 r;
+	for (int k = 0; k < 8; ++k)
+		r.l[k] = sqrtf(a.l[k]);
+	return r;
+}
+static inline sf8 sf8_select(sf8 m, sf8 a, sf8 b)
+{
+	sf8 r;
+	for (int k = 0; k < 8; ++k) {
+		const uint32_t mk = simd_bits_(m.l[k]);
+		r.l[k] = simd_float_((mk & simd_bits_(a.l[k])) | (~mk & simd_bits_(b.l[k])));
+	}
+	return r;
+}
+static inline sf8 sf8_lanes_below(uint32_t n)
+{
+	sf8 r;
+	for (uint32_t k = 0; k < 8; ++k)
+		r.l[k] = SIMD_MASK_(k < n);
+	return r;
+}
+static inline int sf8_mask_bits(sf8 m)
+{
+	int bits = 0;
+	for (int k = 0; k < 8; ++k)
+		bits |= (int)(simd_bits_(m.l[k]) >> 31) << k;
+	return bits;
+}
+static inline void sf8_gather_quads(const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
+{
+	for (int k = 0; k < 8; ++k) {
+		const float *p = base + 4 * (size_t)idx[k];
+		c0->l[k] = p[0];
+		c1->l[k] = p[1];
+		c2->l[k] = p[2];
+		c3->l[k] = p[3];
+	}
+}
+static inline void sf8_sub_gather_quads(const float q[4], const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1,
+                                        sf8 *c2, sf8 *c3)
+{
+	for (int k = 0; k < 8; ++k) {
+		const float *p = base + 4 * (size_t)idx[k];
+		c0->l[k] = q[0] - p[0];
+		c1->l[k] = q[1] - p[1];
+		c2->l[k] = q[2] - p[2];
+		c3->l[k] = q[3] - p[3];
+	}
+}
+static inline void sf8_fold4(sf8 a, float out[4])
+{
+	for (int k = 0; k < 4; ++k)
+		out[k] = a.l[k] + a.l[k + 4];
+}
+#endif
+
+/* ---- common to the three ----------------------------------------------- */
+
+static inline float sf8_sum(sf8 a)
+{
+	float f[4];
+	sf8_fold4(a, f);
+	return (f[0] + f[1]) + (f[2] + f[3]);
+}
+
+/* ---- added for nbr ---- */
+/* The lanes of a, and the same entries of idx[0..7], where mask m is set,
+ * packed to the front of out and out_idx in lane order; all eight entries
+ * of each may be written (the callers leave room). Returns how many.
+ * Branch-free: which lanes are set is a coin toss in the neighbour search,
+ * and a mispredicted branch costs more than writing every lane. AVX2 packs
+ * with a permutation made from the mask (pdep/pext), the others write each
+ * lane and move the count past the set ones: the same entries either way. */
+#ifdef SIMD_AVX2
+static inline uint32_t sf8_pack(sf8 m, sf8 a, const uint32_t idx[8], float *out, uint32_t *out_idx)
+{
+	const unsigned bits = (unsigned)_mm256_movemask_ps(m);
+	const uint64_t keep = _pdep_u64(bits, 0x0101010101010101ull) * 0xFF; /* a byte of ones per lane kept */
+	const __m256i perm = _mm256_cvtepu8_epi32(_mm_cvtsi64_si128((long long)_pext_u64(0x0706050403020100ull, keep)));
+	_mm256_storeu_si256((__m256i *)(void *)out_idx,
+	                    _mm256_permutevar8x32_epi32(_mm256_loadu_si256((const __m256i *)(const void *)idx), perm));
+	_mm256_storeu_ps(out, _mm256_permutevar8x32_ps(a, perm));
+	return (uint32_t)__builtin_popcount(bits);
+}
+#else
+static inline uint32_t sf8_pack(sf8 m, sf8 a, const uint32_t idx[8], float *out, uint32_t *out_idx)
+{
+	const unsigned bits = (unsigned)sf8_mask_bits(m);
+	float l[8];
+	sf8_store(l, a);
+	uint32_t cnt = 0;
+	for (unsigned k = 0; k < 8; ++k) {
+		out_idx[cnt] = idx[k];
+		out[cnt] = l[k];
+		cnt += bits >> k & 1;
+	}
+	return cnt;
+}
+#endif
+
+#endif
