@@ -4,6 +4,7 @@
 #   make            build everything into build/
 #   make run        install missing Debian packages, build, run the default scene
 #   make test       install missing Debian packages, build, run the tests
+#   make test SIMD=scalar   the same on the SPH passes' scalar back-end (build/scalar)
 #   make bench      benchmarks (machine-readable JSON in build/bench*.json)
 #   make asan       the tests under AddressSanitizer + UndefinedBehaviorSanitizer
 #   make fuzz       libFuzzer over scene loading and stepping (FUZZ_SECONDS)
@@ -11,6 +12,15 @@
 #   make install PREFIX=/usr/local [DESTDIR=...]
 #   make clean
 
+# SIMD=scalar: the SPH passes on simd.h's scalar back-end, no AVX2 variants,
+# in a build directory of its own.
+SIMD    ?=
+ifeq ($(SIMD),scalar)
+BUILD   ?= build/scalar
+SIMD_FLAGS := -DEDDY_SIMD_SCALAR
+else ifneq ($(SIMD),)
+$(error SIMD=$(SIMD): allowed are SIMD=scalar or nothing)
+endif
 BUILD   ?= build
 PREFIX  ?= /usr/local
 CC      ?= cc
@@ -27,7 +37,7 @@ SOMAJOR := $(firstword $(subst ., ,$(VERSION)))
 # Symbols are hidden unless the public header marks them EDDY_API.
 WARN    := -Wall -Wextra -Wpedantic -Wshadow -Wstrict-prototypes -Wmissing-prototypes \
            -Wformat=2 -Wvla -Wpointer-arith -Wcast-qual -Wundef -Werror
-BASE    := -std=c11 $(OPT) -g -fPIC -fopenmp -fvisibility=hidden $(WARN) $(SAN) -MMD -MP
+BASE    := -std=c11 $(OPT) -g -fPIC -fopenmp -fvisibility=hidden $(WARN) $(SAN) $(SIMD_FLAGS) -MMD -MP
 LDBASE  := -fopenmp $(SAN)
 # The one C++ file (src/surface_vdb.cpp, OpenVDB): same warnings and sanitizers.
 # Not -fvisibility=hidden: OpenVDB's templates instantiated here must share
@@ -69,7 +79,19 @@ TEST_C   := $(wildcard tests/test_*.c) tests/runner.c tests/fuzz_scene.c
 BENCHES  := bench bench_flip bench_sph bench_render
 
 obj = $(1:%.c=$(BUILD)/obj/%.o)
-LIB_O   := $(call obj,$(SRC_C) $(RENDER_C)) $(SRC_CXX:%.cpp=$(BUILD)/obj/%.o)
+
+# The SPH files written against src/sph/simd.h: compiled once more with AVX2
+# (X.avx2.o, -DEDDY_SIMD_VARIANT: only their kernels) on x86 unless
+# SIMD=scalar; the normal compile then gets -DEDDY_SIMD_HAVE_AVX2 so that
+# SIMD_PICK can choose the variant at run time (see simd.h).
+SIMD_C  := $(shell grep -l 'include "simd.h"' src/sph/*.c)
+ifeq ($(SIMD),scalar)
+SIMD_VARIANT_O :=
+else
+SIMD_VARIANT_O := $(if $(filter x86_64% i386% i486% i586% i686%,$(shell $(CC) -dumpmachine)),$(SIMD_C:%.c=$(BUILD)/obj/%.avx2.o))
+endif
+
+LIB_O   := $(call obj,$(SRC_C) $(RENDER_C)) $(SRC_CXX:%.cpp=$(BUILD)/obj/%.o) $(SIMD_VARIANT_O)
 LUA_O   := $(call obj,$(LUA_C))
 CLI_O   := $(call obj,$(CLI_C))
 TEST_O  := $(call obj,$(TEST_C))
@@ -109,7 +131,12 @@ $(BUILD)/obj/tests/%.o: tests/%.c $(HEADER)
 # SPH pair loops: with errno semantics GCC follows every sqrtss with a compare
 # and a branch to libm's sqrtf (to set errno for a negative argument, which r^2
 # never is). -fno-math-errno drops only that; results are bit-identical.
-$(BUILD)/obj/src/sph/pressure.o $(BUILD)/obj/src/sph/viscosity.o: BASE += -fno-math-errno
+$(sort $(call obj,src/sph/pressure.c src/sph/viscosity.c $(SIMD_C))) $(SIMD_VARIANT_O): BASE += -fno-math-errno
+$(call obj,$(SIMD_C)): BASE += $(if $(SIMD_VARIANT_O),-DEDDY_SIMD_HAVE_AVX2)
+
+$(BUILD)/obj/src/sph/%.avx2.o: src/sph/%.c
+	@mkdir -p $(dir $@)
+	$(CC) $(BASE) -mavx2 -mbmi2 -DEDDY_SIMD_VARIANT -Isrc -c $< -o $@
 $(BUILD)/obj/src/flip_hypre.o: BASE += $(HYPRE_CFLAGS)
 
 # ---- linking --------------------------------------------------------------------

@@ -34,7 +34,7 @@
  * grows and that pass runs again. Every particle writes only its own lists,
  * so they are the same for any thread count. The filter is written once
  * against simd.h; this file is compiled once more as the AVX2 variant, which
- * sees only the kernel (filter_rows). */
+ * sees only the kernel (neighbors_filter). */
 #include "neighbors.h"
 #include "simd.h"
 #include "systems.h"
@@ -129,12 +129,12 @@ static inline uint32_t filter_boundary(const filter_ctx *f, long i, uint32_t b)
 	return bcnt;
 }
 
-SIMD_DECLARE(bool, filter_rows, (const filter_ctx *f, int threads, uint32_t *max_f, uint32_t *max_b));
+SIMD_DECLARE(bool, neighbors_filter, (const filter_ctx *f, int threads, uint32_t *max_f, uint32_t *max_b));
 
 /* The exact lists and kernel sums from the Verlet list. Returns false when
  * out of memory; *max_f, *max_b: the largest counts (above the strides:
  * widen and filter again). */
-bool SIMD_NAME(filter_rows)(const filter_ctx *f, int threads, uint32_t *max_f, uint32_t *max_b)
+bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, uint32_t *max_f, uint32_t *max_b)
 {
 	sph_neighbors *nb = f->nb;
 	const size_t stride = nb->verlet.stride, cap = nb->cap;
@@ -383,7 +383,7 @@ static eddy_status exact_lists(eddy_world *w, sph_shared *sh, const float *p4, i
 			return lists_nomem(w, n, nb->bcap);
 		const sph_search_out out = {true, sh->k.h2, nb->cap, nb->bcap, nb->nbr, nb->count, nb->bnbr, nb->bcount};
 		uint32_t mf, mb;
-		const bool ok = nb->verlet.stored ? SIMD_PICK(filter_rows)(&f, threads, &mf, &mb)
+		const bool ok = nb->verlet.stored ? SIMD_PICK(neighbors_filter)(&f, threads, &mf, &mb)
 		                                  : sph_search(w, nb, &out, threads, &mf, &mb);
 		if (!ok)
 			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for the neighbour lists");

@@ -25,10 +25,11 @@
  * gradient has no direction at r = 0, and skipping them would leave
  * coincident particles stuck together (docs/validation.md C.6).
  * Positions and 1/rho come from sph_density's (x y z 1/rho) quads (sh->pq).
- * The fluid pairs go eight at a time (AVX2 when the CPU has it, else SSE as
- * two halves doing the same per lane; EDDY_NO_AVX2 forces SSE), a particle's
- * last group masked, with per-lane partial sums added in a fixed order: the
- * same bits for any thread count and either path. The particles go in blocks
+ * The fluid pairs go eight at a time, written once against simd.h (AVX2
+ * when the CPU has it, else SSE or scalar doing the same per lane;
+ * EDDY_NO_AVX2 forces the base path), a particle's last group masked, with
+ * per-lane partial sums added in a fixed order: the same bits for any thread
+ * count and any back-end. The particles go in blocks
  * of 64, the sums over the block's groups first, then a loop finishing its
  * particles (the walls, ax ay az). A group with a coincident pair ends the
  * vector sums of its particle; the finish loop takes the rest pair by pair.
@@ -39,35 +40,18 @@
  * 0.25 sqrt(h/|a|)).
  * Source: Mueller, Charypar & Gross 2003; Adami, Hu & Adams, "A generalized
  * wall boundary condition for SPH", JCP 2012. */
+#include "simd.h"
 #include "sph.h"
 #include "systems.h"
 
 #include <stdlib.h>
 
-typedef struct sph_pressure {
-	eddy_sph_pressure_def def;
-} sph_pressure;
-
-static const int pressure_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_DENSITY, COL_PRESSURE};
-static const int pressure_writes[] = {COL_AX, COL_AY, COL_AZ, -1};
-static const int no_hint_writes[] = {-1};
-
-eddy_sph_pressure_def eddy_default_sph_pressure_def(void)
-{
-	eddy_sph_pressure_def d;
-	d.scale = 1.0f;
-	return d;
-}
-
 /* The pass goes in blocks of particles: first the sums over the fluid pairs
- * of the block (pair_sums), then a loop that finishes its particles (the
+ * of the block (pressure_pair_sums), then a loop that finishes its particles (the
  * walls, the rare coincident pairs, ax ay az). Finishing each particle right
  * after its groups put the adds of its totals behind every (often
  * mispredicted) exit of the loop over its groups; the particles of the second
- * loop are independent of each other (as in sph_dfsph). (Tried: one loop
- * over all the block's groups, each adding to its particle's sums in memory,
- * to overlap the square roots and divisions of several particles: slower,
- * 65 against 47-55 ns per particle.) */
+ * loop are independent of each other (as in sph_dfsph). */
 #define PRESSURE_BLOCK 64
 #define PRESSURE_T 12 /* floats of the sums per particle: 4 lanes of x, y, z */
 
@@ -85,149 +69,74 @@ typedef struct pair_args {
  * done[q] how many of its pairs they cover: all, unless a group has a
  * coincident pair, from which on the finish loop takes the pairs one by one. */
 typedef void pair_sums_fn(const pair_args *a, long i0, long cnt, float *t, uint32_t *done);
+SIMD_DECLARE(void, pressure_pair_sums, (const pair_args *a, long i0, long cnt, float *t, uint32_t *done));
 
-#ifdef __SSE2__
-/* One group (neighbours l[0..7]) as two halves, with the same operations
- * per lane as the AVX2 path; false, summing nothing, if a pair is
- * coincident. Whole groups (masked false) need no mask: the compiler drops
- * it where the argument is constant. */
-static inline bool group_sse(const pair_args *a, const uint32_t *l, bool masked, uint32_t left, __m128 vxi,
-                             __m128 vyi, __m128 vzi, __m128 vpi, __m128 sx[2], __m128 sy[2], __m128 sz[2])
+/* One group (neighbours l[0..7]; with masked, only the first left count);
+ * false, summing nothing, if a pair is coincident (r^2 <= eps2: no
+ * direction to divide by). Whole groups (masked false) need no mask: the
+ * compiler drops it where the argument is constant. */
+static inline bool group(const pair_args *a, const uint32_t *l, bool masked, uint32_t left, sf8 xi, sf8 yi, sf8 zi,
+                         sf8 p_i, sf8 *sx, sf8 *sy, sf8 *sz)
 {
-	const __m128 vh = _mm_set1_ps(a->h), veps2 = _mm_set1_ps(a->eps2);
-	__m128 rx[2], ry[2], rz[2], ir[2], r2[2];
-	for (int k = 0; k < 2; ++k) {
-		const uint32_t *lk = l + 4 * k;
-		__m128 px = _mm_loadu_ps(a->pk + 4 * (size_t)lk[0]), py = _mm_loadu_ps(a->pk + 4 * (size_t)lk[1]),
-		       pz = _mm_loadu_ps(a->pk + 4 * (size_t)lk[2]), pw = _mm_loadu_ps(a->pk + 4 * (size_t)lk[3]);
-		_MM_TRANSPOSE4_PS(px, py, pz, pw);
-		rx[k] = _mm_sub_ps(vxi, px);
-		ry[k] = _mm_sub_ps(vyi, py);
-		rz[k] = _mm_sub_ps(vzi, pz);
-		ir[k] = pw;
-		r2[k] = _mm_add_ps(_mm_add_ps(_mm_mul_ps(rx[k], rx[k]), _mm_mul_ps(ry[k], ry[k])), _mm_mul_ps(rz[k], rz[k]));
-	}
-	if ((_mm_movemask_ps(_mm_cmpgt_ps(r2[0], veps2)) & _mm_movemask_ps(_mm_cmpgt_ps(r2[1], veps2))) != 15)
+	sf8 px, py, pz, ir;
+	sf8_gather_quads(a->pk, l, &px, &py, &pz, &ir);
+	const sf8 rx = sf8_sub(xi, px), ry = sf8_sub(yi, py), rz = sf8_sub(zi, pz);
+	const sf8 r2 = sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz));
+	if (sf8_mask_bits(sf8_gt(r2, sf8_set1(a->eps2))) != 255)
 		return false;
-	for (int k = 0; k < 2; ++k) {
-		const uint32_t *lk = l + 4 * k;
-		const __m128 r = _mm_sqrt_ps(r2[k]), hr = _mm_sub_ps(vh, r);
-		const __m128 pj = _mm_setr_ps(a->p[lk[0]], a->p[lk[1]], a->p[lk[2]], a->p[lk[3]]);
-		__m128 c = _mm_div_ps(_mm_mul_ps(_mm_mul_ps(_mm_mul_ps(_mm_add_ps(vpi, pj), ir[k]), hr), hr), r);
-		if (masked)
-			c = _mm_and_ps(c, _mm_castsi128_ps(_mm_cmpgt_epi32(_mm_set1_epi32((int)left),
-			                                                   _mm_setr_epi32(4 * k, 4 * k + 1, 4 * k + 2, 4 * k + 3))));
-		sx[k] = _mm_add_ps(sx[k], _mm_mul_ps(c, rx[k]));
-		sy[k] = _mm_add_ps(sy[k], _mm_mul_ps(c, ry[k]));
-		sz[k] = _mm_add_ps(sz[k], _mm_mul_ps(c, rz[k]));
-	}
-	return true;
-}
-
-static void pair_sums_sse(const pair_args *a, long i0, long cnt, float *t, uint32_t *done)
-{
-	const sph_neighbors *nb = a->nb;
-	for (long b = 0; b < cnt; ++b) {
-		const long i = i0 + b;
-		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
-		const float *pi = a->pk + 4 * i;
-		const __m128 vxi = _mm_set1_ps(pi[0]), vyi = _mm_set1_ps(pi[1]), vzi = _mm_set1_ps(pi[2]),
-		             vpi = _mm_set1_ps(a->p[i]);
-		__m128 sx[2] = {_mm_setzero_ps(), _mm_setzero_ps()}, sy[2] = {sx[0], sx[0]}, sz[2] = {sx[0], sx[0]};
-		uint32_t q = 0;
-		for (; q + 8 <= c; q += 8)
-			if (!group_sse(a, list + q, false, 8, vxi, vyi, vzi, vpi, sx, sy, sz))
-				break;
-		if (q + 8 > c && q < c) {
-			uint32_t l[8];
-			sph_group_rows(list, c, q, l);
-			if (group_sse(a, l, true, c - q, vxi, vyi, vzi, vpi, sx, sy, sz))
-				q = c;
-		}
-		float *tb = t + PRESSURE_T * b;
-		_mm_storeu_ps(tb, _mm_add_ps(sx[0], sx[1]));
-		_mm_storeu_ps(tb + 4, _mm_add_ps(sy[0], sy[1]));
-		_mm_storeu_ps(tb + 8, _mm_add_ps(sz[0], sz[1]));
-		done[b] = q < c ? q : c;
-	}
-}
-#else
-/* Without SSE the finish loop takes every pair. */
-static void pair_sums_none(const pair_args *a, long i0, long cnt, float *t, uint32_t *done)
-{
-	(void)a;
-	(void)i0;
-	for (long k = 0; k < PRESSURE_T * cnt; ++k)
-		t[k] = 0;
-	for (long b = 0; b < cnt; ++b)
-		done[b] = 0;
-}
-#endif
-
-#ifdef SPH_AVX2
-__attribute__((target("avx2"))) static inline bool group_avx2(const pair_args *a, const uint32_t *l, bool masked,
-                                                              uint32_t left, __m256 vxi, __m256 vyi, __m256 vzi,
-                                                              __m256 vpi, __m256 *sx, __m256 *sy, __m256 *sz)
-{
-	const __m256 vh = _mm256_set1_ps(a->h), veps2 = _mm256_set1_ps(a->eps2);
-	const float *const quad[8] = {a->pk + 4 * (size_t)l[0], a->pk + 4 * (size_t)l[1], a->pk + 4 * (size_t)l[2],
-	                              a->pk + 4 * (size_t)l[3], a->pk + 4 * (size_t)l[4], a->pk + 4 * (size_t)l[5],
-	                              a->pk + 4 * (size_t)l[6], a->pk + 4 * (size_t)l[7]};
-	__m256 px, py, pz, ir;
-	sph_transpose8(quad, &px, &py, &pz, &ir);
-	const __m256 rx = _mm256_sub_ps(vxi, px), ry = _mm256_sub_ps(vyi, py), rz = _mm256_sub_ps(vzi, pz);
-	const __m256 r2 = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(rx, rx), _mm256_mul_ps(ry, ry)), _mm256_mul_ps(rz, rz));
-	if (_mm256_movemask_ps(_mm256_cmp_ps(r2, veps2, _CMP_GT_OQ)) != 255)
-		return false;
-	const __m256 r = _mm256_sqrt_ps(r2), hr = _mm256_sub_ps(vh, r);
-	/* eight scalar loads: vgatherdps made the pass 10-15% slower */
-	const __m256 pj = _mm256_setr_ps(a->p[l[0]], a->p[l[1]], a->p[l[2]], a->p[l[3]], a->p[l[4]], a->p[l[5]],
-	                                 a->p[l[6]], a->p[l[7]]);
-	__m256 c = _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(_mm256_mul_ps(_mm256_add_ps(vpi, pj), ir), hr), hr), r);
+	const sf8 r = sf8_sqrt(r2), hr = sf8_sub(sf8_set1(a->h), r);
+	const sf8 pj = sf8_gather(a->p, l);
+	sf8 c = sf8_div(sf8_mul(sf8_mul(sf8_mul(sf8_add(p_i, pj), ir), hr), hr), r);
 	if (masked)
-		c = _mm256_and_ps(c, _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32((int)left),
-		                                                            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7))));
-	*sx = _mm256_add_ps(*sx, _mm256_mul_ps(c, rx));
-	*sy = _mm256_add_ps(*sy, _mm256_mul_ps(c, ry));
-	*sz = _mm256_add_ps(*sz, _mm256_mul_ps(c, rz));
+		c = sf8_and(c, sf8_lanes_below(left));
+	*sx = sf8_add(*sx, sf8_mul(c, rx));
+	*sy = sf8_add(*sy, sf8_mul(c, ry));
+	*sz = sf8_add(*sz, sf8_mul(c, rz));
 	return true;
 }
 
-/* lanes l and l + 4 added, as the SSE path adds its halves */
-__attribute__((target("avx2"))) static inline __m128 fold8(__m256 v)
-{
-	return _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
-}
-
-__attribute__((target("avx2"))) static void pair_sums_avx2(const pair_args *a, long i0, long cnt, float *t,
-                                                           uint32_t *done)
+void SIMD_NAME(pressure_pair_sums)(const pair_args *a, long i0, long cnt, float *t, uint32_t *done)
 {
 	const sph_neighbors *nb = a->nb;
 	for (long b = 0; b < cnt; ++b) {
 		const long i = i0 + b;
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
 		const float *pi = a->pk + 4 * i;
-		const __m256 vxi = _mm256_broadcast_ss(pi), vyi = _mm256_broadcast_ss(pi + 1),
-		             vzi = _mm256_broadcast_ss(pi + 2), vpi = _mm256_broadcast_ss(a->p + i);
-		__m256 sx = _mm256_setzero_ps(), sy = sx, sz = sx;
+		const sf8 xi = sf8_set1(pi[0]), yi = sf8_set1(pi[1]), zi = sf8_set1(pi[2]), p_i = sf8_set1(a->p[i]);
+		sf8 sx = sf8_zero(), sy = sx, sz = sx;
 		uint32_t q = 0;
 		for (; q + 8 <= c; q += 8)
-			if (!group_avx2(a, list + q, false, 8, vxi, vyi, vzi, vpi, &sx, &sy, &sz))
+			if (!group(a, list + q, false, 8, xi, yi, zi, p_i, &sx, &sy, &sz))
 				break;
 		if (q + 8 > c && q < c) {
 			uint32_t l[8];
 			sph_group_rows(list, c, q, l);
-			if (group_avx2(a, l, true, c - q, vxi, vyi, vzi, vpi, &sx, &sy, &sz))
+			if (group(a, l, true, c - q, xi, yi, zi, p_i, &sx, &sy, &sz))
 				q = c;
 		}
 		float *tb = t + PRESSURE_T * b;
-		_mm_storeu_ps(tb, fold8(sx));
-		_mm_storeu_ps(tb + 4, fold8(sy));
-		_mm_storeu_ps(tb + 8, fold8(sz));
+		sf8_fold4(sx, tb);
+		sf8_fold4(sy, tb + 4);
+		sf8_fold4(sz, tb + 8);
 		done[b] = q < c ? q : c;
 	}
 }
-#endif
+
+#ifndef EDDY_SIMD_VARIANT
+typedef struct sph_pressure {
+	eddy_sph_pressure_def def;
+} sph_pressure;
+
+static const int pressure_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_DENSITY, COL_PRESSURE};
+static const int pressure_writes[] = {COL_AX, COL_AY, COL_AZ, -1};
+static const int no_hint_writes[] = {-1};
+
+eddy_sph_pressure_def eddy_default_sph_pressure_def(void)
+{
+	eddy_sph_pressure_def d;
+	d.scale = 1.0f;
+	return d;
+}
 
 /* The finish loop of a block: the pairs the sums left (coincident ones, one
  * by one), the walls, and ax ay az. */
@@ -321,13 +230,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	                        eps2,
 	                        sh->mass,
 	                        -kc.spiky_grad * sh->grad_cal * sp->def.scale};
-#ifdef SPH_AVX2
-	pair_sums_fn *sums = sph_use_avx2() ? pair_sums_avx2 : pair_sums_sse;
-#elif defined(__SSE2__)
-	pair_sums_fn *sums = pair_sums_sse;
-#else
-	pair_sums_fn *sums = pair_sums_none;
-#endif
+	pair_sums_fn *sums = SIMD_PICK(pressure_pair_sums);
 	const int threads = ctx->threads;
 	/* the threads take equal shares in order; a particle's result does not
 	 * depend on the blocks, so it is the same for any thread count */
@@ -390,3 +293,4 @@ eddy_system_id eddy_add_sph_pressure(eddy_world *w, const eddy_sph_pressure_def 
 		sp->def = *def;
 	return eddy__add_system(w, &eddy__kind_sph_pressure, sp, pressure_reads, 5, pressure_writes, 3);
 }
+#endif

@@ -20,10 +20,23 @@
  * compile sees only the kernels: the file keeps its system glue under
  * #ifndef EDDY_SIMD_VARIANT. Kernels the glue calls are named SIMD_NAME(x)
  * (x_avx2 in the variant, x_base otherwise), declared with
- * SIMD_DECLARE(x, (params)) and picked at run time with SIMD_PICK(x). The
+ * SIMD_DECLARE(ret, x, (params)) and picked at run time with SIMD_PICK(x).
+ * Both are extern (hidden, as the whole library), so x carries the file's
+ * prefix (visc_pair_sums, pressure_pair_sums). The
  * Makefile defines EDDY_SIMD_HAVE_AVX2 for the normal compile when it builds
  * the variant; without it (another build, the fuzzer's single compile)
- * SIMD_PICK always gives x_base. */
+ * SIMD_PICK always gives x_base.
+ *
+ * Beyond the shared contract (simd_spec.md) this file adds:
+ *   sf8_load_quad2(p)      a quad p[0..3] in lanes 0-3 and again in 4-7;
+ *   sf8_gather(base, idx)  lane k = base[idx[k]];
+ *   sf8_sub_gather_quads(q, base, idx, c0..c3)
+ *                          as sf8_gather_quads, each quad subtracted from
+ *                          q's lanes 0-3 first: c0 lane k = q0 - base[4 idx[k]],
+ *                          c1 lane k = q1 - base[4 idx[k] + 1], ... The same
+ *                          per-lane results as gathering and then
+ *                          subtracting broadcasts, but the particle's own
+ *                          four values take one register, not four. */
 #ifndef EDDY_SIMD_H
 #define EDDY_SIMD_H
 
@@ -128,15 +141,20 @@ static inline void sf8_gather_quads(const float *base, const uint32_t idx[8], sf
 	simd_transpose8_(simd_quad_pair_(base, idx[0], idx[4]), simd_quad_pair_(base, idx[1], idx[5]),
 	                 simd_quad_pair_(base, idx[2], idx[6]), simd_quad_pair_(base, idx[3], idx[7]), c0, c1, c2, c3);
 }
-/* q minus each quad, then transposed: c0 lane k = q[0] - base[4 idx[k]],
- * c1 lane k = q[1] - base[4 idx[k] + 1], ... The same per-lane results as
- * gathering first and subtracting q's broadcasts, but the particle's own
- * values take one register instead of four. */
-static inline void sf8_sub_gather_quads(const float q[4], const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1,
-                                        sf8 *c2, sf8 *c3)
+static inline sf8 sf8_load_quad2(const float *p)
 {
-	const __m128 q4 = _mm_loadu_ps(q);
-	const __m256 qq = _mm256_set_m128(q4, q4);
+	const __m128 q = _mm_loadu_ps(p);
+	return _mm256_set_m128(q, q);
+}
+/* eight scalar loads: vgatherdps is slower on the CPUs at hand */
+static inline sf8 sf8_gather(const float *base, const uint32_t idx[8])
+{
+	return _mm256_setr_ps(base[idx[0]], base[idx[1]], base[idx[2]], base[idx[3]], base[idx[4]], base[idx[5]],
+	                      base[idx[6]], base[idx[7]]);
+}
+static inline void sf8_sub_gather_quads(sf8 qq, const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2,
+                                        sf8 *c3)
+{
 	simd_transpose8_(_mm256_sub_ps(qq, simd_quad_pair_(base, idx[0], idx[4])),
 	                 _mm256_sub_ps(qq, simd_quad_pair_(base, idx[1], idx[5])),
 	                 _mm256_sub_ps(qq, simd_quad_pair_(base, idx[2], idx[6])),
@@ -215,10 +233,20 @@ static inline void sf8_gather_quads(const float *base, const uint32_t idx[8], sf
 	*c2 = simd_pair_(a[0][2], a[1][2]);
 	*c3 = simd_pair_(a[0][3], a[1][3]);
 }
-static inline void sf8_sub_gather_quads(const float q[4], const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1,
-                                        sf8 *c2, sf8 *c3)
+static inline sf8 sf8_load_quad2(const float *p)
 {
-	const __m128 q4 = _mm_loadu_ps(q);
+	const __m128 q = _mm_loadu_ps(p);
+	return simd_pair_(q, q);
+}
+static inline sf8 sf8_gather(const float *base, const uint32_t idx[8])
+{
+	return simd_pair_(_mm_setr_ps(base[idx[0]], base[idx[1]], base[idx[2]], base[idx[3]]),
+	                  _mm_setr_ps(base[idx[4]], base[idx[5]], base[idx[6]], base[idx[7]]));
+}
+static inline void sf8_sub_gather_quads(sf8 qq, const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2,
+                                        sf8 *c3)
+{
+	const __m128 q4 = qq.lo;
 	__m128 a[2][4];
 	for (int k = 0; k < 2; ++k) {
 		a[k][0] = _mm_sub_ps(q4, _mm_loadu_ps(base + 4 * (size_t)idx[4 * k]));
@@ -345,15 +373,29 @@ static inline void sf8_gather_quads(const float *base, const uint32_t idx[8], sf
 		c3->l[k] = p[3];
 	}
 }
-static inline void sf8_sub_gather_quads(const float q[4], const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1,
-                                        sf8 *c2, sf8 *c3)
+static inline sf8 sf8_load_quad2(const float *p)
+{
+	sf8 r;
+	for (int k = 0; k < 8; ++k)
+		r.l[k] = p[k & 3];
+	return r;
+}
+static inline sf8 sf8_gather(const float *base, const uint32_t idx[8])
+{
+	sf8 r;
+	for (int k = 0; k < 8; ++k)
+		r.l[k] = base[idx[k]];
+	return r;
+}
+static inline void sf8_sub_gather_quads(sf8 qq, const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2,
+                                        sf8 *c3)
 {
 	for (int k = 0; k < 8; ++k) {
 		const float *p = base + 4 * (size_t)idx[k];
-		c0->l[k] = q[0] - p[0];
-		c1->l[k] = q[1] - p[1];
-		c2->l[k] = q[2] - p[2];
-		c3->l[k] = q[3] - p[3];
+		c0->l[k] = qq.l[0] - p[0];
+		c1->l[k] = qq.l[1] - p[1];
+		c2->l[k] = qq.l[2] - p[2];
+		c3->l[k] = qq.l[3] - p[3];
 	}
 }
 static inline void sf8_fold4(sf8 a, float out[4])
