@@ -256,33 +256,29 @@ static bool boundary_fill_static(eddy_world *w, sph_shared *sh, size_t nstat)
 {
 	sph_neighbors *nb = &sh->nb;
 	const size_t alloc = nstat ? nstat : 1;
-	float *x = malloc(alloc * sizeof *x), *y = malloc(alloc * sizeof *y), *z = malloc(alloc * sizeof *z),
-	      *v = malloc(alloc * sizeof *v);
-	uint32_t *key = malloc(alloc * sizeof *key), *order = malloc(alloc * sizeof *order);
-	const bool ok = x && y && z && v && key && order;
+	/* one block: x y z vol as floats, key order as indices */
+	float *x = malloc(6 * alloc * sizeof *x);
+	if (!x)
+		return false;
+	float *y = x + alloc, *z = y + alloc, *v = z + alloc;
+	uint32_t *key = (uint32_t *)(void *)(v + alloc), *order = key + alloc;
 	size_t at = 0;
-	for (int k = 0; k < w->order_count && ok; ++k) {
+	for (int k = 0; k < w->order_count; ++k) {
 		const eddy_system *o = &w->slots[w->order[k]];
 		if (o->vt == &eddy__kind_sph_boundary_box)
 			at += eddy__sph_boundary_box_points(o, sh->h, x + at, y + at, z + at, v + at);
 	}
-	for (size_t i = 0; i < nstat && ok; ++i)
+	for (size_t i = 0; i < nstat; ++i)
 		key[i] = sph_cell_at(&nb->grid, x[i], y[i], z[i]);
-	if (ok)
-		sph_counting_sort(key, nstat, sph_grid_cells(&nb->grid), nb->grid.bound_start, order);
-	for (size_t i = 0; i < nstat && ok; ++i) {
+	sph_counting_sort(key, nstat, sph_grid_cells(&nb->grid), nb->grid.bound_start, order);
+	for (size_t i = 0; i < nstat; ++i) {
 		nb->bx[i] = x[order[i]];
 		nb->by[i] = y[order[i]];
 		nb->bz[i] = z[order[i]];
 		nb->bvol[i] = v[order[i]];
 	}
 	free(x);
-	free(y);
-	free(z);
-	free(v);
-	free(key);
-	free(order);
-	return ok;
+	return true;
 }
 
 /* The colliders' particles after the static ones, in pipeline order, each

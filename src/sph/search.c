@@ -74,17 +74,6 @@ typedef struct block_runs {
 	uint32_t fluid_layer[SEARCH_LAYERS + 1], bound_layer[SEARCH_LAYERS + 1]; /* buffer offset of each z layer */
 } block_runs;
 
-static void search_buf_free(search_buf *b)
-{
-	free(b->x);
-	free(b->y);
-	free(b->z);
-	free(b->d);
-	free(b->j);
-	free(b->hit);
-	memset(b, 0, sizeof *b);
-}
-
 static bool search_buf_grow(search_buf *b, size_t want)
 {
 	want += 8;
@@ -93,15 +82,13 @@ static bool search_buf_grow(search_buf *b, size_t want)
 	size_t cap = b->cap ? b->cap : 256;
 	while (cap < want)
 		cap *= 2;
-	search_buf_free(b);
-	b->x = malloc(cap * sizeof *b->x);
-	b->y = malloc(cap * sizeof *b->y);
-	b->z = malloc(cap * sizeof *b->z);
-	b->d = malloc(cap * sizeof *b->d);
-	b->j = malloc(cap * sizeof *b->j);
-	b->hit = malloc(cap * sizeof *b->hit);
-	b->cap = cap;
-	return b->x && b->y && b->z && b->d && b->j && b->hit;
+	/* one block: x y z d as floats, j hit as indices (both 4 bytes) */
+	float *m = realloc(b->x, 6 * cap * sizeof *m);
+	if (!m)
+		return false;
+	*b = (search_buf){cap, m, m + cap, m + 2 * cap, m + 3 * cap, (uint32_t *)(void *)(m + 4 * cap),
+	                  (uint32_t *)(void *)(m + 5 * cap)};
+	return true;
 }
 
 /* The runs of cells around block id, in cell order, with their row ranges;
@@ -340,8 +327,8 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
 #pragma omp for schedule(dynamic, 8)
 		for (long k = 0; k < blocks; ++k)
 			ok = ok && block(&c, ids[k], &fb, &bb, &mf, &mb);
-		search_buf_free(&fb);
-		search_buf_free(&bb);
+		free(fb.x);
+		free(bb.x);
 	}
 	*max_f = mf;
 	*max_b = mb;

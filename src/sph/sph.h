@@ -1,7 +1,26 @@
 /* SPDX-License-Identifier: MIT */
-/* Internals shared by the SPH systems (sys_sph_*.c): kernels as inline
- * functions of r^2 where possible, and the neighbour data that sph_density
- * builds once per step for the later SPH passes. */
+/* The SPH folder's shared header: kernel constants, and the neighbour data
+ * that sph_density builds once per step for the later SPH passes.
+ *
+ * The folder's parts:
+ *   grid.c search.c neighbors.c  the neighbour search (its internals:
+ *                                neighbors.h): cells and cell order, the grid
+ *                                search, the Verlet list and its filter
+ *   boundary.c boundary_box.c    boundary particles of walls and colliders
+ *   kernels.c                    the kernels' lattice sums
+ *   density.c pressure.c viscosity.c surface_tension.c dfsph.c
+ *                                one file per system
+ *   simd.h                       the vocabulary the pair loops are written in
+ *
+ * A new pair pass (XSPH, say) is one new file plus the registry:
+ *   1. src/sph/xsph.c: its def, add function and step under
+ *      #ifndef EDDY_SIMD_VARIANT; the pair loop once, against simd.h, as
+ *      SIMD_NAME(xsph_pair_sums) outside it, over sph_shared's lists (nbr,
+ *      count) and quads (pq), picked in the step with SIMD_PICK. The Makefile
+ *      finds the file and builds its AVX2 variant (it includes "simd.h").
+ *   2. the registry: its vtable in systems.h, its def and add function in
+ *      eddy.h, its Lua binding; it declares that it requires sph_density
+ *      (whose sph_shared it reads). */
 #ifndef EDDY_SPH_H
 #define EDDY_SPH_H
 
@@ -152,15 +171,15 @@ const eddy_sph_density_def *eddy__sph_density_def(const eddy_system *s);
 /* The sph_density system nearest before system s in the pipeline, or NULL. */
 sph_shared *eddy__sph_find(eddy_world *w, const eddy_system *s);
 
-/* Builds the boundary particles (once per set of boundary systems). */
+/* Builds the boundary particles (once per set of boundary systems: boundary.c). */
 eddy_status eddy__sph_boundary_ready(eddy_world *w, sph_shared *sh);
 
 /* Builds the lists for the current particle table, reordering it by cell. */
 eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads);
 void eddy__sph_neighbors_free(sph_neighbors *nb);
 
-/* Boundary particle access for sph_density's builder. */
-/* With x == NULL only counts; h sets how many layers the shell has. */
+/* An sph_boundary_box's particles (boundary.c gathers them); with x == NULL
+ * only counts. h sets how many layers the shell has. */
 size_t eddy__sph_boundary_box_points(const eddy_system *s, float h, float *x, float *y, float *z, float *vol);
 /* s is an sph_boundary_box over exactly [min, max]. */
 bool eddy__sph_boundary_box_covers(const eddy_system *s, eddy_vec3 min, eddy_vec3 max);
@@ -212,6 +231,8 @@ static inline void sph_group_rows(const uint32_t *list, uint32_t cnt, uint32_t q
 		l[k] = g[last + ((k - last) & (0u - (uint32_t)(k < last)))];
 }
 
+/* ---- Left over from the passes' intrinsics (sph_dfsph until it is written
+ * against simd.h): delete with the last user. ---- */
 #ifdef __SSE2__
 /* Sum of the four lanes in a fixed order, (l0 + l1) + (l2 + l3): the passes
  * over neighbours keep four partial sums and end with this. */
