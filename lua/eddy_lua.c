@@ -36,6 +36,7 @@
 #define PARAMS_USED_KEY "eddy.params_used"
 #define WORLDS_KEY "eddy.worlds" /* weak: eddy_world* -> its userdata */
 #define OUT_DIR_KEY "eddy.out_dir"
+#define THREADS_KEY "eddy.threads"
 
 /* Every list of kinds the module exposes; each ends with EDDY_LUA_KIND_END. */
 static const eddy_lua_kind *const kind_lists[] = {
@@ -381,6 +382,9 @@ static int l_world(lua_State *L)
 	eddy_world_def def;
 	eddy_lua_world_kind.defaults(&def);
 	read_fields(L, &eddy_lua_world_kind, 1, &def, NULL, 0);
+	if (lua_getfield(L, LUA_REGISTRYINDEX, THREADS_KEY) == LUA_TNUMBER)
+		def.threads = (int)lua_tointeger(L, -1);
+	lua_pop(L, 1);
 	lua_world *lw = lua_newuserdatauv(L, sizeof *lw, 1);
 	memset(lw, 0, sizeof *lw);
 	luaL_setmetatable(L, WORLD_MT);
@@ -1631,6 +1635,15 @@ void eddy_lua_set_out_dir(lua_State *L, const char *dir)
 {
 	lua_pushstring(L, dir);
 	lua_setfield(L, LUA_REGISTRYINDEX, OUT_DIR_KEY);
+}
+
+void eddy_lua_set_threads(lua_State *L, int threads)
+{
+	if (threads > 0)
+		lua_pushinteger(L, threads);
+	else
+		lua_pushnil(L);
+	lua_setfield(L, LUA_REGISTRYINDEX, THREADS_KEY);
 }
 
 void eddy_lua_take_frame_fields(lua_State *L, int world_idx)

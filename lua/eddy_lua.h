@@ -19,6 +19,11 @@ void eddy_lua_set_param(lua_State *L, const char *key, const char *value);
 void eddy_lua_push_unused_params(lua_State *L);
 /* The output directory for eddy.out_dir() (--out). */
 void eddy_lua_set_out_dir(lua_State *L, const char *dir);
+/* Worker threads for every world eddy.world{} creates from now on, whatever
+ * the scene asks (--threads; 0: the scene's). Set before the scene runs, so
+ * the work done while it builds its pipeline (a mesh's distance field) has
+ * them too. */
+void eddy_lua_set_threads(lua_State *L, int threads);
 
 /* Safe mode (eddy run --safe). Call after luaL_openlibs, with "eddy" in
  * package.loaded, before loading the scene. Afterwards Lua code in L cannot:

@@ -108,6 +108,7 @@ static int load_scene(lua_State *L, cli_options *o)
 	else
 		snprintf(o->outdir, sizeof o->outdir, "out/%s", name);
 	eddy_lua_set_out_dir(L, o->outdir);
+	eddy_lua_set_threads(L, o->threads);
 
 	char buf[1024];
 	if (o->safe && eddy_lua_sandbox(L, o->outdir) != 0)

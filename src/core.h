@@ -19,9 +19,34 @@
 
 typedef struct eddy_system eddy_system;
 
+/* What a kind offers the systems after it and asks of the ones before it.
+ * A kind lists them in its vtable (provides, requires, excludes); the
+ * pipeline checks them when a system is added or removed, so a scene that
+ * cannot work fails at the line that built it, naming both systems. Systems
+ * find each other through these (eddy__provider, eddy__systems), never by
+ * comparing kinds. */
+typedef enum eddy_capability {
+	EDDY_CAP_SPH_NEIGHBORS = 1u << 0,  /* sph_density: neighbour lists, densities, boundary particles (sph_shared) */
+	EDDY_CAP_SPH_EOS_FORCE = 1u << 1,  /* sph_pressure: the force from the equation of state's pressure */
+	EDDY_CAP_SPH_WALLS = 1u << 2,      /* boundary particles on fixed walls (sph_boundary_box) */
+	EDDY_CAP_COLLIDER = 1u << 3,       /* a solid with a signed distance (vtable distance) */
+	EDDY_CAP_MAC_GRID = 1u << 4,       /* flip_p2g: particle velocities on the staggered grid */
+	EDDY_CAP_SOLID_FACES = 1u << 5,    /* flip_boundary: the grid's solid cells and face velocities */
+	EDDY_CAP_FREE_SURFACE = 1u << 6,   /* flip_surface: the liquid's level set */
+	EDDY_CAP_GRAVITY = 1u << 7,        /* gravity: shares its eddy_gravity_def */
+	EDDY_CAP_GRID_DENSITY = 1u << 8,   /* flip_pressure: shares its eddy_flip_pressure_def (the fluid's density) */
+} eddy_capability;
+
 /* What a system kind can do. step is required except for frame-only systems. */
 typedef struct eddy_system_vtable {
 	const char *name;
+	/* couplings (bits of eddy_capability, see above): what the kind
+	 * provides; what an earlier system must provide; what no other system
+	 * in the pipeline may provide */
+	uint32_t provides, requires, excludes;
+	/* the block a provider shares for capability cap (e.g. sph_shared for
+	 * EDDY_CAP_SPH_NEIGHBORS), or NULL */
+	void *(*shared)(const eddy_system *s, uint32_t cap);
 	eddy_status (*step)(eddy_world *w, eddy_system *s, const eddy_step_context *ctx);
 	eddy_status (*frame)(eddy_world *w, eddy_system *s, int frame);
 	double (*limit)(eddy_world *w, eddy_system *s, const char **reason);
@@ -38,6 +63,11 @@ typedef struct eddy_system_vtable {
 	int (*check)(eddy_world *w, const eddy_system *s, eddy_check_fn report, void *user);
 	/* colliders: signed distance to the solid, < 0 inside it */
 	float (*distance)(const eddy_system *s, eddy_vec3 p);
+	/* colliders: pose and size, for hosts that draw them (eddy_collider_shape_of) */
+	void (*shape)(const eddy_system *s, eddy_collider_shape *out);
+	/* colliders: SPH boundary particles (sph/sph.h, eddy__sph_collider_points) */
+	size_t (*sph_points)(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
+	                     float *z, float *vol, eddy_vec3 *normal);
 	/* columns the kind writes, ending in -1; names the fix in order errors */
 	const int *default_writes;
 	/* the system's mutable state as one plain block, saved and restored
@@ -196,11 +226,27 @@ static inline float *eddy__col(eddy_world *w, int id) { return (float *)w->colum
 eddy_system *eddy__system_get(eddy_world *w, eddy_system_id id);
 const eddy_system *eddy__system_peek(const eddy_world *w, eddy_system_id id);
 /* Adds a system of kind vt; data is the system's heap block (taken over, freed
- * by eddy_free on failure too). */
-eddy_system_id eddy__add_system(eddy_world *w, const eddy_system_vtable *vt, void *data,
-                                const int *reads, int read_count, const int *writes,
-                                int write_count);
+ * on failure too). reads and writes are column lists ending in -1 (NULL for
+ * none), so no count is ever typed beside a list. */
+eddy_system_id eddy__add_system(eddy_world *w, const eddy_system_vtable *vt, void *data, const int *reads,
+                                const int *writes);
 void eddy__system_free(eddy_world *w, eddy_system *s);
+
+/* The pipeline in step order, optionally only the systems that provide any
+ * of caps (0: all):
+ *   for (eddy_system_iter it = eddy__systems(w, caps); (s = eddy__systems_next(&it));) */
+typedef struct eddy_system_iter {
+	const eddy_world *w;
+	int pos;
+	uint32_t caps;
+} eddy_system_iter;
+eddy_system_iter eddy__systems(const eddy_world *w, uint32_t caps);
+const eddy_system *eddy__systems_next(eddy_system_iter *it);
+/* The nearest system before s (any position when s is NULL: the last one)
+ * that provides cap, or NULL. */
+const eddy_system *eddy__provider(const eddy_world *w, const eddy_system *s, uint32_t cap);
+/* What that provider shares for cap (vtable shared), or NULL. */
+void *eddy__provided(const eddy_world *w, const eddy_system *s, uint32_t cap);
 
 /* FNV-1a over bytes, for the state hash and the checkpoint checksums: start
  * from EDDY__FNV_BASIS and feed the pieces in order. */

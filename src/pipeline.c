@@ -70,6 +70,71 @@ static void writers_hint(const eddy_world *w, int col, char *buf, size_t cap)
 		snprintf(buf + len, cap - len, " before it");
 }
 
+/* What each capability is, for the errors (in bit order). */
+static const char *const capability_names[] = {
+	"SPH neighbour lists", "the SPH equation-of-state force", "SPH wall particles",
+	"a collider", "the MAC grid velocities", "the grid's solid faces", "the FLIP free surface", "gravity",
+	"the grid fluid's density",
+};
+
+/* The built-in kinds that provide cap, as "a, b or c". */
+static void providers_hint(uint32_t cap, char *buf, size_t cap_len)
+{
+	size_t len = 0;
+	int n = 0, total = 0;
+	for (size_t k = 0; k < sizeof kinds / sizeof kinds[0]; ++k)
+		total += (kinds[k]->provides & cap) != 0;
+	for (size_t k = 0; k < sizeof kinds / sizeof kinds[0] && len < cap_len; ++k)
+		if (kinds[k]->provides & cap) {
+			const char *sep = n == 0 ? "" : n == total - 1 ? " or " : ", ";
+			len += (size_t)snprintf(buf + len, cap_len - len, "%s%s", sep, kinds[k]->name);
+			n++;
+		}
+	if (n == 0)
+		snprintf(buf, cap_len, "a system that provides it");
+}
+
+static const char *capability_name(uint32_t bit)
+{
+	int i = 0;
+	while (i < 31 && !(bit & (1u << i)))
+		++i;
+	return i < (int)(sizeof capability_names / sizeof capability_names[0]) ? capability_names[i] : "a capability";
+}
+
+/* The couplings of the system at position pos: every capability it requires
+ * provided before it, and no capability it excludes provided anywhere else
+ * in the pipeline (or the other way round). */
+static eddy_status check_couplings(eddy_world *w, int pos)
+{
+	const eddy_system *s = &w->slots[w->order[pos]];
+	for (uint32_t bit = 1; bit && bit <= s->vt->requires; bit <<= 1) {
+		if (!(s->vt->requires & bit))
+			continue;
+		bool found = false;
+		for (int k = 0; k < pos && !found; ++k)
+			found = (w->slots[w->order[k]].vt->provides & bit) != 0;
+		if (!found) {
+			char hint[160];
+			providers_hint(bit, hint, sizeof hint);
+			return eddy__fail(w, EDDY_ERR_ORDER, "%s needs %s from an earlier system: add %s before it", s->label,
+			                  capability_name(bit), hint);
+		}
+	}
+	for (int k = 0; k < w->order_count + (pos == w->order_count); ++k) {
+		const eddy_system *o = &w->slots[w->order[k]];
+		if (k == pos)
+			continue;
+		const eddy_system *excluder = (s->vt->excludes & o->vt->provides) ? s : o, *other = excluder == s ? o : s;
+		const uint32_t clash = excluder->vt->excludes & other->vt->provides;
+		if (clash)
+			return eddy__fail(w, EDDY_ERR_ORDER,
+			                  "%s and %s cannot share a pipeline (%s excludes %s); remove one of them from the scene",
+			                  excluder->label, other->label, excluder->label, capability_name(clash & (0u - clash)));
+	}
+	return EDDY_OK;
+}
+
 /* Checks the system at pipeline position pos against the systems before it. */
 static eddy_status validate_at(eddy_world *w, int pos)
 {
@@ -91,7 +156,41 @@ static eddy_status validate_at(eddy_world *w, int pos)
 			                  w->columns[col].name, hint);
 		}
 	}
-	return EDDY_OK;
+	return check_couplings(w, pos);
+}
+
+eddy_system_iter eddy__systems(const eddy_world *w, uint32_t caps) { return (eddy_system_iter){w, 0, caps}; }
+
+const eddy_system *eddy__systems_next(eddy_system_iter *it)
+{
+	while (it->pos < it->w->order_count) {
+		const eddy_system *s = &it->w->slots[it->w->order[it->pos++]];
+		if (!it->caps || (s->vt->provides & it->caps))
+			return s;
+	}
+	return NULL;
+}
+
+const eddy_system *eddy__provider(const eddy_world *w, const eddy_system *s, uint32_t cap)
+{
+	const eddy_system *found = NULL, *o;
+	for (eddy_system_iter it = eddy__systems(w, cap); (o = eddy__systems_next(&it)) && o != s;)
+		found = o;
+	return found;
+}
+
+void *eddy__provided(const eddy_world *w, const eddy_system *s, uint32_t cap)
+{
+	const eddy_system *p = eddy__provider(w, s, cap);
+	return p && p->vt->shared ? p->vt->shared(p, cap) : NULL;
+}
+
+static int column_list_length(const int *cols)
+{
+	int n = 0;
+	while (cols && cols[n] >= 0)
+		++n;
+	return n;
 }
 
 static void make_label(eddy_world *w, eddy_system *s)
@@ -180,8 +279,9 @@ static eddy_system_id add_system_named(eddy_world *w, const eddy_system_vtable *
 }
 
 eddy_system_id eddy__add_system(eddy_world *w, const eddy_system_vtable *vt, void *data, const int *reads,
-                                int read_count, const int *writes, int write_count)
+                                const int *writes)
 {
+	const int read_count = column_list_length(reads), write_count = column_list_length(writes);
 	if (!w) {
 		free(data);
 		return EDDY_NULL_SYSTEM;

@@ -11,7 +11,7 @@
  * x_b = pivot + R^T (x - pivot - offset), the normal turned back by R and
  * the wall velocity v + omega x (x - pivot - offset) at the contact point.
  * With SPH a block also carries boundary particles that move with it
- * (eddy__sph_box_points below; Akinci et al., "Versatile rigid-fluid
+ * (sph_points below; Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012); a tank's walls are an
  * sph_boundary_box's. The clamping here is the last guard. */
 #include "sph/sph.h"
@@ -176,11 +176,18 @@ static float distance(const eddy_system *s, eddy_vec3 q)
 	return b->def.inside ? -box_sd : box_sd;
 }
 
+static void shape(const eddy_system *s, eddy_collider_shape *out);
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
+                         float *vol, eddy_vec3 *normal);
+
 const eddy_system_vtable eddy__kind_collide_box = {
 	.name = "collide_box",
 	.step = step,
 	.state = eddy__collider_state,
+	.provides = EDDY_CAP_COLLIDER,
 	.distance = distance,
+	.shape = shape,
+	.sph_points = sph_points,
 	.default_writes = box_io,
 };
 
@@ -197,13 +204,12 @@ eddy_system_id eddy_add_collide_box(eddy_world *w, const eddy_collide_box_def *d
 		eddy__collider_init_pivot(&b->base, eddy__v3(0.5f * (def->min.x + def->max.x), 0.5f * (def->min.y + def->max.y),
 		                                             0.5f * (def->min.z + def->max.z)));
 	}
-	return eddy__add_system(w, &eddy__kind_collide_box, b, box_io, 6, box_io, 6);
+	return eddy__add_system(w, &eddy__kind_collide_box, b, box_io, box_io);
 }
 
 /* ---- shape, for drawing (eddy_collider_shape_of) ---- */
-#include "collider_shape.h"
 
-void eddy__shape_collide_box(const eddy_system *s, eddy_collider_shape *out)
+static void shape(const eddy_system *s, eddy_collider_shape *out)
 {
 	const collide_box *b = s->data;
 	out->kind = EDDY_COLLIDER_BOX;
@@ -223,14 +229,16 @@ void eddy__shape_collide_box(const eddy_system *s, eddy_collider_shape *out)
  * A tank (inside = true) gets none: an sph_boundary_box is its walls; nor
  * does a block an sph_boundary_box already samples (the same min and max:
  * a thin plate is made that way). */
-size_t eddy__sph_box_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
-                            float *z, float *vol)
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
+                         float *vol, eddy_vec3 *normal)
 {
+	(void)normal;
 	const collide_box *b = s->data;
 	if (b->def.inside)
 		return 0;
-	for (int k = 0; k < w->order_count; ++k)
-		if (eddy__sph_boundary_box_covers(&w->slots[w->order[k]], b->def.min, b->def.max))
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS); (o = eddy__systems_next(&it));)
+		if (eddy__sph_boundary_box_covers(o, b->def.min, b->def.max))
 			return 0;
 	const float lo[3] = {b->def.min.x, b->def.min.y, b->def.min.z}, hi[3] = {b->def.max.x, b->def.max.y, b->def.max.z};
 	long n[3];

@@ -241,12 +241,19 @@ static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void
 	return 0;
 }
 
+static void shape(const eddy_system *s, eddy_collider_shape *out);
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
+                         float *vol, eddy_vec3 *normal);
+
 const eddy_system_vtable eddy__kind_collide_mesh = {
 	.name = "collide_mesh",
 	.check = check,
 	.step = step,
 	.state = eddy__collider_state,
+	.provides = EDDY_CAP_COLLIDER,
 	.distance = distance,
+	.shape = shape,
+	.sph_points = sph_points,
 	.default_writes = mesh_io,
 };
 
@@ -346,7 +353,7 @@ eddy_system_id eddy_add_collide_mesh(eddy_world *w, const eddy_collide_mesh_def 
 	for (size_t q = 0; q < nodes; ++q)
 		b->depth = fmaxf(b->depth, -b->field[q]);
 	eddy__collider_init_pivot(&b->base, def->translate);
-	eddy_system_id id = eddy__add_system(w, &eddy__kind_collide_mesh, b, mesh_io, 6, mesh_io, 6);
+	eddy_system_id id = eddy__add_system(w, &eddy__kind_collide_mesh, b, mesh_io, mesh_io);
 	return id;
 }
 
@@ -354,9 +361,8 @@ eddy_system_id eddy_add_collide_mesh(eddy_world *w, const eddy_collide_mesh_def 
  * The distance grid's box (the mesh's box plus the grid's margin), with the
  * offset; a drawer turns it by rotation about pivot and loads the mesh file
  * for the triangles. */
-#include "collider_shape.h"
 
-void eddy__shape_collide_mesh(const eddy_system *s, eddy_collider_shape *out)
+static void shape(const eddy_system *s, eddy_collider_shape *out)
 {
 	const collide_mesh *b = s->data;
 	const eddy_vec3 o = b->base.motion.offset;
@@ -389,8 +395,11 @@ void eddy__shape_collide_mesh(const eddy_system *s, eddy_collider_shape *out)
  * particles over the rim). A layer keeps the lattice's s^-2 points per unit
  * area on average. A tank mesh (inside = true) gets its shell outside the
  * mesh. */
-size_t eddy__sph_mesh_points(const eddy_system *s, float spacing, float h, float *x, float *y, float *z, float *vol)
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
+                         float *vol, eddy_vec3 *normal)
 {
+	(void)w;
+	(void)normal;
 	const collide_mesh *b = s->data;
 	const int L = (int)ceil(h / spacing - 1e-4);
 	const double sp = spacing, grow = (L + 1) * sp;

@@ -9,7 +9,7 @@
  * velocity v + omega x (x - pivot - offset) at the contact; its SPH patch
  * then turns with it whole.
  * With SPH the plane also carries boundary particles that move with it
- * (eddy__sph_plane_points below; Akinci et al., "Versatile rigid-fluid
+ * (sph_points below; Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012); the projection here is
  * the last guard. */
 #include "sph/sph.h"
@@ -87,11 +87,18 @@ static float distance(const eddy_system *s, eddy_vec3 q)
 	return (q.x - o.x) * nrm.x + (q.y - o.y) * nrm.y + (q.z - o.z) * nrm.z;
 }
 
+static void shape(const eddy_system *s, eddy_collider_shape *out);
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
+                         float *vol, eddy_vec3 *normal);
+
 const eddy_system_vtable eddy__kind_collide_plane = {
 	.name = "collide_plane",
 	.step = step,
 	.state = eddy__collider_state,
+	.provides = EDDY_CAP_COLLIDER,
 	.distance = distance,
+	.shape = shape,
+	.sph_points = sph_points,
 	.default_writes = plane_io,
 };
 
@@ -110,13 +117,12 @@ eddy_system_id eddy_add_collide_plane(eddy_world *w, const eddy_collide_plane_de
 		b->def.normal = nrm;
 		eddy__collider_init_pivot(&b->base, def->point);
 	}
-	return eddy__add_system(w, &eddy__kind_collide_plane, b, plane_io, 6, plane_io, 6);
+	return eddy__add_system(w, &eddy__kind_collide_plane, b, plane_io, plane_io);
 }
 
 /* ---- shape, for drawing (eddy_collider_shape_of) ---- */
-#include "collider_shape.h"
 
-void eddy__shape_collide_plane(const eddy_system *s, eddy_collider_shape *out)
+static void shape(const eddy_system *s, eddy_collider_shape *out)
 {
 	const collide_plane *b = s->data;
 	out->kind = EDDY_COLLIDER_PLANE;
@@ -147,8 +153,8 @@ static void plane_basis(eddy_vec3 n, eddy_vec3 *t1, eddy_vec3 *t2)
 	*t2 = eddy__v3(n.y * u.z - n.z * u.y, n.z * u.x - n.x * u.z, n.x * u.y - n.y * u.x);
 }
 
-size_t eddy__sph_plane_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
-                              float *z, float *vol, eddy_vec3 *normal)
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
+                         float *vol, eddy_vec3 *normal)
 {
 	const collide_plane *b = s->data;
 	const eddy_vec3 n = b->def.normal, o = b->def.point;

@@ -11,7 +11,7 @@
  * takes as the wall's velocity (a ball spinning about its centre drags
  * particles with friction > 0).
  * With SPH the sphere also carries boundary particles that move with it
- * (eddy__sph_sphere_points below; Akinci et al., "Versatile rigid-fluid
+ * (sph_points below; Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012): the fluid beside it then
  * has a full neighbourhood, and the projection here is the last guard. */
 #include "sph/sph.h"
@@ -97,11 +97,18 @@ static float distance(const eddy_system *s, eddy_vec3 q)
 	return b->def.inside ? -d : d;
 }
 
+static void shape(const eddy_system *s, eddy_collider_shape *out);
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
+                         float *vol, eddy_vec3 *normal);
+
 const eddy_system_vtable eddy__kind_collide_sphere = {
 	.name = "collide_sphere",
 	.step = step,
 	.state = eddy__collider_state,
+	.provides = EDDY_CAP_COLLIDER,
 	.distance = distance,
+	.shape = shape,
+	.sph_points = sph_points,
 	.default_writes = sphere_io,
 };
 
@@ -118,13 +125,12 @@ eddy_system_id eddy_add_collide_sphere(eddy_world *w, const eddy_collide_sphere_
 		b->def = *def;
 		eddy__collider_init_pivot(&b->base, def->center);
 	}
-	return eddy__add_system(w, &eddy__kind_collide_sphere, b, sphere_io, 6, sphere_io, 6);
+	return eddy__add_system(w, &eddy__kind_collide_sphere, b, sphere_io, sphere_io);
 }
 
 /* ---- shape, for drawing (eddy_collider_shape_of) ---- */
-#include "collider_shape.h"
 
-void eddy__shape_collide_sphere(const eddy_system *s, eddy_collider_shape *out)
+static void shape(const eddy_system *s, eddy_collider_shape *out)
 {
 	const collide_sphere *b = s->data;
 	out->kind = EDDY_COLLIDER_SPHERE;
@@ -165,8 +171,11 @@ static size_t fib_layer(double rk, double s, double *px, double *py, double *pz)
 	return nk;
 }
 
-size_t eddy__sph_sphere_points(const eddy_system *s, float spacing, float h, float *x, float *y, float *z, float *vol)
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
+                         float *vol, eddy_vec3 *normal)
 {
+	(void)w;
+	(void)normal;
 	const collide_sphere *b = s->data;
 	const double R = b->def.radius, sp = spacing, hh = h;
 	const int L = (int)ceil(h / spacing - 1e-4);

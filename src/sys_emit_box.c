@@ -231,7 +231,7 @@ eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def)
 			return EDDY_NULL_SYSTEM;
 		}
 	}
-	eddy_system_id id = eddy__add_system(w, &eddy__kind_emit_box, e, NULL, 0, box_writes, 6);
+	eddy_system_id id = eddy__add_system(w, &eddy__kind_emit_box, e, NULL, box_writes);
 	if (eddy_system_valid(w, id))
 		eddy__note_length_scale(w, def->spacing);
 	return id;

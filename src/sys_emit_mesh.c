@@ -195,7 +195,7 @@ eddy_system_id eddy_add_emit_mesh(eddy_world *w, const eddy_emit_mesh_def *def)
 		           sys, def->path, (double)def->spacing);
 		return EDDY_NULL_SYSTEM;
 	}
-	eddy_system_id id = eddy__add_system(w, &eddy__kind_emit_mesh, e, NULL, 0, mesh_writes, 6);
+	eddy_system_id id = eddy__add_system(w, &eddy__kind_emit_mesh, e, NULL, mesh_writes);
 	if (eddy_system_valid(w, id))
 		eddy__note_length_scale(w, def->spacing);
 	return id;

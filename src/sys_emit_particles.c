@@ -443,7 +443,7 @@ eddy_system_id eddy_add_emit_particles(eddy_world *w, const eddy_emit_particles_
 			return EDDY_NULL_SYSTEM;
 		}
 	}
-	eddy_system_id id = eddy__add_system(w, &eddy__kind_emit_particles, e, NULL, 0, ep_writes, 6);
+	eddy_system_id id = eddy__add_system(w, &eddy__kind_emit_particles, e, NULL, ep_writes);
 	if (eddy_system_valid(w, id))
 		eddy__note_length_scale(w, def->spacing);
 	return id;

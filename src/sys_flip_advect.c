@@ -21,7 +21,7 @@ typedef struct advect {
 	eddy_flip_advect_def def;
 } advect;
 
-static const int advect_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_FACE_U, COL_FACE_V, COL_FACE_W};
+static const int advect_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_FACE_U, COL_FACE_V, COL_FACE_W, -1};
 static const int advect_writes[] = {COL_X_, COL_Y_, COL_Z_, -1};
 
 eddy_flip_advect_def eddy_default_flip_advect_def(void)
@@ -114,5 +114,5 @@ eddy_system_id eddy_add_flip_advect(eddy_world *w, const eddy_flip_advect_def *d
 	advect *ad = malloc(sizeof *ad);
 	if (ad)
 		ad->def = *def;
-	return eddy__add_system(w, &eddy__kind_flip_advect, ad, advect_reads, 6, advect_writes, 3);
+	return eddy__add_system(w, &eddy__kind_flip_advect, ad, advect_reads, advect_writes);
 }

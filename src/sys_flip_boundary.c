@@ -397,6 +397,7 @@ static void *state(eddy_world *w, eddy_system *s, size_t *size)
 
 const eddy_system_vtable eddy__kind_flip_boundary = {
 	.name = "flip_boundary",
+	.provides = EDDY_CAP_SOLID_FACES,
 	.state = state,
 	.step = step,
 	.destroy = destroy,
@@ -415,5 +416,5 @@ eddy_system_id eddy_add_flip_boundary(eddy_world *w, const eddy_flip_boundary_de
 		b->def = *def;
 		b->vel_step = -1;
 	}
-	return eddy__add_system(w, &eddy__kind_flip_boundary, b, boundary_io, 4, boundary_io, 4);
+	return eddy__add_system(w, &eddy__kind_flip_boundary, b, boundary_io, boundary_io);
 }

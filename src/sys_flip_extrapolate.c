@@ -20,7 +20,7 @@ typedef struct extrapolate {
 	eddy_flip_extrapolate_def def;
 } extrapolate;
 
-static const int extrap_reads[] = {COL_CELL_TYPE, COL_FACE_U, COL_FACE_V, COL_FACE_W};
+static const int extrap_reads[] = {COL_CELL_TYPE, COL_FACE_U, COL_FACE_V, COL_FACE_W, -1};
 static const int extrap_writes[] = {COL_FACE_U, COL_FACE_V, COL_FACE_W, -1};
 
 eddy_flip_extrapolate_def eddy_default_flip_extrapolate_def(void)
@@ -335,5 +335,5 @@ eddy_system_id eddy_add_flip_extrapolate(eddy_world *w, const eddy_flip_extrapol
 	extrapolate *ex = malloc(sizeof *ex);
 	if (ex)
 		ex->def = *def;
-	return eddy__add_system(w, &eddy__kind_flip_extrapolate, ex, extrap_reads, 4, extrap_writes, 3);
+	return eddy__add_system(w, &eddy__kind_flip_extrapolate, ex, extrap_reads, extrap_writes);
 }

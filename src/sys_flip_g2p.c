@@ -29,10 +29,10 @@ typedef struct g2p {
 } g2p;
 
 static const int g2p_reads[] = {COL_X_,     COL_Y_,     COL_Z_,     COL_VX,    COL_VY,    COL_VZ,
-                                COL_FACE_U, COL_FACE_V, COL_FACE_W, COL_U_OLD, COL_V_OLD, COL_W_OLD};
+                                COL_FACE_U, COL_FACE_V, COL_FACE_W, COL_U_OLD, COL_V_OLD, COL_W_OLD, -1};
 static const int g2p_writes[] = {COL_VX, COL_VY, COL_VZ, -1};
 static const int apic_writes[] = {COL_VX,      COL_VY,      COL_VZ,      COL_APIC_UX, COL_APIC_UY, COL_APIC_UZ,
-                                  COL_APIC_VX, COL_APIC_VY, COL_APIC_VZ, COL_APIC_WX, COL_APIC_WY, COL_APIC_WZ};
+                                  COL_APIC_VX, COL_APIC_VY, COL_APIC_VZ, COL_APIC_WX, COL_APIC_WY, COL_APIC_WZ, -1};
 
 eddy_flip_g2p_def eddy_default_flip_g2p_def(void)
 {
@@ -156,5 +156,5 @@ eddy_system_id eddy_add_flip_g2p(eddy_world *w, const eddy_flip_g2p_def *def)
 		g->def = *def;
 	/* only apic declares (and so allocates) the affine columns */
 	const bool apic = def->transfer == EDDY_FLIP_TRANSFER_APIC;
-	return eddy__add_system(w, &eddy__kind_flip_g2p, g, g2p_reads, 12, apic ? apic_writes : g2p_writes, apic ? 12 : 3);
+	return eddy__add_system(w, &eddy__kind_flip_g2p, g, g2p_reads, apic ? apic_writes : g2p_writes);
 }

@@ -63,7 +63,7 @@ typedef struct p2g {
 	size_t particles;  /* the particle count they were computed with */
 } p2g;
 
-static const int p2g_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_AX, COL_AY, COL_AZ};
+static const int p2g_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_AX, COL_AY, COL_AZ, -1};
 static const int p2g_writes[] = {COL_VX,  COL_VY,  COL_VZ,  COL_FACE_U,    COL_FACE_V,   COL_FACE_W,
                                  COL_U_OLD, COL_V_OLD, COL_W_OLD, COL_CELL_TYPE, COL_FLIP_PHI, -1};
 
@@ -334,6 +334,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 
 const eddy_system_vtable eddy__kind_flip_p2g = {
 	.name = "flip_p2g",
+	.provides = EDDY_CAP_MAC_GRID,
 	.step = step,
 	.destroy = destroy,
 	.default_writes = p2g_writes,
@@ -375,5 +376,5 @@ eddy_system_id eddy_add_flip_p2g(eddy_world *w, const eddy_flip_p2g_def *def)
 		pg->def = *def;
 		pg->step = -1;
 	}
-	return eddy__add_system(w, &eddy__kind_flip_p2g, pg, p2g_reads, 9, p2g_writes, 11);
+	return eddy__add_system(w, &eddy__kind_flip_p2g, pg, p2g_reads, p2g_writes);
 }

@@ -91,7 +91,7 @@ typedef struct pressure {
 } pressure;
 
 static const int pressure_reads[] = {COL_CELL_TYPE, COL_FLIP_PHI, COL_FACE_U, COL_FACE_V, COL_FACE_W,
-                                     COL_X_,        COL_Y_,       COL_Z_};
+                                     COL_X_,        COL_Y_,       COL_Z_, -1};
 static const int pressure_writes[] = {COL_FACE_U, COL_FACE_V, COL_FACE_W, COL_CELL_PRESSURE, -1};
 
 eddy_flip_pressure_def eddy_default_flip_pressure_def(void)
@@ -541,8 +541,15 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	return st;
 }
 
+static void *shared(const eddy_system *s, uint32_t cap)
+{
+	return cap == EDDY_CAP_GRID_DENSITY ? &((pressure *)s->data)->def : NULL;
+}
+
 const eddy_system_vtable eddy__kind_flip_pressure = {
 	.name = "flip_pressure",
+	.provides = EDDY_CAP_GRID_DENSITY,
+	.shared = shared,
 	.step = step,
 	.destroy = destroy,
 	.default_writes = pressure_writes,
@@ -573,5 +580,5 @@ eddy_system_id eddy_add_flip_pressure(eddy_world *w, const eddy_flip_pressure_de
 	pressure *ps = calloc(1, sizeof *ps);
 	if (ps)
 		ps->def = *def;
-	return eddy__add_system(w, &eddy__kind_flip_pressure, ps, pressure_reads, 8, pressure_writes, 4);
+	return eddy__add_system(w, &eddy__kind_flip_pressure, ps, pressure_reads, pressure_writes);
 }

@@ -31,7 +31,7 @@ typedef struct reseed {
 	eddy_flip_reseed_def def;
 } reseed;
 
-static const int reseed_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_CELL_TYPE, COL_FACE_U, COL_FACE_V, COL_FACE_W};
+static const int reseed_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_CELL_TYPE, COL_FACE_U, COL_FACE_V, COL_FACE_W, -1};
 static const int reseed_writes[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, -1};
 
 eddy_flip_reseed_def eddy_default_flip_reseed_def(void)
@@ -178,5 +178,5 @@ eddy_system_id eddy_add_flip_reseed(eddy_world *w, const eddy_flip_reseed_def *d
 	reseed *rs = malloc(sizeof *rs);
 	if (rs)
 		rs->def = *def;
-	return eddy__add_system(w, &eddy__kind_flip_reseed, rs, reseed_reads, 7, reseed_writes, 6);
+	return eddy__add_system(w, &eddy__kind_flip_reseed, rs, reseed_reads, reseed_writes);
 }

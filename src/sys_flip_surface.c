@@ -31,7 +31,7 @@ typedef struct surface {
 	int64_t sd_step; /* the step they were computed at, -1 none */
 } surface;
 
-static const int surface_reads[] = {COL_CELL_TYPE, COL_FLIP_PHI};
+static const int surface_reads[] = {COL_CELL_TYPE, COL_FLIP_PHI, -1};
 static const int surface_writes[] = {COL_FLIP_PHI, -1};
 
 eddy_flip_surface_def eddy_default_flip_surface_def(void)
@@ -182,6 +182,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 
 const eddy_system_vtable eddy__kind_flip_surface = {
 	.name = "flip_surface",
+	.provides = EDDY_CAP_FREE_SURFACE,
 	.step = step,
 	.default_writes = surface_writes,
 };
@@ -216,5 +217,5 @@ eddy_system_id eddy_add_flip_surface(eddy_world *w, const eddy_flip_surface_def 
 		sf->def = *def;
 		sf->sd_step = -1;
 	}
-	return eddy__add_system(w, &eddy__kind_flip_surface, sf, surface_reads, 2, surface_writes, 1);
+	return eddy__add_system(w, &eddy__kind_flip_surface, sf, surface_reads, surface_writes);
 }

@@ -36,8 +36,15 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	return EDDY_OK;
 }
 
+static void *shared(const eddy_system *s, uint32_t cap)
+{
+	return cap == EDDY_CAP_GRAVITY ? &((gravity *)s->data)->def : NULL;
+}
+
 const eddy_system_vtable eddy__kind_gravity = {
 	.name = "gravity",
+	.provides = EDDY_CAP_GRAVITY,
+	.shared = shared,
 	.step = step,
 	.default_writes = gravity_writes,
 };
@@ -52,5 +59,5 @@ eddy_system_id eddy_add_gravity(eddy_world *w, const eddy_gravity_def *def)
 	gravity *g = malloc(sizeof *g);
 	if (g)
 		g->def = *def;
-	return eddy__add_system(w, &eddy__kind_gravity, g, NULL, 0, gravity_writes, 3);
+	return eddy__add_system(w, &eddy__kind_gravity, g, NULL, gravity_writes);
 }

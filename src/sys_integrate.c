@@ -16,7 +16,7 @@ typedef struct integrate {
 	eddy_integrate_def def;
 } integrate;
 
-static const int integrate_reads[] = {COL_AX, COL_AY, COL_AZ, COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ};
+static const int integrate_reads[] = {COL_AX, COL_AY, COL_AZ, COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, -1};
 static const int integrate_writes[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, -1};
 
 eddy_integrate_def eddy_default_integrate_def(void)
@@ -91,5 +91,5 @@ eddy_system_id eddy_add_integrate(eddy_world *w, const eddy_integrate_def *def)
 	integrate *it = malloc(sizeof *it);
 	if (it)
 		it->def = *def;
-	return eddy__add_system(w, &eddy__kind_integrate, it, integrate_reads, 9, integrate_writes, 6);
+	return eddy__add_system(w, &eddy__kind_integrate, it, integrate_reads, integrate_writes);
 }

@@ -611,15 +611,24 @@ static bool inside_any_collider(const eddy_world *w, eddy_vec3 p)
  * Built-in kinds whose def is read here keep it as their data's first member
  * (C11 6.7.2.1p15: a pointer to a struct converts to one to its first
  * member); tests/test_stress_slosh.c checks non-default values come through. */
+static void *first_shared(const eddy_world *w, uint32_t cap)
+{
+	eddy_system_iter it = eddy__systems(w, cap);
+	const eddy_system *o = eddy__systems_next(&it);
+	return o && o->vt->shared ? o->vt->shared(o, cap) : NULL;
+}
+
 static double particle_mass(const eddy_world *w)
 {
+	const sph_shared *sh = first_shared(w, EDDY_CAP_SPH_NEIGHBORS);
+	if (sh)
+		return sh->mass;
 	double rho = NAN, s = NAN;
-	for (int k = 0; k < w->order_count; ++k) {
-		const eddy_system *o = &w->slots[w->order[k]];
-		if (o->vt == &eddy__kind_sph_density)
-			return ((const sph_shared *)o->data)->mass;
-		if (o->vt == &eddy__kind_flip_pressure && isnan(rho))
-			rho = ((const eddy_flip_pressure_def *)o->data)->density;
+	const eddy_flip_pressure_def *grid = first_shared(w, EDDY_CAP_GRID_DENSITY);
+	if (grid)
+		rho = grid->density;
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, 0); (o = eddy__systems_next(&it));) {
 		if (o->vt->spacing) {
 			const double e = o->vt->spacing(o);
 			if (isnan(s))
@@ -656,18 +665,16 @@ static void energy_stats(const eddy_world *w, eddy_frame_stats *out)
 	const eddy_sph_density_def *eos = NULL;
 	float rho0 = 0;
 	bool wcsph = false;
-	for (int k = 0; k < w->order_count; ++k) {
-		const eddy_system *o = &w->slots[w->order[k]];
-		if (o->vt == &eddy__kind_gravity) {
-			const double sc = ((const eddy_gravity_def *)o->data)->scale;
-			gx += sc * w->def.gravity.x, gy += sc * w->def.gravity.y, gz += sc * w->def.gravity.z;
-		}
-		if (o->vt == &eddy__kind_sph_density && !eos) {
-			eos = eddy__sph_density_def(o);
-			rho0 = ((const sph_shared *)o->data)->rho0;
-		}
-		wcsph = wcsph || o->vt == &eddy__kind_sph_pressure;
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_GRAVITY); (o = eddy__systems_next(&it));) {
+		const double sc = ((const eddy_gravity_def *)o->vt->shared(o, EDDY_CAP_GRAVITY))->scale;
+		gx += sc * w->def.gravity.x, gy += sc * w->def.gravity.y, gz += sc * w->def.gravity.z;
 	}
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_NEIGHBORS); !eos && (o = eddy__systems_next(&it));) {
+		eos = eddy__sph_density_def(o);
+		rho0 = ((const sph_shared *)o->vt->shared(o, EDDY_CAP_SPH_NEIGHBORS))->rho0;
+	}
+	wcsph = eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL;
 	const eddy_vec3 lo = w->def.bounds_min;
 	/* On all threads, summed in fixed chunks whose sums are added in chunk
 	 * order: the same figures on any number of threads. At most STAT_CHUNKS
@@ -920,9 +927,7 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 	/* particles per cell: a grid method wants 3 to 12 (docs/validation.md §A);
 	 * FLIP with less than one leaves fluid cells holding no particle, which
 	 * the grid then takes for air */
-	bool flip = false;
-	for (int k = 0; k < w->order_count; ++k)
-		flip = flip || w->slots[w->order[k]].vt == &eddy__kind_flip_p2g;
+	const bool flip = eddy__provider(w, NULL, EDDY_CAP_MAC_GRID) != NULL;
 	if (w->grid_allocated && w->length_scale > 0) {
 		const double ppc = pow(w->def.cell_size / w->length_scale, 3);
 		if (flip && ppc < 1) {

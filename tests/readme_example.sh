@@ -6,7 +6,9 @@ set -eu
 build=${1:-build}
 stage="$(pwd)/$build/readme-stage"
 rm -rf "$stage"
-make -s --no-print-directory install BUILD="$build" PREFIX="$stage" >/dev/null
+# -o all: install what the caller built, never rebuild it here (with this
+# make's default flags it would relink a sanitizer build without them)
+make -s --no-print-directory -o all install BUILD="$build" PREFIX="$stage" >/dev/null
 # the first ```c block after the marker line in README.md
 awk '/<!-- readme-c-example -->/ { armed = 1; next }
      armed && /^```c/ { inside = 1; next }

@@ -135,6 +135,51 @@ static void order_errors_name_the_fix(void)
 	eddy_destroy_world(w);
 }
 
+/* Couplings are checked when a system is added (and removed), not at the
+ * first step: a system that needs what an earlier system provides names it,
+ * and two systems that exclude each other name both, in either order. */
+static void couplings_are_checked_when_added(void)
+{
+	eddy_world *w = make_world();
+	/* 'density' written by a custom system satisfies the column rule, but
+	 * not sph_viscosity's need for neighbour lists */
+	const char *writes[] = {"density"};
+	eddy_custom_system_def wr = eddy_default_custom_system_def();
+	wr.name = "my_density";
+	wr.writes = writes;
+	wr.write_count = 1;
+	wr.step = noop_step;
+	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &wr)));
+	eddy_sph_viscosity_def vd = eddy_default_sph_viscosity_def();
+	CHECK(!eddy_system_valid(w, eddy_add_sph_viscosity(w, &vd)));
+	CHECK_HAS(eddy_world_error(w),
+	          "sph_viscosity needs SPH neighbour lists from an earlier system: add sph_density before it");
+	CHECK(eddy_world_system_count(w) == 1);
+
+	eddy_sph_density_def dd = eddy_default_sph_density_def();
+	eddy_system_id did = eddy_add_sph_density(w, &dd);
+	CHECK(eddy_system_valid(w, did));
+	eddy_system_id vid = eddy_add_sph_viscosity(w, &vd);
+	CHECK(eddy_system_valid(w, vid));
+	/* removing the provider would leave the viscosity without its lists;
+	 * the custom writer still writes 'density', so only the coupling holds it */
+	CHECK(eddy_world_remove_system(w, did) == EDDY_ERR_ORDER);
+	CHECK_HAS(eddy_world_error(w), "cannot remove sph_density: sph_viscosity needs SPH neighbour lists");
+
+	/* sph_pressure first, then sph_dfsph: refused naming both */
+	eddy_sph_pressure_def pd = eddy_default_sph_pressure_def();
+	eddy_system_id pid = eddy_add_sph_pressure(w, &pd);
+	CHECK(eddy_system_valid(w, pid));
+	eddy_sph_dfsph_def fd = eddy_default_sph_dfsph_def();
+	CHECK(!eddy_system_valid(w, eddy_add_sph_dfsph(w, &fd)));
+	CHECK_HAS(eddy_world_error(w), "sph_dfsph and sph_pressure cannot share a pipeline (sph_dfsph excludes the SPH "
+	                               "equation-of-state force); remove one of them from the scene");
+	/* without sph_pressure it joins */
+	CHECK(eddy_world_remove_system(w, pid) == EDDY_OK);
+	CHECK(eddy_system_valid(w, eddy_add_sph_dfsph(w, &fd)));
+	eddy_destroy_world(w);
+}
+
 static void stale_handles_are_detected(void)
 {
 	eddy_world *w = make_world();
@@ -848,6 +893,7 @@ void suite_core(void)
 	RUN(world_def_rejects_bad_values);
 	RUN(absent_systems_allocate_nothing);
 	RUN(order_errors_name_the_fix);
+	RUN(couplings_are_checked_when_added);
 	RUN(stale_handles_are_detected);
 	RUN(grid_exists_only_for_grid_systems);
 	RUN(swap_remove_and_growth);

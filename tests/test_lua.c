@@ -611,9 +611,29 @@ static void arguments_that_once_crashed(void)
 	CHECK_HAS(e, "'min'");
 }
 
+/* --threads reaches a world when the scene creates it (eddy_lua_set_threads
+ * before the scene runs), so what the scene builds while adding systems (a
+ * mesh collider's distance field) runs on those threads; 0 leaves the
+ * scene's own choice. */
+static void threads_override_applies_at_creation(void)
+{
+	lua_State *L = new_state();
+	eddy_lua_set_threads(L, 2);
+	CHECK(run(L, "local eddy = require 'eddy'\nreturn eddy.world{ threads = 1 }\n") == NULL);
+	const eddy_world *w = eddy_lua_toworld(L, -1);
+	CHECK(w != NULL && eddy_world_get_def(w)->threads == 2);
+	lua_pop(L, 1);
+	eddy_lua_set_threads(L, 0);
+	CHECK(run(L, "local eddy = require 'eddy'\nreturn eddy.world{ threads = 1 }\n") == NULL);
+	w = eddy_lua_toworld(L, -1);
+	CHECK(w != NULL && eddy_world_get_def(w)->threads == 1);
+	lua_close(L);
+}
+
 void suite_lua(void)
 {
 	RUN(unknown_field_names_file_line_and_fix);
+	RUN(threads_override_applies_at_creation);
 	RUN(wrong_type_and_range);
 	RUN(order_error_in_lua);
 	RUN(stale_handle_in_lua);

@@ -1173,14 +1173,18 @@ static void dfsph_rejects_bad_input(void)
 	CHECK(!eddy_system_valid(w, eddy_add_sph_dfsph(w, NULL)));
 	eddy_destroy_world(w);
 
-	/* with sph_pressure too, the first step says to remove one */
+	/* sph_pressure beside it is refused when added, naming both systems,
+	 * and the pipeline stays as it was */
 	sph_setup s = default_setup();
 	df = eddy_default_sph_dfsph_def();
 	w = dfsph_world(s, &df, 100);
+	const int before = eddy_world_system_count(w);
 	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
-	CHECK(eddy_system_valid(w, eddy_add_sph_pressure(w, &pr)));
-	CHECK(eddy_world_step(w) != EDDY_OK);
-	CHECK_HAS(eddy_world_error(w), "replaces sph_pressure");
+	CHECK(!eddy_system_valid(w, eddy_add_sph_pressure(w, &pr)));
+	CHECK_HAS(eddy_world_error(w), "sph_dfsph and sph_pressure cannot share a pipeline");
+	CHECK_HAS(eddy_world_error(w), "remove one of them");
+	CHECK(eddy_world_system_count(w) == before);
+	CHECK(eddy_world_step(w) == EDDY_OK);
 	eddy_destroy_world(w);
 
 	char path[512], cmd[1200], out[4096];

@@ -38,22 +38,19 @@
 static uint64_t boundary_signature(const eddy_world *w)
 {
 	uint64_t sig = 0x9E3779B97F4A7C15ull;
-	for (int k = 0; k < w->order_count; ++k) {
-		const eddy_system *o = &w->slots[w->order[k]];
-		if (o->vt == &eddy__kind_sph_boundary_box || eddy__is_collider(o))
-			sig = (sig ^ ((uint64_t)w->order[k] << 16 | o->generation)) * 0x100000001b3ull;
-	}
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS | EDDY_CAP_COLLIDER); (o = eddy__systems_next(&it));)
+		sig = (sig ^ ((uint64_t)(o - w->slots) << 16 | o->generation)) * 0x100000001b3ull;
 	return sig;
 }
 
 /* The fluid spacing: that of the sph_density that owns sh. */
 static float fluid_spacing(const eddy_world *w, const sph_shared *sh)
 {
-	for (int k = 0; k < w->order_count; ++k) {
-		const eddy_system *o = &w->slots[w->order[k]];
-		if (o->data == sh && eddy__sph_density_def(o))
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_NEIGHBORS); (o = eddy__systems_next(&it));)
+		if (o->vt->shared(o, EDDY_CAP_SPH_NEIGHBORS) == sh && eddy__sph_density_def(o))
 			return eddy__sph_density_def(o)->spacing;
-	}
 	return sh->h / 2;
 }
 
@@ -203,11 +200,11 @@ static void boundary_count(const eddy_world *w, const sph_shared *sh, float spac
 {
 	eddy_vec3 normal;
 	*nstat = *ncolp = *ncol = 0;
-	for (int k = 0; k < w->order_count; ++k) {
-		const eddy_system *o = &w->slots[w->order[k]];
-		if (o->vt == &eddy__kind_sph_boundary_box)
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS | EDDY_CAP_COLLIDER); (o = eddy__systems_next(&it));) {
+		if (o->vt->provides & EDDY_CAP_SPH_WALLS)
 			*nstat += eddy__sph_boundary_box_points(o, sh->h, NULL, NULL, NULL, NULL);
-		else if (eddy__is_collider(o)) {
+		else {
 			const size_t c = eddy__sph_collider_points(w, o, spacing, sh->h, NULL, NULL, NULL, NULL, &normal);
 			*ncolp += c;
 			*ncol += c > 0;
@@ -263,11 +260,9 @@ static bool boundary_fill_static(eddy_world *w, sph_shared *sh, size_t nstat)
 	float *y = x + alloc, *z = y + alloc, *v = z + alloc;
 	uint32_t *key = (uint32_t *)(void *)(v + alloc), *order = key + alloc;
 	size_t at = 0;
-	for (int k = 0; k < w->order_count; ++k) {
-		const eddy_system *o = &w->slots[w->order[k]];
-		if (o->vt == &eddy__kind_sph_boundary_box)
-			at += eddy__sph_boundary_box_points(o, sh->h, x + at, y + at, z + at, v + at);
-	}
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS); (o = eddy__systems_next(&it));)
+		at += eddy__sph_boundary_box_points(o, sh->h, x + at, y + at, z + at, v + at);
 	for (size_t i = 0; i < nstat; ++i)
 		key[i] = sph_cell_at(&nb->grid, x[i], y[i], z[i]);
 	sph_counting_sort(key, nstat, sph_grid_cells(&nb->grid), nb->grid.bound_start, order);
@@ -289,10 +284,8 @@ static eddy_status boundary_fill_colliders(eddy_world *w, sph_shared *sh, float 
 	sph_boundary *bd = &nb->bnd;
 	size_t at = bd->n_static;
 	eddy_vec3 normal;
-	for (int k = 0; k < w->order_count; ++k) {
-		const eddy_system *o = &w->slots[w->order[k]];
-		if (o->vt == &eddy__kind_sph_boundary_box || !eddy__is_collider(o))
-			continue;
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_COLLIDER); (o = eddy__systems_next(&it));) {
 		const size_t want = eddy__sph_collider_points(w, o, spacing, sh->h, NULL, NULL, NULL, NULL, &normal);
 		if (!want)
 			continue;
@@ -301,7 +294,7 @@ static eddy_status boundary_fill_colliders(eddy_world *w, sph_shared *sh, float 
 		if (got != want)
 			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for the boundary particles of %s", o->label);
 		struct sph_collider_set *cs = &bd->col[bd->ncol++];
-		*cs = (struct sph_collider_set){.slot = w->order[k], .first = at, .count = got, .normal = normal};
+		*cs = (struct sph_collider_set){.slot = (int)(o - w->slots), .first = at, .count = got, .normal = normal};
 		cs->disp = eddy__v3(NAN, NAN, NAN); /* placed by sph_boundary_move */
 		const eddy_vec3 pv = ((const eddy_collider_base *)o->data)->motion.pivot;
 		for (size_t b = at; b < at + got; ++b) {

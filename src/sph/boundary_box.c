@@ -73,6 +73,7 @@ bool eddy__sph_boundary_box_covers(const eddy_system *s, eddy_vec3 min, eddy_vec
 
 const eddy_system_vtable eddy__kind_sph_boundary_box = {
 	.name = "sph_boundary_box",
+	.provides = EDDY_CAP_SPH_WALLS,
 };
 
 eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_boundary_box_def *def)
@@ -109,5 +110,5 @@ eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_boundary_
 		eddy__fail(w, EDDY_ERR_NOMEM, "%s: the box needs too many boundary particles; use a larger spacing", sys);
 		return EDDY_NULL_SYSTEM;
 	}
-	return eddy__add_system(w, &eddy__kind_sph_boundary_box, b, NULL, 0, NULL, 0);
+	return eddy__add_system(w, &eddy__kind_sph_boundary_box, b, NULL, NULL);
 }

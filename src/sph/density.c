@@ -45,7 +45,7 @@ typedef struct sph_density {
 	eddy_sph_density_def def;
 } sph_density;
 
-static const int density_reads[] = {COL_X_, COL_Y_, COL_Z_};
+static const int density_reads[] = {COL_X_, COL_Y_, COL_Z_, -1};
 static const int density_writes[] = {COL_DENSITY, COL_PRESSURE, COL_SPH_NEIGHBORS, -1};
 
 eddy_sph_density_def eddy_default_sph_density_def(void)
@@ -265,9 +265,7 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 {
 	if (w->n == 0 || sd->sh.nb.nbound == 0)
 		return EDDY_OK;
-	bool iterate = false;
-	for (int q = 0; q < w->order_count; ++q)
-		iterate = iterate || w->slots[w->order[q]].vt == &eddy__kind_sph_pressure;
+	const bool iterate = eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL;
 	wall_pairs wp;
 	if (!wall_pairs_make(w, &sd->sh.nb, iterate, &wp))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles",
@@ -337,8 +335,8 @@ static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void
 	const sph_density *sd = s->data;
 	const double dx = sd->def.spacing, h = sd->def.radius;
 	int errors = 0;
-	for (int k = 0; k < w->order_count; ++k) {
-		const eddy_system *e = &w->slots[w->order[k]];
+	const eddy_system *e;
+	for (eddy_system_iter it = eddy__systems(w, 0); (e = eddy__systems_next(&it));) {
 		if (!e->vt->spacing)
 			continue;
 		const double de = e->vt->spacing(e);
@@ -367,8 +365,15 @@ static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void
 	return errors;
 }
 
+static void *shared(const eddy_system *s, uint32_t cap)
+{
+	return cap == EDDY_CAP_SPH_NEIGHBORS ? &((sph_density *)s->data)->sh : NULL;
+}
+
 const eddy_system_vtable eddy__kind_sph_density = {
 	.name = "sph_density",
+	.provides = EDDY_CAP_SPH_NEIGHBORS,
+	.shared = shared,
 	.step = step,
 	.state = state,
 	.destroy = destroy,
@@ -424,7 +429,7 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	const double vol = (double)def->spacing * def->spacing * def->spacing;
 	sd->sh.grad_cal = (float)(eddy_sph_lattice_sum(EDDY_SPH_POLY6, def->spacing, def->radius) * vol /
 	                          eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, def->spacing, def->radius));
-	eddy_system_id id = eddy__add_system(w, &eddy__kind_sph_density, sd, density_reads, 3, density_writes, 3);
+	eddy_system_id id = eddy__add_system(w, &eddy__kind_sph_density, sd, density_reads, density_writes);
 	if (eddy_system_valid(w, id))
 		eddy_world_set_rest_density(w, def->rest_density);
 	return id;

@@ -156,8 +156,8 @@ typedef struct sph_dfsph {
 	             * above DFSPH_FAIL_CAPPED_ERROR times its tolerance */
 } sph_dfsph;
 
-static const int dfsph_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, COL_AX, COL_AY, COL_AZ};
-static const int dfsph_writes[] = {COL_PRESSURE, COL_AX, COL_AY, COL_AZ};
+static const int dfsph_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, COL_AX, COL_AY, COL_AZ, -1};
+static const int dfsph_writes[] = {COL_PRESSURE, COL_AX, COL_AY, COL_AZ, -1};
 static const int no_hint_writes[] = {-1};
 
 /* dt <= DFSPH_GRAVITY_LIMIT sqrt(h / |g|) (times the CFL number): gravity
@@ -1094,24 +1094,12 @@ static int density_solve(dfsph_work *wk, dfsph_cg *cg, const sph_dfsph *sd, floa
 	return it;
 }
 
-/* A scene uses one pressure system: sph_pressure's force on top of the solve
- * would be counted twice. */
-static bool has_sph_pressure(const eddy_world *w)
-{
-	for (int k = 0; k < w->order_count; ++k)
-		if (w->slots[w->order[k]].vt == &eddy__kind_sph_pressure)
-			return true;
-	return false;
-}
-
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	sph_dfsph *sd = s->data;
 	sph_shared *sh = eddy__sph_find(w, s);
 	if (!sh)
 		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)", s->label);
-	if (has_sph_pressure(w))
-		return eddy__fail(w, EDDY_ERR_ORDER, "%s: replaces sph_pressure; remove one of them from the scene", s->label);
 	if (sd->frame != w->frame) {
 		sd->frame = w->frame;
 		sd->steps = sd->sweeps = sd->div_sweeps = sd->unconverged = 0;
@@ -1323,6 +1311,9 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 
 const eddy_system_vtable eddy__kind_sph_dfsph = {
 	.name = "sph_dfsph",
+	.requires = EDDY_CAP_SPH_NEIGHBORS,
+	/* the implicit solve replaces that force: both would count the pressure twice */
+	.excludes = EDDY_CAP_SPH_EOS_FORCE,
 	.step = step,
 	.limit = limit,
 	/* ax ay az are every force's: order hints for them name gravity alone */
@@ -1358,7 +1349,7 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 	sd->avx2 = sph_use_avx2();
 #endif
 	if (!def->divergence_solver) /* the warm starts are the velocity solve's */
-		return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, dfsph_reads, 10, dfsph_writes, 4);
+		return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, dfsph_reads, dfsph_writes);
 	/* the warm starts' state columns (shared by the sph_dfsph systems of a
 	 * world: each writes its own fluid's rows) */
 	const char *names[2] = {DFSPH_K_COLUMN, DFSPH_KD_COLUMN};
@@ -1372,10 +1363,14 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 			return EDDY_NULL_SYSTEM;
 		}
 	}
-	int reads[12], writes[6];
+	/* the lists above plus the two state columns, -1 moved to the end */
+	const int nr = (int)(sizeof dfsph_reads / sizeof dfsph_reads[0]) - 1,
+	          nw = (int)(sizeof dfsph_writes / sizeof dfsph_writes[0]) - 1;
+	int reads[sizeof dfsph_reads / sizeof dfsph_reads[0] + 2], writes[sizeof dfsph_writes / sizeof dfsph_writes[0] + 2];
 	memcpy(reads, dfsph_reads, sizeof dfsph_reads);
 	memcpy(writes, dfsph_writes, sizeof dfsph_writes);
-	reads[10] = writes[4] = sd->kcol;
-	reads[11] = writes[5] = sd->kdcol;
-	return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, reads, 12, writes, 6);
+	reads[nr] = writes[nw] = sd->kcol;
+	reads[nr + 1] = writes[nw + 1] = sd->kdcol;
+	reads[nr + 2] = writes[nw + 2] = -1;
+	return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, reads, writes);
 }

@@ -191,15 +191,7 @@ void eddy__sph_neighbors_free(sph_neighbors *nb)
 
 sph_shared *eddy__sph_find(eddy_world *w, const eddy_system *s)
 {
-	sph_shared *found = NULL;
-	for (int k = 0; k < w->order_count; ++k) {
-		eddy_system *o = &w->slots[w->order[k]];
-		if (o == s)
-			break;
-		if (o->vt == &eddy__kind_sph_density)
-			found = o->data;
-	}
-	return found;
+	return eddy__provided(w, s, EDDY_CAP_SPH_NEIGHBORS);
 }
 
 /* Grows every per-row array to n. */

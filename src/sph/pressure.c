@@ -127,7 +127,7 @@ typedef struct sph_pressure {
 	eddy_sph_pressure_def def;
 } sph_pressure;
 
-static const int pressure_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_DENSITY, COL_PRESSURE};
+static const int pressure_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_DENSITY, COL_PRESSURE, -1};
 static const int pressure_writes[] = {COL_AX, COL_AY, COL_AZ, -1};
 static const int no_hint_writes[] = {-1};
 
@@ -275,6 +275,8 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 
 const eddy_system_vtable eddy__kind_sph_pressure = {
 	.name = "sph_pressure",
+	.provides = EDDY_CAP_SPH_EOS_FORCE,
+	.requires = EDDY_CAP_SPH_NEIGHBORS,
 	.step = step,
 	.limit = limit,
 	/* ax ay az are every force's: order hints for them name gravity alone */
@@ -291,6 +293,6 @@ eddy_system_id eddy_add_sph_pressure(eddy_world *w, const eddy_sph_pressure_def 
 	sph_pressure *sp = malloc(sizeof *sp);
 	if (sp)
 		sp->def = *def;
-	return eddy__add_system(w, &eddy__kind_sph_pressure, sp, pressure_reads, 5, pressure_writes, 3);
+	return eddy__add_system(w, &eddy__kind_sph_pressure, sp, pressure_reads, pressure_writes);
 }
 #endif

@@ -192,16 +192,11 @@ bool eddy__sph_boundary_box_covers(const eddy_system *s, eddy_vec3 min, eddy_vec
  * the plane) or 0 (they move with the whole offset). Colliders that get
  * none: a tank box (its walls are an sph_boundary_box's), a block box that
  * an sph_boundary_box already samples (the same min and max), and any
- * collider that is not one of the built-in four (box, sphere, plane, mesh). Implemented beside each
- * collider (sys_collide_*.c), dispatched in collider_shape.c. */
+ * collider whose kind has no sph_points (only the built-in four have).
+ * Implemented beside each collider (sys_collide_*.c, the vtable's
+ * sph_points), called through collider_shape.c. */
 size_t eddy__sph_collider_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
                                  float *z, float *vol, eddy_vec3 *normal);
-size_t eddy__sph_sphere_points(const eddy_system *s, float spacing, float h, float *x, float *y, float *z, float *vol);
-size_t eddy__sph_mesh_points(const eddy_system *s, float spacing, float h, float *x, float *y, float *z, float *vol);
-size_t eddy__sph_plane_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
-                              float *z, float *vol, eddy_vec3 *normal);
-size_t eddy__sph_box_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
-                            float *z, float *vol);
 
 /* Deterministic antisymmetric direction for a coincident pair (i, j): the
  * gradient has no direction at r = 0, so an arbitrary fixed one (not along a

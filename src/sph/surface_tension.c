@@ -28,7 +28,7 @@ typedef struct sph_surface_tension {
 	eddy_sph_surface_tension_def def;
 } sph_surface_tension;
 
-static const int st_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_DENSITY};
+static const int st_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_DENSITY, -1};
 static const int st_writes[] = {COL_SPH_NX, COL_SPH_NY, COL_SPH_NZ, COL_SPH_CURVATURE, COL_AX, COL_AY, COL_AZ, -1};
 static const int st_hint_writes[] = {COL_SPH_NX, COL_SPH_NY, COL_SPH_NZ, COL_SPH_CURVATURE, -1};
 
@@ -126,6 +126,7 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 
 const eddy_system_vtable eddy__kind_sph_surface_tension = {
 	.name = "sph_surface_tension",
+	.requires = EDDY_CAP_SPH_NEIGHBORS,
 	.step = step,
 	.limit = limit,
 	/* ax ay az are every force's: order hints for them name gravity alone */
@@ -144,5 +145,5 @@ eddy_system_id eddy_add_sph_surface_tension(eddy_world *w, const eddy_sph_surfac
 	sph_surface_tension *st = malloc(sizeof *st);
 	if (st)
 		st->def = *def;
-	return eddy__add_system(w, &eddy__kind_sph_surface_tension, st, st_reads, 4, st_writes, 7);
+	return eddy__add_system(w, &eddy__kind_sph_surface_tension, st, st_reads, st_writes);
 }

@@ -122,7 +122,7 @@ typedef struct sph_viscosity {
 	eddy_sph_viscosity_def def;
 } sph_viscosity;
 
-static const int viscosity_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY};
+static const int viscosity_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, -1};
 static const int viscosity_writes[] = {COL_AX, COL_AY, COL_AZ, -1};
 static const int no_hint_writes[] = {-1};
 
@@ -204,6 +204,7 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 
 const eddy_system_vtable eddy__kind_sph_viscosity = {
 	.name = "sph_viscosity",
+	.requires = EDDY_CAP_SPH_NEIGHBORS,
 	.step = step,
 	.limit = limit,
 	/* ax ay az are every force's: order hints for them name gravity alone */
@@ -221,6 +222,6 @@ eddy_system_id eddy_add_sph_viscosity(eddy_world *w, const eddy_sph_viscosity_de
 	sph_viscosity *sv = malloc(sizeof *sv);
 	if (sv)
 		sv->def = *def;
-	return eddy__add_system(w, &eddy__kind_sph_viscosity, sv, viscosity_reads, 7, viscosity_writes, 3);
+	return eddy__add_system(w, &eddy__kind_sph_viscosity, sv, viscosity_reads, viscosity_writes);
 }
 #endif
