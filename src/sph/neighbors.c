@@ -64,15 +64,17 @@ static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *cand, u
 	const uint32_t *row_of = f->row_of;
 	uint32_t cnt = 0;
 	for (uint32_t q = 0; q < vc; q += 8) {
-		uint32_t j[8];
-		if (q + 8 <= vc)
-			for (uint32_t k = 0; k < 8; ++k)
-				j[k] = row_of ? row_of[cand[q + k]] : cand[q + k];
-		else
+		/* a whole group of unmoved rows is its candidates, read in place (a
+		 * copy just written would stall the packing's vector load) */
+		uint32_t rows[8];
+		const uint32_t *j = cand + q;
+		if (q + 8 > vc || row_of) {
 			for (uint32_t k = 0; k < 8; ++k) {
 				const uint32_t s = cand[q + k < vc ? q + k : vc - 1];
-				j[k] = row_of ? row_of[s] : s;
+				rows[k] = row_of ? row_of[s] : s;
 			}
+			j = rows;
+		}
 		sf8 px, py, pz, pw;
 		sf8_gather_quads(f->p4, j, &px, &py, &pz, &pw);
 		const sf8 rx = sf8_sub(vx, px), ry = sf8_sub(vy, py), rz = sf8_sub(vz, pz);
