@@ -60,13 +60,28 @@ eddy_sph_density_def eddy_default_sph_density_def(void)
 	return d;
 }
 
+/* The EOS: pressure of a density (clamped at 0) and density of a pressure. */
+static float eos_pressure(const sph_density *sd, float rho)
+{
+	const float rho0 = sd->sh.rho0, k = sd->def.stiffness, gamma = sd->def.tait_gamma;
+	const float p = sd->def.eos == EDDY_SPH_EOS_TAIT ? k * rho0 / gamma * (powf(rho / rho0, gamma) - 1.0f)
+	                                                 : k * (rho - rho0);
+	return p > 0 ? p : 0;
+}
+
+static float eos_density(const sph_density *sd, float p)
+{
+	const float rho0 = sd->sh.rho0, k = sd->def.stiffness, gamma = sd->def.tait_gamma;
+	return sd->def.eos == EDDY_SPH_EOS_TAIT ? rho0 * powf(p / (k * rho0 / gamma) + 1.0f, 1.0f / gamma) : rho0 + p / k;
+}
+
 /* Adami et al. 2012, eq. 27, with the wall at rest: each boundary particle
  * takes the Shepard average of the fluid pressure near it plus the hydrostatic
  * difference, and the EOS density for that pressure. The wall densities enter
  * the fluid's density sums, which set the fluid pressure the walls copy: a
  * loop. Closed with the previous step's wall densities (as the neighbour
  * search summed them), it is a one-step-lagged positive feedback that pumps
- * energy into the fluid at the walls (a still column never came to rest).
+ * energy into the fluid at the walls (a still column never comes to rest).
  * With the EOS pressure (a world with sph_pressure) the loop is therefore
  * iterated within the step: the walls are extrapolated, the density of every
  * fluid particle near them corrected by sum_b V_b (rho_b new - rho_b old)
@@ -75,131 +90,136 @@ eddy_sph_density_def eddy_default_sph_density_def(void)
  * more than WALL_TOL of what the first pass changed (the lag). Each pass
  * shrinks the error by the walls' share of a particle's kernel sum (about
  * 1/4 at a flat wall, at most about 1/2 at a corner): three passes leave
- * 1/64 to 1/8 of the lag. The kernel weights and g . (x_b - x_f) of the
- * wall-fluid pairs are made once, in the first pass; the later passes are
- * sums over the stored pairs of the walls with fluid near them.
- * sph_dfsph solves for its own pressure: with the iterated wall densities its
- * closed-tank collapse at a/20 gained 355% of the released energy instead of
- * 20%, so there the walls keep the one-step lag. */
+ * 1/64 to 1/8 of the lag. sph_dfsph solves for its own pressure, and
+ * against that solve the iterated wall densities pump energy in instead (a
+ * closed tank's collapse gains several times the energy it releases): there
+ * the walls keep the one-step lag. */
 #define WALL_PASSES_MAX 3
 #define WALL_TOL 1e-3f
-static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads)
+
+/* The wall-fluid pairs, boundary-major: the fluid's boundary lists turned
+ * around (most wall particles have no fluid near them, and a grid walk for
+ * each would cost more than the fluid), rows ascending. */
+typedef struct wall_pairs {
+	size_t n, nbound;
+	uint32_t *start;  /* nbound + 1: wall b's fluid rows are fluid[start[b] .. start[b + 1]) */
+	uint32_t *fluid;
+	/* for the iteration, else NULL: */
+	float *wgt, *grav;  /* per pair: (h^2 - r^2)^3 and g . (x_b - x_f), boundary-major */
+	uint32_t *fstart;   /* n + 1: row i's pairs in its list order are [fstart[i], fstart[i + 1]) */
+	uint32_t *pos;      /* per pair in that order, its place in the boundary-major order */
+	float *inv_sw, *old; /* per wall: 1 / sum of its weights; the density the fluid sums hold */
+} wall_pairs;
+
+static bool wall_pairs_make(eddy_world *w, const sph_neighbors *nb, bool iterate, wall_pairs *wp)
 {
-	sph_neighbors *nb = &sd->sh.nb;
-	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
-	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
-	float *inv_rho = sd->sh.inv_rho, *pq = sd->sh.pq;
-	const sph_kernel_consts kc = sd->sh.k;
-	const float gx = w->def.gravity.x, gy = w->def.gravity.y, gz = w->def.gravity.z;
-	const float rho0 = sd->sh.rho0, k = sd->def.stiffness, gamma = sd->def.tait_gamma;
-	const bool tait = sd->def.eos == EDDY_SPH_EOS_TAIT;
-	const float B = k * rho0 / gamma;
-	const size_t n = w->n, nbound = nb->nb;
-	if (n == 0 || nbound == 0)
-		return EDDY_OK;
-	const bool iterate = eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL;
-	/* the fluid near each boundary particle, from the fluid's boundary lists
-	 * turned around (most wall particles have none, and a grid walk for each
-	 * was most of a walled scene's step): rows ascending, as a walk over the
-	 * cell-ordered table would give them */
-	uint32_t *start = eddy__arena_alloc(&w->arena, (nbound + 1) * sizeof *start);
-	if (!start)
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", nbound);
-	memset(start, 0, (nbound + 1) * sizeof *start);
-	for (size_t i = 0; i < n; ++i) {
-		const uint32_t *bl = nb->bnbr + i * nb->bcap;
+	const size_t n = w->n, nbound = nb->nbound;
+	*wp = (wall_pairs){.n = n, .nbound = nbound};
+	wp->start = eddy__arena_alloc(&w->arena, (nbound + 1) * sizeof *wp->start);
+	uint32_t *at = eddy__arena_alloc(&w->arena, nbound * sizeof *at);
+	if (!wp->start || !at)
+		return false;
+	memset(wp->start, 0, (nbound + 1) * sizeof *wp->start);
+	for (size_t i = 0; i < n; ++i)
 		for (uint32_t q = 0; q < nb->bcount[i]; ++q)
-			start[bl[q] + 1]++;
-	}
+			wp->start[nb->bnbr[i * nb->bcap + q] + 1]++;
 	for (size_t b = 0; b < nbound; ++b)
-		start[b + 1] += start[b];
-	const size_t pairs = start[nbound] ? start[nbound] : 1;
-	uint32_t *fluid = eddy__arena_alloc(&w->arena, pairs * sizeof *fluid),
-	         *at = eddy__arena_alloc(&w->arena, nbound * sizeof *at);
-	/* for the iteration: each pair's weight (h^2 - r^2)^3 and g . (x_b - x_f)
-	 * in the boundary-major order, and, in the order of the fluid's boundary
-	 * lists (rows with walls only, from fstart), where the pair sits in it */
-	float *wq = NULL, *gq = NULL, *inv_sw = NULL, *old = NULL;
-	uint32_t *pos = NULL, *fstart = NULL;
-	if (!fluid || !at)
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", nbound);
+		wp->start[b + 1] += wp->start[b];
+	const size_t pairs = wp->start[nbound] ? wp->start[nbound] : 1;
+	wp->fluid = eddy__arena_alloc(&w->arena, pairs * sizeof *wp->fluid);
+	if (!wp->fluid)
+		return false;
 	if (iterate) {
-		wq = eddy__arena_alloc(&w->arena, pairs * sizeof *wq);
-		gq = eddy__arena_alloc(&w->arena, pairs * sizeof *gq);
-		pos = eddy__arena_alloc(&w->arena, pairs * sizeof *pos);
-		inv_sw = eddy__arena_alloc(&w->arena, nbound * sizeof *inv_sw);
-		old = eddy__arena_alloc(&w->arena, nbound * sizeof *old);
-		fstart = eddy__arena_alloc(&w->arena, (n + 1) * sizeof *fstart);
-		if (!wq || !gq || !pos || !inv_sw || !old || !fstart)
-			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles",
-			                  nbound);
-		fstart[0] = 0;
+		wp->wgt = eddy__arena_alloc(&w->arena, pairs * sizeof *wp->wgt);
+		wp->grav = eddy__arena_alloc(&w->arena, pairs * sizeof *wp->grav);
+		wp->pos = eddy__arena_alloc(&w->arena, pairs * sizeof *wp->pos);
+		wp->inv_sw = eddy__arena_alloc(&w->arena, nbound * sizeof *wp->inv_sw);
+		wp->old = eddy__arena_alloc(&w->arena, nbound * sizeof *wp->old);
+		wp->fstart = eddy__arena_alloc(&w->arena, (n + 1) * sizeof *wp->fstart);
+		if (!wp->wgt || !wp->grav || !wp->pos || !wp->inv_sw || !wp->old || !wp->fstart)
+			return false;
+		wp->fstart[0] = 0;
 		for (size_t i = 0; i < n; ++i)
-			fstart[i + 1] = fstart[i] + nb->bcount[i];
+			wp->fstart[i + 1] = wp->fstart[i] + nb->bcount[i];
 	}
-	memcpy(at, start, nbound * sizeof *at);
+	memcpy(at, wp->start, nbound * sizeof *at);
 	for (size_t i = 0; i < n; ++i) {
 		const uint32_t *bl = nb->bnbr + i * nb->bcap;
 		for (uint32_t q = 0; q < nb->bcount[i]; ++q) {
-			if (pos)
-				pos[fstart[i] + q] = at[bl[q]];
-			fluid[at[bl[q]]++] = (uint32_t)i;
+			if (wp->pos)
+				wp->pos[wp->fstart[i] + q] = at[bl[q]];
+			wp->fluid[at[bl[q]]++] = (uint32_t)i;
 		}
 	}
-	const long lb = (long)nbound;
-	/* first pass: the walls from this step's fluid (the weights made and, when
-	 * iterating, kept) */
+	return true;
+}
+
+/* The first pass: every wall from this step's fluid (the pair weights kept
+ * when iterating). */
+static void walls_extrapolate(eddy_world *w, sph_density *sd, const wall_pairs *wp, int threads)
+{
+	sph_neighbors *nb = &sd->sh.nb;
+	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	const float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
+	const float h2 = sd->sh.k.h2, gx = w->def.gravity.x, gy = w->def.gravity.y, gz = w->def.gravity.z;
+	const long lb = (long)wp->nbound;
 #pragma omp parallel for num_threads(threads) schedule(static)
 	for (long b = 0; b < lb; ++b) {
 		const float xb = nb->bx[b], yb = nb->by[b], zb = nb->bz[b];
 		float sw = 0, sp = 0;
-		for (uint32_t q = start[b]; q < start[b + 1]; ++q) {
-			const uint32_t j = fluid[q];
+		for (uint32_t q = wp->start[b]; q < wp->start[b + 1]; ++q) {
+			const uint32_t j = wp->fluid[q];
 			const float rx = xb - x[j], ry = yb - y[j], rz = zb - z[j];
-			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
+			const float d = h2 - (rx * rx + ry * ry + rz * rz);
 			const float wgt = d * d * d, gr = gx * rx + gy * ry + gz * rz;
 			sw += wgt;
 			sp += wgt * (p[j] + rho[j] * gr);
-			if (wq) {
-				wq[q] = wgt;
-				gq[q] = gr;
+			if (wp->wgt) {
+				wp->wgt[q] = wgt;
+				wp->grav[q] = gr;
 			}
 		}
 		const float pb = sw > 0 ? fmaxf(sp / sw, 0.0f) : 0.0f;
-		if (inv_sw) {
-			inv_sw[b] = sw > 0 ? 1.0f / sw : 0.0f;
-			old[b] = nb->brho[b]; /* the last step's: what the fluid sums hold */
+		if (wp->inv_sw) {
+			wp->inv_sw[b] = sw > 0 ? 1.0f / sw : 0.0f;
+			wp->old[b] = nb->bnd.rho[b]; /* the last step's: what the fluid sums hold */
 		}
 		nb->bp[b] = pb;
-		nb->brho[b] = tait ? rho0 * powf(pb / B + 1.0f, 1.0f / gamma) : rho0 + pb / k;
+		nb->bnd.rho[b] = eos_density(sd, pb);
 	}
-	if (!iterate)
-		return EDDY_OK;
-	/* the later passes touch only the walls with fluid near them (act) and
-	 * the fluid rows with walls near them (rows), the latter with the pairs'
-	 * weights in the order of their lists (wf) */
+}
+
+/* The later passes, over the walls with fluid near them (act) and the
+ * fluid rows with walls near them (rows), the latter with the pairs'
+ * weights in the order of their lists (wf). */
+static eddy_status walls_iterate(eddy_world *w, sph_density *sd, const wall_pairs *wp, int threads)
+{
+	sph_neighbors *nb = &sd->sh.nb;
+	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
+	const float poly6 = sd->sh.k.poly6;
+	const size_t n = wp->n, nbound = wp->nbound;
 	uint32_t *act = eddy__arena_alloc(&w->arena, nbound * sizeof *act),
 	         *rows = eddy__arena_alloc(&w->arena, n * sizeof *rows);
-	float *wf = eddy__arena_alloc(&w->arena, pairs * sizeof *wf),
+	float *wf = eddy__arena_alloc(&w->arena, (wp->start[nbound] ? wp->start[nbound] : 1) * sizeof *wf),
 	      *dv = eddy__arena_alloc(&w->arena, nbound * sizeof *dv);
 	if (!act || !rows || !wf || !dv)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", nbound);
 	long na = 0, nr = 0;
 	for (size_t b = 0; b < nbound; ++b)
-		if (start[b] < start[b + 1])
+		if (wp->start[b] < wp->start[b + 1])
 			act[na++] = (uint32_t)b;
 	for (size_t i = 0; i < n; ++i)
 		if (nb->bcount[i])
 			rows[nr++] = (uint32_t)i;
-	for (size_t q = 0; q < fstart[n]; ++q)
-		wf[q] = wq[pos[q]];
+	for (size_t q = 0; q < wp->fstart[n]; ++q)
+		wf[q] = wp->wgt[wp->pos[q]];
 	float first = 0; /* the largest change of the first pass: the lag */
 	for (int pass = 1; pass <= WALL_PASSES_MAX; ++pass) {
 		float change = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : change)
 		for (long a = 0; a < na; ++a) {
 			const uint32_t b = act[a];
-			const float d = nb->brho[b] - old[b];
+			const float d = nb->bnd.rho[b] - wp->old[b];
 			dv[b] = nb->bvol[b] * d;
 			change = fabsf(d) > change ? fabsf(d) : change;
 		}
@@ -210,37 +230,48 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 		/* the fluid near the walls takes the walls' new densities */
 #pragma omp parallel for num_threads(threads) schedule(static)
 		for (long r = 0; r < nr; ++r) {
-			const uint32_t i = rows[r], bc = nb->bcount[i];
+			const uint32_t i = rows[r];
 			const uint32_t *bl = nb->bnbr + (size_t)i * nb->bcap;
-			const float *wi = wf + fstart[i];
+			const float *wi = wf + wp->fstart[i];
 			float dr = 0;
-			for (uint32_t q = 0; q < bc; ++q)
+			for (uint32_t q = 0; q < nb->bcount[i]; ++q)
 				dr += dv[bl[q]] * wi[q];
 			if (dr == 0)
 				continue;
-			const float rr = rho[i] + kc.poly6 * dr;
-			rho[i] = rr;
-			inv_rho[i] = 1.0f / rr;
-			pq[4 * i + 3] = inv_rho[i];
-			const float pr = tait ? B * (powf(rr / rho0, gamma) - 1.0f) : k * (rr - rho0);
-			p[i] = pr > 0 ? pr : 0;
+			rho[i] = rho[i] + poly6 * dr;
+			sd->sh.inv_rho[i] = 1.0f / rho[i];
+			sd->sh.pq[4 * i + 3] = sd->sh.inv_rho[i];
+			p[i] = eos_pressure(sd, rho[i]);
 		}
 		/* ... and the walls that fluid's pressure */
 #pragma omp parallel for num_threads(threads) schedule(static)
 		for (long a = 0; a < na; ++a) {
 			const uint32_t b = act[a];
 			float sp = 0;
-			for (uint32_t q = start[b]; q < start[b + 1]; ++q) {
-				const uint32_t j = fluid[q];
-				sp += wq[q] * (p[j] + rho[j] * gq[q]);
+			for (uint32_t q = wp->start[b]; q < wp->start[b + 1]; ++q) {
+				const uint32_t j = wp->fluid[q];
+				sp += wp->wgt[q] * (p[j] + rho[j] * wp->grav[q]);
 			}
-			const float pb = fmaxf(sp * inv_sw[b], 0.0f);
-			old[b] = nb->brho[b];
+			const float pb = fmaxf(sp * wp->inv_sw[b], 0.0f);
+			wp->old[b] = nb->bnd.rho[b];
 			nb->bp[b] = pb;
-			nb->brho[b] = tait ? rho0 * powf(pb / B + 1.0f, 1.0f / gamma) : rho0 + pb / k;
+			nb->bnd.rho[b] = eos_density(sd, pb);
 		}
 	}
 	return EDDY_OK;
+}
+
+static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads)
+{
+	if (w->n == 0 || sd->sh.nb.nbound == 0)
+		return EDDY_OK;
+	const bool iterate = eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL;
+	wall_pairs wp;
+	if (!wall_pairs_make(w, &sd->sh.nb, iterate, &wp))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles",
+		                  sd->sh.nb.nbound);
+	walls_extrapolate(w, sd, &wp, threads);
+	return iterate ? walls_iterate(w, sd, &wp, threads) : EDDY_OK;
 }
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
@@ -253,24 +284,20 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const sph_neighbors *nb = &sh->nb;
 	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE), *ncount = eddy__col(w, COL_SPH_NEIGHBORS);
 	const sph_kernel_consts kc = sh->k;
-	const float m = sh->mass, rho0 = sh->rho0, k = sd->def.stiffness;
-	const float self = kc.h2 * kc.h2 * kc.h2; /* (h^2 - 0)^3: the particle itself */
-	const bool tait = sd->def.eos == EDDY_SPH_EOS_TAIT; /* EOS choice, not a feature switch */
-	const float B = k * rho0 / sd->def.tait_gamma, gamma = sd->def.tait_gamma;
+	const float m = sh->mass, self = kc.h2 * kc.h2 * kc.h2; /* (h^2 - 0)^3: the particle itself */
 	const long n = (long)w->n;
 	float *inv_rho = eddy__arena_alloc(&w->arena, (w->n ? w->n : 1) * sizeof *inv_rho);
 	if (!inv_rho)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", w->n);
 	sh->inv_rho = inv_rho;
-	/* the kernel sums were accumulated by the neighbour search */
+	/* the kernel sums were made with the neighbour lists */
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		const float r = kc.poly6 * (m * (self + nb->wsum[i]) + nb->bwsum[i]);
 		rho[i] = r;
 		inv_rho[i] = 1.0f / r;
 		sh->pq[4 * i + 3] = inv_rho[i];
-		const float pr = tait ? B * (powf(r / rho0, gamma) - 1.0f) : k * (r - rho0);
-		p[i] = pr > 0 ? pr : 0;
+		p[i] = eos_pressure(sd, r);
 		ncount[i] = (float)(nb->count[i] + nb->bcount[i]);
 	}
 	return boundary_pressure(w, sd, ctx->threads);
@@ -293,7 +320,7 @@ static void *state(eddy_world *w, eddy_system *s, size_t *size)
 	*size = 0;
 	if (eddy__sph_boundary_ready(w, &sd->sh) != EDDY_OK || !sd->sh.nb.bp)
 		return NULL;
-	*size = sd->sh.nb.bstate_size; /* bp, brho and the colliders' seen offsets (sph.h) */
+	*size = sd->sh.nb.bnd.state_size; /* bp, rho and the colliders' seen offsets (sph.h) */
 	return sd->sh.nb.bp;
 }
 

@@ -437,4 +437,39 @@ static inline float sf8_sum(sf8 a)
 	return (f[0] + f[1]) + (f[2] + f[3]);
 }
 
+/* ---- added for nbr ---- */
+/* The lanes of a, and the same entries of idx[0..7], where mask m is set,
+ * packed to the front of out and out_idx in lane order; all eight entries
+ * of each may be written (the callers leave room). Returns how many.
+ * Branch-free: which lanes are set is a coin toss in the neighbour search,
+ * and a mispredicted branch costs more than writing every lane. AVX2 packs
+ * with a permutation made from the mask (pdep/pext), the others write each
+ * lane and move the count past the set ones: the same entries either way. */
+#ifdef SIMD_AVX2
+static inline uint32_t sf8_pack(sf8 m, sf8 a, const uint32_t idx[8], float *out, uint32_t *out_idx)
+{
+	const unsigned bits = (unsigned)_mm256_movemask_ps(m);
+	const uint64_t keep = _pdep_u64(bits, 0x0101010101010101ull) * 0xFF; /* a byte of ones per lane kept */
+	const __m256i perm = _mm256_cvtepu8_epi32(_mm_cvtsi64_si128((long long)_pext_u64(0x0706050403020100ull, keep)));
+	_mm256_storeu_si256((__m256i *)(void *)out_idx,
+	                    _mm256_permutevar8x32_epi32(_mm256_loadu_si256((const __m256i *)(const void *)idx), perm));
+	_mm256_storeu_ps(out, _mm256_permutevar8x32_ps(a, perm));
+	return (uint32_t)__builtin_popcount(bits);
+}
+#else
+static inline uint32_t sf8_pack(sf8 m, sf8 a, const uint32_t idx[8], float *out, uint32_t *out_idx)
+{
+	const unsigned bits = (unsigned)sf8_mask_bits(m);
+	float l[8];
+	sf8_store(l, a);
+	uint32_t cnt = 0;
+	for (unsigned k = 0; k < 8; ++k) {
+		out_idx[cnt] = idx[k];
+		out[cnt] = l[k];
+		cnt += bits >> k & 1;
+	}
+	return cnt;
+}
+#endif
+
 #endif

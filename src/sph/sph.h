@@ -1,7 +1,26 @@
 /* SPDX-License-Identifier: MIT */
-/* Internals shared by the SPH systems (sys_sph_*.c): kernels as inline
- * functions of r^2 where possible, and the neighbour data that sph_density
- * builds once per step for the later SPH passes. */
+/* The SPH folder's shared header: kernel constants, and the neighbour data
+ * that sph_density builds once per step for the later SPH passes.
+ *
+ * The folder's parts:
+ *   grid.c search.c neighbors.c  the neighbour search (its internals:
+ *                                neighbors.h): cells and cell order, the grid
+ *                                search, the Verlet list and its filter
+ *   boundary.c boundary_box.c    boundary particles of walls and colliders
+ *   kernels.c                    the kernels' lattice sums
+ *   density.c pressure.c viscosity.c surface_tension.c dfsph.c
+ *                                one file per system
+ *   simd.h                       the vocabulary the pair loops are written in
+ *
+ * A new pair pass (XSPH, say) is one new file plus the registry:
+ *   1. src/sph/xsph.c: its def, add function and step under
+ *      #ifndef EDDY_SIMD_VARIANT; the pair loop once, against simd.h, as
+ *      SIMD_NAME(xsph_pair_sums) outside it, over sph_shared's lists (nbr,
+ *      count) and quads (pq), picked in the step with SIMD_PICK. The Makefile
+ *      finds the file and builds its AVX2 variant (it includes "simd.h").
+ *   2. the registry: its vtable in systems.h, its def and add function in
+ *      eddy.h, its Lua binding; it declares that it requires sph_density
+ *      (whose sph_shared it reads). */
 #ifndef EDDY_SPH_H
 #define EDDY_SPH_H
 
@@ -37,69 +56,56 @@ static inline sph_kernel_consts sph_consts(float h)
 	return k;
 }
 
-/* Neighbour lists: particle i's fluid neighbours (itself excluded, r < h
- * exactly, in ascending index order) are nbr[i*cap .. i*cap + count[i]), its
- * boundary neighbours (r < h, ascending) bnbr[i*bcap .. i*bcap + bcount[i])
- * indexing the boundary arrays. Valid for the step in which sph_density built
- * them (the particle table is in that order, sorted by grid cell).
- *
- * Behind them, private to neighbors.c, a Verlet list: the pairs closer
- * than h (1 + skin) when it was last searched, in the indices of that time
- * ("build slots"), reused while no particle has moved more than half the
- * skin. The skin follows the motion (see SPH_SKIN), and is 0 while a list
- * would not outlive a few steps anyway (large implicit steps, an emitter
- * adding particles every step). It changes how fast the lists are made,
- * never what they hold. */
-typedef struct sph_neighbors {
-	size_t n, cap, bcap;
-	uint32_t *nbr, *count, *bnbr, *bcount;
-	size_t n_alloc, cap_alloc, bcap_alloc;
+/* Neighbour lists, made by sph_density every step (neighbors.c): particle
+ * i's fluid neighbours (itself excluded, r < h exactly, ascending index)
+ * are nbr[i*cap .. i*cap + count[i]), its boundary neighbours (r < h,
+ * ascending) bnbr[i*bcap .. i*bcap + bcount[i]), indexing the boundary
+ * arrays. Valid for the step that made them (the particle table is then in
+ * grid-cell order). The sub-structs are private to the search's files
+ * (neighbors.h); the passes read only the lists and the boundary arrays. */
 
-	/* sum_j (h^2 - r^2)^3 over the fluid neighbours and sum_b V_b rho_b
-	 * (h^2 - r^2)^3 over the boundary ones, made with the lists */
-	float *wsum, *bwsum;
+/* The cell grid (grid.c) */
+typedef struct sph_grid {
+	float ox, oy, oz;      /* m, the low corner of cell 0 */
+	float inv_cell;        /* 1/m, 1 / the cell size */
+	int gx, gy, gz;        /* cells along each axis, x fastest */
+	uint32_t *fluid_start; /* cells + 1: the rows of cell c are [fluid_start[c], fluid_start[c + 1]) */
+	uint32_t *bound_start; /* cells + 1: the same over the boundary particles in cell order */
+} sph_grid;
 
-	/* grid over the world bounds plus a margin of h, cell size h / 2: the
-	 * 5^3 cells around a particle hold 58% of the candidates of 3^3 cells of
-	 * size h, and 7^3 cover the Verlet radius */
-	float ox, oy, oz, inv;
-	int gx, gy, gz;
-	/* (cells + 1) fluid rows per cell, rows in cell order; made only when a
-	 * search runs or boundary particles exist (a table that stayed in cell
-	 * order skips it): private to sph_density, use the lists */
-	uint32_t *cell_start;
-	uint32_t *cell_of;    /* cell of each row (n_alloc) */
+/* The Verlet list (neighbors.c): the pairs closer than h (1 + skin) at the
+ * last search, in the rows of that time ("build slots"), reused while no
+ * particle has moved more than half the skin since. It changes how fast the
+ * exact lists are made, never what they hold. */
+typedef struct sph_verlet {
+	size_t n;                  /* particles at the search */
+	size_t stride, bstride;    /* candidates per build slot: fluid, boundary */
+	size_t cand_alloc, bcand_alloc;
+	uint32_t *cand, *count;    /* slot s's fluid candidates: cand[s*stride .. + count[s]) */
+	uint32_t *bcand, *bcount;  /* ... boundary candidates, ascending */
+	float *x, *y, *z;          /* m, each slot's position at the search */
+	uint32_t *slot_of, *row_of; /* build slot of each row, row of each build slot */
+	uint64_t boundary_sig;     /* the boundary systems at the search */
+	float skin;                /* 1, of h: this list's skin (see SPH_SKIN in neighbors.h) */
+	int age;                   /* steps since the search */
+	bool searched;             /* a search ran: x y z and slot_of hold it */
+	bool stored;               /* the candidates were kept (skin > 0): else the search wrote the exact lists */
+	bool rows_kept;            /* no particle has changed row since the search: row_of is the identity */
+	bool count_changed;        /* the search was forced by a new particle count */
+} sph_verlet;
 
-	/* the Verlet list (see above) */
-	size_t vn, vcap, vbcap, vcap_alloc, vbcap_alloc, v_alloc;
-	uint32_t *vnbr, *vcount, *vbnbr, *vbcount;
-	float *vx, *vy, *vz;             /* m, position of each build slot at the search */
-	uint32_t *slot_of, *now_of;       /* build slot of each row, row of each build slot */
-	uint64_t vbsig;                   /* boundary systems at the search */
-	bool vvalid, vsame; /* vsame: no particle has changed row since the search */
-	bool vlist;         /* the list was stored: a search without a skin makes the exact lists directly */
-	float skin;                       /* 1, of h: this list's skin (see SPH_SKIN) */
-	int age;                          /* steps since the search */
-	bool count_changed;               /* the search was forced by a new particle count */
-	int64_t searches;                 /* statistics: Verlet searches so far */
-
-	/* boundary particles: those of every sph_boundary_box first (static,
-	 * cell-sorted, nbs of them), then those of the colliders (moving with
-	 * them, in the order they were made: see sph_collider_points) */
-	size_t nb, nbs;
-	float *bx, *by, *bz, *bvol; /* m, m^3 (volume each boundary particle stands for) */
-	float *bp, *brho;           /* Pa, kg/m^3: extrapolated from the fluid each step */
-	uint32_t *bcell_start;      /* over the boundary particles in cell order at the last search */
-	uint64_t bsig; /* which boundary systems the arrays were built from */
-	/* With collider particles (nb > nbs), else NULL: */
-	uint32_t *border;           /* boundary indices in cell order at the last search */
-	float *blx, *bly, *blz;     /* m, collider particles in their collider's def pose */
-	float *bvx, *bvy, *bvz;     /* m/s, each boundary particle's velocity this step (0 for the static ones) */
-	/* 1/s, sum_b V_b rho0 v_b . grad W_spiky(x_i - x_b) per fluid row: the
-	 * rate of density change the moving walls add (sph_dfsph subtracts it
-	 * from v_i . B_i); NULL while every wall is at rest */
-	float *bdiv;
-	size_t bdiv_alloc;
+/* The boundary particles' private part (boundary.c): those of every
+ * sph_boundary_box first (static, cell-sorted, n_static of them), then
+ * those of the colliders, moving with them. */
+typedef struct sph_boundary {
+	size_t n_static;
+	float *rho;                 /* kg/m^3, EOS density for bp; in bp's block */
+	uint64_t sig;               /* the boundary systems the arrays were built from */
+	/* with collider particles (nbound > n_static), else NULL: */
+	uint32_t *order;            /* boundary indices in cell order at the last search */
+	float *x0, *y0, *z0;        /* m, collider particles in their collider's def pose */
+	float *vx, *vy, *vz;        /* m/s, each particle's velocity this step (0 for the static ones) */
+	size_t div_alloc;           /* bdiv's */
 	int ncol;
 	struct sph_collider_set {
 		int slot;            /* pipeline slot of the collider */
@@ -111,28 +117,39 @@ typedef struct sph_neighbors {
 		eddy_vec3 rot_at_search; /* degrees, ... at the last Verlet search */
 		float reach;         /* m, the farthest particle from the collider's pivot (bounds a rotation's sweep) */
 	} *col;
-	/* per collider, the offset seen at the previous step (velocity = its
-	 * change over the time since); part of sph_density's checkpointed
-	 * state, which is the block bp, brho, seen (bstate_size bytes) */
+	/* per collider, the pose seen at the previous step (velocity = its
+	 * change over the time since); with bp and rho the checkpointed block
+	 * of sph_density (state_size bytes from bp) */
 	struct sph_collider_seen {
 		float x, y, z, have; /* m; have = 1 once seen (floats: no padding in a checkpoint) */
 		float rx, ry, rz, unused; /* degrees, the rotation seen */
 		double time;         /* s */
 	} *seen;
-	size_t bstate_size;
-} sph_neighbors;
+	size_t state_size;
+} sph_boundary;
 
-/* Verlet skin as a fraction of h: larger means rarer searches but more
- * candidates to filter every step ((1 + skin)^3 of the exact list's). It is
- * sized from the motion per step seen at the last search, so that a list
- * should last SPH_SKIN_LIFE steps, within [SPH_SKIN_MIN, SPH_SKIN]; 0 when
- * even SPH_SKIN would not last SPH_SKIN_MIN_LIFE steps. */
-#define SPH_SKIN 0.2f
-#define SPH_SKIN_MIN 0.05f
-#define SPH_SKIN_LIFE 8
-#define SPH_SKIN_MIN_LIFE 3
-#define SPH_VERLET_CELLS 3 /* cells of h/2 the Verlet radius spans: ceil(2 (1 + SPH_SKIN)) */
-#define SPH_CELLS_PER_H 2
+typedef struct sph_neighbors {
+	/* the exact lists */
+	size_t n, cap, bcap;
+	uint32_t *nbr, *count, *bnbr, *bcount;
+	/* sum_j (h^2 - r^2)^3 over the fluid neighbours and sum_b V_b rho_b
+	 * (h^2 - r^2)^3 over the boundary ones, made with the lists */
+	float *wsum, *bwsum;
+	/* the boundary particles, nbound of them */
+	size_t nbound;
+	float *bx, *by, *bz, *bvol; /* m, m^3 (the volume each stands for) */
+	float *bp;                  /* Pa, extrapolated from the fluid each step */
+	/* 1/s, sum_b V_b rho0 v_b . grad W_spiky(x_i - x_b) per fluid row: the
+	 * rate of density change the moving walls add (sph_dfsph subtracts it
+	 * from v_i . B_i); NULL while every wall is at rest */
+	float *bdiv;
+
+	size_t rows_alloc, list_alloc, blist_alloc; /* private: allocated sizes */
+	uint32_t *cell_of;                          /* private: the cell of each row */
+	sph_grid grid;
+	sph_verlet verlet;
+	sph_boundary bnd;
+} sph_neighbors;
 
 /* What sph_density shares with the SPH systems after it. */
 typedef struct sph_shared {
@@ -154,15 +171,15 @@ const eddy_sph_density_def *eddy__sph_density_def(const eddy_system *s);
 /* The sph_density system nearest before system s in the pipeline, or NULL. */
 sph_shared *eddy__sph_find(eddy_world *w, const eddy_system *s);
 
-/* Builds the boundary particles (once per set of boundary systems). */
+/* Builds the boundary particles (once per set of boundary systems: boundary.c). */
 eddy_status eddy__sph_boundary_ready(eddy_world *w, sph_shared *sh);
 
 /* Builds the lists for the current particle table, reordering it by cell. */
 eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads);
 void eddy__sph_neighbors_free(sph_neighbors *nb);
 
-/* Boundary particle access for sph_density's builder. */
-/* With x == NULL only counts; h sets how many layers the shell has. */
+/* An sph_boundary_box's particles (boundary.c gathers them); with x == NULL
+ * only counts. h sets how many layers the shell has. */
 size_t eddy__sph_boundary_box_points(const eddy_system *s, float h, float *x, float *y, float *z, float *vol);
 /* s is an sph_boundary_box over exactly [min, max]. */
 bool eddy__sph_boundary_box_covers(const eddy_system *s, eddy_vec3 min, eddy_vec3 max);
@@ -209,6 +226,8 @@ static inline void sph_group_rows(const uint32_t *list, uint32_t cnt, uint32_t q
 		l[k] = g[last + ((k - last) & (0u - (uint32_t)(k < last)))];
 }
 
+/* ---- Left over from the passes' intrinsics (sph_dfsph until it is written
+ * against simd.h): delete with the last user. ---- */
 #ifdef __SSE2__
 /* Sum of the four lanes in a fixed order, (l0 + l1) + (l2 + l3): the passes
  * over neighbours keep four partial sums and end with this. */

@@ -1,0 +1,397 @@
+/* SPDX-License-Identifier: MIT */
+/* Boundary particles for the neighbour search: the walls of every
+ * sph_boundary_box and the colliders, as frozen fluid (Akinci, Ihmsen,
+ * Akinci, Solenthaler & Teschner, "Versatile rigid-fluid coupling for
+ * incompressible SPH", SIGGRAPH 2012).
+ *
+ * Reads: the pipeline's boundary systems and colliders. Writes: sph_neighbors'
+ * bx by bz bvol bp bdiv and its private sph_boundary.
+ *
+ * Those of the sph_boundary_box systems are static: gathered and cell-sorted
+ * once, and again only when the set of boundary systems changes (the
+ * signature). Those of the colliders follow them, made once in the
+ * collider's def pose (each collider file samples its own, see sph.h) and
+ * moved every step:
+ *   translating:  x_b = x_b0 + offset (a plane's patch only along its normal),
+ *                 v_b = (offset - offset seen last step) / time since
+ *                 (as sys_flip_boundary.c takes it);
+ *   rotating:     x_b = pivot + offset + R (x_b0 - pivot),
+ *                 v_b = v + omega x (x_b - pivot - offset), omega from the
+ *                 orientation seen last step over the time since.
+ * A moved set's displacement since the last Verlet search (for a rotating
+ * one bounded by the pivot's move plus its reach times the angle turned)
+ * counts in the search's displacement test like a particle's. At each search
+ * every boundary particle is cell-sorted anew (order), and each fluid
+ * particle's boundary hits are sorted by index, so the lists and sums do
+ * not depend on when the search ran; the seen poses are sph_density's
+ * checkpointed state, so a resumed run stays bit-identical.
+ * bdiv, the density change rate the moving walls add (Akinci et al. 2012,
+ * eq. 6 with the wall's velocity), is made here for sph_dfsph. */
+#include "neighbors.h"
+#include "systems.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+/* Which boundary systems there are: every sph_boundary_box and every
+ * collider (a collider without particles changes nothing but this). */
+static uint64_t boundary_signature(const eddy_world *w)
+{
+	uint64_t sig = 0x9E3779B97F4A7C15ull;
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS | EDDY_CAP_COLLIDER); (o = eddy__systems_next(&it));)
+		sig = (sig ^ ((uint64_t)(o - w->slots) << 16 | o->generation)) * 0x100000001b3ull;
+	return sig;
+}
+
+/* The fluid spacing: that of the sph_density that owns sh. */
+static float fluid_spacing(const eddy_world *w, const sph_shared *sh)
+{
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_NEIGHBORS); (o = eddy__systems_next(&it));)
+		if (o->vt->shared(o, EDDY_CAP_SPH_NEIGHBORS) == sh && eddy__sph_density_def(o))
+			return eddy__sph_density_def(o)->spacing;
+	return sh->h / 2;
+}
+
+void sph_boundary_free(sph_neighbors *nb)
+{
+	sph_boundary *bd = &nb->bnd;
+	free(nb->bx);
+	free(nb->by);
+	free(nb->bz);
+	free(nb->bvol);
+	free(nb->bp); /* rho and seen live in the same block */
+	free(nb->bdiv);
+	free(bd->order);
+	free(bd->x0); /* y0, z0 in the same block */
+	free(bd->vx); /* vy, vz in the same block */
+	free(bd->col);
+	nb->bx = nb->by = nb->bz = nb->bvol = nb->bp = nb->bdiv = NULL;
+	nb->nbound = 0;
+	memset(bd, 0, sizeof *bd);
+}
+
+static const eddy_collider_motion *collider_motion(const eddy_world *w, const struct sph_collider_set *cs)
+{
+	return &((const eddy_collider_base *)w->slots[cs->slot].data)->motion;
+}
+
+/* A rotating collider's particles (or one that rotated since it was last
+ * seen), placed by its whole pose. Returns the bound on the squared
+ * displacement of any of them since the search. */
+static float move_rotating(const eddy_world *w, sph_neighbors *nb, int c)
+{
+	sph_boundary *bd = &nb->bnd;
+	struct sph_collider_set *cs = &bd->col[c];
+	const eddy_collider_motion *m = collider_motion(w, cs);
+	const eddy_vec3 off = m->offset, rot = m->rotation;
+	if (off.x != cs->disp.x || off.y != cs->disp.y || off.z != cs->disp.z || rot.x != cs->rot.x ||
+	    rot.y != cs->rot.y || rot.z != cs->rot.z) {
+		const eddy_collider_pose pose = eddy__collider_pose(m);
+		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
+			const eddy_vec3 q = eddy__pose_to_world(&pose, eddy__v3(bd->x0[b], bd->y0[b], bd->z0[b]));
+			nb->bx[b] = q.x, nb->by[b] = q.y, nb->bz[b] = q.z;
+		}
+		cs->disp = off;
+		cs->rot = rot;
+	}
+	struct sph_collider_seen *sn = &bd->seen[c];
+	if (sn->have == 0 || w->time != sn->time) {
+		eddy_collider_velocity mv = {{0, 0, 0}, {0, 0, 0}, eddy__add3(m->pivot, off)};
+		if (sn->have != 0 && w->time > sn->time)
+			mv = eddy__collider_motion_since(m, eddy__v3(sn->x, sn->y, sn->z), eddy__v3(sn->rx, sn->ry, sn->rz),
+			                                 w->time - sn->time);
+		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
+			const eddy_vec3 v = eddy__rigid_velocity(&mv, eddy__v3(nb->bx[b], nb->by[b], nb->bz[b]));
+			bd->vx[b] = v.x, bd->vy[b] = v.y, bd->vz[b] = v.z;
+		}
+		*sn = (struct sph_collider_seen){off.x, off.y, off.z, 1, rot.x, rot.y, rot.z, 0, w->time};
+	}
+	const eddy_vec3 om = eddy__rotation_rate(cs->rot_at_search, rot, 1.0);
+	const float ex = off.x - cs->at_search.x, ey = off.y - cs->at_search.y, ez = off.z - cs->at_search.z;
+	const float ang = sqrtf(om.x * om.x + om.y * om.y + om.z * om.z);
+	const float m1 = sqrtf(ex * ex + ey * ey + ez * ez) + cs->reach * ang;
+	return m1 * m1;
+}
+
+/* A translating collider's particles. Returns their squared displacement
+ * since the search. */
+static float move_translating(const eddy_world *w, sph_neighbors *nb, int c)
+{
+	sph_boundary *bd = &nb->bnd;
+	struct sph_collider_set *cs = &bd->col[c];
+	const eddy_vec3 off = collider_motion(w, cs)->offset, n = cs->normal;
+	const bool plane = n.x != 0 || n.y != 0 || n.z != 0;
+	const float along = off.x * n.x + off.y * n.y + off.z * n.z;
+	const eddy_vec3 d = plane ? eddy__v3(along * n.x, along * n.y, along * n.z) : off;
+	if (d.x != cs->disp.x || d.y != cs->disp.y || d.z != cs->disp.z) {
+		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
+			nb->bx[b] = bd->x0[b] + d.x;
+			nb->by[b] = bd->y0[b] + d.y;
+			nb->bz[b] = bd->z0[b] + d.z;
+		}
+		cs->disp = d;
+	}
+	struct sph_collider_seen *sn = &bd->seen[c];
+	if (sn->have == 0 || w->time != sn->time) {
+		eddy_vec3 v = {0, 0, 0};
+		if (sn->have != 0 && w->time > sn->time) {
+			const float inv = (float)(1.0 / (w->time - sn->time));
+			v = eddy__v3((off.x - sn->x) * inv, (off.y - sn->y) * inv, (off.z - sn->z) * inv);
+			if (plane) {
+				const float vn = v.x * n.x + v.y * n.y + v.z * n.z;
+				v = eddy__v3(vn * n.x, vn * n.y, vn * n.z);
+			}
+		}
+		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
+			bd->vx[b] = v.x;
+			bd->vy[b] = v.y;
+			bd->vz[b] = v.z;
+		}
+		*sn = (struct sph_collider_seen){off.x, off.y, off.z, 1, 0, 0, 0, 0, w->time};
+	}
+	const float ex = d.x - cs->at_search.x, ey = d.y - cs->at_search.y, ez = d.z - cs->at_search.z;
+	return ex * ex + ey * ey + ez * ez;
+}
+
+/* Every collider's particles where their collider is now, with their
+ * velocities. Returns the largest squared displacement since the search. */
+float sph_boundary_move(const eddy_world *w, sph_neighbors *nb)
+{
+	float moved2 = 0;
+	for (int c = 0; c < nb->bnd.ncol; ++c) {
+		const struct sph_collider_set *cs = &nb->bnd.col[c];
+		const struct sph_collider_seen *sn = &nb->bnd.seen[c];
+		/* the rotating path also while a past rotation is still undone */
+		const bool rotating = eddy__motion_rotates(collider_motion(w, cs)) || sn->rx != 0 || sn->ry != 0 ||
+		                      sn->rz != 0 || cs->rot.x != 0 || cs->rot.y != 0 || cs->rot.z != 0 ||
+		                      cs->rot_at_search.x != 0 || cs->rot_at_search.y != 0 || cs->rot_at_search.z != 0;
+		const float m2 = rotating ? move_rotating(w, nb, c) : move_translating(w, nb, c);
+		moved2 = m2 > moved2 ? m2 : moved2;
+	}
+	return moved2;
+}
+
+/* The cell order of every boundary particle now, for a search (with
+ * collider particles only: the static ones are stored in cell order). */
+eddy_status sph_boundary_sort(eddy_world *w, sph_neighbors *nb)
+{
+	sph_boundary *bd = &nb->bnd;
+	if (!bd->order)
+		return EDDY_OK;
+	const size_t total = nb->nbound;
+	uint32_t *key = eddy__arena_alloc(&w->arena, (total ? total : 1) * sizeof *key);
+	if (!key)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", total);
+	for (size_t i = 0; i < total; ++i)
+		key[i] = sph_cell_at(&nb->grid, nb->bx[i], nb->by[i], nb->bz[i]);
+	sph_counting_sort(key, total, sph_grid_cells(&nb->grid), nb->grid.bound_start, bd->order);
+	for (int c = 0; c < bd->ncol; ++c) {
+		bd->col[c].at_search = bd->col[c].disp;
+		bd->col[c].rot_at_search = bd->col[c].rot;
+	}
+	return EDDY_OK;
+}
+
+/* How many particles the boundary boxes and the colliders give. */
+static void boundary_count(const eddy_world *w, const sph_shared *sh, float spacing, size_t *nstat, size_t *ncolp,
+                           size_t *ncol)
+{
+	eddy_vec3 normal;
+	*nstat = *ncolp = *ncol = 0;
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS | EDDY_CAP_COLLIDER); (o = eddy__systems_next(&it));) {
+		if (o->vt->provides & EDDY_CAP_SPH_WALLS)
+			*nstat += eddy__sph_boundary_box_points(o, sh->h, NULL, NULL, NULL, NULL);
+		else {
+			const size_t c = eddy__sph_collider_points(w, o, spacing, sh->h, NULL, NULL, NULL, NULL, &normal);
+			*ncolp += c;
+			*ncol += c > 0;
+		}
+	}
+}
+
+/* The arrays for total particles, ncol of them moving colliders' sets. */
+static bool boundary_alloc(sph_neighbors *nb, size_t total, size_t ncol)
+{
+	sph_boundary *bd = &nb->bnd;
+	const size_t alloc = total ? total : 1;
+	/* one block: bp, rho, then each collider's seen pose, sph_density's
+	 * checkpointed state (after 2 total floats the records are 8-byte
+	 * aligned: with colliders, alloc = total) */
+	bd->state_size = 2 * total * sizeof *nb->bp + ncol * sizeof *bd->seen;
+	nb->bp = calloc(1, 2 * alloc * sizeof *nb->bp + ncol * sizeof *bd->seen);
+	bd->rho = nb->bp ? nb->bp + alloc : NULL;
+	bd->seen = nb->bp && ncol ? (struct sph_collider_seen *)(void *)(nb->bp + 2 * alloc) : NULL;
+	/* positions padded by three for the search's groups of four */
+	nb->bx = malloc((alloc + 3) * sizeof *nb->bx);
+	nb->by = malloc((alloc + 3) * sizeof *nb->by);
+	nb->bz = malloc((alloc + 3) * sizeof *nb->bz);
+	nb->bvol = malloc(alloc * sizeof *nb->bvol);
+	if (!nb->bp || !nb->bx || !nb->by || !nb->bz || !nb->bvol)
+		return false;
+	for (size_t i = total; i < total + 3; ++i)
+		nb->bx[i] = nb->by[i] = nb->bz[i] = 0; /* read, always masked */
+	if (!ncol)
+		return true;
+	bd->order = malloc(alloc * sizeof *bd->order);
+	bd->x0 = malloc(3 * alloc * sizeof *bd->x0);
+	bd->vx = calloc(3 * alloc, sizeof *bd->vx);
+	bd->col = calloc(ncol, sizeof *bd->col);
+	if (!bd->order || !bd->x0 || !bd->vx || !bd->col)
+		return false;
+	bd->y0 = bd->x0 + alloc;
+	bd->z0 = bd->y0 + alloc;
+	bd->vy = bd->vx + alloc;
+	bd->vz = bd->vy + alloc;
+	return true;
+}
+
+/* The boundary boxes' particles, cell-sorted, into [0, nstat). */
+static bool boundary_fill_static(eddy_world *w, sph_shared *sh, size_t nstat)
+{
+	sph_neighbors *nb = &sh->nb;
+	const size_t alloc = nstat ? nstat : 1;
+	/* one block: x y z vol as floats, key order as indices */
+	float *x = malloc(6 * alloc * sizeof *x);
+	if (!x)
+		return false;
+	float *y = x + alloc, *z = y + alloc, *v = z + alloc;
+	uint32_t *key = (uint32_t *)(void *)(v + alloc), *order = key + alloc;
+	size_t at = 0;
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS); (o = eddy__systems_next(&it));)
+		at += eddy__sph_boundary_box_points(o, sh->h, x + at, y + at, z + at, v + at);
+	for (size_t i = 0; i < nstat; ++i)
+		key[i] = sph_cell_at(&nb->grid, x[i], y[i], z[i]);
+	sph_counting_sort(key, nstat, sph_grid_cells(&nb->grid), nb->grid.bound_start, order);
+	for (size_t i = 0; i < nstat; ++i) {
+		nb->bx[i] = x[order[i]];
+		nb->by[i] = y[order[i]];
+		nb->bz[i] = z[order[i]];
+		nb->bvol[i] = v[order[i]];
+	}
+	free(x);
+	return true;
+}
+
+/* The colliders' particles after the static ones, in pipeline order, each
+ * set in its collider's def pose. */
+static eddy_status boundary_fill_colliders(eddy_world *w, sph_shared *sh, float spacing)
+{
+	sph_neighbors *nb = &sh->nb;
+	sph_boundary *bd = &nb->bnd;
+	size_t at = bd->n_static;
+	eddy_vec3 normal;
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_COLLIDER); (o = eddy__systems_next(&it));) {
+		const size_t want = eddy__sph_collider_points(w, o, spacing, sh->h, NULL, NULL, NULL, NULL, &normal);
+		if (!want)
+			continue;
+		const size_t got =
+			eddy__sph_collider_points(w, o, spacing, sh->h, bd->x0 + at, bd->y0 + at, bd->z0 + at, nb->bvol + at, &normal);
+		if (got != want)
+			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for the boundary particles of %s", o->label);
+		struct sph_collider_set *cs = &bd->col[bd->ncol++];
+		*cs = (struct sph_collider_set){.slot = (int)(o - w->slots), .first = at, .count = got, .normal = normal};
+		cs->disp = eddy__v3(NAN, NAN, NAN); /* placed by sph_boundary_move */
+		const eddy_vec3 pv = ((const eddy_collider_base *)o->data)->motion.pivot;
+		for (size_t b = at; b < at + got; ++b) {
+			const float dx = bd->x0[b] - pv.x, dy = bd->y0[b] - pv.y, dz = bd->z0[b] - pv.z;
+			cs->reach = fmaxf(cs->reach, sqrtf(dx * dx + dy * dy + dz * dz));
+		}
+		at += got;
+	}
+	return EDDY_OK;
+}
+
+/* The boundary particles of the pipeline's boundary systems, made again
+ * only when they change. */
+eddy_status sph_boundary_build(eddy_world *w, sph_shared *sh)
+{
+	sph_neighbors *nb = &sh->nb;
+	const uint64_t sig = boundary_signature(w);
+	if (sig == nb->bnd.sig && nb->bx)
+		return EDDY_OK;
+	const float spacing = fluid_spacing(w, sh);
+	size_t nstat, ncolp, ncol;
+	boundary_count(w, sh, spacing, &nstat, &ncolp, &ncol);
+	/* a plane's patch spans the world bounds: 5e7 particles is about 2 GB */
+	if ((double)ncolp > 5e7)
+		return eddy__fail(w, EDDY_ERR_NOMEM,
+		                  "sph_density: the colliders need %.0f boundary particles (at most 5e7); shrink the world "
+		                  "bounds or the colliders, or use a larger spacing",
+		                  (double)ncolp);
+	const size_t total = nstat + ncolp;
+	sph_boundary_free(nb);
+	if (!boundary_alloc(nb, total, ncol) || !boundary_fill_static(w, sh, nstat)) {
+		sph_boundary_free(nb);
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu boundary particles", total);
+	}
+	nb->bnd.n_static = nstat;
+	if (ncol) {
+		const eddy_status st = boundary_fill_colliders(w, sh, spacing);
+		if (st != EDDY_OK) {
+			sph_boundary_free(nb);
+			return st;
+		}
+	}
+	for (size_t i = 0; i < total; ++i)
+		nb->bnd.rho[i] = sh->rho0;
+	nb->nbound = total;
+	if (nb->bnd.ncol) {
+		sph_boundary_move(w, nb);
+		for (size_t i = 0; i < total; ++i)
+			nb->bnd.order[i] = (uint32_t)i; /* the first search sorts them */
+	}
+	nb->bnd.sig = sig;
+	return EDDY_OK;
+}
+
+eddy_status eddy__sph_boundary_ready(eddy_world *w, sph_shared *sh)
+{
+	eddy_status st = sph_grid_init(w, &sh->nb.grid, sh->h);
+	return st == EDDY_OK ? sph_boundary_build(w, sh) : st;
+}
+
+/* nb->bdiv: sum_b V_b rho0 v_b . grad W_spiky(x_i - x_b) per row, with
+ * sph_dfsph's kernel gradient and cut-offs; NULL while no wall moves. */
+eddy_status sph_boundary_divergence(eddy_world *w, sph_shared *sh, int threads)
+{
+	sph_neighbors *nb = &sh->nb;
+	const sph_boundary *bd = &nb->bnd;
+	bool moving = false;
+	for (size_t b = bd->n_static; b < nb->nbound && !moving; ++b)
+		moving = bd->vx[b] != 0 || bd->vy[b] != 0 || bd->vz[b] != 0;
+	if (!moving || !sh->pq) {
+		free(nb->bdiv);
+		nb->bdiv = NULL;
+		nb->bnd.div_alloc = 0;
+		return EDDY_OK;
+	}
+	const size_t n = nb->n;
+	if (!sph_grow((void **)&nb->bdiv, &nb->bnd.div_alloc, n, sizeof *nb->bdiv))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
+	const float h = sh->k.h, eps2 = 1e-6f * sh->k.h2, c0 = sh->rho0 * sh->k.spiky_grad;
+	const float *p4 = sh->pq;
+	const long ln = (long)n;
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (long i = 0; i < ln; ++i) {
+		const uint32_t *bl = nb->bnbr + (size_t)i * nb->bcap;
+		float u = 0;
+		for (uint32_t q = 0; q < nb->bcount[i]; ++q) {
+			const uint32_t b = bl[q];
+			if (b < bd->n_static)
+				continue; /* at rest */
+			const float rx = p4[4 * i] - nb->bx[b], ry = p4[4 * i + 1] - nb->by[b], rz = p4[4 * i + 2] - nb->bz[b];
+			const float r2 = rx * rx + ry * ry + rz * rz, r = sqrtf(r2), hr = h - r;
+			if (!(r2 > eps2 && hr > 0))
+				continue;
+			const float c = nb->bvol[b] * c0 * hr * hr / r;
+			u += c * (rx * bd->vx[b] + ry * bd->vy[b] + rz * bd->vz[b]);
+		}
+		nb->bdiv[i] = u;
+	}
+	return EDDY_OK;
+}

@@ -1,0 +1,338 @@
+/* SPDX-License-Identifier: MIT */
+/* The grid search: every pair closer than sqrt(r2max), fluid-fluid and
+ * fluid-boundary, into the Verlet list or (exact mode) straight into the
+ * exact lists and kernel sums.
+ *
+ * It works on blocks of SEARCH_BX x SEARCH_BY x SEARCH_BZ cells (about 16
+ * particles in a fluid at cells of h/2). The particles of a block share
+ * their candidates: the runs of cells around the block (x fastest: the
+ * cells of one row along x are one contiguous stretch of rows) are gathered
+ * once, in cell order, into one buffer. Each particle of the block then
+ * tests the stretch of the buffer within its own z layers, eight at a time,
+ * and packs its hits without a branch. The table is in cell order and the
+ * buffer is gathered in cell order, so a particle's fluid hits come in
+ * ascending row order; its boundary hits are sorted by index when collider
+ * particles make the cells' boundary order differ from the index order.
+ *
+ * The same tests, in the same operation order, as neighbors.c's filter, and
+ * the sums in sph_cube_sum's order: an exact-mode search gives the same bits
+ * as a Verlet search followed by the filter. Every particle writes only its
+ * own lists, so they are the same for any thread count.
+ *
+ * The pair test is written once against simd.h; this file is compiled once
+ * more as the AVX2 variant, which sees only the kernel (search_block). */
+#include "neighbors.h"
+#include "simd.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#define SEARCH_BX 4
+#define SEARCH_BY 2
+#define SEARCH_BZ 2
+/* the most runs around a block and the most z layers searched for it */
+#define SEARCH_RUNS ((2 * SPH_VERLET_CELLS + SEARCH_BY) * (2 * SPH_VERLET_CELLS + SEARCH_BZ))
+#define SEARCH_LAYERS (2 * SPH_VERLET_CELLS + SEARCH_BZ)
+#define FAR 1e30f /* a coordinate no particle is near: padding, and a particle's own entry on its turn */
+
+/* What every block reads. */
+typedef struct search_ctx {
+	const sph_neighbors *nb;
+	const sph_search_out *out;
+	const float *x, *y, *z;
+	const uint32_t *bound_order; /* the boundary particles in cell order (NULL: they are stored in it) */
+	int R;                       /* cells searched beyond the block's on each side */
+	/* reach[a][b]: the cells along x a run at cell offsets (a, b) in (y, z)
+	 * from the block needs on each side, -1 for none */
+	int reach[SPH_VERLET_CELLS + 1][SPH_VERLET_CELLS + 1];
+	int blocks_x, blocks_y;
+} search_ctx;
+
+/* One thread's buffers: a block's gathered candidates (padded by eight
+ * FAR points, so groups of eight need no tail) and one particle's hits. */
+typedef struct search_buf {
+	size_t cap;
+	float *x, *y, *z, *d;
+	uint32_t *j, *hit;
+} search_buf;
+
+/* One row of cells along x around a block. */
+typedef struct cell_run {
+	uint32_t fluid_begin, fluid_end; /* rows */
+	uint32_t bound_begin, bound_end; /* positions in the boundary cell order */
+	uint32_t own_cell;               /* the block's first cell in this row, NO_CELL if not the block's */
+	uint32_t layer;                  /* the row's z layer, 0 = the lowest searched */
+} cell_run;
+#define NO_CELL UINT32_MAX
+
+/* A block's runs and where they landed in the buffers. */
+typedef struct block_runs {
+	int x0, x1, y0, y1, z0, z1; /* the block's cells, inclusive */
+	int count;
+	cell_run run[SEARCH_RUNS];
+	uint32_t fluid_at[SEARCH_RUNS];                             /* buffer offset of each run's rows */
+	uint32_t fluid_layer[SEARCH_LAYERS + 1], bound_layer[SEARCH_LAYERS + 1]; /* buffer offset of each z layer */
+} block_runs;
+
+static bool search_buf_grow(search_buf *b, size_t want)
+{
+	want += 8;
+	if (want <= b->cap)
+		return true;
+	size_t cap = b->cap ? b->cap : 256;
+	while (cap < want)
+		cap *= 2;
+	/* one block: x y z d as floats, j hit as indices (both 4 bytes) */
+	float *m = realloc(b->x, 6 * cap * sizeof *m);
+	if (!m)
+		return false;
+	*b = (search_buf){cap, m, m + cap, m + 2 * cap, m + 3 * cap, (uint32_t *)(void *)(m + 4 * cap),
+	                  (uint32_t *)(void *)(m + 5 * cap)};
+	return true;
+}
+
+/* The runs of cells around block id, in cell order, with their row ranges;
+ * *nf, *nbd: the fluid and boundary candidates they hold. */
+static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br, size_t *nf, size_t *nbd)
+{
+	const sph_grid *g = &c->nb->grid;
+	const int R = c->R, bxi = (int)(id % (uint32_t)c->blocks_x), byi = (int)(id / (uint32_t)c->blocks_x % (uint32_t)c->blocks_y),
+	          bzi = (int)(id / ((uint32_t)c->blocks_x * (uint32_t)c->blocks_y));
+	br->x0 = bxi * SEARCH_BX, br->x1 = br->x0 + SEARCH_BX - 1 < g->gx ? br->x0 + SEARCH_BX - 1 : g->gx - 1;
+	br->y0 = byi * SEARCH_BY, br->y1 = br->y0 + SEARCH_BY - 1 < g->gy ? br->y0 + SEARCH_BY - 1 : g->gy - 1;
+	br->z0 = bzi * SEARCH_BZ, br->z1 = br->z0 + SEARCH_BZ - 1 < g->gz ? br->z0 + SEARCH_BZ - 1 : g->gz - 1;
+	br->count = 0;
+	*nf = *nbd = 0;
+	for (int zz = br->z0 - R; zz <= br->z1 + R; ++zz) {
+		if (zz < 0 || zz >= g->gz)
+			continue;
+		const int ez = zz < br->z0 ? br->z0 - zz : zz > br->z1 ? zz - br->z1 : 0;
+		for (int yy = br->y0 - R; yy <= br->y1 + R; ++yy) {
+			const int ey = yy < br->y0 ? br->y0 - yy : yy > br->y1 ? yy - br->y1 : 0, ext = c->reach[ey][ez];
+			if (yy < 0 || yy >= g->gy || ext < 0)
+				continue;
+			const int x0 = br->x0 >= ext ? br->x0 - ext : 0, x1 = br->x1 < g->gx - ext ? br->x1 + ext : g->gx - 1;
+			const size_t row = ((size_t)zz * (size_t)g->gy + (size_t)yy) * (size_t)g->gx;
+			cell_run *r = &br->run[br->count++];
+			r->fluid_begin = g->fluid_start[row + (size_t)x0];
+			r->fluid_end = g->fluid_start[row + (size_t)x1 + 1];
+			r->bound_begin = g->bound_start[row + (size_t)x0];
+			r->bound_end = g->bound_start[row + (size_t)x1 + 1];
+			r->own_cell = ey == 0 && ez == 0 ? (uint32_t)(row + (size_t)br->x0) : NO_CELL;
+			r->layer = (uint32_t)(zz - (br->z0 - R));
+			*nf += r->fluid_end - r->fluid_begin;
+			*nbd += r->bound_end - r->bound_begin;
+		}
+	}
+}
+
+/* The runs' candidates into the buffers, with the offsets of each run and
+ * of each z layer (a particle needs only the 2R + 1 layers around its own:
+ * one stretch of the buffer), then the FAR padding. */
+static void block_gather(const search_ctx *c, block_runs *br, search_buf *fb, search_buf *bb)
+{
+	const sph_neighbors *nb = c->nb;
+	uint32_t nf = 0, nbd = 0;
+	int layer = 0;
+	for (int r = 0; r < br->count; ++r) {
+		const cell_run *run = &br->run[r];
+		for (; layer <= (int)run->layer; ++layer) {
+			br->fluid_layer[layer] = nf;
+			br->bound_layer[layer] = nbd;
+		}
+		br->fluid_at[r] = nf;
+		for (uint32_t j = run->fluid_begin; j < run->fluid_end; ++j, ++nf) {
+			fb->x[nf] = c->x[j];
+			fb->y[nf] = c->y[j];
+			fb->z[nf] = c->z[j];
+			fb->j[nf] = j;
+		}
+		for (uint32_t q = run->bound_begin; q < run->bound_end; ++q, ++nbd) {
+			const uint32_t jb = c->bound_order ? c->bound_order[q] : q;
+			bb->x[nbd] = nb->bx[jb];
+			bb->y[nbd] = nb->by[jb];
+			bb->z[nbd] = nb->bz[jb];
+			bb->j[nbd] = jb;
+		}
+	}
+	for (; layer <= 2 * c->R + br->z1 - br->z0 + 1; ++layer) {
+		br->fluid_layer[layer] = nf;
+		br->bound_layer[layer] = nbd;
+	}
+	for (uint32_t q = 0; q < 8; ++q) {
+		fb->x[nf + q] = fb->y[nf + q] = fb->z[nf + q] = FAR;
+		fb->j[nf + q] = 0;
+		bb->x[nbd + q] = bb->y[nbd + q] = bb->z[nbd + q] = FAR;
+		bb->j[nbd + q] = 0;
+	}
+}
+
+/* Sorts hits (and their d) by index: insertion, a particle has a few dozen
+ * boundary neighbours at most, nearly in order. */
+static void sort_hits(uint32_t *hit, float *d, uint32_t cnt)
+{
+	for (uint32_t a = 1; a < cnt; ++a) {
+		const uint32_t j = hit[a];
+		const float dj = d[a];
+		uint32_t k = a;
+		for (; k > 0 && hit[k - 1] > j; --k) {
+			hit[k] = hit[k - 1];
+			d[k] = d[k - 1];
+		}
+		hit[k] = j;
+		d[k] = dj;
+	}
+}
+
+/* ---- the kernel (also compiled as the AVX2 variant) ---- */
+
+/* The candidates b[q0..q1) with r2max - r^2 > 0, in order, into b->hit and
+ * b->d; returns how many. The last group reads past q1 (into the padding)
+ * and is masked to q1. */
+static inline uint32_t hits(search_buf *b, uint32_t q0, uint32_t q1, float xi, float yi, float zi, float r2max)
+{
+	const sf8 vx = sf8_set1(xi), vy = sf8_set1(yi), vz = sf8_set1(zi), vr2 = sf8_set1(r2max), zero = sf8_zero();
+	uint32_t cnt = 0;
+	for (uint32_t q = q0; q < q1; q += 8) {
+		const sf8 rx = sf8_sub(vx, sf8_load(b->x + q)), ry = sf8_sub(vy, sf8_load(b->y + q)),
+		          rz = sf8_sub(vz, sf8_load(b->z + q));
+		const sf8 d = sf8_sub(vr2, sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz)));
+		const sf8 in = sf8_and(sf8_gt(d, zero), sf8_lanes_below(q1 - q));
+		cnt += sf8_pack(in, d, b->j + q, b->d + cnt, b->hit + cnt);
+	}
+	return cnt;
+}
+
+/* Particle i of run r: its hits into its lists (and, exact, its sums). */
+static void search_particle(const search_ctx *c, const block_runs *br, int r, uint32_t i, search_buf *fb,
+                            search_buf *bb, uint32_t *mf, uint32_t *mb)
+{
+	const sph_search_out *o = c->out;
+	const cell_run *run = &br->run[r];
+	const float xi = c->x[i], yi = c->y[i], zi = c->z[i];
+	/* not itself: its own entry is moved away for its turn */
+	const uint32_t self = br->fluid_at[r] + (i - run->fluid_begin);
+	fb->x[self] = FAR;
+	const uint32_t l0 = run->layer - (uint32_t)c->R, l1 = run->layer + (uint32_t)c->R + 1;
+	const uint32_t cnt = hits(fb, br->fluid_layer[l0], br->fluid_layer[l1], xi, yi, zi, o->r2max);
+	const uint32_t bcnt = hits(bb, br->bound_layer[l0], br->bound_layer[l1], xi, yi, zi, o->r2max);
+	fb->x[self] = xi;
+	if (c->bound_order)
+		sort_hits(bb->hit, bb->d, bcnt);
+	if (cnt <= o->stride)
+		memcpy(o->list + (size_t)i * o->stride, fb->hit, cnt * sizeof *fb->hit);
+	if (bcnt <= o->bstride)
+		memcpy(o->blist + (size_t)i * o->bstride, bb->hit, bcnt * sizeof *bb->hit);
+	o->count[i] = cnt;
+	o->bcount[i] = bcnt;
+	if (o->exact) {
+		c->nb->wsum[i] = sph_cube_sum(fb->d, cnt);
+		c->nb->bwsum[i] = sph_boundary_sum(c->nb, bb->hit, bb->d, bcnt);
+	}
+	*mf = cnt > *mf ? cnt : *mf;
+	*mb = bcnt > *mb ? bcnt : *mb;
+}
+
+SIMD_DECLARE(bool, search_block,
+             (const search_ctx *c, uint32_t id, search_buf *fb, search_buf *bb, uint32_t *mf, uint32_t *mb));
+
+/* Block id: gather its candidates, search for each of its particles.
+ * False when out of memory. */
+bool SIMD_NAME(search_block)(const search_ctx *c, uint32_t id, search_buf *fb, search_buf *bb, uint32_t *mf,
+                             uint32_t *mb)
+{
+	block_runs br;
+	size_t nf, nbd;
+	block_find_runs(c, id, &br, &nf, &nbd);
+	if (!search_buf_grow(fb, nf) || !search_buf_grow(bb, nbd))
+		return false;
+	block_gather(c, &br, fb, bb);
+	const uint32_t *start = c->nb->grid.fluid_start;
+	for (int r = 0; r < br.count; ++r) {
+		const uint32_t own = br.run[r].own_cell;
+		if (own == NO_CELL)
+			continue;
+		const uint32_t end = start[own + (uint32_t)(br.x1 - br.x0) + 1];
+		for (uint32_t i = start[own]; i < end; ++i)
+			search_particle(c, &br, r, i, fb, bb, mf, mb);
+	}
+	return true;
+}
+
+#ifndef EDDY_SIMD_VARIANT
+
+static int cmp_u32(const void *a, const void *b)
+{
+	const uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+	return (x > y) - (x < y);
+}
+
+/* reach[a][b] for r2max: a cell k cells away is at least (k - 1) cells of
+ * h/2 from the particle, so the block's far corners are skipped. */
+static void reach_table(search_ctx *c, float r2max)
+{
+	const double rs2 = 1.001 * (double)r2max * (double)c->nb->grid.inv_cell * (double)c->nb->grid.inv_cell; /* in cells^2, 0.1% for rounding */
+	for (int a = 0; a <= c->R; ++a)
+		for (int b = 0; b <= c->R; ++b) {
+			const double ey = a > 0 ? a - 1 : 0, ez = b > 0 ? b - 1 : 0, rem = rs2 - ey * ey - ez * ez;
+			int k = -1;
+			if (rem > 0) /* x offsets k with (k - 1)^2 < rem */
+				for (k = 0; k < c->R && (double)k * k < rem; ++k)
+					;
+			c->reach[a][b] = k;
+		}
+}
+
+/* The blocks that hold particles, ascending, into ids; returns how many. */
+static long occupied_blocks(const sph_neighbors *nb, size_t n, int blocks_x, int blocks_y, uint32_t *ids)
+{
+	const uint32_t gx = (uint32_t)nb->grid.gx, gy = (uint32_t)nb->grid.gy;
+	long blocks = 0;
+	uint32_t prev = UINT32_MAX;
+	/* one id per stretch of rows in one row of cells and one block, then unique */
+	for (size_t i = 0; i < n; ++i) {
+		const uint32_t cell = nb->cell_of[i], cx = cell % gx, cy = cell / gx % gy, cz = cell / (gx * gy);
+		const uint32_t id = (cz / SEARCH_BZ * (uint32_t)blocks_y + cy / SEARCH_BY) * (uint32_t)blocks_x + cx / SEARCH_BX;
+		if (id != prev)
+			ids[blocks++] = id;
+		prev = id;
+	}
+	qsort(ids, (size_t)blocks, sizeof *ids, cmp_u32);
+	long unique = 0;
+	for (long k = 0; k < blocks; ++k)
+		if (k == 0 || ids[k] != ids[unique - 1])
+			ids[unique++] = ids[k];
+	return unique;
+}
+
+bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int threads, uint32_t *max_f,
+                uint32_t *max_b)
+{
+	search_ctx c = {.nb = nb, .out = out, .bound_order = nb->bnd.order, .R = out->exact ? SPH_CELLS_PER_H : SPH_VERLET_CELLS};
+	c.x = eddy__col(w, COL_X_), c.y = eddy__col(w, COL_Y_), c.z = eddy__col(w, COL_Z_);
+	c.blocks_x = (nb->grid.gx + SEARCH_BX - 1) / SEARCH_BX;
+	c.blocks_y = (nb->grid.gy + SEARCH_BY - 1) / SEARCH_BY;
+	reach_table(&c, out->r2max);
+	uint32_t *ids = eddy__arena_alloc(&w->arena, (w->n + 1) * sizeof *ids);
+	if (!ids)
+		return false;
+	const long blocks = occupied_blocks(nb, w->n, c.blocks_x, c.blocks_y, ids);
+	bool (*const block)(const search_ctx *, uint32_t, search_buf *, search_buf *, uint32_t *, uint32_t *) =
+		SIMD_PICK(search_block);
+	uint32_t mf = 0, mb = 0;
+	bool ok = true;
+#pragma omp parallel num_threads(threads) reduction(max : mf, mb) reduction(&& : ok)
+	{
+		search_buf fb = {0}, bb = {0};
+#pragma omp for schedule(dynamic, 8)
+		for (long k = 0; k < blocks; ++k)
+			ok = ok && block(&c, ids[k], &fb, &bb, &mf, &mb);
+		free(fb.x);
+		free(bb.x);
+	}
+	*max_f = mf;
+	*max_b = mb;
+	return ok;
+}
+
+#endif
