@@ -99,11 +99,8 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	size_t used = 0;
 	/* the solids now (after the colliders moved): a cut cell's fair share is
 	 * min_per_cell times its open fraction, and no particle is placed inside */
-	float margin = 0;
 	flip_solid sd;
-	memset(&sd, 0, sizeof sd);
-	const eddy_vec3 *svel = NULL;
-	if (eddy__flip_boundary_info(w, &margin, &svel) && !eddy__flip_solid_faces(w, ctx->dt, margin, svel, &sd))
+	if (!eddy__flip_solid_for(w, s, ctx->dt, &sd))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_reseed: out of memory");
 	const double h = w->def.cell_size;
 	const flip_grid grid = flip_grid_of(w);
@@ -112,7 +109,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 		for (int j = 1; j < ny - 1; ++j)
 			for (int i = 1; i < nx - 1; ++i) {
 				const size_t c = flip_cell(w, i, j, k);
-				const double share = sd.any ? (double)sd.open[c] : 1.0;
+				const double share = sd.any ? (double)flip_solid_open(&sd, c) : 1.0;
 				if (type[c] != EDDY_CELL_FLUID || share < 1 || count[c] >= rs->def.min_per_cell)
 					continue; /* cut cells are skipped: their open part is uncertain to a cell */
 				const size_t sx = 1, sy = (size_t)nx, sz = (size_t)nx * ny;

@@ -158,7 +158,8 @@ static int child_block(const char *method, long n, int threads, int steps)
 	}
 	const double t0 = now_ms();
 	for (int s = 0; s < 2; ++s)
-		if (eddy_world_step(w) != EDDY_OK) {
+		if (getenv("EDDY_SCALE_COLUMNS") && fprintf(stderr, "peak RSS before step %d: %.1f MB\n", s, (double)maxrss_kb() / 1e3) < 0) {
+		} else if (eddy_world_step(w) != EDDY_OK) {
 			fprintf(stderr, "bench_scale: %s %ld: %s\n", method, n, eddy_world_error(w));
 			return 1;
 		}
