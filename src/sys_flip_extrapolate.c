@@ -49,61 +49,89 @@ static inline void face_coords(size_t f, const size_t st[3], int m1, bool small,
 	}
 }
 
-/* Layer flags are read by neighbouring threads while their own face turns
- * from UNKNOWN to l, both of which fail "< l": the outcome does not depend
- * on which one a reader sees, and relaxed atomics make that read defined. */
-static inline uint8_t layer_get(const uint8_t *layer, size_t f)
+/* Face f's value from its neighbours known before layer l (flag < l), in
+ * the order -x, +x, -y, +y, -z, +z; false when it has none. Summed in
+ * double: equal neighbours give exactly their value (in float, (v + v + v)
+ * / 3 need not be v), so a uniform field extrapolates to itself and G2P's
+ * FLIP delta stays exactly 0. */
+static inline bool face_average(const float *u, const uint8_t *layer, const int m[3], const size_t st[3], const int c[3],
+                                size_t f, int l, float *out)
 {
-	return __atomic_load_n(&layer[f], __ATOMIC_RELAXED);
+	double sum = 0;
+	int cnt = 0;
+	for (int d = 0; d < 3; ++d) {
+		if (c[d] > 0 && layer[f - st[d]] < l) {
+			sum += (double)u[f - st[d]];
+			cnt++;
+		}
+		if (c[d] + 1 < m[d] && layer[f + st[d]] < l) {
+			sum += (double)u[f + st[d]];
+			cnt++;
+		}
+	}
+	if (cnt)
+		*out = (float)(sum / cnt);
+	return cnt > 0;
 }
 
 /* One face grid: m faces per axis (strides st), layer flags (0 known,
- * UNKNOWN). Layer l: every unknown face with a neighbour known before it
- * (flag < l) takes their average and flag l. A face's value reads only faces
- * of earlier layers, which this pass does not write, so the faces of a layer
- * are independent: the pass runs on all threads in z slabs with the same
- * result on any thread count (and as the serial frontier sweep this
- * replaces: its layer l was the unknown faces next to layer l - 1, the same
- * set, averaged in the same neighbour order). A full sweep per layer costs a
- * byte per face; the frontier lists it replaces cost 16 bytes per face. */
-static void extrapolate_grid(float *u, uint8_t *layer, const int m[3], const size_t st[3], int layers, int nt)
+ * UNKNOWN), hit: a byte per face. Layer l: every unknown face with a
+ * neighbour known before it (flag < l) takes their average and flag l.
+ * A pass reads flags and known values and writes only the values of this
+ * layer's faces (unknown until the pass ends, so no one reads them) and
+ * their hit bytes; the flags are set in a second pass. Both run on all
+ * threads in z slabs, each face one thread's: the same result on any thread
+ * count (and as the serial frontier sweep this replaces: its layer l was the
+ * unknown faces next to layer l - 1, the same set, averaged in the same
+ * neighbour order). A row inside the grid is tested branch-free, which the
+ * compiler vectorises: a sweep costs about a byte load per face and
+ * neighbour, and no frontier list (16 bytes per face) is kept. */
+static void extrapolate_grid(float *u, uint8_t *restrict layer, uint8_t *restrict hit, const int m[3],
+                             const size_t st[3], int layers, int nt)
 {
 	for (int l = 1; l <= layers; ++l) {
 		long filled = 0;
+		const uint8_t lb = (uint8_t)l;
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(+ : filled)
 		for (int k = 0; k < m[2]; ++k)
 			for (int j = 0; j < m[1]; ++j) {
 				const size_t row = st[1] * (size_t)j + st[2] * (size_t)k;
-				for (int i = 0; i < m[0]; ++i) {
-					const size_t f = row + (size_t)i;
-					if (layer_get(layer, f) != UNKNOWN)
-						continue;
-					const int c[3] = {i, j, k};
-					/* summed in double: equal neighbours give exactly their
-					 * value (in float, (v + v + v) / 3 need not be v), so a
-					 * uniform field extrapolates to itself and G2P's FLIP
-					 * delta stays exactly 0 */
-					double sum = 0;
-					int cnt = 0;
-					for (int d = 0; d < 3; ++d) {
-						if (c[d] > 0 && layer_get(layer, f - st[d]) < l) {
-							sum += (double)u[f - st[d]];
-							cnt++;
-						}
-						if (c[d] + 1 < m[d] && layer_get(layer, f + st[d]) < l) {
-							sum += (double)u[f + st[d]];
-							cnt++;
-						}
+				uint8_t *restrict h = hit + row;
+				const uint8_t *L = layer + row;
+				const bool inner = j > 0 && j + 1 < m[1] && k > 0 && k + 1 < m[2] && m[0] > 2;
+				if (inner) {
+					/* interior of the row: all six neighbours exist */
+					const size_t sy = st[1], sz = st[2];
+					for (int i = 1; i < m[0] - 1; ++i)
+						h[i] = (uint8_t)((L[i] == UNKNOWN) & ((L[i - 1] < lb) | (L[i + 1] < lb) | (L[i - sy] < lb) |
+						                                        (L[i + sy] < lb) | (L[i - sz] < lb) | (L[i + sz] < lb)));
+					for (int i = 0; i < m[0]; i += m[0] - 1) { /* the row's two ends */
+						const int c[3] = {i, j, k};
+						float v;
+						h[i] = L[i] == UNKNOWN && face_average(u, layer, m, st, c, row + (size_t)i, l, &v);
 					}
-					if (cnt) {
-						u[f] = (float)(sum / cnt);
-						__atomic_store_n(&layer[f], (uint8_t)l, __ATOMIC_RELAXED);
-						filled++;
+				} else {
+					for (int i = 0; i < m[0]; ++i) {
+						const int c[3] = {i, j, k};
+						float v;
+						h[i] = L[i] == UNKNOWN && face_average(u, layer, m, st, c, row + (size_t)i, l, &v);
 					}
 				}
+				for (int i = 0; i < m[0]; ++i)
+					if (h[i]) {
+						const int c[3] = {i, j, k};
+						float v = 0;
+						face_average(u, layer, m, st, c, row + (size_t)i, l, &v);
+						u[row + (size_t)i] = v;
+						filled++;
+					}
 			}
 		if (filled == 0)
 			break;
+		const long nf = (long)(st[2] * (size_t)m[2]);
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+		for (long f = 0; f < nf; ++f)
+			layer[f] = hit[f] ? lb : layer[f];
 	}
 }
 
@@ -251,7 +279,8 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	float *face[3] = {eddy__col(w, COL_FACE_U), eddy__col(w, COL_FACE_V), eddy__col(w, COL_FACE_W)};
 	int m[3][3];
 	size_t st[3][3];
-	uint8_t *layer[3];
+	uint8_t *layer[3], *hit = NULL;
+	size_t nfmax = 0;
 	const size_t ncell = (size_t)n[0] * n[1] * n[2];
 	const int nt = ncell > 32768 ? ctx->threads : 1;
 	for (int a = 0; a < 3; ++a) {
@@ -262,6 +291,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 		st[a][2] = (size_t)m[a][0] * (size_t)m[a][1];
 		const size_t nf = st[a][2] * (size_t)m[a][2];
 		layer[a] = eddy__arena_alloc(&w->arena, nf);
+		nfmax = nf > nfmax ? nf : nfmax;
 		if (!layer[a])
 			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_extrapolate: out of memory");
 		uint8_t *la = layer[a];
@@ -283,8 +313,11 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 					la[f] = known ? 0 : UNKNOWN;
 				}
 	}
+	hit = eddy__arena_alloc(&w->arena, nfmax);
+	if (!hit)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_extrapolate: out of memory");
 	for (int a = 0; a < 3; ++a)
-		extrapolate_grid(face[a], layer[a], m[a], st[a], ex->def.layers, nt);
+		extrapolate_grid(face[a], layer[a], hit, m[a], st[a], ex->def.layers, nt);
 	return EDDY_OK;
 }
 

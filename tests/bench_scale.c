@@ -181,6 +181,8 @@ static int child_block(const char *method, long n, int threads, int steps)
 		}
 		ms[s] = now_ms() - a;
 		cpu[s] = cpu_ms() - c;
+		if (getenv("EDDY_SCALE_COLUMNS"))
+			fprintf(stderr, "peak RSS after timed step %d: %.1f MB\n", s, (double)maxrss_kb() / 1e3);
 		eddy_frame_stats st;
 		eddy_world_frame_stats(w, &st);
 		const double it = extra_stat(&st, "iterations");
