@@ -289,27 +289,48 @@ static inline float flip_face_weight(const eddy_world *w, const flip_solid *s, i
 
 /* Particle density per cell (nc floats): every particle's trilinear weights
  * at the cell centres around it (constant extension at the domain's sides,
- * so a cell at a wall sees the full rest density). Sum = particle count. */
+ * so a cell at a wall sees the full rest density). Sum = particle count.
+ * On nt threads in slabs of z rows: each slab sums, over the particles in
+ * index order, the weights landing in its rows (a particle reaches rows
+ * floor(gz - 1/2) and one above, so a slab skips those with gz outside
+ * [klo - 1.5, khi + 1.5); NaN clamps to row 0, which one slab owns): every
+ * cell sums the same terms in the same order on any thread count. */
 static inline void flip_particle_density(const eddy_world *w, const float *px, const float *py, const float *pz,
-                                         float *dens)
+                                         float *dens, int nt)
 {
 	const flip_grid g = flip_grid_of(w);
 	const size_t sy = (size_t)w->nx, sz = (size_t)w->nx * (size_t)w->ny;
-	memset(dens, 0, sz * (size_t)w->nz * sizeof *dens);
-	for (size_t p = 0; p < w->n; ++p) {
-		const flip_axes ax = flip_axes_at(&g, (eddy_vec3){px[p], py[p], pz[p]});
-		const size_t i0 = (size_t)ax.cx.i0, i1 = (size_t)ax.cx.i1;
-		const size_t j0 = (size_t)ax.cy.i0 * sy, j1 = (size_t)ax.cy.i1 * sy;
-		const size_t k0 = (size_t)ax.cz.i0 * sz, k1 = (size_t)ax.cz.i1 * sz;
-		const float wx = ax.cx.w1, wy = ax.cy.w1, wz = ax.cz.w1;
-		dens[k0 + j0 + i0] += (1 - wx) * (1 - wy) * (1 - wz);
-		dens[k0 + j0 + i1] += wx * (1 - wy) * (1 - wz);
-		dens[k0 + j1 + i0] += (1 - wx) * wy * (1 - wz);
-		dens[k0 + j1 + i1] += wx * wy * (1 - wz);
-		dens[k1 + j0 + i0] += (1 - wx) * (1 - wy) * wz;
-		dens[k1 + j0 + i1] += wx * (1 - wy) * wz;
-		dens[k1 + j1 + i0] += (1 - wx) * wy * wz;
-		dens[k1 + j1 + i1] += wx * wy * wz;
+	const int nz = w->nz;
+	const size_t np = w->n;
+	nt = np > 16384 && nt > 1 ? nt : 1;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static, 1)
+	for (int t = 0; t < nt; ++t) {
+		const int klo = nz * t / nt, khi = t == nt - 1 ? nz : nz * (t + 1) / nt;
+		const float zlo = klo == 0 ? -INFINITY : (float)klo - 1.5f, zhi = t == nt - 1 ? INFINITY : (float)khi + 1.5f;
+		memset(dens + (size_t)klo * sz, 0, (size_t)(khi - klo) * sz * sizeof *dens);
+		for (size_t p = 0; p < np; ++p) {
+			const float gz = (pz[p] - g.o.z) * g.inv;
+			if (gz < zlo || gz >= zhi)
+				continue;
+			const flip_axes ax = flip_axes_at(&g, (eddy_vec3){px[p], py[p], pz[p]});
+			const size_t i0 = (size_t)ax.cx.i0, i1 = (size_t)ax.cx.i1;
+			const size_t j0 = (size_t)ax.cy.i0 * sy, j1 = (size_t)ax.cy.i1 * sy;
+			const size_t k0 = (size_t)ax.cz.i0 * sz, k1 = (size_t)ax.cz.i1 * sz;
+			const bool in0 = ax.cz.i0 >= klo && ax.cz.i0 < khi, in1 = ax.cz.i1 >= klo && ax.cz.i1 < khi;
+			const float wx = ax.cx.w1, wy = ax.cy.w1, wz = ax.cz.w1;
+			if (in0) {
+				dens[k0 + j0 + i0] += (1 - wx) * (1 - wy) * (1 - wz);
+				dens[k0 + j0 + i1] += wx * (1 - wy) * (1 - wz);
+				dens[k0 + j1 + i0] += (1 - wx) * wy * (1 - wz);
+				dens[k0 + j1 + i1] += wx * wy * (1 - wz);
+			}
+			if (in1) {
+				dens[k1 + j0 + i0] += (1 - wx) * (1 - wy) * wz;
+				dens[k1 + j0 + i1] += wx * (1 - wy) * wz;
+				dens[k1 + j1 + i0] += (1 - wx) * wy * wz;
+				dens[k1 + j1 + i1] += wx * wy * wz;
+			}
+		}
 	}
 }
 

@@ -536,13 +536,16 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_boundary: out of memory");
 	b->sd_step = ctx->step;
 	const flip_solid sd = b->sd;
-	/* closed faces take the solid's normal velocity; domain sides are still */
+	/* closed faces take the solid's normal velocity; domain sides are still
+	 * (each face written once: on all threads) */
+	const int nt = (size_t)nx * ny * nz > 32768 ? ctx->threads : 1;
 	for (int a = 0; a < 3; ++a) {
 		const int fx = nx + (a == 0), fy = ny + (a == 1), fz = nz + (a == 2);
-		size_t f = 0;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 		for (int k = 0; k < fz; ++k)
 			for (int j = 0; j < fy; ++j)
-				for (int i = 0; i < fx; ++i, ++f) {
+				for (int i = 0; i < fx; ++i) {
+					const size_t f = (size_t)i + (size_t)fx * ((size_t)j + (size_t)fy * (size_t)k);
 					const int c[3] = {i, j, k}, n[3] = {nx, ny, nz};
 					if (c[a] == 0 || c[a] == n[a])
 						face[a][f] = 0;
@@ -559,9 +562,10 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	 * solid, as before: flip_extrapolate keeps their faces and flip_surface
 	 * stops its blur there; flip_pressure still solves for the cut ones with
 	 * an open face (the type no longer means "no fluid") */
-	const size_t nc = (size_t)nx * ny * nz;
-	for (size_t c = 0; c < nc; ++c)
-		if (flip_solid_open(&sd, c) < 0.5f)
+	const long nc = (long)nx * ny * nz;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (long c = 0; c < nc; ++c)
+		if (flip_solid_open(&sd, (size_t)c) < 0.5f)
 			type[c] = EDDY_CELL_SOLID;
 	return EDDY_OK;
 }

@@ -279,7 +279,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 			if (!d || !hc)
 				return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory");
 			const float *px = eddy__col(w, COL_X_), *py = eddy__col(w, COL_Y_), *pz = eddy__col(w, COL_Z_);
-			flip_particle_density(w, px, py, pz, d);
+			flip_particle_density(w, px, py, pz, d, ctx->threads);
 			memset(hc, 0, nc);
 			const flip_grid g = flip_grid_of(w);
 			for (size_t p = 0; p < w->n; ++p)

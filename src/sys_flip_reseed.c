@@ -21,7 +21,10 @@
  *   positions in the cell (the world's random stream, so runs repeat), with
  *   the grid velocity there. Holes left over are closed and surpluses left
  *   over spread by flip_pressure's volume correction, which acts on the same
- *   density. Run it last, after the colliders. */
+ *   density. Run it last, after the colliders.
+ * Threads: the counts (integer, atomic) and the density (slabs, flip.h) on
+ * all threads, the same on any count; choosing the spares (each cell's
+ * first in index order) and the holes' random positions stay serial. */
 #include "flip.h"
 
 #include <stdlib.h>
@@ -72,15 +75,22 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_reseed: out of memory");
 	memset(count, 0, nc * sizeof *count);
 	{
+		/* integer counts: the same whatever order the threads add in */
 		const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
-		for (size_t i = 0; i < w->n; ++i)
-			count[cell_of(w, x[i], y[i], z[i])]++;
+		const long np = (long)w->n;
+		const int nt = np > 16384 ? ctx->threads : 1;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+		for (long i = 0; i < np; ++i) {
+			const long c = cell_of(w, x[i], y[i], z[i]);
+#pragma omp atomic
+			count[c]++;
+		}
 	}
 	float *dens = eddy__arena_alloc(&w->arena, nc * sizeof *dens);
 	size_t *spare = eddy__arena_alloc(&w->arena, (w->n + 1) * sizeof *spare);
 	if (!dens || !spare)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_reseed: out of memory");
-	flip_particle_density(w, eddy__col(w, COL_X_), eddy__col(w, COL_Y_), eddy__col(w, COL_Z_), dens);
+	flip_particle_density(w, eddy__col(w, COL_X_), eddy__col(w, COL_Y_), eddy__col(w, COL_Z_), dens, ctx->threads);
 	/* surplus: particles a packed cell can give (counted, not removed) */
 	const double n0 = flip_rest_count(w);
 	size_t nspare = 0;
