@@ -283,9 +283,14 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 		for (long q = 0; q < nw; ++q) {
 			uint64_t word = 0;
 			const size_t f0 = (size_t)q * 64, f1 = f0 + 64 < nf[a] ? f0 + 64 : nf[a];
+			int c[3];
+			grid_coords(f0, fx, fy, c);
 			for (size_t f = f0; f < f1; ++f) {
-				int c[3];
-				grid_coords(f, fx, fy, c);
+				if (f > f0 && ++c[0] == (int)fx) { /* the next face's coordinates, no division */
+					c[0] = 0;
+					if (++c[1] == (int)fy)
+						c[1] = 0, ++c[2];
+				}
 				const size_t g0 = (size_t)c[0] + sy * (size_t)c[1] + sz * (size_t)c[2];
 				bool m = phi[g0] <= 0 || phi[g0 + s1] <= 0 || phi[g0 + s1 + s2] <= 0 || phi[g0 + s2] <= 0;
 				if (!m) {
