@@ -30,6 +30,11 @@
  * particles it projects out pack, and the level drops (measured: 6% lowering
  * a 4 cm sphere into a 15 cm pool, 44% moving it back and forth).
  * Add the colliders after flip_advect (where they also keep particles out).
+ * The solid faces are computed once a step, on all threads (each node, cell
+ * and face written by one: the same on any thread count), kept compactly
+ * (flip.h's flip_solid: only the faces and cells that are not plainly open)
+ * in this system's store, and lent to flip_surface and flip_pressure after
+ * it (eddy__flip_boundary_solid).
  * State: the offsets seen at the last step, per pipeline position
  * (checkpointed, so a resumed run sees the same solid velocities). */
 #include "flip.h"

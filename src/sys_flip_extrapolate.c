@@ -6,8 +6,9 @@
  * Reads: cell_type u v w. Writes: u v w.
  *   Known faces: a fluid or solid cell on a side, or on the domain's sides.
  *   Layer l = 1..layers: every unknown face with known neighbours (6-connected
- *   in its own face grid) takes their average and becomes known. A frontier
- *   list keeps the cost to the faces filled, not the whole grid per layer.
+ *   in its own face grid) takes their average and becomes known. A layer is
+ *   a vectorised sweep of the grid's flag bytes on all threads (see
+ *   extrapolate_grid): the same result on any thread count.
  * Solid faces are never rewritten, so the solid velocities flip_boundary set
  * stay imposed. RK2 advection at CFL number C samples up to C + 1 cells
  * beyond the fluid: layers should be at least that. */
@@ -32,7 +33,7 @@ eddy_flip_extrapolate_def eddy_default_flip_extrapolate_def(void)
 
 enum { UNKNOWN = 255 }; /* layers are at most 64 */
 
-/* (i, j, k) of face f. The divisions dominate the frontier passes, and a
+/* (i, j, k) of face f. The divisions dominate the fill's rounds, and a
  * 32-bit division is several times faster than a 64-bit one: grids of fewer
  * than 2^32 faces (all in practice) take it. */
 static inline void face_coords(size_t f, const size_t st[3], int m1, bool small, size_t c[3])

@@ -46,7 +46,10 @@
  * stays on the grid (the role of the particle-radius rule r >= sqrt(3)/2 dx).
  * The splat runs on all threads in slabs of z rows, each slab summing its
  * own samples over the particles in index order (see the loop): results are
- * bit-identical on any number of threads. */
+ * bit-identical on any number of threads. The sums sum W v and sum W go to
+ * u v w and u_old v_old w_old themselves (both are overwritten by the
+ * division and its copy), so the splat needs only a byte per face of
+ * scratch (which faces a particle reached), not two floats. */
 #include "flip.h"
 
 #include <stdlib.h>
