@@ -157,12 +157,14 @@ static int child_block(const char *method, long n, int threads, int steps)
 		return 1;
 	}
 	const double t0 = now_ms();
-	for (int s = 0; s < 2; ++s)
-		if (getenv("EDDY_SCALE_COLUMNS") && fprintf(stderr, "peak RSS before step %d: %.1f MB\n", s, (double)maxrss_kb() / 1e3) < 0) {
-		} else if (eddy_world_step(w) != EDDY_OK) {
+	for (int s = 0; s < 2; ++s) {
+		if (getenv("EDDY_SCALE_COLUMNS")) /* where the peak is reached: emission, first step or later */
+			fprintf(stderr, "peak RSS before step %d: %.1f MB\n", s, (double)maxrss_kb() / 1e3);
+		if (eddy_world_step(w) != EDDY_OK) {
 			fprintf(stderr, "bench_scale: %s %ld: %s\n", method, n, eddy_world_error(w));
 			return 1;
 		}
+	}
 	const double setup_s = (now_ms() - t0) / 1e3;
 	const size_t np = eddy_world_particle_count(w);
 	const int ns = eddy_world_system_count(w);
