@@ -173,44 +173,102 @@ static inline eddy_vec3 flip_velocity_at(const flip_grid *g, const float *u, con
 
 /* Before the pressure solve (flip_p2g calls it once the cells are marked):
  * every interior face with a fluid cell on a side and no particle weight
- * (weight[a][wstride * f] == 0) takes the average of its known neighbours in
+ * (reached[a][f] == 0) takes the average of its known neighbours in
  * its own face grid, round by round, so the solve sees a velocity on every
  * face of every fluid cell (sys_flip_extrapolate.c, which says why). */
-eddy_status eddy__flip_fill_fluid_faces(eddy_world *w, float *const face[3], const float *const weight[3],
-                                        size_t wstride);
+eddy_status eddy__flip_fill_fluid_faces(eddy_world *w, float *const face[3], const uint8_t *const reached[3]);
 
 /* ---- fractional solid faces ----------------------------------------------
  * Batty, Bertails & Bridson 2007, "A fast variational framework for accurate
  * solid-fluid coupling": every face carries the fraction of its area open to
  * the fluid, from the colliders' signed distance at its four corners (grid
  * nodes; the union of the solids is the minimum distance), and the normal
- * velocity of the collider covering it. Computed by flip_boundary (cell types,
- * closed faces) and again by flip_pressure (weights, solid flux) from the same
- * collider offsets, so both see the same geometry within a step. */
+ * velocity of the collider covering it. flip_boundary computes them once a
+ * step (cell types, closed faces) and lends them to flip_surface and
+ * flip_pressure after it (eddy__flip_boundary_solid); a system that cannot
+ * borrow them computes its own from the same collider offsets.
+ *
+ * Stored compactly: almost every face and cell of a scene is plainly open
+ * (weight 1, open volume 1), so only the others are kept. A face is marked
+ * when a corner is in or on a solid or a cell beside it has its centre in one
+ * (those faces' solid velocity is read); a cell when its open volume is
+ * below 1. A marked item's slot is the count of marked items before it: a
+ * running count per 64-item word plus a popcount in the word. About 0.19
+ * bytes per face and cell plus 8 (4) per marked face (cell), against 8 (4)
+ * for every face (cell) stored plainly: 60 MB at a million particles in a
+ * tank whose walls are a collider. Unmarked: weight 1, velocity 0, open 1. */
 typedef struct flip_solid {
-	bool any;      /* a collider is in the pipeline; if not, the arrays are NULL */
-	float *wt[3];  /* per face grid: open fraction in [0, 1]; 0 on the domain's sides */
-	float *vel[3]; /* per face grid: m/s, normal velocity of the covering collider */
-	float *open;   /* per cell: open volume fraction, clamp(1/2 + phi_s(centre) / dx, 0, 1) */
-	float *dist;   /* per cell: m, phi_s at the centre (signed distance to the nearest solid) */
+	bool any;                /* a collider is in the pipeline; if not, the arrays are NULL */
+	const uint64_t *mark[3]; /* per face grid: bit f % 64 of word f / 64, face f is marked */
+	const uint32_t *rank[3]; /* per word: marked faces before it */
+	const float *wt[3];      /* per marked face, in face order: open fraction in [0, 1]; 0 on the domain's sides */
+	const float *vel[3];     /* per marked face: m/s, normal velocity of the covering collider (0 on the sides) */
+	const uint64_t *cmark;   /* cells, as the faces */
+	const uint32_t *crank;
+	const float *open; /* per marked cell: open volume fraction, clamp(1/2 + phi_s(centre) / dx, 0, 1) */
 } flip_solid;
 
-/* Fills s from the colliders (margin inflates them); arrays from the world's
- * arena. velocities: per pipeline position, the solids' velocities of this
- * step (flip_boundary's), or NULL for each collider's motion record. Returns
- * false when out of memory. */
-bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_vec3 *velocities, flip_solid *s);
+/* Where flip_boundary keeps its solid faces from step to step (malloc'd,
+ * grown as needed): the arena is a stack, and the faces outlive the systems
+ * after flip_boundary whose scratch is released above them. */
+typedef struct flip_solid_store {
+	void *mem;
+	size_t cap; /* bytes */
+} flip_solid_store;
+
+static inline bool flip_marked(const uint64_t *mark, const uint32_t *rank, size_t f, size_t *slot)
+{
+	const uint64_t word = mark[f >> 6], bit = (uint64_t)1 << (f & 63);
+	if (!(word & bit))
+		return false;
+	*slot = (size_t)rank[f >> 6] + (size_t)__builtin_popcountll(word & (bit - 1));
+	return true;
+}
+
+/* Open fraction of face f of grid a as stored (1 when unmarked). */
+static inline float flip_solid_wt(const flip_solid *s, int a, size_t f)
+{
+	size_t q;
+	return s->any && flip_marked(s->mark[a], s->rank[a], f, &q) ? s->wt[a][q] : 1.0f;
+}
+/* m/s, the covering solid's normal velocity at face f of grid a (0 when unmarked). */
+static inline float flip_solid_vel(const flip_solid *s, int a, size_t f)
+{
+	size_t q;
+	return s->any && flip_marked(s->mark[a], s->rank[a], f, &q) ? s->vel[a][q] : 0.0f;
+}
+/* Open volume fraction of cell c: 1 without colliders or when unmarked. */
+static inline float flip_solid_open(const flip_solid *s, size_t c)
+{
+	size_t q;
+	return s->any && flip_marked(s->cmark, s->crank, c, &q) ? s->open[q] : 1.0f;
+}
+
+/* Fills s from the colliders (margin inflates them). The arrays go to store
+ * (its scratch released from the world's arena before returning), or with
+ * store NULL to the world's arena along with the scratch. velocities: per
+ * pipeline position, the solids' velocities of this step (flip_boundary's),
+ * or NULL for each collider's motion record. On all of the world's threads,
+ * the same result on any thread count. Returns false when out of memory. */
+bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_vec3 *velocities, flip_solid *s,
+                            flip_solid_store *store);
 /* The margin of the pipeline's flip_boundary and the solid velocities it used
  * this step (NULL if it has not run this step); false if it has none (then
  * flip_pressure sees no solids, as flip_boundary marks none). */
 bool eddy__flip_boundary_info(const eddy_world *w, float *margin, const eddy_vec3 **vel);
 
-/* The solid faces flip_surface computed this step, for the flip_pressure
- * right after it in the pipeline (self): the same geometry (same step, same
- * boundary margin and velocities, no system between them to move a
- * collider), so the pressure solve need not compute it again. false when
- * self does not directly follow a flip_surface that ran this step. */
-bool eddy__flip_surface_solid(const eddy_world *w, const eddy_system *self, flip_solid *sd);
+/* The solid faces the pipeline's flip_boundary computed this step, for a
+ * system after it (self): the same geometry when only FLIP grid systems and
+ * gravity run between them (none of them moves a collider). false when there
+ * is no such flip_boundary, it has not run this step, or another system
+ * (a collider, a callback) runs between them: then compute them afresh. */
+bool eddy__flip_boundary_solid(const eddy_world *w, const eddy_system *self, flip_solid *sd);
+
+/* The solid faces for system self: flip_boundary's of this step when it can
+ * lend them (above), else computed into the world's arena with its margin
+ * and velocities (all zero, any = false, without a flip_boundary). false
+ * when out of memory. */
+bool eddy__flip_solid_for(eddy_world *w, const eddy_system *self, double dt, flip_solid *sd);
 
 /* The trilinear particle density (flip_particle_density) and the cells
  * holding a particle (nc each) as the pipeline's flip_p2g computed them this
@@ -226,32 +284,53 @@ static inline float flip_face_weight(const eddy_world *w, const flip_solid *s, i
 	const int c[3] = {i, j, k}, n[3] = {w->nx, w->ny, w->nz};
 	if (c[axis] == 0 || c[axis] == n[axis])
 		return 0.0f;
-	return s->any ? s->wt[axis][f] : 1.0f;
+	return s->any ? flip_solid_wt(s, axis, f) : 1.0f;
 }
 
 /* Particle density per cell (nc floats): every particle's trilinear weights
  * at the cell centres around it (constant extension at the domain's sides,
- * so a cell at a wall sees the full rest density). Sum = particle count. */
+ * so a cell at a wall sees the full rest density). Sum = particle count.
+ * On nt threads in slabs of z rows: each slab sums, over the particles in
+ * index order, the weights landing in its rows (a particle reaches rows
+ * floor(gz - 1/2) and one above, so a slab skips those with gz outside
+ * [klo - 1.5, khi + 1.5); NaN clamps to row 0, which one slab owns): every
+ * cell sums the same terms in the same order on any thread count. */
 static inline void flip_particle_density(const eddy_world *w, const float *px, const float *py, const float *pz,
-                                         float *dens)
+                                         float *dens, int nt)
 {
 	const flip_grid g = flip_grid_of(w);
 	const size_t sy = (size_t)w->nx, sz = (size_t)w->nx * (size_t)w->ny;
-	memset(dens, 0, sz * (size_t)w->nz * sizeof *dens);
-	for (size_t p = 0; p < w->n; ++p) {
-		const flip_axes ax = flip_axes_at(&g, (eddy_vec3){px[p], py[p], pz[p]});
-		const size_t i0 = (size_t)ax.cx.i0, i1 = (size_t)ax.cx.i1;
-		const size_t j0 = (size_t)ax.cy.i0 * sy, j1 = (size_t)ax.cy.i1 * sy;
-		const size_t k0 = (size_t)ax.cz.i0 * sz, k1 = (size_t)ax.cz.i1 * sz;
-		const float wx = ax.cx.w1, wy = ax.cy.w1, wz = ax.cz.w1;
-		dens[k0 + j0 + i0] += (1 - wx) * (1 - wy) * (1 - wz);
-		dens[k0 + j0 + i1] += wx * (1 - wy) * (1 - wz);
-		dens[k0 + j1 + i0] += (1 - wx) * wy * (1 - wz);
-		dens[k0 + j1 + i1] += wx * wy * (1 - wz);
-		dens[k1 + j0 + i0] += (1 - wx) * (1 - wy) * wz;
-		dens[k1 + j0 + i1] += wx * (1 - wy) * wz;
-		dens[k1 + j1 + i0] += (1 - wx) * wy * wz;
-		dens[k1 + j1 + i1] += wx * wy * wz;
+	const int nz = w->nz;
+	const size_t np = w->n;
+	nt = np > 16384 && nt > 1 ? nt : 1;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static, 1)
+	for (int t = 0; t < nt; ++t) {
+		const int klo = nz * t / nt, khi = t == nt - 1 ? nz : nz * (t + 1) / nt;
+		const float zlo = klo == 0 ? -INFINITY : (float)klo - 1.5f, zhi = t == nt - 1 ? INFINITY : (float)khi + 1.5f;
+		memset(dens + (size_t)klo * sz, 0, (size_t)(khi - klo) * sz * sizeof *dens);
+		for (size_t p = 0; p < np; ++p) {
+			const float gz = (pz[p] - g.o.z) * g.inv;
+			if (gz < zlo || gz >= zhi)
+				continue;
+			const flip_axes ax = flip_axes_at(&g, (eddy_vec3){px[p], py[p], pz[p]});
+			const size_t i0 = (size_t)ax.cx.i0, i1 = (size_t)ax.cx.i1;
+			const size_t j0 = (size_t)ax.cy.i0 * sy, j1 = (size_t)ax.cy.i1 * sy;
+			const size_t k0 = (size_t)ax.cz.i0 * sz, k1 = (size_t)ax.cz.i1 * sz;
+			const bool in0 = ax.cz.i0 >= klo && ax.cz.i0 < khi, in1 = ax.cz.i1 >= klo && ax.cz.i1 < khi;
+			const float wx = ax.cx.w1, wy = ax.cy.w1, wz = ax.cz.w1;
+			if (in0) {
+				dens[k0 + j0 + i0] += (1 - wx) * (1 - wy) * (1 - wz);
+				dens[k0 + j0 + i1] += wx * (1 - wy) * (1 - wz);
+				dens[k0 + j1 + i0] += (1 - wx) * wy * (1 - wz);
+				dens[k0 + j1 + i1] += wx * wy * (1 - wz);
+			}
+			if (in1) {
+				dens[k1 + j0 + i0] += (1 - wx) * (1 - wy) * wz;
+				dens[k1 + j0 + i1] += wx * (1 - wy) * wz;
+				dens[k1 + j1 + i0] += (1 - wx) * wy * wz;
+				dens[k1 + j1 + i1] += wx * wy * wz;
+			}
+		}
 	}
 }
 

@@ -30,6 +30,11 @@
  * particles it projects out pack, and the level drops (measured: 6% lowering
  * a 4 cm sphere into a 15 cm pool, 44% moving it back and forth).
  * Add the colliders after flip_advect (where they also keep particles out).
+ * The solid faces are computed once a step, on all threads (each node, cell
+ * and face written by one: the same on any thread count), kept compactly
+ * (flip.h's flip_solid: only the faces and cells that are not plainly open)
+ * in this system's store, and lent to flip_surface and flip_pressure after
+ * it (eddy__flip_boundary_solid).
  * State: the offsets seen at the last step, per pipeline position
  * (checkpointed, so a resumed run sees the same solid velocities). */
 #include "flip.h"
@@ -51,6 +56,10 @@ typedef struct boundary {
 	eddy_vec3 *omega;  /* rad/s, per pipeline position, this step's (with vel) */
 	eddy_vec3 *center; /* m, the pivot each omega turns about */
 	int64_t vel_step; /* the step vel belongs to, -1 for none */
+	/* this step's solid faces, lent to the FLIP systems after this one */
+	flip_solid sd;
+	flip_solid_store store;
+	int64_t sd_step; /* the step sd belongs to, -1 for none */
 } boundary;
 
 static const int boundary_io[] = {COL_CELL_TYPE, COL_FACE_U, COL_FACE_V, COL_FACE_W, -1};
@@ -116,37 +125,80 @@ static float frac_inside(float p0, float p1, float p2, float p3)
 	return 0.5f * frac1(l[0], l[1]) * frac1(l[0], l[3]) + 0.5f * frac1(l[2], l[1]) * frac1(l[2], l[3]);
 }
 
-bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_vec3 *velocities, flip_solid *s)
+/* Open volume fraction of a cell from phi_s at its centre: exact for a plane
+ * through the cell along an axis; < 1/2 exactly when the centre is in the
+ * solid (the binary rule's solid cells). */
+static inline float open_of(float cphi, float h)
+{
+	const float op = 0.5f + cphi / h;
+	return cphi < 0 ? (op < 0 ? 0 : op > 0.5f ? 0.4999f : op) : (op > 1 ? 1 : op);
+}
+
+/* (i, j, k) of item f of a grid with rows of m0 and planes of m0 m1 items. */
+static inline void grid_coords(size_t f, size_t m0, size_t m1, int c[3])
+{
+	const size_t row = f / m0;
+	c[0] = (int)(f - row * m0);
+	c[1] = (int)(row % m1);
+	c[2] = (int)(row / m1);
+}
+
+/* Serial prefix over the words: rank[q] = marked items before word q; returns the total. */
+static size_t rank_words(const uint64_t *mark, uint32_t *rank, size_t nwords)
+{
+	size_t total = 0;
+	for (size_t q = 0; q < nwords; ++q) {
+		rank[q] = (uint32_t)total;
+		total += (size_t)__builtin_popcountll(mark[q]);
+	}
+	return total;
+}
+
+bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_vec3 *velocities, flip_solid *s,
+                            flip_solid_store *store)
 {
 	memset(s, 0, sizeof *s);
 	int ncol = 0;
+	int colq[EDDY_MAX_SYSTEMS]; /* the colliders' pipeline positions, in order */
 	for (int q = 0; q < w->order_count; ++q)
-		ncol += eddy__is_collider(&w->slots[w->order[q]]);
+		if (eddy__is_collider(&w->slots[w->order[q]]))
+			colq[ncol++] = q;
 	if (ncol == 0)
 		return true;
-	const int nx = w->nx, ny = w->ny, nz = w->nz;
+	const int nx = w->nx, ny = w->ny, nz = w->nz, nt = w->def.threads;
 	const double h = w->def.cell_size;
+	const float hf = (float)h;
 	const eddy_vec3 o = w->def.bounds_min;
 	const size_t mx = (size_t)nx + 1, my = (size_t)ny + 1, mz = (size_t)nz + 1, nn = mx * my * mz;
+	const size_t nf[3] = {mx * ny * nz, (size_t)nx * my * nz, (size_t)nx * ny * mz}, nc = (size_t)nx * ny * nz;
+	size_t nwf[3], nwc = (nc + 63) / 64, fixed = 0;
+	for (int a = 0; a < 3; ++a) {
+		nwf[a] = (nf[a] + 63) / 64;
+		fixed += nwf[a] * (sizeof(uint64_t) + sizeof(uint32_t));
+	}
+	fixed += nwc * (sizeof(uint64_t) + sizeof(uint32_t));
+	const eddy_arena_mark am = eddy__arena_mark(&w->arena);
 	float *phi = eddy__arena_alloc(&w->arena, nn * sizeof *phi);
 	uint16_t *own = eddy__arena_alloc(&w->arena, nn * sizeof *own);
 	eddy_vec3 *vel = eddy__arena_alloc(&w->arena, (size_t)w->order_count * sizeof *vel + 1);
-	const size_t nf[3] = {mx * ny * nz, (size_t)nx * my * nz, (size_t)nx * ny * mz}, nc = (size_t)nx * ny * nz;
-	for (int a = 0; a < 3; ++a) {
-		s->wt[a] = eddy__arena_alloc(&w->arena, nf[a] * sizeof(float));
-		s->vel[a] = eddy__arena_alloc(&w->arena, nf[a] * sizeof(float));
-		if (!s->wt[a] || !s->vel[a])
-			return false;
-	}
-	s->open = eddy__arena_alloc(&w->arena, nc * sizeof *s->open);
 	float *cphi = eddy__arena_alloc(&w->arena, nc * sizeof *cphi);
-	if (!phi || !own || !vel || !s->open || !cphi)
+	/* marks and running counts, copied to the output once the counts are known */
+	unsigned char *marks = eddy__arena_alloc(&w->arena, fixed);
+	if (!phi || !own || !vel || !cphi || !marks)
 		return false;
-	for (size_t c = 0; c < nc; ++c)
-		cphi[c] = INFINITY;
+	uint64_t *fmark[3], *cmark;
+	uint32_t *frank[3], *crank;
+	{
+		unsigned char *m = marks;
+		for (int a = 0; a < 3; ++a) {
+			fmark[a] = (uint64_t *)m, m += nwf[a] * sizeof(uint64_t);
+		}
+		cmark = (uint64_t *)m, m += nwc * sizeof(uint64_t);
+		for (int a = 0; a < 3; ++a)
+			frank[a] = (uint32_t *)m, m += nwf[a] * sizeof(uint32_t);
+		crank = (uint32_t *)m;
+	}
 	s->any = true;
-	for (size_t g = 0; g < nn; ++g)
-		phi[g] = INFINITY, own[g] = 0;
 	const float inv_dt = dt > 0 ? (float)(1.0 / dt) : 0.0f;
 	/* the rotating solids' angular velocities: flip_boundary's of this step
 	 * with its velocities, else from each motion record; NULL while none turns */
@@ -176,87 +228,200 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 			break;
 		}
 	}
-	for (int q = 0; q < w->order_count; ++q) {
-		const eddy_system *c = &w->slots[w->order[q]];
-		if (!eddy__is_collider(c))
-			continue;
+	for (int t = 0; t < ncol; ++t) {
+		const int q = colq[t];
 		if (velocities) {
 			vel[q] = velocities[q];
 		} else {
-			const eddy_collider_motion m = ((const eddy_collider_base *)c->data)->motion;
+			const eddy_collider_motion m = ((const eddy_collider_base *)w->slots[w->order[q]].data)->motion;
 			vel[q] = (eddy_vec3){(m.offset.x - m.last_offset.x) * inv_dt, (m.offset.y - m.last_offset.y) * inv_dt,
 			                     (m.offset.z - m.last_offset.z) * inv_dt};
 		}
-		size_t g = 0;
-		for (size_t k = 0; k < mz; ++k)
-			for (size_t j = 0; j < my; ++j)
-				for (size_t i = 0; i < mx; ++i, ++g) {
-					const eddy_vec3 p = {(float)(o.x + (double)i * h), (float)(o.y + (double)j * h),
-					                     (float)(o.z + (double)k * h)};
-					const float d = c->vt->distance(c, p) - margin;
-					if (d < phi[g])
-						phi[g] = d, own[g] = (uint16_t)(q + 1);
-				}
-		size_t cc = 0;
-		for (int k = 0; k < nz; ++k)
-			for (int j = 0; j < ny; ++j)
-				for (int i = 0; i < nx; ++i, ++cc) {
-					const eddy_vec3 p = {(float)(o.x + (i + 0.5) * h), (float)(o.y + (j + 0.5) * h),
-					                     (float)(o.z + (k + 0.5) * h)};
-					const float d = c->vt->distance(c, p) - margin;
-					cphi[cc] = d < cphi[cc] ? d : cphi[cc];
-				}
 	}
-	/* faces: corners in cyclic order in the face's plane; the covering
-	 * collider is the one nearest (most inside) at a corner */
+	/* phi_s at the nodes and the cell centres: per point, the colliders in
+	 * pipeline order, the first of equal distances owning it; each point
+	 * written by one thread (the distances are read-only queries) */
+	const int ntp = nn > 32768 ? nt : 1;
+#pragma omp parallel for num_threads(ntp) if (ntp > 1) schedule(static)
+	for (size_t k = 0; k < mz; ++k)
+		for (size_t j = 0; j < my; ++j)
+			for (size_t i = 0; i < mx; ++i) {
+				const size_t g = i + mx * (j + my * k);
+				const eddy_vec3 p = {(float)(o.x + (double)i * h), (float)(o.y + (double)j * h),
+				                     (float)(o.z + (double)k * h)};
+				float best = INFINITY;
+				uint16_t who = 0;
+				for (int t = 0; t < ncol; ++t) {
+					const eddy_system *c = &w->slots[w->order[colq[t]]];
+					const float d = c->vt->distance(c, p) - margin;
+					if (d < best)
+						best = d, who = (uint16_t)(colq[t] + 1);
+				}
+				phi[g] = best, own[g] = who;
+			}
+#pragma omp parallel for num_threads(ntp) if (ntp > 1) schedule(static)
+	for (int k = 0; k < nz; ++k)
+		for (int j = 0; j < ny; ++j)
+			for (int i = 0; i < nx; ++i) {
+				const eddy_vec3 p = {(float)(o.x + (i + 0.5) * h), (float)(o.y + (j + 0.5) * h),
+				                     (float)(o.z + (k + 0.5) * h)};
+				float best = INFINITY;
+				for (int t = 0; t < ncol; ++t) {
+					const eddy_system *c = &w->slots[w->order[colq[t]]];
+					const float d = c->vt->distance(c, p) - margin;
+					best = d < best ? d : best;
+				}
+				cphi[(size_t)i + (size_t)nx * ((size_t)j + (size_t)ny * (size_t)k)] = best;
+			}
+	/* marks: a face with a corner in or on a solid or a cell beside it whose
+	 * centre is in one; a cell with open volume below 1. Word by word, each
+	 * word one thread's. */
 	const size_t sy = mx, sz = mx * my;
 	for (int a = 0; a < 3; ++a) {
-		const int fx = nx + (a == 0), fy = ny + (a == 1), fz = nz + (a == 2);
-		/* the two in-plane node strides */
-		const size_t s1 = a == 0 ? sy : 1, s2 = a == 2 ? sy : sz;
-		const int comp = a;
-		size_t f = 0;
-		for (int k = 0; k < fz; ++k)
-			for (int j = 0; j < fy; ++j)
-				for (int i = 0; i < fx; ++i, ++f) {
-					const size_t g0 = (size_t)i + sy * (size_t)j + sz * (size_t)k;
-					const size_t g[4] = {g0, g0 + s1, g0 + s1 + s2, g0 + s2};
-					const int cc[3] = {i, j, k}, n[3] = {nx, ny, nz};
-					if (cc[a] == 0 || cc[a] == n[a]) { /* the domain's sides: still, closed */
-						s->wt[a][f] = 0.0f;
-						s->vel[a][f] = 0.0f;
-						continue;
-					}
-					const float fin = frac_inside(phi[g[0]], phi[g[1]], phi[g[2]], phi[g[3]]);
-					/* tiny openings are closed: a weight of 1e-6 only conditions A badly */
-					float wt = 1.0f - fin;
-					if (wt < 1e-3f)
-						wt = 0.0f;
-					s->wt[a][f] = wt;
-					int best = 0;
-					for (int c = 1; c < 4; ++c)
-						if (phi[g[c]] < phi[g[best]])
-							best = c;
-					const uint16_t ow = own[g[best]];
-					eddy_vec3 v = ow ? vel[ow - 1] : (eddy_vec3){0, 0, 0};
-					if (ow && omega && (omega[ow - 1].x != 0 || omega[ow - 1].y != 0 || omega[ow - 1].z != 0)) {
-						/* a turning solid: its point velocity at the face's centre */
-						const eddy_collider_velocity rv = {v, omega[ow - 1], center[ow - 1]};
-						const eddy_vec3 fc = {(float)(o.x + (i + 0.5 * (a != 0)) * h), (float)(o.y + (j + 0.5 * (a != 1)) * h),
-						                      (float)(o.z + (k + 0.5 * (a != 2)) * h)};
-						v = eddy__rigid_velocity(&rv, fc);
-					}
-					s->vel[a][f] = comp == 0 ? v.x : comp == 1 ? v.y : v.z;
+		const size_t fx = (size_t)nx + (a == 0), fy = (size_t)ny + (a == 1);
+		const size_t s1 = a == 0 ? sy : 1, s2 = a == 2 ? sy : sz; /* the two in-plane node strides */
+		const size_t cst = a == 0 ? 1 : a == 1 ? (size_t)nx : (size_t)nx * ny;
+		const int n[3] = {nx, ny, nz};
+		uint64_t *mk = fmark[a];
+		const long nw = (long)nwf[a];
+#pragma omp parallel for num_threads(ntp) if (ntp > 1) schedule(static)
+		for (long q = 0; q < nw; ++q) {
+			uint64_t word = 0;
+			const size_t f0 = (size_t)q * 64, f1 = f0 + 64 < nf[a] ? f0 + 64 : nf[a];
+			int c[3];
+			grid_coords(f0, fx, fy, c);
+			for (size_t f = f0; f < f1; ++f) {
+				if (f > f0 && ++c[0] == (int)fx) { /* the next face's coordinates, no division */
+					c[0] = 0;
+					if (++c[1] == (int)fy)
+						c[1] = 0, ++c[2];
 				}
+				const size_t g0 = (size_t)c[0] + sy * (size_t)c[1] + sz * (size_t)c[2];
+				bool m = phi[g0] <= 0 || phi[g0 + s1] <= 0 || phi[g0 + s1 + s2] <= 0 || phi[g0 + s2] <= 0;
+				if (!m) {
+					const size_t ch = (size_t)c[0] + (size_t)nx * ((size_t)c[1] + (size_t)ny * (size_t)c[2]);
+					m = (c[a] < n[a] && cphi[ch] < 0) || (c[a] > 0 && cphi[ch - cst] < 0);
+				}
+				word |= (uint64_t)m << (f - f0);
+			}
+			mk[q] = word;
+		}
 	}
-	/* open volume fraction of each cell from phi_s at its centre: exact for a
-	 * plane through the cell along an axis; < 1/2 exactly when the centre is
-	 * in the solid (the binary rule's solid cells) */
-	s->dist = cphi;
-	for (size_t c = 0; c < nc; ++c) {
-		const float op = 0.5f + cphi[c] / (float)h;
-		s->open[c] = cphi[c] < 0 ? (op < 0 ? 0 : op > 0.5f ? 0.4999f : op) : (op > 1 ? 1 : op);
+	{
+		const long nw = (long)nwc;
+#pragma omp parallel for num_threads(ntp) if (ntp > 1) schedule(static)
+		for (long q = 0; q < nw; ++q) {
+			uint64_t word = 0;
+			const size_t c0 = (size_t)q * 64, c1 = c0 + 64 < nc ? c0 + 64 : nc;
+			for (size_t c = c0; c < c1; ++c)
+				word |= (uint64_t)(open_of(cphi[c], hf) < 1) << (c - c0);
+			cmark[q] = word;
+		}
 	}
+	size_t cnt[3], ccnt = rank_words(cmark, crank, nwc), vals = ccnt;
+	for (int a = 0; a < 3; ++a)
+		vals += 2 * (cnt[a] = rank_words(fmark[a], frank[a], nwf[a]));
+	/* the output: marks and counts, then the values of the marked items */
+	const size_t bytes = fixed + vals * sizeof(float);
+	unsigned char *out;
+	float *wtv[3], *velv[3], *openv;
+	if (store) {
+		if (store->cap < bytes) {
+			free(store->mem);
+			store->mem = malloc(bytes);
+			store->cap = store->mem ? bytes : 0;
+			if (!store->mem)
+				return false;
+		}
+		out = store->mem;
+	} else {
+		out = eddy__arena_alloc(&w->arena, bytes);
+		if (!out)
+			return false;
+	}
+	memcpy(out, marks, fixed);
+	{
+		unsigned char *m = out;
+		for (int a = 0; a < 3; ++a)
+			fmark[a] = (uint64_t *)m, m += nwf[a] * sizeof(uint64_t);
+		cmark = (uint64_t *)m, m += nwc * sizeof(uint64_t);
+		for (int a = 0; a < 3; ++a)
+			frank[a] = (uint32_t *)m, m += nwf[a] * sizeof(uint32_t);
+		crank = (uint32_t *)m, m += nwc * sizeof(uint32_t);
+		float *v = (float *)m;
+		for (int a = 0; a < 3; ++a) {
+			s->mark[a] = fmark[a], s->rank[a] = frank[a];
+			s->wt[a] = wtv[a] = v, v += cnt[a];
+			s->vel[a] = velv[a] = v, v += cnt[a];
+		}
+		s->cmark = cmark, s->crank = crank, s->open = openv = v;
+	}
+	/* the marked faces' values: corners in cyclic order in the face's plane;
+	 * the covering collider is the one nearest (most inside) at a corner */
+	for (int a = 0; a < 3; ++a) {
+		const size_t fx = (size_t)nx + (a == 0), fy = (size_t)ny + (a == 1);
+		const size_t s1 = a == 0 ? sy : 1, s2 = a == 2 ? sy : sz;
+		const int n[3] = {nx, ny, nz};
+		const uint64_t *mk = fmark[a];
+		const uint32_t *rk = frank[a];
+		float *wt = wtv[a], *fv = velv[a];
+		const long nw = (long)nwf[a];
+#pragma omp parallel for num_threads(ntp) if (ntp > 1) schedule(static)
+		for (long q = 0; q < nw; ++q) {
+			uint64_t word = mk[q];
+			size_t slot = rk[q];
+			while (word) {
+				const size_t f = (size_t)q * 64 + (size_t)__builtin_ctzll(word);
+				word &= word - 1;
+				int c[3];
+				grid_coords(f, fx, fy, c);
+				const int i = c[0], j = c[1], k = c[2];
+				const size_t g0 = (size_t)i + sy * (size_t)j + sz * (size_t)k;
+				const size_t g[4] = {g0, g0 + s1, g0 + s1 + s2, g0 + s2};
+				if (c[a] == 0 || c[a] == n[a]) { /* the domain's sides: still, closed */
+					wt[slot] = 0.0f;
+					fv[slot++] = 0.0f;
+					continue;
+				}
+				const float fin = frac_inside(phi[g[0]], phi[g[1]], phi[g[2]], phi[g[3]]);
+				/* tiny openings are closed: a weight of 1e-6 only conditions A badly */
+				float wf = 1.0f - fin;
+				if (wf < 1e-3f)
+					wf = 0.0f;
+				wt[slot] = wf;
+				int best = 0;
+				for (int e = 1; e < 4; ++e)
+					if (phi[g[e]] < phi[g[best]])
+						best = e;
+				const uint16_t ow = own[g[best]];
+				eddy_vec3 v = ow ? vel[ow - 1] : (eddy_vec3){0, 0, 0};
+				if (ow && omega && (omega[ow - 1].x != 0 || omega[ow - 1].y != 0 || omega[ow - 1].z != 0)) {
+					/* a turning solid: its point velocity at the face's centre */
+					const eddy_collider_velocity rv = {v, omega[ow - 1], center[ow - 1]};
+					const eddy_vec3 fc = {(float)(o.x + (i + 0.5 * (a != 0)) * h), (float)(o.y + (j + 0.5 * (a != 1)) * h),
+					                      (float)(o.z + (k + 0.5 * (a != 2)) * h)};
+					v = eddy__rigid_velocity(&rv, fc);
+				}
+				fv[slot++] = a == 0 ? v.x : a == 1 ? v.y : v.z;
+			}
+		}
+	}
+	{
+		float *op = openv;
+		const long nw = (long)nwc;
+#pragma omp parallel for num_threads(ntp) if (ntp > 1) schedule(static)
+		for (long q = 0; q < nw; ++q) {
+			uint64_t word = cmark[q];
+			size_t slot = crank[q];
+			while (word) {
+				const size_t c = (size_t)q * 64 + (size_t)__builtin_ctzll(word);
+				word &= word - 1;
+				op[slot++] = open_of(cphi[c], hf);
+			}
+		}
+	}
+	if (store)
+		eddy__arena_release(&w->arena, am);
 	return true;
 }
 
@@ -273,6 +438,39 @@ bool eddy__flip_boundary_info(const eddy_world *w, float *margin, const eddy_vec
 		}
 	}
 	return false;
+}
+
+bool eddy__flip_boundary_solid(const eddy_world *w, const eddy_system *self, flip_solid *sd)
+{
+	int at = -1;
+	for (int q = 0; q < w->order_count; ++q)
+		if (&w->slots[w->order[q]] == self)
+			at = q;
+	for (int q = at - 1; q >= 0; --q) {
+		const eddy_system *c = &w->slots[w->order[q]];
+		if (c->vt == &eddy__kind_flip_boundary) {
+			const boundary *b = c->data;
+			if (b->sd_step != w->step)
+				return false;
+			*sd = b->sd;
+			return true;
+		}
+		/* systems that move no collider: the geometry is flip_boundary's */
+		if (c->vt != &eddy__kind_flip_p2g && c->vt != &eddy__kind_flip_surface && c->vt != &eddy__kind_flip_pressure &&
+		    c->vt != &eddy__kind_flip_extrapolate && c->vt != &eddy__kind_gravity)
+			return false;
+	}
+	return false;
+}
+
+bool eddy__flip_solid_for(eddy_world *w, const eddy_system *self, double dt, flip_solid *sd)
+{
+	memset(sd, 0, sizeof *sd);
+	if (eddy__flip_boundary_solid(w, self, sd))
+		return true;
+	float margin = 0;
+	const eddy_vec3 *svel = NULL;
+	return !eddy__flip_boundary_info(w, &margin, &svel) || eddy__flip_solid_faces(w, dt, margin, svel, sd, NULL);
 }
 
 /* The solids' velocities for this step, per pipeline position. A collider's
@@ -343,21 +541,29 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_boundary: out of memory");
 	uint8_t *type = (uint8_t *)w->columns[COL_CELL_TYPE].data;
 	float *face[3] = {eddy__col(w, COL_FACE_U), eddy__col(w, COL_FACE_V), eddy__col(w, COL_FACE_W)};
-	flip_solid sd;
-	if (!eddy__flip_solid_faces(w, ctx->dt, b->def.margin, b->vel, &sd))
+	b->sd_step = -1;
+	if (!eddy__flip_solid_faces(w, ctx->dt, b->def.margin, b->vel, &b->sd, &b->store))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_boundary: out of memory");
-	/* closed faces take the solid's normal velocity; domain sides are still */
+	b->sd_step = ctx->step;
+	const flip_solid sd = b->sd;
+	/* closed faces take the solid's normal velocity; domain sides are still
+	 * (each face written once: on all threads) */
+	const int nt = (size_t)nx * ny * nz > 32768 ? ctx->threads : 1;
 	for (int a = 0; a < 3; ++a) {
 		const int fx = nx + (a == 0), fy = ny + (a == 1), fz = nz + (a == 2);
-		size_t f = 0;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 		for (int k = 0; k < fz; ++k)
 			for (int j = 0; j < fy; ++j)
-				for (int i = 0; i < fx; ++i, ++f) {
+				for (int i = 0; i < fx; ++i) {
+					const size_t f = (size_t)i + (size_t)fx * ((size_t)j + (size_t)fy * (size_t)k);
 					const int c[3] = {i, j, k}, n[3] = {nx, ny, nz};
 					if (c[a] == 0 || c[a] == n[a])
 						face[a][f] = 0;
-					else if (sd.any && sd.wt[a][f] == 0)
-						face[a][f] = sd.vel[a][f];
+					else if (sd.any) {
+						size_t q;
+						if (flip_marked(sd.mark[a], sd.rank[a], f, &q) && sd.wt[a][q] == 0)
+							face[a][f] = sd.vel[a][q];
+					}
 				}
 	}
 	if (!sd.any)
@@ -366,9 +572,10 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	 * solid, as before: flip_extrapolate keeps their faces and flip_surface
 	 * stops its blur there; flip_pressure still solves for the cut ones with
 	 * an open face (the type no longer means "no fluid") */
-	const size_t nc = (size_t)nx * ny * nz;
-	for (size_t c = 0; c < nc; ++c)
-		if (sd.open[c] < 0.5f)
+	const long nc = (long)nx * ny * nz;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (long c = 0; c < nc; ++c)
+		if (flip_solid_open(&sd, (size_t)c) < 0.5f)
 			type[c] = EDDY_CELL_SOLID;
 	return EDDY_OK;
 }
@@ -382,6 +589,7 @@ static void destroy(eddy_system *s)
 	free(b->vel);
 	free(b->omega);
 	free(b->center);
+	free(b->store.mem);
 }
 
 static void *state(eddy_world *w, eddy_system *s, size_t *size)
@@ -415,6 +623,7 @@ eddy_system_id eddy_add_flip_boundary(eddy_world *w, const eddy_flip_boundary_de
 	if (b) {
 		b->def = *def;
 		b->vel_step = -1;
+		b->sd_step = -1;
 	}
 	return eddy__add_system(w, &eddy__kind_flip_boundary, b, boundary_io, boundary_io);
 }

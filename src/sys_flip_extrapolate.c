@@ -6,8 +6,9 @@
  * Reads: cell_type u v w. Writes: u v w.
  *   Known faces: a fluid or solid cell on a side, or on the domain's sides.
  *   Layer l = 1..layers: every unknown face with known neighbours (6-connected
- *   in its own face grid) takes their average and becomes known. A frontier
- *   list keeps the cost to the faces filled, not the whole grid per layer.
+ *   in its own face grid) takes their average and becomes known. A layer is
+ *   a vectorised sweep of the grid's flag bytes on all threads (see
+ *   extrapolate_grid): the same result on any thread count.
  * Solid faces are never rewritten, so the solid velocities flip_boundary set
  * stay imposed. RK2 advection at CFL number C samples up to C + 1 cells
  * beyond the fluid: layers should be at least that. */
@@ -30,9 +31,9 @@ eddy_flip_extrapolate_def eddy_default_flip_extrapolate_def(void)
 	return d;
 }
 
-enum { UNKNOWN = 255, QUEUED = 254 };
+enum { UNKNOWN = 255 }; /* layers are at most 64 */
 
-/* (i, j, k) of face f. The divisions dominate the frontier passes, and a
+/* (i, j, k) of face f. The divisions dominate the fill's rounds, and a
  * 32-bit division is several times faster than a 64-bit one: grids of fewer
  * than 2^32 faces (all in practice) take it. */
 static inline void face_coords(size_t f, const size_t st[3], int m1, bool small, size_t c[3])
@@ -49,71 +50,89 @@ static inline void face_coords(size_t f, const size_t st[3], int m1, bool small,
 	}
 }
 
-/* One face grid: m faces per axis (strides st), layer flags (0 known,
- * UNKNOWN), two frontier buffers of m0 m1 m2 entries each. Only faces next to
- * the last layer are visited, so the cost follows the filled region. */
-static void extrapolate_grid(float *u, uint8_t *layer, size_t *cur, size_t *next, const int m[3], const size_t st[3],
-                             int layers)
+/* Face f's value from its neighbours known before layer l (flag < l), in
+ * the order -x, +x, -y, +y, -z, +z; false when it has none. Summed in
+ * double: equal neighbours give exactly their value (in float, (v + v + v)
+ * / 3 need not be v), so a uniform field extrapolates to itself and G2P's
+ * FLIP delta stays exactly 0. */
+static inline bool face_average(const float *u, const uint8_t *layer, const int m[3], const size_t st[3], const int c[3],
+                                size_t f, int l, float *out)
 {
-	const bool small = st[2] * (size_t)m[2] <= UINT32_MAX;
-	size_t ncur = 0;
-	for (int k = 0; k < m[2]; ++k)
-		for (int j = 0; j < m[1]; ++j)
-			for (int i = 0; i < m[0]; ++i) {
-				const size_t f = (size_t)i + st[1] * (size_t)j + st[2] * (size_t)k;
-				if (layer[f] != UNKNOWN)
-					continue;
-				const int c[3] = {i, j, k};
-				for (int d = 0; d < 3; ++d)
-					if ((c[d] > 0 && layer[f - st[d]] == 0) || (c[d] < m[d] - 1 && layer[f + st[d]] == 0)) {
-						layer[f] = QUEUED;
-						cur[ncur++] = f;
-						break;
+	double sum = 0;
+	int cnt = 0;
+	for (int d = 0; d < 3; ++d) {
+		if (c[d] > 0 && layer[f - st[d]] < l) {
+			sum += (double)u[f - st[d]];
+			cnt++;
+		}
+		if (c[d] + 1 < m[d] && layer[f + st[d]] < l) {
+			sum += (double)u[f + st[d]];
+			cnt++;
+		}
+	}
+	if (cnt)
+		*out = (float)(sum / cnt);
+	return cnt > 0;
+}
+
+/* One face grid: m faces per axis (strides st), layer flags (0 known,
+ * UNKNOWN), hit: a byte per face. Layer l: every unknown face with a
+ * neighbour known before it (flag < l) takes their average and flag l.
+ * A pass reads flags and known values and writes only the values of this
+ * layer's faces (unknown until the pass ends, so no one reads them) and
+ * their hit bytes; the flags are set in a second pass. Both run on all
+ * threads in z slabs, each face one thread's: the same result on any thread
+ * count (and as the serial frontier sweep this replaces: its layer l was the
+ * unknown faces next to layer l - 1, the same set, averaged in the same
+ * neighbour order). A row inside the grid is tested branch-free, which the
+ * compiler vectorises: a sweep costs about a byte load per face and
+ * neighbour, and no frontier list (16 bytes per face) is kept. */
+static void extrapolate_grid(float *u, uint8_t *restrict layer, uint8_t *restrict hit, const int m[3],
+                             const size_t st[3], int layers, int nt)
+{
+	for (int l = 1; l <= layers; ++l) {
+		long filled = 0;
+		const uint8_t lb = (uint8_t)l;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(+ : filled)
+		for (int k = 0; k < m[2]; ++k)
+			for (int j = 0; j < m[1]; ++j) {
+				const size_t row = st[1] * (size_t)j + st[2] * (size_t)k;
+				uint8_t *restrict h = hit + row;
+				const uint8_t *L = layer + row;
+				const bool inner = j > 0 && j + 1 < m[1] && k > 0 && k + 1 < m[2] && m[0] > 2;
+				if (inner) {
+					/* interior of the row: all six neighbours exist */
+					const size_t sy = st[1], sz = st[2];
+					for (int i = 1; i < m[0] - 1; ++i)
+						h[i] = (uint8_t)((L[i] == UNKNOWN) & ((L[i - 1] < lb) | (L[i + 1] < lb) | (L[i - sy] < lb) |
+						                                        (L[i + sy] < lb) | (L[i - sz] < lb) | (L[i + sz] < lb)));
+					for (int i = 0; i < m[0]; i += m[0] - 1) { /* the row's two ends */
+						const int c[3] = {i, j, k};
+						float v;
+						h[i] = L[i] == UNKNOWN && face_average(u, layer, m, st, c, row + (size_t)i, l, &v);
+					}
+				} else {
+					for (int i = 0; i < m[0]; ++i) {
+						const int c[3] = {i, j, k};
+						float v;
+						h[i] = L[i] == UNKNOWN && face_average(u, layer, m, st, c, row + (size_t)i, l, &v);
+					}
+				}
+				for (int i = 0; i < m[0]; ++i)
+					if (h[i]) {
+						const int c[3] = {i, j, k};
+						float v = 0;
+						face_average(u, layer, m, st, c, row + (size_t)i, l, &v);
+						u[row + (size_t)i] = v;
+						filled++;
 					}
 			}
-	for (int l = 1; l <= layers && ncur > 0; ++l) {
-		/* one pass: each frontier face's value, from faces known before this
-		 * layer only (the frontier's own faces are QUEUED, not < l, until the
-		 * pass is over), and its unknown neighbours queued for the next
-		 * layer; the coordinates are computed once for both */
-		size_t nnext = 0;
-		for (size_t q = 0; q < ncur; ++q) {
-			const size_t f = cur[q];
-			size_t c[3];
-			face_coords(f, st, m[1], small, c);
-			/* summed in double: equal neighbours give exactly their value
-			 * (in float, (v + v + v) / 3 need not be v), so a uniform field
-			 * extrapolates to itself and G2P's FLIP delta stays exactly 0 */
-			double sum = 0;
-			int cnt = 0;
-			for (int d = 0; d < 3; ++d) {
-				if (c[d] > 0 && layer[f - st[d]] < l) {
-					sum += (double)u[f - st[d]];
-					cnt++;
-				}
-				if (c[d] + 1 < (size_t)m[d] && layer[f + st[d]] < l) {
-					sum += (double)u[f + st[d]];
-					cnt++;
-				}
-			}
-			u[f] = cnt ? (float)(sum / cnt) : u[f];
-			for (int d = 0; d < 3; ++d) {
-				if (c[d] > 0 && layer[f - st[d]] == UNKNOWN) {
-					layer[f - st[d]] = QUEUED;
-					next[nnext++] = f - st[d];
-				}
-				if (c[d] + 1 < (size_t)m[d] && layer[f + st[d]] == UNKNOWN) {
-					layer[f + st[d]] = QUEUED;
-					next[nnext++] = f + st[d];
-				}
-			}
-		}
-		for (size_t q = 0; q < ncur; ++q)
-			layer[cur[q]] = (uint8_t)l;
-		size_t *t = cur;
-		cur = next;
-		next = t;
-		ncur = nnext;
+		if (filled == 0)
+			break;
+		const long nf = (long)(st[2] * (size_t)m[2]);
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+		for (long f = 0; f < nf; ++f)
+			layer[f] = hit[f] ? lb : layer[f];
 	}
 }
 
@@ -150,8 +169,7 @@ static void extrapolate_grid(float *u, uint8_t *layer, size_t *cur, size_t *next
  * The average is summed in double: equal neighbours give exactly their value,
  * so the filled faces add no round-off of their own (a uniform field's D is
  * then only the round-off of flip_p2g's float weighted means, ~1e-6 |V|). */
-eddy_status eddy__flip_fill_fluid_faces(eddy_world *w, float *const face[3], const float *const weight[3],
-                                        size_t wstride)
+eddy_status eddy__flip_fill_fluid_faces(eddy_world *w, float *const face[3], const uint8_t *const reached[3])
 {
 	const int n[3] = {w->nx, w->ny, w->nz};
 	const uint8_t *type = (const uint8_t *)w->columns[COL_CELL_TYPE].data;
@@ -165,7 +183,7 @@ eddy_status eddy__flip_fill_fluid_faces(eddy_world *w, float *const face[3], con
 		st[2] = (size_t)m[0] * (size_t)m[1];
 		const size_t cst = a == 0 ? 1 : a == 1 ? (size_t)n[0] : (size_t)n[0] * (size_t)n[1];
 		float *u = face[a];
-		const float *wt = weight[a];
+		const uint8_t *wt = reached[a];
 		/* needed faces: interior, weight 0, a fluid cell on a side. Face
 		 * (i, j, k) of grid a lies between cell (i, j, k) and the one below
 		 * it on axis a, so a scan over cells with c[a] >= 1 visits each
@@ -181,7 +199,7 @@ eddy_status eddy__flip_fill_fluid_faces(eddy_world *w, float *const face[3], con
 						if (type[cl] != EDDY_CELL_FLUID && type[cl - cst] != EDDY_CELL_FLUID)
 							continue;
 						const size_t f = (size_t)i + st[1] * (size_t)j + st[2] * (size_t)k;
-						if (wt[wstride * f] > 0)
+						if (wt[f])
 							continue;
 						if (pass)
 							need[nneed] = f;
@@ -220,7 +238,7 @@ eddy_status eddy__flip_fill_fluid_faces(eddy_world *w, float *const face[3], con
 						if (sgn < 0 ? c[d] == 0 : c[d] + 1 >= (size_t)m[d])
 							continue;
 						const size_t g = sgn < 0 ? f - st[d] : f + st[d];
-						bool known = wt[wstride * g] > 0;
+						bool known = wt[g] != 0;
 						if (!known) {
 							size_t lo = 0, hi = nneed; /* need[] is increasing */
 							while (lo < hi) {
@@ -262,8 +280,10 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	float *face[3] = {eddy__col(w, COL_FACE_U), eddy__col(w, COL_FACE_V), eddy__col(w, COL_FACE_W)};
 	int m[3][3];
 	size_t st[3][3];
-	uint8_t *layer[3];
-	size_t *buf[3];
+	uint8_t *layer[3], *hit = NULL;
+	size_t nfmax = 0;
+	const size_t ncell = (size_t)n[0] * n[1] * n[2];
+	const int nt = ncell > 32768 ? ctx->threads : 1;
 	for (int a = 0; a < 3; ++a) {
 		for (int d = 0; d < 3; ++d)
 			m[a][d] = n[d] + (d == a);
@@ -272,14 +292,18 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 		st[a][2] = (size_t)m[a][0] * (size_t)m[a][1];
 		const size_t nf = st[a][2] * (size_t)m[a][2];
 		layer[a] = eddy__arena_alloc(&w->arena, nf);
-		buf[a] = eddy__arena_alloc(&w->arena, 2 * nf * sizeof *buf[a]);
-		if (!layer[a] || !buf[a])
+		nfmax = nf > nfmax ? nf : nfmax;
+		if (!layer[a])
 			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_extrapolate: out of memory");
-		for (int k = 0; k < m[a][2]; ++k)
-			for (int j = 0; j < m[a][1]; ++j)
-				for (int i = 0; i < m[a][0]; ++i) {
+		uint8_t *la = layer[a];
+		const int ma[3] = {m[a][0], m[a][1], m[a][2]};
+		const size_t sa[3] = {st[a][0], st[a][1], st[a][2]};
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+		for (int k = 0; k < ma[2]; ++k)
+			for (int j = 0; j < ma[1]; ++j)
+				for (int i = 0; i < ma[0]; ++i) {
 					const int c[3] = {i, j, k};
-					const size_t f = (size_t)i + st[a][1] * (size_t)j + st[a][2] * (size_t)k;
+					const size_t f = (size_t)i + sa[1] * (size_t)j + sa[2] * (size_t)k;
 					bool known = c[a] == 0 || c[a] == n[a];
 					if (!known) {
 						int lo[3] = {i, j, k};
@@ -287,16 +311,14 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 						known = type[flip_cell(w, lo[0], lo[1], lo[2])] != EDDY_CELL_AIR ||
 						        type[flip_cell(w, i, j, k)] != EDDY_CELL_AIR;
 					}
-					layer[a][f] = known ? 0 : UNKNOWN;
+					la[f] = known ? 0 : UNKNOWN;
 				}
 	}
-	/* the three grids are independent: one thread each, same result */
-	const int nt = ctx->threads < 3 ? ctx->threads : 3;
-#pragma omp parallel for num_threads(nt) schedule(static, 1)
-	for (int a = 0; a < 3; ++a) {
-		const size_t nf = st[a][2] * (size_t)m[a][2];
-		extrapolate_grid(face[a], layer[a], buf[a], buf[a] + nf, m[a], st[a], ex->def.layers);
-	}
+	hit = eddy__arena_alloc(&w->arena, nfmax);
+	if (!hit)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_extrapolate: out of memory");
+	for (int a = 0; a < 3; ++a)
+		extrapolate_grid(face[a], layer[a], hit, m[a], st[a], ex->def.layers, nt);
 	return EDDY_OK;
 }
 

@@ -46,7 +46,10 @@
  * stays on the grid (the role of the particle-radius rule r >= sqrt(3)/2 dx).
  * The splat runs on all threads in slabs of z rows, each slab summing its
  * own samples over the particles in index order (see the loop): results are
- * bit-identical on any number of threads. */
+ * bit-identical on any number of threads. The sums sum W v and sum W go to
+ * u v w and u_old v_old w_old themselves (both are overwritten by the
+ * division and its copy), so the splat needs only a byte per face of
+ * scratch (which faces a particle reached), not two floats. */
 #include "flip.h"
 
 #include <stdlib.h>
@@ -84,32 +87,32 @@ static inline int floor_int(float t)
 }
 static inline int ceil_int(float t) { return -floor_int(-t); }
 
-/* Adds weight * val and weight to the 8 samples around a point of one face
- * grid. acc interleaves the two sums per face (acc[2q] = sum W v, acc[2q+1]
- * = sum W): each update touches one cache line instead of two. */
-static inline void splat(float *restrict acc, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az, float val,
-                         int klo, int khi)
+/* Adds weight * val to sv and weight to sw at the 8 samples around a point
+ * of one face grid. sv is the face column itself and sw the face grid's
+ * u_old column (written after the splat anyway): no grid-sized scratch. */
+static inline void splat(float *restrict sv, float *restrict sw, size_t sy, size_t sz, flip_axis ax, flip_axis ay,
+                         flip_axis az, float val, int klo, int khi)
 {
 	const size_t j[2] = {(size_t)ay.i0 * sy, (size_t)ay.i1 * sy}, k[2] = {(size_t)az.i0 * sz, (size_t)az.i1 * sz};
 	const float wy[2] = {1.0f - ay.w1, ay.w1}, wz[2] = {1.0f - az.w1, az.w1}, wx0 = 1.0f - ax.w1, wx1 = ax.w1;
 	const int kk[2] = {az.i0, az.i1};
 	for (int c = 0; c < 2; ++c)
 		for (int b = 0; b < 2 && kk[c] >= klo && kk[c] < khi; ++b) {
-			float *row = acc + 2 * (k[c] + j[b]);
+			const size_t row = k[c] + j[b];
 			const float wyz = wz[c] * wy[b], w0 = wyz * wx0, w1 = wyz * wx1;
-			float *a0 = row + 2 * (size_t)ax.i0, *a1 = row + 2 * (size_t)ax.i1;
-			a0[0] += w0 * val;
-			a0[1] += w0;
-			a1[0] += w1 * val;
-			a1[1] += w1;
+			const size_t q0 = row + (size_t)ax.i0, q1 = row + (size_t)ax.i1;
+			sv[q0] += w0 * val;
+			sw[q0] += w0;
+			sv[q1] += w1 * val;
+			sw[q1] += w1;
 		}
 }
 
 /* splat() for APIC: the value at a face is val + c . (x_f - x_p), with
  * d0 = x_f - x_p (m) at each axis's i0 sample and h the spacing (i1 is one
  * sample further; at the clamped top i1 = i0 with weight 0). */
-static inline void splat_affine(float *restrict acc, size_t sy, size_t sz, flip_axis ax, flip_axis ay, flip_axis az,
-                                float val, const float c[3], const float d0[3], float h, int klo, int khi)
+static inline void splat_affine(float *restrict sv, float *restrict sw, size_t sy, size_t sz, flip_axis ax, flip_axis ay,
+                                flip_axis az, float val, const float c[3], const float d0[3], float h, int klo, int khi)
 {
 	const int kk[2] = {az.i0, az.i1};
 	const size_t j[2] = {(size_t)ay.i0 * sy, (size_t)ay.i1 * sy}, k[2] = {(size_t)az.i0 * sz, (size_t)az.i1 * sz};
@@ -118,13 +121,13 @@ static inline void splat_affine(float *restrict acc, size_t sy, size_t sz, flip_
 	            ez[2] = {c[2] * d0[2], c[2] * (d0[2] + h)};
 	for (int cc = 0; cc < 2; ++cc)
 		for (int b = 0; b < 2 && kk[cc] >= klo && kk[cc] < khi; ++b) {
-			float *row = acc + 2 * (k[cc] + j[b]);
+			const size_t row = k[cc] + j[b];
 			const float wyz = wz[cc] * wy[b], w0 = wyz * wx0, w1 = wyz * wx1, v = val + ey[b] + ez[cc];
-			float *a0 = row + 2 * (size_t)ax.i0, *a1 = row + 2 * (size_t)ax.i1;
-			a0[0] += w0 * (v + ex[0]);
-			a0[1] += w0;
-			a1[0] += w1 * (v + ex[1]);
-			a1[1] += w1;
+			const size_t q0 = row + (size_t)ax.i0, q1 = row + (size_t)ax.i1;
+			sv[q0] += w0 * (v + ex[0]);
+			sw[q0] += w0;
+			sv[q1] += w1 * (v + ex[1]);
+			sw[q1] += w1;
 		}
 }
 
@@ -162,10 +165,10 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	float *face[3] = {eddy__col(w, COL_FACE_U), eddy__col(w, COL_FACE_V), eddy__col(w, COL_FACE_W)};
 	float *old[3] = {eddy__col(w, COL_U_OLD), eddy__col(w, COL_V_OLD), eddy__col(w, COL_W_OLD)};
 	const size_t nf[3] = {(size_t)(nx + 1) * ny * nz, (size_t)nx * (ny + 1) * nz, (size_t)nx * ny * (nz + 1)};
-	float *acc[3]; /* per face: sum W v, sum W (see splat) */
+	uint8_t *reached[3]; /* per face: a particle's stencil weighs it (sum W > 0) */
 	for (int a = 0; a < 3; ++a) {
-		acc[a] = eddy__arena_alloc(&w->arena, 2 * nf[a] * sizeof *acc[a]);
-		if (!acc[a])
+		reached[a] = eddy__arena_alloc(&w->arena, nf[a]);
+		if (!reached[a])
 			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_p2g: out of memory for splat weights");
 	}
 	const size_t nc = (size_t)nx * ny * nz;
@@ -222,7 +225,8 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 			const int top = nz + (a == 2);
 			q0[a] = (size_t)klo * row;
 			q1[a] = (size_t)(khi < top ? khi : top) * row;
-			memset(acc[a] + 2 * q0[a], 0, 2 * (q1[a] - q0[a]) * sizeof *acc[a]);
+			memset(face[a] + q0[a], 0, (q1[a] - q0[a]) * sizeof *face[a]);
+			memset(old[a] + q0[a], 0, (q1[a] - q0[a]) * sizeof *old[a]);
 		}
 		const size_t c0 = (size_t)klo * sx * sy, c1 = (size_t)(khi < nz ? khi : nz) * sx * sy;
 		memset(dens + c0, 0, (c1 - c0) * sizeof *dens);
@@ -243,23 +247,25 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 				                     face_offset(g.cz, 0.5f, tz, h)};
 				const float dw[3] = {face_offset(g.cx, 0.5f, tx, h), face_offset(g.cy, 0.5f, ty, h),
 				                     face_offset(g.fz, 0.0f, tz, h)};
-				splat_affine(acc[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, pvx, cx, du, h, klo, khi);
-				splat_affine(acc[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, pvy, cy, dv, h, klo, khi);
-				splat_affine(acc[2], sx, sx * sy, g.cx, g.cy, g.fz, pvz, cz, dw, h, klo, khi);
+				splat_affine(face[0], old[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, pvx, cx, du, h, klo, khi);
+				splat_affine(face[1], old[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, pvy, cy, dv, h, klo, khi);
+				splat_affine(face[2], old[2], sx, sx * sy, g.cx, g.cy, g.fz, pvz, cz, dw, h, klo, khi);
 			} else {
-				splat(acc[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, pvx, klo, khi);
-				splat(acc[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, pvy, klo, khi);
-				splat(acc[2], sx, sx * sy, g.cx, g.cy, g.fz, pvz, klo, khi);
+				splat(face[0], old[0], sx + 1, (sx + 1) * sy, g.fx, g.cy, g.cz, pvx, klo, khi);
+				splat(face[1], old[1], sx, sx * (sy + 1), g.cx, g.fy, g.cz, pvy, klo, khi);
+				splat(face[2], old[2], sx, sx * sy, g.cx, g.cy, g.fz, pvz, klo, khi);
 			}
 			splat_density(dens, sx, sx * sy, g.cx, g.cy, g.cz, klo, khi);
 		}
-		/* this slab's faces, then its cells */
+		/* this slab's faces (the weighted means; u_old their copy), then its cells */
 		for (int a = 0; a < 3; ++a) {
-			float *f = face[a];
-			const float *s2 = acc[a];
-			for (size_t q = q0[a]; q < q1[a]; ++q)
-				f[q] = s2[2 * q + 1] > 0 ? s2[2 * q] / s2[2 * q + 1] : 0.0f;
-			memcpy(old[a] + q0[a], f + q0[a], (q1[a] - q0[a]) * sizeof *f);
+			float *f = face[a], *sw = old[a];
+			uint8_t *re = reached[a];
+			for (size_t q = q0[a]; q < q1[a]; ++q) {
+				re[q] = sw[q] > 0;
+				f[q] = sw[q] > 0 ? f[q] / sw[q] : 0.0f;
+				sw[q] = f[q];
+			}
 		}
 		/* the fill fraction of every cell from the particle density: one
 		 * particle is 1 / n0 of a cell, so sum (1 - phi) / 2 over the cells
@@ -309,8 +315,8 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	pm->particles = np;
 	/* faces of fluid cells no particle reached get a velocity before the
 	 * solve; u_old keeps 0 there, but no particle's stencil weighs them */
-	const float *const weight[3] = {acc[0] + 1, acc[1] + 1, acc[2] + 1};
-	return eddy__flip_fill_fluid_faces(w, face, weight, 2);
+	const uint8_t *const known[3] = {reached[0], reached[1], reached[2]};
+	return eddy__flip_fill_fluid_faces(w, face, known);
 }
 
 static void destroy(eddy_system *s)

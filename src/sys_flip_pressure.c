@@ -157,12 +157,8 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	float *pcell = eddy__col(w, COL_CELL_PRESSURE);
 	const double h = w->def.cell_size, tmin = ps->def.theta_min;
 
-	float margin = 0;
 	flip_solid sd;
-	memset(&sd, 0, sizeof sd);
-	const eddy_vec3 *svel = NULL;
-	if (!eddy__flip_surface_solid(w, s, &sd) && eddy__flip_boundary_info(w, &margin, &svel) &&
-	    !eddy__flip_solid_faces(w, ctx->dt, margin, svel, &sd))
+	if (!eddy__flip_solid_for(w, s, ctx->dt, &sd))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory");
 	int *row = eddy__arena_alloc(&w->arena, nc * sizeof *row);
 	if (!row)
@@ -174,7 +170,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 			for (int i = 0; i < nx; ++i) {
 				const size_t c = flip_cell(w, i, j, k);
 				bool unknown = type[c] == EDDY_CELL_FLUID;
-				if (sd.any && !unknown && sd.open[c] < 1) {
+				if (sd.any && !unknown && flip_solid_open(&sd, c) < 1) {
 					/* A cell the solid cuts that holds no particle (they sit
 					 * in the open part of the cells next door), or whose
 					 * centre is in the solid (typed solid): it is liquid up
@@ -194,16 +190,16 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 						if (o < 0 || flip_face_weight(w, &sd, ax, f, fc[0], fc[1], fc[2]) == 0)
 							continue;
 						wet |= type[o] == EDDY_CELL_FLUID;
-						dry |= type[o] == EDDY_CELL_AIR && sd.open[o] >= 1;
+						dry |= type[o] == EDDY_CELL_AIR && flip_solid_open(&sd, o) >= 1;
 					}
 					unknown = wet && !dry;
 				}
 				row[c] = unknown ? n++ : -1;
 				if (unknown && type[c] == EDDY_CELL_SOLID) {
-					vol += sd.open[c]; /* no marker there: full of liquid up to the solid */
+					vol += flip_solid_open(&sd, c); /* no marker there: full of liquid up to the solid */
 				} else if (type[c] != EDDY_CELL_SOLID) {
 					const double f = 0.5 * (1.0 - (double)phi[c]);
-					vol += (f < 0 ? 0 : f > 1 ? 1 : f) * (sd.any ? (double)sd.open[c] : 1.0);
+					vol += (f < 0 ? 0 : f > 1 ? 1 : f) * (sd.any ? (double)flip_solid_open(&sd, c) : 1.0);
 				}
 			}
 	vol *= h * h * h;
@@ -249,7 +245,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 						wf = 0; /* a solid cell out of the system: its faces move with the solid */
 					double flux = (double)face[ax][f];
 					if (sd.any)
-						flux = wf * flux + (1.0 - wf) * (double)sd.vel[ax][f];
+						flux = wf * flux + (1.0 - wf) * (double)flip_solid_vel(&sd, ax, f);
 					div += (d & 1) ? flux : -flux;
 					int link = -1;
 					if (o >= 0 && wf > 0) {
@@ -283,7 +279,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 			if (!d || !hc)
 				return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory");
 			const float *px = eddy__col(w, COL_X_), *py = eddy__col(w, COL_Y_), *pz = eddy__col(w, COL_Z_);
-			flip_particle_density(w, px, py, pz, d);
+			flip_particle_density(w, px, py, pz, d, ctx->threads);
 			memset(hc, 0, nc);
 			const flip_grid g = flip_grid_of(w);
 			for (size_t p = 0; p < w->n; ++p)
@@ -296,7 +292,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 		const double n0 = flip_rest_count(w);
 		for (int r = 0; r < n; ++r) {
 			const int c = cell_of[r];
-			if (type[c] != EDDY_CELL_FLUID || (sd.any && sd.open[c] < 1))
+			if (type[c] != EDDY_CELL_FLUID || (sd.any && flip_solid_open(&sd, c) < 1))
 				continue;
 			double e = (double)dens[c] / n0 - 1.0;
 			if (has_air[r] && e <= VC_PACKED)
@@ -310,7 +306,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 				const int o = A.nb[6 * r + d];
 				size_t f;
 				if (o >= 0) {
-					walled |= sd.any && sd.open[cell_of[o]] < 1;
+					walled |= sd.any && flip_solid_open(&sd, (size_t)cell_of[o]) < 1;
 					deep &= !has_air[o];
 				} else if (across(w, i, j, k, d, &f) >= 0) {
 					walled |= type[across(w, i, j, k, d, &f)] == EDDY_CELL_SOLID;
@@ -470,7 +466,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 					/* as in the matrix: a side that is not an unknown is air
 					 * (ghost pressure) or a wall-like solid cell (no update) */
 					if ((rl < 0 && type[cl] != EDDY_CELL_AIR) || (rh < 0 && type[ch] != EDDY_CELL_AIR)) {
-						f[fi] = sd.vel[a][fi]; /* as the matrix saw it: moving with the solid */
+						f[fi] = flip_solid_vel(&sd, a, fi); /* as the matrix saw it: moving with the solid */
 						continue;
 					}
 					double ql, qh;
@@ -506,7 +502,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 				double wf = flip_face_weight(w, &sd, ax, f, fc[0], fc[1], fc[2]);
 				if (o >= 0 && row[o] < 0 && type[o] == EDDY_CELL_SOLID)
 					wf = 0;
-				flux = wf * flux + (1.0 - wf) * (double)sd.vel[ax][f];
+				flux = wf * flux + (1.0 - wf) * (double)flip_solid_vel(&sd, ax, f);
 			}
 			div += (d & 1) ? flux : -flux;
 		}

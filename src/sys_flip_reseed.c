@@ -21,7 +21,10 @@
  *   positions in the cell (the world's random stream, so runs repeat), with
  *   the grid velocity there. Holes left over are closed and surpluses left
  *   over spread by flip_pressure's volume correction, which acts on the same
- *   density. Run it last, after the colliders. */
+ *   density. Run it last, after the colliders.
+ * Threads: the counts (integer, atomic) and the density (slabs, flip.h) on
+ * all threads, the same on any count; choosing the spares (each cell's
+ * first in index order) and the holes' random positions stay serial. */
 #include "flip.h"
 
 #include <stdlib.h>
@@ -72,15 +75,22 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_reseed: out of memory");
 	memset(count, 0, nc * sizeof *count);
 	{
+		/* integer counts: the same whatever order the threads add in */
 		const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
-		for (size_t i = 0; i < w->n; ++i)
-			count[cell_of(w, x[i], y[i], z[i])]++;
+		const long np = (long)w->n;
+		const int nt = np > 16384 ? ctx->threads : 1;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+		for (long i = 0; i < np; ++i) {
+			const long c = cell_of(w, x[i], y[i], z[i]);
+#pragma omp atomic
+			count[c]++;
+		}
 	}
 	float *dens = eddy__arena_alloc(&w->arena, nc * sizeof *dens);
 	size_t *spare = eddy__arena_alloc(&w->arena, (w->n + 1) * sizeof *spare);
 	if (!dens || !spare)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_reseed: out of memory");
-	flip_particle_density(w, eddy__col(w, COL_X_), eddy__col(w, COL_Y_), eddy__col(w, COL_Z_), dens);
+	flip_particle_density(w, eddy__col(w, COL_X_), eddy__col(w, COL_Y_), eddy__col(w, COL_Z_), dens, ctx->threads);
 	/* surplus: particles a packed cell can give (counted, not removed) */
 	const double n0 = flip_rest_count(w);
 	size_t nspare = 0;
@@ -99,11 +109,8 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	size_t used = 0;
 	/* the solids now (after the colliders moved): a cut cell's fair share is
 	 * min_per_cell times its open fraction, and no particle is placed inside */
-	float margin = 0;
 	flip_solid sd;
-	memset(&sd, 0, sizeof sd);
-	const eddy_vec3 *svel = NULL;
-	if (eddy__flip_boundary_info(w, &margin, &svel) && !eddy__flip_solid_faces(w, ctx->dt, margin, svel, &sd))
+	if (!eddy__flip_solid_for(w, s, ctx->dt, &sd))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_reseed: out of memory");
 	const double h = w->def.cell_size;
 	const flip_grid grid = flip_grid_of(w);
@@ -112,7 +119,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 		for (int j = 1; j < ny - 1; ++j)
 			for (int i = 1; i < nx - 1; ++i) {
 				const size_t c = flip_cell(w, i, j, k);
-				const double share = sd.any ? (double)sd.open[c] : 1.0;
+				const double share = sd.any ? (double)flip_solid_open(&sd, c) : 1.0;
 				if (type[c] != EDDY_CELL_FLUID || share < 1 || count[c] >= rs->def.min_per_cell)
 					continue; /* cut cells are skipped: their open part is uncertain to a cell */
 				const size_t sx = 1, sy = (size_t)nx, sz = (size_t)nx * ny;

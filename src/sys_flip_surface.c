@@ -25,10 +25,6 @@
 
 typedef struct surface {
 	eddy_flip_surface_def def;
-	/* this step's solid faces (in the world's arena, alive to the step's
-	 * end), kept for a flip_pressure right after (eddy__flip_surface_solid) */
-	flip_solid sd;
-	int64_t sd_step; /* the step they were computed at, -1 none */
 } surface;
 
 static const int surface_reads[] = {COL_CELL_TYPE, COL_FLIP_PHI, -1};
@@ -60,7 +56,9 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	 * in proportion to their own fill (a wall between a full and an empty
 	 * cell took its weight from the full one); a cell a collider cuts holds
 	 * its particles in its open part, so its fill is count / (n0 open) */
-	const flip_solid sd = sf->sd;
+	flip_solid sd;
+	if (!eddy__flip_solid_for(w, s, ctx->dt, &sd))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_surface: out of memory");
 	if (sd.any) {
 		memcpy(tmp, phi, nc * sizeof *phi);
 		for (int k = 0; k < n[2]; ++k)
@@ -87,8 +85,8 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 					phi[c] = 1.0f;
 				}
 		for (size_t c = 0; c < nc; ++c)
-			if (type[c] != EDDY_CELL_SOLID && sd.open[c] < 1) {
-				const float open = sd.open[c] > 0.05f ? sd.open[c] : 0.05f;
+			if (type[c] != EDDY_CELL_SOLID && flip_solid_open(&sd, c) < 1) {
+				const float open = flip_solid_open(&sd, c) > 0.05f ? flip_solid_open(&sd, c) : 0.05f;
 				float f = 0.5f * (1.0f - phi[c]) / open;
 				f = f < 2.0f ? f : 2.0f;
 				phi[c] = 1.0f - 2.0f * f;
@@ -162,18 +160,6 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
  * peak is the largest system's scratch, not their sum. */
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
-	/* the solid faces first, before the mark: they outlive this step for a
-	 * flip_pressure right after, which then need not compute them again */
-	surface *sf = s->data;
-	float margin = 0;
-	const eddy_vec3 *svel = NULL;
-	memset(&sf->sd, 0, sizeof sf->sd);
-	sf->sd_step = -1;
-	if (eddy__flip_boundary_info(w, &margin, &svel)) {
-		if (!eddy__flip_solid_faces(w, ctx->dt, margin, svel, &sf->sd))
-			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_surface: out of memory");
-	}
-	sf->sd_step = w->step;
 	const eddy_arena_mark m = eddy__arena_mark(&w->arena);
 	const eddy_status st = step_body(w, s, ctx);
 	eddy__arena_release(&w->arena, m);
@@ -187,22 +173,6 @@ const eddy_system_vtable eddy__kind_flip_surface = {
 	.default_writes = surface_writes,
 };
 
-bool eddy__flip_surface_solid(const eddy_world *w, const eddy_system *self, flip_solid *sd)
-{
-	for (int q = 1; q < w->order_count; ++q)
-		if (&w->slots[w->order[q]] == self) {
-			const eddy_system *prev = &w->slots[w->order[q - 1]];
-			if (prev->vt != &eddy__kind_flip_surface)
-				return false;
-			const surface *sf = prev->data;
-			if (sf->sd_step != w->step)
-				return false;
-			*sd = sf->sd;
-			return true;
-		}
-	return false;
-}
-
 eddy_system_id eddy_add_flip_surface(eddy_world *w, const eddy_flip_surface_def *def)
 {
 	const char *sys = "flip_surface";
@@ -213,9 +183,7 @@ eddy_system_id eddy_add_flip_surface(eddy_world *w, const eddy_flip_surface_def 
 		return EDDY_NULL_SYSTEM;
 	}
 	surface *sf = calloc(1, sizeof *sf);
-	if (sf) {
+	if (sf)
 		sf->def = *def;
-		sf->sd_step = -1;
-	}
 	return eddy__add_system(w, &eddy__kind_flip_surface, sf, surface_reads, surface_writes);
 }

@@ -157,11 +157,14 @@ static int child_block(const char *method, long n, int threads, int steps)
 		return 1;
 	}
 	const double t0 = now_ms();
-	for (int s = 0; s < 2; ++s)
+	for (int s = 0; s < 2; ++s) {
+		if (getenv("EDDY_SCALE_COLUMNS")) /* where the peak is reached: emission, first step or later */
+			fprintf(stderr, "peak RSS before step %d: %.1f MB\n", s, (double)maxrss_kb() / 1e3);
 		if (eddy_world_step(w) != EDDY_OK) {
 			fprintf(stderr, "bench_scale: %s %ld: %s\n", method, n, eddy_world_error(w));
 			return 1;
 		}
+	}
 	const double setup_s = (now_ms() - t0) / 1e3;
 	const size_t np = eddy_world_particle_count(w);
 	const int ns = eddy_world_system_count(w);
@@ -180,6 +183,8 @@ static int child_block(const char *method, long n, int threads, int steps)
 		}
 		ms[s] = now_ms() - a;
 		cpu[s] = cpu_ms() - c;
+		if (getenv("EDDY_SCALE_COLUMNS"))
+			fprintf(stderr, "peak RSS after timed step %d: %.1f MB\n", s, (double)maxrss_kb() / 1e3);
 		eddy_frame_stats st;
 		eddy_world_frame_stats(w, &st);
 		const double it = extra_stat(&st, "iterations");

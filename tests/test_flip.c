@@ -1053,6 +1053,109 @@ static void threads_do_not_change_apic_marking(void)
 	CHECK(hash[0] == hash[1] && hash[1] == hash[2] && hash[2] == hash[3]);
 }
 
+/* The solid faces on all threads, computed once and lent: a tank whose walls
+ * are a collider and a sphere the host moves and turns (its faces carry a
+ * rotating solid's point velocities), on a grid above the sizes where the
+ * solid faces (32768 nodes), flip_extrapolate (32768 cells) and flip_p2g
+ * (16384 particles) go parallel, with reseeding (which computes its own
+ * faces after the colliders moved). Runs: 1 thread, 2 threads, and 1 thread
+ * with a custom system between flip_boundary and flip_surface, so that
+ * flip_surface and flip_pressure compute the faces themselves instead of
+ * borrowing flip_boundary's. Particles and grid velocities agree bit for bit
+ * in all three: the lent faces are the ones a system would compute, and the
+ * thread count changes nothing. */
+static eddy_status noop_step(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	(void)w, (void)ctx, (void)user;
+	return EDDY_OK;
+}
+
+static void threads_and_lending_do_not_change_solids(void)
+{
+	float *state[3] = {NULL, NULL, NULL};
+	size_t len[3] = {0, 0, 0};
+	const char *chan[7] = {"x", "y", "z", "vx", "vy", "vz", "u"};
+	for (int run = 0; run < 3; ++run) {
+		eddy_world_def d = eddy_default_world_def();
+		d.bounds_max = (eddy_vec3){1.0f, 0.6f, 1.0f};
+		d.cell_size = 0.03;
+		d.threads = run == 1 ? 2 : 1;
+		d.fps = 400; /* a step or two a frame */
+		eddy_world *w = eddy_create_world(&d, NULL, 0);
+		CHECK(w != NULL);
+		if (!w)
+			return;
+		eddy_gravity_def g = eddy_default_gravity_def();
+		eddy_add_gravity(w, &g);
+		eddy_flip_p2g_def p = eddy_default_flip_p2g_def();
+		eddy_add_flip_p2g(w, &p);
+		eddy_flip_boundary_def b = eddy_default_flip_boundary_def();
+		eddy_add_flip_boundary(w, &b);
+		if (run == 2) {
+			eddy_custom_system_def cs = eddy_default_custom_system_def();
+			cs.name = "between";
+			cs.step = noop_step;
+			CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
+		}
+		eddy_flip_surface_def sf = eddy_default_flip_surface_def();
+		eddy_add_flip_surface(w, &sf);
+		eddy_flip_pressure_def pr = eddy_default_flip_pressure_def();
+		eddy_add_flip_pressure(w, &pr);
+		eddy_flip_extrapolate_def ex = eddy_default_flip_extrapolate_def();
+		eddy_add_flip_extrapolate(w, &ex);
+		eddy_flip_g2p_def gp = eddy_default_flip_g2p_def();
+		eddy_add_flip_g2p(w, &gp);
+		eddy_flip_advect_def ad = eddy_default_flip_advect_def();
+		eddy_add_flip_advect(w, &ad);
+		eddy_collide_box_def bx = eddy_default_collide_box_def();
+		bx.max = d.bounds_max;
+		eddy_add_collide_box(w, &bx);
+		eddy_collide_sphere_def sp = eddy_default_collide_sphere_def();
+		sp.center = (eddy_vec3){0.5f, 0.2f, 0.5f};
+		sp.radius = 0.12f;
+		const eddy_system_id ball = eddy_add_collide_sphere(w, &sp);
+		CHECK(eddy_system_valid(w, ball));
+		eddy_flip_reseed_def rs = eddy_default_flip_reseed_def();
+		eddy_add_flip_reseed(w, &rs);
+		if (run == 2) { /* the custom system sits where it was added */
+			eddy_system_info a, c;
+			eddy_world_system_info(w, eddy_world_system_at(w, 3), &a);
+			eddy_world_system_info(w, eddy_world_system_at(w, 4), &c);
+			CHECKF(strcmp(a.name, "between") == 0 && strcmp(c.name, "flip_surface") == 0, "order: %s %s", a.name, c.name);
+		}
+		fill(w, d.cell_size, (eddy_vec3){0.03f, 0.03f, 0.03f}, (eddy_vec3){0.97f, 0.21f, 0.97f}, NULL,
+		     (eddy_vec3){0.2f, 0, -0.1f});
+		CHECK(eddy_world_particle_count(w) > 16384);
+		for (int f = 0; f < 3; ++f) {
+			CHECK(eddy_collider_set_offset(w, ball, (eddy_vec3){0.02f * (f + 1), -0.01f * (f + 1), 0}) == EDDY_OK);
+			CHECK(eddy_collider_set_rotation(w, ball, (eddy_vec3){0, 0.3f * (f + 1), 0.1f}) == EDDY_OK);
+			if (!step_frames(w, 1))
+				break;
+		}
+		size_t total = 0, n[7];
+		for (int c = 0; c < 7; ++c) {
+			CHECK(eddy_world_channel(w, chan[c], &n[c]) != NULL);
+			total += n[c];
+		}
+		state[run] = malloc(total * sizeof(float));
+		len[run] = total;
+		size_t at = 0;
+		for (int c = 0; c < 7 && state[run]; ++c) {
+			memcpy(state[run] + at, eddy_world_channel(w, chan[c], NULL), n[c] * sizeof(float));
+			at += n[c];
+		}
+		eddy_destroy_world(w);
+	}
+	CHECK(state[0] && state[1] && state[2]);
+	CHECK(len[0] == len[1] && len[0] == len[2]);
+	if (state[0] && state[1] && state[2] && len[0] == len[1] && len[0] == len[2]) {
+		CHECKF(memcmp(state[0], state[1], len[0] * sizeof(float)) == 0, "1 vs 2 threads differ");
+		CHECKF(memcmp(state[0], state[2], len[0] * sizeof(float)) == 0, "lent vs recomputed solid faces differ");
+	}
+	for (int r = 0; r < 3; ++r)
+		free(state[r]);
+}
+
 /* Reseeding fills interior cells below 3 particles from a packed cell's
  * surplus over 12, moving particles rather than creating them: the 7 inner
  * cells holding 1 take 2 each from the cell holding 28, and the count (the
@@ -1221,6 +1324,7 @@ void suite_flip(void)
 	RUN(pcg_failure_is_an_error);
 	RUN(threads_do_not_change_results);
 	RUN(threads_do_not_change_apic_marking);
+	RUN(threads_and_lending_do_not_change_solids);
 	RUN(reseed_keeps_counts);
 	RUN(mark_radius_marks_neighbours);
 	RUN(defs_and_order_are_checked);
