@@ -61,6 +61,9 @@ typedef struct eddy_system_vtable {
 	/* the kind's own preflight findings (eddy_world_check), one line each;
 	 * returns the number of EDDY_CHECK_ERROR findings it reported */
 	int (*check)(eddy_world *w, const eddy_system *s, eddy_check_fn report, void *user);
+	/* never moves a solid nor changes what a solid covers: FLIP's solid
+	 * faces made before it still hold after it (eddy__flip_solid_for) */
+	bool keeps_solids;
 	/* colliders: signed distance to the solid, < 0 inside it */
 	float (*distance)(const eddy_system *s, eddy_vec3 p);
 	/* colliders: pose and size, for hosts that draw them (eddy_collider_shape_of) */
@@ -242,6 +245,9 @@ typedef struct eddy_system_iter {
 } eddy_system_iter;
 eddy_system_iter eddy__systems(const eddy_world *w, uint32_t caps);
 const eddy_system *eddy__systems_next(eddy_system_iter *it);
+/* The pipeline position of the system the last eddy__systems_next gave, for
+ * data kept per position. */
+static inline int eddy__systems_position(const eddy_system_iter *it) { return it->pos - 1; }
 /* The nearest system before s (any position when s is NULL: the last one)
  * that provides cap, or NULL. */
 const eddy_system *eddy__provider(const eddy_world *w, const eddy_system *s, uint32_t cap);

@@ -60,9 +60,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
 	const eddy_system *col[EDDY_MAX_SYSTEMS];
 	int nc = 0;
-	for (int q = 0; q < w->order_count; ++q)
-		if (eddy__is_collider(&w->slots[w->order[q]]))
-			col[nc++] = &w->slots[w->order[q]];
+	eddy_system_iter it = eddy__systems(w, EDDY_CAP_COLLIDER);
+	for (const eddy_system *c; (c = eddy__systems_next(&it));)
+		col[nc++] = c;
 	const long n = (long)w->n;
 	const flip_grid grid = flip_grid_of(w);
 #pragma omp parallel for num_threads(ctx->threads) if (n > 16384) schedule(static)

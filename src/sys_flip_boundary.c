@@ -160,9 +160,9 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 	memset(s, 0, sizeof *s);
 	int ncol = 0;
 	int colq[EDDY_MAX_SYSTEMS]; /* the colliders' pipeline positions, in order */
-	for (int q = 0; q < w->order_count; ++q)
-		if (eddy__is_collider(&w->slots[w->order[q]]))
-			colq[ncol++] = q;
+	eddy_system_iter it = eddy__systems(w, EDDY_CAP_COLLIDER);
+	while (eddy__systems_next(&it))
+		colq[ncol++] = eddy__systems_position(&it);
 	if (ncol == 0)
 		return true;
 	const int nx = w->nx, ny = w->ny, nz = w->nz, nt = w->def.threads;
@@ -206,7 +206,7 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 	eddy_vec3 *own_omega = NULL, *own_center = NULL;
 	for (int q = 0; q < w->order_count; ++q) {
 		const eddy_system *c = &w->slots[w->order[q]];
-		if (velocities && c->vt == &eddy__kind_flip_boundary && ((const boundary *)c->data)->vel == velocities) {
+		if (velocities && (c->vt->provides & EDDY_CAP_SOLID_FACES) && ((const boundary *)c->data)->vel == velocities) {
 			omega = ((const boundary *)c->data)->omega, center = ((const boundary *)c->data)->center;
 			break;
 		}
@@ -427,17 +427,15 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 
 bool eddy__flip_boundary_info(const eddy_world *w, float *margin, const eddy_vec3 **vel)
 {
-	for (int q = 0; q < w->order_count; ++q) {
-		const eddy_system *c = &w->slots[w->order[q]];
-		if (c->vt == &eddy__kind_flip_boundary) {
-			const boundary *b = c->data;
-			*margin = b->def.margin;
-			if (vel)
-				*vel = b->vel_step == w->step && b->cap == w->order_count ? b->vel : NULL;
-			return true;
-		}
-	}
-	return false;
+	eddy_system_iter it = eddy__systems(w, EDDY_CAP_SOLID_FACES);
+	const eddy_system *c = eddy__systems_next(&it);
+	if (!c)
+		return false;
+	const boundary *b = c->data;
+	*margin = b->def.margin;
+	if (vel)
+		*vel = b->vel_step == w->step && b->cap == w->order_count ? b->vel : NULL;
+	return true;
 }
 
 bool eddy__flip_boundary_solid(const eddy_world *w, const eddy_system *self, flip_solid *sd)
@@ -448,16 +446,15 @@ bool eddy__flip_boundary_solid(const eddy_world *w, const eddy_system *self, fli
 			at = q;
 	for (int q = at - 1; q >= 0; --q) {
 		const eddy_system *c = &w->slots[w->order[q]];
-		if (c->vt == &eddy__kind_flip_boundary) {
+		if (c->vt->provides & EDDY_CAP_SOLID_FACES) {
 			const boundary *b = c->data;
 			if (b->sd_step != w->step)
 				return false;
 			*sd = b->sd;
 			return true;
 		}
-		/* systems that move no collider: the geometry is flip_boundary's */
-		if (c->vt != &eddy__kind_flip_p2g && c->vt != &eddy__kind_flip_surface && c->vt != &eddy__kind_flip_pressure &&
-		    c->vt != &eddy__kind_flip_extrapolate && c->vt != &eddy__kind_gravity)
+		/* past a system that may move a solid, the geometry is not flip_boundary's */
+		if (!c->vt->keeps_solids)
 			return false;
 	}
 	return false;

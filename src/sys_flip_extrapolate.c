@@ -334,6 +334,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 
 const eddy_system_vtable eddy__kind_flip_extrapolate = {
 	.name = "flip_extrapolate",
+	.keeps_solids = true,
 	.step = step,
 	.default_writes = extrap_writes,
 };

@@ -340,6 +340,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 
 const eddy_system_vtable eddy__kind_flip_p2g = {
 	.name = "flip_p2g",
+	.keeps_solids = true,
 	.provides = EDDY_CAP_MAC_GRID,
 	.step = step,
 	.destroy = destroy,
@@ -353,7 +354,7 @@ bool eddy__flip_p2g_density(const eddy_world *w, const eddy_system *self, const 
 		const eddy_system *c = &w->slots[w->order[q]];
 		if (c == self)
 			break;
-		if (c->vt == &eddy__kind_flip_p2g) {
+		if (c->vt->provides & EDDY_CAP_MAC_GRID) {
 			pg = c->data;
 			continue;
 		}

@@ -544,6 +544,7 @@ static void *shared(const eddy_system *s, uint32_t cap)
 
 const eddy_system_vtable eddy__kind_flip_pressure = {
 	.name = "flip_pressure",
+	.keeps_solids = true,
 	.provides = EDDY_CAP_GRID_DENSITY,
 	.shared = shared,
 	.step = step,

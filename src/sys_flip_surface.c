@@ -168,6 +168,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 
 const eddy_system_vtable eddy__kind_flip_surface = {
 	.name = "flip_surface",
+	.keeps_solids = true,
 	.provides = EDDY_CAP_FREE_SURFACE,
 	.step = step,
 	.default_writes = surface_writes,

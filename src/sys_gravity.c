@@ -43,6 +43,7 @@ static void *shared(const eddy_system *s, uint32_t cap)
 
 const eddy_system_vtable eddy__kind_gravity = {
 	.name = "gravity",
+	.keeps_solids = true,
 	.provides = EDDY_CAP_GRAVITY,
 	.shared = shared,
 	.step = step,
