@@ -1392,7 +1392,8 @@ static diff_stats compare_rgb(const uint8_t *a, const uint8_t *b, size_t pixels)
  * same images one pixel apart differ by 8 levels on average and in 20% of the
  * pixels, so a flipped axis, a wrong shading term or a sphere a pixel too
  * large fails; measured figures are printed. Perspective and orthographic, and the splatter on 1
- * and 3 threads gives the same bytes. */
+ * and 3 threads, and its one-pixel-at-a-time path (the AVX2 one draws eight),
+ * give the same bytes. */
 static void splat_matches_gl(void)
 {
 	enum { W = 240, H = 160, S = 2, N = 3000 };
@@ -1443,6 +1444,11 @@ static void splat_matches_gl(void)
 		eddy_downsample_rows(eddy_gl_pixels(gl), W, H, S, a, 0, H);
 		CHECKF(eddy_splat_draw(&sp, &sc, 1, S, b, err, sizeof err) == 0, "%s", err);
 		CHECKF(eddy_splat_draw(&sp, &sc, 3, S, c, err, sizeof err) == 0, "%s", err);
+		CHECK(memcmp(b, c, W * H * 3) == 0);
+		/* one pixel at a time: the same bytes as eight at a time */
+		sp.scalar = true;
+		CHECKF(eddy_splat_draw(&sp, &sc, 2, S, c, err, sizeof err) == 0, "%s", err);
+		sp.scalar = false;
 		CHECK(memcmp(b, c, W * H * 3) == 0);
 		const diff_stats d = compare_rgb(a, b, (size_t)W * H);
 		printf("    %s: mean |diff| %.3f levels, %.3f%% of pixels off by > 8, max %d\n",
