@@ -257,53 +257,77 @@ __attribute__((target("avx2"))) static __m256i unorm8_avx2(__m256 v)
 	return _mm256_cvttps_epi32(_mm256_add_ps(_mm256_mul_ps(v, _mm256_set1_ps(255.0f)), _mm256_set1_ps(0.5f)));
 }
 
-__attribute__((target("avx2"))) static bool span_avx2(const sprite_row *q, int i0, int i1)
+/* The sprite row's constants, broadcast. */
+typedef struct row8 {
+	__m256 front, xw, inv, py2, nez, r, L0, L2, pyL1, H0, H2, pyH1, cr, cg, cb;
+} row8;
+
+/* Eight pixels from dp and cp (only the lanes set in `lanes` when tail):
+ * whether any was drawn. */
+__attribute__((target("avx2"), always_inline)) static inline bool pixels8(const row8 *k, float *dp, uint8_t *cp,
+                                                                       float x, bool tail, __m256i lanes)
 {
 	const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.0f);
+	const __m256 d = tail ? _mm256_maskload_ps(dp, lanes) : _mm256_loadu_ps(dp);
+	__m256 ahead = _mm256_cmp_ps(k->front, d, _CMP_LT_OQ);
+	if (tail)
+		ahead = _mm256_and_ps(ahead, _mm256_castsi256_ps(lanes));
+	if (!_mm256_movemask_ps(ahead))
+		return false;
 	const __m256 lane = _mm256_setr_ps(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f);
-	const __m256 front = _mm256_set1_ps(q->front), xw = _mm256_set1_ps(q->xw), inv = _mm256_set1_ps(q->inv);
-	const __m256 py2 = _mm256_set1_ps(q->py2), nez = _mm256_set1_ps(q->nez), r = _mm256_set1_ps(q->r);
-	const __m256 L0 = _mm256_set1_ps(q->L[0]), L2 = _mm256_set1_ps(q->L[2]), pyL1 = _mm256_set1_ps(q->pyL1);
-	const __m256 H0 = _mm256_set1_ps(q->Hw[0]), H2 = _mm256_set1_ps(q->Hw[2]), pyH1 = _mm256_set1_ps(q->pyH1);
-	const __m256 cr = _mm256_set1_ps(q->c[0]), cg = _mm256_set1_ps(q->c[1]), cb = _mm256_set1_ps(q->c[2]);
+	const __m256 px =
+	    _mm256_mul_ps(_mm256_sub_ps(_mm256_add_ps(_mm256_add_ps(_mm256_set1_ps(x), lane), _mm256_set1_ps(0.5f)), k->xw), k->inv);
+	const __m256 r2 = _mm256_add_ps(_mm256_mul_ps(px, px), k->py2);
+	const __m256 nz = _mm256_sqrt_ps(_mm256_max_ps(_mm256_sub_ps(one, r2), zero));
+	const __m256 key = _mm256_sub_ps(k->nez, _mm256_mul_ps(k->r, nz));
+	const __m256 m =
+	    _mm256_and_ps(_mm256_and_ps(ahead, _mm256_cmp_ps(r2, one, _CMP_LE_OQ)), _mm256_cmp_ps(key, d, _CMP_LT_OQ));
+	if (!_mm256_movemask_ps(m))
+		return false;
+	const __m256 dl = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(px, k->L0), k->pyL1), _mm256_mul_ps(nz, k->L2));
+	const __m256 dh = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(px, k->H0), k->pyH1), _mm256_mul_ps(nz, k->H2));
+	/* max(x, 0) is x > 0 ? x : 0, as the scalar code */
+	const __m256 diffuse = _mm256_max_ps(dl, zero);
+	__m256 spec = _mm256_max_ps(dh, zero);
+	for (int e = 0; e < 5; ++e)
+		spec = _mm256_mul_ps(spec, spec);
+	const __m256 shade = _mm256_add_ps(_mm256_set1_ps(0.32f), _mm256_mul_ps(_mm256_set1_ps(0.68f), diffuse));
+	const __m256 hl = _mm256_mul_ps(_mm256_set1_ps(0.28f), spec);
+	const __m256i R = unorm8_avx2(_mm256_add_ps(_mm256_mul_ps(k->cr, shade), hl));
+	const __m256i G = unorm8_avx2(_mm256_add_ps(_mm256_mul_ps(k->cg, shade), hl));
+	const __m256i B = unorm8_avx2(_mm256_add_ps(_mm256_mul_ps(k->cb, shade), hl));
+	const __m256i rgba = _mm256_or_si256(_mm256_or_si256(R, _mm256_slli_epi32(G, 8)),
+	                                     _mm256_or_si256(_mm256_slli_epi32(B, 16), _mm256_set1_epi32((int)0xff000000u)));
+	if (tail) {
+		_mm256_maskstore_ps(dp, _mm256_castps_si256(m), key);
+		_mm256_maskstore_epi32((int *)(void *)cp, _mm256_castps_si256(m), rgba);
+	} else {
+		_mm256_storeu_ps(dp, _mm256_blendv_ps(d, key, m));
+		__m256i *c = (__m256i *)(void *)cp;
+		const __m256i old = _mm256_loadu_si256(c);
+		_mm256_storeu_si256(c, _mm256_castps_si256(_mm256_blendv_ps(_mm256_castsi256_ps(old), _mm256_castsi256_ps(rgba), m)));
+	}
+	return true;
+}
+
+__attribute__((target("avx2"))) static bool span_avx2(const sprite_row *q, int i0, int i1)
+{
+	const row8 k = {_mm256_set1_ps(q->front), _mm256_set1_ps(q->xw),   _mm256_set1_ps(q->inv),
+	                _mm256_set1_ps(q->py2),   _mm256_set1_ps(q->nez),  _mm256_set1_ps(q->r),
+	                _mm256_set1_ps(q->L[0]),  _mm256_set1_ps(q->L[2]), _mm256_set1_ps(q->pyL1),
+	                _mm256_set1_ps(q->Hw[0]), _mm256_set1_ps(q->Hw[2]), _mm256_set1_ps(q->pyH1),
+	                _mm256_set1_ps(q->c[0]),  _mm256_set1_ps(q->c[1]), _mm256_set1_ps(q->c[2])};
+	const __m256i all = _mm256_set1_epi32(-1);
 	bool wrote = false;
 	int i = i0;
-	for (; i + 8 <= i1; i += 8) {
-		float *dp = q->drow + i;
-		const __m256 d = _mm256_loadu_ps(dp);
-		const __m256 ahead = _mm256_cmp_ps(front, d, _CMP_LT_OQ);
-		if (!_mm256_movemask_ps(ahead))
-			continue;
-		const __m256 px =
-		    _mm256_mul_ps(_mm256_sub_ps(_mm256_add_ps(_mm256_add_ps(_mm256_set1_ps((float)i), lane), _mm256_set1_ps(0.5f)), xw), inv);
-		const __m256 r2 = _mm256_add_ps(_mm256_mul_ps(px, px), py2);
-		const __m256 nz = _mm256_sqrt_ps(_mm256_max_ps(_mm256_sub_ps(one, r2), zero));
-		const __m256 key = _mm256_sub_ps(nez, _mm256_mul_ps(r, nz));
-		const __m256 m = _mm256_and_ps(_mm256_and_ps(ahead, _mm256_cmp_ps(r2, one, _CMP_LE_OQ)),
-		                               _mm256_cmp_ps(key, d, _CMP_LT_OQ));
-		if (!_mm256_movemask_ps(m))
-			continue;
-		wrote = true;
-		_mm256_storeu_ps(dp, _mm256_blendv_ps(d, key, m));
-		const __m256 dl = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(px, L0), pyL1), _mm256_mul_ps(nz, L2));
-		const __m256 dh = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(px, H0), pyH1), _mm256_mul_ps(nz, H2));
-		/* max(x, 0) is x > 0 ? x : 0, as the scalar code */
-		const __m256 diffuse = _mm256_max_ps(dl, zero);
-		__m256 spec = _mm256_max_ps(dh, zero);
-		for (int k = 0; k < 5; ++k)
-			spec = _mm256_mul_ps(spec, spec);
-		const __m256 shade = _mm256_add_ps(_mm256_set1_ps(0.32f), _mm256_mul_ps(_mm256_set1_ps(0.68f), diffuse));
-		const __m256 hl = _mm256_mul_ps(_mm256_set1_ps(0.28f), spec);
-		const __m256i R = unorm8_avx2(_mm256_add_ps(_mm256_mul_ps(cr, shade), hl));
-		const __m256i G = unorm8_avx2(_mm256_add_ps(_mm256_mul_ps(cg, shade), hl));
-		const __m256i B = unorm8_avx2(_mm256_add_ps(_mm256_mul_ps(cb, shade), hl));
-		const __m256i rgba = _mm256_or_si256(_mm256_or_si256(R, _mm256_slli_epi32(G, 8)),
-		                                     _mm256_or_si256(_mm256_slli_epi32(B, 16), _mm256_set1_epi32((int)0xff000000u)));
-		__m256i *cp = (__m256i *)(void *)(q->crow + 4 * (size_t)i);
-		const __m256i old = _mm256_loadu_si256(cp);
-		_mm256_storeu_si256(cp, _mm256_castps_si256(_mm256_blendv_ps(_mm256_castsi256_ps(old), _mm256_castsi256_ps(rgba), m)));
+	for (; i + 8 <= i1; i += 8)
+		wrote |= pixels8(&k, q->drow + i, q->crow + 4 * (size_t)i, (float)i, false, all);
+	if (i < i1) {
+		/* the last 1-7 pixels: masked loads and stores, nothing past i1 touched */
+		const __m256i lanes = _mm256_cmpgt_epi32(_mm256_set1_epi32(i1 - i), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+		wrote |= pixels8(&k, q->drow + i, q->crow + 4 * (size_t)i, (float)i, true, lanes);
 	}
-	return span_scalar(q, i, i1) || wrote;
+	return wrote;
 }
 #endif
 
