@@ -29,6 +29,8 @@
 #include "eddy_lua.h"
 #include "../render/render.h" /* the CPU splatter and the GL context, compared */
 
+#include <png.h> /* libpng reads render/png.c's files back, checksums checked */
+
 #define STB_IMAGE_IMPLEMENTATION
 #define STBI_ONLY_PNG
 #include <stb/stb_image.h>
@@ -359,6 +361,64 @@ static uint64_t fixed_scene_hash(const char *name)
 	stbi_image_free(im.px);
 	eddy_destroy_world(w);
 	return h;
+}
+
+/* render/png.c writes runs of rows equal to the row above as its own deflate
+ * blocks between zlib's: images with such runs at the top, in the middle and
+ * at the bottom, runs one row too short for that (7) and just long enough
+ * (8), and widths whose rows end the block's copies in each way (3 w - 1
+ * zero bytes after the first: 2, 5, 257 (one copy), 260 (257 + 3), 518,
+ * 899), read back by libpng (which checks every CRC and the zlib Adler-32)
+ * and by stb_image give the bytes written. */
+static void png_writer_round_trips(void)
+{
+	const int widths[6] = {1, 2, 86, 87, 173, 300};
+	enum { H = 64 };
+	for (int wi = 0; wi < 6; ++wi) {
+		const int w = widths[wi];
+		uint8_t *rgb = malloc((size_t)w * H * 3);
+		if (!rgb)
+			return;
+		uint64_t r = 7 + (uint64_t)wi;
+		for (int y = 0; y < H; ++y) {
+			uint8_t *row = rgb + (size_t)y * (size_t)w * 3;
+			/* rows 1-9 repeat the row above (a run of 9), 21-27 (7, through
+			 * zlib), 31-38 (8), 41-63 (23, to the end); the rest is noise */
+			const bool repeat = (y > 0 && y <= 9) || (y > 20 && y <= 27) || (y > 30 && y <= 38) || y > 40;
+			if (repeat) {
+				memcpy(row, row - (size_t)w * 3, (size_t)w * 3);
+				continue;
+			}
+			for (int i = 0; i < w * 3; ++i) {
+				r = r * 6364136223846793005ull + 1442695040888963407ull;
+				row[i] = (uint8_t)(r >> 56);
+			}
+		}
+		char path[600];
+		char name[64];
+		snprintf(name, sizeof name, "png_w%d.png", w);
+		out_path(path, sizeof path, name);
+		CHECK(eddy_write_png(path, w, H, rgb) == 0);
+		png_image im;
+		memset(&im, 0, sizeof im);
+		im.version = PNG_IMAGE_VERSION;
+		uint8_t *back = malloc((size_t)w * H * 3);
+		CHECKF(png_image_begin_read_from_file(&im, path) != 0, "libpng cannot read %s: %s", path, im.message);
+		if (back && im.width == (png_uint_32)w && im.height == H) {
+			im.format = PNG_FORMAT_RGB;
+			CHECKF(png_image_finish_read(&im, NULL, back, 0, NULL) != 0, "libpng: %s: %s", path, im.message);
+			CHECKF(memcmp(back, rgb, (size_t)w * H * 3) == 0, "width %d: libpng reads other pixels back", w);
+		} else {
+			CHECKF(0, "width %d: libpng reads %ux%u", w, (unsigned)im.width, (unsigned)im.height);
+			png_image_free(&im);
+		}
+		int sw = 0, sh = 0, comp = 0;
+		uint8_t *st = stbi_load(path, &sw, &sh, &comp, 3);
+		CHECKF(st && sw == w && sh == H && memcmp(st, rgb, (size_t)w * H * 3) == 0, "width %d: stb_image reads other pixels", w);
+		stbi_image_free(st);
+		free(back);
+		free(rgb);
+	}
 }
 
 static void png_round_trip_and_pinned_hash(void)
@@ -1504,6 +1564,7 @@ void suite_render(void)
 	RUN(colour_map_is_applied);
 	RUN(background_where_nothing_is_drawn);
 	RUN(png_round_trip_and_pinned_hash);
+	RUN(png_writer_round_trips);
 	RUN(no_gl_context_is_a_clear_error);
 	RUN(unwritable_path_is_an_io_error);
 	RUN(bad_defs_are_rejected);
