@@ -135,13 +135,10 @@ typedef struct eddy_splat {
 	int width, height;  /* px */
 	uint8_t *rgba;      /* bottom row first, as eddy_gl_pixels */
 	float *depth;       /* distance along the view axis, m: the depth test's key */
-	/* the particles sorted near to far (splat.c), reused between frames */
-	float *sx, *sy, *sz;
-	uint8_t *srgb;
-	uint32_t *bin;
-	size_t sorted_cap;
-	/* the sorted particles that reach the buffer, projected once per frame */
-	eddy_splat_sprite *sprites;
+	/* the particles that reach the buffer, projected once per frame and
+	 * sorted near to far (unsorted: in the particles' order, culled ones
+	 * with size 0); reused between frames */
+	eddy_splat_sprite *sprites, *unsorted;
 	size_t sprite_count, sprite_cap;
 	/* square tiles of EDDY_SPLAT_TILE output pixels (times the supersample):
 	 * whether anything is drawn in each, and the farthest depth it holds

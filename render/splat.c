@@ -92,8 +92,7 @@ void eddy_splat_free(eddy_splat *s)
 {
 	free(s->rgba);
 	free(s->depth);
-	free(s->sx), free(s->sy), free(s->sz), free(s->srgb), free(s->bin);
-	free(s->sprites), free(s->tile_used), free(s->tile_dirty), free(s->tile_far);
+	free(s->sprites), free(s->unsorted), free(s->tile_used), free(s->tile_dirty), free(s->tile_far);
 	memset(s, 0, sizeof *s);
 }
 
@@ -112,6 +111,7 @@ typedef struct band {
 	int ss, y0, y1; /* output rows (top-down) it filters */
 	int tr0, tr1;   /* its tile rows (top-down): [r0, r1) is exactly theirs */
 	int ts, tiles_x; /* tile side in buffer pixels, tiles per row */
+	uint64_t ts_mul; /* ceil(2^32 / ts), for tile_div */
 	uint8_t *out;
 	uint8_t *mark;  /* draw_lines: set the tiles the lines cover instead of drawing */
 	bool avx2;      /* the CPU has AVX2: draw_sprites' eight-pixel path (the same bits) */
@@ -127,7 +127,11 @@ static void tile_rows(const band *b, int tr, int *lo, int *hi)
 	*hi = H - tr * b->ts;
 }
 
-static int tile_row_of(const band *b, int j) { return (b->s->height - 1 - j) / b->ts; }
+/* x / ts for 0 <= x < 2^16 without a division: x ceil(2^32 / ts) / 2^32 is
+ * x / ts plus less than x / 2^32 < 1 / ts, so its floor is exact. */
+static int tile_div(const band *b, int x) { return (int)(((uint64_t)(uint32_t)x * b->ts_mul) >> 32); }
+
+static int tile_row_of(const band *b, int j) { return tile_div(b, b->s->height - 1 - j); }
 
 static uint8_t bg_byte(float v) { return unorm8(v); }
 
@@ -356,10 +360,12 @@ static void draw_sprites(const band *b)
 		const float front = -sp->ez - r; /* the sphere's nearest distance */
 		/* when no tile under the square holds anything farther than the
 		 * sphere's front, no pixel of it passes the depth test: skip it
-		 * whole (most of a pool's spheres are behind its front layer) */
-		const int tx0 = i0 / b->ts, tx1 = (i1 - 1) / b->ts;
+		 * whole (most of a pool's spheres are behind its front layer). Not
+		 * asked for squares under half a tile wide: finding a tile's
+		 * farthest depth costs more than their pixels' own tests. */
+		const int tx0 = tile_div(b, i0), tx1 = tile_div(b, i1 - 1);
 		const int ty0 = tile_row_of(b, j1 - 1), ty1 = tile_row_of(b, j0);
-		bool open = false;
+		bool open = 2 * (i1 - i0) < b->ts;
 		for (int ty = ty0; ty <= ty1 && !open; ++ty)
 			for (int tx = tx0; tx <= tx1 && !open; ++tx)
 				open = front < tile_far(b, tx, ty);
@@ -382,7 +388,7 @@ static void draw_sprites(const band *b)
 			q.drow = s->depth + (size_t)j * (size_t)width;
 			q.crow = s->rgba + (size_t)j * (size_t)width * 4;
 #if defined(__x86_64__)
-			if (b->avx2) {
+			if (b->avx2 && i1 - i0 >= 8) { /* narrower rows: cheaper one pixel at a time */
 				wrote |= span_avx2(&q, i0, i1);
 				continue;
 			}
@@ -396,7 +402,8 @@ static void draw_sprites(const band *b)
 		}
 		if (wrote)
 			for (int ty = ty0; ty <= ty1; ++ty)
-				memset(s->tile_dirty + (size_t)ty * (size_t)b->tiles_x + (size_t)tx0, 1, (size_t)(tx1 - tx0 + 1));
+				for (int tx = tx0; tx <= tx1; ++tx) /* a few: no memset call */
+					s->tile_dirty[(size_t)ty * (size_t)b->tiles_x + (size_t)tx] = 1;
 	}
 }
 
@@ -478,7 +485,7 @@ static void draw_lines(const band *b)
 					if (j < b->r0 || j >= b->r1)
 						continue;
 					if (b->mark) {
-						b->mark[(size_t)tile_row_of(b, j) * (size_t)b->tiles_x + (size_t)(i / b->ts)] = 1;
+						b->mark[(size_t)tile_row_of(b, j) * (size_t)b->tiles_x + (size_t)tile_div(b, i)] = 1;
 						continue;
 					}
 					const size_t at = (size_t)j * (size_t)s->width + (size_t)i;
@@ -532,19 +539,36 @@ static void *band_main(void *arg)
 	return NULL;
 }
 
-/* Projects the sorted particles into s->sprites (those whose square reaches
- * the buffer, in order) and marks the tiles their squares cover. */
-static void project_sprites(eddy_splat *s, const eddy_gl_scene *sc, const band *b)
+/* The sort's bin of a centre at eye z ez: NaN and out-of-range distances go last. */
+static uint32_t bin_of(float ez, float lo, float scale)
+{
+	const float f = (-ez - lo) * scale;
+	return f >= 0 && f <= (float)(SORT_BINS - 1) ? (uint32_t)f : SORT_BINS - 1;
+}
+
+/* Projects the particles, marks the tiles their squares cover and sorts
+ * those that reach the buffer near to far into s->sprites (room for
+ * sc->count made by the caller, there and in s->unsorted): a stable counting
+ * sort on SORT_BINS bins of the centres' distance between the nearest and the
+ * farthest particle. */
+static void project_and_sort(eddy_splat *s, const eddy_gl_scene *sc, const band *b)
 {
 	const float *v = sc->view, *p = sc->proj;
 	const float W = (float)s->width, H = (float)s->height;
 	const float size_k = 2.0f * sc->radius * p[5] * (0.5f * H);
-	size_t n = 0;
+	eddy_splat_sprite *tmp = s->unsorted;
+	float lo = INFINITY, hi = -INFINITY;
 	for (size_t k = 0; k < sc->count; ++k) {
 		const float x = sc->x[k], y = sc->y[k], z = sc->z[k];
 		const float ex = v[0] * x + v[4] * y + v[8] * z + v[12];
 		const float ey = v[1] * x + v[5] * y + v[9] * z + v[13];
 		const float ez = v[2] * x + v[6] * y + v[10] * z + v[14];
+		/* the sort's range: every particle's distance, drawn or not */
+		const float dist = -ez;
+		lo = dist < lo ? dist : lo;
+		hi = dist > hi ? dist : hi;
+		eddy_splat_sprite *o = &tmp[k];
+		o->size = 0; /* not drawn */
 		const float cw = p[3] * ex + p[7] * ey + p[11] * ez + p[15];
 		const float cz = p[2] * ex + p[6] * ey + p[10] * ez + p[14];
 		if (!(cw > 0) || !(cz >= -cw && cz <= cw))
@@ -567,68 +591,26 @@ static void project_sprites(eddy_splat *s, const eddy_gl_scene *sc, const band *
 		j1 = j1 > s->height ? s->height : j1;
 		if (i0 >= i1)
 			continue;
-		eddy_splat_sprite *o = &s->sprites[n++];
 		o->xw = xw, o->yw = yw, o->size = size, o->ez = ez;
 		memcpy(o->rgba, sc->rgb + 4 * k, 4);
-		const int tx0 = i0 / b->ts, tx1 = (i1 - 1) / b->ts;
+		const int tx0 = tile_div(b, i0), tx1 = tile_div(b, i1 - 1);
 		for (int ty = tile_row_of(b, j1 - 1); ty <= tile_row_of(b, j0); ++ty)
-			memset(s->tile_used + (size_t)ty * (size_t)b->tiles_x + (size_t)tx0, 1, (size_t)(tx1 - tx0 + 1));
-	}
-	s->sprite_count = n;
-}
-
-/* Copies the particles into s->sx.. near to far; -1 when out of memory. */
-static int sort_near_to_far(eddy_splat *s, const eddy_gl_scene *sc)
-{
-	const size_t n = sc->count;
-	if (n > s->sorted_cap) {
-		const size_t c = n + n / 4;
-		float *x = realloc(s->sx, c * sizeof *x);
-		if (x)
-			s->sx = x;
-		float *y = realloc(s->sy, c * sizeof *y);
-		if (y)
-			s->sy = y;
-		float *z = realloc(s->sz, c * sizeof *z);
-		if (z)
-			s->sz = z;
-		uint8_t *rgb = realloc(s->srgb, c * 4);
-		if (rgb)
-			s->srgb = rgb;
-		uint32_t *bin = realloc(s->bin, c * sizeof *bin);
-		if (bin)
-			s->bin = bin;
-		if (!x || !y || !z || !rgb || !bin)
-			return -1;
-		s->sorted_cap = c;
-	}
-	const float *v = sc->view;
-	float lo = INFINITY, hi = -INFINITY;
-	for (size_t k = 0; k < n; ++k) {
-		const float d = -(v[2] * sc->x[k] + v[6] * sc->y[k] + v[10] * sc->z[k] + v[14]);
-		lo = d < lo ? d : lo;
-		hi = d > hi ? d : hi;
+			for (int tx = tx0; tx <= tx1; ++tx) /* a few: no memset call */
+				s->tile_used[(size_t)ty * (size_t)b->tiles_x + (size_t)tx] = 1;
 	}
 	const float scale = hi > lo ? (float)(SORT_BINS - 1) / (hi - lo) : 0.0f;
 	static_assert(SORT_BINS <= 65536, "bins fit the counts below");
 	size_t count[SORT_BINS + 1];
 	memset(count, 0, sizeof count);
-	for (size_t k = 0; k < n; ++k) {
-		const float d = -(v[2] * sc->x[k] + v[6] * sc->y[k] + v[10] * sc->z[k] + v[14]);
-		const float f = (d - lo) * scale;
-		/* NaN and out-of-range distances go last (the draw culls them) */
-		const uint32_t b = f >= 0 && f <= (float)(SORT_BINS - 1) ? (uint32_t)f : SORT_BINS - 1;
-		s->bin[k] = b;
-		count[b + 1]++;
-	}
-	for (int b = 0; b < SORT_BINS; ++b)
-		count[b + 1] += count[b];
-	for (size_t k = 0; k < n; ++k) {
-		const size_t at = count[s->bin[k]]++;
-		s->sx[at] = sc->x[k], s->sy[at] = sc->y[k], s->sz[at] = sc->z[k];
-		memcpy(s->srgb + 4 * at, sc->rgb + 4 * k, 4);
-	}
-	return 0;
+	for (size_t k = 0; k < sc->count; ++k)
+		if (tmp[k].size > 0)
+			count[bin_of(tmp[k].ez, lo, scale) + 1]++;
+	for (int bin = 0; bin < SORT_BINS; ++bin)
+		count[bin + 1] += count[bin];
+	for (size_t k = 0; k < sc->count; ++k)
+		if (tmp[k].size > 0)
+			s->sprites[count[bin_of(tmp[k].ez, lo, scale)]++] = tmp[k];
+	s->sprite_count = count[SORT_BINS];
 }
 
 /* Room for n sprites and the tiles; false when out of memory. */
@@ -637,9 +619,13 @@ static bool reserve_frame(eddy_splat *s, size_t n, size_t tiles)
 	if (n > s->sprite_cap) {
 		const size_t c = n + n / 4;
 		eddy_splat_sprite *p = realloc(s->sprites, c * sizeof *p);
-		if (!p)
+		if (p)
+			s->sprites = p;
+		eddy_splat_sprite *q = realloc(s->unsorted, c * sizeof *q);
+		if (q)
+			s->unsorted = q;
+		if (!p || !q)
 			return false;
-		s->sprites = p;
 		s->sprite_cap = c;
 	}
 	if (tiles > s->tile_cap) {
@@ -662,8 +648,7 @@ static bool reserve_frame(eddy_splat *s, size_t n, size_t tiles)
 int eddy_splat_draw(eddy_splat *s, const eddy_gl_scene *sc_in, int threads, int ss, uint8_t *out, char *err,
                     size_t cap)
 {
-	eddy_gl_scene sorted = *sc_in;
-	const eddy_gl_scene *sc = &sorted;
+	const eddy_gl_scene *sc = sc_in;
 	if (sc->mesh_sets > 0) {
 		snprintf(err, cap, "the CPU renderer draws particles and lines only, not meshes");
 		return -1;
@@ -671,13 +656,6 @@ int eddy_splat_draw(eddy_splat *s, const eddy_gl_scene *sc_in, int threads, int 
 	if (ss < 1 || s->width % ss || s->height % ss) {
 		snprintf(err, cap, "a %dx%d buffer cannot be filtered by %d", s->width, s->height, ss);
 		return -1;
-	}
-	if (sc->count > 0) {
-		if (sort_near_to_far(s, sc_in) != 0) {
-			snprintf(err, cap, "out of memory for %zu sorted particles", sc->count);
-			return -1;
-		}
-		sorted.x = s->sx, sorted.y = s->sy, sorted.z = s->sz, sorted.rgb = s->srgb;
 	}
 	const int H = s->height / ss; /* output rows */
 	const int ts = EDDY_SPLAT_TILE * ss;
@@ -706,6 +684,7 @@ int eddy_splat_draw(eddy_splat *s, const eddy_gl_scene *sc_in, int threads, int 
 		b->ss = ss;
 		b->out = out;
 		b->ts = ts;
+		b->ts_mul = 0xffffffffu / (uint32_t)ts + 1;
 		b->tiles_x = tiles_x;
 #if defined(__x86_64__)
 		b->avx2 = !s->scalar && __builtin_cpu_supports("avx2");
@@ -727,7 +706,7 @@ int eddy_splat_draw(eddy_splat *s, const eddy_gl_scene *sc_in, int threads, int 
 	band whole = bands[0];
 	whole.r0 = 0, whole.r1 = s->height;
 	if (sc->count > 0)
-		project_sprites(s, sc, &whole);
+		project_and_sort(s, sc, &whole);
 	whole.mark = s->tile_used;
 	draw_lines(&whole);
 	pthread_t tid[MAX_THREADS];
