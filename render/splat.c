@@ -387,18 +387,26 @@ static void draw_sprites(const band *b)
 			q.pyL1 = q.py * L[1], q.pyH1 = q.py * Hw[1];
 			q.drow = s->depth + (size_t)j * (size_t)width;
 			q.crow = s->rgba + (size_t)j * (size_t)width * 4;
+			/* the disc's chord on this row, |i + 0.5 - xw| <= half sqrt(1 - py^2),
+			 * a pixel wider each side than rounding could make it: the
+			 * pixels' own test still decides, so only pixels it would turn
+			 * down are left out */
+			const float chord = half * sqrtf(1.0f - q.py2);
+			int a = (int)floorf(xw - 0.5f - chord) - 1, e = (int)ceilf(xw - 0.5f + chord) + 2;
+			a = a < i0 ? i0 : a;
+			e = e > i1 ? i1 : e;
 #if defined(__x86_64__)
-			if (b->avx2 && i1 - i0 >= 8) { /* narrower rows: cheaper one pixel at a time */
-				wrote |= span_avx2(&q, i0, i1);
+			if (b->avx2 && e - a >= 8) { /* narrower rows: cheaper one pixel at a time */
+				wrote |= span_avx2(&q, a, e);
 				continue;
 			}
 #endif
 			/* the whole row hidden: one vectorised pass instead of a branch per pixel */
 			int row_open = 0;
-			for (int i = i0; i < i1; ++i)
+			for (int i = a; i < e; ++i)
 				row_open |= front < q.drow[i];
 			if (row_open)
-				wrote |= span_scalar(&q, i0, i1);
+				wrote |= span_scalar(&q, a, e);
 		}
 		if (wrote)
 			for (int ty = ty0; ty <= ty1; ++ty)
