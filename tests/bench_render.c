@@ -7,10 +7,9 @@
  * 2 threads (render_points draws in as many row bands), as JSON. Then the
  * PNG encoders on the pour-sized frame: CPU ms per encode (median of 15) and
  * bytes for stb_image_write at its default level (eddy's encoder before
- * libpng), libpng at its defaults (level 6, adaptive filters), libpng with
- * render/png.c's settings (level 1, Z_RLE, the up filter; eddy's encoder
- * before its own container), and render/png.c itself (the same, with runs of
- * equal rows kept out of zlib, written to a file).
+ * libpng), libpng at its defaults (level 6, adaptive filters), libpng at
+ * level 1 with Z_RLE and the up filter (eddy's encoder before its own), and
+ * render/png.c (the up filter, its own run-length deflate; to a file).
  *
  * Then the surface mesher on the pour (tests/scenes/pour_surface.lua through
  * the eddy command beside this program, 1 thread, no images): the medians
@@ -24,6 +23,8 @@
  *
  *   bench_render OUT.json            everything, JSON to OUT.json
  *   bench_render --quick             the pour-sized and 1M frames only, to stdout
+ *   bench_render --encoders          the encoders only (on the frame a full run left), to stdout
+ *   bench_render --pour              the pour's turns only, to stdout
  *
  * A frame is the whole render_points frame hook: colouring by speed, the
  * drawing and box filter (draw_ms), the PNG encoding and writing (png_ms);
@@ -223,7 +224,7 @@ static int encoders(FILE *f, const char *frame)
 		return 1;
 	}
 	const char *names[4] = {"stb_image_write level 8", "libpng defaults (level 6, adaptive filters)",
-	                        "libpng level 1, Z_RLE, up", "eddy (render/png.c: zlib level 1, Z_RLE, up, equal rows as runs)"};
+	                        "libpng level 1, Z_RLE, up", "eddy (render/png.c: up, run-length deflate with its own Huffman codes)"};
 	enum { REPS = 15 };
 	for (int e = 0; e < 4; ++e) {
 		double ms[REPS];
@@ -246,7 +247,8 @@ static int encoders(FILE *f, const char *frame)
 		char line[256];
 		snprintf(line, sizeof line, "{\"encoder\":\"%s\",\"width\":%d,\"height\":%d,\"cpu_ms_median\":%.2f,\"bytes\":%zu}",
 		         names[e], w, h, median(ms, REPS), bytes);
-		fprintf(f, "%s\n  %s", e ? "," : "", line);
+		if (f)
+			fprintf(f, "%s\n  %s", e ? "," : "", line);
 		printf("%s\n", line);
 	}
 	stbi_image_free(rgb);
@@ -373,6 +375,11 @@ static int surface_vs_step(FILE *json, const char *argv0)
 
 int main(int argc, char **argv)
 {
+	/* one part alone, to stdout: the encoders on the newest pour-sized frame, or the pour's turns */
+	if (argc >= 2 && strcmp(argv[1], "--encoders") == 0)
+		return encoders(NULL, "build/bench_render/frame_960x540_5625_9.png");
+	if (argc >= 2 && strcmp(argv[1], "--pour") == 0)
+		return pour_frames_cost(NULL, argv[0]);
 	const bool quick = argc >= 2 && strcmp(argv[1], "--quick") == 0;
 	const char *out = argc >= 2 && !quick ? argv[1] : "build/bench_render.json";
 	FILE *f = quick ? NULL : fopen(out, "w");

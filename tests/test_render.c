@@ -363,13 +363,15 @@ static uint64_t fixed_scene_hash(const char *name)
 	return h;
 }
 
-/* render/png.c writes runs of rows equal to the row above as its own deflate
- * blocks between zlib's: images with such runs at the top, in the middle and
- * at the bottom, runs one row too short for that (7) and just long enough
- * (8), and widths whose rows end the block's copies in each way (3 w - 1
- * zero bytes after the first: 2, 5, 257 (one copy), 260 (257 + 3), 518,
- * 899), read back by libpng (which checks every CRC and the zlib Adler-32)
- * and by stb_image give the bytes written. */
+/* render/png.c's own deflate: images with runs of equal rows at the top, in
+ * the middle and at the bottom, of 7 to 23 rows, in widths whose rows end a
+ * run of copies in each way (3 w - 1 zero bytes after a row's first: 2, 5,
+ * 257, 260, 518, 899), and one row of 75024 bytes shuffled with Fibonacci
+ * frequencies (symbol k F(k + 2) times, k < 22: Huffman would give codes 21 bits
+ * long, so the 15-bit limit is exercised, and more tokens than one block
+ * holds), read back by libpng (which checks every CRC, the code's
+ * completeness and the zlib Adler-32) and by stb_image, give the bytes
+ * written. */
 static void png_writer_round_trips(void)
 {
 	const int widths[6] = {1, 2, 86, 87, 173, 300};
@@ -419,6 +421,41 @@ static void png_writer_round_trips(void)
 		free(back);
 		free(rgb);
 	}
+	/* the skewed row */
+	enum { FW = 25008 };
+	uint8_t *row = malloc(3 * FW), *back = malloc(3 * FW);
+	if (!row || !back) {
+		free(row), free(back);
+		return;
+	}
+	size_t at = 0;
+	uint32_t f0 = 1, f1 = 1; /* F(1), F(2) */
+	for (int k = 0; k < 22; ++k) {
+		for (uint32_t c = 0; c < f1; ++c)
+			row[at++] = (uint8_t)(7 * k);
+		const uint32_t f2 = f0 + f1;
+		f0 = f1, f1 = f2;
+	}
+	row[at++] = 255; /* 75023 bytes so far */
+	CHECK(at == 3 * FW);
+	uint64_t r = 5;
+	for (size_t i = 3 * FW - 1; i > 0; --i) {
+		r = r * 6364136223846793005ull + 1442695040888963407ull;
+		const size_t j = (size_t)(r >> 33) % (i + 1);
+		const uint8_t t = row[i];
+		row[i] = row[j], row[j] = t;
+	}
+	char path[600];
+	out_path(path, sizeof path, "png_skewed.png");
+	CHECK(eddy_write_png(path, FW, 1, row) == 0);
+	png_image im;
+	memset(&im, 0, sizeof im);
+	im.version = PNG_IMAGE_VERSION;
+	CHECKF(png_image_begin_read_from_file(&im, path) != 0, "libpng cannot read %s: %s", path, im.message);
+	im.format = PNG_FORMAT_RGB;
+	CHECKF(im.width == FW && png_image_finish_read(&im, NULL, back, 0, NULL) != 0, "libpng: %s: %s", path, im.message);
+	CHECK(memcmp(back, row, 3 * FW) == 0);
+	free(row), free(back);
 }
 
 static void png_round_trip_and_pinned_hash(void)
