@@ -115,11 +115,6 @@ int eddy_color_ok(eddy_vec3 c);
 
 /* ---- CPU point sprites and lines (splat.c) ---- */
 
-/* A colour and depth buffer drawn on the CPU: render_points' sprites shaded
- * exactly as gl_osmesa.c's sprite shader does, and its lines, without GL.
- * The rows are split into `threads` bands, each drawn by its own thread
- * through every particle in order, so the image does not depend on the
- * thread count. */
 /* The side of splat.c's square tiles, output pixels. */
 #define EDDY_SPLAT_TILE 8
 
@@ -131,6 +126,11 @@ typedef struct eddy_splat_sprite {
 	uint8_t rgba[4];
 } eddy_splat_sprite;
 
+/* A colour and depth buffer drawn on the CPU: render_points' sprites shaded
+ * exactly as gl_osmesa.c's sprite shader does, and its lines, without GL.
+ * The rows are split into `threads` bands, each drawn by its own thread
+ * through every particle in order, so the image does not depend on the
+ * thread count. */
 typedef struct eddy_splat {
 	int width, height;  /* px */
 	uint8_t *rgba;      /* bottom row first, as eddy_gl_pixels */
@@ -154,7 +154,9 @@ int eddy_splat_init(eddy_splat *s, int width, int height);
 void eddy_splat_free(eddy_splat *s);
 /* Draws the scene's particles and lines (meshes are GL's alone: mesh_sets
  * must be 0) and, with out != NULL, box-filters by ss into out (RGB, top row
- * first, width/ss by height/ss). 0, or -1 with the reason in err. */
+ * first, width/ss by height/ss); then only the tiles anything was drawn in
+ * hold this frame's pixels in rgba and depth, while with out == NULL all of
+ * them do. 0, or -1 with the reason in err. */
 int eddy_splat_draw(eddy_splat *s, const eddy_gl_scene *scene, int threads, int ss, uint8_t *out, char *err,
                     size_t cap);
 
