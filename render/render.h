@@ -4,6 +4,7 @@
 #ifndef EDDY_RENDER_H
 #define EDDY_RENDER_H
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -107,10 +108,23 @@ void eddy_rotate_points(float *xyz, size_t n, eddy_vec3 rotation, eddy_vec3 pivo
 /* Box-filters RGBA rows (bottom row first, W*s by H*s) down to RGB (top row
  * first, W by H), output rows [y0, y1) only. */
 void eddy_downsample_rows(const uint8_t *rgba, int W, int H, int s, uint8_t *out, int y0, int y1);
+/* The same for output columns [x0, x1) of rows [y0, y1) only. */
+void eddy_downsample_block(const uint8_t *rgba, int W, int H, int s, uint8_t *out, int y0, int y1, int x0, int x1);
 /* 1 when the colour components are all in [0, 1]. */
 int eddy_color_ok(eddy_vec3 c);
 
 /* ---- CPU point sprites and lines (splat.c) ---- */
+
+/* The side of splat.c's square tiles, output pixels. */
+#define EDDY_SPLAT_TILE 8
+
+/* A particle as splat.c draws it, projected once per frame. */
+typedef struct eddy_splat_sprite {
+	float xw, yw;       /* px, the centre's window position */
+	float size;         /* px, the point size, >= 1 */
+	float ez;           /* m, the centre's eye-space z (negative in front of the eye) */
+	uint8_t rgba[4];
+} eddy_splat_sprite;
 
 /* A colour and depth buffer drawn on the CPU: render_points' sprites shaded
  * exactly as gl_osmesa.c's sprite shader does, and its lines, without GL.
@@ -121,11 +135,18 @@ typedef struct eddy_splat {
 	int width, height;  /* px */
 	uint8_t *rgba;      /* bottom row first, as eddy_gl_pixels */
 	float *depth;       /* distance along the view axis, m: the depth test's key */
-	/* the particles sorted near to far (splat.c), reused between frames */
-	float *sx, *sy, *sz;
-	uint8_t *srgb;
-	uint32_t *bin;
-	size_t sorted_cap;
+	/* the particles that reach the buffer, projected once per frame and
+	 * sorted near to far (unsorted: in the particles' order, culled ones
+	 * with size 0); reused between frames */
+	eddy_splat_sprite *sprites, *unsorted;
+	size_t sprite_count, sprite_cap;
+	/* square tiles of EDDY_SPLAT_TILE output pixels (times the supersample):
+	 * whether anything is drawn in each, and the farthest depth it holds
+	 * (valid unless dirty) */
+	uint8_t *tile_used, *tile_dirty;
+	float *tile_far;
+	size_t tile_cap;
+	bool scalar;         /* draw one pixel at a time even where AVX2 is there (the tests compare the two) */
 } eddy_splat;
 
 /* 0, or -1 when out of memory. */
@@ -133,7 +154,9 @@ int eddy_splat_init(eddy_splat *s, int width, int height);
 void eddy_splat_free(eddy_splat *s);
 /* Draws the scene's particles and lines (meshes are GL's alone: mesh_sets
  * must be 0) and, with out != NULL, box-filters by ss into out (RGB, top row
- * first, width/ss by height/ss). 0, or -1 with the reason in err. */
+ * first, width/ss by height/ss); then only the tiles anything was drawn in
+ * hold this frame's pixels in rgba and depth, while with out == NULL all of
+ * them do. 0, or -1 with the reason in err. */
 int eddy_splat_draw(eddy_splat *s, const eddy_gl_scene *scene, int threads, int ss, uint8_t *out, char *err,
                     size_t cap);
 

@@ -177,25 +177,31 @@ void eddy_rotate_points(float *xyz, size_t n, eddy_vec3 rotation, eddy_vec3 pivo
 
 void eddy_downsample_rows(const uint8_t *rgba, int W, int H, int s, uint8_t *out, int y0, int y1)
 {
+	eddy_downsample_block(rgba, W, H, s, out, y0, y1, 0, W);
+}
+
+void eddy_downsample_block(const uint8_t *rgba, int W, int H, int s, uint8_t *out, int y0, int y1, int x0, int x1)
+{
 	const int sw = W * s, sh = H * s;
 	const unsigned area = (unsigned)(s * s);
 	for (int y = y0; y < y1; ++y) {
 		uint8_t *o = out + (size_t)y * (size_t)W * 3;
 		if (s == 1) {
 			const uint8_t *row = rgba + (size_t)(sh - 1 - y) * (size_t)sw * 4; /* GL rows bottom-up */
-			for (int x = 0; x < W; ++x)
+			for (int x = x0; x < x1; ++x)
 				o[3 * x] = row[4 * x], o[3 * x + 1] = row[4 * x + 1], o[3 * x + 2] = row[4 * x + 2];
 			continue;
 		}
 		if (s == 2) {
 			/* the default supersample: two rows, two pixels each */
 			const uint8_t *r0 = rgba + (size_t)(sh - 1 - 2 * y) * (size_t)sw * 4, *r1 = r0 - (size_t)sw * 4;
-			for (int x = 0; x < W; ++x, r0 += 8, r1 += 8)
+			r0 += 8 * (size_t)x0, r1 += 8 * (size_t)x0;
+			for (int x = x0; x < x1; ++x, r0 += 8, r1 += 8)
 				for (int c = 0; c < 3; ++c)
 					o[3 * x + c] = (uint8_t)((unsigned)(r0[c] + r0[4 + c] + r1[c] + r1[4 + c] + 2) / 4);
 			continue;
 		}
-		for (int x = 0; x < W; ++x) {
+		for (int x = x0; x < x1; ++x) {
 			unsigned sum[3] = {0, 0, 0};
 			for (int j = 0; j < s; ++j) {
 				const uint8_t *row = rgba + (size_t)(sh - 1 - (y * s + j)) * (size_t)sw * 4;

@@ -1,13 +1,15 @@
 /* SPDX-License-Identifier: MIT */
 #define _POSIX_C_SOURCE 200809L
+#define _DEFAULT_SOURCE /* getloadavg */
 /* Renderer benchmark (make bench-render, part of make bench): milliseconds per
  * rendered frame at 1280x720 for 10k, 100k, 1M and 10M particles, and at the
  * pour scene's 960x540 (supersample 2) for its 5625, with the world on 1 and
  * 2 threads (render_points draws in as many row bands), as JSON. Then the
  * PNG encoders on the pour-sized frame: CPU ms per encode (median of 15) and
  * bytes for stb_image_write at its default level (eddy's encoder before
- * libpng), libpng at its defaults (level 6, adaptive filters), and libpng as
- * render/png.c sets it (level 1, Z_RLE, the up filter).
+ * libpng), libpng at its defaults (level 6, adaptive filters), libpng at
+ * level 1 with Z_RLE and the up filter (eddy's encoder before its own), and
+ * render/png.c (the up filter, its own run-length deflate; to a file).
  *
  * Then the surface mesher on the pour (tests/scenes/pour_surface.lua through
  * the eddy command beside this program, 1 thread, no images): the medians
@@ -15,8 +17,14 @@
  * frame (the frame's wall_ms less the surface_mesh system's), and their
  * ratio (issue 16's target: below 1).
  *
+ * Then what frames cost the pour itself (issue 17's target: within 1.3x):
+ * `eddy run scenes/pour.lua --threads 1` with frames and without, in turns,
+ * wall and CPU time (pour_frames in the JSON; not with --quick).
+ *
  *   bench_render OUT.json            everything, JSON to OUT.json
  *   bench_render --quick             the pour-sized and 1M frames only, to stdout
+ *   bench_render --encoders          the encoders only (on the frame a full run left), to stdout
+ *   bench_render --pour              the pour's turns only, to stdout
  *
  * A frame is the whole render_points frame hook: colouring by speed, the
  * drawing and box filter (draw_ms), the PNG encoding and writing (png_ms);
@@ -29,6 +37,8 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
 
 #include <png.h>
 #include <zlib.h>
@@ -42,6 +52,7 @@
 
 #include "eddy.h"
 #include "bench_util.h"
+#include "../render/render.h" /* eddy_write_png */
 
 /* CPU time of the whole process (all llvmpipe threads): on a shared machine
  * it moves less with other people's load than wall time does. */
@@ -212,21 +223,32 @@ static int encoders(FILE *f, const char *frame)
 		fprintf(stderr, "bench_render: cannot read %s back\n", frame);
 		return 1;
 	}
-	const char *names[3] = {"stb_image_write level 8", "libpng defaults (level 6, adaptive filters)",
-	                        "libpng level 1, Z_RLE, up (eddy)"};
+	const char *names[4] = {"stb_image_write level 8", "libpng defaults (level 6, adaptive filters)",
+	                        "libpng level 1, Z_RLE, up", "eddy (render/png.c: up, run-length deflate with its own Huffman codes)"};
 	enum { REPS = 15 };
-	for (int e = 0; e < 3; ++e) {
+	for (int e = 0; e < 4; ++e) {
 		double ms[REPS];
 		size_t bytes = 0;
 		for (int r = 0; r < REPS; ++r) {
 			const double t0 = thread_cpu_ms();
-			bytes = e == 0 ? stb_encode(rgb, w, h) : libpng_encode(rgb, w, h, e == 2);
+			if (e == 3) {
+				/* eddy's writer, to a file as render_points writes it */
+				const char *path = "build/bench_render/encoder.png";
+				struct stat st;
+				if (eddy_write_png(path, w, h, rgb) != 0 || stat(path, &st) != 0) {
+					fprintf(stderr, "bench_render: cannot write %s\n", path);
+					return 1;
+				}
+				bytes = (size_t)st.st_size;
+			} else
+				bytes = e == 0 ? stb_encode(rgb, w, h) : libpng_encode(rgb, w, h, e == 2);
 			ms[r] = thread_cpu_ms() - t0;
 		}
 		char line[256];
 		snprintf(line, sizeof line, "{\"encoder\":\"%s\",\"width\":%d,\"height\":%d,\"cpu_ms_median\":%.2f,\"bytes\":%zu}",
 		         names[e], w, h, median(ms, REPS), bytes);
-		fprintf(f, "%s\n  %s", e ? "," : "", line);
+		if (f)
+			fprintf(f, "%s\n  %s", e ? "," : "", line);
 		printf("%s\n", line);
 	}
 	stbi_image_free(rgb);
@@ -242,19 +264,78 @@ static double json_number(const char *line, const char *key)
 	return p ? strtod(p + strlen(pat), NULL) : NAN;
 }
 
+/* The eddy command beside this program (build/tests/.. -> build/eddy). */
+static void eddy_beside(const char *argv0, char *eddy, size_t cap)
+{
+	snprintf(eddy, cap, "%s", argv0);
+	char *slash = strrchr(eddy, '/');
+	if (slash)
+		*slash = '\0'; /* build/tests */
+	slash = strrchr(eddy, '/');
+	snprintf(slash ? slash + 1 : eddy, cap - (size_t)(slash ? slash + 1 - eddy : 0), "eddy");
+	if (!slash)
+		snprintf(eddy, cap, "build/eddy");
+}
+
+static double children_cpu_ms(void)
+{
+	struct rusage ru;
+	getrusage(RUSAGE_CHILDREN, &ru);
+	return (double)(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) * 1e3 +
+	       (double)(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec) * 1e-3;
+}
+
+/* What frames cost the pour (issue 17's target: within 1.3x): `eddy run
+ * scenes/pour.lua --threads 1` with its frames and with --set render=false,
+ * in turns (which goes first alternates), wall and CPU time of each run
+ * (children's rusage), medians over TURNS pairs and of the pairs' ratios,
+ * with the load average before and after. */
+static int pour_frames_cost(FILE *json, const char *argv0)
+{
+	enum { TURNS = 5 };
+	char eddy[1024], cmd[2][2400];
+	eddy_beside(argv0, eddy, sizeof eddy);
+	snprintf(cmd[0], sizeof cmd[0], "'%s' run scenes/pour.lua --threads 1 --set render=false --quiet "
+	         "--out build/bench_render/pour >/dev/null", eddy);
+	snprintf(cmd[1], sizeof cmd[1], "'%s' run scenes/pour.lua --threads 1 --quiet --out build/bench_render/pour "
+	         ">/dev/null", eddy);
+	double load0[3] = {0, 0, 0}, load1[3] = {0, 0, 0};
+	getloadavg(load0, 3);
+	double wall[2][TURNS], cpu[2][TURNS], rwall[TURNS], rcpu[TURNS];
+	for (int t = 0; t < TURNS; ++t) {
+		for (int k = 0; k < 2; ++k) {
+			const int which = t % 2 ? 1 - k : k;
+			const double w0 = now_ms(), c0 = children_cpu_ms();
+			if (system(cmd[which]) != 0) {
+				fprintf(stderr, "bench_render: %s failed\n", cmd[which]);
+				return 1;
+			}
+			wall[which][t] = now_ms() - w0;
+			cpu[which][t] = children_cpu_ms() - c0;
+		}
+		rwall[t] = wall[1][t] / wall[0][t];
+		rcpu[t] = cpu[1][t] / cpu[0][t];
+	}
+	getloadavg(load1, 3);
+	char out[768];
+	snprintf(out, sizeof out,
+	         "{\"scene\":\"scenes/pour.lua\",\"threads\":1,\"turns\":%d,\"wall_s_no_frames\":%.2f,"
+	         "\"wall_s_frames\":%.2f,\"cpu_s_no_frames\":%.2f,\"cpu_s_frames\":%.2f,\"wall_ratio\":%.2f,"
+	         "\"cpu_ratio\":%.2f,\"load_before\":%.1f,\"load_after\":%.1f}",
+	         TURNS, median(wall[0], TURNS) / 1e3, median(wall[1], TURNS) / 1e3, median(cpu[0], TURNS) / 1e3,
+	         median(cpu[1], TURNS) / 1e3, median(rwall, TURNS), median(rcpu, TURNS), load0[0], load1[0]);
+	printf("%s\n", out);
+	if (json)
+		fprintf(json, "\n  %s", out);
+	return 0;
+}
+
 /* The pour with surface_mesh: medians of the mesher's and the simulation's
  * ms per frame. */
 static int surface_vs_step(FILE *json, const char *argv0)
 {
 	char eddy[1024], cmd[2400];
-	snprintf(eddy, sizeof eddy, "%s", argv0);
-	char *slash = strrchr(eddy, '/');
-	if (slash)
-		*slash = '\0'; /* build/tests */
-	slash = strrchr(eddy, '/');
-	snprintf(slash ? slash + 1 : eddy, sizeof eddy - (size_t)(slash ? slash + 1 - eddy : 0), "eddy");
-	if (!slash)
-		snprintf(eddy, sizeof eddy, "build/eddy");
+	eddy_beside(argv0, eddy, sizeof eddy);
 	snprintf(cmd, sizeof cmd,
 	         "'%s' run tests/scenes/pour_surface.lua --threads 1 --set render=false --quiet "
 	         "--out build/bench_render/pour_surface --stats -",
@@ -294,6 +375,11 @@ static int surface_vs_step(FILE *json, const char *argv0)
 
 int main(int argc, char **argv)
 {
+	/* one part alone, to stdout: the encoders on the newest pour-sized frame, or the pour's turns */
+	if (argc >= 2 && strcmp(argv[1], "--encoders") == 0)
+		return encoders(NULL, "build/bench_render/frame_960x540_5625_9.png");
+	if (argc >= 2 && strcmp(argv[1], "--pour") == 0)
+		return pour_frames_cost(NULL, argv[0]);
 	const bool quick = argc >= 2 && strcmp(argv[1], "--quick") == 0;
 	const char *out = argc >= 2 && !quick ? argv[1] : "build/bench_render.json";
 	FILE *f = quick ? NULL : fopen(out, "w");
@@ -323,6 +409,9 @@ int main(int argc, char **argv)
 		return 1;
 	fprintf(f, "\n],\"surface\":[");
 	if (surface_vs_step(f, argv[0]) != 0)
+		return 1;
+	fprintf(f, "\n],\"pour_frames\":[");
+	if (pour_frames_cost(f, argv[0]) != 0)
 		return 1;
 	fprintf(f, "\n]}\n");
 	fclose(f);

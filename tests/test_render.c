@@ -29,6 +29,8 @@
 #include "eddy_lua.h"
 #include "../render/render.h" /* the CPU splatter and the GL context, compared */
 
+#include <png.h> /* libpng reads render/png.c's files back, checksums checked */
+
 #define STB_IMAGE_IMPLEMENTATION
 #define STBI_ONLY_PNG
 #include <stb/stb_image.h>
@@ -359,6 +361,101 @@ static uint64_t fixed_scene_hash(const char *name)
 	stbi_image_free(im.px);
 	eddy_destroy_world(w);
 	return h;
+}
+
+/* render/png.c's own deflate: images with runs of equal rows at the top, in
+ * the middle and at the bottom, of 7 to 23 rows, in widths whose rows end a
+ * run of copies in each way (3 w - 1 zero bytes after a row's first: 2, 5,
+ * 257, 260, 518, 899), and one row of 75024 bytes shuffled with Fibonacci
+ * frequencies (symbol k F(k + 2) times, k < 22: Huffman would give codes 21 bits
+ * long, so the 15-bit limit is exercised, and more tokens than one block
+ * holds), read back by libpng (which checks every CRC, the code's
+ * completeness and the zlib Adler-32) and by stb_image, give the bytes
+ * written. */
+static void png_writer_round_trips(void)
+{
+	const int widths[6] = {1, 2, 86, 87, 173, 300};
+	enum { H = 64 };
+	for (int wi = 0; wi < 6; ++wi) {
+		const int w = widths[wi];
+		uint8_t *rgb = malloc((size_t)w * H * 3);
+		if (!rgb)
+			return;
+		uint64_t r = 7 + (uint64_t)wi;
+		for (int y = 0; y < H; ++y) {
+			uint8_t *row = rgb + (size_t)y * (size_t)w * 3;
+			/* rows 1-9 repeat the row above (a run of 9), 21-27 (7, through
+			 * zlib), 31-38 (8), 41-63 (23, to the end); the rest is noise */
+			const bool repeat = (y > 0 && y <= 9) || (y > 20 && y <= 27) || (y > 30 && y <= 38) || y > 40;
+			if (repeat) {
+				memcpy(row, row - (size_t)w * 3, (size_t)w * 3);
+				continue;
+			}
+			for (int i = 0; i < w * 3; ++i) {
+				r = r * 6364136223846793005ull + 1442695040888963407ull;
+				row[i] = (uint8_t)(r >> 56);
+			}
+		}
+		char path[600];
+		char name[64];
+		snprintf(name, sizeof name, "png_w%d.png", w);
+		out_path(path, sizeof path, name);
+		CHECK(eddy_write_png(path, w, H, rgb) == 0);
+		png_image im;
+		memset(&im, 0, sizeof im);
+		im.version = PNG_IMAGE_VERSION;
+		uint8_t *back = malloc((size_t)w * H * 3);
+		CHECKF(png_image_begin_read_from_file(&im, path) != 0, "libpng cannot read %s: %s", path, im.message);
+		if (back && im.width == (png_uint_32)w && im.height == H) {
+			im.format = PNG_FORMAT_RGB;
+			CHECKF(png_image_finish_read(&im, NULL, back, 0, NULL) != 0, "libpng: %s: %s", path, im.message);
+			CHECKF(memcmp(back, rgb, (size_t)w * H * 3) == 0, "width %d: libpng reads other pixels back", w);
+		} else {
+			CHECKF(0, "width %d: libpng reads %ux%u", w, (unsigned)im.width, (unsigned)im.height);
+			png_image_free(&im);
+		}
+		int sw = 0, sh = 0, comp = 0;
+		uint8_t *st = stbi_load(path, &sw, &sh, &comp, 3);
+		CHECKF(st && sw == w && sh == H && memcmp(st, rgb, (size_t)w * H * 3) == 0, "width %d: stb_image reads other pixels", w);
+		stbi_image_free(st);
+		free(back);
+		free(rgb);
+	}
+	/* the skewed row */
+	enum { FW = 25008 };
+	uint8_t *row = malloc(3 * FW), *back = malloc(3 * FW);
+	if (!row || !back) {
+		free(row), free(back);
+		return;
+	}
+	size_t at = 0;
+	uint32_t f0 = 1, f1 = 1; /* F(1), F(2) */
+	for (int k = 0; k < 22; ++k) {
+		for (uint32_t c = 0; c < f1; ++c)
+			row[at++] = (uint8_t)(7 * k);
+		const uint32_t f2 = f0 + f1;
+		f0 = f1, f1 = f2;
+	}
+	row[at++] = 255; /* 75023 bytes so far */
+	CHECK(at == 3 * FW);
+	uint64_t r = 5;
+	for (size_t i = 3 * FW - 1; i > 0; --i) {
+		r = r * 6364136223846793005ull + 1442695040888963407ull;
+		const size_t j = (size_t)(r >> 33) % (i + 1);
+		const uint8_t t = row[i];
+		row[i] = row[j], row[j] = t;
+	}
+	char path[600];
+	out_path(path, sizeof path, "png_skewed.png");
+	CHECK(eddy_write_png(path, FW, 1, row) == 0);
+	png_image im;
+	memset(&im, 0, sizeof im);
+	im.version = PNG_IMAGE_VERSION;
+	CHECKF(png_image_begin_read_from_file(&im, path) != 0, "libpng cannot read %s: %s", path, im.message);
+	im.format = PNG_FORMAT_RGB;
+	CHECKF(im.width == FW && png_image_finish_read(&im, NULL, back, 0, NULL) != 0, "libpng: %s: %s", path, im.message);
+	CHECK(memcmp(back, row, 3 * FW) == 0);
+	free(row), free(back);
 }
 
 static void png_round_trip_and_pinned_hash(void)
@@ -1392,7 +1489,8 @@ static diff_stats compare_rgb(const uint8_t *a, const uint8_t *b, size_t pixels)
  * same images one pixel apart differ by 8 levels on average and in 20% of the
  * pixels, so a flipped axis, a wrong shading term or a sphere a pixel too
  * large fails; measured figures are printed. Perspective and orthographic, and the splatter on 1
- * and 3 threads gives the same bytes. */
+ * and 3 threads, and its one-pixel-at-a-time path (the AVX2 one draws eight),
+ * give the same bytes. */
 static void splat_matches_gl(void)
 {
 	enum { W = 240, H = 160, S = 2, N = 3000 };
@@ -1443,6 +1541,11 @@ static void splat_matches_gl(void)
 		eddy_downsample_rows(eddy_gl_pixels(gl), W, H, S, a, 0, H);
 		CHECKF(eddy_splat_draw(&sp, &sc, 1, S, b, err, sizeof err) == 0, "%s", err);
 		CHECKF(eddy_splat_draw(&sp, &sc, 3, S, c, err, sizeof err) == 0, "%s", err);
+		CHECK(memcmp(b, c, W * H * 3) == 0);
+		/* one pixel at a time: the same bytes as eight at a time */
+		sp.scalar = true;
+		CHECKF(eddy_splat_draw(&sp, &sc, 2, S, c, err, sizeof err) == 0, "%s", err);
+		sp.scalar = false;
 		CHECK(memcmp(b, c, W * H * 3) == 0);
 		const diff_stats d = compare_rgb(a, b, (size_t)W * H);
 		printf("    %s: mean |diff| %.3f levels, %.3f%% of pixels off by > 8, max %d\n",
@@ -1498,6 +1601,7 @@ void suite_render(void)
 	RUN(colour_map_is_applied);
 	RUN(background_where_nothing_is_drawn);
 	RUN(png_round_trip_and_pinned_hash);
+	RUN(png_writer_round_trips);
 	RUN(no_gl_context_is_a_clear_error);
 	RUN(unwritable_path_is_an_io_error);
 	RUN(bad_defs_are_rejected);
