@@ -6,10 +6,10 @@
  * pour scene's 960x540 (supersample 2) for its 5625, with the world on 1 and
  * 2 threads (render_points draws in as many row bands), as JSON. Then the
  * PNG encoders on the pour-sized frame: CPU ms per encode (median of 15) and
- * bytes for stb_image_write at its default level (eddy's encoder before
- * libpng), libpng at its defaults (level 6, adaptive filters), libpng at
- * level 1 with Z_RLE and the up filter (eddy's encoder before its own), and
- * render/png.c (the up filter, its own run-length deflate; to a file).
+ * bytes for stb_image_write at its default level, libpng at its defaults
+ * (level 6, adaptive filters), libpng at level 1 with Z_RLE and the up
+ * filter in memory, and render/png.c (those settings, to a file as
+ * render_points writes it).
  *
  * Then the surface mesher on the pour (tests/scenes/pour_surface.lua through
  * the eddy command beside this program, 1 thread, no images): the medians
@@ -224,7 +224,7 @@ static int encoders(FILE *f, const char *frame)
 		return 1;
 	}
 	const char *names[4] = {"stb_image_write level 8", "libpng defaults (level 6, adaptive filters)",
-	                        "libpng level 1, Z_RLE, up", "eddy (render/png.c: up, run-length deflate with its own Huffman codes)"};
+	                        "libpng level 1, Z_RLE, up", "eddy (render/png.c: libpng level 1, Z_RLE, up, to a file)"};
 	enum { REPS = 15 };
 	for (int e = 0; e < 4; ++e) {
 		double ms[REPS];
