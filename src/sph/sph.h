@@ -26,10 +26,6 @@
 
 #include "core.h"
 
-#ifdef __SSE2__
-#include <emmintrin.h>
-#endif
-
 #ifndef M_PI
 #define M_PI 3.14159265358979323846
 #endif
@@ -209,7 +205,7 @@ static inline void sph_coincident_dir(size_t i, size_t j, float *dx, float *dy, 
 	*dz = s * 0.26726124f;
 }
 
-/* Four partial sums stored to memory, added in sph_hsum4's order. */
+/* Four partial sums stored to memory, added in sf8_sum's order (simd.h). */
 static inline float sph_sum4(const float *l)
 {
 	return (l[0] + l[1]) + (l[2] + l[3]);
@@ -225,60 +221,5 @@ static inline void sph_group_rows(const uint32_t *list, uint32_t cnt, uint32_t q
 	for (uint32_t k = 0; k < 8; ++k)
 		l[k] = g[last + ((k - last) & (0u - (uint32_t)(k < last)))];
 }
-
-/* ---- Left over from the passes' intrinsics (sph_dfsph until it is written
- * against simd.h): delete with the last user. ---- */
-#ifdef __SSE2__
-/* Sum of the four lanes in a fixed order, (l0 + l1) + (l2 + l3): the passes
- * over neighbours keep four partial sums and end with this. */
-static inline float sph_hsum4(__m128 v)
-{
-	const __m128 sw = _mm_shuffle_ps(v, v, _MM_SHUFFLE(2, 3, 0, 1)); /* l1 l0 l3 l2 */
-	const __m128 s = _mm_add_ps(v, sw);                               /* l0+l1, ., l2+l3, . */
-	return _mm_cvtss_f32(_mm_add_ss(s, _mm_movehl_ps(s, s)));
-}
-#endif
-
-/* An AVX2 path beside the SSE one (chosen at run time, the default build
- * stays portable): the pair loops work on groups of eight neighbours, which
- * the SSE path does as two halves with separate partial sums, so that both
- * paths do the same operations per lane and give the same bits. */
-#if defined(__SSE2__) && defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__))
-#define SPH_AVX2 1
-#include <immintrin.h>
-#include <stdlib.h>
-/* AVX2 with BMI2 (the search and filter pack their hits with pdep/pext;
- * every AVX2 CPU from Haswell and Zen on has both). EDDY_NO_AVX2 (set, not
- * empty) takes the SSE path on such a machine: the test that both paths
- * give the same bits, and a way around a suspect CPU. */
-static inline bool sph_use_avx2(void)
-{
-	const char *off = getenv("EDDY_NO_AVX2");
-	return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("bmi2") && !(off && *off);
-}
-
-/* Sum of eight lanes as the SSE path sums its two halves. */
-__attribute__((target("avx2"))) static inline float sph_hsum8(__m256 v)
-{
-	return sph_hsum4(_mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1)));
-}
-
-/* Quads a[0..7] (16 bytes each) to four vectors of eight lanes: lanes 0-3
- * from a[0..3], lanes 4-7 from a[4..7], as two _MM_TRANSPOSE4_PS would. */
-__attribute__((target("avx2"))) static inline void sph_transpose8(const float *const a[8], __m256 *c0, __m256 *c1,
-                                                                  __m256 *c2, __m256 *c3)
-{
-	const __m256 v0 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[0])), _mm_loadu_ps(a[4]), 1),
-	             v1 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[1])), _mm_loadu_ps(a[5]), 1),
-	             v2 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[2])), _mm_loadu_ps(a[6]), 1),
-	             v3 = _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(a[3])), _mm_loadu_ps(a[7]), 1);
-	const __m256 t0 = _mm256_unpacklo_ps(v0, v1), t1 = _mm256_unpacklo_ps(v2, v3), t2 = _mm256_unpackhi_ps(v0, v1),
-	             t3 = _mm256_unpackhi_ps(v2, v3);
-	*c0 = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(1, 0, 1, 0));
-	*c1 = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(3, 2, 3, 2));
-	*c2 = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(1, 0, 1, 0));
-	*c3 = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(3, 2, 3, 2));
-}
-#endif
 
 #endif
