@@ -282,30 +282,33 @@ static void gradient_sums(dfsph_work *wk, long i0, long cnt, float *t)
 
 /* The wall sums of particle i: B_i (out[0..2]) and the hydrostatic sum
  * sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b) (out[3..5]). Four partial
- * sums each (boundary neighbour q onto sum q mod 4), ended as sph_sum4
- * ends them: most particles have no boundary neighbours and those at a wall
- * a few, too few to fill eight lanes. */
+ * sums each (boundary neighbour q onto sum q mod 4, the last four padded
+ * with copies of the last neighbour and masked out), ended as sph_sum4 ends
+ * them: most particles have no boundary neighbours and those at a wall a
+ * few, too few to fill eight lanes. */
 static void wall_sums(const dfsph_geometry *a, long i, float out[6])
 {
 	const sph_neighbors *nb = a->nb;
 	const float *pi = a->pq + 4 * i;
-	const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
+	const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap, bcnt = nb->bcount[i];
 	float s[6][4] = {{0}};
-	for (uint32_t q = 0; q < nb->bcount[i]; ++q) {
-		const uint32_t b = blist[q], l = q % 4;
-		const float rx = pi[0] - nb->bx[b], ry = pi[1] - nb->by[b], rz = pi[2] - nb->bz[b];
-		const float r2 = rx * rx + ry * ry + rz * rz;
-		const float mb = nb->bvol[b] * a->rho0; /* Akinci: the wall at rest density */
-		const float r = sqrtf(r2), hr = a->h - r;
-		const float c = r2 > a->eps2 && hr > 0 ? mb * a->spiky_grad * hr * hr / r : 0.0f;
-		s[0][l] += c * rx;
-		s[1][l] += c * ry;
-		s[2][l] += c * rz;
-		const float gh = -(a->gx * rx + a->gy * ry + a->gz * rz) * c; /* g . (x_b - x_i) */
-		s[3][l] += gh * rx;
-		s[4][l] += gh * ry;
-		s[5][l] += gh * rz;
-	}
+	for (uint32_t q = 0; q < bcnt; q += 4)
+		for (uint32_t l = 0; l < 4; ++l) {
+			const uint32_t b = blist[q + l < bcnt ? q + l : bcnt - 1];
+			const float rx = pi[0] - nb->bx[b], ry = pi[1] - nb->by[b], rz = pi[2] - nb->bz[b];
+			const float r2 = rx * rx + ry * ry + rz * rz;
+			const float mb = nb->bvol[b] * a->rho0; /* Akinci: the wall at rest density */
+			const float r = sqrtf(r2), hr = a->h - r;
+			const bool ok = q + l < bcnt && r2 > a->eps2 && hr > 0;
+			const float c = ok ? mb * a->spiky_grad * hr * hr / r : 0.0f; /* + 0 leaves a sum as it is */
+			s[0][l] += c * rx;
+			s[1][l] += c * ry;
+			s[2][l] += c * rz;
+			const float gh = -(a->gx * rx + a->gy * ry + a->gz * rz) * c; /* g . (x_b - x_i) */
+			s[3][l] += gh * rx;
+			s[4][l] += gh * ry;
+			s[5][l] += gh * rz;
+		}
 	for (int k = 0; k < 6; ++k)
 		out[k] = sph_sum4(s[k]);
 }
