@@ -9,6 +9,7 @@
 #   make asan       the tests under AddressSanitizer + UndefinedBehaviorSanitizer
 #   make fuzz       libFuzzer over scene loading and stepping (FUZZ_SECONDS)
 #   make study      every accuracy/time study in scenes/studies/
+#   make format     clang-format over the tree (.clang-format)
 #   make install PREFIX=/usr/local [DESTDIR=...]
 #   make clean
 
@@ -97,7 +98,7 @@ CLI_O   := $(call obj,$(CLI_C))
 TEST_O  := $(call obj,$(TEST_C))
 HEADER  := $(BUILD)/include/eddy.h
 
-.PHONY: all run test test-long check-tests bench asan fuzz study install clean deps deps-test
+.PHONY: all run test test-long check-tests bench asan fuzz study format install clean deps deps-test
 .DEFAULT_GOAL := all
 
 all: $(BUILD)/libeddy.a $(BUILD)/libeddy.so $(BUILD)/eddy.so $(BUILD)/eddy $(BUILD)/eddy.pc
@@ -263,6 +264,14 @@ STUDY_FLAGS ?=
 study: deps
 	@$(MAKE) --no-print-directory all
 	@for s in $(STUDIES); do echo "== $$s"; $(BUILD)/eddy study $$s $(STUDY_FLAGS) || exit 1; done
+
+# ---- formatting: every C, C++ and header file by .clang-format ----------------------
+
+CLANG_FORMAT ?= $(firstword $(shell for c in clang-format clang-format-14; do command -v $$c; done))
+
+format:
+	@test -n "$(CLANG_FORMAT)" || { echo "make format: needs clang-format (apt-get install clang-format)"; exit 1; }
+	$(CLANG_FORMAT) -i $$(git ls-files '*.c' '*.h' '*.cpp' | grep -v '^tests/fuzz/')
 
 # ---- install ------------------------------------------------------------------------
 # The Lua module and helpers go where the stock lua5.4 looks (lib/lua/5.4/,

@@ -12,22 +12,22 @@
 #include "eddy.h"
 
 typedef enum eddy_lua_field_type {
-	EDDY_LUA_FLOAT,  /* float */
-	EDDY_LUA_DOUBLE, /* double */
-	EDDY_LUA_INT,    /* int */
-	EDDY_LUA_INT64,  /* int64_t, >= 0 */
-	EDDY_LUA_U64,    /* uint64_t */
-	EDDY_LUA_BOOL,   /* bool */
-	EDDY_LUA_VEC3,   /* eddy_vec3 from {x, y, z} */
-	EDDY_LUA_BOUNDS, /* two eddy_vec3 (min, max) from {{...}, {...}} */
-	EDDY_LUA_ENUM,   /* int from one of the strings in choices (index) */
-	EDDY_LUA_STRING, /* char[size] from a string */
+	EDDY_LUA_FLOAT,       /* float */
+	EDDY_LUA_DOUBLE,      /* double */
+	EDDY_LUA_INT,         /* int */
+	EDDY_LUA_INT64,       /* int64_t, >= 0 */
+	EDDY_LUA_U64,         /* uint64_t */
+	EDDY_LUA_BOOL,        /* bool */
+	EDDY_LUA_VEC3,        /* eddy_vec3 from {x, y, z} */
+	EDDY_LUA_BOUNDS,      /* two eddy_vec3 (min, max) from {{...}, {...}} */
+	EDDY_LUA_ENUM,        /* int from one of the strings in choices (index) */
+	EDDY_LUA_STRING,      /* char[size] from a string */
 	EDDY_LUA_STRING_LIST, /* char[size]: a table of strings (or one string), joined by spaces */
-	EDDY_LUA_OFFSET, /* collider offset: a vector or a function of time */
-	EDDY_LUA_ROTATION, /* collider rotation: an axis-angle vector (degrees) or a function of time */
-	EDDY_LUA_PIVOT,  /* collider pivot: a vector (eddy_collider_set_pivot) */
-	EDDY_LUA_INPUT_PATH /* char[size] from a string: a file the system reads (safe mode
-	                       reads anywhere, and checks only EDDY_LUA_STRING paths as outputs) */
+	EDDY_LUA_OFFSET,      /* collider offset: a vector or a function of time */
+	EDDY_LUA_ROTATION,    /* collider rotation: an axis-angle vector (degrees) or a function of time */
+	EDDY_LUA_PIVOT,       /* collider pivot: a vector (eddy_collider_set_pivot) */
+	EDDY_LUA_INPUT_PATH   /* char[size] from a string: a file the system reads (safe mode
+	                         reads anywhere, and checks only EDDY_LUA_STRING paths as outputs) */
 } eddy_lua_field_type;
 
 typedef struct eddy_lua_field {
@@ -39,24 +39,42 @@ typedef struct eddy_lua_field {
 } eddy_lua_field;
 
 typedef struct eddy_lua_kind {
-	const char *name;                                      /* eddy.<name>{...} */
+	const char *name; /* eddy.<name>{...} */
 	size_t def_size;
 	void (*defaults)(void *def);
 	eddy_system_id (*add)(eddy_world *w, const void *def); /* NULL for the world */
 	const eddy_lua_field *fields;                          /* ends with a NULL name */
 } eddy_lua_kind;
 
-#define EDDY_LUA_FIELD(T, f, type) {#f, type, offsetof(T, f), NULL, 0}
-#define EDDY_LUA_ENUM_FIELD(T, f, choices) {#f, EDDY_LUA_ENUM, offsetof(T, f), choices, 0}
-#define EDDY_LUA_STRING_FIELD(T, f) {#f, EDDY_LUA_STRING, offsetof(T, f), NULL, sizeof(((T *)0)->f)}
-#define EDDY_LUA_END {NULL, EDDY_LUA_FLOAT, 0, NULL, 0}
+#define EDDY_LUA_FIELD(T, f, type)        \
+	{                                     \
+#f, type, offsetof(T, f), NULL, 0 \
+	}
+#define EDDY_LUA_ENUM_FIELD(T, f, choices)            \
+	{                                                 \
+#f, EDDY_LUA_ENUM, offsetof(T, f), choices, 0 \
+	}
+#define EDDY_LUA_STRING_FIELD(T, f)                                    \
+	{                                                                  \
+#f, EDDY_LUA_STRING, offsetof(T, f), NULL, sizeof(((T *)0)->f) \
+	}
+#define EDDY_LUA_END                     \
+	{                                    \
+		NULL, EDDY_LUA_FLOAT, 0, NULL, 0 \
+	}
 
 /* Wrappers with the generic signatures for eddy_default_<k>_def and eddy_add_<k>. */
-#define EDDY_LUA_KIND_FUNCS(k) \
+#define EDDY_LUA_KIND_FUNCS(k)                                                             \
 	static void k##_defaults(void *d) { *(eddy_##k##_def *)d = eddy_default_##k##_def(); } \
 	static eddy_system_id k##_add(eddy_world *w, const void *d) { return eddy_add_##k(w, (const eddy_##k##_def *)d); }
-#define EDDY_LUA_KIND(k) {#k, sizeof(eddy_##k##_def), k##_defaults, k##_add, k##_fields}
-#define EDDY_LUA_KIND_END {NULL, 0, NULL, NULL, NULL}
+#define EDDY_LUA_KIND(k)                                              \
+	{                                                                 \
+#k, sizeof(eddy_##k##_def), k##_defaults, k##_add, k##_fields \
+	}
+#define EDDY_LUA_KIND_END         \
+	{                             \
+		NULL, 0, NULL, NULL, NULL \
+	}
 
 /* The kind lists, each ending with EDDY_LUA_KIND_END. */
 extern const eddy_lua_kind eddy_lua_core_kinds[];

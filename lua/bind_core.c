@@ -2,12 +2,13 @@
 /* Lua descriptions of the world def and the core systems' defs. */
 #include "bind.h"
 
-#define RESPONSE_FIELDS(T) \
+#define RESPONSE_FIELDS(T)                                                                                           \
 	{"restitution", EDDY_LUA_FLOAT, offsetof(T, response) + offsetof(eddy_collider_response, restitution), NULL, 0}, \
-	{"friction", EDDY_LUA_FLOAT, offsetof(T, response) + offsetof(eddy_collider_response, friction), NULL, 0}, \
-	{"offset", EDDY_LUA_OFFSET, 0, NULL, 0}, \
-	{"rotation", EDDY_LUA_ROTATION, 0, NULL, 0}, \
-	{"pivot", EDDY_LUA_PIVOT, 0, NULL, 0}
+		{"friction", EDDY_LUA_FLOAT, offsetof(T, response) + offsetof(eddy_collider_response, friction), NULL, 0},   \
+		{"offset", EDDY_LUA_OFFSET, 0, NULL, 0}, {"rotation", EDDY_LUA_ROTATION, 0, NULL, 0},                        \
+	{                                                                                                                \
+		"pivot", EDDY_LUA_PIVOT, 0, NULL, 0                                                                          \
+	}
 
 static const char *const escape_choices[] = {"error", "remove", NULL};
 

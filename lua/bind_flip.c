@@ -54,7 +54,7 @@ EDDY_LUA_KIND_FUNCS(flip_advect)
 EDDY_LUA_KIND_FUNCS(flip_reseed)
 
 const eddy_lua_kind eddy_lua_flip_kinds[] = {
-	EDDY_LUA_KIND(flip_p2g),         EDDY_LUA_KIND(flip_boundary), EDDY_LUA_KIND(flip_surface),
-	EDDY_LUA_KIND(flip_pressure),    EDDY_LUA_KIND(flip_extrapolate), EDDY_LUA_KIND(flip_g2p),
-	EDDY_LUA_KIND(flip_advect),      EDDY_LUA_KIND(flip_reseed),   EDDY_LUA_KIND_END,
+	EDDY_LUA_KIND(flip_p2g),      EDDY_LUA_KIND(flip_boundary),    EDDY_LUA_KIND(flip_surface),
+	EDDY_LUA_KIND(flip_pressure), EDDY_LUA_KIND(flip_extrapolate), EDDY_LUA_KIND(flip_g2p),
+	EDDY_LUA_KIND(flip_advect),   EDDY_LUA_KIND(flip_reseed),      EDDY_LUA_KIND_END,
 };

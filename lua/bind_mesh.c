@@ -3,7 +3,10 @@
  * sys_collide_mesh.c, sys_emit_mesh.c, sys_emit_particles.c). */
 #include "bind.h"
 
-#define INPUT_PATH(T) {"path", EDDY_LUA_INPUT_PATH, offsetof(T, path), NULL, sizeof(((T *)0)->path)}
+#define INPUT_PATH(T)                                                                \
+	{                                                                                \
+		"path", EDDY_LUA_INPUT_PATH, offsetof(T, path), NULL, sizeof(((T *)0)->path) \
+	}
 
 static const eddy_lua_field collide_mesh_fields[] = {
 	INPUT_PATH(eddy_collide_mesh_def),
@@ -14,9 +17,9 @@ static const eddy_lua_field collide_mesh_fields[] = {
 	EDDY_LUA_FIELD(eddy_collide_mesh_def, inside, EDDY_LUA_BOOL),
 	EDDY_LUA_FIELD(eddy_collide_mesh_def, open, EDDY_LUA_BOOL),
 	{"restitution", EDDY_LUA_FLOAT,
-	 offsetof(eddy_collide_mesh_def, response) + offsetof(eddy_collider_response, restitution), NULL, 0},
+     offsetof(eddy_collide_mesh_def, response) + offsetof(eddy_collider_response, restitution), NULL, 0},
 	{"friction", EDDY_LUA_FLOAT, offsetof(eddy_collide_mesh_def, response) + offsetof(eddy_collider_response, friction),
-	 NULL, 0},
+     NULL, 0},
 	{"offset", EDDY_LUA_OFFSET, 0, NULL, 0},
 	{"rotation", EDDY_LUA_ROTATION, 0, NULL, 0},
 	{"pivot", EDDY_LUA_PIVOT, 0, NULL, 0},

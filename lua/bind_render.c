@@ -37,7 +37,7 @@ static const eddy_lua_field render_points_fields[] = {
 static const eddy_lua_field export_particles_fields[] = {
 	EDDY_LUA_ENUM_FIELD(eddy_export_particles_def, format, format_choices),
 	{"channels", EDDY_LUA_STRING_LIST, offsetof(eddy_export_particles_def, channels), NULL,
-	 sizeof(((eddy_export_particles_def *)0)->channels)},
+     sizeof(((eddy_export_particles_def *)0)->channels)},
 	EDDY_LUA_STRING_FIELD(eddy_export_particles_def, path),
 	EDDY_LUA_FIELD(eddy_export_particles_def, every, EDDY_LUA_INT),
 	EDDY_LUA_END,
@@ -48,7 +48,7 @@ static const eddy_lua_field surface_mesh_fields[] = {
 	EDDY_LUA_FIELD(eddy_surface_mesh_def, support, EDDY_LUA_FLOAT),
 	EDDY_LUA_FIELD(eddy_surface_mesh_def, voxel, EDDY_LUA_FLOAT),
 	{"format", EDDY_LUA_STRING_LIST, offsetof(eddy_surface_mesh_def, format), NULL,
-	 sizeof(((eddy_surface_mesh_def *)0)->format)},
+     sizeof(((eddy_surface_mesh_def *)0)->format)},
 	EDDY_LUA_STRING_FIELD(eddy_surface_mesh_def, path),
 	EDDY_LUA_FIELD(eddy_surface_mesh_def, every, EDDY_LUA_INT),
 	EDDY_LUA_END,

@@ -51,7 +51,11 @@ EDDY_LUA_KIND_FUNCS(sph_boundary_box)
 EDDY_LUA_KIND_FUNCS(sph_dfsph)
 
 const eddy_lua_kind eddy_lua_sph_kinds[] = {
-	EDDY_LUA_KIND(sph_density),         EDDY_LUA_KIND(sph_pressure),     EDDY_LUA_KIND(sph_viscosity),
-	EDDY_LUA_KIND(sph_surface_tension), EDDY_LUA_KIND(sph_boundary_box), EDDY_LUA_KIND(sph_dfsph),
+	EDDY_LUA_KIND(sph_density),
+	EDDY_LUA_KIND(sph_pressure),
+	EDDY_LUA_KIND(sph_viscosity),
+	EDDY_LUA_KIND(sph_surface_tension),
+	EDDY_LUA_KIND(sph_boundary_box),
+	EDDY_LUA_KIND(sph_dfsph),
 	EDDY_LUA_KIND_END,
 };

@@ -18,14 +18,14 @@
 enum { CLI_EXIT_RUN = 1, CLI_EXIT_USAGE = 2 };
 
 typedef struct cli_options {
-	const char *command;  /* run, plan or check */
+	const char *command; /* run, plan or check */
 	const char *scene;
-	int frames;           /* -1: from the duration */
-	double duration;      /* < 0: the scene's */
+	int frames;      /* -1: from the duration */
+	double duration; /* < 0: the scene's */
 	const char *out;
-	int threads;          /* 0: the scene's */
-	const char *stats;    /* "-": stdout */
-	const char *video;    /* the rendered frames through ffmpeg */
+	int threads;               /* 0: the scene's */
+	const char *stats;         /* "-": stdout */
+	const char *video;         /* the rendered frames through ffmpeg */
 	const char *export_format; /* --export ply|vtk|vtp, NULL: none */
 	bool quiet, dot, safe;
 	int checkpoint_every; /* 0: none */

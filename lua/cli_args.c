@@ -91,18 +91,17 @@ static const char plan_usage[] =
 	"  --safe       load the scene in a sandbox\n"
 	"  -h, --help   this help\n";
 
-static const char check_usage[] =
-	"usage: eddy check SCENE.lua [options]\n"
-	"\n"
-	"Preflight: the time step at the start and what limits it, particles starting\n"
-	"inside colliders or outside the bounds, the memory estimate. Exit status 1\n"
-	"when it finds an error.\n"
-	"\n"
-	"options:\n"
-	"  --set K=V    a scene parameter (eddy.param); repeatable, once per K\n"
-	"  --out DIR    the output folder the scene is told (eddy.out_dir())\n"
-	"  --safe       load the scene in a sandbox\n"
-	"  -h, --help   this help\n";
+static const char check_usage[] = "usage: eddy check SCENE.lua [options]\n"
+								  "\n"
+								  "Preflight: the time step at the start and what limits it, particles starting\n"
+								  "inside colliders or outside the bounds, the memory estimate. Exit status 1\n"
+								  "when it finds an error.\n"
+								  "\n"
+								  "options:\n"
+								  "  --set K=V    a scene parameter (eddy.param); repeatable, once per K\n"
+								  "  --out DIR    the output folder the scene is told (eddy.out_dir())\n"
+								  "  --safe       load the scene in a sandbox\n"
+								  "  -h, --help   this help\n";
 
 int cli_fail(int code, const char *fmt, ...)
 {
@@ -175,8 +174,21 @@ static bool parse_int(const char *s, int lo, int hi, int *out)
 }
 
 enum {
-	OPT_FRAMES = 256, OPT_DURATION, OPT_OUT, OPT_THREADS, OPT_SET, OPT_STATS, OPT_QUIET, OPT_DOT, OPT_SAFE,
-	OPT_CHECKPOINT_EVERY, OPT_KEEP_CHECKPOINTS, OPT_RESUME, OPT_EXPORT, OPT_VIDEO, OPT_VERSION,
+	OPT_FRAMES = 256,
+	OPT_DURATION,
+	OPT_OUT,
+	OPT_THREADS,
+	OPT_SET,
+	OPT_STATS,
+	OPT_QUIET,
+	OPT_DOT,
+	OPT_SAFE,
+	OPT_CHECKPOINT_EVERY,
+	OPT_KEEP_CHECKPOINTS,
+	OPT_RESUME,
+	OPT_EXPORT,
+	OPT_VIDEO,
+	OPT_VERSION,
 };
 
 static const struct option long_options[] = {
@@ -264,14 +276,29 @@ static int parse_option(int opt, const char *v, cli_options *o)
 			return cli_fail(CLI_EXIT_USAGE, "--export must be ply, vtk or vtp (got '%s')", v);
 		o->export_format = v;
 		return 0;
-	case OPT_OUT: o->out = v; return 0;
-	case OPT_STATS: o->stats = v; return 0;
-	case OPT_RESUME: o->resume = v; return 0;
-	case OPT_VIDEO: o->video = v; return 0;
-	case OPT_QUIET: o->quiet = true; return 0;
-	case OPT_DOT: o->dot = true; return 0;
-	case OPT_SAFE: o->safe = true; return 0;
-	default: return cli_fail(CLI_EXIT_USAGE, "internal: unhandled option %d", opt);
+	case OPT_OUT:
+		o->out = v;
+		return 0;
+	case OPT_STATS:
+		o->stats = v;
+		return 0;
+	case OPT_RESUME:
+		o->resume = v;
+		return 0;
+	case OPT_VIDEO:
+		o->video = v;
+		return 0;
+	case OPT_QUIET:
+		o->quiet = true;
+		return 0;
+	case OPT_DOT:
+		o->dot = true;
+		return 0;
+	case OPT_SAFE:
+		o->safe = true;
+		return 0;
+	default:
+		return cli_fail(CLI_EXIT_USAGE, "internal: unhandled option %d", opt);
 	}
 }
 
@@ -346,10 +373,11 @@ int cli_parse(int argc, char **argv, cli_options *o, lua_State *L)
 		return -1;
 	}
 	if (!o->command)
-		return cli_fail(CLI_EXIT_USAGE, "no command: eddy run|plan|check|study|compare SCENE.lua [options] (see eddy --help)");
+		return cli_fail(CLI_EXIT_USAGE,
+		                "no command: eddy run|plan|check|study|compare SCENE.lua [options] (see eddy --help)");
 	if (strcmp(o->command, "run") != 0 && strcmp(o->command, "plan") != 0 && strcmp(o->command, "check") != 0)
-		return cli_fail(CLI_EXIT_USAGE, "unknown command '%s': use run, plan, check, study or compare (see eddy --help)",
-		                o->command);
+		return cli_fail(CLI_EXIT_USAGE,
+		                "unknown command '%s': use run, plan, check, study or compare (see eddy --help)", o->command);
 	if (!o->scene)
 		return cli_fail(CLI_EXIT_USAGE, "%s needs a scene file, e.g. eddy %s scenes/bounce.lua", o->command,
 		                o->command);

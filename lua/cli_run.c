@@ -33,14 +33,14 @@ typedef struct run {
 	const cli_options *o;
 	int world_idx;
 	eddy_world *w;
-	int first, frames;      /* the frames first+1 .. frames are simulated */
-	char ckpt_dir[1100];    /* OUT/checkpoints: where this run saves */
-	FILE *stats;            /* NULL: no --stats */
-	FILE *video;            /* the ffmpeg pipe, NULL: no --video */
+	int first, frames;   /* the frames first+1 .. frames are simulated */
+	char ckpt_dir[1100]; /* OUT/checkpoints: where this run saves */
+	FILE *stats;         /* NULL: no --stats */
+	FILE *video;         /* the ffmpeg pipe, NULL: no --video */
 	int video_frames;
-	char video_log[64];     /* ffmpeg's messages */
-	bool bar;               /* a progress bar on stderr */
-	bool reader_gone;       /* the stats reader closed its pipe: stop quietly */
+	char video_log[64]; /* ffmpeg's messages */
+	bool bar;           /* a progress bar on stderr */
+	bool reader_gone;   /* the stats reader closed its pipe: stop quietly */
 	double t0;
 } run;
 
@@ -61,7 +61,8 @@ static void progress(int frame, int frames, double sim_t, double wall_s, int64_t
 	bar[width] = '\0';
 	double rate = wall_s > 0 ? (double)steps / wall_s : 0;
 	double eta = frame > 0 ? wall_s / frame * (frames - frame) : 0;
-	fprintf(stderr, "\r[%s] frame %d/%d  t = %.3f s  %.0f steps/s  ETA %.0f s   ", bar, frame, frames, sim_t, rate, eta);
+	fprintf(stderr, "\r[%s] frame %d/%d  t = %.3f s  %.0f steps/s  ETA %.0f s   ", bar, frame, frames, sim_t, rate,
+	        eta);
 	fflush(stderr);
 }
 
@@ -337,8 +338,10 @@ static int start_video(run *r)
 {
 	const char *file = r->o->video;
 	if (!on_path("ffmpeg"))
-		return cli_fail(CLI_EXIT_RUN, "--video %s: ffmpeg is not installed (not found on PATH); install it (Debian: "
-		                              "apt-get install ffmpeg) or leave out --video (PNG frames need no ffmpeg)", file);
+		return cli_fail(CLI_EXIT_RUN,
+		                "--video %s: ffmpeg is not installed (not found on PATH); install it (Debian: "
+		                "apt-get install ffmpeg) or leave out --video (PNG frames need no ffmpeg)",
+		                file);
 	snprintf(r->video_log, sizeof r->video_log, "/tmp/eddy-ffmpeg-XXXXXX");
 	int fd = mkstemp(r->video_log);
 	if (fd >= 0)
@@ -384,8 +387,10 @@ static int video_frame(run *r)
 	}
 	/* stats texts hold 63 characters: a longer path arrives cut short */
 	if (strlen(img->text) >= 63)
-		return cli_fail(CLI_EXIT_RUN, "--video %s: the frame path '%s...' is too long to pass on (63 characters at "
-		                              "most); use a shorter --out or image path", r->o->video, img->text);
+		return cli_fail(CLI_EXIT_RUN,
+		                "--video %s: the frame path '%s...' is too long to pass on (63 characters at "
+		                "most); use a shorter --out or image path",
+		                r->o->video, img->text);
 	return cli_fail(CLI_EXIT_RUN, "--video %s: cannot pass frame '%s' to ffmpeg: %s", r->o->video, img->text,
 	                strerror(errno));
 }
@@ -441,8 +446,10 @@ static int prepare(run *r)
 	if (o->frames < 0 && o->duration > 0) {
 		const double ran = r->frames / def->fps;
 		if (ran > 2 * o->duration)
-			return cli_fail(CLI_EXIT_USAGE, "--duration %g s is shorter than one frame of the scene (%g s at %g fps): "
-			                                "give at least %g s or --frames", o->duration, 1 / def->fps, def->fps, 1 / def->fps);
+			return cli_fail(CLI_EXIT_USAGE,
+			                "--duration %g s is shorter than one frame of the scene (%g s at %g fps): "
+			                "give at least %g s or --frames",
+			                o->duration, 1 / def->fps, def->fps, 1 / def->fps);
 		if (ran > 1.01 * o->duration && !o->quiet)
 			fprintf(stderr, "eddy: warning: --duration %g s runs %d whole frames, %g s\n", o->duration, r->frames, ran);
 	}
@@ -458,8 +465,9 @@ static int prepare(run *r)
 		return code;
 	r->first = eddy_world_frame(r->w);
 	if (o->resume && r->first >= r->frames)
-		return cli_fail(CLI_EXIT_USAGE, "--resume: the checkpoint is at frame %d and the run ends at frame %d: "
-		                                "nothing left to run (ask for more with --frames or --duration)",
+		return cli_fail(CLI_EXIT_USAGE,
+		                "--resume: the checkpoint is at frame %d and the run ends at frame %d: "
+		                "nothing left to run (ask for more with --frames or --duration)",
 		                r->first, r->frames);
 	/* the preflight of eddy check: a scene that cannot work (one that would
 	 * not fit in memory, say) is refused before it allocates anything */
@@ -518,7 +526,8 @@ static int frame(run *r, int i)
 		if (code == 0)
 			code = cli_fail(128 + stop_signal,
 			                "interrupted after frame %d (t = %.6g s); resume with: eddy run %s --resume %s (and the "
-			                "same options)", i + 1, eddy_world_time(r->w), r->o->scene, r->ckpt_dir);
+			                "same options)",
+			                i + 1, eddy_world_time(r->w), r->o->scene, r->ckpt_dir);
 	}
 	return code;
 }

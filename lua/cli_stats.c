@@ -52,10 +52,17 @@ static void json_lua(FILE *f, lua_State *L, int idx, int depth)
 		else
 			json_number(f, lua_tonumber(L, idx));
 		return;
-	case LUA_TBOOLEAN: fputs(lua_toboolean(L, idx) ? "true" : "false", f); return;
-	case LUA_TSTRING: json_string(f, lua_tostring(L, idx)); return;
-	case LUA_TTABLE: break;
-	default: fputs("null", f); return;
+	case LUA_TBOOLEAN:
+		fputs(lua_toboolean(L, idx) ? "true" : "false", f);
+		return;
+	case LUA_TSTRING:
+		json_string(f, lua_tostring(L, idx));
+		return;
+	case LUA_TTABLE:
+		break;
+	default:
+		fputs("null", f);
+		return;
 	}
 	if (depth > 16) {
 		fputs("null", f);
@@ -105,9 +112,11 @@ static void json_lua(FILE *f, lua_State *L, int idx, int depth)
 }
 
 static const char *const contract_fields[] = {
-	"frame", "time", "steps", "dt_min", "dt_max", "dt_limit", "particles", "max_speed", "cfl", "density_err_avg",
-	"density_err_max", "density_compression_avg", "volume", "leaked", "nonfinite", "solver", "iterations", "residual", "divergence", "wall_ms",
-	"state_hash", "systems", "kinetic_energy", "potential_energy", "energy", "momentum", NULL,
+	"frame",      "time",      "steps",      "dt_min",          "dt_max",          "dt_limit",
+	"particles",  "max_speed", "cfl",        "density_err_avg", "density_err_max", "density_compression_avg",
+	"volume",     "leaked",    "nonfinite",  "solver",          "iterations",      "residual",
+	"divergence", "wall_ms",   "state_hash", "systems",         "kinetic_energy",  "potential_energy",
+	"energy",     "momentum",  NULL,
 };
 
 static bool is_contract_field(const char *name)

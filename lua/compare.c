@@ -74,7 +74,6 @@ static const char compare_usage[] =
 	"be written; 2 bad usage; 128+N stopped by signal N (Ctrl-C: the running method\n"
 	"ends after its frame, no further method runs, what ran is written).\n";
 
-
 /* listdir(dir) -> { names } (no "." or ".."), or nil, message */
 static int l_listdir(lua_State *L)
 {
@@ -222,7 +221,8 @@ static int parse_set(const char *arg, compare_args *a)
 		return usage_error("--set %s: the method is chosen by --methods (e.g. --methods %s)", arg, eq + 1);
 	for (int i = 0; i < a->nsets; ++i)
 		if (strncmp(a->sets[i], arg, (size_t)klen) == 0 && a->sets[i][klen] == '=')
-			return usage_error("--set %.*s given twice ('%s' and '%s'); give each parameter once", klen, arg, a->sets[i], arg);
+			return usage_error("--set %.*s given twice ('%s' and '%s'); give each parameter once", klen, arg,
+			                   a->sets[i], arg);
 	if (a->nsets == MAX_SETS)
 		return usage_error("more than 256 --set options");
 	a->sets[a->nsets++] = arg;
@@ -249,8 +249,12 @@ static int parse_compare_args(int argc, char **argv, compare_args *a)
 	while (code == 0 && (opt = getopt_long(argc - 1, argv + 1, ":h", compare_options, NULL)) != -1) {
 		const char *arg = argv[optind]; /* argv + 1's optind - 1 */
 		switch (opt) {
-		case OPT_METHODS: code = parse_methods(optarg, a); break;
-		case OPT_SET: code = parse_set(optarg, a); break;
+		case OPT_METHODS:
+			code = parse_methods(optarg, a);
+			break;
+		case OPT_SET:
+			code = parse_set(optarg, a);
+			break;
 		case OPT_OUT:
 			if (!optarg[0])
 				code = usage_error("--out must not be empty");
@@ -269,10 +273,18 @@ static int parse_compare_args(int argc, char **argv, compare_args *a)
 			a->threads = (int)t;
 			break;
 		}
-		case OPT_QUICK: a->quick = true; break;
-		case OPT_SAFE: a->safe = true; break;
-		case 'h': a->help = true; break;
-		case ':': code = usage_error("%s needs a value (see eddy compare --help)", option_text(arg, name)); break;
+		case OPT_QUICK:
+			a->quick = true;
+			break;
+		case OPT_SAFE:
+			a->safe = true;
+			break;
+		case 'h':
+			a->help = true;
+			break;
+		case ':':
+			code = usage_error("%s needs a value (see eddy compare --help)", option_text(arg, name));
+			break;
 		default:
 			if (optopt == OPT_QUICK || optopt == OPT_SAFE || optopt == 'h')
 				code = usage_error("option '%s' takes no value", option_text(arg, name));
@@ -315,8 +327,10 @@ int eddy_compare_main(int argc, char **argv)
 	if (lua_pcall(L, 1, 1, handler) != LUA_OK) {
 		const char *msg = lua_tostring(L, -1);
 		if (msg && strncmp(msg, "module 'eddy.", 13) == 0 && strstr(msg, "not found"))
-			fprintf(stderr, "eddy: compare: its Lua driver eddy/compare.lua (or eddy/study.lua) is not installed "
-			                "(looked in %s/../lua, %s/../../lua and %s/../share/lua/5.4)\n", dir, dir, dir);
+			fprintf(stderr,
+			        "eddy: compare: its Lua driver eddy/compare.lua (or eddy/study.lua) is not installed "
+			        "(looked in %s/../lua, %s/../../lua and %s/../share/lua/5.4)\n",
+			        dir, dir, dir);
 		else
 			fprintf(stderr, "eddy: %.*s\n", (int)strcspn(msg ? msg : "?", "\n"), msg ? msg : "?");
 		goto done;

@@ -135,18 +135,20 @@ static eddy_vec3 vec3_field(lua_State *L, const eddy_lua_kind *k, const char *na
 	return (eddy_vec3){v[0], v[1], v[2]};
 }
 
-static lua_Integer integer_field(lua_State *L, const eddy_lua_kind *k, const char *name, int idx, lua_Integer lo, lua_Integer hi)
+static lua_Integer integer_field(lua_State *L, const eddy_lua_kind *k, const char *name, int idx, lua_Integer lo,
+                                 lua_Integer hi)
 {
 	int ok = 0;
 	lua_Integer v = lua_tointegerx(L, idx, &ok);
 	if (!ok || v < lo || v > hi)
-		return luaL_error(L, "%s: '%s' must be an integer in [%I, %I] (got %s)", k->name, name, lo, hi, lua_type(L, idx) == LUA_TNUMBER ? lua_tostring(L, idx) : luaL_typename(L, idx));
+		return luaL_error(L, "%s: '%s' must be an integer in [%I, %I] (got %s)", k->name, name, lo, hi,
+		                  lua_type(L, idx) == LUA_TNUMBER ? lua_tostring(L, idx) : luaL_typename(L, idx));
 	return v;
 }
 
 typedef struct lua_def {
 	const eddy_lua_kind *k;
-	bool has_offset;    /* a constant offset in `offset` */
+	bool has_offset; /* a constant offset in `offset` */
 	eddy_vec3 offset;
 	bool has_rotation;  /* a constant rotation in `rotation` */
 	eddy_vec3 rotation; /* degrees, axis-angle */
@@ -182,17 +184,29 @@ static void read_fields(lua_State *L, const eddy_lua_kind *k, int idx, void *def
 			unknown_field(L, k, name);
 		void *p = base + f->offset;
 		switch (f->type) {
-		case EDDY_LUA_FLOAT: *(float *)p = to_float(number_field(L, k, name, -1, "a number")); break;
-		case EDDY_LUA_DOUBLE: *(double *)p = number_field(L, k, name, -1, "a number"); break;
-		case EDDY_LUA_INT: *(int *)p = (int)integer_field(L, k, name, -1, -1000000000, 1000000000); break;
-		case EDDY_LUA_INT64: *(int64_t *)p = (int64_t)integer_field(L, k, name, -1, 0, LUA_MAXINTEGER); break;
-		case EDDY_LUA_U64: *(uint64_t *)p = (uint64_t)integer_field(L, k, name, -1, 0, LUA_MAXINTEGER); break;
+		case EDDY_LUA_FLOAT:
+			*(float *)p = to_float(number_field(L, k, name, -1, "a number"));
+			break;
+		case EDDY_LUA_DOUBLE:
+			*(double *)p = number_field(L, k, name, -1, "a number");
+			break;
+		case EDDY_LUA_INT:
+			*(int *)p = (int)integer_field(L, k, name, -1, -1000000000, 1000000000);
+			break;
+		case EDDY_LUA_INT64:
+			*(int64_t *)p = (int64_t)integer_field(L, k, name, -1, 0, LUA_MAXINTEGER);
+			break;
+		case EDDY_LUA_U64:
+			*(uint64_t *)p = (uint64_t)integer_field(L, k, name, -1, 0, LUA_MAXINTEGER);
+			break;
 		case EDDY_LUA_BOOL:
 			if (!lua_isboolean(L, -1))
 				luaL_error(L, "%s: '%s' must be true or false (got %s)", k->name, name, luaL_typename(L, -1));
 			*(bool *)p = lua_toboolean(L, -1);
 			break;
-		case EDDY_LUA_VEC3: *(eddy_vec3 *)p = vec3_field(L, k, name, -1); break;
+		case EDDY_LUA_VEC3:
+			*(eddy_vec3 *)p = vec3_field(L, k, name, -1);
+			break;
 		case EDDY_LUA_BOUNDS: {
 			if (!lua_istable(L, -1) || lua_rawlen(L, -1) != 2)
 				luaL_error(L, "%s: '%s' must be {{xmin, ymin, zmin}, {xmax, ymax, zmax}} (got %s)", k->name, name,
@@ -440,10 +454,10 @@ static eddy_status call_lua(lua_State *L, eddy_world *w, int nargs, int nresults
 
 typedef struct callback {
 	lua_State *L;
-	lua_world *owner;       /* outlives the callback: its __gc destroys the world */
-	int fn;                 /* registry reference */
-	eddy_system_id target;  /* animate: the collider */
-	bool rotation;          /* animate: the function gives the rotation (else the offset) */
+	lua_world *owner;      /* outlives the callback: its __gc destroys the world */
+	int fn;                /* registry reference */
+	eddy_system_id target; /* animate: the collider */
+	bool rotation;         /* animate: the function gives the rotation (else the offset) */
 	char what[64];
 } callback;
 
@@ -496,7 +510,8 @@ static eddy_status on_frame_hook(eddy_world *w, int frame, void *user)
 	} else if (!lua_isnil(L, -1)) {
 		const char *tn = luaL_typename(L, -1);
 		lua_settop(L, top);
-		return eddy_world_fail(w, EDDY_ERR_EXTERNAL, "on_frame: must return a table of stats fields or nothing (got %s)", tn);
+		return eddy_world_fail(w, EDDY_ERR_EXTERNAL,
+		                       "on_frame: must return a table of stats fields or nothing (got %s)", tn);
 	}
 	lua_settop(L, top);
 	return EDDY_OK;
@@ -639,7 +654,8 @@ static int l_world_add(lua_State *L)
 			lw->inside = NULL;
 			if (rc != LUA_OK)
 				return lua_error(L);
-			eddy_vec3 v = vec3_field(L, ld->k, u ? "rotation (returned by the function)" : "offset (returned by the function)", -1);
+			eddy_vec3 v = vec3_field(
+				L, ld->k, u ? "rotation (returned by the function)" : "offset (returned by the function)", -1);
 			lua_pop(L, 1);
 			if ((u ? eddy_collider_set_rotation(w, id, v) : eddy_collider_set_offset(w, id, v)) != EDDY_OK)
 				return luaL_error(L, "%s", eddy_world_error(w));
@@ -801,25 +817,38 @@ static int l_world_stats(lua_State *L)
 	eddy_frame_stats s;
 	eddy_world_frame_stats(lw->w, &s);
 	lua_newtable(L);
-	lua_pushinteger(L, s.frame); lua_setfield(L, -2, "frame");
-	lua_pushnumber(L, s.time); lua_setfield(L, -2, "time");
-	lua_pushinteger(L, (lua_Integer)s.steps); lua_setfield(L, -2, "steps");
-	lua_pushnumber(L, s.dt_min); lua_setfield(L, -2, "dt_min");
-	lua_pushnumber(L, s.dt_max); lua_setfield(L, -2, "dt_max");
-	lua_pushstring(L, s.dt_limit); lua_setfield(L, -2, "dt_limit");
-	lua_pushinteger(L, (lua_Integer)s.particles); lua_setfield(L, -2, "particles");
-	lua_pushnumber(L, s.max_speed); lua_setfield(L, -2, "max_speed");
-	lua_pushinteger(L, (lua_Integer)s.leaked); lua_setfield(L, -2, "leaked");
-	lua_pushinteger(L, (lua_Integer)s.nonfinite); lua_setfield(L, -2, "nonfinite");
+	lua_pushinteger(L, s.frame);
+	lua_setfield(L, -2, "frame");
+	lua_pushnumber(L, s.time);
+	lua_setfield(L, -2, "time");
+	lua_pushinteger(L, (lua_Integer)s.steps);
+	lua_setfield(L, -2, "steps");
+	lua_pushnumber(L, s.dt_min);
+	lua_setfield(L, -2, "dt_min");
+	lua_pushnumber(L, s.dt_max);
+	lua_setfield(L, -2, "dt_max");
+	lua_pushstring(L, s.dt_limit);
+	lua_setfield(L, -2, "dt_limit");
+	lua_pushinteger(L, (lua_Integer)s.particles);
+	lua_setfield(L, -2, "particles");
+	lua_pushnumber(L, s.max_speed);
+	lua_setfield(L, -2, "max_speed");
+	lua_pushinteger(L, (lua_Integer)s.leaked);
+	lua_setfield(L, -2, "leaked");
+	lua_pushinteger(L, (lua_Integer)s.nonfinite);
+	lua_setfield(L, -2, "nonfinite");
 	char hash[24];
 	snprintf(hash, sizeof hash, "%016llx", (unsigned long long)s.state_hash);
-	lua_pushstring(L, hash); lua_setfield(L, -2, "state_hash");
+	lua_pushstring(L, hash);
+	lua_setfield(L, -2, "state_hash");
 	/* energy and momentum: nil without a particle mass (see eddy_frame_stats) */
 	const struct {
 		const char *name;
 		double v;
-	} energies[] = {{"particle_mass", s.particle_mass},       {"kinetic_energy", s.kinetic_energy},
-	                {"potential_energy", s.potential_energy}, {"compression_energy", s.compression_energy},
+	} energies[] = {{"particle_mass", s.particle_mass},
+	                {"kinetic_energy", s.kinetic_energy},
+	                {"potential_energy", s.potential_energy},
+	                {"compression_energy", s.compression_energy},
 	                {"energy", s.energy}};
 	for (size_t i = 0; i < sizeof energies / sizeof energies[0]; ++i)
 		if (isfinite(energies[i].v)) {
@@ -887,7 +916,7 @@ static int l_world_channel(lua_State *L)
 	lua_world *lw = check_world(L, 1);
 	const char *name = luaL_checkstring(L, 2);
 	eddy_column_id id = eddy_world_find_column(lw->w, name);
-	if (id < 0 || strlen(name) >= sizeof ((lua_channel *)0)->name)
+	if (id < 0 || strlen(name) >= sizeof((lua_channel *)0)->name)
 		return luaL_error(L, "channel: no column named '%s'", name);
 	eddy_column_info info;
 	eddy_world_column_info(lw->w, id, &info);
@@ -1134,7 +1163,8 @@ static void check_writable(lua_State *L, const char *fn, const char *path, const
 			why = "a symbolic link is not written through in " SAFE_MODE;
 		/* a parent that does not exist fails the open by itself */
 		else if (real_parent && (!real_dir || (strcmp(real_parent, real_dir) != 0 && !below(real_parent, real_dir))))
-			why = "files are written only under the output directory in " SAFE_MODE " (a symbolic link leads out of it)";
+			why =
+				"files are written only under the output directory in " SAFE_MODE " (a symbolic link leads out of it)";
 		free(real_parent);
 		free(real_dir);
 	}
@@ -1499,7 +1529,8 @@ static int l_load_scene(lua_State *L)
 			lua_pop(L, 1);
 			const char *k = lua_type(L, -1) == LUA_TSTRING ? lua_tostring(L, -1) : "";
 			if (strcmp(k, "safe") != 0 && strcmp(k, "out") != 0)
-				return luaL_error(L, "load_scene: unknown option '%s' (options: safe, out)", luaL_tolstring(L, -1, NULL));
+				return luaL_error(L, "load_scene: unknown option '%s' (options: safe, out)",
+				                  luaL_tolstring(L, -1, NULL));
 		}
 		if (lua_getfield(L, 2, "safe") != LUA_TNIL) {
 			if (!lua_isboolean(L, -1))
@@ -1534,17 +1565,17 @@ static int l_load_scene(lua_State *L)
 		lua_replace(L, 3);
 	}
 	lua_remove(L, 2); /* 2: the output directory (or nil) */
-	lua_newtable(L); /* 3: the scene's globals */
+	lua_newtable(L);  /* 3: the scene's globals */
 	if (!safe) {
 		lua_createtable(L, 0, 1);
 		lua_pushglobaltable(L);
 		lua_setfield(L, -2, "__index");
 		lua_setmetatable(L, 3);
 	} else {
-		static const char *const base[] = {"assert", "collectgarbage", "error", "getmetatable", "ipairs", "next",
-		                                   "pairs", "pcall", "print", "rawequal", "rawget", "rawlen", "rawset",
-		                                   "select", "setmetatable", "tonumber", "tostring", "type", "xpcall",
-		                                   "warn", "_VERSION", NULL};
+		static const char *const base[] = {
+			"assert",   "collectgarbage", "error",  "getmetatable", "ipairs",   "next",   "pairs",        "pcall",
+			"print",    "rawequal",       "rawget", "rawlen",       "rawset",   "select", "setmetatable", "tonumber",
+			"tostring", "type",           "xpcall", "warn",         "_VERSION", NULL};
 		static const char *const libs[] = {"string", "math", "table", "utf8", "coroutine", "os", "io", NULL};
 		push_loaded(L, "_G");
 		for (int i = 0; base[i]; ++i) {
@@ -1582,8 +1613,8 @@ static int l_load_scene(lua_State *L)
 		lua_setfield(L, 3, "package");
 		lua_pushvalue(L, 6);
 		lua_setfield(L, 4, "package");
-		lua_getfield(L, 3, "os");  /* 7 */
-		lua_getfield(L, 3, "io");  /* 8 */
+		lua_getfield(L, 3, "os"); /* 7 */
+		lua_getfield(L, 3, "io"); /* 8 */
 		push_loaded(L, "_G");
 		lua_getfield(L, -1, "load");
 		lua_setfield(L, 3, "load"); /* make_safe wraps it */
@@ -1715,24 +1746,19 @@ static int l_out_dir(lua_State *L)
 }
 
 static const luaL_Reg world_methods[] = {
-	{"add", l_world_add},       {"advance", l_world_advance}, {"step", l_world_step},
-	{"time", l_world_time},     {"frame", l_world_frame},     {"steps", l_world_steps},
-	{"count", l_world_count},   {"channel", l_world_channel}, {"plan", l_world_plan},
-	{"on_frame", l_world_on_frame}, {"remove", l_world_remove}, {"stats", l_world_stats},
-	{"gravity", l_world_gravity}, {"close", l_world_close},   {NULL, NULL},
+	{"add", l_world_add},           {"advance", l_world_advance}, {"step", l_world_step},
+	{"time", l_world_time},         {"frame", l_world_frame},     {"steps", l_world_steps},
+	{"count", l_world_count},       {"channel", l_world_channel}, {"plan", l_world_plan},
+	{"on_frame", l_world_on_frame}, {"remove", l_world_remove},   {"stats", l_world_stats},
+	{"gravity", l_world_gravity},   {"close", l_world_close},     {NULL, NULL},
 };
 
 static const luaL_Reg system_methods[] = {
-	{"valid", l_system_valid},
-	{"name", l_system_name},
-	{"mass", l_system_mass},
-	{"set_offset", l_system_set_offset},
-	{"offset", l_system_offset},
-	{"set_rotation", l_system_set_rotation},
-	{"rotation", l_system_rotation},
-	{"set_group", l_system_set_group},
-	{"group", l_system_group},
-	{NULL, NULL},
+	{"valid", l_system_valid},       {"name", l_system_name},
+	{"mass", l_system_mass},         {"set_offset", l_system_set_offset},
+	{"offset", l_system_offset},     {"set_rotation", l_system_set_rotation},
+	{"rotation", l_system_rotation}, {"set_group", l_system_set_group},
+	{"group", l_system_group},       {NULL, NULL},
 };
 
 static int l_def_tostring(lua_State *L)

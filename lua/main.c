@@ -31,7 +31,7 @@
 #include <unistd.h>
 
 #include "eddy_lua.h"
-#include "study.h" /* eddy study: lua/study.c */
+#include "study.h"   /* eddy study: lua/study.c */
 #include "compare.h" /* eddy compare: lua/compare.c */
 
 /* The scene's name without directory and extension, for out/<scene>. */
@@ -80,8 +80,7 @@ static int load_chunk(lua_State *L, cli_options *o)
 	if (rc == LUA_ERRFILE)
 		return cli_fail(CLI_EXIT_RUN, "cannot read scene '%s': %s", o->scene, strerror(errno ? errno : ENOENT));
 	if (rc != LUA_OK && strstr(lua_tostring(L, -1), "binary chunk"))
-		return cli_fail(CLI_EXIT_RUN, "%s: a precompiled (binary) chunk; scenes are loaded as Lua text only",
-		                o->scene);
+		return cli_fail(CLI_EXIT_RUN, "%s: a precompiled (binary) chunk; scenes are loaded as Lua text only", o->scene);
 	if (rc != LUA_OK)
 		return cli_fail(CLI_EXIT_RUN, "%s", cli_first_line(lua_tostring(L, -1), buf, sizeof buf));
 	/* a checkpoint belongs to this scene text with these --set values */
@@ -126,8 +125,8 @@ static int load_scene(lua_State *L, cli_options *o)
 	lua_pushnil(L);
 	if (lua_next(L, -2)) {
 		const char *key = lua_tostring(L, -2);
-		return cli_fail(CLI_EXIT_USAGE, "--set %s: %s has no parameter '%s' (it reads parameters with eddy.param)",
-		                key, o->scene, key);
+		return cli_fail(CLI_EXIT_USAGE, "--set %s: %s has no parameter '%s' (it reads parameters with eddy.param)", key,
+		                o->scene, key);
 	}
 	lua_pop(L, 1);
 	return 0;

@@ -64,7 +64,6 @@ static void catch_signals(bool on, struct sigaction old[2])
 	}
 }
 
-
 int eddy_cli_spawn(lua_State *L)
 {
 	luaL_checktype(L, 1, LUA_TTABLE);
@@ -124,7 +123,6 @@ int eddy_cli_spawn(lua_State *L)
 	lua_pushinteger(L, stop_signal);
 	return 4;
 }
-
 
 lua_State *eddy_cli_driver_state(char exe[EDDY_CLI_PATH_MAX], char dir[EDDY_CLI_PATH_MAX])
 {

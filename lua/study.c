@@ -30,25 +30,24 @@
 #include <time.h>
 #include <unistd.h>
 
-static const char study_usage[] =
-	"usage: eddy study STUDY.lua [--out DIR] [--quick] [--safe]\n"
-	"\n"
-	"Runs every configuration the study file sweeps (each as `eddy run SCENE\n"
-	"--set render=false`, one process per run), measures its error against the\n"
-	"study's reference, its wall time, per-system time, steps and peak memory,\n"
-	"and writes into DIR (default out/study_<name>):\n"
-	"  <name>.csv   one row per run\n"
-	"  <name>.png   error against wall time, log-log, one series per method,\n"
-	"               Pareto front marked (needs gnuplot: apt-get install gnuplot-nox)\n"
-	"\n"
-	"options:\n"
-	"  --out DIR   output directory\n"
-	"  --quick     the study's reduced sweep (under a minute)\n"
-	"  --safe      run every scene with eddy run --safe (sandboxed)\n"
-	"  -h, --help  this help\n"
-	"\n"
-	"Shipped studies: scenes/studies/*.lua (the format is described in\n"
-	"lua/eddy/study.lua).\n";
+static const char study_usage[] = "usage: eddy study STUDY.lua [--out DIR] [--quick] [--safe]\n"
+								  "\n"
+								  "Runs every configuration the study file sweeps (each as `eddy run SCENE\n"
+								  "--set render=false`, one process per run), measures its error against the\n"
+								  "study's reference, its wall time, per-system time, steps and peak memory,\n"
+								  "and writes into DIR (default out/study_<name>):\n"
+								  "  <name>.csv   one row per run\n"
+								  "  <name>.png   error against wall time, log-log, one series per method,\n"
+								  "               Pareto front marked (needs gnuplot: apt-get install gnuplot-nox)\n"
+								  "\n"
+								  "options:\n"
+								  "  --out DIR   output directory\n"
+								  "  --quick     the study's reduced sweep (under a minute)\n"
+								  "  --safe      run every scene with eddy run --safe (sandboxed)\n"
+								  "  -h, --help  this help\n"
+								  "\n"
+								  "Shipped studies: scenes/studies/*.lua (the format is described in\n"
+								  "lua/eddy/study.lua).\n";
 
 static const struct option study_options[] = {
 	{"out", required_argument, NULL, 'o'},
@@ -88,7 +87,8 @@ static int parse_study_args(int argc, char **argv, study_args *a)
 			return fprintf(stderr, "eddy: study: option '%.*s' takes no value\n", (int)strcspn(arg, "="), arg), 2;
 		else
 			return fprintf(stderr, "eddy: study: unknown option '%.*s' (see eddy study --help)\n",
-			               (int)strcspn(arg, "="), arg), 2;
+			               (int)strcspn(arg, "="), arg),
+			       2;
 	}
 	for (int i = optind + 1; i < argc; ++i) {
 		if (a->file)
@@ -106,8 +106,10 @@ static void report(const char *msg, const char *exe_dir)
 	snprintf(buf, sizeof buf, "%s", msg ? msg : "(error object is not a string)");
 	buf[strcspn(buf, "\n")] = '\0';
 	if (strncmp(buf, "module 'eddy.study' not found", 29) == 0)
-		fprintf(stderr, "eddy: study: its Lua driver eddy/study.lua is not installed (looked in %s/../lua, "
-		                "%s/../../lua and %s/../share/lua/5.4)\n", exe_dir, exe_dir, exe_dir);
+		fprintf(stderr,
+		        "eddy: study: its Lua driver eddy/study.lua is not installed (looked in %s/../lua, "
+		        "%s/../../lua and %s/../share/lua/5.4)\n",
+		        exe_dir, exe_dir, exe_dir);
 	else
 		fprintf(stderr, "eddy: %s\n", buf);
 }

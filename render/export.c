@@ -39,7 +39,7 @@
 /* A VTP point-data array: one channel, or a triple <p>x <p>y <p>z. */
 typedef struct vtp_array {
 	char name[NAME_CAP];
-	int k;              /* components, 1 or 3 */
+	int k; /* components, 1 or 3 */
 	const float *col[3];
 } vtp_array;
 
@@ -53,22 +53,22 @@ typedef struct exporter {
 	bool all;                     /* channels "all": every allocated particle float column */
 	char names[MAX_CHANNELS][32]; /* explicit channels: x y z, then the chosen ones */
 	int count;
-	float *speed;                 /* the derived "speed" channel, cap floats */
+	float *speed; /* the derived "speed" channel, cap floats */
 	size_t cap;
-	unsigned char *buf;           /* file-order bytes of one chunk, grown as needed */
+	unsigned char *buf; /* file-order bytes of one chunk, grown as needed */
 	size_t buf_cap;
-	bool need_speed;              /* "speed" is a channel */
-	const char **fnames;          /* this frame's channels (x y z first) and their values */
+	bool need_speed;     /* "speed" is a channel */
+	const char **fnames; /* this frame's channels (x y z first) and their values */
 	const float **fcols;
-	struct vtp_array *arrays;     /* VTP: the channels grouped, and which are taken */
+	struct vtp_array *arrays; /* VTP: the channels grouped, and which are taken */
 	bool *used;
-	int fcap;                     /* entries of each of the four above */
+	int fcap; /* entries of each of the four above */
 	/* VTP only: the collection file and the frames it lists, in frame order */
 	char pvd[1024];
-	size_t pvd_dir_len;           /* bytes of the frame paths' folder prefix the .pvd shares */
+	size_t pvd_dir_len; /* bytes of the frame paths' folder prefix the .pvd shares */
 	pvd_entry *entries;
 	size_t entry_count, entry_cap;
-	bool pvd_read;                /* the collection on disk was taken over (see pvd_take_over) */
+	bool pvd_read; /* the collection on disk was taken over (see pvd_take_over) */
 } exporter;
 
 eddy_export_particles_def eddy_default_export_particles_def(void)
@@ -84,7 +84,8 @@ eddy_export_particles_def eddy_default_export_particles_def(void)
 
 static void put_le32(unsigned char *p, uint32_t v)
 {
-	p[0] = (unsigned char)v, p[1] = (unsigned char)(v >> 8), p[2] = (unsigned char)(v >> 16), p[3] = (unsigned char)(v >> 24);
+	p[0] = (unsigned char)v, p[1] = (unsigned char)(v >> 8), p[2] = (unsigned char)(v >> 16),
+	p[3] = (unsigned char)(v >> 24);
 }
 static void put_le64(unsigned char *p, uint64_t v)
 {
@@ -93,7 +94,8 @@ static void put_le64(unsigned char *p, uint64_t v)
 }
 static void put_be32(unsigned char *p, uint32_t v)
 {
-	p[0] = (unsigned char)(v >> 24), p[1] = (unsigned char)(v >> 16), p[2] = (unsigned char)(v >> 8), p[3] = (unsigned char)v;
+	p[0] = (unsigned char)(v >> 24), p[1] = (unsigned char)(v >> 16), p[2] = (unsigned char)(v >> 8),
+	p[3] = (unsigned char)v;
 }
 static uint32_t float_bits(float f)
 {
@@ -175,7 +177,8 @@ static void put_columns(exporter *e, eddy_file *f, const float *const *cols, int
 
 static void write_ply(exporter *e, eddy_file *f, size_t n, int nc, int frame, double t)
 {
-	eddy_file_printf(f, "ply\nformat binary_little_endian 1.0\ncomment eddy frame %d time %.17g s\nelement vertex %zu\n",
+	eddy_file_printf(f,
+	                 "ply\nformat binary_little_endian 1.0\ncomment eddy frame %d time %.17g s\nelement vertex %zu\n",
 	                 frame, t, n);
 	for (int c = 0; c < nc; ++c) {
 		char name[NAME_CAP];
@@ -188,8 +191,9 @@ static void write_ply(exporter *e, eddy_file *f, size_t n, int nc, int frame, do
 
 static void write_vtk(exporter *e, eddy_file *f, size_t n, int nc, int frame, double t)
 {
-	eddy_file_printf(f, "# vtk DataFile Version 3.0\neddy frame %d time %.17g s\nBINARY\nDATASET POLYDATA\nPOINTS %zu float\n",
-	                 frame, t, n);
+	eddy_file_printf(
+		f, "# vtk DataFile Version 3.0\neddy frame %d time %.17g s\nBINARY\nDATASET POLYDATA\nPOINTS %zu float\n",
+		frame, t, n);
 	put_columns(e, f, e->fcols, 3, n, true);
 	eddy_file_printf(f, "\nVERTICES %zu %zu\n", n, 2 * n);
 	for (size_t first = 0; first < n && !f->err; first += CHUNK) {
@@ -265,17 +269,18 @@ static void write_vtp(exporter *e, eddy_file *f, size_t n, int nc, int frame, do
 	const bool wide = n > (size_t)INT32_MAX;
 	const size_t isz = wide ? 8 : 4;
 	const char *itype = wide ? "Int64" : "Int32";
-	eddy_file_printf(f,
-	                 "<?xml version=\"1.0\"?>\n"
-	                 "<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n"
-	                 "  <PolyData>\n"
-	                 "    <FieldData>\n"
-	                 "      <DataArray type=\"Float64\" Name=\"TimeValue\" NumberOfTuples=\"1\" format=\"ascii\">%.17g</DataArray>\n"
-	                 "      <DataArray type=\"Int32\" Name=\"Frame\" NumberOfTuples=\"1\" format=\"ascii\">%d</DataArray>\n"
-	                 "    </FieldData>\n"
-	                 "    <Piece NumberOfPoints=\"%zu\" NumberOfVerts=\"%zu\" NumberOfLines=\"0\" NumberOfStrips=\"0\" "
-	                 "NumberOfPolys=\"0\">\n",
-	                 t, frame, n, n);
+	eddy_file_printf(
+		f,
+		"<?xml version=\"1.0\"?>\n"
+		"<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n"
+		"  <PolyData>\n"
+		"    <FieldData>\n"
+		"      <DataArray type=\"Float64\" Name=\"TimeValue\" NumberOfTuples=\"1\" format=\"ascii\">%.17g</DataArray>\n"
+		"      <DataArray type=\"Int32\" Name=\"Frame\" NumberOfTuples=\"1\" format=\"ascii\">%d</DataArray>\n"
+		"    </FieldData>\n"
+		"    <Piece NumberOfPoints=\"%zu\" NumberOfVerts=\"%zu\" NumberOfLines=\"0\" NumberOfStrips=\"0\" "
+		"NumberOfPolys=\"0\">\n",
+		t, frame, n, n);
 	bool velocity = false;
 	for (int a = 0; a < na; ++a)
 		velocity = velocity || (arrays[a].k == 3 && strcmp(arrays[a].name, "velocity") == 0);
@@ -284,19 +289,21 @@ static void write_vtp(exporter *e, eddy_file *f, size_t n, int nc, int frame, do
 	 * count, then the bytes */
 	uint64_t off = 0;
 	for (int a = 0; a < na; ++a) {
-		eddy_file_printf(f,
-		                 "        <DataArray type=\"Float32\" Name=\"%s\" NumberOfComponents=\"%d\" format=\"appended\" "
-		                 "offset=\"%llu\"/>\n",
-		                 arrays[a].name, arrays[a].k, (unsigned long long)off);
+		eddy_file_printf(
+			f,
+			"        <DataArray type=\"Float32\" Name=\"%s\" NumberOfComponents=\"%d\" format=\"appended\" "
+			"offset=\"%llu\"/>\n",
+			arrays[a].name, arrays[a].k, (unsigned long long)off);
 		off += 8 + (uint64_t)n * 4 * (uint64_t)arrays[a].k;
 	}
-	eddy_file_printf(f, "      </PointData>\n      <Points>\n"
-	                    "        <DataArray type=\"Float32\" Name=\"Points\" NumberOfComponents=\"3\" format=\"appended\" "
-	                    "offset=\"%llu\"/>\n      </Points>\n      <Verts>\n",
+	eddy_file_printf(f,
+	                 "      </PointData>\n      <Points>\n"
+	                 "        <DataArray type=\"Float32\" Name=\"Points\" NumberOfComponents=\"3\" format=\"appended\" "
+	                 "offset=\"%llu\"/>\n      </Points>\n      <Verts>\n",
 	                 (unsigned long long)off);
 	off += 8 + (uint64_t)n * 12;
-	eddy_file_printf(f, "        <DataArray type=\"%s\" Name=\"connectivity\" format=\"appended\" offset=\"%llu\"/>\n", itype,
-	                 (unsigned long long)off);
+	eddy_file_printf(f, "        <DataArray type=\"%s\" Name=\"connectivity\" format=\"appended\" offset=\"%llu\"/>\n",
+	                 itype, (unsigned long long)off);
 	off += 8 + (uint64_t)n * isz;
 	eddy_file_printf(f,
 	                 "        <DataArray type=\"%s\" Name=\"offsets\" format=\"appended\" offset=\"%llu\"/>\n"
@@ -422,8 +429,9 @@ static eddy_status write_pvd(eddy_world *w, exporter *e, int frame, double t)
 	eddy_file f;
 	if (eddy_file_begin(&f, e->pvd) != 0)
 		return eddy_world_fail(w, EDDY_ERR_IO, "cannot write '%s': %s", e->pvd, strerror(f.err));
-	eddy_file_printf(&f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n"
-	                     "  <Collection>\n");
+	eddy_file_printf(
+		&f, "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n"
+			"  <Collection>\n");
 	for (size_t i = 0; i < e->entry_count && !f.err; ++i) {
 		/* frame paths share the .pvd's folder prefix; the rest is relative
 		 * to it */
@@ -491,9 +499,15 @@ static eddy_status write_frame(eddy_world *w, int frame, void *user)
 		return eddy_world_fail(w, EDDY_ERR_IO, "cannot write '%s': %s", path, strerror(f.err));
 	const double t = eddy_world_time(w);
 	switch (e->def.format) {
-	case EDDY_EXPORT_PLY: write_ply(e, &f, n, nc, frame, t); break;
-	case EDDY_EXPORT_VTK: write_vtk(e, &f, n, nc, frame, t); break;
-	case EDDY_EXPORT_VTP: write_vtp(e, &f, n, nc, frame, t); break;
+	case EDDY_EXPORT_PLY:
+		write_ply(e, &f, n, nc, frame, t);
+		break;
+	case EDDY_EXPORT_VTK:
+		write_vtk(e, &f, n, nc, frame, t);
+		break;
+	case EDDY_EXPORT_VTP:
+		write_vtp(e, &f, n, nc, frame, t);
+		break;
 	}
 	if (eddy_file_finish(&f) != 0)
 		return eddy_world_fail(w, EDDY_ERR_IO, "cannot write '%s': %s", path, strerror(f.err));
@@ -551,7 +565,8 @@ eddy_system_id eddy_add_export_particles(eddy_world *w, const eddy_export_partic
 	if (!def)
 		return eddy_world_fail(w, EDDY_ERR_INVALID, "%s: def is NULL", sys), EDDY_NULL_SYSTEM;
 	if (def->format != EDDY_EXPORT_PLY && def->format != EDDY_EXPORT_VTK && def->format != EDDY_EXPORT_VTP)
-		return eddy_world_fail(w, EDDY_ERR_INVALID, "%s: 'format' must be ply, vtk or vtp (got %d)", sys, (int)def->format),
+		return eddy_world_fail(w, EDDY_ERR_INVALID, "%s: 'format' must be ply, vtk or vtp (got %d)", sys,
+		                       (int)def->format),
 		       EDDY_NULL_SYSTEM;
 	if (def->every < 1)
 		return eddy_world_fail(w, EDDY_ERR_INVALID, "%s: 'every' must be >= 1 frame (got %d)", sys, def->every),
@@ -561,7 +576,8 @@ eddy_system_id eddy_add_export_particles(eddy_world *w, const eddy_export_partic
 		       EDDY_NULL_SYSTEM;
 	const char *why = eddy_check_frame_pattern(def->path);
 	if (why)
-		return eddy_world_fail(w, EDDY_ERR_INVALID, "%s: 'path' %s (got \"%s\")", sys, why, def->path), EDDY_NULL_SYSTEM;
+		return eddy_world_fail(w, EDDY_ERR_INVALID, "%s: 'path' %s (got \"%s\")", sys, why, def->path),
+		       EDDY_NULL_SYSTEM;
 	exporter *e = calloc(1, sizeof *e);
 	if (!e)
 		return eddy_world_fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
@@ -613,9 +629,10 @@ eddy_system_id eddy_add_export_particles(eddy_world *w, const eddy_export_partic
 			if (id < 0 || eddy_world_column_info(w, id, &info) != EDDY_OK || info.domain != EDDY_DOMAIN_PARTICLE ||
 			    info.type != EDDY_F32) {
 				destroy(e);
-				return eddy_world_fail(w, EDDY_ERR_INVALID,
-				                       "%s: 'channels': '%s' is not a per-particle number column (or \"speed\" or \"all\")",
-				                       sys, name),
+				return eddy_world_fail(
+						   w, EDDY_ERR_INVALID,
+						   "%s: 'channels': '%s' is not a per-particle number column (or \"speed\" or \"all\")", sys,
+						   name),
 				       EDDY_NULL_SYSTEM;
 			}
 		}
@@ -623,8 +640,8 @@ eddy_system_id eddy_add_export_particles(eddy_world *w, const eddy_export_partic
 	}
 	if (e->all && e->count > 3) {
 		destroy(e);
-		return eddy_world_fail(w, EDDY_ERR_INVALID, "%s: 'channels': \"all\" stands alone (it already holds every column)",
-		                       sys),
+		return eddy_world_fail(w, EDDY_ERR_INVALID,
+		                       "%s: 'channels': \"all\" stands alone (it already holds every column)", sys),
 		       EDDY_NULL_SYSTEM;
 	}
 	/* the reads: every named column once, plus vx vy vz for speed; "all"

@@ -86,7 +86,7 @@ const float *eddy_particle_values(const eddy_world *w, const char *name, float *
 	size_t n = 0;
 	if (strcmp(name, "speed") == 0) {
 		const float *vx = eddy_world_channel(w, "vx", &n), *vy = eddy_world_channel(w, "vy", &n),
-		            *vz = eddy_world_channel(w, "vz", &n);
+					*vz = eddy_world_channel(w, "vz", &n);
 		if (!vx || !vy || !vz)
 			return NULL;
 		for (size_t i = 0; i < count; ++i)

@@ -40,22 +40,21 @@ struct eddy_gl {
 	GLint ms_view, ms_proj, ms_light, ms_color, ms_spec, ms_fresnel, ms_ortho, ms_pos, ms_normal;
 };
 
-static const char sprite_vs[] =
-	"#version 120\n"
-	"attribute float ax, ay, az;\n"
-	"attribute vec4 acolor;\n"
-	"uniform mat4 view, proj;\n"
-	"uniform float radius, half_height;\n"
-	"varying float v_z;\n"
-	"varying vec3 v_color;\n"
-	"void main() {\n"
-	"  vec4 e = view * vec4(ax, ay, az, 1.0);\n"
-	"  v_z = e.z;\n"
-	"  v_color = acolor.rgb;\n"
-	"  vec4 c = proj * e;\n"
-	"  gl_Position = c;\n"
-	"  gl_PointSize = 2.0 * radius * proj[1][1] * half_height / c.w;\n"
-	"}\n";
+static const char sprite_vs[] = "#version 120\n"
+								"attribute float ax, ay, az;\n"
+								"attribute vec4 acolor;\n"
+								"uniform mat4 view, proj;\n"
+								"uniform float radius, half_height;\n"
+								"varying float v_z;\n"
+								"varying vec3 v_color;\n"
+								"void main() {\n"
+								"  vec4 e = view * vec4(ax, ay, az, 1.0);\n"
+								"  v_z = e.z;\n"
+								"  v_color = acolor.rgb;\n"
+								"  vec4 c = proj * e;\n"
+								"  gl_Position = c;\n"
+								"  gl_PointSize = 2.0 * radius * proj[1][1] * half_height / c.w;\n"
+								"}\n";
 
 /* Per fragment only what varies over the sprite: the fragment shader is the
  * cost at a million particles (writing depth turns off early depth tests), so
@@ -82,50 +81,46 @@ static const char sprite_fs[] =
 	"  gl_FragColor = vec4(min(v_color * (0.32 + 0.68 * diffuse) + vec3(0.28 * s), vec3(1.0)), 1.0);\n"
 	"}\n";
 
-static const char line_vs[] =
-	"#version 120\n"
-	"attribute vec3 pos;\n"
-	"uniform mat4 view, proj;\n"
-	"void main() { gl_Position = proj * (view * vec4(pos, 1.0)); }\n";
+static const char line_vs[] = "#version 120\n"
+							  "attribute vec3 pos;\n"
+							  "uniform mat4 view, proj;\n"
+							  "void main() { gl_Position = proj * (view * vec4(pos, 1.0)); }\n";
 
-static const char line_fs[] =
-	"#version 120\n"
-	"uniform vec3 color;\n"
-	"void main() { gl_FragColor = vec4(color, 1.0); }\n";
+static const char line_fs[] = "#version 120\n"
+							  "uniform vec3 color;\n"
+							  "void main() { gl_FragColor = vec4(color, 1.0); }\n";
 
 /* Meshes (render_surface): per-pixel Phong in eye space with a Schlick
  * Fresnel term F = (1 - n.v)^5 that brightens grazing angles towards the
  * sky colour, the look of water; the view vector is exact (towards the
  * eye, or the view axis when orthographic). */
-static const char mesh_vs[] =
-	"#version 120\n"
-	"attribute vec3 pos, normal;\n"
-	"uniform mat4 view, proj;\n"
-	"varying vec3 v_p, v_n;\n"
-	"void main() {\n"
-	"  vec4 e = view * vec4(pos, 1.0);\n"
-	"  v_p = e.xyz;\n"
-	"  v_n = mat3(view) * normal;\n"
-	"  gl_Position = proj * e;\n"
-	"}\n";
+static const char mesh_vs[] = "#version 120\n"
+							  "attribute vec3 pos, normal;\n"
+							  "uniform mat4 view, proj;\n"
+							  "varying vec3 v_p, v_n;\n"
+							  "void main() {\n"
+							  "  vec4 e = view * vec4(pos, 1.0);\n"
+							  "  v_p = e.xyz;\n"
+							  "  v_n = mat3(view) * normal;\n"
+							  "  gl_Position = proj * e;\n"
+							  "}\n";
 
-static const char mesh_fs[] =
-	"#version 120\n"
-	"uniform vec3 light, color;\n"
-	"uniform float spec, fresnel, ortho;\n"
-	"varying vec3 v_p, v_n;\n"
-	"void main() {\n"
-	"  vec3 n = normalize(v_n);\n"
-	"  vec3 v = normalize(mix(-v_p, vec3(0.0, 0.0, 1.0), ortho));\n"
-	"  if (dot(n, v) < 0.0) n = -n;\n"
-	"  float diffuse = max(dot(n, light), 0.0);\n"
-	"  float s = pow(max(dot(n, normalize(light + v)), 0.0), 60.0);\n"
-	"  float f = pow(1.0 - max(dot(n, v), 0.0), 5.0);\n"
-	"  vec3 sky = vec3(0.75, 0.85, 0.95);\n"
-	"  vec3 c = color * (0.30 + 0.70 * diffuse);\n"
-	"  c = mix(c, sky, fresnel * (0.04 + 0.96 * f)) + vec3(spec * s);\n"
-	"  gl_FragColor = vec4(min(c, vec3(1.0)), 1.0);\n"
-	"}\n";
+static const char mesh_fs[] = "#version 120\n"
+							  "uniform vec3 light, color;\n"
+							  "uniform float spec, fresnel, ortho;\n"
+							  "varying vec3 v_p, v_n;\n"
+							  "void main() {\n"
+							  "  vec3 n = normalize(v_n);\n"
+							  "  vec3 v = normalize(mix(-v_p, vec3(0.0, 0.0, 1.0), ortho));\n"
+							  "  if (dot(n, v) < 0.0) n = -n;\n"
+							  "  float diffuse = max(dot(n, light), 0.0);\n"
+							  "  float s = pow(max(dot(n, normalize(light + v)), 0.0), 60.0);\n"
+							  "  float f = pow(1.0 - max(dot(n, v), 0.0), 5.0);\n"
+							  "  vec3 sky = vec3(0.75, 0.85, 0.95);\n"
+							  "  vec3 c = color * (0.30 + 0.70 * diffuse);\n"
+							  "  c = mix(c, sky, fresnel * (0.04 + 0.96 * f)) + vec3(spec * s);\n"
+							  "  gl_FragColor = vec4(min(c, vec3(1.0)), 1.0);\n"
+							  "}\n";
 
 static GLuint compile(GLenum type, const char *src, char *err, size_t cap)
 {
@@ -177,8 +172,9 @@ eddy_gl *eddy_gl_create(int width, int height, char *err, size_t cap)
 	const char *forced = getenv("EDDY_RENDER_FAIL_CONTEXT");
 	if (forced && forced[0]) {
 		/* fault injection for tests: the same path as a real failure */
-		snprintf(err, cap, "cannot create an OpenGL context with OSMesa (EDDY_RENDER_FAIL_CONTEXT is set); "
-		                   "the renderer needs Mesa's libOSMesa (Debian: libosmesa6)");
+		snprintf(err, cap,
+		         "cannot create an OpenGL context with OSMesa (EDDY_RENDER_FAIL_CONTEXT is set); "
+		         "the renderer needs Mesa's libOSMesa (Debian: libosmesa6)");
 		return NULL;
 	}
 	eddy_gl *g = calloc(1, sizeof *g);
@@ -191,12 +187,22 @@ eddy_gl *eddy_gl_create(int width, int height, char *err, size_t cap)
 	}
 	g->width = width;
 	g->height = height;
-	const int attribs[] = {OSMESA_FORMAT, OSMESA_RGBA, OSMESA_DEPTH_BITS, 24, OSMESA_STENCIL_BITS, 0,
-	                       OSMESA_ACCUM_BITS, 0, OSMESA_PROFILE, OSMESA_COMPAT_PROFILE, 0};
+	const int attribs[] = {OSMESA_FORMAT,
+	                       OSMESA_RGBA,
+	                       OSMESA_DEPTH_BITS,
+	                       24,
+	                       OSMESA_STENCIL_BITS,
+	                       0,
+	                       OSMESA_ACCUM_BITS,
+	                       0,
+	                       OSMESA_PROFILE,
+	                       OSMESA_COMPAT_PROFILE,
+	                       0};
 	g->ctx = OSMesaCreateContextAttribs(attribs, NULL);
 	if (!g->ctx) {
-		snprintf(err, cap, "cannot create an OpenGL context with OSMesa (OSMesaCreateContextAttribs failed); "
-		                   "the renderer needs Mesa's libOSMesa (Debian: libosmesa6)");
+		snprintf(err, cap,
+		         "cannot create an OpenGL context with OSMesa (OSMesaCreateContextAttribs failed); "
+		         "the renderer needs Mesa's libOSMesa (Debian: libosmesa6)");
 		eddy_gl_destroy(g);
 		return NULL;
 	}

@@ -19,8 +19,8 @@ typedef struct eddy_gl eddy_gl;
 typedef struct eddy_gl_lines {
 	const float *xyz;
 	size_t segments;
-	float rgb[3];       /* 1 */
-	float width;        /* px */
+	float rgb[3]; /* 1 */
+	float width;  /* px */
 } eddy_gl_lines;
 
 /* A triangle mesh lit per pixel (Phong, plus a Schlick Fresnel rim of
@@ -28,13 +28,13 @@ typedef struct eddy_gl_lines {
  * normals 3 floats each; with cull_back only faces wound counter-clockwise
  * towards the camera are drawn. */
 typedef struct eddy_gl_mesh {
-	const float *xyz;      /* m */
-	const float *normal;   /* 1, unit */
-	const uint32_t *tri;   /* 3 per triangle */
+	const float *xyz;    /* m */
+	const float *normal; /* 1, unit */
+	const uint32_t *tri; /* 3 per triangle */
 	size_t triangles;
-	float rgb[3];          /* 1, albedo */
-	float specular;        /* 1, highlight strength */
-	float fresnel;         /* 1, rim strength */
+	float rgb[3];   /* 1, albedo */
+	float specular; /* 1, highlight strength */
+	float fresnel;  /* 1, rim strength */
 	int cull_back;
 } eddy_gl_mesh;
 
@@ -76,14 +76,14 @@ eddy_vec3 eddy_v3_norm(eddy_vec3 a); /* a / |a|, or a when zero */
 
 /* What a camera is asked for: the fields render_points and render_surface share. */
 typedef struct eddy_view_def {
-	int width, height;          /* px, [1, 8192] */
-	int supersample;            /* 1, [1, 4]; width and height times it <= 16384 */
-	eddy_vec3 eye, target, up;  /* m; eye == target frames the world's bounds */
-	float fov;                  /* degrees, vertical */
+	int width, height;         /* px, [1, 8192] */
+	int supersample;           /* 1, [1, 4]; width and height times it <= 16384 */
+	eddy_vec3 eye, target, up; /* m; eye == target frames the world's bounds */
+	float fov;                 /* degrees, vertical */
 	eddy_projection projection;
-	float ortho_height;         /* m, 0 = fit the bounds */
-	float eye_pad;              /* m, extra distance of an automatic eye from the bounds */
-	float depth_pad;            /* m, how far drawn things reach out of the bounds (near and far planes) */
+	float ortho_height; /* m, 0 = fit the bounds */
+	float eye_pad;      /* m, extra distance of an automatic eye from the bounds */
+	float depth_pad;    /* m, how far drawn things reach out of the bounds (near and far planes) */
 } eddy_view_def;
 
 typedef struct eddy_camera {
@@ -120,9 +120,9 @@ int eddy_color_ok(eddy_vec3 c);
 
 /* A particle as splat.c draws it, projected once per frame. */
 typedef struct eddy_splat_sprite {
-	float xw, yw;       /* px, the centre's window position */
-	float size;         /* px, the point size, >= 1 */
-	float ez;           /* m, the centre's eye-space z (negative in front of the eye) */
+	float xw, yw; /* px, the centre's window position */
+	float size;   /* px, the point size, >= 1 */
+	float ez;     /* m, the centre's eye-space z (negative in front of the eye) */
 	uint8_t rgba[4];
 } eddy_splat_sprite;
 
@@ -132,9 +132,9 @@ typedef struct eddy_splat_sprite {
  * through every particle in order, so the image does not depend on the
  * thread count. */
 typedef struct eddy_splat {
-	int width, height;  /* px */
-	uint8_t *rgba;      /* bottom row first, as eddy_gl_pixels */
-	float *depth;       /* distance along the view axis, m: the depth test's key */
+	int width, height; /* px */
+	uint8_t *rgba;     /* bottom row first, as eddy_gl_pixels */
+	float *depth;      /* distance along the view axis, m: the depth test's key */
 	/* the particles that reach the buffer, projected once per frame and
 	 * sorted near to far (unsorted: in the particles' order, culled ones
 	 * with size 0); reused between frames */
@@ -146,7 +146,7 @@ typedef struct eddy_splat {
 	uint8_t *tile_used, *tile_dirty;
 	float *tile_far;
 	size_t tile_cap;
-	bool scalar;         /* draw one pixel at a time even where AVX2 is there (the tests compare the two) */
+	bool scalar; /* draw one pixel at a time even where AVX2 is there (the tests compare the two) */
 } eddy_splat;
 
 /* 0, or -1 when out of memory. */
@@ -190,7 +190,7 @@ typedef struct eddy_file {
 	FILE *f;
 	const char *path; /* the final name: the caller's string, alive until finish */
 	char tmp[1100];
-	int err;          /* errno of the first failure, 0 while all succeeded */
+	int err; /* errno of the first failure, 0 while all succeeded */
 } eddy_file;
 
 /* Creates the parent folders and the temporary file; 0 or an errno value. */
@@ -219,10 +219,10 @@ const float *eddy_particle_values(const eddy_world *w, const char *name, float *
 typedef struct eddy_surface_cache {
 	eddy_surface_def def;
 	eddy_mesh mesh;
-	bool valid;         /* mesh is of the state stamped below */
+	bool valid; /* mesh is of the state stamped below */
 	int frame;
 	int64_t steps;
-	double time;        /* s */
+	double time; /* s */
 	size_t particles;
 } eddy_surface_cache;
 

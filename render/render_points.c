@@ -76,8 +76,8 @@ eddy_render_points_def eddy_default_render_points_def(void)
 static eddy_view_def view_def(const eddy_render_points_def *d)
 {
 	/* a sphere reaches a radius out of the bounds; the eye keeps two away */
-	return (eddy_view_def){d->width, d->height, d->supersample, d->eye, d->target, d->up, d->fov, d->projection, d->ortho_height,
-	                       2.0f * d->radius, 2.0f * d->radius};
+	return (eddy_view_def){d->width, d->height,     d->supersample,  d->eye,           d->target,       d->up,
+	                       d->fov,   d->projection, d->ortho_height, 2.0f * d->radius, 2.0f * d->radius};
 }
 
 /* ---- outlines ---- */
@@ -114,8 +114,10 @@ static int sphere_silhouette(float *out, eddy_vec3 c, float rad, const eddy_came
 	eddy_vec3 b = eddy_v3_cross(u, a);
 	for (int i = 0; i < CIRCLE_SEGMENTS; ++i) {
 		float t0 = (2.0f * PI_F) * (float)i / CIRCLE_SEGMENTS, t1 = (2.0f * PI_F) * (float)(i + 1) / CIRCLE_SEGMENTS;
-		eddy_vec3 p0 = eddy_v3_add(center, eddy_v3_add(eddy_v3_scale(a, rr * cosf(t0)), eddy_v3_scale(b, rr * sinf(t0))));
-		eddy_vec3 p1 = eddy_v3_add(center, eddy_v3_add(eddy_v3_scale(a, rr * cosf(t1)), eddy_v3_scale(b, rr * sinf(t1))));
+		eddy_vec3 p0 =
+			eddy_v3_add(center, eddy_v3_add(eddy_v3_scale(a, rr * cosf(t0)), eddy_v3_scale(b, rr * sinf(t0))));
+		eddy_vec3 p1 =
+			eddy_v3_add(center, eddy_v3_add(eddy_v3_scale(a, rr * cosf(t1)), eddy_v3_scale(b, rr * sinf(t1))));
 		float *o = out + 6 * i;
 		o[0] = p0.x, o[1] = p0.y, o[2] = p0.z, o[3] = p1.x, o[4] = p1.y, o[5] = p1.z;
 	}
@@ -146,8 +148,7 @@ static long build_outlines(line_buf *b, const eddy_render_points_def *d, eddy_wo
 			eddy_box_edges(b->xyz + 6 * n, shape.a, shape.b);
 			eddy_rotate_points(b->xyz + 6 * n, 24, shape.rotation, shape.pivot);
 			n += 12;
-		}
-		else if (shape.kind == EDDY_COLLIDER_SPHERE)
+		} else if (shape.kind == EDDY_COLLIDER_SPHERE)
 			n += (size_t)sphere_silhouette(b->xyz + 6 * n, shape.a, shape.radius, cam,
 			                               d->projection == EDDY_PROJECTION_ORTHOGRAPHIC);
 		else if (shape.kind != EDDY_COLLIDER_PLANE) {
@@ -252,42 +253,42 @@ typedef struct job {
 	int frame;
 	char path[1024];
 	size_t count, count_cap;
-	float *x, *y, *z;       /* m, copies of the positions */
-	float *values;          /* color_by's values, or NULL for the constant colour */
+	float *x, *y, *z; /* m, copies of the positions */
+	float *values;    /* color_by's values, or NULL for the constant colour */
 	size_t values_cap;
 	line_buf lines;
 	size_t segments;
 	float view[16], proj[16];
-	int threads;            /* the world's thread count: the drawing's bands */
+	int threads; /* the world's thread count: the drawing's bands */
 	bool has_values;
 } job;
 
 typedef struct renderer {
 	eddy_render_points_def def;
 	/* the stepping thread's */
-	eddy_system_id id;      /* this system, for its label */
-	bool started;           /* the writer thread runs */
-	float *speed;           /* scratch for the speed of the newest job */
+	eddy_system_id id; /* this system, for its label */
+	bool started;      /* the writer thread runs */
+	float *speed;      /* scratch for the speed of the newest job */
 	size_t speed_cap;
-	int published;          /* the newest frame whose times went into the stats */
+	int published; /* the newest frame whose times went into the stats */
 	/* shared, under mu */
 	pthread_t thread;
 	pthread_mutex_t mu;
 	pthread_cond_t cv;
 	job jobs[JOBS];
-	int head, queued;       /* jobs[head .. head + queued) wait or are being drawn */
+	int head, queued; /* jobs[head .. head + queued) wait or are being drawn */
 	bool quit;
-	int ready;              /* 0 while the buffers are being made, 1 made, -1 failed (msg holds why) */
-	eddy_status failed;     /* a failure not yet returned, EDDY_OK if none */
-	int failed_frame;       /* its frame */
-	char msg[512];          /* its reason (or the buffers', ready < 0) */
-	int done;               /* the newest frame written */
+	int ready;                /* 0 while the buffers are being made, 1 made, -1 failed (msg holds why) */
+	eddy_status failed;       /* a failure not yet returned, EDDY_OK if none */
+	int failed_frame;         /* its frame */
+	char msg[512];            /* its reason (or the buffers', ready < 0) */
+	int done;                 /* the newest frame written */
 	double render_ms, png_ms; /* its times */
 	/* the writer thread's */
-	eddy_splat splat;       /* the supersampled colour and depth buffers */
-	uint8_t *rgb;           /* per-particle colours, RGBA */
+	eddy_splat splat; /* the supersampled colour and depth buffers */
+	uint8_t *rgb;     /* per-particle colours, RGBA */
 	size_t rgb_cap;
-	uint8_t *image;         /* the final RGB image, top row first */
+	uint8_t *image; /* the final RGB image, top row first */
 } renderer;
 
 /* Draws and writes one job; 0, or -1 with the status in st and the reason in err. */
@@ -306,8 +307,8 @@ static int draw_job(renderer *r, const job *j, double *render_ms, double *png_ms
 		}
 		colour_particles(d, j->has_values ? j->values : NULL, j->count, r->rgb);
 	}
-	eddy_gl_lines lines = {j->lines.xyz, j->segments, {d->outline_color.x, d->outline_color.y, d->outline_color.z},
-	                       1.5f * (float)s};
+	eddy_gl_lines lines = {
+		j->lines.xyz, j->segments, {d->outline_color.x, d->outline_color.y, d->outline_color.z}, 1.5f * (float)s};
 	eddy_gl_scene scene;
 	memset(&scene, 0, sizeof scene);
 	memcpy(scene.view, j->view, sizeof scene.view);
@@ -432,7 +433,7 @@ static eddy_status fill_job(renderer *r, eddy_world *w, job *j, int frame)
 	j->has_values = false;
 	if (n > 0) {
 		const float *x = eddy_world_channel(w, "x", &cnt), *y = eddy_world_channel(w, "y", &cnt),
-		            *z = eddy_world_channel(w, "z", &cnt);
+					*z = eddy_world_channel(w, "z", &cnt);
 		if (!x || !y || !z)
 			return eddy_world_fail(w, EDDY_ERR_INVALID, "the positions x y z are not allocated");
 		size_t cap = j->count_cap;
@@ -606,7 +607,8 @@ eddy_system_id eddy_add_render_points(eddy_world *w, const eddy_render_points_de
 		eddy_column_info info;
 		if (id < 0 || eddy_world_column_info(w, id, &info) != EDDY_OK)
 			return BAD("%s: 'color_by' must be \"speed\", \"\" (constant 'color') or a particle column (no column "
-			           "named '%s')", sys, by);
+			           "named '%s')",
+			           sys, by);
 		if (info.domain != EDDY_DOMAIN_PARTICLE || info.type != EDDY_F32)
 			return BAD("%s: 'color_by' column '%s' is not a per-particle number column", sys, by);
 		if (strcmp(by, "x") && strcmp(by, "y") && strcmp(by, "z"))

@@ -36,8 +36,8 @@ typedef struct surface_renderer {
 	float *cxyz, *cnormal; /* colliders' vertices and normals */
 	uint32_t *ctri;
 	size_t cv_cap, ct_cap; /* vertices, triangles */
-	uint8_t *image;       /* RGB, top row first */
-	eddy_mesh other;      /* scratch: a collider of no described shape, meshed from its distance */
+	uint8_t *image;        /* RGB, top row first */
+	eddy_mesh other;       /* scratch: a collider of no described shape, meshed from its distance */
 } surface_renderer;
 
 eddy_render_surface_def eddy_default_render_surface_def(void)
@@ -68,8 +68,17 @@ eddy_render_surface_def eddy_default_render_surface_def(void)
 static eddy_view_def view_def(const eddy_render_surface_def *d)
 {
 	/* the surface reaches about a support radius past the particles */
-	return (eddy_view_def){d->width, d->height, d->supersample, d->eye, d->target, d->up, d->fov, d->projection, d->ortho_height,
-	                       2.0f * d->spacing, 4.0f * d->support * d->spacing};
+	return (eddy_view_def){d->width,
+	                       d->height,
+	                       d->supersample,
+	                       d->eye,
+	                       d->target,
+	                       d->up,
+	                       d->fov,
+	                       d->projection,
+	                       d->ortho_height,
+	                       2.0f * d->spacing,
+	                       4.0f * d->support * d->spacing};
 }
 
 /* ---- colliders as triangles ---- */
@@ -171,14 +180,16 @@ static long build_colliders(surface_renderer *r, eddy_world *w)
 		if (eddy_collider_shape_of(w, eddy_world_system_at(w, i), &shape) != EDDY_OK)
 			continue;
 		const float sign = shape.inside ? -1.0f : 1.0f;
-		if (shape.kind != EDDY_COLLIDER_BOX && shape.kind != EDDY_COLLIDER_SPHERE && shape.kind != EDDY_COLLIDER_PLANE) {
+		if (shape.kind != EDDY_COLLIDER_BOX && shape.kind != EDDY_COLLIDER_SPHERE &&
+		    shape.kind != EDDY_COLLIDER_PLANE) {
 			/* any other kind (a mesh collider): the zero level of its distance,
 			 * whose normals already face the liquid; one that cannot be meshed
 			 * is left out rather than failing the frame */
 			if (eddy_collider_mesh(w, eddy_world_system_at(w, i), 0.0f, &r->other) != EDDY_OK)
 				continue;
 			const eddy_mesh *m = &r->other;
-			if (m->vertex_count > UINT32_MAX - nv || !reserve_colliders(r, nv + m->vertex_count, nt + m->triangle_count))
+			if (m->vertex_count > UINT32_MAX - nv ||
+			    !reserve_colliders(r, nv + m->vertex_count, nt + m->triangle_count))
 				return -1;
 			memcpy(r->cxyz + 3 * nv, m->xyz, 3 * m->vertex_count * sizeof *m->xyz);
 			memcpy(r->cnormal + 3 * nv, m->normal, 3 * m->vertex_count * sizeof *m->normal);
@@ -196,8 +207,7 @@ static long build_colliders(surface_renderer *r, eddy_world *w)
 			box_mesh(r, &nv, &nt, shape.a, shape.b, sign);
 			eddy_rotate_points(r->cxyz + 3 * first, nv - first, shape.rotation, shape.pivot);
 			eddy_rotate_points(r->cnormal + 3 * first, nv - first, shape.rotation, (eddy_vec3){0, 0, 0});
-		}
-		else if (shape.kind == EDDY_COLLIDER_SPHERE)
+		} else if (shape.kind == EDDY_COLLIDER_SPHERE)
 			sphere_mesh(r, &nv, &nt, shape.a, shape.radius, sign);
 		/* planes are unbounded: not drawn */
 	}
@@ -235,10 +245,11 @@ eddy_status eddy_render_surface_frame(eddy_world *w, int frame, void *user)
 	eddy_gl_lines lines = {edges, 12, {d->outline_color.x, d->outline_color.y, d->outline_color.z}, 1.5f * (float)s};
 	eddy_gl_mesh meshes[2];
 	memset(meshes, 0, sizeof meshes);
-	meshes[0] = (eddy_gl_mesh){mesh->xyz, mesh->normal, mesh->tri, mesh->triangle_count,
-	                           {d->color.x, d->color.y, d->color.z}, 0.6f, 1.0f, 0};
-	meshes[1] = (eddy_gl_mesh){r->cxyz, r->cnormal, r->ctri, (size_t)ctris,
-	                           {d->collider_color.x, d->collider_color.y, d->collider_color.z}, 0.1f, 0.0f, 1};
+	meshes[0] = (eddy_gl_mesh){
+		mesh->xyz, mesh->normal, mesh->tri, mesh->triangle_count, {d->color.x, d->color.y, d->color.z}, 0.6f, 1.0f, 0};
+	meshes[1] = (eddy_gl_mesh){
+		r->cxyz, r->cnormal, r->ctri, (size_t)ctris, {d->collider_color.x, d->collider_color.y, d->collider_color.z},
+		0.1f,    0.0f,       1};
 	eddy_gl_scene scene;
 	memset(&scene, 0, sizeof scene);
 	eddy_camera cam;
@@ -304,9 +315,11 @@ eddy_system_id eddy_add_render_surface(eddy_world *w, const eddy_render_surface_
 		return BAD("%s: %s", sys, why);
 	if (eddy_check_surface_fields(d->spacing, d->support, d->voxel, why, sizeof why))
 		return BAD("%s: %s", sys, why);
-	if (!eddy_color_ok(d->background) || !eddy_color_ok(d->color) || !eddy_color_ok(d->collider_color) || !eddy_color_ok(d->outline_color))
+	if (!eddy_color_ok(d->background) || !eddy_color_ok(d->color) || !eddy_color_ok(d->collider_color) ||
+	    !eddy_color_ok(d->outline_color))
 		return BAD("%s: 'background', 'color', 'collider_color' and 'outline_color' must be RGB colours with "
-		           "components in [0, 1]", sys);
+		           "components in [0, 1]",
+		           sys);
 	if (d->every < 1)
 		return BAD("%s: 'every' must be >= 1 frame (got %d)", sys, d->every);
 	if (!memchr(d->path, '\0', sizeof d->path))

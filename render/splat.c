@@ -106,15 +106,15 @@ typedef struct band {
 	eddy_splat *s;
 	const eddy_gl_scene *sc;
 	float halfway[3];
-	float far_key;  /* m, the far plane's distance */
-	int r0, r1;     /* the buffer rows this band draws, bottom-up */
-	int ss, y0, y1; /* output rows (top-down) it filters */
-	int tr0, tr1;   /* its tile rows (top-down): [r0, r1) is exactly theirs */
+	float far_key;   /* m, the far plane's distance */
+	int r0, r1;      /* the buffer rows this band draws, bottom-up */
+	int ss, y0, y1;  /* output rows (top-down) it filters */
+	int tr0, tr1;    /* its tile rows (top-down): [r0, r1) is exactly theirs */
 	int ts, tiles_x; /* tile side in buffer pixels, tiles per row */
 	uint64_t ts_mul; /* ceil(2^32 / ts), for tile_div */
 	uint8_t *out;
-	uint8_t *mark;  /* draw_lines: set the tiles the lines cover instead of drawing */
-	bool avx2;      /* the CPU has AVX2: draw_sprites' eight-pixel path (the same bits) */
+	uint8_t *mark; /* draw_lines: set the tiles the lines cover instead of drawing */
+	bool avx2;     /* the CPU has AVX2: draw_sprites' eight-pixel path (the same bits) */
 } band;
 
 /* Buffer rows [*lo, *hi) of tile row tr (tile rows count from the top, so
@@ -206,14 +206,14 @@ static float tile_far(const band *b, int tx, int tr)
 
 /* One row of one sprite: what its pixels need. */
 typedef struct sprite_row {
-	float *drow;       /* the row's depths */
-	uint8_t *crow;     /* its RGBA pixels */
-	float xw, inv;     /* px, the centre; 2 / size */
-	float py, py2;     /* the row's offset from the centre, in radii, and its square */
+	float *drow;         /* the row's depths */
+	uint8_t *crow;       /* its RGBA pixels */
+	float xw, inv;       /* px, the centre; 2 / size */
+	float py, py2;       /* the row's offset from the centre, in radii, and its square */
 	float front, nez, r; /* m: the sphere's nearest distance, -z of its centre, its radius */
-	float L[3], Hw[3]; /* the light and halfway directions */
-	float pyL1, pyH1;  /* py L[1], py Hw[1] */
-	float c[3];        /* the albedo */
+	float L[3], Hw[3];   /* the light and halfway directions */
+	float pyL1, pyH1;    /* py L[1], py Hw[1] */
+	float c[3];          /* the albedo */
 } sprite_row;
 
 /* Pixels [i0, i1) of a sprite's row, one at a time; true when one was drawn. */
@@ -269,7 +269,7 @@ typedef struct row8 {
 /* Eight pixels from dp and cp (only the lanes set in `lanes` when tail):
  * whether any was drawn. */
 __attribute__((target("avx2"), always_inline)) static inline bool pixels8(const row8 *k, float *dp, uint8_t *cp,
-                                                                       float x, bool tail, __m256i lanes)
+                                                                          float x, bool tail, __m256i lanes)
 {
 	const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.0f);
 	const __m256 d = tail ? _mm256_maskload_ps(dp, lanes) : _mm256_loadu_ps(dp);
@@ -279,13 +279,13 @@ __attribute__((target("avx2"), always_inline)) static inline bool pixels8(const 
 	if (!_mm256_movemask_ps(ahead))
 		return false;
 	const __m256 lane = _mm256_setr_ps(0.0f, 1.0f, 2.0f, 3.0f, 4.0f, 5.0f, 6.0f, 7.0f);
-	const __m256 px =
-	    _mm256_mul_ps(_mm256_sub_ps(_mm256_add_ps(_mm256_add_ps(_mm256_set1_ps(x), lane), _mm256_set1_ps(0.5f)), k->xw), k->inv);
+	const __m256 px = _mm256_mul_ps(
+		_mm256_sub_ps(_mm256_add_ps(_mm256_add_ps(_mm256_set1_ps(x), lane), _mm256_set1_ps(0.5f)), k->xw), k->inv);
 	const __m256 r2 = _mm256_add_ps(_mm256_mul_ps(px, px), k->py2);
 	const __m256 nz = _mm256_sqrt_ps(_mm256_max_ps(_mm256_sub_ps(one, r2), zero));
 	const __m256 key = _mm256_sub_ps(k->nez, _mm256_mul_ps(k->r, nz));
 	const __m256 m =
-	    _mm256_and_ps(_mm256_and_ps(ahead, _mm256_cmp_ps(r2, one, _CMP_LE_OQ)), _mm256_cmp_ps(key, d, _CMP_LT_OQ));
+		_mm256_and_ps(_mm256_and_ps(ahead, _mm256_cmp_ps(r2, one, _CMP_LE_OQ)), _mm256_cmp_ps(key, d, _CMP_LT_OQ));
 	if (!_mm256_movemask_ps(m))
 		return false;
 	const __m256 dl = _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(px, k->L0), k->pyL1), _mm256_mul_ps(nz, k->L2));
@@ -300,8 +300,9 @@ __attribute__((target("avx2"), always_inline)) static inline bool pixels8(const 
 	const __m256i R = unorm8_avx2(_mm256_add_ps(_mm256_mul_ps(k->cr, shade), hl));
 	const __m256i G = unorm8_avx2(_mm256_add_ps(_mm256_mul_ps(k->cg, shade), hl));
 	const __m256i B = unorm8_avx2(_mm256_add_ps(_mm256_mul_ps(k->cb, shade), hl));
-	const __m256i rgba = _mm256_or_si256(_mm256_or_si256(R, _mm256_slli_epi32(G, 8)),
-	                                     _mm256_or_si256(_mm256_slli_epi32(B, 16), _mm256_set1_epi32((int)0xff000000u)));
+	const __m256i rgba =
+		_mm256_or_si256(_mm256_or_si256(R, _mm256_slli_epi32(G, 8)),
+	                    _mm256_or_si256(_mm256_slli_epi32(B, 16), _mm256_set1_epi32((int)0xff000000u)));
 	if (tail) {
 		_mm256_maskstore_ps(dp, _mm256_castps_si256(m), key);
 		_mm256_maskstore_epi32((int *)(void *)cp, _mm256_castps_si256(m), rgba);
@@ -309,18 +310,19 @@ __attribute__((target("avx2"), always_inline)) static inline bool pixels8(const 
 		_mm256_storeu_ps(dp, _mm256_blendv_ps(d, key, m));
 		__m256i *c = (__m256i *)(void *)cp;
 		const __m256i old = _mm256_loadu_si256(c);
-		_mm256_storeu_si256(c, _mm256_castps_si256(_mm256_blendv_ps(_mm256_castsi256_ps(old), _mm256_castsi256_ps(rgba), m)));
+		_mm256_storeu_si256(
+			c, _mm256_castps_si256(_mm256_blendv_ps(_mm256_castsi256_ps(old), _mm256_castsi256_ps(rgba), m)));
 	}
 	return true;
 }
 
 __attribute__((target("avx2"))) static bool span_avx2(const sprite_row *q, int i0, int i1)
 {
-	const row8 k = {_mm256_set1_ps(q->front), _mm256_set1_ps(q->xw),   _mm256_set1_ps(q->inv),
-	                _mm256_set1_ps(q->py2),   _mm256_set1_ps(q->nez),  _mm256_set1_ps(q->r),
-	                _mm256_set1_ps(q->L[0]),  _mm256_set1_ps(q->L[2]), _mm256_set1_ps(q->pyL1),
+	const row8 k = {_mm256_set1_ps(q->front), _mm256_set1_ps(q->xw),    _mm256_set1_ps(q->inv),
+	                _mm256_set1_ps(q->py2),   _mm256_set1_ps(q->nez),   _mm256_set1_ps(q->r),
+	                _mm256_set1_ps(q->L[0]),  _mm256_set1_ps(q->L[2]),  _mm256_set1_ps(q->pyL1),
 	                _mm256_set1_ps(q->Hw[0]), _mm256_set1_ps(q->Hw[2]), _mm256_set1_ps(q->pyH1),
-	                _mm256_set1_ps(q->c[0]),  _mm256_set1_ps(q->c[1]), _mm256_set1_ps(q->c[2])};
+	                _mm256_set1_ps(q->c[0]),  _mm256_set1_ps(q->c[1]),  _mm256_set1_ps(q->c[2])};
 	const __m256i all = _mm256_set1_epi32(-1);
 	bool wrote = false;
 	int i = i0;
@@ -653,8 +655,7 @@ static bool reserve_frame(eddy_splat *s, size_t n, size_t tiles)
 	return true;
 }
 
-int eddy_splat_draw(eddy_splat *s, const eddy_gl_scene *sc_in, int threads, int ss, uint8_t *out, char *err,
-                    size_t cap)
+int eddy_splat_draw(eddy_splat *s, const eddy_gl_scene *sc_in, int threads, int ss, uint8_t *out, char *err, size_t cap)
 {
 	const eddy_gl_scene *sc = sc_in;
 	if (sc->mesh_sets > 0) {

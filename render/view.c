@@ -77,13 +77,13 @@ void eddy_camera_make(const eddy_view_def *d, const eddy_world_def *wd, eddy_cam
 		target = center;
 		const eddy_vec3 back = eddy_v3_norm((eddy_vec3){0.42f, 0.38f, 1.0f});
 		const eddy_vec3 f = eddy_v3_scale(back, -1.0f), sd = eddy_v3_norm(eddy_v3_cross(f, d->up)),
-		                u = eddy_v3_cross(sd, f);
+						u = eddy_v3_cross(sd, f);
 		const float tv = tanf(half_fov), th = tv * aspect;
 		float D = 0;
 		for (int k = 0; k < 8; ++k) {
 			eddy_vec3 q = eddy_v3_sub(corner(lo, hi, k), center);
 			float qf = eddy_v3_dot(q, f), need_s = fabsf(eddy_v3_dot(q, sd)) / th - qf,
-			      need_u = fabsf(eddy_v3_dot(q, u)) / tv - qf;
+				  need_u = fabsf(eddy_v3_dot(q, u)) / tv - qf;
 			D = need_s > D ? need_s : D;
 			D = need_u > D ? need_u : D;
 		}
@@ -106,7 +106,7 @@ void eddy_camera_make(const eddy_view_def *d, const eddy_world_def *wd, eddy_cam
 		dmin = depth < dmin ? depth : dmin;
 		dmax = depth > dmax ? depth : dmax;
 		const float s = fabsf(eddy_v3_dot(eddy_v3_sub(p, target), c->side)),
-		            u = fabsf(eddy_v3_dot(eddy_v3_sub(p, target), c->up));
+					u = fabsf(eddy_v3_dot(eddy_v3_sub(p, target), c->up));
 		smax = s > smax ? s : smax;
 		umax = u > umax ? u : umax;
 	}
@@ -159,8 +159,8 @@ void eddy_rotate_points(float *xyz, size_t n, eddy_vec3 rotation, eddy_vec3 pivo
 {
 	/* Rodrigues: R v = v cos t + (k x v) sin t + k (k . v)(1 - cos t), with k
 	 * the unit axis and t the angle (the rotation vector is in degrees) */
-	const double len = sqrt((double)rotation.x * rotation.x + (double)rotation.y * rotation.y +
-	                        (double)rotation.z * rotation.z);
+	const double len =
+		sqrt((double)rotation.x * rotation.x + (double)rotation.y * rotation.y + (double)rotation.z * rotation.z);
 	if (!(len > 0))
 		return;
 	const double kx = rotation.x / len, ky = rotation.y / len, kz = rotation.z / len;

@@ -158,7 +158,7 @@ eddy_status eddy_world_save(eddy_world *w, const char *path, uint64_t fingerprin
 	unsigned char header[HEADER_BYTES] = {0};
 	const uint32_t version = CKPT_VERSION;
 	const uint64_t fp = pipeline_fingerprint(w, fingerprint), size = b.len,
-	               sum = eddy__fnv1a(EDDY__FNV_BASIS, b.p, b.len);
+				   sum = eddy__fnv1a(EDDY__FNV_BASIS, b.p, b.len);
 	memcpy(header, CKPT_MAGIC, 8);
 	memcpy(header + 8, &version, 4);
 	memcpy(header + 16, &fp, 8);
@@ -253,12 +253,11 @@ static eddy_status check_clock(eddy_world *w, const char *path, double time, int
 		/* frame k ends at k / fps and the clock lands on it exactly; between
 		 * frames the time lies in [frame / fps, (frame + 1) / fps] */
 		bad = "frame";
-		snprintf(why, sizeof why, "%d, inconsistent with time %.9g s at %g fps (frame %.0f expected)", frame, time,
-		         fps, floor(time * fps + 1e-6));
+		snprintf(why, sizeof why, "%d, inconsistent with time %.9g s at %g fps (frame %.0f expected)", frame, time, fps,
+		         floor(time * fps + 1e-6));
 	} else if (step < frame) {
 		bad = "step";
-		snprintf(why, sizeof why, "%lld, fewer than the %d frames (every frame takes a step)", (long long)step,
-		         frame);
+		snprintf(why, sizeof why, "%lld, fewer than the %d frames (every frame takes a step)", (long long)step, frame);
 	} else if (!(isfinite(last_dt) && last_dt >= 0 && last_dt <= w->def.dt_max * (1 + 1e-9))) {
 		bad = "last_dt";
 		snprintf(why, sizeof why, "%g s, must be in [0, dt_max = %g s]", last_dt, w->def.dt_max);
@@ -357,9 +356,9 @@ eddy_status eddy_world_load(eddy_world *w, const char *path, uint64_t fingerprin
 	GET(&r, n);
 	uint32_t ncols;
 	GET(&r, ncols);
-	eddy_status st = r.short_read ? eddy__fail(w, EDDY_ERR_IO, "checkpoint '%s': malformed payload", path)
-	                              : check_clock(w, path, time, frame, step, last_dt, length_scale, rest_density, n,
-	                                            ncols);
+	eddy_status st = r.short_read
+	                     ? eddy__fail(w, EDDY_ERR_IO, "checkpoint '%s': malformed payload", path)
+	                     : check_clock(w, path, time, frame, step, last_dt, length_scale, rest_density, n, ncols);
 	struct {
 		int id;
 		const unsigned char *data;

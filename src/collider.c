@@ -68,10 +68,9 @@ eddy_vec3 eddy__rotation_rate(eddy_vec3 from, eddy_vec3 to, double dt)
 	quat_of(to, a);
 	quat_of(from, b);
 	/* q = a * conj(b) */
-	double q[4] = {a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3],
-	               -a[0] * b[1] + a[1] * b[0] - a[2] * b[3] + a[3] * b[2],
-	               -a[0] * b[2] + a[1] * b[3] + a[2] * b[0] - a[3] * b[1],
-	               -a[0] * b[3] - a[1] * b[2] + a[2] * b[1] + a[3] * b[0]};
+	double q[4] = {
+		a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3], -a[0] * b[1] + a[1] * b[0] - a[2] * b[3] + a[3] * b[2],
+		-a[0] * b[2] + a[1] * b[3] + a[2] * b[0] - a[3] * b[1], -a[0] * b[3] - a[1] * b[2] + a[2] * b[1] + a[3] * b[0]};
 	if (q[0] < 0)
 		for (int k = 0; k < 4; ++k)
 			q[k] = -q[k];
@@ -106,8 +105,8 @@ eddy_collider_velocity eddy__collider_motion_since(const eddy_collider_motion *m
 
 eddy_collider_velocity eddy__collider_step_motion(eddy_collider_base *b, double dt)
 {
-	const eddy_collider_velocity v = eddy__collider_motion_since(&b->motion, b->motion.last_offset,
-	                                                             b->motion.last_rotation, dt);
+	const eddy_collider_velocity v =
+		eddy__collider_motion_since(&b->motion, b->motion.last_offset, b->motion.last_rotation, dt);
 	b->motion.last_offset = b->motion.offset;
 	b->motion.last_rotation = b->motion.rotation;
 	b->motion.stepped = 1;
@@ -165,8 +164,8 @@ eddy_status eddy_collider_set_rotation(eddy_world *w, eddy_system_id id, eddy_ve
 	if (!m)
 		return w && !eddy_system_valid(w, id) ? EDDY_ERR_STALE : EDDY_ERR_INVALID;
 	/* beyond 1e6 degrees a float angle has lost whole degrees */
-	const double deg2 = (double)axis_angle.x * axis_angle.x + (double)axis_angle.y * axis_angle.y +
-	                    (double)axis_angle.z * axis_angle.z;
+	const double deg2 =
+		(double)axis_angle.x * axis_angle.x + (double)axis_angle.y * axis_angle.y + (double)axis_angle.z * axis_angle.z;
 	if (!(deg2 <= 1e12)) {
 		eddy__fail(w, EDDY_ERR_INVALID,
 		           "%s: 'rotation' must be an axis-angle vector in degrees of length at most 1e6 (got {%g, %g, %g})",

@@ -53,11 +53,16 @@ size_t eddy__column_elems(const eddy_world *w, const eddy_column *c)
 {
 	const size_t nx = (size_t)w->nx, ny = (size_t)w->ny, nz = (size_t)w->nz;
 	switch (c->domain) {
-	case EDDY_DOMAIN_PARTICLE: return w->n;
-	case EDDY_DOMAIN_CELL: return nx * ny * nz;
-	case EDDY_DOMAIN_FACE_X: return (nx + 1) * ny * nz;
-	case EDDY_DOMAIN_FACE_Y: return nx * (ny + 1) * nz;
-	case EDDY_DOMAIN_FACE_Z: return nx * ny * (nz + 1);
+	case EDDY_DOMAIN_PARTICLE:
+		return w->n;
+	case EDDY_DOMAIN_CELL:
+		return nx * ny * nz;
+	case EDDY_DOMAIN_FACE_X:
+		return (nx + 1) * ny * nz;
+	case EDDY_DOMAIN_FACE_Y:
+		return nx * (ny + 1) * nz;
+	case EDDY_DOMAIN_FACE_Z:
+		return nx * ny * (nz + 1);
 	}
 	return 0;
 }
@@ -86,9 +91,10 @@ static eddy_status grid_setup(eddy_world *w, const eddy_column *c)
 	 * round up to a sliver cell past the wall (FLIP puts its walls at the
 	 * grid's sides), hence a tolerance well above float rounding */
 	const double nx = ceil((hi.x - lo.x) / h - 1e-4), ny = ceil((hi.y - lo.y) / h - 1e-4),
-	             nz = ceil((hi.z - lo.z) / h - 1e-4);
+				 nz = ceil((hi.z - lo.z) / h - 1e-4);
 	if (nx * ny * nz > 2e9)
-		return eddy__fail(w, EDDY_ERR_NOMEM, "grid of %.0f x %.0f x %.0f cells is too large; use a larger cell_size", nx, ny, nz);
+		return eddy__fail(w, EDDY_ERR_NOMEM, "grid of %.0f x %.0f x %.0f cells is too large; use a larger cell_size",
+		                  nx, ny, nz);
 	w->nx = nx < 1 ? 1 : (int)nx;
 	w->ny = ny < 1 ? 1 : (int)ny;
 	w->nz = nz < 1 ? 1 : (int)nz;
@@ -132,9 +138,11 @@ eddy_status eddy__column_acquire(eddy_world *w, int id)
 				w->grid_allocated = false;
 				w->nx = w->ny = w->nz = 0;
 			}
-			return eddy__fail(w, EDDY_ERR_NOMEM,
-			                  "the %d x %d x %d grid needs %.1f GB for its columns, more than 80%% of this machine's %.1f GB; "
-			                  "use a larger cell_size", w->nx, w->ny, w->nz, grid_bytes / 1e9, phys / 1e9);
+			return eddy__fail(
+				w, EDDY_ERR_NOMEM,
+				"the %d x %d x %d grid needs %.1f GB for its columns, more than 80%% of this machine's %.1f GB; "
+				"use a larger cell_size",
+				w->nx, w->ny, w->nz, grid_bytes / 1e9, phys / 1e9);
 		}
 	}
 	/* calloc(0) may return NULL; keep a real block so "allocated" stays visible. */
@@ -179,7 +187,8 @@ eddy_status eddy__reserve_particles(eddy_world *w, size_t count)
 	double phys = pages > 0 && page > 0 ? (double)pages * (double)page : 0;
 	if (phys > 0 && (double)cap * (double)per_particle > 0.8 * phys)
 		return eddy__fail(w, EDDY_ERR_NOMEM,
-		                  "%zu particles need %.1f GB of particle columns, more than 80%% of this machine's %.1f GB; use a larger spacing",
+		                  "%zu particles need %.1f GB of particle columns, more than 80%% of this machine's %.1f GB; "
+		                  "use a larger spacing",
 		                  count, (double)cap * (double)per_particle / 1e9, phys / 1e9);
 	for (int i = 0; i < w->column_count; ++i) {
 		eddy_column *c = &w->columns[i];
@@ -272,8 +281,8 @@ eddy_status eddy_world_column_info(const eddy_world *w, eddy_column_id id, eddy_
 	return EDDY_OK;
 }
 
-eddy_column_id eddy_world_declare_column(eddy_world *w, const char *name, eddy_domain domain,
-                                         eddy_type type, eddy_lifetime lifetime, const char *unit)
+eddy_column_id eddy_world_declare_column(eddy_world *w, const char *name, eddy_domain domain, eddy_type type,
+                                         eddy_lifetime lifetime, const char *unit)
 {
 	if (!w)
 		return -1;
@@ -341,8 +350,9 @@ eddy_status eddy_world_add_particles(eddy_world *w, size_t count, const eddy_vec
 	for (size_t i = 0; i < count; ++i) {
 		eddy_vec3 p = pos[i];
 		if (!(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z))
-			return eddy__fail(w, EDDY_ERR_INVALID, "add_particles: particle %zu at (%g, %g, %g) is outside the world bounds",
-			                  i, (double)p.x, (double)p.y, (double)p.z);
+			return eddy__fail(w, EDDY_ERR_INVALID,
+			                  "add_particles: particle %zu at (%g, %g, %g) is outside the world bounds", i, (double)p.x,
+			                  (double)p.y, (double)p.z);
 		if (vel && !(isfinite(vel[i].x) && isfinite(vel[i].y) && isfinite(vel[i].z)))
 			return eddy__fail(w, EDDY_ERR_INVALID, "add_particles: velocity of particle %zu is not finite", i);
 	}
@@ -353,13 +363,19 @@ eddy_status eddy_world_add_particles(eddy_world *w, size_t count, const eddy_vec
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	for (size_t i = 0; i < count; ++i) {
-		if (x) x[first + i] = pos[i].x;
-		if (y) y[first + i] = pos[i].y;
-		if (z) z[first + i] = pos[i].z;
+		if (x)
+			x[first + i] = pos[i].x;
+		if (y)
+			y[first + i] = pos[i].y;
+		if (z)
+			z[first + i] = pos[i].z;
 		if (vel) {
-			if (vx) vx[first + i] = vel[i].x;
-			if (vy) vy[first + i] = vel[i].y;
-			if (vz) vz[first + i] = vel[i].z;
+			if (vx)
+				vx[first + i] = vel[i].x;
+			if (vy)
+				vy[first + i] = vel[i].y;
+			if (vz)
+				vz[first + i] = vel[i].z;
 		}
 	}
 	return EDDY_OK;

@@ -26,15 +26,15 @@ typedef struct eddy_system eddy_system;
  * find each other through these (eddy__provider, eddy__systems), never by
  * comparing kinds. */
 typedef enum eddy_capability {
-	EDDY_CAP_SPH_NEIGHBORS = 1u << 0,  /* sph_density: neighbour lists, densities, boundary particles (sph_shared) */
-	EDDY_CAP_SPH_EOS_FORCE = 1u << 1,  /* sph_pressure: the force from the equation of state's pressure */
-	EDDY_CAP_SPH_WALLS = 1u << 2,      /* boundary particles on fixed walls (sph_boundary_box) */
-	EDDY_CAP_COLLIDER = 1u << 3,       /* a solid with a signed distance (vtable distance) */
-	EDDY_CAP_MAC_GRID = 1u << 4,       /* flip_p2g: particle velocities on the staggered grid */
-	EDDY_CAP_SOLID_FACES = 1u << 5,    /* flip_boundary: the grid's solid cells and face velocities */
-	EDDY_CAP_FREE_SURFACE = 1u << 6,   /* flip_surface: the liquid's level set */
-	EDDY_CAP_GRAVITY = 1u << 7,        /* gravity: shares its eddy_gravity_def */
-	EDDY_CAP_GRID_DENSITY = 1u << 8,   /* flip_pressure: shares its eddy_flip_pressure_def (the fluid's density) */
+	EDDY_CAP_SPH_NEIGHBORS = 1u << 0, /* sph_density: neighbour lists, densities, boundary particles (sph_shared) */
+	EDDY_CAP_SPH_EOS_FORCE = 1u << 1, /* sph_pressure: the force from the equation of state's pressure */
+	EDDY_CAP_SPH_WALLS = 1u << 2,     /* boundary particles on fixed walls (sph_boundary_box) */
+	EDDY_CAP_COLLIDER = 1u << 3,      /* a solid with a signed distance (vtable distance) */
+	EDDY_CAP_MAC_GRID = 1u << 4,      /* flip_p2g: particle velocities on the staggered grid */
+	EDDY_CAP_SOLID_FACES = 1u << 5,   /* flip_boundary: the grid's solid cells and face velocities */
+	EDDY_CAP_FREE_SURFACE = 1u << 6,  /* flip_surface: the liquid's level set */
+	EDDY_CAP_GRAVITY = 1u << 7,       /* gravity: shares its eddy_gravity_def */
+	EDDY_CAP_GRID_DENSITY = 1u << 8,  /* flip_pressure: shares its eddy_flip_pressure_def (the fluid's density) */
 } eddy_capability;
 
 /* What a system kind can do. step is required except for frame-only systems. */
@@ -105,8 +105,8 @@ typedef struct eddy_column {
 	eddy_domain domain;
 	eddy_type type;
 	eddy_lifetime lifetime;
-	int users;   /* systems in the pipeline that read or write it */
-	void *data;  /* NULL unless users > 0 */
+	int users;  /* systems in the pipeline that read or write it */
+	void *data; /* NULL unless users > 0 */
 } eddy_column;
 
 /* A bump allocator reset at the start of every step: scratch that lives for one
@@ -318,7 +318,7 @@ typedef struct eddy_collider_motion {
 	eddy_vec3 rotation;      /* degrees, axis-angle about the pivot, now */
 	eddy_vec3 last_rotation; /* degrees, ... at the collider's last step */
 	eddy_vec3 pivot;         /* m, the centre of rotation in the def pose */
-	float stepped;           /* 1 once it has run: from now on offsets are motion (a float: no padding in a checkpoint) */
+	float stepped; /* 1 once it has run: from now on offsets are motion (a float: no padding in a checkpoint) */
 } eddy_collider_motion;
 
 /* A rotation as a row-major 3x3 matrix, and the rigid transform of a pose. */
@@ -387,8 +387,8 @@ bool eddy__is_collider(const eddy_system *s);
 bool eddy__check_response(eddy_world *w, const char *sys, eddy_collider_response r);
 /* Projects particle i to p_surface and applies the velocity response against
  * the surface normal n (unit, pointing out of the solid) and wall velocity vw. */
-static inline void eddy__collide_response(float *vx, float *vy, float *vz, size_t i, eddy_vec3 n,
-                                          eddy_vec3 vw, eddy_collider_response r)
+static inline void eddy__collide_response(float *vx, float *vy, float *vz, size_t i, eddy_vec3 n, eddy_vec3 vw,
+                                          eddy_collider_response r)
 {
 	float rx = vx[i] - vw.x, ry = vy[i] - vw.y, rz = vz[i] - vw.z;
 	float vn = rx * n.x + ry * n.y + rz * n.z;

@@ -57,14 +57,14 @@ extern "C" {
 
 typedef enum eddy_status {
 	EDDY_OK = 0,
-	EDDY_ERR_INVALID,   /* a def field or argument is out of range */
-	EDDY_ERR_ORDER,     /* the pipeline reads a column before anything writes it */
-	EDDY_ERR_STALE,     /* a handle refers to something that no longer exists */
-	EDDY_ERR_NOMEM,     /* an allocation failed or would not fit */
-	EDDY_ERR_IO,        /* a file could not be read or written */
-	EDDY_ERR_NUMERIC,   /* a non-finite value, an escaped particle, a collapsed step */
-	EDDY_ERR_SOLVER,    /* a linear solve failed */
-	EDDY_ERR_EXTERNAL   /* a host callback or an external library reported failure */
+	EDDY_ERR_INVALID, /* a def field or argument is out of range */
+	EDDY_ERR_ORDER,   /* the pipeline reads a column before anything writes it */
+	EDDY_ERR_STALE,   /* a handle refers to something that no longer exists */
+	EDDY_ERR_NOMEM,   /* an allocation failed or would not fit */
+	EDDY_ERR_IO,      /* a file could not be read or written */
+	EDDY_ERR_NUMERIC, /* a non-finite value, an escaped particle, a collapsed step */
+	EDDY_ERR_SOLVER,  /* a linear solve failed */
+	EDDY_ERR_EXTERNAL /* a host callback or an external library reported failure */
 } eddy_status;
 
 EDDY_API const char *eddy_status_name(eddy_status s);
@@ -94,20 +94,20 @@ typedef enum eddy_escape_policy {
 } eddy_escape_policy;
 
 typedef struct eddy_world_def {
-	eddy_vec3 bounds_min;       /* m, lower corner of the domain */
-	eddy_vec3 bounds_max;       /* m, upper corner of the domain */
-	eddy_vec3 gravity;          /* m/s^2, applied by the gravity system */
-	double fps;                 /* 1/s, frames per simulated second */
-	double duration;            /* s, default length of a run */
-	double cfl;                 /* 1, multiplies every time-step limit systems report */
-	double dt_max;              /* s, upper bound on the step */
-	double dt_min;              /* s, a step limit below this stops the run */
-	int max_steps_per_frame;    /* 1, a frame needing more steps stops the run */
-	double cell_size;           /* m, MAC grid spacing; 0 = no grid may be used */
-	uint64_t seed;              /* 1, seed of the world's random stream (jitter) */
-	int threads;                /* 1, worker threads for systems that parallelise */
-	eddy_escape_policy escape;  /* what a particle leaving the bounds means */
-	bool check_finite;          /* scan written columns after each system */
+	eddy_vec3 bounds_min;      /* m, lower corner of the domain */
+	eddy_vec3 bounds_max;      /* m, upper corner of the domain */
+	eddy_vec3 gravity;         /* m/s^2, applied by the gravity system */
+	double fps;                /* 1/s, frames per simulated second */
+	double duration;           /* s, default length of a run */
+	double cfl;                /* 1, multiplies every time-step limit systems report */
+	double dt_max;             /* s, upper bound on the step */
+	double dt_min;             /* s, a step limit below this stops the run */
+	int max_steps_per_frame;   /* 1, a frame needing more steps stops the run */
+	double cell_size;          /* m, MAC grid spacing; 0 = no grid may be used */
+	uint64_t seed;             /* 1, seed of the world's random stream (jitter) */
+	int threads;               /* 1, worker threads for systems that parallelise */
+	eddy_escape_policy escape; /* what a particle leaving the bounds means */
+	bool check_finite;         /* scan written columns after each system */
 } eddy_world_def;
 
 EDDY_API eddy_world_def eddy_default_world_def(void);
@@ -130,11 +130,11 @@ EDDY_API eddy_status eddy_world_fail(eddy_world *w, eddy_status status, const ch
 EDDY_API const eddy_world_def *eddy_world_get_def(const eddy_world *w);
 EDDY_API eddy_status eddy_world_set_threads(eddy_world *w, int threads);
 
-EDDY_API double eddy_world_time(const eddy_world *w);   /* s */
+EDDY_API double eddy_world_time(const eddy_world *w);       /* s */
 EDDY_API double eddy_world_frame_time(const eddy_world *w); /* s, 1/fps */
-EDDY_API int eddy_world_frame(const eddy_world *w);     /* frames completed */
-EDDY_API int64_t eddy_world_steps(const eddy_world *w); /* steps taken */
-EDDY_API double eddy_world_last_dt(const eddy_world *w);/* s, 0 before the first step */
+EDDY_API int eddy_world_frame(const eddy_world *w);         /* frames completed */
+EDDY_API int64_t eddy_world_steps(const eddy_world *w);     /* steps taken */
+EDDY_API double eddy_world_last_dt(const eddy_world *w);    /* s, 0 before the first step */
 
 /* One adaptive step, never past the next frame time. */
 EDDY_API eddy_status eddy_world_step(eddy_world *w);
@@ -171,10 +171,7 @@ typedef enum eddy_domain {
 	EDDY_DOMAIN_FACE_Z        /* one value per z-face, nx*ny*(nz+1) */
 } eddy_domain;
 
-typedef enum eddy_type {
-	EDDY_F32 = 0,
-	EDDY_U8
-} eddy_type;
+typedef enum eddy_type { EDDY_F32 = 0, EDDY_U8 } eddy_type;
 
 typedef enum eddy_lifetime {
 	EDDY_STATE = 0, /* persists across steps; part of the state hash */
@@ -188,9 +185,9 @@ typedef struct eddy_column_info {
 	eddy_domain domain;
 	eddy_type type;
 	eddy_lifetime lifetime;
-	const char *unit;        /* SI unit, "" for dimensionless */
-	bool allocated;          /* some system in the pipeline uses it */
-	size_t bytes;            /* bytes currently allocated */
+	const char *unit; /* SI unit, "" for dimensionless */
+	bool allocated;   /* some system in the pipeline uses it */
+	size_t bytes;     /* bytes currently allocated */
 } eddy_column_info;
 
 EDDY_API int eddy_world_column_count(const eddy_world *w);
@@ -198,8 +195,8 @@ EDDY_API eddy_column_id eddy_world_find_column(const eddy_world *w, const char *
 EDDY_API eddy_status eddy_world_column_info(const eddy_world *w, eddy_column_id id, eddy_column_info *out);
 /* Declares a new column for custom systems (e.g. "temperature"). Returns its id,
  * or < 0 with the world error set if the name is taken or invalid. */
-EDDY_API eddy_column_id eddy_world_declare_column(eddy_world *w, const char *name, eddy_domain domain,
-                                         eddy_type type, eddy_lifetime lifetime, const char *unit);
+EDDY_API eddy_column_id eddy_world_declare_column(eddy_world *w, const char *name, eddy_domain domain, eddy_type type,
+                                                  eddy_lifetime lifetime, const char *unit);
 
 /* Read access by name: NULL if the column is unknown or not allocated. *count gets
  * the number of elements (particles, cells or faces). */
@@ -213,16 +210,15 @@ EDDY_API size_t eddy_world_particle_count(const eddy_world *w);
 /* Appends count particles; each allocated particle column is zero-filled except
  * positions and velocities taken from the arrays (vel may be NULL). Positions
  * outside the bounds are rejected. */
-EDDY_API eddy_status eddy_world_add_particles(eddy_world *w, size_t count, const eddy_vec3 *pos,
-                                     const eddy_vec3 *vel);
+EDDY_API eddy_status eddy_world_add_particles(eddy_world *w, size_t count, const eddy_vec3 *pos, const eddy_vec3 *vel);
 /* Swap-remove: the last particle moves into slot i. Iterate backwards. */
 EDDY_API eddy_status eddy_world_remove_particle(eddy_world *w, size_t i);
 
 typedef struct eddy_grid_info {
 	bool allocated;
-	int nx, ny, nz;      /* cells along each axis */
-	double cell_size;    /* m */
-	eddy_vec3 origin;    /* m, corner of cell (0,0,0) */
+	int nx, ny, nz;   /* cells along each axis */
+	double cell_size; /* m */
+	eddy_vec3 origin; /* m, corner of cell (0,0,0) */
 } eddy_grid_info;
 
 EDDY_API eddy_grid_info eddy_world_grid(const eddy_world *w);
@@ -234,21 +230,23 @@ EDDY_API uint64_t eddy_world_state_hash(const eddy_world *w);
 /* ---- pipeline ---------------------------------------------------------- */
 
 typedef struct eddy_step_context {
-	double dt;       /* s, this step's size */
-	double time;     /* s, time at the start of the step */
-	int64_t step;    /* index of this step, from 0 */
-	int threads;     /* worker threads the system may use */
+	double dt;    /* s, this step's size */
+	double time;  /* s, time at the start of the step */
+	int64_t step; /* index of this step, from 0 */
+	int threads;  /* worker threads the system may use */
 } eddy_step_context;
 
 typedef struct eddy_system_info {
-	const char *name;        /* the system kind, e.g. "emit_box" */
-	const char *label;       /* kind plus slot, e.g. "emit_box#1" */
-	const char *const *reads;  int read_count;
-	const char *const *writes; int write_count;
-	double profile_ms;       /* total wall time spent in step, ms */
-	int64_t calls;           /* steps run */
+	const char *name;  /* the system kind, e.g. "emit_box" */
+	const char *label; /* kind plus slot, e.g. "emit_box#1" */
+	const char *const *reads;
+	int read_count;
+	const char *const *writes;
+	int write_count;
+	double profile_ms;          /* total wall time spent in step, ms */
+	int64_t calls;              /* steps run */
 	int64_t expected_particles; /* emitters: particles it will create, -1 unbounded, 0 others */
-	const char *group;       /* the node group that added it ("" if none), see eddy_system_set_group */
+	const char *group;          /* the node group that added it ("" if none), see eddy_system_set_group */
 } eddy_system_info;
 
 EDDY_API int eddy_world_system_count(const eddy_world *w);
@@ -278,15 +276,15 @@ typedef eddy_status (*eddy_frame_fn)(eddy_world *w, int frame, void *user);
 typedef double (*eddy_limit_fn)(eddy_world *w, void *user, const char **reason);
 
 typedef struct eddy_custom_system_def {
-	const char *name;               /* shown in plans and errors; copied */
-	const char *const *reads;       /* column names the step reads */
+	const char *name;         /* shown in plans and errors; copied */
+	const char *const *reads; /* column names the step reads */
 	int read_count;
-	const char *const *writes;      /* column names the step writes */
+	const char *const *writes; /* column names the step writes */
 	int write_count;
-	eddy_step_fn step;              /* may be NULL for a frame-only system */
-	eddy_frame_fn frame;            /* called at each frame time; may be NULL */
-	eddy_limit_fn limit;            /* may be NULL */
-	void (*destroy)(void *user);    /* called when the system is removed */
+	eddy_step_fn step;           /* may be NULL for a frame-only system */
+	eddy_frame_fn frame;         /* called at each frame time; may be NULL */
+	eddy_limit_fn limit;         /* may be NULL */
+	void (*destroy)(void *user); /* called when the system is removed */
 	void *user;
 	/* may be NULL; for systems whose frame hook leaves work running
 	 * (eddy_world_set_background_output): waits for it and returns its first
@@ -309,20 +307,17 @@ EDDY_API void *eddy_world_custom_user(const eddy_world *w, eddy_system_id id, ed
 
 /* What emit_box fills: the whole box, or the ellipsoid inscribed in it (a
  * drop: centre (min + max) / 2, semi-axes (max - min) / 2). */
-typedef enum eddy_emit_shape {
-	EDDY_EMIT_BLOCK = 0,
-	EDDY_EMIT_ELLIPSOID
-} eddy_emit_shape;
+typedef enum eddy_emit_shape { EDDY_EMIT_BLOCK = 0, EDDY_EMIT_ELLIPSOID } eddy_emit_shape;
 
 /* emit_box: a block (or the ellipsoid inscribed in it) of particles on a
  * cubic lattice, once, at time `start`. */
 typedef struct eddy_emit_box_def {
-	eddy_vec3 min;       /* m, lower corner of the block */
-	eddy_vec3 max;       /* m, upper corner of the block */
-	float spacing;       /* m, lattice spacing; > 0 */
-	float jitter;        /* 1, random offset as a fraction of spacing, [0, 0.5] */
-	eddy_vec3 velocity;  /* m/s, initial velocity */
-	double start;        /* s, emission time */
+	eddy_vec3 min;         /* m, lower corner of the block */
+	eddy_vec3 max;         /* m, upper corner of the block */
+	float spacing;         /* m, lattice spacing; > 0 */
+	float jitter;          /* 1, random offset as a fraction of spacing, [0, 0.5] */
+	eddy_vec3 velocity;    /* m/s, initial velocity */
+	double start;          /* s, emission time */
 	eddy_emit_shape shape; /* block (default) or the inscribed ellipsoid */
 } eddy_emit_box_def;
 EDDY_API eddy_emit_box_def eddy_default_emit_box_def(void);
@@ -332,13 +327,13 @@ EDDY_API eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def
  * leave the nozzle every spacing/speed seconds, so the jet has the lattice
  * density; rate = speed * pi r^2 / spacing^3 particles per second. */
 typedef struct eddy_emit_nozzle_def {
-	eddy_vec3 center;    /* m, centre of the nozzle opening */
-	float radius;        /* m, > 0 */
-	eddy_vec3 direction; /* 1, jet direction (normalised on add) */
-	float speed;         /* m/s, > 0 */
-	float spacing;       /* m, > 0 */
-	double start;        /* s, time the pour begins */
-	double duration;     /* s, length of the pour; infinity = no end */
+	eddy_vec3 center;      /* m, centre of the nozzle opening */
+	float radius;          /* m, > 0 */
+	eddy_vec3 direction;   /* 1, jet direction (normalised on add) */
+	float speed;           /* m/s, > 0 */
+	float spacing;         /* m, > 0 */
+	double start;          /* s, time the pour begins */
+	double duration;       /* s, length of the pour; infinity = no end */
 	int64_t max_particles; /* 1, stop after this many; 0 = no limit */
 } eddy_emit_nozzle_def;
 EDDY_API eddy_emit_nozzle_def eddy_default_emit_nozzle_def(void);
@@ -371,9 +366,9 @@ typedef struct eddy_collider_response {
 /* collide_box: an axis-aligned box; inside = the particles live inside it (a
  * tank), otherwise the box is a solid block they stay out of. */
 typedef struct eddy_collide_box_def {
-	eddy_vec3 min;      /* m */
-	eddy_vec3 max;      /* m */
-	bool inside;        /* particles are kept inside (true) or outside (false) */
+	eddy_vec3 min; /* m */
+	eddy_vec3 max; /* m */
+	bool inside;   /* particles are kept inside (true) or outside (false) */
 	eddy_collider_response response;
 } eddy_collide_box_def;
 EDDY_API eddy_collide_box_def eddy_default_collide_box_def(void);
@@ -414,14 +409,14 @@ EDDY_API eddy_system_id eddy_add_collide_plane(eddy_world *w, const eddy_collide
  * be closed (every edge in two triangles, consistently wound) unless open =
  * true, which decides inside by six rays' vote. */
 typedef struct eddy_collide_mesh_def {
-	char path[512];       /* the mesh file */
-	eddy_vec3 scale;      /* 1, per axis; each > 0 */
-	eddy_vec3 rotate;     /* degrees, rotation vector: |rotate| degrees about rotate / |rotate| */
-	eddy_vec3 translate;  /* m */
-	float cell_size;      /* m, distance grid spacing; 0 = auto: the finest of the mesh's longest side / 64,
-	                         half the world's cell_size and half the spacing of emitters added before it */
-	bool inside;          /* particles are kept inside (true) or outside (false) the mesh */
-	bool open;            /* accept a mesh that is not closed */
+	char path[512];      /* the mesh file */
+	eddy_vec3 scale;     /* 1, per axis; each > 0 */
+	eddy_vec3 rotate;    /* degrees, rotation vector: |rotate| degrees about rotate / |rotate| */
+	eddy_vec3 translate; /* m */
+	float cell_size;     /* m, distance grid spacing; 0 = auto: the finest of the mesh's longest side / 64,
+	                        half the world's cell_size and half the spacing of emitters added before it */
+	bool inside;         /* particles are kept inside (true) or outside (false) the mesh */
+	bool open;           /* accept a mesh that is not closed */
 	eddy_collider_response response;
 } eddy_collide_mesh_def;
 EDDY_API eddy_collide_mesh_def eddy_default_collide_mesh_def(void);
@@ -450,11 +445,11 @@ EDDY_API eddy_system_id eddy_add_emit_mesh(eddy_world *w, const eddy_emit_mesh_d
  * without vx vy vz take `velocity`. Every particle must lie in the world's
  * bounds. */
 typedef struct eddy_emit_particles_def {
-	char path[512];      /* the PLY file */
-	float spacing;       /* m, the spacing the particles sample the fluid at (the advection limit's length,
-	                        SPH's mass calibration); > 0 */
-	eddy_vec3 velocity;  /* m/s, for particles the file gives no velocity */
-	double start;        /* s, emission time */
+	char path[512];     /* the PLY file */
+	float spacing;      /* m, the spacing the particles sample the fluid at (the advection limit's length,
+	                       SPH's mass calibration); > 0 */
+	eddy_vec3 velocity; /* m/s, for particles the file gives no velocity */
+	double start;       /* s, emission time */
 } eddy_emit_particles_def;
 EDDY_API eddy_emit_particles_def eddy_default_emit_particles_def(void);
 EDDY_API eddy_system_id eddy_add_emit_particles(eddy_world *w, const eddy_emit_particles_def *def);
@@ -489,34 +484,34 @@ EDDY_API eddy_status eddy_collider_distance(const eddy_world *w, eddy_system_id 
 #define EDDY_MAX_EXTRA_STATS 16
 
 typedef struct eddy_stat_value {
-	const char *name;  /* e.g. "iterations" */
-	double value;      /* NAN when text is used */
-	const char *text;  /* NULL for a number */
+	const char *name; /* e.g. "iterations" */
+	double value;     /* NAN when text is used */
+	const char *text; /* NULL for a number */
 } eddy_stat_value;
 
 typedef struct eddy_frame_stats {
-	int frame;              /* frames completed */
-	double time;            /* s */
-	int64_t steps;          /* steps in this frame */
-	double dt_min, dt_max;  /* s, over this frame's steps */
-	const char *dt_limit;   /* what limited the last step, e.g. "integrate: advection" */
+	int frame;             /* frames completed */
+	double time;           /* s */
+	int64_t steps;         /* steps in this frame */
+	double dt_min, dt_max; /* s, over this frame's steps */
+	const char *dt_limit;  /* what limited the last step, e.g. "integrate: advection" */
 	size_t particles;
-	double max_speed;       /* m/s */
-	double cfl;             /* 1, max_speed * dt / length; NAN without a length */
-	double density_err_avg; /* 1, |rho - rho0| / rho0; NAN without a density */
-	double density_err_max; /* 1 */
+	double max_speed;               /* m/s */
+	double cfl;                     /* 1, max_speed * dt / length; NAN without a length */
+	double density_err_avg;         /* 1, |rho - rho0| / rho0; NAN without a density */
+	double density_err_max;         /* 1 */
 	double density_compression_avg; /* 1, mean of max(rho - rho0, 0) / rho0: the part of
-	                         * the density error a pressure solve controls (the free
-	                         * surface's under-density is the rest); NAN without a density */
-	double volume;          /* m^3, fluid volume on the grid; NAN without a grid */
-	size_t leaked;          /* particles outside the bounds or inside a collider */
-	size_t nonfinite;       /* non-finite values in particle state columns */
-	double wall_ms;         /* ms of wall time this frame */
+	                                 * the density error a pressure solve controls (the free
+	                                 * surface's under-density is the rest); NAN without a density */
+	double volume;                  /* m^3, fluid volume on the grid; NAN without a grid */
+	size_t leaked;                  /* particles outside the bounds or inside a collider */
+	size_t nonfinite;               /* non-finite values in particle state columns */
+	double wall_ms;                 /* ms of wall time this frame */
 	uint64_t state_hash;
 	int system_count;
 	const char *system_names[EDDY_MAX_STAT_SYSTEMS]; /* labels, pipeline order */
 	double system_ms[EDDY_MAX_STAT_SYSTEMS];         /* ms this frame */
-	int extra_count;        /* values systems published this frame */
+	int extra_count;                                 /* values systems published this frame */
 	eddy_stat_value extra[EDDY_MAX_EXTRA_STATS];
 	/* Energy and momentum (appended: the fields above keep their places).
 	 * All NAN without a particle mass: sph_density's calibrated mass, or for
@@ -650,9 +645,9 @@ EDDY_API eddy_system_id eddy_add_sph_surface_tension(eddy_world *w, const eddy_s
  * so particles at walls have full neighbourhoods: no sticking, no gap. Keep a
  * collide_box with the same bounds as the hard limit. */
 typedef struct eddy_sph_boundary_box_def {
-	eddy_vec3 min;  /* m */
-	eddy_vec3 max;  /* m */
-	float spacing;  /* m, spacing of the boundary particles; > 0 (about the fluid's) */
+	eddy_vec3 min; /* m */
+	eddy_vec3 max; /* m */
+	float spacing; /* m, spacing of the boundary particles; > 0 (about the fluid's) */
 } eddy_sph_boundary_box_def;
 EDDY_API eddy_sph_boundary_box_def eddy_default_sph_boundary_box_def(void);
 EDDY_API eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_boundary_box_def *def);
@@ -671,15 +666,15 @@ EDDY_API eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_
  * still. Publishes solver, iterations, residual,
  * residual_max, divergence_iterations and unconverged in the frame stats. */
 typedef struct eddy_sph_dfsph_def {
-	float max_density_error;    /* 1, mean density error rho/rho0 - 1 the solve
-	                               stops at (compression only without the divergence
-	                               solver); > 0 and <= 0.1 (0.001-0.01 usual) */
-	int max_iterations;         /* 1, cap on constant-density sweeps per step; 2 to 10000 */
-	bool divergence_solver;     /* also make the velocity divergence-free each step
-	                               (default; off: a cheaper cold solve that holds
-	                               shallow water only) */
-	float max_divergence_error; /* 1, mean |Drho/Dt| dt / rho0 the velocity solve
-	                               leaves per step (default 5e-5); > 0 and <= 1 */
+	float max_density_error;       /* 1, mean density error rho/rho0 - 1 the solve
+	                                  stops at (compression only without the divergence
+	                                  solver); > 0 and <= 0.1 (0.001-0.01 usual) */
+	int max_iterations;            /* 1, cap on constant-density sweeps per step; 2 to 10000 */
+	bool divergence_solver;        /* also make the velocity divergence-free each step
+	                                  (default; off: a cheaper cold solve that holds
+	                                  shallow water only) */
+	float max_divergence_error;    /* 1, mean |Drho/Dt| dt / rho0 the velocity solve
+	                                  leaves per step (default 5e-5); > 0 and <= 1 */
 	int max_divergence_iterations; /* 1, cap on divergence sweeps per step; 1 to 10000 */
 } eddy_sph_dfsph_def;
 EDDY_API eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void);
@@ -723,10 +718,10 @@ EDDY_API eddy_flip_surface_def eddy_default_flip_surface_def(void);
 EDDY_API eddy_system_id eddy_add_flip_surface(eddy_world *w, const eddy_flip_surface_def *def);
 
 typedef enum eddy_flip_solver {
-	EDDY_FLIP_PCG = 0,  /* MIC(0)-preconditioned conjugate gradient, double precision */
-	EDDY_FLIP_CHOLMOD,  /* supernodal sparse Cholesky (CHOLMOD), the exact reference */
-	EDDY_FLIP_HYPRE     /* CG preconditioned by a HYPRE PFMG multigrid V-cycle: iterations
-	                       flat in grid size; initialises MPI if the host has not */
+	EDDY_FLIP_PCG = 0, /* MIC(0)-preconditioned conjugate gradient, double precision */
+	EDDY_FLIP_CHOLMOD, /* supernodal sparse Cholesky (CHOLMOD), the exact reference */
+	EDDY_FLIP_HYPRE    /* CG preconditioned by a HYPRE PFMG multigrid V-cycle: iterations
+	                      flat in grid size; initialises MPI if the host has not */
 } eddy_flip_solver;
 
 /* flip_pressure: the pressure Poisson equation over fluid cells with
@@ -763,7 +758,7 @@ typedef enum eddy_flip_transfer {
 	EDDY_FLIP_TRANSFER_APIC      /* affine PIC; flip_ratio is not used */
 } eddy_flip_transfer;
 typedef struct eddy_flip_g2p_def {
-	float flip_ratio; /* 1, 0.95, 1 = pure FLIP, 0 = pure PIC; [0, 1]; transfer flip only */
+	float flip_ratio;            /* 1, 0.95, 1 = pure FLIP, 0 = pure PIC; [0, 1]; transfer flip only */
 	eddy_flip_transfer transfer; /* flip */
 } eddy_flip_g2p_def;
 EDDY_API eddy_flip_g2p_def eddy_default_flip_g2p_def(void);
@@ -793,10 +788,7 @@ EDDY_API eddy_system_id eddy_add_flip_reseed(eddy_world *w, const eddy_flip_rese
  * reads x y z and the columns color_by needs; it never runs per substep. The GL
  * context is created at the first frame: a failure there is the frame's
  * eddy_status (EDDY_ERR_EXTERNAL) with the reason in eddy_world_error(). */
-typedef enum eddy_projection {
-	EDDY_PROJECTION_PERSPECTIVE = 0,
-	EDDY_PROJECTION_ORTHOGRAPHIC
-} eddy_projection;
+typedef enum eddy_projection { EDDY_PROJECTION_PERSPECTIVE = 0, EDDY_PROJECTION_ORTHOGRAPHIC } eddy_projection;
 
 typedef enum eddy_colormap {
 	EDDY_COLORMAP_VIRIDIS = 0, /* perceptually uniform, dark blue to yellow */
@@ -805,26 +797,26 @@ typedef enum eddy_colormap {
 } eddy_colormap;
 
 typedef struct eddy_render_points_def {
-	int width, height;     /* px, image size, [1, 8192] */
-	int supersample;       /* 1, samples per pixel along each axis (box-filtered), [1, 4] */
-	eddy_vec3 eye;         /* m, camera position; eye == target frames the world's bounds */
-	eddy_vec3 target;      /* m, the point the camera looks at */
-	eddy_vec3 up;          /* 1, the camera's up direction (not parallel to the view) */
-	float fov;             /* degrees, vertical field of view (perspective), (0, 180) */
+	int width, height;          /* px, image size, [1, 8192] */
+	int supersample;            /* 1, samples per pixel along each axis (box-filtered), [1, 4] */
+	eddy_vec3 eye;              /* m, camera position; eye == target frames the world's bounds */
+	eddy_vec3 target;           /* m, the point the camera looks at */
+	eddy_vec3 up;               /* 1, the camera's up direction (not parallel to the view) */
+	float fov;                  /* degrees, vertical field of view (perspective), (0, 180) */
 	eddy_projection projection; /* perspective (uses fov) or orthographic (uses ortho_height) */
-	float ortho_height;    /* m, visible height (orthographic); 0 = fit the bounds */
-	eddy_vec3 background;  /* 1, RGB in [0, 1] */
-	float radius;          /* m, particle radius in world units, > 0 */
-	char color_by[32];     /* "speed" (m/s, derived), a particle column name (its unit), or "" for `color` */
-	eddy_vec3 color;       /* 1, RGB in [0, 1] when color_by is "" */
-	eddy_colormap colormap; /* maps color_by's value range to colours */
-	float value_min;       /* unit of color_by, bottom of the colour map; NaN = the frame's minimum */
-	float value_max;       /* unit of color_by, top of the colour map; NaN = the frame's maximum */
-	bool outline_domain;   /* draw the edges of the world's bounds (lines 1.5 px wide) */
-	bool outline_colliders;/* draw box colliders' edges and spheres' silhouettes (planes: none) */
-	eddy_vec3 outline_color; /* 1, RGB in [0, 1] */
-	char path[512];        /* printf pattern with one integer conversion (the frame), e.g. "out/f_%04d.png" */
-	int every;             /* frames, render every N-th frame, >= 1 */
+	float ortho_height;         /* m, visible height (orthographic); 0 = fit the bounds */
+	eddy_vec3 background;       /* 1, RGB in [0, 1] */
+	float radius;               /* m, particle radius in world units, > 0 */
+	char color_by[32];          /* "speed" (m/s, derived), a particle column name (its unit), or "" for `color` */
+	eddy_vec3 color;            /* 1, RGB in [0, 1] when color_by is "" */
+	eddy_colormap colormap;     /* maps color_by's value range to colours */
+	float value_min;            /* unit of color_by, bottom of the colour map; NaN = the frame's minimum */
+	float value_max;            /* unit of color_by, top of the colour map; NaN = the frame's maximum */
+	bool outline_domain;        /* draw the edges of the world's bounds (lines 1.5 px wide) */
+	bool outline_colliders;     /* draw box colliders' edges and spheres' silhouettes (planes: none) */
+	eddy_vec3 outline_color;    /* 1, RGB in [0, 1] */
+	char path[512];             /* printf pattern with one integer conversion (the frame), e.g. "out/f_%04d.png" */
+	int every;                  /* frames, render every N-th frame, >= 1 */
 } eddy_render_points_def;
 
 EDDY_API eddy_render_points_def eddy_default_render_points_def(void);
@@ -848,10 +840,10 @@ typedef enum eddy_export_format {
 
 typedef struct eddy_export_particles_def {
 	eddy_export_format format; /* EDDY_EXPORT_PLY (default), EDDY_EXPORT_VTP, or EDDY_EXPORT_VTK */
-	char channels[256];    /* "all" (default: every allocated particle float column at each frame), or particle
-	                        * columns besides x y z, separated by spaces or commas; "speed" is derived */
-	char path[512];        /* printf pattern with one integer conversion (the frame) */
-	int every;             /* frames, export every N-th frame, >= 1 */
+	char channels[256];        /* "all" (default: every allocated particle float column at each frame), or particle
+	                            * columns besides x y z, separated by spaces or commas; "speed" is derived */
+	char path[512];            /* printf pattern with one integer conversion (the frame) */
+	int every;                 /* frames, export every N-th frame, >= 1 */
 } eddy_export_particles_def;
 
 EDDY_API eddy_export_particles_def eddy_default_export_particles_def(void);
@@ -862,18 +854,18 @@ typedef enum eddy_collider_kind {
 	EDDY_COLLIDER_BOX = 0,
 	EDDY_COLLIDER_SPHERE,
 	EDDY_COLLIDER_PLANE,
-	EDDY_COLLIDER_OTHER,   /* a collider whose shape has no description */
-	EDDY_COLLIDER_MESH     /* a collide_mesh: a, b its distance grid's box (eddy_collider_mesh draws it) */
+	EDDY_COLLIDER_OTHER, /* a collider whose shape has no description */
+	EDDY_COLLIDER_MESH   /* a collide_mesh: a, b its distance grid's box (eddy_collider_mesh draws it) */
 } eddy_collider_kind;
 
 typedef struct eddy_collider_shape {
 	eddy_collider_kind kind; /* which of the fields below apply */
-	eddy_vec3 a;           /* m, box min, sphere centre or a point on the plane (before the rotation) */
-	eddy_vec3 b;           /* m, box max; 1, the plane's unit normal (rotation applied) */
-	float radius;          /* m, sphere radius */
-	bool inside;           /* particles live inside the box or sphere (a tank or bowl) */
-	eddy_vec3 rotation;    /* degrees, rotation vector turning a box or mesh about `pivot` (0: none) */
-	eddy_vec3 pivot;       /* m, the centre of that rotation, offset applied */
+	eddy_vec3 a;             /* m, box min, sphere centre or a point on the plane (before the rotation) */
+	eddy_vec3 b;             /* m, box max; 1, the plane's unit normal (rotation applied) */
+	float radius;            /* m, sphere radius */
+	bool inside;             /* particles live inside the box or sphere (a tank or bowl) */
+	eddy_vec3 rotation;      /* degrees, rotation vector turning a box or mesh about `pivot` (0: none) */
+	eddy_vec3 pivot;         /* m, the centre of that rotation, offset applied */
 } eddy_collider_shape;
 
 /* The collider's current shape (its offset applied; a box's corners a, b are
@@ -889,9 +881,9 @@ EDDY_API eddy_status eddy_collider_shape_of(const eddy_world *w, eddy_system_id 
  * Works on any particles (SPH, or FLIP's with spacing = cell_size / 2 for 8
  * per cell). The mesh is closed (every edge shared by two triangles). */
 typedef struct eddy_surface_def {
-	float spacing;   /* m, the particles' rest spacing (each stands for spacing^3 of liquid); > 0 */
-	float support;   /* 1, kernel support radius in spacings; [1, 4] */
-	float voxel;     /* 1, voxel size in spacings; [0.1, 1] */
+	float spacing; /* m, the particles' rest spacing (each stands for spacing^3 of liquid); > 0 */
+	float support; /* 1, kernel support radius in spacings; [1, 4] */
+	float voxel;   /* 1, voxel size in spacings; [0.1, 1] */
 } eddy_surface_def;
 EDDY_API eddy_surface_def eddy_default_surface_def(void);
 
@@ -899,11 +891,11 @@ EDDY_API eddy_surface_def eddy_default_surface_def(void);
  * buffers grow as needed), then eddy_mesh_free. */
 typedef struct eddy_mesh {
 	size_t vertex_count, triangle_count;
-	float *xyz;       /* m, 3 per vertex */
-	float *normal;    /* 1, 3 per vertex: the field's outward unit normal */
-	uint32_t *tri;    /* 3 vertex indices per triangle, counter-clockwise seen from outside */
+	float *xyz;    /* m, 3 per vertex */
+	float *normal; /* 1, 3 per vertex: the field's outward unit normal */
+	uint32_t *tri; /* 3 vertex indices per triangle, counter-clockwise seen from outside */
 	size_t vertex_cap, normal_cap, triangle_cap; /* floats / indices allocated */
-	void *field;      /* the field it came from (for eddy_mesh_write_vdb) */
+	void *field;                                 /* the field it came from (for eddy_mesh_write_vdb) */
 } eddy_mesh;
 
 /* Meshes the world's particles now (x y z). No particles: an empty mesh. */
@@ -921,11 +913,7 @@ EDDY_API eddy_status eddy_collider_mesh(eddy_world *w, eddy_system_id id, float 
  * f a//a b//b c//c) or OpenVDB (.vdb: the field's 1/2 level as a narrow-band
  * level set grid "surface", signed distance in m, which Blender and Houdini
  * read). Failures are EDDY_ERR_IO naming the file. */
-typedef enum eddy_mesh_format {
-	EDDY_MESH_PLY = 0,
-	EDDY_MESH_OBJ,
-	EDDY_MESH_VDB
-} eddy_mesh_format;
+typedef enum eddy_mesh_format { EDDY_MESH_PLY = 0, EDDY_MESH_OBJ, EDDY_MESH_VDB } eddy_mesh_format;
 EDDY_API eddy_status eddy_world_write_mesh(eddy_world *w, const eddy_mesh *mesh, eddy_mesh_format format,
                                            const char *path);
 EDDY_API void eddy_mesh_free(eddy_mesh *mesh);
@@ -953,25 +941,25 @@ EDDY_API eddy_system_id eddy_add_surface_mesh(eddy_world *w, const eddy_surface_
  * `every`-th frame. The camera fields mean what they mean in render_points.
  * Publishes render_ms, surface_ms and image. */
 typedef struct eddy_render_surface_def {
-	int width, height;     /* px, image size, [1, 8192] */
-	int supersample;       /* 1, samples per pixel along each axis, [1, 4] */
-	eddy_vec3 eye;         /* m, camera position; eye == target frames the world's bounds */
-	eddy_vec3 target;      /* m */
-	eddy_vec3 up;          /* 1 */
-	float fov;             /* degrees, (0, 180) */
+	int width, height; /* px, image size, [1, 8192] */
+	int supersample;   /* 1, samples per pixel along each axis, [1, 4] */
+	eddy_vec3 eye;     /* m, camera position; eye == target frames the world's bounds */
+	eddy_vec3 target;  /* m */
+	eddy_vec3 up;      /* 1 */
+	float fov;         /* degrees, (0, 180) */
 	eddy_projection projection;
-	float ortho_height;    /* m, 0 = fit the bounds */
-	eddy_vec3 background;  /* 1, RGB in [0, 1] */
-	float spacing;         /* m, as eddy_surface_def; > 0 */
-	float support;         /* 1, as eddy_surface_def; [1, 4] */
-	float voxel;           /* 1, as eddy_surface_def; [0.1, 1] */
-	eddy_vec3 color;       /* 1, the water's RGB in [0, 1] */
-	bool draw_colliders;   /* box and sphere colliders as meshes */
+	float ortho_height;       /* m, 0 = fit the bounds */
+	eddy_vec3 background;     /* 1, RGB in [0, 1] */
+	float spacing;            /* m, as eddy_surface_def; > 0 */
+	float support;            /* 1, as eddy_surface_def; [1, 4] */
+	float voxel;              /* 1, as eddy_surface_def; [0.1, 1] */
+	eddy_vec3 color;          /* 1, the water's RGB in [0, 1] */
+	bool draw_colliders;      /* box and sphere colliders as meshes */
 	eddy_vec3 collider_color; /* 1, RGB in [0, 1] */
-	bool outline_domain;   /* the world's bounds as lines */
-	eddy_vec3 outline_color; /* 1, RGB in [0, 1] */
-	char path[512];        /* printf pattern with one integer conversion (the frame), e.g. "out/s_%04d.png" */
-	int every;             /* frames, >= 1 */
+	bool outline_domain;      /* the world's bounds as lines */
+	eddy_vec3 outline_color;  /* 1, RGB in [0, 1] */
+	char path[512];           /* printf pattern with one integer conversion (the frame), e.g. "out/s_%04d.png" */
+	int every;                /* frames, >= 1 */
 } eddy_render_surface_def;
 EDDY_API eddy_render_surface_def eddy_default_render_surface_def(void);
 EDDY_API eddy_system_id eddy_add_render_surface(eddy_world *w, const eddy_render_surface_def *def);
@@ -985,9 +973,8 @@ EDDY_API eddy_system_id eddy_add_render_surface(eddy_world *w, const eddy_render
  * another size is centred, and cropped if larger; one that cannot be read
  * gets the reason in its caption. The panel size used goes to *out_w and
  * *out_h (either may be NULL). Returns 0, or -1 with the reason in err. */
-EDDY_API int eddy_compose_panels(const char *path, int panels, const char *const *images,
-                                 const char *const *captions, int panel_w, int panel_h, int *out_w, int *out_h,
-                                 char *err, size_t cap);
+EDDY_API int eddy_compose_panels(const char *path, int panels, const char *const *images, const char *const *captions,
+                                 int panel_w, int panel_h, int *out_w, int *out_h, char *err, size_t cap);
 
 #ifdef __cplusplus
 }

@@ -278,8 +278,7 @@ bool eddy__flip_solid_for(eddy_world *w, const eddy_system *self, double dt, fli
 bool eddy__flip_p2g_density(const eddy_world *w, const eddy_system *self, const float **dens, const uint8_t **held);
 
 /* Open fraction of face `axis` (i, j, k): 1 without colliders, 0 on the sides. */
-static inline float flip_face_weight(const eddy_world *w, const flip_solid *s, int axis, size_t f, int i, int j,
-                                     int k)
+static inline float flip_face_weight(const eddy_world *w, const flip_solid *s, int axis, size_t f, int i, int j, int k)
 {
 	const int c[3] = {i, j, k}, n[3] = {w->nx, w->ny, w->nz};
 	if (c[axis] == 0 || c[axis] == n[axis])
@@ -365,16 +364,13 @@ typedef struct flip_matrix {
 	double *off;  /* 6 n, or NULL for all 1 */
 } flip_matrix;
 
-static inline double flip_off(const flip_matrix *A, int r, int d)
-{
-	return A->off ? A->off[6 * r + d] : 1.0;
-}
+static inline double flip_off(const flip_matrix *A, int r, int d) { return A->off ? A->off[6 * r + d] : 1.0; }
 
 /* MIC(0)-PCG (flip_pcg.c). Solves A x = b to max|r| <= tol max|b|; x starts
  * at 0. Scratch comes from the world's arena. Returns false if it did not
  * converge in max_it; *it and *res (max|r| / max|b|) are always set. */
-bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double *x, double tol, int max_it,
-                    int *it, double *res);
+bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double *x, double tol, int max_it, int *it,
+                    double *res);
 
 /* PFMG-preconditioned CG (flip_hypre.c, the only file including HYPRE or
  * MPI). Solves A x = b to max|r| <= tol max|b| as eddy__flip_pcg; cell_of[r]
@@ -383,8 +379,8 @@ bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double
  * false: no convergence in max_it (EDDY_OK returned; *it, *res set). Any
  * other failure (MPI or HYPRE unavailable, out of memory) returns an error
  * with the world error set. */
-eddy_status eddy__flip_hypre_solve(eddy_world *w, const flip_matrix *A, const int *cell_of, const double *b,
-                                   double *x, double tol, int max_it, int *it, double *res, bool *converged);
+eddy_status eddy__flip_hypre_solve(eddy_world *w, const flip_matrix *A, const int *cell_of, const double *b, double *x,
+                                   double tol, int max_it, int *it, double *res, bool *converged);
 
 /* CHOLMOD (flip_cholmod.c, the only file including cholmod.h). One solver
  * per flip_pressure system, keeping the symbolic analysis while the pattern
@@ -394,7 +390,7 @@ flip_cholmod *eddy__flip_cholmod_new(void);
 void eddy__flip_cholmod_free(flip_cholmod *c);
 /* Factorises A (re-analysing only if its pattern changed) and solves A x = b.
  * On failure returns EDDY_ERR_SOLVER (or NOMEM) with the world error set. */
-eddy_status eddy__flip_cholmod_solve(eddy_world *w, flip_cholmod *c, const flip_matrix *A, const double *b,
-                                     double *x, bool *reanalysed);
+eddy_status eddy__flip_cholmod_solve(eddy_world *w, flip_cholmod *c, const flip_matrix *A, const double *b, double *x,
+                                     bool *reanalysed);
 
 #endif

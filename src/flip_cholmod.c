@@ -49,20 +49,29 @@ void eddy__flip_cholmod_free(flip_cholmod *s)
 static const char *status_text(int st)
 {
 	switch (st) {
-	case CHOLMOD_OK: return "ok";
-	case CHOLMOD_NOT_INSTALLED: return "method not installed";
-	case CHOLMOD_OUT_OF_MEMORY: return "out of memory";
-	case CHOLMOD_TOO_LARGE: return "problem too large";
-	case CHOLMOD_INVALID: return "invalid input";
-	case CHOLMOD_GPU_PROBLEM: return "GPU problem";
-	case CHOLMOD_NOT_POSDEF: return "matrix not positive definite";
-	case CHOLMOD_DSMALL: return "tiny diagonal";
-	default: return "unknown status";
+	case CHOLMOD_OK:
+		return "ok";
+	case CHOLMOD_NOT_INSTALLED:
+		return "method not installed";
+	case CHOLMOD_OUT_OF_MEMORY:
+		return "out of memory";
+	case CHOLMOD_TOO_LARGE:
+		return "problem too large";
+	case CHOLMOD_INVALID:
+		return "invalid input";
+	case CHOLMOD_GPU_PROBLEM:
+		return "GPU problem";
+	case CHOLMOD_NOT_POSDEF:
+		return "matrix not positive definite";
+	case CHOLMOD_DSMALL:
+		return "tiny diagonal";
+	default:
+		return "unknown status";
 	}
 }
 
-eddy_status eddy__flip_cholmod_solve(eddy_world *w, flip_cholmod *s, const flip_matrix *A, const double *b,
-                                     double *x, bool *reanalysed)
+eddy_status eddy__flip_cholmod_solve(eddy_world *w, flip_cholmod *s, const flip_matrix *A, const double *b, double *x,
+                                     bool *reanalysed)
 {
 	const int n = A->n;
 	*reanalysed = false;
@@ -74,8 +83,8 @@ eddy_status eddy__flip_cholmod_solve(eddy_world *w, flip_cholmod *s, const flip_
 		nnz += 1 + (A->nb[6 * j + 4] >= 0) + (A->nb[6 * j + 2] >= 0) + (A->nb[6 * j + 0] >= 0);
 	cholmod_sparse *M = cholmod_allocate_sparse((size_t)n, (size_t)n, (size_t)nnz, 1, 1, 1, CHOLMOD_REAL, &s->c);
 	if (!M)
-		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: CHOLMOD cannot allocate the matrix (%d unknowns): %s",
-		                  n, status_text(s->c.status));
+		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: CHOLMOD cannot allocate the matrix (%d unknowns): %s", n,
+		                  status_text(s->c.status));
 	int *cp = M->p, *ri = M->i;
 	double *val = M->x;
 	int k = 0;

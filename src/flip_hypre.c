@@ -292,8 +292,9 @@ static eddy_status solve(eddy_world *w, const flip_matrix *A, const int *cell_of
 	e |= HYPRE_StructPFMGSetup(H.pfmg, H.mat, H.rv, H.zv);
 	if (e) {
 		hyp_free(&H);
-		return eddy__fail(w, EDDY_ERR_SOLVER, "flip_pressure: HYPRE PFMG setup failed (error %d, %d unknowns, box %dx%dx%d)",
-		                  e, n, bx, by, bz);
+		return eddy__fail(w, EDDY_ERR_SOLVER,
+		                  "flip_pressure: HYPRE PFMG setup failed (error %d, %d unknowns, box %dx%dx%d)", e, n, bx, by,
+		                  bz);
 	}
 
 	/* CG, as flip_pcg.c */
@@ -334,8 +335,8 @@ static eddy_status solve(eddy_world *w, const flip_matrix *A, const int *cell_of
 	return EDDY_OK;
 }
 
-eddy_status eddy__flip_hypre_solve(eddy_world *w, const flip_matrix *A, const int *cell_of, const double *b,
-                                   double *x, double tol, int max_it, int *it, double *res, bool *converged)
+eddy_status eddy__flip_hypre_solve(eddy_world *w, const flip_matrix *A, const int *cell_of, const double *b, double *x,
+                                   double tol, int max_it, int *it, double *res, bool *converged)
 {
 	pthread_once(&init_once, init_libraries);
 	if (init_error) {

@@ -53,8 +53,7 @@ KERNEL void mic0_w(const flip_matrix *A, double *precon, const bool W)
 	}
 }
 
-KERNEL void apply_w(const flip_matrix *A, const double *precon, const double *r, double *y,
-                                                         double *z, const bool W)
+KERNEL void apply_w(const flip_matrix *A, const double *precon, const double *r, double *y, double *z, const bool W)
 {
 	for (int i = 0; i < A->n; ++i) {
 		const int *nb = &A->nb[6 * i];
@@ -163,8 +162,8 @@ static double maxabs(const double *a, int n)
 	return m;
 }
 
-bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double *x, double tol, int max_it,
-                    int *it, double *res)
+bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double *x, double tol, int max_it, int *it,
+                    double *res)
 {
 	const int n = A->n;
 	memset(x, 0, (size_t)n * sizeof *x);
@@ -189,7 +188,7 @@ bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double
 	const double *prev = z; /* s_old of the first iteration: s = z + 0 z = z */
 	for (int k = 1; k <= max_it; ++k) {
 		const double sq = matvec_dot(A, z, prev, beta, s, y, part, nt); /* y doubles as q = A s */
-		if (!(sq > 0)) { /* breakdown: A is not positive definite on s */
+		if (!(sq > 0)) {                                                /* breakdown: A is not positive definite on s */
 			*it = k;
 			*res = maxabs(r, n) / bmax;
 			return false;

@@ -84,7 +84,7 @@ static int cmp_vkey(const void *a, const void *b)
 }
 
 typedef struct ekey {
-	int a, b; /* a < b */
+	int a, b;    /* a < b */
 	int forward; /* 1 when the triangle runs a -> b */
 } ekey;
 
@@ -133,7 +133,8 @@ static double signed_volume(const eddy_trimesh *m)
 	double v = 0;
 	for (int t = 0; t < m->nt; ++t) {
 		const double *a = m->v[m->t[t][0]], *b = m->v[m->t[t][1]], *c = m->v[m->t[t][2]];
-		v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0]);
+		v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
+		     a[2] * (b[0] * c[1] - b[1] * c[0]);
 	}
 	return v / 6.0;
 }
@@ -195,7 +196,8 @@ bool eddy__mesh_load(eddy_trimesh *m, const char *path, eddy_mesh_pose pose, cha
 	}
 	double R[3][3];
 	rotation(pose.rotate, R);
-	const double sc3[3] = {pose.scale.x, pose.scale.y, pose.scale.z}, tr[3] = {pose.translate.x, pose.translate.y, pose.translate.z};
+	const double sc3[3] = {pose.scale.x, pose.scale.y, pose.scale.z},
+				 tr[3] = {pose.translate.x, pose.translate.y, pose.translate.z};
 	vkey *keys = malloc(nv * sizeof *keys);
 	int *tri = malloc(3 * nt * sizeof *tri), *id = malloc(nv * sizeof *id);
 	m->v = malloc(nv * sizeof *m->v);
@@ -343,7 +345,8 @@ static bool point_in_triangle_2d(double x0, double y0, double x1, double y1, dou
 
 /* Winding numbers of the samples along axis a: from the low end into wlo,
  * from the high end into whi (either may be NULL), indexed x fastest. */
-static bool winding_axis(const eddy_trimesh *m, const double origin[3], double h, const int n[3], int a, int *wlo, int *whi)
+static bool winding_axis(const eddy_trimesh *m, const double origin[3], double h, const int n[3], int a, int *wlo,
+                         int *whi)
 {
 	const int b = (a + 1) % 3, c = (a + 2) % 3, na = n[a], nb = n[b], nc = n[c];
 	const size_t rows = (size_t)nb * (size_t)nc;
@@ -395,7 +398,8 @@ static bool winding_axis(const eddy_trimesh *m, const double origin[3], double h
 	return true;
 }
 
-bool eddy__mesh_inside(const eddy_trimesh *m, const double origin[3], double h, const int n[3], bool vote, uint8_t *inside)
+bool eddy__mesh_inside(const eddy_trimesh *m, const double origin[3], double h, const int n[3], bool vote,
+                       uint8_t *inside)
 {
 	const size_t N = (size_t)n[0] * (size_t)n[1] * (size_t)n[2];
 	int *wlo = malloc(N * sizeof *wlo), *whi = vote ? malloc(N * sizeof *whi) : NULL;
@@ -601,7 +605,8 @@ float eddy__sdf_value(const eddy_sdf *s, eddy_vec3 p)
 	const size_t nx = (size_t)s->n[0], nxy = nx * (size_t)s->n[1];
 	const float *d = s->d + (size_t)i[0] + nx * (size_t)i[1] + nxy * (size_t)i[2];
 	const double c00 = d[0] + f[0] * (d[1] - d[0]), c10 = d[nx] + f[0] * (d[nx + 1] - d[nx]);
-	const double c01 = d[nxy] + f[0] * (d[nxy + 1] - d[nxy]), c11 = d[nxy + nx] + f[0] * (d[nxy + nx + 1] - d[nxy + nx]);
+	const double c01 = d[nxy] + f[0] * (d[nxy + 1] - d[nxy]),
+				 c11 = d[nxy + nx] + f[0] * (d[nxy + nx + 1] - d[nxy + nx]);
 	const double c0 = c00 + f[1] * (c10 - c00), c1 = c01 + f[1] * (c11 - c01);
 	return (float)(c0 + f[2] * (c1 - c0) + sqrt(out2) * s->h);
 }

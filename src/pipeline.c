@@ -72,8 +72,8 @@ static void writers_hint(const eddy_world *w, int col, char *buf, size_t cap)
 
 /* What each capability is, for the errors (in bit order). */
 static const char *const capability_names[] = {
-	"SPH neighbour lists", "the SPH equation-of-state force", "SPH wall particles",
-	"a collider", "the MAC grid velocities", "the grid's solid faces", "the FLIP free surface", "gravity",
+	"SPH neighbour lists",      "the SPH equation-of-state force", "SPH wall particles",    "a collider",
+	"the MAC grid velocities",  "the grid's solid faces",          "the FLIP free surface", "gravity",
 	"the grid fluid's density",
 };
 
@@ -419,13 +419,19 @@ static void custom_destroy(eddy_system *s)
 
 /* One vtable per feature set, so the world skips the hooks a custom system lacks
  * (a frame-only system is not timed as a step). Index: step + 2*frame + 4*limit. */
-#define CUSTOM_KIND(st, f, l) \
-	{.name = "custom", .step = (st), .frame = (f), .limit = (l), .destroy = custom_destroy, .sync = custom_sync}
+#define CUSTOM_KIND(st, f, l)                                                                                      \
+	{                                                                                                              \
+		.name = "custom", .step = (st), .frame = (f), .limit = (l), .destroy = custom_destroy, .sync = custom_sync \
+	}
 static const eddy_system_vtable custom_kinds[8] = {
-	CUSTOM_KIND(NULL, NULL, NULL),         CUSTOM_KIND(custom_step, NULL, NULL),
-	CUSTOM_KIND(NULL, custom_frame, NULL), CUSTOM_KIND(custom_step, custom_frame, NULL),
-	CUSTOM_KIND(NULL, NULL, custom_limit), CUSTOM_KIND(custom_step, NULL, custom_limit),
-	CUSTOM_KIND(NULL, custom_frame, custom_limit), CUSTOM_KIND(custom_step, custom_frame, custom_limit),
+	CUSTOM_KIND(NULL, NULL, NULL),
+	CUSTOM_KIND(custom_step, NULL, NULL),
+	CUSTOM_KIND(NULL, custom_frame, NULL),
+	CUSTOM_KIND(custom_step, custom_frame, NULL),
+	CUSTOM_KIND(NULL, NULL, custom_limit),
+	CUSTOM_KIND(custom_step, NULL, custom_limit),
+	CUSTOM_KIND(NULL, custom_frame, custom_limit),
+	CUSTOM_KIND(custom_step, custom_frame, custom_limit),
 };
 #undef CUSTOM_KIND
 
@@ -541,7 +547,8 @@ size_t eddy_world_plan(const eddy_world *w, char *buf, size_t cap)
 		buf[0] = '\0';
 	if (!w)
 		return 0;
-	sb_printf(&b, "pipeline: %d system%s, run in this order every step\n", w->order_count, w->order_count == 1 ? "" : "s");
+	sb_printf(&b, "pipeline: %d system%s, run in this order every step\n", w->order_count,
+	          w->order_count == 1 ? "" : "s");
 	int64_t expected = 0;
 	bool unbounded = false;
 	for (int k = 0; k < w->order_count; ++k) {
@@ -660,7 +667,8 @@ size_t eddy_world_plan_dot(const eddy_world *w, char *buf, size_t cap)
 		buf[0] = '\0';
 	if (!w)
 		return 0;
-	sb_printf(&b, "digraph eddy {\n  rankdir=LR;\n  node [shape=box, style=\"rounded,filled\", fillcolor=\"#eef4fb\", fontname=\"Helvetica\"];\n");
+	sb_printf(&b, "digraph eddy {\n  rankdir=LR;\n  node [shape=box, style=\"rounded,filled\", fillcolor=\"#eef4fb\", "
+	              "fontname=\"Helvetica\"];\n");
 	sb_printf(&b, "  edge [fontname=\"Helvetica\", fontsize=10];\n");
 	for (int k = 0; k < w->order_count; ++k) {
 		const eddy_system *s = &w->slots[w->order[k]];
@@ -679,8 +687,8 @@ size_t eddy_world_plan_dot(const eddy_world *w, char *buf, size_t cap)
 				label[0] = '\0';
 				for (int i = 0; i < s->read_count; ++i) {
 					if (producer_of(w, s->reads[i], r, prev == 1) == p && len < sizeof label)
-						len += (size_t)snprintf(label + len, sizeof label - len, "%s%s", len ? " " : "",
-						                        s->read_names[i]);
+						len +=
+							(size_t)snprintf(label + len, sizeof label - len, "%s%s", len ? " " : "", s->read_names[i]);
 				}
 				if (len)
 					sb_printf(&b, "  s%d -> s%d [label=\"%s\"%s];\n", p, r, label,
@@ -688,7 +696,8 @@ size_t eddy_world_plan_dot(const eddy_world *w, char *buf, size_t cap)
 			}
 		}
 	}
-	sb_printf(&b, "  label=\"eddy pipeline: solid edges carry columns within a step, dashed ones into the next step\";\n");
+	sb_printf(&b,
+	          "  label=\"eddy pipeline: solid edges carry columns within a step, dashed ones into the next step\";\n");
 	sb_printf(&b, "  fontname=\"Helvetica\";\n}\n");
 	return b.len;
 }
@@ -742,8 +751,9 @@ bool eddy__check_box(eddy_world *w, const char *sys, eddy_vec3 lo, eddy_vec3 hi)
 		return false;
 	if (hi.x > lo.x && hi.y > lo.y && hi.z > lo.z)
 		return true;
-	eddy__fail(w, EDDY_ERR_INVALID, "%s: 'max' must exceed 'min' on every axis (got min {%g, %g, %g}, max {%g, %g, %g})",
-	           sys, (double)lo.x, (double)lo.y, (double)lo.z, (double)hi.x, (double)hi.y, (double)hi.z);
+	eddy__fail(w, EDDY_ERR_INVALID,
+	           "%s: 'max' must exceed 'min' on every axis (got min {%g, %g, %g}, max {%g, %g, %g})", sys, (double)lo.x,
+	           (double)lo.y, (double)lo.z, (double)hi.x, (double)hi.y, (double)hi.z);
 	return false;
 }
 

@@ -39,8 +39,7 @@ static eddy_status check_def(eddy_world *w, const char *sys, float spacing, floa
 		return eddy__fail(w, EDDY_ERR_INVALID, "%s: 'support' must be in [1, 4] spacings (got %g)", sys,
 		                  (double)support);
 	if (!(voxel >= 0.1f && voxel <= 1))
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: 'voxel' must be in [0.1, 1] spacings (got %g)", sys,
-		                  (double)voxel);
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: 'voxel' must be in [0.1, 1] spacings (got %g)", sys, (double)voxel);
 	return EDDY_OK;
 }
 
@@ -224,8 +223,8 @@ static void write_ply(out_file *o, const eddy_mesh *m)
 
 static void write_obj(out_file *o, const eddy_mesh *m)
 {
-	if (!o->err && fprintf(o->f, "# eddy liquid surface: %zu vertices, %zu triangles\n", m->vertex_count,
-	                       m->triangle_count) < 0)
+	if (!o->err &&
+	    fprintf(o->f, "# eddy liquid surface: %zu vertices, %zu triangles\n", m->vertex_count, m->triangle_count) < 0)
 		o->err = errno ? errno : EIO;
 	/* %.9g: floats survive the text round trip exactly */
 	for (size_t v = 0; v < m->vertex_count && !o->err; ++v) {
@@ -240,8 +239,7 @@ static void write_obj(out_file *o, const eddy_mesh *m)
 	}
 	for (size_t t = 0; t < m->triangle_count && !o->err; ++t) {
 		const uint32_t *q = m->tri + 3 * t; /* OBJ counts from 1 */
-		if (fprintf(o->f, "f %u//%u %u//%u %u//%u\n", q[0] + 1, q[0] + 1, q[1] + 1, q[1] + 1, q[2] + 1,
-		            q[2] + 1) < 0)
+		if (fprintf(o->f, "f %u//%u %u//%u %u//%u\n", q[0] + 1, q[0] + 1, q[1] + 1, q[1] + 1, q[2] + 1, q[2] + 1) < 0)
 			o->err = errno ? errno : EIO;
 	}
 }

@@ -66,7 +66,8 @@
 /* this file's own symbols stay inside the library (see the Makefile) */
 #pragma GCC visibility push(hidden)
 
-namespace {
+namespace
+{
 
 using openvdb::FloatGrid;
 
@@ -160,8 +161,9 @@ struct Splat {
 			return;
 		}
 		FloatGrid::Accessor acc = grid->getAccessor();
-		splat(r.begin(), r.end(),
-		      [&](int i, int j, int kk, float v) { acc.modifyValue(openvdb::Coord(i, j, kk), [v](float &u) { u += v; }); });
+		splat(r.begin(), r.end(), [&](int i, int j, int kk, float v) {
+			acc.modifyValue(openvdb::Coord(i, j, kk), [v](float &u) { u += v; });
+		});
 	}
 
 	void join(Splat &o) { openvdb::tools::compSum(*grid, *o.grid); }
@@ -228,8 +230,7 @@ int fill_mesh(const FloatGrid &grid, float dx, const std::vector<openvdb::Vec3s>
 	const float h = 0.5f * dx;
 	/* the sampler keeps a reference to the accessor: it must outlive it */
 	const FloatGrid::ConstAccessor acc = grid.getConstAccessor();
-	openvdb::tools::GridSampler<FloatGrid::ConstAccessor, openvdb::tools::BoxSampler> sampler(
-		acc, grid.transform());
+	openvdb::tools::GridSampler<FloatGrid::ConstAccessor, openvdb::tools::BoxSampler> sampler(acc, grid.transform());
 	for (size_t v = 0; v < nv; ++v) {
 		const float *P = mesh->xyz + 3 * v;
 		float g[3];

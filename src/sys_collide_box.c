@@ -169,7 +169,8 @@ static float distance(const eddy_system *s, eddy_vec3 q)
 		bounds(b, &lo, &hi);
 	}
 	/* distance to the box surface, negative inside the box */
-	const float dx = fmaxf(lo.x - q.x, q.x - hi.x), dy = fmaxf(lo.y - q.y, q.y - hi.y), dz = fmaxf(lo.z - q.z, q.z - hi.z);
+	const float dx = fmaxf(lo.x - q.x, q.x - hi.x), dy = fmaxf(lo.y - q.y, q.y - hi.y),
+				dz = fmaxf(lo.z - q.z, q.z - hi.z);
 	const float ox = fmaxf(dx, 0), oy = fmaxf(dy, 0), oz = fmaxf(dz, 0);
 	const float box_sd = sqrtf(ox * ox + oy * oy + oz * oz) + fminf(fmaxf(dx, fmaxf(dy, dz)), 0);
 	/* a tank's solid is everything outside the box */
@@ -177,8 +178,8 @@ static float distance(const eddy_system *s, eddy_vec3 q)
 }
 
 static void shape(const eddy_system *s, eddy_collider_shape *out);
-static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
-                         float *vol, eddy_vec3 *normal);
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
+                         float *z, float *vol, eddy_vec3 *normal);
 
 const eddy_system_vtable eddy__kind_collide_box = {
 	.name = "collide_box",
@@ -229,8 +230,8 @@ static void shape(const eddy_system *s, eddy_collider_shape *out)
  * A tank (inside = true) gets none: an sph_boundary_box is its walls; nor
  * does a block an sph_boundary_box already samples (the same min and max:
  * a thin plate is made that way). */
-static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
-                         float *vol, eddy_vec3 *normal)
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
+                         float *z, float *vol, eddy_vec3 *normal)
 {
 	(void)normal;
 	const collide_box *b = s->data;

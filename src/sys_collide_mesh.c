@@ -242,8 +242,8 @@ static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void
 }
 
 static void shape(const eddy_system *s, eddy_collider_shape *out);
-static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
-                         float *vol, eddy_vec3 *normal);
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
+                         float *z, float *vol, eddy_vec3 *normal);
 
 const eddy_system_vtable eddy__kind_collide_mesh = {
 	.name = "collide_mesh",
@@ -330,7 +330,8 @@ eddy_system_id eddy_add_collide_mesh(eddy_world *w, const eddy_collide_mesh_def 
 		eddy__mesh_free(&m);
 		eddy__fail(w, EDDY_ERR_INVALID,
 		           "%s: %s: a distance grid of %d x %d x %d nodes is more than eddy builds (2^26); use a larger "
-		           "cell_size", sys, def->path, sdf.n[0], sdf.n[1], sdf.n[2]);
+		           "cell_size",
+		           sys, def->path, sdf.n[0], sdf.n[1], sdf.n[2]);
 		return EDDY_NULL_SYSTEM;
 	}
 	/* one block with the field, so every path that frees the data frees it */
@@ -395,8 +396,8 @@ static void shape(const eddy_system *s, eddy_collider_shape *out)
  * particles over the rim). A layer keeps the lattice's s^-2 points per unit
  * area on average. A tank mesh (inside = true) gets its shell outside the
  * mesh. */
-static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
-                         float *vol, eddy_vec3 *normal)
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
+                         float *z, float *vol, eddy_vec3 *normal)
 {
 	(void)w;
 	(void)normal;
@@ -425,7 +426,8 @@ static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacin
 					 * step along the field's normal) */
 					const float target = -((float)floor(-d / sp) + 0.5f) * (float)sp;
 					const eddy_vec3 nrm = body_normal(b, q);
-					x[k] = q.x + nrm.x * (target - d), y[k] = q.y + nrm.y * (target - d), z[k] = q.z + nrm.z * (target - d);
+					x[k] = q.x + nrm.x * (target - d), y[k] = q.y + nrm.y * (target - d),
+					z[k] = q.z + nrm.z * (target - d);
 					vol[k] = v;
 				}
 				k++;

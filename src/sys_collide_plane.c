@@ -73,8 +73,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		x[i] -= d * nrm.x;
 		y[i] -= d * nrm.y;
 		z[i] -= d * nrm.z;
-		eddy__collide_response(vx, vy, vz, (size_t)i, nrm, rot ? eddy__rigid_velocity(&mv, eddy__v3(x[i], y[i], z[i])) : vw,
-		                       r);
+		eddy__collide_response(vx, vy, vz, (size_t)i, nrm,
+		                       rot ? eddy__rigid_velocity(&mv, eddy__v3(x[i], y[i], z[i])) : vw, r);
 	}
 	return EDDY_OK;
 }
@@ -88,8 +88,8 @@ static float distance(const eddy_system *s, eddy_vec3 q)
 }
 
 static void shape(const eddy_system *s, eddy_collider_shape *out);
-static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
-                         float *vol, eddy_vec3 *normal);
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
+                         float *z, float *vol, eddy_vec3 *normal);
 
 const eddy_system_vtable eddy__kind_collide_plane = {
 	.name = "collide_plane",
@@ -153,8 +153,8 @@ static void plane_basis(eddy_vec3 n, eddy_vec3 *t1, eddy_vec3 *t2)
 	*t2 = eddy__v3(n.y * u.z - n.z * u.y, n.z * u.x - n.x * u.z, n.x * u.y - n.y * u.x);
 }
 
-static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
-                         float *vol, eddy_vec3 *normal)
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
+                         float *z, float *vol, eddy_vec3 *normal)
 {
 	const collide_plane *b = s->data;
 	const eddy_vec3 n = b->def.normal, o = b->def.point;
@@ -165,7 +165,7 @@ static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacin
 	for (int c = 0; c < 8; ++c) {
 		const eddy_vec3 q = {c & 1 ? hi.x : lo.x, c & 2 ? hi.y : lo.y, c & 4 ? hi.z : lo.z};
 		const double u = (q.x - o.x) * t1.x + (q.y - o.y) * t1.y + (q.z - o.z) * t1.z,
-		             v = (q.x - o.x) * t2.x + (q.y - o.y) * t2.y + (q.z - o.z) * t2.z;
+					 v = (q.x - o.x) * t2.x + (q.y - o.y) * t2.y + (q.z - o.z) * t2.z;
 		u0 = fmin(u0, u), u1 = fmax(u1, u), v0 = fmin(v0, v), v1 = fmax(v1, v);
 	}
 	const double sp = spacing;

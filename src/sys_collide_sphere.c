@@ -54,7 +54,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		mv = eddy__collider_step_motion(&b->base, ctx->dt);
 	else
 		vw = eddy__collider_step_velocity(&b->base, ctx->dt);
-	const eddy_vec3 c = rot ? eddy__pose_to_world(&pose, b->def.center) : eddy__add3(b->def.center, b->base.motion.offset);
+	const eddy_vec3 c =
+		rot ? eddy__pose_to_world(&pose, b->def.center) : eddy__add3(b->def.center, b->base.motion.offset);
 	const float rad = b->def.radius;
 	const bool bowl = b->def.inside;
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
@@ -73,8 +74,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		y[i] = c.y + u.y * rad;
 		z[i] = c.z + u.z * rad;
 		const eddy_vec3 nrm = bowl ? eddy__v3(-u.x, -u.y, -u.z) : u;
-		eddy__collide_response(vx, vy, vz, (size_t)i, nrm, rot ? eddy__rigid_velocity(&mv, eddy__v3(x[i], y[i], z[i])) : vw,
-		                       r);
+		eddy__collide_response(vx, vy, vz, (size_t)i, nrm,
+		                       rot ? eddy__rigid_velocity(&mv, eddy__v3(x[i], y[i], z[i])) : vw, r);
 	}
 	return EDDY_OK;
 }
@@ -98,8 +99,8 @@ static float distance(const eddy_system *s, eddy_vec3 q)
 }
 
 static void shape(const eddy_system *s, eddy_collider_shape *out);
-static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
-                         float *vol, eddy_vec3 *normal);
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
+                         float *z, float *vol, eddy_vec3 *normal);
 
 const eddy_system_vtable eddy__kind_collide_sphere = {
 	.name = "collide_sphere",
@@ -162,7 +163,7 @@ static size_t fib_layer(double rk, double s, double *px, double *py, double *pz)
 		const double golden = M_PI * (3.0 - sqrt(5.0));
 		for (size_t j = 0; j < nk; ++j) {
 			const double zz = 1.0 - (2.0 * (double)j + 1.0) / (double)nk, rr = sqrt(fmax(0.0, 1.0 - zz * zz)),
-			             ph = golden * (double)j;
+						 ph = golden * (double)j;
 			px[j] = rk * rr * cos(ph);
 			py[j] = rk * zz;
 			pz[j] = rk * rr * sin(ph);
@@ -171,8 +172,8 @@ static size_t fib_layer(double rk, double s, double *px, double *py, double *pz)
 	return nk;
 }
 
-static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y, float *z,
-                         float *vol, eddy_vec3 *normal)
+static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
+                         float *z, float *vol, eddy_vec3 *normal)
 {
 	(void)w;
 	(void)normal;
@@ -198,7 +199,7 @@ static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacin
 	if (!x)
 		return real;
 	double *px = malloc((all + 1) * sizeof *px), *py = malloc((all + 1) * sizeof *py),
-	       *pz = malloc((all + 1) * sizeof *pz);
+		   *pz = malloc((all + 1) * sizeof *pz);
 	size_t *start = malloc((size_t)(2 * L + 1) * sizeof *start);
 	if (!px || !py || !pz || !start) {
 		/* no memory for the volume sums: the lattice cell's volume instead */

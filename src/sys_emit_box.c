@@ -21,7 +21,7 @@ typedef struct emit_box {
 	eddy_emit_box_def def;
 	int nx, ny, nz;
 	eddy_vec3 origin; /* m, corner of the lattice's first cell */
-	size_t count; /* points emitted: nx ny nz, or those inside the ellipsoid */
+	size_t count;     /* points emitted: nx ny nz, or those inside the ellipsoid */
 	bool done;
 } emit_box;
 
@@ -53,7 +53,8 @@ static double axis_count(float lo, float hi, float h)
 static eddy_vec3 lattice_point(const emit_box *e, size_t k)
 {
 	const eddy_emit_box_def *d = &e->def;
-	const size_t ix = k % (size_t)e->nx, iy = k / (size_t)e->nx % (size_t)e->ny, iz = k / ((size_t)e->nx * (size_t)e->ny);
+	const size_t ix = k % (size_t)e->nx, iy = k / (size_t)e->nx % (size_t)e->ny,
+				 iz = k / ((size_t)e->nx * (size_t)e->ny);
 	return (eddy_vec3){e->origin.x + ((float)ix + 0.5f) * d->spacing, e->origin.y + ((float)iy + 0.5f) * d->spacing,
 	                   e->origin.z + ((float)iz + 0.5f) * d->spacing};
 }
@@ -65,8 +66,8 @@ static bool emitted(const eddy_emit_box_def *d, eddy_vec3 p)
 	if (d->shape != EDDY_EMIT_ELLIPSOID)
 		return true;
 	const double ux = ((double)p.x - 0.5 * ((double)d->min.x + d->max.x)) / (0.5 * ((double)d->max.x - d->min.x)),
-	             uy = ((double)p.y - 0.5 * ((double)d->min.y + d->max.y)) / (0.5 * ((double)d->max.y - d->min.y)),
-	             uz = ((double)p.z - 0.5 * ((double)d->min.z + d->max.z)) / (0.5 * ((double)d->max.z - d->min.z));
+				 uy = ((double)p.y - 0.5 * ((double)d->min.y + d->max.y)) / (0.5 * ((double)d->max.y - d->min.y)),
+				 uz = ((double)p.z - 0.5 * ((double)d->min.z + d->max.z)) / (0.5 * ((double)d->max.z - d->min.z));
 	return ux * ux + uy * uy + uz * uz <= 1.0;
 }
 
@@ -178,9 +179,9 @@ eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def)
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
 	if (def->min.x < lo.x || def->min.y < lo.y || def->min.z < lo.z || def->max.x > hi.x || def->max.y > hi.y ||
 	    def->max.z > hi.z) {
-		eddy__fail(w, EDDY_ERR_INVALID, "%s: the block {%g, %g, %g}..{%g, %g, %g} must lie inside the world bounds", sys,
-		           (double)def->min.x, (double)def->min.y, (double)def->min.z, (double)def->max.x, (double)def->max.y,
-		           (double)def->max.z);
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: the block {%g, %g, %g}..{%g, %g, %g} must lie inside the world bounds",
+		           sys, (double)def->min.x, (double)def->min.y, (double)def->min.z, (double)def->max.x,
+		           (double)def->max.y, (double)def->max.z);
 		return EDDY_NULL_SYSTEM;
 	}
 	emit_box *e = calloc(1, sizeof *e);
@@ -188,8 +189,8 @@ eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
 	e->def = *def;
 	const double nx = axis_count(def->min.x, def->max.x, def->spacing),
-	             ny = axis_count(def->min.y, def->max.y, def->spacing),
-	             nz = axis_count(def->min.z, def->max.z, def->spacing), count = nx * ny * nz;
+				 ny = axis_count(def->min.y, def->max.y, def->spacing),
+				 nz = axis_count(def->min.z, def->max.z, def->spacing), count = nx * ny * nz;
 	if (count == 0) {
 		free(e);
 		eddy__fail(w, EDDY_ERR_INVALID,
@@ -199,7 +200,8 @@ eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def)
 	}
 	if (count > (double)(1ll << 31)) {
 		free(e);
-		eddy__fail(w, EDDY_ERR_NOMEM, "%s: %.3g particles is more than eddy can hold; use a larger spacing", sys, count);
+		eddy__fail(w, EDDY_ERR_NOMEM, "%s: %.3g particles is more than eddy can hold; use a larger spacing", sys,
+		           count);
 		return EDDY_NULL_SYSTEM;
 	}
 	e->nx = (int)nx;
@@ -211,9 +213,9 @@ eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def)
 		/* an even number of cells per axis, centred on the ellipsoid (at most
 		 * two more per axis than the block's; about pi/6 of them are inside) */
 		const double hx = 0.5 * ((double)def->max.x - def->min.x), hy = 0.5 * ((double)def->max.y - def->min.y),
-		             hz = 0.5 * ((double)def->max.z - def->min.z);
+					 hz = 0.5 * ((double)def->max.z - def->min.z);
 		const double cx = ceil(hx / def->spacing - 1e-6), cy = ceil(hy / def->spacing - 1e-6),
-		             cz = ceil(hz / def->spacing - 1e-6);
+					 cz = ceil(hz / def->spacing - 1e-6);
 		e->nx = 2 * (int)cx;
 		e->ny = 2 * (int)cy;
 		e->nz = 2 * (int)cz;

@@ -133,7 +133,8 @@ eddy_system_id eddy_add_emit_mesh(eddy_world *w, const eddy_emit_mesh_def *def)
 	const char *sys = "emit_mesh";
 	if (!eddy__add_args(w, def, sys))
 		return EDDY_NULL_SYSTEM;
-	if (!eddy__check_positive(w, sys, "spacing", def->spacing) || !eddy__check_range(w, sys, "jitter", def->jitter, 0, 0.5) ||
+	if (!eddy__check_positive(w, sys, "spacing", def->spacing) ||
+	    !eddy__check_range(w, sys, "jitter", def->jitter, 0, 0.5) ||
 	    !eddy__check_vec3(w, sys, "velocity", def->velocity) || !eddy__check_nonneg(w, sys, "start", def->start))
 		return EDDY_NULL_SYSTEM;
 	eddy_trimesh m;
@@ -144,7 +145,8 @@ eddy_system_id eddy_add_emit_mesh(eddy_world *w, const eddy_emit_mesh_def *def)
 		eddy__mesh_describe_open(&m, def->path, err, sizeof err);
 		eddy__mesh_free(&m);
 		/* an emitter has no open = true: without an inside there is nothing to fill */
-		eddy__fail(w, EDDY_ERR_INVALID, "%s: %.*s", sys, (int)(strstr(err, "; close it") ? strstr(err, "; close it") - err : (long)strlen(err)), err);
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: %.*s", sys,
+		           (int)(strstr(err, "; close it") ? strstr(err, "; close it") - err : (long)strlen(err)), err);
 		return EDDY_NULL_SYSTEM;
 	}
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
@@ -169,8 +171,10 @@ eddy_system_id eddy_add_emit_mesh(eddy_world *w, const eddy_emit_mesh_def *def)
 	/* the inside test needs 9 bytes a lattice point while it runs */
 	if (N > (double)(1ll << 27)) {
 		eddy__mesh_free(&m);
-		eddy__fail(w, EDDY_ERR_NOMEM, "%s: %s: %.3g lattice points in the mesh's box is more than eddy fills (2^27); use a "
-		           "larger spacing", sys, def->path, N);
+		eddy__fail(w, EDDY_ERR_NOMEM,
+		           "%s: %s: %.3g lattice points in the mesh's box is more than eddy fills (2^27); use a "
+		           "larger spacing",
+		           sys, def->path, N);
 		return EDDY_NULL_SYSTEM;
 	}
 	emit_mesh *e = calloc(1, sizeof *e + (size_t)N);
@@ -191,8 +195,9 @@ eddy_system_id eddy_add_emit_mesh(eddy_world *w, const eddy_emit_mesh_def *def)
 		e->count += e->inside[q];
 	if (e->count == 0) {
 		free(e);
-		eddy__fail(w, EDDY_ERR_INVALID, "%s: %s: the mesh holds no lattice point at spacing %g m; use a smaller spacing",
-		           sys, def->path, (double)def->spacing);
+		eddy__fail(w, EDDY_ERR_INVALID,
+		           "%s: %s: the mesh holds no lattice point at spacing %g m; use a smaller spacing", sys, def->path,
+		           (double)def->spacing);
 		return EDDY_NULL_SYSTEM;
 	}
 	eddy_system_id id = eddy__add_system(w, &eddy__kind_emit_mesh, e, NULL, mesh_writes);

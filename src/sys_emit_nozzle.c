@@ -19,8 +19,8 @@ typedef struct emit_nozzle {
 	eddy_vec3 u, v;       /* unit vectors spanning the opening */
 	int disc;             /* particles per disc */
 	int half;             /* lattice extent: offsets in [-half, half] */
-	struct nozzle_state {  /* what a checkpoint saves */
-		double travelled;  /* m the jet moved since the last disc left */
+	struct nozzle_state { /* what a checkpoint saves */
+		double travelled; /* m the jet moved since the last disc left */
 		int64_t emitted;
 		bool started;
 	} run;
@@ -199,7 +199,8 @@ eddy_system_id eddy_add_emit_nozzle(eddy_world *w, const eddy_emit_nozzle_def *d
 	    !eddy__check_finite(w, sys, "start", def->start))
 		return EDDY_NULL_SYSTEM;
 	if (!(def->duration > 0)) {
-		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'duration' must be > 0 s, or infinite for no end (got %g)", sys, def->duration);
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'duration' must be > 0 s, or infinite for no end (got %g)", sys,
+		           def->duration);
 		return EDDY_NULL_SYSTEM;
 	}
 	if (def->max_particles < 0) {
@@ -215,8 +216,9 @@ eddy_system_id eddy_add_emit_nozzle(eddy_world *w, const eddy_emit_nozzle_def *d
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max, c = def->center;
 	const float r = def->radius;
 	if (c.x - r < lo.x || c.y - r < lo.y || c.z - r < lo.z || c.x + r > hi.x || c.y + r > hi.y || c.z + r > hi.z) {
-		eddy__fail(w, EDDY_ERR_INVALID, "%s: the opening (centre {%g, %g, %g}, radius %g m) must lie inside the world bounds",
-		           sys, (double)c.x, (double)c.y, (double)c.z, (double)r);
+		eddy__fail(w, EDDY_ERR_INVALID,
+		           "%s: the opening (centre {%g, %g, %g}, radius %g m) must lie inside the world bounds", sys,
+		           (double)c.x, (double)c.y, (double)c.z, (double)r);
 		return EDDY_NULL_SYSTEM;
 	}
 	emit_nozzle *e = calloc(1, sizeof *e);

@@ -117,8 +117,8 @@ typedef struct ply_elem {
 	ply_prop props[MAX_PROPS];
 } ply_elem;
 
-static const char *const type_names[] = {"char",  "int8",   "uchar", "uint8",  "short",   "int16",  "ushort", "uint16",
-                                         "int",   "int32",  "uint",  "uint32", "float",   "float32", "double", "float64"};
+static const char *const type_names[] = {"char", "int8",  "uchar", "uint8",  "short", "int16",   "ushort", "uint16",
+                                         "int",  "int32", "uint",  "uint32", "float", "float32", "double", "float64"};
 static const int type_size[] = {1, 1, 2, 2, 4, 4, 4, 8};
 
 static int type_of(const char *s)
@@ -140,12 +140,18 @@ static double binary_value(const unsigned char *p, int t, bool big)
 	for (int i = n - 1; i >= 0; --i)
 		u = u << 8 | b[i];
 	switch (t) {
-	case 0: return (double)(int8_t)u;
-	case 1: return (double)(uint8_t)u;
-	case 2: return (double)(int16_t)u;
-	case 3: return (double)(uint16_t)u;
-	case 4: return (double)(int32_t)u;
-	case 5: return (double)(uint32_t)u;
+	case 0:
+		return (double)(int8_t)u;
+	case 1:
+		return (double)(uint8_t)u;
+	case 2:
+		return (double)(int16_t)u;
+	case 3:
+		return (double)(uint16_t)u;
+	case 4:
+		return (double)(int32_t)u;
+	case 5:
+		return (double)(uint32_t)u;
 	case 6: {
 		uint32_t v = (uint32_t)u;
 		float f;
@@ -172,8 +178,8 @@ typedef struct reader {
 static bool next_value(reader *r, int format, int t, double *out, const char *what, size_t row)
 {
 	if (format == PLY_ASCII) {
-		while (r->pos < r->len && (r->buf[r->pos] == ' ' || r->buf[r->pos] == '\t' || r->buf[r->pos] == '\n' ||
-		                           r->buf[r->pos] == '\r'))
+		while (r->pos < r->len &&
+		       (r->buf[r->pos] == ' ' || r->buf[r->pos] == '\t' || r->buf[r->pos] == '\n' || r->buf[r->pos] == '\r'))
 			r->pos++;
 		if (r->pos >= r->len) {
 			snprintf(r->err, r->cap, "%s: the data ends at row %zu of '%s'", r->path, row, what);
@@ -265,12 +271,15 @@ static emit_particles *read_ply(const char *path, eddy_vec3 vdef, char *err, siz
 		if (strcmp(w0, "end_header") == 0) {
 			ended = true;
 		} else if (strcmp(w0, "format") == 0) {
-			format = strcmp(w1, "ascii") == 0 ? PLY_ASCII
+			format = strcmp(w1, "ascii") == 0                  ? PLY_ASCII
 			         : strcmp(w1, "binary_little_endian") == 0 ? PLY_LE
-			         : strcmp(w1, "binary_big_endian") == 0 ? PLY_BE : -1;
+			         : strcmp(w1, "binary_big_endian") == 0    ? PLY_BE
+			                                                   : -1;
 			if (format < 0 || strcmp(w2, "1.0") != 0) {
-				snprintf(err, cap, "%s: header line %d: unknown format '%s %s' (ascii, binary_little_endian or "
-				         "binary_big_endian 1.0)", path, line_no, w1, w2);
+				snprintf(err, cap,
+				         "%s: header line %d: unknown format '%s %s' (ascii, binary_little_endian or "
+				         "binary_big_endian 1.0)",
+				         path, line_no, w1, w2);
 				goto out;
 			}
 		} else if (strcmp(w0, "element") == 0) {
@@ -309,8 +318,10 @@ static emit_particles *read_ply(const char *path, eddy_vec3 vdef, char *err, siz
 			p->type = type_of(list ? w3 : w1);
 			snprintf(p->name, sizeof p->name, "%s", list ? w4 : w2);
 			if (p->type < 0 || (list && p->list_type < 0) || nw != (list ? 5 : 3)) {
-				snprintf(err, cap, "%s: header line %d: cannot read '%s' (property <type> <name>, or property list "
-				         "<count type> <type> <name>)", path, line_no, line);
+				snprintf(err, cap,
+				         "%s: header line %d: cannot read '%s' (property <type> <name>, or property list "
+				         "<count type> <type> <name>)",
+				         path, line_no, line);
 				goto out;
 			}
 		} else {
@@ -422,8 +433,8 @@ eddy_system_id eddy_add_emit_particles(eddy_world *w, const eddy_emit_particles_
 	const char *sys = "emit_particles";
 	if (!eddy__add_args(w, def, sys))
 		return EDDY_NULL_SYSTEM;
-	if (!eddy__check_positive(w, sys, "spacing", def->spacing) || !eddy__check_vec3(w, sys, "velocity", def->velocity) ||
-	    !eddy__check_nonneg(w, sys, "start", def->start))
+	if (!eddy__check_positive(w, sys, "spacing", def->spacing) ||
+	    !eddy__check_vec3(w, sys, "velocity", def->velocity) || !eddy__check_nonneg(w, sys, "start", def->start))
 		return EDDY_NULL_SYSTEM;
 	if (!memchr(def->path, '\0', sizeof def->path) || !def->path[0])
 		return eddy__fail(w, EDDY_ERR_INVALID, "%s: 'path' must name a PLY file", sys), EDDY_NULL_SYSTEM;

@@ -37,9 +37,10 @@ static eddy_vec3 push_out(const eddy_system *c, eddy_vec3 p, float gap, float ep
 		const float d = c->vt->distance(c, p);
 		if (!(d < gap))
 			return p;
-		eddy_vec3 g = {c->vt->distance(c, eddy__v3(p.x + eps, p.y, p.z)) - c->vt->distance(c, eddy__v3(p.x - eps, p.y, p.z)),
-		               c->vt->distance(c, eddy__v3(p.x, p.y + eps, p.z)) - c->vt->distance(c, eddy__v3(p.x, p.y - eps, p.z)),
-		               c->vt->distance(c, eddy__v3(p.x, p.y, p.z + eps)) - c->vt->distance(c, eddy__v3(p.x, p.y, p.z - eps))};
+		eddy_vec3 g = {
+			c->vt->distance(c, eddy__v3(p.x + eps, p.y, p.z)) - c->vt->distance(c, eddy__v3(p.x - eps, p.y, p.z)),
+			c->vt->distance(c, eddy__v3(p.x, p.y + eps, p.z)) - c->vt->distance(c, eddy__v3(p.x, p.y - eps, p.z)),
+			c->vt->distance(c, eddy__v3(p.x, p.y, p.z + eps)) - c->vt->distance(c, eddy__v3(p.x, p.y, p.z - eps))};
 		const float len = sqrtf(g.x * g.x + g.y * g.y + g.z * g.z);
 		if (!(len > 0))
 			return p;

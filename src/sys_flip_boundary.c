@@ -48,14 +48,14 @@ typedef struct boundary {
 	 * step, and the solid velocities of the current step (see step) */
 	int cap;
 	struct seen_offset {
-		float x, y, z; /* m */
-		float have;    /* 1 when x y z hold a collider's offset (floats only: no padding in a checkpoint) */
+		float x, y, z;            /* m */
+		float have;               /* 1 when x y z hold a collider's offset (floats only: no padding in a checkpoint) */
 		float rx, ry, rz, unused; /* degrees, the collider's rotation */
-	} *seen;
+	} * seen;
 	eddy_vec3 *vel;
 	eddy_vec3 *omega;  /* rad/s, per pipeline position, this step's (with vel) */
 	eddy_vec3 *center; /* m, the pivot each omega turns about */
-	int64_t vel_step; /* the step vel belongs to, -1 for none */
+	int64_t vel_step;  /* the step vel belongs to, -1 for none */
 	/* this step's solid faces, lent to the FLIP systems after this one */
 	flip_solid sd;
 	flip_solid_store store;
@@ -210,7 +210,8 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 			omega = ((const boundary *)c->data)->omega, center = ((const boundary *)c->data)->center;
 			break;
 		}
-		if (!velocities && eddy__is_collider(c) && eddy__motion_rotates(&((const eddy_collider_base *)c->data)->motion)) {
+		if (!velocities && eddy__is_collider(c) &&
+		    eddy__motion_rotates(&((const eddy_collider_base *)c->data)->motion)) {
 			own_omega = eddy__arena_alloc(&w->arena, (size_t)w->order_count * sizeof *own_omega + 1);
 			own_center = eddy__arena_alloc(&w->arena, (size_t)w->order_count * sizeof *own_center + 1);
 			if (!own_omega || !own_center)
@@ -398,7 +399,8 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 				if (ow && omega && (omega[ow - 1].x != 0 || omega[ow - 1].y != 0 || omega[ow - 1].z != 0)) {
 					/* a turning solid: its point velocity at the face's centre */
 					const eddy_collider_velocity rv = {v, omega[ow - 1], center[ow - 1]};
-					const eddy_vec3 fc = {(float)(o.x + (i + 0.5 * (a != 0)) * h), (float)(o.y + (j + 0.5 * (a != 1)) * h),
+					const eddy_vec3 fc = {(float)(o.x + (i + 0.5 * (a != 0)) * h),
+					                      (float)(o.y + (j + 0.5 * (a != 1)) * h),
 					                      (float)(o.z + (k + 0.5 * (a != 2)) * h)};
 					v = eddy__rigid_velocity(&rv, fc);
 				}
@@ -517,14 +519,16 @@ static bool solid_velocities(eddy_world *w, boundary *b, const eddy_step_context
 			continue;
 		}
 		const eddy_collider_motion m = ((const eddy_collider_base *)c->data)->motion;
-		const eddy_vec3 ref = b->seen[q].have != 0 ? (eddy_vec3){b->seen[q].x, b->seen[q].y, b->seen[q].z} : m.last_offset;
+		const eddy_vec3 ref =
+			b->seen[q].have != 0 ? (eddy_vec3){b->seen[q].x, b->seen[q].y, b->seen[q].z} : m.last_offset;
 		const eddy_vec3 rref =
 			b->seen[q].have != 0 ? (eddy_vec3){b->seen[q].rx, b->seen[q].ry, b->seen[q].rz} : m.last_rotation;
 		b->vel[q] = (eddy_vec3){(float)((m.offset.x - ref.x) * inv_dt), (float)((m.offset.y - ref.y) * inv_dt),
 		                        (float)((m.offset.z - ref.z) * inv_dt)};
 		b->omega[q] = eddy__rotation_rate(rref, m.rotation, ctx->dt);
 		b->center[q] = eddy__add3(m.pivot, m.offset);
-		b->seen[q] = (struct seen_offset){m.offset.x, m.offset.y, m.offset.z, 1, m.rotation.x, m.rotation.y, m.rotation.z, 0};
+		b->seen[q] =
+			(struct seen_offset){m.offset.x, m.offset.y, m.offset.z, 1, m.rotation.x, m.rotation.y, m.rotation.z, 0};
 	}
 	b->vel_step = ctx->step;
 	return true;

@@ -55,8 +55,8 @@ static inline void face_coords(size_t f, const size_t st[3], int m1, bool small,
  * double: equal neighbours give exactly their value (in float, (v + v + v)
  * / 3 need not be v), so a uniform field extrapolates to itself and G2P's
  * FLIP delta stays exactly 0. */
-static inline bool face_average(const float *u, const uint8_t *layer, const int m[3], const size_t st[3], const int c[3],
-                                size_t f, int l, float *out)
+static inline bool face_average(const float *u, const uint8_t *layer, const int m[3], const size_t st[3],
+                                const int c[3], size_t f, int l, float *out)
 {
 	double sum = 0;
 	int cnt = 0;
@@ -105,7 +105,7 @@ static void extrapolate_grid(float *u, uint8_t *restrict layer, uint8_t *restric
 					const size_t sy = st[1], sz = st[2];
 					for (int i = 1; i < m[0] - 1; ++i)
 						h[i] = (uint8_t)((L[i] == UNKNOWN) & ((L[i - 1] < lb) | (L[i + 1] < lb) | (L[i - sy] < lb) |
-						                                        (L[i + sy] < lb) | (L[i - sz] < lb) | (L[i + sz] < lb)));
+						                                      (L[i + sy] < lb) | (L[i - sz] < lb) | (L[i + sz] < lb)));
 					for (int i = 0; i < m[0]; i += m[0] - 1) { /* the row's two ends */
 						const int c[3] = {i, j, k};
 						float v;

@@ -28,11 +28,12 @@ typedef struct g2p {
 	eddy_flip_g2p_def def;
 } g2p;
 
-static const int g2p_reads[] = {COL_X_,     COL_Y_,     COL_Z_,     COL_VX,    COL_VY,    COL_VZ,
-                                COL_FACE_U, COL_FACE_V, COL_FACE_W, COL_U_OLD, COL_V_OLD, COL_W_OLD, -1};
+static const int g2p_reads[] = {COL_X_,     COL_Y_,     COL_Z_,    COL_VX,    COL_VY,    COL_VZ, COL_FACE_U,
+                                COL_FACE_V, COL_FACE_W, COL_U_OLD, COL_V_OLD, COL_W_OLD, -1};
 static const int g2p_writes[] = {COL_VX, COL_VY, COL_VZ, -1};
-static const int apic_writes[] = {COL_VX,      COL_VY,      COL_VZ,      COL_APIC_UX, COL_APIC_UY, COL_APIC_UZ,
-                                  COL_APIC_VX, COL_APIC_VY, COL_APIC_VZ, COL_APIC_WX, COL_APIC_WY, COL_APIC_WZ, -1};
+static const int apic_writes[] = {COL_VX,      COL_VY,      COL_VZ,      COL_APIC_UX, COL_APIC_UY,
+                                  COL_APIC_UZ, COL_APIC_VX, COL_APIC_VY, COL_APIC_VZ, COL_APIC_WX,
+                                  COL_APIC_WY, COL_APIC_WZ, -1};
 
 eddy_flip_g2p_def eddy_default_flip_g2p_def(void)
 {
@@ -49,7 +50,7 @@ static inline float sample_grad(const float *f, size_t sy, size_t sz, flip_axis 
                                 float dx, float dy, float dz, float g[3])
 {
 	const size_t i[2] = {(size_t)ax.i0, (size_t)ax.i1}, j[2] = {(size_t)ay.i0 * sy, (size_t)ay.i1 * sy},
-	             k[2] = {(size_t)az.i0 * sz, (size_t)az.i1 * sz};
+				 k[2] = {(size_t)az.i0 * sz, (size_t)az.i1 * sz};
 	const float wx[2] = {1.0f - ax.w1, ax.w1}, wy[2] = {1.0f - ay.w1, ay.w1}, wz[2] = {1.0f - az.w1, az.w1};
 	const float gx[2] = {-dx, dx}, gy[2] = {-dy, dy}, gz[2] = {-dz, dz};
 	float v = 0, sx = 0, sy2 = 0, sz2 = 0;
@@ -89,7 +90,7 @@ static void apic_step(eddy_world *w, int threads)
 	for (long i = 0; i < n; ++i) {
 		const flip_axes a = flip_axes_at(&grid, (eddy_vec3){x[i], y[i], z[i]});
 		const float tx = (x[i] - grid.o.x) * grid.inv, ty = (y[i] - grid.o.y) * grid.inv,
-		            tz = (z[i] - grid.o.z) * grid.inv;
+					tz = (z[i] - grid.o.z) * grid.inv;
 		const float sfx = axis_slope(tx, 0.0f, grid.nx + 1, grid.inv), scx = axis_slope(tx, 0.5f, grid.nx, grid.inv);
 		const float sfy = axis_slope(ty, 0.0f, grid.ny + 1, grid.inv), scy = axis_slope(ty, 0.5f, grid.ny, grid.inv);
 		const float sfz = axis_slope(tz, 0.0f, grid.nz + 1, grid.inv), scz = axis_slope(tz, 0.5f, grid.nz, grid.inv);

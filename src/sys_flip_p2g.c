@@ -61,13 +61,13 @@ typedef struct p2g {
 	 * particle, kept for flip_pressure (eddy__flip_p2g_density) */
 	float *dens;
 	uint8_t *held;
-	size_t cap;        /* cells allocated */
-	int64_t step;      /* the world step they were computed at, -1 never */
-	size_t particles;  /* the particle count they were computed with */
+	size_t cap;       /* cells allocated */
+	int64_t step;     /* the world step they were computed at, -1 never */
+	size_t particles; /* the particle count they were computed with */
 } p2g;
 
 static const int p2g_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_AX, COL_AY, COL_AZ, -1};
-static const int p2g_writes[] = {COL_VX,  COL_VY,  COL_VZ,  COL_FACE_U,    COL_FACE_V,   COL_FACE_W,
+static const int p2g_writes[] = {COL_VX,    COL_VY,    COL_VZ,    COL_FACE_U,    COL_FACE_V,   COL_FACE_W,
                                  COL_U_OLD, COL_V_OLD, COL_W_OLD, COL_CELL_TYPE, COL_FLIP_PHI, -1};
 
 eddy_flip_p2g_def eddy_default_flip_p2g_def(void)
@@ -111,14 +111,15 @@ static inline void splat(float *restrict sv, float *restrict sw, size_t sy, size
 /* splat() for APIC: the value at a face is val + c . (x_f - x_p), with
  * d0 = x_f - x_p (m) at each axis's i0 sample and h the spacing (i1 is one
  * sample further; at the clamped top i1 = i0 with weight 0). */
-static inline void splat_affine(float *restrict sv, float *restrict sw, size_t sy, size_t sz, flip_axis ax, flip_axis ay,
-                                flip_axis az, float val, const float c[3], const float d0[3], float h, int klo, int khi)
+static inline void splat_affine(float *restrict sv, float *restrict sw, size_t sy, size_t sz, flip_axis ax,
+                                flip_axis ay, flip_axis az, float val, const float c[3], const float d0[3], float h,
+                                int klo, int khi)
 {
 	const int kk[2] = {az.i0, az.i1};
 	const size_t j[2] = {(size_t)ay.i0 * sy, (size_t)ay.i1 * sy}, k[2] = {(size_t)az.i0 * sz, (size_t)az.i1 * sz};
 	const float wy[2] = {1.0f - ay.w1, ay.w1}, wz[2] = {1.0f - az.w1, az.w1}, wx0 = 1.0f - ax.w1, wx1 = ax.w1;
 	const float ex[2] = {c[0] * d0[0], c[0] * (d0[0] + h)}, ey[2] = {c[1] * d0[1], c[1] * (d0[1] + h)},
-	            ez[2] = {c[2] * d0[2], c[2] * (d0[2] + h)};
+				ez[2] = {c[2] * d0[2], c[2] * (d0[2] + h)};
 	for (int cc = 0; cc < 2; ++cc)
 		for (int b = 0; b < 2 && kk[cc] >= klo && kk[cc] < khi; ++b) {
 			const size_t row = k[cc] + j[b];
@@ -240,7 +241,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 			if (cu[0]) {
 				const float tx = (x[i] - o.x) * inv, ty = (y[i] - o.y) * inv, tz = gz;
 				const float cx[3] = {cu[0][i], cu[1][i], cu[2][i]}, cy[3] = {cu[3][i], cu[4][i], cu[5][i]},
-				            cz[3] = {cu[6][i], cu[7][i], cu[8][i]};
+							cz[3] = {cu[6][i], cu[7][i], cu[8][i]};
 				const float du[3] = {face_offset(g.fx, 0.0f, tx, h), face_offset(g.cy, 0.5f, ty, h),
 				                     face_offset(g.cz, 0.5f, tz, h)};
 				const float dv[3] = {face_offset(g.cx, 0.5f, tx, h), face_offset(g.fy, 0.0f, ty, h),
@@ -302,7 +303,8 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 			for (int kk = k0; kk <= k1; ++kk)
 				for (int jj = j0; jj <= j1; ++jj)
 					for (int ii = i0; ii <= i1; ++ii) {
-						const float ddx = (float)ii + 0.5f - gx, ddy = (float)jj + 0.5f - gy, ddz = (float)kk + 0.5f - gz;
+						const float ddx = (float)ii + 0.5f - gx, ddy = (float)jj + 0.5f - gy,
+									ddz = (float)kk + 0.5f - gz;
 						if (ddx * ddx + ddy * ddy + ddz * ddz <= r2) {
 							const size_t q = flip_cell(w, ii, jj, kk);
 							type[q] = EDDY_CELL_FLUID;

@@ -91,7 +91,7 @@ typedef struct pressure {
 } pressure;
 
 static const int pressure_reads[] = {COL_CELL_TYPE, COL_FLIP_PHI, COL_FACE_U, COL_FACE_V, COL_FACE_W,
-                                     COL_X_,        COL_Y_,       COL_Z_, -1};
+                                     COL_X_,        COL_Y_,       COL_Z_,     -1};
 static const int pressure_writes[] = {COL_FACE_U, COL_FACE_V, COL_FACE_W, COL_CELL_PRESSURE, -1};
 
 eddy_flip_pressure_def eddy_default_flip_pressure_def(void)
@@ -139,7 +139,9 @@ static long across(const eddy_world *w, int i, int j, int k, int d, size_t *f)
 	const int n[3] = {w->nx, w->ny, w->nz};
 	int fc[3] = {i, j, k};
 	fc[a] += plus;
-	*f = a == 0 ? flip_fu(w, fc[0], fc[1], fc[2]) : a == 1 ? flip_fv(w, fc[0], fc[1], fc[2]) : flip_fw(w, fc[0], fc[1], fc[2]);
+	*f = a == 0   ? flip_fu(w, fc[0], fc[1], fc[2])
+	     : a == 1 ? flip_fv(w, fc[0], fc[1], fc[2])
+	              : flip_fw(w, fc[0], fc[1], fc[2]);
 	c[a] += plus ? 1 : -1;
 	if (c[a] < 0 || c[a] >= n[a])
 		return -1;
@@ -319,7 +321,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 			 * beyond the domain's sides excepted) */
 			if (deep && e <= 0) {
 				const int i0 = i > 0 ? -1 : 0, i1 = i + 1 < nx ? 1 : 0, j0 = j > 0 ? -1 : 0, j1 = j + 1 < ny ? 1 : 0,
-				          k0 = k > 0 ? -1 : 0, k1 = k + 1 < nz ? 1 : 0;
+						  k0 = k > 0 ? -1 : 0, k1 = k + 1 < nz ? 1 : 0;
 				const long sy = nx, sz = (long)nx * ny;
 				for (int dk = k0; dk <= k1 && deep; ++dk)
 					for (int dj = j0; dj <= j1 && deep; ++dj)
@@ -396,11 +398,12 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 		if (st != EDDY_OK)
 			return st;
 		if (!converged)
-			return eddy__fail(w, EDDY_ERR_SOLVER,
-			                  "flip_pressure: HYPRE PFMG-PCG did not converge at step %lld: relative residual %.3g after "
-			                  "%d iterations (tolerance %.3g, %d unknowns); raise max_iterations or use solver = "
-			                  "\"cholmod\"",
-			                  (long long)ctx->step, residual, iterations, ps->def.tolerance, n);
+			return eddy__fail(
+				w, EDDY_ERR_SOLVER,
+				"flip_pressure: HYPRE PFMG-PCG did not converge at step %lld: relative residual %.3g after "
+				"%d iterations (tolerance %.3g, %d unknowns); raise max_iterations or use solver = "
+				"\"cholmod\"",
+				(long long)ctx->step, residual, iterations, ps->def.tolerance, n);
 	} else {
 		/* created at the first solve, not in add: a failed add frees the
 		 * system's data without its destroy hook */
@@ -430,10 +433,11 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	residual = bmax > 0 ? rmax / bmax : rmax;
 	const double allowed = ps->def.solver == EDDY_FLIP_CHOLMOD ? 1e-8 : ps->def.tolerance * 1.0001;
 	if (!finite || !(residual <= allowed))
-		return eddy__fail(w, EDDY_ERR_SOLVER,
-		                  "flip_pressure: %s solution rejected at step %lld: relative residual %.3g > %.3g (%d unknowns, %s)",
-		                  solver_label[ps->def.solver], (long long)ctx->step, residual, allowed, n,
-		                  finite ? "finite" : "non-finite values");
+		return eddy__fail(
+			w, EDDY_ERR_SOLVER,
+			"flip_pressure: %s solution rejected at step %lld: relative residual %.3g > %.3g (%d unknowns, %s)",
+			solver_label[ps->def.solver], (long long)ctx->step, residual, allowed, n,
+			finite ? "finite" : "non-finite values");
 
 	/* velocity update on faces with fluid on a side and no solid */
 	const double pscale = ps->def.density * h / ctx->dt;

@@ -136,7 +136,8 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 					continue; /* no spare particle: flip_pressure's correction closes the gap */
 				float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 				float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
-				const float *u = eddy__col(w, COL_FACE_U), *v = eddy__col(w, COL_FACE_V), *wv = eddy__col(w, COL_FACE_W);
+				const float *u = eddy__col(w, COL_FACE_U), *v = eddy__col(w, COL_FACE_V),
+							*wv = eddy__col(w, COL_FACE_W);
 				for (size_t a = 0; a < add; ++a) {
 					const size_t q = spare[used++];
 					const eddy_vec3 p = {(float)(o.x + (i + eddy__rand01(&w->rng)) * h),

@@ -25,7 +25,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	(void)ctx;
 	const gravity *g = s->data;
 	const float gx = w->def.gravity.x * g->def.scale, gy = w->def.gravity.y * g->def.scale,
-	            gz = w->def.gravity.z * g->def.scale;
+				gz = w->def.gravity.z * g->def.scale;
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	const size_t n = w->n;
 	for (size_t i = 0; i < n; ++i) {

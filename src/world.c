@@ -20,15 +20,24 @@
 const char *eddy_status_name(eddy_status s)
 {
 	switch (s) {
-	case EDDY_OK: return "ok";
-	case EDDY_ERR_INVALID: return "invalid argument";
-	case EDDY_ERR_ORDER: return "pipeline order";
-	case EDDY_ERR_STALE: return "stale handle";
-	case EDDY_ERR_NOMEM: return "out of memory";
-	case EDDY_ERR_IO: return "i/o error";
-	case EDDY_ERR_NUMERIC: return "numerical failure";
-	case EDDY_ERR_SOLVER: return "solver failure";
-	case EDDY_ERR_EXTERNAL: return "external failure";
+	case EDDY_OK:
+		return "ok";
+	case EDDY_ERR_INVALID:
+		return "invalid argument";
+	case EDDY_ERR_ORDER:
+		return "pipeline order";
+	case EDDY_ERR_STALE:
+		return "stale handle";
+	case EDDY_ERR_NOMEM:
+		return "out of memory";
+	case EDDY_ERR_IO:
+		return "i/o error";
+	case EDDY_ERR_NUMERIC:
+		return "numerical failure";
+	case EDDY_ERR_SOLVER:
+		return "solver failure";
+	case EDDY_ERR_EXTERNAL:
+		return "external failure";
 	}
 	return "unknown status";
 }
@@ -322,8 +331,8 @@ static eddy_status check_written(eddy_world *w, const eddy_system *s)
 			const size_t bad = first_nonfinite(v, w->n);
 			if (bad < w->n)
 				return eddy__fail(w, EDDY_ERR_NUMERIC,
-				                  "%s: non-finite %s = %g of particle %zu at step %lld (t = %.6g s)",
-				                  s->label, c->name, (double)v[bad], bad, (long long)w->step, w->time);
+				                  "%s: non-finite %s = %g of particle %zu at step %lld (t = %.6g s)", s->label, c->name,
+				                  (double)v[bad], bad, (long long)w->step, w->time);
 			continue;
 		}
 		const size_t n = eddy__column_elems(w, c), bad = first_nonfinite(v, n);
@@ -331,7 +340,7 @@ static eddy_status check_written(eddy_world *w, const eddy_system *s)
 			continue;
 		/* x fastest; a face grid has one more layer along its axis */
 		const size_t nx = (size_t)w->nx + (c->domain == EDDY_DOMAIN_FACE_X),
-		             ny = (size_t)w->ny + (c->domain == EDDY_DOMAIN_FACE_Y);
+					 ny = (size_t)w->ny + (c->domain == EDDY_DOMAIN_FACE_Y);
 		const char *where = c->domain == EDDY_DOMAIN_CELL ? "cell" : "face";
 		return eddy__fail(w, EDDY_ERR_NUMERIC, "%s: non-finite %s = %g at %s (%zu, %zu, %zu) at step %lld (t = %.6g s)",
 		                  s->label, c->name, (double)v[bad], where, bad % nx, bad / nx % ny, bad / (nx * ny),
@@ -356,11 +365,12 @@ static eddy_status check_bounds(eddy_world *w)
 			eddy_world_remove_particle(w, i);
 			continue;
 		}
-		return eddy__fail(w, EDDY_ERR_NUMERIC,
-		                  "particle %zu left the domain at step %lld (t = %.6g s): (%g, %g, %g) outside [%g, %g]x[%g, %g]x[%g, %g]; "
-		                  "add collide_box{min = bounds min, max = bounds max, inside = true} or set escape = \"remove\"",
-		                  i, (long long)w->step, w->time, (double)x[i], (double)y[i], (double)z[i],
-		                  (double)lo.x, (double)hi.x, (double)lo.y, (double)hi.y, (double)lo.z, (double)hi.z);
+		return eddy__fail(
+			w, EDDY_ERR_NUMERIC,
+			"particle %zu left the domain at step %lld (t = %.6g s): (%g, %g, %g) outside [%g, %g]x[%g, %g]x[%g, %g]; "
+			"add collide_box{min = bounds min, max = bounds max, inside = true} or set escape = \"remove\"",
+			i, (long long)w->step, w->time, (double)x[i], (double)y[i], (double)z[i], (double)lo.x, (double)hi.x,
+			(double)lo.y, (double)hi.y, (double)lo.z, (double)hi.z);
 	}
 	return EDDY_OK;
 }
@@ -716,7 +726,8 @@ static void energy_stats(const eddy_world *w, eddy_frame_stats *out)
 			const double r = rho[i];
 			if (!(r > r0))
 				continue;
-			cce += tait ? (B / r0) * ((pow(r / r0, gam - 1) - 1) / (gam - 1) + r0 / r - 1) : kk * (log(r / r0) + r0 / r - 1);
+			cce += tait ? (B / r0) * ((pow(r / r0, gam - 1) - 1) / (gam - 1) + r0 / r - 1)
+			            : kk * (log(r / r0) + r0 / r - 1);
 		}
 		part[c][0] = cce;
 	}
@@ -754,7 +765,8 @@ eddy_status eddy_world_frame_stats(eddy_world *w, eddy_frame_stats *out)
 		}
 		if (x && y && z) {
 			eddy_vec3 p = {x[i], y[i], z[i]};
-			bool out_of_bounds = !(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z);
+			bool out_of_bounds =
+				!(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z);
 			if (out_of_bounds || inside_any_collider(w, p))
 				leaked++;
 		}
@@ -893,16 +905,17 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 	long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
 	double avail = pages > 0 && page > 0 ? (double)pages * (double)page : 0;
 	if (unbounded)
-		eddy__report(report, user, EDDY_CHECK_WARNING,
-		        "memory: an emitter has no end (set duration or max_particles); %lld particles known, %zu bytes each",
-		        (long long)expected, per_particle);
+		eddy__report(
+			report, user, EDDY_CHECK_WARNING,
+			"memory: an emitter has no end (set duration or max_particles); %lld particles known, %zu bytes each",
+			(long long)expected, per_particle);
 	else
 		eddy__report(report, user, EDDY_CHECK_INFO, "memory: %lld particles x %zu bytes, about %.1f MB in all",
-		        (long long)expected, per_particle, bytes / 1e6);
+		             (long long)expected, per_particle, bytes / 1e6);
 	if (avail > 0 && bytes > 0.8 * avail) {
 		eddy__report(report, user, EDDY_CHECK_ERROR,
-		        "memory: the scene needs about %.1f GB but the machine has %.1f GB; use a coarser spacing",
-		        bytes / 1e9, avail / 1e9);
+		             "memory: the scene needs about %.1f GB but the machine has %.1f GB; use a coarser spacing",
+		             bytes / 1e9, avail / 1e9);
 		errors++;
 	}
 
@@ -938,10 +951,11 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 			errors++;
 		} else if (ppc < 3 || ppc > 12) {
 			/* 8 per cell: spacing = cell_size / 2 */
-			eddy__report(report, user, EDDY_CHECK_WARNING,
-			        "particles per cell: %.1f (cell_size %g m, spacing %g m); 3 to 12 keep the grid resolved, e.g. "
-			        "spacing = %g m",
-			        ppc, w->def.cell_size, (double)w->length_scale, w->def.cell_size / 2);
+			eddy__report(
+				report, user, EDDY_CHECK_WARNING,
+				"particles per cell: %.1f (cell_size %g m, spacing %g m); 3 to 12 keep the grid resolved, e.g. "
+				"spacing = %g m",
+				ppc, w->def.cell_size, (double)w->length_scale, w->def.cell_size / 2);
 		} else {
 			eddy__report(report, user, EDDY_CHECK_INFO, "particles per cell: %.1f", ppc);
 		}
@@ -976,15 +990,16 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 	double lim = step_limit(w, &reason);
 	double frame_dt = 1.0 / w->def.fps;
 	eddy__report(report, user, EDDY_CHECK_INFO, "time step: %.3g s at the start, limited by %s (%.0f steps per frame)",
-	        lim, reason, ceil(frame_dt / lim - 1e-9));
+	             lim, reason, ceil(frame_dt / lim - 1e-9));
 	if (ceil(frame_dt / lim - 1e-9) > w->def.max_steps_per_frame) {
 		eddy__report(report, user, EDDY_CHECK_ERROR,
-		        "time step: a frame needs %.0f steps, more than max_steps_per_frame = %d; raise it or relax %s",
-		        ceil(frame_dt / lim - 1e-9), w->def.max_steps_per_frame, reason);
+		             "time step: a frame needs %.0f steps, more than max_steps_per_frame = %d; raise it or relax %s",
+		             ceil(frame_dt / lim - 1e-9), w->def.max_steps_per_frame, reason);
 		errors++;
 	}
 	if (lim < w->def.dt_min) {
-		eddy__report(report, user, EDDY_CHECK_ERROR, "time step: %s allows %.3g s, below dt_min = %.3g s", reason, lim, w->def.dt_min);
+		eddy__report(report, user, EDDY_CHECK_ERROR, "time step: %s allows %.3g s, below dt_min = %.3g s", reason, lim,
+		             w->def.dt_min);
 		errors++;
 	}
 
@@ -1001,7 +1016,8 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 			continue;
 		size_t np = e->vt->sample(w, e, pts, cap);
 		if (np == 0) {
-			eddy__report(report, user, EDDY_CHECK_ERROR, "%s: emits no particles; make its region larger than its spacing", e->label);
+			eddy__report(report, user, EDDY_CHECK_ERROR,
+			             "%s: emits no particles; make its region larger than its spacing", e->label);
 			errors++;
 		}
 		for (int j = 0; j < w->order_count; ++j) {
@@ -1019,8 +1035,8 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 				errors++;
 			} else if (inside) {
 				eddy__report(report, user, EDDY_CHECK_WARNING,
-				        "%s: %zu of %zu particles start inside %s; they will be pushed out in the first step",
-				        e->label, inside, np, c->label);
+				             "%s: %zu of %zu particles start inside %s; they will be pushed out in the first step",
+				             e->label, inside, np, c->label);
 			}
 		}
 		size_t outside = 0;
@@ -1030,7 +1046,8 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 			outside += !(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z);
 		}
 		if (outside) {
-			eddy__report(report, user, EDDY_CHECK_ERROR, "%s: %zu of %zu particles start outside the world bounds", e->label, outside, np);
+			eddy__report(report, user, EDDY_CHECK_ERROR, "%s: %zu of %zu particles start outside the world bounds",
+			             e->label, outside, np);
 			errors++;
 		}
 		free(pts);

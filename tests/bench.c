@@ -12,8 +12,6 @@
 #include "eddy.h"
 #include "bench_util.h"
 
-
-
 /* A block of n particles (approximately) bouncing in a tank around a ball. */
 static eddy_world *scene(int n, int threads)
 {

@@ -21,9 +21,6 @@
 #include "grid_fixture.h"
 #include "bench_util.h"
 
-
-
-
 static double profile_ms(eddy_world *w, const char *name)
 {
 	for (int k = 0; k < eddy_world_system_count(w); ++k) {
@@ -108,8 +105,8 @@ static void transfers(FILE *f, bool *first)
 			}
 		}
 		const double total = median(sum, REPS);
-		fprintf(f, "%s\n {\"kind\":\"transfers\",\"grid\":32,\"particles\":%.0f,\"threads\":%d,\"ns_per_particle\":{", *first ? "" : ",", n,
-		        threads[t]);
+		fprintf(f, "%s\n {\"kind\":\"transfers\",\"grid\":32,\"particles\":%.0f,\"threads\":%d,\"ns_per_particle\":{",
+		        *first ? "" : ",", n, threads[t]);
 		printf("transfers 32^3 half full, %.0f particles, %d thread%s:", n, threads[t], threads[t] > 1 ? "s" : "");
 		for (int k = 0; k < 3; ++k) {
 			const double m = median(per[k], REPS);
@@ -194,10 +191,13 @@ static void pressure(FILE *f, bool *first)
 				}
 				/* CHOLMOD: the first solve analyses; the others reuse it */
 				const double s = chol ? median(t + 1, reps - 1) : median(t, reps);
-				fprintf(f, "%s\n {\"kind\":\"pressure\",\"grid\":%d,\"unknowns\":%d,\"solver\":\"%s\",\"tolerance\":%g,\"threads\":%d,"
+				fprintf(f,
+				        "%s\n "
+				        "{\"kind\":\"pressure\",\"grid\":%d,\"unknowns\":%d,\"solver\":\"%s\",\"tolerance\":%g,"
+				        "\"threads\":%d,"
 				        "\"iterations\":%.0f,\"s_per_solve\":%.4f",
-				        *first ? "" : ",", n, n * n * n / 2, chol ? "cholmod" : "pcg", chol ? 0.0 : runs[ri].tol, threads,
-				        iters, s);
+				        *first ? "" : ",", n, n * n * n / 2, chol ? "cholmod" : "pcg", chol ? 0.0 : runs[ri].tol,
+				        threads, iters, s);
 				if (chol)
 					fprintf(f, ",\"s_first_solve_with_analysis\":%.4f", first_ms);
 				fprintf(f, "}");
@@ -289,11 +289,16 @@ static void pressure_sweep(FILE *f, bool *first)
 				for (size_t c = 0; c < nc; ++c)
 					unknowns += type[c] == EDDY_CELL_FLUID;
 				const double sec = median(t, reps), csec = median(cpu, reps);
-				fprintf(f, "%s\n {\"kind\":\"pressure_sweep\",\"scene\":\"wavy_pool\",\"grid\":%d,\"unknowns\":%d,\"solver\":\"%s\","
-				        "\"tolerance\":1e-06,\"threads\":%d,\"iterations\":%.0f,\"s_per_solve\":%.4f,\"cpu_s_per_frame\":%.4f}",
+				fprintf(f,
+				        "%s\n "
+				        "{\"kind\":\"pressure_sweep\",\"scene\":\"wavy_pool\",\"grid\":%d,\"unknowns\":%d,\"solver\":"
+				        "\"%s\","
+				        "\"tolerance\":1e-06,\"threads\":%d,\"iterations\":%.0f,\"s_per_solve\":%.4f,\"cpu_s_per_"
+				        "frame\":%.4f}",
 				        *first ? "" : ",", n, unknowns, names[sv], threads, iters, sec, csec);
 				*first = false;
-				printf("pressure sweep, wavy pool %d^3 (%d unknowns), %s(1e-6), %d thread%s: %.0f iterations, %.4f s per solve "
+				printf("pressure sweep, wavy pool %d^3 (%d unknowns), %s(1e-6), %d thread%s: %.0f iterations, %.4f s "
+				       "per solve "
 				       "(process CPU per frame %.4f s)\n",
 				       n, unknowns, names[sv], threads, threads > 1 ? "s" : "", iters, sec, csec);
 				fflush(stdout);
@@ -331,7 +336,8 @@ static void pour(FILE *f, bool *first)
 		eddy_destroy_world(w);
 	}
 	const double m = median(rate, REPS);
-	fprintf(f, "%s\n {\"kind\":\"pour\",\"particles\":%zu,\"threads\":1,\"sim_s_per_wall_s\":%.2f}", *first ? "" : ",", particles, m);
+	fprintf(f, "%s\n {\"kind\":\"pour\",\"particles\":%zu,\"threads\":1,\"sim_s_per_wall_s\":%.2f}", *first ? "" : ",",
+	        particles, m);
 	*first = false;
 	printf("pour scene, %zu particles, 1 thread: %.2f simulated s per wall s (target >= 5)\n", particles, m);
 }
@@ -367,7 +373,8 @@ int main(int argc, char **argv)
 	bool first = true;
 	const char *blas = blas_in_use();
 	printf("BLAS behind CHOLMOD: %s\n", blas);
-	fprintf(f, "{\"benchmark\":\"flip\",\"note\":\"medians; shared, noisy machine\",\"blas\":\"%s\",\"results\":[", blas);
+	fprintf(f, "{\"benchmark\":\"flip\",\"note\":\"medians; shared, noisy machine\",\"blas\":\"%s\",\"results\":[",
+	        blas);
 	if (!sweep_only) {
 		transfers(f, &first);
 		pour(f, &first);

@@ -63,8 +63,6 @@ static double cpu_ms(void)
 	return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
 }
 
-
-
 static double extra(const eddy_frame_stats *s, const char *name)
 {
 	for (int i = 0; i < s->extra_count; ++i)
@@ -245,8 +243,9 @@ static int encoders(FILE *f, const char *frame)
 			ms[r] = thread_cpu_ms() - t0;
 		}
 		char line[256];
-		snprintf(line, sizeof line, "{\"encoder\":\"%s\",\"width\":%d,\"height\":%d,\"cpu_ms_median\":%.2f,\"bytes\":%zu}",
-		         names[e], w, h, median(ms, REPS), bytes);
+		snprintf(line, sizeof line,
+		         "{\"encoder\":\"%s\",\"width\":%d,\"height\":%d,\"cpu_ms_median\":%.2f,\"bytes\":%zu}", names[e], w, h,
+		         median(ms, REPS), bytes);
 		if (f)
 			fprintf(f, "%s\n  %s", e ? "," : "", line);
 		printf("%s\n", line);
@@ -295,10 +294,14 @@ static int pour_frames_cost(FILE *json, const char *argv0)
 	enum { TURNS = 5 };
 	char eddy[1024], cmd[2][2400];
 	eddy_beside(argv0, eddy, sizeof eddy);
-	snprintf(cmd[0], sizeof cmd[0], "'%s' run scenes/pour.lua --threads 1 --set render=false --quiet "
-	         "--out build/bench_render/pour >/dev/null", eddy);
-	snprintf(cmd[1], sizeof cmd[1], "'%s' run scenes/pour.lua --threads 1 --quiet --out build/bench_render/pour "
-	         ">/dev/null", eddy);
+	snprintf(cmd[0], sizeof cmd[0],
+	         "'%s' run scenes/pour.lua --threads 1 --set render=false --quiet "
+	         "--out build/bench_render/pour >/dev/null",
+	         eddy);
+	snprintf(cmd[1], sizeof cmd[1],
+	         "'%s' run scenes/pour.lua --threads 1 --quiet --out build/bench_render/pour "
+	         ">/dev/null",
+	         eddy);
 	double load0[3] = {0, 0, 0}, load1[3] = {0, 0, 0};
 	getloadavg(load0, 3);
 	double wall[2][TURNS], cpu[2][TURNS], rwall[TURNS], rcpu[TURNS];
@@ -350,7 +353,7 @@ static int surface_vs_step(FILE *json, const char *argv0)
 	static char line[1 << 16];
 	while (fgets(line, sizeof line, p) && n < 4096) {
 		const double m = json_number(line, "surface_ms"), wall = json_number(line, "wall_ms"),
-		             sys = json_number(line, "surface_mesh");
+					 sys = json_number(line, "surface_mesh");
 		if (isnan(m) || isnan(wall) || isnan(sys))
 			continue;
 		mesh[n] = m;

@@ -80,7 +80,8 @@ static double extra_stat(const eddy_frame_stats *st, const char *name)
 static eddy_world *block(const char *method, long n, int threads)
 {
 	const bool flip = strcmp(method, "flip") == 0, dfsph = strcmp(method, "dfsph") == 0;
-	const float dx = 0.01f, side = dx * (roundf(cbrtf((float)n)) + 0.5f); /* + 0.5: a whole number of spacings after floor */
+	const float dx = 0.01f,
+				side = dx * (roundf(cbrtf((float)n)) + 0.5f); /* + 0.5: a whole number of spacings after floor */
 	eddy_world_def d = eddy_default_world_def();
 	d.bounds_max = (eddy_vec3){2 * side, 1.5f * side, 2 * side};
 	d.threads = threads;
@@ -191,9 +192,10 @@ static int child_block(const char *method, long n, int threads, int steps)
 		iters += isnan(it) ? 0 : it;
 	}
 	printf("{\"method\":\"%s\",\"particles\":%zu,\"threads\":%d,\"steps\":%d,\"ns_per_particle_step\":%.2f,"
-	       "\"cpu_ns_per_particle_step\":%.2f,\"setup_s\":%.3f,\"peak_rss_bytes\":%ld,\"iterations_per_step\":%.2f,\"state_hash\":\"%016llx\",\"systems_ns\":{",
-	       method, np, threads, steps, median(ms, steps) * 1e6 / (double)np, median(cpu, steps) * 1e6 / (double)np, setup_s, maxrss_kb() * 1024L,
-	       iters / steps, (unsigned long long)eddy_world_state_hash(w));
+	       "\"cpu_ns_per_particle_step\":%.2f,\"setup_s\":%.3f,\"peak_rss_bytes\":%ld,\"iterations_per_step\":%.2f,"
+	       "\"state_hash\":\"%016llx\",\"systems_ns\":{",
+	       method, np, threads, steps, median(ms, steps) * 1e6 / (double)np, median(cpu, steps) * 1e6 / (double)np,
+	       setup_s, maxrss_kb() * 1024L, iters / steps, (unsigned long long)eddy_world_state_hash(w));
 	for (int k = 0; k < ns; ++k) {
 		eddy_system_info info;
 		eddy_world_system_info(w, eddy_world_system_at(w, k), &info);
@@ -394,11 +396,12 @@ int main(int argc, char **argv)
 		fprintf(stderr, "bench_scale: cannot write %s\n", path);
 		return 1;
 	}
-	fprintf(f, "{\"benchmark\":\"scale\",\"note\":\"block settling in a tank (2 warm-up steps, %d timed); ns per particle "
-	           "per step of the whole step, median over the timed steps, then over %d runs per thread count; 1- and "
-	           "2-thread runs alternate and the speed-up is the median of the paired ratios; peak RSS of each run's "
-	           "own process over its particle count; shared 2-core machine\",\"load_start\":%.2f,\"nproc\":%ld,"
-	           "\"results\":[",
+	fprintf(f,
+	        "{\"benchmark\":\"scale\",\"note\":\"block settling in a tank (2 warm-up steps, %d timed); ns per particle "
+	        "per step of the whole step, median over the timed steps, then over %d runs per thread count; 1- and "
+	        "2-thread runs alternate and the speed-up is the median of the paired ratios; peak RSS of each run's "
+	        "own process over its particle count; shared 2-core machine\",\"load_start\":%.2f,\"nproc\":%ld,"
+	        "\"results\":[",
 	        steps, reps, load1(), sysconf(_SC_NPROCESSORS_ONLN));
 	bool first = true;
 	char out[8192], sn[32], st[8], ss[8];
@@ -412,11 +415,14 @@ int main(int argc, char **argv)
 			/* memory: the largest measured bytes per particle so far, scaled */
 			const double need = (isnan(bpp_prev) ? 1500.0 : bpp_prev) * (double)n, avail = mem_available();
 			if (n > 2000000 && (isnan(bpp_prev) || need > 0.75 * avail)) {
-				fprintf(f, "%s\n {\"method\":\"%s\",\"particles\":%ld,\"skipped\":\"needs about %.1f GB (%.0f B per particle "
-				           "at %ld), %.1f GB available\"}",
-				        first ? "" : ",", methods[m], n, need / 1e9, isnan(bpp_prev) ? 1500.0 : bpp_prev, n_prev,
-				        avail / 1e9);
-				printf("%s %ld: skipped, needs about %.1f GB, %.1f GB available\n", methods[m], n, need / 1e9, avail / 1e9);
+				fprintf(
+					f,
+					"%s\n {\"method\":\"%s\",\"particles\":%ld,\"skipped\":\"needs about %.1f GB (%.0f B per particle "
+					"at %ld), %.1f GB available\"}",
+					first ? "" : ",", methods[m], n, need / 1e9, isnan(bpp_prev) ? 1500.0 : bpp_prev, n_prev,
+					avail / 1e9);
+				printf("%s %ld: skipped, needs about %.1f GB, %.1f GB available\n", methods[m], n, need / 1e9,
+				       avail / 1e9);
 				first = false;
 				continue;
 			}
@@ -449,8 +455,8 @@ int main(int argc, char **argv)
 				}
 				ratio[ok] = ns[0][ok] / ns[1][ok];
 				ok++;
-				printf("  %s %zu: run %d: %.1f / %.1f ns per particle per step on 1 / 2 threads\n", methods[m], np, r + 1,
-				       ns[0][ok - 1], ns[1][ok - 1]);
+				printf("  %s %zu: run %d: %.1f / %.1f ns per particle per step on 1 / 2 threads\n", methods[m], np,
+				       r + 1, ns[0][ok - 1], ns[1][ok - 1]);
 				fflush(stdout);
 			}
 			if (!ok)
@@ -458,20 +464,23 @@ int main(int argc, char **argv)
 			const double l = load1();
 			for (int t = 0; t < 2; ++t) {
 				const double med = median(ns[t], ok), cmed = median(cpu[t], ok);
-				fprintf(f, "%s\n {\"method\":\"%s\",\"particles\":%zu,\"threads\":%d,\"ns_per_particle_step\":%.1f,"
-				           "\"cpu_ns_per_particle_step\":%.1f,\"peak_rss_bytes_per_particle\":%.1f,\"iterations_per_step\":%.2f,"
-				           "\"runs\":%d,%s",
+				fprintf(f,
+				        "%s\n {\"method\":\"%s\",\"particles\":%zu,\"threads\":%d,\"ns_per_particle_step\":%.1f,"
+				        "\"cpu_ns_per_particle_step\":%.1f,\"peak_rss_bytes_per_particle\":%.1f,\"iterations_per_"
+				        "step\":%.2f,"
+				        "\"runs\":%d,%s",
 				        first ? "" : ",", methods[m], np, t + 1, med, cmed, rss[t] / (double)np, it, ok, sys2[t]);
 				first = false;
-				printf("%s %zu particles, %d thread%s: %.1f ns per particle per step (process CPU %.1f), %.0f B per particle "
+				printf("%s %zu particles, %d thread%s: %.1f ns per particle per step (process CPU %.1f), %.0f B per "
+				       "particle "
 				       "peak RSS\n",
 				       methods[m], np, t + 1, t ? "s" : " ", med, cmed, rss[t] / (double)np);
 			}
 			const double sp = median(ratio, ok);
-			fprintf(f, ",\n {\"method\":\"%s\",\"particles\":%zu,\"speedup_2_threads\":%.2f,\"load\":%.2f}", methods[m], np, sp,
-			        l);
-			printf("%s %zu particles: speed-up on 2 threads %.2fx (median of %d paired runs; load %.2f)\n", methods[m], np,
-			       sp, ok, l);
+			fprintf(f, ",\n {\"method\":\"%s\",\"particles\":%zu,\"speedup_2_threads\":%.2f,\"load\":%.2f}", methods[m],
+			        np, sp, l);
+			printf("%s %zu particles: speed-up on 2 threads %.2fx (median of %d paired runs; load %.2f)\n", methods[m],
+			       np, sp, ok, l);
 			fflush(stdout);
 			bpp_prev = fmax(rss[0], rss[1]) / (double)np;
 			n_prev = (long)np;
@@ -490,8 +499,8 @@ int main(int argc, char **argv)
 				}
 				fprintf(f, "%s\n {\"kind\":\"pressure\",\"scene\":\"wavy_pool\",%s", first ? "" : ",", out + 1);
 				first = false;
-				printf("pressure %ld^3 wavy pool, %s, %d thread%s: %.0f iterations, %.3f s per solve\n", grids[g], solver, t,
-				       t > 1 ? "s" : "", json_num(out, "iterations"), json_num(out, "s_per_solve"));
+				printf("pressure %ld^3 wavy pool, %s, %d thread%s: %.0f iterations, %.3f s per solve\n", grids[g],
+				       solver, t, t > 1 ? "s" : "", json_num(out, "iterations"), json_num(out, "s_per_solve"));
 				fflush(stdout);
 			}
 	fprintf(f, "\n],\"load_end\":%.2f}\n", load1());

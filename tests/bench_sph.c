@@ -21,8 +21,6 @@
 #include "eddy.h"
 #include "bench_util.h"
 
-
-
 /* A cube of about n particles on the lattice, resting on the floor of a tank
  * twice as wide, with gravity: the neighbourhoods of a real fluid. A block
  * this calm seldom moves a particle by half the Verlet skin, so this times
@@ -30,7 +28,8 @@
  * search every few steps. */
 static eddy_world *block(int n, int threads)
 {
-	const float dx = 0.01f, side = dx * (roundf(cbrtf((float)n)) + 0.5f); /* + 0.5: a whole number of spacings after floor */
+	const float dx = 0.01f,
+				side = dx * (roundf(cbrtf((float)n)) + 0.5f); /* + 0.5: a whole number of spacings after floor */
 	eddy_world_def d = eddy_default_world_def();
 	d.bounds_max = (eddy_vec3){2 * side, 1.5f * side, 2 * side};
 	d.threads = threads;
@@ -135,7 +134,8 @@ static bool pour_row(FILE *f, bool first, const char *solver, float stiffness, i
 	for (int r = 0; r < reps; ++r) {
 		eddy_world *w = pour(solver, stiffness);
 		const double a = now_ms();
-		double err_avg_full = 0, err_max_full = 0, comp_full = 0, full_start = 0, full_sim = 0, sweeps = 0, div_sweeps = 0;
+		double err_avg_full = 0, err_max_full = 0, comp_full = 0, full_start = 0, full_sim = 0, sweeps = 0,
+			   div_sweeps = 0;
 		double wall = 0, wall_full = 0, sim_full = 0;
 		int full_frames = 0;
 		int64_t steps = 0;
@@ -179,22 +179,22 @@ static bool pour_row(FILE *f, bool first, const char *solver, float stiffness, i
 		qsort(rates_full, (size_t)reps, sizeof rates_full[0], cmp_double);
 		qsort(rates_scene, (size_t)reps, sizeof rates_scene[0], cmp_double);
 		const double rate = rates[reps / 2], rate_full = rates_full[reps / 2], rate_scene = rates_scene[reps / 2];
-		printf("pour %s (5625 particles, %s, 1 thread, median of %d): %.3f simulated s per wall s over the scene's 4 s, "
-		       "%.3f over the first 2.5 s, %.3f with all particles in; "
-		       "%lld steps (mean dt %.2g s); density error avg %.4f (max over frames with all particles in), max %.3f "
-		       "(surface particles), mean compression %.5f; %.2f iterations per step (+ %.2f divergence)\n",
-		       solver, strcmp(solver, "dfsph") == 0 ? "tolerance 0.01" : "k = 400", reps, rate_scene, rate, rate_full,
-		       (long long)steps,
-		       2.5 / (double)steps, err_avg_full, err_max_full, comp_full, sweeps / (double)steps,
-		       div_sweeps / (double)steps);
-		fprintf(f, "%s\n {\"scene\":\"pour\",\"solver\":\"%s\",\"particles\":5625,\"stiffness\":%.0f,\"threads\":1,"
-		           "\"sim_s_per_wall_s_scene\":%.4f,\"sim_s_per_wall_s\":%.4f,\"sim_s_per_wall_s_full\":%.4f,"
-		           "\"steps\":%lld,\"density_err_avg\":%.4f,"
-		           "\"density_err_max\":%.4f,\"compression_avg\":%.5f,\"iterations_per_step\":%.3f,"
-		           "\"divergence_iterations_per_step\":%.3f}",
-		        first ? "" : ",", solver, (double)stiffness, rate_scene, rate, rate_full, (long long)steps, err_avg_full, err_max_full,
-		        comp_full,
-		        sweeps / (double)steps, div_sweeps / (double)steps);
+		printf(
+			"pour %s (5625 particles, %s, 1 thread, median of %d): %.3f simulated s per wall s over the scene's 4 s, "
+			"%.3f over the first 2.5 s, %.3f with all particles in; "
+			"%lld steps (mean dt %.2g s); density error avg %.4f (max over frames with all particles in), max %.3f "
+			"(surface particles), mean compression %.5f; %.2f iterations per step (+ %.2f divergence)\n",
+			solver, strcmp(solver, "dfsph") == 0 ? "tolerance 0.01" : "k = 400", reps, rate_scene, rate, rate_full,
+			(long long)steps, 2.5 / (double)steps, err_avg_full, err_max_full, comp_full, sweeps / (double)steps,
+			div_sweeps / (double)steps);
+		fprintf(f,
+		        "%s\n {\"scene\":\"pour\",\"solver\":\"%s\",\"particles\":5625,\"stiffness\":%.0f,\"threads\":1,"
+		        "\"sim_s_per_wall_s_scene\":%.4f,\"sim_s_per_wall_s\":%.4f,\"sim_s_per_wall_s_full\":%.4f,"
+		        "\"steps\":%lld,\"density_err_avg\":%.4f,"
+		        "\"density_err_max\":%.4f,\"compression_avg\":%.5f,\"iterations_per_step\":%.3f,"
+		        "\"divergence_iterations_per_step\":%.3f}",
+		        first ? "" : ",", solver, (double)stiffness, rate_scene, rate, rate_full, (long long)steps,
+		        err_avg_full, err_max_full, comp_full, sweeps / (double)steps, div_sweeps / (double)steps);
 		eddy_destroy_world(w);
 	}
 	return true;
@@ -211,9 +211,10 @@ int main(int argc, char **argv)
 	const int counts[] = {5000, 30000, 100000};
 	const char *names[] = {"sph_density", "sph_pressure", "sph_viscosity"};
 	enum { REPS = 9, STEPS = 5 };
-	fprintf(f, "{\"benchmark\":\"sph\",\"unit\":\"ns per particle per step\",\"note\":\"medians of %d runs of %d steps, "
-	           "1 and 2 threads alternating; the speed-up is the median of the paired ratios; shared 2-core machine\","
-	           "\"results\":[",
+	fprintf(f,
+	        "{\"benchmark\":\"sph\",\"unit\":\"ns per particle per step\",\"note\":\"medians of %d runs of %d steps, "
+	        "1 and 2 threads alternating; the speed-up is the median of the paired ratios; shared 2-core machine\","
+	        "\"results\":[",
 	        REPS, STEPS);
 	const bool pour_only = argc > 2 && strcmp(argv[2], "--pour-only") == 0;
 	for (size_t c = 0; c < 3 && !pour_only; ++c) {

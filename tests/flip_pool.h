@@ -15,7 +15,7 @@
 static inline bool pool_fill(eddy_world *w, double h, eddy_vec3 lo, eddy_vec3 hi)
 {
 	const int nx = (int)lround((hi.x - lo.x) / h * 2), ny = (int)lround((hi.y - lo.y) / h * 2),
-	          nz = (int)lround((hi.z - lo.z) / h * 2);
+			  nz = (int)lround((hi.z - lo.z) / h * 2);
 	const size_t n = (size_t)nx * ny * nz;
 	eddy_vec3 *p = malloc(n * sizeof *p);
 	if (!p)

@@ -48,8 +48,8 @@ static unsigned take(input *in, unsigned range)
 /* A number as Lua source: mostly plausible, often hostile. */
 static void number(input *in, char *out, size_t cap)
 {
-	static const char *const special[] = {"0", "-1", "1", "0.5", "1e-9", "1e9", "0/0", "1/0", "-1/0", "1e300",
-	                                      "-5", "0.01", "0.1", "2", "-1e-300", "3"};
+	static const char *const special[] = {"0",    "-1",    "1",  "0.5",  "1e-9", "1e9", "0/0",     "1/0",
+	                                      "-1/0", "1e300", "-5", "0.01", "0.1",  "2",   "-1e-300", "3"};
 	unsigned k = take(in, 24);
 	if (k < 16)
 		snprintf(out, cap, "%s", special[k]);
@@ -64,7 +64,9 @@ static void value(input *in, char *out, size_t cap)
 	switch (take(in, 8)) {
 	case 0:
 	case 1:
-	case 2: number(in, out, cap); break;
+	case 2:
+		number(in, out, cap);
+		break;
 	case 3:
 	case 4:
 		number(in, a, sizeof a);
@@ -72,10 +74,19 @@ static void value(input *in, char *out, size_t cap)
 		number(in, c, sizeof c);
 		snprintf(out, cap, "{%s, %s, %s}", a, b, c);
 		break;
-	case 5: snprintf(out, cap, "%s", take(in, 2) ? "true" : "false"); break;
+	case 5:
+		snprintf(out, cap, "%s", take(in, 2) ? "true" : "false");
+		break;
 	case 6: {
-		static const char *const strs[] = {"'error'", "'remove'", "'cholmod'", "'pcg'", "{}", "{1, 2}", "{{0,0,0},{1,1,1}}",
-		                                   "function(t) return {t, 0, 0} end", "function(t) return nil end",
+		static const char *const strs[] = {"'error'",
+		                                   "'remove'",
+		                                   "'cholmod'",
+		                                   "'pcg'",
+		                                   "{}",
+		                                   "{1, 2}",
+		                                   "{{0,0,0},{1,1,1}}",
+		                                   "function(t) return {t, 0, 0} end",
+		                                   "function(t) return nil end",
 		                                   "function(t) error('boom') end"};
 		snprintf(out, cap, "%s", strs[take(in, sizeof strs / sizeof strs[0])]);
 		break;
@@ -86,18 +97,17 @@ static void value(input *in, char *out, size_t cap)
 	}
 }
 
-static const char *const systems[] = {"emit_box", "emit_nozzle", "gravity", "integrate", "collide_box",
-                                      "collide_sphere", "collide_plane", "flip_p2g", "flip_boundary",
-                                      "flip_surface", "flip_pressure", "flip_extrapolate", "flip_g2p",
-                                      "flip_advect", "flip_reseed"};
-static const char *const fields[] = {"min", "max", "spacing", "jitter", "velocity", "start", "center", "radius",
-                                     "direction", "speed", "duration", "max_particles", "scale", "max_speed",
-                                     "inside", "restitution", "friction", "offset", "point", "normal", "typo",
-                                     "mark_radius", "margin", "sigma", "solver", "density", "tolerance",
-                                     "max_iterations", "theta_min", "layers", "flip_ratio", "wall_gap",
-                                     "min_per_cell", "max_per_cell"};
-static const char *const world_fields[] = {"bounds", "gravity", "fps", "cfl", "dt_max", "dt_min", "seed",
-                                           "escape", "check_finite", "cell_size", "duration"};
+static const char *const systems[] = {"emit_box",       "emit_nozzle",      "gravity",  "integrate",     "collide_box",
+                                      "collide_sphere", "collide_plane",    "flip_p2g", "flip_boundary", "flip_surface",
+                                      "flip_pressure",  "flip_extrapolate", "flip_g2p", "flip_advect",   "flip_reseed"};
+static const char *const fields[] = {
+	"min",         "max",         "spacing",    "jitter",   "velocity",      "start",       "center",
+	"radius",      "direction",   "speed",      "duration", "max_particles", "scale",       "max_speed",
+	"inside",      "restitution", "friction",   "offset",   "point",         "normal",      "typo",
+	"mark_radius", "margin",      "sigma",      "solver",   "density",       "tolerance",   "max_iterations",
+	"theta_min",   "layers",      "flip_ratio", "wall_gap", "min_per_cell",  "max_per_cell"};
+static const char *const world_fields[] = {"bounds", "gravity", "fps",          "cfl",       "dt_max",  "dt_min",
+                                           "seed",   "escape",  "check_finite", "cell_size", "duration"};
 
 static lua_State *new_state(void)
 {
@@ -133,11 +143,11 @@ int eddy_fuzz_one(const uint8_t *data, size_t size)
 	input in = {data, size};
 	char src[8192], v[160];
 	size_t len = 0;
-#define EMIT(...) \
-	do { \
+#define EMIT(...)                                                    \
+	do {                                                             \
 		int k_ = snprintf(src + len, sizeof src - len, __VA_ARGS__); \
-		if (k_ > 0 && (size_t)k_ < sizeof src - len) \
-			len += (size_t)k_; \
+		if (k_ > 0 && (size_t)k_ < sizeof src - len)                 \
+			len += (size_t)k_;                                       \
 	} while (0)
 	/* a step budget keeps hostile time steps from running for hours */
 	EMIT("local eddy = require 'eddy'\nlocal w = eddy.world{ max_steps_per_frame = 300, escape = 'remove', "

@@ -39,7 +39,8 @@ static inline void fixture_wavy_pool(eddy_world *w)
 			for (int i = 0; i < g.nx; ++i) {
 				const double x = (i + 0.5) / g.nx, y = (j + 0.5) / g.ny, z = (k + 0.5) / g.nz;
 				const double s = 0.5 + 0.1 * sin(6.3 * x) * cos(4.1 * z) + 0.05 * sin(17 * x + 3 * z);
-				const double drop = sqrt((x - 0.5) * (x - 0.5) + (y - 0.85) * (y - 0.85) + (z - 0.5) * (z - 0.5)) - 0.08;
+				const double drop =
+					sqrt((x - 0.5) * (x - 0.5) + (y - 0.85) * (y - 0.85) + (z - 0.5) * (z - 0.5)) - 0.08;
 				const double d = drop < y - s ? drop : y - s;
 				const size_t c = (size_t)i + (size_t)g.nx * ((size_t)j + (size_t)g.ny * k);
 				phi[c] = (float)(d * g.ny);

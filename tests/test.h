@@ -21,30 +21,30 @@ int test_sh(const char *cmd, char *out, size_t cap);
 /* Directory of the build under test (build/ or build/asan/). */
 const char *test_build_dir(void);
 
-#define CHECK(cond) \
-	do { \
-		if (!(cond)) \
+#define CHECK(cond)                                     \
+	do {                                                \
+		if (!(cond))                                    \
 			test_fail(__FILE__, __LINE__, "%s", #cond); \
 	} while (0)
 
-#define CHECKF(cond, ...) \
-	do { \
-		if (!(cond)) \
+#define CHECKF(cond, ...)                               \
+	do {                                                \
+		if (!(cond))                                    \
 			test_fail(__FILE__, __LINE__, __VA_ARGS__); \
 	} while (0)
 
-#define CHECK_NEAR(a, b, tol) \
-	do { \
-		double a_ = (double)(a), b_ = (double)(b), t_ = (double)(tol); \
-		if (!(fabs(a_ - b_) <= t_)) \
+#define CHECK_NEAR(a, b, tol)                                                                               \
+	do {                                                                                                    \
+		double a_ = (double)(a), b_ = (double)(b), t_ = (double)(tol);                                      \
+		if (!(fabs(a_ - b_) <= t_))                                                                         \
 			test_fail(__FILE__, __LINE__, "%s = %.9g, expected %s = %.9g within %.3g", #a, a_, #b, b_, t_); \
 	} while (0)
 
 /* Substring check with the haystack shown on failure. */
-#define CHECK_HAS(hay, needle) \
-	do { \
-		const char *h_ = (hay); \
-		if (!h_ || !strstr(h_, (needle))) \
+#define CHECK_HAS(hay, needle)                                                                     \
+	do {                                                                                           \
+		const char *h_ = (hay);                                                                    \
+		if (!h_ || !strstr(h_, (needle)))                                                          \
 			test_fail(__FILE__, __LINE__, "expected \"%s\" in: %s", (needle), h_ ? h_ : "(null)"); \
 	} while (0)
 

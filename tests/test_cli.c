@@ -186,9 +186,28 @@ static void json_reader_rejects_bad_json(void)
 }
 
 static const char *const contract[] = {
-	"frame", "time", "steps", "dt_min", "dt_max", "particles", "max_speed", "cfl", "density_err_avg",
-	"density_err_max", "density_compression_avg", "volume", "leaked", "nonfinite", "solver", "iterations", "residual", "divergence",
-	"wall_ms", "state_hash", "systems", NULL,
+	"frame",
+	"time",
+	"steps",
+	"dt_min",
+	"dt_max",
+	"particles",
+	"max_speed",
+	"cfl",
+	"density_err_avg",
+	"density_err_max",
+	"density_compression_avg",
+	"volume",
+	"leaked",
+	"nonfinite",
+	"solver",
+	"iterations",
+	"residual",
+	"divergence",
+	"wall_ms",
+	"state_hash",
+	"systems",
+	NULL,
 };
 
 static void run_writes_stats_lines(void)
@@ -227,10 +246,14 @@ static void run_writes_stats_lines(void)
 static void run_is_deterministic(void)
 {
 	char cmd[1024], a[16384], b[16384], c[16384];
-	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 4 --stats - --quiet | grep -o '\"state_hash\":\"[0-9a-f]*\"'", eddy());
+	snprintf(cmd, sizeof cmd,
+	         "%s run scenes/bounce.lua --frames 4 --stats - --quiet | grep -o '\"state_hash\":\"[0-9a-f]*\"'", eddy());
 	CHECK(test_sh(cmd, a, sizeof a) == 0);
 	CHECK(test_sh(cmd, b, sizeof b) == 0);
-	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 4 --threads 2 --stats - --quiet | grep -o '\"state_hash\":\"[0-9a-f]*\"'", eddy());
+	snprintf(
+		cmd, sizeof cmd,
+		"%s run scenes/bounce.lua --frames 4 --threads 2 --stats - --quiet | grep -o '\"state_hash\":\"[0-9a-f]*\"'",
+		eddy());
 	CHECK(test_sh(cmd, c, sizeof c) == 0);
 	CHECK(strlen(a) > 40);
 	CHECK(strcmp(a, b) == 0);
@@ -290,7 +313,8 @@ static void usage_and_errors(void)
 	CHECK_HAS(out, "eddy: cannot write stats file '/dev/null/x/s.jsonl'");
 	CHECK(one_line(out));
 	/* --duration under one frame (bounce runs at 30 fps) would run 30x what it asks */
-	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --duration 0.001 --quiet --out %s/t_dur", eddy(), test_build_dir());
+	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --duration 0.001 --quiet --out %s/t_dur", eddy(),
+	         test_build_dir());
 	CHECK(test_sh(cmd, out, sizeof out) == 2);
 	CHECK_HAS(out, "eddy: --duration 0.001 s is shorter than one frame");
 	CHECK(one_line(out));
@@ -307,7 +331,9 @@ static void bad_scenes_fail_with_one_line(void)
 {
 	char path[256], cmd[2048], out[8192];
 	snprintf(path, sizeof path, "%s/t_bad.lua", test_build_dir());
-	write_scene(path, "local eddy = require 'eddy'\nlocal w = eddy.world{}\n\nw:add(eddy.emit_box{ spacin = 0.01 })\nreturn w\n");
+	write_scene(
+		path,
+		"local eddy = require 'eddy'\nlocal w = eddy.world{}\n\nw:add(eddy.emit_box{ spacin = 0.01 })\nreturn w\n");
 	snprintf(cmd, sizeof cmd, "%s run %s", eddy(), path);
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	char expect[600];
@@ -364,8 +390,10 @@ static void stats_write_errors_stop_the_run(void)
 	CHECK_HAS(out, "eddy: cannot write stats file '/dev/full': No space left on device");
 	CHECK(one_line(out));
 	const char *b = test_build_dir();
-	snprintf(cmd, sizeof cmd, "(%s run scenes/bounce.lua --frames 300 --quiet --stats - 2>%s/t_pipe.err; "
-	         "echo $? >%s/t_pipe.rc) | head -1 >/dev/null; cat %s/t_pipe.rc %s/t_pipe.err", eddy(), b, b, b, b);
+	snprintf(cmd, sizeof cmd,
+	         "(%s run scenes/bounce.lua --frames 300 --quiet --stats - 2>%s/t_pipe.err; "
+	         "echo $? >%s/t_pipe.rc) | head -1 >/dev/null; cat %s/t_pipe.rc %s/t_pipe.err",
+	         eddy(), b, b, b, b);
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECKF(strcmp(out, "0\n") == 0, "status and stderr of the run: %s", out);
 	/* the same for plan's stdout; a full disk is an error there too */
@@ -405,14 +433,20 @@ static void set_is_given_once_per_key(void)
 static void options_take_values_either_way(void)
 {
 	char cmd[1024], a[16384], b[16384];
-	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 2 --stats - --quiet --set spacing=0.04 "
-	         "| grep -o '\"state_hash\":\"[0-9a-f]*\"'", eddy());
+	snprintf(cmd, sizeof cmd,
+	         "%s run scenes/bounce.lua --frames 2 --stats - --quiet --set spacing=0.04 "
+	         "| grep -o '\"state_hash\":\"[0-9a-f]*\"'",
+	         eddy());
 	CHECK(test_sh(cmd, a, sizeof a) == 0);
-	snprintf(cmd, sizeof cmd, "%s run --frames=2 --stats=- --quiet --set=spacing=0.04 scenes/bounce.lua "
-	         "| grep -o '\"state_hash\":\"[0-9a-f]*\"'", eddy());
+	snprintf(cmd, sizeof cmd,
+	         "%s run --frames=2 --stats=- --quiet --set=spacing=0.04 scenes/bounce.lua "
+	         "| grep -o '\"state_hash\":\"[0-9a-f]*\"'",
+	         eddy());
 	CHECK(test_sh(cmd, b, sizeof b) == 0);
 	CHECK(strlen(a) > 40 && strcmp(a, b) == 0);
-	static const struct { const char *args, *expect; } bad[] = {
+	static const struct {
+		const char *args, *expect;
+	} bad[] = {
 		{"run scenes/bounce.lua --frames", "eddy: --frames needs a value"},
 		{"run scenes/bounce.lua --stats", "eddy: --stats needs a value"},
 		{"run scenes/bounce.lua --quiet=yes", "eddy: --quiet takes no value"},
@@ -431,9 +465,14 @@ static void options_take_values_either_way(void)
 		CHECK_HAS(a, bad[i].expect);
 		CHECKF(one_line(a), "%s: %s", bad[i].args, a);
 	}
-	static const struct { const char *command, *expect; } help[] = {
-		{"run", "usage: eddy run SCENE.lua"}, {"plan", "usage: eddy plan SCENE.lua"},
-		{"check", "usage: eddy check SCENE.lua"}, {"study", "usage: eddy study STUDY.lua"}, {NULL, NULL},
+	static const struct {
+		const char *command, *expect;
+	} help[] = {
+		{"run", "usage: eddy run SCENE.lua"},
+		{"plan", "usage: eddy plan SCENE.lua"},
+		{"check", "usage: eddy check SCENE.lua"},
+		{"study", "usage: eddy study STUDY.lua"},
+		{NULL, NULL},
 	};
 	for (int i = 0; help[i].command; ++i) {
 		snprintf(cmd, sizeof cmd, "%s %s --help 2>/dev/null", eddy(), help[i].command);
@@ -499,8 +538,10 @@ static void resume_checks_frames_and_stats(void)
 	char cmd[2048], out[8192], stats[512], shorter[512];
 	snprintf(stats, sizeof stats, "%s/t_res/s.jsonl", b);
 	snprintf(shorter, sizeof shorter, "%s/t_res/short.jsonl", b);
-	snprintf(cmd, sizeof cmd, "rm -rf %s/t_res && %s run scenes/bounce.lua --frames 10 --checkpoint-every 5 --quiet "
-	         "--out %s/t_res --stats %s && head -3 %s > %s", b, eddy(), b, stats, stats, shorter);
+	snprintf(cmd, sizeof cmd,
+	         "rm -rf %s/t_res && %s run scenes/bounce.lua --frames 10 --checkpoint-every 5 --quiet "
+	         "--out %s/t_res --stats %s && head -3 %s > %s",
+	         b, eddy(), b, stats, stats, shorter);
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK(count_lines(stats) == 10);
 	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 8 --quiet --out %s/t_res --resume %s/t_res --stats %s",
@@ -509,15 +550,17 @@ static void resume_checks_frames_and_stats(void)
 	CHECK_HAS(out, "eddy: --resume: the checkpoint is at frame 10 and the run ends at frame 8: nothing left to run");
 	CHECK(one_line(out));
 	CHECK(count_lines(stats) == 10);
-	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 12 --quiet --out %s/t_res --resume %s/t_res --stats %s",
-	         eddy(), b, b, shorter);
+	snprintf(cmd, sizeof cmd,
+	         "%s run scenes/bounce.lua --frames 12 --quiet --out %s/t_res --resume %s/t_res --stats %s", eddy(), b, b,
+	         shorter);
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "short.jsonl' has 3 lines for the 10 frames up to the checkpoint");
 	CHECK(one_line(out));
 	CHECK(count_lines(shorter) == 3);
 	/* the output folder itself, not its checkpoints/ */
-	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 12 --quiet --out %s/t_res --resume %s/t_res --stats %s",
-	         eddy(), b, b, stats);
+	snprintf(cmd, sizeof cmd,
+	         "%s run scenes/bounce.lua --frames 12 --quiet --out %s/t_res --resume %s/t_res --stats %s", eddy(), b, b,
+	         stats);
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK(count_lines(stats) == 12);
 	char *text = slurp(stats);
@@ -533,7 +576,8 @@ static void checkpoints_are_pruned_and_temps_removed(void)
 {
 	const char *b = test_build_dir();
 	char cmd[2048], out[8192];
-	snprintf(cmd, sizeof cmd, "rm -rf %s/t_keep && mkdir -p %s/t_keep/checkpoints && "
+	snprintf(cmd, sizeof cmd,
+	         "rm -rf %s/t_keep && mkdir -p %s/t_keep/checkpoints && "
 	         "echo junk > %s/t_keep/checkpoints/frame-000003.eddy.tmp && "
 	         "echo junk > %s/t_keep/.frame_0004.png.999-1.tmp && "
 	         "%s run scenes/bounce.lua --frames 10 --checkpoint-every 2 --quiet --out %s/t_keep && "
@@ -541,13 +585,17 @@ static void checkpoints_are_pruned_and_temps_removed(void)
 	         b, b, b, b, eddy(), b, b, b);
 	test_sh(cmd, out, sizeof out);
 	CHECKF(strcmp(out, "frame-000006.eddy\nframe-000008.eddy\nframe-000010.eddy\n0\n") == 0, "%s", out);
-	snprintf(cmd, sizeof cmd, "rm -rf %s/t_keep && %s run scenes/bounce.lua --frames 10 --checkpoint-every 2 --quiet "
-	         "--keep-checkpoints 0 --out %s/t_keep && ls %s/t_keep/checkpoints | wc -l", b, eddy(), b, b);
+	snprintf(cmd, sizeof cmd,
+	         "rm -rf %s/t_keep && %s run scenes/bounce.lua --frames 10 --checkpoint-every 2 --quiet "
+	         "--keep-checkpoints 0 --out %s/t_keep && ls %s/t_keep/checkpoints | wc -l",
+	         b, eddy(), b, b);
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK(atoi(out) == 5);
-	snprintf(cmd, sizeof cmd, "echo junk > %s/t_keep/checkpoints/frame-000011.eddy.tmp && "
+	snprintf(cmd, sizeof cmd,
+	         "echo junk > %s/t_keep/checkpoints/frame-000011.eddy.tmp && "
 	         "%s run scenes/bounce.lua --frames 12 --checkpoint-every 2 --quiet --keep-checkpoints=1 --out %s/t_keep "
-	         "--resume %s/t_keep && ls %s/t_keep/checkpoints", b, eddy(), b, b, b);
+	         "--resume %s/t_keep && ls %s/t_keep/checkpoints",
+	         b, eddy(), b, b, b);
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECKF(strcmp(out, "frame-000012.eddy\n") == 0, "%s", out);
 }
@@ -580,14 +628,18 @@ static void export_adds_particle_files(void)
 {
 	const char *b = test_build_dir();
 	char cmd[2048], out[8192];
-	snprintf(cmd, sizeof cmd, "rm -rf %s/t_exp && %s run scenes/bounce.lua --frames 2 --quiet --out %s/t_exp "
-	         "--export ply && ls %s/t_exp | grep -c '^particles_000[12]\\.ply$' && head -c 3 %s/t_exp/particles_0002.ply",
-	         b, eddy(), b, b, b);
+	snprintf(
+		cmd, sizeof cmd,
+		"rm -rf %s/t_exp && %s run scenes/bounce.lua --frames 2 --quiet --out %s/t_exp "
+		"--export ply && ls %s/t_exp | grep -c '^particles_000[12]\\.ply$' && head -c 3 %s/t_exp/particles_0002.ply",
+		b, eddy(), b, b, b);
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK(strcmp(out, "2\nply") == 0);
 	/* vtp: a file a frame and the collection listing both */
-	snprintf(cmd, sizeof cmd, "rm -rf %s/t_exp && %s run scenes/bounce.lua --frames=2 --quiet --out %s/t_exp "
-	         "--export=vtp && ls %s/t_exp | grep -c '^particles_000[12]\\.vtp$' && grep -c '<DataSet ' %s/t_exp/particles.pvd",
+	snprintf(cmd, sizeof cmd,
+	         "rm -rf %s/t_exp && %s run scenes/bounce.lua --frames=2 --quiet --out %s/t_exp "
+	         "--export=vtp && ls %s/t_exp | grep -c '^particles_000[12]\\.vtp$' && grep -c '<DataSet ' "
+	         "%s/t_exp/particles.pvd",
 	         b, eddy(), b, b, b);
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECKF(strcmp(out, "2\n2\n") == 0, "%s", out);

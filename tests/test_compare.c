@@ -140,8 +140,10 @@ static void compare_three_methods(void)
 	const char *b = test_build_dir();
 	char out[256], cmd[1024], buf[16384], path[512];
 	snprintf(out, sizeof out, "%s/t_compare", b);
-	snprintf(cmd, sizeof cmd, "rm -rf %s && %s/eddy compare tests/scenes/compare_tiny.lua --methods wcsph,flip,broken "
-	         "--quick --out %s", out, b, out);
+	snprintf(cmd, sizeof cmd,
+	         "rm -rf %s && %s/eddy compare tests/scenes/compare_tiny.lua --methods wcsph,flip,broken "
+	         "--quick --out %s",
+	         out, b, out);
 	int code = test_sh(cmd, buf, sizeof buf);
 	CHECKF(code == 1, "exit %d, expected 1 (a method failed):\n%s", code, buf);
 	CHECK_HAS(buf, "3 methods, 1 failed");
@@ -189,11 +191,26 @@ static void compare_three_methods(void)
 	snprintf(path, sizeof path, "%s/compare.csv", out);
 	if (c && read_csv(path, c)) {
 		CHECKF(c->rows == 3, "%d rows, expected 3", c->rows);
-		static const char *const cols[] = {"method", "status", "exit_code", "wall_s", "frames", "sim_time_s",
-		                                   "steps", "dt_mean_s", "dt_max_s", "peak_mb", "particles",
-		                                   "sys_sph_density_ms", "sys_flip_pressure_ms", "density_err_avg_end",
-		                                   "density_err_avg_worst", "volume_end", "max_speed_end",
-		                                   "max_speed_worst", "top_end", "top_worst"};
+		static const char *const cols[] = {"method",
+		                                   "status",
+		                                   "exit_code",
+		                                   "wall_s",
+		                                   "frames",
+		                                   "sim_time_s",
+		                                   "steps",
+		                                   "dt_mean_s",
+		                                   "dt_max_s",
+		                                   "peak_mb",
+		                                   "particles",
+		                                   "sys_sph_density_ms",
+		                                   "sys_flip_pressure_ms",
+		                                   "density_err_avg_end",
+		                                   "density_err_avg_worst",
+		                                   "volume_end",
+		                                   "max_speed_end",
+		                                   "max_speed_worst",
+		                                   "top_end",
+		                                   "top_worst"};
 		for (size_t i = 0; i < sizeof cols / sizeof cols[0]; ++i)
 			CHECKF(column(c, cols[i]) >= 0, "compare.csv has no column '%s'", cols[i]);
 		static const char *const ok[] = {"wcsph", "flip"};
@@ -259,7 +276,8 @@ static void compare_all_ok_with_video(void)
 	/* a folder name long enough that the runs' image paths are cut short in
 	 * their stats lines (63 characters): the frames are then found by number */
 	snprintf(out, sizeof out, "%s/t_compare_ok_in_a_folder_whose_name_is_longer_than_stats_texts", b);
-	snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s/bin && printf '#!/bin/sh\\nfor a; do last=$a; done\\n"
+	snprintf(cmd, sizeof cmd,
+	         "rm -rf %s && mkdir -p %s/bin && printf '#!/bin/sh\\nfor a; do last=$a; done\\n"
 	         "cat > \"$last\"\\n' > %s/bin/ffmpeg && chmod +x %s/bin/ffmpeg && PATH=%s/bin:$PATH %s/eddy compare "
 	         "tests/scenes/compare_tiny.lua --methods=flip,wcsph --quick --field top --set spacing=0.01 --out %s",
 	         out, out, out, out, out, b, out);
@@ -277,7 +295,8 @@ static void compare_all_ok_with_video(void)
 	}
 	snprintf(path, sizeof path, "%s/runs/flip/stats.jsonl", out);
 	CHECKF(file_has(path, "\"frame\":6,"), "%s: no sixth frame", path);
-	CHECKF(!file_has(path, "frame_0001.png"), "%s: the image path was not cut short; make the folder name longer", path);
+	CHECKF(!file_has(path, "frame_0001.png"), "%s: the image path was not cut short; make the folder name longer",
+	       path);
 	for (int frame = 1; frame <= 6; ++frame) {
 		snprintf(path, sizeof path, "%s/frame_%04d.png", out, frame);
 		int w = 0, h = 0, comp = 0;

@@ -332,7 +332,8 @@ static void ellipsoid_emitter(void)
 	eddy_add_integrate(w, &it);
 	CHECK(eddy_world_step(w) == EDDY_OK);
 	size_t n;
-	const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL), *z = eddy_world_channel(w, "z", NULL);
+	const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
+				*z = eddy_world_channel(w, "z", NULL);
 	const double volume = 4.0 / 3.0 * 3.14159265358979 * a * c * e / (dx * dx * dx);
 	printf("    ellipsoid: %zu particles, volume / spacing^3 = %.0f\n", n, volume);
 	CHECK(fabs((double)n / volume - 1) < 0.03);
@@ -479,13 +480,13 @@ static void preflight_findings(void)
 static bool is_null_system(eddy_system_id id) { return id.index == 0 && id.generation == 0; }
 
 /* Each eddy_add_* with a NULL world and with a NULL def. */
-#define CHECK_ADDER(kind) \
-	do { \
+#define CHECK_ADDER(kind)                                   \
+	do {                                                    \
 		eddy_##kind##_def d_ = eddy_default_##kind##_def(); \
-		CHECK(is_null_system(eddy_add_##kind(NULL, &d_))); \
+		CHECK(is_null_system(eddy_add_##kind(NULL, &d_)));  \
 		CHECK(is_null_system(eddy_add_##kind(NULL, NULL))); \
-		CHECK(is_null_system(eddy_add_##kind(w, NULL))); \
-		CHECK_HAS(eddy_world_error(w), "def is NULL"); \
+		CHECK(is_null_system(eddy_add_##kind(w, NULL)));    \
+		CHECK_HAS(eddy_world_error(w), "def is NULL");      \
 	} while (0)
 
 /* Every public function of eddy.h with NULL in each pointer argument: no
@@ -804,7 +805,8 @@ static void check_catches_scene_mistakes(void)
 	w = spacing_world(0.01f, 0.5, 0.2);
 	memset(&f, 0, sizeof f);
 	CHECK(eddy_world_check(w, collect, &f) == 1);
-	CHECK_HAS(f.text, "world: 'fps' is 0.5 but 'duration' is 0.2 s: the first frame (2 s) is longer than the whole run");
+	CHECK_HAS(f.text,
+	          "world: 'fps' is 0.5 but 'duration' is 0.2 s: the first frame (2 s) is longer than the whole run");
 	CHECK_HAS(f.text, "set fps >= 5");
 	eddy_destroy_world(w);
 	w = spacing_world(0.01f, 30, 0.21);

@@ -96,7 +96,7 @@ typedef eddy_vec3 (*vel_fn)(eddy_vec3 p);
 static void fill(eddy_world *w, double h, eddy_vec3 lo, eddy_vec3 hi, vel_fn f, eddy_vec3 v0)
 {
 	const int nx = (int)lround((hi.x - lo.x) / h * 2), ny = (int)lround((hi.y - lo.y) / h * 2),
-	          nz = (int)lround((hi.z - lo.z) / h * 2);
+			  nz = (int)lround((hi.z - lo.z) / h * 2);
 	const size_t n = (size_t)nx * ny * nz;
 	eddy_vec3 *p = malloc(n * sizeof *p), *v = malloc(n * sizeof *v);
 	size_t q = 0;
@@ -124,7 +124,7 @@ static double max_speed(eddy_world *w)
 {
 	size_t n;
 	const float *vx = eddy_world_channel(w, "vx", &n), *vy = eddy_world_channel(w, "vy", NULL),
-	            *vz = eddy_world_channel(w, "vz", NULL);
+				*vz = eddy_world_channel(w, "vz", NULL);
 	double m = 0;
 	for (size_t i = 0; i < n; ++i) {
 		const double s = sqrt((double)vx[i] * vx[i] + (double)vy[i] * vy[i] + (double)vz[i] * vz[i]);
@@ -151,9 +151,9 @@ static bool step_frames(eddy_world *w, int frames)
  * walls, so u = s grad(phi) sampled on the faces is a pure gradient the
  * projection must remove, leaving p = rho s phi / dt + const, to O(h^2). */
 typedef struct poisson_case {
-	double s;           /* m^2/s, scale of the gradient field */
-	bool noisy;         /* add a divergence-free-breaking pseudo-random part */
-	double max_div0;    /* max |div u| dt before the solve */
+	double s;        /* m^2/s, scale of the gradient field */
+	bool noisy;      /* add a divergence-free-breaking pseudo-random part */
+	double max_div0; /* max |div u| dt before the solve */
 } poisson_case;
 
 static eddy_status poisson_setup(eddy_world *w, const eddy_step_context *ctx, void *user)
@@ -163,7 +163,7 @@ static eddy_status poisson_setup(eddy_world *w, const eddy_step_context *ctx, vo
 	const int nx = g.nx, ny = g.ny, nz = g.nz;
 	const double h = g.cell_size, pi = acos(-1.0);
 	float *u = eddy_world_channel_mut(w, "u", NULL), *v = eddy_world_channel_mut(w, "v", NULL),
-	      *wv = eddy_world_channel_mut(w, "w", NULL), *phi = eddy_world_channel_mut(w, "flip_phi", NULL);
+		  *wv = eddy_world_channel_mut(w, "w", NULL), *phi = eddy_world_channel_mut(w, "flip_phi", NULL);
 	uint8_t *type = (uint8_t *)(uintptr_t)eddy_world_channel_u8(w, "cell_type", NULL);
 	uint64_t r = 12345;
 	for (int k = 0; k < nz; ++k)
@@ -206,9 +206,9 @@ static eddy_status poisson_setup(eddy_world *w, const eddy_step_context *ctx, vo
 }
 
 typedef struct poisson_result {
-	double err;      /* max |p - p_exact| / max |p_exact| (both zero-mean) */
+	double err; /* max |p - p_exact| / max |p_exact| (both zero-mean) */
 	double residual, divergence, iterations;
-	float *p;        /* cell_pressure copy, caller frees */
+	float *p; /* cell_pressure copy, caller frees */
 	size_t n;
 } poisson_result;
 
@@ -394,7 +394,8 @@ static void thin_theta_is_clamped_consistently(void)
 {
 	double div1, div2, top1, top2;
 	const double p1 = thin_theta_run(0.01f, &div1, &top1), p2 = thin_theta_run(0.5f, &div2, &top2);
-	printf("    theta 1e-4 clamped to 0.01: max |p| %.4g Pa, top layer %.4g Pa, divergence %.2g; clamped to 0.5: top layer %.4g Pa, "
+	printf("    theta 1e-4 clamped to 0.01: max |p| %.4g Pa, top layer %.4g Pa, divergence %.2g; clamped to 0.5: top "
+	       "layer %.4g Pa, "
 	       "divergence %.2g\n",
 	       p1, top1, div1, top2, div2);
 	CHECK(div1 <= 1e-6 && div2 <= 1e-6);
@@ -471,7 +472,8 @@ static void hydrostatic_tank_with_surface(void)
 						cells++;
 					}
 			const double vmax = max_speed(w);
-			printf("    tank (%s): %d interior cells, max |p - rho g d| = %.3g Pa (one cell: %.0f Pa), max speed %.2g m/s\n",
+			printf("    tank (%s): %d interior cells, max |p - rho g d| = %.3g Pa (one cell: %.0f Pa), max speed %.2g "
+			       "m/s\n",
 			       sv ? "hypre" : "pcg", cells, emax, RHO * G * s.h, vmax);
 			CHECK(cells == 8 * 5 * 4);
 			CHECK(emax <= RHO * G * s.h);
@@ -558,8 +560,9 @@ static void ballistic_blob_falls_at_g(void)
 		const double T = 4.0 / 50;
 		const double ay = (y[2] - 2 * y[1] + y[0]) / (T * T);
 		const double av = (v[1] - v0[1]) / (12.0 / 50);
-		printf("    blob: CoM acceleration from positions %.5f, from velocities %.5f m/s^2 (g = %.2f); vx %.5f -> %.5f\n", ay,
-		       av, G, vx0, v[0]);
+		printf(
+			"    blob: CoM acceleration from positions %.5f, from velocities %.5f m/s^2 (g = %.2f); vx %.5f -> %.5f\n",
+			ay, av, G, vx0, v[0]);
 		CHECK(fabs(ay + G) <= 0.01 * G);
 		CHECK(fabs(av + G) <= 0.01 * G);
 		CHECK(fabs(v[0] - vx0) <= 0.01 * vx0);
@@ -608,7 +611,7 @@ static void dam_break_matches_martin_moyce(void)
 		s.h = h;
 		s.hi = (eddy_vec3){(float)(5.5 * a), (float)(2.5 * a), (float)(4 * h)};
 		s.solver = sv == 1 ? EDDY_FLIP_CHOLMOD : sv == 3 ? EDDY_FLIP_HYPRE : EDDY_FLIP_PCG;
-		s.cfl = sv == 2 ? 4 : 1; /* the third run: large steps (extrapolation reaches 6 layers) */
+		s.cfl = sv == 2 ? 4 : 1;  /* the third run: large steps (extrapolation reaches 6 layers) */
 		s.fps = 1 / (0.1 * tref); /* a frame every 0.1 in T */
 		s.dt_max = 0.1 * tref;
 		eddy_world *w = flip_world(&s);
@@ -642,7 +645,8 @@ static void dam_break_matches_martin_moyce(void)
 			}
 			eddy_frame_stats fs;
 			eddy_world_frame_stats(w, &fs);
-			printf("    dam break (%s, CFL %g): Z(T=1) %.2f, Z(1.5) %.2f, Z(2) %.2f, Z(2.5) %.2f, Z(3) %.2f; worst error %.1f%% "
+			printf("    dam break (%s, CFL %g): Z(T=1) %.2f, Z(1.5) %.2f, Z(2) %.2f, Z(2.5) %.2f, Z(3) %.2f; worst "
+			       "error %.1f%% "
 			       "with shift %.1f; %lld steps\n",
 			       names[sv], s.cfl, Z[9], Z[14], Z[19], Z[24], Z[29], 100 * best, best_shift,
 			       (long long)eddy_world_steps(w));
@@ -702,7 +706,7 @@ static double kinetic(eddy_world *w)
 {
 	size_t n;
 	const float *vx = eddy_world_channel(w, "vx", &n), *vy = eddy_world_channel(w, "vy", NULL),
-	            *vz = eddy_world_channel(w, "vz", NULL);
+				*vz = eddy_world_channel(w, "vz", NULL);
 	double e = 0;
 	for (size_t i = 0; i < n; ++i)
 		e += 0.5 * ((double)vx[i] * vx[i] + (double)vy[i] * vy[i] + (double)vz[i] * vz[i]);
@@ -778,7 +782,7 @@ static void apic_keeps_affine_motion(void)
 	                                     "apic_vz", "apic_wx", "apic_wy", "apic_wz"};
 	size_t n;
 	const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
-	            *z = eddy_world_channel(w, "z", NULL);
+				*z = eddy_world_channel(w, "z", NULL);
 	float *v[3] = {eddy_world_channel_mut(w, "vx", NULL), eddy_world_channel_mut(w, "vy", NULL),
 	               eddy_world_channel_mut(w, "vz", NULL)};
 	float *c[9];
@@ -1121,7 +1125,8 @@ static void threads_and_lending_do_not_change_solids(void)
 			eddy_system_info a, c;
 			eddy_world_system_info(w, eddy_world_system_at(w, 3), &a);
 			eddy_world_system_info(w, eddy_world_system_at(w, 4), &c);
-			CHECKF(strcmp(a.name, "between") == 0 && strcmp(c.name, "flip_surface") == 0, "order: %s %s", a.name, c.name);
+			CHECKF(strcmp(a.name, "between") == 0 && strcmp(c.name, "flip_surface") == 0, "order: %s %s", a.name,
+			       c.name);
 		}
 		fill(w, d.cell_size, (eddy_vec3){0.03f, 0.03f, 0.03f}, (eddy_vec3){0.97f, 0.21f, 0.97f}, NULL,
 		     (eddy_vec3){0.2f, 0, -0.1f});
@@ -1180,7 +1185,7 @@ static void reseed_keeps_counts(void)
 	if (step_frames(w, 1)) {
 		size_t m;
 		const float *x = eddy_world_channel(w, "x", &m), *y = eddy_world_channel(w, "y", NULL),
-		            *z = eddy_world_channel(w, "z", NULL);
+					*z = eddy_world_channel(w, "z", NULL);
 		int count[216] = {0};
 		for (size_t i = 0; i < m; ++i)
 			count[(int)(x[i] / 0.1f) + 6 * ((int)(y[i] / 0.1f) + 6 * (int)(z[i] / 0.1f))]++;
@@ -1289,7 +1294,8 @@ static void dam_break_scene_runs_every_solver(void)
 static void scene_rejects_unknown_solver(void)
 {
 	char cmd[512], out[2048];
-	snprintf(cmd, sizeof cmd, "%s/eddy run scenes/dam_break.lua --set method=flip --frames 1 --set solver=lu --quiet 2>&1",
+	snprintf(cmd, sizeof cmd,
+	         "%s/eddy run scenes/dam_break.lua --set method=flip --frames 1 --set solver=lu --quiet 2>&1",
 	         test_build_dir());
 	FILE *f = popen(cmd, "r");
 	CHECK(f != NULL);

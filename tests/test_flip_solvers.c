@@ -113,7 +113,8 @@ static eddy_world *pool(pool_case pc, eddy_flip_solver solver, double tol, int t
  * faces (the divergence after projection within tol of the flux scale). */
 static void hypre_agrees_with_cholmod(void)
 {
-	static const char *const names[3] = {"sloped surface", "closed box (pinned)", "sphere and plane (fractional faces)"};
+	static const char *const names[3] = {"sloped surface", "closed box (pinned)",
+	                                     "sphere and plane (fractional faces)"};
 	const double tol = 1e-6;
 	for (int pc = 0; pc < 3; ++pc) {
 		eddy_world *c = pool((pool_case)pc, EDDY_FLIP_CHOLMOD, tol, 1);

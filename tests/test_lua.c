@@ -49,7 +49,8 @@ static void unknown_field_names_file_line_and_fix(void)
 	const char *e = run_fresh(HEAD "world:add(eddy.emit_box{ spacin = 0.01 })\n", buf, sizeof buf);
 	CHECK_HAS(e, "scenes/t.lua:3: emit_box: unknown field 'spacin' (did you mean 'spacing'?");
 	CHECK_HAS(e, "fields: min, max, spacing, jitter, velocity, start, shape)");
-	e = run_fresh("local eddy = require 'eddy'\nlocal w = eddy.world{ bounds = {{0,0,0},{1,1,1}}, fsp = 3 }\n", buf, sizeof buf);
+	e = run_fresh("local eddy = require 'eddy'\nlocal w = eddy.world{ bounds = {{0,0,0},{1,1,1}}, fsp = 3 }\n", buf,
+	              sizeof buf);
 	CHECK_HAS(e, "scenes/t.lua:2: world: unknown field 'fsp' (did you mean 'fps'?");
 }
 
@@ -106,24 +107,23 @@ static void sph_mass_from_the_handle(void)
 static void world_api_and_channels(void)
 {
 	lua_State *L = new_state();
-	const char *e = run(L, HEAD
-	                    "world:add(eddy.emit_box{ min = {0.1,0.1,0.1}, max = {0.2,0.3,0.2}, spacing = 0.05 })\n"
-	                    "world:add(eddy.gravity{})\n"
-	                    "world:add(eddy.integrate{})\n"
-	                    "world:add(eddy.collide_box{})\n"
-	                    "world:advance(0.1)\n"
-	                    "local y = world:channel('y')\n"
-	                    "assert(#y == world:count() and #y == 16, 'count ' .. #y)\n"
-	                    "assert(y[1] > 0 and y[1] < 0.3 and y[0] == nil and y[17] == nil)\n"
-	                    "local n = 0; for i, v in ipairs(y) do n = i end\n"
-	                    "assert(n == 16, 'ipairs ' .. n)\n"
-	                    "assert(math.abs(world:time() - 0.1) < 1e-12 and world:frame() == 3)\n"
-	                    "assert(world:step() > 0)\n"
-	                    "assert(world:plan():find('collide_box', 1, true))\n"
-	                    "assert(world:plan{dot = true}:find('digraph', 1, true))\n"
-	                    "local ok, err = pcall(world.channel, world, 'density')\n"
-	                    "assert(not ok and err:find('not allocated', 1, true), err)\n"
-	                    "return world:stats()\n");
+	const char *e = run(L, HEAD "world:add(eddy.emit_box{ min = {0.1,0.1,0.1}, max = {0.2,0.3,0.2}, spacing = 0.05 })\n"
+	                            "world:add(eddy.gravity{})\n"
+	                            "world:add(eddy.integrate{})\n"
+	                            "world:add(eddy.collide_box{})\n"
+	                            "world:advance(0.1)\n"
+	                            "local y = world:channel('y')\n"
+	                            "assert(#y == world:count() and #y == 16, 'count ' .. #y)\n"
+	                            "assert(y[1] > 0 and y[1] < 0.3 and y[0] == nil and y[17] == nil)\n"
+	                            "local n = 0; for i, v in ipairs(y) do n = i end\n"
+	                            "assert(n == 16, 'ipairs ' .. n)\n"
+	                            "assert(math.abs(world:time() - 0.1) < 1e-12 and world:frame() == 3)\n"
+	                            "assert(world:step() > 0)\n"
+	                            "assert(world:plan():find('collide_box', 1, true))\n"
+	                            "assert(world:plan{dot = true}:find('digraph', 1, true))\n"
+	                            "local ok, err = pcall(world.channel, world, 'density')\n"
+	                            "assert(not ok and err:find('not allocated', 1, true), err)\n"
+	                            "return world:stats()\n");
 	CHECKF(e == NULL, "%s", e);
 	if (!e) {
 		lua_getfield(L, -1, "particles");
@@ -137,11 +137,10 @@ static void world_api_and_channels(void)
 static void on_frame_fields_merge(void)
 {
 	lua_State *L = new_state();
-	const char *e = run(L, HEAD
-	                    "world:add(eddy.emit_box{ min = {0.1,0.1,0.1}, max = {0.2,0.2,0.2}, spacing = 0.05 })\n"
-	                    "world:on_frame(function(w, f) return { a = f } end)\n"
-	                    "world:on_frame(function(w, f) return { b = w:count() } end)\n"
-	                    "return world\n");
+	const char *e = run(L, HEAD "world:add(eddy.emit_box{ min = {0.1,0.1,0.1}, max = {0.2,0.2,0.2}, spacing = 0.05 })\n"
+	                            "world:on_frame(function(w, f) return { a = f } end)\n"
+	                            "world:on_frame(function(w, f) return { b = w:count() } end)\n"
+	                            "return world\n");
 	CHECKF(e == NULL, "%s", e);
 	eddy_world *w = eddy_lua_toworld(L, -1);
 	CHECK(w != NULL);
@@ -196,33 +195,36 @@ static void callbacks_cannot_reenter_their_world(void)
 	char err[512];
 	double t;
 	int frame;
-	eddy_status st = step_frame_from_c(HEAD "world:add(eddy.emit_box{ min = {0.1,0.1,0.1}, max = {0.2,0.2,0.2}, spacing = 0.05 })\n"
-	                                        "world:on_frame(function(w, f) w:advance(1) end)\n"
-	                                        "return world\n",
-	                                   err, sizeof err, &t, &frame);
+	eddy_status st =
+		step_frame_from_c(HEAD "world:add(eddy.emit_box{ min = {0.1,0.1,0.1}, max = {0.2,0.2,0.2}, spacing = 0.05 })\n"
+	                           "world:on_frame(function(w, f) w:advance(1) end)\n"
+	                           "return world\n",
+	                      err, sizeof err, &t, &frame);
 	CHECK(st == EDDY_ERR_EXTERNAL);
 	CHECK_HAS(err, "on_frame: scenes/t.lua:4: world:advance() cannot be called from inside on_frame");
 	CHECKF(frame <= 1 && t <= 1.0 / 30 + 1e-9, "frame %d, t %g: the refused advance ran", frame, t);
 
 	/* every refused call, caught: the frame completes as if none was made */
-	st = step_frame_from_c(HEAD "local g = world:add(eddy.gravity{})\n"
-	                            "world:on_frame(function(w, f)\n"
-	                            "  local t, n = w:time(), w:frame()\n"
-	                            "  local calls = {\n"
-	                            "    {'advance', function() w:advance(1) end}, {'step', function() w:step() end},\n"
-	                            "    {'add', function() w:add(eddy.integrate{}) end}, {'remove', function() w:remove(g) end},\n"
-	                            "    {'on_frame', function() w:on_frame(print) end}, {'close', function() w:close() end},\n"
-	                            "    {'close', function() local c <close> = w end},\n"
-	                            "    {'close', function() getmetatable(w).__gc(w) end},\n"
-	                            "  }\n"
-	                            "  for _, c in ipairs(calls) do\n"
-	                            "    local ok, e = pcall(c[2])\n"
-	                            "    assert(not ok and e:find('world:' .. c[1] .. '() cannot be called from inside on_frame', 1, true), e)\n"
-	                            "  end\n"
-	                            "  assert(w:time() == t and w:frame() == n and g:valid())\n"
-	                            "end)\n"
-	                            "return world\n",
-	                       err, sizeof err, &t, &frame);
+	st = step_frame_from_c(
+		HEAD
+		"local g = world:add(eddy.gravity{})\n"
+		"world:on_frame(function(w, f)\n"
+		"  local t, n = w:time(), w:frame()\n"
+		"  local calls = {\n"
+		"    {'advance', function() w:advance(1) end}, {'step', function() w:step() end},\n"
+		"    {'add', function() w:add(eddy.integrate{}) end}, {'remove', function() w:remove(g) end},\n"
+		"    {'on_frame', function() w:on_frame(print) end}, {'close', function() w:close() end},\n"
+		"    {'close', function() local c <close> = w end},\n"
+		"    {'close', function() getmetatable(w).__gc(w) end},\n"
+		"  }\n"
+		"  for _, c in ipairs(calls) do\n"
+		"    local ok, e = pcall(c[2])\n"
+		"    assert(not ok and e:find('world:' .. c[1] .. '() cannot be called from inside on_frame', 1, true), e)\n"
+		"  end\n"
+		"  assert(w:time() == t and w:frame() == n and g:valid())\n"
+		"end)\n"
+		"return world\n",
+		err, sizeof err, &t, &frame);
 	CHECKF(st == EDDY_OK, "%s", err);
 	CHECK(frame == 1);
 	CHECK_NEAR(t, 1.0 / 30, 1e-9);
@@ -236,8 +238,9 @@ static void callbacks_cannot_reenter_their_world(void)
 	CHECK(st == EDDY_ERR_EXTERNAL);
 	CHECK_HAS(err, "scenes/t.lua:4: world:step() cannot be called from inside an offset function");
 	char buf[512];
-	const char *e = run_fresh(HEAD "world:add(eddy.collide_sphere{ offset = function(t) world:close(); return {0, 0, 0} end })\n",
-	                          buf, sizeof buf);
+	const char *e =
+		run_fresh(HEAD "world:add(eddy.collide_sphere{ offset = function(t) world:close(); return {0, 0, 0} end })\n",
+	              buf, sizeof buf);
 	CHECK_HAS(e, "scenes/t.lua:3: world:close() cannot be called from inside an offset function");
 }
 
@@ -272,15 +275,15 @@ static void params_convert_to_the_default_type(void)
 static void animated_collider(void)
 {
 	lua_State *L = new_state();
-	const char *e = run(L, HEAD
-	                    "local s = world:add(eddy.collide_sphere{ center = {0.5,0.5,0.5}, radius = 0.1,\n"
-	                    "  offset = function(t) return {t, 0, 0} end })\n"
-	                    "world:advance(0.2)\n"
-	                    "local o = s:offset()\n"
-	                    "assert(math.abs(o[1] - 0.2) < 1e-6, 'offset ' .. o[1])\n"
-	                    "assert(world:plan():find('animate', 1, true))\n"
-	                    "local ok, err = pcall(eddy.collide_plane, { offset = function() end, normal = 3 })\n"
-	                    "assert(not ok and err:find(\"'normal' must be a table of 3 numbers\", 1, true), err)\n");
+	const char *e =
+		run(L, HEAD "local s = world:add(eddy.collide_sphere{ center = {0.5,0.5,0.5}, radius = 0.1,\n"
+	                "  offset = function(t) return {t, 0, 0} end })\n"
+	                "world:advance(0.2)\n"
+	                "local o = s:offset()\n"
+	                "assert(math.abs(o[1] - 0.2) < 1e-6, 'offset ' .. o[1])\n"
+	                "assert(world:plan():find('animate', 1, true))\n"
+	                "local ok, err = pcall(eddy.collide_plane, { offset = function() end, normal = 3 })\n"
+	                "assert(not ok and err:find(\"'normal' must be a table of 3 numbers\", 1, true), err)\n");
 	CHECKF(e == NULL, "%s", e);
 	lua_close(L);
 	char buf[512];
@@ -317,19 +320,20 @@ static void fluid_group_expands_per_method(void)
 	};
 	char src[1024], buf[4096];
 	for (size_t c = 0; c < sizeof cases / sizeof cases[0]; ++c) {
-		snprintf(src, sizeof src,
-		         "local eddy = require 'eddy'\n"
-		         "local fluid = eddy.fluid { method = '%s', resolution = 0.02 }\n"
-		         "local world = fluid:world { bounds = { {0, 0, 0}, {0.3, 0.3, 0.1} }, fps = 30, duration = 0.1 }\n"
-		         "world:add(eddy.emit_box { min = {0, 0, 0}, max = {0.1, 0.1, 0.1}, spacing = fluid.spacing })\n"
-		         "local h = world:add(fluid)\n"
-		         "world:advance(1 / 30)\n"
-		         "local names = {}\n"
-		         "for i, s in ipairs(h) do names[i] = s:name():gsub('#%%d+', '') end\n"
-		         "local st = world:stats()\n"
-		         "assert(type(st.energy) == 'number' and st.kinetic_energy >= 0 and #st.momentum == 3, 'energy stats')\n"
-		         "return table.concat(names, ' ') .. '|' .. h[1]:group() .. '|' .. world:plan() .. '|' .. world:count()\n",
-		         cases[c].method);
+		snprintf(
+			src, sizeof src,
+			"local eddy = require 'eddy'\n"
+			"local fluid = eddy.fluid { method = '%s', resolution = 0.02 }\n"
+			"local world = fluid:world { bounds = { {0, 0, 0}, {0.3, 0.3, 0.1} }, fps = 30, duration = 0.1 }\n"
+			"world:add(eddy.emit_box { min = {0, 0, 0}, max = {0.1, 0.1, 0.1}, spacing = fluid.spacing })\n"
+			"local h = world:add(fluid)\n"
+			"world:advance(1 / 30)\n"
+			"local names = {}\n"
+			"for i, s in ipairs(h) do names[i] = s:name():gsub('#%%d+', '') end\n"
+			"local st = world:stats()\n"
+			"assert(type(st.energy) == 'number' and st.kinetic_energy >= 0 and #st.momentum == 3, 'energy stats')\n"
+			"return table.concat(names, ' ') .. '|' .. h[1]:group() .. '|' .. world:plan() .. '|' .. world:count()\n",
+			cases[c].method);
 		const char *out = run_group(src, buf, sizeof buf);
 		CHECKF(strncmp(out, cases[c].systems, strlen(cases[c].systems)) == 0, "%s: %s", cases[c].method, out);
 		char group[128];
@@ -343,17 +347,18 @@ static void fluid_group_expands_per_method(void)
 		const char *fields, *error;
 	} bad[] = {
 		{"method = 'flip', resolution = 0.02, stiffness = 100",
-		 "scenes/t.lua:2: eddy.fluid: 'stiffness' does not apply to method 'flip' (it applies to wcsph; fields for "
-		 "flip: cell_size, flip_ratio,"},
+	     "scenes/t.lua:2: eddy.fluid: 'stiffness' does not apply to method 'flip' (it applies to wcsph; fields for "
+	     "flip: cell_size, flip_ratio,"},
 		{"method = 'sph', resolution = 0.02", "scenes/t.lua:2: eddy.fluid: 'method' must be one of wcsph, dfsph, flip, "
-		                                     "pic, apic (got sph)"},
-		{"method = 'dfsph', resolution = 0.02, tolerence = 0.01", "scenes/t.lua:2: eddy.fluid: unknown field 'tolerence'"},
+	                                          "pic, apic (got sph)"},
+		{"method = 'dfsph', resolution = 0.02, tolerence = 0.01",
+	     "scenes/t.lua:2: eddy.fluid: unknown field 'tolerence'"},
 		{"method = 'flip', resolution = 0.02, wcsph = { stiffness = 100 }, flip = { stiffness = 1 }",
-		 "scenes/t.lua:2: eddy.fluid: 'stiffness' in flip = {...} does not apply to method 'flip'"},
+	     "scenes/t.lua:2: eddy.fluid: 'stiffness' in flip = {...} does not apply to method 'flip'"},
 		{"method = 'wcsph', resolution = -1", "scenes/t.lua:2: eddy.fluid: 'resolution' (m, the particle spacing) must "
-		                                     "be a number > 0 (got -1)"},
+	                                          "be a number > 0 (got -1)"},
 		{"method = 'dfsph', resolution = 0.02, tolerance = -1",
-		 "scenes/t.lua:4: eddy.fluid: sph_dfsph: 'max_density_error' must be > 0 (got -1)"},
+	     "scenes/t.lua:4: eddy.fluid: sph_dfsph: 'max_density_error' must be > 0 (got -1)"},
 	};
 	for (size_t c = 0; c < sizeof bad / sizeof bad[0]; ++c) {
 		snprintf(src, sizeof src,
@@ -363,10 +368,11 @@ static void fluid_group_expands_per_method(void)
 		CHECK_HAS(run_group(src, buf, sizeof buf), bad[c].error);
 	}
 	/* SPH needs the tank: a world made without fluid:world and no tank field */
-	CHECK_HAS(run_group("local eddy = require 'eddy'\nlocal fluid = eddy.fluid { method = 'wcsph', resolution = 0.02 }\n"
-	                    "local world = eddy.world {}\nworld:add(fluid)\n",
-	                    buf, sizeof buf),
-	          "scenes/t.lua:4: eddy.fluid: an SPH method needs the tank's walls");
+	CHECK_HAS(
+		run_group("local eddy = require 'eddy'\nlocal fluid = eddy.fluid { method = 'wcsph', resolution = 0.02 }\n"
+	              "local world = eddy.world {}\nworld:add(fluid)\n",
+	              buf, sizeof buf),
+		"scenes/t.lua:4: eddy.fluid: an SPH method needs the tank's walls");
 }
 
 static void every_field_rejects_nan_and_inf(void);
@@ -419,26 +425,30 @@ static void safe_mode_refuses_escapes(void)
 		{"io.output('/tmp/x')", "io.output: cannot write '/tmp/x'"},
 		{"package.loadlib('/lib/x.so', 'f')", "package.loadlib is not available in safe mode"},
 		{"package.loaded.eddy = nil; local ok, err = pcall(require, 'eddy'); package.loaded.eddy = eddy; error(err)",
-		 "C modules (package.cpath) are not loaded in safe mode"},
+	     "C modules (package.cpath) are not loaded in safe mode"},
 		{"package.cpath = '/usr/lib/?.so'; require 'nosuchmodule'", "C modules (package.cpath) are not loaded"},
-		{"assert(load(string.dump(function() end)))", "load: binary chunks (string.dump) cannot be loaded in safe mode"},
+		{"assert(load(string.dump(function() end)))",
+	     "load: binary chunks (string.dump) cannot be loaded in safe mode"},
 		{"assert(load(string.dump(function() end), 'x', 'b'))", "binary chunks (string.dump) cannot be loaded"},
 		{"local s = string.dump(function() end); assert(load(function() local r = s; s = nil; return r end))",
-		 "attempt to load a binary chunk (mode is 't')"},
+	     "attempt to load a binary chunk (mode is 't')"},
 		{"local f = assert(io.open(OUT .. '/dumped.lua', 'wb')); f:write(string.dump(function() end)); f:close()\n"
-		 "assert(loadfile(OUT .. '/dumped.lua', 'b'))",
-		 "/dumped.lua: a binary (precompiled) chunk: eddy loads Lua source only"},
+	     "assert(loadfile(OUT .. '/dumped.lua', 'b'))",
+	     "/dumped.lua: a binary (precompiled) chunk: eddy loads Lua source only"},
 		{"dofile(OUT .. '/dumped.lua')", "/dumped.lua: a binary (precompiled) chunk"},
 		{"package.path = OUT .. '/?.lua'; require 'dumped'", "error loading module 'dumped' from file"},
 		{"debug.getinfo(1)", "global 'debug'"},
 		{"require 'debug'", "module 'debug' not found"},
 		{"local w = eddy.world{}; w:add(eddy.render_points{ path = '/tmp/f_%04d.png' })",
-		 "render_points: cannot write '/tmp/f_%04d.png'"},
+	     "render_points: cannot write '/tmp/f_%04d.png'"},
 		{"local w = eddy.world{}; w:add(eddy.export_particles{ path = OUT .. '/../p_%04d.ply' })",
-		 "export_particles: cannot write"},
-		{"eddy.load_scene('scenes/bounce.lua', { safe = false })", "load_scene: safe = false is not available in safe mode"},
-		{"eddy.load_scene('scenes/bounce.lua', { out = '/tmp' })", "load_scene: 'out' must be the output directory or below it"},
-		{"eddy.load_scene('scenes/bounce.lua', { out = OUT .. '/../x' })", "load_scene: 'out' must be the output directory"},
+	     "export_particles: cannot write"},
+		{"eddy.load_scene('scenes/bounce.lua', { safe = false })",
+	     "load_scene: safe = false is not available in safe mode"},
+		{"eddy.load_scene('scenes/bounce.lua', { out = '/tmp' })",
+	     "load_scene: 'out' must be the output directory or below it"},
+		{"eddy.load_scene('scenes/bounce.lua', { out = OUT .. '/../x' })",
+	     "load_scene: 'out' must be the output directory"},
 	};
 	lua_State *L = new_safe_state(out);
 	for (size_t i = 0; i < sizeof refused / sizeof refused[0]; ++i) {
@@ -484,16 +494,16 @@ static void load_scene_runs_a_scene_sandboxed(void)
 	char path[600], luac[600], cmd[2048], buf[512];
 	snprintf(path, sizeof path, "%s/escape.lua", out);
 	const char *escape = "X_LEAKED = true\nlocal ok, e = pcall(os.execute, 'true')\n"
-	                     "assert(not ok and e:find('os.execute is not available in safe mode', 1, true), e)\n"
-	                     "ok, e = pcall(io.open, '/tmp/x', 'w')\n"
-	                     "assert(not ok and e:find('only under the output directory', 1, true), e)\n"
-	                     "assert(io.open(eddy_out .. '/ok.txt', 'w')):close()\n"
-	                     "assert(debug == nil and package.loadlib ~= nil and not pcall(package.loadlib, 'x', 'y'))\n"
-	                     "assert(not load(string.dump(function() end)))\n"
-	                     "local eddy = require 'eddy'\n"
-	                     "assert(eddy.out_dir() == eddy_out)\n"
-	                     "return eddy.world{}, 42, function() return eddy.world{} end,\n"
-	                     "  function() return eddy.load_scene('scenes/bounce.lua', { safe = false }) end\n";
+						 "assert(not ok and e:find('os.execute is not available in safe mode', 1, true), e)\n"
+						 "ok, e = pcall(io.open, '/tmp/x', 'w')\n"
+						 "assert(not ok and e:find('only under the output directory', 1, true), e)\n"
+						 "assert(io.open(eddy_out .. '/ok.txt', 'w')):close()\n"
+						 "assert(debug == nil and package.loadlib ~= nil and not pcall(package.loadlib, 'x', 'y'))\n"
+						 "assert(not load(string.dump(function() end)))\n"
+						 "local eddy = require 'eddy'\n"
+						 "assert(eddy.out_dir() == eddy_out)\n"
+						 "return eddy.world{}, 42, function() return eddy.world{} end,\n"
+						 "  function() return eddy.load_scene('scenes/bounce.lua', { safe = false }) end\n";
 	/* the out option is the scene's eddy.out_dir() */
 	char scene[2048];
 	snprintf(scene, sizeof scene, "local eddy_out = require('eddy').out_dir()\n%s", escape);

@@ -165,7 +165,8 @@ static void sdf_same_on_any_thread_count(void)
 		uint64_t s = 11;
 		int differ = 0;
 		for (int q = 0; q < 64; ++q) {
-			const eddy_vec3 p = {(float)(0.15 + 0.7 * u01(&s)), (float)(0.1 + 0.8 * u01(&s)), (float)(0.15 + 0.7 * u01(&s))};
+			const eddy_vec3 p = {(float)(0.15 + 0.7 * u01(&s)), (float)(0.1 + 0.8 * u01(&s)),
+			                     (float)(0.15 + 0.7 * u01(&s))};
 			float dist = NAN;
 			CHECK(eddy_collider_distance(w, id, p, &dist) == EDDY_OK);
 			if (threads == 1)
@@ -245,12 +246,14 @@ static void closed_and_open_meshes(void)
 	CHECK(!eddy_system_valid(w, add_mesh(w, open_p, false, 0.5f)));
 	CHECK_HAS(eddy_world_error(w), "collide_mesh: ");
 	CHECK_HAS(eddy_world_error(w), open_p);
-	CHECK_HAS(eddy_world_error(w), "is not a closed surface (3 open edges, 0 edges in more than two triangles, 0 edges");
+	CHECK_HAS(eddy_world_error(w),
+	          "is not a closed surface (3 open edges, 0 edges in more than two triangles, 0 edges");
 	CHECK_HAS(eddy_world_error(w), "set open = true");
 	CHECK(!eddy_system_valid(w, add_mesh(w, fin_p, false, 0.5f)));
 	CHECK_HAS(eddy_world_error(w), "(2 open edges, 1 edges in more than two triangles, 0 edges whose");
 	CHECK(!eddy_system_valid(w, add_mesh(w, flip_p, false, 0.5f)));
-	CHECK_HAS(eddy_world_error(w), "(0 open edges, 0 edges in more than two triangles, 3 edges whose triangles are wound");
+	CHECK_HAS(eddy_world_error(w),
+	          "(0 open edges, 0 edges in more than two triangles, 3 edges whose triangles are wound");
 	CHECK(!eddy_system_valid(w, add_mesh(w, none_p, false, 0.5f)));
 	CHECK_HAS(eddy_world_error(w), none_p);
 	CHECK_HAS(eddy_world_error(w), "cannot read the mesh: ");
@@ -317,7 +320,9 @@ static void flip_wall_warning(void)
 		if (k == 0)
 			CHECKF(strstr(buf, "is nowhere thicker than") == NULL, "%s", buf);
 		else
-			CHECK_HAS(buf, "collide_mesh: scenes/meshes/cup.obj is nowhere thicker than 0.011 m, 1.4 grid cells: FLIP can carry");
+			CHECK_HAS(
+				buf,
+				"collide_mesh: scenes/meshes/cup.obj is nowhere thicker than 0.011 m, 1.4 grid cells: FLIP can carry");
 		eddy_destroy_world(w);
 	}
 }
@@ -392,8 +397,8 @@ static void emit_mesh_counts(void)
 			CHECK(obj == box);
 	}
 	const double s = 0.01;
-	const int64_t turned = mesh_count("scenes/meshes/cube.obj", one, (eddy_vec3){10, 30, 0}, (eddy_vec3){0.5f, 0.3f, 0.4f},
-	                                  (float)s);
+	const int64_t turned =
+		mesh_count("scenes/meshes/cube.obj", one, (eddy_vec3){10, 30, 0}, (eddy_vec3){0.5f, 0.3f, 0.4f}, (float)s);
 	CHECK_NEAR(turned / (0.008 / (s * s * s)), 1, 0.03);
 	const double R = 0.15;
 	/* the icosphere's volume: 0.9865 of the sphere's (its 1280 tetrahedra from the centre) */
@@ -480,7 +485,7 @@ static fall_result fall(const char *method, bool mesh)
 	if (w && run_frames(w, 15)) {
 		size_t n;
 		const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
-		            *z = eddy_world_channel(w, "z", NULL);
+					*z = eddy_world_channel(w, "z", NULL);
 		for (size_t i = 0; i < n; ++i) {
 			const double dx = x[i] - 0.15, dy = y[i] - 0.12, dz = z[i] - 0.15;
 			r.worst = fmin(r.worst, sqrt(dx * dx + dy * dy + dz * dz) - 0.08);
@@ -555,7 +560,7 @@ static cup_result run_cup(const char *method, const char *spacing, const char *d
 	}
 	if (ran) {
 		const float *x = eddy_world_channel(w, "x", &c.n), *y = eddy_world_channel(w, "y", NULL),
-		            *z = eddy_world_channel(w, "z", NULL);
+					*z = eddy_world_channel(w, "z", NULL);
 		double sy = 0;
 		for (size_t i = 0; i < c.n; ++i) {
 			sy += y[i];
@@ -600,15 +605,17 @@ static void cup_holds_dropped_and_sph_water(void)
 {
 	const double vol = 32 * sin(2 * 3.14159265358979 / 64); /* the 64-gon's area / r^2 */
 	const cup_result f = run_cup("flip", "0.0025", "0.01", 30);
-	printf("    FLIP, dropped 1 cm: %zu particles, level %.5f m against %.5f m geometric, widest %.5f m, lowest %.5f m\n",
-	       f.n, f.level, 0.06 * 0.035 * 0.035 / (0.04 * 0.04), f.rmax, f.ymin);
+	printf(
+		"    FLIP, dropped 1 cm: %zu particles, level %.5f m against %.5f m geometric, widest %.5f m, lowest %.5f m\n",
+		f.n, f.level, 0.06 * 0.035 * 0.035 / (0.04 * 0.04), f.rmax, f.ymin);
 	CHECK(f.ok && f.rmax <= 0.04 + 1e-4 && f.ymin >= 0.02 - 1e-4 && f.leaked == 0);
 	const char *const spacings[] = {"0.004", "0.003"};
 	for (int k = 0; k < 2; ++k) {
 		const double sp = atof(spacings[k]);
 		const cup_result s = run_cup("dfsph", spacings[k], "0", 30);
 		const double expect = (double)s.n * sp * sp * sp / (vol * 0.04 * 0.04);
-		printf("    DFSPH at rest, %.0f mm: %zu particles, level %.5f m against %.5f m for their lattice volume (%+.2f%%), "
+		printf("    DFSPH at rest, %.0f mm: %zu particles, level %.5f m against %.5f m for their lattice volume "
+		       "(%+.2f%%), "
 		       "%zu over the rim, none in the walls in any frame: %s\n",
 		       sp * 1e3, s.n, s.level, expect, 100 * (s.level / expect - 1), s.outside, s.leaked ? "no" : "yes");
 		CHECK(s.ok && s.leaked == 0 && s.outside == 0);
@@ -713,24 +720,35 @@ static void ply_formats_and_errors(void)
 		size_t bytes;
 		const char *error; /* NULL: loads */
 	} cases[] = {
-		{"a.ply", "ply\nformat ascii 1.0\ncomment hand-written\nelement vertex 2\nproperty float x\nproperty double y\n"
-		          "property float z\nproperty uchar red\nelement face 0\nproperty list uchar int vertex_indices\n"
-		          "end_header\n0.1 0.2 0.3 255\n0.4 0.5 0.6 0\n", 0, NULL},
-		{"be.ply", "ply\nformat binary_big_endian 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
-		           "property float z\nproperty float vx\nproperty float vy\nproperty float vz\nend_header\n"
-		           "\x3e\x80\x00\x00\x3f\x00\x00\x00\x3f\x40\x00\x00\x3f\x80\x00\x00\x40\x00\x00\x00\xc0\x40\x00\x00",
-		 24, NULL},
+		{"a.ply",
+	     "ply\nformat ascii 1.0\ncomment hand-written\nelement vertex 2\nproperty float x\nproperty double y\n"
+	     "property float z\nproperty uchar red\nelement face 0\nproperty list uchar int vertex_indices\n"
+	     "end_header\n0.1 0.2 0.3 255\n0.4 0.5 0.6 0\n",
+	     0, NULL},
+		{"be.ply",
+	     "ply\nformat binary_big_endian 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+	     "property float z\nproperty float vx\nproperty float vy\nproperty float vz\nend_header\n"
+	     "\x3e\x80\x00\x00\x3f\x00\x00\x00\x3f\x40\x00\x00\x3f\x80\x00\x00\x40\x00\x00\x00\xc0\x40\x00\x00",
+	     24, NULL},
 		{"nox.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float y\nproperty float z\nend_header\n1 2\n", 0,
-		 "the vertex element has no scalar property 'x'"},
-		{"short.ply", "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-		              "property float z\nend_header\n\0\0\0\0", 4, "the data ends at row 0 of 'vertex'"},
+	     "the vertex element has no scalar property 'x'"},
+		{"short.ply",
+	     "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+	     "property float z\nend_header\n\0\0\0\0",
+	     4, "the data ends at row 0 of 'vertex'"},
 		{"fmt.ply", "ply\nformat binary_middle_endian 1.0\nend_header\n", 0, "header line 2: unknown format"},
-		{"vel.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
-		            "property float vx\nend_header\n0.1 0.1 0.1 3\n", 0, "has 1 of the velocity properties"},
-		{"nan.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
-		            "end_header\n0.1 zz 0.1\n", 0, "row 0 of 'vertex': 'zz' is not a number"},
-		{"far.ply", "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n"
-		            "end_header\n0.1 0.1 0.1\n0.1 2 0.1\n", 0, "vertex 1 at {0.1, 2, 0.1} lies outside the world bounds"},
+		{"vel.ply",
+	     "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+	     "property float vx\nend_header\n0.1 0.1 0.1 3\n",
+	     0, "has 1 of the velocity properties"},
+		{"nan.ply",
+	     "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n"
+	     "end_header\n0.1 zz 0.1\n",
+	     0, "row 0 of 'vertex': 'zz' is not a number"},
+		{"far.ply",
+	     "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n"
+	     "end_header\n0.1 0.1 0.1\n0.1 2 0.1\n",
+	     0, "vertex 1 at {0.1, 2, 0.1} lies outside the world bounds"},
 		{"obj.ply", "v 0 0 0\n", 0, "not a PLY file"},
 	};
 	for (size_t k = 0; k < sizeof cases / sizeof cases[0]; ++k) {
@@ -761,7 +779,7 @@ static void ply_formats_and_errors(void)
 	CHECK(eddy_world_step(w) == EDDY_OK);
 	size_t n = 0;
 	const float *x = eddy_world_channel(w, "x", &n), *vy = eddy_world_channel(w, "vy", NULL),
-	            *vz = eddy_world_channel(w, "vz", NULL);
+				*vz = eddy_world_channel(w, "vz", NULL);
 	CHECK(n == 3);
 	if (n == 3) {
 		CHECK(x[0] == 0.1f && x[1] == 0.4f && vy[0] == -1 && vy[1] == -1);
@@ -777,20 +795,20 @@ static void lua_kinds(void)
 	lua_State *L = new_state();
 	CHECK(eddy_lua_sandbox(L, NULL) == LUA_OK);
 	const char *src = "local eddy = require 'eddy'\n"
-	                  "local w = eddy.world { bounds = {{0, 0, 0}, {1, 1, 1}} }\n"
-	                  "w:add(eddy.emit_mesh { path = 'scenes/meshes/cube.obj', scale = {0.1, 0.1, 0.1},\n"
-	                  "                       translate = {0.4, 0.4, 0.4}, spacing = 0.02 })\n"
-	                  "w:add(eddy.collide_mesh { path = 'scenes/meshes/icosphere.obj', scale = {0.1, 0.1, 0.1},\n"
-	                  "                          translate = {0.5, 0.2, 0.5}, restitution = 0.2, friction = 0.1,\n"
-	                  "                          offset = {0.01, 0, 0} })\n"
-	                  "return w\n";
+					  "local w = eddy.world { bounds = {{0, 0, 0}, {1, 1, 1}} }\n"
+					  "w:add(eddy.emit_mesh { path = 'scenes/meshes/cube.obj', scale = {0.1, 0.1, 0.1},\n"
+					  "                       translate = {0.4, 0.4, 0.4}, spacing = 0.02 })\n"
+					  "w:add(eddy.collide_mesh { path = 'scenes/meshes/icosphere.obj', scale = {0.1, 0.1, 0.1},\n"
+					  "                          translate = {0.5, 0.2, 0.5}, restitution = 0.2, friction = 0.1,\n"
+					  "                          offset = {0.01, 0, 0} })\n"
+					  "return w\n";
 	eddy_world *w = load(L, src);
 	CHECK(w && eddy_world_system_count(w) == 2);
 	lua_close(L);
 	L = new_state();
 	const char *bad = "local eddy = require 'eddy'\n"
-	                  "local w = eddy.world {}\n"
-	                  "w:add(eddy.collide_mesh { path = 'nowhere.obj' })\n";
+					  "local w = eddy.world {}\n"
+					  "w:add(eddy.collide_mesh { path = 'nowhere.obj' })\n";
 	CHECK(luaL_loadbuffer(L, bad, strlen(bad), "@t.lua") == LUA_OK);
 	CHECK(lua_pcall(L, 0, 0, 0) != LUA_OK);
 	CHECK_HAS(lua_tostring(L, -1), "t.lua:3: collide_mesh: nowhere.obj: cannot read the mesh: ");

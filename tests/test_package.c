@@ -21,7 +21,8 @@ static void repository_stands_alone(void)
 	char cmd[512];
 	snprintf(cmd, sizeof cmd,
 	         "grep -rIl -e '%s' Makefile README.md scripts src lua render scenes tests data docs .ci; true",
-	         "\\.\\./" "shared");
+	         "\\.\\./"
+	         "shared");
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECKF(out[0] == '\0', "files citing a folder outside the repository:\n%s", out);
 	CHECK(test_sh("test -s LICENSE && grep -q '^MIT License' LICENSE", out, sizeof out) == 0);

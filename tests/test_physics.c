@@ -114,7 +114,7 @@ static void colliders_keep_every_particle_out(void)
 			CHECK(eddy_world_step(s.w) == EDDY_OK);
 			size_t n;
 			const float *x = eddy_world_channel(s.w, "x", &n), *y = eddy_world_channel(s.w, "y", NULL),
-			            *z = eddy_world_channel(s.w, "z", NULL);
+						*z = eddy_world_channel(s.w, "z", NULL);
 			int bad = 0;
 			for (size_t i = 0; i < n; ++i) {
 				eddy_vec3 p = {x[i], y[i], z[i]};
@@ -126,7 +126,8 @@ static void colliders_keep_every_particle_out(void)
 				 * may remain, and the box wins last */
 				bad += ds < -1e-5f || dp < -1e-5f || db < 0;
 			}
-			CHECKF(bad == 0, "restitution %g, step %d: %d particles inside a collider", (double)restitution[r], step, bad);
+			CHECKF(bad == 0, "restitution %g, step %d: %d particles inside a collider", (double)restitution[r], step,
+			       bad);
 			if (bad)
 				break;
 		}

@@ -58,10 +58,7 @@ static void run_frames(eddy_world *w, eddy_system_id sphere, int frames)
 	}
 }
 
-static void ckpt_path(char *out, size_t cap, const char *name)
-{
-	snprintf(out, cap, "%s/%s", test_build_dir(), name);
-}
+static void ckpt_path(char *out, size_t cap, const char *name) { snprintf(out, cap, "%s/%s", test_build_dir(), name); }
 
 static void checkpoint_resume_is_bit_identical(void)
 {
@@ -158,8 +155,10 @@ static void cli_resume_skips_a_corrupted_checkpoint(void)
 {
 	const char *bin = test_build_dir();
 	char cmd[2048], out[65536], a[8192], b[8192];
-	snprintf(cmd, sizeof cmd, "rm -rf %s/t_run && %s/eddy run scenes/bounce.lua --frames 16 --quiet --stats - "
-	         "| tail -1 | grep -o '\"state_hash\":\"[0-9a-f]*\"'", bin, bin);
+	snprintf(cmd, sizeof cmd,
+	         "rm -rf %s/t_run && %s/eddy run scenes/bounce.lua --frames 16 --quiet --stats - "
+	         "| tail -1 | grep -o '\"state_hash\":\"[0-9a-f]*\"'",
+	         bin, bin);
 	CHECK(test_sh(cmd, a, sizeof a) == 0);
 	snprintf(cmd, sizeof cmd, "%s/eddy run scenes/bounce.lua --frames 11 --quiet --checkpoint-every 5 --out %s/t_run",
 	         bin, bin);
@@ -167,8 +166,10 @@ static void cli_resume_skips_a_corrupted_checkpoint(void)
 	char newest[512];
 	snprintf(newest, sizeof newest, "%s/t_run/checkpoints/frame-000010.eddy", bin);
 	corrupt_byte(newest, 100);
-	snprintf(cmd, sizeof cmd, "%s/eddy run scenes/bounce.lua --frames 16 --out %s/t_run --resume %s/t_run/checkpoints "
-	         "--stats %s/t_run/s.jsonl", bin, bin, bin, bin);
+	snprintf(cmd, sizeof cmd,
+	         "%s/eddy run scenes/bounce.lua --frames 16 --out %s/t_run --resume %s/t_run/checkpoints "
+	         "--stats %s/t_run/s.jsonl",
+	         bin, bin, bin, bin);
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK_HAS(out, "checksum mismatch (corrupted); trying an older one");
 	CHECK_HAS(out, "resuming from");
@@ -178,8 +179,8 @@ static void cli_resume_skips_a_corrupted_checkpoint(void)
 	CHECK(strlen(a) > 20);
 	CHECK(strcmp(a, b) == 0);
 	/* --set changes the scene: its checkpoints are not taken */
-	snprintf(cmd, sizeof cmd, "%s/eddy run scenes/bounce.lua --frames 16 --set restitution=0.9 --resume %s/t_run/checkpoints",
-	         bin, bin);
+	snprintf(cmd, sizeof cmd,
+	         "%s/eddy run scenes/bounce.lua --frames 16 --set restitution=0.9 --resume %s/t_run/checkpoints", bin, bin);
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "no valid checkpoint of this scene");
 }
@@ -188,20 +189,27 @@ static void cli_resume_skips_a_corrupted_checkpoint(void)
  * at frame 7 and resumed from its frame-6 checkpoint end in the same states. */
 static void fluid_scenes_resume_bit_identical(void)
 {
-	static const char *const scenes[] = {"scenes/dam_break.lua --set method=flip --set render=false --set spacing=0.005",
-	                                     "scenes/dam_break.lua --set render=false --set spacing=0.01",
-	                                     /* a collider moved by an offset function: flip_boundary's memory of it */
-	                                     "scenes/stress/flip_solid_sphere.lua --set cell_size=0.025", NULL};
+	static const char *const scenes[] = {
+		"scenes/dam_break.lua --set method=flip --set render=false --set spacing=0.005",
+		"scenes/dam_break.lua --set render=false --set spacing=0.01",
+		/* a collider moved by an offset function: flip_boundary's memory of it */
+		"scenes/stress/flip_solid_sphere.lua --set cell_size=0.025", NULL};
 	const char *bin = test_build_dir();
 	for (int i = 0; scenes[i]; ++i) {
 		char cmd[2048], a[16384], b[16384], out[4096];
-		snprintf(cmd, sizeof cmd, "rm -rf %s/t_fluid %s/t_fluid_b.jsonl && %s/eddy run %s --frames 10 --quiet --out %s/t_fluid/a --stats - "
-		         "| grep -o '\"state_hash\":\"[0-9a-f]*\"'", bin, bin, bin, scenes[i], bin);
+		snprintf(
+			cmd, sizeof cmd,
+			"rm -rf %s/t_fluid %s/t_fluid_b.jsonl && %s/eddy run %s --frames 10 --quiet --out %s/t_fluid/a --stats - "
+			"| grep -o '\"state_hash\":\"[0-9a-f]*\"'",
+			bin, bin, bin, scenes[i], bin);
 		CHECK(test_sh(cmd, a, sizeof a) == 0);
-		snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 7 --checkpoint-every 3 --quiet --out %s/t_fluid/b "
-		         "--stats %s/t_fluid_b.jsonl", bin, scenes[i], bin, bin);
+		snprintf(cmd, sizeof cmd,
+		         "%s/eddy run %s --frames 7 --checkpoint-every 3 --quiet --out %s/t_fluid/b "
+		         "--stats %s/t_fluid_b.jsonl",
+		         bin, scenes[i], bin, bin);
 		CHECK(test_sh(cmd, out, sizeof out) == 0);
-		snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 10 --quiet --out %s/t_fluid/b --stats %s/t_fluid_b.jsonl "
+		snprintf(cmd, sizeof cmd,
+		         "%s/eddy run %s --frames 10 --quiet --out %s/t_fluid/b --stats %s/t_fluid_b.jsonl "
 		         "--resume %s/t_fluid/b/checkpoints && grep -o '\"state_hash\":\"[0-9a-f]*\"' %s/t_fluid_b.jsonl",
 		         bin, scenes[i], bin, bin, bin, bin);
 		CHECK(test_sh(cmd, b, sizeof b) == 0);
@@ -281,7 +289,8 @@ static void run_refuses_what_cannot_fit(void)
 	FILE *f = fopen(path, "w");
 	fputs("local eddy = require 'eddy'\nlocal w = eddy.world{ bounds = {{0,0,0},{10,10,10}} }\n"
 	      "w:add(eddy.emit_box{ min = {0,0,0}, max = {10,10,10}, spacing = 0.01 })\n"
-	      "w:add(eddy.gravity{})\nw:add(eddy.integrate{})\nreturn w\n", f);
+	      "w:add(eddy.gravity{})\nw:add(eddy.integrate{})\nreturn w\n",
+	      f);
 	fclose(f);
 	snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 1", test_build_dir(), path);
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
@@ -396,7 +405,8 @@ static void run_refuses_mismatched_sph_spacing(void)
 	fputs("local eddy = require 'eddy'\nlocal w = eddy.world{ bounds = {{0,0,0},{1,1,1}} }\n"
 	      "w:add(eddy.emit_box{ min = {0.1,0.1,0.1}, max = {0.3,0.3,0.3}, spacing = 0.02 })\n"
 	      "w:add(eddy.sph_density{})\nw:add(eddy.gravity{})\nw:add(eddy.sph_pressure{})\n"
-	      "w:add(eddy.integrate{})\nreturn w\n", f);
+	      "w:add(eddy.integrate{})\nreturn w\n",
+	      f);
 	fclose(f);
 	snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 1 --out %s/t_spacing_out", test_build_dir(), path,
 	         test_build_dir());

@@ -108,7 +108,10 @@ static image render_once(eddy_world *w, const eddy_render_points_def *d, size_t 
 	return im;
 }
 
-static const unsigned char *pixel(const image *im, int x, int y) { return im->px + ((size_t)y * (size_t)im->w + (size_t)x) * 3; }
+static const unsigned char *pixel(const image *im, int x, int y)
+{
+	return im->px + ((size_t)y * (size_t)im->w + (size_t)x) * 3;
+}
 
 static void add_particles(eddy_world *w, size_t n, const eddy_vec3 *p, const eddy_vec3 *v)
 {
@@ -333,7 +336,8 @@ static uint64_t fixed_scene_hash(const char *name)
 		return 0;
 	eddy_vec3 p[512], v[512];
 	for (int i = 0; i < 512; ++i) {
-		p[i] = (eddy_vec3){0.1f + 0.1f * (float)(i % 8), 0.1f + 0.1f * (float)((i / 8) % 8), 0.1f + 0.1f * (float)(i / 64)};
+		p[i] = (eddy_vec3){0.1f + 0.1f * (float)(i % 8), 0.1f + 0.1f * (float)((i / 8) % 8),
+		                   0.1f + 0.1f * (float)(i / 64)};
 		v[i] = (eddy_vec3){(float)(i % 7) * 0.1f, (float)(i % 5) * -0.2f, 0.0f};
 	}
 	eddy_render_points_def d = eddy_default_render_points_def();
@@ -416,7 +420,8 @@ static void png_writer_round_trips(void)
 		}
 		int sw = 0, sh = 0, comp = 0;
 		uint8_t *st = stbi_load(path, &sw, &sh, &comp, 3);
-		CHECKF(st && sw == w && sh == H && memcmp(st, rgb, (size_t)w * H * 3) == 0, "width %d: stb_image reads other pixels", w);
+		CHECKF(st && sw == w && sh == H && memcmp(st, rgb, (size_t)w * H * 3) == 0,
+		       "width %d: stb_image reads other pixels", w);
 		stbi_image_free(st);
 		free(back);
 		free(rgb);
@@ -597,7 +602,8 @@ static const char *line(const unsigned char **p, const unsigned char *end, char 
 }
 
 enum { NP = 5 };
-static const eddy_vec3 exp_pos[NP] = {{0.1f, 0.2f, 0.3f}, {0.9f, 0.8f, 0.7f}, {0.5f, 0.5f, 0.5f}, {0.25f, 0.125f, 0.0625f}, {1e-3f, 0.999f, 0.33f}};
+static const eddy_vec3 exp_pos[NP] = {
+	{0.1f, 0.2f, 0.3f}, {0.9f, 0.8f, 0.7f}, {0.5f, 0.5f, 0.5f}, {0.25f, 0.125f, 0.0625f}, {1e-3f, 0.999f, 0.33f}};
 static const eddy_vec3 exp_vel[NP] = {{1, 2, 2}, {-3, 0, 4}, {0, 0, 0}, {0.5f, -0.25f, 1e-3f}, {-7.5f, 3.25f, 0}};
 
 static eddy_world *export_world(eddy_export_format format, const char *name)
@@ -695,7 +701,8 @@ static void vtk_parses_back(void)
 	p += NP * 12;
 	line(&p, end, buf, sizeof buf); /* the newline after the binary block */
 	long cells = 0, size = 0;
-	CHECK(sscanf(line(&p, end, buf, sizeof buf), "VERTICES %ld %ld", &cells, &size) == 2 && cells == NP && size == 2 * NP);
+	CHECK(sscanf(line(&p, end, buf, sizeof buf), "VERTICES %ld %ld", &cells, &size) == 2 && cells == NP &&
+	      size == 2 * NP);
 	for (int i = 0; i < NP && p + 8 <= end; ++i, p += 8)
 		CHECK(be_u32(p) == 1 && be_u32(p + 4) == (uint32_t)i);
 	line(&p, end, buf, sizeof buf);
@@ -1024,7 +1031,8 @@ static void list_dir(const char *dir, char *out, size_t cap)
 
 /* Whether a failed frame left dir clean and named its file; what is wrong
  * is appended to why. */
-static void expect_clean_failure(eddy_world *w, eddy_status st, const char *dir, const char *file, char *why, size_t cap)
+static void expect_clean_failure(eddy_world *w, eddy_status st, const char *dir, const char *file, char *why,
+                                 size_t cap)
 {
 	char ls[1024];
 	size_t len = strlen(why);
@@ -1033,7 +1041,8 @@ static void expect_clean_failure(eddy_world *w, eddy_status st, const char *dir,
 	if (len < cap && !strstr(eddy_world_error(w), file))
 		len += (size_t)snprintf(why + len, cap - len, "[message '%s' does not name %s] ", eddy_world_error(w), file);
 	if (len < cap && !strstr(eddy_world_error(w), strerror(EFBIG)))
-		len += (size_t)snprintf(why + len, cap - len, "[message '%s' lacks '%s'] ", eddy_world_error(w), strerror(EFBIG));
+		len +=
+			(size_t)snprintf(why + len, cap - len, "[message '%s' lacks '%s'] ", eddy_world_error(w), strerror(EFBIG));
 	list_dir(dir, ls, sizeof ls);
 	if (len < cap && ls[0])
 		snprintf(why + len, cap - len, "[%s: left behind in %s: %s] ", file, dir, ls);
@@ -1052,8 +1061,9 @@ static void failed_export_leaves_no_file(void)
 	} formats[3] = {{EDDY_EXPORT_PLY, "ply"}, {EDDY_EXPORT_VTK, "vtk"}, {EDDY_EXPORT_VTP, "vtp"}};
 	const char *b = test_build_dir();
 	char cmd[1024], out[256];
-	snprintf(cmd, sizeof cmd, "rm -rf %s/t_render/full && mkdir -p %s/t_render/full/ply %s/t_render/full/vtk %s/t_render/full/vtp",
-	         b, b, b, b);
+	snprintf(cmd, sizeof cmd,
+	         "rm -rf %s/t_render/full && mkdir -p %s/t_render/full/ply %s/t_render/full/vtk %s/t_render/full/vtp", b, b,
+	         b, b);
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	int fds[2];
 	CHECK(pipe(fds) == 0);
@@ -1303,7 +1313,8 @@ static void command_frames_in_the_background(void)
 			same_pixels(s, r, why, sizeof why);
 		struct stat st;
 		if (!why[0] && stat(a, &st) == 0) {
-			if (st.st_mtim.tv_sec < last.tv_sec || (st.st_mtim.tv_sec == last.tv_sec && st.st_mtim.tv_nsec < last.tv_nsec))
+			if (st.st_mtim.tv_sec < last.tv_sec ||
+			    (st.st_mtim.tv_sec == last.tv_sec && st.st_mtim.tv_nsec < last.tv_nsec))
 				snprintf(why, sizeof why, "%s was written before frame %d", a, f - 1);
 			last = st.st_mtim;
 		}
@@ -1408,8 +1419,9 @@ static void command_renders_and_pipes_video(void)
 {
 	const char *b = test_build_dir();
 	char cmd[2048], out[4096], path[600];
-	snprintf(cmd, sizeof cmd, "rm -rf %s/t_render/cli && %s/eddy run scenes/bounce.lua --frames 2 --out %s/t_render/cli --quiet",
-	         b, b, b);
+	snprintf(cmd, sizeof cmd,
+	         "rm -rf %s/t_render/cli && %s/eddy run scenes/bounce.lua --frames 2 --out %s/t_render/cli --quiet", b, b,
+	         b);
 	CHECKF(test_sh(cmd, out, sizeof out) == 0, "%s", out);
 	snprintf(path, sizeof path, "%s/t_render/cli/frame_0002.png", b);
 	int iw = 0, ih = 0, comp;
@@ -1417,14 +1429,17 @@ static void command_renders_and_pipes_video(void)
 	CHECKF(px && iw == 960 && ih == 540, "bounce frame %s (%dx%d)", path, iw, ih);
 	stbi_image_free(px);
 
-	snprintf(cmd, sizeof cmd, "PATH=/nonexistent %s/eddy run scenes/bounce.lua --frames 1 --out %s/t_render/cli --video %s/t_render/v.mp4",
-	         b, b, b);
+	snprintf(
+		cmd, sizeof cmd,
+		"PATH=/nonexistent %s/eddy run scenes/bounce.lua --frames 1 --out %s/t_render/cli --video %s/t_render/v.mp4", b,
+		b, b);
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "ffmpeg is not installed");
 	CHECK(strchr(out, '\n') == strrchr(out, '\n')); /* one line */
 
 	snprintf(cmd, sizeof cmd,
-	         "mkdir -p %s/t_render/fakebin && printf '#!/bin/sh\\ncat > \"$EDDY_FAKE_FFMPEG\"\\n' > %s/t_render/fakebin/ffmpeg && "
+	         "mkdir -p %s/t_render/fakebin && printf '#!/bin/sh\\ncat > \"$EDDY_FAKE_FFMPEG\"\\n' > "
+	         "%s/t_render/fakebin/ffmpeg && "
 	         "chmod +x %s/t_render/fakebin/ffmpeg && EDDY_FAKE_FFMPEG=%s/t_render/piped PATH=%s/t_render/fakebin:$PATH "
 	         "%s/eddy run scenes/bounce.lua --frames 3 --out %s/t_render/cli --video %s/t_render/v.mp4 --quiet",
 	         b, b, b, b, b, b, b, b);
@@ -1442,19 +1457,19 @@ static void command_renders_and_pipes_video(void)
 	}
 
 	snprintf(cmd, sizeof cmd,
-	         "EDDY_RENDER_FAIL_CONTEXT=1 %s/eddy run scenes/surface.lua --frames 1 --set points=false --out %s/t_render/cli_surface --quiet",
+	         "EDDY_RENDER_FAIL_CONTEXT=1 %s/eddy run scenes/surface.lua --frames 1 --set points=false --out "
+	         "%s/t_render/cli_surface --quiet",
 	         b, b);
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "eddy: render_surface");
 	CHECK_HAS(out, "cannot create an OpenGL context with OSMesa");
 }
 
-
 /* ---- the CPU splatter against llvmpipe ---- */
 
 typedef struct diff_stats {
-	double mean;      /* mean |difference| over all channels, of 255 */
-	double over8;     /* fraction of pixels with a channel off by more than 8 */
+	double mean;  /* mean |difference| over all channels, of 255 */
+	double over8; /* fraction of pixels with a channel off by more than 8 */
 	int max;
 } diff_stats;
 
@@ -1516,12 +1531,15 @@ static void splat_matches_gl(void)
 	}
 	float lines[15 * 6];
 	eddy_box_edges(lines, (eddy_vec3){0, 0, 0}, (eddy_vec3){1, 1, 1});
-	const float extra[3][6] = {{0, 0.3f, 0.5f, 1, 0.35f, 0.4f}, {0.2f, 0, 0.2f, 0.25f, 1, 0.8f}, {0.5f, 0.5f, -2, 0.5f, 0.5f, 3}};
+	const float extra[3][6] = {
+		{0, 0.3f, 0.5f, 1, 0.35f, 0.4f}, {0.2f, 0, 0.2f, 0.25f, 1, 0.8f}, {0.5f, 0.5f, -2, 0.5f, 0.5f, 3}};
 	memcpy(lines + 12 * 6, extra, sizeof extra);
 	eddy_world_def wd = eddy_default_world_def();
 	for (int ortho = 0; ortho < 2; ++ortho) {
-		eddy_view_def vd = {W, H, S, {0, 0, 0}, {0, 0, 0}, {0, 1, 0}, 40.0f,
-		                    ortho ? EDDY_PROJECTION_ORTHOGRAPHIC : EDDY_PROJECTION_PERSPECTIVE, 0.0f, 0.024f, 0.024f};
+		eddy_view_def vd = {
+			W,         H,         S,     {0, 0, 0},
+			{0, 0, 0}, {0, 1, 0}, 40.0f, ortho ? EDDY_PROJECTION_ORTHOGRAPHIC : EDDY_PROJECTION_PERSPECTIVE,
+			0.0f,      0.024f,    0.024f};
 		eddy_camera cam;
 		eddy_camera_make(&vd, &wd, &cam);
 		eddy_gl_lines ls = {lines, 15, {0.6f, 0.62f, 0.66f}, 1.5f * S};

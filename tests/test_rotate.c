@@ -56,11 +56,11 @@ typedef struct paddle_case {
 } paddle_case;
 
 typedef struct paddle_result {
-	double worst_inside;   /* spacings, <= 0 */
-	double swirl;          /* mean tangential speed / tip speed at the end */
-	double tip;            /* m/s */
-	double compression;    /* SPH: largest mean compression over the frames */
-	double vol_err;        /* FLIP: largest |V - V0| / V0 over the frames */
+	double worst_inside; /* spacings, <= 0 */
+	double swirl;        /* mean tangential speed / tip speed at the end */
+	double tip;          /* m/s */
+	double compression;  /* SPH: largest mean compression over the frames */
+	double vol_err;      /* FLIP: largest |V - V0| / V0 over the frames */
 	size_t n0, n;
 	uint64_t hash;
 } paddle_result;
@@ -101,7 +101,7 @@ static eddy_status carve(eddy_world *w, const eddy_step_context *ctx, void *user
 		return EDDY_OK;
 	size_t n;
 	const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
-	            *z = eddy_world_channel(w, "z", NULL);
+				*z = eddy_world_channel(w, "z", NULL);
 	for (size_t i = n; i-- > 0;) {
 		float d;
 		eddy_collider_distance(w, m->paddle, (eddy_vec3){x[i], y[i], z[i]}, &d);
@@ -244,8 +244,8 @@ static double mean_swirl(eddy_world *w, eddy_vec3 pivot, eddy_vec3 a)
 {
 	size_t n;
 	const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
-	            *z = eddy_world_channel(w, "z", NULL), *vx = eddy_world_channel(w, "vx", NULL),
-	            *vy = eddy_world_channel(w, "vy", NULL), *vz = eddy_world_channel(w, "vz", NULL);
+				*z = eddy_world_channel(w, "z", NULL), *vx = eddy_world_channel(w, "vx", NULL),
+				*vy = eddy_world_channel(w, "vy", NULL), *vz = eddy_world_channel(w, "vz", NULL);
 	double sum = 0;
 	size_t m = 0;
 	for (size_t i = 0; i < n; ++i) {
@@ -256,7 +256,8 @@ static double mean_swirl(eddy_world *w, eddy_vec3 pivot, eddy_vec3 a)
 		if (rl < 0.02 || rl > 0.09)
 			continue;
 		/* (r x v) . a */
-		const double cx = r[1] * vz[i] - r[2] * vy[i], cy = r[2] * vx[i] - r[0] * vz[i], cz = r[0] * vy[i] - r[1] * vx[i];
+		const double cx = r[1] * vz[i] - r[2] * vy[i], cy = r[2] * vx[i] - r[0] * vz[i],
+					 cz = r[0] * vy[i] - r[1] * vx[i];
 		sum += (cx * a.x + cy * a.y + cz * a.z) / rl;
 		m++;
 	}
@@ -283,7 +284,7 @@ static void run_paddle(const paddle_case *c, paddle_result *res)
 		}
 		size_t n;
 		const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
-		            *z = eddy_world_channel(w, "z", NULL);
+					*z = eddy_world_channel(w, "z", NULL);
 		if (f == 0)
 			res->n0 = n;
 		for (size_t i = 0; i < n; ++i) {
@@ -300,8 +301,8 @@ static void run_paddle(const paddle_case *c, paddle_result *res)
 			const double e = fabs(fs.volume - v0) / v0;
 			res->vol_err = e > res->vol_err ? e : res->vol_err;
 		} else {
-			res->compression = fs.density_compression_avg > res->compression ? fs.density_compression_avg
-			                                                                 : res->compression;
+			res->compression =
+				fs.density_compression_avg > res->compression ? fs.density_compression_avg : res->compression;
 		}
 	}
 	res->swirl = mean_swirl(w, pivot, mv.axis) / res->tip;
@@ -338,9 +339,9 @@ static void check_paddle(const paddle_case *c, const paddle_result *r)
 {
 	printf("    %s%s, %.1f turns/s, axis %.0f deg: deepest %.4f spacings inside; swirl %.3f of the tip speed "
 	       "(%.3f m/s); %s %.4f; particles %zu -> %zu\n",
-	       method_name(c->m), c->mesh ? " (mesh paddle)" : "", c->turns_per_s, c->tilt, -r->worst_inside, r->swirl, r->tip,
-	       c->m == M_FLIP ? "max |V - V0| / V0" : "max mean compression", c->m == M_FLIP ? r->vol_err : r->compression,
-	       r->n0, r->n);
+	       method_name(c->m), c->mesh ? " (mesh paddle)" : "", c->turns_per_s, c->tilt, -r->worst_inside, r->swirl,
+	       r->tip, c->m == M_FLIP ? "max |V - V0| / V0" : "max mean compression",
+	       c->m == M_FLIP ? r->vol_err : r->compression, r->n0, r->n);
 	CHECK(r->worst_inside > -0.01);
 	CHECK(r->swirl > 0.1);
 	if (c->m == M_FLIP)
@@ -480,7 +481,7 @@ static void contact_takes_rotational_velocity(void)
 	pvy[0] = -0.1f;
 	CHECK(eddy_world_step_frame(w) == EDDY_OK);
 	const float *x = eddy_world_channel(w, "x", NULL), *vx = eddy_world_channel(w, "vx", NULL),
-	            *vz = eddy_world_channel(w, "vz", NULL);
+				*vz = eddy_world_channel(w, "vz", NULL);
 	/* omega x r with omega = (0, 2, 0), r = (x, 0, z): (2 z, 0, -2 x) */
 	printf("    particle at x = %.4f m on a plate turning at %.1f rad/s: v = (%.4f, %.4f) m/s, omega x r = (0, %.4f)\n",
 	       (double)x[0], omega, (double)vx[0], (double)vz[0], -omega * x[0]);
@@ -567,9 +568,9 @@ static void lua_case(const char *src, char *err, size_t cap, eddy_vec3 *rot, flo
 	lua_close(L);
 }
 
-#define BOX_SCENE(FIELDS) \
-	"local eddy = require 'eddy'\n" \
-	"local w = eddy.world { fps = 10, dt_max = 0.1 }\n" \
+#define BOX_SCENE(FIELDS)                                                                                        \
+	"local eddy = require 'eddy'\n"                                                                              \
+	"local w = eddy.world { fps = 10, dt_max = 0.1 }\n"                                                          \
 	"w:add(eddy.collide_box { min = {0.3, 0.45, 0.45}, max = {0.7, 0.55, 0.55}, inside = false, " FIELDS " })\n" \
 	"return w\n"
 
@@ -601,7 +602,8 @@ static void lua_rotation_fields(void)
 	CHECK_HAS(err, "rotation (returned by the function)");
 	lua_case(BOX_SCENE("rotation = function(t) if t > 0.3 then return {1, 2} end return {0, 0, 0} end"), err,
 	         sizeof err, &rot, &d);
-	CHECK_HAS(err, "animate collide_box rotation: the rotation function must return an axis-angle {x, y, z} in degrees");
+	CHECK_HAS(err,
+	          "animate collide_box rotation: the rotation function must return an axis-angle {x, y, z} in degrees");
 	lua_case(BOX_SCENE("rotation = function(t) if t > 0.3 then return {0, 0/0, 0} end return {0, 0, 0} end"), err,
 	         sizeof err, &rot, &d);
 	CHECK_HAS(err, "'rotation' must be");

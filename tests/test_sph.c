@@ -106,7 +106,6 @@ static void lattice_sums(void)
 	}
 }
 
-
 /* ---- scenes ------------------------------------------------------------- */
 
 typedef struct sph_setup {
@@ -120,7 +119,7 @@ typedef struct sph_setup {
 	bool walls;           /* boundary particles on the tank */
 	int threads;
 	double cfl;
-	double fps;                     /* frames per second */
+	double fps;                      /* frames per second */
 	const eddy_sph_dfsph_def *dfsph; /* the implicit solve in place of sph_pressure, or NULL */
 } sph_setup;
 
@@ -238,7 +237,7 @@ static double max_speed(const eddy_world *w)
 {
 	size_t n;
 	const float *vx = eddy_world_channel(w, "vx", &n), *vy = eddy_world_channel(w, "vy", NULL),
-	            *vz = eddy_world_channel(w, "vz", NULL);
+				*vz = eddy_world_channel(w, "vz", NULL);
 	double m = 0;
 	for (size_t i = 0; i < n; ++i)
 		m = fmax(m, sqrt((double)vx[i] * vx[i] + (double)vy[i] * vy[i] + (double)vz[i] * vz[i]));
@@ -291,9 +290,9 @@ static void hydrostatic_tank(void)
 		const int blk = (int)fmin(BLOCKS - 1, (eddy_world_time(w) - t0) / span * BLOCKS);
 		samples++;
 		const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
-		            *z = eddy_world_channel(w, "z", NULL), *p = eddy_world_channel(w, "pressure", NULL),
-		            *rho = eddy_world_channel(w, "density", NULL), *vx = eddy_world_channel(w, "vx", NULL),
-		            *vy = eddy_world_channel(w, "vy", NULL), *vz = eddy_world_channel(w, "vz", NULL);
+					*z = eddy_world_channel(w, "z", NULL), *p = eddy_world_channel(w, "pressure", NULL),
+					*rho = eddy_world_channel(w, "density", NULL), *vx = eddy_world_channel(w, "vx", NULL),
+					*vy = eddy_world_channel(w, "vy", NULL), *vz = eddy_world_channel(w, "vz", NULL);
 		double top = 0;
 		for (size_t i = 0; i < n; ++i) {
 			top = fmax(top, y[i]);
@@ -345,9 +344,11 @@ static void hydrostatic_tank(void)
 		var += pow(bsum[b] / bcount[b] - mean, 2) / (BLOCKS - 1);
 	const double se = sqrt(var / BLOCKS), surface = top_sum / samples + s.dx / 2;
 	const double gH_k = g * surface / s.k, rho_bottom = dsum / dcount / rho0, vrms = sqrt(v2sum / vcount);
-	printf("    hydrostatic: mean (p - rho0 g d) / (rho0 g H) %+.4f +- %.4f (bound 2 gH/k = %.4f), worst of %d layers %.4f, "
-	       "bottom rho/rho0 %.4f (1 + gH/k = %.4f), closest to walls x/z %.4f / %.4f y %.4f m, rms speed %.3f sqrt(gH)\n",
-	       mean, se, 2 * gH_k, used, worst, rho_bottom, 1 + gH_k, xmin, s.hi.x - xmax, ymin, vrms / sqrt(g * H));
+	printf(
+		"    hydrostatic: mean (p - rho0 g d) / (rho0 g H) %+.4f +- %.4f (bound 2 gH/k = %.4f), worst of %d layers "
+		"%.4f, "
+		"bottom rho/rho0 %.4f (1 + gH/k = %.4f), closest to walls x/z %.4f / %.4f y %.4f m, rms speed %.3f sqrt(gH)\n",
+		mean, se, 2 * gH_k, used, worst, rho_bottom, 1 + gH_k, xmin, s.hi.x - xmax, ymin, vrms / sqrt(g * H));
 	free(sorted);
 	CHECK(used >= 5);
 	CHECK(fabs(mean) <= 2 * gH_k + 3 * se);
@@ -397,7 +398,7 @@ static double min_pair_distance(const eddy_world *w)
 {
 	size_t n;
 	const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
-	            *z = eddy_world_channel(w, "z", NULL);
+				*z = eddy_world_channel(w, "z", NULL);
 	double m2 = INFINITY;
 	for (size_t i = 0; i < n; ++i)
 		for (size_t j = i + 1; j < n; ++j) {
@@ -452,12 +453,14 @@ static void table_is_kept_in_cell_order(void)
 	eddy_vec3 pts[N * N * N];
 	for (int k = 0; k < N * N * N; ++k) {
 		const int q = N * N * N - 1 - k; /* reverse order: z fastest descending */
-		pts[k] = (eddy_vec3){0.3f + 0.01f * (float)(q % N), 0.3f + 0.01f * (float)(q / N % N), 0.3f + 0.01f * (float)(q / (N * N))};
+		pts[k] = (eddy_vec3){0.3f + 0.01f * (float)(q % N), 0.3f + 0.01f * (float)(q / N % N),
+		                     0.3f + 0.01f * (float)(q / (N * N))};
 	}
 	CHECK(eddy_world_add_particles(w, N * N * N, pts, NULL) == EDDY_OK);
 	size_t n;
 	float *tag = eddy_world_channel_mut(w, "tag", &n);
-	const float *x = eddy_world_channel(w, "x", NULL), *y = eddy_world_channel(w, "y", NULL), *z = eddy_world_channel(w, "z", NULL);
+	const float *x = eddy_world_channel(w, "x", NULL), *y = eddy_world_channel(w, "y", NULL),
+				*z = eddy_world_channel(w, "z", NULL);
 	for (size_t i = 0; i < n; ++i)
 		tag[i] = x[i] + 10 * y[i] + 100 * z[i];
 	CHECK(eddy_world_step(w) == EDDY_OK);
@@ -542,7 +545,10 @@ static void equations_of_state(void)
 		printf("    %s EOS: max density %.1f, worst |p - EOS| / (k rho0) %.1e, %d surface particles clamped to p = 0\n",
 		       tait ? "Tait" : "linear", rho_max, worst, clamped);
 		/* the interior sums the packed lattice with the calibrated mass */
-		CHECK_NEAR(rho_max, 1000.0 * eddy_sph_lattice_sum(EDDY_SPH_POLY6, 0.0098, 0.02) / eddy_sph_lattice_sum(EDDY_SPH_POLY6, 0.01, 0.02), 0.05);
+		CHECK_NEAR(rho_max,
+		           1000.0 * eddy_sph_lattice_sum(EDDY_SPH_POLY6, 0.0098, 0.02) /
+		               eddy_sph_lattice_sum(EDDY_SPH_POLY6, 0.01, 0.02),
+		           0.05);
 		CHECK(worst < 1e-5);
 		CHECK(clamped > 100);
 		eddy_destroy_world(w);
@@ -660,8 +666,8 @@ static void jet_does_not_tunnel_thin_plate(void)
 	}
 	eddy_frame_stats st;
 	eddy_world_frame_stats(w, &st);
-	printf("    jet at a plate 0.1 spacing thick: %zu particles, %zu frames x particles beyond it, leaked %zu\n", n, beyond,
-	       st.leaked);
+	printf("    jet at a plate 0.1 spacing thick: %zu particles, %zu frames x particles beyond it, leaked %zu\n", n,
+	       beyond, st.leaked);
 	CHECK(n == 1500);
 	CHECK(beyond == 0 && st.leaked == 0);
 	eddy_destroy_world(w);
@@ -675,7 +681,8 @@ static void deterministic_across_threads(void)
 	sph_setup s = splash_setup();
 	s.sigma = 0.0728f;
 	hashes_on_one_and_two_threads(s, 5, hash);
-	printf("    state hash 1 thread %016llx, 2 threads %016llx\n", (unsigned long long)hash[0], (unsigned long long)hash[1]);
+	printf("    state hash 1 thread %016llx, 2 threads %016llx\n", (unsigned long long)hash[0],
+	       (unsigned long long)hash[1]);
 	CHECK(hash[0] == hash[1]);
 }
 
@@ -794,8 +801,10 @@ static double drop_omega(int per_radius, double eps, double seconds, double *ome
 	CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &drop)));
 	*omega_theory = sqrt(8 * sigma / (rho0 * R * R * R));
 	const double period = 2 * M_PI / *omega_theory;
-	enum { CROSSINGS = 8 }; /* three and a half periods: chaos in the particle motion moves
-	                         * single crossings by a few percent of a period */
+	enum {
+		CROSSINGS = 8
+	}; /* three and a half periods: chaos in the particle motion moves
+	    * single crossings by a few percent of a period */
 	double prev = 0, crossings[CROSSINGS];
 	int nc = 0;
 	*min_gap = INFINITY;
@@ -1067,9 +1076,9 @@ static void dfsph_hydrostatic_tank(void)
 		CHECKF(eddy_world_step_frame(w) == EDDY_OK, "%s", eddy_world_error(w));
 		size_t n;
 		const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
-		            *z = eddy_world_channel(w, "z", NULL), *p = eddy_world_channel(w, "pressure", NULL),
-		            *vx = eddy_world_channel(w, "vx", NULL), *vy = eddy_world_channel(w, "vy", NULL),
-		            *vz = eddy_world_channel(w, "vz", NULL);
+					*z = eddy_world_channel(w, "z", NULL), *p = eddy_world_channel(w, "pressure", NULL),
+					*vx = eddy_world_channel(w, "vx", NULL), *vy = eddy_world_channel(w, "vy", NULL),
+					*vz = eddy_world_channel(w, "vz", NULL);
 		double top = 0;
 		for (size_t i = 0; i < n; ++i) {
 			top = fmax(top, y[i]);
@@ -1120,8 +1129,8 @@ static void dfsph_dam_break_matches_martin_moyce(void)
 	CHECK(read_reference("data/martin_moyce_1952_a2.25in.csv", &ref[0]));
 	CHECK(read_reference("data/martin_moyce_1952_a1.125in.csv", &ref[1]));
 	char last[16384] = "";
-	run_scene("scenes/dam_break.lua", "--set spacing=0.008333 --set fps=100 --set method=dfsph --set cfl=0.8", "T",
-	          "Z", &sim, last, sizeof last);
+	run_scene("scenes/dam_break.lua", "--set spacing=0.008333 --set fps=100 --set method=dfsph --set cfl=0.8", "T", "Z",
+	          &sim, last, sizeof last);
 	CHECK(sim.n > 20);
 	if (sim.n <= 20 || ref[0].n < 2 || ref[1].n < 2)
 		return;
@@ -1367,8 +1376,8 @@ static eddy_status verlet_check_step(eddy_world *w, const eddy_step_context *ctx
 	verlet_check *vc = user;
 	size_t n;
 	const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
-	            *z = eddy_world_channel(w, "z", NULL), *rho = eddy_world_channel(w, "density", NULL),
-	            *nc = eddy_world_channel(w, "neighbors", NULL);
+				*z = eddy_world_channel(w, "z", NULL), *rho = eddy_world_channel(w, "density", NULL),
+				*nc = eddy_world_channel(w, "neighbors", NULL);
 	const float h2 = vc->h * vc->h;
 	const double poly6 = 315.0 / (64.0 * M_PI * pow(vc->h, 9));
 	for (size_t i = 0; i < n; ++i) {

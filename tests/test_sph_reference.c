@@ -168,10 +168,10 @@ static double tolerance(int n_terms, double magnitude, double cond)
  * float rounding is measured against. */
 typedef struct reference {
 	double rho[NP];
-	int pairs[NP];                /* neighbours within h, i excluded */
-	double rho_tol[NP];           /* kg/m^3 */
-	double ap[3][NP], ap_tol[NP]; /* pressure acceleration and its tolerance (see tolerance()) */
-	double av[3][NP], av_tol[NP]; /* viscous acceleration (both parts) */
+	int pairs[NP];                 /* neighbours within h, i excluded */
+	double rho_tol[NP];            /* kg/m^3 */
+	double ap[3][NP], ap_tol[NP];  /* pressure acceleration and its tolerance (see tolerance()) */
+	double av[3][NP], av_tol[NP];  /* viscous acceleration (both parts) */
 	double ap_mag[NP], av_mag[NP]; /* sums of |terms| */
 } reference;
 
@@ -182,8 +182,8 @@ static void evaluate_reference(const ref_case *c, const snapshot *s, double m, r
 	/* the pressure force is divided by its lattice moment (sph_pressure's
 	 * header): m / (rho0 dx^3) times the spiky kernel's moment */
 	const double dx3 = (double)c->dx * c->dx * c->dx;
-	const double grad_cal =
-		eddy_sph_lattice_sum(EDDY_SPH_POLY6, c->dx, h) * dx3 / eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, c->dx, h);
+	const double grad_cal = eddy_sph_lattice_sum(EDDY_SPH_POLY6, c->dx, h) * dx3 /
+	                        eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, c->dx, h);
 	const double sound = sqrt((double)c->k), eps = 0.01 * h * h;
 	const size_t n = s->n;
 	for (size_t i = 0; i < n; ++i) {
@@ -269,8 +269,9 @@ static void check_against_reference(const ref_case *c, uint32_t seed, const char
 			const double ep = fabs(gp - ref.ap[a][i]) / ref.ap_tol[i];
 			const double ev = fabs(gv - ref.av[a][i]) / ref.av_tol[i];
 			if ((ep > 1 || ev > 1) && bad++ < 5)
-				printf("    particle %zu axis %d (%d pairs, p_i %g, sums of |terms| %g %g): pressure %.9g vs %.9g, viscous %.9g vs %.9g\n", i, a, nt, s.p[i], ref.ap_mag[i], ref.av_mag[i], gp,
-				       ref.ap[a][i], gv, ref.av[a][i]);
+				printf("    particle %zu axis %d (%d pairs, p_i %g, sums of |terms| %g %g): pressure %.9g vs %.9g, "
+				       "viscous %.9g vs %.9g\n",
+				       i, a, nt, s.p[i], ref.ap_mag[i], ref.av_mag[i], gp, ref.ap[a][i], gv, ref.av[a][i]);
 			worst_p = fmax(worst_p, ep);
 			worst_v = fmax(worst_v, ev);
 		}
@@ -339,9 +340,8 @@ static void backends_give_the_pinned_bits(void)
 			char want[64];
 			snprintf(want, sizeof want, "\"state_hash\":\"%s\"", pinned[k].hash);
 			printf("    %s, 2 frames%s: %s", pinned[k].scene, path ? ", EDDY_NO_AVX2" : "", out);
-			CHECKF(strstr(out, want) != NULL,
-			       "%s: %s, pinned %s (another compiler or libm may round differently)", pinned[k].scene, out,
-			       pinned[k].hash);
+			CHECKF(strstr(out, want) != NULL, "%s: %s, pinned %s (another compiler or libm may round differently)",
+			       pinned[k].scene, out, pinned[k].hash);
 		}
 }
 

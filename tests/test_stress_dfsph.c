@@ -49,9 +49,10 @@ static still_water run_still_water(const char *sets, double t_settle)
 		r.status = -1;
 		return r;
 	}
-	snprintf(cmd, sizeof cmd,
-	         "%s/eddy run scenes/stress/still_water.lua %s --stats - --quiet --threads 1 --out %s/stress_still_water 2>&1",
-	         test_build_dir(), sets, test_build_dir());
+	snprintf(
+		cmd, sizeof cmd,
+		"%s/eddy run scenes/stress/still_water.lua %s --stats - --quiet --threads 1 --out %s/stress_still_water 2>&1",
+		test_build_dir(), sets, test_build_dir());
 	r.status = test_sh(cmd, out, CAP);
 	snprintf(r.out, sizeof r.out, "%s", out);
 	for (char *line = out; line && *line;) {

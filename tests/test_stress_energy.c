@@ -62,7 +62,8 @@ static void collapse_makes_no_energy(void)
 	static const struct {
 		const char *method;
 		double spacing;
-	} runs[] = {{"wcsph", 0.005}, {"flip", 0.005}, {"pic", 0.005}, {"apic", 0.005}, {"dfsph", 0.01}, {"dfsph", 0.005}, {"wcsph", 0.01}};
+	} runs[] = {{"wcsph", 0.005}, {"flip", 0.005},  {"pic", 0.005}, {"apic", 0.005},
+	            {"dfsph", 0.01},  {"dfsph", 0.005}, {"wcsph", 0.01}};
 	for (size_t i = 0; i < sizeof runs / sizeof runs[0]; ++i) {
 		double rise, released;
 		const bool ran = energy_rise(runs[i].method, runs[i].spacing, &rise, &released);
@@ -76,7 +77,4 @@ static void collapse_makes_no_energy(void)
 	}
 }
 
-void suite_stress_energy(void)
-{
-	RUN(collapse_makes_no_energy);
-}
+void suite_stress_energy(void) { RUN(collapse_makes_no_energy); }

@@ -24,12 +24,12 @@ static const double RHO = 1000, G = 9.81;
 static const double L = 0.1; /* m, blob size (the 0.1 m cube) */
 
 typedef struct flight {
-	eddy_vec3 V;   /* m/s, initial velocity */
-	double h;      /* m, cell size */
-	bool sphere;   /* the ball inscribed in the cube instead of the cube */
+	eddy_vec3 V; /* m/s, initial velocity */
+	double h;    /* m, cell size */
+	bool sphere; /* the ball inscribed in the cube instead of the cube */
 	bool gravity;
-	double T;      /* s, flight time */
-	double dt_max; /* s, the world's step limit */
+	double T;          /* s, flight time */
+	double dt_max;     /* s, the world's step limit */
 	float mark_radius; /* cells, flip_p2g's */
 } flight;
 
@@ -48,7 +48,7 @@ static eddy_status probe_divergence(eddy_world *w, const eddy_step_context *ctx,
 	const eddy_grid_info g = eddy_world_grid(w);
 	const int nx = g.nx, ny = g.ny, nz = g.nz;
 	const float *u = eddy_world_channel(w, "u", NULL), *v = eddy_world_channel(w, "v", NULL),
-	            *wv = eddy_world_channel(w, "w", NULL);
+				*wv = eddy_world_channel(w, "w", NULL);
 	const uint8_t *type = eddy_world_channel_u8(w, "cell_type", NULL);
 	for (int k = 0; k < nz; ++k)
 		for (int j = 0; j < ny; ++j)
@@ -153,8 +153,8 @@ static size_t fill(eddy_world *w, const flight *f, eddy_vec3 start)
 		for (int j = 0; j < m; ++j)
 			for (int i = 0; i < m; ++i) {
 				const double o[3] = {(i + 0.5) * sp, (j + 0.5) * sp, (k + 0.5) * sp};
-				const double r2 = (o[0] - L / 2) * (o[0] - L / 2) + (o[1] - L / 2) * (o[1] - L / 2) +
-				                  (o[2] - L / 2) * (o[2] - L / 2);
+				const double r2 =
+					(o[0] - L / 2) * (o[0] - L / 2) + (o[1] - L / 2) * (o[1] - L / 2) + (o[2] - L / 2) * (o[2] - L / 2);
 				if (f->sphere && r2 > L * L / 4)
 					continue;
 				p[n] = (eddy_vec3){(float)(start.x + o[0]), (float)(start.y + o[1]), (float)(start.z + o[2])};
@@ -183,10 +183,10 @@ static void moments(eddy_world *w, double c[3], double vm[3])
 typedef struct flight_result {
 	bool ok;
 	size_t n0, n;
-	double p_err;     /* |P - P_expected| / |P_expected|, P = total momentum / particle mass */
-	double shape_err; /* max_i |(x_i - c) - (x_i0 - c0)| / L */
-	double a_pos;     /* m/s^2, y acceleration of the centre of mass from positions */
-	double a_vel;     /* m/s^2, from the mean velocity */
+	double p_err;      /* |P - P_expected| / |P_expected|, P = total momentum / particle mass */
+	double shape_err;  /* max_i |(x_i - c) - (x_i0 - c0)| / L */
+	double a_pos;      /* m/s^2, y acceleration of the centre of mass from positions */
+	double a_vel;      /* m/s^2, from the mean velocity */
 	double iterations; /* largest PCG iteration count published */
 	probe pr;
 	double wall_s;
@@ -205,7 +205,7 @@ static flight_result fly(const flight *f)
 	r.n0 = fill(w, f, start);
 	size_t n;
 	const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
-	            *z = eddy_world_channel(w, "z", NULL);
+				*z = eddy_world_channel(w, "z", NULL);
 	float *rel0 = malloc(3 * n * sizeof *rel0);
 	double c0[3], v0[3], c[3], vm[3];
 	moments(w, c0, v0);
@@ -260,7 +260,7 @@ static flight_result fly(const flight *f)
 			double e = 0;
 			for (size_t i = 0; i < r.n; ++i) {
 				const double dx = x[i] - c[0] - rel0[3 * i], dy = y[i] - c[1] - rel0[3 * i + 1],
-				             dz = z[i] - c[2] - rel0[3 * i + 2];
+							 dz = z[i] - c[2] - rel0[3 * i + 2];
 				e = fmax(e, sqrt(dx * dx + dy * dy + dz * dz));
 			}
 			r.shape_err = e / L;

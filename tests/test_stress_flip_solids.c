@@ -54,7 +54,7 @@ typedef struct sphere_motion {
 } sphere_motion;
 
 static const double SPH_R = 0.04, SPH_X = 0.1, SPH_Z = 0.06, SPH_Y0 = 0.22, SPH_Y1 = 0.08, OSC_A = 0.05,
-                    OSC_W = 4 * 3.14159265358979; /* rad/s: 2 Hz */
+					OSC_W = 4 * 3.14159265358979; /* rad/s: 2 Hz */
 
 static eddy_vec3 sphere_offset(const sphere_motion *m, double t)
 {
@@ -174,7 +174,7 @@ static void run_sphere(int kind, bool reseed, eddy_flip_solver solver, double se
 		const eddy_vec3 off = sphere_offset(&m, eddy_world_time(w));
 		size_t n;
 		const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
-		            *z = eddy_world_channel(w, "z", NULL);
+					*z = eddy_world_channel(w, "z", NULL);
 		for (size_t i = 0; i < n; ++i) {
 			const double dxp = x[i] - (SPH_X + off.x), dyp = y[i] - (yc + off.y), dzp = z[i] - (SPH_Z + off.z);
 			const double sd = (sqrt(dxp * dxp + dyp * dyp + dzp * dzp) - SPH_R) / h;
@@ -284,7 +284,6 @@ static void threads_agree_with_moving_sphere(void)
 	free(b.y);
 }
 
-
 /* ---- volume with reseeding: a drop into a pool, a dam break ----------------- */
 
 typedef struct volume_result {
@@ -390,10 +389,11 @@ static void dam_break_volume(void)
 		CHECK(pool_fill(w, h, (eddy_vec3){0, 0, 0}, (eddy_vec3){(float)a, (float)(2 * a), (float)(4 * h)}));
 		volume_result r;
 		run_volume(w, a * 2 * a * 4 * h, 45, &r);
-		printf("    dam break, reseed %s: max |V - V0| / V0 = %.2f%%, at 1.5 s %+.2f%%; particles %zu -> %zu (%+.1f%%); "
-		       "%.1f s\n",
-		       rs ? "on" : "off", 100 * r.worst, 100 * r.final, r.n0, r.n1,
-		       100.0 * ((double)r.n1 - (double)r.n0) / (double)r.n0, r.ms / 1000);
+		printf(
+			"    dam break, reseed %s: max |V - V0| / V0 = %.2f%%, at 1.5 s %+.2f%%; particles %zu -> %zu (%+.1f%%); "
+			"%.1f s\n",
+			rs ? "on" : "off", 100 * r.worst, 100 * r.final, r.n0, r.n1,
+			100.0 * ((double)r.n1 - (double)r.n0) / (double)r.n0, r.ms / 1000);
 		/* at 1.5 s the water still sloshes in a layer a/2 = 2.5 cm deep (4
 		 * cells): half a cell of surface placement is 12.5%. Reseeding moves
 		 * particles and never deletes them (flip_reseed; the volume's own

@@ -145,7 +145,7 @@ static void sums(eddy_world *w, double gy, double lo_y, double *ke, double *pe, 
 	size_t n;
 	const float *y = eddy_world_channel(w, "y", &n);
 	const float *vx = eddy_world_channel(w, "vx", NULL), *vy = eddy_world_channel(w, "vy", NULL),
-	            *vz = eddy_world_channel(w, "vz", NULL);
+				*vz = eddy_world_channel(w, "vz", NULL);
 	*ke = *pe = p[0] = p[1] = p[2] = 0;
 	for (size_t i = 0; i < n; ++i) {
 		*ke += 0.5 * ((double)vx[i] * vx[i] + (double)vy[i] * vy[i] + (double)vz[i] * vz[i]);
@@ -291,7 +291,7 @@ static void slosh_all_methods(void)
 	const struct {
 		const char *name;
 		const slosh_result *r;
-	} rows[] = {{"FLIP 0.95 2.5 mm", &flip}, {"PIC 2.5 mm", &pic}, {"APIC 2.5 mm", &apic},
+	} rows[] = {{"FLIP 0.95 2.5 mm", &flip}, {"PIC 2.5 mm", &pic},   {"APIC 2.5 mm", &apic},
 	            {"WCSPH 5 mm", &wcsph},      {"DFSPH 5 mm", &dfsph}, {"DFSPH 10 mm", &dfsph10}};
 	for (size_t i = 0; i < sizeof rows / sizeof rows[0]; ++i)
 		printf("    slosh %-17s period error %+6.2f%%, damping ratio %.4f, %.0f peaks, wall %.1f s\n", rows[i].name,
@@ -318,10 +318,7 @@ static void slosh_all_methods(void)
 	CHECK(apic.damping > -0.003 && apic.damping < 0.01);
 }
 
-void suite_long_slosh(void)
-{
-	RUN(slosh_all_methods);
-}
+void suite_long_slosh(void) { RUN(slosh_all_methods); }
 
 void suite_stress_slosh(void)
 {

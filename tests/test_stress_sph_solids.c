@@ -45,10 +45,10 @@ typedef enum { SOLID_SPHERE, SOLID_PISTON, SOLID_BLOCK, SOLID_NONE } solid_kind;
 typedef struct solid_case {
 	solid_kind kind;
 	bool dfsph;
-	double r;                  /* m, sphere radius, or half the block's side */
-	double y0, y1, t_lower;    /* m, m, s: sphere centre start, working height, end of the lowering */
-	double amp, omega, t_osc;  /* m, rad/s, s: oscillation along x, from t_lower for t_osc */
-	double piston_x, stroke;   /* m: piston plane (normal +x) start, and how far it is driven in */
+	double r;                 /* m, sphere radius, or half the block's side */
+	double y0, y1, t_lower;   /* m, m, s: sphere centre start, working height, end of the lowering */
+	double amp, omega, t_osc; /* m, rad/s, s: oscillation along x, from t_lower for t_osc */
+	double piston_x, stroke;  /* m: piston plane (normal +x) start, and how far it is driven in */
 	double seconds;
 	int threads;
 } solid_case;
@@ -102,7 +102,7 @@ static double solid_distance(const solid_case *c, eddy_vec3 off, double x, doubl
 	if (c->kind == SOLID_BLOCK) {
 		/* inside only: the depth to the nearest face, negative */
 		const double ex = fabs(x - (TW / 2 + off.x)) - c->r, ey = fabs(y - (c->y0 + off.y)) - c->r,
-		             ez = fabs(z - (TD / 2 + off.z)) - c->r;
+					 ez = fabs(z - (TD / 2 + off.z)) - c->r;
 		const double m = fmax(ex, fmax(ey, ez));
 		return m < 0 ? m : 0;
 	}
@@ -122,7 +122,7 @@ static double mean_level(eddy_world *w, double x0)
 {
 	size_t n;
 	const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
-	            *z = eddy_world_channel(w, "z", NULL);
+				*z = eddy_world_channel(w, "z", NULL);
 	const double cs = 2 * SP;
 	const int nx = (int)floor((TW - x0) / cs + 1e-6), nz = (int)lround(TD / cs);
 	float *col = malloc((n + 1) * sizeof *col);
@@ -250,7 +250,7 @@ static void run_solid(const solid_case *c, solid_result *res)
 		const eddy_vec3 off = solid_offset(c, eddy_world_time(w));
 		size_t n;
 		const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
-		            *z = eddy_world_channel(w, "z", NULL);
+					*z = eddy_world_channel(w, "z", NULL);
 		for (size_t i = 0; i < n; ++i) {
 			const double sd = solid_distance(c, off, x[i], y[i], z[i]) / SP;
 			res->worst_inside = sd < res->worst_inside ? sd : res->worst_inside;

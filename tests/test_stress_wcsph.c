@@ -41,7 +41,7 @@ static double field(const char *line, const char *name)
 typedef struct still_water {
 	int status, frames;
 	double vmax_ratio, bp_min, bp_max, bp_mean; /* from t_settle */
-	double thrown, leaked, nonfinite;  /* the whole run */
+	double thrown, leaked, nonfinite;           /* the whole run */
 } still_water;
 
 static still_water run_still_water(const char *sets, double t_settle)
@@ -93,9 +93,10 @@ static void still_water_at_rest(const char *depth, int layers)
 	char sets[128];
 	snprintf(sets, sizeof sets, "--set depth=%s --set duration=3", depth);
 	const still_water r = run_still_water(sets, 2.0);
-	printf("    WCSPH still water %d layers, t >= 2 s: vmax <= %.4f sqrt(g H) (held to 0.06), bottom p mean %.3f x rho0 "
-	       "g H (held to 0.95-1.05), range %.3f-%.3f (open: not asserted), thrown %g\n",
-	       layers, r.vmax_ratio, r.bp_mean, r.bp_min, r.bp_max, r.thrown);
+	printf(
+		"    WCSPH still water %d layers, t >= 2 s: vmax <= %.4f sqrt(g H) (held to 0.06), bottom p mean %.3f x rho0 "
+		"g H (held to 0.95-1.05), range %.3f-%.3f (open: not asserted), thrown %g\n",
+		layers, r.vmax_ratio, r.bp_mean, r.bp_min, r.bp_max, r.thrown);
 	CHECK(r.status == 0);
 	CHECK(r.frames == 90);
 	CHECK(r.thrown == 0);
@@ -105,26 +106,14 @@ static void still_water_at_rest(const char *depth, int layers)
 }
 
 /* 10 layers (0.125 m, 640 particles): a few seconds. */
-static void still_water_10_layers_at_rest(void)
-{
-	still_water_at_rest("0.125", 10);
-}
+static void still_water_10_layers_at_rest(void) { still_water_at_rest("0.125", 10); }
 
 /* 20 layers (0.25 m, 1280 particles) and 40 (0.5 m, 2560): long. */
-static void still_water_20_layers_at_rest(void)
-{
-	still_water_at_rest("0.25", 20);
-}
+static void still_water_20_layers_at_rest(void) { still_water_at_rest("0.25", 20); }
 
-static void still_water_40_layers_at_rest(void)
-{
-	still_water_at_rest("0.5", 40);
-}
+static void still_water_40_layers_at_rest(void) { still_water_at_rest("0.5", 40); }
 
-void suite_stress_wcsph(void)
-{
-	RUN(still_water_10_layers_at_rest);
-}
+void suite_stress_wcsph(void) { RUN(still_water_10_layers_at_rest); }
 
 void suite_long_stress_wcsph(void)
 {

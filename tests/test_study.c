@@ -91,8 +91,8 @@ static bool run_quick(const char *study, const char *out, csv *c)
  * front. */
 static void check_common(const csv *c, const char *name)
 {
-	static const char *const cols[] = {"study", "method", "resolution", "error", "wall_s", "steps",
-	                                   "frames", "particles", "peak_mb", "status", "pareto"};
+	static const char *const cols[] = {"study",  "method",    "resolution", "error",  "wall_s", "steps",
+	                                   "frames", "particles", "peak_mb",    "status", "pareto"};
 	for (size_t i = 0; i < sizeof cols / sizeof cols[0]; ++i)
 		CHECKF(column(c, cols[i]) >= 0, "%s.csv has no column '%s'", name, cols[i]);
 	bool per_system = false;
@@ -135,11 +135,10 @@ static void check_finer_is_better(const csv *c, const char *name, int methods_ex
 			if (h < fine_h)
 				fine_h = h, fine_e = e;
 		}
-		printf("    %s %s: error %.4g at %g, %.4g at %g\n", name, c->cell[r][meth], coarse_e, coarse_h, fine_e,
-		       fine_h);
+		printf("    %s %s: error %.4g at %g, %.4g at %g\n", name, c->cell[r][meth], coarse_e, coarse_h, fine_e, fine_h);
 		CHECKF(fine_h < coarse_h, "%s %s: fewer than two runs with an error", name, c->cell[r][meth]);
-		CHECKF(fine_e < coarse_e, "%s %s: finer run (%g) error %g not below coarser (%g) %g", name,
-		       c->cell[r][meth], fine_h, fine_e, coarse_h, coarse_e);
+		CHECKF(fine_e < coarse_e, "%s %s: finer run (%g) error %g not below coarser (%g) %g", name, c->cell[r][meth],
+		       fine_h, fine_e, coarse_h, coarse_e);
 	}
 	CHECK(methods == methods_expected);
 }
@@ -161,8 +160,7 @@ static void quick_dam_break_study(void)
 			CHECKF(isfinite(num(c, r, err)) && num(c, r, err) < 0.6, "row %d error %s", r + 1, c->cell[r][err]);
 			CHECKF(num(c, r, shifted) <= num(c, r, err), "row %d: shifted error above unshifted", r + 1);
 		}
-		CHECKF(num(c, 1, err) < num(c, 0, err), "SPH a/10 error %g not below a/5 %g", num(c, 1, err),
-		       num(c, 0, err));
+		CHECKF(num(c, 1, err) < num(c, 0, err), "SPH a/10 error %g not below a/5 %g", num(c, 1, err), num(c, 0, err));
 		/* the runs timed physics alone: no frame was rendered */
 		char cmd[600];
 		snprintf(cmd, sizeof cmd, "cat %s/runs/*.jsonl | grep -c '\"image\"'", out);
@@ -217,20 +215,20 @@ static void bad_study_files(void)
 		const char *src, *expect;
 	} cases[] = {
 		{"return study {\n name = 'x', reference = { finest = true },\n metric = { kind = 'mean', field = 'q' },\n"
-		 " methods = {\n  method { name = 'A', scene = 's.lua', sweeep = {} },\n },\n}\n",
-		 "bad.lua:5: method: unknown field 'sweeep'"},
+	     " methods = {\n  method { name = 'A', scene = 's.lua', sweeep = {} },\n },\n}\n",
+	     "bad.lua:5: method: unknown field 'sweeep'"},
 		{"return study {\n name = 3, reference = { finest = true },\n metric = { kind = 'mean', field = 'q' },\n"
-		 " methods = {},\n}\n",
-		 "bad.lua:2: study: 'name' must be a string (got number)"},
+	     " methods = {},\n}\n",
+	     "bad.lua:2: study: 'name' must be a string (got number)"},
 		{"return study {\n name = 'x', reference = { finest = true },\n metric = { kind = 'median', field = 'q' },\n"
-		 " methods = { method { name = 'A', scene = 's.lua' } },\n}\n",
-		 "bad.lua:3: study: metric kind 'median' is not one of"},
+	     " methods = { method { name = 'A', scene = 's.lua' } },\n}\n",
+	     "bad.lua:3: study: metric kind 'median' is not one of"},
 		{"local m = method { name = 'A', scene = 's.lua',\n sweep = { spacing = 0.01 } }\n",
-		 "bad.lua:2: method 'A': sweep 'spacing' must be a non-empty list"},
+	     "bad.lua:2: method 'A': sweep 'spacing' must be a non-empty list"},
 		{"return 42\n", "must return study { ... }"},
 		{"return study {\n name = 'x', reference = { finest = true },\n metric = { kind = 'mean', field = 'q' },\n"
-		 " methods = {\n  method { name = 'A',\n   scene = 'scenes/nope.lua' },\n },\n}\n",
-		 "bad.lua:6: method 'A': scene 'scenes/nope.lua' not found"},
+	     " methods = {\n  method { name = 'A',\n   scene = 'scenes/nope.lua' },\n },\n}\n",
+	     "bad.lua:6: method 'A': scene 'scenes/nope.lua' not found"},
 	};
 	for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
 		write_file(path, cases[i].src);
@@ -257,8 +255,10 @@ static void missing_driver_is_one_line(void)
 {
 	const char *b = test_build_dir();
 	char cmd[1024], buf[4096];
-	snprintf(cmd, sizeof cmd, "rm -rf %s/t_lonely && mkdir -p %s/t_lonely/a/b && cp %s/eddy %s/t_lonely/a/b/eddy && "
-	         "%s/t_lonely/a/b/eddy study scenes/studies/dam_break.lua --quick", b, b, b, b, b);
+	snprintf(cmd, sizeof cmd,
+	         "rm -rf %s/t_lonely && mkdir -p %s/t_lonely/a/b && cp %s/eddy %s/t_lonely/a/b/eddy && "
+	         "%s/t_lonely/a/b/eddy study scenes/studies/dam_break.lua --quick",
+	         b, b, b, b, b);
 	CHECK(test_sh(cmd, buf, sizeof buf) == 1);
 	CHECK_HAS(buf, "eddy: study: its Lua driver eddy/study.lua is not installed (looked in ");
 	CHECKF(strchr(buf, '\n') == buf + strlen(buf) - 1, "not one line: %s", buf);

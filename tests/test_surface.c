@@ -88,7 +88,7 @@ static double mesh_volume(const eddy_mesh *m)
 	double v = 0;
 	for (size_t t = 0; t < m->triangle_count; ++t) {
 		const float *a = m->xyz + 3 * m->tri[3 * t], *b = m->xyz + 3 * m->tri[3 * t + 1],
-		            *c = m->xyz + 3 * m->tri[3 * t + 2];
+					*c = m->xyz + 3 * m->tri[3 * t + 2];
 		v += (double)a[0] * ((double)b[1] * c[2] - (double)b[2] * c[1]) -
 		     (double)a[1] * ((double)b[0] * c[2] - (double)b[2] * c[0]) +
 		     (double)a[2] * ((double)b[0] * c[1] - (double)b[1] * c[0]);

@@ -86,8 +86,8 @@ static float move_rotating(const eddy_world *w, sph_neighbors *nb, int c)
 	struct sph_collider_set *cs = &bd->col[c];
 	const eddy_collider_motion *m = collider_motion(w, cs);
 	const eddy_vec3 off = m->offset, rot = m->rotation;
-	if (off.x != cs->disp.x || off.y != cs->disp.y || off.z != cs->disp.z || rot.x != cs->rot.x ||
-	    rot.y != cs->rot.y || rot.z != cs->rot.z) {
+	if (off.x != cs->disp.x || off.y != cs->disp.y || off.z != cs->disp.z || rot.x != cs->rot.x || rot.y != cs->rot.y ||
+	    rot.z != cs->rot.z) {
 		const eddy_collider_pose pose = eddy__collider_pose(m);
 		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
 			const eddy_vec3 q = eddy__pose_to_world(&pose, eddy__v3(bd->x0[b], bd->y0[b], bd->z0[b]));
@@ -201,7 +201,8 @@ static void boundary_count(const eddy_world *w, const sph_shared *sh, float spac
 	eddy_vec3 normal;
 	*nstat = *ncolp = *ncol = 0;
 	const eddy_system *o;
-	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS | EDDY_CAP_COLLIDER); (o = eddy__systems_next(&it));) {
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS | EDDY_CAP_COLLIDER);
+	     (o = eddy__systems_next(&it));) {
 		if (o->vt->provides & EDDY_CAP_SPH_WALLS)
 			*nstat += eddy__sph_boundary_box_points(o, sh->h, NULL, NULL, NULL, NULL);
 		else {
@@ -289,10 +290,11 @@ static eddy_status boundary_fill_colliders(eddy_world *w, sph_shared *sh, float 
 		const size_t want = eddy__sph_collider_points(w, o, spacing, sh->h, NULL, NULL, NULL, NULL, &normal);
 		if (!want)
 			continue;
-		const size_t got =
-			eddy__sph_collider_points(w, o, spacing, sh->h, bd->x0 + at, bd->y0 + at, bd->z0 + at, nb->bvol + at, &normal);
+		const size_t got = eddy__sph_collider_points(w, o, spacing, sh->h, bd->x0 + at, bd->y0 + at, bd->z0 + at,
+		                                             nb->bvol + at, &normal);
 		if (got != want)
-			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for the boundary particles of %s", o->label);
+			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for the boundary particles of %s",
+			                  o->label);
 		struct sph_collider_set *cs = &bd->col[bd->ncol++];
 		*cs = (struct sph_collider_set){.slot = (int)(o - w->slots), .first = at, .count = got, .normal = normal};
 		cs->disp = eddy__v3(NAN, NAN, NAN); /* placed by sph_boundary_move */

@@ -26,9 +26,9 @@
 
 typedef struct sph_boundary_box {
 	eddy_sph_boundary_box_def def;
-	int n[3];     /* lattice cells inside the box along each axis (0: thinner than a spacing) */
-	float sp[3];  /* m, adjusted spacing along each axis */
-	float o[3];   /* m, lattice origin: min, or the centre of a thin side */
+	int n[3];    /* lattice cells inside the box along each axis (0: thinner than a spacing) */
+	float sp[3]; /* m, adjusted spacing along each axis */
+	float o[3];  /* m, lattice origin: min, or the centre of a thin side */
 } sph_boundary_box;
 
 eddy_sph_boundary_box_def eddy_default_sph_boundary_box_def(void)
@@ -95,7 +95,8 @@ eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_boundary_
 		const double cells = round(ext[a] / def->spacing);
 		if (cells > 1e6) {
 			free(b);
-			eddy__fail(w, EDDY_ERR_NOMEM, "%s: the box is more than a million spacings long; use a larger spacing", sys);
+			eddy__fail(w, EDDY_ERR_NOMEM, "%s: the box is more than a million spacings long; use a larger spacing",
+			           sys);
 			return EDDY_NULL_SYSTEM;
 		}
 		b->n[a] = (int)cells;

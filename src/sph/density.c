@@ -64,8 +64,8 @@ eddy_sph_density_def eddy_default_sph_density_def(void)
 static float eos_pressure(const sph_density *sd, float rho)
 {
 	const float rho0 = sd->sh.rho0, k = sd->def.stiffness, gamma = sd->def.tait_gamma;
-	const float p = sd->def.eos == EDDY_SPH_EOS_TAIT ? k * rho0 / gamma * (powf(rho / rho0, gamma) - 1.0f)
-	                                                 : k * (rho - rho0);
+	const float p =
+		sd->def.eos == EDDY_SPH_EOS_TAIT ? k * rho0 / gamma * (powf(rho / rho0, gamma) - 1.0f) : k * (rho - rho0);
 	return p > 0 ? p : 0;
 }
 
@@ -102,12 +102,12 @@ static float eos_density(const sph_density *sd, float p)
  * each would cost more than the fluid), rows ascending. */
 typedef struct wall_pairs {
 	size_t n, nbound;
-	uint32_t *start;  /* nbound + 1: wall b's fluid rows are fluid[start[b] .. start[b + 1]) */
+	uint32_t *start; /* nbound + 1: wall b's fluid rows are fluid[start[b] .. start[b + 1]) */
 	uint32_t *fluid;
 	/* for the iteration, else NULL: */
-	float *wgt, *grav;  /* per pair: (h^2 - r^2)^3 and g . (x_b - x_f), boundary-major */
-	uint32_t *fstart;   /* n + 1: row i's pairs in its list order are [fstart[i], fstart[i + 1]) */
-	uint32_t *pos;      /* per pair in that order, its place in the boundary-major order */
+	float *wgt, *grav;   /* per pair: (h^2 - r^2)^3 and g . (x_b - x_f), boundary-major */
+	uint32_t *fstart;    /* n + 1: row i's pairs in its list order are [fstart[i], fstart[i + 1]) */
+	uint32_t *pos;       /* per pair in that order, its place in the boundary-major order */
 	float *inv_sw, *old; /* per wall: 1 / sum of its weights; the density the fluid sums hold */
 } wall_pairs;
 
@@ -199,9 +199,9 @@ static eddy_status walls_iterate(eddy_world *w, sph_density *sd, const wall_pair
 	const float poly6 = sd->sh.k.poly6;
 	const size_t n = wp->n, nbound = wp->nbound;
 	uint32_t *act = eddy__arena_alloc(&w->arena, nbound * sizeof *act),
-	         *rows = eddy__arena_alloc(&w->arena, n * sizeof *rows);
+			 *rows = eddy__arena_alloc(&w->arena, n * sizeof *rows);
 	float *wf = eddy__arena_alloc(&w->arena, (wp->start[nbound] ? wp->start[nbound] : 1) * sizeof *wf),
-	      *dv = eddy__arena_alloc(&w->arena, nbound * sizeof *dv);
+		  *dv = eddy__arena_alloc(&w->arena, nbound * sizeof *dv);
 	if (!act || !rows || !wf || !dv)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", nbound);
 	long na = 0, nr = 0;
@@ -227,7 +227,7 @@ static eddy_status walls_iterate(eddy_world *w, sph_density *sd, const wall_pair
 			first = change;
 		else if (!(change > WALL_TOL * first))
 			return EDDY_OK;
-		/* the fluid near the walls takes the walls' new densities */
+			/* the fluid near the walls takes the walls' new densities */
 #pragma omp parallel for num_threads(threads) schedule(static)
 		for (long r = 0; r < nr; ++r) {
 			const uint32_t i = rows[r];
@@ -399,14 +399,16 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	const char *sys = "sph_density";
 	if (!eddy__add_args(w, def, sys))
 		return EDDY_NULL_SYSTEM;
-	if (!eddy__check_positive(w, sys, "spacing", def->spacing) || !eddy__check_positive(w, sys, "radius", def->radius) ||
+	if (!eddy__check_positive(w, sys, "spacing", def->spacing) ||
+	    !eddy__check_positive(w, sys, "radius", def->radius) ||
 	    !eddy__check_positive(w, sys, "rest_density", def->rest_density) ||
 	    !eddy__check_positive(w, sys, "stiffness", def->stiffness) ||
 	    !eddy__check_range(w, sys, "tait_gamma", def->tait_gamma, 1, 20))
 		return EDDY_NULL_SYSTEM;
 	if (!(def->radius > def->spacing && def->radius <= 5 * def->spacing)) {
 		eddy__fail(w, EDDY_ERR_INVALID,
-		           "%s: 'radius' must be between 1 and 5 times 'spacing' (got radius = %g m, spacing = %g m; 2 x spacing is usual)",
+		           "%s: 'radius' must be between 1 and 5 times 'spacing' (got radius = %g m, spacing = %g m; 2 x "
+		           "spacing is usual)",
 		           sys, (double)def->radius, (double)def->spacing);
 		return EDDY_NULL_SYSTEM;
 	}

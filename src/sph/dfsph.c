@@ -169,14 +169,14 @@ typedef struct dfsph_group {
 /* What the gradient pass reads. */
 typedef struct dfsph_geometry {
 	const sph_neighbors *nb;
-	const float *pq;       /* (x y z 1/rho) quads of sph_density */
-	const float *rho;      /* kg/m^3 */
-	float h;               /* m, kernel radius */
-	float eps2;            /* m^2: a pair closer than sqrt(eps2) has no direction, G = 0 */
-	float mg;              /* m spiky_grad: G_ij = mg (h - r)^2 / r r_vec */
+	const float *pq;  /* (x y z 1/rho) quads of sph_density */
+	const float *rho; /* kg/m^3 */
+	float h;          /* m, kernel radius */
+	float eps2;       /* m^2: a pair closer than sqrt(eps2) has no direction, G = 0 */
+	float mg;         /* m spiky_grad: G_ij = mg (h - r)^2 / r r_vec */
 	float rho0, spiky_grad;
-	float gx, gy, gz;      /* m/s^2, gravity */
-	float dmin;            /* D_i below this is negligible */
+	float gx, gy, gz; /* m/s^2, gravity */
+	float dmin;       /* D_i below this is negligible */
 } dfsph_geometry;
 
 /* What the rate pass computes (dfsph_sweep.rate). */
@@ -189,9 +189,9 @@ enum dfsph_rate {
 /* What a sweep needs beside the work arrays. */
 typedef struct dfsph_sweep {
 	float dt, inv_dt, inv_dt2, rho0;
-	bool divergence;     /* the divergence-free solve, else the constant-density one */
-	bool projected;      /* projected relaxed Jacobi on the symmetric operator
-	                      * (with the divergence solver), else sweeps that add pressure */
+	bool divergence; /* the divergence-free solve, else the constant-density one */
+	bool projected;  /* projected relaxed Jacobi on the symmetric operator
+	                  * (with the divergence solver), else sweeps that add pressure */
 	enum dfsph_rate rate;
 } dfsph_sweep;
 
@@ -200,19 +200,19 @@ enum dfsph_pass { PASS_GRADIENTS, PASS_RATE, PASS_CORRECT };
 /* The solver's per-step scratch, all in the world's arena. */
 typedef struct dfsph_work {
 	long n;
-	size_t *goff;     /* particle i's groups are g[goff[i] .. goff[i + 1]) */
+	size_t *goff; /* particle i's groups are g[goff[i] .. goff[i + 1]) */
 	dfsph_group *g;
-	uint32_t *owner;  /* the particle of each group */
-	dfsph_vec4 *b;    /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
-	float *dsym;      /* 1 / D'_i, the symmetric operator's diagonal (0 likewise); divergence solver only */
-	dfsph_vec4 *v;    /* v*_i (w unused: a neighbour's velocity is one quad) */
-	dfsph_vec4 *h;    /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
-	float *k;         /* the k_i a correction applies */
-	float *ksum;      /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
-	float *kp;        /* the pressure's k_i: the sum over both solves */
-	float *err;       /* per particle: the error the sweep measured */
-	float *full;      /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the
-	                   * velocity solve's particles (divergence solver only) */
+	uint32_t *owner; /* the particle of each group */
+	dfsph_vec4 *b;   /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
+	float *dsym;     /* 1 / D'_i, the symmetric operator's diagonal (0 likewise); divergence solver only */
+	dfsph_vec4 *v;   /* v*_i (w unused: a neighbour's velocity is one quad) */
+	dfsph_vec4 *h;   /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
+	float *k;        /* the k_i a correction applies */
+	float *ksum;     /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
+	float *kp;       /* the pressure's k_i: the sum over both solves */
+	float *err;      /* per particle: the error the sweep measured */
+	float *full;     /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the
+	                  * velocity solve's particles (divergence solver only) */
 	const dfsph_geometry *geo;
 } dfsph_work;
 
@@ -250,7 +250,7 @@ static void gradient_sums(dfsph_work *wk, long i0, long cnt, float *t)
 	const dfsph_geometry *a = wk->geo;
 	fill_groups(wk, i0, cnt);
 	const sf8 h = sf8_set1(a->h), eps2 = sf8_set1(a->eps2), mg = sf8_set1(a->mg), one = sf8_set1(1.0f),
-	          zero = sf8_zero();
+			  zero = sf8_zero();
 	for (size_t gi = wk->goff[i0], ge = wk->goff[i0 + cnt]; gi < ge; ++gi) {
 		dfsph_group *g = wk->g + gi;
 		sf8 rx, ry, rz, rw; /* x_i - x_j */
@@ -358,10 +358,7 @@ static void rate_sums(const dfsph_work *wk, long i0, long cnt, float *t)
 }
 
 /* max(e, 0), and 0 for NaN */
-static inline float positive(float e)
-{
-	return e > 0 ? e : 0.0f;
-}
+static inline float positive(float e) { return e > 0 ? e : 0.0f; }
 
 /* The rate pass's rest: Drho_i/Dt, and for a sweep its error and change of k. */
 static void rate_finish(dfsph_work *wk, const dfsph_sweep *a, long i0, long cnt, const float *t)
@@ -516,7 +513,8 @@ typedef struct sph_dfsph {
 	                        * above DFSPH_FAIL_CAPPED_ERROR times its tolerance */
 } sph_dfsph;
 
-static const int dfsph_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, COL_AX, COL_AY, COL_AZ, -1};
+static const int dfsph_reads[] = {COL_X_,      COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ,
+                                  COL_DENSITY, COL_AX, COL_AY, COL_AZ, -1};
 static const int dfsph_writes[] = {COL_PRESSURE, COL_AX, COL_AY, COL_AZ, -1};
 static const int no_hint_writes[] = {-1};
 
@@ -705,8 +703,7 @@ static double fluid_depth(eddy_world *w, eddy_vec3 g)
  * the iteration cap. Returns the iterations (conjugate gradient steps and
  * sweeps). The velocity solve stops no earlier than DFSPH_SMOOTH sweeps,
  * the density solve no earlier than DFSPH_MIN_SWEEPS iterations. */
-static int solve(dfsph_solver *s, dfsph_cg *cg, bool divergence, bool projected, int cap, double tol,
-                 double *residual)
+static int solve(dfsph_solver *s, dfsph_cg *cg, bool divergence, bool projected, int cap, double tol, double *residual)
 {
 	const dfsph_sweep a = sweep_of(s, divergence, projected, RATE_SWEEP);
 	int it = 0, sweeps = 0;
@@ -825,8 +822,9 @@ static eddy_status apply_result(eddy_world *w, const eddy_system *sys, const dfs
 	const float inv_dt = 1.0f / dt;
 	long bad = -1;
 	for (long i = 0; i < wk->n; ++i) {
-		const float ux = (wk->v[i].x - (vx[i] + dt * ax[i])) * inv_dt, uy = (wk->v[i].y - (vy[i] + dt * ay[i])) * inv_dt,
-		            uz = (wk->v[i].z - (vz[i] + dt * az[i])) * inv_dt;
+		const float ux = (wk->v[i].x - (vx[i] + dt * ax[i])) * inv_dt,
+					uy = (wk->v[i].y - (vy[i] + dt * ay[i])) * inv_dt,
+					uz = (wk->v[i].z - (vz[i] + dt * az[i])) * inv_dt;
 		ax[i] += ux;
 		ay[i] += uy;
 		az[i] += uz;
@@ -835,9 +833,10 @@ static eddy_status apply_result(eddy_world *w, const eddy_system *sys, const dfs
 			bad = i;
 	}
 	if (bad >= 0)
-		return eddy__fail(w, EDDY_ERR_NUMERIC,
-		                  "%s: non-finite pressure acceleration at step %lld, particle %ld (density %g kg/m^3, %u neighbours)",
-		                  sys->label, (long long)ctx->step, bad, (double)wk->h[bad].w, sh->nb.count[bad]);
+		return eddy__fail(
+			w, EDDY_ERR_NUMERIC,
+			"%s: non-finite pressure acceleration at step %lld, particle %ld (density %g kg/m^3, %u neighbours)",
+			sys->label, (long long)ctx->step, bad, (double)wk->h[bad].w, sh->nb.count[bad]);
 	return EDDY_OK;
 }
 
@@ -868,7 +867,8 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	sph_dfsph *sd = sys->data;
 	sph_shared *sh = eddy__sph_find(w, sys);
 	if (!sh)
-		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)", sys->label);
+		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)",
+		                  sys->label);
 	if (sd->frame != w->frame) {
 		sd->frame = w->frame;
 		sd->steps = sd->sweeps = sd->div_sweeps = sd->unconverged = 0;
@@ -891,8 +891,9 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	const sph_kernel_consts kc = sh->k;
 	const float dref = sh->mass * kc.spiky_grad * kc.h2; /* |G| scale */
 	const eddy_vec3 g = w->def.gravity;
-	const dfsph_geometry geo = {nb,  sh->pq, eddy__col(w, COL_DENSITY), kc.h, 1e-6f * kc.h2, sh->mass * kc.spiky_grad,
-	                            rho0, kc.spiky_grad, g.x, g.y, g.z, 1e-6f * dref * dref};
+	const dfsph_geometry geo = {
+		nb,  sh->pq, eddy__col(w, COL_DENSITY), kc.h, 1e-6f * kc.h2, sh->mass * kc.spiky_grad, rho0, kc.spiky_grad, g.x,
+		g.y, g.z,    1e-6f * dref * dref};
 	wk->geo = &geo;
 	pass(&s, PASS_GRADIENTS, NULL);
 	memset(wk->ksum, 0, (size_t)n * sizeof *wk->ksum);
@@ -1016,7 +1017,8 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 	for (int c = 0; c < 2; ++c) {
 		*cols[c] = eddy_world_find_column(w, names[c]);
 		if (*cols[c] < 0)
-			*cols[c] = eddy_world_declare_column(w, names[c], EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "m^5/(kg s^2)");
+			*cols[c] =
+				eddy_world_declare_column(w, names[c], EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "m^5/(kg s^2)");
 		if (*cols[c] < 0) {
 			free(sd);
 			return EDDY_NULL_SYSTEM;
@@ -1024,7 +1026,7 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 	}
 	/* the lists above plus the two state columns, -1 moved to the end */
 	const int nr = (int)(sizeof dfsph_reads / sizeof dfsph_reads[0]) - 1,
-	          nw = (int)(sizeof dfsph_writes / sizeof dfsph_writes[0]) - 1;
+			  nw = (int)(sizeof dfsph_writes / sizeof dfsph_writes[0]) - 1;
 	int reads[sizeof dfsph_reads / sizeof dfsph_reads[0] + 2], writes[sizeof dfsph_writes / sizeof dfsph_writes[0] + 2];
 	memcpy(reads, dfsph_reads, sizeof dfsph_reads);
 	memcpy(writes, dfsph_writes, sizeof dfsph_writes);

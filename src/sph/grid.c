@@ -21,13 +21,14 @@ eddy_status sph_grid_init(eddy_world *w, sph_grid *g, float h)
 	g->oz = lo.z - h;
 	g->inv_cell = SPH_CELLS_PER_H / h;
 	const double gx = ceil((hi.x - lo.x) * g->inv_cell) + 2 * SPH_CELLS_PER_H,
-	             gy = ceil((hi.y - lo.y) * g->inv_cell) + 2 * SPH_CELLS_PER_H,
-	             gz = ceil((hi.z - lo.z) * g->inv_cell) + 2 * SPH_CELLS_PER_H;
+				 gy = ceil((hi.y - lo.y) * g->inv_cell) + 2 * SPH_CELLS_PER_H,
+				 gz = ceil((hi.z - lo.z) * g->inv_cell) + 2 * SPH_CELLS_PER_H;
 	if (gx * gy * gz > 1.5e8)
-		return eddy__fail(w, EDDY_ERR_NOMEM,
-		                  "sph_density: the world bounds hold %.0f x %.0f x %.0f neighbour cells of size radius/2 = %g m; "
-		                  "shrink the bounds or use a larger radius",
-		                  gx, gy, gz, (double)h / SPH_CELLS_PER_H);
+		return eddy__fail(
+			w, EDDY_ERR_NOMEM,
+			"sph_density: the world bounds hold %.0f x %.0f x %.0f neighbour cells of size radius/2 = %g m; "
+			"shrink the bounds or use a larger radius",
+			gx, gy, gz, (double)h / SPH_CELLS_PER_H);
 	g->gx = (int)gx;
 	g->gy = (int)gy;
 	g->gz = (int)gz;

@@ -18,7 +18,8 @@ double eddy_sph_kernel_value(eddy_sph_kernel k, double r, double h)
 		const double d = h * h - r * r;
 		return 315.0 / (64.0 * M_PI * h6 * h3) * d * d * d;
 	}
-	case EDDY_SPH_SPIKY: return 15.0 / (M_PI * h6) * (h - r) * (h - r) * (h - r);
+	case EDDY_SPH_SPIKY:
+		return 15.0 / (M_PI * h6) * (h - r) * (h - r) * (h - r);
 	case EDDY_SPH_VISCOSITY:
 		if (r == 0)
 			return INFINITY; /* integrable 1/r singularity */
@@ -37,7 +38,8 @@ double eddy_sph_kernel_derivative(eddy_sph_kernel k, double r, double h)
 		const double d = h * h - r * r;
 		return -6.0 * 315.0 / (64.0 * M_PI * h6 * h3) * d * d * r;
 	}
-	case EDDY_SPH_SPIKY: return -45.0 / (M_PI * h6) * (h - r) * (h - r);
+	case EDDY_SPH_SPIKY:
+		return -45.0 / (M_PI * h6) * (h - r) * (h - r);
 	case EDDY_SPH_VISCOSITY:
 		if (r == 0)
 			return -INFINITY;
@@ -60,7 +62,8 @@ double eddy_sph_kernel_laplacian(eddy_sph_kernel k, double r, double h)
 		if (r == 0)
 			return -INFINITY;
 		return -90.0 / (M_PI * h6) * (h - r) * (h - 2 * r) / r; /* (1/r^2) d/dr (r^2 dW/dr) */
-	case EDDY_SPH_VISCOSITY: return 45.0 / (M_PI * h6) * (h - r);
+	case EDDY_SPH_VISCOSITY:
+		return 45.0 / (M_PI * h6) * (h - r);
 	}
 	return 0;
 }

@@ -60,7 +60,7 @@ static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *cand, u
                                     uint32_t *jl, float *dv)
 {
 	const sf8 vx = sf8_set1(pi[0]), vy = sf8_set1(pi[1]), vz = sf8_set1(pi[2]), vh2 = sf8_set1(f->h2),
-	          zero = sf8_zero();
+			  zero = sf8_zero();
 	const uint32_t *row_of = f->row_of;
 	uint32_t cnt = 0;
 	for (uint32_t q = 0; q < vc; q += 8) {
@@ -154,8 +154,8 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, uint32_t *max
 			if (!ok)
 				continue;
 			const uint32_t b = nb->verlet.slot_of[i];
-			const uint32_t cnt = filter_fluid(f, nb->verlet.cand + (size_t)b * stride, nb->verlet.count[b],
-			                                  f->p4 + 4 * i, jl, dv);
+			const uint32_t cnt =
+				filter_fluid(f, nb->verlet.cand + (size_t)b * stride, nb->verlet.count[b], f->p4 + 4 * i, jl, dv);
 			sort_rows(jl, dv, cnt);
 			nb->wsum[i] = sph_cube_sum(dv, cnt);
 			if (cnt <= cap) {
@@ -181,9 +181,8 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, uint32_t *max
 void eddy__sph_neighbors_free(sph_neighbors *nb)
 {
 	sph_verlet *v = &nb->verlet;
-	void *arrays[] = {nb->nbr,  nb->count,   nb->wsum,   nb->bwsum, nb->bnbr, nb->bcount, nb->cell_of,
-	                  v->cand,  v->count,    v->bcand,   v->bcount, v->x,     v->y,       v->z,
-	                  v->slot_of, v->row_of};
+	void *arrays[] = {nb->nbr,  nb->count, nb->wsum,  nb->bwsum, nb->bnbr, nb->bcount, nb->cell_of, v->cand,
+	                  v->count, v->bcand,  v->bcount, v->x,      v->y,     v->z,       v->slot_of,  v->row_of};
 	for (size_t a = 0; a < sizeof arrays / sizeof arrays[0]; ++a)
 		free(arrays[a]);
 	sph_boundary_free(nb);
@@ -191,10 +190,7 @@ void eddy__sph_neighbors_free(sph_neighbors *nb)
 	memset(nb, 0, sizeof *nb);
 }
 
-sph_shared *eddy__sph_find(eddy_world *w, const eddy_system *s)
-{
-	return eddy__provided(w, s, EDDY_CAP_SPH_NEIGHBORS);
-}
+sph_shared *eddy__sph_find(eddy_world *w, const eddy_system *s) { return eddy__provided(w, s, EDDY_CAP_SPH_NEIGHBORS); }
 
 /* Grows every per-row array to n. */
 static bool grow_rows(sph_neighbors *nb, size_t n)

@@ -209,7 +209,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const sph_pressure *sp = s->data;
 	sph_shared *sh = eddy__sph_find(w, s);
 	if (!sh)
-		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)", s->label);
+		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)",
+		                  s->label);
 	const sph_neighbors *nb = &sh->nb;
 	const sph_kernel_consts kc = sh->k;
 	const float eps2 = 1e-6f * kc.h2;
@@ -266,7 +267,8 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	*reason = "acoustic";
 	if (!sh)
 		return INFINITY;
-	const double acoustic = sh->h / (sh->c + max_norm(w, COL_VX, COL_VY, COL_VZ)), a = max_norm(w, COL_AX, COL_AY, COL_AZ);
+	const double acoustic = sh->h / (sh->c + max_norm(w, COL_VX, COL_VY, COL_VZ)),
+				 a = max_norm(w, COL_AX, COL_AY, COL_AZ);
 	const double force = a > 0 ? 0.625 * sqrt(sh->h / a) : INFINITY;
 	if (force < acoustic)
 		*reason = "force";

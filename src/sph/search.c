@@ -70,7 +70,7 @@ typedef struct block_runs {
 	int x0, x1, y0, y1, z0, z1; /* the block's cells, inclusive */
 	int count;
 	cell_run run[SEARCH_RUNS];
-	uint32_t fluid_at[SEARCH_RUNS];                             /* buffer offset of each run's rows */
+	uint32_t fluid_at[SEARCH_RUNS];                                          /* buffer offset of each run's rows */
 	uint32_t fluid_layer[SEARCH_LAYERS + 1], bound_layer[SEARCH_LAYERS + 1]; /* buffer offset of each z layer */
 } block_runs;
 
@@ -86,7 +86,12 @@ static bool search_buf_grow(search_buf *b, size_t want)
 	float *m = realloc(b->x, 6 * cap * sizeof *m);
 	if (!m)
 		return false;
-	*b = (search_buf){cap, m, m + cap, m + 2 * cap, m + 3 * cap, (uint32_t *)(void *)(m + 4 * cap),
+	*b = (search_buf){cap,
+	                  m,
+	                  m + cap,
+	                  m + 2 * cap,
+	                  m + 3 * cap,
+	                  (uint32_t *)(void *)(m + 4 * cap),
 	                  (uint32_t *)(void *)(m + 5 * cap)};
 	return true;
 }
@@ -96,8 +101,9 @@ static bool search_buf_grow(search_buf *b, size_t want)
 static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br, size_t *nf, size_t *nbd)
 {
 	const sph_grid *g = &c->nb->grid;
-	const int R = c->R, bxi = (int)(id % (uint32_t)c->blocks_x), byi = (int)(id / (uint32_t)c->blocks_x % (uint32_t)c->blocks_y),
-	          bzi = (int)(id / ((uint32_t)c->blocks_x * (uint32_t)c->blocks_y));
+	const int R = c->R, bxi = (int)(id % (uint32_t)c->blocks_x),
+			  byi = (int)(id / (uint32_t)c->blocks_x % (uint32_t)c->blocks_y),
+			  bzi = (int)(id / ((uint32_t)c->blocks_x * (uint32_t)c->blocks_y));
 	br->x0 = bxi * SEARCH_BX, br->x1 = br->x0 + SEARCH_BX - 1 < g->gx ? br->x0 + SEARCH_BX - 1 : g->gx - 1;
 	br->y0 = byi * SEARCH_BY, br->y1 = br->y0 + SEARCH_BY - 1 < g->gy ? br->y0 + SEARCH_BY - 1 : g->gy - 1;
 	br->z0 = bzi * SEARCH_BZ, br->z1 = br->z0 + SEARCH_BZ - 1 < g->gz ? br->z0 + SEARCH_BZ - 1 : g->gz - 1;
@@ -195,7 +201,7 @@ static inline uint32_t hits(search_buf *b, uint32_t q0, uint32_t q1, float xi, f
 	uint32_t cnt = 0;
 	for (uint32_t q = q0; q < q1; q += 8) {
 		const sf8 rx = sf8_sub(vx, sf8_load(b->x + q)), ry = sf8_sub(vy, sf8_load(b->y + q)),
-		          rz = sf8_sub(vz, sf8_load(b->z + q));
+				  rz = sf8_sub(vz, sf8_load(b->z + q));
 		const sf8 d = sf8_sub(vr2, sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz)));
 		const sf8 in = sf8_and(sf8_gt(d, zero), sf8_lanes_below(q1 - q));
 		cnt += sf8_pack(in, d, b->j + q, b->d + cnt, b->hit + cnt);
@@ -271,7 +277,8 @@ static int cmp_u32(const void *a, const void *b)
  * h/2 from the particle, so the block's far corners are skipped. */
 static void reach_table(search_ctx *c, float r2max)
 {
-	const double rs2 = 1.001 * (double)r2max * (double)c->nb->grid.inv_cell * (double)c->nb->grid.inv_cell; /* in cells^2, 0.1% for rounding */
+	const double rs2 = 1.001 * (double)r2max * (double)c->nb->grid.inv_cell *
+	                   (double)c->nb->grid.inv_cell; /* in cells^2, 0.1% for rounding */
 	for (int a = 0; a <= c->R; ++a)
 		for (int b = 0; b <= c->R; ++b) {
 			const double ey = a > 0 ? a - 1 : 0, ez = b > 0 ? b - 1 : 0, rem = rs2 - ey * ey - ez * ez;
@@ -292,7 +299,8 @@ static long occupied_blocks(const sph_neighbors *nb, size_t n, int blocks_x, int
 	/* one id per stretch of rows in one row of cells and one block, then unique */
 	for (size_t i = 0; i < n; ++i) {
 		const uint32_t cell = nb->cell_of[i], cx = cell % gx, cy = cell / gx % gy, cz = cell / (gx * gy);
-		const uint32_t id = (cz / SEARCH_BZ * (uint32_t)blocks_y + cy / SEARCH_BY) * (uint32_t)blocks_x + cx / SEARCH_BX;
+		const uint32_t id =
+			(cz / SEARCH_BZ * (uint32_t)blocks_y + cy / SEARCH_BY) * (uint32_t)blocks_x + cx / SEARCH_BX;
 		if (id != prev)
 			ids[blocks++] = id;
 		prev = id;
@@ -308,7 +316,8 @@ static long occupied_blocks(const sph_neighbors *nb, size_t n, int blocks_x, int
 bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int threads, uint32_t *max_f,
                 uint32_t *max_b)
 {
-	search_ctx c = {.nb = nb, .out = out, .bound_order = nb->bnd.order, .R = out->exact ? SPH_CELLS_PER_H : SPH_VERLET_CELLS};
+	search_ctx c = {
+		.nb = nb, .out = out, .bound_order = nb->bnd.order, .R = out->exact ? SPH_CELLS_PER_H : SPH_VERLET_CELLS};
 	c.x = eddy__col(w, COL_X_), c.y = eddy__col(w, COL_Y_), c.z = eddy__col(w, COL_Z_);
 	c.blocks_x = (nb->grid.gx + SEARCH_BX - 1) / SEARCH_BX;
 	c.blocks_y = (nb->grid.gy + SEARCH_BY - 1) / SEARCH_BY;

@@ -68,8 +68,8 @@
 	ret x##_base params;             \
 	ret x##_avx2 params
 
-#if defined(EDDY_SIMD_HAVE_AVX2) && !defined(EDDY_SIMD_VARIANT) && !defined(EDDY_SIMD_SCALAR) && \
-	defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__))
+#if defined(EDDY_SIMD_HAVE_AVX2) && !defined(EDDY_SIMD_VARIANT) && !defined(EDDY_SIMD_SCALAR) && defined(__GNUC__) && \
+	(defined(__x86_64__) || defined(__i386__))
 #include <stdlib.h>
 /* The CPU has AVX2 and BMI2 (every AVX2 CPU from Haswell and Zen on has
  * both) and EDDY_NO_AVX2 is unset or empty. EDDY_NO_AVX2=1 takes the base
@@ -82,10 +82,7 @@ static inline bool simd_use_avx2(void)
 }
 #define SIMD_PICK(x) (simd_use_avx2() ? x##_avx2 : x##_base)
 #else
-static inline bool simd_use_avx2(void)
-{
-	return false;
-}
+static inline bool simd_use_avx2(void) { return false; }
 #define SIMD_PICK(x) x##_base
 #endif
 
@@ -136,7 +133,7 @@ static inline int sf8_mask_bits(sf8 m) { return _mm256_movemask_ps(m); }
 static inline void simd_transpose8_(__m256 v0, __m256 v1, __m256 v2, __m256 v3, sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
 {
 	const __m256 t0 = _mm256_unpacklo_ps(v0, v1), t1 = _mm256_unpacklo_ps(v2, v3), t2 = _mm256_unpackhi_ps(v0, v1),
-	             t3 = _mm256_unpackhi_ps(v2, v3);
+				 t3 = _mm256_unpackhi_ps(v2, v3);
 	*c0 = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(1, 0, 1, 0));
 	*c1 = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(3, 2, 3, 2));
 	*c2 = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(1, 0, 1, 0));
@@ -299,15 +296,15 @@ static inline float simd_float_(uint32_t u)
 	memcpy(&f, &u, sizeof f);
 	return f;
 }
-#define SIMD_SCALAR_OP2_(name, expr)             \
-	static inline sf8 name(sf8 a, sf8 b)         \
-	{                                            \
-		sf8 r;                                   \
-		for (int k = 0; k < 8; ++k) {            \
-			const float x = a.l[k], y = b.l[k];  \
-			r.l[k] = (expr);                     \
-		}                                        \
-		return r;                                \
+#define SIMD_SCALAR_OP2_(name, expr)            \
+	static inline sf8 name(sf8 a, sf8 b)        \
+	{                                           \
+		sf8 r;                                  \
+		for (int k = 0; k < 8; ++k) {           \
+			const float x = a.l[k], y = b.l[k]; \
+			r.l[k] = (expr);                    \
+		}                                       \
+		return r;                               \
 	}
 #define SIMD_MASK_(c) simd_float_((c) ? 0xffffffffu : 0u)
 
@@ -334,7 +331,7 @@ static inline sf8 sf8_load(const float *p)
 static inline void sf8_store(float *p, sf8 a) { memcpy(p, a.l, sizeof a.l); }
 SIMD_SCALAR_OP2_(sf8_add, x + y)
 SIMD_SCALAR_OP2_(sf8_sub, x - y)
-SIMD_SCALAR_OP2_(sf8_mul, x * y)
+SIMD_SCALAR_OP2_(sf8_mul, x *y)
 SIMD_SCALAR_OP2_(sf8_div, x / y)
 /* as maxps/minps: the second operand unless the first is strictly greater
  * (smaller), so b when either is NaN or both are zeros */

@@ -74,20 +74,20 @@ typedef struct sph_grid {
  * particle has moved more than half the skin since. It changes how fast the
  * exact lists are made, never what they hold. */
 typedef struct sph_verlet {
-	size_t n;                  /* particles at the search */
-	size_t stride, bstride;    /* candidates per build slot: fluid, boundary */
+	size_t n;               /* particles at the search */
+	size_t stride, bstride; /* candidates per build slot: fluid, boundary */
 	size_t cand_alloc, bcand_alloc;
-	uint32_t *cand, *count;    /* slot s's fluid candidates: cand[s*stride .. + count[s]) */
-	uint32_t *bcand, *bcount;  /* ... boundary candidates, ascending */
-	float *x, *y, *z;          /* m, each slot's position at the search */
+	uint32_t *cand, *count;     /* slot s's fluid candidates: cand[s*stride .. + count[s]) */
+	uint32_t *bcand, *bcount;   /* ... boundary candidates, ascending */
+	float *x, *y, *z;           /* m, each slot's position at the search */
 	uint32_t *slot_of, *row_of; /* build slot of each row, row of each build slot */
-	uint64_t boundary_sig;     /* the boundary systems at the search */
-	float skin;                /* 1, of h: this list's skin (see SPH_SKIN in neighbors.h) */
-	int age;                   /* steps since the search */
-	bool searched;             /* a search ran: x y z and slot_of hold it */
-	bool stored;               /* the candidates were kept (skin > 0): else the search wrote the exact lists */
-	bool rows_kept;            /* no particle has changed row since the search: row_of is the identity */
-	bool count_changed;        /* the search was forced by a new particle count */
+	uint64_t boundary_sig;      /* the boundary systems at the search */
+	float skin;                 /* 1, of h: this list's skin (see SPH_SKIN in neighbors.h) */
+	int age;                    /* steps since the search */
+	bool searched;              /* a search ran: x y z and slot_of hold it */
+	bool stored;                /* the candidates were kept (skin > 0): else the search wrote the exact lists */
+	bool rows_kept;             /* no particle has changed row since the search: row_of is the identity */
+	bool count_changed;         /* the search was forced by a new particle count */
 } sph_verlet;
 
 /* The boundary particles' private part (boundary.c): those of every
@@ -95,32 +95,32 @@ typedef struct sph_verlet {
  * those of the colliders, moving with them. */
 typedef struct sph_boundary {
 	size_t n_static;
-	float *rho;                 /* kg/m^3, EOS density for bp; in bp's block */
-	uint64_t sig;               /* the boundary systems the arrays were built from */
+	float *rho;   /* kg/m^3, EOS density for bp; in bp's block */
+	uint64_t sig; /* the boundary systems the arrays were built from */
 	/* with collider particles (nbound > n_static), else NULL: */
-	uint32_t *order;            /* boundary indices in cell order at the last search */
-	float *x0, *y0, *z0;        /* m, collider particles in their collider's def pose */
-	float *vx, *vy, *vz;        /* m/s, each particle's velocity this step (0 for the static ones) */
-	size_t div_alloc;           /* bdiv's */
+	uint32_t *order;     /* boundary indices in cell order at the last search */
+	float *x0, *y0, *z0; /* m, collider particles in their collider's def pose */
+	float *vx, *vy, *vz; /* m/s, each particle's velocity this step (0 for the static ones) */
+	size_t div_alloc;    /* bdiv's */
 	int ncol;
 	struct sph_collider_set {
-		int slot;            /* pipeline slot of the collider */
-		size_t first, count; /* its particles */
-		eddy_vec3 normal;    /* a plane's: only the offset along it moves them; 0 otherwise */
-		eddy_vec3 disp;      /* m, their displacement from the def pose now */
-		eddy_vec3 at_search; /* m, ... at the last Verlet search */
-		eddy_vec3 rot;       /* degrees, the collider's rotation they were placed with */
+		int slot;                /* pipeline slot of the collider */
+		size_t first, count;     /* its particles */
+		eddy_vec3 normal;        /* a plane's: only the offset along it moves them; 0 otherwise */
+		eddy_vec3 disp;          /* m, their displacement from the def pose now */
+		eddy_vec3 at_search;     /* m, ... at the last Verlet search */
+		eddy_vec3 rot;           /* degrees, the collider's rotation they were placed with */
 		eddy_vec3 rot_at_search; /* degrees, ... at the last Verlet search */
-		float reach;         /* m, the farthest particle from the collider's pivot (bounds a rotation's sweep) */
-	} *col;
+		float reach;             /* m, the farthest particle from the collider's pivot (bounds a rotation's sweep) */
+	} * col;
 	/* per collider, the pose seen at the previous step (velocity = its
 	 * change over the time since); with bp and rho the checkpointed block
 	 * of sph_density (state_size bytes from bp) */
 	struct sph_collider_seen {
-		float x, y, z, have; /* m; have = 1 once seen (floats: no padding in a checkpoint) */
+		float x, y, z, have;      /* m; have = 1 once seen (floats: no padding in a checkpoint) */
 		float rx, ry, rz, unused; /* degrees, the rotation seen */
-		double time;         /* s */
-	} *seen;
+		double time;              /* s */
+	} * seen;
 	size_t state_size;
 } sph_boundary;
 
@@ -151,7 +151,7 @@ typedef struct sph_neighbors {
 typedef struct sph_shared {
 	float h, mass, rho0;
 	float grad_cal; /* 1 / the pressure force's lattice moment: see sph_pressure */
-	float c; /* m/s, speed of sound sqrt(k) */
+	float c;        /* m/s, speed of sound sqrt(k) */
 	sph_kernel_consts k;
 	sph_neighbors nb;
 	float *inv_rho; /* 1/rho this step (arena), set by sph_density */
@@ -206,10 +206,7 @@ static inline void sph_coincident_dir(size_t i, size_t j, float *dx, float *dy, 
 }
 
 /* Four partial sums stored to memory, added in sf8_sum's order (simd.h). */
-static inline float sph_sum4(const float *l)
-{
-	return (l[0] + l[1]) + (l[2] + l[3]);
-}
+static inline float sph_sum4(const float *l) { return (l[0] + l[1]) + (l[2] + l[3]); }
 
 /* The neighbours of a particle's last group, from q, padded with copies of
  * its last neighbour (the padding's lanes are masked out by the caller). */

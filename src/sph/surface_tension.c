@@ -45,7 +45,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const sph_surface_tension *st = s->data;
 	sph_shared *sh = eddy__sph_find(w, s);
 	if (!sh)
-		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)", s->label);
+		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)",
+		                  s->label);
 	const sph_neighbors *nb = &sh->nb;
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const float *inv_rho = sh->inv_rho;

@@ -142,7 +142,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const sph_viscosity *sv = s->data;
 	sph_shared *sh = eddy__sph_find(w, s);
 	if (!sh)
-		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)", s->label);
+		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)",
+		                  s->label);
 	const sph_neighbors *nb = &sh->nb;
 	/* positions and 1/rho come with sph_density's quads (sh->pq) */
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
@@ -153,7 +154,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	/* -m Pi grad W = m alpha c h vr / ((r^2 + eps) rho_ij) spiky_grad (h-r)^2 r_hat */
 	/* 2 x: the mean density (rho_i + rho_j) / 2 is folded into the pair term */
 	const float acoef = 2.0f * sh->mass * sv->def.artificial * sh->c * kc.h * -kc.spiky_grad, eps = 0.01f * kc.h2,
-	            rmin = 1e-3f * kc.h;
+				rmin = 1e-3f * kc.h;
 	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
 	/* each neighbour's eight inputs as two 16-byte quads, (x y z 1/rho) from
 	 * sph_density and (vx vy vz -rho) made here: a group of neighbours then
@@ -219,7 +220,8 @@ eddy_system_id eddy_add_sph_viscosity(eddy_world *w, const eddy_sph_viscosity_de
 	const char *sys = "sph_viscosity";
 	if (!eddy__add_args(w, def, sys))
 		return EDDY_NULL_SYSTEM;
-	if (!eddy__check_nonneg(w, sys, "viscosity", def->viscosity) || !eddy__check_finite(w, sys, "viscosity", def->viscosity) ||
+	if (!eddy__check_nonneg(w, sys, "viscosity", def->viscosity) ||
+	    !eddy__check_finite(w, sys, "viscosity", def->viscosity) ||
 	    !eddy__check_range(w, sys, "artificial", def->artificial, 0, 2))
 		return EDDY_NULL_SYSTEM;
 	sph_viscosity *sv = malloc(sizeof *sv);
