@@ -739,40 +739,47 @@ static long argmax(const float *e, long n)
 	return m;
 }
 
-/* The velocity solve, from last step's k (applied as one correction); its
- * k goes to the state column and into the pressure's kp. Fails when it
- * stopped at its cap far above its tolerance too many steps in a row. */
-static eddy_status velocity_solve(eddy_world *w, eddy_system *sys, dfsph_solver *s, dfsph_cg *cg,
-                                  const eddy_step_context *ctx, double tol, int *iterations, double *residual)
+/* The velocity (divergence) or the density solve. With the divergence
+ * solver it starts from its state column's k of the last step, applied as
+ * one correction, and writes its k back there; its k is added to kp. The
+ * velocity solve fails when it stopped at its cap far above its tolerance
+ * too many steps in a row. */
+static eddy_status run_solve(eddy_world *w, eddy_system *sys, dfsph_solver *s, dfsph_cg *cg,
+                             const eddy_step_context *ctx, bool divergence, double tol, int *it, double *residual)
 {
 	sph_dfsph *sd = sys->data;
 	dfsph_work *wk = &s->wk;
 	const long n = wk->n;
-	const float *rho = eddy__col(w, COL_DENSITY);
-	float *kcol = eddy__col(w, sd->kcol);
-	for (long i = 0; i < n; ++i) {
-		wk->full[i] = rho[i] >= DFSPH_SURFACE * s->rho0 ? 1.0f : 0.0f;
-		wk->k[i] = kcol[i] > 0 && wk->full[i] > 0 ? kcol[i] : 0.0f;
+	const bool warm = sd->def.divergence_solver;
+	float *col = warm ? eddy__col(w, divergence ? sd->kcol : sd->kdcol) : NULL;
+	memset(wk->ksum, 0, (size_t)n * sizeof *wk->ksum);
+	if (warm) {
+		for (long i = 0; i < n; ++i) {
+			if (divergence)
+				wk->full[i] = wk->geo->rho[i] >= DFSPH_SURFACE * s->rho0 ? 1.0f : 0.0f;
+			wk->k[i] = col[i] > 0 && (!divergence || wk->full[i] > 0) ? col[i] : 0.0f;
+		}
+		const dfsph_sweep a = sweep_of(s, divergence, true, false);
+		pass(s, PASS_CORRECT, &a);
 	}
-	const dfsph_sweep warm = sweep_of(s, true, true, false);
-	pass(s, PASS_CORRECT, &warm);
-	const int cap = sd->def.max_divergence_iterations;
-	*iterations = solve(s, cg, true, true, cap, tol, residual);
-	const bool capped = *iterations >= cap && *residual > DFSPH_FAIL_CAPPED_ERROR * tol;
-	sd->capped = capped ? sd->capped + 1 : 0;
-	if (sd->capped >= DFSPH_FAIL_CAPPED) {
+	const int cap = divergence ? sd->def.max_divergence_iterations : sd->def.max_iterations;
+	*it = solve(s, warm ? cg : NULL, divergence, warm, cap, tol, residual);
+	if (divergence)
+		sd->capped = *it >= cap && *residual > DFSPH_FAIL_CAPPED_ERROR * tol ? sd->capped + 1 : 0;
+	if (divergence && sd->capped >= DFSPH_FAIL_CAPPED) {
 		const long wi = argmax(wk->err, n);
 		return eddy__fail(w, EDDY_ERR_NUMERIC,
 		                  "%s: the velocity solve did not converge at step %lld: mean error %.3g after %d "
 		                  "iterations in %d steps in a row (max_divergence_error %g), worst at particle %ld "
 		                  "(%.3g); the water may be too deep for it: raise max_divergence_iterations or lower "
 		                  "the world's cfl",
-		                  sys->label, (long long)ctx->step, *residual, *iterations, sd->capped,
+		                  sys->label, (long long)ctx->step, *residual, *it, sd->capped,
 		                  (double)sd->def.max_divergence_error, wi, wk->err[wi] / s->rho0);
 	}
-	memcpy(kcol, wk->ksum, (size_t)n * sizeof *kcol);
-	memcpy(wk->kp, wk->ksum, (size_t)n * sizeof *wk->kp);
-	memset(wk->ksum, 0, (size_t)n * sizeof *wk->ksum);
+	for (long i = 0; i < n; ++i)
+		wk->kp[i] += wk->ksum[i];
+	if (warm)
+		memcpy(col, wk->ksum, (size_t)n * sizeof *col);
 	return EDDY_OK;
 }
 
@@ -825,8 +832,20 @@ static void publish(eddy_world *w, sph_dfsph *sd, int it, double residual, int d
 	eddy_world_publish(w, "residual_max", sd->worst);
 }
 
-/* The gradients, h and v* = v + dt (a + h); the warm-started velocity solve
- * (divergence solver); the density solve; the result. */
+/* The gradient pass's inputs, from sph_density's. */
+static dfsph_geometry geometry_of(eddy_world *w, const sph_shared *sh)
+{
+	const sph_kernel_consts kc = sh->k;
+	const float dref = sh->mass * kc.spiky_grad * kc.h2; /* |G| scale */
+	const eddy_vec3 g = w->def.gravity;
+	return (dfsph_geometry){&sh->nb,  sh->pq,        eddy__col(w, COL_DENSITY),
+	                        kc.h,     1e-6f * kc.h2, sh->mass * kc.spiky_grad,
+	                        sh->rho0, kc.spiky_grad, g.x,
+	                        g.y,      g.z,           1e-6f * dref * dref};
+}
+
+/* The gradients, h and v* = v + dt (a + h); the velocity solve (divergence
+ * solver); the density solve; the result. */
 static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context *ctx)
 {
 	sph_dfsph *sd = sys->data;
@@ -839,8 +858,7 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 		sd->steps = sd->sweeps = sd->div_sweeps = sd->unconverged = 0;
 		sd->residual = sd->worst = 0;
 	}
-	const sph_neighbors *nb = &sh->nb;
-	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
+	const long n = sh->nb.n < w->n ? (long)sh->nb.n : (long)w->n;
 	const float dt = (float)ctx->dt, rho0 = sh->rho0;
 	if (n == 0 || !(dt > 0))
 		return EDDY_OK;
@@ -850,48 +868,29 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	dfsph_solver s = {.block = sd->block, .threads = ctx->threads, .rho0 = rho0, .dt = dt};
 	dfsph_work *wk = &s.wk;
 	dfsph_cg cg;
-	if (!work_alloc(w, wk, &cg, nb, n, divergence))
+	if (!work_alloc(w, wk, &cg, &sh->nb, n, divergence))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
-
-	const sph_kernel_consts kc = sh->k;
-	const float dref = sh->mass * kc.spiky_grad * kc.h2; /* |G| scale */
-	const eddy_vec3 g = w->def.gravity;
-	const dfsph_geometry geo = {
-		nb,  sh->pq, eddy__col(w, COL_DENSITY), kc.h, 1e-6f * kc.h2, sh->mass * kc.spiky_grad, rho0, kc.spiky_grad, g.x,
-		g.y, g.z,    1e-6f * dref * dref};
+	const dfsph_geometry geo = geometry_of(w, sh);
 	wk->geo = &geo;
 	pass(&s, PASS_GRADIENTS, NULL);
-	memset(wk->ksum, 0, (size_t)n * sizeof *wk->ksum);
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	for (long i = 0; i < n; ++i)
 		wk->v[i] = (dfsph_vec4){vx[i] + dt * (ax[i] + wk->h[i].x), vy[i] + dt * (ay[i] + wk->h[i].y),
 		                        vz[i] + dt * (az[i] + wk->h[i].z), 0};
+	memset(wk->kp, 0, (size_t)n * sizeof *wk->kp);
 
-	int div_it = 0;
-	double div_residual = 0, tol = sd->def.max_density_error;
+	int it, div_it = 0;
+	double residual, div_residual = 0, tol = sd->def.max_density_error;
 	if (divergence) {
-		const double depth = fluid_depth(w, g);
-		tol = divergence_tolerance(sd->def.max_density_error, kc.h, depth);
-		const double dtol = divergence_tolerance(sd->def.max_divergence_error, kc.h, depth);
-		const eddy_status st = velocity_solve(w, sys, &s, &cg, ctx, dtol, &div_it, &div_residual);
+		const double depth = fluid_depth(w, w->def.gravity);
+		tol = divergence_tolerance(sd->def.max_density_error, sh->h, depth);
+		const double dtol = divergence_tolerance(sd->def.max_divergence_error, sh->h, depth);
+		const eddy_status st = run_solve(w, sys, &s, &cg, ctx, true, dtol, &div_it, &div_residual);
 		if (st != EDDY_OK)
 			return st;
-		/* the density solve, from last step's k likewise */
-		const float *kdcol = eddy__col(w, sd->kdcol);
-		for (long i = 0; i < n; ++i)
-			wk->k[i] = kdcol[i] > 0 ? kdcol[i] : 0.0f;
-		const dfsph_sweep warm = sweep_of(&s, false, true, false);
-		pass(&s, PASS_CORRECT, &warm);
-	} else {
-		memset(wk->kp, 0, (size_t)n * sizeof *wk->kp);
 	}
-	double residual = 0;
-	const int it = solve(&s, divergence ? &cg : NULL, false, divergence, sd->def.max_iterations, tol, &residual);
-	for (long i = 0; i < n; ++i)
-		wk->kp[i] += wk->ksum[i];
-	if (divergence)
-		memcpy(eddy__col(w, sd->kdcol), wk->ksum, (size_t)n * sizeof(float));
+	run_solve(w, sys, &s, &cg, ctx, false, tol, &it, &residual);
 	/* the particle the solve left furthest off (the last sweep's errors) */
 	const long worst = argmax(wk->err, n);
 	const double worst_err = wk->err[worst] / rho0;
@@ -908,6 +907,46 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 		                  worst_err);
 	return EDDY_OK;
 }
+
+/* For tests/test_sph_reference.c: after a step of w, the passes on the last
+ * sph_density's lists, on the back-end SIMD_PICK gives now. Per particle:
+ * inv_d = 1 / D_i, inv_dsym = 1 / D'_i, rate = R_i(v) (the wall counted
+ * twice) of the velocity columns, and acc[3 i ..] = -(sum_j (k_i + k_j)
+ * G_ij + 2 k_i B_i) for k_i = k[i]. */
+eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float *inv_dsym, float *rate, float *acc);
+eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float *inv_dsym, float *rate, float *acc)
+{
+	const sph_shared *sh = eddy__sph_find(w, NULL);
+	if (!sh)
+		return EDDY_ERR_ORDER;
+	const long n = sh->nb.n < w->n ? (long)sh->nb.n : (long)w->n;
+	dfsph_solver s = {.block = SIMD_PICK(dfsph_block), .threads = 1, .rho0 = sh->rho0, .dt = 1.0f};
+	dfsph_work *wk = &s.wk;
+	dfsph_cg cg;
+	if (!work_alloc(w, wk, &cg, &sh->nb, n, true))
+		return EDDY_ERR_NOMEM;
+	const dfsph_geometry geo = geometry_of(w, sh);
+	wk->geo = &geo;
+	pass(&s, PASS_GRADIENTS, NULL);
+	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	for (long i = 0; i < n; ++i)
+		wk->v[i] = (dfsph_vec4){vx[i], vy[i], vz[i], 0};
+	const dfsph_sweep a = sweep_of(&s, true, true, true);
+	pass(&s, PASS_RATE, &a);
+	memcpy(wk->k, k, (size_t)n * sizeof *k);
+	memset(wk->v, 0, (size_t)n * sizeof *wk->v);
+	pass(&s, PASS_CORRECT, &a); /* v = -dt (...), dt = 1 */
+	for (long i = 0; i < n; ++i) {
+		inv_d[i] = wk->b[i].w;
+		inv_dsym[i] = wk->dsym[i];
+		rate[i] = wk->err[i];
+		acc[3 * i] = wk->v[i].x;
+		acc[3 * i + 1] = wk->v[i].y;
+		acc[3 * i + 2] = wk->v[i].z;
+	}
+	return EDDY_OK;
+}
+
 static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
 	const sph_shared *sh = eddy__sph_find(w, s);
