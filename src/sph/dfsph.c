@@ -1,110 +1,97 @@
 /* SPDX-License-Identifier: MIT */
 /* sph_dfsph: implicit (incompressible) SPH pressure, the divergence-free SPH
- * of Bender & Koschier (SCA 2015, TVCG 2017). It replaces sph_pressure: the
- * pressure is solved for each step so the fluid keeps its rest density, and
- * the time step is limited by the flow speed, not by a speed of sound.
+ * of Bender & Koschier. It replaces sph_pressure: the pressure is solved for
+ * each step so the fluid keeps its rest density, and the time step is
+ * limited by the flow speed, not by a speed of sound.
  *
  * Reads: x y z vx vy vz density ax ay az, and with the divergence solver the
  * state columns dfsph_k dfsph_kd it declares (each solve's k of the last
  * step). Writes: pressure, ax ay az (accumulated), dfsph_k dfsph_kd. Runs
- * after the non-pressure forces and before integrate, whose v += dt a then
- * gives the corrected velocity; uses sph_density's neighbour lists.
+ * after the other forces and before integrate, whose v += dt a then gives
+ * the corrected velocity; uses sph_density's neighbour lists.
  *
- * The density is sph_density's (poly6) and G_ij = m grad W_spiky(x_i - x_j),
- * sph_pressure's gradient and mass (the poly6 gradient vanishes at r = 0 and
- * lets a tank at rest cluster); boundary particles (Akinci et al. 2012) have
- * mass m_b = V_b rho0. With B_i = sum_b m_b grad W(x_i - x_b), S_i = sum_j
- * G_ij and the pressure written as k_i = p_i / rho_i^2:
+ * With G_ij = m grad W_spiky(x_i - x_j) (sph_pressure's: the poly6 gradient
+ * vanishes at r = 0 and lets a tank at rest cluster), S_i = sum_j G_ij,
+ * boundary particles of mass m_b = V_b rho0 (Akinci et al.), B_i = sum_b m_b
+ * grad W(x_i - x_b), and the pressure as k_i = p_i / rho_i^2:
  *   Drho_i/Dt = sum_j (v_i - v_j) . G_ij + v_i . B_i - bdiv_i
  *   a_i^p     = -sum_j (k_i + k_j) G_ij - 2 k_i B_i + h_i
- * bdiv_i = sum_b m_b v_b . grad W(x_i - x_b) is the moving colliders' part
- * (sph.h). The boundary particles mirror the particle's pressure (p_b = p_i:
- * the wall term counts twice, else a wall could not hold a particle whose
- * neighbourhood is full, where S_i + B_i ~ 0), plus Adami et al.'s
- * hydrostatic part p_b - p_i = rho_i g . (x_b - x_i), which supports the
- * fluid beside the walls:
+ * bdiv_i is the moving colliders' part (sph.h). The boundary particles
+ * mirror the pressure (p_b = p_i, so the wall term counts twice: with one
+ * k_i a wall could not hold a particle whose neighbourhood is full, where
+ * S_i + B_i ~ 0), plus Adami et al.'s hydrostatic part p_b - p_i =
+ * rho_i g . (x_b - x_i), which supports the fluid beside the walls:
  *   h_i = -(1/rho_i) sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b).
- * Each step sets v* = v + dt (a + h), then solves for k on it by sweeps that
- * each set k from the current v* and move v* by dt a^p of the change.
+ * A step sets v* = v + dt (a + h), then solves for k on it by sweeps that
+ * each set k from the current v* and move v* by dt a^p of the change; the
+ * result a^p = (v* - (v + dt a)) / dt is added to ax ay az, and the pressure
+ * column gets p_i = M k_i rho_i^2 (k summed over the solves, M = 1 /
+ * grad_cal the force's lattice moment, see sph_pressure), in Pa.
  *
- * With the divergence solver (the default) the paper's two solves (Alg. 1)
- * run in one step, both warm-started from their own k of the last step and
- * projected, on the symmetric operator:
- *   velocity solve:  R_i(v*) = 0
- *   density solve:   rho_i + dt R_i(v*) = rho0
+ * With the divergence solver (the default) the paper's two solves run in
+ * one step, warm-started from their own k of the last step, projected, on
+ * the symmetric operator:
+ *   velocity solve:  R_i(v*) = 0,   density solve:  rho_i + dt R_i(v*) = rho0
  *   R_i(v) = sum_j (v_i - v_j) . G_ij + 2 (v_i . B_i - bdiv_i)
- * R counts the wall twice, as the force does, so a change of k moves the
- * predicted density by -(A k)_i, A = dt^2 grad^T grad symmetric positive
+ * Counting the wall twice, as the force does, makes a change of k move the
+ * predicted density by -(A k)_i with A = dt^2 grad^T grad symmetric positive
  * semi-definite, of diagonal dt^2 D'_i, D'_i = |S_i + 2 B_i|^2 + sum_j
  * |G_ij|^2 (the true rate makes A non-symmetric, and Jacobi sweeps on it can
- * diverge in a deep column; counted twice the solve is only stiffer at a
- * wall). A sweep is projected relaxed Jacobi (Ihmsen et al. 2014) on the
- * residual res_i (R_i, or the predicted rho_i - rho0):
+ * diverge in a deep column). A sweep is projected relaxed Jacobi (Ihmsen et
+ * al.) on the residual res_i (R_i, or the predicted rho_i - rho0):
  *   k_i <- max(k_i + omega res_i / (dt^n D'_i), 0),   omega = DFSPH_OMEGA,
- * n = 1 for the velocity solve, 2 for the density one: a particle may lose
- * pressure it no longer needs but never goes below 0, so the free surface is
- * not pulled together. The warm start matters: the velocity solve's k is the
- * pressure that carries the water above, which sweeps cannot rebuild through
- * deep water (their error in the column-wide mode falls by 1 - c / N^2 a
- * sweep for N layers). Each solve first runs Jacobi-preconditioned conjugate
- * gradients on the particles that hold pressure or are compressing
+ * n = 1 for the velocity solve, 2 for the density one: k never goes below 0,
+ * so the free surface is not pulled together. The warm start carries the
+ * pressure that holds up the water above, which sweeps could not rebuild
+ * each step through deep water (their error in the column-wide mode falls by
+ * 1 - c / N^2 a sweep for N layers). Each solve first runs preconditioned
+ * conjugate gradients on the particles that hold pressure or are compressing
  * (divergence_cg: 1 - c / N a step), then projected sweeps settle the
  * particles that entered or left that set; the velocity solve makes at least
- * DFSPH_SMOOTH of them, which damp the particle-scale error the Krylov solve
- * leaves. The velocity solve leaves out particles whose density is below
- * DFSPH_SURFACE rho0 (k = 0, no constraint: a Dirichlet surface), so water a
- * moving solid stirred apart is not held at its expanded density.
- * Stopping: a sweep's error is |res_i| where k_i > 0 and max(res_i, 0) where
- * k_i = 0, averaged over all particles; the velocity solve stops once that
- * times dt / rho0 is at most max_divergence_error (the density change per
- * step it leaves, which must be well below max_density_error), the density
+ * DFSPH_SMOOTH of them. It leaves out particles below DFSPH_SURFACE rho0 (a
+ * Dirichlet surface), so water a solid stirred apart is not held expanded.
+ * A sweep's error is |res_i| where k_i > 0 and max(res_i, 0) where k_i = 0,
+ * averaged over all particles; the velocity solve stops once that times
+ * dt / rho0 is at most max_divergence_error (which must be well below
+ * max_density_error, or the water compresses by it every step), the density
  * solve once it is at most max_density_error, both scaled by
- * (DFSPH_DEPTH_REF h / H)^2 in a fluid H deep beyond DFSPH_DEPTH_REF h
- * (divergence_tolerance: the column-wide mode's error grows so against the
- * mean residual).
+ * (DFSPH_DEPTH_REF h / H)^2 in a fluid H deep (divergence_tolerance).
  *
  * Without the divergence solver the density solve runs alone, cold, with the
  * paper's sweeps that only add pressure, on the true wall rate and
  * D_i = (S_i + 2 B_i) . (S_i + B_i) + sum_j |G_ij|^2:
  *   k_i += max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
- * until the mean predicted compression is at most max_density_error: cheaper
- * for shallow, splashing scenes (scenes/pour.lua), and it does not hold still
- * water much deeper than 10 layers.
- *
- * The result a^p = (v* - (v + dt a)) / dt is added to ax ay az; the pressure
- * column gets p_i = M k_i rho_i^2, k summed over both solves, M the force's
- * lattice moment (1 / grad_cal, see sph_pressure), so that it is in Pa.
+ * until the mean compression is at most max_density_error: cheaper for
+ * shallow, splashing scenes, but it does not hold still water much deeper
+ * than 10 layers.
  *
  * The passes: the pairs are packed once a step into groups of eight
- * (dfsph_group), which the sweeps stream. A pass goes in blocks of
- * particles: the pair sums of the block, written once against simd.h and
- * compiled for each back-end, then the rest, eight particles at a time. Each
- * sum ends in simd.h's fixed lane order and each particle writes only its
- * own results, so the result is the same bit for bit on every back-end and
+ * (dfsph_group), which the sweeps stream. A pass goes in blocks: the pair
+ * sums of the block's particles, written once against simd.h, then the rest
+ * eight particles at a time. Sums end in simd.h's fixed lane order and each
+ * particle writes only its own results: the same bits on every back-end and
  * for any thread count.
  *
- * Published per frame: solver = "dfsph", iterations (mean density-solve
- * iterations per step), residual (largest final mean density error of a
- * step), residual_max (largest final error of one particle, / rho0),
- * divergence_iterations (mean), unconverged (steps in which a solve hit its
- * cap above its tolerance). A step fails naming the particle when its mean
- * error is above DFSPH_FAIL_ERROR or one particle's above
- * DFSPH_FAIL_PARTICLE (the solve has lost the fluid). Time-step limits
- * (times the CFL number): dt <= h / max|v|; dt <= DFSPH_GRAVITY_LIMIT
- * sqrt(h / |g|), and with the divergence solver in a fluid H deep beyond
- * DFSPH_DEPTH_REF h that times sqrt(DFSPH_DEPTH_REF h / H), i.e. dt ~
- * h / sqrt(|g| H): the first-order prediction's error grows with the
- * hydrostatic pressure it moves. No acoustic limit.
+ * Published per frame: solver = "dfsph", iterations (mean per step of the
+ * density solve), residual (largest final mean density error of a step),
+ * residual_max (largest final error of one particle, / rho0),
+ * divergence_iterations (mean), unconverged (steps in which a solve stopped
+ * at its cap above its tolerance). A step fails naming the particle when the
+ * solve has lost the fluid (DFSPH_FAIL_ERROR, DFSPH_FAIL_PARTICLE). Time-step
+ * limits (times the CFL number): dt <= h / max|v|, and dt <=
+ * DFSPH_GRAVITY_LIMIT sqrt(h / |g|), with the divergence solver times
+ * sqrt(DFSPH_DEPTH_REF h / H) in a fluid H deep beyond DFSPH_DEPTH_REF h
+ * (dt ~ h / sqrt(|g| H): the prediction's error grows with the hydrostatic
+ * pressure it moves). No acoustic limit.
  *
  * Sources: Bender & Koschier, "Divergence-free smoothed particle
  * hydrodynamics", SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and
  * "Divergence-free SPH for incompressible and viscous fluids", TVCG 2017;
- * Hestenes & Stiefel, J. Res. NBS 1952, and Saad, "Iterative methods for
- * sparse linear systems", 2003 (Alg. 9.1, preconditioned CG); Ihmsen et al.,
- * "Implicit incompressible SPH", TVCG 2014 (relaxed Jacobi); Akinci et al.,
- * "Versatile rigid-fluid coupling for incompressible SPH", SIGGRAPH 2012;
- * Adami, Hu & Adams, "A generalized wall boundary condition for SPH", JCP
- * 2012 (eq. 27). */
+ * Hestenes & Stiefel, J. Res. NBS 1952; Saad, "Iterative methods for sparse
+ * linear systems", 2003 (Alg. 9.1); Ihmsen et al., "Implicit incompressible
+ * SPH", TVCG 2014 (relaxed Jacobi); Akinci et al., "Versatile rigid-fluid
+ * coupling for incompressible SPH", SIGGRAPH 2012; Adami, Hu & Adams, "A
+ * generalized wall boundary condition for SPH", JCP 2012 (eq. 27). */
 #include "simd.h"
 #include "sph.h"
 
@@ -159,8 +146,14 @@ typedef struct dfsph_sweep {
 
 enum dfsph_pass { PASS_GRADIENTS, PASS_RATE, PASS_CORRECT };
 
-/* The solver's per-step scratch, all in the world's arena. */
-typedef struct dfsph_work {
+typedef struct dfsph_work dfsph_work;
+/* One block of a pass, particles i0 .. i0 + cnt - 1 (cnt <= DFSPH_BLOCK),
+ * on one SIMD back-end (a is NULL for the gradient pass). */
+typedef void dfsph_block_fn(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sweep *a, long i0, long cnt);
+SIMD_DECLARE(void, dfsph_block, (dfsph_work * wk, enum dfsph_pass kind, const dfsph_sweep *a, long i0, long cnt));
+
+/* The solver's per-step scratch, all in the world's arena, and how it runs. */
+struct dfsph_work {
 	long n;
 	size_t *goff; /* particle i's groups are g[goff[i] .. goff[i + 1]) */
 	dfsph_group *g;
@@ -172,16 +165,22 @@ typedef struct dfsph_work {
 	float *ksum;       /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
 	float *kp;         /* the pressure's k_i: the sum over both solves */
 	float *err;        /* per particle: the error the sweep measured, or R_i(v) */
-	float *full;       /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the velocity solve's particles */
 	const float *bdiv; /* the moving walls' part of the rate (sph.h); NULL while none moves
 	                    * and in the operator's product, which is linear */
 	const dfsph_geometry *geo;
-} dfsph_work;
-
-/* One block of a pass, particles i0 .. i0 + cnt - 1 (cnt <= DFSPH_BLOCK),
- * on one SIMD back-end (a is NULL for the gradient pass). */
-typedef void dfsph_block_fn(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sweep *a, long i0, long cnt);
-SIMD_DECLARE(void, dfsph_block, (dfsph_work * wk, enum dfsph_pass kind, const dfsph_sweep *a, long i0, long cnt));
+	/* the divergence solver's: */
+	float *full; /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the velocity solve's particles */
+	/* the conjugate gradients' vectors (divergence_cg) */
+	dfsph_vec4 *u;  /* the velocity change of a direction: -dt grad p */
+	float *p;       /* the search direction (a change of k) */
+	float *r;       /* the residual on the active set */
+	float *mask;    /* 1 on the active set, else 0 */
+	float *scratch; /* the correct pass's sum of k, not kept */
+	/* the runner */
+	dfsph_block_fn *block; /* the passes on the chosen SIMD back-end */
+	int threads;
+	float rho0, dt;
+};
 
 /* ---- the passes, compiled once per SIMD back-end ---------------------------- */
 
@@ -505,33 +504,25 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	return d;
 }
 
-/* The step's pass runner: the work arrays and the chosen back-end. */
-typedef struct dfsph_solver {
-	dfsph_work wk;
-	dfsph_block_fn *block;
-	int threads;
-	float rho0, dt;
-} dfsph_solver;
-
 /* A pass over all particles, the threads taking equal shares in order.
  * Each particle writes only its own values (rate its err and k, correct its
  * velocity and k sum: the others read k) from inputs no other particle of
  * the pass changes, so the result is the same for any thread count. */
-static void pass(dfsph_solver *s, enum dfsph_pass kind, const dfsph_sweep *a)
+static void pass(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sweep *a)
 {
-	const long n = s->wk.n;
-	const int threads = s->threads;
+	const long n = wk->n;
+	const int threads = wk->threads;
 #pragma omp parallel for num_threads(threads) schedule(static)
 	for (int th = 0; th < threads; ++th)
 		for (long i0 = n * th / threads, hi = n * (th + 1) / threads; i0 < hi; i0 += DFSPH_BLOCK)
-			s->block(&s->wk, kind, a, i0, hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK);
+			wk->block(wk, kind, a, i0, hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK);
 }
 
 /* The sweep of the velocity (divergence) solve or the density one. */
-static dfsph_sweep sweep_of(const dfsph_solver *s, bool divergence, bool projected, bool rate_only)
+static dfsph_sweep sweep_of(const dfsph_work *wk, bool divergence, bool projected, bool rate_only)
 {
-	const float inv = divergence ? 1.0f / s->dt : 1.0f / (s->dt * s->dt);
-	return (dfsph_sweep){s->dt, inv, s->rho0, divergence, projected, rate_only};
+	const float inv = divergence ? 1.0f / wk->dt : 1.0f / (wk->dt * wk->dt);
+	return (dfsph_sweep){wk->dt, inv, wk->rho0, divergence, projected, rate_only};
 }
 
 /* Serial sum in row order: the same for any thread count. */
@@ -543,30 +534,20 @@ static double mean_of(const float *e, long n)
 	return n > 0 ? s / (double)n : 0;
 }
 
-/* The conjugate gradient's vectors (see divergence_cg). */
-typedef struct dfsph_cg {
-	dfsph_vec4 *u;  /* the velocity change of a direction: -dt grad p */
-	float *p;       /* the search direction (a change of k) */
-	float *r;       /* the residual on the active set */
-	float *mask;    /* 1 on the active set, else 0 */
-	float *scratch; /* the correct pass's sum of k, not kept */
-} dfsph_cg;
-
 /* err = R(u) for u = -dt grad p from zero, without the moving walls' part:
  * A p up to the factor -dt. The passes work on the work arrays, which
  * stand in for the time. */
-static void operator_product(dfsph_solver *s, dfsph_cg *cg)
+static void operator_product(dfsph_work *wk)
 {
-	dfsph_work *wk = &s->wk;
 	const dfsph_work keep = *wk;
-	memset(cg->u, 0, (size_t)wk->n * sizeof *cg->u);
-	wk->v = cg->u;
-	wk->k = cg->p;
-	wk->ksum = cg->scratch;
+	memset(wk->u, 0, (size_t)wk->n * sizeof *wk->u);
+	wk->v = wk->u;
+	wk->k = wk->p;
+	wk->ksum = wk->scratch;
 	wk->bdiv = NULL;
-	const dfsph_sweep as = sweep_of(s, true, true, true);
-	pass(s, PASS_CORRECT, &as);
-	pass(s, PASS_RATE, &as);
+	const dfsph_sweep as = sweep_of(wk, true, true, true);
+	pass(wk, PASS_CORRECT, &as);
+	pass(wk, PASS_RATE, &as);
 	*wk = keep;
 }
 
@@ -580,51 +561,50 @@ static void operator_product(dfsph_solver *s, dfsph_cg *cg)
  * particles whose k ends below 0 are then set to 0 (the projection), and the
  * sweeps that follow settle the particles that left or entered the set.
  * Every sum is serial in row order: the same bits for any thread count. */
-static int divergence_cg(dfsph_solver *s, dfsph_cg *cg, int cap, bool density, double tol, double *residual)
+static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, double *residual)
 {
-	dfsph_work *wk = &s->wk;
 	const long n = wk->n;
-	const float dt = s->dt, rho0 = s->rho0;
-	const dfsph_sweep as = sweep_of(s, true, true, true);
+	const float dt = wk->dt, rho0 = wk->rho0;
+	const dfsph_sweep as = sweep_of(wk, true, true, true);
 	const double scale = (double)dt / ((double)rho0 * (double)n);
-	pass(s, PASS_RATE, &as);
+	pass(wk, PASS_RATE, &as);
 	double rz = 0, esum = 0;
 	for (long i = 0; i < n; ++i) {
 		const float res = density ? wk->err[i] + (wk->h[i].w - rho0) / dt : wk->err[i];
 		const bool on = (density || wk->full[i] > 0) && (wk->ksum[i] > 0 || res > 0);
-		cg->mask[i] = on ? 1.0f : 0.0f;
-		cg->r[i] = on ? res : 0.0f;
-		cg->p[i] = wk->dsym[i] * cg->r[i];
-		rz += (double)cg->r[i] * cg->p[i];
-		esum += fabsf(cg->r[i]);
+		wk->mask[i] = on ? 1.0f : 0.0f;
+		wk->r[i] = on ? res : 0.0f;
+		wk->p[i] = wk->dsym[i] * wk->r[i];
+		rz += (double)wk->r[i] * wk->p[i];
+		esum += fabsf(wk->r[i]);
 	}
 	*residual = esum * scale;
 	int it = 0;
 	while (*residual > tol && it < cap && rz > 0) {
-		operator_product(s, cg);
+		operator_product(wk);
 		double pq = 0;
 		for (long i = 0; i < n; ++i)
-			pq -= (double)cg->p[i] * (cg->mask[i] * wk->err[i]);
+			pq -= (double)wk->p[i] * (wk->mask[i] * wk->err[i]);
 		if (!(pq > 0))
 			break;
 		const float alpha = (float)(rz / pq);
 		double rz1 = 0;
 		esum = 0;
 		for (long i = 0; i < n; ++i) {
-			wk->v[i].x += alpha * cg->u[i].x;
-			wk->v[i].y += alpha * cg->u[i].y;
-			wk->v[i].z += alpha * cg->u[i].z;
-			wk->ksum[i] += alpha * cg->p[i];
-			cg->r[i] += alpha * (cg->mask[i] * wk->err[i]);
-			rz1 += (double)cg->r[i] * (wk->dsym[i] * cg->r[i]);
-			esum += fabsf(cg->r[i]);
+			wk->v[i].x += alpha * wk->u[i].x;
+			wk->v[i].y += alpha * wk->u[i].y;
+			wk->v[i].z += alpha * wk->u[i].z;
+			wk->ksum[i] += alpha * wk->p[i];
+			wk->r[i] += alpha * (wk->mask[i] * wk->err[i]);
+			rz1 += (double)wk->r[i] * (wk->dsym[i] * wk->r[i]);
+			esum += fabsf(wk->r[i]);
 		}
 		++it;
 		*residual = esum * scale;
 		const float beta = (float)(rz1 / rz);
 		rz = rz1;
 		for (long i = 0; i < n; ++i)
-			cg->p[i] = wk->dsym[i] * cg->r[i] + beta * cg->p[i];
+			wk->p[i] = wk->dsym[i] * wk->r[i] + beta * wk->p[i];
 	}
 	/* the projection: k_i < 0 back to 0, as one correction */
 	bool neg = false;
@@ -633,7 +613,7 @@ static int divergence_cg(dfsph_solver *s, dfsph_cg *cg, int cap, bool density, d
 		neg |= wk->ksum[i] < 0;
 	}
 	if (neg)
-		pass(s, PASS_CORRECT, &as);
+		pass(wk, PASS_CORRECT, &as);
 	return it;
 }
 
@@ -673,31 +653,30 @@ static double fluid_depth(eddy_world *w, eddy_vec3 g)
  * the iteration cap. Returns the iterations (conjugate gradient steps and
  * sweeps). The velocity solve stops no earlier than DFSPH_SMOOTH sweeps,
  * the density solve no earlier than DFSPH_MIN_SWEEPS iterations. */
-static int solve(dfsph_solver *s, dfsph_cg *cg, bool divergence, bool projected, int cap, double tol, double *residual)
+static int solve(dfsph_work *wk, bool divergence, bool projected, int cap, double tol, double *residual)
 {
-	const dfsph_sweep a = sweep_of(s, divergence, projected, false);
+	const dfsph_sweep a = sweep_of(wk, divergence, projected, false);
 	int it = 0, sweeps = 0;
 	for (;;) {
-		if (cg)
-			it += divergence_cg(s, cg, cap - it, !divergence, tol, residual);
-		pass(s, PASS_RATE, &a);
-		*residual = mean_of(s->wk.err, s->wk.n) / s->rho0;
+		if (projected)
+			it += divergence_cg(wk, cap - it, !divergence, tol, residual);
+		pass(wk, PASS_RATE, &a);
+		*residual = mean_of(wk->err, wk->n) / wk->rho0;
 		const bool enough = divergence ? sweeps >= DFSPH_SMOOTH : it >= DFSPH_MIN_SWEEPS;
 		if ((enough && *residual <= tol) || it >= cap)
 			break;
-		pass(s, PASS_CORRECT, &a);
+		pass(wk, PASS_CORRECT, &a);
 		++it;
 		++sweeps;
 	}
 	return it;
 }
 
-/* The step's scratch in the world's arena; false when out of memory. */
-static bool work_alloc(eddy_world *w, dfsph_work *wk, dfsph_cg *cg, const sph_neighbors *nb, long n, bool divergence)
+/* The step's scratch in the world's arena, for particles 0 .. n - 1 and
+ * lists nb; false when out of memory. */
+static bool work_alloc(eddy_world *w, dfsph_work *wk, const sph_neighbors *nb, long n, bool divergence)
 {
-	const size_t un = (size_t)n;
-	memset(wk, 0, sizeof *wk);
-	memset(cg, 0, sizeof *cg);
+	const size_t un = (size_t)n, nq = divergence ? 4 : 3, nf = divergence ? 10 : 4;
 	wk->n = n;
 	wk->bdiv = nb->bdiv;
 	wk->goff = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk->goff);
@@ -707,29 +686,20 @@ static bool work_alloc(eddy_world *w, dfsph_work *wk, dfsph_cg *cg, const sph_ne
 	for (long i = 0; i < n; ++i)
 		wk->goff[i + 1] = wk->goff[i] + (nb->count[i] + 7) / 8;
 	wk->g = eddy__arena_alloc(&w->arena, (wk->goff[n] ? wk->goff[n] : 1) * sizeof *wk->g);
-	/* b v h as quads, then k ksum err kp, and dsym with the divergence solver */
-	wk->b = eddy__arena_alloc(&w->arena, 3 * un * sizeof(dfsph_vec4) + 5 * un * sizeof(float));
+	/* nq quad arrays, then nf float ones */
+	wk->b = eddy__arena_alloc(&w->arena, un * (nq * sizeof(dfsph_vec4) + nf * sizeof(float)));
 	if (!wk->g || !wk->b)
 		return false;
 	wk->v = wk->b + un;
 	wk->h = wk->v + un;
-	wk->k = (float *)(wk->h + un);
-	wk->ksum = wk->k + un;
-	wk->err = wk->ksum + un;
-	wk->kp = wk->err + un;
-	if (!divergence)
-		return true;
-	wk->dsym = wk->kp + un;
-	cg->u = eddy__arena_alloc(&w->arena, un * sizeof(dfsph_vec4) + 5 * un * sizeof(float));
-	if (!cg->u)
-		return false;
-	cg->p = (float *)(cg->u + un);
-	cg->r = cg->p + un;
-	cg->mask = cg->r + un;
-	cg->scratch = cg->mask + un;
-	wk->full = cg->scratch + un;
+	wk->u = divergence ? wk->h + un : NULL;
+	float **floats[10] = {&wk->k,    &wk->ksum, &wk->err, &wk->kp,   &wk->dsym,
+	                      &wk->full, &wk->p,    &wk->r,   &wk->mask, &wk->scratch};
+	for (size_t a = 0; a < 10; ++a)
+		*floats[a] = a < nf ? (float *)(wk->b + nq * un) + a * un : NULL;
 	return true;
 }
+
 /* The index of the largest of e[0 .. n) (the first of equals). */
 static long argmax(const float *e, long n)
 {
@@ -744,11 +714,10 @@ static long argmax(const float *e, long n)
  * one correction, and writes its k back there; its k is added to kp. The
  * velocity solve fails when it stopped at its cap far above its tolerance
  * too many steps in a row. */
-static eddy_status run_solve(eddy_world *w, eddy_system *sys, dfsph_solver *s, dfsph_cg *cg,
-                             const eddy_step_context *ctx, bool divergence, double tol, int *it, double *residual)
+static eddy_status run_solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const eddy_step_context *ctx,
+                             bool divergence, double tol, int *it, double *residual)
 {
 	sph_dfsph *sd = sys->data;
-	dfsph_work *wk = &s->wk;
 	const long n = wk->n;
 	const bool warm = sd->def.divergence_solver;
 	float *col = warm ? eddy__col(w, divergence ? sd->kcol : sd->kdcol) : NULL;
@@ -756,14 +725,14 @@ static eddy_status run_solve(eddy_world *w, eddy_system *sys, dfsph_solver *s, d
 	if (warm) {
 		for (long i = 0; i < n; ++i) {
 			if (divergence)
-				wk->full[i] = wk->geo->rho[i] >= DFSPH_SURFACE * s->rho0 ? 1.0f : 0.0f;
+				wk->full[i] = wk->geo->rho[i] >= DFSPH_SURFACE * wk->rho0 ? 1.0f : 0.0f;
 			wk->k[i] = col[i] > 0 && (!divergence || wk->full[i] > 0) ? col[i] : 0.0f;
 		}
-		const dfsph_sweep a = sweep_of(s, divergence, true, false);
-		pass(s, PASS_CORRECT, &a);
+		const dfsph_sweep a = sweep_of(wk, divergence, true, false);
+		pass(wk, PASS_CORRECT, &a);
 	}
 	const int cap = divergence ? sd->def.max_divergence_iterations : sd->def.max_iterations;
-	*it = solve(s, warm ? cg : NULL, divergence, warm, cap, tol, residual);
+	*it = solve(wk, divergence, warm, cap, tol, residual);
 	if (divergence)
 		sd->capped = *it >= cap && *residual > DFSPH_FAIL_CAPPED_ERROR * tol ? sd->capped + 1 : 0;
 	if (divergence && sd->capped >= DFSPH_FAIL_CAPPED) {
@@ -774,7 +743,7 @@ static eddy_status run_solve(eddy_world *w, eddy_system *sys, dfsph_solver *s, d
 		                  "(%.3g); the water may be too deep for it: raise max_divergence_iterations or lower "
 		                  "the world's cfl",
 		                  sys->label, (long long)ctx->step, *residual, *it, sd->capped,
-		                  (double)sd->def.max_divergence_error, wi, wk->err[wi] / s->rho0);
+		                  (double)sd->def.max_divergence_error, wi, wk->err[wi] / wk->rho0);
 	}
 	for (long i = 0; i < n; ++i)
 		wk->kp[i] += wk->ksum[i];
@@ -786,8 +755,9 @@ static eddy_status run_solve(eddy_world *w, eddy_system *sys, dfsph_solver *s, d
 /* a += (v* - (v + dt a)) / dt and p = M kp rho^2; fails naming the first
  * particle whose result is not finite. */
 static eddy_status apply_result(eddy_world *w, const eddy_system *sys, const dfsph_work *wk, const sph_shared *sh,
-                                float dt, const eddy_step_context *ctx)
+                                const eddy_step_context *ctx)
 {
+	const float dt = wk->dt;
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	float *p = eddy__col(w, COL_PRESSURE);
@@ -832,16 +802,22 @@ static void publish(eddy_world *w, sph_dfsph *sd, int it, double residual, int d
 	eddy_world_publish(w, "residual_max", sd->worst);
 }
 
-/* The gradient pass's inputs, from sph_density's. */
-static dfsph_geometry geometry_of(eddy_world *w, const sph_shared *sh)
+/* The scratch for sph_density's particles and lists, and the gradient pass
+ * on them; false when out of memory. */
+static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n, bool divergence, dfsph_geometry *geo)
 {
 	const sph_kernel_consts kc = sh->k;
 	const float dref = sh->mass * kc.spiky_grad * kc.h2; /* |G| scale */
 	const eddy_vec3 g = w->def.gravity;
-	return (dfsph_geometry){&sh->nb,  sh->pq,        eddy__col(w, COL_DENSITY),
+	*geo = (dfsph_geometry){&sh->nb,  sh->pq,        eddy__col(w, COL_DENSITY),
 	                        kc.h,     1e-6f * kc.h2, sh->mass * kc.spiky_grad,
 	                        sh->rho0, kc.spiky_grad, g.x,
 	                        g.y,      g.z,           1e-6f * dref * dref};
+	wk->geo = geo;
+	if (!work_alloc(w, wk, &sh->nb, n, divergence))
+		return false;
+	pass(wk, PASS_GRADIENTS, NULL);
+	return true;
 }
 
 /* The gradients, h and v* = v + dt (a + h); the velocity solve (divergence
@@ -859,26 +835,22 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 		sd->residual = sd->worst = 0;
 	}
 	const long n = sh->nb.n < w->n ? (long)sh->nb.n : (long)w->n;
-	const float dt = (float)ctx->dt, rho0 = sh->rho0;
+	const float dt = (float)ctx->dt;
 	if (n == 0 || !(dt > 0))
 		return EDDY_OK;
 	if ((uint64_t)n > (uint64_t)UINT32_MAX) /* the groups hold j in 32 bits */
 		return eddy__fail(w, EDDY_ERR_INVALID, "%s: too many particles (%ld)", sys->label, n);
 	const bool divergence = sd->def.divergence_solver;
-	dfsph_solver s = {.block = sd->block, .threads = ctx->threads, .rho0 = rho0, .dt = dt};
-	dfsph_work *wk = &s.wk;
-	dfsph_cg cg;
-	if (!work_alloc(w, wk, &cg, &sh->nb, n, divergence))
+	dfsph_work wk = {.block = sd->block, .threads = ctx->threads, .rho0 = sh->rho0, .dt = dt};
+	dfsph_geometry geo;
+	if (!prepare(w, &wk, sh, n, divergence, &geo))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
-	const dfsph_geometry geo = geometry_of(w, sh);
-	wk->geo = &geo;
-	pass(&s, PASS_GRADIENTS, NULL);
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	for (long i = 0; i < n; ++i)
-		wk->v[i] = (dfsph_vec4){vx[i] + dt * (ax[i] + wk->h[i].x), vy[i] + dt * (ay[i] + wk->h[i].y),
-		                        vz[i] + dt * (az[i] + wk->h[i].z), 0};
-	memset(wk->kp, 0, (size_t)n * sizeof *wk->kp);
+		wk.v[i] = (dfsph_vec4){vx[i] + dt * (ax[i] + wk.h[i].x), vy[i] + dt * (ay[i] + wk.h[i].y),
+		                       vz[i] + dt * (az[i] + wk.h[i].z), 0};
+	memset(wk.kp, 0, (size_t)n * sizeof *wk.kp);
 
 	int it, div_it = 0;
 	double residual, div_residual = 0, tol = sd->def.max_density_error;
@@ -886,15 +858,15 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 		const double depth = fluid_depth(w, w->def.gravity);
 		tol = divergence_tolerance(sd->def.max_density_error, sh->h, depth);
 		const double dtol = divergence_tolerance(sd->def.max_divergence_error, sh->h, depth);
-		const eddy_status st = run_solve(w, sys, &s, &cg, ctx, true, dtol, &div_it, &div_residual);
+		const eddy_status st = run_solve(w, sys, &wk, ctx, true, dtol, &div_it, &div_residual);
 		if (st != EDDY_OK)
 			return st;
 	}
-	run_solve(w, sys, &s, &cg, ctx, false, tol, &it, &residual);
+	run_solve(w, sys, &wk, ctx, false, tol, &it, &residual);
 	/* the particle the solve left furthest off (the last sweep's errors) */
-	const long worst = argmax(wk->err, n);
-	const double worst_err = wk->err[worst] / rho0;
-	const eddy_status st = apply_result(w, sys, wk, sh, dt, ctx);
+	const long worst = argmax(wk.err, n);
+	const double worst_err = wk.err[worst] / wk.rho0;
+	const eddy_status st = apply_result(w, sys, &wk, sh, ctx);
 	if (st != EDDY_OK)
 		return st;
 	publish(w, sd, it, residual, div_it, div_residual, worst_err);
@@ -920,29 +892,25 @@ eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float
 	if (!sh)
 		return EDDY_ERR_ORDER;
 	const long n = sh->nb.n < w->n ? (long)sh->nb.n : (long)w->n;
-	dfsph_solver s = {.block = SIMD_PICK(dfsph_block), .threads = 1, .rho0 = sh->rho0, .dt = 1.0f};
-	dfsph_work *wk = &s.wk;
-	dfsph_cg cg;
-	if (!work_alloc(w, wk, &cg, &sh->nb, n, true))
+	dfsph_work wk = {.block = SIMD_PICK(dfsph_block), .threads = 1, .rho0 = sh->rho0, .dt = 1.0f};
+	dfsph_geometry geo;
+	if (!prepare(w, &wk, sh, n, true, &geo))
 		return EDDY_ERR_NOMEM;
-	const dfsph_geometry geo = geometry_of(w, sh);
-	wk->geo = &geo;
-	pass(&s, PASS_GRADIENTS, NULL);
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	for (long i = 0; i < n; ++i)
-		wk->v[i] = (dfsph_vec4){vx[i], vy[i], vz[i], 0};
-	const dfsph_sweep a = sweep_of(&s, true, true, true);
-	pass(&s, PASS_RATE, &a);
-	memcpy(wk->k, k, (size_t)n * sizeof *k);
-	memset(wk->v, 0, (size_t)n * sizeof *wk->v);
-	pass(&s, PASS_CORRECT, &a); /* v = -dt (...), dt = 1 */
+		wk.v[i] = (dfsph_vec4){vx[i], vy[i], vz[i], 0};
+	const dfsph_sweep a = sweep_of(&wk, true, true, true);
+	pass(&wk, PASS_RATE, &a);
+	memcpy(wk.k, k, (size_t)n * sizeof *k);
+	memset(wk.v, 0, (size_t)n * sizeof *wk.v);
+	pass(&wk, PASS_CORRECT, &a); /* v = -dt (...), dt = 1 */
 	for (long i = 0; i < n; ++i) {
-		inv_d[i] = wk->b[i].w;
-		inv_dsym[i] = wk->dsym[i];
-		rate[i] = wk->err[i];
-		acc[3 * i] = wk->v[i].x;
-		acc[3 * i + 1] = wk->v[i].y;
-		acc[3 * i + 2] = wk->v[i].z;
+		inv_d[i] = wk.b[i].w;
+		inv_dsym[i] = wk.dsym[i];
+		rate[i] = wk.err[i];
+		acc[3 * i] = wk.v[i].x;
+		acc[3 * i + 1] = wk.v[i].y;
+		acc[3 * i + 2] = wk.v[i].z;
 	}
 	return EDDY_OK;
 }
