@@ -135,13 +135,12 @@ typedef struct dfsph_geometry {
 	float dmin;       /* D_i below this is negligible */
 } dfsph_geometry;
 
-/* What a sweep needs beside the work arrays. */
+/* Which sweep a rate or correct pass is part of. */
 typedef struct dfsph_sweep {
-	float dt, inv, rho0; /* inv = 1 / dt^n: n = 1 for the velocity solve, 2 for the density one */
-	bool divergence;     /* the velocity (divergence-free) solve, else the density one */
-	bool projected;      /* projected relaxed Jacobi on the symmetric operator (the
-	                      * divergence solver), else sweeps that only add pressure */
-	bool rate_only;      /* the rate pass writes only R_i(v) to err */
+	bool divergence; /* the velocity (divergence-free) solve, else the density one */
+	bool projected;  /* projected relaxed Jacobi on the symmetric operator (the
+	                  * divergence solver), else sweeps that only add pressure */
+	bool rate_only;  /* the rate pass writes only R_i(v) to err */
 } dfsph_sweep;
 
 enum dfsph_pass { PASS_GRADIENTS, PASS_RATE, PASS_CORRECT };
@@ -199,12 +198,9 @@ static inline sf8 load8(const float *p, long m)
 static inline void store8(float *p, sf8 a, long m)
 {
 	float l[8];
-	if (m == 8) {
-		sf8_store(p, a);
-		return;
-	}
-	sf8_store(l, a);
-	memcpy(p, l, (size_t)m * sizeof *l);
+	sf8_store(m == 8 ? p : l, a);
+	if (m < 8)
+		memcpy(p, l, (size_t)m * sizeof *l);
 }
 
 /* Eight particles' quads p[0 .. m) by component: lane k of c0 .. c3 holds
@@ -358,7 +354,9 @@ static void rate(dfsph_work *wk, const dfsph_sweep *a, long i0, long cnt)
 		}
 		sf8_fold4(sf8_add(sf8_add(sx, sy), sz), t[q]);
 	}
-	const sf8 zero = sf8_zero(), dt = sf8_set1(a->dt), inv = sf8_set1(a->inv), rho0 = sf8_set1(a->rho0),
+	/* 1 / dt^n: n = 1 for the velocity solve, 2 for the density one */
+	const float inv1 = a->divergence ? 1.0f / wk->dt : 1.0f / (wk->dt * wk->dt);
+	const sf8 zero = sf8_zero(), dt = sf8_set1(wk->dt), inv = sf8_set1(inv1), rho0 = sf8_set1(wk->rho0),
 			  omega = sf8_set1(DFSPH_OMEGA), minus = sf8_set1(-0.0f);
 	for (long q = 0; q < cnt; q += 8) {
 		const long i = i0 + q, m = cnt - q < 8 ? cnt - q : 8;
@@ -394,7 +392,7 @@ static void rate(dfsph_work *wk, const dfsph_sweep *a, long i0, long cnt)
 
 /* The correction: v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i), and k_i
  * added to its sum. */
-static void correct(dfsph_work *wk, const dfsph_sweep *a, long i0, long cnt)
+static void correct(dfsph_work *wk, long i0, long cnt)
 {
 	const float *k = wk->k;
 	float t[3][DFSPH_BLOCK][4];
@@ -411,7 +409,7 @@ static void correct(dfsph_work *wk, const dfsph_sweep *a, long i0, long cnt)
 		sf8_fold4(sy, t[1][q]);
 		sf8_fold4(sz, t[2][q]);
 	}
-	const sf8 dt = sf8_set1(a->dt), two = sf8_set1(2.0f);
+	const sf8 dt = sf8_set1(wk->dt), two = sf8_set1(2.0f);
 	for (long q = 0; q < cnt; q += 8) {
 		const long i = i0 + q, m = cnt - q < 8 ? cnt - q : 8;
 		sf8 vx, vy, vz, vw, bx, by, bz, bw;
@@ -433,7 +431,7 @@ void SIMD_NAME(dfsph_block)(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sw
 	else if (kind == PASS_RATE)
 		rate(wk, a, i0, cnt);
 	else
-		correct(wk, a, i0, cnt);
+		correct(wk, i0, cnt);
 }
 
 #ifndef EDDY_SIMD_VARIANT
@@ -442,8 +440,8 @@ void SIMD_NAME(dfsph_block)(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sw
 
 /* dt <= DFSPH_GRAVITY_LIMIT sqrt(h / |g|) (times the CFL number): gravity
  * compresses the fluid by g dt^2 each step, which the first-order prediction
- * of the solve must absorb (a tank at rest rings up from 0.19 on). Transient
- * forces need no such limit: the velocity limit covers them. */
+ * of the solve must absorb, or a tank at rest rings up. Transient forces
+ * need no such limit: the velocity limit covers them. */
 #define DFSPH_GRAVITY_LIMIT 0.18
 
 /* above this final mean density error a step fails instead of going on */
@@ -476,9 +474,6 @@ void SIMD_NAME(dfsph_block)(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sw
  * requested tolerance; deeper, the tolerance falls with the square of the
  * depth (divergence_tolerance) */
 #define DFSPH_DEPTH_REF 5.0
-
-/* density-solve iterations a step makes at least */
-#define DFSPH_MIN_SWEEPS 1
 
 typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
@@ -518,22 +513,6 @@ static void pass(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sweep *a)
 			wk->block(wk, kind, a, i0, hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK);
 }
 
-/* The sweep of the velocity (divergence) solve or the density one. */
-static dfsph_sweep sweep_of(const dfsph_work *wk, bool divergence, bool projected, bool rate_only)
-{
-	const float inv = divergence ? 1.0f / wk->dt : 1.0f / (wk->dt * wk->dt);
-	return (dfsph_sweep){wk->dt, inv, wk->rho0, divergence, projected, rate_only};
-}
-
-/* Serial sum in row order: the same for any thread count. */
-static double mean_of(const float *e, long n)
-{
-	double s = 0;
-	for (long i = 0; i < n; ++i)
-		s += e[i];
-	return n > 0 ? s / (double)n : 0;
-}
-
 /* err = R(u) for u = -dt grad p from zero, without the moving walls' part:
  * A p up to the factor -dt. The passes work on the work arrays, which
  * stand in for the time. */
@@ -545,7 +524,7 @@ static void operator_product(dfsph_work *wk)
 	wk->k = wk->p;
 	wk->ksum = wk->scratch;
 	wk->bdiv = NULL;
-	const dfsph_sweep as = sweep_of(wk, true, true, true);
+	const dfsph_sweep as = {true, true, true};
 	pass(wk, PASS_CORRECT, &as);
 	pass(wk, PASS_RATE, &as);
 	*wk = keep;
@@ -565,7 +544,7 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 {
 	const long n = wk->n;
 	const float dt = wk->dt, rho0 = wk->rho0;
-	const dfsph_sweep as = sweep_of(wk, true, true, true);
+	const dfsph_sweep as = {true, true, true};
 	const double scale = (double)dt / ((double)rho0 * (double)n);
 	pass(wk, PASS_RATE, &as);
 	double rz = 0, esum = 0;
@@ -652,17 +631,20 @@ static double fluid_depth(eddy_world *w, eddy_vec3 g)
  * of a rate and a correction until the mean error / rho0 is at most tol, or
  * the iteration cap. Returns the iterations (conjugate gradient steps and
  * sweeps). The velocity solve stops no earlier than DFSPH_SMOOTH sweeps,
- * the density solve no earlier than DFSPH_MIN_SWEEPS iterations. */
+ * the density solve no earlier than one iteration. */
 static int solve(dfsph_work *wk, bool divergence, bool projected, int cap, double tol, double *residual)
 {
-	const dfsph_sweep a = sweep_of(wk, divergence, projected, false);
+	const dfsph_sweep a = {divergence, projected, false};
 	int it = 0, sweeps = 0;
 	for (;;) {
 		if (projected)
 			it += divergence_cg(wk, cap - it, !divergence, tol, residual);
 		pass(wk, PASS_RATE, &a);
-		*residual = mean_of(wk->err, wk->n) / wk->rho0;
-		const bool enough = divergence ? sweeps >= DFSPH_SMOOTH : it >= DFSPH_MIN_SWEEPS;
+		double sum = 0; /* serial, in row order: the same for any thread count */
+		for (long i = 0; i < wk->n; ++i)
+			sum += wk->err[i];
+		*residual = sum / (double)wk->n / wk->rho0;
+		const bool enough = divergence ? sweeps >= DFSPH_SMOOTH : it >= 1;
 		if ((enough && *residual <= tol) || it >= cap)
 			break;
 		pass(wk, PASS_CORRECT, &a);
@@ -728,7 +710,7 @@ static eddy_status run_solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, co
 				wk->full[i] = wk->geo->rho[i] >= DFSPH_SURFACE * wk->rho0 ? 1.0f : 0.0f;
 			wk->k[i] = col[i] > 0 && (!divergence || wk->full[i] > 0) ? col[i] : 0.0f;
 		}
-		const dfsph_sweep a = sweep_of(wk, divergence, true, false);
+		const dfsph_sweep a = {divergence, true, false};
 		pass(wk, PASS_CORRECT, &a);
 	}
 	const int cap = divergence ? sd->def.max_divergence_iterations : sd->def.max_iterations;
@@ -899,7 +881,7 @@ eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	for (long i = 0; i < n; ++i)
 		wk.v[i] = (dfsph_vec4){vx[i], vy[i], vz[i], 0};
-	const dfsph_sweep a = sweep_of(&wk, true, true, true);
+	const dfsph_sweep a = {true, true, true};
 	pass(&wk, PASS_RATE, &a);
 	memcpy(wk.k, k, (size_t)n * sizeof *k);
 	memset(wk.v, 0, (size_t)n * sizeof *wk.v);
