@@ -288,8 +288,11 @@ static void gradients(dfsph_work *wk, long i0, long cnt)
 		sf8 sx = zero, sy = zero, sz = zero, s2 = zero;
 		dfsph_group *g = wk->g + wk->goff[i];
 		for (uint32_t p = 0; p < c; p += 8, ++g) {
-			for (uint32_t l = 0; l < 8; ++l)
-				g->j[l] = p + l < c ? list[p + l] : (uint32_t)i;
+			if (p + 8 <= c)
+				memcpy(g->j, list + p, sizeof g->j);
+			else
+				for (uint32_t l = 0; l < 8; ++l)
+					g->j[l] = p + l < c ? list[p + l] : (uint32_t)i;
 			sf8 rx, ry, rz, rw; /* x_i - x_j */
 			sf8_sub_gather_quads(pi, a->pq, g->j, &rx, &ry, &rz, &rw);
 			const sf8 r2 = sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz));
@@ -310,7 +313,10 @@ static void gradients(dfsph_work *wk, long i0, long cnt)
 		sf8_fold4(sy, t[1][q]);
 		sf8_fold4(sz, t[2][q]);
 		sf8_fold4(s2, t[3][q]);
-		wall_sums(a, i, w, q);
+		for (int k = 0; k < 6; ++k)
+			w[k][q] = 0;
+		if (nb->bcount[i]) /* most particles are away from the walls */
+			wall_sums(a, i, w, q);
 	}
 	for (long q = 0; q < cnt; q += 8) {
 		const long i = i0 + q, m = cnt - q < 8 ? cnt - q : 8;
