@@ -1,11 +1,11 @@
 /* SPDX-License-Identifier: MIT */
 /* The SPH passes against a plain reference: sph_density, sph_pressure,
- * sph_viscosity and sph_dfsph's passes on a small random block of particles, compared with a
- * double-precision evaluation of the Mueller kernels over all pairs, written
- * for clarity (O(n^2), no neighbour lists, no SIMD). The passes' SIMD
- * back-ends share their lane order with each other, so they cannot check
- * one another; this reference shares nothing with them but the equations of
- * their header comments. Run on whichever back-end the build has (AVX2 or
+ * sph_viscosity and sph_dfsph's passes on a small random block of
+ * particles, compared with a double-precision evaluation of the Mueller
+ * kernels over all pairs, written for clarity (O(n^2), no neighbour lists,
+ * no SIMD). The passes' SIMD back-ends share their lane order with each
+ * other, so they cannot check one another; this reference shares nothing
+ * with them but the equations of their header comments. Run on whichever back-end the build has (AVX2 or
  * SSE; SIMD=scalar: the scalar one) and again with EDDY_NO_AVX2=1.
  *
  * Sources: Mueller, Charypar & Gross 2003 (poly6 density, spiky pressure
