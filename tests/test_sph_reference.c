@@ -1,11 +1,11 @@
 /* SPDX-License-Identifier: MIT */
-/* The SPH passes against a plain reference: sph_density, sph_pressure and
- * sph_viscosity on a small random block of particles, compared with a
- * double-precision evaluation of the Mueller kernels over all pairs, written
- * for clarity (O(n^2), no neighbour lists, no SIMD). The passes' SIMD
- * back-ends share their lane order with each other, so they cannot check
- * one another; this reference shares nothing with them but the equations of
- * their header comments. Run on whichever back-end the build has (AVX2 or
+/* The SPH passes against a plain reference: sph_density, sph_pressure,
+ * sph_viscosity and sph_dfsph's passes on a small random block of
+ * particles, compared with a double-precision evaluation of the Mueller
+ * kernels over all pairs, written for clarity (O(n^2), no neighbour lists,
+ * no SIMD). The passes' SIMD back-ends share their lane order with each
+ * other, so they cannot check one another; this reference shares nothing
+ * with them but the equations of their header comments. Run on whichever back-end the build has (AVX2 or
  * SSE; SIMD=scalar: the scalar one) and again with EDDY_NO_AVX2=1.
  *
  * Sources: Mueller, Charypar & Gross 2003 (poly6 density, spiky pressure
@@ -288,6 +288,110 @@ static void check_against_reference(const ref_case *c, uint32_t seed, const char
 	CHECK(mean_pmag > 1.0 && mean_vmag > 1.0);
 }
 
+/* sph_dfsph's passes (its header's equations), run on the random block by
+ * eddy__dfsph_probe (dfsph.c) after one step of sph_density, against the
+ * same kind of reference: with G_ij = m grad W_spiky(x_i - x_j) and
+ * S_i = sum_j G_ij, no walls (B_i = 0, so D'_i = D_i):
+ *   D_i = |S_i|^2 + sum_j |G_ij|^2,   R_i(v) = sum_j (v_i - v_j) . G_ij,
+ *   a_i = -sum_j (k_i + k_j) G_ij   (the correction for a given k). */
+eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float *inv_dsym, float *rate, float *acc);
+
+static void check_dfsph_against_reference(const ref_case *c, uint32_t seed, const char *label)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.bounds_max = (eddy_vec3){0.3f, 0.3f, 0.3f};
+	d.gravity = (eddy_vec3){0, 0, 0};
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	de.spacing = c->dx;
+	de.radius = c->h;
+	de.rest_density = c->rho0;
+	const eddy_system_id dens = eddy_add_sph_density(w, &de);
+	/* sph_dfsph reads the velocities (the columns the probe reads) and writes
+	 * only ax ay az (after gravity's, g = 0), pressure and its warm starts */
+	eddy_gravity_def gr = eddy_default_gravity_def();
+	CHECK(eddy_system_valid(w, eddy_add_gravity(w, &gr)));
+	eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+	CHECKF(eddy_system_valid(w, eddy_add_sph_dfsph(w, &df)), "%s", eddy_world_error(w));
+	static eddy_vec3 pos[NP], vel[NP];
+	random_block(seed, c->dx, pos, vel);
+	CHECK(eddy_world_add_particles(w, NP, pos, vel) == EDDY_OK);
+	CHECKF(eddy_world_step(w) == EDDY_OK, "%s", eddy_world_error(w));
+	/* the rows as the step left them (in cell order; no integrator moved them) */
+	size_t n = 0;
+	const char *names[6] = {"x", "y", "z", "vx", "vy", "vz"};
+	const float *col[6];
+	for (int a = 0; a < 6; ++a)
+		col[a] = eddy_world_channel(w, names[a], &n);
+	CHECK(n == NP && col[5]);
+	if (n != NP || !col[5]) {
+		eddy_destroy_world(w);
+		return;
+	}
+	/* an irregular k, 0 for every fifth particle as for one without pressure */
+	static float k[NP], inv_d[NP], inv_dsym[NP], rate[NP], acc[3 * NP];
+	for (size_t i = 0; i < n; ++i)
+		k[i] = i % 5 == 0 ? 0.0f : 1e-3f * (float)(1 + i * 7 % 11);
+	CHECK(eddy__dfsph_probe(w, k, inv_d, inv_dsym, rate, acc) == EDDY_OK);
+	const double m = eddy_sph_particle_mass(w, dens), h = c->h;
+	const double spiky = -45.0 / (M_PI * pow(h, 6));
+	double worst_d = 0, worst_r = 0, worst_a = 0, mean_rmag = 0;
+	for (size_t i = 0; i < n; ++i) {
+		double S[3] = {0, 0, 0}, s2 = 0, R = 0, a[3] = {0, 0, 0};
+		double smag[3] = {0, 0, 0}, scond[3] = {0, 0, 0}, s2cond = 0, rmag = 0, rcond = 0, amag[3] = {0, 0, 0},
+			   acond[3] = {0, 0, 0};
+		int pairs = 0;
+		for (size_t j = 0; j < n; ++j) {
+			const double rv[3] = {col[0][i] - col[0][j], col[1][i] - col[1][j], col[2][i] - col[2][j]};
+			const double r = sqrt(rv[0] * rv[0] + rv[1] * rv[1] + rv[2] * rv[2]);
+			if (j == i || r >= h)
+				continue;
+			pairs++;
+			/* G has (h - r)^2, |G|^2 (h - r)^4: their conditioning (see tolerance()) */
+			const double kr = 2 * r / (h - r);
+			for (int e = 0; e < 3; ++e) {
+				const double g = m * spiky * (h - r) * (h - r) / r * rv[e];
+				const double rt = (col[3 + e][i] - col[3 + e][j]) * g, at = -((double)k[i] + k[j]) * g;
+				S[e] += g;
+				s2 += g * g;
+				R += rt;
+				a[e] += at;
+				smag[e] += fabs(g);
+				scond[e] += fabs(g) * kr;
+				s2cond += g * g * 2 * kr;
+				rmag += fabs(rt);
+				rcond += fabs(rt) * kr;
+				amag[e] += fabs(at);
+				acond[e] += fabs(at) * kr;
+			}
+		}
+		/* D's error: sum |G|^2's, plus |S|^2's from each S_e's error
+		 * (2 |S_e| dS_e + dS_e^2), plus the few roundings of the products,
+		 * the sums and 1 / D (4 u D) */
+		const double D = S[0] * S[0] + S[1] * S[1] + S[2] * S[2] + s2;
+		double d_tol = tolerance(3 * pairs, s2, s2cond) + 4 * ROUNDOFF * D;
+		for (int e = 0; e < 3; ++e) {
+			const double ds = tolerance(pairs, smag[e], scond[e]);
+			d_tol += 2 * fabs(S[e]) * ds + ds * ds;
+		}
+		worst_d = fmax(worst_d, fabs(1.0 / inv_d[i] - D) / d_tol);
+		worst_d = fmax(worst_d, fabs(1.0 / inv_dsym[i] - D) / d_tol);
+		worst_r = fmax(worst_r, fabs(rate[i] - R) / tolerance(3 * pairs, rmag, rcond));
+		for (int e = 0; e < 3; ++e)
+			worst_a = fmax(worst_a, fabs(acc[3 * i + e] - a[e]) / tolerance(pairs, amag[e], acond[e]));
+		mean_rmag += rmag / (double)n;
+	}
+	printf("    %s: worst error / tolerance: D and D' %.2f, rate %.2f, correction %.2f (mean sum of |rate terms| "
+	       "%.3g kg/(m^3 s))\n",
+	       label, worst_d, worst_r, worst_a, mean_rmag);
+	CHECK(worst_d <= 1);
+	CHECK(worst_r <= 1);
+	CHECK(worst_a <= 1);
+	/* the block exercises the rate: approaching and receding pairs */
+	CHECK(mean_rmag > 1.0);
+	eddy_destroy_world(w);
+}
+
 /* Two cases: the default water setup (h = 2 spacings), and one step beyond
  * it, a wider support (h = 2.6 spacings: some 60% more neighbours per
  * particle and other last-group sizes) with a stiffer EOS, a larger
@@ -308,6 +412,10 @@ static void passes_match_double_reference(void)
 		check_against_reference(&water, 12345u, label);
 		snprintf(label, sizeof label, "h = 2.6 dx%s", path ? ", EDDY_NO_AVX2" : "");
 		check_against_reference(&wide, 777u, label);
+		snprintf(label, sizeof label, "dfsph, h = 2 dx%s", path ? ", EDDY_NO_AVX2" : "");
+		check_dfsph_against_reference(&water, 12345u, label);
+		snprintf(label, sizeof label, "dfsph, h = 2.6 dx%s", path ? ", EDDY_NO_AVX2" : "");
+		check_dfsph_against_reference(&wide, 777u, label);
 	}
 	if (saved)
 		setenv("EDDY_NO_AVX2", saved, 1);

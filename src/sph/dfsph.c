@@ -1,138 +1,95 @@
 /* SPDX-License-Identifier: MIT */
 /* sph_dfsph: implicit (incompressible) SPH pressure, the divergence-free SPH
- * of Bender & Koschier (SCA 2015, TVCG 2017). It replaces sph_pressure: the
- * pressure is solved for each step so the fluid keeps its rest density, and
- * the time step is limited by the flow speed, not by a speed of sound.
+ * of Bender & Koschier. It replaces sph_pressure: the pressure is solved for
+ * each step so the fluid keeps its rest density, and the time step is
+ * limited by the flow speed, not by a speed of sound.
  *
- * Reads: x y z vx vy vz density ax ay az, and with the divergence solver
- * dfsph_k dfsph_kd (state columns it declares: each solve's k of the last
- * step). Writes: pressure ax ay az (accumulated), dfsph_k dfsph_kd. Runs
- * after the non-pressure forces (gravity, sph_viscosity, sph_surface_tension)
- * and before integrate, whose v += dt a then gives the corrected velocity. It
- * uses sph_density's neighbour lists.
+ * Reads: x y z vx vy vz density ax ay az, and with the divergence solver the
+ * state columns dfsph_k dfsph_kd it declares (each solve's k of the last
+ * step). Writes: pressure, ax ay az (accumulated), dfsph_k dfsph_kd. Runs
+ * after the other forces and before integrate, whose v += dt a then gives
+ * the corrected velocity; uses sph_density's neighbour lists.
  *
- * Kernel: the density is sph_density's (poly6, the 'density' column the
- * stats report) and G_ij = m grad W_spiky(x_i - x_j), the gradient and mass
- * sph_pressure uses; boundary particles (Akinci et al. 2012) have mass
- * m_b = V_b rho0. The spiky gradient stays repulsive as particles close in
- * (the poly6 gradient, exact for the poly6 density, vanishes at r = 0 and
- * lets a tank at rest cluster and churn).
- * With B_i = sum_b m_b grad W(x_i - x_b) and the pressure written as
- * k_i = p_i / rho_i^2:
- *   Drho_i/Dt = sum_j (v_i - v_j) . G_ij + v_i . B_i - sum_b m_b v_b . grad W(x_i - x_b)
- * (the last term: boundary particles of moving colliders, neighbors.c's
- * bdiv; 0 for walls at rest)
+ * With G_ij = m grad W_spiky(x_i - x_j) (sph_pressure's: the poly6 gradient
+ * vanishes at r = 0 and lets a tank at rest cluster), S_i = sum_j G_ij,
+ * boundary particles of mass m_b = V_b rho0 (Akinci et al.), B_i = sum_b m_b
+ * grad W(x_i - x_b), and the pressure as k_i = p_i / rho_i^2:
+ *   Drho_i/Dt = sum_j (v_i - v_j) . G_ij + v_i . B_i - bdiv_i
  *   a_i^p     = -sum_j (k_i + k_j) G_ij - 2 k_i B_i + h_i
- * The boundary particles mirror the particle's pressure (p_b = p_i, so the
- * wall term counts twice: with a single k_i the wall could not hold a
- * particle whose neighbourhood is full, as sum_j G_ij + B_i ~ 0 there), plus
- * Adami et al.'s (2012) hydrostatic part p_b - p_i = rho_i g . (x_b - x_i):
- *   h_i = -(1/rho_i) sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b)
- * (up, away from a floor), known before the solve and added to the forces;
- * without it the fluid beside the walls lacks support and circulates.
- * Each step first sets v* = v + dt (a + h), the velocity the non-pressure
- * forces give, then solves for k on it, by sweeps that each set k from the
- * current v* and move v* by dt a^p of the change.
+ * bdiv_i is the moving colliders' part (sph.h). The boundary particles
+ * mirror the pressure (p_b = p_i, so the wall term counts twice: with one
+ * k_i a wall could not hold a particle whose neighbourhood is full, where
+ * S_i + B_i ~ 0), plus Adami et al.'s hydrostatic part p_b - p_i =
+ * rho_i g . (x_b - x_i), which supports the fluid beside the walls:
+ *   h_i = -(1/rho_i) sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b).
+ * A step sets v* = v + dt (a + h), then solves for k on it by sweeps that
+ * each set k from the current v* and move v* by dt a^p of the change; the
+ * result a^p = (v* - (v + dt a)) / dt is added to ax ay az, and the pressure
+ * column gets p_i = M k_i rho_i^2 (k summed over the solves, M = 1 /
+ * grad_cal the force's lattice moment, see sph_pressure), in Pa.
  *
- * With the divergence solver (the default) there are two solves, the
- * paper's pair (Alg. 1) folded into one step, both on the symmetric
- * operator, warm-started and projected:
- *   velocity (divergence-free) solve:  Drho_i/Dt(v*) = 0
- *   density solve:                     rho_i + dt Drho_i/Dt(v*) = rho0
- * In both the rate counts the wall as the force does,
- *   R_i(v) = sum_j (v_i - v_j) . G_ij + 2 v_i . B_i,
- * so that a change of k moves the predicted density by -(A k)_i with
- * A = dt^2 grad^T grad symmetric positive semi-definite, of diagonal
- * dt^2 D'_i,   D'_i = |S_i + 2 B_i|^2 + sum_j |G_ij|^2,   S_i = sum_j G_ij.
- * (The true wall rate is v_i . B_i: counted twice, the solve over-predicts
- * compression at a wall and is only stiffer there; at rest the constraint
- * is the same. The true rate makes the operator non-symmetric, and Jacobi
- * sweeps on it can diverge in a deep column.) Each sweep is a projected,
- * relaxed Jacobi step on the residual res_i (Drho_i/Dt, or the predicted
- * rho_i - rho0):
+ * With the divergence solver (the default) the paper's two solves run in
+ * one step, warm-started from their own k of the last step, projected, on
+ * the symmetric operator:
+ *   velocity solve:  R_i(v*) = 0,   density solve:  rho_i + dt R_i(v*) = rho0
+ *   R_i(v) = sum_j (v_i - v_j) . G_ij + 2 (v_i . B_i - bdiv_i)
+ * Counting the wall twice, as the force does, makes a change of k move the
+ * predicted density by -(A k)_i with A = dt^2 grad^T grad symmetric positive
+ * semi-definite, of diagonal dt^2 D'_i, D'_i = |S_i + 2 B_i|^2 + sum_j
+ * |G_ij|^2 (the true rate makes A non-symmetric, and Jacobi sweeps on it can
+ * diverge in a deep column). A sweep is projected relaxed Jacobi (Ihmsen et
+ * al.) on the residual res_i (R_i, or the predicted rho_i - rho0):
  *   k_i <- max(k_i + omega res_i / (dt^n D'_i), 0),   omega = DFSPH_OMEGA,
- * n = 1 for the velocity solve, 2 for the density one (Ihmsen et al.'s
- * relaxed Jacobi, with the projection of unilateral pressure: a particle
- * may lose pressure it no longer needs but never goes below 0, so the free
- * surface is not pulled together). Each solve starts from its own k of the
- * last step (the state columns DFSPH_K_COLUMN and DFSPH_KD_COLUMN, which
- * move with the particles and are checkpointed), applied as one
- * correction: the velocity solve's k is the pressure that carries the
- * weight of the water above (it balances gravity over a step whatever dt
- * is), the density solve's the one that holds the compression the velocity
- * solve leaves. Cold, each step would have to rebuild the hydrostatic
- * pressure from the compression it allowed, which Jacobi sweeps cannot do
- * through deep water (their error in the column-wide mode falls by about
- * 1 - c / N^2 a sweep for N layers).
- * Each solve first runs Jacobi-preconditioned conjugate gradients on the
- * particles that hold pressure or are compressing (divergence_cg: they
- * reduce the column-wide mode about N times faster than the sweeps), then
- * the projected sweeps above settle the particles that entered or left that
- * set; the velocity solve makes at least DFSPH_SMOOTH of them, which damp
- * the particle-scale error the Krylov solve leaves. In the velocity solve a
- * particle whose kernel sum is below DFSPH_SURFACE rho0 (the outermost
- * layer of a free surface) holds no pressure (k = 0 and no constraint: a
- * Dirichlet surface, as SPlisHSPlasH's DFSPH leaves out particles with few
- * neighbours), so water a moving solid stirred apart below it is not held
- * at its expanded density; the density solve still covers every particle.
- * A sweep's error is |res_i| where k_i > 0 (too much pressure counts, as
- * too little) and max(res_i, 0) where k_i = 0, averaged over all particles:
- * the velocity solve stops once that times dt / rho0 is at most
- * max_divergence_error (the density change per step it leaves: it must be
- * well below max_density_error, or the water compresses by it every step),
- * the density solve once it is at most max_density_error, both scaled by
- * (DFSPH_DEPTH_REF h / H)^2 in a fluid H deep along gravity beyond
- * DFSPH_DEPTH_REF kernel radii (divergence_tolerance: the mean residual of
- * the column-wide mode shrinks so against its error).
+ * n = 1 for the velocity solve, 2 for the density one: k never goes below 0,
+ * so the free surface is not pulled together. The warm start carries the
+ * pressure that holds up the water above, which sweeps could not rebuild
+ * each step through deep water (their error in the column-wide mode falls by
+ * 1 - c / N^2 a sweep for N layers). Each solve first runs preconditioned
+ * conjugate gradients on the particles that hold pressure or are compressing
+ * (divergence_cg: 1 - c / N a step), then projected sweeps settle the
+ * particles that entered or left that set; the velocity solve makes at least
+ * DFSPH_SMOOTH of them. It leaves out particles below DFSPH_SURFACE rho0 (a
+ * Dirichlet surface), so water a solid stirred apart is not held expanded.
+ * A sweep's error is |res_i| where k_i > 0 and max(res_i, 0) where k_i = 0,
+ * averaged over all particles; the velocity solve stops once that times
+ * dt / rho0 is at most max_divergence_error (which must be well below
+ * max_density_error, or the water compresses by it every step), the density
+ * solve once it is at most max_density_error, both scaled by
+ * (DFSPH_DEPTH_REF h / H)^2 in a fluid H deep (divergence_tolerance).
  *
- * Without the divergence solver the density solve runs alone, cold, with
- * the paper's sweeps that only add pressure, on the true wall rate and
+ * Without the divergence solver the density solve runs alone, cold, with the
+ * paper's sweeps that only add pressure, on the true wall rate and
  * D_i = (S_i + 2 B_i) . (S_i + B_i) + sum_j |G_ij|^2:
  *   k_i += max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
- * until the mean predicted compression is at most max_density_error. It is
- * the cheaper choice for shallow, splashing scenes (scenes/pour.lua), and
- * does not hold still water much deeper than 10 layers.
- *
- * The result, a^p = (v* - (v + dt a)) / dt, is added to ax ay az. The pressure
- * column gets p_i = M k_i rho_i^2, k_i summed over both solves, M the
- * force's lattice moment (1 / grad_cal, see sph_pressure): the force of a
- * linear field is M grad p / rho, so this is the pressure in Pa (M = 0.947
- * at h = 2 spacings).
+ * until the mean compression is at most max_density_error: cheaper for
+ * shallow, splashing scenes, but it does not hold still water much deeper
+ * than 10 layers.
  *
  * The passes: the pairs are packed once a step into groups of eight
- * (dfsph_group: the neighbours and G_ij by component), which the sweeps
- * stream; positions come from sph_density's (x y z 1/rho) quads. A pass
- * goes in blocks of particles (dfsph_block): first the pair sums of the
- * block's particles, written once against the SIMD vocabulary (simd.h) and
- * compiled for each back-end, then the per-particle rest of the pass. Each
- * pair sum keeps eight lanes and ends in simd.h's fixed order (sf8_sum);
- * each particle writes only its own results, and the mean errors are summed
- * serially in row order. So the result is the same, bit for bit, on every
- * back-end and for any thread count. The AVX2 back-end is taken when the
- * CPU has it and EDDY_NO_AVX2 is unset or empty when the system is added.
+ * (dfsph_group), which the sweeps stream. A pass goes in blocks: the pair
+ * sums of the block's particles, written once against simd.h, then the rest
+ * eight particles at a time. Sums end in simd.h's fixed lane order and each
+ * particle writes only its own results: the same bits on every back-end and
+ * for any thread count.
  *
- * Published per frame: solver = "dfsph", iterations (mean constant-density
- * sweeps per step), residual (largest final mean density error of a step),
+ * Published per frame: solver = "dfsph", iterations (mean per step of the
+ * density solve), residual (largest final mean density error of a step),
  * residual_max (largest final error of one particle, / rho0),
- * divergence_iterations (mean), unconverged (steps in which a solve hit its
- * cap above its tolerance). A step whose final mean density error is above
- * DFSPH_FAIL_ERROR, or one particle's above DFSPH_FAIL_PARTICLE, fails
- * naming the step and the particle: the solve has lost the fluid (a time
- * step far too long, or water deeper than the solver holds).
- * Time-step limits (the world multiplies them by its CFL number): velocity,
- * dt <= h / max|v|; gravity, dt <= DFSPH_GRAVITY_LIMIT sqrt(h / |g|), and
- * with the divergence solver in a fluid H deep beyond DFSPH_DEPTH_REF h,
- * that times sqrt(DFSPH_DEPTH_REF h / H), i.e. dt ~ h / sqrt(|g| H): the
- * first-order prediction's error in a step grows with the hydrostatic
- * pressure p ~ rho0 |g| H it moves. There is no acoustic limit: that is
- * sph_pressure's, which a scene with this lacks.
- * Source: Bender & Koschier, "Divergence-free smoothed particle hydrodynamics",
- * SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and "Divergence-free SPH
- * for incompressible and viscous fluids", TVCG 2017; Hestenes & Stiefel,
- * "Methods of conjugate gradients for solving linear systems", J. Res. NBS
- * 1952, and Saad, "Iterative methods for sparse linear systems", 2003 (Alg.
- * 9.1, preconditioned CG); Ihmsen et al., "Implicit incompressible SPH",
- * TVCG 2014 (relaxed Jacobi); Akinci et al., "Versatile rigid-fluid
+ * divergence_iterations (mean), unconverged (steps in which a solve stopped
+ * at its cap above its tolerance). A step fails naming the particle when the
+ * solve has lost the fluid (DFSPH_FAIL_ERROR, DFSPH_FAIL_PARTICLE). Time-step
+ * limits (times the CFL number): dt <= h / max|v|, and dt <=
+ * DFSPH_GRAVITY_LIMIT sqrt(h / |g|), with the divergence solver times
+ * sqrt(DFSPH_DEPTH_REF h / H) in a fluid H deep beyond DFSPH_DEPTH_REF h
+ * (dt ~ h / sqrt(|g| H): the prediction's error grows with the hydrostatic
+ * pressure it moves). No acoustic limit.
+ *
+ * Sources: Bender & Koschier, "Divergence-free smoothed particle
+ * hydrodynamics", SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and
+ * "Divergence-free SPH for incompressible and viscous fluids", TVCG 2017;
+ * Hestenes & Stiefel, J. Res. NBS 1952; Saad, "Iterative methods for sparse
+ * linear systems", 2003 (Alg. 9.1); Ihmsen et al., "Implicit incompressible
+ * SPH", TVCG 2014 (relaxed Jacobi); Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012; Adami, Hu & Adams, "A
  * generalized wall boundary condition for SPH", JCP 2012 (eq. 27). */
 #include "simd.h"
@@ -141,14 +98,13 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* The relaxation of both solves' projected Jacobi sweeps (with the
- * divergence solver): the largest eigenvalue of D'^-1 A is near 4 here (full
- * neighbourhoods plus the doubled wall), so sweeps with omega above 0.5 can
- * grow. */
+/* The relaxation of the projected Jacobi sweeps: the largest eigenvalue of
+ * D'^-1 A is near 4 (full neighbourhoods plus the doubled wall), so sweeps
+ * with omega above 0.5 can grow. */
 #define DFSPH_OMEGA 0.5f
 
-/* Particles per block of a pass: the pair sums of a block first, then the
- * rest per particle, whose particles are independent (finishing each
+/* Particles per block of a pass, a multiple of 8: the pair sums of a block
+ * first, then the rest, whose particles are independent (finishing each
  * particle right after its pairs puts a long chain of dependent operations
  * behind every exit of the loop over its groups). */
 #define DFSPH_BLOCK 64
@@ -179,127 +135,128 @@ typedef struct dfsph_geometry {
 	float dmin;       /* D_i below this is negligible */
 } dfsph_geometry;
 
-/* What the rate pass computes (dfsph_sweep.rate). */
-enum dfsph_rate {
-	RATE_SWEEP,  /* a sweep: the residual, the error and the change of k */
-	RATE_SIGNED, /* only R_i(v) to err, the moving walls' part included (a residual) */
-	RATE_LINEAR, /* only R_i(v) to err without it (the linear operator's product) */
-};
-
-/* What a sweep needs beside the work arrays. */
+/* Which sweep a rate or correct pass is part of. */
 typedef struct dfsph_sweep {
-	float dt, inv_dt, inv_dt2, rho0;
-	bool divergence; /* the divergence-free solve, else the constant-density one */
-	bool projected;  /* projected relaxed Jacobi on the symmetric operator
-	                  * (with the divergence solver), else sweeps that add pressure */
-	enum dfsph_rate rate;
+	bool divergence; /* the velocity (divergence-free) solve, else the density one */
+	bool projected;  /* projected relaxed Jacobi on the symmetric operator (the
+	                  * divergence solver), else sweeps that only add pressure */
+	bool rate_only;  /* the rate pass writes only R_i(v) to err */
 } dfsph_sweep;
 
 enum dfsph_pass { PASS_GRADIENTS, PASS_RATE, PASS_CORRECT };
 
-/* The solver's per-step scratch, all in the world's arena. */
-typedef struct dfsph_work {
-	long n;
-	size_t *goff; /* particle i's groups are g[goff[i] .. goff[i + 1]) */
-	dfsph_group *g;
-	uint32_t *owner; /* the particle of each group */
-	dfsph_vec4 *b;   /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
-	float *dsym;     /* 1 / D'_i, the symmetric operator's diagonal (0 likewise); divergence solver only */
-	dfsph_vec4 *v;   /* v*_i (w unused: a neighbour's velocity is one quad) */
-	dfsph_vec4 *h;   /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
-	float *k;        /* the k_i a correction applies */
-	float *ksum;     /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
-	float *kp;       /* the pressure's k_i: the sum over both solves */
-	float *err;      /* per particle: the error the sweep measured */
-	float *full;     /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the
-	                  * velocity solve's particles (divergence solver only) */
-	const dfsph_geometry *geo;
-} dfsph_work;
-
+typedef struct dfsph_work dfsph_work;
 /* One block of a pass, particles i0 .. i0 + cnt - 1 (cnt <= DFSPH_BLOCK),
  * on one SIMD back-end (a is NULL for the gradient pass). */
 typedef void dfsph_block_fn(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sweep *a, long i0, long cnt);
 SIMD_DECLARE(void, dfsph_block, (dfsph_work * wk, enum dfsph_pass kind, const dfsph_sweep *a, long i0, long cnt));
 
+/* The solver's per-step scratch, all in the world's arena, and how it runs. */
+struct dfsph_work {
+	long n;
+	size_t *goff; /* particle i's groups are g[goff[i] .. goff[i + 1]) */
+	dfsph_group *g;
+	dfsph_vec4 *b;     /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
+	float *dsym;       /* 1 / D'_i, the symmetric operator's diagonal (0 likewise); divergence solver only */
+	dfsph_vec4 *v;     /* v*_i (w unused: a neighbour's velocity is one quad) */
+	dfsph_vec4 *h;     /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
+	float *k;          /* the k_i a correction applies */
+	float *ksum;       /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
+	float *kp;         /* the pressure's k_i: the sum over both solves */
+	float *err;        /* per particle: the error the sweep measured, or R_i(v) */
+	const float *bdiv; /* the moving walls' part of the rate (sph.h); NULL while none moves
+	                    * and in the operator's product, which is linear */
+	const dfsph_geometry *geo;
+	/* the divergence solver's: */
+	float *full; /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the velocity solve's particles */
+	/* the conjugate gradients' vectors (divergence_cg) */
+	dfsph_vec4 *u;  /* the velocity change of a direction: -dt grad p */
+	float *p;       /* the search direction (a change of k) */
+	float *r;       /* the residual on the active set */
+	float *mask;    /* 1 on the active set, else 0 */
+	float *scratch; /* the correct pass's sum of k, not kept */
+	/* the runner */
+	dfsph_block_fn *block; /* the passes on the chosen SIMD back-end */
+	int threads;
+	float rho0, dt;
+};
+
 /* ---- the passes, compiled once per SIMD back-end ---------------------------- */
 
-/* The neighbours of the block's groups, each particle's last group padded
- * with the particle itself. */
-static void fill_groups(dfsph_work *wk, long i0, long cnt)
+/* Eight particles' floats p[0 .. m) in lanes 0 .. m - 1, and back (m < 8:
+ * the last particles of a block; the other lanes are 0 and not stored). */
+static inline sf8 load8(const float *p, long m)
 {
-	const sph_neighbors *nb = wk->geo->nb;
-	for (long i = i0; i < i0 + cnt; ++i) {
-		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
-		dfsph_group *g = wk->g + wk->goff[i];
-		uint32_t p = 0;
-		for (; p + 8 <= c; p += 8, ++g)
-			memcpy(g->j, list + p, sizeof g->j);
-		if (p < c)
-			for (uint32_t l = 0; l < 8; ++l)
-				g->j[l] = p + l < c ? list[p + l] : (uint32_t)i;
-	}
+	if (m == 8)
+		return sf8_load(p);
+	float l[8];
+	for (long k = 0; k < 8; ++k)
+		l[k] = k < m ? p[k] : 0.0f;
+	return sf8_load(l);
 }
 
-/* G_ij of the block's groups, with G = 0 for a pair closer than
- * sqrt(eps2), at r >= h (the list's margin) and for the padding; then each
- * particle's sums: t[4 q ..] = S_i by component and sum_j |G_ij|^2. The
- * groups go in one loop over the block, so that the square roots and
- * divisions of several particles overlap. */
-static void gradient_sums(dfsph_work *wk, long i0, long cnt, float *t)
+static inline void store8(float *p, sf8 a, long m)
 {
-	const dfsph_geometry *a = wk->geo;
-	fill_groups(wk, i0, cnt);
-	const sf8 h = sf8_set1(a->h), eps2 = sf8_set1(a->eps2), mg = sf8_set1(a->mg), one = sf8_set1(1.0f),
-			  zero = sf8_zero();
-	for (size_t gi = wk->goff[i0], ge = wk->goff[i0 + cnt]; gi < ge; ++gi) {
-		dfsph_group *g = wk->g + gi;
-		sf8 rx, ry, rz, rw; /* x_i - x_j */
-		sf8_sub_gather_quads(sf8_load_quad2(a->pq + 4 * (size_t)wk->owner[gi]), a->pq, g->j, &rx, &ry, &rz, &rw);
-		const sf8 r2 = sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz));
-		const sf8 r = sf8_sqrt(r2), hr = sf8_sub(h, r);
-		const sf8 ok = sf8_and(sf8_gt(r2, eps2), sf8_gt(hr, zero));
-		/* r is at least sqrt(eps2) where ok; elsewhere divide by 1 */
-		const sf8 f = sf8_and(ok, sf8_div(sf8_mul(sf8_mul(mg, hr), hr), sf8_select(ok, r, one)));
-		sf8_store(g->gx, sf8_mul(f, rx));
-		sf8_store(g->gy, sf8_mul(f, ry));
-		sf8_store(g->gz, sf8_mul(f, rz));
-	}
-	for (long q = 0; q < cnt; ++q) {
-		sf8 sx = zero, sy = zero, sz = zero, s2 = zero;
-		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
-			const sf8 gx = sf8_load(g->gx), gy = sf8_load(g->gy), gz = sf8_load(g->gz);
-			sx = sf8_add(sx, gx);
-			sy = sf8_add(sy, gy);
-			sz = sf8_add(sz, gz);
-			s2 = sf8_add(s2, sf8_add(sf8_add(sf8_mul(gx, gx), sf8_mul(gy, gy)), sf8_mul(gz, gz)));
-		}
-		t[4 * q] = sf8_sum(sx);
-		t[4 * q + 1] = sf8_sum(sy);
-		t[4 * q + 2] = sf8_sum(sz);
-		t[4 * q + 3] = sf8_sum(s2);
-	}
+	float l[8];
+	sf8_store(m == 8 ? p : l, a);
+	if (m < 8)
+		memcpy(p, l, (size_t)m * sizeof *l);
 }
 
-/* The wall sums of particle i: B_i (out[0..2]) and the hydrostatic sum
- * sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b) (out[3..5]). Four partial
- * sums each (boundary neighbour q onto sum q mod 4, the last four padded
- * with copies of the last neighbour and masked out), ended as sph_sum4 ends
- * them: most particles have no boundary neighbours and those at a wall a
- * few, too few to fill eight lanes. */
-static void wall_sums(const dfsph_geometry *a, long i, float out[6])
+/* Eight particles' quads p[0 .. m) by component: lane k of c0 .. c3 holds
+ * p[k].x .. p[k].w. */
+static inline void load_quads8(const dfsph_vec4 *p, long m, sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
+{
+	static const uint32_t idx[8] = {0, 1, 2, 3, 4, 5, 6, 7};
+	dfsph_vec4 l[8];
+	if (m < 8) {
+		for (long k = 0; k < 8; ++k)
+			l[k] = k < m ? p[k] : (dfsph_vec4){0, 0, 0, 0};
+		p = l;
+	}
+	sf8_gather_quads(&p->x, idx, c0, c1, c2, c3);
+}
+
+static inline void store_quads8(dfsph_vec4 *p, long m, sf8 c0, sf8 c1, sf8 c2, sf8 c3)
+{
+	float l[4][8];
+	sf8_store(l[0], c0);
+	sf8_store(l[1], c1);
+	sf8_store(l[2], c2);
+	sf8_store(l[3], c3);
+	for (long k = 0; k < m; ++k)
+		p[k] = (dfsph_vec4){l[0][k], l[1][k], l[2][k], l[3][k]};
+}
+
+/* Per particle of eight, the sum of its four partial sums (sf8_fold4's, the
+ * eight particles' quads from t): the order of sf8_sum. */
+static inline sf8 sum8(const float *t, long m)
+{
+	sf8 f0, f1, f2, f3;
+	load_quads8((const dfsph_vec4 *)t, m, &f0, &f1, &f2, &f3);
+	return sf8_add(sf8_add(f0, f1), sf8_add(f2, f3));
+}
+
+/* The wall sums of particle i: B_i (out[0..2][q]) and the hydrostatic sum
+ * sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b) (out[3..5][q]). Four
+ * partial sums each (boundary neighbour q onto sum q mod 4, the last four
+ * padded with copies of the last neighbour and masked out), ended as
+ * sph_sum4 ends them: most particles have no boundary neighbours and those
+ * at a wall a few, too few to fill eight lanes. */
+static void wall_sums(const dfsph_geometry *a, long i, float out[6][DFSPH_BLOCK], long q)
 {
 	const sph_neighbors *nb = a->nb;
 	const float *pi = a->pq + 4 * i;
 	const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap, bcnt = nb->bcount[i];
 	float s[6][4] = {{0}};
-	for (uint32_t q = 0; q < bcnt; q += 4)
+	for (uint32_t p = 0; p < bcnt; p += 4)
 		for (uint32_t l = 0; l < 4; ++l) {
-			const uint32_t b = blist[q + l < bcnt ? q + l : bcnt - 1];
+			const uint32_t b = blist[p + l < bcnt ? p + l : bcnt - 1];
 			const float rx = pi[0] - nb->bx[b], ry = pi[1] - nb->by[b], rz = pi[2] - nb->bz[b];
 			const float r2 = rx * rx + ry * ry + rz * rz;
 			const float mb = nb->bvol[b] * a->rho0; /* Akinci: the wall at rest density */
 			const float r = sqrtf(r2), hr = a->h - r;
-			const bool ok = q + l < bcnt && r2 > a->eps2 && hr > 0;
+			const bool ok = p + l < bcnt && r2 > a->eps2 && hr > 0;
 			const float c = ok ? mb * a->spiky_grad * hr * hr / r : 0.0f; /* + 0 leaves a sum as it is */
 			s[0][l] += c * rx;
 			s[1][l] += c * ry;
@@ -310,39 +267,87 @@ static void wall_sums(const dfsph_geometry *a, long i, float out[6])
 			s[5][l] += gh * rz;
 		}
 	for (int k = 0; k < 6; ++k)
-		out[k] = sph_sum4(s[k]);
+		out[k][q] = sph_sum4(s[k]);
 }
 
-/* The gradient pass's rest: the walls' sums, h_i and 1 / D_i (and 1 / D'_i). */
-static void gradient_finish(dfsph_work *wk, long i0, long cnt, const float *t)
+/* The gradient pass: the block's groups (each particle's last one padded
+ * with the particle itself) and G_ij, with G = 0 for a pair closer than
+ * sqrt(eps2), at r >= h (the list's margin) and for the padding; then per
+ * particle S_i, sum_j |G_ij|^2, the walls' sums, h_i, 1 / D_i and 1 / D'_i. */
+static void gradients(dfsph_work *wk, long i0, long cnt)
 {
-	/* a copy the stores below cannot alias: the constants stay in registers */
-	const dfsph_geometry a = *wk->geo;
+	const dfsph_geometry *a = wk->geo;
+	const sph_neighbors *nb = a->nb;
+	const sf8 h = sf8_set1(a->h), eps2 = sf8_set1(a->eps2), mg = sf8_set1(a->mg), one = sf8_set1(1.0f),
+			  two = sf8_set1(2.0f), zero = sf8_zero(), dmin = sf8_set1(a->dmin);
+	float t[4][DFSPH_BLOCK][4], w[6][DFSPH_BLOCK];
 	for (long q = 0; q < cnt; ++q) {
 		const long i = i0 + q;
-		const float sx = t[4 * q], sy = t[4 * q + 1], sz = t[4 * q + 2], s2 = t[4 * q + 3];
-		float w[6] = {0, 0, 0, 0, 0, 0};
-		if (a.nb->bcount[i])
-			wall_sums(&a, i, w);
-		const float bx = w[0], by = w[1], bz = w[2];
-		const float ir = a.pq[4 * i + 3]; /* 1 / rho_i */
-		wk->h[i] = (dfsph_vec4){-w[3] * ir, -w[4] * ir, -w[5] * ir, a.rho[i]};
-		/* (S + 2B) . (S + B) + sum |G|^2: the boundary term of the
-		 * acceleration counts twice (pressure mirroring) */
-		const float d = (sx + 2 * bx) * (sx + bx) + (sy + 2 * by) * (sy + by) + (sz + 2 * bz) * (sz + bz) + s2;
-		wk->b[i] = (dfsph_vec4){bx, by, bz, d > a.dmin ? 1.0f / d : 0.0f};
-		if (wk->dsym) { /* the symmetric operator's: |S + 2B|^2 + sum |G|^2 */
-			const float ds =
-				(sx + 2 * bx) * (sx + 2 * bx) + (sy + 2 * by) * (sy + 2 * by) + (sz + 2 * bz) * (sz + 2 * bz) + s2;
-			wk->dsym[i] = ds > a.dmin ? 1.0f / ds : 0.0f;
+		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
+		const sf8 pi = sf8_load_quad2(a->pq + 4 * i);
+		sf8 sx = zero, sy = zero, sz = zero, s2 = zero;
+		dfsph_group *g = wk->g + wk->goff[i];
+		for (uint32_t p = 0; p < c; p += 8, ++g) {
+			if (p + 8 <= c)
+				memcpy(g->j, list + p, sizeof g->j);
+			else
+				for (uint32_t l = 0; l < 8; ++l)
+					g->j[l] = p + l < c ? list[p + l] : (uint32_t)i;
+			sf8 rx, ry, rz, rw; /* x_i - x_j */
+			sf8_sub_gather_quads(pi, a->pq, g->j, &rx, &ry, &rz, &rw);
+			const sf8 r2 = sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz));
+			const sf8 r = sf8_sqrt(r2), hr = sf8_sub(h, r);
+			const sf8 ok = sf8_and(sf8_gt(r2, eps2), sf8_gt(hr, zero));
+			/* r is at least sqrt(eps2) where ok; elsewhere divide by 1 */
+			const sf8 f = sf8_and(ok, sf8_div(sf8_mul(sf8_mul(mg, hr), hr), sf8_select(ok, r, one)));
+			const sf8 gx = sf8_mul(f, rx), gy = sf8_mul(f, ry), gz = sf8_mul(f, rz);
+			sf8_store(g->gx, gx);
+			sf8_store(g->gy, gy);
+			sf8_store(g->gz, gz);
+			sx = sf8_add(sx, gx);
+			sy = sf8_add(sy, gy);
+			sz = sf8_add(sz, gz);
+			s2 = sf8_add(s2, sf8_add(sf8_add(sf8_mul(gx, gx), sf8_mul(gy, gy)), sf8_mul(gz, gz)));
+		}
+		sf8_fold4(sx, t[0][q]);
+		sf8_fold4(sy, t[1][q]);
+		sf8_fold4(sz, t[2][q]);
+		sf8_fold4(s2, t[3][q]);
+		for (int k = 0; k < 6; ++k)
+			w[k][q] = 0;
+		if (nb->bcount[i]) /* most particles are away from the walls */
+			wall_sums(a, i, w, q);
+	}
+	for (long q = 0; q < cnt; q += 8) {
+		const long i = i0 + q, m = cnt - q < 8 ? cnt - q : 8;
+		const sf8 sx = sum8(t[0][q], m), sy = sum8(t[1][q], m), sz = sum8(t[2][q], m), s2 = sum8(t[3][q], m);
+		const sf8 bx = load8(w[0] + q, m), by = load8(w[1] + q, m), bz = load8(w[2] + q, m);
+		sf8 x, y, z, ir; /* ir = 1 / rho_i */
+		load_quads8((const dfsph_vec4 *)a->pq + i, m, &x, &y, &z, &ir);
+		const sf8 minus = sf8_set1(-0.0f);
+		store_quads8(wk->h + i, m, sf8_mul(sf8_xor(minus, load8(w[3] + q, m)), ir),
+		             sf8_mul(sf8_xor(minus, load8(w[4] + q, m)), ir), sf8_mul(sf8_xor(minus, load8(w[5] + q, m)), ir),
+		             load8(a->rho + i, m));
+		/* S + 2B: the boundary term of the acceleration counts twice (pressure mirroring) */
+		const sf8 ex = sf8_add(sx, sf8_mul(two, bx)), ey = sf8_add(sy, sf8_mul(two, by)),
+				  ez = sf8_add(sz, sf8_mul(two, bz));
+		/* D_i = (S + 2B) . (S + B) + sum |G|^2 */
+		const sf8 d = sf8_add(
+			sf8_add(sf8_add(sf8_mul(ex, sf8_add(sx, bx)), sf8_mul(ey, sf8_add(sy, by))), sf8_mul(ez, sf8_add(sz, bz))),
+			s2);
+		store_quads8(wk->b + i, m, bx, by, bz, sf8_and(sf8_gt(d, dmin), sf8_div(one, d)));
+		if (wk->dsym) { /* D'_i = |S + 2B|^2 + sum |G|^2 */
+			const sf8 ds = sf8_add(sf8_add(sf8_add(sf8_mul(ex, ex), sf8_mul(ey, ey)), sf8_mul(ez, ez)), s2);
+			store8(wk->dsym + i, sf8_and(sf8_gt(ds, dmin), sf8_div(one, ds)), m);
 		}
 	}
 }
 
-/* t[q] = sum_j (v_i - v_j) . G_ij over the block's particles. */
-static void rate_sums(const dfsph_work *wk, long i0, long cnt, float *t)
+/* The rate pass: R_i(v) (or Drho_i/Dt), and for a sweep its error and change of k. */
+static void rate(dfsph_work *wk, const dfsph_sweep *a, long i0, long cnt)
 {
 	const float *v = &wk->v->x;
+	float t[DFSPH_BLOCK][4];
 	for (long q = 0; q < cnt; ++q) {
 		const sf8 vi = sf8_load_quad2(v + 4 * (i0 + q));
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
@@ -353,50 +358,50 @@ static void rate_sums(const dfsph_work *wk, long i0, long cnt, float *t)
 			sy = sf8_add(sy, sf8_mul(dy, sf8_load(g->gy)));
 			sz = sf8_add(sz, sf8_mul(dz, sf8_load(g->gz)));
 		}
-		t[q] = sf8_sum(sf8_add(sf8_add(sx, sy), sz));
+		sf8_fold4(sf8_add(sf8_add(sx, sy), sz), t[q]);
 	}
-}
-
-/* max(e, 0), and 0 for NaN */
-static inline float positive(float e) { return e > 0 ? e : 0.0f; }
-
-/* The rate pass's rest: Drho_i/Dt, and for a sweep its error and change of k. */
-static void rate_finish(dfsph_work *wk, const dfsph_sweep *a, long i0, long cnt, const float *t)
-{
-	/* bdiv: the moving walls' v_b part of the rate (sph.h), NULL while no wall moves */
-	const float *bdiv = a->rate == RATE_LINEAR ? NULL : wk->geo->nb->bdiv;
-	const float inv = a->divergence ? a->inv_dt : a->inv_dt2;
-	for (long q = 0; q < cnt; ++q) {
-		const long i = i0 + q;
-		const dfsph_vec4 vi = wk->v[i], bi = wk->b[i];
-		const float vb = (vi.x * bi.x + vi.y * bi.y + vi.z * bi.z) - (bdiv ? bdiv[i] : 0.0f);
-		if (a->rate != RATE_SWEEP) { /* R_i(v), the wall counted as in the projected sweeps */
-			wk->err[i] = t[q] + (vb + vb);
-		} else if (a->projected) {
-			/* the wall's rate counted twice, as its force: the symmetric operator */
-			const float r = t[q] + (vb + vb);
-			const float res = a->divergence ? r * wk->full[i] : (wk->h[i].w + a->dt * r) - a->rho0;
-			/* k_i = max(k_i + omega res_i / (dt^n D'_i), 0); correct applies the change */
-			const float ks = wk->ksum[i];
-			const float kn = positive(ks + ((res * DFSPH_OMEGA) * inv) * wk->dsym[i]);
-			wk->k[i] = kn - ks;
-			/* |res| under pressure, the compression max(res, 0) without */
-			const float e = kn > 0 ? fabsf(res) : positive(res);
-			wk->err[i] = a->divergence ? e * a->dt : e;
-		} else {
-			/* the paper's sweeps: only compression adds pressure */
-			const float r = t[q] + vb;
-			const float e = a->divergence ? positive(r) : positive((wk->h[i].w + a->dt * r) - a->rho0);
-			wk->err[i] = a->divergence ? e * a->dt : e;
-			wk->k[i] = (e * inv) * bi.w;
+	/* 1 / dt^n: n = 1 for the velocity solve, 2 for the density one */
+	const float inv1 = a->divergence ? 1.0f / wk->dt : 1.0f / (wk->dt * wk->dt);
+	const sf8 zero = sf8_zero(), dt = sf8_set1(wk->dt), inv = sf8_set1(inv1), rho0 = sf8_set1(wk->rho0),
+			  omega = sf8_set1(DFSPH_OMEGA), minus = sf8_set1(-0.0f);
+	for (long q = 0; q < cnt; q += 8) {
+		const long i = i0 + q, m = cnt - q < 8 ? cnt - q : 8;
+		sf8 vx, vy, vz, vw, bx, by, bz, bw;
+		load_quads8(wk->v + i, m, &vx, &vy, &vz, &vw);
+		load_quads8(wk->b + i, m, &bx, &by, &bz, &bw);
+		sf8 vb = sf8_add(sf8_add(sf8_mul(vx, bx), sf8_mul(vy, by)), sf8_mul(vz, bz));
+		if (wk->bdiv)
+			vb = sf8_sub(vb, load8(wk->bdiv + i, m));
+		/* the wall counted twice, as its force, on the symmetric operator */
+		const sf8 r = sf8_add(sum8(t[q], m), a->projected ? sf8_add(vb, vb) : vb);
+		if (a->rate_only) {
+			store8(wk->err + i, r, m);
+			continue;
 		}
+		const sf8 res = a->divergence ? sf8_mul(r, load8(wk->full + i, m))
+		                              : sf8_sub(sf8_add(load8(wk->geo->rho + i, m), sf8_mul(dt, r)), rho0);
+		sf8 e = sf8_max(res, zero); /* the compression */
+		if (a->projected) {
+			/* k_i = max(k_i + omega res_i / (dt^n D'_i), 0); correct applies the change */
+			const sf8 ks = load8(wk->ksum + i, m);
+			const sf8 kn =
+				sf8_max(sf8_add(ks, sf8_mul(sf8_mul(sf8_mul(res, omega), inv), load8(wk->dsym + i, m))), zero);
+			store8(wk->k + i, sf8_sub(kn, ks), m);
+			/* |res| under pressure: too much pressure counts as too little */
+			e = sf8_select(sf8_gt(kn, zero), sf8_andnot(minus, res), e);
+		} else { /* the paper's sweeps: only compression adds pressure */
+			store8(wk->k + i, sf8_mul(sf8_mul(e, inv), bw), m);
+		}
+		store8(wk->err + i, a->divergence ? sf8_mul(e, dt) : e, m);
 	}
 }
 
-/* t[3 q ..] = sum_j (k_i + k_j) G_ij by component over the block's particles. */
-static void correct_sums(const dfsph_work *wk, long i0, long cnt, float *t)
+/* The correction: v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i), and k_i
+ * added to its sum. */
+static void correct(dfsph_work *wk, long i0, long cnt)
 {
 	const float *k = wk->k;
+	float t[3][DFSPH_BLOCK][4];
 	for (long q = 0; q < cnt; ++q) {
 		const sf8 ki = sf8_set1(k[i0 + q]);
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
@@ -406,40 +411,33 @@ static void correct_sums(const dfsph_work *wk, long i0, long cnt, float *t)
 			sy = sf8_add(sy, sf8_mul(c, sf8_load(g->gy)));
 			sz = sf8_add(sz, sf8_mul(c, sf8_load(g->gz)));
 		}
-		t[3 * q] = sf8_sum(sx);
-		t[3 * q + 1] = sf8_sum(sy);
-		t[3 * q + 2] = sf8_sum(sz);
+		sf8_fold4(sx, t[0][q]);
+		sf8_fold4(sy, t[1][q]);
+		sf8_fold4(sz, t[2][q]);
 	}
-}
-
-/* The correction's rest: v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i),
- * and k_i added to its sum. */
-static void correct_finish(dfsph_work *wk, const dfsph_sweep *a, long i0, long cnt, const float *t)
-{
-	for (long q = 0; q < cnt; ++q) {
-		const long i = i0 + q;
-		const dfsph_vec4 bi = wk->b[i];
-		const float ki = wk->k[i], kb = 2 * ki; /* the boundary particles mirror k_i */
-		wk->v[i].x -= a->dt * (kb * bi.x + t[3 * q]);
-		wk->v[i].y -= a->dt * (kb * bi.y + t[3 * q + 1]);
-		wk->v[i].z -= a->dt * (kb * bi.z + t[3 * q + 2]);
-		wk->ksum[i] += ki;
+	const sf8 dt = sf8_set1(wk->dt), two = sf8_set1(2.0f);
+	for (long q = 0; q < cnt; q += 8) {
+		const long i = i0 + q, m = cnt - q < 8 ? cnt - q : 8;
+		sf8 vx, vy, vz, vw, bx, by, bz, bw;
+		load_quads8(wk->v + i, m, &vx, &vy, &vz, &vw);
+		load_quads8(wk->b + i, m, &bx, &by, &bz, &bw);
+		const sf8 ki = load8(wk->k + i, m), kb = sf8_mul(two, ki); /* the boundary particles mirror k_i */
+		vx = sf8_sub(vx, sf8_mul(dt, sf8_add(sf8_mul(kb, bx), sum8(t[0][q], m))));
+		vy = sf8_sub(vy, sf8_mul(dt, sf8_add(sf8_mul(kb, by), sum8(t[1][q], m))));
+		vz = sf8_sub(vz, sf8_mul(dt, sf8_add(sf8_mul(kb, bz), sum8(t[2][q], m))));
+		store_quads8(wk->v + i, m, vx, vy, vz, vw);
+		store8(wk->ksum + i, sf8_add(load8(wk->ksum + i, m), ki), m);
 	}
 }
 
 void SIMD_NAME(dfsph_block)(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sweep *a, long i0, long cnt)
 {
-	float t[DFSPH_BLOCK * 4];
-	if (kind == PASS_GRADIENTS) {
-		gradient_sums(wk, i0, cnt, t);
-		gradient_finish(wk, i0, cnt, t);
-	} else if (kind == PASS_RATE) {
-		rate_sums(wk, i0, cnt, t);
-		rate_finish(wk, a, i0, cnt, t);
-	} else {
-		correct_sums(wk, i0, cnt, t);
-		correct_finish(wk, a, i0, cnt, t);
-	}
+	if (kind == PASS_GRADIENTS)
+		gradients(wk, i0, cnt);
+	else if (kind == PASS_RATE)
+		rate(wk, a, i0, cnt);
+	else
+		correct(wk, i0, cnt);
 }
 
 #ifndef EDDY_SIMD_VARIANT
@@ -448,57 +446,40 @@ void SIMD_NAME(dfsph_block)(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sw
 
 /* dt <= DFSPH_GRAVITY_LIMIT sqrt(h / |g|) (times the CFL number): gravity
  * compresses the fluid by g dt^2 each step, which the first-order prediction
- * of the solve must absorb; a tank at rest rings up from dt = 0.19 sqrt(h / g)
- * on and stays quiet below it. Transient forces (viscosity, impacts) do not
- * need it: the velocity limit covers them. */
+ * of the solve must absorb, or a tank at rest rings up. Transient forces
+ * need no such limit: the velocity limit covers them. */
 #define DFSPH_GRAVITY_LIMIT 0.18
 
 /* above this final mean density error a step fails instead of going on */
 #define DFSPH_FAIL_ERROR 0.05
 
 /* above this predicted density error at one particle a step fails: the
- * particles overlap (the pour's largest is 0.42) */
+ * particles overlap */
 #define DFSPH_FAIL_PARTICLE 1.0
 
 /* The velocity solve warm-starts, so a step stopped at its cap hands the
- * rest on to the next (a 40-layer column at rest stops there once, in its
- * first step, at 1.8 times the tolerance). Stopped at the cap above
- * DFSPH_FAIL_CAPPED_ERROR times the tolerance in DFSPH_FAIL_CAPPED steps in
- * a row, it is not catching up (an 80-layer column: 2.5-3.6 times in its
- * first steps, before it threw water to the lid), and the step fails. */
+ * rest on to the next. Stopped at the cap above DFSPH_FAIL_CAPPED_ERROR
+ * times the tolerance in DFSPH_FAIL_CAPPED steps in a row, it is not
+ * catching up, and the step fails. */
 #define DFSPH_FAIL_CAPPED_ERROR 2.0
 #define DFSPH_FAIL_CAPPED 3
 
 /* projected Jacobi sweeps the velocity solve makes after its conjugate
- * gradients: they damp the particle-scale part of the error, which the
- * Krylov solve leaves (without them single particles at the surface of
- * still water jitter at a few % of sqrt(g H)) */
+ * gradients: they damp the particle-scale error the Krylov solve leaves,
+ * which makes single particles at a still surface jitter */
 #define DFSPH_SMOOTH 2
 
-/* The velocity solve leaves out a particle whose kernel sum (its density,
- * walls included) is below DFSPH_SURFACE rho0: the outermost particles of a
- * free surface (0.75-0.9 rho0 in water at rest, every other particle
- * 0.95-1.05). Held there too, the velocity solve keeps water a moving solid
- * has stirred apart at its expanded density; a higher threshold leaves out
- * enough of the surface to let still water jitter, a lower one lets a
- * dropped block compress at impact beyond the density solve's tolerance.
- * At 0.8 still water rests under 0.5% of sqrt(g H) at 10-20 layers and
- * 1.1% at 40, and a dropped block compresses 0.46%. */
+/* The velocity solve leaves out a particle whose kernel sum (walls
+ * included) is below DFSPH_SURFACE rho0: the outermost particles of a free
+ * surface (every other particle of water at rest is within 5% of rho0).
+ * Higher leaves out enough of the surface to let still water jitter; lower
+ * lets a dropped block compress at impact beyond the density tolerance. */
 #define DFSPH_SURFACE 0.8f
 
-/* the depth (in kernel radii) up to which the velocity solve stops at its
+/* the depth (in kernel radii) up to which the solves stop at their
  * requested tolerance; deeper, the tolerance falls with the square of the
  * depth (divergence_tolerance) */
 #define DFSPH_DEPTH_REF 5.0
-
-/* constant-density sweeps a step makes at least (the paper makes 2; one
- * gives the same errors in the pour, tank and drop) */
-#define DFSPH_MIN_SWEEPS 1
-
-/* the particle state columns with each particle's k of the velocity and of
- * the density solve, their warm starts in the next step */
-#define DFSPH_K_COLUMN "dfsph_k"
-#define DFSPH_KD_COLUMN "dfsph_kd"
 
 typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
@@ -507,16 +488,11 @@ typedef struct sph_dfsph {
 	int64_t steps, sweeps, div_sweeps, unconverged;
 	double residual, worst;
 	dfsph_block_fn *block; /* the passes on the SIMD back-end chosen when added */
-	int kcol;              /* the state column DFSPH_K_COLUMN (divergence solver only) */
-	int kdcol;             /* the state column DFSPH_KD_COLUMN (likewise) */
+	int kcol, kdcol;       /* the state columns dfsph_k and dfsph_kd: the velocity and the density
+	                        * solve's k, their warm starts (-1 without the divergence solver) */
 	int capped;            /* consecutive steps whose velocity solve stopped at its cap
 	                        * above DFSPH_FAIL_CAPPED_ERROR times its tolerance */
 } sph_dfsph;
-
-static const int dfsph_reads[] = {COL_X_,      COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ,
-                                  COL_DENSITY, COL_AX, COL_AY, COL_AZ, -1};
-static const int dfsph_writes[] = {COL_PRESSURE, COL_AX, COL_AY, COL_AZ, -1};
-static const int no_hint_writes[] = {-1};
 
 eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 {
@@ -529,132 +505,91 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	return d;
 }
 
-/* The step's pass runner: the work arrays and the chosen back-end. */
-typedef struct dfsph_solver {
-	dfsph_work wk;
-	dfsph_block_fn *block;
-	int threads;
-	float rho0, dt;
-} dfsph_solver;
-
 /* A pass over all particles, the threads taking equal shares in order.
  * Each particle writes only its own values (rate its err and k, correct its
  * velocity and k sum: the others read k) from inputs no other particle of
  * the pass changes, so the result is the same for any thread count. */
-static void pass(dfsph_solver *s, enum dfsph_pass kind, const dfsph_sweep *a)
+static void pass(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sweep *a)
 {
-	const long n = s->wk.n;
-	const int threads = s->threads;
+	const long n = wk->n;
+	const int threads = wk->threads;
 #pragma omp parallel for num_threads(threads) schedule(static)
 	for (int th = 0; th < threads; ++th)
 		for (long i0 = n * th / threads, hi = n * (th + 1) / threads; i0 < hi; i0 += DFSPH_BLOCK)
-			s->block(&s->wk, kind, a, i0, hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK);
+			wk->block(wk, kind, a, i0, hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK);
 }
 
-/* The sweep of one solve: the velocity (divergence) solve or the density
- * one, projected (the divergence solver) or not; rate as given. */
-static dfsph_sweep sweep_of(const dfsph_solver *s, bool divergence, bool projected, enum dfsph_rate rate)
+/* err = R(u) for u = -dt grad p from zero, without the moving walls' part:
+ * A p up to the factor -dt. The passes work on the work arrays, which
+ * stand in for the time. */
+static void operator_product(dfsph_work *wk)
 {
-	return (dfsph_sweep){s->dt, 1.0f / s->dt, 1.0f / (s->dt * s->dt), s->rho0, divergence, projected, rate};
-}
-
-/* Serial sum in row order: the same for any thread count. */
-static double mean_of(const float *e, long n)
-{
-	double s = 0;
-	for (long i = 0; i < n; ++i)
-		s += e[i];
-	return n > 0 ? s / (double)n : 0;
-}
-
-/* The conjugate gradient's vectors (see divergence_cg). */
-typedef struct dfsph_cg {
-	dfsph_vec4 *u;  /* the velocity change of a direction: -dt grad p */
-	float *p;       /* the search direction (a change of k) */
-	float *r;       /* the residual on the active set */
-	float *mask;    /* 1 on the active set, else 0 */
-	float *scratch; /* the correct pass's sum of k, not kept */
-} dfsph_cg;
-
-/* err = R(u) for u = -dt grad p, from zero: A p up to the factor -dt. The
- * passes read and write the work arrays, which stand in for the time. */
-static void operator_product(dfsph_solver *s, dfsph_cg *cg)
-{
-	dfsph_work *wk = &s->wk;
-	dfsph_vec4 *const v = wk->v;
-	float *const k = wk->k, *const ksum = wk->ksum;
-	memset(cg->u, 0, (size_t)wk->n * sizeof *cg->u);
-	wk->v = cg->u;
-	wk->k = cg->p;
-	wk->ksum = cg->scratch;
-	const dfsph_sweep as = sweep_of(s, true, true, RATE_SIGNED), al = sweep_of(s, true, true, RATE_LINEAR);
-	pass(s, PASS_CORRECT, &as);
-	pass(s, PASS_RATE, &al);
-	wk->v = v;
-	wk->k = k;
-	wk->ksum = ksum;
+	const dfsph_work keep = *wk;
+	memset(wk->u, 0, (size_t)wk->n * sizeof *wk->u);
+	wk->v = wk->u;
+	wk->k = wk->p;
+	wk->ksum = wk->scratch;
+	wk->bdiv = NULL;
+	const dfsph_sweep as = {true, true, true};
+	pass(wk, PASS_CORRECT, &as);
+	pass(wk, PASS_RATE, &as);
+	*wk = keep;
 }
 
 /* The solves' bulk: Jacobi-preconditioned conjugate gradients (Hestenes &
- * Stiefel 1952; Saad 2003, Alg. 9.1) on A k = R(v*), A = dt grad^T grad the
- * symmetric operator of the projected sweeps, restricted to the particles
- * that hold pressure (k_i > 0 from the warm start) or are compressing
- * (R_i > 0): there the unilateral constraint is an equality. Jacobi sweeps
- * shrink the column-wide error mode of N layers by about 1 - c / N^2 a
- * sweep, conjugate gradients by about 1 - c / N, so a deep column converges
- * in a number of products that grows with the depth, not its square. The
- * density solve's right side is the rate that brings rho_i to rho0 in a
- * step. The iteration stops when the mean |r_i| dt / rho0 is at most tol
- * (the projected sweeps' measure) or when a direction has no positive
- * curvature. The particles whose k ends below 0 are then set to 0 (the
- * projection), and the projected sweeps that follow settle what the fixed
- * set got wrong: particles that left or entered it. Every sum is serial in
- * row order: the same bits for any thread count. */
-static int divergence_cg(dfsph_solver *s, dfsph_cg *cg, int cap, bool density, double tol, double *residual)
+ * Stiefel 1952; Saad 2003, Alg. 9.1) on A k = R(v*), restricted to the
+ * particles that hold pressure (k_i > 0 from the warm start) or are
+ * compressing (R_i > 0): there the unilateral constraint is an equality.
+ * The density solve's right side is the rate that brings rho_i to rho0 in a
+ * step. It stops when the mean |r_i| dt / rho0 is at most tol (the
+ * projected sweeps' measure) or a direction has no positive curvature; the
+ * particles whose k ends below 0 are then set to 0 (the projection), and the
+ * sweeps that follow settle the particles that left or entered the set.
+ * Every sum is serial in row order: the same bits for any thread count. */
+static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, double *residual)
 {
-	dfsph_work *wk = &s->wk;
 	const long n = wk->n;
-	const float dt = s->dt, rho0 = s->rho0;
-	const dfsph_sweep as = sweep_of(s, true, true, RATE_SIGNED);
+	const float dt = wk->dt, rho0 = wk->rho0;
+	const dfsph_sweep as = {true, true, true};
 	const double scale = (double)dt / ((double)rho0 * (double)n);
-	pass(s, PASS_RATE, &as);
+	pass(wk, PASS_RATE, &as);
 	double rz = 0, esum = 0;
 	for (long i = 0; i < n; ++i) {
 		const float res = density ? wk->err[i] + (wk->h[i].w - rho0) / dt : wk->err[i];
 		const bool on = (density || wk->full[i] > 0) && (wk->ksum[i] > 0 || res > 0);
-		cg->mask[i] = on ? 1.0f : 0.0f;
-		cg->r[i] = on ? res : 0.0f;
-		cg->p[i] = wk->dsym[i] * cg->r[i];
-		rz += (double)cg->r[i] * cg->p[i];
-		esum += fabsf(cg->r[i]);
+		wk->mask[i] = on ? 1.0f : 0.0f;
+		wk->r[i] = on ? res : 0.0f;
+		wk->p[i] = wk->dsym[i] * wk->r[i];
+		rz += (double)wk->r[i] * wk->p[i];
+		esum += fabsf(wk->r[i]);
 	}
 	*residual = esum * scale;
 	int it = 0;
 	while (*residual > tol && it < cap && rz > 0) {
-		operator_product(s, cg);
+		operator_product(wk);
 		double pq = 0;
 		for (long i = 0; i < n; ++i)
-			pq -= (double)cg->p[i] * (cg->mask[i] * wk->err[i]);
+			pq -= (double)wk->p[i] * (wk->mask[i] * wk->err[i]);
 		if (!(pq > 0))
 			break;
 		const float alpha = (float)(rz / pq);
 		double rz1 = 0;
 		esum = 0;
 		for (long i = 0; i < n; ++i) {
-			wk->v[i].x += alpha * cg->u[i].x;
-			wk->v[i].y += alpha * cg->u[i].y;
-			wk->v[i].z += alpha * cg->u[i].z;
-			wk->ksum[i] += alpha * cg->p[i];
-			cg->r[i] += alpha * (cg->mask[i] * wk->err[i]);
-			rz1 += (double)cg->r[i] * (wk->dsym[i] * cg->r[i]);
-			esum += fabsf(cg->r[i]);
+			wk->v[i].x += alpha * wk->u[i].x;
+			wk->v[i].y += alpha * wk->u[i].y;
+			wk->v[i].z += alpha * wk->u[i].z;
+			wk->ksum[i] += alpha * wk->p[i];
+			wk->r[i] += alpha * (wk->mask[i] * wk->err[i]);
+			rz1 += (double)wk->r[i] * (wk->dsym[i] * wk->r[i]);
+			esum += fabsf(wk->r[i]);
 		}
 		++it;
 		*residual = esum * scale;
 		const float beta = (float)(rz1 / rz);
 		rz = rz1;
 		for (long i = 0; i < n; ++i)
-			cg->p[i] = wk->dsym[i] * cg->r[i] + beta * cg->p[i];
+			wk->p[i] = wk->dsym[i] * wk->r[i] + beta * wk->p[i];
 	}
 	/* the projection: k_i < 0 back to 0, as one correction */
 	bool neg = false;
@@ -663,17 +598,17 @@ static int divergence_cg(dfsph_solver *s, dfsph_cg *cg, int cap, bool density, d
 		neg |= wk->ksum[i] < 0;
 	}
 	if (neg)
-		pass(s, PASS_CORRECT, &as);
+		pass(wk, PASS_CORRECT, &as);
 	return it;
 }
 
-/* The velocity solve's stopping tolerance in water `depth` deep (m) for a
- * kernel radius h: the requested one down to DFSPH_DEPTH_REF h, and below
- * that scaled by (DFSPH_DEPTH_REF h / depth)^2. The operator's smallest
+/* A solve's stopping tolerance in water `depth` deep (m) for a kernel
+ * radius h: the requested one down to DFSPH_DEPTH_REF h, and below that
+ * scaled by (DFSPH_DEPTH_REF h / depth)^2. The operator's smallest
  * eigenvalue, that of the column-wide mode, falls relative to its diagonal
  * as (h / depth)^2, so a mean residual eps leaves that mode an error of
- * eps (depth / h)^2: with the tolerance scaled so, the pressure that
- * carries the column is held to the same fraction at any depth. */
+ * eps (depth / h)^2: scaled so, the pressure that carries the column is
+ * held to the same fraction at any depth. */
 static double divergence_tolerance(double tol, float h, double depth)
 {
 	const double ref = DFSPH_DEPTH_REF * (double)h;
@@ -702,66 +637,54 @@ static double fluid_depth(eddy_world *w, eddy_vec3 g)
  * of a rate and a correction until the mean error / rho0 is at most tol, or
  * the iteration cap. Returns the iterations (conjugate gradient steps and
  * sweeps). The velocity solve stops no earlier than DFSPH_SMOOTH sweeps,
- * the density solve no earlier than DFSPH_MIN_SWEEPS iterations. */
-static int solve(dfsph_solver *s, dfsph_cg *cg, bool divergence, bool projected, int cap, double tol, double *residual)
+ * the density solve no earlier than one iteration. */
+static int solve(dfsph_work *wk, bool divergence, bool projected, int cap, double tol, double *residual)
 {
-	const dfsph_sweep a = sweep_of(s, divergence, projected, RATE_SWEEP);
+	const dfsph_sweep a = {divergence, projected, false};
 	int it = 0, sweeps = 0;
 	for (;;) {
-		if (cg)
-			it += divergence_cg(s, cg, cap - it, !divergence, tol, residual);
-		pass(s, PASS_RATE, &a);
-		*residual = mean_of(s->wk.err, s->wk.n) / s->rho0;
-		const bool enough = divergence ? sweeps >= DFSPH_SMOOTH : it >= DFSPH_MIN_SWEEPS;
+		if (projected)
+			it += divergence_cg(wk, cap - it, !divergence, tol, residual);
+		pass(wk, PASS_RATE, &a);
+		double sum = 0; /* serial, in row order: the same for any thread count */
+		for (long i = 0; i < wk->n; ++i)
+			sum += wk->err[i];
+		*residual = sum / (double)wk->n / wk->rho0;
+		const bool enough = divergence ? sweeps >= DFSPH_SMOOTH : it >= 1;
 		if ((enough && *residual <= tol) || it >= cap)
 			break;
-		pass(s, PASS_CORRECT, &a);
+		pass(wk, PASS_CORRECT, &a);
 		++it;
 		++sweeps;
 	}
 	return it;
 }
 
-/* The step's scratch in the world's arena; false when out of memory. */
-static bool work_alloc(eddy_world *w, dfsph_work *wk, dfsph_cg *cg, const sph_neighbors *nb, long n, bool divergence)
+/* The step's scratch in the world's arena, for particles 0 .. n - 1 and
+ * lists nb; false when out of memory. */
+static bool work_alloc(eddy_world *w, dfsph_work *wk, const sph_neighbors *nb, long n, bool divergence)
 {
-	const size_t un = (size_t)n;
-	memset(wk, 0, sizeof *wk);
-	memset(cg, 0, sizeof *cg);
+	const size_t un = (size_t)n, nq = divergence ? 4 : 3, nf = divergence ? 10 : 4;
 	wk->n = n;
+	wk->bdiv = nb->bdiv;
 	wk->goff = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk->goff);
 	if (!wk->goff)
 		return false;
 	wk->goff[0] = 0;
 	for (long i = 0; i < n; ++i)
 		wk->goff[i + 1] = wk->goff[i] + (nb->count[i] + 7) / 8;
-	const size_t groups = wk->goff[n] ? wk->goff[n] : 1;
-	wk->g = eddy__arena_alloc(&w->arena, groups * sizeof *wk->g);
-	wk->owner = eddy__arena_alloc(&w->arena, groups * sizeof *wk->owner);
-	dfsph_vec4 *quads = eddy__arena_alloc(&w->arena, 3 * un * sizeof(dfsph_vec4) + 5 * un * sizeof(float));
-	if (!wk->g || !wk->owner || !quads)
+	wk->g = eddy__arena_alloc(&w->arena, (wk->goff[n] ? wk->goff[n] : 1) * sizeof *wk->g);
+	/* nq quad arrays, then nf float ones */
+	wk->b = eddy__arena_alloc(&w->arena, un * (nq * sizeof(dfsph_vec4) + nf * sizeof(float)));
+	if (!wk->g || !wk->b)
 		return false;
-	for (long i = 0; i < n; ++i)
-		for (size_t gi = wk->goff[i]; gi < wk->goff[i + 1]; ++gi)
-			wk->owner[gi] = (uint32_t)i;
-	wk->b = quads;
 	wk->v = wk->b + un;
 	wk->h = wk->v + un;
-	wk->k = (float *)(wk->h + un);
-	wk->ksum = wk->k + un;
-	wk->err = wk->ksum + un;
-	wk->kp = wk->err + un;
-	if (!divergence)
-		return true;
-	wk->dsym = wk->kp + un;
-	cg->u = eddy__arena_alloc(&w->arena, un * sizeof(dfsph_vec4) + 5 * un * sizeof(float));
-	if (!cg->u)
-		return false;
-	cg->p = (float *)(cg->u + un);
-	cg->r = cg->p + un;
-	cg->mask = cg->r + un;
-	cg->scratch = cg->mask + un;
-	wk->full = cg->scratch + un;
+	wk->u = divergence ? wk->h + un : NULL;
+	float **floats[10] = {&wk->k,    &wk->ksum, &wk->err, &wk->kp,   &wk->dsym,
+	                      &wk->full, &wk->p,    &wk->r,   &wk->mask, &wk->scratch};
+	for (size_t a = 0; a < 10; ++a)
+		*floats[a] = a < nf ? (float *)(wk->b + nq * un) + a * un : NULL;
 	return true;
 }
 
@@ -774,48 +697,55 @@ static long argmax(const float *e, long n)
 	return m;
 }
 
-/* The velocity solve, from last step's k (applied as one correction); its
- * k goes to the state column and into the pressure's kp. Fails when it
- * stopped at its cap far above its tolerance too many steps in a row. */
-static eddy_status velocity_solve(eddy_world *w, eddy_system *sys, dfsph_solver *s, dfsph_cg *cg,
-                                  const eddy_step_context *ctx, double tol, int *iterations, double *residual)
+/* The velocity (divergence) or the density solve. With the divergence
+ * solver it starts from its state column's k of the last step, applied as
+ * one correction, and writes its k back there; its k is added to kp. The
+ * velocity solve fails when it stopped at its cap far above its tolerance
+ * too many steps in a row. */
+static eddy_status run_solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const eddy_step_context *ctx,
+                             bool divergence, double tol, int *it, double *residual)
 {
 	sph_dfsph *sd = sys->data;
-	dfsph_work *wk = &s->wk;
 	const long n = wk->n;
-	const float *rho = eddy__col(w, COL_DENSITY);
-	float *kcol = eddy__col(w, sd->kcol);
-	for (long i = 0; i < n; ++i) {
-		wk->full[i] = rho[i] >= DFSPH_SURFACE * s->rho0 ? 1.0f : 0.0f;
-		wk->k[i] = kcol[i] > 0 && wk->full[i] > 0 ? kcol[i] : 0.0f;
+	const bool warm = sd->def.divergence_solver;
+	float *col = warm ? eddy__col(w, divergence ? sd->kcol : sd->kdcol) : NULL;
+	memset(wk->ksum, 0, (size_t)n * sizeof *wk->ksum);
+	if (warm) {
+		for (long i = 0; i < n; ++i) {
+			if (divergence)
+				wk->full[i] = wk->geo->rho[i] >= DFSPH_SURFACE * wk->rho0 ? 1.0f : 0.0f;
+			wk->k[i] = col[i] > 0 && (!divergence || wk->full[i] > 0) ? col[i] : 0.0f;
+		}
+		const dfsph_sweep a = {divergence, true, false};
+		pass(wk, PASS_CORRECT, &a);
 	}
-	const dfsph_sweep warm = sweep_of(s, true, true, RATE_SWEEP);
-	pass(s, PASS_CORRECT, &warm);
-	const int cap = sd->def.max_divergence_iterations;
-	*iterations = solve(s, cg, true, true, cap, tol, residual);
-	const bool capped = *iterations >= cap && *residual > DFSPH_FAIL_CAPPED_ERROR * tol;
-	sd->capped = capped ? sd->capped + 1 : 0;
-	if (sd->capped >= DFSPH_FAIL_CAPPED) {
+	const int cap = divergence ? sd->def.max_divergence_iterations : sd->def.max_iterations;
+	*it = solve(wk, divergence, warm, cap, tol, residual);
+	if (divergence)
+		sd->capped = *it >= cap && *residual > DFSPH_FAIL_CAPPED_ERROR * tol ? sd->capped + 1 : 0;
+	if (divergence && sd->capped >= DFSPH_FAIL_CAPPED) {
 		const long wi = argmax(wk->err, n);
 		return eddy__fail(w, EDDY_ERR_NUMERIC,
 		                  "%s: the velocity solve did not converge at step %lld: mean error %.3g after %d "
 		                  "iterations in %d steps in a row (max_divergence_error %g), worst at particle %ld "
 		                  "(%.3g); the water may be too deep for it: raise max_divergence_iterations or lower "
 		                  "the world's cfl",
-		                  sys->label, (long long)ctx->step, *residual, *iterations, sd->capped,
-		                  (double)sd->def.max_divergence_error, wi, wk->err[wi] / s->rho0);
+		                  sys->label, (long long)ctx->step, *residual, *it, sd->capped,
+		                  (double)sd->def.max_divergence_error, wi, wk->err[wi] / wk->rho0);
 	}
-	memcpy(kcol, wk->ksum, (size_t)n * sizeof *kcol);
-	memcpy(wk->kp, wk->ksum, (size_t)n * sizeof *wk->kp);
-	memset(wk->ksum, 0, (size_t)n * sizeof *wk->ksum);
+	for (long i = 0; i < n; ++i)
+		wk->kp[i] += wk->ksum[i];
+	if (warm)
+		memcpy(col, wk->ksum, (size_t)n * sizeof *col);
 	return EDDY_OK;
 }
 
 /* a += (v* - (v + dt a)) / dt and p = M kp rho^2; fails naming the first
  * particle whose result is not finite. */
 static eddy_status apply_result(eddy_world *w, const eddy_system *sys, const dfsph_work *wk, const sph_shared *sh,
-                                float dt, const eddy_step_context *ctx)
+                                const eddy_step_context *ctx)
 {
+	const float dt = wk->dt;
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	float *p = eddy__col(w, COL_PRESSURE);
@@ -860,8 +790,26 @@ static void publish(eddy_world *w, sph_dfsph *sd, int it, double residual, int d
 	eddy_world_publish(w, "residual_max", sd->worst);
 }
 
-/* The gradients, h and v* = v + dt (a + h); the warm-started velocity solve
- * (divergence solver); the density solve; the result. */
+/* The scratch for sph_density's particles and lists, and the gradient pass
+ * on them; false when out of memory. */
+static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n, bool divergence, dfsph_geometry *geo)
+{
+	const sph_kernel_consts kc = sh->k;
+	const float dref = sh->mass * kc.spiky_grad * kc.h2; /* |G| scale */
+	const eddy_vec3 g = w->def.gravity;
+	*geo = (dfsph_geometry){&sh->nb,  sh->pq,        eddy__col(w, COL_DENSITY),
+	                        kc.h,     1e-6f * kc.h2, sh->mass * kc.spiky_grad,
+	                        sh->rho0, kc.spiky_grad, g.x,
+	                        g.y,      g.z,           1e-6f * dref * dref};
+	wk->geo = geo;
+	if (!work_alloc(w, wk, &sh->nb, n, divergence))
+		return false;
+	pass(wk, PASS_GRADIENTS, NULL);
+	return true;
+}
+
+/* The gradients, h and v* = v + dt (a + h); the velocity solve (divergence
+ * solver); the density solve; the result. */
 static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context *ctx)
 {
 	sph_dfsph *sd = sys->data;
@@ -874,63 +822,39 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 		sd->steps = sd->sweeps = sd->div_sweeps = sd->unconverged = 0;
 		sd->residual = sd->worst = 0;
 	}
-	const sph_neighbors *nb = &sh->nb;
-	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
-	const float dt = (float)ctx->dt, rho0 = sh->rho0;
+	const long n = sh->nb.n < w->n ? (long)sh->nb.n : (long)w->n;
+	const float dt = (float)ctx->dt;
 	if (n == 0 || !(dt > 0))
 		return EDDY_OK;
 	if ((uint64_t)n > (uint64_t)UINT32_MAX) /* the groups hold j in 32 bits */
 		return eddy__fail(w, EDDY_ERR_INVALID, "%s: too many particles (%ld)", sys->label, n);
 	const bool divergence = sd->def.divergence_solver;
-	dfsph_solver s = {.block = sd->block, .threads = ctx->threads, .rho0 = rho0, .dt = dt};
-	dfsph_work *wk = &s.wk;
-	dfsph_cg cg;
-	if (!work_alloc(w, wk, &cg, nb, n, divergence))
+	dfsph_work wk = {.block = sd->block, .threads = ctx->threads, .rho0 = sh->rho0, .dt = dt};
+	dfsph_geometry geo;
+	if (!prepare(w, &wk, sh, n, divergence, &geo))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
-
-	const sph_kernel_consts kc = sh->k;
-	const float dref = sh->mass * kc.spiky_grad * kc.h2; /* |G| scale */
-	const eddy_vec3 g = w->def.gravity;
-	const dfsph_geometry geo = {
-		nb,  sh->pq, eddy__col(w, COL_DENSITY), kc.h, 1e-6f * kc.h2, sh->mass * kc.spiky_grad, rho0, kc.spiky_grad, g.x,
-		g.y, g.z,    1e-6f * dref * dref};
-	wk->geo = &geo;
-	pass(&s, PASS_GRADIENTS, NULL);
-	memset(wk->ksum, 0, (size_t)n * sizeof *wk->ksum);
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	for (long i = 0; i < n; ++i)
-		wk->v[i] = (dfsph_vec4){vx[i] + dt * (ax[i] + wk->h[i].x), vy[i] + dt * (ay[i] + wk->h[i].y),
-		                        vz[i] + dt * (az[i] + wk->h[i].z), 0};
+		wk.v[i] = (dfsph_vec4){vx[i] + dt * (ax[i] + wk.h[i].x), vy[i] + dt * (ay[i] + wk.h[i].y),
+		                       vz[i] + dt * (az[i] + wk.h[i].z), 0};
+	memset(wk.kp, 0, (size_t)n * sizeof *wk.kp);
 
-	int div_it = 0;
-	double div_residual = 0, tol = sd->def.max_density_error;
+	int it, div_it = 0;
+	double residual, div_residual = 0, tol = sd->def.max_density_error;
 	if (divergence) {
-		const double depth = fluid_depth(w, g);
-		tol = divergence_tolerance(sd->def.max_density_error, kc.h, depth);
-		const double dtol = divergence_tolerance(sd->def.max_divergence_error, kc.h, depth);
-		const eddy_status st = velocity_solve(w, sys, &s, &cg, ctx, dtol, &div_it, &div_residual);
+		const double depth = fluid_depth(w, w->def.gravity);
+		tol = divergence_tolerance(sd->def.max_density_error, sh->h, depth);
+		const double dtol = divergence_tolerance(sd->def.max_divergence_error, sh->h, depth);
+		const eddy_status st = run_solve(w, sys, &wk, ctx, true, dtol, &div_it, &div_residual);
 		if (st != EDDY_OK)
 			return st;
-		/* the density solve, from last step's k likewise */
-		const float *kdcol = eddy__col(w, sd->kdcol);
-		for (long i = 0; i < n; ++i)
-			wk->k[i] = kdcol[i] > 0 ? kdcol[i] : 0.0f;
-		const dfsph_sweep warm = sweep_of(&s, false, true, RATE_SWEEP);
-		pass(&s, PASS_CORRECT, &warm);
-	} else {
-		memset(wk->kp, 0, (size_t)n * sizeof *wk->kp);
 	}
-	double residual = 0;
-	const int it = solve(&s, divergence ? &cg : NULL, false, divergence, sd->def.max_iterations, tol, &residual);
-	for (long i = 0; i < n; ++i)
-		wk->kp[i] += wk->ksum[i];
-	if (divergence)
-		memcpy(eddy__col(w, sd->kdcol), wk->ksum, (size_t)n * sizeof(float));
+	run_solve(w, sys, &wk, ctx, false, tol, &it, &residual);
 	/* the particle the solve left furthest off (the last sweep's errors) */
-	const long worst = argmax(wk->err, n);
-	const double worst_err = wk->err[worst] / rho0;
-	const eddy_status st = apply_result(w, sys, wk, sh, dt, ctx);
+	const long worst = argmax(wk.err, n);
+	const double worst_err = wk.err[worst] / wk.rho0;
+	const eddy_status st = apply_result(w, sys, &wk, sh, ctx);
 	if (st != EDDY_OK)
 		return st;
 	publish(w, sd, it, residual, div_it, div_residual, worst_err);
@@ -943,6 +867,42 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 		                  worst_err);
 	return EDDY_OK;
 }
+
+/* For tests/test_sph_reference.c: after a step of w, the passes on the last
+ * sph_density's lists, on the back-end SIMD_PICK gives now. Per particle:
+ * inv_d = 1 / D_i, inv_dsym = 1 / D'_i, rate = R_i(v) (the wall counted
+ * twice) of the velocity columns, and acc[3 i ..] = -(sum_j (k_i + k_j)
+ * G_ij + 2 k_i B_i) for k_i = k[i]. */
+eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float *inv_dsym, float *rate, float *acc);
+eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float *inv_dsym, float *rate, float *acc)
+{
+	const sph_shared *sh = eddy__sph_find(w, NULL);
+	if (!sh)
+		return EDDY_ERR_ORDER;
+	const long n = sh->nb.n < w->n ? (long)sh->nb.n : (long)w->n;
+	dfsph_work wk = {.block = SIMD_PICK(dfsph_block), .threads = 1, .rho0 = sh->rho0, .dt = 1.0f};
+	dfsph_geometry geo;
+	if (!prepare(w, &wk, sh, n, true, &geo))
+		return EDDY_ERR_NOMEM;
+	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	for (long i = 0; i < n; ++i)
+		wk.v[i] = (dfsph_vec4){vx[i], vy[i], vz[i], 0};
+	const dfsph_sweep a = {true, true, true};
+	pass(&wk, PASS_RATE, &a);
+	memcpy(wk.k, k, (size_t)n * sizeof *k);
+	memset(wk.v, 0, (size_t)n * sizeof *wk.v);
+	pass(&wk, PASS_CORRECT, &a); /* v = -dt (...), dt = 1 */
+	for (long i = 0; i < n; ++i) {
+		inv_d[i] = wk.b[i].w;
+		inv_dsym[i] = wk.dsym[i];
+		rate[i] = wk.err[i];
+		acc[3 * i] = wk.v[i].x;
+		acc[3 * i + 1] = wk.v[i].y;
+		acc[3 * i + 2] = wk.v[i].z;
+	}
+	return EDDY_OK;
+}
+
 static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
 	const sph_shared *sh = eddy__sph_find(w, s);
@@ -970,6 +930,8 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 		*reason = "gravity";
 	return la < lv ? la : lv;
 }
+
+static const int no_hint_writes[] = {-1};
 
 const eddy_system_vtable eddy__kind_sph_dfsph = {
 	.name = "sph_dfsph",
@@ -1008,31 +970,27 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 	sd->def = *def;
 	sd->frame = -1;
 	sd->block = SIMD_PICK(dfsph_block);
-	if (!def->divergence_solver) /* the warm starts are the velocity solve's */
-		return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, dfsph_reads, dfsph_writes);
-	/* the warm starts' state columns (shared by the sph_dfsph systems of a
-	 * world: each writes its own fluid's rows) */
-	const char *names[2] = {DFSPH_K_COLUMN, DFSPH_KD_COLUMN};
-	int *cols[2] = {&sd->kcol, &sd->kdcol};
-	for (int c = 0; c < 2; ++c) {
-		*cols[c] = eddy_world_find_column(w, names[c]);
-		if (*cols[c] < 0)
-			*cols[c] =
-				eddy_world_declare_column(w, names[c], EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "m^5/(kg s^2)");
-		if (*cols[c] < 0) {
-			free(sd);
-			return EDDY_NULL_SYSTEM;
+	sd->kcol = sd->kdcol = -1;
+	if (def->divergence_solver) {
+		/* the warm starts' state columns, shared by the sph_dfsph systems of
+		 * a world (each writes its own fluid's rows) */
+		const char *names[2] = {"dfsph_k", "dfsph_kd"};
+		int *cols[2] = {&sd->kcol, &sd->kdcol};
+		for (int c = 0; c < 2; ++c) {
+			*cols[c] = eddy_world_find_column(w, names[c]);
+			if (*cols[c] < 0)
+				*cols[c] =
+					eddy_world_declare_column(w, names[c], EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "m^5/(kg s^2)");
+			if (*cols[c] < 0) {
+				free(sd);
+				return EDDY_NULL_SYSTEM;
+			}
 		}
 	}
-	/* the lists above plus the two state columns, -1 moved to the end */
-	const int nr = (int)(sizeof dfsph_reads / sizeof dfsph_reads[0]) - 1,
-			  nw = (int)(sizeof dfsph_writes / sizeof dfsph_writes[0]) - 1;
-	int reads[sizeof dfsph_reads / sizeof dfsph_reads[0] + 2], writes[sizeof dfsph_writes / sizeof dfsph_writes[0] + 2];
-	memcpy(reads, dfsph_reads, sizeof dfsph_reads);
-	memcpy(writes, dfsph_writes, sizeof dfsph_writes);
-	reads[nr] = writes[nw] = sd->kcol;
-	reads[nr + 1] = writes[nw + 1] = sd->kdcol;
-	reads[nr + 2] = writes[nw + 2] = -1;
+	/* without the divergence solver the lists end at kcol = -1 */
+	const int reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX,   COL_VY,    COL_VZ, COL_DENSITY,
+	                     COL_AX, COL_AY, COL_AZ, sd->kcol, sd->kdcol, -1};
+	const int writes[] = {COL_PRESSURE, COL_AX, COL_AY, COL_AZ, sd->kcol, sd->kdcol, -1};
 	return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, reads, writes);
 }
 #endif /* EDDY_SIMD_VARIANT */
