@@ -56,21 +56,19 @@ static float fluid_spacing(const eddy_world *w, const sph_shared *sh)
 
 void sph_boundary_free(sph_neighbors *nb)
 {
-	sph_boundary *bd = &nb->bnd;
-	free(nb->bx);
-	free(nb->by);
-	free(nb->bz);
-	free(nb->bvol);
-	free(nb->bp); /* rho and seen live in the same block */
+	free(nb->bx); /* by, bz, bvol in the same block */
+	free(nb->bp); /* rho and seen in the same block */
 	free(nb->bdiv);
-	free(bd->order);
-	free(bd->x0); /* y0, z0 in the same block */
-	free(bd->vx); /* vy, vz in the same block */
-	free(bd->col);
+	free(nb->bnd.x0); /* y0 z0 vx vy vz order in the same block */
+	free(nb->bnd.col);
 	nb->bx = nb->by = nb->bz = nb->bvol = nb->bp = nb->bdiv = NULL;
 	nb->nbound = 0;
-	memset(bd, 0, sizeof *bd);
+	memset(&nb->bnd, 0, sizeof nb->bnd);
 }
+
+static bool nonzero(eddy_vec3 a) { return a.x != 0 || a.y != 0 || a.z != 0; }
+
+static bool differ(eddy_vec3 a, eddy_vec3 b) { return a.x != b.x || a.y != b.y || a.z != b.z; }
 
 static const eddy_collider_motion *collider_motion(const eddy_world *w, const struct sph_collider_set *cs)
 {
@@ -86,8 +84,7 @@ static float move_rotating(const eddy_world *w, sph_neighbors *nb, int c)
 	struct sph_collider_set *cs = &bd->col[c];
 	const eddy_collider_motion *m = collider_motion(w, cs);
 	const eddy_vec3 off = m->offset, rot = m->rotation;
-	if (off.x != cs->disp.x || off.y != cs->disp.y || off.z != cs->disp.z || rot.x != cs->rot.x || rot.y != cs->rot.y ||
-	    rot.z != cs->rot.z) {
+	if (differ(off, cs->disp) || differ(rot, cs->rot)) {
 		const eddy_collider_pose pose = eddy__collider_pose(m);
 		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
 			const eddy_vec3 q = eddy__pose_to_world(&pose, eddy__v3(bd->x0[b], bd->y0[b], bd->z0[b]));
@@ -122,10 +119,10 @@ static float move_translating(const eddy_world *w, sph_neighbors *nb, int c)
 	sph_boundary *bd = &nb->bnd;
 	struct sph_collider_set *cs = &bd->col[c];
 	const eddy_vec3 off = collider_motion(w, cs)->offset, n = cs->normal;
-	const bool plane = n.x != 0 || n.y != 0 || n.z != 0;
+	const bool plane = nonzero(n);
 	const float along = off.x * n.x + off.y * n.y + off.z * n.z;
 	const eddy_vec3 d = plane ? eddy__v3(along * n.x, along * n.y, along * n.z) : off;
-	if (d.x != cs->disp.x || d.y != cs->disp.y || d.z != cs->disp.z) {
+	if (differ(d, cs->disp)) {
 		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
 			nb->bx[b] = bd->x0[b] + d.x;
 			nb->by[b] = bd->y0[b] + d.y;
@@ -164,9 +161,9 @@ float sph_boundary_move(const eddy_world *w, sph_neighbors *nb)
 		const struct sph_collider_set *cs = &nb->bnd.col[c];
 		const struct sph_collider_seen *sn = &nb->bnd.seen[c];
 		/* the rotating path also while a past rotation is still undone */
-		const bool rotating = eddy__motion_rotates(collider_motion(w, cs)) || sn->rx != 0 || sn->ry != 0 ||
-		                      sn->rz != 0 || cs->rot.x != 0 || cs->rot.y != 0 || cs->rot.z != 0 ||
-		                      cs->rot_at_search.x != 0 || cs->rot_at_search.y != 0 || cs->rot_at_search.z != 0;
+		const bool rotating = eddy__motion_rotates(collider_motion(w, cs)) ||
+		                      nonzero(eddy__v3(sn->rx, sn->ry, sn->rz)) || nonzero(cs->rot) ||
+		                      nonzero(cs->rot_at_search);
 		const float m2 = rotating ? move_rotating(w, nb, c) : move_translating(w, nb, c);
 		moved2 = m2 > moved2 ? m2 : moved2;
 	}
@@ -223,29 +220,26 @@ static bool boundary_alloc(sph_neighbors *nb, size_t total, size_t ncol)
 	 * aligned: with colliders, alloc = total) */
 	bd->state_size = 2 * total * sizeof *nb->bp + ncol * sizeof *bd->seen;
 	nb->bp = calloc(1, 2 * alloc * sizeof *nb->bp + ncol * sizeof *bd->seen);
-	bd->rho = nb->bp ? nb->bp + alloc : NULL;
-	bd->seen = nb->bp && ncol ? (struct sph_collider_seen *)(void *)(nb->bp + 2 * alloc) : NULL;
-	/* positions padded by three for the search's groups of four */
-	nb->bx = malloc((alloc + 3) * sizeof *nb->bx);
-	nb->by = malloc((alloc + 3) * sizeof *nb->by);
-	nb->bz = malloc((alloc + 3) * sizeof *nb->bz);
-	nb->bvol = malloc(alloc * sizeof *nb->bvol);
-	if (!nb->bp || !nb->bx || !nb->by || !nb->bz || !nb->bvol)
+	nb->bx = malloc(4 * alloc * sizeof *nb->bx);
+	if (!nb->bp || !nb->bx)
 		return false;
-	for (size_t i = total; i < total + 3; ++i)
-		nb->bx[i] = nb->by[i] = nb->bz[i] = 0; /* read, always masked */
+	bd->rho = nb->bp + alloc;
+	bd->seen = ncol ? (struct sph_collider_seen *)(void *)(nb->bp + 2 * alloc) : NULL;
+	nb->by = nb->bx + alloc;
+	nb->bz = nb->by + alloc;
+	nb->bvol = nb->bz + alloc;
 	if (!ncol)
 		return true;
-	bd->order = malloc(alloc * sizeof *bd->order);
-	bd->x0 = malloc(3 * alloc * sizeof *bd->x0);
-	bd->vx = calloc(3 * alloc, sizeof *bd->vx);
+	bd->x0 = calloc(7 * alloc, sizeof *bd->x0); /* the velocities 0 for the static particles */
 	bd->col = calloc(ncol, sizeof *bd->col);
-	if (!bd->order || !bd->x0 || !bd->vx || !bd->col)
+	if (!bd->x0 || !bd->col)
 		return false;
 	bd->y0 = bd->x0 + alloc;
 	bd->z0 = bd->y0 + alloc;
+	bd->vx = bd->z0 + alloc;
 	bd->vy = bd->vx + alloc;
 	bd->vz = bd->vy + alloc;
+	bd->order = (uint32_t *)(void *)(bd->vz + alloc);
 	return true;
 }
 
@@ -254,8 +248,8 @@ static bool boundary_fill_static(eddy_world *w, sph_shared *sh, size_t nstat)
 {
 	sph_neighbors *nb = &sh->nb;
 	const size_t alloc = nstat ? nstat : 1;
-	/* one block: x y z vol as floats, key order as indices */
-	float *x = malloc(6 * alloc * sizeof *x);
+	/* x y z vol as floats, key order as indices */
+	float *x = eddy__arena_alloc(&w->arena, 6 * alloc * sizeof *x);
 	if (!x)
 		return false;
 	float *y = x + alloc, *z = y + alloc, *v = z + alloc;
@@ -273,7 +267,6 @@ static bool boundary_fill_static(eddy_world *w, sph_shared *sh, size_t nstat)
 		nb->bz[i] = z[order[i]];
 		nb->bvol[i] = v[order[i]];
 	}
-	free(x);
 	return true;
 }
 
