@@ -70,86 +70,57 @@ static bool nonzero(eddy_vec3 a) { return a.x != 0 || a.y != 0 || a.z != 0; }
 
 static bool differ(eddy_vec3 a, eddy_vec3 b) { return a.x != b.x || a.y != b.y || a.z != b.z; }
 
-static const eddy_collider_motion *collider_motion(const eddy_world *w, const struct sph_collider_set *cs)
-{
-	return &((const eddy_collider_base *)w->slots[cs->slot].data)->motion;
-}
-
-/* A rotating collider's particles (or one that rotated since it was last
- * seen), placed by its whole pose. Returns the bound on the squared
- * displacement of any of them since the search. */
-static float move_rotating(const eddy_world *w, sph_neighbors *nb, int c)
+/* Collider c's particles where the collider is now, and their velocities
+ * (once per time). Returns the squared displacement of any of them since
+ * the search: a bound for a rotating one. */
+static float move_collider(const eddy_world *w, sph_neighbors *nb, int c)
 {
 	sph_boundary *bd = &nb->bnd;
 	struct sph_collider_set *cs = &bd->col[c];
-	const eddy_collider_motion *m = collider_motion(w, cs);
-	const eddy_vec3 off = m->offset, rot = m->rotation;
-	if (differ(off, cs->disp) || differ(rot, cs->rot)) {
+	struct sph_collider_seen *sn = &bd->seen[c];
+	const eddy_collider_motion *m = &((const eddy_collider_base *)w->slots[cs->slot].data)->motion;
+	const eddy_vec3 off = m->offset, rot = m->rotation, n = cs->normal;
+	/* placed by the whole pose also while a past rotation is still undone */
+	const bool rotating = eddy__motion_rotates(m) || nonzero(eddy__v3(sn->rx, sn->ry, sn->rz)) || nonzero(cs->rot) ||
+	                      nonzero(cs->rot_at_search);
+	const bool plane = !rotating && nonzero(n); /* only the offset along the normal moves the patch */
+	const float along = off.x * n.x + off.y * n.y + off.z * n.z;
+	const eddy_vec3 d = plane ? eddy__v3(along * n.x, along * n.y, along * n.z) : off;
+	if (differ(d, cs->disp) || differ(rot, cs->rot)) {
 		const eddy_collider_pose pose = eddy__collider_pose(m);
 		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
-			const eddy_vec3 q = eddy__pose_to_world(&pose, eddy__v3(bd->x0[b], bd->y0[b], bd->z0[b]));
+			const eddy_vec3 q0 = eddy__v3(bd->x0[b], bd->y0[b], bd->z0[b]);
+			const eddy_vec3 q = rotating ? eddy__pose_to_world(&pose, q0) : eddy__add3(q0, d);
 			nb->bx[b] = q.x, nb->by[b] = q.y, nb->bz[b] = q.z;
 		}
-		cs->disp = off;
+		cs->disp = d;
 		cs->rot = rot;
 	}
-	struct sph_collider_seen *sn = &bd->seen[c];
 	if (sn->have == 0 || w->time != sn->time) {
 		eddy_collider_velocity mv = {{0, 0, 0}, {0, 0, 0}, eddy__add3(m->pivot, off)};
-		if (sn->have != 0 && w->time > sn->time)
+		const bool since = sn->have != 0 && w->time > sn->time;
+		if (since && rotating)
 			mv = eddy__collider_motion_since(m, eddy__v3(sn->x, sn->y, sn->z), eddy__v3(sn->rx, sn->ry, sn->rz),
 			                                 w->time - sn->time);
+		else if (since) {
+			const float inv = (float)(1.0 / (w->time - sn->time));
+			mv.v = eddy__v3((off.x - sn->x) * inv, (off.y - sn->y) * inv, (off.z - sn->z) * inv);
+			const float vn = mv.v.x * n.x + mv.v.y * n.y + mv.v.z * n.z;
+			mv.v = plane ? eddy__v3(vn * n.x, vn * n.y, vn * n.z) : mv.v;
+		}
 		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
-			const eddy_vec3 v = eddy__rigid_velocity(&mv, eddy__v3(nb->bx[b], nb->by[b], nb->bz[b]));
+			const eddy_vec3 v = rotating ? eddy__rigid_velocity(&mv, eddy__v3(nb->bx[b], nb->by[b], nb->bz[b])) : mv.v;
 			bd->vx[b] = v.x, bd->vy[b] = v.y, bd->vz[b] = v.z;
 		}
 		*sn = (struct sph_collider_seen){off.x, off.y, off.z, 1, rot.x, rot.y, rot.z, 0, w->time};
 	}
-	const eddy_vec3 om = eddy__rotation_rate(cs->rot_at_search, rot, 1.0);
-	const float ex = off.x - cs->at_search.x, ey = off.y - cs->at_search.y, ez = off.z - cs->at_search.z;
-	const float ang = sqrtf(om.x * om.x + om.y * om.y + om.z * om.z);
-	const float m1 = sqrtf(ex * ex + ey * ey + ez * ez) + cs->reach * ang;
-	return m1 * m1;
-}
-
-/* A translating collider's particles. Returns their squared displacement
- * since the search. */
-static float move_translating(const eddy_world *w, sph_neighbors *nb, int c)
-{
-	sph_boundary *bd = &nb->bnd;
-	struct sph_collider_set *cs = &bd->col[c];
-	const eddy_vec3 off = collider_motion(w, cs)->offset, n = cs->normal;
-	const bool plane = nonzero(n);
-	const float along = off.x * n.x + off.y * n.y + off.z * n.z;
-	const eddy_vec3 d = plane ? eddy__v3(along * n.x, along * n.y, along * n.z) : off;
-	if (differ(d, cs->disp)) {
-		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
-			nb->bx[b] = bd->x0[b] + d.x;
-			nb->by[b] = bd->y0[b] + d.y;
-			nb->bz[b] = bd->z0[b] + d.z;
-		}
-		cs->disp = d;
-	}
-	struct sph_collider_seen *sn = &bd->seen[c];
-	if (sn->have == 0 || w->time != sn->time) {
-		eddy_vec3 v = {0, 0, 0};
-		if (sn->have != 0 && w->time > sn->time) {
-			const float inv = (float)(1.0 / (w->time - sn->time));
-			v = eddy__v3((off.x - sn->x) * inv, (off.y - sn->y) * inv, (off.z - sn->z) * inv);
-			if (plane) {
-				const float vn = v.x * n.x + v.y * n.y + v.z * n.z;
-				v = eddy__v3(vn * n.x, vn * n.y, vn * n.z);
-			}
-		}
-		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
-			bd->vx[b] = v.x;
-			bd->vy[b] = v.y;
-			bd->vz[b] = v.z;
-		}
-		*sn = (struct sph_collider_seen){off.x, off.y, off.z, 1, 0, 0, 0, 0, w->time};
-	}
 	const float ex = d.x - cs->at_search.x, ey = d.y - cs->at_search.y, ez = d.z - cs->at_search.z;
-	return ex * ex + ey * ey + ez * ez;
+	if (!rotating)
+		return ex * ex + ey * ey + ez * ez;
+	/* the pivot's move plus the reach times the angle turned */
+	const eddy_vec3 om = eddy__rotation_rate(cs->rot_at_search, rot, 1.0);
+	const float m1 = sqrtf(ex * ex + ey * ey + ez * ez) + cs->reach * sqrtf(om.x * om.x + om.y * om.y + om.z * om.z);
+	return m1 * m1;
 }
 
 /* Every collider's particles where their collider is now, with their
@@ -158,13 +129,7 @@ float sph_boundary_move(const eddy_world *w, sph_neighbors *nb)
 {
 	float moved2 = 0;
 	for (int c = 0; c < nb->bnd.ncol; ++c) {
-		const struct sph_collider_set *cs = &nb->bnd.col[c];
-		const struct sph_collider_seen *sn = &nb->bnd.seen[c];
-		/* the rotating path also while a past rotation is still undone */
-		const bool rotating = eddy__motion_rotates(collider_motion(w, cs)) ||
-		                      nonzero(eddy__v3(sn->rx, sn->ry, sn->rz)) || nonzero(cs->rot) ||
-		                      nonzero(cs->rot_at_search);
-		const float m2 = rotating ? move_rotating(w, nb, c) : move_translating(w, nb, c);
+		const float m2 = move_collider(w, nb, c);
 		moved2 = m2 > moved2 ? m2 : moved2;
 	}
 	return moved2;

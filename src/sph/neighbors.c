@@ -3,34 +3,29 @@
  * the cell grid, filtered into the exact lists and kernel sums.
  *
  * Reads: x y z, the boundary particles (boundary.c). Writes: the particle
- * table's order (cell order), sph_neighbors' lists and sums, sph_shared's pq.
+ * table's order, sph_neighbors' lists and sums, sph_shared's pq.
  *
- * Every step: the cell of every particle (grid.c), and unless the table is
- * still in cell order (a fluid at rest), a stable counting sort by cell and
- * the whole table permuted into that order, so the passes over neighbours
- * stream memory. The particle order is then a function of the positions.
+ * Every step the table is put in cell order (a stable counting sort, skipped
+ * while it is in order already), so the passes over neighbours stream
+ * memory and the particle order is a function of the positions.
  *
  * The grid search (search.c), the costly part, runs only when the Verlet
- * list is stale. Its hits are the pairs with r < h_s = h (1 + skin), in the
- * rows of that time ("build slots"); the later permutations are followed
- * with slot_of / row_of. The list stays valid while every particle is within
- * skin/2 of where it was at the search: then a pair closer than h now was
- * closer than h + skin then. The argument is about positions, so it holds
- * whichever row a particle is in (a swap-remove, a loaded checkpoint). A new
- * particle count or a new set of boundary systems forces a search, and so
- * does a moving collider's particles' displacement (boundary.c) beyond
- * skin/2. With a skin of 0 (see choose_skin) the search is at h itself and
- * writes the exact lists and sums directly: the same bits as the filter.
+ * list is stale. Its hits are the pairs with r < h (1 + skin), in the rows
+ * of that time ("build slots"), followed through later permutations with
+ * slot_of / row_of. The list is valid while every particle is within skin/2
+ * of where it was at the search: then a pair closer than h now was closer
+ * than h + skin then, whichever row a particle is in now. A new particle
+ * count, a new set of boundary systems or a collider's particles moved
+ * beyond skin/2 force a search. With a skin of 0 the search is at h and
+ * writes the exact lists and sums itself.
  *
  * Every step each particle's candidates are filtered by r^2 < h^2 into its
- * exact list, sorted by row, and the density's kernel sums made in that
- * order. Since the order is a function of the positions and the lists are
- * exact, the lists and sums are the same whenever the last search ran: a
- * resumed run is bit-identical without checkpointing the Verlet list. Every
- * particle writes only its own lists, so they are the same for any thread
- * count. Both lists have a fixed stride per particle, a multiple of 8 (the
- * Verlet one wider); when a particle has more entries than the stride
- * (compressed fluid), the stride grows and that pass runs again. */
+ * exact list, sorted by row, and the kernel sums made in that order: the
+ * same bits whenever the last search ran, so a resumed run is bit-identical
+ * without checkpointing the Verlet list. Every particle writes only its own
+ * lists: the same for any thread count. Both lists have a fixed stride per
+ * particle, a multiple of 8, widened (and the pass run again) when a
+ * particle has more entries (compressed fluid). */
 #include "neighbors.h"
 #include "simd.h"
 #include "systems.h"
@@ -65,7 +60,8 @@ static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *cand, u
 		 * copy just written would stall the packing's vector load) */
 		uint32_t rows[8];
 		const uint32_t *j = cand + q;
-		if (q + 8 > vc || row_of) {
+		const bool last = q + 8 > vc;
+		if (last || row_of) {
 			for (uint32_t k = 0; k < 8; ++k) {
 				const uint32_t s = cand[q + k < vc ? q + k : vc - 1];
 				rows[k] = row_of ? row_of[s] : s;
@@ -76,7 +72,9 @@ static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *cand, u
 		sf8_gather_quads(p4, j, &px, &py, &pz, &pw);
 		const sf8 rx = sf8_sub(vx, px), ry = sf8_sub(vy, py), rz = sf8_sub(vz, pz);
 		const sf8 d = sf8_sub(vh2, sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz)));
-		const sf8 in = sf8_and(sf8_gt(d, zero), sf8_lanes_below(vc - q));
+		sf8 in = sf8_gt(d, zero);
+		if (last)
+			in = sf8_and(in, sf8_lanes_below(vc - q));
 		cnt += sf8_pack(in, d, j, dv + cnt, jl + cnt);
 	}
 	return cnt;
@@ -123,9 +121,8 @@ static inline uint32_t filter_boundary(const filter_ctx *f, long i, uint32_t b)
 
 SIMD_DECLARE(bool, neighbors_filter, (const filter_ctx *f, int threads, uint32_t *max_f, uint32_t *max_b));
 
-/* The exact lists and kernel sums from the Verlet list. Returns false when
- * out of memory; *max_f, *max_b: the largest counts (above the strides:
- * widen and filter again). */
+/* The exact lists and kernel sums from the Verlet list. False when out of
+ * memory; *max_f, *max_b: the largest counts (as sph_search). */
 bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, uint32_t *max_f, uint32_t *max_b)
 {
 	sph_neighbors *nb = f->nb;
@@ -134,8 +131,7 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, uint32_t *max
 	bool ok = true;
 #pragma omp parallel num_threads(threads) reduction(max : mf, mb) reduction(&& : ok)
 	{
-		/* a particle's hits, sorted here and then written once, whole;
-		 * + 8: whole groups are stored */
+		/* a particle's hits, sorted here, then written whole; + 8: whole groups */
 		uint32_t *jl = malloc((stride + 8) * sizeof *jl);
 		float *dv = malloc((stride + 8) * sizeof *dv);
 		ok = jl && dv;
