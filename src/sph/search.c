@@ -113,9 +113,24 @@ static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br, si
 	}
 }
 
+/* Candidates [begin, end) of one run into b from at (order: their
+ * indices, NULL for the identity); returns the end. */
+static uint32_t gather_run(search_buf *b, uint32_t at, const float *x, const float *y, const float *z,
+                           const uint32_t *order, uint32_t begin, uint32_t end)
+{
+	for (uint32_t q = begin; q < end; ++q, ++at) {
+		const uint32_t j = order ? order[q] : q;
+		b->x[at] = x[j];
+		b->y[at] = y[j];
+		b->z[at] = z[j];
+		b->j[at] = j;
+	}
+	return at;
+}
+
 /* The runs' candidates into the buffers, with the offsets of each run and
  * of each z layer (a particle needs only the 2R + 1 layers around its own:
- * one stretch of the buffer), then the FAR padding. */
+ * one stretch of the buffer), then eight FAR points. */
 static void block_gather(const search_ctx *c, block_runs *br, search_buf *fb, search_buf *bb)
 {
 	const sph_neighbors *nb = c->nb;
@@ -128,19 +143,8 @@ static void block_gather(const search_ctx *c, block_runs *br, search_buf *fb, se
 			br->bound_layer[layer] = nbd;
 		}
 		br->fluid_at[r] = nf;
-		for (uint32_t j = run->fluid_begin; j < run->fluid_end; ++j, ++nf) {
-			fb->x[nf] = c->x[j];
-			fb->y[nf] = c->y[j];
-			fb->z[nf] = c->z[j];
-			fb->j[nf] = j;
-		}
-		for (uint32_t q = run->bound_begin; q < run->bound_end; ++q, ++nbd) {
-			const uint32_t jb = c->bound_order ? c->bound_order[q] : q;
-			bb->x[nbd] = nb->bx[jb];
-			bb->y[nbd] = nb->by[jb];
-			bb->z[nbd] = nb->bz[jb];
-			bb->j[nbd] = jb;
-		}
+		nf = gather_run(fb, nf, c->x, c->y, c->z, NULL, run->fluid_begin, run->fluid_end);
+		nbd = gather_run(bb, nbd, nb->bx, nb->by, nb->bz, c->bound_order, run->bound_begin, run->bound_end);
 	}
 	for (; layer <= 2 * c->R + br->z1 - br->z0 + 1; ++layer) {
 		br->fluid_layer[layer] = nf;
