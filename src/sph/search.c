@@ -56,10 +56,9 @@ typedef struct search_buf {
 typedef struct cell_run {
 	uint32_t fluid_begin, fluid_end; /* rows */
 	uint32_t bound_begin, bound_end; /* positions in the boundary cell order */
-	uint32_t own_cell;               /* the block's first cell in this row, NO_CELL if not the block's */
+	uint32_t own_begin, own_end;     /* the rows of the block's own particles in it (none: equal) */
 	uint32_t layer;                  /* the row's z layer, 0 = the lowest searched */
 } cell_run;
-#define NO_CELL UINT32_MAX
 
 /* A block's runs and where they landed in the buffers. */
 typedef struct block_runs {
@@ -105,7 +104,9 @@ static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br, si
 			r->fluid_end = g->fluid_start[row + (size_t)x1 + 1];
 			r->bound_begin = g->bound_start[row + (size_t)x0];
 			r->bound_end = g->bound_start[row + (size_t)x1 + 1];
-			r->own_cell = ey == 0 && ez == 0 ? (uint32_t)(row + (size_t)br->x0) : NO_CELL;
+			const bool own = ey == 0 && ez == 0;
+			r->own_begin = own ? g->fluid_start[row + (size_t)br->x0] : 0;
+			r->own_end = own ? g->fluid_start[row + (size_t)br->x1 + 1] : 0;
 			r->layer = (uint32_t)(zz - (br->z0 - R));
 			*nf += r->fluid_end - r->fluid_begin;
 			*nbd += r->bound_end - r->bound_begin;
@@ -231,15 +232,9 @@ bool SIMD_NAME(search_block)(const search_ctx *c, uint32_t id, search_buf *fb, s
 	if (!search_buf_grow(fb, nf) || !search_buf_grow(bb, nbd))
 		return false;
 	block_gather(c, &br, fb, bb);
-	const uint32_t *start = c->nb->grid.fluid_start;
-	for (int r = 0; r < br.count; ++r) {
-		const uint32_t own = br.run[r].own_cell;
-		if (own == NO_CELL)
-			continue;
-		const uint32_t end = start[own + (uint32_t)(br.x1 - br.x0) + 1];
-		for (uint32_t i = start[own]; i < end; ++i)
+	for (int r = 0; r < br.count; ++r)
+		for (uint32_t i = br.run[r].own_begin; i < br.run[r].own_end; ++i)
 			search_particle(c, &br, r, i, fb, bb, mf, mb);
-	}
 	return true;
 }
 
