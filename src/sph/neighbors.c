@@ -213,12 +213,15 @@ static inline float row_quad(const float *x, const float *y, const float *z, con
 	return dx * dx + dy * dy + dz * dz;
 }
 
-/* The cells, whether the table is in cell order, the quads and the
- * displacements: one pass, as a step of a fluid at rest needs nothing more
- * (a parallel region costs a thread wake-up). */
-static bool cell_pass(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threads)
+/* The table into cell order, the Verlet slots followed through the
+ * permutation, the quads and the displacements; returns whether the table
+ * was in order already. Then the first pass is all (a step of a fluid at
+ * rest: a parallel region costs a thread wake-up) and the counting sort,
+ * which makes grid.fluid_start, is left to the caller. */
+static bool cell_order(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threads)
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	sph_verlet *v = &nb->verlet;
 	const long n = (long)w->n;
 	int sorted = 1;
 	float d2max = 0;
@@ -227,19 +230,12 @@ static bool cell_pass(eddy_world *w, sph_neighbors *nb, row_pass *rp, int thread
 		const uint32_t k = sph_cell_at(&nb->grid, x[i], y[i], z[i]);
 		rp->key[i] = nb->cell_of[i] = k;
 		sorted = sorted && (i == 0 || sph_cell_at(&nb->grid, x[i - 1], y[i - 1], z[i - 1]) <= k);
-		const float d2 = row_quad(x, y, z, rp, &nb->verlet, i);
+		const float d2 = row_quad(x, y, z, rp, v, i);
 		d2max = d2 > d2max ? d2 : d2max;
 	}
 	rp->moved2 = d2max;
-	return sorted;
-}
-
-/* The table into cell order (grid.fluid_start made on the way), the Verlet
- * slots followed through the permutation, the quads and displacements. */
-static void reorder(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threads)
-{
-	const long n = (long)w->n;
-	sph_verlet *v = &nb->verlet;
+	if (sorted)
+		return true;
 	sph_counting_sort(rp->key, w->n, sph_grid_cells(&nb->grid), nb->grid.fluid_start, rp->order);
 	eddy__permute_particles(w, rp->order, rp->scratch);
 	if (rp->verlet) {
@@ -250,8 +246,8 @@ static void reorder(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threads)
 		memcpy(v->slot_of, slot, w->n * sizeof *slot);
 		v->rows_moved = true;
 	}
-	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
-	float d2max = 0;
+	x = eddy__col(w, COL_X_), y = eddy__col(w, COL_Y_), z = eddy__col(w, COL_Z_);
+	d2max = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : d2max)
 	for (long i = 0; i < n; ++i) {
 		nb->cell_of[i] = rp->key[rp->order[i]];
@@ -261,6 +257,7 @@ static void reorder(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threads)
 		d2max = d2 > d2max ? d2 : d2max;
 	}
 	rp->moved2 = d2max;
+	return false;
 }
 
 /* The skin for a new search. It pays only if the list outlives a few steps:
@@ -378,9 +375,7 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	if (!rp.key || !rp.order || !rp.scratch || !rp.p4)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", n);
 	v->age++;
-	const bool in_order = cell_pass(w, nb, &rp, threads);
-	if (!in_order)
-		reorder(w, nb, &rp, threads);
+	const bool in_order = cell_order(w, nb, &rp, threads);
 	rp.moved2 = bmove2 > rp.moved2 ? bmove2 : rp.moved2;
 	/* valid while every particle is within skin/2 of its build slot's
 	 * position (0.49: float rounding); false for NaN too */
