@@ -56,103 +56,71 @@ static float fluid_spacing(const eddy_world *w, const sph_shared *sh)
 
 void sph_boundary_free(sph_neighbors *nb)
 {
-	sph_boundary *bd = &nb->bnd;
-	free(nb->bx);
-	free(nb->by);
-	free(nb->bz);
-	free(nb->bvol);
-	free(nb->bp); /* rho and seen live in the same block */
+	free(nb->bx); /* by, bz, bvol in the same block */
+	free(nb->bp); /* rho and seen in the same block */
 	free(nb->bdiv);
-	free(bd->order);
-	free(bd->x0); /* y0, z0 in the same block */
-	free(bd->vx); /* vy, vz in the same block */
-	free(bd->col);
+	free(nb->bnd.x0); /* y0 z0 vx vy vz order in the same block */
+	free(nb->bnd.col);
 	nb->bx = nb->by = nb->bz = nb->bvol = nb->bp = nb->bdiv = NULL;
 	nb->nbound = 0;
-	memset(bd, 0, sizeof *bd);
+	memset(&nb->bnd, 0, sizeof nb->bnd);
 }
 
-static const eddy_collider_motion *collider_motion(const eddy_world *w, const struct sph_collider_set *cs)
-{
-	return &((const eddy_collider_base *)w->slots[cs->slot].data)->motion;
-}
+static bool nonzero(eddy_vec3 a) { return a.x != 0 || a.y != 0 || a.z != 0; }
 
-/* A rotating collider's particles (or one that rotated since it was last
- * seen), placed by its whole pose. Returns the bound on the squared
- * displacement of any of them since the search. */
-static float move_rotating(const eddy_world *w, sph_neighbors *nb, int c)
+static bool differ(eddy_vec3 a, eddy_vec3 b) { return a.x != b.x || a.y != b.y || a.z != b.z; }
+
+/* Collider c's particles where the collider is now, and their velocities
+ * (once per time). Returns the squared displacement of any of them since
+ * the search: a bound for a rotating one. */
+static float move_collider(const eddy_world *w, sph_neighbors *nb, int c)
 {
 	sph_boundary *bd = &nb->bnd;
 	struct sph_collider_set *cs = &bd->col[c];
-	const eddy_collider_motion *m = collider_motion(w, cs);
-	const eddy_vec3 off = m->offset, rot = m->rotation;
-	if (off.x != cs->disp.x || off.y != cs->disp.y || off.z != cs->disp.z || rot.x != cs->rot.x || rot.y != cs->rot.y ||
-	    rot.z != cs->rot.z) {
+	struct sph_collider_seen *sn = &bd->seen[c];
+	const eddy_collider_motion *m = &((const eddy_collider_base *)w->slots[cs->slot].data)->motion;
+	const eddy_vec3 off = m->offset, rot = m->rotation, n = cs->normal;
+	/* placed by the whole pose also while a past rotation is still undone */
+	const bool rotating = eddy__motion_rotates(m) || nonzero(eddy__v3(sn->rx, sn->ry, sn->rz)) || nonzero(cs->rot) ||
+	                      nonzero(cs->rot_at_search);
+	const bool plane = !rotating && nonzero(n); /* only the offset along the normal moves the patch */
+	const float along = off.x * n.x + off.y * n.y + off.z * n.z;
+	const eddy_vec3 d = plane ? eddy__v3(along * n.x, along * n.y, along * n.z) : off;
+	if (differ(d, cs->disp) || differ(rot, cs->rot)) {
 		const eddy_collider_pose pose = eddy__collider_pose(m);
 		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
-			const eddy_vec3 q = eddy__pose_to_world(&pose, eddy__v3(bd->x0[b], bd->y0[b], bd->z0[b]));
+			const eddy_vec3 q0 = eddy__v3(bd->x0[b], bd->y0[b], bd->z0[b]);
+			const eddy_vec3 q = rotating ? eddy__pose_to_world(&pose, q0) : eddy__add3(q0, d);
 			nb->bx[b] = q.x, nb->by[b] = q.y, nb->bz[b] = q.z;
 		}
-		cs->disp = off;
+		cs->disp = d;
 		cs->rot = rot;
 	}
-	struct sph_collider_seen *sn = &bd->seen[c];
 	if (sn->have == 0 || w->time != sn->time) {
 		eddy_collider_velocity mv = {{0, 0, 0}, {0, 0, 0}, eddy__add3(m->pivot, off)};
-		if (sn->have != 0 && w->time > sn->time)
+		const bool since = sn->have != 0 && w->time > sn->time;
+		if (since && rotating)
 			mv = eddy__collider_motion_since(m, eddy__v3(sn->x, sn->y, sn->z), eddy__v3(sn->rx, sn->ry, sn->rz),
 			                                 w->time - sn->time);
+		else if (since) {
+			const float inv = (float)(1.0 / (w->time - sn->time));
+			mv.v = eddy__v3((off.x - sn->x) * inv, (off.y - sn->y) * inv, (off.z - sn->z) * inv);
+			const float vn = mv.v.x * n.x + mv.v.y * n.y + mv.v.z * n.z;
+			mv.v = plane ? eddy__v3(vn * n.x, vn * n.y, vn * n.z) : mv.v;
+		}
 		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
-			const eddy_vec3 v = eddy__rigid_velocity(&mv, eddy__v3(nb->bx[b], nb->by[b], nb->bz[b]));
+			const eddy_vec3 v = rotating ? eddy__rigid_velocity(&mv, eddy__v3(nb->bx[b], nb->by[b], nb->bz[b])) : mv.v;
 			bd->vx[b] = v.x, bd->vy[b] = v.y, bd->vz[b] = v.z;
 		}
 		*sn = (struct sph_collider_seen){off.x, off.y, off.z, 1, rot.x, rot.y, rot.z, 0, w->time};
 	}
-	const eddy_vec3 om = eddy__rotation_rate(cs->rot_at_search, rot, 1.0);
-	const float ex = off.x - cs->at_search.x, ey = off.y - cs->at_search.y, ez = off.z - cs->at_search.z;
-	const float ang = sqrtf(om.x * om.x + om.y * om.y + om.z * om.z);
-	const float m1 = sqrtf(ex * ex + ey * ey + ez * ez) + cs->reach * ang;
-	return m1 * m1;
-}
-
-/* A translating collider's particles. Returns their squared displacement
- * since the search. */
-static float move_translating(const eddy_world *w, sph_neighbors *nb, int c)
-{
-	sph_boundary *bd = &nb->bnd;
-	struct sph_collider_set *cs = &bd->col[c];
-	const eddy_vec3 off = collider_motion(w, cs)->offset, n = cs->normal;
-	const bool plane = n.x != 0 || n.y != 0 || n.z != 0;
-	const float along = off.x * n.x + off.y * n.y + off.z * n.z;
-	const eddy_vec3 d = plane ? eddy__v3(along * n.x, along * n.y, along * n.z) : off;
-	if (d.x != cs->disp.x || d.y != cs->disp.y || d.z != cs->disp.z) {
-		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
-			nb->bx[b] = bd->x0[b] + d.x;
-			nb->by[b] = bd->y0[b] + d.y;
-			nb->bz[b] = bd->z0[b] + d.z;
-		}
-		cs->disp = d;
-	}
-	struct sph_collider_seen *sn = &bd->seen[c];
-	if (sn->have == 0 || w->time != sn->time) {
-		eddy_vec3 v = {0, 0, 0};
-		if (sn->have != 0 && w->time > sn->time) {
-			const float inv = (float)(1.0 / (w->time - sn->time));
-			v = eddy__v3((off.x - sn->x) * inv, (off.y - sn->y) * inv, (off.z - sn->z) * inv);
-			if (plane) {
-				const float vn = v.x * n.x + v.y * n.y + v.z * n.z;
-				v = eddy__v3(vn * n.x, vn * n.y, vn * n.z);
-			}
-		}
-		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
-			bd->vx[b] = v.x;
-			bd->vy[b] = v.y;
-			bd->vz[b] = v.z;
-		}
-		*sn = (struct sph_collider_seen){off.x, off.y, off.z, 1, 0, 0, 0, 0, w->time};
-	}
 	const float ex = d.x - cs->at_search.x, ey = d.y - cs->at_search.y, ez = d.z - cs->at_search.z;
-	return ex * ex + ey * ey + ez * ez;
+	if (!rotating)
+		return ex * ex + ey * ey + ez * ez;
+	/* the pivot's move plus the reach times the angle turned */
+	const eddy_vec3 om = eddy__rotation_rate(cs->rot_at_search, rot, 1.0);
+	const float m1 = sqrtf(ex * ex + ey * ey + ez * ez) + cs->reach * sqrtf(om.x * om.x + om.y * om.y + om.z * om.z);
+	return m1 * m1;
 }
 
 /* Every collider's particles where their collider is now, with their
@@ -161,13 +129,7 @@ float sph_boundary_move(const eddy_world *w, sph_neighbors *nb)
 {
 	float moved2 = 0;
 	for (int c = 0; c < nb->bnd.ncol; ++c) {
-		const struct sph_collider_set *cs = &nb->bnd.col[c];
-		const struct sph_collider_seen *sn = &nb->bnd.seen[c];
-		/* the rotating path also while a past rotation is still undone */
-		const bool rotating = eddy__motion_rotates(collider_motion(w, cs)) || sn->rx != 0 || sn->ry != 0 ||
-		                      sn->rz != 0 || cs->rot.x != 0 || cs->rot.y != 0 || cs->rot.z != 0 ||
-		                      cs->rot_at_search.x != 0 || cs->rot_at_search.y != 0 || cs->rot_at_search.z != 0;
-		const float m2 = rotating ? move_rotating(w, nb, c) : move_translating(w, nb, c);
+		const float m2 = move_collider(w, nb, c);
 		moved2 = m2 > moved2 ? m2 : moved2;
 	}
 	return moved2;
@@ -223,29 +185,26 @@ static bool boundary_alloc(sph_neighbors *nb, size_t total, size_t ncol)
 	 * aligned: with colliders, alloc = total) */
 	bd->state_size = 2 * total * sizeof *nb->bp + ncol * sizeof *bd->seen;
 	nb->bp = calloc(1, 2 * alloc * sizeof *nb->bp + ncol * sizeof *bd->seen);
-	bd->rho = nb->bp ? nb->bp + alloc : NULL;
-	bd->seen = nb->bp && ncol ? (struct sph_collider_seen *)(void *)(nb->bp + 2 * alloc) : NULL;
-	/* positions padded by three for the search's groups of four */
-	nb->bx = malloc((alloc + 3) * sizeof *nb->bx);
-	nb->by = malloc((alloc + 3) * sizeof *nb->by);
-	nb->bz = malloc((alloc + 3) * sizeof *nb->bz);
-	nb->bvol = malloc(alloc * sizeof *nb->bvol);
-	if (!nb->bp || !nb->bx || !nb->by || !nb->bz || !nb->bvol)
+	nb->bx = malloc(4 * alloc * sizeof *nb->bx);
+	if (!nb->bp || !nb->bx)
 		return false;
-	for (size_t i = total; i < total + 3; ++i)
-		nb->bx[i] = nb->by[i] = nb->bz[i] = 0; /* read, always masked */
+	bd->rho = nb->bp + alloc;
+	bd->seen = ncol ? (struct sph_collider_seen *)(void *)(nb->bp + 2 * alloc) : NULL;
+	nb->by = nb->bx + alloc;
+	nb->bz = nb->by + alloc;
+	nb->bvol = nb->bz + alloc;
 	if (!ncol)
 		return true;
-	bd->order = malloc(alloc * sizeof *bd->order);
-	bd->x0 = malloc(3 * alloc * sizeof *bd->x0);
-	bd->vx = calloc(3 * alloc, sizeof *bd->vx);
+	bd->x0 = calloc(7 * alloc, sizeof *bd->x0); /* the velocities 0 for the static particles */
 	bd->col = calloc(ncol, sizeof *bd->col);
-	if (!bd->order || !bd->x0 || !bd->vx || !bd->col)
+	if (!bd->x0 || !bd->col)
 		return false;
 	bd->y0 = bd->x0 + alloc;
 	bd->z0 = bd->y0 + alloc;
+	bd->vx = bd->z0 + alloc;
 	bd->vy = bd->vx + alloc;
 	bd->vz = bd->vy + alloc;
+	bd->order = (uint32_t *)(void *)(bd->vz + alloc);
 	return true;
 }
 
@@ -254,8 +213,8 @@ static bool boundary_fill_static(eddy_world *w, sph_shared *sh, size_t nstat)
 {
 	sph_neighbors *nb = &sh->nb;
 	const size_t alloc = nstat ? nstat : 1;
-	/* one block: x y z vol as floats, key order as indices */
-	float *x = malloc(6 * alloc * sizeof *x);
+	/* x y z vol as floats, key order as indices */
+	float *x = eddy__arena_alloc(&w->arena, 6 * alloc * sizeof *x);
 	if (!x)
 		return false;
 	float *y = x + alloc, *z = y + alloc, *v = z + alloc;
@@ -273,7 +232,6 @@ static bool boundary_fill_static(eddy_world *w, sph_shared *sh, size_t nstat)
 		nb->bz[i] = z[order[i]];
 		nb->bvol[i] = v[order[i]];
 	}
-	free(x);
 	return true;
 }
 

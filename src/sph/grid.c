@@ -40,13 +40,6 @@ eddy_status sph_grid_init(eddy_world *w, sph_grid *g, float h)
 	return EDDY_OK;
 }
 
-void sph_grid_free(sph_grid *g)
-{
-	free(g->fluid_start);
-	free(g->bound_start);
-	memset(g, 0, sizeof *g);
-}
-
 /* Stable counting sort of keys[0..n) (cells in [0, cells)): order[k] is the
  * k-th index in cell order, start[c] the position of cell c's first. */
 void sph_counting_sort(const uint32_t *keys, size_t n, size_t cells, uint32_t *start, uint32_t *order)
@@ -64,18 +57,6 @@ void sph_counting_sort(const uint32_t *keys, size_t n, size_t cells, uint32_t *s
 	start[0] = 0;
 }
 
-/* The cell offsets of a table already in cell order (keys non-decreasing):
- * start[c] is the first row in cell c or after it. */
-void sph_cell_ranges(const uint32_t *keys, size_t n, size_t cells, uint32_t *start)
-{
-	size_t c = 0;
-	for (size_t i = 0; i < n; ++i)
-		while (c <= keys[i])
-			start[c++] = (uint32_t)i;
-	while (c <= cells)
-		start[c++] = (uint32_t)n;
-}
-
 bool sph_grow(void **p, size_t *have, size_t want, size_t elem)
 {
 	if (want <= *have)
@@ -89,4 +70,30 @@ bool sph_grow(void **p, size_t *have, size_t want, size_t elem)
 	*p = q;
 	*have = cap;
 	return true;
+}
+
+bool sph_grow_block(void **p, size_t *have, size_t cap, void **slices[], int k)
+{
+	size_t entries = *have * (size_t)k;
+	if (!sph_grow(p, &entries, cap * (size_t)k, 4))
+		return false;
+	*have = entries / (size_t)k;
+	for (int a = 0; a < k; ++a)
+		*slices[a] = (uint32_t *)*p + (size_t)a * *have;
+	return true;
+}
+
+void sph_sort_hits(uint32_t *idx, float *d, uint32_t cnt)
+{
+	for (uint32_t a = 1; a < cnt; ++a) {
+		const uint32_t j = idx[a];
+		const float dj = d[a];
+		uint32_t k = a;
+		for (; k > 0 && idx[k - 1] > j; --k) {
+			idx[k] = idx[k - 1];
+			d[k] = d[k - 1];
+		}
+		idx[k] = j;
+		d[k] = dj;
+	}
 }

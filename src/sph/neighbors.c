@@ -3,38 +3,29 @@
  * the cell grid, filtered into the exact lists and kernel sums.
  *
  * Reads: x y z, the boundary particles (boundary.c). Writes: the particle
- * table's order (cell order), sph_neighbors' lists and sums, sph_shared's pq.
+ * table's order, sph_neighbors' lists and sums, sph_shared's pq.
  *
- * Every step: the cell of every particle (grid.c), and unless the table is
- * still in cell order (a fluid at rest), a stable counting sort by cell and
- * the whole table permuted into that order, so the passes over neighbours
- * stream memory. The particle order is then a function of the positions.
+ * Every step the table is put in cell order (a stable counting sort, skipped
+ * while it is in order already), so the passes over neighbours stream
+ * memory and the particle order is a function of the positions.
  *
  * The grid search (search.c), the costly part, runs only when the Verlet
- * list is stale. Its hits are the pairs with r < h_s = h (1 + skin), in the
- * rows of that time ("build slots"); the later permutations are followed
- * with slot_of / row_of. The list stays valid while every particle is within
- * skin/2 of where it was at the search: then a pair closer than h now was
- * closer than h + skin then. The argument is about positions, so it holds
- * whichever row a particle is in (a swap-remove, a loaded checkpoint). A new
- * particle count or a new set of boundary systems forces a search, and so
- * does a moving collider's particles' displacement (boundary.c) beyond
- * skin/2. With a skin of 0 (a list that would not outlive a few steps, see
- * choose_skin) the search is at h itself and writes the exact lists and sums
- * directly, with the filter's tests, order and sums: the same bits.
+ * list is stale. Its hits are the pairs with r < h (1 + skin), in the rows
+ * of that time ("build slots"), followed through later permutations with
+ * slot_of / row_of. The list is valid while every particle is within skin/2
+ * of where it was at the search: then a pair closer than h now was closer
+ * than h + skin then, whichever row a particle is in now. A new particle
+ * count, a new set of boundary systems or a collider's particles moved
+ * beyond skin/2 force a search. With a skin of 0 the search is at h and
+ * writes the exact lists and sums itself.
  *
  * Every step each particle's candidates are filtered by r^2 < h^2 into its
- * exact list, sorted by row, and the density's kernel sums made in that
- * order. Since the order is a function of the positions and the lists are
- * exact, the lists and sums are the same whenever the last search ran: a
- * resumed run is bit-identical without checkpointing the Verlet list.
- *
- * Both lists have a fixed stride per particle (the Verlet one wider); when a
- * particle has more entries than the stride (compressed fluid), the stride
- * grows and that pass runs again. Every particle writes only its own lists,
- * so they are the same for any thread count. The filter is written once
- * against simd.h; this file is compiled once more as the AVX2 variant, which
- * sees only the kernel (neighbors_filter). */
+ * exact list, sorted by row, and the kernel sums made in that order: the
+ * same bits whenever the last search ran, so a resumed run is bit-identical
+ * without checkpointing the Verlet list. Every particle writes only its own
+ * lists: the same for any thread count. Both lists have a fixed stride per
+ * particle, a multiple of 8, widened (and the pass run again) when a
+ * particle has more entries (compressed fluid). */
 #include "neighbors.h"
 #include "simd.h"
 #include "systems.h"
@@ -62,13 +53,15 @@ static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *cand, u
 	const sf8 vx = sf8_set1(pi[0]), vy = sf8_set1(pi[1]), vz = sf8_set1(pi[2]), vh2 = sf8_set1(f->h2),
 			  zero = sf8_zero();
 	const uint32_t *row_of = f->row_of;
+	const float *p4 = f->p4; /* in locals: sf8_pack's stores may alias f */
 	uint32_t cnt = 0;
 	for (uint32_t q = 0; q < vc; q += 8) {
 		/* a whole group of unmoved rows is its candidates, read in place (a
 		 * copy just written would stall the packing's vector load) */
 		uint32_t rows[8];
 		const uint32_t *j = cand + q;
-		if (q + 8 > vc || row_of) {
+		const bool last = q + 8 > vc;
+		if (last || row_of) {
 			for (uint32_t k = 0; k < 8; ++k) {
 				const uint32_t s = cand[q + k < vc ? q + k : vc - 1];
 				rows[k] = row_of ? row_of[s] : s;
@@ -76,32 +69,27 @@ static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *cand, u
 			j = rows;
 		}
 		sf8 px, py, pz, pw;
-		sf8_gather_quads(f->p4, j, &px, &py, &pz, &pw);
+		sf8_gather_quads(p4, j, &px, &py, &pz, &pw);
 		const sf8 rx = sf8_sub(vx, px), ry = sf8_sub(vy, py), rz = sf8_sub(vz, pz);
 		const sf8 d = sf8_sub(vh2, sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz)));
-		const sf8 in = sf8_and(sf8_gt(d, zero), sf8_lanes_below(vc - q));
+		sf8 in = sf8_gt(d, zero);
+		if (last)
+			in = sf8_and(in, sf8_lanes_below(vc - q));
 		cnt += sf8_pack(in, d, j, dv + cnt, jl + cnt);
 	}
 	return cnt;
 }
 
-/* jl (and dv) by row: sorted already unless a particle changed cell since
- * the search, and then nearly: insertion. */
+/* jl (and dv) by row, after a permutation since the search (else the
+ * candidates are in ascending rows, and so are their hits): sorted already
+ * unless a particle changed cell, and then nearly. */
 static inline void sort_rows(uint32_t *jl, float *dv, uint32_t cnt)
 {
-	for (uint32_t a = 1; a < cnt; ++a) {
-		const uint32_t j = jl[a];
-		if (jl[a - 1] < j)
-			continue;
-		const float d = dv[a];
-		uint32_t k = a;
-		for (; k > 0 && jl[k - 1] > j; --k) {
-			jl[k] = jl[k - 1];
-			dv[k] = dv[k - 1];
-		}
-		jl[k] = j;
-		dv[k] = d;
-	}
+	uint32_t descents = 0; /* over the whole list, no early exit: the loop vectorises */
+	for (uint32_t a = 1; a < cnt; ++a)
+		descents += jl[a - 1] > jl[a];
+	if (descents)
+		sph_sort_hits(jl, dv, cnt);
 }
 
 /* Row i's boundary list and sum from its build slot's candidates (in index
@@ -133,9 +121,8 @@ static inline uint32_t filter_boundary(const filter_ctx *f, long i, uint32_t b)
 
 SIMD_DECLARE(bool, neighbors_filter, (const filter_ctx *f, int threads, uint32_t *max_f, uint32_t *max_b));
 
-/* The exact lists and kernel sums from the Verlet list. Returns false when
- * out of memory; *max_f, *max_b: the largest counts (above the strides:
- * widen and filter again). */
+/* The exact lists and kernel sums from the Verlet list. False when out of
+ * memory; *max_f, *max_b: the largest counts (as sph_search). */
 bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, uint32_t *max_f, uint32_t *max_b)
 {
 	sph_neighbors *nb = f->nb;
@@ -144,8 +131,7 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, uint32_t *max
 	bool ok = true;
 #pragma omp parallel num_threads(threads) reduction(max : mf, mb) reduction(&& : ok)
 	{
-		/* a particle's hits, sorted here and then written once, whole;
-		 * + 8: whole groups are stored */
+		/* a particle's hits, sorted here, then written whole; + 8: whole groups */
 		uint32_t *jl = malloc((stride + 8) * sizeof *jl);
 		float *dv = malloc((stride + 8) * sizeof *dv);
 		ok = jl && dv;
@@ -156,13 +142,12 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, uint32_t *max
 			const uint32_t b = nb->verlet.slot_of[i];
 			const uint32_t cnt =
 				filter_fluid(f, nb->verlet.cand + (size_t)b * stride, nb->verlet.count[b], f->p4 + 4 * i, jl, dv);
-			sort_rows(jl, dv, cnt);
+			if (f->row_of)
+				sort_rows(jl, dv, cnt);
 			nb->wsum[i] = sph_cube_sum(dv, cnt);
-			if (cnt <= cap) {
-				uint32_t *list = nb->nbr + (size_t)i * cap;
-				for (uint32_t q = 0; q < cnt; ++q)
-					list[q] = jl[q];
-			}
+			/* whole groups: cap is a multiple of 8, jl holds whole groups */
+			for (uint32_t q = 0; q < cnt && cnt <= cap; q += 8)
+				memcpy(nb->nbr + (size_t)i * cap + q, jl + q, 8 * sizeof *jl);
 			nb->count[i] = cnt;
 			const uint32_t bcnt = filter_boundary(f, i, b);
 			mf = cnt > mf ? cnt : mf;
@@ -180,33 +165,28 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, uint32_t *max
 
 void eddy__sph_neighbors_free(sph_neighbors *nb)
 {
-	sph_verlet *v = &nb->verlet;
-	void *arrays[] = {nb->nbr,  nb->count, nb->wsum,  nb->bwsum, nb->bnbr, nb->bcount, nb->cell_of, v->cand,
-	                  v->count, v->bcand,  v->bcount, v->x,      v->y,     v->z,       v->slot_of,  v->row_of};
-	for (size_t a = 0; a < sizeof arrays / sizeof arrays[0]; ++a)
-		free(arrays[a]);
+	free(nb->rows);
+	free(nb->nbr);
+	free(nb->bnbr);
+	free(nb->verlet.cand);
+	free(nb->verlet.bcand);
+	free(nb->grid.fluid_start);
+	free(nb->grid.bound_start);
 	sph_boundary_free(nb);
-	sph_grid_free(&nb->grid);
 	memset(nb, 0, sizeof *nb);
 }
 
 sph_shared *eddy__sph_find(eddy_world *w, const eddy_system *s) { return eddy__provided(w, s, EDDY_CAP_SPH_NEIGHBORS); }
 
-/* Grows every per-row array to n. */
+/* Every per-row array to n rows. What they held is not kept: a new count
+ * forces a search, which needs none of it. */
 static bool grow_rows(sph_neighbors *nb, size_t n)
 {
 	sph_verlet *v = &nb->verlet;
 	void **arrays[] = {(void **)&nb->cell_of, (void **)&nb->count, (void **)&nb->bcount, (void **)&nb->wsum,
 	                   (void **)&nb->bwsum,   (void **)&v->count,  (void **)&v->bcount,  (void **)&v->x,
 	                   (void **)&v->y,        (void **)&v->z,      (void **)&v->slot_of, (void **)&v->row_of};
-	size_t had = nb->rows_alloc;
-	for (size_t a = 0; a < sizeof arrays / sizeof arrays[0]; ++a) {
-		had = nb->rows_alloc;
-		if (!sph_grow(arrays[a], &had, n, 4)) /* every one is 4 bytes a row */
-			return false;
-	}
-	nb->rows_alloc = had;
-	return true;
+	return sph_grow_block(&nb->rows, &nb->rows_alloc, n, arrays, (int)(sizeof arrays / sizeof arrays[0]));
 }
 
 /* The per-step scratch of the cell-order pass. */
@@ -219,13 +199,29 @@ typedef struct row_pass {
 	float moved2;    /* m^2, the largest squared displacement from the build slots */
 } row_pass;
 
-/* The cells, whether the table is in cell order, the quads and (with a
- * Verlet list) the displacements: one pass, as a step of a fluid at rest
- * needs nothing more (a parallel region costs a thread wake-up). */
-static bool cell_pass(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threads)
+/* Row i's quad (x y z 0: sph_density puts 1/rho in the fourth) and, with a
+ * Verlet list, its squared distance from its build slot's position. */
+static inline float row_quad(const float *x, const float *y, const float *z, const row_pass *rp, const sph_verlet *v,
+                             long i)
+{
+	float *q = rp->p4 + 4 * i;
+	q[0] = x[i], q[1] = y[i], q[2] = z[i], q[3] = 0;
+	if (!rp->verlet)
+		return 0;
+	const uint32_t b = v->slot_of[i];
+	const float dx = x[i] - v->x[b], dy = y[i] - v->y[b], dz = z[i] - v->z[b];
+	return dx * dx + dy * dy + dz * dz;
+}
+
+/* The table into cell order, the Verlet slots followed through the
+ * permutation, the quads and the displacements; returns whether the table
+ * was in order already. Then the first pass is all (a step of a fluid at
+ * rest: a parallel region costs a thread wake-up) and the counting sort,
+ * which makes grid.fluid_start, is left to the caller. */
+static bool cell_order(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threads)
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
-	const sph_verlet *v = &nb->verlet;
+	sph_verlet *v = &nb->verlet;
 	const long n = (long)w->n;
 	int sorted = 1;
 	float d2max = 0;
@@ -234,25 +230,12 @@ static bool cell_pass(eddy_world *w, sph_neighbors *nb, row_pass *rp, int thread
 		const uint32_t k = sph_cell_at(&nb->grid, x[i], y[i], z[i]);
 		rp->key[i] = nb->cell_of[i] = k;
 		sorted = sorted && (i == 0 || sph_cell_at(&nb->grid, x[i - 1], y[i - 1], z[i - 1]) <= k);
-		float *q = rp->p4 + 4 * i;
-		q[0] = x[i], q[1] = y[i], q[2] = z[i], q[3] = 0; /* sph_density puts 1/rho in q[3] */
-		if (rp->verlet) {
-			const uint32_t b = v->slot_of[i];
-			const float dx = x[i] - v->x[b], dy = y[i] - v->y[b], dz = z[i] - v->z[b];
-			const float d2 = dx * dx + dy * dy + dz * dz;
-			d2max = d2 > d2max ? d2 : d2max;
-		}
+		const float d2 = row_quad(x, y, z, rp, v, i);
+		d2max = d2 > d2max ? d2 : d2max;
 	}
 	rp->moved2 = d2max;
-	return sorted;
-}
-
-/* The table into cell order (grid.fluid_start made on the way), the Verlet
- * slots followed through the permutation, the quads and displacements. */
-static void reorder(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threads)
-{
-	const long n = (long)w->n;
-	sph_verlet *v = &nb->verlet;
+	if (sorted)
+		return true;
 	sph_counting_sort(rp->key, w->n, sph_grid_cells(&nb->grid), nb->grid.fluid_start, rp->order);
 	eddy__permute_particles(w, rp->order, rp->scratch);
 	if (rp->verlet) {
@@ -261,24 +244,20 @@ static void reorder(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threads)
 		for (long i = 0; i < n; ++i)
 			slot[i] = v->slot_of[rp->order[i]];
 		memcpy(v->slot_of, slot, w->n * sizeof *slot);
-		v->rows_kept = false;
+		v->rows_moved = true;
 	}
-	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
-	float d2max = 0;
+	x = eddy__col(w, COL_X_), y = eddy__col(w, COL_Y_), z = eddy__col(w, COL_Z_);
+	d2max = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : d2max)
 	for (long i = 0; i < n; ++i) {
 		nb->cell_of[i] = rp->key[rp->order[i]];
-		float *q = rp->p4 + 4 * i;
-		q[0] = x[i], q[1] = y[i], q[2] = z[i], q[3] = 0;
-		if (rp->verlet) {
-			const uint32_t b = v->slot_of[i];
-			v->row_of[b] = (uint32_t)i;
-			const float dx = x[i] - v->x[b], dy = y[i] - v->y[b], dz = z[i] - v->z[b];
-			const float d2 = dx * dx + dy * dy + dz * dz;
-			d2max = d2 > d2max ? d2 : d2max;
-		}
+		if (rp->verlet)
+			v->row_of[v->slot_of[i]] = (uint32_t)i;
+		const float d2 = row_quad(x, y, z, rp, v, i);
+		d2max = d2 > d2max ? d2 : d2max;
 	}
 	rp->moved2 = d2max;
+	return false;
 }
 
 /* The skin for a new search. It pays only if the list outlives a few steps:
@@ -291,22 +270,20 @@ static void reorder(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threads)
  * candidates than its exact lists hold. */
 static void choose_skin(sph_verlet *v, const row_pass *rp, size_t n, float h)
 {
-	const bool emitting = !rp->verlet && v->searched && v->n != n && v->count_changed && v->age <= 1;
+	const bool count_changed = v->n != 0 && v->n != n;
+	const bool emitting = count_changed && v->count_changed && v->age <= 1;
 	const float step_move = rp->verlet ? sqrtf(rp->moved2) / (float)v->age : 0.0f;
 	const bool fast = rp->verlet && step_move * SPH_SKIN_MIN_LIFE > 0.5f * SPH_SKIN * h;
 	const float sized = 2.0f * SPH_SKIN_LIFE * step_move / h;
-	v->count_changed = v->searched && v->n != n;
+	v->count_changed = count_changed;
 	v->skin = emitting || fast ? 0.0f : !rp->verlet ? SPH_SKIN : fminf(SPH_SKIN, fmaxf(SPH_SKIN_MIN, sized));
 }
 
-static eddy_status lists_nomem(eddy_world *w, size_t n, size_t stride)
-{
-	return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n, stride);
-}
-
-/* The grid search into the Verlet list, widening the strides until every
- * particle's candidates fit. */
-static eddy_status verlet_search(eddy_world *w, sph_shared *sh, int threads)
+/* The Verlet candidates (candidates) or the exact lists: the search, or the
+ * filter of the candidates kept, until every particle's entries fit the
+ * strides; a stride too narrow is widened with room to spare, so that this
+ * stays rare, and the pass runs again. */
+static eddy_status fill_lists(eddy_world *w, sph_shared *sh, const float *p4, bool candidates, int threads)
 {
 	sph_neighbors *nb = &sh->nb;
 	sph_verlet *v = &nb->verlet;
@@ -314,21 +291,28 @@ static eddy_status verlet_search(eddy_world *w, sph_shared *sh, int threads)
 	/* 1e-4 over: the filter's exact test (r < h, another operation order)
 	 * must find every pair it would keep among the candidates */
 	const float hs = sh->h * (1.0f + v->skin + 1e-4f);
+	size_t *stride = candidates ? &v->stride : &nb->cap, *bstride = candidates ? &v->bstride : &nb->bcap;
+	const filter_ctx f = {nb, p4, v->rows_moved ? v->row_of : NULL, sh->k.h2, (long)n};
 	for (;;) {
-		if (!sph_grow((void **)&v->cand, &v->cand_alloc, n * v->stride, sizeof *v->cand))
-			return lists_nomem(w, n, v->stride);
-		if (!sph_grow((void **)&v->bcand, &v->bcand_alloc, n * v->bstride, sizeof *v->bcand))
-			return lists_nomem(w, n, v->bstride);
-		const sph_search_out out = {false, hs * hs, v->stride, v->bstride, v->cand, v->count, v->bcand, v->bcount};
+		const bool grown = candidates ? sph_grow((void **)&v->cand, &v->alloc, n * v->stride, 4) &&
+		                                    sph_grow((void **)&v->bcand, &v->balloc, n * v->bstride, 4)
+		                              : sph_grow((void **)&nb->nbr, &nb->list_alloc, n * nb->cap, 4) &&
+		                                    sph_grow((void **)&nb->bnbr, &nb->blist_alloc, n * nb->bcap, 4);
+		if (!grown)
+			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n,
+			                  *stride + *bstride);
+		const sph_search_out out =
+			candidates ? (sph_search_out){false, hs * hs, v->stride, v->bstride, v->cand, v->count, v->bcand, v->bcount}
+					   : (sph_search_out){true, sh->k.h2, nb->cap, nb->bcap, nb->nbr, nb->count, nb->bnbr, nb->bcount};
 		uint32_t mf, mb;
-		if (!sph_search(w, nb, &out, threads, &mf, &mb))
-			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for the neighbour search");
-		if (mf <= v->stride && mb <= v->bstride)
+		const bool ok = !candidates && v->skin > 0 ? SIMD_PICK(neighbors_filter)(&f, threads, &mf, &mb)
+		                                           : sph_search(w, nb, &out, threads, &mf, &mb);
+		if (!ok)
+			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for the neighbour lists");
+		if (mf <= *stride && mb <= *bstride)
 			return EDDY_OK;
-		if (mf > v->stride)
-			v->stride = (mf + 15) / 16 * 16;
-		if (mb > v->bstride)
-			v->bstride = (mb + 15) / 16 * 16;
+		*stride = mf > *stride ? (mf + 7) / 8 * 8 + 8 : *stride;
+		*bstride = mb > *bstride ? (mb + 7) / 8 * 8 + 8 : *bstride;
 	}
 }
 
@@ -343,7 +327,7 @@ static eddy_status verlet_rebuild(eddy_world *w, sph_shared *sh, const row_pass 
 	if (st != EDDY_OK)
 		return st;
 	choose_skin(v, rp, n, sh->h);
-	if (v->skin > 0 && (st = verlet_search(w, sh, threads)) != EDDY_OK)
+	if (v->skin > 0 && (st = fill_lists(w, sh, rp->p4, true, threads)) != EDDY_OK)
 		return st;
 	memcpy(v->x, eddy__col(w, COL_X_), n * sizeof *v->x);
 	memcpy(v->y, eddy__col(w, COL_Y_), n * sizeof *v->y);
@@ -352,40 +336,9 @@ static eddy_status verlet_rebuild(eddy_world *w, sph_shared *sh, const row_pass 
 		v->slot_of[i] = v->row_of[i] = (uint32_t)i;
 	v->n = n;
 	v->boundary_sig = nb->bnd.sig;
-	v->searched = true;
-	v->stored = v->skin > 0; /* else the exact search below writes the lists */
-	v->rows_kept = true;
+	v->rows_moved = false;
 	v->age = 0;
 	return EDDY_OK;
-}
-
-/* The exact lists, with their own (tighter) strides: filtered from the
- * Verlet list, or searched at h when none was stored. */
-static eddy_status exact_lists(eddy_world *w, sph_shared *sh, const float *p4, int threads)
-{
-	sph_neighbors *nb = &sh->nb;
-	const size_t n = w->n;
-	const filter_ctx f = {nb, p4, nb->verlet.rows_kept ? NULL : nb->verlet.row_of, sh->k.h2, (long)n};
-	for (;;) {
-		if (!sph_grow((void **)&nb->nbr, &nb->list_alloc, n * nb->cap, sizeof *nb->nbr))
-			return lists_nomem(w, n, nb->cap);
-		if (!sph_grow((void **)&nb->bnbr, &nb->blist_alloc, n * nb->bcap, sizeof *nb->bnbr))
-			return lists_nomem(w, n, nb->bcap);
-		const sph_search_out out = {true, sh->k.h2, nb->cap, nb->bcap, nb->nbr, nb->count, nb->bnbr, nb->bcount};
-		uint32_t mf, mb;
-		const bool ok = nb->verlet.stored ? SIMD_PICK(neighbors_filter)(&f, threads, &mf, &mb)
-		                                  : sph_search(w, nb, &out, threads, &mf, &mb);
-		if (!ok)
-			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for the neighbour lists");
-		if (mf <= nb->cap && mb <= nb->bcap)
-			return EDDY_OK;
-		/* more neighbours than the stride (compressed fluid): widen, with
-		 * room to spare so that this stays rare, and redo */
-		if (mf > nb->cap)
-			nb->cap = (mf + 7) / 8 * 8 + 8;
-		if (mb > nb->bcap)
-			nb->bcap = (mb + 7) / 8 * 8 + 8;
-	}
 }
 
 /* Builds the lists for the current particle table, reordering it by cell. */
@@ -403,7 +356,7 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	nb->n = n;
 	sh->pq = NULL;
 	if (n == 0) {
-		v->searched = false;
+		v->n = 0;
 		return EDDY_OK;
 	}
 	if (!v->stride) {
@@ -412,7 +365,7 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		nb->cap = 32;
 		nb->bcap = 16;
 	}
-	row_pass rp = {.verlet = v->searched && v->n == n && v->boundary_sig == nb->bnd.sig};
+	row_pass rp = {.verlet = v->n == n && v->boundary_sig == nb->bnd.sig};
 	rp.key = eddy__arena_alloc(&w->arena, n * sizeof *rp.key);
 	rp.order = eddy__arena_alloc(&w->arena, n * sizeof *rp.order);
 	rp.scratch = eddy__arena_alloc(&w->arena, n * sizeof(float));
@@ -422,21 +375,19 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	if (!rp.key || !rp.order || !rp.scratch || !rp.p4)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", n);
 	v->age++;
-	const bool in_order = cell_pass(w, nb, &rp, threads);
-	if (!in_order)
-		reorder(w, nb, &rp, threads);
+	const bool in_order = cell_order(w, nb, &rp, threads);
 	rp.moved2 = bmove2 > rp.moved2 ? bmove2 : rp.moved2;
 	/* valid while every particle is within skin/2 of its build slot's
 	 * position (0.49: float rounding); false for NaN too */
 	const float half = 0.49f * v->skin * sh->h;
-	const bool valid = rp.verlet && v->stored && rp.moved2 < half * half;
+	const bool valid = rp.verlet && v->skin > 0 && rp.moved2 < half * half;
 	/* the search and the boundary pressure walk cells */
 	if (in_order && (!valid || nb->nbound > 0))
-		sph_cell_ranges(rp.key, n, sph_grid_cells(&nb->grid), nb->grid.fluid_start);
+		sph_counting_sort(rp.key, n, sph_grid_cells(&nb->grid), nb->grid.fluid_start, rp.order);
 	if (!valid && (st = verlet_rebuild(w, sh, &rp, threads)) != EDDY_OK)
 		return st;
 	sh->pq = rp.p4;
-	st = exact_lists(w, sh, rp.p4, threads);
+	st = fill_lists(w, sh, rp.p4, false, threads);
 	return st == EDDY_OK ? sph_boundary_divergence(w, sh, threads) : st;
 }
 

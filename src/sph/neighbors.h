@@ -24,9 +24,7 @@
 
 /* ---- grid.c ---- */
 eddy_status sph_grid_init(eddy_world *w, sph_grid *g, float h);
-void sph_grid_free(sph_grid *g);
 void sph_counting_sort(const uint32_t *keys, size_t n, size_t cells, uint32_t *start, uint32_t *order);
-void sph_cell_ranges(const uint32_t *keys, size_t n, size_t cells, uint32_t *start);
 
 static inline size_t sph_grid_cells(const sph_grid *g) { return (size_t)g->gx * (size_t)g->gy * (size_t)g->gz; }
 
@@ -43,6 +41,14 @@ static inline uint32_t sph_cell_at(const sph_grid *g, float x, float y, float z)
 
 /* Grows *p (elem bytes each) to hold want, doubling; *have is in elements. */
 bool sph_grow(void **p, size_t *have, size_t want, size_t elem);
+/* Points the k arrays *slices[0..k) at consecutive stretches of cap 4-byte
+ * entries in one block *p, grown to hold them; *have is in entries of one
+ * array. What the arrays held is not kept. */
+bool sph_grow_block(void **p, size_t *have, size_t cap, void **slices[], int k);
+
+/* Sorts idx (and d with it) ascending: insertion, for lists that are in
+ * order or nearly. */
+void sph_sort_hits(uint32_t *idx, float *d, uint32_t cnt);
 
 /* ---- boundary.c ---- */
 eddy_status sph_boundary_build(eddy_world *w, sph_shared *sh);
@@ -52,8 +58,8 @@ eddy_status sph_boundary_sort(eddy_world *w, sph_neighbors *nb);
 eddy_status sph_boundary_divergence(eddy_world *w, sph_shared *sh, int threads);
 
 /* ---- search.c ---- */
-/* Where a search writes: the Verlet list (r2max = (h (1 + skin))^2) or,
- * with exact, the exact lists and kernel sums (r2max = h^2). */
+/* The lists a search writes: the Verlet candidates (r2max = (h (1 + skin))^2)
+ * or, with exact, the exact lists and kernel sums (r2max = h^2). */
 typedef struct sph_search_out {
 	bool exact;
 	float r2max;
@@ -79,15 +85,6 @@ static inline float sph_cube_sum(const float *d, uint32_t cnt)
 	float s = (a[0] + a[1]) + (a[2] + a[3]);
 	for (; q < cnt; ++q)
 		s += d[q] * d[q] * d[q];
-	return s;
-}
-
-/* sum_b V_b rho_b d_b^3 over a particle's boundary hits, in list order. */
-static inline float sph_boundary_sum(const sph_neighbors *nb, const uint32_t *hit, const float *d, uint32_t cnt)
-{
-	float s = 0;
-	for (uint32_t q = 0; q < cnt; ++q)
-		s += nb->bvol[hit[q]] * nb->bnd.rho[hit[q]] * d[q] * d[q] * d[q];
 	return s;
 }
 

@@ -4,23 +4,18 @@
  * exact lists and kernel sums.
  *
  * It works on blocks of SEARCH_BX x SEARCH_BY x SEARCH_BZ cells (about 16
- * particles in a fluid at cells of h/2). The particles of a block share
- * their candidates: the runs of cells around the block (x fastest: the
- * cells of one row along x are one contiguous stretch of rows) are gathered
- * once, in cell order, into one buffer. Each particle of the block then
- * tests the stretch of the buffer within its own z layers, eight at a time,
- * and packs its hits without a branch. The table is in cell order and the
- * buffer is gathered in cell order, so a particle's fluid hits come in
- * ascending row order; its boundary hits are sorted by index when collider
- * particles make the cells' boundary order differ from the index order.
+ * particles in a fluid at cells of h/2), whose particles share their
+ * candidates: the runs of cells around the block (x fastest: one row of
+ * cells along x is one stretch of table rows) are gathered once, in cell
+ * order, into one buffer. Each particle of the block then tests the stretch
+ * of the buffer within its own z layers, eight at a time, and packs its hits
+ * without a branch. So a particle's fluid hits come in ascending row order;
+ * its boundary hits are sorted by index when collider particles make the
+ * cells' boundary order differ from the index order.
  *
  * The same tests, in the same operation order, as neighbors.c's filter, and
  * the sums in sph_cube_sum's order: an exact-mode search gives the same bits
- * as a Verlet search followed by the filter. Every particle writes only its
- * own lists, so they are the same for any thread count.
- *
- * The pair test is written once against simd.h; this file is compiled once
- * more as the AVX2 variant, which sees only the kernel (search_block). */
+ * as a Verlet search followed by the filter. */
 #include "neighbors.h"
 #include "simd.h"
 
@@ -51,6 +46,7 @@ typedef struct search_ctx {
 /* One thread's buffers: a block's gathered candidates (padded by eight
  * FAR points, so groups of eight need no tail) and one particle's hits. */
 typedef struct search_buf {
+	void *block; /* holds the six arrays */
 	size_t cap;
 	float *x, *y, *z, *d;
 	uint32_t *j, *hit;
@@ -60,10 +56,9 @@ typedef struct search_buf {
 typedef struct cell_run {
 	uint32_t fluid_begin, fluid_end; /* rows */
 	uint32_t bound_begin, bound_end; /* positions in the boundary cell order */
-	uint32_t own_cell;               /* the block's first cell in this row, NO_CELL if not the block's */
+	uint32_t own_begin, own_end;     /* the rows of the block's own particles in it (none: equal) */
 	uint32_t layer;                  /* the row's z layer, 0 = the lowest searched */
 } cell_run;
-#define NO_CELL UINT32_MAX
 
 /* A block's runs and where they landed in the buffers. */
 typedef struct block_runs {
@@ -76,24 +71,9 @@ typedef struct block_runs {
 
 static bool search_buf_grow(search_buf *b, size_t want)
 {
-	want += 8;
-	if (want <= b->cap)
-		return true;
-	size_t cap = b->cap ? b->cap : 256;
-	while (cap < want)
-		cap *= 2;
-	/* one block: x y z d as floats, j hit as indices (both 4 bytes) */
-	float *m = realloc(b->x, 6 * cap * sizeof *m);
-	if (!m)
-		return false;
-	*b = (search_buf){cap,
-	                  m,
-	                  m + cap,
-	                  m + 2 * cap,
-	                  m + 3 * cap,
-	                  (uint32_t *)(void *)(m + 4 * cap),
-	                  (uint32_t *)(void *)(m + 5 * cap)};
-	return true;
+	void **slices[] = {(void **)&b->x, (void **)&b->y, (void **)&b->z,
+	                   (void **)&b->d, (void **)&b->j, (void **)&b->hit};
+	return sph_grow_block(&b->block, &b->cap, want + 8, slices, 6);
 }
 
 /* The runs of cells around block id, in cell order, with their row ranges;
@@ -124,7 +104,9 @@ static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br, si
 			r->fluid_end = g->fluid_start[row + (size_t)x1 + 1];
 			r->bound_begin = g->bound_start[row + (size_t)x0];
 			r->bound_end = g->bound_start[row + (size_t)x1 + 1];
-			r->own_cell = ey == 0 && ez == 0 ? (uint32_t)(row + (size_t)br->x0) : NO_CELL;
+			const bool own = ey == 0 && ez == 0;
+			r->own_begin = own ? g->fluid_start[row + (size_t)br->x0] : 0;
+			r->own_end = own ? g->fluid_start[row + (size_t)br->x1 + 1] : 0;
 			r->layer = (uint32_t)(zz - (br->z0 - R));
 			*nf += r->fluid_end - r->fluid_begin;
 			*nbd += r->bound_end - r->bound_begin;
@@ -132,9 +114,24 @@ static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br, si
 	}
 }
 
+/* Candidates [begin, end) of one run into b from at (order: their
+ * indices, NULL for the identity); returns the end. */
+static uint32_t gather_run(search_buf *b, uint32_t at, const float *x, const float *y, const float *z,
+                           const uint32_t *order, uint32_t begin, uint32_t end)
+{
+	for (uint32_t q = begin; q < end; ++q, ++at) {
+		const uint32_t j = order ? order[q] : q;
+		b->x[at] = x[j];
+		b->y[at] = y[j];
+		b->z[at] = z[j];
+		b->j[at] = j;
+	}
+	return at;
+}
+
 /* The runs' candidates into the buffers, with the offsets of each run and
  * of each z layer (a particle needs only the 2R + 1 layers around its own:
- * one stretch of the buffer), then the FAR padding. */
+ * one stretch of the buffer), then eight FAR points. */
 static void block_gather(const search_ctx *c, block_runs *br, search_buf *fb, search_buf *bb)
 {
 	const sph_neighbors *nb = c->nb;
@@ -147,19 +144,8 @@ static void block_gather(const search_ctx *c, block_runs *br, search_buf *fb, se
 			br->bound_layer[layer] = nbd;
 		}
 		br->fluid_at[r] = nf;
-		for (uint32_t j = run->fluid_begin; j < run->fluid_end; ++j, ++nf) {
-			fb->x[nf] = c->x[j];
-			fb->y[nf] = c->y[j];
-			fb->z[nf] = c->z[j];
-			fb->j[nf] = j;
-		}
-		for (uint32_t q = run->bound_begin; q < run->bound_end; ++q, ++nbd) {
-			const uint32_t jb = c->bound_order ? c->bound_order[q] : q;
-			bb->x[nbd] = nb->bx[jb];
-			bb->y[nbd] = nb->by[jb];
-			bb->z[nbd] = nb->bz[jb];
-			bb->j[nbd] = jb;
-		}
+		nf = gather_run(fb, nf, c->x, c->y, c->z, NULL, run->fluid_begin, run->fluid_end);
+		nbd = gather_run(bb, nbd, nb->bx, nb->by, nb->bz, c->bound_order, run->bound_begin, run->bound_end);
 	}
 	for (; layer <= 2 * c->R + br->z1 - br->z0 + 1; ++layer) {
 		br->fluid_layer[layer] = nf;
@@ -173,38 +159,28 @@ static void block_gather(const search_ctx *c, block_runs *br, search_buf *fb, se
 	}
 }
 
-/* Sorts hits (and their d) by index: insertion, a particle has a few dozen
- * boundary neighbours at most, nearly in order. */
-static void sort_hits(uint32_t *hit, float *d, uint32_t cnt)
-{
-	for (uint32_t a = 1; a < cnt; ++a) {
-		const uint32_t j = hit[a];
-		const float dj = d[a];
-		uint32_t k = a;
-		for (; k > 0 && hit[k - 1] > j; --k) {
-			hit[k] = hit[k - 1];
-			d[k] = d[k - 1];
-		}
-		hit[k] = j;
-		d[k] = dj;
-	}
-}
-
 /* ---- the kernel (also compiled as the AVX2 variant) ---- */
 
 /* The candidates b[q0..q1) with r2max - r^2 > 0, in order, into b->hit and
  * b->d; returns how many. The last group reads past q1 (into the padding)
- * and is masked to q1. */
+ * and is masked to q1. The arrays are held in locals: sf8_pack's stores
+ * may alias anything, and would reload them from b every group. */
 static inline uint32_t hits(search_buf *b, uint32_t q0, uint32_t q1, float xi, float yi, float zi, float r2max)
 {
+	const float *bx = b->x, *by = b->y, *bz = b->z;
+	const uint32_t *bj = b->j;
+	uint32_t *hit = b->hit;
+	float *dv = b->d;
 	const sf8 vx = sf8_set1(xi), vy = sf8_set1(yi), vz = sf8_set1(zi), vr2 = sf8_set1(r2max), zero = sf8_zero();
 	uint32_t cnt = 0;
 	for (uint32_t q = q0; q < q1; q += 8) {
-		const sf8 rx = sf8_sub(vx, sf8_load(b->x + q)), ry = sf8_sub(vy, sf8_load(b->y + q)),
-				  rz = sf8_sub(vz, sf8_load(b->z + q));
+		const sf8 rx = sf8_sub(vx, sf8_load(bx + q)), ry = sf8_sub(vy, sf8_load(by + q)),
+				  rz = sf8_sub(vz, sf8_load(bz + q));
 		const sf8 d = sf8_sub(vr2, sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz)));
-		const sf8 in = sf8_and(sf8_gt(d, zero), sf8_lanes_below(q1 - q));
-		cnt += sf8_pack(in, d, b->j + q, b->d + cnt, b->hit + cnt);
+		sf8 in = sf8_gt(d, zero);
+		if (q1 - q < 8)
+			in = sf8_and(in, sf8_lanes_below(q1 - q));
+		cnt += sf8_pack(in, d, bj + q, dv + cnt, hit + cnt);
 	}
 	return cnt;
 }
@@ -224,7 +200,7 @@ static void search_particle(const search_ctx *c, const block_runs *br, int r, ui
 	const uint32_t bcnt = hits(bb, br->bound_layer[l0], br->bound_layer[l1], xi, yi, zi, o->r2max);
 	fb->x[self] = xi;
 	if (c->bound_order)
-		sort_hits(bb->hit, bb->d, bcnt);
+		sph_sort_hits(bb->hit, bb->d, bcnt);
 	if (cnt <= o->stride)
 		memcpy(o->list + (size_t)i * o->stride, fb->hit, cnt * sizeof *fb->hit);
 	if (bcnt <= o->bstride)
@@ -233,7 +209,10 @@ static void search_particle(const search_ctx *c, const block_runs *br, int r, ui
 	o->bcount[i] = bcnt;
 	if (o->exact) {
 		c->nb->wsum[i] = sph_cube_sum(fb->d, cnt);
-		c->nb->bwsum[i] = sph_boundary_sum(c->nb, bb->hit, bb->d, bcnt);
+		float bws = 0; /* in list order, as the filter sums */
+		for (uint32_t q = 0; q < bcnt; ++q)
+			bws += c->nb->bvol[bb->hit[q]] * c->nb->bnd.rho[bb->hit[q]] * bb->d[q] * bb->d[q] * bb->d[q];
+		c->nb->bwsum[i] = bws;
 	}
 	*mf = cnt > *mf ? cnt : *mf;
 	*mb = bcnt > *mb ? bcnt : *mb;
@@ -253,15 +232,9 @@ bool SIMD_NAME(search_block)(const search_ctx *c, uint32_t id, search_buf *fb, s
 	if (!search_buf_grow(fb, nf) || !search_buf_grow(bb, nbd))
 		return false;
 	block_gather(c, &br, fb, bb);
-	const uint32_t *start = c->nb->grid.fluid_start;
-	for (int r = 0; r < br.count; ++r) {
-		const uint32_t own = br.run[r].own_cell;
-		if (own == NO_CELL)
-			continue;
-		const uint32_t end = start[own + (uint32_t)(br.x1 - br.x0) + 1];
-		for (uint32_t i = start[own]; i < end; ++i)
+	for (int r = 0; r < br.count; ++r)
+		for (uint32_t i = br.run[r].own_begin; i < br.run[r].own_end; ++i)
 			search_particle(c, &br, r, i, fb, bb, mf, mb);
-	}
 	return true;
 }
 
@@ -336,8 +309,8 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
 #pragma omp for schedule(dynamic, 8)
 		for (long k = 0; k < blocks; ++k)
 			ok = ok && block(&c, ids[k], &fb, &bb, &mf, &mb);
-		free(fb.x);
-		free(bb.x);
+		free(fb.block);
+		free(bb.block);
 	}
 	*max_f = mf;
 	*max_b = mb;

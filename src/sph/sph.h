@@ -74,20 +74,18 @@ typedef struct sph_grid {
  * particle has moved more than half the skin since. It changes how fast the
  * exact lists are made, never what they hold. */
 typedef struct sph_verlet {
-	size_t n;               /* particles at the search */
-	size_t stride, bstride; /* candidates per build slot: fluid, boundary */
-	size_t cand_alloc, bcand_alloc;
-	uint32_t *cand, *count;     /* slot s's fluid candidates: cand[s*stride .. + count[s]) */
-	uint32_t *bcand, *bcount;   /* ... boundary candidates, ascending */
+	size_t n;                   /* particles at the last search; 0: none since the table was empty */
+	size_t stride, bstride;     /* candidates per build slot: fluid, boundary */
+	size_t alloc, balloc;       /* of cand, bcand */
+	uint32_t *cand, *bcand;     /* slot s's candidates: cand[s*stride ..), bcand[s*bstride ..) ascending */
+	uint32_t *count, *bcount;   /* per slot */
 	float *x, *y, *z;           /* m, each slot's position at the search */
 	uint32_t *slot_of, *row_of; /* build slot of each row, row of each build slot */
 	uint64_t boundary_sig;      /* the boundary systems at the search */
-	float skin;                 /* 1, of h: this list's skin (see SPH_SKIN in neighbors.h) */
-	int age;                    /* steps since the search */
-	bool searched;              /* a search ran: x y z and slot_of hold it */
-	bool stored;                /* the candidates were kept (skin > 0): else the search wrote the exact lists */
-	bool rows_kept;             /* no particle has changed row since the search: row_of is the identity */
-	bool count_changed;         /* the search was forced by a new particle count */
+	float skin;         /* 1, of h (SPH_SKIN in neighbors.h); 0: the search wrote the exact lists, no candidates */
+	int age;            /* steps since the search */
+	bool rows_moved;    /* a permutation since the search: row_of is not the identity */
+	bool count_changed; /* the search was forced by a new particle count */
 } sph_verlet;
 
 /* The boundary particles' private part (boundary.c): those of every
@@ -140,8 +138,10 @@ typedef struct sph_neighbors {
 	 * from v_i . B_i); NULL while every wall is at rest */
 	float *bdiv;
 
-	size_t rows_alloc, list_alloc, blist_alloc; /* private: allocated sizes */
-	uint32_t *cell_of;                          /* private: the cell of each row */
+	/* private: the per-row arrays' block, its size in rows, the lists' sizes */
+	void *rows;
+	size_t rows_alloc, list_alloc, blist_alloc;
+	uint32_t *cell_of; /* the cell of each row */
 	sph_grid grid;
 	sph_verlet verlet;
 	sph_boundary bnd;
