@@ -68,26 +68,11 @@ double eddy_sph_kernel_laplacian(eddy_sph_kernel k, double r, double h)
 	return 0;
 }
 
-double eddy_sph_lattice_sum(eddy_sph_kernel k, double spacing, double h)
-{
-	if (!(spacing > 0) || !(h > 0))
-		return 0;
-	if (!(h / spacing <= 100))
-		return NAN; /* (2 h / spacing)^3 terms: a mistaken argument must not hang the host */
-	const int m = (int)ceil(h / spacing);
-	double sum = 0;
-	for (int i = -m; i <= m; ++i)
-		for (int j = -m; j <= m; ++j)
-			for (int l = -m; l <= m; ++l) {
-				const double r = spacing * sqrt((double)(i * i + j * j + l * l));
-				if (k == EDDY_SPH_VISCOSITY && r == 0)
-					continue; /* singular: its self term is not defined */
-				sum += eddy_sph_kernel_value(k, r, h);
-			}
-	return sum;
-}
-
-double eddy_sph_lattice_gradient_moment(eddy_sph_kernel k, double spacing, double h)
+/* Over the simple cubic lattice of the given spacing: the sum of W, or with
+ * moment its gradient moment -sum V x^2 (dW/dr) / r (the point itself, which
+ * has no direction, left out; so is the viscosity kernel's singular self
+ * term from the sum). */
+static double lattice(eddy_sph_kernel k, double spacing, double h, bool moment)
 {
 	if (!(spacing > 0) || !(h > 0))
 		return 0;
@@ -100,8 +85,17 @@ double eddy_sph_lattice_gradient_moment(eddy_sph_kernel k, double spacing, doubl
 		for (int j = -m; j <= m; ++j)
 			for (int l = -m; l <= m; ++l) {
 				const double r = spacing * sqrt((double)(i * i + j * j + l * l)), xi = spacing * i;
-				if (r > 0) /* the point itself has no direction */
+				if (moment && r > 0)
 					sum -= vol * xi * xi * eddy_sph_kernel_derivative(k, r, h) / r;
+				else if (!moment && !(k == EDDY_SPH_VISCOSITY && r == 0))
+					sum += eddy_sph_kernel_value(k, r, h);
 			}
 	return sum;
+}
+
+double eddy_sph_lattice_sum(eddy_sph_kernel k, double spacing, double h) { return lattice(k, spacing, h, false); }
+
+double eddy_sph_lattice_gradient_moment(eddy_sph_kernel k, double spacing, double h)
+{
+	return lattice(k, spacing, h, true);
 }

@@ -13,26 +13,23 @@
  * SSE/AVX compares give. Sums over lanes end in one fixed order (sf8_fold4,
  * sf8_sum) for the same reason.
  *
- * The operations:
- *   sf8_zero() sf8_set1(a) sf8_load(p) sf8_store(p, a)    8 floats, unaligned
- *   sf8_add sub mul div sqrt; max min                      as maxps/minps: b when unordered
- *   sf8_lt gt le ge (ordered: false with a NaN)            masks
- *   sf8_and or xor; sf8_andnot(m, a) = ~m & a; sf8_select(m, a, b)
+ * The operations: sf8_zero, set1(a), load(p) and store(p, a) (unaligned);
+ * add sub mul div sqrt, max min (as maxps/minps: b when unordered); the
+ * ordered compares lt gt le ge; and or xor, andnot(m, a) = ~m & a,
+ * select(m, a, b) (a where m, else b); and these:
  *   sf8_lanes_below(n)       mask of the lanes k < n (n may be >= 8)
- *   sf8_quad_lanes_below(n)  mask of the lanes k with k mod 4 < n
+ *   sf8_quad_lanes_below(n)  mask of the lanes k with k mod 4 < n (n <= 4)
  *   sf8_mask_bits(m)         bit k = lane k's sign bit (movemask)
  *   sf8_gather(base, idx)    lane k = base[idx[k]]
  *   sf8_load_quad2(p)        the quad p[0..3] in lanes 0-3 and again in 4-7
  *   sf8_gather_quads(base, idx, c0..c3)
- *                            the quads base + 4 idx[k] (a 16-byte quad per
- *                            particle, such as sph_shared's pq) transposed:
- *                            c0 lane k = base[4 idx[k]], c1 the second float...
+ *                            the quads at base + 4 idx[k] (such as sph_shared's
+ *                            pq) transposed: cj lane k = base[4 idx[k] + j]
  *   sf8_sub_gather_quads(q, base, idx, c0..c3)
- *                            the same with each quad subtracted from q
- *                            (made by sf8_load_quad2) first: c0 lane k =
- *                            q0 - base[4 idx[k]], ...; the same per-lane results
- *                            as gathering and then subtracting broadcasts, but
- *                            the particle's own quad takes one register, not four
+ *                            the same, each quad subtracted from q (made by
+ *                            sf8_load_quad2) first: cj lane k = qj - base[4
+ *                            idx[k] + j], the particle's own quad in one
+ *                            register instead of four broadcasts
  *   sf8_fold4(a, out)        out[l] = lane l + lane l + 4
  *   sf8_sum(a)               (f0 + f1) + (f2 + f3) of the fold
  *   sf8_pack(m, a, idx, out, out_idx)  see below
@@ -124,14 +121,6 @@ static inline sf8 sf8_load(const float *p) { return _mm256_loadu_ps(p); }
 static inline void sf8_store(float *p, sf8 a) { _mm256_storeu_ps(p, a); }
 static inline sf8 sf8_sqrt(sf8 a) { return _mm256_sqrt_ps(a); }
 static inline sf8 sf8_select(sf8 m, sf8 a, sf8 b) { return _mm256_blendv_ps(b, a, m); }
-/* unsigned n > k as a signed compare of both with the sign bit flipped (no
- * clamp, no branch) */
-static inline sf8 sf8_lanes_below(uint32_t n)
-{
-	const __m256i f = _mm256_set1_epi32(INT32_MIN);
-	return _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_xor_si256(_mm256_set1_epi32((int32_t)n), f),
-	                                              _mm256_xor_si256(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), f)));
-}
 static inline int sf8_mask_bits(sf8 m) { return _mm256_movemask_ps(m); }
 /* eight scalar loads: vgatherdps is slower on the CPUs at hand */
 static inline sf8 sf8_gather(const float *base, const uint32_t idx[8])
@@ -182,12 +171,6 @@ static inline void sf8_store(float *p, sf8 a)
 	_mm_storeu_ps(p + 4, a.hi);
 }
 static inline sf8 sf8_sqrt(sf8 a) { return simd_halves_(_mm_sqrt_ps(a.lo), _mm_sqrt_ps(a.hi)); }
-static inline sf8 sf8_lanes_below(uint32_t n)
-{
-	const __m128i f = _mm_set1_epi32(INT32_MIN), c = _mm_xor_si128(_mm_set1_epi32((int32_t)n), f);
-	return simd_halves_(_mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_xor_si128(_mm_setr_epi32(0, 1, 2, 3), f))),
-	                    _mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_xor_si128(_mm_setr_epi32(4, 5, 6, 7), f))));
-}
 static inline int sf8_mask_bits(sf8 m) { return _mm_movemask_ps(m.lo) | _mm_movemask_ps(m.hi) << 4; }
 static inline sf8 sf8_gather(const float *base, const uint32_t idx[8])
 {
@@ -278,13 +261,6 @@ static inline sf8 sf8_sqrt(sf8 a)
 		a.l[k] = sqrtf(a.l[k]);
 	return a;
 }
-static inline sf8 sf8_lanes_below(uint32_t n)
-{
-	sf8 r;
-	for (uint32_t k = 0; k < 8; ++k)
-		r.l[k] = SIMD_MASK_(k < n);
-	return r;
-}
 static inline int sf8_mask_bits(sf8 m)
 {
 	int bits = 0;
@@ -331,15 +307,16 @@ static inline sf8 sf8_select(sf8 m, sf8 a, sf8 b) { return sf8_or(sf8_and(m, a),
 
 static inline sf8 sf8_load_quad2(const float *p) { return simd_quad_pair_(p, 0, 0); }
 
-static inline sf8 sf8_quad_lanes_below(int n)
-{
-	uint32_t bits[4];
-	float quad[4];
-	for (int k = 0; k < 4; ++k)
-		bits[k] = k < n ? 0xffffffffu : 0u;
-	memcpy(quad, bits, sizeof quad);
-	return sf8_load_quad2(quad);
-}
+/* Eight lanes of ones, then eight of zeros: the masks of the first n lanes
+ * are loads from it (64-byte aligned: no load crosses a cache line). */
+static _Alignas(64) const union {
+	uint32_t bits[16];
+	float lanes[16];
+} simd_ones_zeros_ = {{~0u, ~0u, ~0u, ~0u, ~0u, ~0u, ~0u, ~0u}};
+
+static inline sf8 sf8_lanes_below(uint32_t n) { return sf8_load(simd_ones_zeros_.lanes + 8 - (n < 8 ? n : 8)); }
+
+static inline sf8 sf8_quad_lanes_below(int n) { return sf8_load_quad2(simd_ones_zeros_.lanes + 8 - n); }
 
 static inline void sf8_gather_quads(const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
 {

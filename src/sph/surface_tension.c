@@ -43,10 +43,7 @@ eddy_sph_surface_tension_def eddy_default_sph_surface_tension_def(void)
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	const sph_surface_tension *st = s->data;
-	sph_shared *sh = eddy__sph_find(w, s);
-	if (!sh)
-		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)",
-		                  s->label);
+	const sph_shared *sh = eddy__sph_find(w, s); /* never NULL: the pipeline checks .requires */
 	const sph_neighbors *nb = &sh->nb;
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const float *inv_rho = sh->inv_rho;
@@ -55,7 +52,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	const sph_kernel_consts kc = sh->k;
 	const float m = sh->mass, sigma = st->def.tension, thr = st->def.threshold / sh->h;
-	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
+	const long n = sph_rows(w, sh);
 	/* pass 1: the colour-field gradient n */
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
@@ -119,7 +116,7 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	const sph_surface_tension *st = s->data;
 	const sph_shared *sh = eddy__sph_find(w, s);
 	*reason = "capillary";
-	if (!sh || !(st->def.tension > 0))
+	if (!(st->def.tension > 0))
 		return INFINITY;
 	const double dx = 0.5 * sh->h;
 	return 2.5 * sqrt(sh->rho0 * dx * dx * dx / (2 * M_PI * st->def.tension));
