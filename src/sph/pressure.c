@@ -108,10 +108,6 @@ void SIMD_NAME(pressure_pair_sums)(const pressure_args *a, long i0, long cnt, fl
 }
 
 #ifndef EDDY_SIMD_VARIANT
-typedef struct sph_pressure {
-	eddy_sph_pressure_def def;
-} sph_pressure;
-
 static const int pressure_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_DENSITY, COL_PRESSURE, -1};
 static const int pressure_writes[] = {COL_AX, COL_AY, COL_AZ, -1};
 
@@ -185,7 +181,7 @@ static void pressure_block(const void *arg, long i0, long cnt)
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
-	const sph_pressure *sp = s->data;
+	const eddy_sph_pressure_def *def = s->data;
 	const sph_shared *sh = eddy__sph_find(w, s); /* never NULL: the pipeline checks .requires */
 	const sph_kernel_consts kc = sh->k;
 	/* -grad W = +45/(pi h^6) (h-r)^2 r_hat, so the signs of the sums are already "away" */
@@ -199,7 +195,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	                         .h = kc.h,
 	                         .eps2 = 1e-6f * kc.h2,
 	                         .m = sh->mass,
-	                         .g = -kc.spiky_grad * sh->grad_cal * sp->def.scale,
+	                         .g = -kc.spiky_grad * sh->grad_cal * def->scale,
 	                         .pair_sums = SIMD_PICK(pressure_pair_sums)};
 	sph_block_pass(sph_rows(w, sh), ctx->threads, pressure_block, &a);
 	return EDDY_OK;
@@ -230,14 +226,14 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	return force < acoustic ? force : acoustic;
 }
 
+/* ax ay az are every force's: no default_writes, so order hints for them
+ * name gravity alone */
 const eddy_system_vtable eddy__kind_sph_pressure = {
 	.name = "sph_pressure",
 	.provides = EDDY_CAP_SPH_EOS_FORCE,
 	.requires = EDDY_CAP_SPH_NEIGHBORS,
 	.step = step,
 	.limit = limit,
-	/* ax ay az are every force's: no default_writes, order hints for them
-     * name gravity alone */
 };
 
 eddy_system_id eddy_add_sph_pressure(eddy_world *w, const eddy_sph_pressure_def *def)
@@ -247,9 +243,9 @@ eddy_system_id eddy_add_sph_pressure(eddy_world *w, const eddy_sph_pressure_def 
 		return EDDY_NULL_SYSTEM;
 	if (!eddy__check_positive(w, sys, "scale", def->scale))
 		return EDDY_NULL_SYSTEM;
-	sph_pressure *sp = malloc(sizeof *sp);
-	if (sp)
-		sp->def = *def;
-	return eddy__add_system(w, &eddy__kind_sph_pressure, sp, pressure_reads, pressure_writes);
+	eddy_sph_pressure_def *copy = malloc(sizeof *copy);
+	if (copy)
+		*copy = *def;
+	return eddy__add_system(w, &eddy__kind_sph_pressure, copy, pressure_reads, pressure_writes);
 }
 #endif

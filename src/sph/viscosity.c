@@ -107,10 +107,6 @@ void SIMD_NAME(visc_pair_sums)(const visc_args *a, long i0, long cnt, float *t)
 }
 
 #ifndef EDDY_SIMD_VARIANT
-typedef struct sph_viscosity {
-	eddy_sph_viscosity_def def;
-} sph_viscosity;
-
 static const int viscosity_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, -1};
 static const int viscosity_writes[] = {COL_AX, COL_AY, COL_AZ, -1};
 
@@ -140,7 +136,7 @@ static void visc_block(const void *arg, long i0, long cnt)
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
-	const sph_viscosity *sv = s->data;
+	const eddy_sph_viscosity_def *def = s->data;
 	const sph_shared *sh = eddy__sph_find(w, s); /* never NULL: the pipeline checks .requires */
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *rho = eddy__col(w, COL_DENSITY);
@@ -172,8 +168,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	                     .h = kc.h,
 	                     .eps = 0.01f * kc.h2,
 	                     .rmin = 1e-3f * kc.h,
-	                     .coef = sv->def.viscosity * sh->mass * kc.visc_lap,
-	                     .acoef = 2.0f * sh->mass * sv->def.artificial * sh->c * kc.h * -kc.spiky_grad,
+	                     .coef = def->viscosity * sh->mass * kc.visc_lap,
+	                     .acoef = 2.0f * sh->mass * def->artificial * sh->c * kc.h * -kc.spiky_grad,
 	                     .pair_sums = SIMD_PICK(visc_pair_sums)};
 	sph_block_pass(n, ctx->threads, visc_block, &a);
 	return EDDY_OK;
@@ -181,19 +177,22 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 
 static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
-	const sph_viscosity *sv = s->data;
+	const eddy_sph_viscosity_def *def = s->data;
 	const sph_shared *sh = eddy__sph_find(w, s);
 	*reason = "viscous";
-	if (!(sv->def.viscosity > 0))
+	if (!(def->viscosity > 0))
 		return INFINITY;
-	const double nu = sv->def.viscosity / sh->rho0;
+	const double nu = def->viscosity / sh->rho0;
 	return 0.3125 * (double)sh->h * sh->h / nu;
 }
 
+/* ax ay az are every force's: no default_writes, so order hints for them
+ * name gravity alone */
 const eddy_system_vtable eddy__kind_sph_viscosity = {
-	.name = "sph_viscosity", .requires = EDDY_CAP_SPH_NEIGHBORS, .step = step, .limit = limit,
-	/* ax ay az are every force's: no default_writes, order hints for them
-     * name gravity alone */
+	.name = "sph_viscosity",
+	.requires = EDDY_CAP_SPH_NEIGHBORS,
+	.step = step,
+	.limit = limit,
 };
 
 eddy_system_id eddy_add_sph_viscosity(eddy_world *w, const eddy_sph_viscosity_def *def)
@@ -205,9 +204,9 @@ eddy_system_id eddy_add_sph_viscosity(eddy_world *w, const eddy_sph_viscosity_de
 	    !eddy__check_finite(w, sys, "viscosity", def->viscosity) ||
 	    !eddy__check_range(w, sys, "artificial", def->artificial, 0, 2))
 		return EDDY_NULL_SYSTEM;
-	sph_viscosity *sv = malloc(sizeof *sv);
-	if (sv)
-		sv->def = *def;
-	return eddy__add_system(w, &eddy__kind_sph_viscosity, sv, viscosity_reads, viscosity_writes);
+	eddy_sph_viscosity_def *copy = malloc(sizeof *copy);
+	if (copy)
+		*copy = *def;
+	return eddy__add_system(w, &eddy__kind_sph_viscosity, copy, viscosity_reads, viscosity_writes);
 }
 #endif
