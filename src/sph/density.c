@@ -69,24 +69,19 @@ static float eos_density(const sph_density *sd, float p)
 	return sd->def.eos == EDDY_SPH_EOS_TAIT ? rho0 * powf(p / (k * rho0 / gamma) + 1.0f, 1.0f / gamma) : rho0 + p / k;
 }
 
-/* Adami et al. 2012, eq. 27, with the wall at rest: each boundary particle
- * takes the Shepard average of the fluid pressure near it plus the hydrostatic
- * difference, and the EOS density for that pressure. The wall densities enter
- * the fluid's density sums, which set the fluid pressure the walls copy: a
- * loop. Closed with the previous step's wall densities (as the neighbour
- * search summed them), it is a one-step-lagged positive feedback that pumps
- * energy into the fluid at the walls (a still column never comes to rest).
- * With the EOS pressure (a world with sph_pressure) the loop is therefore
- * iterated within the step: the walls are extrapolated, the density of every
- * fluid particle near them corrected by sum_b V_b (rho_b new - rho_b old)
- * W_poly6 (its pressure with it), and the walls extrapolated again:
- * WALL_PASSES_MAX times, or fewer once a pass changes no wall density by
- * more than WALL_TOL of what the first pass changed (the lag). Each pass
- * shrinks the error by the walls' share of a particle's kernel sum (about
- * 1/4 at a flat wall, at most about 1/2 at a corner): three passes leave
- * 1/64 to 1/8 of the lag. sph_dfsph solves for its own pressure, and
- * against that solve the iterated wall densities pump energy in instead:
- * there the walls keep the one-step lag. */
+/* Adami et al. 2012, eq. 27, with the wall at rest. The wall densities
+ * enter the fluid's density sums, which set the fluid pressure the walls
+ * copy: a loop. Closed with the previous step's wall densities (as the
+ * neighbour search summed them), it is a one-step-lagged positive feedback
+ * that pumps energy into the fluid at the walls (a still column never comes
+ * to rest). With the EOS pressure (sph_pressure) the loop is therefore
+ * iterated within the step: the fluid near the walls takes their new
+ * densities, sum_b V_b (rho_b new - rho_b old) W_poly6, and the walls are
+ * extrapolated again, WALL_PASSES_MAX times or until no wall density changes
+ * by more than WALL_TOL of the first pass's change. Each pass shrinks the
+ * error by the walls' share of a kernel sum (1/4 at a flat wall, 1/2 at a
+ * corner). Against sph_dfsph's pressure solve the iterated walls pump
+ * energy in instead: there they keep the one-step lag. */
 #define WALL_PASSES_MAX 3
 #define WALL_TOL 1e-3f
 
@@ -100,20 +95,35 @@ typedef struct walls {
 	eddy_vec3 g;
 	uint32_t *start; /* nbound + 1: wall b's fluid rows are fluid[start[b] .. start[b + 1]) */
 	uint32_t *fluid;
-	float *old, *dv; /* when iterating, per wall: the density the fluid sums hold, V_b times its change */
+	/* when iterating, else NULL: */
+	uint32_t *act, *rows; /* the walls with fluid near them, the fluid rows with walls near them */
+	long nact, nrows;
+	float *wgt, *grav; /* per pair: (h^2 - r^2)^3 and g . (x_b - x_f), boundary-major */
+	float *wf;         /* per pair: its weight again, in the fluid's list order */
+	uint32_t *fstart;  /* n + 1: row i's pairs in that order are [fstart[i], fstart[i + 1]) */
+	uint32_t *fpos;    /* per boundary-major pair, its place in that order */
+	float *old, *dv;   /* per wall: the density the fluid sums hold, V_b times its change */
 } walls;
+
+static void *scratch(eddy_world *w, size_t count, size_t size, bool *ok)
+{
+	void *p = eddy__arena_alloc(&w->arena, (count ? count : 1) * size);
+	*ok = *ok && p;
+	return p;
+}
 
 static bool walls_make(eddy_world *w, const sph_density *sd, bool iterate, walls *wl)
 {
 	const sph_neighbors *nb = &sd->sh.nb;
 	const size_t n = w->n, nbound = nb->nbound;
+	bool ok = true;
 	*wl = (walls){.nb = nb, .h2 = sd->sh.k.h2, .g = w->def.gravity};
 	wl->x = eddy__col(w, COL_X_);
 	wl->y = eddy__col(w, COL_Y_);
 	wl->z = eddy__col(w, COL_Z_);
-	wl->start = eddy__arena_alloc(&w->arena, (nbound + 1) * sizeof *wl->start);
-	uint32_t *at = eddy__arena_alloc(&w->arena, nbound * sizeof *at);
-	if (!wl->start || !at)
+	wl->start = scratch(w, nbound + 1, sizeof *wl->start, &ok);
+	uint32_t *at = scratch(w, nbound, sizeof *at, &ok);
+	if (!ok)
 		return false;
 	memset(wl->start, 0, (nbound + 1) * sizeof *wl->start);
 	for (size_t i = 0; i < n; ++i)
@@ -121,45 +131,73 @@ static bool walls_make(eddy_world *w, const sph_density *sd, bool iterate, walls
 			wl->start[nb->bnbr[i * nb->bcap + q] + 1]++;
 	for (size_t b = 0; b < nbound; ++b)
 		wl->start[b + 1] += wl->start[b];
-	wl->fluid = eddy__arena_alloc(&w->arena, (wl->start[nbound] ? wl->start[nbound] : 1) * sizeof *wl->fluid);
+	const size_t pairs = wl->start[nbound];
+	wl->fluid = scratch(w, pairs, sizeof *wl->fluid, &ok);
 	if (iterate) {
-		wl->old = eddy__arena_alloc(&w->arena, nbound * sizeof *wl->old);
-		wl->dv = eddy__arena_alloc(&w->arena, nbound * sizeof *wl->dv);
+		wl->act = scratch(w, nbound, sizeof *wl->act, &ok);
+		wl->rows = scratch(w, n, sizeof *wl->rows, &ok);
+		wl->wgt = scratch(w, pairs, sizeof *wl->wgt, &ok);
+		wl->grav = scratch(w, pairs, sizeof *wl->grav, &ok);
+		wl->wf = scratch(w, pairs, sizeof *wl->wf, &ok);
+		wl->fpos = scratch(w, pairs, sizeof *wl->fpos, &ok);
+		wl->fstart = scratch(w, n + 1, sizeof *wl->fstart, &ok);
+		wl->old = scratch(w, nbound, sizeof *wl->old, &ok);
+		wl->dv = scratch(w, nbound, sizeof *wl->dv, &ok);
 	}
-	if (!wl->fluid || (iterate && (!wl->old || !wl->dv)))
+	if (!ok)
 		return false;
 	memcpy(at, wl->start, nbound * sizeof *at);
-	for (size_t i = 0; i < n; ++i)
-		for (uint32_t q = 0; q < nb->bcount[i]; ++q)
-			wl->fluid[at[nb->bnbr[i * nb->bcap + q]]++] = (uint32_t)i;
+	uint32_t f = 0; /* the pair's place in the fluid's list order */
+	for (size_t i = 0; i < n; ++i) {
+		const uint32_t *bl = nb->bnbr + i * nb->bcap;
+		if (iterate) {
+			wl->fstart[i] = f;
+			if (nb->bcount[i])
+				wl->rows[wl->nrows++] = (uint32_t)i;
+		}
+		for (uint32_t q = 0; q < nb->bcount[i]; ++q, ++f) {
+			if (iterate)
+				wl->fpos[at[bl[q]]] = f;
+			wl->fluid[at[bl[q]]++] = (uint32_t)i;
+		}
+	}
+	if (iterate) {
+		wl->fstart[n] = f;
+		for (size_t b = 0; b < nbound; ++b)
+			if (wl->start[b] < wl->start[b + 1])
+				wl->act[wl->nact++] = (uint32_t)b;
+	}
 	return true;
 }
 
-/* W_poly6 / poly6 = (h^2 - r^2)^3 between wall b and fluid row f, and g .
- * (x_b - x_f) in *gr: the same bits whichever side asks. */
-static inline float wall_weight(const walls *wl, uint32_t b, uint32_t f, float *gr)
-{
-	const float rx = wl->nb->bx[b] - wl->x[f], ry = wl->nb->by[b] - wl->y[f], rz = wl->nb->bz[b] - wl->z[f];
-	const float d = wl->h2 - (rx * rx + ry * ry + rz * rz);
-	*gr = wl->g.x * rx + wl->g.y * ry + wl->g.z * rz;
-	return d * d * d;
-}
-
-/* Wall b's pressure from the fluid near it and its EOS density; the first
- * pass divides by the weight sum, the later ones multiply by its inverse
- * (both pinned by the state hashes). */
+/* Wall b's pressure from the fluid near it and its EOS density. The first
+ * pass takes the pair weights from the positions (keeping them when
+ * iterating) and divides by their sum; the later ones read them and
+ * multiply by the sum's inverse (both pinned by the state hashes). */
 static void wall_extrapolate(sph_density *sd, const walls *wl, const float *rho, const float *p, uint32_t b, bool first)
 {
+	sph_neighbors *nb = &sd->sh.nb;
 	float sw = 0, sp = 0;
 	for (uint32_t q = wl->start[b]; q < wl->start[b + 1]; ++q) {
 		const uint32_t j = wl->fluid[q];
-		float gr;
-		const float wgt = wall_weight(wl, b, j, &gr);
+		float wgt, gr;
+		if (first) {
+			const float rx = nb->bx[b] - wl->x[j], ry = nb->by[b] - wl->y[j], rz = nb->bz[b] - wl->z[j];
+			const float d = wl->h2 - (rx * rx + ry * ry + rz * rz);
+			wgt = d * d * d;
+			gr = wl->g.x * rx + wl->g.y * ry + wl->g.z * rz;
+			if (wl->wgt) {
+				wl->wgt[q] = wl->wf[wl->fpos[q]] = wgt;
+				wl->grav[q] = gr;
+			}
+		} else {
+			wgt = wl->wgt[q];
+			gr = wl->grav[q];
+		}
 		sw += wgt;
 		sp += wgt * (p[j] + rho[j] * gr);
 	}
 	const float pb = sw > 0 ? fmaxf(first ? sp / sw : sp * (1.0f / sw), 0.0f) : 0.0f;
-	sph_neighbors *nb = &sd->sh.nb;
 	if (wl->old)
 		wl->old[b] = nb->bnd.rho[b];
 	nb->bp[b] = pb;
@@ -173,14 +211,12 @@ static void walls_iterate(eddy_world *w, sph_density *sd, const walls *wl, int t
 	sph_shared *sh = &sd->sh;
 	const sph_neighbors *nb = &sh->nb;
 	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
-	const long n = (long)w->n, nbound = (long)nb->nbound;
 	float first = 0; /* the largest change of the first pass: the lag */
 	for (int pass = 1; pass <= WALL_PASSES_MAX; ++pass) {
 		float change = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : change)
-		for (long b = 0; b < nbound; ++b) {
-			if (wl->start[b] == wl->start[b + 1])
-				continue;
+		for (long a = 0; a < wl->nact; ++a) {
+			const uint32_t b = wl->act[a];
 			const float d = nb->bnd.rho[b] - wl->old[b];
 			wl->dv[b] = nb->bvol[b] * d;
 			change = fabsf(d) > change ? fabsf(d) : change;
@@ -191,11 +227,13 @@ static void walls_iterate(eddy_world *w, sph_density *sd, const walls *wl, int t
 			return;
 			/* the fluid near the walls takes the walls' new densities */
 #pragma omp parallel for num_threads(threads) schedule(static)
-		for (long i = 0; i < n; ++i) {
+		for (long r = 0; r < wl->nrows; ++r) {
+			const uint32_t i = wl->rows[r];
 			const uint32_t *bl = nb->bnbr + (size_t)i * nb->bcap;
-			float dr = 0, gr;
+			const float *wi = wl->wf + wl->fstart[i];
+			float dr = 0;
 			for (uint32_t q = 0; q < nb->bcount[i]; ++q)
-				dr += wl->dv[bl[q]] * wall_weight(wl, bl[q], (uint32_t)i, &gr);
+				dr += wl->dv[bl[q]] * wi[q];
 			if (dr == 0)
 				continue;
 			rho[i] = rho[i] + sh->k.poly6 * dr;
@@ -205,9 +243,8 @@ static void walls_iterate(eddy_world *w, sph_density *sd, const walls *wl, int t
 		}
 		/* ... and the walls that fluid's pressure */
 #pragma omp parallel for num_threads(threads) schedule(static)
-		for (long b = 0; b < nbound; ++b)
-			if (wl->start[b] < wl->start[b + 1])
-				wall_extrapolate(sd, wl, rho, p, (uint32_t)b, false);
+		for (long a = 0; a < wl->nact; ++a)
+			wall_extrapolate(sd, wl, rho, p, wl->act[a], false);
 	}
 }
 

@@ -36,17 +36,14 @@
  *
  * One pass, several back-ends: a file in src/sph/ that includes this header
  * is compiled normally (SSE, or scalar in a SIMD=scalar build) and, on x86
- * unless SIMD=scalar, once more with -mavx2 -mbmi2 -DEDDY_SIMD_VARIANT (the
- * Makefile finds such files by grepping for the include). The variant
- * compile sees only the kernels: the file keeps its system glue under
- * #ifndef EDDY_SIMD_VARIANT. Kernels the glue calls are named SIMD_NAME(x)
- * (x_avx2 in the variant, x_base otherwise), declared with
- * SIMD_DECLARE(ret, x, (params)) and picked at run time with SIMD_PICK(x).
- * Both are extern (hidden, as the whole library), so x carries the file's
- * prefix (visc_pair_sums, pressure_pair_sums). The Makefile defines
- * EDDY_SIMD_HAVE_AVX2 for the normal compile when it builds the variant;
- * without it (another build, the fuzzer's single compile) SIMD_PICK always
- * gives x_base. */
+ * unless SIMD=scalar, once more with -mavx2 -mbmi2 -DEDDY_SIMD_VARIANT
+ * (the Makefile finds such files by the include), which compiles only its
+ * kernels (the system glue is under #ifndef EDDY_SIMD_VARIANT). A kernel the
+ * glue calls is named SIMD_NAME(x) (x_avx2 in the variant, x_base
+ * otherwise; extern, so x carries the file's prefix), declared with
+ * SIMD_DECLARE(ret, x, (params)) and picked at run time with SIMD_PICK(x),
+ * which gives x_base unless the Makefile built the variant
+ * (EDDY_SIMD_HAVE_AVX2). */
 #ifndef EDDY_SIMD_H
 #define EDDY_SIMD_H
 
@@ -90,7 +87,6 @@ static inline bool simd_use_avx2(void)
 }
 #define SIMD_PICK(x) (simd_use_avx2() ? x##_avx2 : x##_base)
 #else
-static inline bool simd_use_avx2(void) { return false; }
 #define SIMD_PICK(x) x##_base
 #endif
 
@@ -340,7 +336,6 @@ static inline float sf8_sum(sf8 a)
 	return (f[0] + f[1]) + (f[2] + f[3]);
 }
 
-/* ---- added for nbr ---- */
 /* The lanes of a, and the same entries of idx[0..7], where mask m is set,
  * packed to the front of out and out_idx in lane order; all eight entries
  * of each may be written (the callers leave room). Returns how many.
