@@ -389,9 +389,7 @@ const eddy_sph_density_def *eddy__sph_density_def(const eddy_system *s)
 eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *def)
 {
 	const char *sys = "sph_density";
-	if (!eddy__add_args(w, def, sys))
-		return EDDY_NULL_SYSTEM;
-	if (!eddy__check_positive(w, sys, "spacing", def->spacing) ||
+	if (!eddy__add_args(w, def, sys) || !eddy__check_positive(w, sys, "spacing", def->spacing) ||
 	    !eddy__check_positive(w, sys, "radius", def->radius) ||
 	    !eddy__check_positive(w, sys, "rest_density", def->rest_density) ||
 	    !eddy__check_positive(w, sys, "stiffness", def->stiffness) ||
@@ -404,10 +402,8 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 		           sys, (double)def->radius, (double)def->spacing);
 		return EDDY_NULL_SYSTEM;
 	}
-	if (def->eos != EDDY_SPH_EOS_LINEAR && def->eos != EDDY_SPH_EOS_TAIT) {
-		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'eos' must be linear or tait", sys);
-		return EDDY_NULL_SYSTEM;
-	}
+	if (def->eos != EDDY_SPH_EOS_LINEAR && def->eos != EDDY_SPH_EOS_TAIT)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: 'eos' must be linear or tait", sys), EDDY_NULL_SYSTEM;
 	sph_density *sd = calloc(1, sizeof *sd);
 	if (!sd)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;

@@ -239,9 +239,7 @@ const eddy_system_vtable eddy__kind_sph_pressure = {
 eddy_system_id eddy_add_sph_pressure(eddy_world *w, const eddy_sph_pressure_def *def)
 {
 	const char *sys = "sph_pressure";
-	if (!eddy__add_args(w, def, sys))
-		return EDDY_NULL_SYSTEM;
-	if (!eddy__check_positive(w, sys, "scale", def->scale))
+	if (!eddy__add_args(w, def, sys) || !eddy__check_positive(w, sys, "scale", def->scale))
 		return EDDY_NULL_SYSTEM;
 	eddy_sph_pressure_def *copy = malloc(sizeof *copy);
 	if (copy)

@@ -18,7 +18,7 @@
  * ordered compares lt gt le ge; and or xor, andnot(m, a) = ~m & a,
  * select(m, a, b) (a where m, else b); and these:
  *   sf8_lanes_below(n)       mask of the lanes k < n (n may be >= 8)
- *   sf8_quad_lanes_below(n)  mask of the lanes k with k mod 4 < n (n <= 4)
+ *   sf8_quad_lanes_below(n)  mask of the lanes k with k mod 4 < n
  *   sf8_mask_bits(m)         bit k = lane k's sign bit (movemask)
  *   sf8_gather(base, idx)    lane k = base[idx[k]]
  *   sf8_load_quad2(p)        the quad p[0..3] in lanes 0-3 and again in 4-7
@@ -117,6 +117,14 @@ static inline sf8 sf8_load(const float *p) { return _mm256_loadu_ps(p); }
 static inline void sf8_store(float *p, sf8 a) { _mm256_storeu_ps(p, a); }
 static inline sf8 sf8_sqrt(sf8 a) { return _mm256_sqrt_ps(a); }
 static inline sf8 sf8_select(sf8 m, sf8 a, sf8 b) { return _mm256_blendv_ps(b, a, m); }
+/* unsigned n > k as a signed compare of both with the sign bit flipped (no
+ * clamp, no branch) */
+static inline sf8 sf8_lanes_below(uint32_t n)
+{
+	const __m256i f = _mm256_set1_epi32(INT32_MIN);
+	return _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_xor_si256(_mm256_set1_epi32((int32_t)n), f),
+	                                              _mm256_xor_si256(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), f)));
+}
 static inline int sf8_mask_bits(sf8 m) { return _mm256_movemask_ps(m); }
 /* eight scalar loads: vgatherdps is slower on the CPUs at hand */
 static inline sf8 sf8_gather(const float *base, const uint32_t idx[8])
@@ -167,6 +175,12 @@ static inline void sf8_store(float *p, sf8 a)
 	_mm_storeu_ps(p + 4, a.hi);
 }
 static inline sf8 sf8_sqrt(sf8 a) { return simd_halves_(_mm_sqrt_ps(a.lo), _mm_sqrt_ps(a.hi)); }
+static inline sf8 sf8_lanes_below(uint32_t n)
+{
+	const __m128i f = _mm_set1_epi32(INT32_MIN), c = _mm_xor_si128(_mm_set1_epi32((int32_t)n), f);
+	return simd_halves_(_mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_xor_si128(_mm_setr_epi32(0, 1, 2, 3), f))),
+	                    _mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_xor_si128(_mm_setr_epi32(4, 5, 6, 7), f))));
+}
 static inline int sf8_mask_bits(sf8 m) { return _mm_movemask_ps(m.lo) | _mm_movemask_ps(m.hi) << 4; }
 static inline sf8 sf8_gather(const float *base, const uint32_t idx[8])
 {
@@ -191,52 +205,37 @@ static inline void simd_transpose_(sf8 v0, sf8 v1, sf8 v2, sf8 v3, sf8 *c0, sf8 
 /* ---- scalar: plain loops over the lanes ----------------------------------- */
 #else
 
-typedef struct sf8 {
+typedef union sf8 {
 	float l[8];
+	uint32_t u[8]; /* the same lanes as bits: a mask lane is ~0u (a quiet NaN as a float) or 0 */
 } sf8;
 
-/* A mask lane as bits and back (all ones is a quiet NaN: copying it as a
- * float keeps the bits). */
-static inline uint32_t simd_bits_(float f)
-{
-	uint32_t u;
-	memcpy(&u, &f, sizeof u);
-	return u;
-}
-static inline float simd_float_(uint32_t u)
-{
-	float f;
-	memcpy(&f, &u, sizeof f);
-	return f;
-}
-#define SIMD_SCALAR_OP_(name, expr)             \
-	static inline sf8 sf8_##name(sf8 a, sf8 b)  \
-	{                                           \
-		sf8 r;                                  \
-		for (int k = 0; k < 8; ++k) {           \
-			const float x = a.l[k], y = b.l[k]; \
-			r.l[k] = (expr);                    \
-		}                                       \
-		return r;                               \
+/* r's lanes (l as floats, u as bits) from a's and b's lanes k */
+#define SIMD_SCALAR_OP_(name, lanes, expr)     \
+	static inline sf8 sf8_##name(sf8 a, sf8 b) \
+	{                                          \
+		sf8 r;                                 \
+		for (int k = 0; k < 8; ++k)            \
+			r.lanes[k] = (expr);               \
+		return r;                              \
 	}
-#define SIMD_MASK_(c) simd_float_((c) ? 0xffffffffu : 0u)
 
-SIMD_SCALAR_OP_(add, x + y)
-SIMD_SCALAR_OP_(sub, x - y)
-SIMD_SCALAR_OP_(mul, x *y)
-SIMD_SCALAR_OP_(div, x / y)
+SIMD_SCALAR_OP_(add, l, a.l[k] + b.l[k])
+SIMD_SCALAR_OP_(sub, l, a.l[k] - b.l[k])
+SIMD_SCALAR_OP_(mul, l, a.l[k] * b.l[k])
+SIMD_SCALAR_OP_(div, l, a.l[k] / b.l[k])
 /* as maxps/minps: the second operand unless the first is strictly greater
  * (smaller), so b when either is NaN or both are zeros */
-SIMD_SCALAR_OP_(max, x > y ? x : y)
-SIMD_SCALAR_OP_(min, x < y ? x : y)
-SIMD_SCALAR_OP_(lt, SIMD_MASK_(x < y))
-SIMD_SCALAR_OP_(gt, SIMD_MASK_(x > y))
-SIMD_SCALAR_OP_(le, SIMD_MASK_(x <= y))
-SIMD_SCALAR_OP_(ge, SIMD_MASK_(x >= y))
-SIMD_SCALAR_OP_(and, simd_float_(simd_bits_(x) & simd_bits_(y)))
-SIMD_SCALAR_OP_(or, simd_float_(simd_bits_(x) | simd_bits_(y)))
-SIMD_SCALAR_OP_(xor, simd_float_(simd_bits_(x) ^ simd_bits_(y)))
-SIMD_SCALAR_OP_(andnot, simd_float_(~simd_bits_(x) & simd_bits_(y)))
+SIMD_SCALAR_OP_(max, l, a.l[k] > b.l[k] ? a.l[k] : b.l[k])
+SIMD_SCALAR_OP_(min, l, a.l[k] < b.l[k] ? a.l[k] : b.l[k])
+SIMD_SCALAR_OP_(lt, u, a.l[k] < b.l[k] ? ~0u : 0u)
+SIMD_SCALAR_OP_(gt, u, a.l[k] > b.l[k] ? ~0u : 0u)
+SIMD_SCALAR_OP_(le, u, a.l[k] <= b.l[k] ? ~0u : 0u)
+SIMD_SCALAR_OP_(ge, u, a.l[k] >= b.l[k] ? ~0u : 0u)
+SIMD_SCALAR_OP_(and, u, a.u[k] & b.u[k])
+SIMD_SCALAR_OP_(or, u, a.u[k] | b.u[k])
+SIMD_SCALAR_OP_(xor, u, a.u[k] ^ b.u[k])
+SIMD_SCALAR_OP_(andnot, u, ~a.u[k] & b.u[k])
 static inline sf8 sf8_set1(float a)
 {
 	sf8 r;
@@ -257,11 +256,18 @@ static inline sf8 sf8_sqrt(sf8 a)
 		a.l[k] = sqrtf(a.l[k]);
 	return a;
 }
+static inline sf8 sf8_lanes_below(uint32_t n)
+{
+	sf8 r;
+	for (uint32_t k = 0; k < 8; ++k)
+		r.u[k] = k < n ? ~0u : 0u;
+	return r;
+}
 static inline int sf8_mask_bits(sf8 m)
 {
 	int bits = 0;
 	for (int k = 0; k < 8; ++k)
-		bits |= (int)(simd_bits_(m.l[k]) >> 31) << k;
+		bits |= (int)(m.u[k] >> 31) << k;
 	return bits;
 }
 static inline sf8 sf8_gather(const float *base, const uint32_t idx[8])
@@ -303,16 +309,15 @@ static inline sf8 sf8_select(sf8 m, sf8 a, sf8 b) { return sf8_or(sf8_and(m, a),
 
 static inline sf8 sf8_load_quad2(const float *p) { return simd_quad_pair_(p, 0, 0); }
 
-/* Eight lanes of ones, then eight of zeros: the masks of the first n lanes
- * are loads from it (64-byte aligned: no load crosses a cache line). */
-static _Alignas(64) const union {
-	uint32_t bits[16];
-	float lanes[16];
-} simd_ones_zeros_ = {{~0u, ~0u, ~0u, ~0u, ~0u, ~0u, ~0u, ~0u}};
-
-static inline sf8 sf8_lanes_below(uint32_t n) { return sf8_load(simd_ones_zeros_.lanes + 8 - (n < 8 ? n : 8)); }
-
-static inline sf8 sf8_quad_lanes_below(int n) { return sf8_load_quad2(simd_ones_zeros_.lanes + 8 - n); }
+static inline sf8 sf8_quad_lanes_below(int n)
+{
+	uint32_t bits[4];
+	float quad[4];
+	for (int k = 0; k < 4; ++k)
+		bits[k] = k < n ? ~0u : 0u;
+	memcpy(quad, bits, sizeof quad);
+	return sf8_load_quad2(quad);
+}
 
 static inline void sf8_gather_quads(const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
 {

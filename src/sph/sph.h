@@ -16,8 +16,9 @@
  *   1. src/sph/xsph.c: its def, add function and step under
  *      #ifndef EDDY_SIMD_VARIANT; the pair loop once, against simd.h, as
  *      SIMD_NAME(xsph_pair_sums) outside it, over sph_shared's lists (nbr,
- *      count) and quads (pq), picked in the step with SIMD_PICK. The Makefile
- *      finds the file and builds its AVX2 variant (it includes "simd.h").
+ *      count) and quads (pq), picked in the step with SIMD_PICK and run
+ *      block by block with sph_block_pass (below). The Makefile finds the
+ *      file and builds its AVX2 variant (it includes "simd.h").
  *   2. the registry: its vtable in systems.h, its def and add function in
  *      eddy.h, its Lua binding; it declares that it requires sph_density
  *      (whose sph_shared it reads). */

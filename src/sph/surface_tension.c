@@ -130,9 +130,8 @@ const eddy_system_vtable eddy__kind_sph_surface_tension = {
 eddy_system_id eddy_add_sph_surface_tension(eddy_world *w, const eddy_sph_surface_tension_def *def)
 {
 	const char *sys = "sph_surface_tension";
-	if (!eddy__add_args(w, def, sys))
-		return EDDY_NULL_SYSTEM;
-	if (!eddy__check_nonneg(w, sys, "tension", def->tension) || !eddy__check_finite(w, sys, "tension", def->tension) ||
+	if (!eddy__add_args(w, def, sys) || !eddy__check_nonneg(w, sys, "tension", def->tension) ||
+	    !eddy__check_finite(w, sys, "tension", def->tension) ||
 	    !eddy__check_nonneg(w, sys, "threshold", def->threshold) ||
 	    !eddy__check_finite(w, sys, "threshold", def->threshold))
 		return EDDY_NULL_SYSTEM;

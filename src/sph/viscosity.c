@@ -121,16 +121,17 @@ eddy_sph_viscosity_def eddy_default_sph_viscosity_def(void)
 /* A block: the pair sums, then their totals added to ax ay az. */
 static void visc_block(const void *arg, long i0, long cnt)
 {
-	const visc_args *a = arg;
+	/* a copy the stores below cannot alias: the constants stay in registers */
+	const visc_args a = *(const visc_args *)arg;
 	float t[SPH_BLOCK * VISC_T];
-	a->pair_sums(a, i0, cnt, t);
+	a.pair_sums(&a, i0, cnt, t);
 	for (long b = 0; b < cnt; ++b) {
 		const long i = i0 + b;
 		const float *tb = t + VISC_T * b;
-		const float k = a->coef * a->pq[4 * i + 3];
-		a->ax[i] += k * sph_sum4(tb) + a->acoef * sph_sum4(tb + 12);
-		a->ay[i] += k * sph_sum4(tb + 4) + a->acoef * sph_sum4(tb + 16);
-		a->az[i] += k * sph_sum4(tb + 8) + a->acoef * sph_sum4(tb + 20);
+		const float k = a.coef * a.pq[4 * i + 3];
+		a.ax[i] += k * sph_sum4(tb) + a.acoef * sph_sum4(tb + 12);
+		a.ay[i] += k * sph_sum4(tb + 4) + a.acoef * sph_sum4(tb + 16);
+		a.az[i] += k * sph_sum4(tb + 8) + a.acoef * sph_sum4(tb + 20);
 	}
 }
 
@@ -198,9 +199,7 @@ const eddy_system_vtable eddy__kind_sph_viscosity = {
 eddy_system_id eddy_add_sph_viscosity(eddy_world *w, const eddy_sph_viscosity_def *def)
 {
 	const char *sys = "sph_viscosity";
-	if (!eddy__add_args(w, def, sys))
-		return EDDY_NULL_SYSTEM;
-	if (!eddy__check_nonneg(w, sys, "viscosity", def->viscosity) ||
+	if (!eddy__add_args(w, def, sys) || !eddy__check_nonneg(w, sys, "viscosity", def->viscosity) ||
 	    !eddy__check_finite(w, sys, "viscosity", def->viscosity) ||
 	    !eddy__check_range(w, sys, "artificial", def->artificial, 0, 2))
 		return EDDY_NULL_SYSTEM;
