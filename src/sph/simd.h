@@ -30,6 +30,9 @@
  *                            sf8_load_quad2) first: cj lane k = qj - base[4
  *                            idx[k] + j], the particle's own quad in one
  *                            register instead of four broadcasts
+ *   sf8_load_quads(p, c0..c3)
+ *                            eight consecutive quads transposed: cj lane k =
+ *                            p[4 k + j]; sf8_store_quads(p, c0..c3) the inverse
  *   sf8_fold4(a, out)        out[l] = lane l + lane l + 4
  *   sf8_sum(a)               (f0 + f1) + (f2 + f3) of the fold
  *   sf8_pack(m, a, idx, out, out_idx)  see below
@@ -95,10 +98,10 @@ static inline bool simd_use_avx2(void)
 #define SIMD_NAMED_OPS_(X) X(add) X(sub) X(mul) X(div) X(max) X(min) X(and) X(or) X(xor) X(andnot)
 
 /* Each back-end defines, besides the operations above, simd_quad_pair_(base,
- * a, b) (the quad at base + 4 a in lanes 0-3, at base + 4 b in 4-7) and
- * simd_transpose_(v0..v3, c0..c3) (cj lane k = v(k mod 4) lane 4 (k / 4) + j:
- * two 4x4 transposes side by side, pure moves), on which the gathers of
- * quads are built once below. */
+ * a, b) (the quad at base + 4 a in lanes 0-3, at base + 4 b in 4-7), its
+ * store simd_store_quad_pair_(base, a, b, v), and simd_transpose_(v0..v3,
+ * c0..c3) (cj lane k = v(k mod 4) lane 4 (k / 4) + j: two 4x4 transposes side
+ * by side, pure moves), on which the quad operations are built once below. */
 
 /* ---- AVX2 ---------------------------------------------------------------- */
 #ifdef SIMD_AVX2
@@ -140,6 +143,11 @@ static inline sf8 simd_quad_pair_(const float *base, uint32_t a, uint32_t b)
 {
 	return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(base + 4 * (size_t)a)),
 	                            _mm_loadu_ps(base + 4 * (size_t)b), 1);
+}
+static inline void simd_store_quad_pair_(float *base, uint32_t a, uint32_t b, sf8 v)
+{
+	_mm_storeu_ps(base + 4 * (size_t)a, _mm256_castps256_ps128(v));
+	_mm_storeu_ps(base + 4 * (size_t)b, _mm256_extractf128_ps(v, 1));
 }
 static inline void simd_transpose_(sf8 v0, sf8 v1, sf8 v2, sf8 v3, sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
 {
@@ -191,6 +199,11 @@ static inline void sf8_fold4(sf8 a, float out[4]) { _mm_storeu_ps(out, _mm_add_p
 static inline sf8 simd_quad_pair_(const float *base, uint32_t a, uint32_t b)
 {
 	return simd_halves_(_mm_loadu_ps(base + 4 * (size_t)a), _mm_loadu_ps(base + 4 * (size_t)b));
+}
+static inline void simd_store_quad_pair_(float *base, uint32_t a, uint32_t b, sf8 v)
+{
+	_mm_storeu_ps(base + 4 * (size_t)a, v.lo);
+	_mm_storeu_ps(base + 4 * (size_t)b, v.hi);
 }
 static inline void simd_transpose_(sf8 v0, sf8 v1, sf8 v2, sf8 v3, sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
 {
@@ -289,6 +302,11 @@ static inline sf8 simd_quad_pair_(const float *base, uint32_t a, uint32_t b)
 	memcpy(r.l + 4, base + 4 * (size_t)b, 4 * sizeof(float));
 	return r;
 }
+static inline void simd_store_quad_pair_(float *base, uint32_t a, uint32_t b, sf8 v)
+{
+	memcpy(base + 4 * (size_t)a, v.l, 4 * sizeof(float));
+	memcpy(base + 4 * (size_t)b, v.l + 4, 4 * sizeof(float));
+}
 static inline void simd_transpose_(sf8 v0, sf8 v1, sf8 v2, sf8 v3, sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
 {
 	const sf8 v[4] = {v0, v1, v2, v3};
@@ -332,6 +350,23 @@ static inline void sf8_sub_gather_quads(sf8 q, const float *base, const uint32_t
 	                sf8_sub(q, simd_quad_pair_(base, idx[1], idx[5])),
 	                sf8_sub(q, simd_quad_pair_(base, idx[2], idx[6])),
 	                sf8_sub(q, simd_quad_pair_(base, idx[3], idx[7])), c0, c1, c2, c3);
+}
+
+static inline void sf8_load_quads(const float *p, sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
+{
+	simd_transpose_(simd_quad_pair_(p, 0, 4), simd_quad_pair_(p, 1, 5), simd_quad_pair_(p, 2, 6),
+	                simd_quad_pair_(p, 3, 7), c0, c1, c2, c3);
+}
+
+/* the transpose is its own inverse */
+static inline void sf8_store_quads(float *p, sf8 c0, sf8 c1, sf8 c2, sf8 c3)
+{
+	sf8 v0, v1, v2, v3;
+	simd_transpose_(c0, c1, c2, c3, &v0, &v1, &v2, &v3);
+	simd_store_quad_pair_(p, 0, 4, v0);
+	simd_store_quad_pair_(p, 1, 5, v1);
+	simd_store_quad_pair_(p, 2, 6, v2);
+	simd_store_quad_pair_(p, 3, 7, v3);
 }
 
 static inline float sf8_sum(sf8 a)
