@@ -1,36 +1,30 @@
 /* SPDX-License-Identifier: MIT */
 /* sph_density: neighbour search, density and equation of state.
  *
- * Reads: x y z. Writes: density pressure neighbors (and reorders the
- * particle table into grid-cell order, see neighbors.c, where the exact
- * neighbour lists are filtered each step from a Verlet list and the kernel
- * sums below are made on the way, in ascending neighbour order with four
- * partial sums). Shares with the later SPH systems (sph.h, sph_shared): the
- * lists, 1/rho, and (x y z 1/rho) quads per particle.
+ * Reads: x y z. Writes: density pressure neighbors, and reorders the
+ * particle table into grid-cell order (neighbors.c, which also makes the
+ * kernel sums below with the lists). Shares with the later SPH systems
+ * (sph_shared): the lists, 1/rho, and (x y z 1/rho) quads per particle.
  *   rho_i = m sum_j W_poly6(x_i - x_j) + sum_b V_b rho_b W_poly6(x_i - x_b)
  *   (j over fluid particles including i itself, b over boundary particles)
- * Boundary particles carry a pressure extrapolated from the fluid near them
- * with the hydrostatic correction (Adami, Hu & Adams 2012, eq. 27),
- *   p_b = max(0, sum_f (p_f + rho_f g . (x_b - x_f)) W_bf / sum_f W_bf),
- * and the density rho_b the EOS gives for it; computed after the fluid pass
- * and, with sph_pressure, iterated with the fluid density near the walls
- * within the step (see boundary_pressure: lagged by a step, the loop pumped
- * energy into the fluid), the last values also starting the next step's
- * sums. Frozen at rho0 (plain Akinci et al. 2012) the walls
- * would leave the fluid beside them less compressed than the fluid away from
- * them, their pressure short of hydrostatic, and the fluid would sink along
- * the walls in a steady circulation.
  *   linear EOS: p_i = k (rho_i - rho0)                      (Mueller 2003, eq. 12)
  *   Tait EOS:   p_i = (k rho0 / gamma) ((rho_i/rho0)^gamma - 1)
  *   p_i is clamped at 0: negative pressure pulls particles into clumps
  *   (tensile instability, docs/validation.md C.1).
+ * Boundary particles carry a pressure extrapolated from the fluid near them
+ * with the hydrostatic correction (Adami, Hu & Adams 2012, eq. 27),
+ *   p_b = max(0, sum_f (p_f + rho_f g . (x_b - x_f)) W_bf / sum_f W_bf),
+ * and the density rho_b the EOS gives for it (see WALL_PASSES_MAX). Frozen
+ * at rho0 (plain Akinci et al. 2012) the walls would leave the fluid beside
+ * them less compressed than the fluid away from them, their pressure short
+ * of hydrostatic, and the fluid would sink along the walls in a steady
+ * circulation.
  * The particle mass is m = rho0 / sum_lattice W_poly6, the sum over a simple
  * cubic lattice of the given spacing, so a block at rest starts at rho0
  * exactly instead of 1% above it at h = 2 spacings (C.8). The self term
  * keeps rho > 0 for a lone particle (C.6).
- * The acoustic time-step limit that the stiffness sets is sph_pressure's:
- * it is that force that carries sound at c = sqrt(k), and a scene solving
- * for the pressure (sph_dfsph) has none.
+ * The acoustic time-step limit is sph_pressure's: that force carries sound
+ * at c = sqrt(k), and a scene solving for the pressure (sph_dfsph) has none.
  * Source: Mueller, Charypar & Gross, "Particle-Based Fluid Simulation for
  * Interactive Applications", SCA 2003; Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012 (boundary term). */
@@ -41,7 +35,7 @@
 #include <string.h>
 
 typedef struct sph_density {
-	sph_shared sh; /* first: the later SPH systems read it through eddy__sph_find */
+	sph_shared sh;
 	eddy_sph_density_def def;
 } sph_density;
 
@@ -75,203 +69,201 @@ static float eos_density(const sph_density *sd, float p)
 	return sd->def.eos == EDDY_SPH_EOS_TAIT ? rho0 * powf(p / (k * rho0 / gamma) + 1.0f, 1.0f / gamma) : rho0 + p / k;
 }
 
-/* Adami et al. 2012, eq. 27, with the wall at rest: each boundary particle
- * takes the Shepard average of the fluid pressure near it plus the hydrostatic
- * difference, and the EOS density for that pressure. The wall densities enter
- * the fluid's density sums, which set the fluid pressure the walls copy: a
- * loop. Closed with the previous step's wall densities (as the neighbour
- * search summed them), it is a one-step-lagged positive feedback that pumps
- * energy into the fluid at the walls (a still column never comes to rest).
- * With the EOS pressure (a world with sph_pressure) the loop is therefore
- * iterated within the step: the walls are extrapolated, the density of every
- * fluid particle near them corrected by sum_b V_b (rho_b new - rho_b old)
- * W_poly6 (its pressure with it), and the walls extrapolated again:
- * WALL_PASSES_MAX times, or fewer once a pass changes no wall density by
- * more than WALL_TOL of what the first pass changed (the lag). Each pass
- * shrinks the error by the walls' share of a particle's kernel sum (about
- * 1/4 at a flat wall, at most about 1/2 at a corner): three passes leave
- * 1/64 to 1/8 of the lag. sph_dfsph solves for its own pressure, and
- * against that solve the iterated wall densities pump energy in instead (a
- * closed tank's collapse gains several times the energy it releases): there
- * the walls keep the one-step lag. */
+/* Adami et al. 2012, eq. 27, with the wall at rest. The wall densities
+ * enter the fluid's density sums, which set the fluid pressure the walls
+ * copy: a loop. Closed with the previous step's wall densities (as the
+ * neighbour search summed them), it is a one-step-lagged positive feedback
+ * that pumps energy into the fluid at the walls (a still column never comes
+ * to rest). With the EOS pressure (sph_pressure) the loop is therefore
+ * iterated within the step: the fluid near the walls takes their new
+ * densities, sum_b V_b (rho_b new - rho_b old) W_poly6, and the walls are
+ * extrapolated again, WALL_PASSES_MAX times or until no wall density changes
+ * by more than WALL_TOL of the first pass's change. Each pass shrinks the
+ * error by the walls' share of a kernel sum (1/4 at a flat wall, 1/2 at a
+ * corner). Against sph_dfsph's pressure solve the iterated walls pump
+ * energy in instead: there they keep the one-step lag. */
 #define WALL_PASSES_MAX 3
 #define WALL_TOL 1e-3f
 
 /* The wall-fluid pairs, boundary-major: the fluid's boundary lists turned
  * around (most wall particles have no fluid near them, and a grid walk for
  * each would cost more than the fluid), rows ascending. */
-typedef struct wall_pairs {
-	size_t n, nbound;
+typedef struct walls {
+	const sph_neighbors *nb;
+	const float *x, *y, *z;
+	float h2;
+	eddy_vec3 g;
 	uint32_t *start; /* nbound + 1: wall b's fluid rows are fluid[start[b] .. start[b + 1]) */
 	uint32_t *fluid;
-	/* for the iteration, else NULL: */
-	float *wgt, *grav;   /* per pair: (h^2 - r^2)^3 and g . (x_b - x_f), boundary-major */
-	uint32_t *fstart;    /* n + 1: row i's pairs in its list order are [fstart[i], fstart[i + 1]) */
-	uint32_t *pos;       /* per pair in that order, its place in the boundary-major order */
-	float *inv_sw, *old; /* per wall: 1 / sum of its weights; the density the fluid sums hold */
-} wall_pairs;
+	/* when iterating, else NULL: */
+	uint32_t *act, *rows; /* the walls with fluid near them, the fluid rows with walls near them */
+	long nact, nrows;
+	float *wgt, *grav; /* per pair: (h^2 - r^2)^3 and g . (x_b - x_f), boundary-major */
+	float *wf;         /* per pair: its weight again, in the fluid's list order */
+	uint32_t *fstart;  /* n + 1: row i's pairs in that order are [fstart[i], fstart[i + 1]) */
+	uint32_t *fpos;    /* per boundary-major pair, its place in that order */
+	float *old, *dv;   /* per wall: the density the fluid sums hold, V_b times its change */
+} walls;
 
-static bool wall_pairs_make(eddy_world *w, const sph_neighbors *nb, bool iterate, wall_pairs *wp)
+static void *scratch(eddy_world *w, size_t count, size_t size, bool *ok)
 {
+	void *p = eddy__arena_alloc(&w->arena, (count ? count : 1) * size);
+	*ok = *ok && p;
+	return p;
+}
+
+static bool walls_make(eddy_world *w, const sph_density *sd, bool iterate, walls *wl)
+{
+	const sph_neighbors *nb = &sd->sh.nb;
 	const size_t n = w->n, nbound = nb->nbound;
-	*wp = (wall_pairs){.n = n, .nbound = nbound};
-	wp->start = eddy__arena_alloc(&w->arena, (nbound + 1) * sizeof *wp->start);
-	uint32_t *at = eddy__arena_alloc(&w->arena, nbound * sizeof *at);
-	if (!wp->start || !at)
+	bool ok = true;
+	*wl = (walls){.nb = nb, .h2 = sd->sh.k.h2, .g = w->def.gravity};
+	wl->x = eddy__col(w, COL_X_);
+	wl->y = eddy__col(w, COL_Y_);
+	wl->z = eddy__col(w, COL_Z_);
+	wl->start = scratch(w, nbound + 1, sizeof *wl->start, &ok);
+	uint32_t *at = scratch(w, nbound, sizeof *at, &ok);
+	if (!ok)
 		return false;
-	memset(wp->start, 0, (nbound + 1) * sizeof *wp->start);
+	memset(wl->start, 0, (nbound + 1) * sizeof *wl->start);
 	for (size_t i = 0; i < n; ++i)
 		for (uint32_t q = 0; q < nb->bcount[i]; ++q)
-			wp->start[nb->bnbr[i * nb->bcap + q] + 1]++;
+			wl->start[nb->bnbr[i * nb->bcap + q] + 1]++;
 	for (size_t b = 0; b < nbound; ++b)
-		wp->start[b + 1] += wp->start[b];
-	const size_t pairs = wp->start[nbound] ? wp->start[nbound] : 1;
-	wp->fluid = eddy__arena_alloc(&w->arena, pairs * sizeof *wp->fluid);
-	if (!wp->fluid)
-		return false;
+		wl->start[b + 1] += wl->start[b];
+	const size_t pairs = wl->start[nbound];
+	wl->fluid = scratch(w, pairs, sizeof *wl->fluid, &ok);
 	if (iterate) {
-		wp->wgt = eddy__arena_alloc(&w->arena, pairs * sizeof *wp->wgt);
-		wp->grav = eddy__arena_alloc(&w->arena, pairs * sizeof *wp->grav);
-		wp->pos = eddy__arena_alloc(&w->arena, pairs * sizeof *wp->pos);
-		wp->inv_sw = eddy__arena_alloc(&w->arena, nbound * sizeof *wp->inv_sw);
-		wp->old = eddy__arena_alloc(&w->arena, nbound * sizeof *wp->old);
-		wp->fstart = eddy__arena_alloc(&w->arena, (n + 1) * sizeof *wp->fstart);
-		if (!wp->wgt || !wp->grav || !wp->pos || !wp->inv_sw || !wp->old || !wp->fstart)
-			return false;
-		wp->fstart[0] = 0;
-		for (size_t i = 0; i < n; ++i)
-			wp->fstart[i + 1] = wp->fstart[i] + nb->bcount[i];
+		wl->act = scratch(w, nbound, sizeof *wl->act, &ok);
+		wl->rows = scratch(w, n, sizeof *wl->rows, &ok);
+		wl->wgt = scratch(w, pairs, sizeof *wl->wgt, &ok);
+		wl->grav = scratch(w, pairs, sizeof *wl->grav, &ok);
+		wl->wf = scratch(w, pairs, sizeof *wl->wf, &ok);
+		wl->fpos = scratch(w, pairs, sizeof *wl->fpos, &ok);
+		wl->fstart = scratch(w, n + 1, sizeof *wl->fstart, &ok);
+		wl->old = scratch(w, nbound, sizeof *wl->old, &ok);
+		wl->dv = scratch(w, nbound, sizeof *wl->dv, &ok);
 	}
-	memcpy(at, wp->start, nbound * sizeof *at);
+	if (!ok)
+		return false;
+	memcpy(at, wl->start, nbound * sizeof *at);
+	uint32_t f = 0; /* the pair's place in the fluid's list order */
 	for (size_t i = 0; i < n; ++i) {
 		const uint32_t *bl = nb->bnbr + i * nb->bcap;
-		for (uint32_t q = 0; q < nb->bcount[i]; ++q) {
-			if (wp->pos)
-				wp->pos[wp->fstart[i] + q] = at[bl[q]];
-			wp->fluid[at[bl[q]]++] = (uint32_t)i;
+		if (iterate) {
+			wl->fstart[i] = f;
+			if (nb->bcount[i])
+				wl->rows[wl->nrows++] = (uint32_t)i;
 		}
+		for (uint32_t q = 0; q < nb->bcount[i]; ++q, ++f) {
+			if (iterate)
+				wl->fpos[at[bl[q]]] = f;
+			wl->fluid[at[bl[q]]++] = (uint32_t)i;
+		}
+	}
+	if (iterate) {
+		wl->fstart[n] = f;
+		for (size_t b = 0; b < nbound; ++b)
+			if (wl->start[b] < wl->start[b + 1])
+				wl->act[wl->nact++] = (uint32_t)b;
 	}
 	return true;
 }
 
-/* The first pass: every wall from this step's fluid (the pair weights kept
- * when iterating). */
-static void walls_extrapolate(eddy_world *w, sph_density *sd, const wall_pairs *wp, int threads)
+/* Wall b's pressure from the fluid near it and its EOS density. The first
+ * pass takes the pair weights from the positions (keeping them when
+ * iterating) and divides by their sum; the later ones read them and
+ * multiply by the sum's inverse (both pinned by the state hashes). */
+static void wall_extrapolate(sph_density *sd, const walls *wl, const float *rho, const float *p, uint32_t b, bool first)
 {
 	sph_neighbors *nb = &sd->sh.nb;
-	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
-	const float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
-	const float h2 = sd->sh.k.h2, gx = w->def.gravity.x, gy = w->def.gravity.y, gz = w->def.gravity.z;
-	const long lb = (long)wp->nbound;
-#pragma omp parallel for num_threads(threads) schedule(static)
-	for (long b = 0; b < lb; ++b) {
-		const float xb = nb->bx[b], yb = nb->by[b], zb = nb->bz[b];
-		float sw = 0, sp = 0;
-		for (uint32_t q = wp->start[b]; q < wp->start[b + 1]; ++q) {
-			const uint32_t j = wp->fluid[q];
-			const float rx = xb - x[j], ry = yb - y[j], rz = zb - z[j];
-			const float d = h2 - (rx * rx + ry * ry + rz * rz);
-			const float wgt = d * d * d, gr = gx * rx + gy * ry + gz * rz;
-			sw += wgt;
-			sp += wgt * (p[j] + rho[j] * gr);
-			if (wp->wgt) {
-				wp->wgt[q] = wgt;
-				wp->grav[q] = gr;
+	float sw = 0, sp = 0;
+	for (uint32_t q = wl->start[b]; q < wl->start[b + 1]; ++q) {
+		const uint32_t j = wl->fluid[q];
+		float wgt, gr;
+		if (first) {
+			const float rx = nb->bx[b] - wl->x[j], ry = nb->by[b] - wl->y[j], rz = nb->bz[b] - wl->z[j];
+			const float d = wl->h2 - (rx * rx + ry * ry + rz * rz);
+			wgt = d * d * d;
+			gr = wl->g.x * rx + wl->g.y * ry + wl->g.z * rz;
+			if (wl->wgt) {
+				wl->wgt[q] = wl->wf[wl->fpos[q]] = wgt;
+				wl->grav[q] = gr;
 			}
+		} else {
+			wgt = wl->wgt[q];
+			gr = wl->grav[q];
 		}
-		const float pb = sw > 0 ? fmaxf(sp / sw, 0.0f) : 0.0f;
-		if (wp->inv_sw) {
-			wp->inv_sw[b] = sw > 0 ? 1.0f / sw : 0.0f;
-			wp->old[b] = nb->bnd.rho[b]; /* the last step's: what the fluid sums hold */
-		}
-		nb->bp[b] = pb;
-		nb->bnd.rho[b] = eos_density(sd, pb);
+		sw += wgt;
+		sp += wgt * (p[j] + rho[j] * gr);
 	}
+	const float pb = sw > 0 ? fmaxf(first ? sp / sw : sp * (1.0f / sw), 0.0f) : 0.0f;
+	if (wl->old)
+		wl->old[b] = nb->bnd.rho[b];
+	nb->bp[b] = pb;
+	nb->bnd.rho[b] = eos_density(sd, pb);
 }
 
-/* The later passes, over the walls with fluid near them (act) and the
- * fluid rows with walls near them (rows), the latter with the pairs'
- * weights in the order of their lists (wf). */
-static eddy_status walls_iterate(eddy_world *w, sph_density *sd, const wall_pairs *wp, int threads)
+/* The passes after the first, over the walls with fluid near them and the
+ * fluid rows with walls near them. */
+static void walls_iterate(eddy_world *w, sph_density *sd, const walls *wl, int threads)
 {
-	sph_neighbors *nb = &sd->sh.nb;
+	sph_shared *sh = &sd->sh;
+	const sph_neighbors *nb = &sh->nb;
 	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
-	const float poly6 = sd->sh.k.poly6;
-	const size_t n = wp->n, nbound = wp->nbound;
-	uint32_t *act = eddy__arena_alloc(&w->arena, nbound * sizeof *act),
-			 *rows = eddy__arena_alloc(&w->arena, n * sizeof *rows);
-	float *wf = eddy__arena_alloc(&w->arena, (wp->start[nbound] ? wp->start[nbound] : 1) * sizeof *wf),
-		  *dv = eddy__arena_alloc(&w->arena, nbound * sizeof *dv);
-	if (!act || !rows || !wf || !dv)
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", nbound);
-	long na = 0, nr = 0;
-	for (size_t b = 0; b < nbound; ++b)
-		if (wp->start[b] < wp->start[b + 1])
-			act[na++] = (uint32_t)b;
-	for (size_t i = 0; i < n; ++i)
-		if (nb->bcount[i])
-			rows[nr++] = (uint32_t)i;
-	for (size_t q = 0; q < wp->fstart[n]; ++q)
-		wf[q] = wp->wgt[wp->pos[q]];
 	float first = 0; /* the largest change of the first pass: the lag */
 	for (int pass = 1; pass <= WALL_PASSES_MAX; ++pass) {
 		float change = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : change)
-		for (long a = 0; a < na; ++a) {
-			const uint32_t b = act[a];
-			const float d = nb->bnd.rho[b] - wp->old[b];
-			dv[b] = nb->bvol[b] * d;
+		for (long a = 0; a < wl->nact; ++a) {
+			const uint32_t b = wl->act[a];
+			const float d = nb->bnd.rho[b] - wl->old[b];
+			wl->dv[b] = nb->bvol[b] * d;
 			change = fabsf(d) > change ? fabsf(d) : change;
 		}
 		if (pass == 1)
 			first = change;
 		else if (!(change > WALL_TOL * first))
-			return EDDY_OK;
+			return;
 			/* the fluid near the walls takes the walls' new densities */
 #pragma omp parallel for num_threads(threads) schedule(static)
-		for (long r = 0; r < nr; ++r) {
-			const uint32_t i = rows[r];
+		for (long r = 0; r < wl->nrows; ++r) {
+			const uint32_t i = wl->rows[r];
 			const uint32_t *bl = nb->bnbr + (size_t)i * nb->bcap;
-			const float *wi = wf + wp->fstart[i];
+			const float *wi = wl->wf + wl->fstart[i];
 			float dr = 0;
 			for (uint32_t q = 0; q < nb->bcount[i]; ++q)
-				dr += dv[bl[q]] * wi[q];
+				dr += wl->dv[bl[q]] * wi[q];
 			if (dr == 0)
 				continue;
-			rho[i] = rho[i] + poly6 * dr;
-			sd->sh.inv_rho[i] = 1.0f / rho[i];
-			sd->sh.pq[4 * i + 3] = sd->sh.inv_rho[i];
+			rho[i] = rho[i] + sh->k.poly6 * dr;
+			sh->inv_rho[i] = 1.0f / rho[i];
+			sh->pq[4 * i + 3] = sh->inv_rho[i];
 			p[i] = eos_pressure(sd, rho[i]);
 		}
 		/* ... and the walls that fluid's pressure */
 #pragma omp parallel for num_threads(threads) schedule(static)
-		for (long a = 0; a < na; ++a) {
-			const uint32_t b = act[a];
-			float sp = 0;
-			for (uint32_t q = wp->start[b]; q < wp->start[b + 1]; ++q) {
-				const uint32_t j = wp->fluid[q];
-				sp += wp->wgt[q] * (p[j] + rho[j] * wp->grav[q]);
-			}
-			const float pb = fmaxf(sp * wp->inv_sw[b], 0.0f);
-			wp->old[b] = nb->bnd.rho[b];
-			nb->bp[b] = pb;
-			nb->bnd.rho[b] = eos_density(sd, pb);
-		}
+		for (long a = 0; a < wl->nact; ++a)
+			wall_extrapolate(sd, wl, rho, p, wl->act[a], false);
 	}
-	return EDDY_OK;
 }
 
 static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads)
 {
-	if (w->n == 0 || sd->sh.nb.nbound == 0)
+	const long nbound = (long)sd->sh.nb.nbound;
+	if (w->n == 0 || nbound == 0)
 		return EDDY_OK;
 	const bool iterate = eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL;
-	wall_pairs wp;
-	if (!wall_pairs_make(w, &sd->sh.nb, iterate, &wp))
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles",
-		                  sd->sh.nb.nbound);
-	walls_extrapolate(w, sd, &wp, threads);
-	return iterate ? walls_iterate(w, sd, &wp, threads) : EDDY_OK;
+	walls wl;
+	if (!walls_make(w, sd, iterate, &wl))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %ld boundary particles", nbound);
+	const float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (long b = 0; b < nbound; ++b)
+		wall_extrapolate(sd, &wl, rho, p, (uint32_t)b, true);
+	if (iterate)
+		walls_iterate(w, sd, &wl, threads);
+	return EDDY_OK;
 }
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
@@ -397,9 +389,7 @@ const eddy_sph_density_def *eddy__sph_density_def(const eddy_system *s)
 eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *def)
 {
 	const char *sys = "sph_density";
-	if (!eddy__add_args(w, def, sys))
-		return EDDY_NULL_SYSTEM;
-	if (!eddy__check_positive(w, sys, "spacing", def->spacing) ||
+	if (!eddy__add_args(w, def, sys) || !eddy__check_positive(w, sys, "spacing", def->spacing) ||
 	    !eddy__check_positive(w, sys, "radius", def->radius) ||
 	    !eddy__check_positive(w, sys, "rest_density", def->rest_density) ||
 	    !eddy__check_positive(w, sys, "stiffness", def->stiffness) ||
@@ -412,10 +402,8 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 		           sys, (double)def->radius, (double)def->spacing);
 		return EDDY_NULL_SYSTEM;
 	}
-	if (def->eos != EDDY_SPH_EOS_LINEAR && def->eos != EDDY_SPH_EOS_TAIT) {
-		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'eos' must be linear or tait", sys);
-		return EDDY_NULL_SYSTEM;
-	}
+	if (def->eos != EDDY_SPH_EOS_LINEAR && def->eos != EDDY_SPH_EOS_TAIT)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: 'eos' must be linear or tait", sys), EDDY_NULL_SYSTEM;
 	sph_density *sd = calloc(1, sizeof *sd);
 	if (!sd)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;

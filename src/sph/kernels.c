@@ -8,86 +8,48 @@
  * All are zero for r >= h and integrate to 1 over the ball of radius h. */
 #include "sph.h"
 
-double eddy_sph_kernel_value(eddy_sph_kernel k, double r, double h)
+/* W (order 0), dW/dr (1) or lap W (2) of kernel k. */
+static double kernel(eddy_sph_kernel k, int order, double r, double h)
 {
 	if (!(h > 0) || !(r >= 0) || r >= h)
 		return 0;
-	const double h3 = h * h * h, h6 = h3 * h3;
-	switch (k) {
-	case EDDY_SPH_POLY6: {
-		const double d = h * h - r * r;
+	const double h3 = h * h * h, h6 = h3 * h3, d = h * h - r * r;
+	switch (3 * (int)k + order) {
+	case 3 * EDDY_SPH_POLY6:
 		return 315.0 / (64.0 * M_PI * h6 * h3) * d * d * d;
-	}
-	case EDDY_SPH_SPIKY:
-		return 15.0 / (M_PI * h6) * (h - r) * (h - r) * (h - r);
-	case EDDY_SPH_VISCOSITY:
-		if (r == 0)
-			return INFINITY; /* integrable 1/r singularity */
-		return 15.0 / (2.0 * M_PI * h3) * (-r * r * r / (2 * h3) + r * r / (h * h) + h / (2 * r) - 1);
-	}
-	return 0;
-}
-
-double eddy_sph_kernel_derivative(eddy_sph_kernel k, double r, double h)
-{
-	if (!(h > 0) || !(r >= 0) || r >= h)
-		return 0;
-	const double h3 = h * h * h, h6 = h3 * h3;
-	switch (k) {
-	case EDDY_SPH_POLY6: {
-		const double d = h * h - r * r;
+	case 3 * EDDY_SPH_POLY6 + 1:
 		return -6.0 * 315.0 / (64.0 * M_PI * h6 * h3) * d * d * r;
-	}
-	case EDDY_SPH_SPIKY:
-		return -45.0 / (M_PI * h6) * (h - r) * (h - r);
-	case EDDY_SPH_VISCOSITY:
-		if (r == 0)
-			return -INFINITY;
-		return 15.0 / (2.0 * M_PI * h3) * (-3 * r * r / (2 * h3) + 2 * r / (h * h) - h / (2 * r * r));
-	}
-	return 0;
-}
-
-double eddy_sph_kernel_laplacian(eddy_sph_kernel k, double r, double h)
-{
-	if (!(h > 0) || !(r >= 0) || r >= h)
-		return 0;
-	const double h3 = h * h * h, h6 = h3 * h3;
-	switch (k) {
-	case EDDY_SPH_POLY6: {
-		const double d = h * h - r * r;
+	case 3 * EDDY_SPH_POLY6 + 2:
 		return -6.0 * 315.0 / (64.0 * M_PI * h6 * h3) * d * (3 * h * h - 7 * r * r);
-	}
-	case EDDY_SPH_SPIKY:
-		if (r == 0)
-			return -INFINITY;
-		return -90.0 / (M_PI * h6) * (h - r) * (h - 2 * r) / r; /* (1/r^2) d/dr (r^2 dW/dr) */
-	case EDDY_SPH_VISCOSITY:
+	case 3 * EDDY_SPH_SPIKY:
+		return 15.0 / (M_PI * h6) * (h - r) * (h - r) * (h - r);
+	case 3 * EDDY_SPH_SPIKY + 1:
+		return -45.0 / (M_PI * h6) * (h - r) * (h - r);
+	case 3 * EDDY_SPH_SPIKY + 2: /* (1/r^2) d/dr (r^2 dW/dr) */
+		return r == 0 ? -INFINITY : -90.0 / (M_PI * h6) * (h - r) * (h - 2 * r) / r;
+	case 3 * EDDY_SPH_VISCOSITY: /* an integrable 1/r singularity at 0 */
+		return r == 0 ? INFINITY
+		              : 15.0 / (2.0 * M_PI * h3) * (-r * r * r / (2 * h3) + r * r / (h * h) + h / (2 * r) - 1);
+	case 3 * EDDY_SPH_VISCOSITY + 1:
+		return r == 0 ? -INFINITY
+		              : 15.0 / (2.0 * M_PI * h3) * (-3 * r * r / (2 * h3) + 2 * r / (h * h) - h / (2 * r * r));
+	case 3 * EDDY_SPH_VISCOSITY + 2:
 		return 45.0 / (M_PI * h6) * (h - r);
 	}
 	return 0;
 }
 
-double eddy_sph_lattice_sum(eddy_sph_kernel k, double spacing, double h)
-{
-	if (!(spacing > 0) || !(h > 0))
-		return 0;
-	if (!(h / spacing <= 100))
-		return NAN; /* (2 h / spacing)^3 terms: a mistaken argument must not hang the host */
-	const int m = (int)ceil(h / spacing);
-	double sum = 0;
-	for (int i = -m; i <= m; ++i)
-		for (int j = -m; j <= m; ++j)
-			for (int l = -m; l <= m; ++l) {
-				const double r = spacing * sqrt((double)(i * i + j * j + l * l));
-				if (k == EDDY_SPH_VISCOSITY && r == 0)
-					continue; /* singular: its self term is not defined */
-				sum += eddy_sph_kernel_value(k, r, h);
-			}
-	return sum;
-}
+double eddy_sph_kernel_value(eddy_sph_kernel k, double r, double h) { return kernel(k, 0, r, h); }
 
-double eddy_sph_lattice_gradient_moment(eddy_sph_kernel k, double spacing, double h)
+double eddy_sph_kernel_derivative(eddy_sph_kernel k, double r, double h) { return kernel(k, 1, r, h); }
+
+double eddy_sph_kernel_laplacian(eddy_sph_kernel k, double r, double h) { return kernel(k, 2, r, h); }
+
+/* Over the simple cubic lattice of the given spacing: the sum of W, or with
+ * moment its gradient moment -sum V x^2 (dW/dr) / r (the point itself, which
+ * has no direction, left out; so is the viscosity kernel's singular self
+ * term from the sum). */
+static double lattice(eddy_sph_kernel k, double spacing, double h, bool moment)
 {
 	if (!(spacing > 0) || !(h > 0))
 		return 0;
@@ -100,8 +62,17 @@ double eddy_sph_lattice_gradient_moment(eddy_sph_kernel k, double spacing, doubl
 		for (int j = -m; j <= m; ++j)
 			for (int l = -m; l <= m; ++l) {
 				const double r = spacing * sqrt((double)(i * i + j * j + l * l)), xi = spacing * i;
-				if (r > 0) /* the point itself has no direction */
-					sum -= vol * xi * xi * eddy_sph_kernel_derivative(k, r, h) / r;
+				if (moment && r > 0)
+					sum -= vol * xi * xi * kernel(k, 1, r, h) / r;
+				else if (!moment && !(k == EDDY_SPH_VISCOSITY && r == 0))
+					sum += kernel(k, 0, r, h);
 			}
 	return sum;
+}
+
+double eddy_sph_lattice_sum(eddy_sph_kernel k, double spacing, double h) { return lattice(k, spacing, h, false); }
+
+double eddy_sph_lattice_gradient_moment(eddy_sph_kernel k, double spacing, double h)
+{
+	return lattice(k, spacing, h, true);
 }

@@ -18,21 +18,13 @@
  * (m / rho0) sum_j x_j^2 |dW/dr| / r_j = 0.947 at h = 2 spacings (the spiky
  * lattice moment 0.956, eddy_sph_lattice_gradient_moment, times the
  * calibrated m over rho0 spacing^3): uncorrected, the force of a linear
- * pressure field falls 5.3% short of grad p and a resting column carries that
- * much more pressure (the hydrostatic test saw +3.7%, now +0.6%). The same
- * correction sph_density makes for the mass.
+ * pressure field falls 5.3% short of grad p. The same correction
+ * sph_density makes for the mass.
  * Pairs closer than 1e-3 h take a fixed antisymmetric direction (sph.h): the
  * gradient has no direction at r = 0, and skipping them would leave
- * coincident particles stuck together (docs/validation.md C.6).
- * Positions and 1/rho come from sph_density's (x y z 1/rho) quads (sh->pq).
- * The fluid pairs go eight at a time, written once against simd.h (AVX2
- * when the CPU has it, else SSE or scalar doing the same per lane;
- * EDDY_NO_AVX2 forces the base path), a particle's last group masked, with
- * per-lane partial sums added in a fixed order: the same bits for any thread
- * count and any back-end. The particles go in blocks
- * of 64, the sums over the block's groups first, then a loop finishing its
- * particles (the walls, ax ay az). A group with a coincident pair ends the
- * vector sums of its particle; the finish loop takes the rest pair by pair.
+ * coincident particles stuck together (docs/validation.md C.6). A group with
+ * such a pair ends the vector sums of its particle; the finish loop takes the
+ * rest pair by pair, and the walls.
  * Time-step limits, the smaller reported: acoustic, dt <= h / (c + max|v|),
  * c = sqrt(k) from sph_density's stiffness (the world's CFL number is the
  * Courant factor lambda, 0.25-0.4); force, dt <= 0.625 sqrt(h / max|a|),
@@ -46,40 +38,33 @@
 
 #include <stdlib.h>
 
-/* The pass goes in blocks of particles: first the sums over the fluid pairs
- * of the block (pressure_pair_sums), then a loop that finishes its particles (the
- * walls, the rare coincident pairs, ax ay az). Finishing each particle right
- * after its groups put the adds of its totals behind every (often
- * mispredicted) exit of the loop over its groups; the particles of the second
- * loop are independent of each other (as in sph_dfsph). */
-#define PRESSURE_BLOCK 64
-#define PRESSURE_T 12 /* floats of the sums per particle: 4 lanes of x, y, z */
+#define PRESSURE_T 12 /* floats of the pair sums per particle: 4 lanes of x, y, z */
 
-/* What the pair sums read. They sum (p_i + p_j) / rho_j (h - r)^2 r_vec / r
- * over the pairs: the 1/r normalises r_vec. */
-typedef struct pair_args {
+/* What a block of the pass reads and writes. The pair sums are of
+ * (p_i + p_j) / rho_j (h - r)^2 r_vec / r: the 1/r normalises r_vec. */
+typedef struct pressure_args {
 	const sph_neighbors *nb;
-	const float *pk, *p; /* (x y z 1/rho) quads; pressures */
-	float h, eps2;
-} pair_args;
+	const float *pq, *p, *inv_rho; /* (x y z 1/rho) quads; pressures; 1/rho */
+	float *ax, *ay, *az;
+	float h, eps2, m, g; /* g: -spiky_grad grad_cal scale */
+	void (*pair_sums)(const struct pressure_args *a, long i0, long cnt, float *t, uint32_t *done);
+} pressure_args;
 
-/* The sums over the fluid pairs of particles i0 .. i0 + cnt - 1, eight
- * neighbours at a time, each particle's as four lanes per component (lane l
- * holding lanes l and l + 4 of the groups) at t + PRESSURE_T q, and in
- * done[q] how many of its pairs they cover: all, unless a group has a
- * coincident pair, from which on the finish loop takes the pairs one by one. */
-typedef void pair_sums_fn(const pair_args *a, long i0, long cnt, float *t, uint32_t *done);
-SIMD_DECLARE(void, pressure_pair_sums, (const pair_args *a, long i0, long cnt, float *t, uint32_t *done));
+/* The sums over the fluid pairs of particles i0 .. i0 + cnt - 1 (sph.h's
+ * block pass), each particle's as four lanes per component at t +
+ * PRESSURE_T q, and in done[q] how many of its pairs they cover: all, unless
+ * a group has a coincident pair. */
+SIMD_DECLARE(void, pressure_pair_sums, (const pressure_args *a, long i0, long cnt, float *t, uint32_t *done));
 
 /* One group (neighbours l[0..7]; with masked, only the first left count);
  * false, summing nothing, if a pair is coincident (r^2 <= eps2: no
  * direction to divide by). Whole groups (masked false) need no mask: the
  * compiler drops it where the argument is constant. */
-static inline bool group(const pair_args *a, const uint32_t *l, bool masked, uint32_t left, sf8 xi, sf8 yi, sf8 zi,
+static inline bool group(const pressure_args *a, const uint32_t *l, bool masked, uint32_t left, sf8 xi, sf8 yi, sf8 zi,
                          sf8 p_i, sf8 *sx, sf8 *sy, sf8 *sz)
 {
 	sf8 px, py, pz, ir;
-	sf8_gather_quads(a->pk, l, &px, &py, &pz, &ir);
+	sf8_gather_quads(a->pq, l, &px, &py, &pz, &ir);
 	const sf8 rx = sf8_sub(xi, px), ry = sf8_sub(yi, py), rz = sf8_sub(zi, pz);
 	const sf8 r2 = sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz));
 	if (sf8_mask_bits(sf8_gt(r2, sf8_set1(a->eps2))) != 255)
@@ -95,13 +80,13 @@ static inline bool group(const pair_args *a, const uint32_t *l, bool masked, uin
 	return true;
 }
 
-void SIMD_NAME(pressure_pair_sums)(const pair_args *a, long i0, long cnt, float *t, uint32_t *done)
+void SIMD_NAME(pressure_pair_sums)(const pressure_args *a, long i0, long cnt, float *t, uint32_t *done)
 {
 	const sph_neighbors *nb = a->nb;
 	for (long b = 0; b < cnt; ++b) {
 		const long i = i0 + b;
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
-		const float *pi = a->pk + 4 * i;
+		const float *pi = a->pq + 4 * i;
 		const sf8 xi = sf8_set1(pi[0]), yi = sf8_set1(pi[1]), zi = sf8_set1(pi[2]), p_i = sf8_set1(a->p[i]);
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
 		uint32_t q = 0;
@@ -123,13 +108,8 @@ void SIMD_NAME(pressure_pair_sums)(const pair_args *a, long i0, long cnt, float 
 }
 
 #ifndef EDDY_SIMD_VARIANT
-typedef struct sph_pressure {
-	eddy_sph_pressure_def def;
-} sph_pressure;
-
 static const int pressure_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_DENSITY, COL_PRESSURE, -1};
 static const int pressure_writes[] = {COL_AX, COL_AY, COL_AZ, -1};
-static const int no_hint_writes[] = {-1};
 
 eddy_sph_pressure_def eddy_default_sph_pressure_def(void)
 {
@@ -138,31 +118,27 @@ eddy_sph_pressure_def eddy_default_sph_pressure_def(void)
 	return d;
 }
 
-/* The finish loop of a block: the pairs the sums left (coincident ones, one
+/* A block: the pair sums, then the pairs they left (coincident ones, one
  * by one), the walls, and ax ay az. */
-typedef struct finish_args {
-	const sph_neighbors *nb;
-	const float *pk, *p, *inv_rho;
-	float *ax, *ay, *az;
-	float h, eps2, m, g; /* g: -spiky_grad grad_cal scale */
-} finish_args;
-
-static void finish(const finish_args *fa, long i0, long cnt, const float *t, const uint32_t *done)
+static void pressure_block(const void *arg, long i0, long cnt)
 {
 	/* a copy the stores below cannot alias: the constants stay in registers */
-	const finish_args a = *fa;
+	const pressure_args a = *(const pressure_args *)arg;
 	const sph_neighbors *nb = a.nb;
+	float t[SPH_BLOCK * PRESSURE_T];
+	uint32_t done[SPH_BLOCK];
+	a.pair_sums(&a, i0, cnt, t, done);
 	for (long b = 0; b < cnt; ++b) {
 		const long i = i0 + b;
 		const float *tb = t + PRESSURE_T * b;
-		const float xi = a.pk[4 * i], yi = a.pk[4 * i + 1], zi = a.pk[4 * i + 2];
+		const float xi = a.pq[4 * i], yi = a.pq[4 * i + 1], zi = a.pq[4 * i + 2];
 		/* rho >= m W(0) > 0 (the self term), so 1/rho is finite */
 		const float iri = a.inv_rho[i], pi_ = a.p[i];
 		float fx = sph_sum4(tb), fy = sph_sum4(tb + 4), fz = sph_sum4(tb + 8);
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
 		for (uint32_t q = done[b], cnt_i = nb->count[i]; q < cnt_i; ++q) {
 			const uint32_t j = list[q];
-			float rx = xi - a.pk[4 * (size_t)j], ry = yi - a.pk[4 * (size_t)j + 1], rz = zi - a.pk[4 * (size_t)j + 2];
+			float rx = xi - a.pq[4 * (size_t)j], ry = yi - a.pq[4 * (size_t)j + 1], rz = zi - a.pq[4 * (size_t)j + 2];
 			const float r2 = rx * rx + ry * ry + rz * rz;
 			float r;
 			if (r2 > a.eps2) {
@@ -183,11 +159,10 @@ static void finish(const finish_args *fa, long i0, long cnt, const float *t, con
 			fz += c * rz;
 		}
 		const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
-		const uint32_t bcnt = nb->bcount[i];
 		float bx = 0, by = 0, bz = 0;
-		for (uint32_t qb = 0; qb < bcnt; ++qb) {
+		for (uint32_t qb = 0; qb < nb->bcount[i]; ++qb) {
 			const uint32_t bj = blist[qb];
-			float rx = xi - nb->bx[bj], ry = yi - nb->by[bj], rz = zi - nb->bz[bj];
+			const float rx = xi - nb->bx[bj], ry = yi - nb->by[bj], rz = zi - nb->bz[bj];
 			const float r2 = rx * rx + ry * ry + rz * rz;
 			if (!(r2 > a.eps2))
 				continue; /* on the wall surface: the collider handles it */
@@ -206,45 +181,23 @@ static void finish(const finish_args *fa, long i0, long cnt, const float *t, con
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
-	const sph_pressure *sp = s->data;
-	sph_shared *sh = eddy__sph_find(w, s);
-	if (!sh)
-		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)",
-		                  s->label);
-	const sph_neighbors *nb = &sh->nb;
+	const eddy_sph_pressure_def *def = s->data;
+	const sph_shared *sh = eddy__sph_find(w, s); /* never NULL: the pipeline checks .requires */
 	const sph_kernel_consts kc = sh->k;
-	const float eps2 = 1e-6f * kc.h2;
-	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
-	/* each neighbour's position and 1/rho as one 16-byte quad (sph_density
-	 * made them): a group of neighbours then costs a load each and a
-	 * transpose instead of four scattered loads each */
-	const pair_args pa = {nb, sh->pq, eddy__col(w, COL_PRESSURE), kc.h, eps2};
 	/* -grad W = +45/(pi h^6) (h-r)^2 r_hat, so the signs of the sums are already "away" */
-	const finish_args fa = {nb,
-	                        sh->pq,
-	                        pa.p,
-	                        sh->inv_rho,
-	                        eddy__col(w, COL_AX),
-	                        eddy__col(w, COL_AY),
-	                        eddy__col(w, COL_AZ),
-	                        kc.h,
-	                        eps2,
-	                        sh->mass,
-	                        -kc.spiky_grad * sh->grad_cal * sp->def.scale};
-	pair_sums_fn *sums = SIMD_PICK(pressure_pair_sums);
-	const int threads = ctx->threads;
-	/* the threads take equal shares in order; a particle's result does not
-	 * depend on the blocks, so it is the same for any thread count */
-#pragma omp parallel for num_threads(threads) schedule(static)
-	for (int th = 0; th < threads; ++th) {
-		float t[PRESSURE_BLOCK * PRESSURE_T];
-		uint32_t done[PRESSURE_BLOCK];
-		for (long i0 = n * th / threads, hi = n * (th + 1) / threads; i0 < hi; i0 += PRESSURE_BLOCK) {
-			const long cnt = hi - i0 < PRESSURE_BLOCK ? hi - i0 : PRESSURE_BLOCK;
-			sums(&pa, i0, cnt, t, done);
-			finish(&fa, i0, cnt, t, done);
-		}
-	}
+	const pressure_args a = {.nb = &sh->nb,
+	                         .pq = sh->pq,
+	                         .p = eddy__col(w, COL_PRESSURE),
+	                         .inv_rho = sh->inv_rho,
+	                         .ax = eddy__col(w, COL_AX),
+	                         .ay = eddy__col(w, COL_AY),
+	                         .az = eddy__col(w, COL_AZ),
+	                         .h = kc.h,
+	                         .eps2 = 1e-6f * kc.h2,
+	                         .m = sh->mass,
+	                         .g = -kc.spiky_grad * sh->grad_cal * def->scale,
+	                         .pair_sums = SIMD_PICK(pressure_pair_sums)};
+	sph_block_pass(sph_rows(w, sh), ctx->threads, pressure_block, &a);
 	return EDDY_OK;
 }
 
@@ -265,8 +218,6 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
 	const sph_shared *sh = eddy__sph_find(w, s);
 	*reason = "acoustic";
-	if (!sh)
-		return INFINITY;
 	const double acoustic = sh->h / (sh->c + max_norm(w, COL_VX, COL_VY, COL_VZ)),
 				 a = max_norm(w, COL_AX, COL_AY, COL_AZ);
 	const double force = a > 0 ? 0.625 * sqrt(sh->h / a) : INFINITY;
@@ -275,26 +226,24 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	return force < acoustic ? force : acoustic;
 }
 
+/* ax ay az are every force's: no default_writes, so order hints for them
+ * name gravity alone */
 const eddy_system_vtable eddy__kind_sph_pressure = {
 	.name = "sph_pressure",
 	.provides = EDDY_CAP_SPH_EOS_FORCE,
 	.requires = EDDY_CAP_SPH_NEIGHBORS,
 	.step = step,
 	.limit = limit,
-	/* ax ay az are every force's: order hints for them name gravity alone */
-	.default_writes = no_hint_writes,
 };
 
 eddy_system_id eddy_add_sph_pressure(eddy_world *w, const eddy_sph_pressure_def *def)
 {
 	const char *sys = "sph_pressure";
-	if (!eddy__add_args(w, def, sys))
+	if (!eddy__add_args(w, def, sys) || !eddy__check_positive(w, sys, "scale", def->scale))
 		return EDDY_NULL_SYSTEM;
-	if (!eddy__check_positive(w, sys, "scale", def->scale))
-		return EDDY_NULL_SYSTEM;
-	sph_pressure *sp = malloc(sizeof *sp);
-	if (sp)
-		sp->def = *def;
-	return eddy__add_system(w, &eddy__kind_sph_pressure, sp, pressure_reads, pressure_writes);
+	eddy_sph_pressure_def *copy = malloc(sizeof *copy);
+	if (copy)
+		*copy = *def;
+	return eddy__add_system(w, &eddy__kind_sph_pressure, copy, pressure_reads, pressure_writes);
 }
 #endif

@@ -13,32 +13,40 @@
  * SSE/AVX compares give. Sums over lanes end in one fixed order (sf8_fold4,
  * sf8_sum) for the same reason.
  *
+ * The operations: sf8_zero, set1(a), load(p) and store(p, a) (unaligned);
+ * add sub mul div sqrt, max min (as maxps/minps: b when unordered); the
+ * ordered compares lt gt le ge; and or xor, andnot(m, a) = ~m & a,
+ * select(m, a, b) (a where m, else b); and these:
+ *   sf8_lanes_below(n)       mask of the lanes k < n (n may be >= 8)
+ *   sf8_quad_lanes_below(n)  mask of the lanes k with k mod 4 < n
+ *   sf8_mask_bits(m)         bit k = lane k's sign bit (movemask)
+ *   sf8_gather(base, idx)    lane k = base[idx[k]]
+ *   sf8_load_quad2(p)        the quad p[0..3] in lanes 0-3 and again in 4-7
+ *   sf8_gather_quads(base, idx, c0..c3)
+ *                            the quads at base + 4 idx[k] (such as sph_shared's
+ *                            pq) transposed: cj lane k = base[4 idx[k] + j]
+ *   sf8_sub_gather_quads(q, base, idx, c0..c3)
+ *                            the same, each quad subtracted from q (made by
+ *                            sf8_load_quad2) first: cj lane k = qj - base[4
+ *                            idx[k] + j], the particle's own quad in one
+ *                            register instead of four broadcasts
+ *   sf8_load_quads(p, c0..c3)
+ *                            eight consecutive quads transposed: cj lane k =
+ *                            p[4 k + j]; sf8_store_quads(p, c0..c3) the inverse
+ *   sf8_fold4(a, out)        out[l] = lane l + lane l + 4
+ *   sf8_sum(a)               (f0 + f1) + (f2 + f3) of the fold
+ *   sf8_pack(m, a, idx, out, out_idx)  see below
+ *
  * One pass, several back-ends: a file in src/sph/ that includes this header
  * is compiled normally (SSE, or scalar in a SIMD=scalar build) and, on x86
- * unless SIMD=scalar, once more with -mavx2 -mbmi2 -DEDDY_SIMD_VARIANT (the
- * Makefile finds such files by grepping for the include). The variant
- * compile sees only the kernels: the file keeps its system glue under
- * #ifndef EDDY_SIMD_VARIANT. Kernels the glue calls are named SIMD_NAME(x)
- * (x_avx2 in the variant, x_base otherwise), declared with
- * SIMD_DECLARE(ret, x, (params)) and picked at run time with SIMD_PICK(x).
- * Both are extern (hidden, as the whole library), so x carries the file's
- * prefix (visc_pair_sums, pressure_pair_sums). The
- * Makefile defines EDDY_SIMD_HAVE_AVX2 for the normal compile when it builds
- * the variant; without it (another build, the fuzzer's single compile)
- * SIMD_PICK always gives x_base.
- *
- * Beyond the shared contract (simd_spec.md) this file adds:
- *   sf8_load_quad2(p)      a quad p[0..3] in lanes 0-3 and again in 4-7;
- *   sf8_gather(base, idx)  lane k = base[idx[k]];
- *   sf8_quad_lanes_below(n) mask of the lanes k with k mod 4 < n (a quad's
- *                          first n floats, with sf8_load_quad2);
- *   sf8_sub_gather_quads(q, base, idx, c0..c3)
- *                          as sf8_gather_quads, each quad subtracted from
- *                          q's lanes 0-3 first: c0 lane k = q0 - base[4 idx[k]],
- *                          c1 lane k = q1 - base[4 idx[k] + 1], ... The same
- *                          per-lane results as gathering and then
- *                          subtracting broadcasts, but the particle's own
- *                          four values take one register, not four. */
+ * unless SIMD=scalar, once more with -mavx2 -mbmi2 -DEDDY_SIMD_VARIANT
+ * (the Makefile finds such files by the include), which compiles only its
+ * kernels (the system glue is under #ifndef EDDY_SIMD_VARIANT). A kernel the
+ * glue calls is named SIMD_NAME(x) (x_avx2 in the variant, x_base
+ * otherwise; extern, so x carries the file's prefix), declared with
+ * SIMD_DECLARE(ret, x, (params)) and picked at run time with SIMD_PICK(x),
+ * which gives x_base unless the Makefile built the variant
+ * (EDDY_SIMD_HAVE_AVX2). */
 #ifndef EDDY_SIMD_H
 #define EDDY_SIMD_H
 
@@ -82,34 +90,35 @@ static inline bool simd_use_avx2(void)
 }
 #define SIMD_PICK(x) (simd_use_avx2() ? x##_avx2 : x##_base)
 #else
-static inline bool simd_use_avx2(void) { return false; }
 #define SIMD_PICK(x) x##_base
 #endif
+
+/* The two-operand operations whose intrinsics are named _mm_<op>_ps and
+ * _mm256_<op>_ps. */
+#define SIMD_NAMED_OPS_(X) X(add) X(sub) X(mul) X(div) X(max) X(min) X(and) X(or) X(xor) X(andnot)
+
+/* Each back-end defines, besides the operations above, simd_quad_pair_(base,
+ * a, b) (the quad at base + 4 a in lanes 0-3, at base + 4 b in 4-7), its
+ * store simd_store_quad_pair_(base, a, b, v), and simd_transpose_(v0..v3,
+ * c0..c3) (cj lane k = v(k mod 4) lane 4 (k / 4) + j: two 4x4 transposes side
+ * by side, pure moves), on which the quad operations are built once below. */
 
 /* ---- AVX2 ---------------------------------------------------------------- */
 #ifdef SIMD_AVX2
 
 typedef __m256 sf8;
 
-static inline sf8 sf8_zero(void) { return _mm256_setzero_ps(); }
-static inline sf8 sf8_set1(float a) { return _mm256_set1_ps(a); }
-static inline sf8 sf8_load(const float *p) { return _mm256_loadu_ps(p); }
-static inline void sf8_store(float *p, sf8 a) { _mm256_storeu_ps(p, a); }
-static inline sf8 sf8_add(sf8 a, sf8 b) { return _mm256_add_ps(a, b); }
-static inline sf8 sf8_sub(sf8 a, sf8 b) { return _mm256_sub_ps(a, b); }
-static inline sf8 sf8_mul(sf8 a, sf8 b) { return _mm256_mul_ps(a, b); }
-static inline sf8 sf8_div(sf8 a, sf8 b) { return _mm256_div_ps(a, b); }
-static inline sf8 sf8_max(sf8 a, sf8 b) { return _mm256_max_ps(a, b); }
-static inline sf8 sf8_min(sf8 a, sf8 b) { return _mm256_min_ps(a, b); }
-static inline sf8 sf8_sqrt(sf8 a) { return _mm256_sqrt_ps(a); }
+#define SIMD_AVX2_OP_(op) \
+	static inline sf8 sf8_##op(sf8 a, sf8 b) { return _mm256_##op##_ps(a, b); }
+SIMD_NAMED_OPS_(SIMD_AVX2_OP_)
 static inline sf8 sf8_lt(sf8 a, sf8 b) { return _mm256_cmp_ps(a, b, _CMP_LT_OQ); }
 static inline sf8 sf8_gt(sf8 a, sf8 b) { return _mm256_cmp_ps(a, b, _CMP_GT_OQ); }
 static inline sf8 sf8_le(sf8 a, sf8 b) { return _mm256_cmp_ps(a, b, _CMP_LE_OQ); }
 static inline sf8 sf8_ge(sf8 a, sf8 b) { return _mm256_cmp_ps(a, b, _CMP_GE_OQ); }
-static inline sf8 sf8_and(sf8 a, sf8 b) { return _mm256_and_ps(a, b); }
-static inline sf8 sf8_or(sf8 a, sf8 b) { return _mm256_or_ps(a, b); }
-static inline sf8 sf8_xor(sf8 a, sf8 b) { return _mm256_xor_ps(a, b); }
-static inline sf8 sf8_andnot(sf8 m, sf8 a) { return _mm256_andnot_ps(m, a); }
+static inline sf8 sf8_set1(float a) { return _mm256_set1_ps(a); }
+static inline sf8 sf8_load(const float *p) { return _mm256_loadu_ps(p); }
+static inline void sf8_store(float *p, sf8 a) { _mm256_storeu_ps(p, a); }
+static inline sf8 sf8_sqrt(sf8 a) { return _mm256_sqrt_ps(a); }
 static inline sf8 sf8_select(sf8 m, sf8 a, sf8 b) { return _mm256_blendv_ps(b, a, m); }
 /* unsigned n > k as a signed compare of both with the sign bit flipped (no
  * clamp, no branch) */
@@ -119,18 +128,28 @@ static inline sf8 sf8_lanes_below(uint32_t n)
 	return _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_xor_si256(_mm256_set1_epi32((int32_t)n), f),
 	                                              _mm256_xor_si256(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), f)));
 }
-static inline sf8 sf8_quad_lanes_below(int n)
-{
-	const __m128i c = _mm_set1_epi32(n);
-	const __m128 m = _mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_setr_epi32(0, 1, 2, 3)));
-	return _mm256_set_m128(m, m);
-}
 static inline int sf8_mask_bits(sf8 m) { return _mm256_movemask_ps(m); }
-
-/* Lanes 0-3 from the quads of idx[0..3], 4-7 from idx[4..7]: two 4x4
- * transposes side by side (pure moves, so the lanes hold the same bits as
- * the SSE back-end's). */
-static inline void simd_transpose8_(__m256 v0, __m256 v1, __m256 v2, __m256 v3, sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
+/* eight scalar loads: vgatherdps is slower on the CPUs at hand */
+static inline sf8 sf8_gather(const float *base, const uint32_t idx[8])
+{
+	return _mm256_setr_ps(base[idx[0]], base[idx[1]], base[idx[2]], base[idx[3]], base[idx[4]], base[idx[5]],
+	                      base[idx[6]], base[idx[7]]);
+}
+static inline void sf8_fold4(sf8 a, float out[4])
+{
+	_mm_storeu_ps(out, _mm_add_ps(_mm256_castps256_ps128(a), _mm256_extractf128_ps(a, 1)));
+}
+static inline sf8 simd_quad_pair_(const float *base, uint32_t a, uint32_t b)
+{
+	return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(base + 4 * (size_t)a)),
+	                            _mm_loadu_ps(base + 4 * (size_t)b), 1);
+}
+static inline void simd_store_quad_pair_(float *base, uint32_t a, uint32_t b, sf8 v)
+{
+	_mm_storeu_ps(base + 4 * (size_t)a, _mm256_castps256_ps128(v));
+	_mm_storeu_ps(base + 4 * (size_t)b, _mm256_extractf128_ps(v, 1));
+}
+static inline void simd_transpose_(sf8 v0, sf8 v1, sf8 v2, sf8 v3, sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
 {
 	const __m256 t0 = _mm256_unpacklo_ps(v0, v1), t1 = _mm256_unpacklo_ps(v2, v3), t2 = _mm256_unpackhi_ps(v0, v1),
 				 t3 = _mm256_unpackhi_ps(v2, v3);
@@ -138,39 +157,6 @@ static inline void simd_transpose8_(__m256 v0, __m256 v1, __m256 v2, __m256 v3, 
 	*c1 = _mm256_shuffle_ps(t0, t1, _MM_SHUFFLE(3, 2, 3, 2));
 	*c2 = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(1, 0, 1, 0));
 	*c3 = _mm256_shuffle_ps(t2, t3, _MM_SHUFFLE(3, 2, 3, 2));
-}
-static inline __m256 simd_quad_pair_(const float *base, uint32_t a, uint32_t b)
-{
-	return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(base + 4 * (size_t)a)),
-	                            _mm_loadu_ps(base + 4 * (size_t)b), 1);
-}
-static inline void sf8_gather_quads(const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
-{
-	simd_transpose8_(simd_quad_pair_(base, idx[0], idx[4]), simd_quad_pair_(base, idx[1], idx[5]),
-	                 simd_quad_pair_(base, idx[2], idx[6]), simd_quad_pair_(base, idx[3], idx[7]), c0, c1, c2, c3);
-}
-static inline sf8 sf8_load_quad2(const float *p)
-{
-	const __m128 q = _mm_loadu_ps(p);
-	return _mm256_set_m128(q, q);
-}
-/* eight scalar loads: vgatherdps is slower on the CPUs at hand */
-static inline sf8 sf8_gather(const float *base, const uint32_t idx[8])
-{
-	return _mm256_setr_ps(base[idx[0]], base[idx[1]], base[idx[2]], base[idx[3]], base[idx[4]], base[idx[5]],
-	                      base[idx[6]], base[idx[7]]);
-}
-static inline void sf8_sub_gather_quads(sf8 qq, const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2,
-                                        sf8 *c3)
-{
-	simd_transpose8_(_mm256_sub_ps(qq, simd_quad_pair_(base, idx[0], idx[4])),
-	                 _mm256_sub_ps(qq, simd_quad_pair_(base, idx[1], idx[5])),
-	                 _mm256_sub_ps(qq, simd_quad_pair_(base, idx[2], idx[6])),
-	                 _mm256_sub_ps(qq, simd_quad_pair_(base, idx[3], idx[7])), c0, c1, c2, c3);
-}
-static inline void sf8_fold4(sf8 a, float out[4])
-{
-	_mm_storeu_ps(out, _mm_add_ps(_mm256_castps256_ps128(a), _mm256_extractf128_ps(a, 1)));
 }
 
 /* ---- SSE: two halves ------------------------------------------------------ */
@@ -180,141 +166,89 @@ typedef struct sf8 {
 	__m128 lo, hi;
 } sf8;
 
-static inline sf8 simd_pair_(__m128 lo, __m128 hi)
-{
-	sf8 r;
-	r.lo = lo;
-	r.hi = hi;
-	return r;
-}
-#define SIMD_SSE_OP2_(name, op) \
-	static inline sf8 name(sf8 a, sf8 b) { return simd_pair_(op(a.lo, b.lo), op(a.hi, b.hi)); }
-
-static inline sf8 sf8_zero(void) { return simd_pair_(_mm_setzero_ps(), _mm_setzero_ps()); }
-static inline sf8 sf8_set1(float a) { return simd_pair_(_mm_set1_ps(a), _mm_set1_ps(a)); }
-static inline sf8 sf8_load(const float *p) { return simd_pair_(_mm_loadu_ps(p), _mm_loadu_ps(p + 4)); }
+static inline sf8 simd_halves_(__m128 lo, __m128 hi) { return (sf8){lo, hi}; }
+#define SIMD_SSE_OP_(op, stem) \
+	static inline sf8 sf8_##op(sf8 a, sf8 b) { return simd_halves_(stem(a.lo, b.lo), stem(a.hi, b.hi)); }
+#define SIMD_SSE_NAMED_OP_(op) SIMD_SSE_OP_(op, _mm_##op##_ps)
+SIMD_NAMED_OPS_(SIMD_SSE_NAMED_OP_)
+SIMD_SSE_OP_(lt, _mm_cmplt_ps)
+SIMD_SSE_OP_(gt, _mm_cmpgt_ps)
+SIMD_SSE_OP_(le, _mm_cmple_ps)
+SIMD_SSE_OP_(ge, _mm_cmpge_ps)
+static inline sf8 sf8_set1(float a) { return simd_halves_(_mm_set1_ps(a), _mm_set1_ps(a)); }
+static inline sf8 sf8_load(const float *p) { return simd_halves_(_mm_loadu_ps(p), _mm_loadu_ps(p + 4)); }
 static inline void sf8_store(float *p, sf8 a)
 {
 	_mm_storeu_ps(p, a.lo);
 	_mm_storeu_ps(p + 4, a.hi);
 }
-SIMD_SSE_OP2_(sf8_add, _mm_add_ps)
-SIMD_SSE_OP2_(sf8_sub, _mm_sub_ps)
-SIMD_SSE_OP2_(sf8_mul, _mm_mul_ps)
-SIMD_SSE_OP2_(sf8_div, _mm_div_ps)
-SIMD_SSE_OP2_(sf8_max, _mm_max_ps)
-SIMD_SSE_OP2_(sf8_min, _mm_min_ps)
-SIMD_SSE_OP2_(sf8_lt, _mm_cmplt_ps)
-SIMD_SSE_OP2_(sf8_gt, _mm_cmpgt_ps)
-SIMD_SSE_OP2_(sf8_le, _mm_cmple_ps)
-SIMD_SSE_OP2_(sf8_ge, _mm_cmpge_ps)
-SIMD_SSE_OP2_(sf8_and, _mm_and_ps)
-SIMD_SSE_OP2_(sf8_or, _mm_or_ps)
-SIMD_SSE_OP2_(sf8_xor, _mm_xor_ps)
-SIMD_SSE_OP2_(sf8_andnot, _mm_andnot_ps)
-static inline sf8 sf8_sqrt(sf8 a) { return simd_pair_(_mm_sqrt_ps(a.lo), _mm_sqrt_ps(a.hi)); }
-static inline sf8 sf8_select(sf8 m, sf8 a, sf8 b)
-{
-	return simd_pair_(_mm_or_ps(_mm_and_ps(m.lo, a.lo), _mm_andnot_ps(m.lo, b.lo)),
-	                  _mm_or_ps(_mm_and_ps(m.hi, a.hi), _mm_andnot_ps(m.hi, b.hi)));
-}
+static inline sf8 sf8_sqrt(sf8 a) { return simd_halves_(_mm_sqrt_ps(a.lo), _mm_sqrt_ps(a.hi)); }
 static inline sf8 sf8_lanes_below(uint32_t n)
 {
 	const __m128i f = _mm_set1_epi32(INT32_MIN), c = _mm_xor_si128(_mm_set1_epi32((int32_t)n), f);
-	return simd_pair_(_mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_xor_si128(_mm_setr_epi32(0, 1, 2, 3), f))),
-	                  _mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_xor_si128(_mm_setr_epi32(4, 5, 6, 7), f))));
-}
-static inline sf8 sf8_quad_lanes_below(int n)
-{
-	const __m128 m = _mm_castsi128_ps(_mm_cmpgt_epi32(_mm_set1_epi32(n), _mm_setr_epi32(0, 1, 2, 3)));
-	return simd_pair_(m, m);
+	return simd_halves_(_mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_xor_si128(_mm_setr_epi32(0, 1, 2, 3), f))),
+	                    _mm_castsi128_ps(_mm_cmpgt_epi32(c, _mm_xor_si128(_mm_setr_epi32(4, 5, 6, 7), f))));
 }
 static inline int sf8_mask_bits(sf8 m) { return _mm_movemask_ps(m.lo) | _mm_movemask_ps(m.hi) << 4; }
-
-static inline void sf8_gather_quads(const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
-{
-	__m128 a[2][4];
-	for (int k = 0; k < 2; ++k) {
-		a[k][0] = _mm_loadu_ps(base + 4 * (size_t)idx[4 * k]);
-		a[k][1] = _mm_loadu_ps(base + 4 * (size_t)idx[4 * k + 1]);
-		a[k][2] = _mm_loadu_ps(base + 4 * (size_t)idx[4 * k + 2]);
-		a[k][3] = _mm_loadu_ps(base + 4 * (size_t)idx[4 * k + 3]);
-		_MM_TRANSPOSE4_PS(a[k][0], a[k][1], a[k][2], a[k][3]);
-	}
-	*c0 = simd_pair_(a[0][0], a[1][0]);
-	*c1 = simd_pair_(a[0][1], a[1][1]);
-	*c2 = simd_pair_(a[0][2], a[1][2]);
-	*c3 = simd_pair_(a[0][3], a[1][3]);
-}
-static inline sf8 sf8_load_quad2(const float *p)
-{
-	const __m128 q = _mm_loadu_ps(p);
-	return simd_pair_(q, q);
-}
 static inline sf8 sf8_gather(const float *base, const uint32_t idx[8])
 {
-	return simd_pair_(_mm_setr_ps(base[idx[0]], base[idx[1]], base[idx[2]], base[idx[3]]),
-	                  _mm_setr_ps(base[idx[4]], base[idx[5]], base[idx[6]], base[idx[7]]));
-}
-static inline void sf8_sub_gather_quads(sf8 qq, const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2,
-                                        sf8 *c3)
-{
-	const __m128 q4 = qq.lo;
-	__m128 a[2][4];
-	for (int k = 0; k < 2; ++k) {
-		a[k][0] = _mm_sub_ps(q4, _mm_loadu_ps(base + 4 * (size_t)idx[4 * k]));
-		a[k][1] = _mm_sub_ps(q4, _mm_loadu_ps(base + 4 * (size_t)idx[4 * k + 1]));
-		a[k][2] = _mm_sub_ps(q4, _mm_loadu_ps(base + 4 * (size_t)idx[4 * k + 2]));
-		a[k][3] = _mm_sub_ps(q4, _mm_loadu_ps(base + 4 * (size_t)idx[4 * k + 3]));
-		_MM_TRANSPOSE4_PS(a[k][0], a[k][1], a[k][2], a[k][3]);
-	}
-	*c0 = simd_pair_(a[0][0], a[1][0]);
-	*c1 = simd_pair_(a[0][1], a[1][1]);
-	*c2 = simd_pair_(a[0][2], a[1][2]);
-	*c3 = simd_pair_(a[0][3], a[1][3]);
+	return simd_halves_(_mm_setr_ps(base[idx[0]], base[idx[1]], base[idx[2]], base[idx[3]]),
+	                    _mm_setr_ps(base[idx[4]], base[idx[5]], base[idx[6]], base[idx[7]]));
 }
 static inline void sf8_fold4(sf8 a, float out[4]) { _mm_storeu_ps(out, _mm_add_ps(a.lo, a.hi)); }
+static inline sf8 simd_quad_pair_(const float *base, uint32_t a, uint32_t b)
+{
+	return simd_halves_(_mm_loadu_ps(base + 4 * (size_t)a), _mm_loadu_ps(base + 4 * (size_t)b));
+}
+static inline void simd_store_quad_pair_(float *base, uint32_t a, uint32_t b, sf8 v)
+{
+	_mm_storeu_ps(base + 4 * (size_t)a, v.lo);
+	_mm_storeu_ps(base + 4 * (size_t)b, v.hi);
+}
+static inline void simd_transpose_(sf8 v0, sf8 v1, sf8 v2, sf8 v3, sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
+{
+	_MM_TRANSPOSE4_PS(v0.lo, v1.lo, v2.lo, v3.lo);
+	_MM_TRANSPOSE4_PS(v0.hi, v1.hi, v2.hi, v3.hi);
+	*c0 = v0;
+	*c1 = v1;
+	*c2 = v2;
+	*c3 = v3;
+}
 
 /* ---- scalar: plain loops over the lanes ----------------------------------- */
 #else
 
-typedef struct sf8 {
+typedef union sf8 {
 	float l[8];
+	uint32_t u[8]; /* the same lanes as bits: a mask lane is ~0u (a quiet NaN as a float) or 0 */
 } sf8;
 
-/* A mask lane as bits and back (all ones is a quiet NaN: copying it as a
- * float keeps the bits). */
-static inline uint32_t simd_bits_(float f)
-{
-	uint32_t u;
-	memcpy(&u, &f, sizeof u);
-	return u;
-}
-static inline float simd_float_(uint32_t u)
-{
-	float f;
-	memcpy(&f, &u, sizeof f);
-	return f;
-}
-#define SIMD_SCALAR_OP2_(name, expr)            \
-	static inline sf8 name(sf8 a, sf8 b)        \
-	{                                           \
-		sf8 r;                                  \
-		for (int k = 0; k < 8; ++k) {           \
-			const float x = a.l[k], y = b.l[k]; \
-			r.l[k] = (expr);                    \
-		}                                       \
-		return r;                               \
+/* r's lanes (l as floats, u as bits) from a's and b's lanes k */
+#define SIMD_SCALAR_OP_(name, lanes, expr)     \
+	static inline sf8 sf8_##name(sf8 a, sf8 b) \
+	{                                          \
+		sf8 r;                                 \
+		for (int k = 0; k < 8; ++k)            \
+			r.lanes[k] = (expr);               \
+		return r;                              \
 	}
-#define SIMD_MASK_(c) simd_float_((c) ? 0xffffffffu : 0u)
 
-static inline sf8 sf8_zero(void)
-{
-	sf8 r;
-	for (int k = 0; k < 8; ++k)
-		r.l[k] = 0.0f;
-	return r;
-}
+SIMD_SCALAR_OP_(add, l, a.l[k] + b.l[k])
+SIMD_SCALAR_OP_(sub, l, a.l[k] - b.l[k])
+SIMD_SCALAR_OP_(mul, l, a.l[k] * b.l[k])
+SIMD_SCALAR_OP_(div, l, a.l[k] / b.l[k])
+/* as maxps/minps: the second operand unless the first is strictly greater
+ * (smaller), so b when either is NaN or both are zeros */
+SIMD_SCALAR_OP_(max, l, a.l[k] > b.l[k] ? a.l[k] : b.l[k])
+SIMD_SCALAR_OP_(min, l, a.l[k] < b.l[k] ? a.l[k] : b.l[k])
+SIMD_SCALAR_OP_(lt, u, a.l[k] < b.l[k] ? ~0u : 0u)
+SIMD_SCALAR_OP_(gt, u, a.l[k] > b.l[k] ? ~0u : 0u)
+SIMD_SCALAR_OP_(le, u, a.l[k] <= b.l[k] ? ~0u : 0u)
+SIMD_SCALAR_OP_(ge, u, a.l[k] >= b.l[k] ? ~0u : 0u)
+SIMD_SCALAR_OP_(and, u, a.u[k] & b.u[k])
+SIMD_SCALAR_OP_(or, u, a.u[k] | b.u[k])
+SIMD_SCALAR_OP_(xor, u, a.u[k] ^ b.u[k])
+SIMD_SCALAR_OP_(andnot, u, ~a.u[k] & b.u[k])
 static inline sf8 sf8_set1(float a)
 {
 	sf8 r;
@@ -329,76 +263,25 @@ static inline sf8 sf8_load(const float *p)
 	return r;
 }
 static inline void sf8_store(float *p, sf8 a) { memcpy(p, a.l, sizeof a.l); }
-SIMD_SCALAR_OP2_(sf8_add, x + y)
-SIMD_SCALAR_OP2_(sf8_sub, x - y)
-SIMD_SCALAR_OP2_(sf8_mul, x *y)
-SIMD_SCALAR_OP2_(sf8_div, x / y)
-/* as maxps/minps: the second operand unless the first is strictly greater
- * (smaller), so b when either is NaN or both are zeros */
-SIMD_SCALAR_OP2_(sf8_max, x > y ? x : y)
-SIMD_SCALAR_OP2_(sf8_min, x < y ? x : y)
-/* ordered compares: false when either is NaN */
-SIMD_SCALAR_OP2_(sf8_lt, SIMD_MASK_(x < y))
-SIMD_SCALAR_OP2_(sf8_gt, SIMD_MASK_(x > y))
-SIMD_SCALAR_OP2_(sf8_le, SIMD_MASK_(x <= y))
-SIMD_SCALAR_OP2_(sf8_ge, SIMD_MASK_(x >= y))
-SIMD_SCALAR_OP2_(sf8_and, simd_float_(simd_bits_(x) & simd_bits_(y)))
-SIMD_SCALAR_OP2_(sf8_or, simd_float_(simd_bits_(x) | simd_bits_(y)))
-SIMD_SCALAR_OP2_(sf8_xor, simd_float_(simd_bits_(x) ^ simd_bits_(y)))
-SIMD_SCALAR_OP2_(sf8_andnot, simd_float_(~simd_bits_(x) & simd_bits_(y)))
 static inline sf8 sf8_sqrt(sf8 a)
 {
-	sf8 r;
 	for (int k = 0; k < 8; ++k)
-		r.l[k] = sqrtf(a.l[k]);
-	return r;
-}
-static inline sf8 sf8_select(sf8 m, sf8 a, sf8 b)
-{
-	sf8 r;
-	for (int k = 0; k < 8; ++k) {
-		const uint32_t mk = simd_bits_(m.l[k]);
-		r.l[k] = simd_float_((mk & simd_bits_(a.l[k])) | (~mk & simd_bits_(b.l[k])));
-	}
-	return r;
+		a.l[k] = sqrtf(a.l[k]);
+	return a;
 }
 static inline sf8 sf8_lanes_below(uint32_t n)
 {
 	sf8 r;
 	for (uint32_t k = 0; k < 8; ++k)
-		r.l[k] = SIMD_MASK_(k < n);
-	return r;
-}
-static inline sf8 sf8_quad_lanes_below(int n)
-{
-	sf8 r;
-	for (int k = 0; k < 8; ++k)
-		r.l[k] = SIMD_MASK_((k & 3) < n);
+		r.u[k] = k < n ? ~0u : 0u;
 	return r;
 }
 static inline int sf8_mask_bits(sf8 m)
 {
 	int bits = 0;
 	for (int k = 0; k < 8; ++k)
-		bits |= (int)(simd_bits_(m.l[k]) >> 31) << k;
+		bits |= (int)(m.u[k] >> 31) << k;
 	return bits;
-}
-static inline void sf8_gather_quads(const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
-{
-	for (int k = 0; k < 8; ++k) {
-		const float *p = base + 4 * (size_t)idx[k];
-		c0->l[k] = p[0];
-		c1->l[k] = p[1];
-		c2->l[k] = p[2];
-		c3->l[k] = p[3];
-	}
-}
-static inline sf8 sf8_load_quad2(const float *p)
-{
-	sf8 r;
-	for (int k = 0; k < 8; ++k)
-		r.l[k] = p[k & 3];
-	return r;
 }
 static inline sf8 sf8_gather(const float *base, const uint32_t idx[8])
 {
@@ -407,25 +290,84 @@ static inline sf8 sf8_gather(const float *base, const uint32_t idx[8])
 		r.l[k] = base[idx[k]];
 	return r;
 }
-static inline void sf8_sub_gather_quads(sf8 qq, const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2,
-                                        sf8 *c3)
-{
-	for (int k = 0; k < 8; ++k) {
-		const float *p = base + 4 * (size_t)idx[k];
-		c0->l[k] = qq.l[0] - p[0];
-		c1->l[k] = qq.l[1] - p[1];
-		c2->l[k] = qq.l[2] - p[2];
-		c3->l[k] = qq.l[3] - p[3];
-	}
-}
 static inline void sf8_fold4(sf8 a, float out[4])
 {
 	for (int k = 0; k < 4; ++k)
 		out[k] = a.l[k] + a.l[k + 4];
 }
+static inline sf8 simd_quad_pair_(const float *base, uint32_t a, uint32_t b)
+{
+	sf8 r;
+	memcpy(r.l, base + 4 * (size_t)a, 4 * sizeof(float));
+	memcpy(r.l + 4, base + 4 * (size_t)b, 4 * sizeof(float));
+	return r;
+}
+static inline void simd_store_quad_pair_(float *base, uint32_t a, uint32_t b, sf8 v)
+{
+	memcpy(base + 4 * (size_t)a, v.l, 4 * sizeof(float));
+	memcpy(base + 4 * (size_t)b, v.l + 4, 4 * sizeof(float));
+}
+static inline void simd_transpose_(sf8 v0, sf8 v1, sf8 v2, sf8 v3, sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
+{
+	const sf8 v[4] = {v0, v1, v2, v3};
+	sf8 *c[4] = {c0, c1, c2, c3};
+	for (int j = 0; j < 4; ++j)
+		for (int k = 0; k < 8; ++k)
+			c[j]->l[k] = v[k & 3].l[(k & 4) + j];
+}
 #endif
 
-/* ---- common to the three ----------------------------------------------- */
+/* ---- written once on the back-ends' operations ----------------------------- */
+
+static inline sf8 sf8_zero(void) { return sf8_set1(0.0f); }
+
+#ifndef SIMD_AVX2
+static inline sf8 sf8_select(sf8 m, sf8 a, sf8 b) { return sf8_or(sf8_and(m, a), sf8_andnot(m, b)); }
+#endif
+
+static inline sf8 sf8_load_quad2(const float *p) { return simd_quad_pair_(p, 0, 0); }
+
+static inline sf8 sf8_quad_lanes_below(int n)
+{
+	uint32_t bits[4];
+	float quad[4];
+	for (int k = 0; k < 4; ++k)
+		bits[k] = k < n ? ~0u : 0u;
+	memcpy(quad, bits, sizeof quad);
+	return sf8_load_quad2(quad);
+}
+
+static inline void sf8_gather_quads(const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
+{
+	simd_transpose_(simd_quad_pair_(base, idx[0], idx[4]), simd_quad_pair_(base, idx[1], idx[5]),
+	                simd_quad_pair_(base, idx[2], idx[6]), simd_quad_pair_(base, idx[3], idx[7]), c0, c1, c2, c3);
+}
+
+static inline void sf8_sub_gather_quads(sf8 q, const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2,
+                                        sf8 *c3)
+{
+	simd_transpose_(sf8_sub(q, simd_quad_pair_(base, idx[0], idx[4])),
+	                sf8_sub(q, simd_quad_pair_(base, idx[1], idx[5])),
+	                sf8_sub(q, simd_quad_pair_(base, idx[2], idx[6])),
+	                sf8_sub(q, simd_quad_pair_(base, idx[3], idx[7])), c0, c1, c2, c3);
+}
+
+static inline void sf8_load_quads(const float *p, sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
+{
+	simd_transpose_(simd_quad_pair_(p, 0, 4), simd_quad_pair_(p, 1, 5), simd_quad_pair_(p, 2, 6),
+	                simd_quad_pair_(p, 3, 7), c0, c1, c2, c3);
+}
+
+/* the transpose is its own inverse */
+static inline void sf8_store_quads(float *p, sf8 c0, sf8 c1, sf8 c2, sf8 c3)
+{
+	sf8 v0, v1, v2, v3;
+	simd_transpose_(c0, c1, c2, c3, &v0, &v1, &v2, &v3);
+	simd_store_quad_pair_(p, 0, 4, v0);
+	simd_store_quad_pair_(p, 1, 5, v1);
+	simd_store_quad_pair_(p, 2, 6, v2);
+	simd_store_quad_pair_(p, 3, 7, v3);
+}
 
 static inline float sf8_sum(sf8 a)
 {
@@ -434,7 +376,6 @@ static inline float sf8_sum(sf8 a)
 	return (f[0] + f[1]) + (f[2] + f[3]);
 }
 
-/* ---- added for nbr ---- */
 /* The lanes of a, and the same entries of idx[0..7], where mask m is set,
  * packed to the front of out and out_idx in lane order; all eight entries
  * of each may be written (the callers leave room). Returns how many.

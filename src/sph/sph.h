@@ -16,8 +16,9 @@
  *   1. src/sph/xsph.c: its def, add function and step under
  *      #ifndef EDDY_SIMD_VARIANT; the pair loop once, against simd.h, as
  *      SIMD_NAME(xsph_pair_sums) outside it, over sph_shared's lists (nbr,
- *      count) and quads (pq), picked in the step with SIMD_PICK. The Makefile
- *      finds the file and builds its AVX2 variant (it includes "simd.h").
+ *      count) and quads (pq), picked in the step with SIMD_PICK and run
+ *      block by block with sph_block_pass (below). The Makefile finds the
+ *      file and builds its AVX2 variant (it includes "simd.h").
  *   2. the registry: its vtable in systems.h, its def and add function in
  *      eddy.h, its Lua binding; it declares that it requires sph_density
  *      (whose sph_shared it reads). */
@@ -203,6 +204,30 @@ static inline void sph_coincident_dir(size_t i, size_t j, float *dx, float *dy, 
 	*dx = s * 0.80178373f; /* (3, 2, 1) / sqrt(14) */
 	*dy = s * 0.53452248f;
 	*dz = s * 0.26726124f;
+}
+
+/* The rows the lists cover: a system after sph_density may have added
+ * particles (they have no lists this step) or removed some. */
+static inline long sph_rows(const eddy_world *w, const sph_shared *sh)
+{
+	return sh->nb.n < w->n ? (long)sh->nb.n : (long)w->n;
+}
+
+/* The force passes go over rows [0, n) in blocks of SPH_BLOCK particles,
+ * block(args, i0, count) making first the SIMD sums over the block's fluid
+ * pairs, then finishing its particles in a plain loop: finishing each
+ * particle right after its groups put the adds of its totals behind every
+ * (often mispredicted) exit of the loop over its groups. The threads take
+ * equal shares in order; a particle's result does not depend on the blocks,
+ * so it is the same for any thread count. */
+#define SPH_BLOCK 64
+static inline void sph_block_pass(long n, int threads, void (*block)(const void *args, long i0, long cnt),
+                                  const void *args)
+{
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (int th = 0; th < threads; ++th)
+		for (long i0 = n * th / threads, hi = n * (th + 1) / threads; i0 < hi; i0 += SPH_BLOCK)
+			block(args, i0, hi - i0 < SPH_BLOCK ? hi - i0 : SPH_BLOCK);
 }
 
 /* Four partial sums stored to memory, added in sf8_sum's order (simd.h). */

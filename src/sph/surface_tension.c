@@ -24,10 +24,6 @@
 
 #include <stdlib.h>
 
-typedef struct sph_surface_tension {
-	eddy_sph_surface_tension_def def;
-} sph_surface_tension;
-
 static const int st_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_DENSITY, -1};
 static const int st_writes[] = {COL_SPH_NX, COL_SPH_NY, COL_SPH_NZ, COL_SPH_CURVATURE, COL_AX, COL_AY, COL_AZ, -1};
 static const int st_hint_writes[] = {COL_SPH_NX, COL_SPH_NY, COL_SPH_NZ, COL_SPH_CURVATURE, -1};
@@ -42,11 +38,8 @@ eddy_sph_surface_tension_def eddy_default_sph_surface_tension_def(void)
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
-	const sph_surface_tension *st = s->data;
-	sph_shared *sh = eddy__sph_find(w, s);
-	if (!sh)
-		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)",
-		                  s->label);
+	const eddy_sph_surface_tension_def *def = s->data;
+	const sph_shared *sh = eddy__sph_find(w, s); /* never NULL: the pipeline checks .requires */
 	const sph_neighbors *nb = &sh->nb;
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const float *inv_rho = sh->inv_rho;
@@ -54,8 +47,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	float *curv = eddy__col(w, COL_SPH_CURVATURE);
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	const sph_kernel_consts kc = sh->k;
-	const float m = sh->mass, sigma = st->def.tension, thr = st->def.threshold / sh->h;
-	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
+	const float m = sh->mass, sigma = def->tension, thr = def->threshold / sh->h;
+	const long n = sph_rows(w, sh);
 	/* pass 1: the colour-field gradient n */
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
@@ -116,13 +109,13 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 
 static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
-	const sph_surface_tension *st = s->data;
+	const eddy_sph_surface_tension_def *def = s->data;
 	const sph_shared *sh = eddy__sph_find(w, s);
 	*reason = "capillary";
-	if (!sh || !(st->def.tension > 0))
+	if (!(def->tension > 0))
 		return INFINITY;
 	const double dx = 0.5 * sh->h;
-	return 2.5 * sqrt(sh->rho0 * dx * dx * dx / (2 * M_PI * st->def.tension));
+	return 2.5 * sqrt(sh->rho0 * dx * dx * dx / (2 * M_PI * def->tension));
 }
 
 const eddy_system_vtable eddy__kind_sph_surface_tension = {
@@ -137,14 +130,13 @@ const eddy_system_vtable eddy__kind_sph_surface_tension = {
 eddy_system_id eddy_add_sph_surface_tension(eddy_world *w, const eddy_sph_surface_tension_def *def)
 {
 	const char *sys = "sph_surface_tension";
-	if (!eddy__add_args(w, def, sys))
-		return EDDY_NULL_SYSTEM;
-	if (!eddy__check_nonneg(w, sys, "tension", def->tension) || !eddy__check_finite(w, sys, "tension", def->tension) ||
+	if (!eddy__add_args(w, def, sys) || !eddy__check_nonneg(w, sys, "tension", def->tension) ||
+	    !eddy__check_finite(w, sys, "tension", def->tension) ||
 	    !eddy__check_nonneg(w, sys, "threshold", def->threshold) ||
 	    !eddy__check_finite(w, sys, "threshold", def->threshold))
 		return EDDY_NULL_SYSTEM;
-	sph_surface_tension *st = malloc(sizeof *st);
-	if (st)
-		st->def = *def;
-	return eddy__add_system(w, &eddy__kind_sph_surface_tension, st, st_reads, st_writes);
+	eddy_sph_surface_tension_def *copy = malloc(sizeof *copy);
+	if (copy)
+		*copy = *def;
+	return eddy__add_system(w, &eddy__kind_sph_surface_tension, copy, st_reads, st_writes);
 }

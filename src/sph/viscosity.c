@@ -15,14 +15,6 @@
  * dam-break validation wants.
  * Time-step limit (viscous): dt <= 0.3125 h^2 / nu, nu = mu / rho0; with the
  * default CFL 0.4 that is the usual 0.125 h^2/nu.
- * Positions and 1/rho come from sph_density's (x y z 1/rho) quads (sh->pq,
- * the positions its lists were made from). The pairs go eight at a time,
- * written once against simd.h (AVX2 when the CPU has it, else SSE or
- * scalar doing the same per lane; EDDY_NO_AVX2 forces the base path), a
- * particle's last group masked, with per-lane partial sums added in a
- * fixed order: the same bits for any thread count and any back-end. The
- * particles go in blocks of 64, the sums over the block's groups first,
- * then a loop adding the totals to ax ay az.
  * Source: Mueller, Charypar & Gross 2003; Monaghan, "Smoothed particle
  * hydrodynamics", ARAA 1992. */
 #include "simd.h"
@@ -31,29 +23,23 @@
 
 #include <stdlib.h>
 
-/* The pass goes in blocks of particles: first the sums over the pairs of the
- * block (visc_pair_sums), then a loop adding each particle's totals to ax ay az.
- * Finishing each particle right after its groups put the adds of its six
- * totals behind every (often mispredicted) exit of the loop over its groups;
- * the particles of the second loop are independent (as in sph_dfsph). */
-#define VISC_BLOCK 64
-#define VISC_T 24 /* floats of the sums per particle: 4 lanes of each of six */
+#define VISC_T 24 /* floats of the pair sums per particle: 4 lanes of each of six */
 
-/* What the pair sums read. Per particle they give -sum (h - r) / rho_j
- * (v_i - v_j) (components 0-2) and the artificial viscosity's sum of
- * max(0, -v_ij . r_vec) (h - r)^2 / ((r^2 + eps) (rho_i + rho_j)
- * max(r, rmin)) r_vec (3-5). */
-typedef struct pair_args {
-	const sph_neighbors *nb;
+/* What a block of the pass reads and writes. Per particle the pair sums
+ * are -sum (h - r) / rho_j (v_i - v_j) (components 0-2) and the artificial
+ * viscosity's sum of max(0, -v_ij . r_vec) (h - r)^2 / ((r^2 + eps)
+ * (rho_i + rho_j) max(r, rmin)) r_vec (3-5). */
+typedef struct visc_args {
 	const float *pq, *pv; /* (x y z 1/rho) and (vx vy vz -rho) per particle */
-	float h, eps, rmin;
-} pair_args;
+	const sph_neighbors *nb;
+	float *ax, *ay, *az;
+	float h, eps, rmin, coef, acoef;
+	void (*pair_sums)(const struct visc_args *a, long i0, long cnt, float *t);
+} visc_args;
 
-/* The sums over the pairs of particles i0 .. i0 + cnt - 1, eight neighbours
- * at a time, each particle's as four lanes per component (lane l holding
- * lanes l and l + 4 of the groups) at t + VISC_T q. */
-typedef void pair_sums_fn(const pair_args *a, long i0, long cnt, float *t);
-SIMD_DECLARE(void, visc_pair_sums, (const pair_args *a, long i0, long cnt, float *t));
+/* The sums over the pairs of particles i0 .. i0 + cnt - 1 (sph.h's block
+ * pass), each particle's as four lanes per component at t + VISC_T q. */
+SIMD_DECLARE(void, visc_pair_sums, (const visc_args *a, long i0, long cnt, float *t));
 
 /* One group (neighbours l[0..7]; with masked, only the first left count).
  * The differences are taken on the quads before the transpose:
@@ -64,7 +50,7 @@ SIMD_DECLARE(void, visc_pair_sums, (const pair_args *a, long i0, long cnt, float
  * (h - r) / rho_j, added instead of subtracted. Whole groups (masked
  * false) need no mask: the compiler drops it where the argument is
  * constant. */
-static inline void group(const pair_args *a, const uint32_t *l, bool masked, uint32_t left, sf8 qp, sf8 qv, sf8 s[6])
+static inline void group(const visc_args *a, const uint32_t *l, bool masked, uint32_t left, sf8 qp, sf8 qv, sf8 s[6])
 {
 	const sf8 zero = sf8_zero();
 	sf8 rx, ry, rz, nir, ux, uy, uz, rho2;
@@ -92,7 +78,7 @@ static inline void group(const pair_args *a, const uint32_t *l, bool masked, uin
 	s[5] = sf8_add(s[5], sf8_mul(g, rz));
 }
 
-void SIMD_NAME(visc_pair_sums)(const pair_args *a, long i0, long cnt, float *t)
+void SIMD_NAME(visc_pair_sums)(const visc_args *a, long i0, long cnt, float *t)
 {
 	const sph_neighbors *nb = a->nb;
 	for (long b = 0; b < cnt; ++b) {
@@ -121,13 +107,8 @@ void SIMD_NAME(visc_pair_sums)(const pair_args *a, long i0, long cnt, float *t)
 }
 
 #ifndef EDDY_SIMD_VARIANT
-typedef struct sph_viscosity {
-	eddy_sph_viscosity_def def;
-} sph_viscosity;
-
 static const int viscosity_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, COL_DENSITY, -1};
 static const int viscosity_writes[] = {COL_AX, COL_AY, COL_AZ, -1};
-static const int no_hint_writes[] = {-1};
 
 eddy_sph_viscosity_def eddy_default_sph_viscosity_def(void)
 {
@@ -137,30 +118,35 @@ eddy_sph_viscosity_def eddy_default_sph_viscosity_def(void)
 	return d;
 }
 
+/* A block: the pair sums, then their totals added to ax ay az. */
+static void visc_block(const void *arg, long i0, long cnt)
+{
+	/* a copy the stores below cannot alias: the constants stay in registers */
+	const visc_args a = *(const visc_args *)arg;
+	float t[SPH_BLOCK * VISC_T];
+	a.pair_sums(&a, i0, cnt, t);
+	for (long b = 0; b < cnt; ++b) {
+		const long i = i0 + b;
+		const float *tb = t + VISC_T * b;
+		const float k = a.coef * a.pq[4 * i + 3];
+		a.ax[i] += k * sph_sum4(tb) + a.acoef * sph_sum4(tb + 12);
+		a.ay[i] += k * sph_sum4(tb + 4) + a.acoef * sph_sum4(tb + 16);
+		a.az[i] += k * sph_sum4(tb + 8) + a.acoef * sph_sum4(tb + 20);
+	}
+}
+
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
-	const sph_viscosity *sv = s->data;
-	sph_shared *sh = eddy__sph_find(w, s);
-	if (!sh)
-		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)",
-		                  s->label);
-	const sph_neighbors *nb = &sh->nb;
-	/* positions and 1/rho come with sph_density's quads (sh->pq) */
+	const eddy_sph_viscosity_def *def = s->data;
+	const sph_shared *sh = eddy__sph_find(w, s); /* never NULL: the pipeline checks .requires */
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *rho = eddy__col(w, COL_DENSITY);
-	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	const sph_kernel_consts kc = sh->k;
-	const float coef = sv->def.viscosity * sh->mass * kc.visc_lap;
-	/* -m Pi grad W = m alpha c h vr / ((r^2 + eps) rho_ij) spiky_grad (h-r)^2 r_hat */
-	/* 2 x: the mean density (rho_i + rho_j) / 2 is folded into the pair term */
-	const float acoef = 2.0f * sh->mass * sv->def.artificial * sh->c * kc.h * -kc.spiky_grad, eps = 0.01f * kc.h2,
-				rmin = 1e-3f * kc.h;
-	const long n = nb->n < w->n ? (long)nb->n : (long)w->n;
+	const long n = sph_rows(w, sh);
 	/* each neighbour's eight inputs as two 16-byte quads, (x y z 1/rho) from
 	 * sph_density and (vx vy vz -rho) made here: a group of neighbours then
 	 * costs two loads each and two transposes instead of eight scattered
-	 * loads each, which were most of the pass */
-	const float *pq = sh->pq;
+	 * loads each */
 	float *pv = eddy__arena_alloc(&w->arena, (size_t)(n ? n : 1) * 4 * sizeof *pv);
 	if (!pv)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
@@ -171,62 +157,55 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		pv[4 * i + 2] = vz[i];
 		pv[4 * i + 3] = -rho[i]; /* negated: see group */
 	}
-	const pair_args pa = {nb, pq, pv, kc.h, eps, rmin};
-	pair_sums_fn *sums = SIMD_PICK(visc_pair_sums);
-	const int threads = ctx->threads;
-	/* the threads take equal shares in order; a particle's result does not
-	 * depend on the blocks, so it is the same for any thread count */
-#pragma omp parallel for num_threads(threads) schedule(static)
-	for (int th = 0; th < threads; ++th) {
-		float t[VISC_BLOCK * VISC_T];
-		for (long i0 = n * th / threads, hi = n * (th + 1) / threads; i0 < hi; i0 += VISC_BLOCK) {
-			const long cnt = hi - i0 < VISC_BLOCK ? hi - i0 : VISC_BLOCK;
-			sums(&pa, i0, cnt, t);
-			for (long b = 0; b < cnt; ++b) {
-				const long i = i0 + b;
-				const float *tb = t + VISC_T * b;
-				const float k = coef * pq[4 * i + 3];
-				ax[i] += k * sph_sum4(tb) + acoef * sph_sum4(tb + 12);
-				ay[i] += k * sph_sum4(tb + 4) + acoef * sph_sum4(tb + 16);
-				az[i] += k * sph_sum4(tb + 8) + acoef * sph_sum4(tb + 20);
-			}
-		}
-	}
+	/* acoef: -m Pi grad W = m alpha c h vr / ((r^2 + eps) rho_ij) spiky_grad
+	 * (h-r)^2 r_hat, times 2: the mean density (rho_i + rho_j) / 2 is folded
+	 * into the pair term */
+	const visc_args a = {.pq = sh->pq,
+	                     .pv = pv,
+	                     .nb = &sh->nb,
+	                     .ax = eddy__col(w, COL_AX),
+	                     .ay = eddy__col(w, COL_AY),
+	                     .az = eddy__col(w, COL_AZ),
+	                     .h = kc.h,
+	                     .eps = 0.01f * kc.h2,
+	                     .rmin = 1e-3f * kc.h,
+	                     .coef = def->viscosity * sh->mass * kc.visc_lap,
+	                     .acoef = 2.0f * sh->mass * def->artificial * sh->c * kc.h * -kc.spiky_grad,
+	                     .pair_sums = SIMD_PICK(visc_pair_sums)};
+	sph_block_pass(n, ctx->threads, visc_block, &a);
 	return EDDY_OK;
 }
 
 static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
-	const sph_viscosity *sv = s->data;
+	const eddy_sph_viscosity_def *def = s->data;
 	const sph_shared *sh = eddy__sph_find(w, s);
 	*reason = "viscous";
-	if (!sh || !(sv->def.viscosity > 0))
+	if (!(def->viscosity > 0))
 		return INFINITY;
-	const double nu = sv->def.viscosity / sh->rho0;
+	const double nu = def->viscosity / sh->rho0;
 	return 0.3125 * (double)sh->h * sh->h / nu;
 }
 
+/* ax ay az are every force's: no default_writes, so order hints for them
+ * name gravity alone */
 const eddy_system_vtable eddy__kind_sph_viscosity = {
 	.name = "sph_viscosity",
 	.requires = EDDY_CAP_SPH_NEIGHBORS,
 	.step = step,
 	.limit = limit,
-	/* ax ay az are every force's: order hints for them name gravity alone */
-	.default_writes = no_hint_writes,
 };
 
 eddy_system_id eddy_add_sph_viscosity(eddy_world *w, const eddy_sph_viscosity_def *def)
 {
 	const char *sys = "sph_viscosity";
-	if (!eddy__add_args(w, def, sys))
-		return EDDY_NULL_SYSTEM;
-	if (!eddy__check_nonneg(w, sys, "viscosity", def->viscosity) ||
+	if (!eddy__add_args(w, def, sys) || !eddy__check_nonneg(w, sys, "viscosity", def->viscosity) ||
 	    !eddy__check_finite(w, sys, "viscosity", def->viscosity) ||
 	    !eddy__check_range(w, sys, "artificial", def->artificial, 0, 2))
 		return EDDY_NULL_SYSTEM;
-	sph_viscosity *sv = malloc(sizeof *sv);
-	if (sv)
-		sv->def = *def;
-	return eddy__add_system(w, &eddy__kind_sph_viscosity, sv, viscosity_reads, viscosity_writes);
+	eddy_sph_viscosity_def *copy = malloc(sizeof *copy);
+	if (copy)
+		*copy = *def;
+	return eddy__add_system(w, &eddy__kind_sph_viscosity, copy, viscosity_reads, viscosity_writes);
 }
 #endif
