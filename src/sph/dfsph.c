@@ -204,28 +204,24 @@ static inline void store8(float *p, sf8 a, long m)
 }
 
 /* Eight particles' quads p[0 .. m) by component: lane k of c0 .. c3 holds
- * p[k].x .. p[k].w. */
+ * p[k].x .. p[k].w; and back. */
 static inline void load_quads8(const dfsph_vec4 *p, long m, sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)
 {
-	static const uint32_t idx[8] = {0, 1, 2, 3, 4, 5, 6, 7};
 	dfsph_vec4 l[8];
 	if (m < 8) {
 		for (long k = 0; k < 8; ++k)
 			l[k] = k < m ? p[k] : (dfsph_vec4){0, 0, 0, 0};
 		p = l;
 	}
-	sf8_gather_quads(&p->x, idx, c0, c1, c2, c3);
+	sf8_load_quads(&p->x, c0, c1, c2, c3);
 }
 
 static inline void store_quads8(dfsph_vec4 *p, long m, sf8 c0, sf8 c1, sf8 c2, sf8 c3)
 {
-	float l[4][8];
-	sf8_store(l[0], c0);
-	sf8_store(l[1], c1);
-	sf8_store(l[2], c2);
-	sf8_store(l[3], c3);
-	for (long k = 0; k < m; ++k)
-		p[k] = (dfsph_vec4){l[0][k], l[1][k], l[2][k], l[3][k]};
+	dfsph_vec4 l[8];
+	sf8_store_quads(m == 8 ? &p->x : &l->x, c0, c1, c2, c3);
+	if (m < 8)
+		memcpy(p, l, (size_t)m * sizeof *l);
 }
 
 /* Per particle of eight, the sum of its four partial sums (sf8_fold4's, the
