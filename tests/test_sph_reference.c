@@ -104,8 +104,10 @@ typedef struct ref_case {
 	float dx, h, rho0, k, mu, alpha, scale;
 } ref_case;
 
-/* One step of density, pressure and viscosity on the random block. */
-static void run_passes(const ref_case *c, uint32_t seed, snapshot *s, double *mass)
+/* A world around the random block, without gravity, with sph_density as c
+ * gives it and a gravity system (g = 0) that writes ax ay az = 0 before the
+ * passes add to them. */
+static eddy_world *ref_world(const ref_case *c, eddy_system_id *dens)
 {
 	eddy_world_def d = eddy_default_world_def();
 	d.bounds_max = (eddy_vec3){0.3f, 0.3f, 0.3f};
@@ -116,10 +118,17 @@ static void run_passes(const ref_case *c, uint32_t seed, snapshot *s, double *ma
 	de.radius = c->h;
 	de.rest_density = c->rho0;
 	de.stiffness = c->k;
-	const eddy_system_id dens = eddy_add_sph_density(w, &de);
-	/* gravity with g = 0: writes ax ay az = 0 before the passes add to them */
+	*dens = eddy_add_sph_density(w, &de);
 	eddy_gravity_def g = eddy_default_gravity_def();
 	CHECK(eddy_system_valid(w, eddy_add_gravity(w, &g)));
+	return w;
+}
+
+/* One step of density, pressure and viscosity on the random block. */
+static void run_passes(const ref_case *c, uint32_t seed, snapshot *s, double *mass)
+{
+	eddy_system_id dens;
+	eddy_world *w = ref_world(c, &dens);
 	add_capture(w, s, "after_density");
 	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
 	pr.scale = c->scale;
@@ -298,19 +307,10 @@ eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float
 
 static void check_dfsph_against_reference(const ref_case *c, uint32_t seed, const char *label)
 {
-	eddy_world_def d = eddy_default_world_def();
-	d.bounds_max = (eddy_vec3){0.3f, 0.3f, 0.3f};
-	d.gravity = (eddy_vec3){0, 0, 0};
-	eddy_world *w = eddy_create_world(&d, NULL, 0);
-	eddy_sph_density_def de = eddy_default_sph_density_def();
-	de.spacing = c->dx;
-	de.radius = c->h;
-	de.rest_density = c->rho0;
-	const eddy_system_id dens = eddy_add_sph_density(w, &de);
 	/* sph_dfsph reads the velocities (the columns the probe reads) and writes
 	 * only ax ay az (after gravity's, g = 0), pressure and its warm starts */
-	eddy_gravity_def gr = eddy_default_gravity_def();
-	CHECK(eddy_system_valid(w, eddy_add_gravity(w, &gr)));
+	eddy_system_id dens;
+	eddy_world *w = ref_world(c, &dens);
 	eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
 	CHECKF(eddy_system_valid(w, eddy_add_sph_dfsph(w, &df)), "%s", eddy_world_error(w));
 	static eddy_vec3 pos[NP], vel[NP];

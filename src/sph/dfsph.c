@@ -103,11 +103,9 @@
  * with omega above 0.5 can grow. */
 #define DFSPH_OMEGA 0.5f
 
-/* Particles per block of a pass, a multiple of 8: the pair sums of a block
- * first, then the rest, whose particles are independent (finishing each
- * particle right after its pairs puts a long chain of dependent operations
- * behind every exit of the loop over its groups). */
-#define DFSPH_BLOCK 64
+/* Particles per block of a pass (sph_block_pass's blocks, a multiple of 8):
+ * the pair sums of a block first, then the rest eight particles at a time. */
+#define DFSPH_BLOCK SPH_BLOCK
 
 typedef struct dfsph_vec4 {
 	float x, y, z, w;
@@ -505,14 +503,22 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
  * Each particle writes only its own values (rate its err and k, correct its
  * velocity and k sum: the others read k) from inputs no other particle of
  * the pass changes, so the result is the same for any thread count. */
+typedef struct dfsph_pass_args {
+	dfsph_work *wk;
+	enum dfsph_pass kind;
+	const dfsph_sweep *a;
+} dfsph_pass_args;
+
+static void pass_block(const void *args, long i0, long cnt)
+{
+	const dfsph_pass_args *p = args;
+	p->wk->block(p->wk, p->kind, p->a, i0, cnt);
+}
+
 static void pass(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sweep *a)
 {
-	const long n = wk->n;
-	const int threads = wk->threads;
-#pragma omp parallel for num_threads(threads) schedule(static)
-	for (int th = 0; th < threads; ++th)
-		for (long i0 = n * th / threads, hi = n * (th + 1) / threads; i0 < hi; i0 += DFSPH_BLOCK)
-			wk->block(wk, kind, a, i0, hi - i0 < DFSPH_BLOCK ? hi - i0 : DFSPH_BLOCK);
+	const dfsph_pass_args p = {wk, kind, a};
+	sph_block_pass(wk->n, wk->threads, pass_block, &p);
 }
 
 /* err = R(u) for u = -dt grad p from zero, without the moving walls' part:
@@ -818,7 +824,7 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 		sd->steps = sd->sweeps = sd->div_sweeps = sd->unconverged = 0;
 		sd->residual = sd->worst = 0;
 	}
-	const long n = sh->nb.n < w->n ? (long)sh->nb.n : (long)w->n;
+	const long n = sph_rows(w, sh);
 	const float dt = (float)ctx->dt;
 	if (n == 0 || !(dt > 0))
 		return EDDY_OK;
@@ -875,7 +881,7 @@ eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float
 	const sph_shared *sh = eddy__sph_find(w, NULL);
 	if (!sh)
 		return EDDY_ERR_ORDER;
-	const long n = sh->nb.n < w->n ? (long)sh->nb.n : (long)w->n;
+	const long n = sph_rows(w, sh);
 	dfsph_work wk = {.block = SIMD_PICK(dfsph_block), .threads = 1, .rho0 = sh->rho0, .dt = 1.0f};
 	dfsph_geometry geo;
 	if (!prepare(w, &wk, sh, n, true, &geo))
