@@ -81,11 +81,11 @@ BENCHES  := bench bench_flip bench_sph bench_render
 
 obj = $(1:%.c=$(BUILD)/obj/%.o)
 
-# The SPH files written against src/sph/simd.h: compiled once more with AVX2
+# The files written against src/simd.h: compiled once more with AVX2
 # (X.avx2.o, -DEDDY_SIMD_VARIANT: only their kernels) on x86 unless
 # SIMD=scalar; the normal compile then gets -DEDDY_SIMD_HAVE_AVX2 so that
 # SIMD_PICK can choose the variant at run time (see simd.h).
-SIMD_C  := $(shell grep -l 'include "simd.h"' src/sph/*.c)
+SIMD_C  := $(shell grep -l 'include "simd.h"' $(SRC_C))
 ifeq ($(SIMD),scalar)
 SIMD_VARIANT_O :=
 else
@@ -135,7 +135,7 @@ $(BUILD)/obj/tests/%.o: tests/%.c $(HEADER)
 $(sort $(call obj,src/sph/pressure.c src/sph/viscosity.c $(SIMD_C))) $(SIMD_VARIANT_O): BASE += -fno-math-errno
 $(call obj,$(SIMD_C)): BASE += $(if $(SIMD_VARIANT_O),-DEDDY_SIMD_HAVE_AVX2)
 
-$(BUILD)/obj/src/sph/%.avx2.o: src/sph/%.c
+$(BUILD)/obj/src/%.avx2.o: src/%.c
 	@mkdir -p $(dir $@)
 	$(CC) $(BASE) -mavx2 -mbmi2 -DEDDY_SIMD_VARIANT -Isrc -c $< -o $@
 $(BUILD)/obj/src/flip_hypre.o: BASE += $(HYPRE_CFLAGS)

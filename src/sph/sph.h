@@ -10,7 +10,7 @@
  *   kernels.c                    the kernels' lattice sums
  *   density.c pressure.c viscosity.c surface_tension.c dfsph.c
  *                                one file per system
- *   simd.h                       the vocabulary the pair loops are written in
+ *   ../simd.h                    the vocabulary the pair loops are written in
  *
  * A new pair pass (XSPH, say) is one new file plus the registry:
  *   1. src/sph/xsph.c: its def, add function and step under

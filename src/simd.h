@@ -37,7 +37,7 @@
  *   sf8_sum(a)               (f0 + f1) + (f2 + f3) of the fold
  *   sf8_pack(m, a, idx, out, out_idx)  see below
  *
- * One pass, several back-ends: a file in src/sph/ that includes this header
+ * One pass, several back-ends: a source file that includes this header
  * is compiled normally (SSE, or scalar in a SIMD=scalar build) and, on x86
  * unless SIMD=scalar, once more with -mavx2 -mbmi2 -DEDDY_SIMD_VARIANT
  * (the Makefile finds such files by the include), which compiles only its
