@@ -66,6 +66,10 @@ enum {
 typedef struct mg_level {
 	int nx, ny, nz;
 	size_t nc;
+	/* The box [lo, hi) around this solve's unknowns on this level: every
+	 * loop stays in it and reads nothing outside it (cells there are not
+	 * unknowns, and their entries are stale from earlier solves). */
+	int lo[3], hi[3];
 	float *d, *ox, *oy, *oz, *e; /* operator (see the header) */
 	float *x, *b, *r;            /* solution, right-hand side, residual */
 } mg_level;
@@ -75,10 +79,10 @@ struct flip_mg {
 	int nlev;
 	mg_level lev[MAX_LEVELS];
 	float *mem;
-	int *co_cell;  /* coarsest: the unknowns' cells */
-	double *chol;  /* coarsest: dense Cholesky factor, row-major lower */
-	double *co_v;  /* coarsest: right-hand side and solution */
-	int co_n;      /* coarsest unknowns */
+	int *co_cell; /* coarsest: the unknowns' cells */
+	double *chol; /* coarsest: dense Cholesky factor, row-major lower */
+	double *co_v; /* coarsest: right-hand side and solution */
+	int co_n;     /* coarsest unknowns */
 };
 
 flip_mg *eddy__flip_mg_new(void) { return calloc(1, sizeof(flip_mg)); }
@@ -149,18 +153,36 @@ static bool mg_alloc(flip_mg *m, int nx, int ny, int nz)
 	return true;
 }
 
-static int level_threads(const mg_level *L, int nt) { return L->nc > PAR_CELLS ? nt : 1; }
+static int level_threads(const mg_level *L, int nt)
+{
+	const size_t n = (size_t)(L->hi[0] - L->lo[0]) * (size_t)(L->hi[1] - L->lo[1]) * (size_t)(L->hi[2] - L->lo[2]);
+	return n > PAR_CELLS ? nt : 1;
+}
 
-/* Level 0 from A (each row writes its own cell). */
+static inline size_t cell_at(const mg_level *L, int i, int j, int k)
+{
+	return (size_t)i + (size_t)L->nx * ((size_t)j + (size_t)L->ny * (size_t)k);
+}
+
+/* Level 0 from A (each row writes its own cell), and its box. */
 static void build_fine(mg_level *L, const flip_matrix *A, const int *cell_of, int nt)
 {
 	memset(L->d, 0, 5 * L->nc * sizeof *L->d); /* d, ox, oy, oz, e are consecutive */
-	const int n = A->n;
+	const int n = A->n, nx = L->nx, ny = L->ny;
 	nt = n > PAR_CELLS ? nt : 1;
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	int x0 = nx, y0 = ny, z0 = L->nz, x1 = 0, y1 = 0, z1 = 0;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(min                         \
+                                                                                : x0, y0, z0) reduction(max \
+                                                                                                        : x1, y1, z1)
 	for (int r = 0; r < n; ++r) {
 		const int *nb = &A->nb[6 * r];
-		const size_t c = (size_t)cell_of[r];
+		const int c = cell_of[r], i = c % nx, j = (c / nx) % ny, k = c / (nx * ny);
+		x0 = i < x0 ? i : x0;
+		y0 = j < y0 ? j : y0;
+		z0 = k < z0 ? k : z0;
+		x1 = i + 1 > x1 ? i + 1 : x1;
+		y1 = j + 1 > y1 ? j + 1 : y1;
+		z1 = k + 1 > z1 ? k + 1 : z1;
 		double links = 0;
 		for (int d = 0; d < 6; ++d)
 			if (nb[d] >= 0)
@@ -172,25 +194,35 @@ static void build_fine(mg_level *L, const flip_matrix *A, const int *cell_of, in
 		const double e = A->diag[r] - links;
 		L->e[c] = e > 0 ? (float)e : 0.0f;
 	}
+	L->lo[0] = x0;
+	L->lo[1] = y0;
+	L->lo[2] = z0;
+	L->hi[0] = x1;
+	L->hi[1] = y1;
+	L->hi[2] = z1;
 }
 
-/* Level C = 1/2 P0^T F P0 (see the header). */
+/* Level C = 1/2 P0^T F P0 (see the header) over the box of F's box's parents. */
 static void build_coarse(const mg_level *F, mg_level *C, int nt)
 {
-	const int fx = F->nx, fy = F->ny, fz = F->nz, cx = C->nx, cy = C->ny, cz = C->nz;
-	const size_t fsy = (size_t)fx, fsz = (size_t)fx * fy;
-	nt = level_threads(F, nt);
+	for (int a = 0; a < 3; ++a) {
+		C->lo[a] = F->lo[a] / 2;
+		C->hi[a] = (F->hi[a] - 1) / 2 + 1;
+	}
+	nt = level_threads(C, nt);
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-	for (int K = 0; K < cz; ++K)
-		for (int J = 0; J < cy; ++J)
-			for (int I = 0; I < cx; ++I) {
-				const size_t cc = (size_t)I + (size_t)cx * ((size_t)J + (size_t)cy * (size_t)K);
+	for (int K = C->lo[2]; K < C->hi[2]; ++K)
+		for (int J = C->lo[1]; J < C->hi[1]; ++J)
+			for (int I = C->lo[0]; I < C->hi[0]; ++I) {
 				float e = 0, lx = 0, ly = 0, lz = 0;
 				bool present = false;
-				for (int k = 2 * K; k < 2 * K + 2 && k < fz; ++k)
-					for (int j = 2 * J; j < 2 * J + 2 && j < fy; ++j)
-						for (int i = 2 * I; i < 2 * I + 2 && i < fx; ++i) {
-							const size_t f = (size_t)i + fsy * (size_t)j + fsz * (size_t)k;
+				for (int k = 2 * K; k < 2 * K + 2; ++k)
+					for (int j = 2 * J; j < 2 * J + 2; ++j)
+						for (int i = 2 * I; i < 2 * I + 2; ++i) {
+							if (i < F->lo[0] || i >= F->hi[0] || j < F->lo[1] || j >= F->hi[1] || k < F->lo[2] ||
+							    k >= F->hi[2])
+								continue;
+							const size_t f = cell_at(F, i, j, k);
 							present |= F->d[f] > 0;
 							e += F->e[f];
 							/* the links leaving the block on its + sides */
@@ -201,48 +233,48 @@ static void build_coarse(const mg_level *F, mg_level *C, int nt)
 							if (k == 2 * K + 1)
 								lz += F->oz[f];
 						}
-				C->e[cc] = 0.5f * e;
-				C->ox[cc] = 0.5f * lx;
-				C->oy[cc] = 0.5f * ly;
-				C->oz[cc] = 0.5f * lz;
-				C->d[cc] = present ? 1.0f : 0.0f; /* marked here, summed below */
+				const size_t c = cell_at(C, I, J, K);
+				C->e[c] = 0.5f * e;
+				C->ox[c] = 0.5f * lx;
+				C->oy[c] = 0.5f * ly;
+				C->oz[c] = 0.5f * lz;
+				C->d[c] = present ? 1.0f : 0.0f; /* marked here, summed below */
 			}
-	const size_t sy = (size_t)cx, sz = (size_t)cx * cy;
-	nt = level_threads(C, nt);
+	const size_t sy = (size_t)C->nx, sz = sy * (size_t)C->ny;
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-	for (int K = 0; K < cz; ++K)
-		for (int J = 0; J < cy; ++J)
-			for (int I = 0; I < cx; ++I) {
-				const size_t c = (size_t)I + sy * (size_t)J + sz * (size_t)K;
+	for (int K = C->lo[2]; K < C->hi[2]; ++K)
+		for (int J = C->lo[1]; J < C->hi[1]; ++J)
+			for (int I = C->lo[0]; I < C->hi[0]; ++I) {
+				const size_t c = cell_at(C, I, J, K);
 				if (C->d[c] == 0)
 					continue;
 				float s = C->e[c] + C->ox[c] + C->oy[c] + C->oz[c];
-				if (I > 0)
+				if (I > C->lo[0])
 					s += C->ox[c - 1];
-				if (J > 0)
+				if (J > C->lo[1])
 					s += C->oy[c - sy];
-				if (K > 0)
+				if (K > C->lo[2])
 					s += C->oz[c - sz];
 				C->d[c] = s > 0 ? s : 1.0f; /* s = 0 only by underflow; any positive value keeps M SPD */
 			}
 }
 
-/* sum of a's links times x around cell c at (i, j, k) */
+/* sum of the links times x around cell c at (i, j, k) (none leave the box) */
 static inline float neighbours(const mg_level *L, const float *x, size_t c, int i, int j, int k)
 {
 	const size_t sy = (size_t)L->nx, sz = sy * (size_t)L->ny;
 	float s = 0;
-	if (i > 0)
+	if (i > L->lo[0])
 		s += L->ox[c - 1] * x[c - 1];
-	if (i + 1 < L->nx)
+	if (i + 1 < L->hi[0])
 		s += L->ox[c] * x[c + 1];
-	if (j > 0)
+	if (j > L->lo[1])
 		s += L->oy[c - sy] * x[c - sy];
-	if (j + 1 < L->ny)
+	if (j + 1 < L->hi[1])
 		s += L->oy[c] * x[c + sy];
-	if (k > 0)
+	if (k > L->lo[2])
 		s += L->oz[c - sz] * x[c - sz];
-	if (k + 1 < L->nz)
+	if (k + 1 < L->hi[2])
 		s += L->oz[c] * x[c + sz];
 	return s;
 }
@@ -250,119 +282,136 @@ static inline float neighbours(const mg_level *L, const float *x, size_t c, int 
 /* One Gauss-Seidel pass over the cells of colour col ((i + j + k) % 2). */
 static void sweep(mg_level *L, int col, int nt)
 {
-	const int nx = L->nx, ny = L->ny, nz = L->nz;
 	nt = level_threads(L, nt);
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-	for (int k = 0; k < nz; ++k)
-		for (int j = 0; j < ny; ++j) {
-			const size_t row = (size_t)nx * ((size_t)j + (size_t)ny * (size_t)k);
-			for (int i = (col + j + k) & 1; i < nx; i += 2) {
-				const size_t c = row + (size_t)i;
+	for (int k = L->lo[2]; k < L->hi[2]; ++k)
+		for (int j = L->lo[1]; j < L->hi[1]; ++j)
+			for (int i = L->lo[0] + ((col + j + k + L->lo[0]) & 1); i < L->hi[0]; i += 2) {
+				const size_t c = cell_at(L, i, j, k);
 				if (L->d[c] > 0)
 					L->x[c] = (L->b[c] + neighbours(L, L->x, c, i, j, k)) / L->d[c];
 			}
-		}
 }
 
 /* r = b - A x (0 off the unknowns) */
 static void residual(mg_level *L, int nt)
 {
-	const int nx = L->nx, ny = L->ny, nz = L->nz;
 	nt = level_threads(L, nt);
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-	for (int k = 0; k < nz; ++k)
-		for (int j = 0; j < ny; ++j) {
-			const size_t row = (size_t)nx * ((size_t)j + (size_t)ny * (size_t)k);
-			for (int i = 0; i < nx; ++i) {
-				const size_t c = row + (size_t)i;
+	for (int k = L->lo[2]; k < L->hi[2]; ++k)
+		for (int j = L->lo[1]; j < L->hi[1]; ++j)
+			for (int i = L->lo[0]; i < L->hi[0]; ++i) {
+				const size_t c = cell_at(L, i, j, k);
 				L->r[c] = L->d[c] > 0 ? L->b[c] - L->d[c] * L->x[c] + neighbours(L, L->x, c, i, j, k) : 0.0f;
 			}
-		}
 }
 
-/* Fine cell i of an axis maps to coarse cells a (weight 3/4) and b (1/4);
- * b = a past the domain's side, giving a the whole weight. */
-static inline void axis_map(int i, int n, int *a, int *b)
+/* x = 0 on the box */
+static void zero_box(mg_level *L, float *x)
+{
+	for (int k = L->lo[2]; k < L->hi[2]; ++k)
+		for (int j = L->lo[1]; j < L->hi[1]; ++j)
+			memset(x + cell_at(L, L->lo[0], j, k), 0, (size_t)(L->hi[0] - L->lo[0]) * sizeof *x);
+}
+
+/* Interpolation along one axis: fine cell i takes 3/4 of coarse cell a and
+ * 1/4 of b. Past the domain's side b = a (a takes the whole weight, the
+ * Neumann wall); a b outside the coarse box is not an unknown (value 0), so
+ * its weight is dropped. */
+typedef struct axis_map {
+	int a, b;
+	float wb;
+} axis_map;
+
+static inline axis_map map_axis(int i, int n, int lo, int hi)
 {
 	const int I = i >> 1, J = (i & 1) ? I + 1 : I - 1;
-	*a = I;
-	*b = J < 0 || J >= n ? I : J;
+	axis_map m = {I, J, 0.25f};
+	if (J < 0 || J >= n)
+		m.b = I;
+	else if (J < lo || J >= hi) {
+		m.b = I;
+		m.wb = 0;
+	}
+	return m;
 }
 
-/* weight of coarse cell I in fine cell i's interpolation */
-static inline float axis_weight(int i, int n, int I)
+/* The fine cells 2I-1 .. 2I+2 of coarse cell I on an axis of nf fine and n
+ * coarse cells and their weights in P (map_axis's, so R is P^T): 1/4, 3/4,
+ * 3/4, 1/4, where a neighbour past the domain's side gives its 1/4 to I;
+ * 0 for a fine cell past the side or outside the fine box [lo, hi) (not an
+ * unknown: its residual is 0). */
+static inline void axis_gather(int I, int nf, int n, int lo, int hi, float wt[4])
 {
-	int a, b;
-	axis_map(i, n, &a, &b);
-	return (a == I ? 0.75f : 0.0f) + (b == I ? 0.25f : 0.0f);
+	wt[0] = I > 0 ? 0.25f : 0.0f;
+	wt[1] = I > 0 ? 0.75f : 1.0f;
+	wt[2] = 2 * I + 1 >= nf ? 0.0f : I + 1 < n ? 0.75f : 1.0f;
+	wt[3] = 2 * I + 2 < nf ? 0.25f : 0.0f;
+	for (int t = 0; t < 4; ++t)
+		if (2 * I - 1 + t < lo || 2 * I - 1 + t >= hi)
+			wt[t] = 0;
 }
 
 /* C->b = P^T F->r, as a gather over the fine cells each coarse cell feeds */
 static void restrict_residual(const mg_level *F, mg_level *C, int nt)
 {
-	const int fx = F->nx, fy = F->ny, fz = F->nz, cx = C->nx, cy = C->ny, cz = C->nz;
-	nt = level_threads(F, nt);
+	nt = level_threads(C, nt);
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-	for (int K = 0; K < cz; ++K)
-		for (int J = 0; J < cy; ++J)
-			for (int I = 0; I < cx; ++I) {
-				const size_t cc = (size_t)I + (size_t)cx * ((size_t)J + (size_t)cy * (size_t)K);
+	for (int K = C->lo[2]; K < C->hi[2]; ++K) {
+		float wz[4];
+		axis_gather(K, F->nz, C->nz, F->lo[2], F->hi[2], wz);
+		for (int J = C->lo[1]; J < C->hi[1]; ++J) {
+			float wy[4];
+			axis_gather(J, F->ny, C->ny, F->lo[1], F->hi[1], wy);
+			for (int I = C->lo[0]; I < C->hi[0]; ++I) {
+				const size_t cc = cell_at(C, I, J, K);
 				if (C->d[cc] == 0) {
 					C->b[cc] = 0;
 					continue;
 				}
+				float wx[4];
+				axis_gather(I, F->nx, C->nx, F->lo[0], F->hi[0], wx);
 				float s = 0;
-				for (int k = 2 * K - 1; k <= 2 * K + 2; ++k) {
-					if (k < 0 || k >= fz)
+				for (int a = 0; a < 4; ++a) {
+					if (wz[a] == 0)
 						continue;
-					const float wz = axis_weight(k, cz, K);
-					if (wz == 0)
-						continue;
-					for (int j = 2 * J - 1; j <= 2 * J + 2; ++j) {
-						if (j < 0 || j >= fy)
+					for (int b = 0; b < 4; ++b) {
+						if (wy[b] == 0)
 							continue;
-						const float wy = axis_weight(j, cy, J);
-						if (wy == 0)
-							continue;
-						const size_t frow = (size_t)fx * ((size_t)j + (size_t)fy * (size_t)k);
 						float sr = 0;
-						for (int i = 2 * I - 1; i <= 2 * I + 2; ++i)
-							if (i >= 0 && i < fx)
-								sr += axis_weight(i, cx, I) * F->r[frow + (size_t)i];
-						s += wz * wy * sr;
+						for (int c = 0; c < 4; ++c)
+							if (wx[c] != 0)
+								sr += wx[c] * F->r[cell_at(F, 2 * I - 1 + c, 2 * J - 1 + b, 2 * K - 1 + a)];
+						s += wz[a] * wy[b] * sr;
 					}
 				}
 				C->b[cc] = s;
 			}
+		}
+	}
 }
 
-/* F->x += P C->x on F's unknowns (C->x is 0 off C's unknowns) */
+/* F->x += P C->x on F's unknowns */
 static void prolong_add(mg_level *F, const mg_level *C, int nt)
 {
-	const int fx = F->nx, fy = F->ny, fz = F->nz, cx = C->nx, cy = C->ny, cz = C->nz;
-	const size_t sy = (size_t)cx, sz = (size_t)cx * cy;
 	nt = level_threads(F, nt);
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-	for (int k = 0; k < fz; ++k)
-		for (int j = 0; j < fy; ++j) {
-			int ka, kb, ja, jb;
-			axis_map(k, cz, &ka, &kb);
-			axis_map(j, cy, &ja, &jb);
-			const size_t r00 = (size_t)ja * sy + (size_t)ka * sz, r01 = (size_t)jb * sy + (size_t)ka * sz;
-			const size_t r10 = (size_t)ja * sy + (size_t)kb * sz, r11 = (size_t)jb * sy + (size_t)kb * sz;
-			const size_t row = (size_t)fx * ((size_t)j + (size_t)fy * (size_t)k);
-			for (int i = 0; i < fx; ++i) {
-				const size_t c = row + (size_t)i;
+	for (int k = F->lo[2]; k < F->hi[2]; ++k)
+		for (int j = F->lo[1]; j < F->hi[1]; ++j) {
+			const axis_map mz = map_axis(k, C->nz, C->lo[2], C->hi[2]);
+			const axis_map my = map_axis(j, C->ny, C->lo[1], C->hi[1]);
+			const float *xaa = C->x + cell_at(C, 0, my.a, mz.a), *xba = C->x + cell_at(C, 0, my.b, mz.a);
+			const float *xab = C->x + cell_at(C, 0, my.a, mz.b), *xbb = C->x + cell_at(C, 0, my.b, mz.b);
+			for (int i = F->lo[0]; i < F->hi[0]; ++i) {
+				const size_t c = cell_at(F, i, j, k);
 				if (F->d[c] == 0)
 					continue;
-				int ia, ib;
-				axis_map(i, cx, &ia, &ib);
-				const float *x = C->x;
-				const float a00 = 0.75f * x[r00 + ia] + 0.25f * x[r00 + ib];
-				const float a01 = 0.75f * x[r01 + ia] + 0.25f * x[r01 + ib];
-				const float a10 = 0.75f * x[r10 + ia] + 0.25f * x[r10 + ib];
-				const float a11 = 0.75f * x[r11 + ia] + 0.25f * x[r11 + ib];
-				F->x[c] += 0.75f * (0.75f * a00 + 0.25f * a01) + 0.25f * (0.75f * a10 + 0.25f * a11);
+				const axis_map mx = map_axis(i, C->nx, C->lo[0], C->hi[0]);
+				const float raa = 0.75f * xaa[mx.a] + mx.wb * xaa[mx.b];
+				const float rba = 0.75f * xba[mx.a] + mx.wb * xba[mx.b];
+				const float rab = 0.75f * xab[mx.a] + mx.wb * xab[mx.b];
+				const float rbb = 0.75f * xbb[mx.a] + mx.wb * xbb[mx.b];
+				F->x[c] += 0.75f * (0.75f * raa + my.wb * rba) + mz.wb * (0.75f * rab + my.wb * rbb);
 			}
 		}
 }
@@ -374,9 +423,11 @@ static bool coarse_factor(flip_mg *m)
 	const mg_level *L = &m->lev[m->nlev - 1];
 	const int nx = L->nx, ny = L->ny;
 	int n = 0;
-	for (size_t c = 0; c < L->nc; ++c)
-		if (L->d[c] > 0)
-			m->co_cell[n++] = (int)c;
+	for (int k = L->lo[2]; k < L->hi[2]; ++k)
+		for (int j = L->lo[1]; j < L->hi[1]; ++j)
+			for (int i = L->lo[0]; i < L->hi[0]; ++i)
+				if (L->d[cell_at(L, i, j, k)] > 0)
+					m->co_cell[n++] = (int)cell_at(L, i, j, k);
 	m->co_n = n;
 	double *a = m->chol;
 	memset(a, 0, (size_t)n * (size_t)n * sizeof *a);
@@ -432,7 +483,7 @@ static void coarse_solve(flip_mg *m)
 			s -= a[(size_t)t * n + p] * v[t];
 		v[p] = s / a[(size_t)p * n + p];
 	}
-	memset(L->x, 0, L->nc * sizeof *L->x);
+	zero_box(L, L->x);
 	for (int p = 0; p < n; ++p)
 		L->x[m->co_cell[p]] = (float)v[p];
 }
@@ -445,7 +496,7 @@ static void vcycle(flip_mg *m, int l, int nt)
 		return;
 	}
 	mg_level *L = &m->lev[l], *C = &m->lev[l + 1];
-	memset(L->x, 0, L->nc * sizeof *L->x);
+	zero_box(L, L->x);
 	for (int s = 0; s < NU; ++s) {
 		sweep(L, 0, nt);
 		sweep(L, 1, nt);
@@ -465,7 +516,7 @@ static void precondition(flip_mg *m, const int *cell_of, int n, const double *r,
 {
 	mg_level *L = &m->lev[0];
 	const int t = n > PAR_CELLS ? nt : 1;
-	/* b is 0 off the unknowns from build_fine's caller; rows overwrite theirs */
+	/* the cycle reads b on the unknowns only */
 #pragma omp parallel for num_threads(t) if (t > 1) schedule(static)
 	for (int i = 0; i < n; ++i)
 		L->b[cell_of[i]] = (float)r[i];
@@ -543,7 +594,6 @@ eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A,
 	double *r = mem, *z = mem + n, *s = mem + 2 * (size_t)n, *q = mem + 3 * (size_t)n, *part = mem + 4 * (size_t)n;
 
 	build_fine(&m->lev[0], A, cell_of, nt);
-	memset(m->lev[0].b, 0, m->lev[0].nc * sizeof *m->lev[0].b);
 	for (int l = 1; l < m->nlev; ++l)
 		build_coarse(&m->lev[l - 1], &m->lev[l], nt);
 	if (!coarse_factor(m))

@@ -241,11 +241,11 @@ static eddy_status wavy_setup(eddy_world *w, const eddy_step_context *ctx, void 
 static void pressure_sweep(FILE *f, bool *first)
 {
 	const int sizes[] = {32, 64, 128};
-	const eddy_flip_solver solvers[] = {EDDY_FLIP_PCG, EDDY_FLIP_HYPRE};
-	const char *const names[] = {"pcg", "hypre"};
+	const eddy_flip_solver solvers[] = {EDDY_FLIP_PCG, EDDY_FLIP_HYPRE, EDDY_FLIP_MG};
+	const char *const names[] = {"pcg", "hypre", "mg"};
 	for (int si = 0; si < 3; ++si)
 		for (int threads = 1; threads <= 2; ++threads)
-			for (int sv = 0; sv < 2; ++sv) {
+			for (int sv = 0; sv < 3; ++sv) {
 				const int n = sizes[si], reps = n >= 128 ? 3 : 5;
 				eddy_world_def d = eddy_default_world_def();
 				d.cell_size = 1.0 / n;
