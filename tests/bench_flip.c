@@ -7,9 +7,10 @@
  *    1e-2 / 1e-5 / 1e-8 and CHOLMOD (first solve = analyse + factor + solve,
  *    repeat = factor + solve with the analysis reused), 1 and 2 threads;
  *  - the pour scene (5625 particles) on one thread: simulated s per wall s;
- *  - pressure sweep: PCG against HYPRE's PFMG-PCG (solver = "hypre") on a
- *    pool with a wavy surface at 32^3, 64^3, 128^3: iterations and s per
- *    solve ("bench_flip FILE sweep" runs only this).
+ *  - pressure sweep: PCG against HYPRE's PFMG-PCG (solver = "hypre") and
+ *    eddy's multigrid-preconditioned CG (solver = "mg") on a pool with a
+ *    wavy surface at 32^3, 64^3, 128^3: iterations and s per solve
+ *    ("bench_flip FILE sweep" runs only this).
  * Every figure is the median of repeats: the machine is shared and noisy. */
 #include <math.h>
 #include <stdio.h>
@@ -215,11 +216,11 @@ static void pressure(FILE *f, bool *first)
 
 /* Grid-size sweep (eddy issue 17): the pool with a wavy surface and a drop
  * (fixture_wavy_pool, about half the box liquid) at n^3, n = 32, 64, 128,
- * solved by MIC(0)-PCG and by HYPRE's PFMG-preconditioned CG to 1e-6, on 1
- * and 2 threads: iterations and seconds per flip_pressure step (assembly,
+ * solved by MIC(0)-PCG, HYPRE's PFMG-preconditioned CG and flip_mg.c's
+ * multigrid-preconditioned CG to 1e-6, on 1 and 2 threads: iterations and seconds per flip_pressure step (assembly,
  * solve, velocity update), the median of the repeats; and the process CPU
- * time per frame (the solve plus the setup system's fill, the same for both
- * solvers), the steadier figure on a shared machine. */
+ * time per frame (the solve plus the setup system's fill, the same for every
+ * solver), the steadier figure on a shared machine. */
 /* Process CPU seconds: on a shared machine a one-thread run's CPU time moves
  * far less than its wall time (it counts all threads: compare 1-thread rows). */
 static double cpu_s(void)
