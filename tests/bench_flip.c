@@ -217,8 +217,9 @@ static void pressure(FILE *f, bool *first)
 /* Grid-size sweep (eddy issue 17): the pool with a wavy surface and a drop
  * (fixture_wavy_pool, about half the box liquid) at n^3, n = 32, 64, 128,
  * solved by MIC(0)-PCG, HYPRE's PFMG-preconditioned CG and flip_mg.c's
- * multigrid-preconditioned CG to 1e-6, on 1 and 2 threads: iterations and seconds per flip_pressure step (assembly,
- * solve, velocity update), the median of the repeats; and the process CPU
+ * multigrid-preconditioned CG to 1e-6, on 1 and 2 threads: iterations and
+ * seconds per flip_pressure step (assembly, solve, velocity update), the
+ * median of the repeats; and the process CPU
  * time per frame (the solve plus the setup system's fill, the same for every
  * solver), the steadier figure on a shared machine. */
 /* Process CPU seconds: on a shared machine a one-thread run's CPU time moves
