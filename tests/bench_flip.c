@@ -219,9 +219,9 @@ static void pressure(FILE *f, bool *first)
  * solved by MIC(0)-PCG, HYPRE's PFMG-preconditioned CG and flip_mg.c's
  * multigrid-preconditioned CG to 1e-6, on 1 and 2 threads: iterations and
  * seconds per flip_pressure step (assembly, solve, velocity update), the
- * median of the repeats; and the process CPU
- * time per frame (the solve plus the setup system's fill, the same for every
- * solver), the steadier figure on a shared machine. */
+ * median of the repeats; and the process CPU time per frame (the solve plus
+ * the setup system's fill, the same for every solver), the steadier figure
+ * on a shared machine. */
 /* Process CPU seconds: on a shared machine a one-thread run's CPU time moves
  * far less than its wall time (it counts all threads: compare 1-thread rows). */
 static double cpu_s(void)
