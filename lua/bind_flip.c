@@ -2,7 +2,7 @@
 /* Lua descriptions of the FLIP systems' defs (sys_flip_*.c). */
 #include "bind.h"
 
-static const char *const solver_choices[] = {"pcg", "cholmod", "hypre", NULL};
+static const char *const solver_choices[] = {"pcg", "cholmod", "hypre", "mg", NULL};
 static const char *const transfer_choices[] = {"flip", "pic", "apic", NULL};
 
 static const eddy_lua_field flip_p2g_fields[] = {

@@ -720,8 +720,10 @@ EDDY_API eddy_system_id eddy_add_flip_surface(eddy_world *w, const eddy_flip_sur
 typedef enum eddy_flip_solver {
 	EDDY_FLIP_PCG = 0, /* MIC(0)-preconditioned conjugate gradient, double precision */
 	EDDY_FLIP_CHOLMOD, /* supernodal sparse Cholesky (CHOLMOD), the exact reference */
-	EDDY_FLIP_HYPRE    /* CG preconditioned by a HYPRE PFMG multigrid V-cycle: iterations
+	EDDY_FLIP_HYPRE,   /* CG preconditioned by a HYPRE PFMG multigrid V-cycle: iterations
 	                      flat in grid size; initialises MPI if the host has not */
+	EDDY_FLIP_MG       /* CG preconditioned by eddy's own geometric multigrid V-cycle
+	                      (McAdams et al. 2010): iterations flat in grid size, on all threads */
 } eddy_flip_solver;
 
 /* flip_pressure: the pressure Poisson equation over fluid cells with
@@ -731,8 +733,8 @@ typedef enum eddy_flip_solver {
 typedef struct eddy_flip_pressure_def {
 	eddy_flip_solver solver;
 	float density;      /* kg/m^3, > 0 */
-	double tolerance;   /* 1, PCG and HYPRE stop at max|r| <= tolerance * max|b|; (0, 1) */
-	int max_iterations; /* 1, PCG and HYPRE cap; failure to converge is an error; >= 1 */
+	double tolerance;   /* 1, PCG, HYPRE and MG stop at max|r| <= tolerance * max|b|; (0, 1) */
+	int max_iterations; /* 1, PCG, HYPRE and MG cap; failure to converge is an error; >= 1 */
 	float theta_min;    /* 1, lower clamp of the ghost-fluid fraction; [1e-4, 0.5] */
 } eddy_flip_pressure_def;
 EDDY_API eddy_flip_pressure_def eddy_default_flip_pressure_def(void);

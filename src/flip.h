@@ -382,6 +382,19 @@ bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double
 eddy_status eddy__flip_hypre_solve(eddy_world *w, const flip_matrix *A, const int *cell_of, const double *b, double *x,
                                    double tol, int max_it, int *it, double *res, bool *converged);
 
+/* Multigrid-preconditioned CG (flip_mg.c, after McAdams, Sifakis & Teran
+ * 2010). One per flip_pressure system: it keeps its grid levels while the
+ * grid size stays. Solves A x = b to max|r| <= tol max|b| as eddy__flip_pcg;
+ * cell_of[r] is row r's cell. On all of the world's threads, the same result
+ * on any thread count. *converged false: no convergence in max_it (EDDY_OK
+ * returned; *it, *res set). Out of memory returns an error with the world
+ * error set. */
+typedef struct flip_mg flip_mg;
+flip_mg *eddy__flip_mg_new(void);
+void eddy__flip_mg_free(flip_mg *m);
+eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A, const int *cell_of, const double *b,
+                                double *x, double tol, int max_it, int *it, double *res, bool *converged);
+
 /* CHOLMOD (flip_cholmod.c, the only file including cholmod.h). One solver
  * per flip_pressure system, keeping the symbolic analysis while the pattern
  * is unchanged. */

@@ -59,8 +59,10 @@
  * exactly because its rows sum to zero.
  * Solvers: MIC(0)-PCG (flip_pcg.c), CG with a HYPRE PFMG multigrid
  * preconditioner (flip_hypre.c, iterations flat in grid size) or supernodal
- * CHOLMOD (flip_cholmod.c), all with the weighted off-diagonals -w_f.
- * Every solve is checked: a non-converged PCG or HYPRE solve, a CHOLMOD
+ * CHOLMOD (flip_cholmod.c), or CG with eddy's own threaded geometric
+ * multigrid preconditioner (flip_mg.c, McAdams et al. 2010), all with the
+ * weighted off-diagonals -w_f.
+ * Every solve is checked: a non-converged PCG, HYPRE or MG solve, a CHOLMOD
  * status other than OK or a relative residual max|b - A q| / max|b| above
  * tolerance (CHOLMOD: 1e-8) is an error and the velocities are left as they
  * were.
@@ -87,6 +89,7 @@
 typedef struct pressure {
 	eddy_flip_pressure_def def;
 	flip_cholmod *chol;
+	flip_mg *mg;
 	int64_t analyses; /* CHOLMOD symbolic analyses so far */
 } pressure;
 
@@ -106,8 +109,8 @@ eddy_flip_pressure_def eddy_default_flip_pressure_def(void)
 }
 
 /* per eddy_flip_solver: the published name and the one in messages */
-static const char *const solver_name[] = {"pcg", "cholmod", "hypre"};
-static const char *const solver_label[] = {"PCG", "CHOLMOD", "HYPRE PFMG-PCG"};
+static const char *const solver_name[] = {"pcg", "cholmod", "hypre", "mg"};
+static const char *const solver_label[] = {"PCG", "CHOLMOD", "HYPRE PFMG-PCG", "MG-PCG"};
 
 /* Fraction of the way from fluid centre i to air centre j where phi = 0. */
 static double theta(float pi, float pj, double tmin)
@@ -404,6 +407,21 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 				"%d iterations (tolerance %.3g, %d unknowns); raise max_iterations or use solver = "
 				"\"cholmod\"",
 				(long long)ctx->step, residual, iterations, ps->def.tolerance, n);
+	} else if (ps->def.solver == EDDY_FLIP_MG) {
+		/* created at the first solve, as CHOLMOD below */
+		if (!ps->mg && !(ps->mg = eddy__flip_mg_new()))
+			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory");
+		bool converged = false;
+		const eddy_status st = eddy__flip_mg_solve(w, ps->mg, &A, cell_of, b, q, ps->def.tolerance,
+		                                           ps->def.max_iterations, &iterations, &residual, &converged);
+		if (st != EDDY_OK)
+			return st;
+		if (!converged)
+			return eddy__fail(w, EDDY_ERR_SOLVER,
+			                  "flip_pressure: MG-PCG did not converge at step %lld: relative residual %.3g after %d "
+			                  "iterations (tolerance %.3g, %d unknowns); raise max_iterations or use solver = "
+			                  "\"cholmod\"",
+			                  (long long)ctx->step, residual, iterations, ps->def.tolerance, n);
 	} else {
 		/* created at the first solve, not in add: a failed add frees the
 		 * system's data without its destroy hook */
@@ -527,8 +545,10 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 static void destroy(eddy_system *s)
 {
 	pressure *ps = s->data;
-	if (ps)
+	if (ps) {
 		eddy__flip_cholmod_free(ps->chol);
+		eddy__flip_mg_free(ps->mg);
+	}
 }
 
 /* The scratch is this step's own: released on return, so the pipeline's
@@ -561,8 +581,9 @@ eddy_system_id eddy_add_flip_pressure(eddy_world *w, const eddy_flip_pressure_de
 	const char *sys = "flip_pressure";
 	if (!eddy__add_args(w, def, sys))
 		return EDDY_NULL_SYSTEM;
-	if (def->solver != EDDY_FLIP_PCG && def->solver != EDDY_FLIP_CHOLMOD && def->solver != EDDY_FLIP_HYPRE) {
-		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'solver' must be \"pcg\", \"cholmod\" or \"hypre\" (got %d)", sys,
+	if (def->solver != EDDY_FLIP_PCG && def->solver != EDDY_FLIP_CHOLMOD && def->solver != EDDY_FLIP_HYPRE &&
+	    def->solver != EDDY_FLIP_MG) {
+		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'solver' must be \"pcg\", \"cholmod\", \"hypre\" or \"mg\" (got %d)", sys,
 		           (int)def->solver);
 		return EDDY_NULL_SYSTEM;
 	}

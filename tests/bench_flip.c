@@ -7,9 +7,10 @@
  *    1e-2 / 1e-5 / 1e-8 and CHOLMOD (first solve = analyse + factor + solve,
  *    repeat = factor + solve with the analysis reused), 1 and 2 threads;
  *  - the pour scene (5625 particles) on one thread: simulated s per wall s;
- *  - pressure sweep: PCG against HYPRE's PFMG-PCG (solver = "hypre") on a
- *    pool with a wavy surface at 32^3, 64^3, 128^3: iterations and s per
- *    solve ("bench_flip FILE sweep" runs only this).
+ *  - pressure sweep: PCG against HYPRE's PFMG-PCG (solver = "hypre") and
+ *    eddy's multigrid-preconditioned CG (solver = "mg") on a pool with a
+ *    wavy surface at 32^3, 64^3, 128^3: iterations and s per solve
+ *    ("bench_flip FILE sweep" runs only this).
  * Every figure is the median of repeats: the machine is shared and noisy. */
 #include <math.h>
 #include <stdio.h>
@@ -215,11 +216,12 @@ static void pressure(FILE *f, bool *first)
 
 /* Grid-size sweep (eddy issue 17): the pool with a wavy surface and a drop
  * (fixture_wavy_pool, about half the box liquid) at n^3, n = 32, 64, 128,
- * solved by MIC(0)-PCG and by HYPRE's PFMG-preconditioned CG to 1e-6, on 1
- * and 2 threads: iterations and seconds per flip_pressure step (assembly,
- * solve, velocity update), the median of the repeats; and the process CPU
- * time per frame (the solve plus the setup system's fill, the same for both
- * solvers), the steadier figure on a shared machine. */
+ * solved by MIC(0)-PCG, HYPRE's PFMG-preconditioned CG and flip_mg.c's
+ * multigrid-preconditioned CG to 1e-6, on 1 and 2 threads: iterations and
+ * seconds per flip_pressure step (assembly, solve, velocity update), the
+ * median of the repeats; and the process CPU time per frame (the solve plus
+ * the setup system's fill, the same for every solver), the steadier figure
+ * on a shared machine. */
 /* Process CPU seconds: on a shared machine a one-thread run's CPU time moves
  * far less than its wall time (it counts all threads: compare 1-thread rows). */
 static double cpu_s(void)
@@ -241,11 +243,11 @@ static eddy_status wavy_setup(eddy_world *w, const eddy_step_context *ctx, void 
 static void pressure_sweep(FILE *f, bool *first)
 {
 	const int sizes[] = {32, 64, 128};
-	const eddy_flip_solver solvers[] = {EDDY_FLIP_PCG, EDDY_FLIP_HYPRE};
-	const char *const names[] = {"pcg", "hypre"};
+	const eddy_flip_solver solvers[] = {EDDY_FLIP_PCG, EDDY_FLIP_HYPRE, EDDY_FLIP_MG};
+	const char *const names[] = {"pcg", "hypre", "mg"};
 	for (int si = 0; si < 3; ++si)
 		for (int threads = 1; threads <= 2; ++threads)
-			for (int sv = 0; sv < 2; ++sv) {
+			for (int sv = 0; sv < 3; ++sv) {
 				const int n = sizes[si], reps = n >= 128 ? 3 : 5;
 				eddy_world_def d = eddy_default_world_def();
 				d.cell_size = 1.0 / n;

@@ -11,8 +11,8 @@
  *    runs on a loaded host (for 2 threads it counts both, and OpenMP's
  *    spinning);
  *  - FLIP's pressure solve on the wavy pool of tests/grid_fixture.h at 64^3,
- *    128^3 and 256^3 cells: iterations and seconds per solve for PCG and
- *    HYPRE on 1 and 2 threads.
+ *    128^3 and 256^3 cells: iterations and seconds per solve for PCG,
+ *    HYPRE and MG on 1 and 2 threads.
  * Every configuration runs in a fresh child process (this program re-executed
  * with --child), so its peak RSS is its own. A 10M run is attempted only when
  * the 1M run's bytes per particle, times 10M, fit in MemAvailable with a
@@ -20,8 +20,9 @@
  *
  *   bench_scale [FILE] [--sizes 100000,1000000,10000000] [--methods wcsph,dfsph,flip]
  *               [--reps 3] [--steps 4] [--grids 64,128,256] [--no-pressure]
- *   bench_scale --child METHOD N THREADS STEPS     one block run, a JSON line on stdout
- *   bench_scale --pressure GRID SOLVER THREADS     one pressure run, a JSON line on stdout */
+ *   bench_scale --child METHOD N THREADS STEPS [SOLVER]   one block run, a JSON line on stdout
+ *                                     (SOLVER: FLIP's pressure solver, pcg (default), hypre or mg)
+ *   bench_scale --pressure GRID SOLVER THREADS     one pressure run (pcg, hypre or mg), a JSON line */
 #include <errno.h>
 #include <stdint.h>
 #include <math.h>
@@ -73,11 +74,17 @@ static double extra_stat(const eddy_frame_stats *st, const char *name)
 	return NAN;
 }
 
+/* FLIP pressure solver by name: "hypre", "mg", otherwise PCG */
+static eddy_flip_solver solver_of(const char *name)
+{
+	return strcmp(name, "hypre") == 0 ? EDDY_FLIP_HYPRE : strcmp(name, "mg") == 0 ? EDDY_FLIP_MG : EDDY_FLIP_PCG;
+}
+
 /* A cube of about n particles at spacing dx = 1 cm on the floor of a tank
  * twice as wide and 1.5 times as tall, as bench_sph's block, for method
  * "wcsph", "dfsph" or "flip" (cells 2 dx wide, 8 particles each, the
  * defaults of eddy.fluid). */
-static eddy_world *block(const char *method, long n, int threads)
+static eddy_world *block(const char *method, long n, int threads, eddy_flip_solver solver)
 {
 	const bool flip = strcmp(method, "flip") == 0, dfsph = strcmp(method, "dfsph") == 0;
 	const float dx = 0.01f,
@@ -107,6 +114,7 @@ static eddy_world *block(const char *method, long n, int threads)
 		eddy_flip_surface_def sf = eddy_default_flip_surface_def();
 		eddy_add_flip_surface(w, &sf);
 		eddy_flip_pressure_def pr = eddy_default_flip_pressure_def();
+		pr.solver = solver;
 		eddy_add_flip_pressure(w, &pr);
 		eddy_flip_extrapolate_def ex = eddy_default_flip_extrapolate_def();
 		ex.layers = 3; /* eddy.fluid's at CFL 1 */
@@ -148,11 +156,11 @@ static eddy_world *block(const char *method, long n, int threads)
 
 /* One block run: 2 steps to emit and take the first kick, then `steps`
  * timed steps. Prints one JSON object. */
-static int child_block(const char *method, long n, int threads, int steps)
+static int child_block(const char *method, long n, int threads, int steps, const char *solver)
 {
 	if (getenv("EDDY_SCALE_COLUMNS"))
 		fprintf(stderr, "peak RSS before the world: %.1f MB\n", (double)maxrss_kb() / 1e3);
-	eddy_world *w = block(method, n, threads);
+	eddy_world *w = block(method, n, threads, solver_of(solver));
 	if (!w) {
 		fprintf(stderr, "bench_scale: cannot create the world\n");
 		return 1;
@@ -191,11 +199,13 @@ static int child_block(const char *method, long n, int threads, int steps)
 		const double it = extra_stat(&st, "iterations");
 		iters += isnan(it) ? 0 : it;
 	}
-	printf("{\"method\":\"%s\",\"particles\":%zu,\"threads\":%d,\"steps\":%d,\"ns_per_particle_step\":%.2f,"
+	printf("{\"method\":\"%s\",\"solver\":\"%s\",\"particles\":%zu,\"threads\":%d,\"steps\":%d,\"ns_per_particle_"
+	       "step\":%.2f,"
 	       "\"cpu_ns_per_particle_step\":%.2f,\"setup_s\":%.3f,\"peak_rss_bytes\":%ld,\"iterations_per_step\":%.2f,"
 	       "\"state_hash\":\"%016llx\",\"systems_ns\":{",
-	       method, np, threads, steps, median(ms, steps) * 1e6 / (double)np, median(cpu, steps) * 1e6 / (double)np,
-	       setup_s, maxrss_kb() * 1024L, iters / steps, (unsigned long long)eddy_world_state_hash(w));
+	       method, solver, np, threads, steps, median(ms, steps) * 1e6 / (double)np,
+	       median(cpu, steps) * 1e6 / (double)np, setup_s, maxrss_kb() * 1024L, iters / steps,
+	       (unsigned long long)eddy_world_state_hash(w));
 	for (int k = 0; k < ns; ++k) {
 		eddy_system_info info;
 		eddy_world_system_info(w, eddy_world_system_at(w, k), &info);
@@ -248,7 +258,7 @@ static eddy_world *pool(int n, int threads, eddy_flip_solver solver)
  * then the n^3 pool solved once (n >= 256) or three times (median). */
 static int child_pressure(int n, const char *solver, int threads)
 {
-	const eddy_flip_solver sv = strcmp(solver, "hypre") == 0 ? EDDY_FLIP_HYPRE : EDDY_FLIP_PCG;
+	const eddy_flip_solver sv = solver_of(solver);
 	eddy_world *warm = pool(16, threads, sv);
 	eddy_world_step_frame(warm);
 	eddy_destroy_world(warm);
@@ -359,8 +369,8 @@ static int parse_list(const char *s, long *v, int cap)
 
 int main(int argc, char **argv)
 {
-	if (argc == 6 && strcmp(argv[1], "--child") == 0)
-		return child_block(argv[2], atol(argv[3]), atoi(argv[4]), atoi(argv[5]));
+	if ((argc == 6 || argc == 7) && strcmp(argv[1], "--child") == 0)
+		return child_block(argv[2], atol(argv[3]), atoi(argv[4]), atoi(argv[5]), argc == 7 ? argv[6] : "pcg");
 	if (argc == 5 && strcmp(argv[1], "--pressure") == 0)
 		return child_pressure(atoi(argv[2]), argv[3], atoi(argv[4]));
 	const char *path = "build/bench_scale.json";
@@ -488,8 +498,8 @@ int main(int argc, char **argv)
 	}
 	for (int g = 0; g < ngrids && do_pressure; ++g)
 		for (int t = 1; t <= 2; ++t)
-			for (int s = 0; s < 2; ++s) {
-				const char *solver = s ? "hypre" : "pcg";
+			for (int s = 0; s < 3; ++s) {
+				const char *solver = s == 0 ? "pcg" : s == 1 ? "hypre" : "mg";
 				snprintf(sn, sizeof sn, "%ld", grids[g]);
 				snprintf(st, sizeof st, "%d", t);
 				char *args[] = {argv[0], "--pressure", sn, (char *)(uintptr_t)solver, st, NULL};

@@ -1267,8 +1267,8 @@ static void defs_and_order_are_checked(void)
  * solver's stats. */
 static void dam_break_scene_runs_every_solver(void)
 {
-	static const char *const names[3] = {"pcg", "cholmod", "hypre"};
-	for (int sv = 0; sv < 3; ++sv) {
+	static const char *const names[4] = {"pcg", "cholmod", "hypre", "mg"};
+	for (int sv = 0; sv < 4; ++sv) {
 		char cmd[512], out[8192];
 		snprintf(cmd, sizeof cmd,
 		         "%s/eddy run scenes/dam_break.lua --set method=flip --frames 3 --set solver=%s --set spacing=0.0125 "
@@ -1306,7 +1306,7 @@ static void scene_rejects_unknown_solver(void)
 	int st = pclose(f);
 	CHECK(WIFEXITED(st) && WEXITSTATUS(st) != 0);
 	CHECK_HAS(out, "scenes/dam_break.lua:");
-	CHECK_HAS(out, "'solver' must be \"pcg\", \"cholmod\" or \"hypre\"");
+	CHECK_HAS(out, "'solver' must be \"pcg\", \"cholmod\", \"hypre\" or \"mg\"");
 }
 
 void suite_flip(void)
