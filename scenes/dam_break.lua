@@ -17,7 +17,7 @@ local eddy = require "eddy"
 local dam = require "eddy.dam_break"
 
 local a = eddy.param("a", 0.1)                  -- m, column base
-local solver = eddy.param("solver", "pcg")      -- FLIP's pressure solve: "pcg", "cholmod" or "hypre"
+local solver = eddy.param("solver", "pcg")      -- FLIP's pressure solve: "pcg", "mg", "cholmod" or "hypre"
 local fluid = eddy.fluid {
 	method = eddy.param("method", "wcsph"),     -- wcsph, dfsph, flip, pic or apic
 	resolution = eddy.param("spacing", a / 20), -- m

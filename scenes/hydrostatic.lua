@@ -22,7 +22,7 @@ local eddy = require "eddy"
 
 local H = eddy.param("depth", 0.1)              -- m, water depth
 local W = eddy.param("width", H)                -- m, tank width (x and z)
-local solver = eddy.param("solver", "pcg")      -- grid methods: "pcg", "cholmod" or "hypre"
+local solver = eddy.param("solver", "pcg")      -- grid methods: "pcg", "mg", "cholmod" or "hypre"
 -- dfsph: mean compression (default 0.001); grid methods: PCG's residual (1e-6)
 local tolerance = eddy.param("tolerance", 0)
 if tolerance <= 0 then tolerance = nil end

@@ -26,7 +26,7 @@
 local eddy = require "eddy"
 
 local L, H = 0.2, 0.3                           -- m, box side and height
-local solver = eddy.param("solver", "pcg")      -- FLIP's pressure solve: "pcg", "cholmod" or "hypre"
+local solver = eddy.param("solver", "pcg")      -- FLIP's pressure solve: "pcg", "mg", "cholmod" or "hypre"
 local fluid = eddy.fluid {
 	method = eddy.param("method", "dfsph"),     -- wcsph, dfsph, flip, pic or apic
 	resolution = eddy.param("spacing", 0.01),   -- m

@@ -10,7 +10,7 @@
 local eddy = require "eddy"
 
 local L, H, W = 1.0, 0.6, 0.5                     -- m, tank
-local solver = eddy.param("solver", "pcg")        -- grid methods: "pcg", "cholmod" or "hypre"
+local solver = eddy.param("solver", "pcg")        -- grid methods: "pcg", "mg", "cholmod" or "hypre"
 local fluid = eddy.fluid {
 	method = eddy.param("method", "flip"),        -- wcsph, dfsph, flip, pic or apic
 	resolution = eddy.param("spacing", 1 / 64),   -- m: FLIP cells of 1/32 m
