@@ -1,73 +1,66 @@
 /* SPDX-License-Identifier: MIT */
 /* sph_dfsph: implicit SPH pressure, the divergence-free SPH of Bender &
  * Koschier, in place of sph_pressure: each step solves for the pressure that
- * keeps the rest density, and dt is limited by the flow speed, not by a
- * speed of sound.
+ * keeps the rest density; dt is limited by the flow, not by a speed of sound.
  *
- * Reads: x y z vx vy vz density ax ay az and sph_density's lists. Writes:
- * pressure, ax ay az (accumulated: after the other forces, before integrate,
- * whose v += dt a then gives the corrected velocity). With the divergence
- * solver it also reads and writes its state columns dfsph_k dfsph_kd, each
- * solve's k of the last step.
+ * Reads: x y z vx vy vz density ax ay az, sph_density's lists. Writes:
+ * pressure, ax ay az (accumulated: it runs after the other forces, before
+ * integrate). With the divergence solver it reads and writes its state
+ * columns dfsph_k dfsph_kd, each solve's k of the last step.
  *
  * With G_ij = m grad W_spiky(x_i - x_j) (the poly6 gradient vanishes at r = 0
  * and lets a tank at rest cluster), S_i = sum_j G_ij, boundary particles of
- * mass m_b = V_b rho0 (Akinci et al.), B_i = sum_b m_b grad W(x_i - x_b), and
- * the pressure as k_i = p_i / rho_i^2:
+ * mass m_b = V_b rho0 (Akinci et al.), B_i = sum_b m_b grad W(x_i - x_b),
+ * k_i = p_i / rho_i^2, and bdiv_i the moving colliders' part (sph.h):
  *   Drho_i/Dt = sum_j (v_i - v_j) . G_ij + v_i . B_i - bdiv_i
  *   a_i^p     = -sum_j (k_i + k_j) G_ij - 2 k_i B_i + h_i
  *   h_i       = -(1/rho_i) sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b)
- * bdiv_i is the moving colliders' part (sph.h). The boundary particles mirror
- * the pressure (p_b = p_i, so the wall counts twice: with one k_i a wall could
- * not hold a particle whose neighbourhood is full, where S_i + B_i ~ 0), plus
- * Adami et al.'s hydrostatic part p_b - p_i = rho_i g . (x_b - x_i), h_i, which
- * supports the fluid beside the walls. A step sets v* = v + dt (a + h), then
- * solves for k by corrections that move v* by dt a^p of a change of k; a gets
- * (v* - (v + dt a)) / dt, and pressure p_i = M k_i rho_i^2 (k summed over the
- * solves, M = 1 / grad_cal the force's lattice moment, see sph_pressure).
+ * The boundary particles mirror the pressure (p_b = p_i, so the wall counts
+ * twice: with one k_i a wall could not hold a particle whose neighbourhood is
+ * full, where S_i + B_i ~ 0), plus Adami et al.'s hydrostatic part p_b - p_i =
+ * rho_i g . (x_b - x_i): h_i, which supports the fluid beside the walls. A
+ * step sets v* = v + dt (a + h), solves for k by corrections that move v* by
+ * dt a^p of a change of k, adds (v* - (v + dt a)) / dt to a and writes
+ * p_i = k_i rho_i^2 / grad_cal (k summed over the solves; see sph_pressure).
  *
  * The divergence solver (the default) runs the paper's two solves,
  *   velocity:  R_i(v*) = 0,   density:  rho_i + dt R_i(v*) = rho0,
  *   R_i(v) = sum_j (v_i - v_j) . G_ij + 2 (v_i . B_i - bdiv_i),
- * the wall counted twice, as the force does: a change of k then moves the
- * predicted density by -(A k)_i, A = dt^2 grad^T grad symmetric positive
- * semi-definite of diagonal dt^2 D'_i, D'_i = |S_i + 2 B_i|^2 + sum_j |G_ij|^2
- * (the true rate makes A non-symmetric, and Jacobi sweeps on it can diverge in
- * a deep column). Each solve starts from its own k of the last step, which
- * carries the pressure that holds up the water above (sweeps cannot rebuild
- * it each step: their error in the column-wide mode falls by 1 - c / N^2 a
- * sweep for N layers); conjugate gradients (1 - c / N a step) then solve on
+ * the wall counted twice as in the force, so that a change of k moves the
+ * predicted density by -(A k)_i with A = dt^2 grad^T grad symmetric positive
+ * semi-definite, of diagonal dt^2 D'_i, D'_i = |S_i + 2 B_i|^2 + sum_j
+ * |G_ij|^2 (on the true rate A is not symmetric, and Jacobi sweeps can
+ * diverge in a deep column). Each solve warm-starts from its own k of the
+ * last step: the pressure that holds up the water above, which sweeps cannot
+ * rebuild each step (their error in the column-wide mode falls by 1 - c / N^2
+ * a sweep for N layers). Conjugate gradients (divergence_cg) then solve on
  * the particles that hold pressure or compress, and projected relaxed Jacobi
  * sweeps (Ihmsen et al.) on the residual res_i (R_i, or the predicted
- * rho_i - rho0) settle the particles that entered or left that set:
+ * rho_i - rho0) settle those that entered or left that set:
  *   k_i <- max(k_i + omega res_i / (dt^n D'_i), 0),   omega = DFSPH_OMEGA,
- * n = 1 for the velocity solve, 2 for the density one. k >= 0: the free
- * surface is not pulled together. The velocity solve leaves out particles
- * below DFSPH_SURFACE rho0 (a Dirichlet surface). A sweep's error is |res_i|
- * where k_i > 0 and max(res_i, 0) where k_i = 0, averaged over all particles;
- * the velocity solve stops once that times dt / rho0 is at most
- * max_divergence_error (which must be well below max_density_error, or the
- * water compresses by it every step), the density solve at
- * max_density_error, both scaled by depth_scale^2 in deep water.
+ * n = 1 for the velocity solve, 2 for the density one; k >= 0 leaves the free
+ * surface unpulled. A sweep's error is |res_i| where k_i > 0, max(res_i, 0)
+ * where k_i = 0, averaged over all particles. The velocity solve stops once
+ * that times dt / rho0 is at most max_divergence_error (which must be well
+ * below max_density_error, or the water compresses by it every step), the
+ * density solve once that / rho0 is at most max_density_error, both scaled by
+ * depth_scale^2.
  *
- * Without the divergence solver the density solve runs alone, cold, with the
- * paper's sweeps that only add pressure, on the true wall rate and
- * D_i = (S_i + 2 B_i) . (S_i + B_i) + sum_j |G_ij|^2:
+ * Without it the density solve runs alone, cold, with the paper's sweeps that
+ * only add pressure, on the true wall rate and D_i = (S_i + 2 B_i) . (S_i +
+ * B_i) + sum_j |G_ij|^2:
  *   k_i += max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
  * until the mean compression is at most max_density_error: cheaper for
  * shallow, splashing scenes, but it does not hold still water much deeper
  * than 10 layers.
  *
- * The passes (gradients, rate, correct) are written once against simd.h and
- * run in sph_block_pass's blocks; each particle writes only its own results
- * and every sum ends in simd.h's lane order or in row order: the same bits on
- * every back-end and for any thread count.
- *
- * Published per frame: solver = "dfsph", iterations (mean per step of the
- * density solve), residual (largest final mean density error of a step),
- * residual_max (largest final error of one particle, / rho0),
- * divergence_iterations (mean), unconverged (steps in which a solve stopped
- * at its cap above its tolerance). Time-step limits (times the CFL number):
+ * Each particle writes only its own results and every sum ends in simd.h's
+ * lane order or in row order: the same bits on every back-end and for any
+ * thread count. Published per frame: solver = "dfsph", iterations (mean per
+ * step of the density solve), divergence_iterations (mean), residual (largest
+ * final mean density error of a step), residual_max (largest final error of
+ * one particle, / rho0), unconverged (steps in which a solve stopped at its
+ * cap above its tolerance). Time-step limits (times the CFL number):
  * dt <= h / max|v| and dt <= DFSPH_GRAVITY_LIMIT sqrt(h / |g|), the latter
  * with the divergence solver times sqrt(depth_scale). No acoustic limit.
  *
@@ -126,11 +119,10 @@ typedef struct dfsph_work {
 	float *err;    /* per particle: the error the sweep measured, or R_i(v) */
 	float *full;   /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the velocity solve's particles */
 	/* the conjugate gradients' (divergence_cg) */
-	dfsph_vec4 *u;  /* the velocity change of a direction: -dt grad p */
-	float *p;       /* the search direction (a change of k) */
-	float *r;       /* the residual on the active set */
-	float *mask;    /* 1 on the active set, else 0 */
-	float *scratch; /* the correct pass's sum of k, not kept */
+	dfsph_vec4 *u; /* the velocity change of a direction: -dt grad p */
+	float *p;      /* the search direction (a change of k) */
+	float *r;      /* the residual on the active set */
+	float *mask;   /* 1 on the active set, else 0 */
 } dfsph_work;
 
 /* A pass over all particles. PASS_RATE writes R_i(v) to err; PASS_SWEEP
@@ -253,11 +245,8 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 		sf8 sx = zero, sy = zero, sz = zero, s2 = zero;
 		dfsph_group *g = wk->groups + wk->goff[i];
 		for (uint32_t p = 0; p < c; p += 8, ++g) {
-			if (p + 8 <= c)
-				memcpy(g->j, list + p, sizeof g->j);
-			else
-				for (uint32_t l = 0; l < 8; ++l)
-					g->j[l] = p + l < c ? list[p + l] : (uint32_t)i;
+			for (uint32_t l = 0; l < 8; ++l)
+				g->j[l] = p + l < c ? list[p + l] : (uint32_t)i;
 			sf8 rx, ry, rz, rw; /* x_i - x_j */
 			sf8_sub_gather_quads(pi, sh->pq, g->j, &rx, &ry, &rz, &rw);
 			const sf8 r2 = sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz));
@@ -418,11 +407,9 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
  * need no such limit: the velocity limit covers them. */
 #define DFSPH_GRAVITY_LIMIT 0.18
 
-/* above this final mean density error a step fails instead of going on */
+/* A step fails above this final mean density error, or above this
+ * predicted density error at one particle (the particles overlap). */
 #define DFSPH_FAIL_ERROR 0.05
-
-/* above this predicted density error at one particle a step fails: the
- * particles overlap */
 #define DFSPH_FAIL_PARTICLE 1.0
 
 /* The velocity solve warm-starts, so a step stopped at its cap hands the
@@ -487,7 +474,7 @@ static void operator_product(dfsph_work *wk)
 	memset(wk->u, 0, (size_t)wk->n * sizeof *wk->u);
 	wk->v = wk->u;
 	wk->k = wk->p;
-	wk->ksum = wk->scratch;
+	wk->ksum = keep.k; /* unused until the projection: the sum of p written there is not kept */
 	wk->bdiv = NULL;
 	pass(wk, PASS_CORRECT, true, true);
 	pass(wk, PASS_RATE, true, true);
@@ -682,8 +669,7 @@ static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n)
 		wk->goff[i + 1] = wk->goff[i] + (sh->nb.count[i] + 7) / 8;
 	wk->groups = eddy__arena_alloc(&w->arena, (wk->goff[n] ? wk->goff[n] : 1) * sizeof *wk->groups);
 	dfsph_vec4 **quads[] = {&wk->b, &wk->v, &wk->h, &wk->u};
-	float **floats[] = {&wk->dsym, &wk->k, &wk->ksum, &wk->kp,   &wk->err,
-	                    &wk->full, &wk->p, &wk->r,    &wk->mask, &wk->scratch};
+	float **floats[] = {&wk->dsym, &wk->k, &wk->ksum, &wk->kp, &wk->err, &wk->full, &wk->p, &wk->r, &wk->mask};
 	bool ok = wk->groups;
 	for (size_t a = 0; a < sizeof quads / sizeof *quads; ++a)
 		ok = ok && (*quads[a] = eddy__arena_alloc(&w->arena, un * sizeof(dfsph_vec4)));
@@ -878,16 +864,12 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 	    !eddy__check_positive(w, sys, "max_divergence_error", def->max_divergence_error) ||
 	    !eddy__check_range(w, sys, "max_divergence_error", def->max_divergence_error, 0, 1))
 		return EDDY_NULL_SYSTEM;
-	const struct {
-		const char *field;
-		int got, lo;
-	} caps[2] = {{"max_iterations", def->max_iterations, 2},
-	             {"max_divergence_iterations", def->max_divergence_iterations, 1}};
-	for (int c = 0; c < 2; ++c)
-		if (caps[c].got < caps[c].lo || caps[c].got > 10000)
-			return eddy__fail(w, EDDY_ERR_INVALID, "%s: '%s' must be between %d and 10000 (got %d)", sys, caps[c].field,
-			                  caps[c].lo, caps[c].got),
-			       EDDY_NULL_SYSTEM;
+	const bool it_bad = def->max_iterations < 2 || def->max_iterations > 10000;
+	if (it_bad || def->max_divergence_iterations < 1 || def->max_divergence_iterations > 10000)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: '%s' must be between %d and 10000 (got %d)", sys,
+		                  it_bad ? "max_iterations" : "max_divergence_iterations", it_bad ? 2 : 1,
+		                  it_bad ? def->max_iterations : def->max_divergence_iterations),
+		       EDDY_NULL_SYSTEM;
 	sph_dfsph *sd = calloc(1, sizeof *sd);
 	if (!sd)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
