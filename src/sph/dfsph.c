@@ -30,21 +30,13 @@
  * predicted density by -(A k)_i with A = dt^2 grad^T grad symmetric positive
  * semi-definite, of diagonal dt^2 D'_i, D'_i = |S_i + 2 B_i|^2 + sum_j
  * |G_ij|^2 (on the true rate A is not symmetric, and Jacobi sweeps can
- * diverge in a deep column). Each solve warm-starts from its own k of the
- * last step: the pressure that holds up the water above, which sweeps cannot
- * rebuild each step (their error in the column-wide mode falls by 1 - c / N^2
- * a sweep for N layers). Conjugate gradients (divergence_cg) then solve on
- * the particles that hold pressure or compress, and projected relaxed Jacobi
- * sweeps (Ihmsen et al.) on the residual res_i (R_i, or the predicted
- * rho_i - rho0) settle those that entered or left that set:
+ * diverge in a deep column). Each solve (solve) starts from its k of the last
+ * step, runs conjugate gradients (divergence_cg), then projected relaxed
+ * Jacobi sweeps (Ihmsen et al.) on the residual res_i (R_i, or the predicted
+ * rho_i - rho0), whose error is |res_i| where k_i > 0, else max(res_i, 0):
  *   k_i <- max(k_i + omega res_i / (dt^n D'_i), 0),   omega = DFSPH_OMEGA,
  * n = 1 for the velocity solve, 2 for the density one; k >= 0 leaves the free
- * surface unpulled. A sweep's error is |res_i| where k_i > 0, max(res_i, 0)
- * where k_i = 0, averaged over all particles. The velocity solve stops once
- * that times dt / rho0 is at most max_divergence_error (which must be well
- * below max_density_error, or the water compresses by it every step), the
- * density solve once that / rho0 is at most max_density_error, both scaled by
- * depth_scale^2.
+ * surface unpulled.
  *
  * Without it the density solve runs alone, cold, with the paper's sweeps that
  * only add pressure, on the true wall rate and D_i = (S_i + 2 B_i) . (S_i +
@@ -54,13 +46,11 @@
  * shallow, splashing scenes, but it does not hold still water much deeper
  * than 10 layers.
  *
- * Each particle writes only its own results and every sum ends in simd.h's
- * lane order or in row order: the same bits on every back-end and for any
- * thread count. Published per frame: solver = "dfsph", iterations (mean per
- * step of the density solve), divergence_iterations (mean), residual (largest
- * final mean density error of a step), residual_max (largest final error of
- * one particle, / rho0), unconverged (steps in which a solve stopped at its
- * cap above its tolerance). Time-step limits (times the CFL number):
+ * Published per frame: solver = "dfsph", iterations (mean per step of the
+ * density solve), divergence_iterations (mean), residual (largest final mean
+ * density error of a step), residual_max (largest final error of one
+ * particle, / rho0), unconverged (steps in which a solve stopped at its cap
+ * above its tolerance). Time-step limits (times the CFL number):
  * dt <= h / max|v| and dt <= DFSPH_GRAVITY_LIMIT sqrt(h / |g|), the latter
  * with the divergence solver times sqrt(depth_scale). No acoustic limit.
  *
@@ -237,7 +227,7 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 	const float dref = sh->mass * sh->k.spiky_grad * sh->k.h2; /* |G|'s scale */
 	const sf8 h = sf8_set1(sh->k.h), eps2 = sf8_set1(1e-6f * sh->k.h2), mg = sf8_set1(sh->mass * sh->k.spiky_grad),
 			  one = sf8_set1(1.0f), two = sf8_set1(2.0f), zero = sf8_zero(), dmin = sf8_set1(1e-6f * dref * dref);
-	float t[4][SPH_BLOCK][4], w[6][SPH_BLOCK];
+	float t[4][SPH_BLOCK][4], w[6][SPH_BLOCK] = {{0}};
 	for (long q = 0; q < cnt; ++q) {
 		const long i = i0 + q;
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
@@ -267,8 +257,6 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 		sf8_fold4(sy, t[1][q]);
 		sf8_fold4(sz, t[2][q]);
 		sf8_fold4(s2, t[3][q]);
-		for (int k = 0; k < 6; ++k)
-			w[k][q] = 0;
 		if (nb->bcount[i]) /* most particles are away from the walls */
 			wall_sums(wk, i, w, q);
 	}
@@ -546,36 +534,30 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	return it;
 }
 
-/* DFSPH_DEPTH_REF h / depth in a fluid `depth` deep (m) beyond
- * DFSPH_DEPTH_REF h, else 1. The operator's smallest eigenvalue, that of the
- * column-wide mode, falls relative to its diagonal as (h / depth)^2, so a
- * mean residual eps leaves that mode an error of eps (depth / h)^2: the
- * solves' tolerances, scaled by its square, hold the pressure that carries
- * the column to the same fraction at any depth. The gravity limit scales
- * with its root (dt ~ h / sqrt(|g| depth): the prediction's error grows with
- * the hydrostatic pressure it moves). */
-static double depth_scale(float h, double depth)
-{
-	const double ref = DFSPH_DEPTH_REF * (double)h;
-	return depth > ref ? ref / depth : 1;
-}
-
-/* The fluid's extent along gravity (m): the depth of water at rest, more
- * (so the solve is stricter) while parts of it fly or splash; 0 without
- * gravity. */
-static double fluid_depth(eddy_world *w, eddy_vec3 g)
+/* DFSPH_DEPTH_REF h / H for a fluid H deep beyond DFSPH_DEPTH_REF h, else 1
+ * (and without gravity), H the fluid's extent along gravity: the depth of
+ * water at rest, more (so stricter) while parts of it fly or splash. The
+ * operator's smallest eigenvalue, that of the column-wide mode, falls
+ * relative to its diagonal as (h / H)^2, so a mean residual eps leaves that
+ * mode an error of eps (H / h)^2: the solves' tolerances, scaled by its
+ * square, hold the pressure that carries the column to the same fraction at
+ * any depth. The gravity limit scales with its root (dt ~ h / sqrt(|g| H):
+ * the prediction's error grows with the hydrostatic pressure it moves). */
+static double depth_scale(eddy_world *w, float h)
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	const eddy_vec3 g = w->def.gravity;
 	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
 	if (!(g1 > 0) || !x || !y || !z || w->n == 0)
-		return 0;
+		return 1;
 	double lo = INFINITY, hi = -INFINITY;
 	for (size_t i = 0; i < w->n; ++i) {
 		const double e = ((double)g.x * x[i] + (double)g.y * y[i] + (double)g.z * z[i]) / g1;
 		lo = e < lo ? e : lo;
 		hi = e > hi ? e : hi;
 	}
-	return hi - lo;
+	const double ref = DFSPH_DEPTH_REF * (double)h, depth = hi - lo;
+	return depth > ref ? ref / depth : 1;
 }
 
 /* The index of the largest of e[0 .. n) (the first of equals). */
@@ -587,15 +569,20 @@ static long argmax(const float *e, long n)
 	return m;
 }
 
-/* The velocity (divergence) or the density solve, adding its k to kp: with
- * the divergence solver from its state column's k of the last step (applied
- * as one correction, and written back at the end), conjugate gradients
- * before each sweep; then sweeps of a rate and a correction until the mean
- * error / rho0 (*residual) is at most tol, the velocity solve making at
- * least DFSPH_SMOOTH, the density solve at least one iteration, or to the
- * cap. *iterations gets the iterations (conjugate gradient steps and sweeps). The
- * velocity solve fails when it stopped at its cap far above its tolerance
- * too many steps in a row. */
+/* The velocity (divergence) or the density solve, adding its k to kp. With
+ * the divergence solver it starts from its state column's k of the last
+ * step (applied as one correction, written back at the end): the pressure
+ * that holds up the water above, which sweeps could not rebuild each step
+ * (their error in the column-wide mode falls by 1 - c / N^2 a sweep for N
+ * layers, the conjugate gradients' by 1 - c / N a step), and it runs
+ * conjugate gradients before each sweep. Sweeps go on until the mean error
+ * / rho0 (*residual; the velocity solve's times dt) is at most tol, the
+ * velocity solve making at least DFSPH_SMOOTH, the density solve at least
+ * one iteration, or to the cap (*iterations: conjugate gradient steps and
+ * sweeps). tol is max_divergence_error (well below max_density_error, or the
+ * water compresses by it every step) or max_density_error, with the
+ * divergence solver times depth_scale^2. The velocity solve fails when it
+ * stopped at its cap far above its tolerance too many steps in a row. */
 static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const eddy_step_context *ctx, bool divergence,
                          double tol, int *iterations, double *residual)
 {
@@ -652,15 +639,17 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 
 /* The step's scratch in the world's arena for rows 0 .. n - 1 of sph_density's
  * lists, and the gradient pass on them; false when out of memory. */
-static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n)
+static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n, float dt, int threads)
 {
 	const size_t un = (size_t)n;
-	wk->n = n;
-	wk->block = SIMD_PICK(dfsph_block);
-	wk->sh = sh;
-	wk->rho = eddy__col(w, COL_DENSITY);
-	wk->gravity = w->def.gravity;
-	wk->bdiv = sh->nb.bdiv;
+	*wk = (dfsph_work){.n = n,
+	                   .dt = dt,
+	                   .threads = threads,
+	                   .block = SIMD_PICK(dfsph_block),
+	                   .sh = sh,
+	                   .rho = eddy__col(w, COL_DENSITY),
+	                   .gravity = w->def.gravity,
+	                   .bdiv = sh->nb.bdiv};
 	wk->goff = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk->goff);
 	if (!wk->goff)
 		return false;
@@ -751,8 +740,8 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 		return EDDY_OK;
 	if ((uint64_t)n > (uint64_t)UINT32_MAX) /* the groups hold j in 32 bits */
 		return eddy__fail(w, EDDY_ERR_INVALID, "%s: too many particles (%ld)", sys->label, n);
-	dfsph_work wk = {.dt = dt, .threads = ctx->threads};
-	if (!prepare(w, &wk, sh, n))
+	dfsph_work wk;
+	if (!prepare(w, &wk, sh, n, dt, ctx->threads))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
@@ -762,7 +751,7 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	int it, div_it = 0;
 	double residual, div_residual = 0, tol = sd->def.max_density_error;
 	if (sd->def.divergence_solver) {
-		const double scale = depth_scale(sh->h, fluid_depth(w, w->def.gravity));
+		const double scale = depth_scale(w, sh->h);
 		tol = sd->def.max_density_error * scale * scale;
 		const double dtol = sd->def.max_divergence_error * scale * scale;
 		const eddy_status st = solve(w, sys, &wk, ctx, true, dtol, &div_it, &div_residual);
@@ -799,8 +788,8 @@ eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float
 	if (!sh)
 		return EDDY_ERR_ORDER;
 	const long n = sph_rows(w, sh);
-	dfsph_work wk = {.dt = 1.0f, .threads = 1};
-	if (!prepare(w, &wk, sh, n))
+	dfsph_work wk;
+	if (!prepare(w, &wk, sh, n, 1.0f, 1))
 		return EDDY_ERR_NOMEM;
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	for (long i = 0; i < n; ++i)
@@ -836,8 +825,8 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	const eddy_vec3 g = w->def.gravity;
 	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
 	double la = g1 > 0 ? DFSPH_GRAVITY_LIMIT * sqrt((double)sh->h / g1) : INFINITY;
-	if (g1 > 0 && ((const sph_dfsph *)s->data)->def.divergence_solver)
-		la *= sqrt(depth_scale(sh->h, fluid_depth(w, g)));
+	if (((const sph_dfsph *)s->data)->def.divergence_solver)
+		la *= sqrt(depth_scale(w, sh->h));
 	if (la < lv)
 		*reason = "gravity";
 	return la < lv ? la : lv;
