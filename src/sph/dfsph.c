@@ -32,25 +32,24 @@
  * |G_ij|^2 (on the true rate A is not symmetric, and Jacobi sweeps can
  * diverge in a deep column). Each solve (solve) starts from its k of the last
  * step, runs conjugate gradients (divergence_cg), then projected relaxed
- * Jacobi sweeps (Ihmsen et al.) on the residual res_i (R_i, or the predicted
- * rho_i - rho0), whose error is |res_i| where k_i > 0, else max(res_i, 0):
+ * Jacobi sweeps (Ihmsen et al.) on the residual res_i (R_i where rho_i >=
+ * DFSPH_SURFACE rho0, or the predicted rho_i - rho0), whose error is |res_i|
+ * where k_i > 0, else max(res_i, 0):
  *   k_i <- max(k_i + omega res_i / (dt^n D'_i), 0),   omega = DFSPH_OMEGA,
  * n = 1 for the velocity solve, 2 for the density one; k >= 0 leaves the free
- * surface unpulled.
+ * surface unpulled. max_divergence_error must be well below
+ * max_density_error, or the water compresses by it every step.
  *
  * Without it the density solve runs alone, cold, with the paper's sweeps that
  * only add pressure, on the true wall rate and D_i = (S_i + 2 B_i) . (S_i +
- * B_i) + sum_j |G_ij|^2:
+ * B_i) + sum_j |G_ij|^2, until the mean compression is at most
+ * max_density_error (cheaper, but it holds still water only some 10 layers deep):
  *   k_i += max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
- * until the mean compression is at most max_density_error: cheaper for
- * shallow, splashing scenes, but it does not hold still water much deeper
- * than 10 layers.
  *
- * Published per frame: solver = "dfsph", iterations (mean per step of the
- * density solve), divergence_iterations (mean), residual (largest final mean
- * density error of a step), residual_max (largest final error of one
- * particle, / rho0), unconverged (steps in which a solve stopped at its cap
- * above its tolerance). Time-step limits (times the CFL number):
+ * Published per frame: solver = "dfsph", iterations and divergence_iterations
+ * (the solves' mean per step), residual (largest final mean density error of
+ * a step), residual_max (... of one particle, / rho0), unconverged (steps in
+ * which a solve stopped at its cap above its tolerance). Time-step limits (times the CFL number):
  * dt <= h / max|v| and dt <= DFSPH_GRAVITY_LIMIT sqrt(h / |g|), the latter
  * with the divergence solver times sqrt(depth_scale). No acoustic limit.
  *
@@ -180,12 +179,10 @@ static inline sf8 sum8(const float *t, long m)
 	return sf8_add(sf8_add(f0, f1), sf8_add(f2, f3));
 }
 
-/* The wall sums of particle i: B_i (out[0..2][q]) and the hydrostatic sum
- * sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b) (out[3..5][q]). Four
- * partial sums each (boundary neighbour q onto sum q mod 4, the last four
- * padded with copies of the last neighbour and masked out), ended as
- * sph_sum4 ends them: most particles have no boundary neighbours and those
- * at a wall a few, too few to fill eight lanes. */
+/* Particle i's wall sums: B_i (out[0..2][q]) and sum_b (g . (x_b - x_i)) m_b
+ * grad W(x_i - x_b) (out[3..5][q]), each in four partial sums (neighbour q
+ * onto sum q mod 4, the last four padded and masked out) ended as sph_sum4
+ * ends them: a particle at a wall has a few, too few to fill eight lanes. */
 static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], long q)
 {
 	const sph_shared *sh = wk->sh;
@@ -215,18 +212,18 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 		out[k][q] = sph_sum4(s[k]);
 }
 
-/* The gradient pass: the block's groups (each particle's last one padded
- * with the particle itself) and G_ij, with G = 0 for a pair closer than
- * sqrt(eps2), at r >= h (the list's margin) and for the padding; then per
- * particle S_i, sum_j |G_ij|^2, the walls' sums, h_i, 1 / D_i and 1 / D'_i
- * (0 where D is negligible, below dmin). */
+/* The gradient pass: the block's groups and G_ij, G = 0 for a pair closer
+ * than sqrt(eps2), at r >= h (the list's margin) and for the padding; then
+ * per particle S_i, sum_j |G_ij|^2, the walls' sums, h_i, 1 / D_i and
+ * 1 / D'_i (0 where D is negligible, below dmin). */
 static void gradients(const dfsph_work *wk, long i0, long cnt)
 {
 	const sph_shared *sh = wk->sh;
 	const sph_neighbors *nb = &sh->nb;
 	const float dref = sh->mass * sh->k.spiky_grad * sh->k.h2; /* |G|'s scale */
 	const sf8 h = sf8_set1(sh->k.h), eps2 = sf8_set1(1e-6f * sh->k.h2), mg = sf8_set1(sh->mass * sh->k.spiky_grad),
-			  one = sf8_set1(1.0f), two = sf8_set1(2.0f), zero = sf8_zero(), dmin = sf8_set1(1e-6f * dref * dref);
+			  one = sf8_set1(1.0f), two = sf8_set1(2.0f), zero = sf8_zero(), dmin = sf8_set1(1e-6f * dref * dref),
+			  minus = sf8_set1(-0.0f);
 	float t[4][SPH_BLOCK][4], w[6][SPH_BLOCK] = {{0}};
 	for (long q = 0; q < cnt; ++q) {
 		const long i = i0 + q;
@@ -266,7 +263,6 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 		const sf8 bx = load8(w[0] + q, m), by = load8(w[1] + q, m), bz = load8(w[2] + q, m);
 		sf8 x, y, z, ir; /* ir = 1 / rho_i */
 		load_quads8((const dfsph_vec4 *)sh->pq + i, m, &x, &y, &z, &ir);
-		const sf8 minus = sf8_set1(-0.0f);
 		store_quads8(wk->h + i, m, sf8_mul(sf8_xor(minus, load8(w[3] + q, m)), ir),
 		             sf8_mul(sf8_xor(minus, load8(w[4] + q, m)), ir), sf8_mul(sf8_xor(minus, load8(w[5] + q, m)), ir),
 		             load8(wk->rho + i, m));
@@ -400,10 +396,9 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
 #define DFSPH_FAIL_ERROR 0.05
 #define DFSPH_FAIL_PARTICLE 1.0
 
-/* The velocity solve warm-starts, so a step stopped at its cap hands the
- * rest on to the next. Stopped at the cap above DFSPH_FAIL_CAPPED_ERROR
- * times the tolerance in DFSPH_FAIL_CAPPED steps in a row, it is not
- * catching up, and the step fails. */
+/* The velocity solve warm-starts: stopped at its cap it hands the rest on to
+ * the next step; stopped there above DFSPH_FAIL_CAPPED_ERROR times the
+ * tolerance DFSPH_FAIL_CAPPED steps in a row, it is not catching up. */
 #define DFSPH_FAIL_CAPPED_ERROR 2.0
 #define DFSPH_FAIL_CAPPED 3
 
@@ -420,8 +415,7 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
  * compress at impact beyond the density tolerance. */
 #define DFSPH_SURFACE 0.8f
 
-/* the depth (in kernel radii) up to which the solves stop at their
- * requested tolerance (depth_scale) */
+/* kernel radii: the depth beyond which the tolerances tighten (depth_scale) */
 #define DFSPH_DEPTH_REF 5.0
 
 typedef struct sph_dfsph {
@@ -470,15 +464,14 @@ static void operator_product(dfsph_work *wk)
 }
 
 /* The solves' bulk: Jacobi-preconditioned conjugate gradients (Hestenes &
- * Stiefel 1952; Saad 2003, Alg. 9.1) on A k = R(v*), restricted to the
- * particles that hold pressure (k_i > 0 from the warm start) or are
- * compressing (R_i > 0): there the unilateral constraint is an equality.
- * The density solve's right side is the rate that brings rho_i to rho0 in a
- * step. It stops when the mean |r_i| dt / rho0 is at most tol (the
- * projected sweeps' measure) or a direction has no positive curvature; the
- * particles whose k ends below 0 are then set to 0 (the projection), and the
- * sweeps that follow settle the particles that left or entered the set.
- * Every sum is serial in row order: the same bits for any thread count. */
+ * Stiefel 1952; Saad 2003, Alg. 9.1) on A k = R(v*) over the particles that
+ * hold pressure (k_i > 0) or compress (R_i > 0), where the unilateral
+ * constraint is an equality; the density solve's right side is the rate that
+ * brings rho_i to rho0 in a step. It stops once the mean |r_i| dt / rho0 is
+ * at most tol or a direction has no positive curvature, then projects (k_i
+ * < 0 back to 0); the sweeps after it settle the particles that left or
+ * entered the set. Its sums are serial in row order: the same bits for any
+ * thread count. */
 static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, double *residual)
 {
 	const long n = wk->n;
@@ -534,15 +527,14 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	return it;
 }
 
-/* DFSPH_DEPTH_REF h / H for a fluid H deep beyond DFSPH_DEPTH_REF h, else 1
- * (and without gravity), H the fluid's extent along gravity: the depth of
- * water at rest, more (so stricter) while parts of it fly or splash. The
- * operator's smallest eigenvalue, that of the column-wide mode, falls
- * relative to its diagonal as (h / H)^2, so a mean residual eps leaves that
- * mode an error of eps (H / h)^2: the solves' tolerances, scaled by its
- * square, hold the pressure that carries the column to the same fraction at
- * any depth. The gravity limit scales with its root (dt ~ h / sqrt(|g| H):
- * the prediction's error grows with the hydrostatic pressure it moves). */
+/* DFSPH_DEPTH_REF h / H in a fluid deeper than that, else 1, H the fluid's
+ * extent along gravity (0 without): the depth of water at rest, more (so
+ * stricter) while parts of it fly. The column-wide mode's eigenvalue falls
+ * relative to the diagonal as (h / H)^2, so a mean residual eps leaves it an
+ * error of eps (H / h)^2: the tolerances times its square hold the pressure
+ * that carries the column to the same fraction at any depth. The gravity
+ * limit takes its root (dt ~ h / sqrt(|g| H): the prediction's error grows
+ * with the hydrostatic pressure it moves). */
 static double depth_scale(eddy_world *w, float h)
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
@@ -570,19 +562,16 @@ static long argmax(const float *e, long n)
 }
 
 /* The velocity (divergence) or the density solve, adding its k to kp. With
- * the divergence solver it starts from its state column's k of the last
- * step (applied as one correction, written back at the end): the pressure
- * that holds up the water above, which sweeps could not rebuild each step
- * (their error in the column-wide mode falls by 1 - c / N^2 a sweep for N
- * layers, the conjugate gradients' by 1 - c / N a step), and it runs
- * conjugate gradients before each sweep. Sweeps go on until the mean error
- * / rho0 (*residual; the velocity solve's times dt) is at most tol, the
- * velocity solve making at least DFSPH_SMOOTH, the density solve at least
- * one iteration, or to the cap (*iterations: conjugate gradient steps and
- * sweeps). tol is max_divergence_error (well below max_density_error, or the
- * water compresses by it every step) or max_density_error, with the
- * divergence solver times depth_scale^2. The velocity solve fails when it
- * stopped at its cap far above its tolerance too many steps in a row. */
+ * the divergence solver it starts from its state column's k of the last step
+ * (written back at the end): the pressure that holds up the water above,
+ * which sweeps could not rebuild each step (their error in the column-wide
+ * mode falls by 1 - c / N^2 a sweep for N layers, conjugate gradients' by
+ * 1 - c / N), and runs conjugate gradients before each sweep. It stops once
+ * the mean error / rho0 (*residual; the velocity solve's times dt) is at most
+ * tol, after at least DFSPH_SMOOTH sweeps (velocity) or one iteration
+ * (density), or at the cap (*iterations counts both kinds). The velocity
+ * solve fails when it stopped at its cap far above its tolerance
+ * DFSPH_FAIL_CAPPED steps in a row. */
 static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const eddy_step_context *ctx, bool divergence,
                          double tol, int *iterations, double *residual)
 {
@@ -642,14 +631,10 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n, float dt, int threads)
 {
 	const size_t un = (size_t)n;
-	*wk = (dfsph_work){.n = n,
-	                   .dt = dt,
-	                   .threads = threads,
-	                   .block = SIMD_PICK(dfsph_block),
-	                   .sh = sh,
-	                   .rho = eddy__col(w, COL_DENSITY),
-	                   .gravity = w->def.gravity,
-	                   .bdiv = sh->nb.bdiv};
+	*wk = (dfsph_work){.n = n, .dt = dt, .threads = threads, .sh = sh, .bdiv = sh->nb.bdiv};
+	wk->block = SIMD_PICK(dfsph_block);
+	wk->rho = eddy__col(w, COL_DENSITY);
+	wk->gravity = w->def.gravity;
 	wk->goff = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk->goff);
 	if (!wk->goff)
 		return false;
@@ -720,8 +705,6 @@ static void publish(eddy_world *w, sph_dfsph *sd, int it, double residual, int d
 	eddy_world_publish(w, "residual_max", sd->worst);
 }
 
-/* The gradients, h and v* = v + dt (a + h); the velocity solve (divergence
- * solver); the density solve; the result. */
 static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context *ctx)
 {
 	sph_dfsph *sd = sys->data;
@@ -748,17 +731,16 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	for (long i = 0; i < n; ++i)
 		wk.v[i] = (dfsph_vec4){vx[i] + dt * (ax[i] + wk.h[i].x), vy[i] + dt * (ay[i] + wk.h[i].y),
 		                       vz[i] + dt * (az[i] + wk.h[i].z), 0};
+	const double scale = sd->def.divergence_solver ? depth_scale(w, sh->h) : 1;
 	int it, div_it = 0;
-	double residual, div_residual = 0, tol = sd->def.max_density_error;
+	double residual, div_residual = 0;
 	if (sd->def.divergence_solver) {
-		const double scale = depth_scale(w, sh->h);
-		tol = sd->def.max_density_error * scale * scale;
 		const double dtol = sd->def.max_divergence_error * scale * scale;
 		const eddy_status st = solve(w, sys, &wk, ctx, true, dtol, &div_it, &div_residual);
 		if (st != EDDY_OK)
 			return st;
 	}
-	solve(w, sys, &wk, ctx, false, tol, &it, &residual);
+	solve(w, sys, &wk, ctx, false, sd->def.max_density_error * scale * scale, &it, &residual);
 	/* the particle the solve left furthest off (the last sweep's errors) */
 	const long worst = argmax(wk.err, n);
 	const double worst_err = wk.err[worst] / sh->rho0;
@@ -794,6 +776,7 @@ eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	for (long i = 0; i < n; ++i)
 		wk.v[i] = (dfsph_vec4){vx[i], vy[i], vz[i], 0};
+	wk.err = rate;
 	pass(&wk, PASS_RATE, true, true);
 	memcpy(wk.k, k, (size_t)n * sizeof *k);
 	memset(wk.v, 0, (size_t)n * sizeof *wk.v);
@@ -801,7 +784,6 @@ eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float
 	for (long i = 0; i < n; ++i) {
 		inv_d[i] = wk.b[i].w;
 		inv_dsym[i] = wk.dsym[i];
-		rate[i] = wk.err[i];
 		acc[3 * i] = wk.v[i].x;
 		acc[3 * i + 1] = wk.v[i].y;
 		acc[3 * i + 2] = wk.v[i].z;
