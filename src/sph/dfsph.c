@@ -420,10 +420,8 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
 
 typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
-	int kcol[2]; /* the state columns dfsph_k and dfsph_kd: the velocity and the density solve's
-	              * k, their warm starts (-1 without the divergence solver) */
-	int capped;  /* consecutive steps whose velocity solve stopped at its cap
-	              * above DFSPH_FAIL_CAPPED_ERROR times its tolerance */
+	int kcol[2]; /* the state columns dfsph_k, dfsph_kd: the two solves' warm starts (or -1) */
+	int capped;  /* steps in a row whose velocity solve ended capped (DFSPH_FAIL_CAPPED) */
 	/* statistics of the current frame */
 	int frame;
 	int64_t steps, sweeps, div_sweeps, unconverged;
@@ -447,9 +445,8 @@ static void pass(dfsph_work *wk, enum dfsph_pass_kind kind, bool divergence, boo
 	sph_block_pass(wk->n, wk->threads, wk->block, &ps);
 }
 
-/* err = R(u) for u = -dt grad p from zero, without the moving walls' part:
- * A p up to the factor -dt. The passes work on the work arrays, which
- * stand in for the time. */
+/* err = R(u) of u = -dt grad p from zero, without the moving walls' part:
+ * A p up to the factor -dt (the passes run on borrowed arrays meanwhile). */
 static void operator_product(dfsph_work *wk)
 {
 	const dfsph_work keep = *wk;
@@ -656,11 +653,13 @@ static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n,
 	return true;
 }
 
-/* a += (v* - (v + dt a)) / dt and p = M kp rho^2; fails naming the first
- * particle whose result is not finite. */
-static eddy_status apply_result(eddy_world *w, const eddy_system *sys, const dfsph_work *wk,
-                                const eddy_step_context *ctx)
+/* The result: a += (v* - (v + dt a)) / dt and p = M kp rho^2, failing at the
+ * first particle whose result is not finite; then the frame's statistics,
+ * published, and a failure if the density solve has lost the fluid. */
+static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_work *wk, const eddy_step_context *ctx,
+                          int it, double residual, int div_it, double div_residual)
 {
+	sph_dfsph *sd = sys->data;
 	const float dt = wk->dt, inv_dt = 1.0f / dt;
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
@@ -682,13 +681,14 @@ static eddy_status apply_result(eddy_world *w, const eddy_system *sys, const dfs
 			w, EDDY_ERR_NUMERIC,
 			"%s: non-finite pressure acceleration at step %lld, particle %ld (density %g kg/m^3, %u neighbours)",
 			sys->label, (long long)ctx->step, bad, (double)wk->h[bad].w, wk->sh->nb.count[bad]);
-	return EDDY_OK;
-}
-
-/* The frame's statistics after a step, published. */
-static void publish(eddy_world *w, sph_dfsph *sd, int it, double residual, int div_it, double div_residual,
-                    double worst_err)
-{
+	/* the particle the solve left furthest off (the last sweep's errors) */
+	const long worst = argmax(wk->err, wk->n);
+	const double worst_err = wk->err[worst] / wk->sh->rho0;
+	if (sd->frame != w->frame) {
+		sd->frame = w->frame;
+		sd->steps = sd->sweeps = sd->div_sweeps = sd->unconverged = 0;
+		sd->residual = sd->worst = 0;
+	}
 	sd->steps++;
 	sd->sweeps += it;
 	sd->div_sweeps += div_it;
@@ -703,6 +703,14 @@ static void publish(eddy_world *w, sph_dfsph *sd, int it, double residual, int d
 		eddy_world_publish(w, "divergence_iterations", (double)sd->div_sweeps / (double)sd->steps);
 	eddy_world_publish(w, "unconverged", (double)sd->unconverged);
 	eddy_world_publish(w, "residual_max", sd->worst);
+	if (!(residual <= DFSPH_FAIL_ERROR) || !(worst_err <= DFSPH_FAIL_PARTICLE))
+		return eddy__fail(w, EDDY_ERR_NUMERIC,
+		                  "%s: did not converge at step %lld: mean density error %.3g after %d iterations "
+		                  "(max_density_error %g), particle %ld off by %.3g; lower the world's cfl or raise "
+		                  "max_iterations",
+		                  sys->label, (long long)ctx->step, residual, it, (double)sd->def.max_density_error, worst,
+		                  worst_err);
+	return EDDY_OK;
 }
 
 static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context *ctx)
@@ -712,11 +720,6 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	if (!sh)
 		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)",
 		                  sys->label);
-	if (sd->frame != w->frame) {
-		sd->frame = w->frame;
-		sd->steps = sd->sweeps = sd->div_sweeps = sd->unconverged = 0;
-		sd->residual = sd->worst = 0;
-	}
 	const long n = sph_rows(w, sh);
 	const float dt = (float)ctx->dt;
 	if (n == 0 || !(dt > 0))
@@ -741,21 +744,7 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 			return st;
 	}
 	solve(w, sys, &wk, ctx, false, sd->def.max_density_error * scale * scale, &it, &residual);
-	/* the particle the solve left furthest off (the last sweep's errors) */
-	const long worst = argmax(wk.err, n);
-	const double worst_err = wk.err[worst] / sh->rho0;
-	const eddy_status st = apply_result(w, sys, &wk, ctx);
-	if (st != EDDY_OK)
-		return st;
-	publish(w, sd, it, residual, div_it, div_residual, worst_err);
-	if (!(residual <= DFSPH_FAIL_ERROR) || !(worst_err <= DFSPH_FAIL_PARTICLE))
-		return eddy__fail(w, EDDY_ERR_NUMERIC,
-		                  "%s: did not converge at step %lld: mean density error %.3g after %d iterations "
-		                  "(max_density_error %g), particle %ld off by %.3g; lower the world's cfl or raise "
-		                  "max_iterations",
-		                  sys->label, (long long)ctx->step, residual, it, (double)sd->def.max_density_error, worst,
-		                  worst_err);
-	return EDDY_OK;
+	return finish(w, sys, &wk, ctx, it, residual, div_it, div_residual);
 }
 
 /* For tests/test_sph_reference.c: after a step of w, the passes on the last
