@@ -123,7 +123,7 @@ typedef struct dfsph_pass {
 	enum dfsph_pass_kind kind;
 	bool divergence; /* the velocity (divergence-free) solve's sweep, else the density one's */
 	bool projected;  /* projected relaxed Jacobi on the symmetric operator (the divergence
-	                  * solver; PASS_RATE's too), else the paper's sweeps */
+	                  * solver, and every PASS_RATE), else the paper's sweeps */
 } dfsph_pass;
 SIMD_DECLARE(void, dfsph_block, (const void *pass, long i0, long cnt));
 
@@ -182,7 +182,8 @@ static inline sf8 sum8(const float *t, long m)
 /* Particle i's wall sums: B_i (out[0..2][q]) and sum_b (g . (x_b - x_i)) m_b
  * grad W(x_i - x_b) (out[3..5][q]), each in four partial sums (neighbour q
  * onto sum q mod 4, the last four padded and masked out) ended as sph_sum4
- * ends them: a particle at a wall has a few, too few to fill eight lanes. */
+ * ends them: a particle at a wall has a few boundary neighbours, too few to
+ * fill eight lanes. */
 static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], long q)
 {
 	const sph_shared *sh = wk->sh;
@@ -213,7 +214,7 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 }
 
 /* The gradient pass: the block's groups and G_ij, G = 0 for a pair closer
- * than sqrt(eps2), at r >= h (the list's margin) and for the padding; then
+ * than 1e-3 h (sqrt(eps2)), at r >= h (the list's margin) and for the padding; then
  * per particle S_i, sum_j |G_ij|^2, the walls' sums, h_i, 1 / D_i and
  * 1 / D'_i (0 where D is negligible, below dmin). */
 static void gradients(const dfsph_work *wk, long i0, long cnt)
@@ -747,8 +748,9 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	return finish(w, sys, &wk, ctx, it, residual, div_it, div_residual);
 }
 
-/* For tests/test_sph_reference.c: after a step of w, the passes on the last
- * sph_density's lists, on the back-end SIMD_PICK gives now. Per particle:
+/* For tests/test_sph_reference.c: after a step of w, the passes (and the
+ * operator product) on the last sph_density's lists, on the back-end
+ * SIMD_PICK gives now. Per particle:
  * inv_d = 1 / D_i, inv_dsym = 1 / D'_i, rate = R_i(v) (the wall counted
  * twice) of the velocity columns, and acc[3 i ..] = -(sum_j (k_i + k_j)
  * G_ij + 2 k_i B_i) for k_i = k[i]. */
@@ -762,20 +764,19 @@ eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float
 	dfsph_work wk;
 	if (!prepare(w, &wk, sh, n, 1.0f, 1))
 		return EDDY_ERR_NOMEM;
+	memcpy(wk.p, k, (size_t)n * sizeof *k);
+	operator_product(&wk); /* the conjugate gradients' A p: u = -dt (...) for k = p, dt = 1 */
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	for (long i = 0; i < n; ++i)
 		wk.v[i] = (dfsph_vec4){vx[i], vy[i], vz[i], 0};
 	wk.err = rate;
 	pass(&wk, PASS_RATE, true, true);
-	memcpy(wk.k, k, (size_t)n * sizeof *k);
-	memset(wk.v, 0, (size_t)n * sizeof *wk.v);
-	pass(&wk, PASS_CORRECT, true, true); /* v = -dt (...), dt = 1 */
 	for (long i = 0; i < n; ++i) {
 		inv_d[i] = wk.b[i].w;
 		inv_dsym[i] = wk.dsym[i];
-		acc[3 * i] = wk.v[i].x;
-		acc[3 * i + 1] = wk.v[i].y;
-		acc[3 * i + 2] = wk.v[i].z;
+		acc[3 * i] = wk.u[i].x;
+		acc[3 * i + 1] = wk.u[i].y;
+		acc[3 * i + 2] = wk.u[i].z;
 	}
 	return EDDY_OK;
 }
