@@ -43,15 +43,16 @@
  * Without it the density solve runs alone, cold, with the paper's sweeps that
  * only add pressure, on the true wall rate and D_i = (S_i + 2 B_i) . (S_i +
  * B_i) + sum_j |G_ij|^2, until the mean compression is at most
- * max_density_error (cheaper, but it holds still water only some 10 layers deep):
+ * max_density_error (cheaper; it holds still water some 10 layers deep):
  *   k_i += max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
  *
  * Published per frame: solver = "dfsph", iterations and divergence_iterations
  * (the solves' mean per step), residual (largest final mean density error of
  * a step), residual_max (... of one particle, / rho0), unconverged (steps in
- * which a solve stopped at its cap above its tolerance). Time-step limits (times the CFL number):
- * dt <= h / max|v| and dt <= DFSPH_GRAVITY_LIMIT sqrt(h / |g|), the latter
- * with the divergence solver times sqrt(depth_scale). No acoustic limit.
+ * which a solve stopped at its cap above its tolerance). Time-step limits
+ * (times the CFL number): dt <= h / max|v| and dt <= DFSPH_GRAVITY_LIMIT
+ * sqrt(h / |g|), the latter with the divergence solver times
+ * sqrt(depth_scale). No acoustic limit.
  *
  * Sources: Bender & Koschier, "Divergence-free smoothed particle
  * hydrodynamics", SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and
@@ -76,10 +77,9 @@ typedef struct dfsph_vec4 {
 	float x, y, z, w;
 } dfsph_vec4;
 
-/* Eight pairs of one particle: the neighbours and G_ij by component. A
- * particle's pairs are whole groups, the last one padded with the particle
- * itself and G = 0 (exact zeros in every sum), so the sweeps stream through
- * one array with neither a scalar tail nor a mask. */
+/* Eight pairs of one particle: the neighbours and G_ij by component. Its
+ * last group is padded with the particle itself and G = 0 (exact zeros in
+ * every sum): the sweeps stream one array with no scalar tail and no mask. */
 typedef struct dfsph_group {
 	uint32_t j[8];
 	float gx[8], gy[8], gz[8];
@@ -128,6 +128,8 @@ typedef struct dfsph_pass {
 SIMD_DECLARE(void, dfsph_block, (const void *pass, long i0, long cnt));
 
 /* ---- the passes, compiled once per SIMD back-end ---------------------------- */
+/* Each particle writes only its own results, and its sums end in simd.h's
+ * lane order: the same bits on every back-end and for any thread count. */
 
 /* Eight particles' floats p[0 .. m) in lanes 0 .. m - 1, and back (m < 8:
  * the last particles of a block; the other lanes are 0 and not stored). */
@@ -213,10 +215,10 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 		out[k][q] = sph_sum4(s[k]);
 }
 
-/* The gradient pass: the block's groups and G_ij, G = 0 for a pair closer
- * than 1e-3 h (sqrt(eps2)), at r >= h (the list's margin) and for the padding; then
- * per particle S_i, sum_j |G_ij|^2, the walls' sums, h_i, 1 / D_i and
- * 1 / D'_i (0 where D is negligible, below dmin). */
+/* The gradient pass: the block's groups and G_ij (0 for a pair closer than
+ * 1e-3 h, at r >= h, the list's margin, and for the padding); then per
+ * particle S_i, sum_j |G_ij|^2, the walls' sums, h_i, 1 / D_i and 1 / D'_i
+ * (0 where D is negligible, below dmin). */
 static void gradients(const dfsph_work *wk, long i0, long cnt)
 {
 	const sph_shared *sh = wk->sh;
@@ -387,9 +389,9 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
 #include "systems.h"
 
 /* dt <= DFSPH_GRAVITY_LIMIT sqrt(h / |g|) (times the CFL number): gravity
- * compresses the fluid by g dt^2 each step, which the first-order prediction
- * of the solve must absorb, or a tank at rest rings up. Transient forces
- * need no such limit: the velocity limit covers them. */
+ * compresses the fluid by g dt^2 a step, which the solve's first-order
+ * prediction must absorb, or a tank at rest rings up (the velocity limit
+ * covers transient forces). */
 #define DFSPH_GRAVITY_LIMIT 0.18
 
 /* A step fails above this final mean density error, or above this
@@ -748,12 +750,11 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	return finish(w, sys, &wk, ctx, it, residual, div_it, div_residual);
 }
 
-/* For tests/test_sph_reference.c: after a step of w, the passes (and the
- * operator product) on the last sph_density's lists, on the back-end
- * SIMD_PICK gives now. Per particle:
- * inv_d = 1 / D_i, inv_dsym = 1 / D'_i, rate = R_i(v) (the wall counted
- * twice) of the velocity columns, and acc[3 i ..] = -(sum_j (k_i + k_j)
- * G_ij + 2 k_i B_i) for k_i = k[i]. */
+/* For tests/test_sph_reference.c: after a step of w, the passes and the
+ * operator product on the last sph_density's lists, on the back-end
+ * SIMD_PICK gives now. Per particle: inv_d = 1 / D_i, inv_dsym = 1 / D'_i,
+ * rate = R_i(v) (the wall counted twice) of the velocity columns, and
+ * acc[3 i ..] = -(sum_j (k_i + k_j) G_ij + 2 k_i B_i) for k_i = k[i]. */
 eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float *inv_dsym, float *rate, float *acc);
 eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float *inv_dsym, float *rate, float *acc)
 {
