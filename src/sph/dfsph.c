@@ -1,88 +1,58 @@
 /* SPDX-License-Identifier: MIT */
-/* sph_dfsph: implicit (incompressible) SPH pressure, the divergence-free SPH
- * of Bender & Koschier. It replaces sph_pressure: the pressure is solved for
- * each step so the fluid keeps its rest density, and the time step is
- * limited by the flow speed, not by a speed of sound.
+/* sph_dfsph: implicit SPH pressure, the divergence-free SPH of Bender &
+ * Koschier, in place of sph_pressure: each step solves for the pressure that
+ * keeps the rest density; dt is limited by the flow, not by a speed of sound.
  *
- * Reads: x y z vx vy vz density ax ay az, and with the divergence solver the
- * state columns dfsph_k dfsph_kd it declares (each solve's k of the last
- * step). Writes: pressure, ax ay az (accumulated), dfsph_k dfsph_kd. Runs
- * after the other forces and before integrate, whose v += dt a then gives
- * the corrected velocity; uses sph_density's neighbour lists.
+ * Reads: x y z vx vy vz density ax ay az, sph_density's lists. Writes:
+ * pressure, ax ay az (accumulated: it runs after the other forces, before
+ * integrate). With the divergence solver it reads and writes its state
+ * columns dfsph_k dfsph_kd, each solve's k of the last step.
  *
- * With G_ij = m grad W_spiky(x_i - x_j) (sph_pressure's: the poly6 gradient
- * vanishes at r = 0 and lets a tank at rest cluster), S_i = sum_j G_ij,
- * boundary particles of mass m_b = V_b rho0 (Akinci et al.), B_i = sum_b m_b
- * grad W(x_i - x_b), and the pressure as k_i = p_i / rho_i^2:
+ * With G_ij = m grad W_spiky(x_i - x_j) (the poly6 gradient vanishes at r = 0
+ * and lets a tank at rest cluster), S_i = sum_j G_ij, boundary particles of
+ * mass m_b = V_b rho0 (Akinci et al.), B_i = sum_b m_b grad W(x_i - x_b),
+ * k_i = p_i / rho_i^2, and bdiv_i the moving colliders' part (sph.h):
  *   Drho_i/Dt = sum_j (v_i - v_j) . G_ij + v_i . B_i - bdiv_i
  *   a_i^p     = -sum_j (k_i + k_j) G_ij - 2 k_i B_i + h_i
- * bdiv_i is the moving colliders' part (sph.h). The boundary particles
- * mirror the pressure (p_b = p_i, so the wall term counts twice: with one
- * k_i a wall could not hold a particle whose neighbourhood is full, where
- * S_i + B_i ~ 0), plus Adami et al.'s hydrostatic part p_b - p_i =
- * rho_i g . (x_b - x_i), which supports the fluid beside the walls:
- *   h_i = -(1/rho_i) sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b).
- * A step sets v* = v + dt (a + h), then solves for k on it by sweeps that
- * each set k from the current v* and move v* by dt a^p of the change; the
- * result a^p = (v* - (v + dt a)) / dt is added to ax ay az, and the pressure
- * column gets p_i = M k_i rho_i^2 (k summed over the solves, M = 1 /
- * grad_cal the force's lattice moment, see sph_pressure), in Pa.
+ *   h_i       = -(1/rho_i) sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b)
+ * The boundary particles mirror the pressure (p_b = p_i, so the wall counts
+ * twice: with one k_i a wall could not hold a particle whose neighbourhood is
+ * full, where S_i + B_i ~ 0), plus Adami et al.'s hydrostatic part p_b - p_i =
+ * rho_i g . (x_b - x_i): h_i, which supports the fluid beside the walls. A
+ * step sets v* = v + dt (a + h), solves for k by corrections that move v* by
+ * dt a^p of a change of k, adds (v* - (v + dt a)) / dt to a and writes
+ * p_i = k_i rho_i^2 / grad_cal (k summed over the solves; see sph_pressure).
  *
- * With the divergence solver (the default) the paper's two solves run in
- * one step, warm-started from their own k of the last step, projected, on
- * the symmetric operator:
- *   velocity solve:  R_i(v*) = 0,   density solve:  rho_i + dt R_i(v*) = rho0
- *   R_i(v) = sum_j (v_i - v_j) . G_ij + 2 (v_i . B_i - bdiv_i)
- * Counting the wall twice, as the force does, makes a change of k move the
+ * The divergence solver (the default) runs the paper's two solves,
+ *   velocity:  R_i(v*) = 0,   density:  rho_i + dt R_i(v*) = rho0,
+ *   R_i(v) = sum_j (v_i - v_j) . G_ij + 2 (v_i . B_i - bdiv_i),
+ * the wall counted twice as in the force, so that a change of k moves the
  * predicted density by -(A k)_i with A = dt^2 grad^T grad symmetric positive
  * semi-definite, of diagonal dt^2 D'_i, D'_i = |S_i + 2 B_i|^2 + sum_j
- * |G_ij|^2 (the true rate makes A non-symmetric, and Jacobi sweeps on it can
- * diverge in a deep column). A sweep is projected relaxed Jacobi (Ihmsen et
- * al.) on the residual res_i (R_i, or the predicted rho_i - rho0):
+ * |G_ij|^2 (on the true rate A is not symmetric, and Jacobi sweeps can
+ * diverge in a deep column). Each solve (solve) starts from its k of the last
+ * step, runs conjugate gradients (divergence_cg), then projected relaxed
+ * Jacobi sweeps (Ihmsen et al.) on the residual res_i (R_i where rho_i >=
+ * DFSPH_SURFACE rho0, or the predicted rho_i - rho0), whose error is |res_i|
+ * where k_i > 0, else max(res_i, 0):
  *   k_i <- max(k_i + omega res_i / (dt^n D'_i), 0),   omega = DFSPH_OMEGA,
- * n = 1 for the velocity solve, 2 for the density one: k never goes below 0,
- * so the free surface is not pulled together. The warm start carries the
- * pressure that holds up the water above, which sweeps could not rebuild
- * each step through deep water (their error in the column-wide mode falls by
- * 1 - c / N^2 a sweep for N layers). Each solve first runs preconditioned
- * conjugate gradients on the particles that hold pressure or are compressing
- * (divergence_cg: 1 - c / N a step), then projected sweeps settle the
- * particles that entered or left that set; the velocity solve makes at least
- * DFSPH_SMOOTH of them. It leaves out particles below DFSPH_SURFACE rho0 (a
- * Dirichlet surface), so water a solid stirred apart is not held expanded.
- * A sweep's error is |res_i| where k_i > 0 and max(res_i, 0) where k_i = 0,
- * averaged over all particles; the velocity solve stops once that times
- * dt / rho0 is at most max_divergence_error (which must be well below
- * max_density_error, or the water compresses by it every step), the density
- * solve once it is at most max_density_error, both scaled by
- * (DFSPH_DEPTH_REF h / H)^2 in a fluid H deep (divergence_tolerance).
+ * n = 1 for the velocity solve, 2 for the density one; k >= 0 leaves the free
+ * surface unpulled. max_divergence_error must be well below
+ * max_density_error, or the water compresses by it every step.
  *
- * Without the divergence solver the density solve runs alone, cold, with the
- * paper's sweeps that only add pressure, on the true wall rate and
- * D_i = (S_i + 2 B_i) . (S_i + B_i) + sum_j |G_ij|^2:
+ * Without it the density solve runs alone, cold, with the paper's sweeps that
+ * only add pressure, on the true wall rate and D_i = (S_i + 2 B_i) . (S_i +
+ * B_i) + sum_j |G_ij|^2, until the mean compression is at most
+ * max_density_error (cheaper; it holds still water some 10 layers deep):
  *   k_i += max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
- * until the mean compression is at most max_density_error: cheaper for
- * shallow, splashing scenes, but it does not hold still water much deeper
- * than 10 layers.
  *
- * The passes: the pairs are packed once a step into groups of eight
- * (dfsph_group), which the sweeps stream. A pass goes in blocks: the pair
- * sums of the block's particles, written once against simd.h, then the rest
- * eight particles at a time. Sums end in simd.h's fixed lane order and each
- * particle writes only its own results: the same bits on every back-end and
- * for any thread count.
- *
- * Published per frame: solver = "dfsph", iterations (mean per step of the
- * density solve), residual (largest final mean density error of a step),
- * residual_max (largest final error of one particle, / rho0),
- * divergence_iterations (mean), unconverged (steps in which a solve stopped
- * at its cap above its tolerance). A step fails naming the particle when the
- * solve has lost the fluid (DFSPH_FAIL_ERROR, DFSPH_FAIL_PARTICLE). Time-step
- * limits (times the CFL number): dt <= h / max|v|, and dt <=
- * DFSPH_GRAVITY_LIMIT sqrt(h / |g|), with the divergence solver times
- * sqrt(DFSPH_DEPTH_REF h / H) in a fluid H deep beyond DFSPH_DEPTH_REF h
- * (dt ~ h / sqrt(|g| H): the prediction's error grows with the hydrostatic
- * pressure it moves). No acoustic limit.
+ * Published per frame: solver = "dfsph", iterations and divergence_iterations
+ * (the solves' mean per step), residual (largest final mean density error of
+ * a step), residual_max (... of one particle, / rho0), unconverged (steps in
+ * which a solve stopped at its cap above its tolerance). Time-step limits
+ * (times the CFL number): dt <= h / max|v| and dt <= DFSPH_GRAVITY_LIMIT
+ * sqrt(h / |g|), the latter with the divergence solver times
+ * sqrt(depth_scale). No acoustic limit.
  *
  * Sources: Bender & Koschier, "Divergence-free smoothed particle
  * hydrodynamics", SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and
@@ -103,83 +73,63 @@
  * with omega above 0.5 can grow. */
 #define DFSPH_OMEGA 0.5f
 
-/* Particles per block of a pass (sph_block_pass's blocks, a multiple of 8):
- * the pair sums of a block first, then the rest eight particles at a time. */
-#define DFSPH_BLOCK SPH_BLOCK
-
 typedef struct dfsph_vec4 {
 	float x, y, z, w;
 } dfsph_vec4;
 
-/* Eight pairs of one particle: the neighbours and G_ij by component. A
- * particle's pairs are whole groups, the last one padded with the particle
- * itself and G = 0 (exact zeros in every sum), so the sweeps stream through
- * one array with neither a scalar tail nor a mask. */
+/* Eight pairs of one particle: the neighbours and G_ij by component. Its
+ * last group is padded with the particle itself and G = 0 (exact zeros in
+ * every sum): the sweeps stream one array with no scalar tail and no mask. */
 typedef struct dfsph_group {
 	uint32_t j[8];
 	float gx[8], gy[8], gz[8];
 } dfsph_group;
 
-/* What the gradient pass reads. */
-typedef struct dfsph_geometry {
-	const sph_neighbors *nb;
-	const float *pq;  /* (x y z 1/rho) quads of sph_density */
-	const float *rho; /* kg/m^3 */
-	float h;          /* m, kernel radius */
-	float eps2;       /* m^2: a pair closer than sqrt(eps2) has no direction, G = 0 */
-	float mg;         /* m spiky_grad: G_ij = mg (h - r)^2 / r r_vec */
-	float rho0, spiky_grad;
-	float gx, gy, gz; /* m/s^2, gravity */
-	float dmin;       /* D_i below this is negligible */
-} dfsph_geometry;
-
-/* Which sweep a rate or correct pass is part of. */
-typedef struct dfsph_sweep {
-	bool divergence; /* the velocity (divergence-free) solve, else the density one */
-	bool projected;  /* projected relaxed Jacobi on the symmetric operator (the
-	                  * divergence solver), else sweeps that only add pressure */
-	bool rate_only;  /* the rate pass writes only R_i(v) to err */
-} dfsph_sweep;
-
-enum dfsph_pass { PASS_GRADIENTS, PASS_RATE, PASS_CORRECT };
-
-typedef struct dfsph_work dfsph_work;
-/* One block of a pass, particles i0 .. i0 + cnt - 1 (cnt <= DFSPH_BLOCK),
- * on one SIMD back-end (a is NULL for the gradient pass). */
-typedef void dfsph_block_fn(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sweep *a, long i0, long cnt);
-SIMD_DECLARE(void, dfsph_block, (dfsph_work * wk, enum dfsph_pass kind, const dfsph_sweep *a, long i0, long cnt));
-
-/* The solver's per-step scratch, all in the world's arena, and how it runs. */
-struct dfsph_work {
+/* A step's inputs and scratch (the arrays in the world's arena, n each). */
+typedef struct dfsph_work {
 	long n;
-	size_t *goff; /* particle i's groups are g[goff[i] .. goff[i + 1]) */
-	dfsph_group *g;
-	dfsph_vec4 *b;     /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
-	float *dsym;       /* 1 / D'_i, the symmetric operator's diagonal (0 likewise); divergence solver only */
-	dfsph_vec4 *v;     /* v*_i (w unused: a neighbour's velocity is one quad) */
-	dfsph_vec4 *h;     /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
-	float *k;          /* the k_i a correction applies */
-	float *ksum;       /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
-	float *kp;         /* the pressure's k_i: the sum over both solves */
-	float *err;        /* per particle: the error the sweep measured, or R_i(v) */
+	float dt; /* s */
+	int threads;
+	void (*block)(const void *pass, long i0, long cnt); /* the passes on the chosen SIMD back-end */
+	const sph_shared *sh;
+	const float *rho;  /* kg/m^3, the density column */
+	eddy_vec3 gravity; /* m/s^2 */
 	const float *bdiv; /* the moving walls' part of the rate (sph.h); NULL while none moves
 	                    * and in the operator's product, which is linear */
-	const dfsph_geometry *geo;
-	/* the divergence solver's: */
-	float *full; /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the velocity solve's particles */
-	/* the conjugate gradients' vectors (divergence_cg) */
-	dfsph_vec4 *u;  /* the velocity change of a direction: -dt grad p */
-	float *p;       /* the search direction (a change of k) */
-	float *r;       /* the residual on the active set */
-	float *mask;    /* 1 on the active set, else 0 */
-	float *scratch; /* the correct pass's sum of k, not kept */
-	/* the runner */
-	dfsph_block_fn *block; /* the passes on the chosen SIMD back-end */
-	int threads;
-	float rho0, dt;
-};
+	size_t *goff;      /* particle i's groups are groups[goff[i] .. goff[i + 1]) */
+	dfsph_group *groups;
+	dfsph_vec4 *b; /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
+	dfsph_vec4 *v; /* v*_i (w unused: a neighbour's velocity is one quad) */
+	dfsph_vec4 *h; /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
+	float *dsym;   /* 1 / D'_i, the symmetric operator's diagonal (0 likewise) */
+	float *k;      /* the k_i a correction applies */
+	float *ksum;   /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
+	float *kp;     /* the pressure's k_i: the sum over both solves */
+	float *err;    /* per particle: the error the sweep measured, or R_i(v) */
+	float *full;   /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the velocity solve's particles */
+	/* the conjugate gradients' (divergence_cg) */
+	dfsph_vec4 *u; /* the velocity change of a direction: -dt grad p */
+	float *p;      /* the search direction (a change of k) */
+	float *r;      /* the residual on the active set */
+	float *mask;   /* 1 on the active set, else 0 */
+} dfsph_work;
+
+/* A pass over all particles. PASS_RATE writes R_i(v) to err; PASS_SWEEP
+ * also the sweep's error and its change of k to k; PASS_CORRECT applies k
+ * to v* and adds it to ksum. */
+enum dfsph_pass_kind { PASS_GRADIENTS, PASS_RATE, PASS_SWEEP, PASS_CORRECT };
+typedef struct dfsph_pass {
+	dfsph_work *wk;
+	enum dfsph_pass_kind kind;
+	bool divergence; /* the velocity (divergence-free) solve's sweep, else the density one's */
+	bool projected;  /* projected relaxed Jacobi on the symmetric operator (the divergence
+	                  * solver, and every PASS_RATE), else the paper's sweeps */
+} dfsph_pass;
+SIMD_DECLARE(void, dfsph_block, (const void *pass, long i0, long cnt));
 
 /* ---- the passes, compiled once per SIMD back-end ---------------------------- */
+/* Each particle writes only its own results, and its sums end in simd.h's
+ * lane order: the same bits on every back-end and for any thread count. */
 
 /* Eight particles' floats p[0 .. m) in lanes 0 .. m - 1, and back (m < 8:
  * the last particles of a block; the other lanes are 0 and not stored). */
@@ -231,16 +181,17 @@ static inline sf8 sum8(const float *t, long m)
 	return sf8_add(sf8_add(f0, f1), sf8_add(f2, f3));
 }
 
-/* The wall sums of particle i: B_i (out[0..2][q]) and the hydrostatic sum
- * sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b) (out[3..5][q]). Four
- * partial sums each (boundary neighbour q onto sum q mod 4, the last four
- * padded with copies of the last neighbour and masked out), ended as
- * sph_sum4 ends them: most particles have no boundary neighbours and those
- * at a wall a few, too few to fill eight lanes. */
-static void wall_sums(const dfsph_geometry *a, long i, float out[6][DFSPH_BLOCK], long q)
+/* Particle i's wall sums: B_i (out[0..2][q]) and sum_b (g . (x_b - x_i)) m_b
+ * grad W(x_i - x_b) (out[3..5][q]), each in four partial sums (neighbour q
+ * onto sum q mod 4, the last four padded and masked out) ended as sph_sum4
+ * ends them: a particle at a wall has a few boundary neighbours, too few to
+ * fill eight lanes. */
+static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], long q)
 {
-	const sph_neighbors *nb = a->nb;
-	const float *pi = a->pq + 4 * i;
+	const sph_shared *sh = wk->sh;
+	const sph_neighbors *nb = &sh->nb;
+	const float *pi = sh->pq + 4 * i, eps2 = 1e-6f * sh->k.h2;
+	const eddy_vec3 g = wk->gravity;
 	const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap, bcnt = nb->bcount[i];
 	float s[6][4] = {{0}};
 	for (uint32_t p = 0; p < bcnt; p += 4)
@@ -248,14 +199,14 @@ static void wall_sums(const dfsph_geometry *a, long i, float out[6][DFSPH_BLOCK]
 			const uint32_t b = blist[p + l < bcnt ? p + l : bcnt - 1];
 			const float rx = pi[0] - nb->bx[b], ry = pi[1] - nb->by[b], rz = pi[2] - nb->bz[b];
 			const float r2 = rx * rx + ry * ry + rz * rz;
-			const float mb = nb->bvol[b] * a->rho0; /* Akinci: the wall at rest density */
-			const float r = sqrtf(r2), hr = a->h - r;
-			const bool ok = p + l < bcnt && r2 > a->eps2 && hr > 0;
-			const float c = ok ? mb * a->spiky_grad * hr * hr / r : 0.0f; /* + 0 leaves a sum as it is */
+			const float mb = nb->bvol[b] * sh->rho0; /* Akinci: the wall at rest density */
+			const float r = sqrtf(r2), hr = sh->k.h - r;
+			const bool ok = p + l < bcnt && r2 > eps2 && hr > 0;
+			const float c = ok ? mb * sh->k.spiky_grad * hr * hr / r : 0.0f; /* + 0 leaves a sum as it is */
 			s[0][l] += c * rx;
 			s[1][l] += c * ry;
 			s[2][l] += c * rz;
-			const float gh = -(a->gx * rx + a->gy * ry + a->gz * rz) * c; /* g . (x_b - x_i) */
+			const float gh = -(g.x * rx + g.y * ry + g.z * rz) * c; /* g . (x_b - x_i) */
 			s[3][l] += gh * rx;
 			s[4][l] += gh * ry;
 			s[5][l] += gh * rz;
@@ -264,31 +215,30 @@ static void wall_sums(const dfsph_geometry *a, long i, float out[6][DFSPH_BLOCK]
 		out[k][q] = sph_sum4(s[k]);
 }
 
-/* The gradient pass: the block's groups (each particle's last one padded
- * with the particle itself) and G_ij, with G = 0 for a pair closer than
- * sqrt(eps2), at r >= h (the list's margin) and for the padding; then per
- * particle S_i, sum_j |G_ij|^2, the walls' sums, h_i, 1 / D_i and 1 / D'_i. */
-static void gradients(dfsph_work *wk, long i0, long cnt)
+/* The gradient pass: the block's groups and G_ij (0 for a pair closer than
+ * 1e-3 h, at r >= h, the list's margin, and for the padding); then per
+ * particle S_i, sum_j |G_ij|^2, the walls' sums, h_i, 1 / D_i and 1 / D'_i
+ * (0 where D is negligible, below dmin). */
+static void gradients(const dfsph_work *wk, long i0, long cnt)
 {
-	const dfsph_geometry *a = wk->geo;
-	const sph_neighbors *nb = a->nb;
-	const sf8 h = sf8_set1(a->h), eps2 = sf8_set1(a->eps2), mg = sf8_set1(a->mg), one = sf8_set1(1.0f),
-			  two = sf8_set1(2.0f), zero = sf8_zero(), dmin = sf8_set1(a->dmin);
-	float t[4][DFSPH_BLOCK][4], w[6][DFSPH_BLOCK];
+	const sph_shared *sh = wk->sh;
+	const sph_neighbors *nb = &sh->nb;
+	const float dref = sh->mass * sh->k.spiky_grad * sh->k.h2; /* |G|'s scale */
+	const sf8 h = sf8_set1(sh->k.h), eps2 = sf8_set1(1e-6f * sh->k.h2), mg = sf8_set1(sh->mass * sh->k.spiky_grad),
+			  one = sf8_set1(1.0f), two = sf8_set1(2.0f), zero = sf8_zero(), dmin = sf8_set1(1e-6f * dref * dref),
+			  minus = sf8_set1(-0.0f);
+	float t[4][SPH_BLOCK][4], w[6][SPH_BLOCK] = {{0}};
 	for (long q = 0; q < cnt; ++q) {
 		const long i = i0 + q;
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
-		const sf8 pi = sf8_load_quad2(a->pq + 4 * i);
+		const sf8 pi = sf8_load_quad2(sh->pq + 4 * i);
 		sf8 sx = zero, sy = zero, sz = zero, s2 = zero;
-		dfsph_group *g = wk->g + wk->goff[i];
+		dfsph_group *g = wk->groups + wk->goff[i];
 		for (uint32_t p = 0; p < c; p += 8, ++g) {
-			if (p + 8 <= c)
-				memcpy(g->j, list + p, sizeof g->j);
-			else
-				for (uint32_t l = 0; l < 8; ++l)
-					g->j[l] = p + l < c ? list[p + l] : (uint32_t)i;
+			for (uint32_t l = 0; l < 8; ++l)
+				g->j[l] = p + l < c ? list[p + l] : (uint32_t)i;
 			sf8 rx, ry, rz, rw; /* x_i - x_j */
-			sf8_sub_gather_quads(pi, a->pq, g->j, &rx, &ry, &rz, &rw);
+			sf8_sub_gather_quads(pi, sh->pq, g->j, &rx, &ry, &rz, &rw);
 			const sf8 r2 = sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz));
 			const sf8 r = sf8_sqrt(r2), hr = sf8_sub(h, r);
 			const sf8 ok = sf8_and(sf8_gt(r2, eps2), sf8_gt(hr, zero));
@@ -307,21 +257,18 @@ static void gradients(dfsph_work *wk, long i0, long cnt)
 		sf8_fold4(sy, t[1][q]);
 		sf8_fold4(sz, t[2][q]);
 		sf8_fold4(s2, t[3][q]);
-		for (int k = 0; k < 6; ++k)
-			w[k][q] = 0;
 		if (nb->bcount[i]) /* most particles are away from the walls */
-			wall_sums(a, i, w, q);
+			wall_sums(wk, i, w, q);
 	}
 	for (long q = 0; q < cnt; q += 8) {
 		const long i = i0 + q, m = cnt - q < 8 ? cnt - q : 8;
 		const sf8 sx = sum8(t[0][q], m), sy = sum8(t[1][q], m), sz = sum8(t[2][q], m), s2 = sum8(t[3][q], m);
 		const sf8 bx = load8(w[0] + q, m), by = load8(w[1] + q, m), bz = load8(w[2] + q, m);
 		sf8 x, y, z, ir; /* ir = 1 / rho_i */
-		load_quads8((const dfsph_vec4 *)a->pq + i, m, &x, &y, &z, &ir);
-		const sf8 minus = sf8_set1(-0.0f);
+		load_quads8((const dfsph_vec4 *)sh->pq + i, m, &x, &y, &z, &ir);
 		store_quads8(wk->h + i, m, sf8_mul(sf8_xor(minus, load8(w[3] + q, m)), ir),
 		             sf8_mul(sf8_xor(minus, load8(w[4] + q, m)), ir), sf8_mul(sf8_xor(minus, load8(w[5] + q, m)), ir),
-		             load8(a->rho + i, m));
+		             load8(wk->rho + i, m));
 		/* S + 2B: the boundary term of the acceleration counts twice (pressure mirroring) */
 		const sf8 ex = sf8_add(sx, sf8_mul(two, bx)), ey = sf8_add(sy, sf8_mul(two, by)),
 				  ez = sf8_add(sz, sf8_mul(two, bz));
@@ -330,22 +277,23 @@ static void gradients(dfsph_work *wk, long i0, long cnt)
 			sf8_add(sf8_add(sf8_mul(ex, sf8_add(sx, bx)), sf8_mul(ey, sf8_add(sy, by))), sf8_mul(ez, sf8_add(sz, bz))),
 			s2);
 		store_quads8(wk->b + i, m, bx, by, bz, sf8_and(sf8_gt(d, dmin), sf8_div(one, d)));
-		if (wk->dsym) { /* D'_i = |S + 2B|^2 + sum |G|^2 */
-			const sf8 ds = sf8_add(sf8_add(sf8_add(sf8_mul(ex, ex), sf8_mul(ey, ey)), sf8_mul(ez, ez)), s2);
-			store8(wk->dsym + i, sf8_and(sf8_gt(ds, dmin), sf8_div(one, ds)), m);
-		}
+		/* D'_i = |S + 2B|^2 + sum |G|^2 */
+		const sf8 ds = sf8_add(sf8_add(sf8_add(sf8_mul(ex, ex), sf8_mul(ey, ey)), sf8_mul(ez, ez)), s2);
+		store8(wk->dsym + i, sf8_and(sf8_gt(ds, dmin), sf8_div(one, ds)), m);
 	}
 }
 
 /* The rate pass: R_i(v) (or Drho_i/Dt), and for a sweep its error and change of k. */
-static void rate(dfsph_work *wk, const dfsph_sweep *a, long i0, long cnt)
+static void rate(const dfsph_pass *ps, long i0, long cnt)
 {
+	const dfsph_work *wk = ps->wk;
 	const float *v = &wk->v->x;
-	float t[DFSPH_BLOCK][4];
+	float t[SPH_BLOCK][4];
 	for (long q = 0; q < cnt; ++q) {
 		const sf8 vi = sf8_load_quad2(v + 4 * (i0 + q));
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
-		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
+		for (const dfsph_group *g = wk->groups + wk->goff[i0 + q], *ge = wk->groups + wk->goff[i0 + q + 1]; g < ge;
+		     ++g) {
 			sf8 dx, dy, dz, dw; /* v_i - v_j */
 			sf8_sub_gather_quads(vi, v, g->j, &dx, &dy, &dz, &dw);
 			sx = sf8_add(sx, sf8_mul(dx, sf8_load(g->gx)));
@@ -355,8 +303,8 @@ static void rate(dfsph_work *wk, const dfsph_sweep *a, long i0, long cnt)
 		sf8_fold4(sf8_add(sf8_add(sx, sy), sz), t[q]);
 	}
 	/* 1 / dt^n: n = 1 for the velocity solve, 2 for the density one */
-	const float inv1 = a->divergence ? 1.0f / wk->dt : 1.0f / (wk->dt * wk->dt);
-	const sf8 zero = sf8_zero(), dt = sf8_set1(wk->dt), inv = sf8_set1(inv1), rho0 = sf8_set1(wk->rho0),
+	const float inv1 = ps->divergence ? 1.0f / wk->dt : 1.0f / (wk->dt * wk->dt);
+	const sf8 zero = sf8_zero(), dt = sf8_set1(wk->dt), inv = sf8_set1(inv1), rho0 = sf8_set1(wk->sh->rho0),
 			  omega = sf8_set1(DFSPH_OMEGA), minus = sf8_set1(-0.0f);
 	for (long q = 0; q < cnt; q += 8) {
 		const long i = i0 + q, m = cnt - q < 8 ? cnt - q : 8;
@@ -367,15 +315,15 @@ static void rate(dfsph_work *wk, const dfsph_sweep *a, long i0, long cnt)
 		if (wk->bdiv)
 			vb = sf8_sub(vb, load8(wk->bdiv + i, m));
 		/* the wall counted twice, as its force, on the symmetric operator */
-		const sf8 r = sf8_add(sum8(t[q], m), a->projected ? sf8_add(vb, vb) : vb);
-		if (a->rate_only) {
+		const sf8 r = sf8_add(sum8(t[q], m), ps->projected ? sf8_add(vb, vb) : vb);
+		if (ps->kind == PASS_RATE) {
 			store8(wk->err + i, r, m);
 			continue;
 		}
-		const sf8 res = a->divergence ? sf8_mul(r, load8(wk->full + i, m))
-		                              : sf8_sub(sf8_add(load8(wk->geo->rho + i, m), sf8_mul(dt, r)), rho0);
+		const sf8 res = ps->divergence ? sf8_mul(r, load8(wk->full + i, m))
+		                               : sf8_sub(sf8_add(load8(wk->rho + i, m), sf8_mul(dt, r)), rho0);
 		sf8 e = sf8_max(res, zero); /* the compression */
-		if (a->projected) {
+		if (ps->projected) {
 			/* k_i = max(k_i + omega res_i / (dt^n D'_i), 0); correct applies the change */
 			const sf8 ks = load8(wk->ksum + i, m);
 			const sf8 kn =
@@ -386,20 +334,21 @@ static void rate(dfsph_work *wk, const dfsph_sweep *a, long i0, long cnt)
 		} else { /* the paper's sweeps: only compression adds pressure */
 			store8(wk->k + i, sf8_mul(sf8_mul(e, inv), bw), m);
 		}
-		store8(wk->err + i, a->divergence ? sf8_mul(e, dt) : e, m);
+		store8(wk->err + i, ps->divergence ? sf8_mul(e, dt) : e, m);
 	}
 }
 
 /* The correction: v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i), and k_i
  * added to its sum. */
-static void correct(dfsph_work *wk, long i0, long cnt)
+static void correct(const dfsph_work *wk, long i0, long cnt)
 {
 	const float *k = wk->k;
-	float t[3][DFSPH_BLOCK][4];
+	float t[3][SPH_BLOCK][4];
 	for (long q = 0; q < cnt; ++q) {
 		const sf8 ki = sf8_set1(k[i0 + q]);
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
-		for (const dfsph_group *g = wk->g + wk->goff[i0 + q], *ge = wk->g + wk->goff[i0 + q + 1]; g < ge; ++g) {
+		for (const dfsph_group *g = wk->groups + wk->goff[i0 + q], *ge = wk->groups + wk->goff[i0 + q + 1]; g < ge;
+		     ++g) {
 			const sf8 c = sf8_add(ki, sf8_gather(k, g->j));
 			sx = sf8_add(sx, sf8_mul(c, sf8_load(g->gx)));
 			sy = sf8_add(sy, sf8_mul(c, sf8_load(g->gy)));
@@ -424,14 +373,15 @@ static void correct(dfsph_work *wk, long i0, long cnt)
 	}
 }
 
-void SIMD_NAME(dfsph_block)(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sweep *a, long i0, long cnt)
+void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
 {
-	if (kind == PASS_GRADIENTS)
-		gradients(wk, i0, cnt);
-	else if (kind == PASS_RATE)
-		rate(wk, a, i0, cnt);
+	const dfsph_pass *ps = pass;
+	if (ps->kind == PASS_GRADIENTS)
+		gradients(ps->wk, i0, cnt);
+	else if (ps->kind == PASS_CORRECT)
+		correct(ps->wk, i0, cnt);
 	else
-		correct(wk, i0, cnt);
+		rate(ps, i0, cnt);
 }
 
 #ifndef EDDY_SIMD_VARIANT
@@ -439,22 +389,19 @@ void SIMD_NAME(dfsph_block)(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sw
 #include "systems.h"
 
 /* dt <= DFSPH_GRAVITY_LIMIT sqrt(h / |g|) (times the CFL number): gravity
- * compresses the fluid by g dt^2 each step, which the first-order prediction
- * of the solve must absorb, or a tank at rest rings up. Transient forces
- * need no such limit: the velocity limit covers them. */
+ * compresses the fluid by g dt^2 a step, which the solve's first-order
+ * prediction must absorb, or a tank at rest rings up (the velocity limit
+ * covers transient forces). */
 #define DFSPH_GRAVITY_LIMIT 0.18
 
-/* above this final mean density error a step fails instead of going on */
+/* A step fails above this final mean density error, or above this
+ * predicted density error at one particle (the particles overlap). */
 #define DFSPH_FAIL_ERROR 0.05
-
-/* above this predicted density error at one particle a step fails: the
- * particles overlap */
 #define DFSPH_FAIL_PARTICLE 1.0
 
-/* The velocity solve warm-starts, so a step stopped at its cap hands the
- * rest on to the next. Stopped at the cap above DFSPH_FAIL_CAPPED_ERROR
- * times the tolerance in DFSPH_FAIL_CAPPED steps in a row, it is not
- * catching up, and the step fails. */
+/* The velocity solve warm-starts: stopped at its cap it hands the rest on to
+ * the next step; stopped there above DFSPH_FAIL_CAPPED_ERROR times the
+ * tolerance DFSPH_FAIL_CAPPED steps in a row, it is not catching up. */
 #define DFSPH_FAIL_CAPPED_ERROR 2.0
 #define DFSPH_FAIL_CAPPED 3
 
@@ -465,27 +412,23 @@ void SIMD_NAME(dfsph_block)(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sw
 
 /* The velocity solve leaves out a particle whose kernel sum (walls
  * included) is below DFSPH_SURFACE rho0: the outermost particles of a free
- * surface (every other particle of water at rest is within 5% of rho0).
- * Higher leaves out enough of the surface to let still water jitter; lower
- * lets a dropped block compress at impact beyond the density tolerance. */
+ * surface (every other particle of water at rest is within 5% of rho0), so
+ * water a solid stirred apart is not held expanded. Higher leaves out enough
+ * of the surface to let still water jitter; lower lets a dropped block
+ * compress at impact beyond the density tolerance. */
 #define DFSPH_SURFACE 0.8f
 
-/* the depth (in kernel radii) up to which the solves stop at their
- * requested tolerance; deeper, the tolerance falls with the square of the
- * depth (divergence_tolerance) */
+/* kernel radii: the depth beyond which the tolerances tighten (depth_scale) */
 #define DFSPH_DEPTH_REF 5.0
 
 typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
+	int kcol[2]; /* the state columns dfsph_k, dfsph_kd: the two solves' warm starts (or -1) */
+	int capped;  /* steps in a row whose velocity solve ended capped (DFSPH_FAIL_CAPPED) */
 	/* statistics of the current frame */
 	int frame;
 	int64_t steps, sweeps, div_sweeps, unconverged;
 	double residual, worst;
-	dfsph_block_fn *block; /* the passes on the SIMD back-end chosen when added */
-	int kcol, kdcol;       /* the state columns dfsph_k and dfsph_kd: the velocity and the density
-	                        * solve's k, their warm starts (-1 without the divergence solver) */
-	int capped;            /* consecutive steps whose velocity solve stopped at its cap
-	                        * above DFSPH_FAIL_CAPPED_ERROR times its tolerance */
 } sph_dfsph;
 
 eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
@@ -499,62 +442,42 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	return d;
 }
 
-/* A pass over all particles, the threads taking equal shares in order.
- * Each particle writes only its own values (rate its err and k, correct its
- * velocity and k sum: the others read k) from inputs no other particle of
- * the pass changes, so the result is the same for any thread count. */
-typedef struct dfsph_pass_args {
-	dfsph_work *wk;
-	enum dfsph_pass kind;
-	const dfsph_sweep *a;
-} dfsph_pass_args;
-
-static void pass_block(const void *args, long i0, long cnt)
+static void pass(dfsph_work *wk, enum dfsph_pass_kind kind, bool divergence, bool projected)
 {
-	const dfsph_pass_args *p = args;
-	p->wk->block(p->wk, p->kind, p->a, i0, cnt);
+	const dfsph_pass ps = {wk, kind, divergence, projected};
+	sph_block_pass(wk->n, wk->threads, wk->block, &ps);
 }
 
-static void pass(dfsph_work *wk, enum dfsph_pass kind, const dfsph_sweep *a)
-{
-	const dfsph_pass_args p = {wk, kind, a};
-	sph_block_pass(wk->n, wk->threads, pass_block, &p);
-}
-
-/* err = R(u) for u = -dt grad p from zero, without the moving walls' part:
- * A p up to the factor -dt. The passes work on the work arrays, which
- * stand in for the time. */
+/* err = R(u) of u = -dt grad p from zero, without the moving walls' part:
+ * A p up to the factor -dt (the passes run on borrowed arrays meanwhile). */
 static void operator_product(dfsph_work *wk)
 {
 	const dfsph_work keep = *wk;
 	memset(wk->u, 0, (size_t)wk->n * sizeof *wk->u);
 	wk->v = wk->u;
 	wk->k = wk->p;
-	wk->ksum = wk->scratch;
+	wk->ksum = keep.k; /* unused until the projection: the sum of p written there is not kept */
 	wk->bdiv = NULL;
-	const dfsph_sweep as = {true, true, true};
-	pass(wk, PASS_CORRECT, &as);
-	pass(wk, PASS_RATE, &as);
+	pass(wk, PASS_CORRECT, true, true);
+	pass(wk, PASS_RATE, true, true);
 	*wk = keep;
 }
 
 /* The solves' bulk: Jacobi-preconditioned conjugate gradients (Hestenes &
- * Stiefel 1952; Saad 2003, Alg. 9.1) on A k = R(v*), restricted to the
- * particles that hold pressure (k_i > 0 from the warm start) or are
- * compressing (R_i > 0): there the unilateral constraint is an equality.
- * The density solve's right side is the rate that brings rho_i to rho0 in a
- * step. It stops when the mean |r_i| dt / rho0 is at most tol (the
- * projected sweeps' measure) or a direction has no positive curvature; the
- * particles whose k ends below 0 are then set to 0 (the projection), and the
- * sweeps that follow settle the particles that left or entered the set.
- * Every sum is serial in row order: the same bits for any thread count. */
+ * Stiefel 1952; Saad 2003, Alg. 9.1) on A k = R(v*) over the particles that
+ * hold pressure (k_i > 0) or compress (R_i > 0), where the unilateral
+ * constraint is an equality; the density solve's right side is the rate that
+ * brings rho_i to rho0 in a step. It stops once the mean |r_i| dt / rho0 is
+ * at most tol or a direction has no positive curvature, then projects (k_i
+ * < 0 back to 0); the sweeps after it settle the particles that left or
+ * entered the set. Its sums are serial in row order: the same bits for any
+ * thread count. */
 static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, double *residual)
 {
 	const long n = wk->n;
-	const float dt = wk->dt, rho0 = wk->rho0;
-	const dfsph_sweep as = {true, true, true};
+	const float dt = wk->dt, rho0 = wk->sh->rho0;
 	const double scale = (double)dt / ((double)rho0 * (double)n);
-	pass(wk, PASS_RATE, &as);
+	pass(wk, PASS_RATE, true, true);
 	double rz = 0, esum = 0;
 	for (long i = 0; i < n; ++i) {
 		const float res = density ? wk->err[i] + (wk->h[i].w - rho0) / dt : wk->err[i];
@@ -600,94 +523,33 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 		neg |= wk->ksum[i] < 0;
 	}
 	if (neg)
-		pass(wk, PASS_CORRECT, &as);
+		pass(wk, PASS_CORRECT, true, true);
 	return it;
 }
 
-/* A solve's stopping tolerance in water `depth` deep (m) for a kernel
- * radius h: the requested one down to DFSPH_DEPTH_REF h, and below that
- * scaled by (DFSPH_DEPTH_REF h / depth)^2. The operator's smallest
- * eigenvalue, that of the column-wide mode, falls relative to its diagonal
- * as (h / depth)^2, so a mean residual eps leaves that mode an error of
- * eps (depth / h)^2: scaled so, the pressure that carries the column is
- * held to the same fraction at any depth. */
-static double divergence_tolerance(double tol, float h, double depth)
-{
-	const double ref = DFSPH_DEPTH_REF * (double)h;
-	return depth > ref ? tol * (ref / depth) * (ref / depth) : tol;
-}
-
-/* The fluid's extent along gravity (m): the depth of water at rest, more
- * (so the solve is stricter) while parts of it fly or splash; 0 without
- * gravity. */
-static double fluid_depth(eddy_world *w, eddy_vec3 g)
+/* DFSPH_DEPTH_REF h / H in a fluid deeper than that, else 1, H the fluid's
+ * extent along gravity (0 without): the depth of water at rest, more (so
+ * stricter) while parts of it fly. The column-wide mode's eigenvalue falls
+ * relative to the diagonal as (h / H)^2, so a mean residual eps leaves it an
+ * error of eps (H / h)^2: the tolerances times its square hold the pressure
+ * that carries the column to the same fraction at any depth. The gravity
+ * limit takes its root (dt ~ h / sqrt(|g| H): the prediction's error grows
+ * with the hydrostatic pressure it moves). */
+static double depth_scale(eddy_world *w, float h)
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	const eddy_vec3 g = w->def.gravity;
 	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
 	if (!(g1 > 0) || !x || !y || !z || w->n == 0)
-		return 0;
+		return 1;
 	double lo = INFINITY, hi = -INFINITY;
 	for (size_t i = 0; i < w->n; ++i) {
 		const double e = ((double)g.x * x[i] + (double)g.y * y[i] + (double)g.z * z[i]) / g1;
 		lo = e < lo ? e : lo;
 		hi = e > hi ? e : hi;
 	}
-	return hi - lo;
-}
-
-/* One solve: conjugate gradients (with the divergence solver), then sweeps
- * of a rate and a correction until the mean error / rho0 is at most tol, or
- * the iteration cap. Returns the iterations (conjugate gradient steps and
- * sweeps). The velocity solve stops no earlier than DFSPH_SMOOTH sweeps,
- * the density solve no earlier than one iteration. */
-static int solve(dfsph_work *wk, bool divergence, bool projected, int cap, double tol, double *residual)
-{
-	const dfsph_sweep a = {divergence, projected, false};
-	int it = 0, sweeps = 0;
-	for (;;) {
-		if (projected)
-			it += divergence_cg(wk, cap - it, !divergence, tol, residual);
-		pass(wk, PASS_RATE, &a);
-		double sum = 0; /* serial, in row order: the same for any thread count */
-		for (long i = 0; i < wk->n; ++i)
-			sum += wk->err[i];
-		*residual = sum / (double)wk->n / wk->rho0;
-		const bool enough = divergence ? sweeps >= DFSPH_SMOOTH : it >= 1;
-		if ((enough && *residual <= tol) || it >= cap)
-			break;
-		pass(wk, PASS_CORRECT, &a);
-		++it;
-		++sweeps;
-	}
-	return it;
-}
-
-/* The step's scratch in the world's arena, for particles 0 .. n - 1 and
- * lists nb; false when out of memory. */
-static bool work_alloc(eddy_world *w, dfsph_work *wk, const sph_neighbors *nb, long n, bool divergence)
-{
-	const size_t un = (size_t)n, nq = divergence ? 4 : 3, nf = divergence ? 10 : 4;
-	wk->n = n;
-	wk->bdiv = nb->bdiv;
-	wk->goff = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk->goff);
-	if (!wk->goff)
-		return false;
-	wk->goff[0] = 0;
-	for (long i = 0; i < n; ++i)
-		wk->goff[i + 1] = wk->goff[i] + (nb->count[i] + 7) / 8;
-	wk->g = eddy__arena_alloc(&w->arena, (wk->goff[n] ? wk->goff[n] : 1) * sizeof *wk->g);
-	/* nq quad arrays, then nf float ones */
-	wk->b = eddy__arena_alloc(&w->arena, un * (nq * sizeof(dfsph_vec4) + nf * sizeof(float)));
-	if (!wk->g || !wk->b)
-		return false;
-	wk->v = wk->b + un;
-	wk->h = wk->v + un;
-	wk->u = divergence ? wk->h + un : NULL;
-	float **floats[10] = {&wk->k,    &wk->ksum, &wk->err, &wk->kp,   &wk->dsym,
-	                      &wk->full, &wk->p,    &wk->r,   &wk->mask, &wk->scratch};
-	for (size_t a = 0; a < 10; ++a)
-		*floats[a] = a < nf ? (float *)(wk->b + nq * un) + a * un : NULL;
-	return true;
+	const double ref = DFSPH_DEPTH_REF * (double)h, depth = hi - lo;
+	return depth > ref ? ref / depth : 1;
 }
 
 /* The index of the largest of e[0 .. n) (the first of equals). */
@@ -699,32 +561,54 @@ static long argmax(const float *e, long n)
 	return m;
 }
 
-/* The velocity (divergence) or the density solve. With the divergence
- * solver it starts from its state column's k of the last step, applied as
- * one correction, and writes its k back there; its k is added to kp. The
- * velocity solve fails when it stopped at its cap far above its tolerance
- * too many steps in a row. */
-static eddy_status run_solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const eddy_step_context *ctx,
-                             bool divergence, double tol, int *it, double *residual)
+/* The velocity (divergence) or the density solve, adding its k to kp. With
+ * the divergence solver it starts from its state column's k of the last step
+ * (written back at the end): the pressure that holds up the water above,
+ * which sweeps could not rebuild each step (their error in the column-wide
+ * mode falls by 1 - c / N^2 a sweep for N layers, conjugate gradients' by
+ * 1 - c / N), and runs conjugate gradients before each sweep. It stops once
+ * the mean error / rho0 (*residual; the velocity solve's times dt) is at most
+ * tol, after at least DFSPH_SMOOTH sweeps (velocity) or one iteration
+ * (density), or at the cap (*iterations counts both kinds). The velocity
+ * solve fails when it stopped at its cap far above its tolerance
+ * DFSPH_FAIL_CAPPED steps in a row. */
+static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const eddy_step_context *ctx, bool divergence,
+                         double tol, int *iterations, double *residual)
 {
 	sph_dfsph *sd = sys->data;
 	const long n = wk->n;
-	const bool warm = sd->def.divergence_solver;
-	float *col = warm ? eddy__col(w, divergence ? sd->kcol : sd->kdcol) : NULL;
+	const float rho0 = wk->sh->rho0;
+	const bool projected = sd->def.divergence_solver;
+	float *col = projected ? eddy__col(w, sd->kcol[divergence ? 0 : 1]) : NULL;
 	memset(wk->ksum, 0, (size_t)n * sizeof *wk->ksum);
-	if (warm) {
+	if (projected) {
 		for (long i = 0; i < n; ++i) {
 			if (divergence)
-				wk->full[i] = wk->geo->rho[i] >= DFSPH_SURFACE * wk->rho0 ? 1.0f : 0.0f;
+				wk->full[i] = wk->rho[i] >= DFSPH_SURFACE * rho0 ? 1.0f : 0.0f;
 			wk->k[i] = col[i] > 0 && (!divergence || wk->full[i] > 0) ? col[i] : 0.0f;
 		}
-		const dfsph_sweep a = {divergence, true, false};
-		pass(wk, PASS_CORRECT, &a);
+		pass(wk, PASS_CORRECT, divergence, true);
 	}
 	const int cap = divergence ? sd->def.max_divergence_iterations : sd->def.max_iterations;
-	*it = solve(wk, divergence, warm, cap, tol, residual);
+	int it = 0, sweeps = 0;
+	for (;;) {
+		if (projected)
+			it += divergence_cg(wk, cap - it, !divergence, tol, residual);
+		pass(wk, PASS_SWEEP, divergence, projected);
+		double sum = 0; /* serial, in row order: the same for any thread count */
+		for (long i = 0; i < n; ++i)
+			sum += wk->err[i];
+		*residual = sum / (double)n / rho0;
+		const bool enough = divergence ? sweeps >= DFSPH_SMOOTH : it >= 1;
+		if ((enough && *residual <= tol) || it >= cap)
+			break;
+		pass(wk, PASS_CORRECT, divergence, projected);
+		++it;
+		++sweeps;
+	}
+	*iterations = it;
 	if (divergence)
-		sd->capped = *it >= cap && *residual > DFSPH_FAIL_CAPPED_ERROR * tol ? sd->capped + 1 : 0;
+		sd->capped = it >= cap && *residual > DFSPH_FAIL_CAPPED_ERROR * tol ? sd->capped + 1 : 0;
 	if (divergence && sd->capped >= DFSPH_FAIL_CAPPED) {
 		const long wi = argmax(wk->err, n);
 		return eddy__fail(w, EDDY_ERR_NUMERIC,
@@ -732,26 +616,57 @@ static eddy_status run_solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, co
 		                  "iterations in %d steps in a row (max_divergence_error %g), worst at particle %ld "
 		                  "(%.3g); the water may be too deep for it: raise max_divergence_iterations or lower "
 		                  "the world's cfl",
-		                  sys->label, (long long)ctx->step, *residual, *it, sd->capped,
-		                  (double)sd->def.max_divergence_error, wi, wk->err[wi] / wk->rho0);
+		                  sys->label, (long long)ctx->step, *residual, it, sd->capped,
+		                  (double)sd->def.max_divergence_error, wi, wk->err[wi] / rho0);
 	}
 	for (long i = 0; i < n; ++i)
 		wk->kp[i] += wk->ksum[i];
-	if (warm)
+	if (projected)
 		memcpy(col, wk->ksum, (size_t)n * sizeof *col);
 	return EDDY_OK;
 }
 
-/* a += (v* - (v + dt a)) / dt and p = M kp rho^2; fails naming the first
- * particle whose result is not finite. */
-static eddy_status apply_result(eddy_world *w, const eddy_system *sys, const dfsph_work *wk, const sph_shared *sh,
-                                const eddy_step_context *ctx)
+/* The step's scratch in the world's arena for rows 0 .. n - 1 of sph_density's
+ * lists, and the gradient pass on them; false when out of memory. */
+static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n, float dt, int threads)
 {
-	const float dt = wk->dt;
+	const size_t un = (size_t)n;
+	*wk = (dfsph_work){.n = n, .dt = dt, .threads = threads, .sh = sh, .bdiv = sh->nb.bdiv};
+	wk->block = SIMD_PICK(dfsph_block);
+	wk->rho = eddy__col(w, COL_DENSITY);
+	wk->gravity = w->def.gravity;
+	wk->goff = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk->goff);
+	if (!wk->goff)
+		return false;
+	wk->goff[0] = 0;
+	for (long i = 0; i < n; ++i)
+		wk->goff[i + 1] = wk->goff[i] + (sh->nb.count[i] + 7) / 8;
+	wk->groups = eddy__arena_alloc(&w->arena, (wk->goff[n] ? wk->goff[n] : 1) * sizeof *wk->groups);
+	dfsph_vec4 **quads[] = {&wk->b, &wk->v, &wk->h, &wk->u};
+	float **floats[] = {&wk->dsym, &wk->k, &wk->ksum, &wk->kp, &wk->err, &wk->full, &wk->p, &wk->r, &wk->mask};
+	bool ok = wk->groups;
+	for (size_t a = 0; a < sizeof quads / sizeof *quads; ++a)
+		ok = ok && (*quads[a] = eddy__arena_alloc(&w->arena, un * sizeof(dfsph_vec4)));
+	for (size_t a = 0; a < sizeof floats / sizeof *floats; ++a)
+		ok = ok && (*floats[a] = eddy__arena_alloc(&w->arena, un * sizeof(float)));
+	if (!ok)
+		return false;
+	memset(wk->kp, 0, un * sizeof *wk->kp);
+	pass(wk, PASS_GRADIENTS, false, false);
+	return true;
+}
+
+/* The result: a += (v* - (v + dt a)) / dt and p = M kp rho^2, failing at the
+ * first particle whose result is not finite; then the frame's statistics,
+ * published, and a failure if the density solve has lost the fluid. */
+static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_work *wk, const eddy_step_context *ctx,
+                          int it, double residual, int div_it, double div_residual)
+{
+	sph_dfsph *sd = sys->data;
+	const float dt = wk->dt, inv_dt = 1.0f / dt;
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	float *p = eddy__col(w, COL_PRESSURE);
-	const float inv_dt = 1.0f / dt;
 	long bad = -1;
 	for (long i = 0; i < wk->n; ++i) {
 		const float ux = (wk->v[i].x - (vx[i] + dt * ax[i])) * inv_dt,
@@ -760,7 +675,7 @@ static eddy_status apply_result(eddy_world *w, const eddy_system *sys, const dfs
 		ax[i] += ux;
 		ay[i] += uy;
 		az[i] += uz;
-		p[i] = wk->kp[i] * wk->h[i].w * wk->h[i].w / sh->grad_cal;
+		p[i] = wk->kp[i] * wk->h[i].w * wk->h[i].w / wk->sh->grad_cal;
 		if (bad < 0 && !(isfinite(ux) && isfinite(uy) && isfinite(uz) && isfinite(p[i])))
 			bad = i;
 	}
@@ -768,14 +683,15 @@ static eddy_status apply_result(eddy_world *w, const eddy_system *sys, const dfs
 		return eddy__fail(
 			w, EDDY_ERR_NUMERIC,
 			"%s: non-finite pressure acceleration at step %lld, particle %ld (density %g kg/m^3, %u neighbours)",
-			sys->label, (long long)ctx->step, bad, (double)wk->h[bad].w, sh->nb.count[bad]);
-	return EDDY_OK;
-}
-
-/* The frame's statistics after a step, published. */
-static void publish(eddy_world *w, sph_dfsph *sd, int it, double residual, int div_it, double div_residual,
-                    double worst_err)
-{
+			sys->label, (long long)ctx->step, bad, (double)wk->h[bad].w, wk->sh->nb.count[bad]);
+	/* the particle the solve left furthest off (the last sweep's errors) */
+	const long worst = argmax(wk->err, wk->n);
+	const double worst_err = wk->err[worst] / wk->sh->rho0;
+	if (sd->frame != w->frame) {
+		sd->frame = w->frame;
+		sd->steps = sd->sweeps = sd->div_sweeps = sd->unconverged = 0;
+		sd->residual = sd->worst = 0;
+	}
 	sd->steps++;
 	sd->sweeps += it;
 	sd->div_sweeps += div_it;
@@ -790,76 +706,6 @@ static void publish(eddy_world *w, sph_dfsph *sd, int it, double residual, int d
 		eddy_world_publish(w, "divergence_iterations", (double)sd->div_sweeps / (double)sd->steps);
 	eddy_world_publish(w, "unconverged", (double)sd->unconverged);
 	eddy_world_publish(w, "residual_max", sd->worst);
-}
-
-/* The scratch for sph_density's particles and lists, and the gradient pass
- * on them; false when out of memory. */
-static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n, bool divergence, dfsph_geometry *geo)
-{
-	const sph_kernel_consts kc = sh->k;
-	const float dref = sh->mass * kc.spiky_grad * kc.h2; /* |G| scale */
-	const eddy_vec3 g = w->def.gravity;
-	*geo = (dfsph_geometry){&sh->nb,  sh->pq,        eddy__col(w, COL_DENSITY),
-	                        kc.h,     1e-6f * kc.h2, sh->mass * kc.spiky_grad,
-	                        sh->rho0, kc.spiky_grad, g.x,
-	                        g.y,      g.z,           1e-6f * dref * dref};
-	wk->geo = geo;
-	if (!work_alloc(w, wk, &sh->nb, n, divergence))
-		return false;
-	pass(wk, PASS_GRADIENTS, NULL);
-	return true;
-}
-
-/* The gradients, h and v* = v + dt (a + h); the velocity solve (divergence
- * solver); the density solve; the result. */
-static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context *ctx)
-{
-	sph_dfsph *sd = sys->data;
-	sph_shared *sh = eddy__sph_find(w, sys);
-	if (!sh)
-		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)",
-		                  sys->label);
-	if (sd->frame != w->frame) {
-		sd->frame = w->frame;
-		sd->steps = sd->sweeps = sd->div_sweeps = sd->unconverged = 0;
-		sd->residual = sd->worst = 0;
-	}
-	const long n = sph_rows(w, sh);
-	const float dt = (float)ctx->dt;
-	if (n == 0 || !(dt > 0))
-		return EDDY_OK;
-	if ((uint64_t)n > (uint64_t)UINT32_MAX) /* the groups hold j in 32 bits */
-		return eddy__fail(w, EDDY_ERR_INVALID, "%s: too many particles (%ld)", sys->label, n);
-	const bool divergence = sd->def.divergence_solver;
-	dfsph_work wk = {.block = sd->block, .threads = ctx->threads, .rho0 = sh->rho0, .dt = dt};
-	dfsph_geometry geo;
-	if (!prepare(w, &wk, sh, n, divergence, &geo))
-		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
-	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
-	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
-	for (long i = 0; i < n; ++i)
-		wk.v[i] = (dfsph_vec4){vx[i] + dt * (ax[i] + wk.h[i].x), vy[i] + dt * (ay[i] + wk.h[i].y),
-		                       vz[i] + dt * (az[i] + wk.h[i].z), 0};
-	memset(wk.kp, 0, (size_t)n * sizeof *wk.kp);
-
-	int it, div_it = 0;
-	double residual, div_residual = 0, tol = sd->def.max_density_error;
-	if (divergence) {
-		const double depth = fluid_depth(w, w->def.gravity);
-		tol = divergence_tolerance(sd->def.max_density_error, sh->h, depth);
-		const double dtol = divergence_tolerance(sd->def.max_divergence_error, sh->h, depth);
-		const eddy_status st = run_solve(w, sys, &wk, ctx, true, dtol, &div_it, &div_residual);
-		if (st != EDDY_OK)
-			return st;
-	}
-	run_solve(w, sys, &wk, ctx, false, tol, &it, &residual);
-	/* the particle the solve left furthest off (the last sweep's errors) */
-	const long worst = argmax(wk.err, n);
-	const double worst_err = wk.err[worst] / wk.rho0;
-	const eddy_status st = apply_result(w, sys, &wk, sh, ctx);
-	if (st != EDDY_OK)
-		return st;
-	publish(w, sd, it, residual, div_it, div_residual, worst_err);
 	if (!(residual <= DFSPH_FAIL_ERROR) || !(worst_err <= DFSPH_FAIL_PARTICLE))
 		return eddy__fail(w, EDDY_ERR_NUMERIC,
 		                  "%s: did not converge at step %lld: mean density error %.3g after %d iterations "
@@ -870,11 +716,45 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	return EDDY_OK;
 }
 
-/* For tests/test_sph_reference.c: after a step of w, the passes on the last
- * sph_density's lists, on the back-end SIMD_PICK gives now. Per particle:
- * inv_d = 1 / D_i, inv_dsym = 1 / D'_i, rate = R_i(v) (the wall counted
- * twice) of the velocity columns, and acc[3 i ..] = -(sum_j (k_i + k_j)
- * G_ij + 2 k_i B_i) for k_i = k[i]. */
+static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context *ctx)
+{
+	sph_dfsph *sd = sys->data;
+	const sph_shared *sh = eddy__sph_find(w, sys);
+	if (!sh)
+		return eddy__fail(w, EDDY_ERR_ORDER, "%s: needs sph_density before it (it builds the neighbour lists)",
+		                  sys->label);
+	const long n = sph_rows(w, sh);
+	const float dt = (float)ctx->dt;
+	if (n == 0 || !(dt > 0))
+		return EDDY_OK;
+	if ((uint64_t)n > (uint64_t)UINT32_MAX) /* the groups hold j in 32 bits */
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: too many particles (%ld)", sys->label, n);
+	dfsph_work wk;
+	if (!prepare(w, &wk, sh, n, dt, ctx->threads))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
+	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
+	for (long i = 0; i < n; ++i)
+		wk.v[i] = (dfsph_vec4){vx[i] + dt * (ax[i] + wk.h[i].x), vy[i] + dt * (ay[i] + wk.h[i].y),
+		                       vz[i] + dt * (az[i] + wk.h[i].z), 0};
+	const double scale = sd->def.divergence_solver ? depth_scale(w, sh->h) : 1;
+	int it, div_it = 0;
+	double residual, div_residual = 0;
+	if (sd->def.divergence_solver) {
+		const double dtol = sd->def.max_divergence_error * scale * scale;
+		const eddy_status st = solve(w, sys, &wk, ctx, true, dtol, &div_it, &div_residual);
+		if (st != EDDY_OK)
+			return st;
+	}
+	solve(w, sys, &wk, ctx, false, sd->def.max_density_error * scale * scale, &it, &residual);
+	return finish(w, sys, &wk, ctx, it, residual, div_it, div_residual);
+}
+
+/* For tests/test_sph_reference.c: after a step of w, the passes and the
+ * operator product on the last sph_density's lists, on the back-end
+ * SIMD_PICK gives now. Per particle: inv_d = 1 / D_i, inv_dsym = 1 / D'_i,
+ * rate = R_i(v) (the wall counted twice) of the velocity columns, and
+ * acc[3 i ..] = -(sum_j (k_i + k_j) G_ij + 2 k_i B_i) for k_i = k[i]. */
 eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float *inv_dsym, float *rate, float *acc);
 eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float *inv_dsym, float *rate, float *acc)
 {
@@ -882,25 +762,22 @@ eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float
 	if (!sh)
 		return EDDY_ERR_ORDER;
 	const long n = sph_rows(w, sh);
-	dfsph_work wk = {.block = SIMD_PICK(dfsph_block), .threads = 1, .rho0 = sh->rho0, .dt = 1.0f};
-	dfsph_geometry geo;
-	if (!prepare(w, &wk, sh, n, true, &geo))
+	dfsph_work wk;
+	if (!prepare(w, &wk, sh, n, 1.0f, 1))
 		return EDDY_ERR_NOMEM;
+	memcpy(wk.p, k, (size_t)n * sizeof *k);
+	operator_product(&wk); /* the conjugate gradients' A p: u = -dt (...) for k = p, dt = 1 */
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	for (long i = 0; i < n; ++i)
 		wk.v[i] = (dfsph_vec4){vx[i], vy[i], vz[i], 0};
-	const dfsph_sweep a = {true, true, true};
-	pass(&wk, PASS_RATE, &a);
-	memcpy(wk.k, k, (size_t)n * sizeof *k);
-	memset(wk.v, 0, (size_t)n * sizeof *wk.v);
-	pass(&wk, PASS_CORRECT, &a); /* v = -dt (...), dt = 1 */
+	wk.err = rate;
+	pass(&wk, PASS_RATE, true, true);
 	for (long i = 0; i < n; ++i) {
 		inv_d[i] = wk.b[i].w;
 		inv_dsym[i] = wk.dsym[i];
-		rate[i] = wk.err[i];
-		acc[3 * i] = wk.v[i].x;
-		acc[3 * i + 1] = wk.v[i].y;
-		acc[3 * i + 2] = wk.v[i].z;
+		acc[3 * i] = wk.u[i].x;
+		acc[3 * i + 1] = wk.u[i].y;
+		acc[3 * i + 2] = wk.u[i].z;
 	}
 	return EDDY_OK;
 }
@@ -921,13 +798,8 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	const eddy_vec3 g = w->def.gravity;
 	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
 	double la = g1 > 0 ? DFSPH_GRAVITY_LIMIT * sqrt((double)sh->h / g1) : INFINITY;
-	const sph_dfsph *sd = s->data;
-	if (g1 > 0 && sd->def.divergence_solver) {
-		/* deeper than DFSPH_DEPTH_REF h: dt <= (that) sqrt(DFSPH_DEPTH_REF h / H) */
-		const double H = fluid_depth(w, g), ref = DFSPH_DEPTH_REF * (double)sh->h;
-		if (H > ref)
-			la *= sqrt(ref / H);
-	}
+	if (((const sph_dfsph *)s->data)->def.divergence_solver)
+		la *= sqrt(depth_scale(w, sh->h));
 	if (la < lv)
 		*reason = "gravity";
 	return la < lv ? la : lv;
@@ -949,50 +821,40 @@ const eddy_system_vtable eddy__kind_sph_dfsph = {
 eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 {
 	const char *sys = "sph_dfsph";
-	if (!eddy__add_args(w, def, sys))
-		return EDDY_NULL_SYSTEM;
-	if (!eddy__check_positive(w, sys, "max_density_error", def->max_density_error) ||
+	if (!eddy__add_args(w, def, sys) || !eddy__check_positive(w, sys, "max_density_error", def->max_density_error) ||
 	    !eddy__check_range(w, sys, "max_density_error", def->max_density_error, 0, 0.1) ||
 	    !eddy__check_positive(w, sys, "max_divergence_error", def->max_divergence_error) ||
 	    !eddy__check_range(w, sys, "max_divergence_error", def->max_divergence_error, 0, 1))
 		return EDDY_NULL_SYSTEM;
-	if (def->max_iterations < 2 || def->max_iterations > 10000) {
-		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'max_iterations' must be between 2 and 10000 (got %d)", sys,
-		           def->max_iterations);
-		return EDDY_NULL_SYSTEM;
-	}
-	if (def->max_divergence_iterations < 1 || def->max_divergence_iterations > 10000) {
-		eddy__fail(w, EDDY_ERR_INVALID, "%s: 'max_divergence_iterations' must be between 1 and 10000 (got %d)", sys,
-		           def->max_divergence_iterations);
-		return EDDY_NULL_SYSTEM;
-	}
+	const bool it_bad = def->max_iterations < 2 || def->max_iterations > 10000;
+	if (it_bad || def->max_divergence_iterations < 1 || def->max_divergence_iterations > 10000)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: '%s' must be between %d and 10000 (got %d)", sys,
+		                  it_bad ? "max_iterations" : "max_divergence_iterations", it_bad ? 2 : 1,
+		                  it_bad ? def->max_iterations : def->max_divergence_iterations),
+		       EDDY_NULL_SYSTEM;
 	sph_dfsph *sd = calloc(1, sizeof *sd);
 	if (!sd)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
 	sd->def = *def;
 	sd->frame = -1;
-	sd->block = SIMD_PICK(dfsph_block);
-	sd->kcol = sd->kdcol = -1;
-	if (def->divergence_solver) {
-		/* the warm starts' state columns, shared by the sph_dfsph systems of
-		 * a world (each writes its own fluid's rows) */
-		const char *names[2] = {"dfsph_k", "dfsph_kd"};
-		int *cols[2] = {&sd->kcol, &sd->kdcol};
-		for (int c = 0; c < 2; ++c) {
-			*cols[c] = eddy_world_find_column(w, names[c]);
-			if (*cols[c] < 0)
-				*cols[c] =
-					eddy_world_declare_column(w, names[c], EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "m^5/(kg s^2)");
-			if (*cols[c] < 0) {
-				free(sd);
-				return EDDY_NULL_SYSTEM;
-			}
+	sd->kcol[0] = sd->kcol[1] = -1;
+	/* the warm starts' state columns, shared by the sph_dfsph systems of a
+	 * world (each writes its own fluid's rows) */
+	const char *names[2] = {"dfsph_k", "dfsph_kd"};
+	for (int c = 0; c < 2 && def->divergence_solver; ++c) {
+		sd->kcol[c] = eddy_world_find_column(w, names[c]);
+		if (sd->kcol[c] < 0)
+			sd->kcol[c] =
+				eddy_world_declare_column(w, names[c], EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "m^5/(kg s^2)");
+		if (sd->kcol[c] < 0) {
+			free(sd);
+			return EDDY_NULL_SYSTEM;
 		}
 	}
-	/* without the divergence solver the lists end at kcol = -1 */
-	const int reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX,   COL_VY,    COL_VZ, COL_DENSITY,
-	                     COL_AX, COL_AY, COL_AZ, sd->kcol, sd->kdcol, -1};
-	const int writes[] = {COL_PRESSURE, COL_AX, COL_AY, COL_AZ, sd->kcol, sd->kdcol, -1};
+	/* without the divergence solver the lists end at kcol[0] = -1 */
+	const int reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX,      COL_VY,      COL_VZ, COL_DENSITY,
+	                     COL_AX, COL_AY, COL_AZ, sd->kcol[0], sd->kcol[1], -1};
+	const int writes[] = {COL_PRESSURE, COL_AX, COL_AY, COL_AZ, sd->kcol[0], sd->kcol[1], -1};
 	return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, reads, writes);
 }
 #endif /* EDDY_SIMD_VARIANT */
