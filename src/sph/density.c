@@ -95,14 +95,10 @@ typedef struct walls {
 	eddy_vec3 g;
 	uint32_t *start; /* nbound + 1: wall b's fluid rows are fluid[start[b] .. start[b + 1]) */
 	uint32_t *fluid;
-	/* when iterating, else NULL: */
-	uint32_t *act, *rows; /* the walls with fluid near them, the fluid rows with walls near them */
-	long nact, nrows;
-	float *wgt, *grav; /* per pair: (h^2 - r^2)^3 and g . (x_b - x_f), boundary-major */
-	float *wf;         /* per pair: its weight again, in the fluid's list order */
-	uint32_t *fstart;  /* n + 1: row i's pairs in that order are [fstart[i], fstart[i + 1]) */
-	uint32_t *fpos;    /* per boundary-major pair, its place in that order */
-	float *old, *dv;   /* per wall: the density the fluid sums hold, V_b times its change */
+	uint32_t *act; /* the walls with fluid near them, nact of them */
+	float *old;    /* per act entry: the wall density the fluid sums hold */
+	float *dv;     /* per wall: V_b times the change of its density */
+	long nact;
 } walls;
 
 static void *scratch(eddy_world *w, size_t count, size_t size, bool *ok)
@@ -112,7 +108,7 @@ static void *scratch(eddy_world *w, size_t count, size_t size, bool *ok)
 	return p;
 }
 
-static bool walls_make(eddy_world *w, const sph_density *sd, bool iterate, walls *wl)
+static bool walls_make(eddy_world *w, const sph_density *sd, walls *wl)
 {
 	const sph_neighbors *nb = &sd->sh.nb;
 	const size_t n = w->n, nbound = nb->nbound;
@@ -122,6 +118,9 @@ static bool walls_make(eddy_world *w, const sph_density *sd, bool iterate, walls
 	wl->y = eddy__col(w, COL_Y_);
 	wl->z = eddy__col(w, COL_Z_);
 	wl->start = scratch(w, nbound + 1, sizeof *wl->start, &ok);
+	wl->act = scratch(w, nbound, sizeof *wl->act, &ok);
+	wl->old = scratch(w, nbound, sizeof *wl->old, &ok);
+	wl->dv = scratch(w, nbound, sizeof *wl->dv, &ok);
 	uint32_t *at = scratch(w, nbound, sizeof *at, &ok);
 	if (!ok)
 		return false;
@@ -131,138 +130,106 @@ static bool walls_make(eddy_world *w, const sph_density *sd, bool iterate, walls
 			wl->start[nb->bnbr[i * nb->bcap + q] + 1]++;
 	for (size_t b = 0; b < nbound; ++b)
 		wl->start[b + 1] += wl->start[b];
-	const size_t pairs = wl->start[nbound];
-	wl->fluid = scratch(w, pairs, sizeof *wl->fluid, &ok);
-	if (iterate) {
-		wl->act = scratch(w, nbound, sizeof *wl->act, &ok);
-		wl->rows = scratch(w, n, sizeof *wl->rows, &ok);
-		wl->wgt = scratch(w, pairs, sizeof *wl->wgt, &ok);
-		wl->grav = scratch(w, pairs, sizeof *wl->grav, &ok);
-		wl->wf = scratch(w, pairs, sizeof *wl->wf, &ok);
-		wl->fpos = scratch(w, pairs, sizeof *wl->fpos, &ok);
-		wl->fstart = scratch(w, n + 1, sizeof *wl->fstart, &ok);
-		wl->old = scratch(w, nbound, sizeof *wl->old, &ok);
-		wl->dv = scratch(w, nbound, sizeof *wl->dv, &ok);
-	}
+	wl->fluid = scratch(w, wl->start[nbound], sizeof *wl->fluid, &ok);
 	if (!ok)
 		return false;
 	memcpy(at, wl->start, nbound * sizeof *at);
-	uint32_t f = 0; /* the pair's place in the fluid's list order */
-	for (size_t i = 0; i < n; ++i) {
-		const uint32_t *bl = nb->bnbr + i * nb->bcap;
-		if (iterate) {
-			wl->fstart[i] = f;
-			if (nb->bcount[i])
-				wl->rows[wl->nrows++] = (uint32_t)i;
+	for (size_t i = 0; i < n; ++i)
+		for (uint32_t q = 0; q < nb->bcount[i]; ++q)
+			wl->fluid[at[nb->bnbr[i * nb->bcap + q]]++] = (uint32_t)i;
+	for (size_t b = 0; b < nbound; ++b)
+		if (wl->start[b] < wl->start[b + 1]) {
+			wl->old[wl->nact] = nb->bnd.rho[b];
+			wl->act[wl->nact++] = (uint32_t)b;
 		}
-		for (uint32_t q = 0; q < nb->bcount[i]; ++q, ++f) {
-			if (iterate)
-				wl->fpos[at[bl[q]]] = f;
-			wl->fluid[at[bl[q]]++] = (uint32_t)i;
-		}
-	}
-	if (iterate) {
-		wl->fstart[n] = f;
-		for (size_t b = 0; b < nbound; ++b)
-			if (wl->start[b] < wl->start[b + 1])
-				wl->act[wl->nact++] = (uint32_t)b;
-	}
 	return true;
 }
 
+/* The kernel weight (h^2 - r^2)^3 of fluid row i and wall b, and in *grav
+ * g . (x_b - x_i). Every pass computes it afresh: the same bits as storing it. */
+static inline float wall_weight(const walls *wl, uint32_t i, uint32_t b, float *grav)
+{
+	const sph_neighbors *nb = wl->nb;
+	const float rx = nb->bx[b] - wl->x[i], ry = nb->by[b] - wl->y[i], rz = nb->bz[b] - wl->z[i];
+	const float d = wl->h2 - (rx * rx + ry * ry + rz * rz);
+	*grav = wl->g.x * rx + wl->g.y * ry + wl->g.z * rz;
+	return d * d * d;
+}
+
 /* Wall b's pressure from the fluid near it and its EOS density. The first
- * pass takes the pair weights from the positions (keeping them when
- * iterating) and divides by their sum; the later ones read them and
- * multiply by the sum's inverse (both pinned by the state hashes). */
+ * pass divides by the weights' sum, the later ones multiply by its inverse
+ * (both pinned by the state hashes). */
 static void wall_extrapolate(sph_density *sd, const walls *wl, const float *rho, const float *p, uint32_t b, bool first)
 {
 	sph_neighbors *nb = &sd->sh.nb;
 	float sw = 0, sp = 0;
 	for (uint32_t q = wl->start[b]; q < wl->start[b + 1]; ++q) {
 		const uint32_t j = wl->fluid[q];
-		float wgt, gr;
-		if (first) {
-			const float rx = nb->bx[b] - wl->x[j], ry = nb->by[b] - wl->y[j], rz = nb->bz[b] - wl->z[j];
-			const float d = wl->h2 - (rx * rx + ry * ry + rz * rz);
-			wgt = d * d * d;
-			gr = wl->g.x * rx + wl->g.y * ry + wl->g.z * rz;
-			if (wl->wgt) {
-				wl->wgt[q] = wl->wf[wl->fpos[q]] = wgt;
-				wl->grav[q] = gr;
-			}
-		} else {
-			wgt = wl->wgt[q];
-			gr = wl->grav[q];
-		}
+		float gr;
+		const float wgt = wall_weight(wl, j, b, &gr);
 		sw += wgt;
 		sp += wgt * (p[j] + rho[j] * gr);
 	}
 	const float pb = sw > 0 ? fmaxf(first ? sp / sw : sp * (1.0f / sw), 0.0f) : 0.0f;
-	if (wl->old)
-		wl->old[b] = nb->bnd.rho[b];
 	nb->bp[b] = pb;
 	nb->bnd.rho[b] = eos_density(sd, pb);
 }
 
-/* The passes after the first, over the walls with fluid near them and the
- * fluid rows with walls near them. */
-static void walls_iterate(eddy_world *w, sph_density *sd, const walls *wl, int threads)
+/* Row i's density r, and what follows from it: 1/rho, the quad's 1/rho and
+ * the EOS pressure. */
+static inline void set_density(sph_density *sd, float *rho, float *p, long i, float r)
 {
-	sph_shared *sh = &sd->sh;
-	const sph_neighbors *nb = &sh->nb;
-	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
-	float first = 0; /* the largest change of the first pass: the lag */
-	for (int pass = 1; pass <= WALL_PASSES_MAX; ++pass) {
-		float change = 0;
-#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : change)
-		for (long a = 0; a < wl->nact; ++a) {
-			const uint32_t b = wl->act[a];
-			const float d = nb->bnd.rho[b] - wl->old[b];
-			wl->dv[b] = nb->bvol[b] * d;
-			change = fabsf(d) > change ? fabsf(d) : change;
-		}
-		if (pass == 1)
-			first = change;
-		else if (!(change > WALL_TOL * first))
-			return;
-			/* the fluid near the walls takes the walls' new densities */
-#pragma omp parallel for num_threads(threads) schedule(static)
-		for (long r = 0; r < wl->nrows; ++r) {
-			const uint32_t i = wl->rows[r];
-			const uint32_t *bl = nb->bnbr + (size_t)i * nb->bcap;
-			const float *wi = wl->wf + wl->fstart[i];
-			float dr = 0;
-			for (uint32_t q = 0; q < nb->bcount[i]; ++q)
-				dr += wl->dv[bl[q]] * wi[q];
-			if (dr == 0)
-				continue;
-			rho[i] = rho[i] + sh->k.poly6 * dr;
-			sh->inv_rho[i] = 1.0f / rho[i];
-			sh->pq[4 * i + 3] = sh->inv_rho[i];
-			p[i] = eos_pressure(sd, rho[i]);
-		}
-		/* ... and the walls that fluid's pressure */
-#pragma omp parallel for num_threads(threads) schedule(static)
-		for (long a = 0; a < wl->nact; ++a)
-			wall_extrapolate(sd, wl, rho, p, wl->act[a], false);
-	}
+	rho[i] = r;
+	sd->sh.inv_rho[i] = 1.0f / r;
+	sd->sh.pq[4 * i + 3] = sd->sh.inv_rho[i];
+	p[i] = eos_pressure(sd, r);
 }
 
+/* The walls' pressure and density: pass 0 extrapolates every wall; when
+ * iterating, each later pass moves the fluid near the walls (act) to the
+ * walls' new densities and extrapolates those walls again. */
 static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads)
 {
-	const long nbound = (long)sd->sh.nb.nbound;
-	if (w->n == 0 || nbound == 0)
+	sph_neighbors *nb = &sd->sh.nb;
+	const long n = (long)w->n, nbound = (long)nb->nbound;
+	if (n == 0 || nbound == 0)
 		return EDDY_OK;
 	const bool iterate = eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL;
 	walls wl;
-	if (!walls_make(w, sd, iterate, &wl))
+	if (!walls_make(w, sd, &wl))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %ld boundary particles", nbound);
-	const float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
+	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
+	float first = 0; /* the largest change of pass 1: the lag */
+	for (int pass = 0; pass <= (iterate ? WALL_PASSES_MAX : 0); ++pass) {
+		if (pass > 0) {
+			float change = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : change)
+			for (long a = 0; a < wl.nact; ++a) {
+				const uint32_t b = wl.act[a];
+				const float d = nb->bnd.rho[b] - wl.old[a];
+				wl.old[a] = nb->bnd.rho[b];
+				wl.dv[b] = nb->bvol[b] * d;
+				change = fabsf(d) > change ? fabsf(d) : change;
+			}
+			if (pass == 1)
+				first = change;
+			else if (!(change > WALL_TOL * first))
+				break;
 #pragma omp parallel for num_threads(threads) schedule(static)
-	for (long b = 0; b < nbound; ++b)
-		wall_extrapolate(sd, &wl, rho, p, (uint32_t)b, true);
-	if (iterate)
-		walls_iterate(w, sd, &wl, threads);
+			for (long i = 0; i < n; ++i) {
+				const uint32_t *bl = nb->bnbr + (size_t)i * nb->bcap;
+				float dr = 0, gr;
+				for (uint32_t q = 0; q < nb->bcount[i]; ++q)
+					dr += wl.dv[bl[q]] * wall_weight(&wl, (uint32_t)i, bl[q], &gr);
+				if (dr != 0)
+					set_density(sd, rho, p, i, rho[i] + sd->sh.k.poly6 * dr);
+			}
+		}
+		const long walls_now = pass ? wl.nact : nbound;
+#pragma omp parallel for num_threads(threads) schedule(static)
+		for (long a = 0; a < walls_now; ++a)
+			wall_extrapolate(sd, &wl, rho, p, pass ? wl.act[a] : (uint32_t)a, pass == 0);
+	}
 	return EDDY_OK;
 }
 
@@ -278,18 +245,13 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const sph_kernel_consts kc = sh->k;
 	const float m = sh->mass, self = kc.h2 * kc.h2 * kc.h2; /* (h^2 - 0)^3: the particle itself */
 	const long n = (long)w->n;
-	float *inv_rho = eddy__arena_alloc(&w->arena, (w->n ? w->n : 1) * sizeof *inv_rho);
-	if (!inv_rho)
+	sh->inv_rho = eddy__arena_alloc(&w->arena, (w->n ? w->n : 1) * sizeof *sh->inv_rho);
+	if (!sh->inv_rho)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", w->n);
-	sh->inv_rho = inv_rho;
-	/* the kernel sums were made with the neighbour lists */
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
-		const float r = kc.poly6 * (m * (self + nb->wsum[i]) + nb->bwsum[i]);
-		rho[i] = r;
-		inv_rho[i] = 1.0f / r;
-		sh->pq[4 * i + 3] = inv_rho[i];
-		p[i] = eos_pressure(sd, r);
+		/* the kernel sums were made with the neighbour lists */
+		set_density(sd, rho, p, i, kc.poly6 * (m * (self + nb->wsum[i]) + nb->bwsum[i]));
 		ncount[i] = (float)(nb->count[i] + nb->bcount[i]);
 	}
 	return boundary_pressure(w, sd, ctx->threads);
@@ -395,13 +357,12 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	    !eddy__check_positive(w, sys, "stiffness", def->stiffness) ||
 	    !eddy__check_range(w, sys, "tait_gamma", def->tait_gamma, 1, 20))
 		return EDDY_NULL_SYSTEM;
-	if (!(def->radius > def->spacing && def->radius <= 5 * def->spacing)) {
-		eddy__fail(w, EDDY_ERR_INVALID,
-		           "%s: 'radius' must be between 1 and 5 times 'spacing' (got radius = %g m, spacing = %g m; 2 x "
-		           "spacing is usual)",
-		           sys, (double)def->radius, (double)def->spacing);
-		return EDDY_NULL_SYSTEM;
-	}
+	if (!(def->radius > def->spacing && def->radius <= 5 * def->spacing))
+		return eddy__fail(w, EDDY_ERR_INVALID,
+		                  "%s: 'radius' must be between 1 and 5 times 'spacing' (got radius = %g m, spacing = %g m; "
+		                  "2 x spacing is usual)",
+		                  sys, (double)def->radius, (double)def->spacing),
+		       EDDY_NULL_SYSTEM;
 	if (def->eos != EDDY_SPH_EOS_LINEAR && def->eos != EDDY_SPH_EOS_TAIT)
 		return eddy__fail(w, EDDY_ERR_INVALID, "%s: 'eos' must be linear or tait", sys), EDDY_NULL_SYSTEM;
 	sph_density *sd = calloc(1, sizeof *sd);
@@ -412,13 +373,14 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	sd->sh.rho0 = def->rest_density;
 	sd->sh.c = sqrtf(def->stiffness);
 	sd->sh.k = sph_consts(def->radius);
-	sd->sh.mass = (float)(def->rest_density / eddy_sph_lattice_sum(EDDY_SPH_POLY6, def->spacing, def->radius));
+	const double lattice = eddy_sph_lattice_sum(EDDY_SPH_POLY6, def->spacing, def->radius);
+	sd->sh.mass = (float)(def->rest_density / lattice);
 	/* the force sums m grad W, and m = rho0 / sum_lattice W is not rho0
 	 * spacing^3: the moment the force sees is the lattice moment times
 	 * m / (rho0 spacing^3) (0.956 / 1.010 = 0.947 at h = 2 spacings) */
 	const double vol = (double)def->spacing * def->spacing * def->spacing;
-	sd->sh.grad_cal = (float)(eddy_sph_lattice_sum(EDDY_SPH_POLY6, def->spacing, def->radius) * vol /
-	                          eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, def->spacing, def->radius));
+	sd->sh.grad_cal =
+		(float)(lattice * vol / eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, def->spacing, def->radius));
 	eddy_system_id id = eddy__add_system(w, &eddy__kind_sph_density, sd, density_reads, density_writes);
 	if (eddy_system_valid(w, id))
 		eddy_world_set_rest_density(w, def->rest_density);

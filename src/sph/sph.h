@@ -1,27 +1,18 @@
 /* SPDX-License-Identifier: MIT */
-/* The SPH folder's shared header: kernel constants, and the neighbour data
- * that sph_density builds once per step for the later SPH passes.
- *
- * The folder's parts:
- *   grid.c search.c neighbors.c  the neighbour search (its internals:
- *                                neighbors.h): cells and cell order, the grid
- *                                search, the Verlet list and its filter
+/* The SPH folder's shared header: kernel constants, the neighbour data
+ * sph_density builds each step for the later SPH passes, their helpers.
+ *   grid.c search.c neighbors.c  cells, grid search, Verlet list (neighbors.h)
  *   boundary.c boundary_box.c    boundary particles of walls and colliders
- *   kernels.c                    the kernels' lattice sums
- *   density.c pressure.c viscosity.c surface_tension.c dfsph.c
- *                                one file per system
- *   ../simd.h                    the vocabulary the pair loops are written in
- *
+ *   kernels.c                    the kernels and their lattice sums
+ *   density.c pressure.c viscosity.c surface_tension.c dfsph.c: the systems
  * A new pair pass (XSPH, say) is one new file plus the registry:
- *   1. src/sph/xsph.c: its def, add function and step under
- *      #ifndef EDDY_SIMD_VARIANT; the pair loop once, against simd.h, as
- *      SIMD_NAME(xsph_pair_sums) outside it, over sph_shared's lists (nbr,
- *      count) and quads (pq), picked in the step with SIMD_PICK and run
- *      block by block with sph_block_pass (below). The Makefile finds the
- *      file and builds its AVX2 variant (it includes "simd.h").
- *   2. the registry: its vtable in systems.h, its def and add function in
- *      eddy.h, its Lua binding; it declares that it requires sph_density
- *      (whose sph_shared it reads). */
+ *   1. src/sph/xsph.c: under #ifndef EDDY_SIMD_VARIANT its def, add
+ *      function and step; outside it, the pair loop once against
+ *      ../simd.h as SIMD_NAME(xsph_pair_sums) over sph_shared's lists and
+ *      quads, picked with SIMD_PICK and run with sph_block_pass (below).
+ *      The Makefile builds an AVX2 variant of any file including simd.h.
+ *   2. the registry: its vtable in systems.h, def and add function in
+ *      eddy.h, Lua binding; .requires = EDDY_CAP_SPH_NEIGHBORS. */
 #ifndef EDDY_SPH_H
 #define EDDY_SPH_H
 
