@@ -186,17 +186,6 @@ bool eddy__sph_boundary_box_covers(const eddy_system *s, eddy_vec3 min, eddy_vec
 size_t eddy__sph_collider_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
                                  float *z, float *vol, eddy_vec3 *normal);
 
-/* Deterministic antisymmetric direction for a coincident pair (i, j): the
- * gradient has no direction at r = 0, so an arbitrary fixed one (not along a
- * wall axis) separates them while keeping the pair's forces opposite. */
-static inline void sph_coincident_dir(size_t i, size_t j, float *dx, float *dy, float *dz)
-{
-	const float s = i < j ? 1.0f : -1.0f;
-	*dx = s * 0.80178373f; /* (3, 2, 1) / sqrt(14) */
-	*dy = s * 0.53452248f;
-	*dz = s * 0.26726124f;
-}
-
 /* The rows the lists cover: a system after sph_density may have added
  * particles (they have no lists this step) or removed some. */
 static inline long sph_rows(const eddy_world *w, const sph_shared *sh)
