@@ -9,22 +9,20 @@
  *   (j over fluid particles including i itself, b over boundary particles)
  *   linear EOS: p_i = k (rho_i - rho0)                      (Mueller 2003, eq. 12)
  *   Tait EOS:   p_i = (k rho0 / gamma) ((rho_i/rho0)^gamma - 1)
- *   p_i is clamped at 0: negative pressure pulls particles into clumps
- *   (tensile instability, docs/validation.md C.1).
- * Boundary particles carry a pressure extrapolated from the fluid near them
- * with the hydrostatic correction (Adami, Hu & Adams 2012, eq. 27),
+ *   p_i >= 0: negative pressure pulls particles into clumps (tensile
+ *   instability, docs/validation.md C.1).
+ * Boundary particles carry the pressure extrapolated from the fluid near
+ * them with the hydrostatic correction (Adami, Hu & Adams 2012, eq. 27),
  *   p_b = max(0, sum_f (p_f + rho_f g . (x_b - x_f)) W_bf / sum_f W_bf),
- * and the density rho_b the EOS gives for it (see WALL_PASSES_MAX). Frozen
- * at rho0 (plain Akinci et al. 2012) the walls would leave the fluid beside
- * them less compressed than the fluid away from them, their pressure short
- * of hydrostatic, and the fluid would sink along the walls in a steady
+ * and the density rho_b the EOS gives for it. Frozen at rho0 (plain Akinci
+ * et al. 2012) the walls would leave the fluid beside them less compressed
+ * than the fluid away from them, and it would sink along them in a steady
  * circulation.
- * The particle mass is m = rho0 / sum_lattice W_poly6, the sum over a simple
- * cubic lattice of the given spacing, so a block at rest starts at rho0
- * exactly instead of 1% above it at h = 2 spacings (C.8). The self term
- * keeps rho > 0 for a lone particle (C.6).
- * The acoustic time-step limit is sph_pressure's: that force carries sound
- * at c = sqrt(k), and a scene solving for the pressure (sph_dfsph) has none.
+ * m = rho0 / sum_lattice W_poly6 over a simple cubic lattice of the given
+ * spacing: a block at rest starts at rho0 exactly, not 1% above it at h = 2
+ * spacings (C.8). The self term keeps rho > 0 for a lone particle (C.6).
+ * No time-step limit: the acoustic one is sph_pressure's, the force that
+ * carries sound at c = sqrt(k); a pressure solve (sph_dfsph) has none.
  * Source: Mueller, Charypar & Gross, "Particle-Based Fluid Simulation for
  * Interactive Applications", SCA 2003; Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012 (boundary term). */
@@ -69,19 +67,18 @@ static float eos_density(const sph_density *sd, float p)
 	return sd->def.eos == EDDY_SPH_EOS_TAIT ? rho0 * powf(p / (k * rho0 / gamma) + 1.0f, 1.0f / gamma) : rho0 + p / k;
 }
 
-/* Adami et al. 2012, eq. 27, with the wall at rest. The wall densities
- * enter the fluid's density sums, which set the fluid pressure the walls
- * copy: a loop. Closed with the previous step's wall densities (as the
- * neighbour search summed them), it is a one-step-lagged positive feedback
- * that pumps energy into the fluid at the walls (a still column never comes
- * to rest). With the EOS pressure (sph_pressure) the loop is therefore
- * iterated within the step: the fluid near the walls takes their new
- * densities, sum_b V_b (rho_b new - rho_b old) W_poly6, and the walls are
- * extrapolated again, WALL_PASSES_MAX times or until no wall density changes
- * by more than WALL_TOL of the first pass's change. Each pass shrinks the
- * error by the walls' share of a kernel sum (1/4 at a flat wall, 1/2 at a
- * corner). Against sph_dfsph's pressure solve the iterated walls pump
- * energy in instead: there they keep the one-step lag. */
+/* The wall densities enter the fluid's density sums, which set the
+ * pressure the walls copy: a loop. Closed with the previous step's wall
+ * densities (as the neighbour search summed them) it is a one-step-lagged
+ * positive feedback that pumps energy into the fluid at the walls (a still
+ * column never comes to rest). With the EOS pressure (sph_pressure) the
+ * loop is iterated within the step: the fluid near the walls takes their
+ * new densities, sum_b V_b (rho_b new - rho_b old) W_poly6, and the walls
+ * are extrapolated again, WALL_PASSES_MAX times or until no wall density
+ * changes by more than WALL_TOL of the first pass's change. Each pass
+ * shrinks the error by the walls' share of a kernel sum (1/4 at a flat
+ * wall, 1/2 at a corner). Against sph_dfsph's pressure solve iterated walls
+ * pump energy in instead: there they keep the one-step lag. */
 #define WALL_PASSES_MAX 3
 #define WALL_TOL 1e-3f
 
@@ -338,9 +335,7 @@ const eddy_system_vtable eddy__kind_sph_density = {
 float eddy_sph_particle_mass(const eddy_world *w, eddy_system_id id)
 {
 	const eddy_system *s = eddy__system_peek(w, id);
-	if (!s || s->vt != &eddy__kind_sph_density)
-		return 0;
-	return ((const sph_density *)s->data)->sh.mass;
+	return eddy__sph_density_def(s) ? ((const sph_density *)s->data)->sh.mass : 0;
 }
 
 const eddy_sph_density_def *eddy__sph_density_def(const eddy_system *s)
@@ -372,7 +367,13 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	sd->sh.h = def->radius;
 	sd->sh.rho0 = def->rest_density;
 	sd->sh.c = sqrtf(def->stiffness);
-	sd->sh.k = sph_consts(def->radius);
+	const double h = def->radius, h6 = h * h * h * h * h * h, h9 = h6 * h * h * h;
+	sd->sh.k = (sph_kernel_consts){.h = def->radius,
+	                               .h2 = def->radius * def->radius,
+	                               .poly6 = (float)(315.0 / (64.0 * M_PI * h9)),
+	                               .poly6_grad = (float)(-6.0 * 315.0 / (64.0 * M_PI * h9)),
+	                               .spiky_grad = (float)(-45.0 / (M_PI * h6)),
+	                               .visc_lap = (float)(45.0 / (M_PI * h6))};
 	const double lattice = eddy_sph_lattice_sum(EDDY_SPH_POLY6, def->spacing, def->radius);
 	sd->sh.mass = (float)(def->rest_density / lattice);
 	/* the force sums m grad W, and m = rho0 / sum_lattice W is not rho0

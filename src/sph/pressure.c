@@ -105,12 +105,7 @@ void SIMD_NAME(pressure_pair_sums)(const pressure_args *a, long i0, long cnt, fl
 static const int pressure_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_DENSITY, COL_PRESSURE, -1};
 static const int pressure_writes[] = {COL_AX, COL_AY, COL_AZ, -1};
 
-eddy_sph_pressure_def eddy_default_sph_pressure_def(void)
-{
-	eddy_sph_pressure_def d;
-	d.scale = 1.0f;
-	return d;
-}
+eddy_sph_pressure_def eddy_default_sph_pressure_def(void) { return (eddy_sph_pressure_def){.scale = 1.0f}; }
 
 /* A block: the pair sums, then the pairs they left (coincident ones, one
  * by one), the walls, and ax ay az. */

@@ -22,7 +22,7 @@
 #define M_PI 3.14159265358979323846
 #endif
 
-/* Kernel constants for support h (3D, Mueller 2003). */
+/* Kernel constants for support h (3D, Mueller 2003; sph_density sets them). */
 typedef struct sph_kernel_consts {
 	float h, h2;
 	float poly6;      /* 315/(64 pi h^9) */
@@ -30,19 +30,6 @@ typedef struct sph_kernel_consts {
 	float spiky_grad; /* -45/(pi h^6): dW/dr = spiky_grad (h-r)^2 */
 	float visc_lap;   /* 45/(pi h^6): lap W = visc_lap (h-r) */
 } sph_kernel_consts;
-
-static inline sph_kernel_consts sph_consts(float h)
-{
-	sph_kernel_consts k;
-	const double hd = h, h6 = hd * hd * hd * hd * hd * hd, h9 = h6 * hd * hd * hd;
-	k.h = h;
-	k.h2 = h * h;
-	k.poly6 = (float)(315.0 / (64.0 * M_PI * h9));
-	k.poly6_grad = (float)(-6.0 * 315.0 / (64.0 * M_PI * h9));
-	k.spiky_grad = (float)(-45.0 / (M_PI * h6));
-	k.visc_lap = (float)(45.0 / (M_PI * h6));
-	return k;
-}
 
 /* Neighbour lists, made by sph_density every step (neighbors.c): particle
  * i's fluid neighbours (itself excluded, r < h exactly, ascending index)

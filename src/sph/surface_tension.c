@@ -30,10 +30,7 @@ static const int st_hint_writes[] = {COL_SPH_NX, COL_SPH_NY, COL_SPH_NZ, COL_SPH
 
 eddy_sph_surface_tension_def eddy_default_sph_surface_tension_def(void)
 {
-	eddy_sph_surface_tension_def d;
-	d.tension = 0.0728f; /* water-air at 20 C */
-	d.threshold = 0.5f;
-	return d;
+	return (eddy_sph_surface_tension_def){.tension = 0.0728f /* water-air at 20 C */, .threshold = 0.5f};
 }
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
@@ -131,9 +128,7 @@ eddy_system_id eddy_add_sph_surface_tension(eddy_world *w, const eddy_sph_surfac
 {
 	const char *sys = "sph_surface_tension";
 	if (!eddy__add_args(w, def, sys) || !eddy__check_nonneg(w, sys, "tension", def->tension) ||
-	    !eddy__check_finite(w, sys, "tension", def->tension) ||
-	    !eddy__check_nonneg(w, sys, "threshold", def->threshold) ||
-	    !eddy__check_finite(w, sys, "threshold", def->threshold))
+	    !eddy__check_nonneg(w, sys, "threshold", def->threshold))
 		return EDDY_NULL_SYSTEM;
 	eddy_sph_surface_tension_def *copy = malloc(sizeof *copy);
 	if (copy)
