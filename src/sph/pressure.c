@@ -97,7 +97,7 @@ void SIMD_NAME(pressure_pair_sums)(const pressure_args *a, long i0, long cnt, fl
 		sf8_fold4(sx, tb);
 		sf8_fold4(sy, tb + 4);
 		sf8_fold4(sz, tb + 8);
-		done[b] = q < c ? q : c;
+		done[b] = q;
 	}
 }
 
@@ -111,7 +111,6 @@ eddy_sph_pressure_def eddy_default_sph_pressure_def(void) { return (eddy_sph_pre
  * by one), the walls, and ax ay az. */
 static void pressure_block(const void *arg, long i0, long cnt)
 {
-	/* a copy the stores below cannot alias: the constants stay in registers */
 	const pressure_args a = *(const pressure_args *)arg;
 	const sph_neighbors *nb = a.nb;
 	float t[SPH_BLOCK * PRESSURE_T];
@@ -209,12 +208,9 @@ static double max_norm(eddy_world *w, int cu, int cv, int cw)
 static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
 	const sph_shared *sh = eddy__sph_find(w, s);
-	*reason = "acoustic";
-	const double acoustic = sh->h / (sh->c + max_norm(w, COL_VX, COL_VY, COL_VZ)),
-				 a = max_norm(w, COL_AX, COL_AY, COL_AZ);
-	const double force = a > 0 ? 0.625 * sqrt(sh->h / a) : INFINITY;
-	if (force < acoustic)
-		*reason = "force";
+	const double acoustic = sh->h / (sh->c + max_norm(w, COL_VX, COL_VY, COL_VZ));
+	const double a = max_norm(w, COL_AX, COL_AY, COL_AZ), force = a > 0 ? 0.625 * sqrt(sh->h / a) : INFINITY;
+	*reason = force < acoustic ? "force" : "acoustic";
 	return force < acoustic ? force : acoustic;
 }
 

@@ -180,13 +180,14 @@ static inline long sph_rows(const eddy_world *w, const sph_shared *sh)
 	return sh->nb.n < w->n ? (long)sh->nb.n : (long)w->n;
 }
 
-/* The force passes go over rows [0, n) in blocks of SPH_BLOCK particles,
- * block(args, i0, count) making first the SIMD sums over the block's fluid
- * pairs, then finishing its particles in a plain loop: finishing each
- * particle right after its groups put the adds of its totals behind every
- * (often mispredicted) exit of the loop over its groups. The threads take
- * equal shares in order; a particle's result does not depend on the blocks,
- * so it is the same for any thread count. */
+/* The force passes run block(args, i0, cnt) over rows [0, n) in blocks of
+ * SPH_BLOCK: first the SIMD sums over the block's fluid pairs, then a plain
+ * loop finishing its particles (finished right after its groups, a
+ * particle's totals would wait behind the often mispredicted exit of the
+ * group loop). A block that copies *args to a local keeps the constants in
+ * registers: its stores cannot alias the copy. The threads take equal
+ * shares in order; a particle's result depends on neither blocks nor
+ * threads. */
 #define SPH_BLOCK 64
 static inline void sph_block_pass(long n, int threads, void (*block)(const void *args, long i0, long cnt),
                                   const void *args)

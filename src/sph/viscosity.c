@@ -118,7 +118,6 @@ eddy_sph_viscosity_def eddy_default_sph_viscosity_def(void)
 /* A block: the pair sums, then their totals added to ax ay az. */
 static void visc_block(const void *arg, long i0, long cnt)
 {
-	/* a copy the stores below cannot alias: the constants stay in registers */
 	const visc_args a = *(const visc_args *)arg;
 	float t[SPH_BLOCK * VISC_T];
 	a.pair_sums(&a, i0, cnt, t);
