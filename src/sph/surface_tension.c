@@ -79,22 +79,23 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		const float xi = x[i], yi = y[i], zi = z[i];
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
 		const uint32_t cnt = nb->count[i];
-		float div = 0, wall = kc.h2 * kc.h2 * kc.h2 * inv_rho[i], wvalid = wall;
+		/* sum V W over all neighbours (i itself included), over those with a normal */
+		float div = 0, w_all = kc.h2 * kc.h2 * kc.h2 * inv_rho[i], w_normal = w_all;
 		for (uint32_t q = 0; q < cnt; ++q) {
 			const uint32_t j = list[q];
 			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
 			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
 			const float vw = d * d * d * inv_rho[j];
-			wall += vw;
+			w_all += vw;
 			const float lj = sqrtf(nx[j] * nx[j] + ny[j] * ny[j] + nz[j] * nz[j]);
 			if (!(lj > thr))
 				continue;
-			wvalid += vw;
+			w_normal += vw;
 			/* (n_j/|n_j| - n_i/|n_i|) . grad_i W, grad_i W = poly6_grad d^2 r_vec */
 			const float dot = (nx[j] / lj - ux) * rx + (ny[j] / lj - uy) * ry + (nz[j] / lj - uz) * rz;
 			div += dot * d * d * inv_rho[j];
 		}
-		const float kappa = -m * kc.poly6_grad * div * (wall / wvalid);
+		const float kappa = -m * kc.poly6_grad * div * (w_all / w_normal);
 		curv[i] = kappa;
 		const float c = sigma * kappa * inv_rho[i];
 		ax[i] += c * nx[i];
