@@ -92,10 +92,15 @@ typedef struct walls {
 	eddy_vec3 g;
 	uint32_t *start; /* nbound + 1: wall b's fluid rows are fluid[start[b] .. start[b + 1]) */
 	uint32_t *fluid;
-	uint32_t *act; /* the walls with fluid near them, nact of them */
-	float *old;    /* per act entry: the wall density the fluid sums hold */
-	float *dv;     /* per wall: V_b times the change of its density */
-	long nact;
+	/* when iterating, else NULL (the first pass stores the pairs' weights): */
+	uint32_t *act, *rows; /* the walls with fluid near them, the fluid rows with walls near them */
+	long nact, nrows;
+	float *wgt, *grav; /* per pair: (h^2 - r^2)^3 and g . (x_b - x_f), boundary-major */
+	float *wf;         /* per pair: its weight again, in the fluid's list order */
+	uint32_t *fstart;  /* n: row i's pairs in that order start at fstart[i] */
+	uint32_t *fpos;    /* per boundary-major pair, its place in that order */
+	float *old;        /* per act entry: the wall density the fluid sums hold */
+	float *dv;         /* per wall: V_b times the change of its density */
 } walls;
 
 static void *scratch(eddy_world *w, size_t count, size_t size, bool *ok)
@@ -105,7 +110,7 @@ static void *scratch(eddy_world *w, size_t count, size_t size, bool *ok)
 	return p;
 }
 
-static bool walls_make(eddy_world *w, const sph_density *sd, walls *wl)
+static bool walls_make(eddy_world *w, const sph_density *sd, bool iterate, walls *wl)
 {
 	const sph_neighbors *nb = &sd->sh.nb;
 	const size_t n = w->n, nbound = nb->nbound;
@@ -115,9 +120,6 @@ static bool walls_make(eddy_world *w, const sph_density *sd, walls *wl)
 	wl->y = eddy__col(w, COL_Y_);
 	wl->z = eddy__col(w, COL_Z_);
 	wl->start = scratch(w, nbound + 1, sizeof *wl->start, &ok);
-	wl->act = scratch(w, nbound, sizeof *wl->act, &ok);
-	wl->old = scratch(w, nbound, sizeof *wl->old, &ok);
-	wl->dv = scratch(w, nbound, sizeof *wl->dv, &ok);
 	uint32_t *at = scratch(w, nbound, sizeof *at, &ok);
 	if (!ok)
 		return false;
@@ -127,14 +129,36 @@ static bool walls_make(eddy_world *w, const sph_density *sd, walls *wl)
 			wl->start[nb->bnbr[i * nb->bcap + q] + 1]++;
 	for (size_t b = 0; b < nbound; ++b)
 		wl->start[b + 1] += wl->start[b];
-	wl->fluid = scratch(w, wl->start[nbound], sizeof *wl->fluid, &ok);
+	const size_t pairs = wl->start[nbound];
+	wl->fluid = scratch(w, pairs, sizeof *wl->fluid, &ok);
+	if (iterate) {
+		wl->act = scratch(w, nbound, sizeof *wl->act, &ok);
+		wl->rows = scratch(w, n, sizeof *wl->rows, &ok);
+		wl->wgt = scratch(w, pairs, sizeof *wl->wgt, &ok);
+		wl->grav = scratch(w, pairs, sizeof *wl->grav, &ok);
+		wl->wf = scratch(w, pairs, sizeof *wl->wf, &ok);
+		wl->fpos = scratch(w, pairs, sizeof *wl->fpos, &ok);
+		wl->fstart = scratch(w, n, sizeof *wl->fstart, &ok);
+		wl->old = scratch(w, nbound, sizeof *wl->old, &ok);
+		wl->dv = scratch(w, nbound, sizeof *wl->dv, &ok);
+	}
 	if (!ok)
 		return false;
 	memcpy(at, wl->start, nbound * sizeof *at);
-	for (size_t i = 0; i < n; ++i)
-		for (uint32_t q = 0; q < nb->bcount[i]; ++q)
-			wl->fluid[at[nb->bnbr[i * nb->bcap + q]]++] = (uint32_t)i;
-	for (size_t b = 0; b < nbound; ++b)
+	uint32_t f = 0; /* the pair's place in the fluid's list order */
+	for (size_t i = 0; i < n; ++i) {
+		const uint32_t *bl = nb->bnbr + i * nb->bcap;
+		if (iterate && nb->bcount[i]) {
+			wl->fstart[wl->nrows] = f;
+			wl->rows[wl->nrows++] = (uint32_t)i;
+		}
+		for (uint32_t q = 0; q < nb->bcount[i]; ++q, ++f) {
+			if (iterate)
+				wl->fpos[at[bl[q]]] = f;
+			wl->fluid[at[bl[q]]++] = (uint32_t)i;
+		}
+	}
+	for (size_t b = 0; iterate && b < nbound; ++b)
 		if (wl->start[b] < wl->start[b + 1]) {
 			wl->old[wl->nact] = nb->bnd.rho[b];
 			wl->act[wl->nact++] = (uint32_t)b;
@@ -142,28 +166,30 @@ static bool walls_make(eddy_world *w, const sph_density *sd, walls *wl)
 	return true;
 }
 
-/* The kernel weight (h^2 - r^2)^3 of fluid row i and wall b, and in *grav
- * g . (x_b - x_i). Every pass computes it afresh: the same bits as storing it. */
-static inline float wall_weight(const walls *wl, uint32_t i, uint32_t b, float *grav)
-{
-	const sph_neighbors *nb = wl->nb;
-	const float rx = nb->bx[b] - wl->x[i], ry = nb->by[b] - wl->y[i], rz = nb->bz[b] - wl->z[i];
-	const float d = wl->h2 - (rx * rx + ry * ry + rz * rz);
-	*grav = wl->g.x * rx + wl->g.y * ry + wl->g.z * rz;
-	return d * d * d;
-}
-
 /* Wall b's pressure from the fluid near it and its EOS density. The first
- * pass divides by the weights' sum, the later ones multiply by its inverse
- * (both pinned by the state hashes). */
+ * pass takes the pair weights from the positions (storing them when
+ * iterating) and divides by their sum; the later ones read them and
+ * multiply by the sum's inverse (both pinned by the state hashes). */
 static void wall_extrapolate(sph_density *sd, const walls *wl, const float *rho, const float *p, uint32_t b, bool first)
 {
 	sph_neighbors *nb = &sd->sh.nb;
 	float sw = 0, sp = 0;
 	for (uint32_t q = wl->start[b]; q < wl->start[b + 1]; ++q) {
 		const uint32_t j = wl->fluid[q];
-		float gr;
-		const float wgt = wall_weight(wl, j, b, &gr);
+		float wgt, gr;
+		if (first) {
+			const float rx = nb->bx[b] - wl->x[j], ry = nb->by[b] - wl->y[j], rz = nb->bz[b] - wl->z[j];
+			const float d = wl->h2 - (rx * rx + ry * ry + rz * rz);
+			wgt = d * d * d;
+			gr = wl->g.x * rx + wl->g.y * ry + wl->g.z * rz;
+			if (wl->wgt) {
+				wl->wgt[q] = wl->wf[wl->fpos[q]] = wgt;
+				wl->grav[q] = gr;
+			}
+		} else {
+			wgt = wl->wgt[q];
+			gr = wl->grav[q];
+		}
 		sw += wgt;
 		sp += wgt * (p[j] + rho[j] * gr);
 	}
@@ -182,50 +208,51 @@ static inline void set_density(sph_density *sd, float *rho, float *p, long i, fl
 	p[i] = eos_pressure(sd, r);
 }
 
-/* The walls' pressure and density: pass 0 extrapolates every wall; when
- * iterating, each later pass moves the fluid near the walls (act) to the
- * walls' new densities and extrapolates those walls again. */
+/* The walls' pressure and density: every wall extrapolated once; when
+ * iterating, each later pass moves the fluid near the walls to the walls'
+ * new densities and extrapolates those walls (act) again. */
 static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads)
 {
 	sph_neighbors *nb = &sd->sh.nb;
-	const long n = (long)w->n, nbound = (long)nb->nbound;
-	if (n == 0 || nbound == 0)
+	const long nbound = (long)nb->nbound;
+	if (w->n == 0 || nbound == 0)
 		return EDDY_OK;
 	const bool iterate = eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL;
 	walls wl;
-	if (!walls_make(w, sd, &wl))
+	if (!walls_make(w, sd, iterate, &wl))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %ld boundary particles", nbound);
 	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (long b = 0; b < nbound; ++b)
+		wall_extrapolate(sd, &wl, rho, p, (uint32_t)b, true);
 	float first = 0; /* the largest change of pass 1: the lag */
-	for (int pass = 0; pass <= (iterate ? WALL_PASSES_MAX : 0); ++pass) {
-		if (pass > 0) {
-			float change = 0;
+	for (int pass = 1; iterate && pass <= WALL_PASSES_MAX; ++pass) {
+		float change = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : change)
-			for (long a = 0; a < wl.nact; ++a) {
-				const uint32_t b = wl.act[a];
-				const float d = nb->bnd.rho[b] - wl.old[a];
-				wl.old[a] = nb->bnd.rho[b];
-				wl.dv[b] = nb->bvol[b] * d;
-				change = fabsf(d) > change ? fabsf(d) : change;
-			}
-			if (pass == 1)
-				first = change;
-			else if (!(change > WALL_TOL * first))
-				break;
-#pragma omp parallel for num_threads(threads) schedule(static)
-			for (long i = 0; i < n; ++i) {
-				const uint32_t *bl = nb->bnbr + (size_t)i * nb->bcap;
-				float dr = 0, gr;
-				for (uint32_t q = 0; q < nb->bcount[i]; ++q)
-					dr += wl.dv[bl[q]] * wall_weight(&wl, (uint32_t)i, bl[q], &gr);
-				if (dr != 0)
-					set_density(sd, rho, p, i, rho[i] + sd->sh.k.poly6 * dr);
-			}
+		for (long a = 0; a < wl.nact; ++a) {
+			const uint32_t b = wl.act[a];
+			const float d = nb->bnd.rho[b] - wl.old[a];
+			wl.old[a] = nb->bnd.rho[b];
+			wl.dv[b] = nb->bvol[b] * d;
+			change = fabsf(d) > change ? fabsf(d) : change;
 		}
-		const long walls_now = pass ? wl.nact : nbound;
+		if (pass == 1)
+			first = change;
+		else if (!(change > WALL_TOL * first))
+			break;
 #pragma omp parallel for num_threads(threads) schedule(static)
-		for (long a = 0; a < walls_now; ++a)
-			wall_extrapolate(sd, &wl, rho, p, pass ? wl.act[a] : (uint32_t)a, pass == 0);
+		for (long r = 0; r < wl.nrows; ++r) {
+			const uint32_t i = wl.rows[r], *bl = nb->bnbr + (size_t)i * nb->bcap;
+			const float *wi = wl.wf + wl.fstart[r];
+			float dr = 0;
+			for (uint32_t q = 0; q < nb->bcount[i]; ++q)
+				dr += wl.dv[bl[q]] * wi[q];
+			if (dr != 0)
+				set_density(sd, rho, p, i, rho[i] + sd->sh.k.poly6 * dr);
+		}
+#pragma omp parallel for num_threads(threads) schedule(static)
+		for (long a = 0; a < wl.nact; ++a)
+			wall_extrapolate(sd, &wl, rho, p, wl.act[a], false);
 	}
 	return EDDY_OK;
 }
