@@ -9,22 +9,20 @@
  *   (j over fluid particles including i itself, b over boundary particles)
  *   linear EOS: p_i = k (rho_i - rho0)                      (Mueller 2003, eq. 12)
  *   Tait EOS:   p_i = (k rho0 / gamma) ((rho_i/rho0)^gamma - 1)
- *   p_i is clamped at 0: negative pressure pulls particles into clumps
- *   (tensile instability, docs/validation.md C.1).
- * Boundary particles carry a pressure extrapolated from the fluid near them
- * with the hydrostatic correction (Adami, Hu & Adams 2012, eq. 27),
+ *   p_i >= 0: negative pressure pulls particles into clumps (tensile
+ *   instability, docs/validation.md C.1).
+ * Boundary particles carry the pressure extrapolated from the fluid near
+ * them with the hydrostatic correction (Adami, Hu & Adams 2012, eq. 27),
  *   p_b = max(0, sum_f (p_f + rho_f g . (x_b - x_f)) W_bf / sum_f W_bf),
- * and the density rho_b the EOS gives for it (see WALL_PASSES_MAX). Frozen
- * at rho0 (plain Akinci et al. 2012) the walls would leave the fluid beside
- * them less compressed than the fluid away from them, their pressure short
- * of hydrostatic, and the fluid would sink along the walls in a steady
+ * and the density rho_b the EOS gives for it. Frozen at rho0 (plain Akinci
+ * et al. 2012) the walls would leave the fluid beside them less compressed
+ * than the fluid away from them, and it would sink along them in a steady
  * circulation.
- * The particle mass is m = rho0 / sum_lattice W_poly6, the sum over a simple
- * cubic lattice of the given spacing, so a block at rest starts at rho0
- * exactly instead of 1% above it at h = 2 spacings (C.8). The self term
- * keeps rho > 0 for a lone particle (C.6).
- * The acoustic time-step limit is sph_pressure's: that force carries sound
- * at c = sqrt(k), and a scene solving for the pressure (sph_dfsph) has none.
+ * m = rho0 / sum_lattice W_poly6 over a simple cubic lattice of the given
+ * spacing: a block at rest starts at rho0 exactly, not 1% above it at h = 2
+ * spacings (C.8). The self term keeps rho > 0 for a lone particle (C.6).
+ * No time-step limit: the acoustic one is sph_pressure's, the force that
+ * carries sound at c = sqrt(k); a pressure solve (sph_dfsph) has none.
  * Source: Mueller, Charypar & Gross, "Particle-Based Fluid Simulation for
  * Interactive Applications", SCA 2003; Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012 (boundary term). */
@@ -69,19 +67,18 @@ static float eos_density(const sph_density *sd, float p)
 	return sd->def.eos == EDDY_SPH_EOS_TAIT ? rho0 * powf(p / (k * rho0 / gamma) + 1.0f, 1.0f / gamma) : rho0 + p / k;
 }
 
-/* Adami et al. 2012, eq. 27, with the wall at rest. The wall densities
- * enter the fluid's density sums, which set the fluid pressure the walls
- * copy: a loop. Closed with the previous step's wall densities (as the
- * neighbour search summed them), it is a one-step-lagged positive feedback
- * that pumps energy into the fluid at the walls (a still column never comes
- * to rest). With the EOS pressure (sph_pressure) the loop is therefore
- * iterated within the step: the fluid near the walls takes their new
- * densities, sum_b V_b (rho_b new - rho_b old) W_poly6, and the walls are
- * extrapolated again, WALL_PASSES_MAX times or until no wall density changes
- * by more than WALL_TOL of the first pass's change. Each pass shrinks the
- * error by the walls' share of a kernel sum (1/4 at a flat wall, 1/2 at a
- * corner). Against sph_dfsph's pressure solve the iterated walls pump
- * energy in instead: there they keep the one-step lag. */
+/* The wall densities enter the fluid's density sums, which set the
+ * pressure the walls copy: a loop. Closed with the previous step's wall
+ * densities (as the neighbour search summed them) it is a one-step-lagged
+ * positive feedback that pumps energy into the fluid at the walls (a still
+ * column never comes to rest). With the EOS pressure (sph_pressure) the
+ * loop is iterated within the step: the fluid near the walls takes their
+ * new densities, sum_b V_b (rho_b new - rho_b old) W_poly6, and the walls
+ * are extrapolated again, WALL_PASSES_MAX times or until no wall density
+ * changes by more than WALL_TOL of the first pass's change. Each pass
+ * shrinks the error by the walls' share of a kernel sum (1/4 at a flat
+ * wall, 1/2 at a corner). Against sph_dfsph's pressure solve iterated walls
+ * pump energy in instead: there they keep the one-step lag. */
 #define WALL_PASSES_MAX 3
 #define WALL_TOL 1e-3f
 
@@ -95,14 +92,15 @@ typedef struct walls {
 	eddy_vec3 g;
 	uint32_t *start; /* nbound + 1: wall b's fluid rows are fluid[start[b] .. start[b + 1]) */
 	uint32_t *fluid;
-	/* when iterating, else NULL: */
+	/* when iterating, else NULL (the first pass stores the pairs' weights): */
 	uint32_t *act, *rows; /* the walls with fluid near them, the fluid rows with walls near them */
 	long nact, nrows;
 	float *wgt, *grav; /* per pair: (h^2 - r^2)^3 and g . (x_b - x_f), boundary-major */
 	float *wf;         /* per pair: its weight again, in the fluid's list order */
-	uint32_t *fstart;  /* n + 1: row i's pairs in that order are [fstart[i], fstart[i + 1]) */
+	uint32_t *fstart;  /* n: row i's pairs in that order start at fstart[i] */
 	uint32_t *fpos;    /* per boundary-major pair, its place in that order */
-	float *old, *dv;   /* per wall: the density the fluid sums hold, V_b times its change */
+	float *old;        /* per act entry: the wall density the fluid sums hold */
+	float *dv;         /* per wall: V_b times the change of its density */
 } walls;
 
 static void *scratch(eddy_world *w, size_t count, size_t size, bool *ok)
@@ -140,7 +138,7 @@ static bool walls_make(eddy_world *w, const sph_density *sd, bool iterate, walls
 		wl->grav = scratch(w, pairs, sizeof *wl->grav, &ok);
 		wl->wf = scratch(w, pairs, sizeof *wl->wf, &ok);
 		wl->fpos = scratch(w, pairs, sizeof *wl->fpos, &ok);
-		wl->fstart = scratch(w, n + 1, sizeof *wl->fstart, &ok);
+		wl->fstart = scratch(w, n, sizeof *wl->fstart, &ok);
 		wl->old = scratch(w, nbound, sizeof *wl->old, &ok);
 		wl->dv = scratch(w, nbound, sizeof *wl->dv, &ok);
 	}
@@ -150,10 +148,9 @@ static bool walls_make(eddy_world *w, const sph_density *sd, bool iterate, walls
 	uint32_t f = 0; /* the pair's place in the fluid's list order */
 	for (size_t i = 0; i < n; ++i) {
 		const uint32_t *bl = nb->bnbr + i * nb->bcap;
-		if (iterate) {
-			wl->fstart[i] = f;
-			if (nb->bcount[i])
-				wl->rows[wl->nrows++] = (uint32_t)i;
+		if (iterate && nb->bcount[i]) {
+			wl->fstart[wl->nrows] = f;
+			wl->rows[wl->nrows++] = (uint32_t)i;
 		}
 		for (uint32_t q = 0; q < nb->bcount[i]; ++q, ++f) {
 			if (iterate)
@@ -161,17 +158,16 @@ static bool walls_make(eddy_world *w, const sph_density *sd, bool iterate, walls
 			wl->fluid[at[bl[q]]++] = (uint32_t)i;
 		}
 	}
-	if (iterate) {
-		wl->fstart[n] = f;
-		for (size_t b = 0; b < nbound; ++b)
-			if (wl->start[b] < wl->start[b + 1])
-				wl->act[wl->nact++] = (uint32_t)b;
-	}
+	for (size_t b = 0; iterate && b < nbound; ++b)
+		if (wl->start[b] < wl->start[b + 1]) {
+			wl->old[wl->nact] = nb->bnd.rho[b];
+			wl->act[wl->nact++] = (uint32_t)b;
+		}
 	return true;
 }
 
 /* Wall b's pressure from the fluid near it and its EOS density. The first
- * pass takes the pair weights from the positions (keeping them when
+ * pass takes the pair weights from the positions (storing them when
  * iterating) and divides by their sum; the later ones read them and
  * multiply by the sum's inverse (both pinned by the state hashes). */
 static void wall_extrapolate(sph_density *sd, const walls *wl, const float *rho, const float *p, uint32_t b, bool first)
@@ -198,71 +194,66 @@ static void wall_extrapolate(sph_density *sd, const walls *wl, const float *rho,
 		sp += wgt * (p[j] + rho[j] * gr);
 	}
 	const float pb = sw > 0 ? fmaxf(first ? sp / sw : sp * (1.0f / sw), 0.0f) : 0.0f;
-	if (wl->old)
-		wl->old[b] = nb->bnd.rho[b];
 	nb->bp[b] = pb;
 	nb->bnd.rho[b] = eos_density(sd, pb);
 }
 
-/* The passes after the first, over the walls with fluid near them and the
- * fluid rows with walls near them. */
-static void walls_iterate(eddy_world *w, sph_density *sd, const walls *wl, int threads)
+/* Row i's density r, and what follows from it: 1/rho, the quad's 1/rho and
+ * the EOS pressure. */
+static inline void set_density(sph_density *sd, float *rho, float *p, long i, float r)
 {
-	sph_shared *sh = &sd->sh;
-	const sph_neighbors *nb = &sh->nb;
-	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
-	float first = 0; /* the largest change of the first pass: the lag */
-	for (int pass = 1; pass <= WALL_PASSES_MAX; ++pass) {
-		float change = 0;
-#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : change)
-		for (long a = 0; a < wl->nact; ++a) {
-			const uint32_t b = wl->act[a];
-			const float d = nb->bnd.rho[b] - wl->old[b];
-			wl->dv[b] = nb->bvol[b] * d;
-			change = fabsf(d) > change ? fabsf(d) : change;
-		}
-		if (pass == 1)
-			first = change;
-		else if (!(change > WALL_TOL * first))
-			return;
-			/* the fluid near the walls takes the walls' new densities */
-#pragma omp parallel for num_threads(threads) schedule(static)
-		for (long r = 0; r < wl->nrows; ++r) {
-			const uint32_t i = wl->rows[r];
-			const uint32_t *bl = nb->bnbr + (size_t)i * nb->bcap;
-			const float *wi = wl->wf + wl->fstart[i];
-			float dr = 0;
-			for (uint32_t q = 0; q < nb->bcount[i]; ++q)
-				dr += wl->dv[bl[q]] * wi[q];
-			if (dr == 0)
-				continue;
-			rho[i] = rho[i] + sh->k.poly6 * dr;
-			sh->inv_rho[i] = 1.0f / rho[i];
-			sh->pq[4 * i + 3] = sh->inv_rho[i];
-			p[i] = eos_pressure(sd, rho[i]);
-		}
-		/* ... and the walls that fluid's pressure */
-#pragma omp parallel for num_threads(threads) schedule(static)
-		for (long a = 0; a < wl->nact; ++a)
-			wall_extrapolate(sd, wl, rho, p, wl->act[a], false);
-	}
+	rho[i] = r;
+	sd->sh.inv_rho[i] = 1.0f / r;
+	sd->sh.pq[4 * i + 3] = sd->sh.inv_rho[i];
+	p[i] = eos_pressure(sd, r);
 }
 
+/* The walls' pressure and density: every wall extrapolated once; when
+ * iterating, each later pass moves the fluid near the walls to the walls'
+ * new densities and extrapolates those walls (act) again. */
 static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads)
 {
-	const long nbound = (long)sd->sh.nb.nbound;
+	sph_neighbors *nb = &sd->sh.nb;
+	const long nbound = (long)nb->nbound;
 	if (w->n == 0 || nbound == 0)
 		return EDDY_OK;
 	const bool iterate = eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL;
 	walls wl;
 	if (!walls_make(w, sd, iterate, &wl))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %ld boundary particles", nbound);
-	const float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
+	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
 #pragma omp parallel for num_threads(threads) schedule(static)
 	for (long b = 0; b < nbound; ++b)
 		wall_extrapolate(sd, &wl, rho, p, (uint32_t)b, true);
-	if (iterate)
-		walls_iterate(w, sd, &wl, threads);
+	float first = 0; /* the largest change of pass 1: the lag */
+	for (int pass = 1; iterate && pass <= WALL_PASSES_MAX; ++pass) {
+		float change = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : change)
+		for (long a = 0; a < wl.nact; ++a) {
+			const uint32_t b = wl.act[a];
+			const float d = nb->bnd.rho[b] - wl.old[a];
+			wl.old[a] = nb->bnd.rho[b];
+			wl.dv[b] = nb->bvol[b] * d;
+			change = fabsf(d) > change ? fabsf(d) : change;
+		}
+		if (pass == 1)
+			first = change;
+		else if (!(change > WALL_TOL * first))
+			break;
+#pragma omp parallel for num_threads(threads) schedule(static)
+		for (long r = 0; r < wl.nrows; ++r) {
+			const uint32_t i = wl.rows[r], *bl = nb->bnbr + (size_t)i * nb->bcap;
+			const float *wi = wl.wf + wl.fstart[r];
+			float dr = 0;
+			for (uint32_t q = 0; q < nb->bcount[i]; ++q)
+				dr += wl.dv[bl[q]] * wi[q];
+			if (dr != 0)
+				set_density(sd, rho, p, i, rho[i] + sd->sh.k.poly6 * dr);
+		}
+#pragma omp parallel for num_threads(threads) schedule(static)
+		for (long a = 0; a < wl.nact; ++a)
+			wall_extrapolate(sd, &wl, rho, p, wl.act[a], false);
+	}
 	return EDDY_OK;
 }
 
@@ -278,18 +269,13 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const sph_kernel_consts kc = sh->k;
 	const float m = sh->mass, self = kc.h2 * kc.h2 * kc.h2; /* (h^2 - 0)^3: the particle itself */
 	const long n = (long)w->n;
-	float *inv_rho = eddy__arena_alloc(&w->arena, (w->n ? w->n : 1) * sizeof *inv_rho);
-	if (!inv_rho)
+	sh->inv_rho = eddy__arena_alloc(&w->arena, (w->n ? w->n : 1) * sizeof *sh->inv_rho);
+	if (!sh->inv_rho)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", w->n);
-	sh->inv_rho = inv_rho;
-	/* the kernel sums were made with the neighbour lists */
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
-		const float r = kc.poly6 * (m * (self + nb->wsum[i]) + nb->bwsum[i]);
-		rho[i] = r;
-		inv_rho[i] = 1.0f / r;
-		sh->pq[4 * i + 3] = inv_rho[i];
-		p[i] = eos_pressure(sd, r);
+		/* the kernel sums were made with the neighbour lists */
+		set_density(sd, rho, p, i, kc.poly6 * (m * (self + nb->wsum[i]) + nb->bwsum[i]));
 		ncount[i] = (float)(nb->count[i] + nb->bcount[i]);
 	}
 	return boundary_pressure(w, sd, ctx->threads);
@@ -376,9 +362,7 @@ const eddy_system_vtable eddy__kind_sph_density = {
 float eddy_sph_particle_mass(const eddy_world *w, eddy_system_id id)
 {
 	const eddy_system *s = eddy__system_peek(w, id);
-	if (!s || s->vt != &eddy__kind_sph_density)
-		return 0;
-	return ((const sph_density *)s->data)->sh.mass;
+	return eddy__sph_density_def(s) ? ((const sph_density *)s->data)->sh.mass : 0;
 }
 
 const eddy_sph_density_def *eddy__sph_density_def(const eddy_system *s)
@@ -395,13 +379,12 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	    !eddy__check_positive(w, sys, "stiffness", def->stiffness) ||
 	    !eddy__check_range(w, sys, "tait_gamma", def->tait_gamma, 1, 20))
 		return EDDY_NULL_SYSTEM;
-	if (!(def->radius > def->spacing && def->radius <= 5 * def->spacing)) {
-		eddy__fail(w, EDDY_ERR_INVALID,
-		           "%s: 'radius' must be between 1 and 5 times 'spacing' (got radius = %g m, spacing = %g m; 2 x "
-		           "spacing is usual)",
-		           sys, (double)def->radius, (double)def->spacing);
-		return EDDY_NULL_SYSTEM;
-	}
+	if (!(def->radius > def->spacing && def->radius <= 5 * def->spacing))
+		return eddy__fail(w, EDDY_ERR_INVALID,
+		                  "%s: 'radius' must be between 1 and 5 times 'spacing' (got radius = %g m, spacing = %g m; "
+		                  "2 x spacing is usual)",
+		                  sys, (double)def->radius, (double)def->spacing),
+		       EDDY_NULL_SYSTEM;
 	if (def->eos != EDDY_SPH_EOS_LINEAR && def->eos != EDDY_SPH_EOS_TAIT)
 		return eddy__fail(w, EDDY_ERR_INVALID, "%s: 'eos' must be linear or tait", sys), EDDY_NULL_SYSTEM;
 	sph_density *sd = calloc(1, sizeof *sd);
@@ -411,14 +394,21 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	sd->sh.h = def->radius;
 	sd->sh.rho0 = def->rest_density;
 	sd->sh.c = sqrtf(def->stiffness);
-	sd->sh.k = sph_consts(def->radius);
-	sd->sh.mass = (float)(def->rest_density / eddy_sph_lattice_sum(EDDY_SPH_POLY6, def->spacing, def->radius));
+	const double h = def->radius, h6 = h * h * h * h * h * h, h9 = h6 * h * h * h;
+	sd->sh.k = (sph_kernel_consts){.h = def->radius,
+	                               .h2 = def->radius * def->radius,
+	                               .poly6 = (float)(315.0 / (64.0 * M_PI * h9)),
+	                               .poly6_grad = (float)(-6.0 * 315.0 / (64.0 * M_PI * h9)),
+	                               .spiky_grad = (float)(-45.0 / (M_PI * h6)),
+	                               .visc_lap = (float)(45.0 / (M_PI * h6))};
+	const double lattice = eddy_sph_lattice_sum(EDDY_SPH_POLY6, def->spacing, def->radius);
+	sd->sh.mass = (float)(def->rest_density / lattice);
 	/* the force sums m grad W, and m = rho0 / sum_lattice W is not rho0
 	 * spacing^3: the moment the force sees is the lattice moment times
 	 * m / (rho0 spacing^3) (0.956 / 1.010 = 0.947 at h = 2 spacings) */
 	const double vol = (double)def->spacing * def->spacing * def->spacing;
-	sd->sh.grad_cal = (float)(eddy_sph_lattice_sum(EDDY_SPH_POLY6, def->spacing, def->radius) * vol /
-	                          eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, def->spacing, def->radius));
+	sd->sh.grad_cal =
+		(float)(lattice * vol / eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, def->spacing, def->radius));
 	eddy_system_id id = eddy__add_system(w, &eddy__kind_sph_density, sd, density_reads, density_writes);
 	if (eddy_system_valid(w, id))
 		eddy_world_set_rest_density(w, def->rest_density);

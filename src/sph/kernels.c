@@ -1,6 +1,6 @@
 /* SPDX-License-Identifier: MIT */
 /* The SPH kernels of Mueller, Charypar & Gross 2003 (3D) as public functions
- * of r, for hosts and tests; the systems use the inline forms in sph.h.
+ * of r, for hosts and tests; the systems use their constants (sph.h).
  *   poly6      W = 315/(64 pi h^9) (h^2 - r^2)^3
  *   spiky      W = 15/(pi h^6) (h - r)^3,          dW/dr = -45/(pi h^6) (h - r)^2
  *   viscosity  W = 15/(2 pi h^3) (-r^3/(2h^3) + r^2/h^2 + h/(2r) - 1),

@@ -1,35 +1,29 @@
 /* SPDX-License-Identifier: MIT */
 /* sph_pressure: the symmetric pressure force with the spiky kernel's gradient
- * (Mueller 2003, eq. 10, without its factor 1/2; see below); boundary
- * particles enter the same sum with the pressure sph_density extrapolated onto
- * them (Adami et al. 2012).
+ * (Mueller 2003, eq. 10, without its factor 1/2); boundary particles enter
+ * the sum with the pressure sph_density extrapolated onto them (Adami et al.
+ * 2012).
  *
  * Reads: x y z density pressure. Writes: ax ay az (accumulated).
  *   a_i -= scale * [ sum_j m (p_i + p_j) / (rho_i rho_j) grad W_spiky(x_i - x_j)
  *                  + sum_b V_b (p_i + p_b) / rho_i grad W_spiky(x_i - x_b) ]
  *   grad W_spiky(r_vec) = -45/(pi h^6) (h - r)^2 r_vec / r
  * Why not the paper's (p_i + p_j) / 2: in the interior sum_j V_j grad W = 0,
- * so sum_j V_j (p_i + p_j)/2 grad W = grad p / 2. The paper's force is half
- * the pressure gradient; a resting column then compresses twice as much as
- * g H / k says and sound travels at sqrt(k/2). The form here is the same
- * symmetric (momentum-conserving) pair force, doubled, so it reproduces
- * grad p and c = sqrt(k) (tested by the hydrostatic tank).
- * The force is divided by the moment it has on the particle lattice,
- * (m / rho0) sum_j x_j^2 |dW/dr| / r_j = 0.947 at h = 2 spacings (the spiky
- * lattice moment 0.956, eddy_sph_lattice_gradient_moment, times the
- * calibrated m over rho0 spacing^3): uncorrected, the force of a linear
- * pressure field falls 5.3% short of grad p. The same correction
- * sph_density makes for the mass.
- * Pairs closer than 1e-3 h take a fixed antisymmetric direction (sph.h): the
- * gradient has no direction at r = 0, and skipping them would leave
- * coincident particles stuck together (docs/validation.md C.6). A group with
- * such a pair ends the vector sums of its particle; the finish loop takes the
- * rest pair by pair, and the walls.
- * Time-step limits, the smaller reported: acoustic, dt <= h / (c + max|v|),
- * c = sqrt(k) from sph_density's stiffness (the world's CFL number is the
- * Courant factor lambda, 0.25-0.4); force, dt <= 0.625 sqrt(h / max|a|),
- * max|a| from the last step (with the default CFL 0.4 the usual
- * 0.25 sqrt(h/|a|)).
+ * so that force is grad p / 2; a resting column would compress twice as
+ * much as g H / k says and sound travel at sqrt(k/2). Doubled, the same
+ * symmetric (momentum-conserving) pair force gives grad p and c = sqrt(k)
+ * (the hydrostatic tank tests it).
+ * The force is divided by its moment on the particle lattice (sh->grad_cal,
+ * 0.947 at h = 2 spacings: see sph_density's add function); uncorrected,
+ * the force of a linear pressure field falls 5.3% short of grad p.
+ * Pairs closer than 1e-3 h take a fixed antisymmetric direction: skipping
+ * them would leave coincident particles stuck together (docs/validation.md
+ * C.6). A group with such a pair ends the vector sums of its particle; the
+ * finish loop takes the rest pair by pair, and the walls.
+ * Time-step limits, the smaller reported: acoustic, dt <= h / (c + max|v|)
+ * (the world's CFL number is the Courant factor, 0.25-0.4); force,
+ * dt <= 0.625 sqrt(h / max|a|), max|a| from the last step (with the default
+ * CFL 0.4 the usual 0.25 sqrt(h/|a|)).
  * Source: Mueller, Charypar & Gross 2003; Adami, Hu & Adams, "A generalized
  * wall boundary condition for SPH", JCP 2012. */
 #include "simd.h"
@@ -44,7 +38,7 @@
  * (p_i + p_j) / rho_j (h - r)^2 r_vec / r: the 1/r normalises r_vec. */
 typedef struct pressure_args {
 	const sph_neighbors *nb;
-	const float *pq, *p, *inv_rho; /* (x y z 1/rho) quads; pressures; 1/rho */
+	const float *pq, *p; /* (x y z 1/rho) quads; pressures */
 	float *ax, *ay, *az;
 	float h, eps2, m, g; /* g: -spiky_grad grad_cal scale */
 	void (*pair_sums)(const struct pressure_args *a, long i0, long cnt, float *t, uint32_t *done);
@@ -103,7 +97,7 @@ void SIMD_NAME(pressure_pair_sums)(const pressure_args *a, long i0, long cnt, fl
 		sf8_fold4(sx, tb);
 		sf8_fold4(sy, tb + 4);
 		sf8_fold4(sz, tb + 8);
-		done[b] = q < c ? q : c;
+		done[b] = q;
 	}
 }
 
@@ -111,18 +105,12 @@ void SIMD_NAME(pressure_pair_sums)(const pressure_args *a, long i0, long cnt, fl
 static const int pressure_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_DENSITY, COL_PRESSURE, -1};
 static const int pressure_writes[] = {COL_AX, COL_AY, COL_AZ, -1};
 
-eddy_sph_pressure_def eddy_default_sph_pressure_def(void)
-{
-	eddy_sph_pressure_def d;
-	d.scale = 1.0f;
-	return d;
-}
+eddy_sph_pressure_def eddy_default_sph_pressure_def(void) { return (eddy_sph_pressure_def){.scale = 1.0f}; }
 
 /* A block: the pair sums, then the pairs they left (coincident ones, one
  * by one), the walls, and ax ay az. */
 static void pressure_block(const void *arg, long i0, long cnt)
 {
-	/* a copy the stores below cannot alias: the constants stay in registers */
 	const pressure_args a = *(const pressure_args *)arg;
 	const sph_neighbors *nb = a.nb;
 	float t[SPH_BLOCK * PRESSURE_T];
@@ -132,8 +120,7 @@ static void pressure_block(const void *arg, long i0, long cnt)
 		const long i = i0 + b;
 		const float *tb = t + PRESSURE_T * b;
 		const float xi = a.pq[4 * i], yi = a.pq[4 * i + 1], zi = a.pq[4 * i + 2];
-		/* rho >= m W(0) > 0 (the self term), so 1/rho is finite */
-		const float iri = a.inv_rho[i], pi_ = a.p[i];
+		const float pi_ = a.p[i];
 		float fx = sph_sum4(tb), fy = sph_sum4(tb + 4), fz = sph_sum4(tb + 8);
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
 		for (uint32_t q = done[b], cnt_i = nb->count[i]; q < cnt_i; ++q) {
@@ -147,13 +134,16 @@ static void pressure_block(const void *arg, long i0, long cnt)
 				rx *= inv;
 				ry *= inv;
 				rz *= inv;
-			} else {
+			} else { /* no direction at r = 0: a fixed one, not along a wall axis, opposite for (j, i) */
+				const float sign = (uint32_t)i < j ? 1.0f : -1.0f;
 				r = 0;
-				sph_coincident_dir((size_t)i, j, &rx, &ry, &rz);
+				rx = sign * 0.80178373f; /* (3, 2, 1) / sqrt(14) */
+				ry = sign * 0.53452248f;
+				rz = sign * 0.26726124f;
 			}
 			const float hr = a.h - r;
 			/* (p_i + p_j)/(rho_i rho_j) times |dW/dr|; the force pushes i away from j */
-			const float c = (pi_ + a.p[j]) * a.inv_rho[j] * hr * hr;
+			const float c = (pi_ + a.p[j]) * a.pq[4 * (size_t)j + 3] * hr * hr;
 			fx += c * rx;
 			fy += c * ry;
 			fz += c * rz;
@@ -173,9 +163,11 @@ static void pressure_block(const void *arg, long i0, long cnt)
 			by += c * ry;
 			bz += c * rz;
 		}
-		a.ax[i] += a.g * iri * (a.m * fx + bx);
-		a.ay[i] += a.g * iri * (a.m * fy + by);
-		a.az[i] += a.g * iri * (a.m * fz + bz);
+		/* rho >= m W(0) > 0 (the self term), so 1/rho is finite */
+		const float gi = a.g * a.pq[4 * i + 3];
+		a.ax[i] += gi * (a.m * fx + bx);
+		a.ay[i] += gi * (a.m * fy + by);
+		a.az[i] += gi * (a.m * fz + bz);
 	}
 }
 
@@ -188,7 +180,6 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const pressure_args a = {.nb = &sh->nb,
 	                         .pq = sh->pq,
 	                         .p = eddy__col(w, COL_PRESSURE),
-	                         .inv_rho = sh->inv_rho,
 	                         .ax = eddy__col(w, COL_AX),
 	                         .ay = eddy__col(w, COL_AY),
 	                         .az = eddy__col(w, COL_AZ),
@@ -217,12 +208,9 @@ static double max_norm(eddy_world *w, int cu, int cv, int cw)
 static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
 	const sph_shared *sh = eddy__sph_find(w, s);
-	*reason = "acoustic";
-	const double acoustic = sh->h / (sh->c + max_norm(w, COL_VX, COL_VY, COL_VZ)),
-				 a = max_norm(w, COL_AX, COL_AY, COL_AZ);
-	const double force = a > 0 ? 0.625 * sqrt(sh->h / a) : INFINITY;
-	if (force < acoustic)
-		*reason = "force";
+	const double acoustic = sh->h / (sh->c + max_norm(w, COL_VX, COL_VY, COL_VZ));
+	const double a = max_norm(w, COL_AX, COL_AY, COL_AZ), force = a > 0 ? 0.625 * sqrt(sh->h / a) : INFINITY;
+	*reason = force < acoustic ? "force" : "acoustic";
 	return force < acoustic ? force : acoustic;
 }
 

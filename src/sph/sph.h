@@ -1,27 +1,18 @@
 /* SPDX-License-Identifier: MIT */
-/* The SPH folder's shared header: kernel constants, and the neighbour data
- * that sph_density builds once per step for the later SPH passes.
- *
- * The folder's parts:
- *   grid.c search.c neighbors.c  the neighbour search (its internals:
- *                                neighbors.h): cells and cell order, the grid
- *                                search, the Verlet list and its filter
+/* The SPH folder's shared header: kernel constants, the neighbour data
+ * sph_density builds each step for the later SPH passes, their helpers.
+ *   grid.c search.c neighbors.c  cells, grid search, Verlet list (neighbors.h)
  *   boundary.c boundary_box.c    boundary particles of walls and colliders
- *   kernels.c                    the kernels' lattice sums
- *   density.c pressure.c viscosity.c surface_tension.c dfsph.c
- *                                one file per system
- *   ../simd.h                    the vocabulary the pair loops are written in
- *
+ *   kernels.c                    the kernels and their lattice sums
+ *   density.c pressure.c viscosity.c surface_tension.c dfsph.c: the systems
  * A new pair pass (XSPH, say) is one new file plus the registry:
- *   1. src/sph/xsph.c: its def, add function and step under
- *      #ifndef EDDY_SIMD_VARIANT; the pair loop once, against simd.h, as
- *      SIMD_NAME(xsph_pair_sums) outside it, over sph_shared's lists (nbr,
- *      count) and quads (pq), picked in the step with SIMD_PICK and run
- *      block by block with sph_block_pass (below). The Makefile finds the
- *      file and builds its AVX2 variant (it includes "simd.h").
- *   2. the registry: its vtable in systems.h, its def and add function in
- *      eddy.h, its Lua binding; it declares that it requires sph_density
- *      (whose sph_shared it reads). */
+ *   1. src/sph/xsph.c: under #ifndef EDDY_SIMD_VARIANT its def, add
+ *      function and step; outside it, the pair loop once against
+ *      ../simd.h as SIMD_NAME(xsph_pair_sums) over sph_shared's lists and
+ *      quads, picked with SIMD_PICK and run with sph_block_pass (below).
+ *      The Makefile builds an AVX2 variant of any file including simd.h.
+ *   2. the registry: its vtable in systems.h, def and add function in
+ *      eddy.h, Lua binding; .requires = EDDY_CAP_SPH_NEIGHBORS. */
 #ifndef EDDY_SPH_H
 #define EDDY_SPH_H
 
@@ -31,7 +22,7 @@
 #define M_PI 3.14159265358979323846
 #endif
 
-/* Kernel constants for support h (3D, Mueller 2003). */
+/* Kernel constants for support h (3D, Mueller 2003; sph_density sets them). */
 typedef struct sph_kernel_consts {
 	float h, h2;
 	float poly6;      /* 315/(64 pi h^9) */
@@ -39,19 +30,6 @@ typedef struct sph_kernel_consts {
 	float spiky_grad; /* -45/(pi h^6): dW/dr = spiky_grad (h-r)^2 */
 	float visc_lap;   /* 45/(pi h^6): lap W = visc_lap (h-r) */
 } sph_kernel_consts;
-
-static inline sph_kernel_consts sph_consts(float h)
-{
-	sph_kernel_consts k;
-	const double hd = h, h6 = hd * hd * hd * hd * hd * hd, h9 = h6 * hd * hd * hd;
-	k.h = h;
-	k.h2 = h * h;
-	k.poly6 = (float)(315.0 / (64.0 * M_PI * h9));
-	k.poly6_grad = (float)(-6.0 * 315.0 / (64.0 * M_PI * h9));
-	k.spiky_grad = (float)(-45.0 / (M_PI * h6));
-	k.visc_lap = (float)(45.0 / (M_PI * h6));
-	return k;
-}
 
 /* Neighbour lists, made by sph_density every step (neighbors.c): particle
  * i's fluid neighbours (itself excluded, r < h exactly, ascending index)
@@ -195,17 +173,6 @@ bool eddy__sph_boundary_box_covers(const eddy_system *s, eddy_vec3 min, eddy_vec
 size_t eddy__sph_collider_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
                                  float *z, float *vol, eddy_vec3 *normal);
 
-/* Deterministic antisymmetric direction for a coincident pair (i, j): the
- * gradient has no direction at r = 0, so an arbitrary fixed one (not along a
- * wall axis) separates them while keeping the pair's forces opposite. */
-static inline void sph_coincident_dir(size_t i, size_t j, float *dx, float *dy, float *dz)
-{
-	const float s = i < j ? 1.0f : -1.0f;
-	*dx = s * 0.80178373f; /* (3, 2, 1) / sqrt(14) */
-	*dy = s * 0.53452248f;
-	*dz = s * 0.26726124f;
-}
-
 /* The rows the lists cover: a system after sph_density may have added
  * particles (they have no lists this step) or removed some. */
 static inline long sph_rows(const eddy_world *w, const sph_shared *sh)
@@ -213,13 +180,14 @@ static inline long sph_rows(const eddy_world *w, const sph_shared *sh)
 	return sh->nb.n < w->n ? (long)sh->nb.n : (long)w->n;
 }
 
-/* The force passes go over rows [0, n) in blocks of SPH_BLOCK particles,
- * block(args, i0, count) making first the SIMD sums over the block's fluid
- * pairs, then finishing its particles in a plain loop: finishing each
- * particle right after its groups put the adds of its totals behind every
- * (often mispredicted) exit of the loop over its groups. The threads take
- * equal shares in order; a particle's result does not depend on the blocks,
- * so it is the same for any thread count. */
+/* The force passes run block(args, i0, cnt) over rows [0, n) in blocks of
+ * SPH_BLOCK: first the SIMD sums over the block's fluid pairs, then a plain
+ * loop finishing its particles (finished right after its groups, a
+ * particle's totals would wait behind the often mispredicted exit of the
+ * group loop). A block that copies *args to a local keeps the constants in
+ * registers: its stores cannot alias the copy. The threads take equal
+ * shares in order; a particle's result depends on neither blocks nor
+ * threads. */
 #define SPH_BLOCK 64
 static inline void sph_block_pass(long n, int threads, void (*block)(const void *args, long i0, long cnt),
                                   const void *args)

@@ -30,10 +30,7 @@ static const int st_hint_writes[] = {COL_SPH_NX, COL_SPH_NY, COL_SPH_NZ, COL_SPH
 
 eddy_sph_surface_tension_def eddy_default_sph_surface_tension_def(void)
 {
-	eddy_sph_surface_tension_def d;
-	d.tension = 0.0728f; /* water-air at 20 C */
-	d.threshold = 0.5f;
-	return d;
+	return (eddy_sph_surface_tension_def){.tension = 0.0728f /* water-air at 20 C */, .threshold = 0.5f};
 }
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
@@ -82,22 +79,23 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		const float xi = x[i], yi = y[i], zi = z[i];
 		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
 		const uint32_t cnt = nb->count[i];
-		float div = 0, wall = kc.h2 * kc.h2 * kc.h2 * inv_rho[i], wvalid = wall;
+		/* sum V W over all neighbours (i itself included), over those with a normal */
+		float div = 0, w_all = kc.h2 * kc.h2 * kc.h2 * inv_rho[i], w_normal = w_all;
 		for (uint32_t q = 0; q < cnt; ++q) {
 			const uint32_t j = list[q];
 			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
 			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
 			const float vw = d * d * d * inv_rho[j];
-			wall += vw;
+			w_all += vw;
 			const float lj = sqrtf(nx[j] * nx[j] + ny[j] * ny[j] + nz[j] * nz[j]);
 			if (!(lj > thr))
 				continue;
-			wvalid += vw;
+			w_normal += vw;
 			/* (n_j/|n_j| - n_i/|n_i|) . grad_i W, grad_i W = poly6_grad d^2 r_vec */
 			const float dot = (nx[j] / lj - ux) * rx + (ny[j] / lj - uy) * ry + (nz[j] / lj - uz) * rz;
 			div += dot * d * d * inv_rho[j];
 		}
-		const float kappa = -m * kc.poly6_grad * div * (wall / wvalid);
+		const float kappa = -m * kc.poly6_grad * div * (w_all / w_normal);
 		curv[i] = kappa;
 		const float c = sigma * kappa * inv_rho[i];
 		ax[i] += c * nx[i];
@@ -131,9 +129,7 @@ eddy_system_id eddy_add_sph_surface_tension(eddy_world *w, const eddy_sph_surfac
 {
 	const char *sys = "sph_surface_tension";
 	if (!eddy__add_args(w, def, sys) || !eddy__check_nonneg(w, sys, "tension", def->tension) ||
-	    !eddy__check_finite(w, sys, "tension", def->tension) ||
-	    !eddy__check_nonneg(w, sys, "threshold", def->threshold) ||
-	    !eddy__check_finite(w, sys, "threshold", def->threshold))
+	    !eddy__check_nonneg(w, sys, "threshold", def->threshold))
 		return EDDY_NULL_SYSTEM;
 	eddy_sph_surface_tension_def *copy = malloc(sizeof *copy);
 	if (copy)

@@ -112,16 +112,12 @@ static const int viscosity_writes[] = {COL_AX, COL_AY, COL_AZ, -1};
 
 eddy_sph_viscosity_def eddy_default_sph_viscosity_def(void)
 {
-	eddy_sph_viscosity_def d;
-	d.viscosity = 1e-3f; /* water at 20 C */
-	d.artificial = 0.05f;
-	return d;
+	return (eddy_sph_viscosity_def){.viscosity = 1e-3f /* water at 20 C */, .artificial = 0.05f};
 }
 
 /* A block: the pair sums, then their totals added to ax ay az. */
 static void visc_block(const void *arg, long i0, long cnt)
 {
-	/* a copy the stores below cannot alias: the constants stay in registers */
 	const visc_args a = *(const visc_args *)arg;
 	float t[SPH_BLOCK * VISC_T];
 	a.pair_sums(&a, i0, cnt, t);
@@ -200,7 +196,6 @@ eddy_system_id eddy_add_sph_viscosity(eddy_world *w, const eddy_sph_viscosity_de
 {
 	const char *sys = "sph_viscosity";
 	if (!eddy__add_args(w, def, sys) || !eddy__check_nonneg(w, sys, "viscosity", def->viscosity) ||
-	    !eddy__check_finite(w, sys, "viscosity", def->viscosity) ||
 	    !eddy__check_range(w, sys, "artificial", def->artificial, 0, 2))
 		return EDDY_NULL_SYSTEM;
 	eddy_sph_viscosity_def *copy = malloc(sizeof *copy);
