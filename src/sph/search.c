@@ -165,12 +165,13 @@ static void block_gather(const search_ctx *c, block_runs *br, search_buf *fb, se
  * b->d; returns how many. The last group reads past q1 (into the padding)
  * and is masked to q1. The arrays are held in locals: sf8_pack's stores
  * may alias anything, and would reload them from b every group. */
-static inline uint32_t hits(search_buf *b, uint32_t q0, uint32_t q1, float xi, float yi, float zi, float r2max)
+__attribute__((noinline)) static uint32_t hits(const search_buf *b, uint32_t q0, uint32_t q1, float xi, float yi,
+                                               float zi, float r2max)
 {
 	const float *bx = b->x, *by = b->y, *bz = b->z;
 	const uint32_t *bj = b->j;
-	uint32_t *hit = b->hit;
-	float *dv = b->d;
+	uint32_t *const hit = b->hit;
+	float *const dv = b->d;
 	const sf8 vx = sf8_set1(xi), vy = sf8_set1(yi), vz = sf8_set1(zi), vr2 = sf8_set1(r2max), zero = sf8_zero();
 	uint32_t cnt = 0;
 	for (uint32_t q = q0; q < q1; q += 8) {
