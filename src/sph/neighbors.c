@@ -365,15 +365,16 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		nb->cap = 32;
 		nb->bcap = 16;
 	}
+	/* one arena block: the quads first (aligned as the arena), then key, order and scratch */
 	row_pass rp = {.verlet = v->n == n && v->boundary_sig == nb->bnd.sig};
-	rp.key = eddy__arena_alloc(&w->arena, n * sizeof *rp.key);
-	rp.order = eddy__arena_alloc(&w->arena, n * sizeof *rp.order);
-	rp.scratch = eddy__arena_alloc(&w->arena, n * sizeof(float));
-	rp.p4 = eddy__arena_alloc(&w->arena, 4 * n * sizeof *rp.p4);
+	rp.p4 = eddy__arena_alloc(&w->arena, 7 * n * sizeof *rp.p4);
+	if (!rp.p4)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", n);
+	rp.key = (uint32_t *)(void *)(rp.p4 + 4 * n);
+	rp.order = rp.key + n;
+	rp.scratch = rp.order + n;
 	if (!grow_rows(nb, n))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
-	if (!rp.key || !rp.order || !rp.scratch || !rp.p4)
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", n);
 	v->age++;
 	const bool in_order = cell_order(w, nb, &rp, threads);
 	rp.moved2 = bmove2 > rp.moved2 ? bmove2 : rp.moved2;
