@@ -80,18 +80,6 @@ static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *cand, u
 	return cnt;
 }
 
-/* jl (and dv) by row, after a permutation since the search (else the
- * candidates are in ascending rows, and so are their hits): sorted already
- * unless a particle changed cell, and then nearly. */
-static inline void sort_rows(uint32_t *jl, float *dv, uint32_t cnt)
-{
-	uint32_t descents = 0; /* over the whole list, no early exit: the loop vectorises */
-	for (uint32_t a = 1; a < cnt; ++a)
-		descents += jl[a - 1] > jl[a];
-	if (descents)
-		sph_sort_hits(jl, dv, cnt);
-}
-
 /* Row i's boundary list and sum from its build slot's candidates (in index
  * order: filtering keeps it). Returns the count. */
 static inline uint32_t filter_boundary(const filter_ctx *f, long i, uint32_t b)
@@ -142,8 +130,14 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, uint32_t *max
 			const uint32_t b = nb->verlet.slot_of[i];
 			const uint32_t cnt =
 				filter_fluid(f, nb->verlet.cand + (size_t)b * stride, nb->verlet.count[b], f->p4 + 4 * i, jl, dv);
-			if (f->row_of)
-				sort_rows(jl, dv, cnt);
+			/* after a permutation since the search (else the candidates are
+			 * in ascending rows, and so are their hits), sorted by row: they
+			 * are unless a particle changed cell, and then nearly */
+			uint32_t descents = 0; /* over the whole list, no early exit: the loop vectorises */
+			for (uint32_t a = 1; f->row_of && a < cnt; ++a)
+				descents += jl[a - 1] > jl[a];
+			if (descents)
+				sph_sort_hits(jl, dv, cnt);
 			nb->wsum[i] = sph_cube_sum(dv, cnt);
 			/* whole groups: cap is a multiple of 8, jl holds whole groups */
 			for (uint32_t q = 0; q < cnt && cnt <= cap; q += 8)
