@@ -156,73 +156,78 @@ eddy_status sph_boundary_sort(eddy_world *w, sph_neighbors *nb)
 	return EDDY_OK;
 }
 
-/* How many particles the boundary boxes and the colliders give. */
-static void boundary_count(const eddy_world *w, const sph_shared *sh, float spacing, size_t *nstat, size_t *ncolp,
-                           size_t *ncol)
-{
-	eddy_vec3 normal;
-	*nstat = *ncolp = *ncol = 0;
-	const eddy_system *o;
-	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS | EDDY_CAP_COLLIDER);
-	     (o = eddy__systems_next(&it));) {
-		if (o->vt->provides & EDDY_CAP_SPH_WALLS)
-			*nstat += eddy__sph_boundary_box_points(o, sh->h, NULL, NULL, NULL, NULL);
-		else {
-			const size_t c = eddy__sph_collider_points(w, o, spacing, sh->h, NULL, NULL, NULL, NULL, &normal);
-			*ncolp += c;
-			*ncol += c > 0;
-		}
-	}
-}
-
-/* The arrays for total particles, ncol of them moving colliders' sets. */
+/* The arrays for nstat static and ncolp collider particles in ncol sets:
+ * bx by bz bvol in one block, bp rho and the seen poses in another
+ * (sph_density's checkpointed state: after 2 total floats the records are
+ * 8-byte aligned, since with colliders alloc = total), x0 .. order in a
+ * third (velocities 0: the static particles' stay so). */
 static bool boundary_alloc(sph_neighbors *nb, size_t total, size_t ncol)
 {
 	sph_boundary *bd = &nb->bnd;
 	const size_t alloc = total ? total : 1;
-	/* one block: bp, rho, then each collider's seen pose, sph_density's
-	 * checkpointed state (after 2 total floats the records are 8-byte
-	 * aligned: with colliders, alloc = total) */
 	bd->state_size = 2 * total * sizeof *nb->bp + ncol * sizeof *bd->seen;
 	nb->bp = calloc(1, 2 * alloc * sizeof *nb->bp + ncol * sizeof *bd->seen);
-	nb->bx = malloc(4 * alloc * sizeof *nb->bx);
-	if (!nb->bp || !nb->bx)
+	if (!nb->bp)
 		return false;
 	bd->rho = nb->bp + alloc;
 	bd->seen = ncol ? (struct sph_collider_seen *)(void *)(nb->bp + 2 * alloc) : NULL;
-	nb->by = nb->bx + alloc;
-	nb->bz = nb->by + alloc;
-	nb->bvol = nb->bz + alloc;
+	void *block = NULL;
+	size_t have = 0;
+	void **stat[] = {(void **)&nb->bx, (void **)&nb->by, (void **)&nb->bz, (void **)&nb->bvol};
+	if (!sph_grow_block(&block, &have, alloc, stat, 4))
+		return false;
 	if (!ncol)
 		return true;
-	bd->x0 = calloc(7 * alloc, sizeof *bd->x0); /* the velocities 0 for the static particles */
+	void **moving[] = {(void **)&bd->x0, (void **)&bd->y0, (void **)&bd->z0,   (void **)&bd->vx,
+	                   (void **)&bd->vy, (void **)&bd->vz, (void **)&bd->order};
+	block = NULL;
+	have = 0;
 	bd->col = calloc(ncol, sizeof *bd->col);
-	if (!bd->x0 || !bd->col)
+	if (!bd->col || !sph_grow_block(&block, &have, alloc, moving, 7))
 		return false;
-	bd->y0 = bd->x0 + alloc;
-	bd->z0 = bd->y0 + alloc;
-	bd->vx = bd->z0 + alloc;
-	bd->vy = bd->vx + alloc;
-	bd->vz = bd->vy + alloc;
-	bd->order = (uint32_t *)(void *)(bd->vz + alloc);
+	memset(bd->vx, 0, 3 * have * sizeof *bd->vx);
 	return true;
 }
 
-/* The boundary boxes' particles, cell-sorted, into [0, nstat). */
-static bool boundary_fill_static(eddy_world *w, sph_shared *sh, size_t nstat)
+/* The particles into the arrays: the boundary boxes' through the arena,
+ * cell-sorted into [0, nstat); the colliders' after them in pipeline order,
+ * each set in its collider's def pose. */
+static eddy_status boundary_fill(eddy_world *w, sph_shared *sh, float spacing, size_t nstat)
 {
 	sph_neighbors *nb = &sh->nb;
+	sph_boundary *bd = &nb->bnd;
 	const size_t alloc = nstat ? nstat : 1;
 	/* x y z vol as floats, key order as indices */
 	float *x = eddy__arena_alloc(&w->arena, 6 * alloc * sizeof *x);
 	if (!x)
-		return false;
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu boundary particles", nstat);
 	float *y = x + alloc, *z = y + alloc, *v = z + alloc;
 	uint32_t *key = (uint32_t *)(void *)(v + alloc), *order = key + alloc;
-	size_t at = 0;
+	size_t at_stat = 0, at = nstat;
+	eddy_vec3 normal;
 	const eddy_system *o;
-	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS); (o = eddy__systems_next(&it));)
-		at += eddy__sph_boundary_box_points(o, sh->h, x + at, y + at, z + at, v + at);
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS | EDDY_CAP_COLLIDER);
+	     (o = eddy__systems_next(&it));) {
+		if (o->vt->provides & EDDY_CAP_SPH_WALLS) {
+			at_stat += eddy__sph_boundary_box_points(o, sh->h, x + at_stat, y + at_stat, z + at_stat, v + at_stat);
+			continue;
+		}
+		const size_t want = eddy__sph_collider_points(w, o, spacing, sh->h, NULL, NULL, NULL, NULL, &normal);
+		if (!want)
+			continue;
+		if (eddy__sph_collider_points(w, o, spacing, sh->h, bd->x0 + at, bd->y0 + at, bd->z0 + at, nb->bvol + at,
+		                              &normal) != want)
+			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for the boundary particles of %s",
+			                  o->label);
+		struct sph_collider_set *cs = &bd->col[bd->ncol++];
+		*cs = (struct sph_collider_set){.slot = (int)(o - w->slots), .first = at, .count = want, .normal = normal};
+		cs->disp = eddy__v3(NAN, NAN, NAN); /* placed by sph_boundary_move */
+		const eddy_vec3 pv = ((const eddy_collider_base *)o->data)->motion.pivot;
+		for (; at < cs->first + want; ++at) {
+			const float dx = bd->x0[at] - pv.x, dy = bd->y0[at] - pv.y, dz = bd->z0[at] - pv.z;
+			cs->reach = fmaxf(cs->reach, sqrtf(dx * dx + dy * dy + dz * dz));
+		}
+	}
 	for (size_t i = 0; i < nstat; ++i)
 		key[i] = sph_cell_at(&nb->grid, x[i], y[i], z[i]);
 	sph_counting_sort(key, nstat, sph_grid_cells(&nb->grid), nb->grid.bound_start, order);
@@ -231,37 +236,6 @@ static bool boundary_fill_static(eddy_world *w, sph_shared *sh, size_t nstat)
 		nb->by[i] = y[order[i]];
 		nb->bz[i] = z[order[i]];
 		nb->bvol[i] = v[order[i]];
-	}
-	return true;
-}
-
-/* The colliders' particles after the static ones, in pipeline order, each
- * set in its collider's def pose. */
-static eddy_status boundary_fill_colliders(eddy_world *w, sph_shared *sh, float spacing)
-{
-	sph_neighbors *nb = &sh->nb;
-	sph_boundary *bd = &nb->bnd;
-	size_t at = bd->n_static;
-	eddy_vec3 normal;
-	const eddy_system *o;
-	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_COLLIDER); (o = eddy__systems_next(&it));) {
-		const size_t want = eddy__sph_collider_points(w, o, spacing, sh->h, NULL, NULL, NULL, NULL, &normal);
-		if (!want)
-			continue;
-		const size_t got = eddy__sph_collider_points(w, o, spacing, sh->h, bd->x0 + at, bd->y0 + at, bd->z0 + at,
-		                                             nb->bvol + at, &normal);
-		if (got != want)
-			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for the boundary particles of %s",
-			                  o->label);
-		struct sph_collider_set *cs = &bd->col[bd->ncol++];
-		*cs = (struct sph_collider_set){.slot = (int)(o - w->slots), .first = at, .count = got, .normal = normal};
-		cs->disp = eddy__v3(NAN, NAN, NAN); /* placed by sph_boundary_move */
-		const eddy_vec3 pv = ((const eddy_collider_base *)o->data)->motion.pivot;
-		for (size_t b = at; b < at + got; ++b) {
-			const float dx = bd->x0[b] - pv.x, dy = bd->y0[b] - pv.y, dz = bd->z0[b] - pv.z;
-			cs->reach = fmaxf(cs->reach, sqrtf(dx * dx + dy * dy + dz * dz));
-		}
-		at += got;
 	}
 	return EDDY_OK;
 }
@@ -275,8 +249,19 @@ eddy_status sph_boundary_build(eddy_world *w, sph_shared *sh)
 	if (sig == nb->bnd.sig && nb->bx)
 		return EDDY_OK;
 	const float spacing = fluid_spacing(w, sh);
-	size_t nstat, ncolp, ncol;
-	boundary_count(w, sh, spacing, &nstat, &ncolp, &ncol);
+	size_t nstat = 0, ncolp = 0, ncol = 0;
+	eddy_vec3 normal;
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS | EDDY_CAP_COLLIDER);
+	     (o = eddy__systems_next(&it));) {
+		if (o->vt->provides & EDDY_CAP_SPH_WALLS) {
+			nstat += eddy__sph_boundary_box_points(o, sh->h, NULL, NULL, NULL, NULL);
+			continue;
+		}
+		const size_t c = eddy__sph_collider_points(w, o, spacing, sh->h, NULL, NULL, NULL, NULL, &normal);
+		ncolp += c;
+		ncol += c > 0;
+	}
 	/* a plane's patch spans the world bounds: 5e7 particles is about 2 GB */
 	if ((double)ncolp > 5e7)
 		return eddy__fail(w, EDDY_ERR_NOMEM,
@@ -285,17 +270,15 @@ eddy_status sph_boundary_build(eddy_world *w, sph_shared *sh)
 		                  (double)ncolp);
 	const size_t total = nstat + ncolp;
 	sph_boundary_free(nb);
-	if (!boundary_alloc(nb, total, ncol) || !boundary_fill_static(w, sh, nstat)) {
+	if (!boundary_alloc(nb, total, ncol)) {
 		sph_boundary_free(nb);
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu boundary particles", total);
 	}
 	nb->bnd.n_static = nstat;
-	if (ncol) {
-		const eddy_status st = boundary_fill_colliders(w, sh, spacing);
-		if (st != EDDY_OK) {
-			sph_boundary_free(nb);
-			return st;
-		}
+	const eddy_status st = boundary_fill(w, sh, spacing, nstat);
+	if (st != EDDY_OK) {
+		sph_boundary_free(nb);
+		return st;
 	}
 	for (size_t i = 0; i < total; ++i)
 		nb->bnd.rho[i] = sh->rho0;

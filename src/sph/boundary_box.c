@@ -84,32 +84,31 @@ eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_boundary_
 	if (!eddy__check_box(w, sys, def->min, def->max) || !eddy__check_positive(w, sys, "spacing", def->spacing))
 		return EDDY_NULL_SYSTEM;
 	const float ext[3] = {def->max.x - def->min.x, def->max.y - def->min.y, def->max.z - def->min.z};
+	const float lo[3] = {def->min.x, def->min.y, def->min.z};
+	/* a side thinner than a spacing (a thin plate) gets no inner cells:
+	 * the layers of both faces meet at its centre */
+	double cells[3], total = 1, inner = 1;
+	for (int a = 0; a < 3; ++a) {
+		cells[a] = round(ext[a] / def->spacing);
+		if (cells[a] > 1e6)
+			return eddy__fail(w, EDDY_ERR_NOMEM,
+			                  "%s: the box is more than a million spacings long; use a larger spacing", sys),
+			       EDDY_NULL_SYSTEM;
+		total *= cells[a] + 10;
+		inner *= cells[a];
+	}
+	if (total - inner > 2e9)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: the box needs too many boundary particles; use a larger spacing",
+		                  sys),
+		       EDDY_NULL_SYSTEM;
 	sph_boundary_box *b = calloc(1, sizeof *b);
 	if (!b)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
 	b->def = *def;
-	double total = 1, inner = 1;
 	for (int a = 0; a < 3; ++a) {
-		/* a side thinner than a spacing (a thin plate) gets no inner cells:
-		 * the layers of both faces meet at its centre */
-		const double cells = round(ext[a] / def->spacing);
-		if (cells > 1e6) {
-			free(b);
-			eddy__fail(w, EDDY_ERR_NOMEM, "%s: the box is more than a million spacings long; use a larger spacing",
-			           sys);
-			return EDDY_NULL_SYSTEM;
-		}
-		b->n[a] = (int)cells;
-		b->sp[a] = cells > 0 ? (float)(ext[a] / cells) : def->spacing;
-		const float lo = a == 0 ? def->min.x : a == 1 ? def->min.y : def->min.z;
-		b->o[a] = cells > 0 ? lo : lo + 0.5f * ext[a];
-		total *= cells + 10;
-		inner *= cells;
-	}
-	if (total - inner > 2e9) {
-		free(b);
-		eddy__fail(w, EDDY_ERR_NOMEM, "%s: the box needs too many boundary particles; use a larger spacing", sys);
-		return EDDY_NULL_SYSTEM;
+		b->n[a] = (int)cells[a];
+		b->sp[a] = cells[a] > 0 ? (float)(ext[a] / cells[a]) : def->spacing;
+		b->o[a] = cells[a] > 0 ? lo[a] : lo[a] + 0.5f * ext[a];
 	}
 	return eddy__add_system(w, &eddy__kind_sph_boundary_box, b, NULL, NULL);
 }

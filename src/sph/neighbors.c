@@ -80,18 +80,6 @@ static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *cand, u
 	return cnt;
 }
 
-/* jl (and dv) by row, after a permutation since the search (else the
- * candidates are in ascending rows, and so are their hits): sorted already
- * unless a particle changed cell, and then nearly. */
-static inline void sort_rows(uint32_t *jl, float *dv, uint32_t cnt)
-{
-	uint32_t descents = 0; /* over the whole list, no early exit: the loop vectorises */
-	for (uint32_t a = 1; a < cnt; ++a)
-		descents += jl[a - 1] > jl[a];
-	if (descents)
-		sph_sort_hits(jl, dv, cnt);
-}
-
 /* Row i's boundary list and sum from its build slot's candidates (in index
  * order: filtering keeps it). Returns the count. */
 static inline uint32_t filter_boundary(const filter_ctx *f, long i, uint32_t b)
@@ -142,8 +130,14 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, uint32_t *max
 			const uint32_t b = nb->verlet.slot_of[i];
 			const uint32_t cnt =
 				filter_fluid(f, nb->verlet.cand + (size_t)b * stride, nb->verlet.count[b], f->p4 + 4 * i, jl, dv);
-			if (f->row_of)
-				sort_rows(jl, dv, cnt);
+			/* after a permutation since the search (else the candidates are
+			 * in ascending rows, and so are their hits), sorted by row: they
+			 * are unless a particle changed cell, and then nearly */
+			uint32_t descents = 0; /* over the whole list, no early exit: the loop vectorises */
+			for (uint32_t a = 1; f->row_of && a < cnt; ++a)
+				descents += jl[a - 1] > jl[a];
+			if (descents)
+				sph_sort_hits(jl, dv, cnt);
 			nb->wsum[i] = sph_cube_sum(dv, cnt);
 			/* whole groups: cap is a multiple of 8, jl holds whole groups */
 			for (uint32_t q = 0; q < cnt && cnt <= cap; q += 8)
@@ -365,15 +359,16 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		nb->cap = 32;
 		nb->bcap = 16;
 	}
+	/* one arena block: the quads first (aligned as the arena), then key, order and scratch */
 	row_pass rp = {.verlet = v->n == n && v->boundary_sig == nb->bnd.sig};
-	rp.key = eddy__arena_alloc(&w->arena, n * sizeof *rp.key);
-	rp.order = eddy__arena_alloc(&w->arena, n * sizeof *rp.order);
-	rp.scratch = eddy__arena_alloc(&w->arena, n * sizeof(float));
-	rp.p4 = eddy__arena_alloc(&w->arena, 4 * n * sizeof *rp.p4);
+	rp.p4 = eddy__arena_alloc(&w->arena, 7 * n * sizeof *rp.p4);
+	if (!rp.p4)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", n);
+	rp.key = (uint32_t *)(void *)(rp.p4 + 4 * n);
+	rp.order = rp.key + n;
+	rp.scratch = rp.order + n;
 	if (!grow_rows(nb, n))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
-	if (!rp.key || !rp.order || !rp.scratch || !rp.p4)
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", n);
 	v->age++;
 	const bool in_order = cell_order(w, nb, &rp, threads);
 	rp.moved2 = bmove2 > rp.moved2 ? bmove2 : rp.moved2;

@@ -1,10 +1,7 @@
 /* SPDX-License-Identifier: MIT */
-/* Internals of the neighbour search, shared by its four files:
- *   grid.c       the cell grid and the counting sort into cell order
- *   boundary.c   boundary particles of walls and colliders, their motion
- *   search.c     the grid search, into the Verlet list or the exact lists
- *   neighbors.c  the step: cell order, the Verlet list's upkeep, the filter
- * The SPH passes read the lists through sph.h only. */
+/* Internals of the neighbour search, shared by grid.c, boundary.c,
+ * search.c and neighbors.c (each says its part in its header comment). The
+ * SPH passes read the lists through sph.h only. */
 #ifndef EDDY_SPH_NEIGHBORS_H
 #define EDDY_SPH_NEIGHBORS_H
 

@@ -58,14 +58,15 @@ typedef struct cell_run {
 	uint32_t bound_begin, bound_end; /* positions in the boundary cell order */
 	uint32_t own_begin, own_end;     /* the rows of the block's own particles in it (none: equal) */
 	uint32_t layer;                  /* the row's z layer, 0 = the lowest searched */
+	uint32_t fluid_at;               /* the buffer offset of its rows */
 } cell_run;
 
-/* A block's runs and where they landed in the buffers. */
+/* A block's runs and where they land in the buffers. */
 typedef struct block_runs {
 	int x0, x1, y0, y1, z0, z1; /* the block's cells, inclusive */
 	int count;
 	cell_run run[SEARCH_RUNS];
-	uint32_t fluid_at[SEARCH_RUNS];                                          /* buffer offset of each run's rows */
+	uint32_t nf, nbd;                                                        /* fluid and boundary candidates */
 	uint32_t fluid_layer[SEARCH_LAYERS + 1], bound_layer[SEARCH_LAYERS + 1]; /* buffer offset of each z layer */
 } block_runs;
 
@@ -76,9 +77,10 @@ static bool search_buf_grow(search_buf *b, size_t want)
 	return sph_grow_block(&b->block, &b->cap, want + 8, slices, 6);
 }
 
-/* The runs of cells around block id, in cell order, with their row ranges;
- * *nf, *nbd: the fluid and boundary candidates they hold. */
-static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br, size_t *nf, size_t *nbd)
+/* The runs of cells around block id, in cell order, with their row ranges
+ * and their buffer offsets, and the offset of each z layer: a particle
+ * needs only the 2R + 1 layers around its own, one stretch of the buffer. */
+static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br)
 {
 	const sph_grid *g = &c->nb->grid;
 	const int R = c->R, bxi = (int)(id % (uint32_t)c->blocks_x),
@@ -88,8 +90,13 @@ static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br, si
 	br->y0 = byi * SEARCH_BY, br->y1 = br->y0 + SEARCH_BY - 1 < g->gy ? br->y0 + SEARCH_BY - 1 : g->gy - 1;
 	br->z0 = bzi * SEARCH_BZ, br->z1 = br->z0 + SEARCH_BZ - 1 < g->gz ? br->z0 + SEARCH_BZ - 1 : g->gz - 1;
 	br->count = 0;
-	*nf = *nbd = 0;
-	for (int zz = br->z0 - R; zz <= br->z1 + R; ++zz) {
+	br->nf = br->nbd = 0;
+	for (int zz = br->z0 - R;; ++zz) {
+		const uint32_t layer = (uint32_t)(zz - (br->z0 - R));
+		br->fluid_layer[layer] = br->nf;
+		br->bound_layer[layer] = br->nbd;
+		if (zz > br->z1 + R)
+			break;
 		if (zz < 0 || zz >= g->gz)
 			continue;
 		const int ez = zz < br->z0 ? br->z0 - zz : zz > br->z1 ? zz - br->z1 : 0;
@@ -107,9 +114,10 @@ static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br, si
 			const bool own = ey == 0 && ez == 0;
 			r->own_begin = own ? g->fluid_start[row + (size_t)br->x0] : 0;
 			r->own_end = own ? g->fluid_start[row + (size_t)br->x1 + 1] : 0;
-			r->layer = (uint32_t)(zz - (br->z0 - R));
-			*nf += r->fluid_end - r->fluid_begin;
-			*nbd += r->bound_end - r->bound_begin;
+			r->layer = layer;
+			r->fluid_at = br->nf;
+			br->nf += r->fluid_end - r->fluid_begin;
+			br->nbd += r->bound_end - r->bound_begin;
 		}
 	}
 }
@@ -129,27 +137,15 @@ static uint32_t gather_run(search_buf *b, uint32_t at, const float *x, const flo
 	return at;
 }
 
-/* The runs' candidates into the buffers, with the offsets of each run and
- * of each z layer (a particle needs only the 2R + 1 layers around its own:
- * one stretch of the buffer), then eight FAR points. */
-static void block_gather(const search_ctx *c, block_runs *br, search_buf *fb, search_buf *bb)
+/* The runs' candidates into the buffers, then eight FAR points. */
+static void block_gather(const search_ctx *c, const block_runs *br, search_buf *fb, search_buf *bb)
 {
 	const sph_neighbors *nb = c->nb;
 	uint32_t nf = 0, nbd = 0;
-	int layer = 0;
 	for (int r = 0; r < br->count; ++r) {
 		const cell_run *run = &br->run[r];
-		for (; layer <= (int)run->layer; ++layer) {
-			br->fluid_layer[layer] = nf;
-			br->bound_layer[layer] = nbd;
-		}
-		br->fluid_at[r] = nf;
 		nf = gather_run(fb, nf, c->x, c->y, c->z, NULL, run->fluid_begin, run->fluid_end);
 		nbd = gather_run(bb, nbd, nb->bx, nb->by, nb->bz, c->bound_order, run->bound_begin, run->bound_end);
-	}
-	for (; layer <= 2 * c->R + br->z1 - br->z0 + 1; ++layer) {
-		br->fluid_layer[layer] = nf;
-		br->bound_layer[layer] = nbd;
 	}
 	for (uint32_t q = 0; q < 8; ++q) {
 		fb->x[nf + q] = fb->y[nf + q] = fb->z[nf + q] = FAR;
@@ -165,12 +161,13 @@ static void block_gather(const search_ctx *c, block_runs *br, search_buf *fb, se
  * b->d; returns how many. The last group reads past q1 (into the padding)
  * and is masked to q1. The arrays are held in locals: sf8_pack's stores
  * may alias anything, and would reload them from b every group. */
-static inline uint32_t hits(search_buf *b, uint32_t q0, uint32_t q1, float xi, float yi, float zi, float r2max)
+__attribute__((noinline)) static uint32_t hits(const search_buf *b, uint32_t q0, uint32_t q1, float xi, float yi,
+                                               float zi, float r2max)
 {
 	const float *bx = b->x, *by = b->y, *bz = b->z;
 	const uint32_t *bj = b->j;
-	uint32_t *hit = b->hit;
-	float *dv = b->d;
+	uint32_t *const hit = b->hit;
+	float *const dv = b->d;
 	const sf8 vx = sf8_set1(xi), vy = sf8_set1(yi), vz = sf8_set1(zi), vr2 = sf8_set1(r2max), zero = sf8_zero();
 	uint32_t cnt = 0;
 	for (uint32_t q = q0; q < q1; q += 8) {
@@ -193,7 +190,7 @@ static void search_particle(const search_ctx *c, const block_runs *br, int r, ui
 	const cell_run *run = &br->run[r];
 	const float xi = c->x[i], yi = c->y[i], zi = c->z[i];
 	/* not itself: its own entry is moved away for its turn */
-	const uint32_t self = br->fluid_at[r] + (i - run->fluid_begin);
+	const uint32_t self = run->fluid_at + (i - run->fluid_begin);
 	fb->x[self] = FAR;
 	const uint32_t l0 = run->layer - (uint32_t)c->R, l1 = run->layer + (uint32_t)c->R + 1;
 	const uint32_t cnt = hits(fb, br->fluid_layer[l0], br->fluid_layer[l1], xi, yi, zi, o->r2max);
@@ -227,9 +224,8 @@ bool SIMD_NAME(search_block)(const search_ctx *c, uint32_t id, search_buf *fb, s
                              uint32_t *mb)
 {
 	block_runs br;
-	size_t nf, nbd;
-	block_find_runs(c, id, &br, &nf, &nbd);
-	if (!search_buf_grow(fb, nf) || !search_buf_grow(bb, nbd))
+	block_find_runs(c, id, &br);
+	if (!search_buf_grow(fb, br.nf) || !search_buf_grow(bb, br.nbd))
 		return false;
 	block_gather(c, &br, fb, bb);
 	for (int r = 0; r < br.count; ++r)
