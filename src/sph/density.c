@@ -83,9 +83,6 @@ static float eos_density(const sph_density *sd, float p)
  * around (most wall particles have no fluid near them, and a grid walk for
  * each would cost more than the fluid), rows ascending. */
 typedef struct walls {
-	const sph_neighbors *nb;
-	const float *x, *y, *z;
-	float h2;
 	eddy_vec3 g;
 	uint32_t *start; /* nbound + 1: wall b's fluid rows are fluid[start[b] .. start[b + 1]) */
 	uint32_t *fluid;
@@ -112,10 +109,7 @@ static bool walls_make(eddy_world *w, const sph_density *sd, bool iterate, walls
 	const sph_neighbors *nb = &sd->sh.nb;
 	const size_t n = w->n, nbound = nb->nbound;
 	bool ok = true;
-	*wl = (walls){.nb = nb, .h2 = sd->sh.k.h2, .g = w->def.gravity};
-	wl->x = eddy__col(w, COL_X_);
-	wl->y = eddy__col(w, COL_Y_);
-	wl->z = eddy__col(w, COL_Z_);
+	*wl = (walls){.g = w->def.gravity};
 	wl->start = scratch(w, nbound + 1, sizeof *wl->start, &ok);
 	uint32_t *at = scratch(w, nbound, sizeof *at, &ok);
 	if (!ok)
@@ -175,8 +169,9 @@ static void wall_extrapolate(sph_density *sd, const walls *wl, const float *rho,
 		const uint32_t j = wl->fluid[q];
 		float wgt, gr;
 		if (first) {
-			const float rx = nb->bx[b] - wl->x[j], ry = nb->by[b] - wl->y[j], rz = nb->bz[b] - wl->z[j];
-			const float d = wl->h2 - (rx * rx + ry * ry + rz * rz);
+			const float *xj = sd->sh.pq + 4 * j; /* x_f y_f z_f */
+			const float rx = nb->bx[b] - xj[0], ry = nb->by[b] - xj[1], rz = nb->bz[b] - xj[2];
+			const float d = sd->sh.k.h2 - (rx * rx + ry * ry + rz * rz);
 			wgt = d * d * d;
 			gr = wl->g.x * rx + wl->g.y * ry + wl->g.z * rz;
 			if (wl->wgt) {

@@ -298,7 +298,6 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 		}
 		sf8_fold4(sf8_add(sf8_add(sx, sy), sz), t[q]);
 	}
-	/* 1 / dt^n: n = 1 for the velocity solve, 2 for the density one */
 	const float inv1 = ps->divergence ? 1.0f / wk->dt : 1.0f / (wk->dt * wk->dt);
 	const sf8 zero = sf8_zero(), dt = sf8_set1(wk->dt), inv = sf8_set1(inv1), rho0 = sf8_set1(wk->sh->rho0),
 			  omega = sf8_set1(DFSPH_OMEGA), minus = sf8_set1(-0.0f);
