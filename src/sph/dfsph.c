@@ -383,10 +383,9 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
 /* ---- the system: solves, step, limits, registration ---------------------------- */
 #include "systems.h"
 
-/* dt <= DFSPH_GRAVITY_LIMIT sqrt(h / |g|) (times the CFL number): gravity
- * compresses the fluid by g dt^2 a step, which the solve's first-order
- * prediction must absorb, or a tank at rest rings up (the velocity limit
- * covers transient forces). */
+/* The gravity limit (header): gravity compresses the fluid by g dt^2 a step,
+ * which the solve's first-order prediction must absorb, or a tank at rest
+ * rings up (the velocity limit covers transient forces). */
 #define DFSPH_GRAVITY_LIMIT 0.18
 
 /* A step fails above this final mean density error, or above this
