@@ -399,9 +399,8 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
 #define DFSPH_FAIL_CAPPED_ERROR 2.0
 #define DFSPH_FAIL_CAPPED 3
 
-/* projected Jacobi sweeps the velocity solve makes after its conjugate
- * gradients: they damp the particle-scale error the Krylov solve leaves,
- * which makes single particles at a still surface jitter */
+/* The least sweeps of the velocity solve: they damp the particle-scale error
+ * its conjugate gradients leave, which jitters particles at a still surface. */
 #define DFSPH_SMOOTH 2
 
 /* The velocity solve leaves out a particle whose kernel sum (walls
