@@ -293,12 +293,9 @@ static void *state(eddy_world *w, eddy_system *s, size_t *size)
 	return sd->sh.nb.bp;
 }
 
-/* Preflight: the mass is calibrated on def.spacing, so every emitter must emit
- * on that lattice; an emitter at spacing d starts the fluid at about
- * (spacing / d)^3 times rho0, which the pressure then collapses or blows
- * apart. h / spacing below 1.2 leaves the nearest neighbours almost outside
- * the kernel (no pressure between them); above 4 it costs (h / spacing)^3
- * neighbours for no accuracy. */
+/* Preflight: every emitter on the lattice the mass is calibrated on, and
+ * h / spacing in [1.2, 4] (an error below, a warning above; the messages
+ * give the reasons). */
 static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void *user)
 {
 	const sph_density *sd = s->data;

@@ -49,10 +49,9 @@
  * Published per frame: solver = "dfsph", iterations and divergence_iterations
  * (the solves' mean per step), residual (largest final mean density error of
  * a step), residual_max (... of one particle, / rho0), unconverged (steps in
- * which a solve stopped at its cap above its tolerance). Time-step limits
- * (times the CFL number): dt <= h / max|v| and dt <= DFSPH_GRAVITY_LIMIT
- * sqrt(h / |g|), the latter with the divergence solver times
- * sqrt(depth_scale). No acoustic limit.
+ * which a solve stopped at its cap above its tolerance). Limits on dt (times
+ * the CFL number): h / max|v| and DFSPH_GRAVITY_LIMIT sqrt(h / |g|), the
+ * latter with the divergence solver times sqrt(depth_scale); none acoustic.
  *
  * Sources: Bender & Koschier, "Divergence-free smoothed particle
  * hydrodynamics", SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and
@@ -732,10 +731,9 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	return finish(w, sys, &wk, ctx, it, residual, div_it, div_residual);
 }
 
-/* For tests/test_sph_reference.c: after a step of w, the passes and the
- * operator product on the last sph_density's lists, on the back-end
- * SIMD_PICK gives now. Per particle: inv_d = 1 / D_i, inv_dsym = 1 / D'_i,
- * rate = R_i(v) (the wall counted twice) of the velocity columns, and
+/* For tests/test_sph_reference.c, after a step of w, on the last lists and
+ * the back-end SIMD_PICK gives now, per particle: inv_d = 1 / D_i, inv_dsym
+ * = 1 / D'_i, rate = R_i(v) of the velocity columns (the wall counted twice),
  * acc[3 i ..] = -(sum_j (k_i + k_j) G_ij + 2 k_i B_i) for k_i = k[i]. */
 eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float *inv_dsym, float *rate, float *acc);
 eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float *inv_dsym, float *rate, float *acc)
