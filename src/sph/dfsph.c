@@ -51,7 +51,7 @@
  * a step), residual_max (... of one particle, / rho0), unconverged (steps in
  * which a solve stopped at its cap above its tolerance). Limits on dt (times
  * the CFL number): h / max|v| and DFSPH_GRAVITY_LIMIT sqrt(h / |g|), the
- * latter with the divergence solver times sqrt(depth_scale); none acoustic.
+ * latter with the divergence solver times sqrt(depth_scale).
  *
  * Sources: Bender & Koschier, "Divergence-free smoothed particle
  * hydrodynamics", SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and
