@@ -3,8 +3,8 @@
  *
  * Reads: x y z. Writes: density pressure neighbors, and reorders the
  * particle table into grid-cell order (neighbors.c, which also makes the
- * kernel sums below with the lists). Shares with the later SPH systems
- * (sph_shared): the lists, 1/rho, and (x y z 1/rho) quads per particle.
+ * kernel sums below with the lists). Shares sph_shared (sph.h) with the
+ * later SPH systems.
  *   rho_i = m sum_j W_poly6(x_i - x_j) + sum_b V_b rho_b W_poly6(x_i - x_b)
  *   (j over fluid particles including i itself, b over boundary particles)
  *   linear EOS: p_i = k (rho_i - rho0)                      (Mueller 2003, eq. 12)
@@ -42,14 +42,12 @@ static const int density_writes[] = {COL_DENSITY, COL_PRESSURE, COL_SPH_NEIGHBOR
 
 eddy_sph_density_def eddy_default_sph_density_def(void)
 {
-	eddy_sph_density_def d;
-	d.radius = 0.02f;
-	d.spacing = 0.01f;
-	d.rest_density = 1000.0f;
-	d.stiffness = 400.0f;
-	d.eos = EDDY_SPH_EOS_LINEAR;
-	d.tait_gamma = 7.0f;
-	return d;
+	return (eddy_sph_density_def){.radius = 0.02f,
+	                              .spacing = 0.01f,
+	                              .rest_density = 1000.0f,
+	                              .stiffness = 400.0f,
+	                              .eos = EDDY_SPH_EOS_LINEAR,
+	                              .tait_gamma = 7.0f};
 }
 
 /* The EOS: pressure of a density (clamped at 0) and density of a pressure. */
@@ -67,18 +65,17 @@ static float eos_density(const sph_density *sd, float p)
 	return sd->def.eos == EDDY_SPH_EOS_TAIT ? rho0 * powf(p / (k * rho0 / gamma) + 1.0f, 1.0f / gamma) : rho0 + p / k;
 }
 
-/* The wall densities enter the fluid's density sums, which set the
- * pressure the walls copy: a loop. Closed with the previous step's wall
- * densities (as the neighbour search summed them) it is a one-step-lagged
- * positive feedback that pumps energy into the fluid at the walls (a still
- * column never comes to rest). With the EOS pressure (sph_pressure) the
- * loop is iterated within the step: the fluid near the walls takes their
- * new densities, sum_b V_b (rho_b new - rho_b old) W_poly6, and the walls
- * are extrapolated again, WALL_PASSES_MAX times or until no wall density
- * changes by more than WALL_TOL of the first pass's change. Each pass
- * shrinks the error by the walls' share of a kernel sum (1/4 at a flat
- * wall, 1/2 at a corner). Against sph_dfsph's pressure solve iterated walls
- * pump energy in instead: there they keep the one-step lag. */
+/* The wall densities enter the fluid's density sums, which set the pressure
+ * the walls copy: a loop. Closed with the previous step's wall densities (as
+ * the neighbour search summed them) it is a one-step-lagged positive feedback
+ * that pumps energy into the fluid at the walls (a still column never comes
+ * to rest). With the EOS pressure (sph_pressure) it is iterated within the
+ * step: the fluid near the walls takes their new densities, sum_b V_b
+ * (rho_b new - rho_b old) W_poly6, and the walls are extrapolated again,
+ * WALL_PASSES_MAX times or until no wall density changes by more than
+ * WALL_TOL of the first pass's change; each pass shrinks the error by the
+ * walls' share of a kernel sum (1/4 at a flat wall, 1/2 at a corner). With
+ * sph_dfsph iterated walls pump energy in instead: it keeps the lag. */
 #define WALL_PASSES_MAX 3
 #define WALL_TOL 1e-3f
 
@@ -86,9 +83,6 @@ static float eos_density(const sph_density *sd, float p)
  * around (most wall particles have no fluid near them, and a grid walk for
  * each would cost more than the fluid), rows ascending. */
 typedef struct walls {
-	const sph_neighbors *nb;
-	const float *x, *y, *z;
-	float h2;
 	eddy_vec3 g;
 	uint32_t *start; /* nbound + 1: wall b's fluid rows are fluid[start[b] .. start[b + 1]) */
 	uint32_t *fluid;
@@ -115,10 +109,7 @@ static bool walls_make(eddy_world *w, const sph_density *sd, bool iterate, walls
 	const sph_neighbors *nb = &sd->sh.nb;
 	const size_t n = w->n, nbound = nb->nbound;
 	bool ok = true;
-	*wl = (walls){.nb = nb, .h2 = sd->sh.k.h2, .g = w->def.gravity};
-	wl->x = eddy__col(w, COL_X_);
-	wl->y = eddy__col(w, COL_Y_);
-	wl->z = eddy__col(w, COL_Z_);
+	*wl = (walls){.g = w->def.gravity};
 	wl->start = scratch(w, nbound + 1, sizeof *wl->start, &ok);
 	uint32_t *at = scratch(w, nbound, sizeof *at, &ok);
 	if (!ok)
@@ -178,8 +169,9 @@ static void wall_extrapolate(sph_density *sd, const walls *wl, const float *rho,
 		const uint32_t j = wl->fluid[q];
 		float wgt, gr;
 		if (first) {
-			const float rx = nb->bx[b] - wl->x[j], ry = nb->by[b] - wl->y[j], rz = nb->bz[b] - wl->z[j];
-			const float d = wl->h2 - (rx * rx + ry * ry + rz * rz);
+			const float *xj = sd->sh.pq + 4 * j; /* x_f y_f z_f */
+			const float rx = nb->bx[b] - xj[0], ry = nb->by[b] - xj[1], rz = nb->bz[b] - xj[2];
+			const float d = sd->sh.k.h2 - (rx * rx + ry * ry + rz * rz);
 			wgt = d * d * d;
 			gr = wl->g.x * rx + wl->g.y * ry + wl->g.z * rz;
 			if (wl->wgt) {
@@ -198,8 +190,7 @@ static void wall_extrapolate(sph_density *sd, const walls *wl, const float *rho,
 	nb->bnd.rho[b] = eos_density(sd, pb);
 }
 
-/* Row i's density r, and what follows from it: 1/rho, the quad's 1/rho and
- * the EOS pressure. */
+/* Row i's density r and what follows: 1/rho (also in its quad), the pressure. */
 static inline void set_density(sph_density *sd, float *rho, float *p, long i, float r)
 {
 	rho[i] = r;
@@ -302,12 +293,9 @@ static void *state(eddy_world *w, eddy_system *s, size_t *size)
 	return sd->sh.nb.bp;
 }
 
-/* Preflight: the mass is calibrated on def.spacing, so every emitter must emit
- * on that lattice; an emitter at spacing d starts the fluid at about
- * (spacing / d)^3 times rho0, which the pressure then collapses or blows
- * apart. h / spacing below 1.2 leaves the nearest neighbours almost outside
- * the kernel (no pressure between them); above 4 it costs (h / spacing)^3
- * neighbours for no accuracy. */
+/* Preflight: every emitter on the lattice the mass is calibrated on, and
+ * h / spacing in [1.2, 4] (an error below, a warning above; the messages
+ * give the reasons). */
 static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void *user)
 {
 	const sph_density *sd = s->data;

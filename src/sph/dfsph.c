@@ -49,10 +49,9 @@
  * Published per frame: solver = "dfsph", iterations and divergence_iterations
  * (the solves' mean per step), residual (largest final mean density error of
  * a step), residual_max (... of one particle, / rho0), unconverged (steps in
- * which a solve stopped at its cap above its tolerance). Time-step limits
- * (times the CFL number): dt <= h / max|v| and dt <= DFSPH_GRAVITY_LIMIT
- * sqrt(h / |g|), the latter with the divergence solver times
- * sqrt(depth_scale). No acoustic limit.
+ * which a solve stopped at its cap above its tolerance). Limits on dt (times
+ * the CFL number): h / max|v| and DFSPH_GRAVITY_LIMIT sqrt(h / |g|), the
+ * latter with the divergence solver times sqrt(depth_scale).
  *
  * Sources: Bender & Koschier, "Divergence-free smoothed particle
  * hydrodynamics", SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and
@@ -114,9 +113,7 @@ typedef struct dfsph_work {
 	float *mask;   /* 1 on the active set, else 0 */
 } dfsph_work;
 
-/* A pass over all particles. PASS_RATE writes R_i(v) to err; PASS_SWEEP
- * also the sweep's error and its change of k to k; PASS_CORRECT applies k
- * to v* and adds it to ksum. */
+/* A pass over all particles: gradients, rate or correct below. */
 enum dfsph_pass_kind { PASS_GRADIENTS, PASS_RATE, PASS_SWEEP, PASS_CORRECT };
 typedef struct dfsph_pass {
 	dfsph_work *wk;
@@ -184,8 +181,7 @@ static inline sf8 sum8(const float *t, long m)
 /* Particle i's wall sums: B_i (out[0..2][q]) and sum_b (g . (x_b - x_i)) m_b
  * grad W(x_i - x_b) (out[3..5][q]), each in four partial sums (neighbour q
  * onto sum q mod 4, the last four padded and masked out) ended as sph_sum4
- * ends them: a particle at a wall has a few boundary neighbours, too few to
- * fill eight lanes. */
+ * ends them: a particle at a wall has too few boundary neighbours for eight. */
 static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], long q)
 {
 	const sph_shared *sh = wk->sh;
@@ -269,7 +265,6 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 		store_quads8(wk->h + i, m, sf8_mul(sf8_xor(minus, load8(w[3] + q, m)), ir),
 		             sf8_mul(sf8_xor(minus, load8(w[4] + q, m)), ir), sf8_mul(sf8_xor(minus, load8(w[5] + q, m)), ir),
 		             load8(wk->rho + i, m));
-		/* S + 2B: the boundary term of the acceleration counts twice (pressure mirroring) */
 		const sf8 ex = sf8_add(sx, sf8_mul(two, bx)), ey = sf8_add(sy, sf8_mul(two, by)),
 				  ez = sf8_add(sz, sf8_mul(two, bz));
 		/* D_i = (S + 2B) . (S + B) + sum |G|^2 */
@@ -302,7 +297,6 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 		}
 		sf8_fold4(sf8_add(sf8_add(sx, sy), sz), t[q]);
 	}
-	/* 1 / dt^n: n = 1 for the velocity solve, 2 for the density one */
 	const float inv1 = ps->divergence ? 1.0f / wk->dt : 1.0f / (wk->dt * wk->dt);
 	const sf8 zero = sf8_zero(), dt = sf8_set1(wk->dt), inv = sf8_set1(inv1), rho0 = sf8_set1(wk->sh->rho0),
 			  omega = sf8_set1(DFSPH_OMEGA), minus = sf8_set1(-0.0f);
@@ -388,10 +382,9 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
 /* ---- the system: solves, step, limits, registration ---------------------------- */
 #include "systems.h"
 
-/* dt <= DFSPH_GRAVITY_LIMIT sqrt(h / |g|) (times the CFL number): gravity
- * compresses the fluid by g dt^2 a step, which the solve's first-order
- * prediction must absorb, or a tank at rest rings up (the velocity limit
- * covers transient forces). */
+/* The gravity limit (header): gravity compresses the fluid by g dt^2 a step,
+ * which the solve's first-order prediction must absorb, or a tank at rest
+ * rings up (the velocity limit covers transient forces). */
 #define DFSPH_GRAVITY_LIMIT 0.18
 
 /* A step fails above this final mean density error, or above this
@@ -405,9 +398,8 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
 #define DFSPH_FAIL_CAPPED_ERROR 2.0
 #define DFSPH_FAIL_CAPPED 3
 
-/* projected Jacobi sweeps the velocity solve makes after its conjugate
- * gradients: they damp the particle-scale error the Krylov solve leaves,
- * which makes single particles at a still surface jitter */
+/* The least sweeps of the velocity solve: they damp the particle-scale error
+ * its conjugate gradients leave, which jitters particles at a still surface. */
 #define DFSPH_SMOOTH 2
 
 /* The velocity solve leaves out a particle whose kernel sum (walls
@@ -433,13 +425,11 @@ typedef struct sph_dfsph {
 
 eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 {
-	eddy_sph_dfsph_def d;
-	d.max_density_error = 0.005f;
-	d.max_iterations = 100;
-	d.divergence_solver = true;
-	d.max_divergence_error = 5e-5f;
-	d.max_divergence_iterations = 1000;
-	return d;
+	return (eddy_sph_dfsph_def){.max_density_error = 0.005f,
+	                            .max_iterations = 100,
+	                            .divergence_solver = true,
+	                            .max_divergence_error = 5e-5f,
+	                            .max_divergence_iterations = 1000};
 }
 
 static void pass(dfsph_work *wk, enum dfsph_pass_kind kind, bool divergence, bool projected)
@@ -463,15 +453,14 @@ static void operator_product(dfsph_work *wk)
 	*wk = keep;
 }
 
-/* The solves' bulk: Jacobi-preconditioned conjugate gradients (Hestenes &
- * Stiefel 1952; Saad 2003, Alg. 9.1) on A k = R(v*) over the particles that
- * hold pressure (k_i > 0) or compress (R_i > 0), where the unilateral
- * constraint is an equality; the density solve's right side is the rate that
- * brings rho_i to rho0 in a step. It stops once the mean |r_i| dt / rho0 is
- * at most tol or a direction has no positive curvature, then projects (k_i
- * < 0 back to 0); the sweeps after it settle the particles that left or
- * entered the set. Its sums are serial in row order: the same bits for any
- * thread count. */
+/* The solves' bulk: Jacobi-preconditioned conjugate gradients on A k = R(v*)
+ * over the particles that hold pressure (k_i > 0) or compress (R_i > 0),
+ * where the unilateral constraint is an equality; the density solve's right
+ * side is the rate that brings rho_i to rho0 in a step. It stops once the
+ * mean |r_i| dt / rho0 is at most tol or a direction has no positive
+ * curvature, then projects (k_i < 0 back to 0); the sweeps after it settle
+ * the particles that left or entered the set. Its sums are serial in row
+ * order: the same bits for any thread count. */
 static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, double *residual)
 {
 	const long n = wk->n;
@@ -527,14 +516,13 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	return it;
 }
 
-/* DFSPH_DEPTH_REF h / H in a fluid deeper than that, else 1, H the fluid's
- * extent along gravity (0 without): the depth of water at rest, more (so
- * stricter) while parts of it fly. The column-wide mode's eigenvalue falls
- * relative to the diagonal as (h / H)^2, so a mean residual eps leaves it an
- * error of eps (H / h)^2: the tolerances times its square hold the pressure
- * that carries the column to the same fraction at any depth. The gravity
- * limit takes its root (dt ~ h / sqrt(|g| H): the prediction's error grows
- * with the hydrostatic pressure it moves). */
+/* DFSPH_DEPTH_REF h / H in a fluid deeper than that, else 1; H is the fluid's
+ * extent along gravity (the depth at rest, more while parts of it fly). The
+ * column-wide mode's eigenvalue falls relative to the diagonal as (h / H)^2,
+ * so a mean residual eps leaves it an error of eps (H / h)^2: the tolerances
+ * times its square hold the column to the same fraction at any depth. The
+ * gravity limit takes its root (dt ~ h / sqrt(|g| H): the prediction's error
+ * grows with the hydrostatic pressure it moves). */
 static double depth_scale(eddy_world *w, float h)
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
@@ -562,16 +550,13 @@ static long argmax(const float *e, long n)
 }
 
 /* The velocity (divergence) or the density solve, adding its k to kp. With
- * the divergence solver it starts from its state column's k of the last step
- * (written back at the end): the pressure that holds up the water above,
- * which sweeps could not rebuild each step (their error in the column-wide
- * mode falls by 1 - c / N^2 a sweep for N layers, conjugate gradients' by
- * 1 - c / N), and runs conjugate gradients before each sweep. It stops once
- * the mean error / rho0 (*residual; the velocity solve's times dt) is at most
- * tol, after at least DFSPH_SMOOTH sweeps (velocity) or one iteration
- * (density), or at the cap (*iterations counts both kinds). The velocity
- * solve fails when it stopped at its cap far above its tolerance
- * DFSPH_FAIL_CAPPED steps in a row. */
+ * the divergence solver it warm-starts from its state column (written back
+ * at the end): sweeps could not rebuild each step the pressure that holds up
+ * the water above (their error in the column-wide mode falls by 1 - c / N^2 a
+ * sweep for N layers, conjugate gradients' by 1 - c / N). It stops once the
+ * mean error / rho0 (*residual; the velocity solve's times dt) is at most tol
+ * after at least DFSPH_SMOOTH sweeps (velocity) or one iteration (density),
+ * or at the cap (*iterations counts both kinds). */
 static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const eddy_step_context *ctx, bool divergence,
                          double tol, int *iterations, double *residual)
 {
@@ -656,9 +641,8 @@ static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n,
 	return true;
 }
 
-/* The result: a += (v* - (v + dt a)) / dt and p = M kp rho^2, failing at the
- * first particle whose result is not finite; then the frame's statistics,
- * published, and a failure if the density solve has lost the fluid. */
+/* a += (v* - (v + dt a)) / dt, p = M kp rho^2 and the frame's statistics;
+ * fails on a non-finite result or when the density solve lost the fluid. */
 static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_work *wk, const eddy_step_context *ctx,
                           int it, double residual, int div_it, double div_residual)
 {
@@ -669,14 +653,11 @@ static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_wor
 	float *p = eddy__col(w, COL_PRESSURE);
 	long bad = -1;
 	for (long i = 0; i < wk->n; ++i) {
-		const float ux = (wk->v[i].x - (vx[i] + dt * ax[i])) * inv_dt,
-					uy = (wk->v[i].y - (vy[i] + dt * ay[i])) * inv_dt,
-					uz = (wk->v[i].z - (vz[i] + dt * az[i])) * inv_dt;
-		ax[i] += ux;
-		ay[i] += uy;
-		az[i] += uz;
+		ax[i] += (wk->v[i].x - (vx[i] + dt * ax[i])) * inv_dt;
+		ay[i] += (wk->v[i].y - (vy[i] + dt * ay[i])) * inv_dt;
+		az[i] += (wk->v[i].z - (vz[i] + dt * az[i])) * inv_dt;
 		p[i] = wk->kp[i] * wk->h[i].w * wk->h[i].w / wk->sh->grad_cal;
-		if (bad < 0 && !(isfinite(ux) && isfinite(uy) && isfinite(uz) && isfinite(p[i])))
+		if (bad < 0 && !(isfinite(ax[i]) && isfinite(ay[i]) && isfinite(az[i]) && isfinite(p[i])))
 			bad = i;
 	}
 	if (bad >= 0)
@@ -750,10 +731,9 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	return finish(w, sys, &wk, ctx, it, residual, div_it, div_residual);
 }
 
-/* For tests/test_sph_reference.c: after a step of w, the passes and the
- * operator product on the last sph_density's lists, on the back-end
- * SIMD_PICK gives now. Per particle: inv_d = 1 / D_i, inv_dsym = 1 / D'_i,
- * rate = R_i(v) (the wall counted twice) of the velocity columns, and
+/* For tests/test_sph_reference.c, after a step of w, on the last lists and
+ * the back-end SIMD_PICK gives now, per particle: inv_d = 1 / D_i, inv_dsym
+ * = 1 / D'_i, rate = R_i(v) of the velocity columns (the wall counted twice),
  * acc[3 i ..] = -(sum_j (k_i + k_j) G_ij + 2 k_i B_i) for k_i = k[i]. */
 eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float *inv_dsym, float *rate, float *acc);
 eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float *inv_dsym, float *rate, float *acc)
@@ -800,8 +780,7 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	double la = g1 > 0 ? DFSPH_GRAVITY_LIMIT * sqrt((double)sh->h / g1) : INFINITY;
 	if (((const sph_dfsph *)s->data)->def.divergence_solver)
 		la *= sqrt(depth_scale(w, sh->h));
-	if (la < lv)
-		*reason = "gravity";
+	*reason = la < lv ? "gravity" : "velocity";
 	return la < lv ? la : lv;
 }
 
