@@ -228,17 +228,15 @@ static bool cell_order(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threa
 		memcpy(v->slot_of, slot, w->n * sizeof *slot);
 		v->rows_moved = true;
 	}
+	/* the quads in the new order; the displacements are the same set */
 	x = eddy__col(w, COL_X_), y = eddy__col(w, COL_Y_), z = eddy__col(w, COL_Z_);
-	d2max = 0;
-#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : d2max)
+#pragma omp parallel for num_threads(threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		nb->cell_of[i] = rp->key[rp->order[i]];
 		if (rp->verlet)
 			v->row_of[v->slot_of[i]] = (uint32_t)i;
-		const float d2 = row_quad(x, y, z, rp, v, i);
-		d2max = d2 > d2max ? d2 : d2max;
+		row_quad(x, y, z, rp, v, i);
 	}
-	rp->moved2 = d2max;
 	return false;
 }
 
