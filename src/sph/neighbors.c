@@ -251,20 +251,17 @@ static eddy_status fill_lists(eddy_world *w, sph_shared *sh, const float *p4, bo
 	const size_t n = w->n;
 	/* 1e-4 over: the filter's exact test (r < h, another operation order)
 	 * must find every pair it would keep among the candidates */
-	const float hs = sh->h * (1.0f + v->skin + 1e-4f);
+	const float hs = sh->h * (1.0f + v->skin + 1e-4f), r2max = candidates ? hs * hs : sh->k.h2;
 	size_t *stride = candidates ? &v->stride : &nb->cap, *bstride = candidates ? &v->bstride : &nb->bcap;
+	size_t *alloc = candidates ? &v->alloc : &nb->list_alloc, *balloc = candidates ? &v->balloc : &nb->blist_alloc;
+	uint32_t **list = candidates ? &v->cand : &nb->nbr, **blist = candidates ? &v->bcand : &nb->bnbr;
+	uint32_t *count = candidates ? v->count : nb->count, *bcount = candidates ? v->bcount : nb->bcount;
 	const filter_ctx f = {nb, p4, v->rows_moved ? v->row_of : NULL, sh->k.h2, (long)n};
 	for (;;) {
-		const bool grown = candidates ? sph_grow((void **)&v->cand, &v->alloc, n * v->stride, 4) &&
-		                                    sph_grow((void **)&v->bcand, &v->balloc, n * v->bstride, 4)
-		                              : sph_grow((void **)&nb->nbr, &nb->list_alloc, n * nb->cap, 4) &&
-		                                    sph_grow((void **)&nb->bnbr, &nb->blist_alloc, n * nb->bcap, 4);
-		if (!grown)
+		if (!sph_grow((void **)list, alloc, n * *stride, 4) || !sph_grow((void **)blist, balloc, n * *bstride, 4))
 			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n,
 			                  *stride + *bstride);
-		const sph_search_out out =
-			candidates ? (sph_search_out){false, hs * hs, v->stride, v->bstride, v->cand, v->count, v->bcand, v->bcount}
-					   : (sph_search_out){true, sh->k.h2, nb->cap, nb->bcap, nb->nbr, nb->count, nb->bnbr, nb->bcount};
+		const sph_search_out out = {!candidates, r2max, *stride, *bstride, *list, count, *blist, bcount};
 		uint32_t mf, mb;
 		const bool ok = !candidates && v->skin > 0 ? SIMD_PICK(neighbors_filter)(&f, threads, &mf, &mb)
 		                                           : sph_search(w, nb, &out, threads, &mf, &mb);
