@@ -154,8 +154,8 @@ static bool boundary_alloc(sph_neighbors *nb, size_t total, size_t ncol)
 		return false;
 	bd->rho = nb->bp + alloc;
 	bd->seen = ncol ? (struct sph_collider_seen *)(void *)(nb->bp + 2 * alloc) : NULL;
-	void *block = NULL;
-	size_t have = 0;
+	void *block = NULL, *moving_block = NULL;
+	size_t have = 0, moving_have = 0;
 	void **stat[] = {(void **)&nb->bx, (void **)&nb->by, (void **)&nb->bz, (void **)&nb->bvol};
 	if (!sph_grow_block(&block, &have, alloc, stat, 4))
 		return false;
@@ -163,12 +163,10 @@ static bool boundary_alloc(sph_neighbors *nb, size_t total, size_t ncol)
 		return true;
 	void **moving[] = {(void **)&bd->x0, (void **)&bd->y0, (void **)&bd->z0,   (void **)&bd->vx,
 	                   (void **)&bd->vy, (void **)&bd->vz, (void **)&bd->order};
-	block = NULL;
-	have = 0;
 	bd->col = calloc(ncol, sizeof *bd->col);
-	if (!bd->col || !sph_grow_block(&block, &have, alloc, moving, 7))
+	if (!bd->col || !sph_grow_block(&moving_block, &moving_have, alloc, moving, 7))
 		return false;
-	memset(bd->vx, 0, 3 * have * sizeof *bd->vx);
+	memset(bd->vx, 0, 3 * moving_have * sizeof *bd->vx);
 	return true;
 }
 
