@@ -7,11 +7,10 @@
  * Reads: the pipeline's boundary systems and colliders. Writes: sph_neighbors'
  * bx by bz bvol bp bdiv and its private sph_boundary.
  *
- * Those of the sph_boundary_box systems are static: gathered and cell-sorted
- * once, and again only when the set of boundary systems changes (the
- * signature). Those of the colliders follow them, made once in the
- * collider's def pose (each collider file samples its own, see sph.h) and
- * moved every step:
+ * The boxes' particles are static: gathered and cell-sorted once, and again
+ * only when the set of boundary systems (the signature) changes. The
+ * colliders' are made once in the def pose (each collider file samples its
+ * own, see sph.h) and moved every step:
  *   translating:  x_b = x_b0 + offset (a plane's patch only along its normal),
  *                 v_b = (offset - offset seen last step) / time since
  *                 (as sys_flip_boundary.c takes it);
@@ -20,13 +19,13 @@
  *                 orientation seen last step over the time since.
  * A moved set's displacement since the last Verlet search (for a rotating
  * one bounded by the pivot's move plus its reach times the angle turned)
- * counts in the search's displacement test like a particle's. At each search
- * every boundary particle is cell-sorted anew (order), and each fluid
- * particle's boundary hits are sorted by index, so the lists and sums do
- * not depend on when the search ran; the seen poses are sph_density's
- * checkpointed state, so a resumed run stays bit-identical.
- * bdiv, the density change rate the moving walls add (Akinci et al. 2012,
- * eq. 6 with the wall's velocity), is made here for sph_dfsph. */
+ * counts in the search's displacement test like a particle's. Each search
+ * cell-sorts every boundary particle anew (order) and sorts each fluid
+ * particle's boundary hits by index, so the lists and sums do not depend on
+ * when the search ran; the seen poses are sph_density's checkpointed state,
+ * so a resumed run stays bit-identical. bdiv, the density change rate the
+ * moving walls add (Akinci et al. 2012, eq. 6 with the wall's velocity), is
+ * made here for sph_dfsph. */
 #include "neighbors.h"
 #include "systems.h"
 
@@ -42,16 +41,6 @@ static uint64_t boundary_signature(const eddy_world *w)
 	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS | EDDY_CAP_COLLIDER); (o = eddy__systems_next(&it));)
 		sig = (sig ^ ((uint64_t)(o - w->slots) << 16 | o->generation)) * 0x100000001b3ull;
 	return sig;
-}
-
-/* The fluid spacing: that of the sph_density that owns sh. */
-static float fluid_spacing(const eddy_world *w, const sph_shared *sh)
-{
-	const eddy_system *o;
-	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_NEIGHBORS); (o = eddy__systems_next(&it));)
-		if (o->vt->shared(o, EDDY_CAP_SPH_NEIGHBORS) == sh && eddy__sph_density_def(o))
-			return eddy__sph_density_def(o)->spacing;
-	return sh->h / 2;
 }
 
 void sph_boundary_free(sph_neighbors *nb)
@@ -70,66 +59,60 @@ static bool nonzero(eddy_vec3 a) { return a.x != 0 || a.y != 0 || a.z != 0; }
 
 static bool differ(eddy_vec3 a, eddy_vec3 b) { return a.x != b.x || a.y != b.y || a.z != b.z; }
 
-/* Collider c's particles where the collider is now, and their velocities
- * (once per time). Returns the squared displacement of any of them since
- * the search: a bound for a rotating one. */
-static float move_collider(const eddy_world *w, sph_neighbors *nb, int c)
-{
-	sph_boundary *bd = &nb->bnd;
-	struct sph_collider_set *cs = &bd->col[c];
-	struct sph_collider_seen *sn = &bd->seen[c];
-	const eddy_collider_motion *m = &((const eddy_collider_base *)w->slots[cs->slot].data)->motion;
-	const eddy_vec3 off = m->offset, rot = m->rotation, n = cs->normal;
-	/* placed by the whole pose also while a past rotation is still undone */
-	const bool rotating = eddy__motion_rotates(m) || nonzero(eddy__v3(sn->rx, sn->ry, sn->rz)) || nonzero(cs->rot) ||
-	                      nonzero(cs->rot_at_search);
-	const bool plane = !rotating && nonzero(n); /* only the offset along the normal moves the patch */
-	const float along = off.x * n.x + off.y * n.y + off.z * n.z;
-	const eddy_vec3 d = plane ? eddy__v3(along * n.x, along * n.y, along * n.z) : off;
-	if (differ(d, cs->disp) || differ(rot, cs->rot)) {
-		const eddy_collider_pose pose = eddy__collider_pose(m);
-		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
-			const eddy_vec3 q0 = eddy__v3(bd->x0[b], bd->y0[b], bd->z0[b]);
-			const eddy_vec3 q = rotating ? eddy__pose_to_world(&pose, q0) : eddy__add3(q0, d);
-			nb->bx[b] = q.x, nb->by[b] = q.y, nb->bz[b] = q.z;
-		}
-		cs->disp = d;
-		cs->rot = rot;
-	}
-	if (sn->have == 0 || w->time != sn->time) {
-		eddy_collider_velocity mv = {{0, 0, 0}, {0, 0, 0}, eddy__add3(m->pivot, off)};
-		const bool since = sn->have != 0 && w->time > sn->time;
-		if (since && rotating)
-			mv = eddy__collider_motion_since(m, eddy__v3(sn->x, sn->y, sn->z), eddy__v3(sn->rx, sn->ry, sn->rz),
-			                                 w->time - sn->time);
-		else if (since) {
-			const float inv = (float)(1.0 / (w->time - sn->time));
-			mv.v = eddy__v3((off.x - sn->x) * inv, (off.y - sn->y) * inv, (off.z - sn->z) * inv);
-			const float vn = mv.v.x * n.x + mv.v.y * n.y + mv.v.z * n.z;
-			mv.v = plane ? eddy__v3(vn * n.x, vn * n.y, vn * n.z) : mv.v;
-		}
-		for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
-			const eddy_vec3 v = rotating ? eddy__rigid_velocity(&mv, eddy__v3(nb->bx[b], nb->by[b], nb->bz[b])) : mv.v;
-			bd->vx[b] = v.x, bd->vy[b] = v.y, bd->vz[b] = v.z;
-		}
-		*sn = (struct sph_collider_seen){off.x, off.y, off.z, 1, rot.x, rot.y, rot.z, 0, w->time};
-	}
-	const float ex = d.x - cs->at_search.x, ey = d.y - cs->at_search.y, ez = d.z - cs->at_search.z;
-	if (!rotating)
-		return ex * ex + ey * ey + ez * ez;
-	/* the pivot's move plus the reach times the angle turned */
-	const eddy_vec3 om = eddy__rotation_rate(cs->rot_at_search, rot, 1.0);
-	const float m1 = sqrtf(ex * ex + ey * ey + ez * ez) + cs->reach * sqrtf(om.x * om.x + om.y * om.y + om.z * om.z);
-	return m1 * m1;
-}
-
-/* Every collider's particles where their collider is now, with their
- * velocities. Returns the largest squared displacement since the search. */
+/* Every collider's particles where their collider is now, and their
+ * velocities (once per time). Returns the largest squared displacement of
+ * any of them since the search: a bound for a rotating set. */
 float sph_boundary_move(const eddy_world *w, sph_neighbors *nb)
 {
+	sph_boundary *bd = &nb->bnd;
 	float moved2 = 0;
-	for (int c = 0; c < nb->bnd.ncol; ++c) {
-		const float m2 = move_collider(w, nb, c);
+	for (int c = 0; c < bd->ncol; ++c) {
+		struct sph_collider_set *cs = &bd->col[c];
+		struct sph_collider_seen *sn = &bd->seen[c];
+		const eddy_collider_motion *m = &((const eddy_collider_base *)w->slots[cs->slot].data)->motion;
+		const eddy_vec3 off = m->offset, rot = m->rotation, n = cs->normal;
+		/* placed by the whole pose also while a past rotation is still undone */
+		const bool rotating = eddy__motion_rotates(m) || nonzero(eddy__v3(sn->rx, sn->ry, sn->rz)) ||
+		                      nonzero(cs->rot) || nonzero(cs->rot_at_search);
+		const bool plane = !rotating && nonzero(n); /* only the offset along the normal moves the patch */
+		const float along = off.x * n.x + off.y * n.y + off.z * n.z;
+		const eddy_vec3 d = plane ? eddy__v3(along * n.x, along * n.y, along * n.z) : off;
+		if (differ(d, cs->disp) || differ(rot, cs->rot)) {
+			const eddy_collider_pose pose = eddy__collider_pose(m);
+			for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
+				const eddy_vec3 q0 = eddy__v3(bd->x0[b], bd->y0[b], bd->z0[b]);
+				const eddy_vec3 q = rotating ? eddy__pose_to_world(&pose, q0) : eddy__add3(q0, d);
+				nb->bx[b] = q.x, nb->by[b] = q.y, nb->bz[b] = q.z;
+			}
+			cs->disp = d;
+			cs->rot = rot;
+		}
+		if (sn->have == 0 || w->time != sn->time) {
+			eddy_collider_velocity mv = {{0, 0, 0}, {0, 0, 0}, eddy__add3(m->pivot, off)};
+			const bool since = sn->have != 0 && w->time > sn->time;
+			if (since && rotating)
+				mv = eddy__collider_motion_since(m, eddy__v3(sn->x, sn->y, sn->z), eddy__v3(sn->rx, sn->ry, sn->rz),
+				                                 w->time - sn->time);
+			else if (since) {
+				const float inv = (float)(1.0 / (w->time - sn->time));
+				mv.v = eddy__v3((off.x - sn->x) * inv, (off.y - sn->y) * inv, (off.z - sn->z) * inv);
+				const float vn = mv.v.x * n.x + mv.v.y * n.y + mv.v.z * n.z;
+				mv.v = plane ? eddy__v3(vn * n.x, vn * n.y, vn * n.z) : mv.v;
+			}
+			for (size_t b = cs->first; b < cs->first + cs->count; ++b) {
+				const eddy_vec3 v =
+					rotating ? eddy__rigid_velocity(&mv, eddy__v3(nb->bx[b], nb->by[b], nb->bz[b])) : mv.v;
+				bd->vx[b] = v.x, bd->vy[b] = v.y, bd->vz[b] = v.z;
+			}
+			*sn = (struct sph_collider_seen){off.x, off.y, off.z, 1, rot.x, rot.y, rot.z, 0, w->time};
+		}
+		const float ex = d.x - cs->at_search.x, ey = d.y - cs->at_search.y, ez = d.z - cs->at_search.z;
+		float m2 = ex * ex + ey * ey + ez * ez;
+		if (rotating) {
+			const eddy_vec3 om = eddy__rotation_rate(cs->rot_at_search, rot, 1.0);
+			const float m1 = sqrtf(m2) + cs->reach * sqrtf(om.x * om.x + om.y * om.y + om.z * om.z);
+			m2 = m1 * m1;
+		}
 		moved2 = m2 > moved2 ? m2 : moved2;
 	}
 	return moved2;
@@ -156,7 +139,7 @@ eddy_status sph_boundary_sort(eddy_world *w, sph_neighbors *nb)
 	return EDDY_OK;
 }
 
-/* The arrays for nstat static and ncolp collider particles in ncol sets:
+/* The arrays for total particles, ncol collider sets among them:
  * bx by bz bvol in one block, bp rho and the seen poses in another
  * (sph_density's checkpointed state: after 2 total floats the records are
  * 8-byte aligned, since with colliders alloc = total), x0 .. order in a
@@ -171,8 +154,8 @@ static bool boundary_alloc(sph_neighbors *nb, size_t total, size_t ncol)
 		return false;
 	bd->rho = nb->bp + alloc;
 	bd->seen = ncol ? (struct sph_collider_seen *)(void *)(nb->bp + 2 * alloc) : NULL;
-	void *block = NULL;
-	size_t have = 0;
+	void *block = NULL, *moving_block = NULL;
+	size_t have = 0, moving_have = 0;
 	void **stat[] = {(void **)&nb->bx, (void **)&nb->by, (void **)&nb->bz, (void **)&nb->bvol};
 	if (!sph_grow_block(&block, &have, alloc, stat, 4))
 		return false;
@@ -180,12 +163,10 @@ static bool boundary_alloc(sph_neighbors *nb, size_t total, size_t ncol)
 		return true;
 	void **moving[] = {(void **)&bd->x0, (void **)&bd->y0, (void **)&bd->z0,   (void **)&bd->vx,
 	                   (void **)&bd->vy, (void **)&bd->vz, (void **)&bd->order};
-	block = NULL;
-	have = 0;
 	bd->col = calloc(ncol, sizeof *bd->col);
-	if (!bd->col || !sph_grow_block(&block, &have, alloc, moving, 7))
+	if (!bd->col || !sph_grow_block(&moving_block, &moving_have, alloc, moving, 7))
 		return false;
-	memset(bd->vx, 0, 3 * have * sizeof *bd->vx);
+	memset(bd->vx, 0, 3 * moving_have * sizeof *bd->vx);
 	return true;
 }
 
@@ -248,10 +229,14 @@ eddy_status sph_boundary_build(eddy_world *w, sph_shared *sh)
 	const uint64_t sig = boundary_signature(w);
 	if (sig == nb->bnd.sig && nb->bx)
 		return EDDY_OK;
-	const float spacing = fluid_spacing(w, sh);
+	/* the fluid spacing: that of the sph_density that owns sh */
+	float spacing = sh->h / 2;
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_NEIGHBORS); (o = eddy__systems_next(&it));)
+		if (o->vt->shared(o, EDDY_CAP_SPH_NEIGHBORS) == sh && eddy__sph_density_def(o))
+			spacing = eddy__sph_density_def(o)->spacing;
 	size_t nstat = 0, ncolp = 0, ncol = 0;
 	eddy_vec3 normal;
-	const eddy_system *o;
 	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS | EDDY_CAP_COLLIDER);
 	     (o = eddy__systems_next(&it));) {
 		if (o->vt->provides & EDDY_CAP_SPH_WALLS) {
@@ -270,12 +255,11 @@ eddy_status sph_boundary_build(eddy_world *w, sph_shared *sh)
 		                  (double)ncolp);
 	const size_t total = nstat + ncolp;
 	sph_boundary_free(nb);
-	if (!boundary_alloc(nb, total, ncol)) {
-		sph_boundary_free(nb);
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu boundary particles", total);
-	}
 	nb->bnd.n_static = nstat;
-	const eddy_status st = boundary_fill(w, sh, spacing, nstat);
+	const eddy_status st =
+		boundary_alloc(nb, total, ncol)
+			? boundary_fill(w, sh, spacing, nstat)
+			: eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu boundary particles", total);
 	if (st != EDDY_OK) {
 		sph_boundary_free(nb);
 		return st;

@@ -6,26 +6,25 @@
  * table's order, sph_neighbors' lists and sums, sph_shared's pq.
  *
  * Every step the table is put in cell order (a stable counting sort, skipped
- * while it is in order already), so the passes over neighbours stream
- * memory and the particle order is a function of the positions.
+ * while in order), so the neighbour passes stream memory and the particle
+ * order is a function of the positions.
  *
  * The grid search (search.c), the costly part, runs only when the Verlet
- * list is stale. Its hits are the pairs with r < h (1 + skin), in the rows
- * of that time ("build slots"), followed through later permutations with
- * slot_of / row_of. The list is valid while every particle is within skin/2
- * of where it was at the search: then a pair closer than h now was closer
- * than h + skin then, whichever row a particle is in now. A new particle
- * count, a new set of boundary systems or a collider's particles moved
- * beyond skin/2 force a search. With a skin of 0 the search is at h and
- * writes the exact lists and sums itself.
+ * list is stale. Its hits, the pairs with r < h (1 + skin), are kept in the
+ * rows of that time ("build slots"), followed through later permutations by
+ * slot_of / row_of. The list holds while every particle is within skin/2 of
+ * where it was at the search (a pair closer than h now was closer than
+ * h + skin then); a new particle count or set of boundary systems, or
+ * collider particles moved beyond skin/2, force a search. With a skin of 0
+ * the search is at h and writes the exact lists and sums itself.
  *
  * Every step each particle's candidates are filtered by r^2 < h^2 into its
- * exact list, sorted by row, and the kernel sums made in that order: the
- * same bits whenever the last search ran, so a resumed run is bit-identical
- * without checkpointing the Verlet list. Every particle writes only its own
- * lists: the same for any thread count. Both lists have a fixed stride per
- * particle, a multiple of 8, widened (and the pass run again) when a
- * particle has more entries (compressed fluid). */
+ * exact list, sorted by row, and summed in that order: the same bits
+ * whenever the last search ran, so a resumed run is bit-identical without
+ * checkpointing the Verlet list. Each particle writes only its own lists:
+ * the same for any thread count. Both lists have a fixed stride per
+ * particle, a multiple of 8, widened (and the pass rerun) when one overflows
+ * (compressed fluid). */
 #include "neighbors.h"
 #include "simd.h"
 #include "systems.h"
@@ -172,17 +171,6 @@ void eddy__sph_neighbors_free(sph_neighbors *nb)
 
 sph_shared *eddy__sph_find(eddy_world *w, const eddy_system *s) { return eddy__provided(w, s, EDDY_CAP_SPH_NEIGHBORS); }
 
-/* Every per-row array to n rows. What they held is not kept: a new count
- * forces a search, which needs none of it. */
-static bool grow_rows(sph_neighbors *nb, size_t n)
-{
-	sph_verlet *v = &nb->verlet;
-	void **arrays[] = {(void **)&nb->cell_of, (void **)&nb->count, (void **)&nb->bcount, (void **)&nb->wsum,
-	                   (void **)&nb->bwsum,   (void **)&v->count,  (void **)&v->bcount,  (void **)&v->x,
-	                   (void **)&v->y,        (void **)&v->z,      (void **)&v->slot_of, (void **)&v->row_of};
-	return sph_grow_block(&nb->rows, &nb->rows_alloc, n, arrays, (int)(sizeof arrays / sizeof arrays[0]));
-}
-
 /* The per-step scratch of the cell-order pass. */
 typedef struct row_pass {
 	uint32_t *key;   /* the cell of each row before the sort */
@@ -240,37 +228,16 @@ static bool cell_order(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threa
 		memcpy(v->slot_of, slot, w->n * sizeof *slot);
 		v->rows_moved = true;
 	}
+	/* the quads in the new order; the displacements are the same set */
 	x = eddy__col(w, COL_X_), y = eddy__col(w, COL_Y_), z = eddy__col(w, COL_Z_);
-	d2max = 0;
-#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : d2max)
+#pragma omp parallel for num_threads(threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		nb->cell_of[i] = rp->key[rp->order[i]];
 		if (rp->verlet)
 			v->row_of[v->slot_of[i]] = (uint32_t)i;
-		const float d2 = row_quad(x, y, z, rp, v, i);
-		d2max = d2 > d2max ? d2 : d2max;
+		row_quad(x, y, z, rp, v, i);
 	}
-	rp->moved2 = d2max;
 	return false;
-}
-
-/* The skin for a new search. It pays only if the list outlives a few steps:
- * when particles move a good part of the skin per step (DFSPH's steps are
- * ten times WCSPH's) or the count changes every step (an emitter), a skin
- * only adds candidates to a search made every step anyway. Then the list is
- * searched at h itself until the motion per step, seen against the last
- * search, would let a skin last. Otherwise the skin is sized for
- * SPH_SKIN_LIFE steps of that motion, so a fluid at rest filters few more
- * candidates than its exact lists hold. */
-static void choose_skin(sph_verlet *v, const row_pass *rp, size_t n, float h)
-{
-	const bool count_changed = v->n != 0 && v->n != n;
-	const bool emitting = count_changed && v->count_changed && v->age <= 1;
-	const float step_move = rp->verlet ? sqrtf(rp->moved2) / (float)v->age : 0.0f;
-	const bool fast = rp->verlet && step_move * SPH_SKIN_MIN_LIFE > 0.5f * SPH_SKIN * h;
-	const float sized = 2.0f * SPH_SKIN_LIFE * step_move / h;
-	v->count_changed = count_changed;
-	v->skin = emitting || fast ? 0.0f : !rp->verlet ? SPH_SKIN : fminf(SPH_SKIN, fmaxf(SPH_SKIN_MIN, sized));
 }
 
 /* The Verlet candidates (candidates) or the exact lists: the search, or the
@@ -284,20 +251,17 @@ static eddy_status fill_lists(eddy_world *w, sph_shared *sh, const float *p4, bo
 	const size_t n = w->n;
 	/* 1e-4 over: the filter's exact test (r < h, another operation order)
 	 * must find every pair it would keep among the candidates */
-	const float hs = sh->h * (1.0f + v->skin + 1e-4f);
+	const float hs = sh->h * (1.0f + v->skin + 1e-4f), r2max = candidates ? hs * hs : sh->k.h2;
 	size_t *stride = candidates ? &v->stride : &nb->cap, *bstride = candidates ? &v->bstride : &nb->bcap;
+	size_t *alloc = candidates ? &v->alloc : &nb->list_alloc, *balloc = candidates ? &v->balloc : &nb->blist_alloc;
+	uint32_t **list = candidates ? &v->cand : &nb->nbr, **blist = candidates ? &v->bcand : &nb->bnbr;
+	uint32_t *count = candidates ? v->count : nb->count, *bcount = candidates ? v->bcount : nb->bcount;
 	const filter_ctx f = {nb, p4, v->rows_moved ? v->row_of : NULL, sh->k.h2, (long)n};
 	for (;;) {
-		const bool grown = candidates ? sph_grow((void **)&v->cand, &v->alloc, n * v->stride, 4) &&
-		                                    sph_grow((void **)&v->bcand, &v->balloc, n * v->bstride, 4)
-		                              : sph_grow((void **)&nb->nbr, &nb->list_alloc, n * nb->cap, 4) &&
-		                                    sph_grow((void **)&nb->bnbr, &nb->blist_alloc, n * nb->bcap, 4);
-		if (!grown)
+		if (!sph_grow((void **)list, alloc, n * *stride, 4) || !sph_grow((void **)blist, balloc, n * *bstride, 4))
 			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n,
 			                  *stride + *bstride);
-		const sph_search_out out =
-			candidates ? (sph_search_out){false, hs * hs, v->stride, v->bstride, v->cand, v->count, v->bcand, v->bcount}
-					   : (sph_search_out){true, sh->k.h2, nb->cap, nb->bcap, nb->nbr, nb->count, nb->bnbr, nb->bcount};
+		const sph_search_out out = {!candidates, r2max, *stride, *bstride, *list, count, *blist, bcount};
 		uint32_t mf, mb;
 		const bool ok = !candidates && v->skin > 0 ? SIMD_PICK(neighbors_filter)(&f, threads, &mf, &mb)
 		                                           : sph_search(w, nb, &out, threads, &mf, &mb);
@@ -320,7 +284,19 @@ static eddy_status verlet_rebuild(eddy_world *w, sph_shared *sh, const row_pass 
 	eddy_status st = sph_boundary_sort(w, nb);
 	if (st != EDDY_OK)
 		return st;
-	choose_skin(v, rp, n, sh->h);
+	/* a skin (sized as neighbors.h says) pays only if the list outlives a
+	 * few steps: when particles move a good part of it per step (DFSPH's
+	 * steps are ten times WCSPH's) or the count changes every step (an
+	 * emitter), it only adds candidates to a search made every step anyway;
+	 * then the search is at h until the motion per step, seen against the
+	 * last search, would let a skin last */
+	const bool count_changed = v->n != 0 && v->n != n;
+	const bool emitting = count_changed && v->count_changed && v->age <= 1;
+	const float step_move = rp->verlet ? sqrtf(rp->moved2) / (float)v->age : 0.0f;
+	const bool fast = rp->verlet && step_move * SPH_SKIN_MIN_LIFE > 0.5f * SPH_SKIN * sh->h;
+	const float sized = 2.0f * SPH_SKIN_LIFE * step_move / sh->h;
+	v->count_changed = count_changed;
+	v->skin = emitting || fast ? 0.0f : !rp->verlet ? SPH_SKIN : fminf(SPH_SKIN, fmaxf(SPH_SKIN_MIN, sized));
 	if (v->skin > 0 && (st = fill_lists(w, sh, rp->p4, true, threads)) != EDDY_OK)
 		return st;
 	memcpy(v->x, eddy__col(w, COL_X_), n * sizeof *v->x);
@@ -367,7 +343,12 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	rp.key = (uint32_t *)(void *)(rp.p4 + 4 * n);
 	rp.order = rp.key + n;
 	rp.scratch = rp.order + n;
-	if (!grow_rows(nb, n))
+	/* every per-row array to n rows; what they held is not kept: a new count
+	 * forces a search, which needs none of it */
+	void **arrays[] = {(void **)&nb->cell_of, (void **)&nb->count, (void **)&nb->bcount, (void **)&nb->wsum,
+	                   (void **)&nb->bwsum,   (void **)&v->count,  (void **)&v->bcount,  (void **)&v->x,
+	                   (void **)&v->y,        (void **)&v->z,      (void **)&v->slot_of, (void **)&v->row_of};
+	if (!sph_grow_block(&nb->rows, &nb->rows_alloc, n, arrays, (int)(sizeof arrays / sizeof arrays[0])))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
 	v->age++;
 	const bool in_order = cell_order(w, nb, &rp, threads);

@@ -10,8 +10,9 @@
 /* Verlet skin as a fraction of h: larger means rarer searches but more
  * candidates to filter every step ((1 + skin)^3 of the exact list's). It is
  * sized from the motion per step seen at the last search, so that a list
- * should last SPH_SKIN_LIFE steps, within [SPH_SKIN_MIN, SPH_SKIN]; 0 when
- * even SPH_SKIN would not last SPH_SKIN_MIN_LIFE steps. */
+ * lasts SPH_SKIN_LIFE steps (a fluid at rest filters few more candidates
+ * than it keeps), within [SPH_SKIN_MIN, SPH_SKIN]; 0 when even SPH_SKIN
+ * would not last SPH_SKIN_MIN_LIFE steps. */
 #define SPH_SKIN 0.2f
 #define SPH_SKIN_MIN 0.05f
 #define SPH_SKIN_LIFE 8

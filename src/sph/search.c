@@ -242,46 +242,6 @@ static int cmp_u32(const void *a, const void *b)
 	return (x > y) - (x < y);
 }
 
-/* reach[a][b] for r2max: a cell k cells away is at least (k - 1) cells of
- * h/2 from the particle, so the block's far corners are skipped. */
-static void reach_table(search_ctx *c, float r2max)
-{
-	const double rs2 = 1.001 * (double)r2max * (double)c->nb->grid.inv_cell *
-	                   (double)c->nb->grid.inv_cell; /* in cells^2, 0.1% for rounding */
-	for (int a = 0; a <= c->R; ++a)
-		for (int b = 0; b <= c->R; ++b) {
-			const double ey = a > 0 ? a - 1 : 0, ez = b > 0 ? b - 1 : 0, rem = rs2 - ey * ey - ez * ez;
-			int k = -1;
-			if (rem > 0) /* x offsets k with (k - 1)^2 < rem */
-				for (k = 0; k < c->R && (double)k * k < rem; ++k)
-					;
-			c->reach[a][b] = k;
-		}
-}
-
-/* The blocks that hold particles, ascending, into ids; returns how many. */
-static long occupied_blocks(const sph_neighbors *nb, size_t n, int blocks_x, int blocks_y, uint32_t *ids)
-{
-	const uint32_t gx = (uint32_t)nb->grid.gx, gy = (uint32_t)nb->grid.gy;
-	long blocks = 0;
-	uint32_t prev = UINT32_MAX;
-	/* one id per stretch of rows in one row of cells and one block, then unique */
-	for (size_t i = 0; i < n; ++i) {
-		const uint32_t cell = nb->cell_of[i], cx = cell % gx, cy = cell / gx % gy, cz = cell / (gx * gy);
-		const uint32_t id =
-			(cz / SEARCH_BZ * (uint32_t)blocks_y + cy / SEARCH_BY) * (uint32_t)blocks_x + cx / SEARCH_BX;
-		if (id != prev)
-			ids[blocks++] = id;
-		prev = id;
-	}
-	qsort(ids, (size_t)blocks, sizeof *ids, cmp_u32);
-	long unique = 0;
-	for (long k = 0; k < blocks; ++k)
-		if (k == 0 || ids[k] != ids[unique - 1])
-			ids[unique++] = ids[k];
-	return unique;
-}
-
 bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int threads, uint32_t *max_f,
                 uint32_t *max_b)
 {
@@ -290,11 +250,37 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
 	c.x = eddy__col(w, COL_X_), c.y = eddy__col(w, COL_Y_), c.z = eddy__col(w, COL_Z_);
 	c.blocks_x = (nb->grid.gx + SEARCH_BX - 1) / SEARCH_BX;
 	c.blocks_y = (nb->grid.gy + SEARCH_BY - 1) / SEARCH_BY;
-	reach_table(&c, out->r2max);
+	/* reach[a][b]: a cell k cells away is at least (k - 1) cells of h/2 from
+	 * the particle, so the block's far corners are skipped */
+	const double rs2 = 1.001 * (double)out->r2max * (double)nb->grid.inv_cell *
+	                   (double)nb->grid.inv_cell; /* in cells^2, 0.1% for rounding */
+	for (int a = 0; a <= c.R; ++a)
+		for (int b = 0; b <= c.R; ++b) {
+			const double ey = a > 0 ? a - 1 : 0, ez = b > 0 ? b - 1 : 0, rem = rs2 - ey * ey - ez * ez;
+			int k = -1;
+			if (rem > 0) /* x offsets k with (k - 1)^2 < rem */
+				for (k = 0; k < c.R && (double)k * k < rem; ++k)
+					;
+			c.reach[a][b] = k;
+		}
 	uint32_t *ids = eddy__arena_alloc(&w->arena, (w->n + 1) * sizeof *ids);
 	if (!ids)
 		return false;
-	const long blocks = occupied_blocks(nb, w->n, c.blocks_x, c.blocks_y, ids);
+	/* the blocks that hold particles, ascending: one id per stretch of rows
+	 * in one row of cells and one block, then unique */
+	const uint32_t gx = (uint32_t)nb->grid.gx, gy = (uint32_t)nb->grid.gy;
+	long found = 0, blocks = 0;
+	for (size_t i = 0; i < w->n; ++i) {
+		const uint32_t cell = nb->cell_of[i], cx = cell % gx, cy = cell / gx % gy, cz = cell / (gx * gy);
+		const uint32_t id =
+			(cz / SEARCH_BZ * (uint32_t)c.blocks_y + cy / SEARCH_BY) * (uint32_t)c.blocks_x + cx / SEARCH_BX;
+		if (found == 0 || id != ids[found - 1])
+			ids[found++] = id;
+	}
+	qsort(ids, (size_t)found, sizeof *ids, cmp_u32);
+	for (long k = 0; k < found; ++k)
+		if (k == 0 || ids[k] != ids[blocks - 1])
+			ids[blocks++] = ids[k];
 	bool (*const block)(const search_ctx *, uint32_t, search_buf *, search_buf *, uint32_t *, uint32_t *) =
 		SIMD_PICK(search_block);
 	uint32_t mf = 0, mb = 0;
