@@ -57,6 +57,19 @@ void sph_counting_sort(const uint32_t *keys, size_t n, size_t cells, uint32_t *s
 	start[0] = 0;
 }
 
+/* The cell offsets of keys[0..n) already in cell order (non-decreasing):
+ * start[c] is the first position in cell c or after it. One pass, no
+ * permutation: a table that stayed in order needs only this. */
+void sph_cell_ranges(const uint32_t *keys, size_t n, size_t cells, uint32_t *start)
+{
+	size_t c = 0;
+	for (size_t i = 0; i < n; ++i)
+		while (c <= keys[i])
+			start[c++] = (uint32_t)i;
+	while (c <= cells)
+		start[c++] = (uint32_t)n;
+}
+
 bool sph_grow(void **p, size_t *have, size_t want, size_t elem)
 {
 	if (want <= *have)

@@ -359,7 +359,7 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	const bool valid = rp.verlet && v->skin > 0 && rp.moved2 < half * half;
 	/* the search and the boundary pressure walk cells */
 	if (in_order && (!valid || nb->nbound > 0))
-		sph_counting_sort(rp.key, n, sph_grid_cells(&nb->grid), nb->grid.fluid_start, rp.order);
+		sph_cell_ranges(rp.key, n, sph_grid_cells(&nb->grid), nb->grid.fluid_start);
 	if (!valid && (st = verlet_rebuild(w, sh, &rp, threads)) != EDDY_OK)
 		return st;
 	sh->pq = rp.p4;

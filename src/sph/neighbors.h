@@ -23,6 +23,7 @@
 /* ---- grid.c ---- */
 eddy_status sph_grid_init(eddy_world *w, sph_grid *g, float h);
 void sph_counting_sort(const uint32_t *keys, size_t n, size_t cells, uint32_t *start, uint32_t *order);
+void sph_cell_ranges(const uint32_t *keys, size_t n, size_t cells, uint32_t *start);
 
 static inline size_t sph_grid_cells(const sph_grid *g) { return (size_t)g->gx * (size_t)g->gy * (size_t)g->gz; }
 
