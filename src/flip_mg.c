@@ -48,15 +48,25 @@
  * Every level works on the box around its unknowns only (a settling block
  * may fill a sixth of its tank's grid); the arrays span the whole grid.
  *
- * Threads: every stage runs on all threads. A red-black sweep writes each cell
- * of a colour from the other colour only; the residual, restriction and
- * prolongation write each cell once from read-only inputs; CG's dot products
- * are summed in fixed chunks of CHUNK rows in chunk order (as flip_pcg.c) and
- * max|r| is order-free: the result is the same, bit for bit, on any thread
- * count. Memory: the levels are allocated once per grid size and reused; the
+ * Threads: the whole solve after the level build is one parallel region;
+ * each stage splits its planes (or its chunks of CHUNK rows) statically among
+ * the threads and ends at a barrier only where the next stage reads what a
+ * neighbouring thread wrote. A level whose box has at most PAR_CELLS cells,
+ * and every level below it, is cycled by one thread while the others wait at
+ * the next barrier: its work would not pay for the barriers. A red-black
+ * sweep writes each cell of a colour from the other colour only; the
+ * residual, restriction and prolongation write each cell once from read-only
+ * inputs; CG's dot products are summed in fixed chunks of CHUNK rows in chunk
+ * order (as flip_pcg.c), each thread adding the same chunk sums in the same
+ * order, and max|r| is order-free: the result is the same, bit for bit, on
+ * any thread count. CG's search direction is updated inside the
+ * matrix-vector product and r's update fills the cycle's right-hand side, so
+ * an iteration's vector work takes three barriers. Memory: the levels are
+ * allocated once per grid size and reused; the
  * CG vectors come from the world's arena. */
 #include "flip.h"
 
+#include <omp.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -158,10 +168,34 @@ static bool mg_alloc(flip_mg *m, int nx, int ny, int nz)
 	return true;
 }
 
-static int level_threads(const mg_level *L, int nt)
+static size_t box_cells(const mg_level *L)
 {
-	const size_t n = (size_t)(L->hi[0] - L->lo[0]) * (size_t)(L->hi[1] - L->lo[1]) * (size_t)(L->hi[2] - L->lo[2]);
-	return n > PAR_CELLS ? nt : 1;
+	return (size_t)(L->hi[0] - L->lo[0]) * (size_t)(L->hi[1] - L->lo[1]) * (size_t)(L->hi[2] - L->lo[2]);
+}
+
+static int level_threads(const mg_level *L, int nt) { return box_cells(L) > PAR_CELLS ? nt : 1; }
+
+/* This thread (id of n) inside the solve's parallel region; SOLO is a
+ * thread working alone (the whole team's share, no barriers). */
+typedef struct team {
+	int id, n;
+} team;
+
+static const team SOLO = {0, 1};
+
+/* The thread's contiguous share [*a, *b) of [lo, hi) */
+static void share(team t, int lo, int hi, int *a, int *b)
+{
+	const int len = hi - lo, q = len / t.n, rem = len % t.n;
+	*a = lo + t.id * q + (t.id < rem ? t.id : rem);
+	*b = *a + q + (t.id < rem ? 1 : 0);
+}
+
+static void team_sync(team t)
+{
+	if (t.n > 1) {
+#pragma omp barrier
+	}
 }
 
 static inline size_t cell_at(const mg_level *L, int i, int j, int k)
@@ -285,36 +319,40 @@ static inline float neighbours(const mg_level *L, const float *x, size_t c, int 
 }
 
 /* One Gauss-Seidel pass over the cells of colour col ((i + j + k) % 2). */
-static void sweep(mg_level *L, int col, int nt)
+static void sweep(mg_level *L, int col, team t)
 {
-	nt = level_threads(L, nt);
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-	for (int k = L->lo[2]; k < L->hi[2]; ++k)
+	int k0, k1;
+	share(t, L->lo[2], L->hi[2], &k0, &k1);
+	for (int k = k0; k < k1; ++k)
 		for (int j = L->lo[1]; j < L->hi[1]; ++j)
 			for (int i = L->lo[0] + ((col + j + k + L->lo[0]) & 1); i < L->hi[0]; i += 2) {
 				const size_t c = cell_at(L, i, j, k);
 				if (L->d[c] > 0)
 					L->x[c] = (L->b[c] + neighbours(L, L->x, c, i, j, k)) / L->d[c];
 			}
+	team_sync(t);
 }
 
 /* r = b - A x (0 off the unknowns) */
-static void residual(mg_level *L, int nt)
+static void residual(mg_level *L, team t)
 {
-	nt = level_threads(L, nt);
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-	for (int k = L->lo[2]; k < L->hi[2]; ++k)
+	int k0, k1;
+	share(t, L->lo[2], L->hi[2], &k0, &k1);
+	for (int k = k0; k < k1; ++k)
 		for (int j = L->lo[1]; j < L->hi[1]; ++j)
 			for (int i = L->lo[0]; i < L->hi[0]; ++i) {
 				const size_t c = cell_at(L, i, j, k);
 				L->r[c] = L->d[c] > 0 ? L->b[c] - L->d[c] * L->x[c] + neighbours(L, L->x, c, i, j, k) : 0.0f;
 			}
+	team_sync(t);
 }
 
-/* x = 0 on the box */
-static void zero_box(mg_level *L, float *x)
+/* x = 0 on the thread's share of the box */
+static void zero_box(mg_level *L, float *x, team t)
 {
-	for (int k = L->lo[2]; k < L->hi[2]; ++k)
+	int k0, k1;
+	share(t, L->lo[2], L->hi[2], &k0, &k1);
+	for (int k = k0; k < k1; ++k)
 		for (int j = L->lo[1]; j < L->hi[1]; ++j)
 			memset(x + cell_at(L, L->lo[0], j, k), 0, (size_t)(L->hi[0] - L->lo[0]) * sizeof *x);
 }
@@ -357,12 +395,13 @@ static inline void axis_gather(int I, int nf, int n, int lo, int hi, float wt[4]
 			wt[t] = 0;
 }
 
-/* C->b = P^T F->r, as a gather over the fine cells each coarse cell feeds */
-static void restrict_residual(const mg_level *F, mg_level *C, int nt)
+/* C->b = P^T F->r, as a gather over the fine cells each coarse cell feeds,
+ * and C->x = 0 (the cycle's start on C) */
+static void restrict_residual(const mg_level *F, mg_level *C, team t)
 {
-	nt = level_threads(C, nt);
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-	for (int K = C->lo[2]; K < C->hi[2]; ++K) {
+	int k0, k1;
+	share(t, C->lo[2], C->hi[2], &k0, &k1);
+	for (int K = k0; K < k1; ++K) {
 		float wz[4];
 		axis_gather(K, F->nz, C->nz, F->lo[2], F->hi[2], wz);
 		for (int J = C->lo[1]; J < C->hi[1]; ++J) {
@@ -370,6 +409,7 @@ static void restrict_residual(const mg_level *F, mg_level *C, int nt)
 			axis_gather(J, F->ny, C->ny, F->lo[1], F->hi[1], wy);
 			for (int I = C->lo[0]; I < C->hi[0]; ++I) {
 				const size_t cc = cell_at(C, I, J, K);
+				C->x[cc] = 0;
 				if (C->d[cc] == 0) {
 					C->b[cc] = 0;
 					continue;
@@ -394,14 +434,15 @@ static void restrict_residual(const mg_level *F, mg_level *C, int nt)
 			}
 		}
 	}
+	team_sync(t);
 }
 
 /* F->x += P C->x on F's unknowns */
-static void prolong_add(mg_level *F, const mg_level *C, int nt)
+static void prolong_add(mg_level *F, const mg_level *C, team t)
 {
-	nt = level_threads(F, nt);
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-	for (int k = F->lo[2]; k < F->hi[2]; ++k)
+	int k0, k1;
+	share(t, F->lo[2], F->hi[2], &k0, &k1);
+	for (int k = k0; k < k1; ++k)
 		for (int j = F->lo[1]; j < F->hi[1]; ++j) {
 			const axis_map mz = map_axis(k, C->nz, C->lo[2], C->hi[2]);
 			const axis_map my = map_axis(j, C->ny, C->lo[1], C->hi[1]);
@@ -419,6 +460,7 @@ static void prolong_add(mg_level *F, const mg_level *C, int nt)
 				F->x[c] += 0.75f * (0.75f * raa + my.wb * rba) + mz.wb * (0.75f * rab + my.wb * rbb);
 			}
 		}
+	team_sync(t);
 }
 
 /* The coarsest level's dense Cholesky factor; false if it is not positive
@@ -488,47 +530,40 @@ static void coarse_solve(flip_mg *m)
 			s -= a[(size_t)t * n + p] * v[t];
 		v[p] = s / a[(size_t)p * n + p];
 	}
-	zero_box(L, L->x);
+	zero_box(L, L->x, SOLO);
 	for (int p = 0; p < n; ++p)
 		L->x[m->co_cell[p]] = (float)v[p];
 }
 
-/* x_l = V-cycle applied to b_l */
-static void vcycle(flip_mg *m, int l, int nt)
+
+/* x_l = V-cycle applied to b_l, x_l = 0 on entry (the caller zeroes it) */
+static void vcycle(flip_mg *m, int l, team t)
 {
 	if (l == m->nlev - 1) {
-		coarse_solve(m);
+		if (t.id == 0)
+			coarse_solve(m);
+		team_sync(t);
 		return;
 	}
 	mg_level *L = &m->lev[l], *C = &m->lev[l + 1];
-	zero_box(L, L->x);
-	for (int s = 0; s < NU; ++s) {
-		sweep(L, 0, nt);
-		sweep(L, 1, nt);
+	if (t.n > 1 && box_cells(L) <= PAR_CELLS) {
+		if (t.id == 0)
+			vcycle(m, l, SOLO);
+		team_sync(t);
+		return;
 	}
-	residual(L, nt);
-	restrict_residual(L, C, nt);
-	vcycle(m, l + 1, nt);
-	prolong_add(L, C, nt);
 	for (int s = 0; s < NU; ++s) {
-		sweep(L, 1, nt);
-		sweep(L, 0, nt);
+		sweep(L, 0, t);
+		sweep(L, 1, t);
 	}
-}
-
-/* z = M^-1 r on the rows */
-static void precondition(flip_mg *m, const int *cell_of, int n, const double *r, double *z, int nt)
-{
-	mg_level *L = &m->lev[0];
-	const int t = n > PAR_CELLS ? nt : 1;
-	/* the cycle reads b on the unknowns only */
-#pragma omp parallel for num_threads(t) if (t > 1) schedule(static)
-	for (int i = 0; i < n; ++i)
-		L->b[cell_of[i]] = (float)r[i];
-	vcycle(m, 0, nt);
-#pragma omp parallel for num_threads(t) if (t > 1) schedule(static)
-	for (int i = 0; i < n; ++i)
-		z[i] = (double)L->x[cell_of[i]];
+	residual(L, t);
+	restrict_residual(L, C, t);
+	vcycle(m, l + 1, t);
+	prolong_add(L, C, t);
+	for (int s = 0; s < NU; ++s) {
+		sweep(L, 1, t);
+		sweep(L, 0, t);
+	}
 }
 
 static double sum_chunks(const double *part, int nch)
@@ -539,40 +574,37 @@ static double sum_chunks(const double *part, int nch)
 	return s;
 }
 
-static double dot(const double *a, const double *b, int n, double *part, int nt)
+static double max_chunks(const double *part, int nch)
 {
-	const int nch = (n + CHUNK - 1) / CHUNK;
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-	for (int c = 0; c < nch; ++c) {
-		const int lo = c * CHUNK, hi = lo + CHUNK < n ? lo + CHUNK : n;
-		double s = 0;
-		for (int i = lo; i < hi; ++i)
-			s += a[i] * b[i];
-		part[c] = s;
-	}
-	return sum_chunks(part, nch);
+	double m = 0;
+	for (int c = 0; c < nch; ++c)
+		m = part[c] > m ? part[c] : m;
+	return m;
 }
 
-/* q = A s; returns s . q (chunked) */
-static double matvec_dot(const flip_matrix *A, const double *s, double *q, double *part, int nt)
+/* the end of chunk c of n rows (it starts at c CHUNK) */
+static int chunk_end(int c, int n) { return (c + 1) * CHUNK < n ? (c + 1) * CHUNK : n; }
+
+/* Over the chunk [lo, hi): s = z on the first iteration, else
+ * s = z + beta s_old (each row's neighbours recomputed from z and s_old,
+ * read-only here, with the same operations, so the values are those of a
+ * separate update), q = A s; returns the chunk's s . q. */
+static double matvec_dot(const flip_matrix *A, const double *z, const double *s_old, double beta, bool first, double *s,
+                         double *q, int lo, int hi)
 {
-	const int n = A->n, nch = (n + CHUNK - 1) / CHUNK;
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-	for (int c = 0; c < nch; ++c) {
-		const int lo = c * CHUNK, hi = lo + CHUNK < n ? lo + CHUNK : n;
-		double sq = 0;
-		for (int i = lo; i < hi; ++i) {
-			const int *nb = &A->nb[6 * i];
-			double t = A->diag[i] * s[i];
-			for (int d = 0; d < 6; ++d)
-				if (nb[d] >= 0)
-					t -= flip_off(A, i, d) * s[nb[d]];
-			q[i] = t;
-			sq += s[i] * t;
-		}
-		part[c] = sq;
+	double sq = 0;
+	for (int i = lo; i < hi; ++i) {
+		const int *nb = &A->nb[6 * i];
+		const double si = first ? z[i] : z[i] + beta * s_old[i];
+		double t = A->diag[i] * si;
+		for (int d = 0; d < 6; ++d)
+			if (nb[d] >= 0)
+				t -= flip_off(A, i, d) * (first ? z[nb[d]] : z[nb[d]] + beta * s_old[nb[d]]);
+		s[i] = si;
+		q[i] = t;
+		sq += si * t;
 	}
-	return sum_chunks(part, nch);
+	return sq;
 }
 
 eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A, const int *cell_of, const double *b,
@@ -589,14 +621,17 @@ eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A,
 	if (n == 0 || bmax == 0)
 		return EDDY_OK;
 	const int nt = w->def.threads > 1 ? w->def.threads : 1;
-	const int ntv = n > 4 * CHUNK ? nt : 1, nch = (n + CHUNK - 1) / CHUNK;
+	const int nch = (n + CHUNK - 1) / CHUNK;
 	if (!mg_alloc(m, w->nx, w->ny, w->nz))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory for the multigrid levels (%dx%dx%d cells)",
 		                  w->nx, w->ny, w->nz);
-	double *mem = eddy__arena_alloc(&w->arena, (4 * (size_t)n + (size_t)nch) * sizeof *mem);
+	double *mem = eddy__arena_alloc(&w->arena, (5 * (size_t)n + 3 * (size_t)nch) * sizeof *mem);
 	if (!mem)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory for %d unknowns", n);
-	double *r = mem, *z = mem + n, *s = mem + 2 * (size_t)n, *q = mem + 3 * (size_t)n, *part = mem + 4 * (size_t)n;
+	double *r = mem, *z = mem + n, *s = mem + 2 * (size_t)n, *s_old = mem + 3 * (size_t)n, *q = mem + 4 * (size_t)n;
+	/* chunk sums of s . q, of r . z and the chunk maxima of |r|: separate, so
+	 * no thread overwrites one that another is still adding up */
+	double *part_sq = mem + 5 * (size_t)n, *part_rz = part_sq + nch, *part_max = part_rz + nch;
 
 	build_fine(&m->lev[0], A, cell_of, nt);
 	for (int l = 1; l < m->nlev; ++l)
@@ -605,40 +640,94 @@ eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A,
 		return eddy__fail(w, EDDY_ERR_SOLVER,
 		                  "flip_pressure: multigrid coarse matrix not positive definite (%d unknowns)", n);
 
-	memcpy(r, b, (size_t)n * sizeof *r);
-	precondition(m, cell_of, n, r, z, nt);
-	memcpy(s, z, (size_t)n * sizeof *s);
-	double rho = dot(r, z, n, part, ntv);
-	for (int k = 1; k <= max_it; ++k) {
-		const double sq = matvec_dot(A, s, q, part, ntv);
-		*it = k;
-		if (!(sq > 0)) { /* breakdown: A is not positive definite on s */
-			double rmax = 0;
-			for (int i = 0; i < n; ++i)
-				rmax = fabs(r[i]) > rmax ? fabs(r[i]) : rmax;
-			*res = rmax / bmax;
-			*converged = false;
-			return EDDY_OK;
+	mg_level *L0 = &m->lev[0];
+	int iters = 0;
+	double resid = 0;
+	bool conv = false;
+	const int ntr = n > 4 * CHUNK ? nt : 1; /* a small solve does not pay for a team */
+#pragma omp parallel num_threads(ntr) if (ntr > 1)
+	{
+		const team t = {omp_get_thread_num(), omp_get_num_threads()};
+		int c0, c1; /* the thread's chunks */
+		share(t, 0, nch, &c0, &c1);
+		/* Level 0's x stays 0 off the unknowns (no stage writes there); on
+		 * them it is zeroed with each new right-hand side. */
+		zero_box(L0, L0->x, t);
+		team_sync(t);
+		for (int c = c0; c < c1; ++c)
+			for (int i = c * CHUNK; i < chunk_end(c, n); ++i) {
+				r[i] = b[i];
+				L0->b[cell_of[i]] = (float)r[i];
+				L0->x[cell_of[i]] = 0;
+			}
+		team_sync(t);
+		double rho = 0, beta = 0;
+		double *sk = s, *sk_old = s_old; /* swapped by every thread alike */
+		for (int k = 0; k <= max_it; ++k) {
+			if (k > 0) {
+				for (int c = c0; c < c1; ++c) {
+					const int c_hi = chunk_end(c, n);
+					part_sq[c] = matvec_dot(A, z, sk_old, beta, k == 1, sk, q, c * CHUNK, c_hi);
+				}
+				team_sync(t);
+				const double sq = sum_chunks(part_sq, nch);
+				if (t.id == 0)
+					iters = k;
+				if (!(sq > 0)) { /* breakdown: A is not positive definite on s */
+					if (t.id == 0) {
+						double rmax = 0;
+						for (int i = 0; i < n; ++i)
+							rmax = fabs(r[i]) > rmax ? fabs(r[i]) : rmax;
+						resid = rmax / bmax;
+					}
+					break;
+				}
+				const double alpha = rho / sq;
+				for (int c = c0; c < c1; ++c) {
+					const int c_hi = chunk_end(c, n);
+					double rmax = 0;
+					for (int i = c * CHUNK; i < c_hi; ++i) {
+						x[i] += alpha * sk[i];
+						r[i] -= alpha * q[i];
+						rmax = fabs(r[i]) > rmax ? fabs(r[i]) : rmax;
+						L0->b[cell_of[i]] = (float)r[i];
+						L0->x[cell_of[i]] = 0;
+					}
+					part_max[c] = rmax;
+				}
+				team_sync(t);
+				const double rk = max_chunks(part_max, nch) / bmax;
+				if (t.id == 0)
+					resid = rk;
+				if (rk <= tol) {
+					if (t.id == 0)
+						conv = true;
+					break;
+				}
+				if (k == max_it)
+					break;
+			}
+			vcycle(m, 0, t);
+			for (int c = c0; c < c1; ++c) {
+				const int c_hi = chunk_end(c, n);
+				double rz = 0;
+				for (int i = c * CHUNK; i < c_hi; ++i) {
+					z[i] = (double)L0->x[cell_of[i]];
+					rz += r[i] * z[i];
+				}
+				part_rz[c] = rz;
+			}
+			team_sync(t);
+			const double rho_new = sum_chunks(part_rz, nch);
+			beta = k > 0 ? rho_new / rho : 0;
+			rho = rho_new;
+			double *tmp = sk_old; /* this s is the next iteration's s_old */
+			sk_old = sk;
+			sk = tmp;
 		}
-		const double alpha = rho / sq;
-		double rmax = 0;
-#pragma omp parallel for num_threads(ntv) if (ntv > 1) schedule(static) reduction(max : rmax)
-		for (int i = 0; i < n; ++i) {
-			x[i] += alpha * s[i];
-			r[i] -= alpha * q[i];
-			rmax = fabs(r[i]) > rmax ? fabs(r[i]) : rmax;
-		}
-		*res = rmax / bmax;
-		if (*res <= tol)
-			return EDDY_OK;
-		precondition(m, cell_of, n, r, z, nt);
-		const double rho_new = dot(r, z, n, part, ntv);
-		const double beta = rho_new / rho;
-		rho = rho_new;
-#pragma omp parallel for num_threads(ntv) if (ntv > 1) schedule(static)
-		for (int i = 0; i < n; ++i)
-			s[i] = z[i] + beta * s[i];
 	}
-	*converged = false;
+	*it = iters;
+	*res = resid;
+	*converged = conv;
 	return EDDY_OK;
 }
