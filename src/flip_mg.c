@@ -74,8 +74,8 @@ enum {
 	NU = 2,            /* red-black sweeps before and after the coarse correction */
 	COARSE_CELLS = 64, /* the coarsest level has at most this many cells */
 	MAX_LEVELS = 24,
-	CHUNK = 4096,      /* rows per chunk of a dot product */
-	PAR_CELLS = 8192,  /* a level box of at most this many cells runs on one thread (same result) */
+	CHUNK = 4096,     /* rows per chunk of a dot product */
+	PAR_CELLS = 8192, /* a level box of at most this many cells runs on one thread (same result) */
 };
 
 typedef struct mg_level {
@@ -534,7 +534,6 @@ static void coarse_solve(flip_mg *m)
 	for (int p = 0; p < n; ++p)
 		L->x[m->co_cell[p]] = (float)v[p];
 }
-
 
 /* x_l = V-cycle applied to b_l, x_l = 0 on entry (the caller zeroes it) */
 static void vcycle(flip_mg *m, int l, team t)
