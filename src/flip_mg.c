@@ -61,9 +61,8 @@
  * order, and max|r| is order-free: the result is the same, bit for bit, on
  * any thread count. r's update fills the cycle's right-hand side and z's
  * gather from the cycle computes r . z, so an iteration's vector work takes
- * four barriers. Memory: the levels are
- * allocated once per grid size and reused; the
- * CG vectors come from the world's arena. */
+ * four barriers. Memory: the levels are allocated once per grid size and
+ * reused; the CG vectors come from the world's arena. */
 #include "flip.h"
 
 #include <omp.h>
