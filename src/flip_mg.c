@@ -59,10 +59,13 @@
  * inputs; CG's dot products are summed in fixed chunks of CHUNK rows in chunk
  * order (as flip_pcg.c), each thread adding the same chunk sums in the same
  * order, and max|r| is order-free: the result is the same, bit for bit, on
- * any thread count. r's update fills the cycle's right-hand side and z's
- * gather from the cycle computes r . z, so an iteration's vector work takes
- * four barriers. Memory: the levels are allocated once per grid size and
- * reused; the CG vectors come from the world's arena. */
+ * any thread count. CG's search direction is updated inside the
+ * matrix-vector product (as flip_pcg.c), r's update fills the cycle's
+ * right-hand side and z's gather from the cycle computes r . z, so an
+ * iteration's vector work takes three barriers. Under a load that leaves
+ * a thread waiting for a core, every barrier can cost a time slice: PAR_CELLS
+ * counts them as well as the work. Memory: the levels are allocated once per
+ * grid size and reused; the CG vectors come from the world's arena. */
 #include "flip.h"
 
 #include <omp.h>
@@ -73,8 +76,8 @@ enum {
 	NU = 2,            /* red-black sweeps before and after the coarse correction */
 	COARSE_CELLS = 64, /* the coarsest level has at most this many cells */
 	MAX_LEVELS = 24,
-	CHUNK = 4096,     /* rows per chunk of a dot product */
-	PAR_CELLS = 8192, /* a level box of at most this many cells runs on one thread (same result) */
+	CHUNK = 4096,      /* rows per chunk of a dot product */
+	PAR_CELLS = 32768, /* a level box of at most this many cells runs on one thread (same result) */
 };
 
 typedef struct mg_level {
@@ -583,18 +586,24 @@ static double max_chunks(const double *part, int nch)
 /* the end of chunk c of n rows (it starts at c CHUNK) */
 static int chunk_end(int c, int n) { return (c + 1) * CHUNK < n ? (c + 1) * CHUNK : n; }
 
-/* Over the chunk [lo, hi): q = A s; returns the chunk's s . q. */
-static double matvec_dot(const flip_matrix *A, const double *s, double *q, int lo, int hi)
+/* Over the chunk [lo, hi): s = z on the first iteration, else
+ * s = z + beta s_old (each row's neighbours recomputed from z and s_old,
+ * read-only here, with the same operations, so the values are those of a
+ * separate update), q = A s; returns the chunk's s . q. */
+static double matvec_dot(const flip_matrix *A, const double *z, const double *s_old, double beta, bool first, double *s,
+                         double *q, int lo, int hi)
 {
 	double sq = 0;
 	for (int i = lo; i < hi; ++i) {
 		const int *nb = &A->nb[6 * i];
-		double t = A->diag[i] * s[i];
+		const double si = first ? z[i] : z[i] + beta * s_old[i];
+		double t = A->diag[i] * si;
 		for (int d = 0; d < 6; ++d)
 			if (nb[d] >= 0)
-				t -= flip_off(A, i, d) * s[nb[d]];
+				t -= flip_off(A, i, d) * (first ? z[nb[d]] : z[nb[d]] + beta * s_old[nb[d]]);
+		s[i] = si;
 		q[i] = t;
-		sq += s[i] * t;
+		sq += si * t;
 	}
 	return sq;
 }
@@ -617,13 +626,13 @@ eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A,
 	if (!mg_alloc(m, w->nx, w->ny, w->nz))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory for the multigrid levels (%dx%dx%d cells)",
 		                  w->nx, w->ny, w->nz);
-	double *mem = eddy__arena_alloc(&w->arena, (4 * (size_t)n + 3 * (size_t)nch) * sizeof *mem);
+	double *mem = eddy__arena_alloc(&w->arena, (5 * (size_t)n + 3 * (size_t)nch) * sizeof *mem);
 	if (!mem)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory for %d unknowns", n);
-	double *r = mem, *z = mem + n, *s = mem + 2 * (size_t)n, *q = mem + 3 * (size_t)n;
+	double *r = mem, *z = mem + n, *s = mem + 2 * (size_t)n, *s_old = mem + 3 * (size_t)n, *q = mem + 4 * (size_t)n;
 	/* chunk sums of s . q, of r . z and the chunk maxima of |r|: separate, so
 	 * no thread overwrites one that another is still adding up */
-	double *part_sq = mem + 4 * (size_t)n, *part_rz = part_sq + nch, *part_max = part_rz + nch;
+	double *part_sq = mem + 5 * (size_t)n, *part_rz = part_sq + nch, *part_max = part_rz + nch;
 
 	build_fine(&m->lev[0], A, cell_of, nt);
 	for (int l = 1; l < m->nlev; ++l)
@@ -653,12 +662,13 @@ eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A,
 				L0->x[cell_of[i]] = 0;
 			}
 		team_sync(t);
-		double rho = 0;
+		double rho = 0, beta = 0;
+		double *sk = s, *sk_old = s_old; /* swapped by every thread alike */
 		for (int k = 0; k <= max_it; ++k) {
 			if (k > 0) {
 				for (int c = c0; c < c1; ++c) {
 					const int c_hi = chunk_end(c, n);
-					part_sq[c] = matvec_dot(A, s, q, c * CHUNK, c_hi);
+					part_sq[c] = matvec_dot(A, z, sk_old, beta, k == 1, sk, q, c * CHUNK, c_hi);
 				}
 				team_sync(t);
 				const double sq = sum_chunks(part_sq, nch);
@@ -678,7 +688,7 @@ eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A,
 					const int c_hi = chunk_end(c, n);
 					double rmax = 0;
 					for (int i = c * CHUNK; i < c_hi; ++i) {
-						x[i] += alpha * s[i];
+						x[i] += alpha * sk[i];
 						r[i] -= alpha * q[i];
 						rmax = fabs(r[i]) > rmax ? fabs(r[i]) : rmax;
 						L0->b[cell_of[i]] = (float)r[i];
@@ -710,18 +720,11 @@ eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A,
 			}
 			team_sync(t);
 			const double rho_new = sum_chunks(part_rz, nch);
-			if (k == 0) {
-				for (int c = c0; c < c1; ++c)
-					for (int i = c * CHUNK; i < chunk_end(c, n); ++i)
-						s[i] = z[i];
-			} else {
-				const double beta = rho_new / rho;
-				for (int c = c0; c < c1; ++c)
-					for (int i = c * CHUNK; i < chunk_end(c, n); ++i)
-						s[i] = z[i] + beta * s[i];
-			}
+			beta = k > 0 ? rho_new / rho : 0;
 			rho = rho_new;
-			team_sync(t); /* the product reads the neighbours' s */
+			double *tmp = sk_old; /* this s is the next iteration's s_old */
+			sk_old = sk;
+			sk = tmp;
 		}
 	}
 	*it = iters;
