@@ -366,6 +366,17 @@ typedef struct flip_matrix {
 
 static inline double flip_off(const flip_matrix *A, int r, int d) { return A->off ? A->off[6 * r + d] : 1.0; }
 
+/* CG's shared row kernel (flip_pcg.c, used by the PCG and MG solvers). A dot
+ * product is summed in fixed chunks of FLIP_CHUNK rows, the chunk sums added
+ * in chunk order, so it is the same on any number of threads. */
+enum { FLIP_CHUNK = 4096 };
+/* Over the rows [lo, hi): s = z + beta s_old, q = A s; returns the chunk's
+ * s . q. With s_old = z and beta = 0 it gives s = z (z finite). */
+double eddy__flip_matvec_dot(const flip_matrix *A, const double *z, const double *s_old, double beta, double *s,
+                             double *q, int lo, int hi);
+/* part[0] + ... + part[nch - 1], in that order */
+double eddy__flip_sum_chunks(const double *part, int nch);
+
 /* MIC(0)-PCG (flip_pcg.c). Solves A x = b to max|r| <= tol max|b|; x starts
  * at 0. Scratch comes from the world's arena. Returns false if it did not
  * converge in max_it; *it and *res (max|r| / max|b|) are always set. */

@@ -49,14 +49,14 @@
  * may fill a sixth of its tank's grid); the arrays span the whole grid.
  *
  * Threads: the whole solve after the level build is one parallel region;
- * each stage splits its planes (or its chunks of CHUNK rows) statically among
+ * each stage splits its planes (or its chunks of FLIP_CHUNK rows) statically among
  * the threads and ends at a barrier only where the next stage reads what a
  * neighbouring thread wrote. A level whose box has at most PAR_CELLS cells,
  * and every level below it, is cycled by one thread while the others wait at
  * the next barrier: its work would not pay for the barriers. A red-black
  * sweep writes each cell of a colour from the other colour only; the
  * residual, restriction and prolongation write each cell once from read-only
- * inputs; CG's dot products are summed in fixed chunks of CHUNK rows in chunk
+ * inputs; CG's dot products are summed in fixed chunks of FLIP_CHUNK rows in chunk
  * order (as flip_pcg.c), each thread adding the same chunk sums in the same
  * order, and max|r| is order-free: the result is the same, bit for bit, on
  * any thread count. CG's search direction is updated inside the
@@ -76,7 +76,6 @@ enum {
 	NU = 2,            /* red-black sweeps before and after the coarse correction */
 	COARSE_CELLS = 64, /* the coarsest level has at most this many cells */
 	MAX_LEVELS = 24,
-	CHUNK = 4096,      /* rows per chunk of a dot product */
 	PAR_CELLS = 32768, /* a level box of at most this many cells runs on one thread (same result) */
 };
 
@@ -567,14 +566,6 @@ static void vcycle(flip_mg *m, int l, team t)
 	}
 }
 
-static double sum_chunks(const double *part, int nch)
-{
-	double s = 0;
-	for (int c = 0; c < nch; ++c)
-		s += part[c];
-	return s;
-}
-
 static double max_chunks(const double *part, int nch)
 {
 	double m = 0;
@@ -583,30 +574,8 @@ static double max_chunks(const double *part, int nch)
 	return m;
 }
 
-/* the end of chunk c of n rows (it starts at c CHUNK) */
-static int chunk_end(int c, int n) { return (c + 1) * CHUNK < n ? (c + 1) * CHUNK : n; }
-
-/* Over the chunk [lo, hi): s = z on the first iteration, else
- * s = z + beta s_old (each row's neighbours recomputed from z and s_old,
- * read-only here, with the same operations, so the values are those of a
- * separate update), q = A s; returns the chunk's s . q. */
-static double matvec_dot(const flip_matrix *A, const double *z, const double *s_old, double beta, bool first, double *s,
-                         double *q, int lo, int hi)
-{
-	double sq = 0;
-	for (int i = lo; i < hi; ++i) {
-		const int *nb = &A->nb[6 * i];
-		const double si = first ? z[i] : z[i] + beta * s_old[i];
-		double t = A->diag[i] * si;
-		for (int d = 0; d < 6; ++d)
-			if (nb[d] >= 0)
-				t -= flip_off(A, i, d) * (first ? z[nb[d]] : z[nb[d]] + beta * s_old[nb[d]]);
-		s[i] = si;
-		q[i] = t;
-		sq += si * t;
-	}
-	return sq;
-}
+/* the end of chunk c of n rows (it starts at c FLIP_CHUNK) */
+static int chunk_end(int c, int n) { return (c + 1) * FLIP_CHUNK < n ? (c + 1) * FLIP_CHUNK : n; }
 
 eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A, const int *cell_of, const double *b,
                                 double *x, double tol, int max_it, int *it, double *res, bool *converged)
@@ -622,7 +591,7 @@ eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A,
 	if (n == 0 || bmax == 0)
 		return EDDY_OK;
 	const int nt = w->def.threads > 1 ? w->def.threads : 1;
-	const int nch = (n + CHUNK - 1) / CHUNK;
+	const int nch = (n + FLIP_CHUNK - 1) / FLIP_CHUNK;
 	if (!mg_alloc(m, w->nx, w->ny, w->nz))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory for the multigrid levels (%dx%dx%d cells)",
 		                  w->nx, w->ny, w->nz);
@@ -645,7 +614,7 @@ eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A,
 	int iters = 0;
 	double resid = 0;
 	bool conv = false;
-	const int ntr = n > 4 * CHUNK ? nt : 1; /* a small solve does not pay for a team */
+	const int ntr = n > 4 * FLIP_CHUNK ? nt : 1; /* a small solve does not pay for a team */
 #pragma omp parallel num_threads(ntr) if (ntr > 1)
 	{
 		const team t = {omp_get_thread_num(), omp_get_num_threads()};
@@ -656,7 +625,7 @@ eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A,
 		zero_box(L0, L0->x, t);
 		team_sync(t);
 		for (int c = c0; c < c1; ++c)
-			for (int i = c * CHUNK; i < chunk_end(c, n); ++i) {
+			for (int i = c * FLIP_CHUNK; i < chunk_end(c, n); ++i) {
 				r[i] = b[i];
 				L0->b[cell_of[i]] = (float)r[i];
 				L0->x[cell_of[i]] = 0;
@@ -668,10 +637,12 @@ eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A,
 			if (k > 0) {
 				for (int c = c0; c < c1; ++c) {
 					const int c_hi = chunk_end(c, n);
-					part_sq[c] = matvec_dot(A, z, sk_old, beta, k == 1, sk, q, c * CHUNK, c_hi);
+					/* the first direction is z: s_old = z, beta = 0 */
+					part_sq[c] = eddy__flip_matvec_dot(A, z, k == 1 ? z : sk_old, k == 1 ? 0.0 : beta, sk, q,
+					                                   c * FLIP_CHUNK, c_hi);
 				}
 				team_sync(t);
-				const double sq = sum_chunks(part_sq, nch);
+				const double sq = eddy__flip_sum_chunks(part_sq, nch);
 				if (t.id == 0)
 					iters = k;
 				if (!(sq > 0)) { /* breakdown: A is not positive definite on s */
@@ -687,7 +658,7 @@ eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A,
 				for (int c = c0; c < c1; ++c) {
 					const int c_hi = chunk_end(c, n);
 					double rmax = 0;
-					for (int i = c * CHUNK; i < c_hi; ++i) {
+					for (int i = c * FLIP_CHUNK; i < c_hi; ++i) {
 						x[i] += alpha * sk[i];
 						r[i] -= alpha * q[i];
 						rmax = fabs(r[i]) > rmax ? fabs(r[i]) : rmax;
@@ -712,14 +683,14 @@ eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A,
 			for (int c = c0; c < c1; ++c) {
 				const int c_hi = chunk_end(c, n);
 				double rz = 0;
-				for (int i = c * CHUNK; i < c_hi; ++i) {
+				for (int i = c * FLIP_CHUNK; i < c_hi; ++i) {
 					z[i] = (double)L0->x[cell_of[i]];
 					rz += r[i] * z[i];
 				}
 				part_rz[c] = rz;
 			}
 			team_sync(t);
-			const double rho_new = sum_chunks(part_rz, nch);
+			const double rho_new = eddy__flip_sum_chunks(part_rz, nch);
 			beta = k > 0 ? rho_new / rho : 0;
 			rho = rho_new;
 			double *tmp = sk_old; /* this s is the next iteration's s_old */

@@ -8,7 +8,7 @@
  * factorisation uses Bridson's general form, not the unit-coefficient one.
  * Threads: the matrix-vector product and the vector updates run on all
  * threads (each row written by one); a dot product is summed in fixed chunks
- * of CHUNK rows, the chunk sums added in chunk order, so it is the same on
+ * of FLIP_CHUNK rows, the chunk sums added in chunk order, so it is the same on
  * any number of threads; max|r| is order-free. The MIC(0) factorisation and
  * its two triangular solves are sequential by nature (row i needs the rows
  * before it) and stay serial. The result does not depend on the thread count. */
@@ -73,8 +73,6 @@ KERNEL void apply_w(const flip_matrix *A, const double *precon, const double *r,
 	}
 }
 
-enum { CHUNK = 4096 };
-
 /* Over the rows [lo, hi): s = z + beta s_old (the search direction's update,
  * fused in so that an iteration opens two parallel regions, not four: each
  * row's neighbours are recomputed from z and s_old, read-only here, with the
@@ -100,9 +98,16 @@ KERNEL double matvec_dot_w(const flip_matrix *A, const double *z, const double *
 
 /* Threads for n rows: one below a size where a parallel region costs more
  * than it saves (the results are the same either way). */
-static int pcg_threads(const eddy_world *w, int n) { return n > 4 * CHUNK ? w->def.threads : 1; }
+static int pcg_threads(const eddy_world *w, int n) { return n > 4 * FLIP_CHUNK ? w->def.threads : 1; }
 
-static double sum_chunks(const double *part, int nch)
+double eddy__flip_matvec_dot(const flip_matrix *A, const double *z, const double *s_old, double beta, double *s,
+                             double *q, int lo, int hi)
+{
+	return A->off ? matvec_dot_w(A, z, s_old, beta, s, q, lo, hi, true)
+	              : matvec_dot_w(A, z, s_old, beta, s, q, lo, hi, false);
+}
+
+double eddy__flip_sum_chunks(const double *part, int nch)
 {
 	double s = 0;
 	for (int c = 0; c < nch; ++c)
@@ -114,14 +119,13 @@ static double sum_chunks(const double *part, int nch)
 static double matvec_dot(const flip_matrix *A, const double *z, const double *s_old, double beta, double *s, double *q,
                          double *part, int nt)
 {
-	const int n = A->n, nch = (n + CHUNK - 1) / CHUNK;
+	const int n = A->n, nch = (n + FLIP_CHUNK - 1) / FLIP_CHUNK;
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (int c = 0; c < nch; ++c) {
-		const int lo = c * CHUNK, hi = lo + CHUNK < n ? lo + CHUNK : n;
-		part[c] = A->off ? matvec_dot_w(A, z, s_old, beta, s, q, lo, hi, true)
-		                 : matvec_dot_w(A, z, s_old, beta, s, q, lo, hi, false);
+		const int lo = c * FLIP_CHUNK, hi = lo + FLIP_CHUNK < n ? lo + FLIP_CHUNK : n;
+		part[c] = eddy__flip_matvec_dot(A, z, s_old, beta, s, q, lo, hi);
 	}
-	return sum_chunks(part, nch);
+	return eddy__flip_sum_chunks(part, nch);
 }
 
 static void mic0(const flip_matrix *A, double *precon)
@@ -142,16 +146,16 @@ static void apply(const flip_matrix *A, const double *precon, const double *r, d
 
 static double dot(const double *a, const double *b, int n, double *part, int nt)
 {
-	const int nch = (n + CHUNK - 1) / CHUNK;
+	const int nch = (n + FLIP_CHUNK - 1) / FLIP_CHUNK;
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (int c = 0; c < nch; ++c) {
-		const int lo = c * CHUNK, hi = lo + CHUNK < n ? lo + CHUNK : n;
+		const int lo = c * FLIP_CHUNK, hi = lo + FLIP_CHUNK < n ? lo + FLIP_CHUNK : n;
 		double s = 0;
 		for (int i = lo; i < hi; ++i)
 			s += a[i] * b[i];
 		part[c] = s;
 	}
-	return sum_chunks(part, nch);
+	return eddy__flip_sum_chunks(part, nch);
 }
 
 static double maxabs(const double *a, int n)
@@ -172,7 +176,7 @@ bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double
 	const double bmax = maxabs(b, n);
 	if (n == 0 || bmax == 0)
 		return true;
-	const int nt = pcg_threads(w, n), nch = (n + CHUNK - 1) / CHUNK;
+	const int nt = pcg_threads(w, n), nch = (n + FLIP_CHUNK - 1) / FLIP_CHUNK;
 	double *mem = eddy__arena_alloc(&w->arena, (6 * (size_t)n + (size_t)nch) * sizeof *mem);
 	if (!mem)
 		return false;
