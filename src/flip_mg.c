@@ -68,9 +68,16 @@
  * grid size and reused; the CG vectors come from the world's arena. */
 #include "flip.h"
 
-#include <omp.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#define TEAM_RANK omp_get_thread_num()
+#define TEAM_SIZE omp_get_num_threads()
+#else /* a build without OpenMP (the fuzzer's) runs the team of one */
+#define TEAM_RANK 0
+#define TEAM_SIZE 1
+#endif
 
 enum {
 	NU = 2,            /* red-black sweeps before and after the coarse correction */
@@ -617,7 +624,7 @@ eddy_status eddy__flip_mg_solve(eddy_world *w, flip_mg *m, const flip_matrix *A,
 	const int ntr = n > 4 * FLIP_CHUNK ? nt : 1; /* a small solve does not pay for a team */
 #pragma omp parallel num_threads(ntr) if (ntr > 1)
 	{
-		const team t = {omp_get_thread_num(), omp_get_num_threads()};
+		const team t = {TEAM_RANK, TEAM_SIZE};
 		int c0, c1; /* the thread's chunks */
 		share(t, 0, nch, &c0, &c1);
 		/* Level 0's x stays 0 off the unknowns (no stage writes there); on
