@@ -5,11 +5,14 @@
  *    sph_pressure and sph_viscosity, for 5k / 30k / 100k particles at
  *    h = 2 spacings, on 1 and 2 threads: a block settling in a tank, one
  *    world per thread count, measured in turns so that the speed-up is a
- *    median of paired ratios;
+ *    median of paired ratios; then the same blocks with sph_dfsph (rows
+ *    "solver":"dfsph": sph_density, sph_viscosity and sph_dfsph);
  *  - the pour scene of scenes/pour.lua (5625 particles, one thread) with
  *    the implicit solve (sph_dfsph, the scene's default) and with WCSPH:
  *    simulated seconds per wall second, the density error, the mean
  *    compression and the solver's iterations per step (one run each).
+ * Options after the output file: --no-pour (the blocks only),
+ * --wcsph-blocks or --dfsph-blocks (one solver's blocks only), --pour-only.
  * Every figure is the median of repeated runs: the machine is shared, and a
  * neighbour's job shows up as outliers. */
 #include <math.h>
@@ -25,8 +28,9 @@
  * twice as wide, with gravity: the neighbourhoods of a real fluid. A block
  * this calm seldom moves a particle by half the Verlet skin, so this times
  * mostly the filtered-list path (src/sph/neighbors.c); a dam break runs the grid
- * search every few steps. */
-static eddy_world *block(int n, int threads)
+ * search every few steps. dfsph: sph_dfsph at its defaults (both solves)
+ * after gravity and viscosity, instead of sph_pressure with k = 400. */
+static eddy_world *block(int n, int threads, bool dfsph)
 {
 	const float dx = 0.01f,
 				side = dx * (roundf(cbrtf((float)n)) + 0.5f); /* + 0.5: a whole number of spacings after floor */
@@ -45,12 +49,19 @@ static eddy_world *block(int n, int threads)
 	de.radius = 2 * dx;
 	de.stiffness = 400;
 	eddy_add_sph_density(w, &de);
-	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
-	eddy_add_sph_pressure(w, &pr);
 	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
-	eddy_add_sph_viscosity(w, &vi);
 	eddy_gravity_def g = eddy_default_gravity_def();
-	eddy_add_gravity(w, &g);
+	if (dfsph) {
+		eddy_add_gravity(w, &g);
+		eddy_add_sph_viscosity(w, &vi);
+		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+		eddy_add_sph_dfsph(w, &df);
+	} else {
+		eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+		eddy_add_sph_pressure(w, &pr);
+		eddy_add_sph_viscosity(w, &vi);
+		eddy_add_gravity(w, &g);
+	}
 	eddy_integrate_def it = eddy_default_integrate_def();
 	eddy_add_integrate(w, &it);
 	eddy_collide_box_def bx = eddy_default_collide_box_def();
@@ -200,28 +211,33 @@ static bool pour_row(FILE *f, bool first, const char *solver, float stiffness, i
 	return true;
 }
 
-int main(int argc, char **argv)
+enum { REPS = 9, STEPS = 5 };
+
+/* The profile time (ms) of each system named in names[0..3) so far. */
+static void profile_ms(eddy_world *w, const char *const names[3], double ms[3])
 {
-	const char *path = argc > 1 ? argv[1] : "build/bench_sph.json";
-	FILE *f = fopen(path, "w");
-	if (!f) {
-		fprintf(stderr, "bench_sph: cannot write %s\n", path);
-		return 1;
+	for (int k = 0; k < eddy_world_system_count(w); ++k) {
+		eddy_system_info info;
+		eddy_world_system_info(w, eddy_world_system_at(w, k), &info);
+		for (int q = 0; q < 3; ++q)
+			if (strcmp(info.name, names[q]) == 0)
+				ms[q] = info.profile_ms;
 	}
+}
+
+/* The block rows of one solver: for each size, the same block on 1 and on 2
+ * threads, measured in turns (the host's load drifts over seconds, so a
+ * ratio of runs made minutes apart measures the host as much as the code).
+ * *first: no row written yet. False if a step failed. */
+static bool block_rows(FILE *f, bool *first, bool dfsph)
+{
 	const int counts[] = {5000, 30000, 100000};
-	const char *names[] = {"sph_density", "sph_pressure", "sph_viscosity"};
-	enum { REPS = 9, STEPS = 5 };
-	fprintf(f,
-	        "{\"benchmark\":\"sph\",\"unit\":\"ns per particle per step\",\"note\":\"medians of %d runs of %d steps, "
-	        "1 and 2 threads alternating; the speed-up is the median of the paired ratios; shared 2-core machine\","
-	        "\"results\":[",
-	        REPS, STEPS);
-	const bool pour_only = argc > 2 && strcmp(argv[2], "--pour-only") == 0;
-	for (size_t c = 0; c < 3 && !pour_only; ++c) {
-		/* the same block on 1 and on 2 threads, measured in turns: the host's
-		 * load drifts over seconds, so a ratio of runs made minutes apart
-		 * measures the host as much as the code */
-		eddy_world *w[2] = {block(counts[c], 1), block(counts[c], 2)};
+	const char *const wcsph_names[3] = {"sph_density", "sph_pressure", "sph_viscosity"};
+	const char *const dfsph_names[3] = {"sph_density", "sph_viscosity", "sph_dfsph"};
+	const char *const *names = dfsph ? dfsph_names : wcsph_names;
+	const char *solver = dfsph ? "dfsph" : "wcsph";
+	for (size_t c = 0; c < 3; ++c) {
+		eddy_world *w[2] = {block(counts[c], 1, dfsph), block(counts[c], 2, dfsph)};
 		for (int t = 0; t < 2; ++t)
 			for (int s = 0; s < 3; ++s)
 				eddy_world_step_frame(w[t]); /* emit, then settle the first kick */
@@ -230,25 +246,13 @@ int main(int argc, char **argv)
 		for (int r = 0; r < REPS; ++r) {
 			for (int t = 0; t < 2; ++t) {
 				double before[3] = {0}, after[3] = {0};
-				for (int k = 0; k < eddy_world_system_count(w[t]); ++k) {
-					eddy_system_info info;
-					eddy_world_system_info(w[t], eddy_world_system_at(w[t], k), &info);
-					for (int q = 0; q < 3; ++q)
-						if (strcmp(info.name, names[q]) == 0)
-							before[q] = info.profile_ms;
-				}
+				profile_ms(w[t], names, before);
 				for (int s = 0; s < STEPS; ++s)
 					if (eddy_world_step(w[t]) != EDDY_OK) {
 						fprintf(stderr, "bench_sph: %s\n", eddy_world_error(w[t]));
-						return 1;
+						return false;
 					}
-				for (int k = 0; k < eddy_world_system_count(w[t]); ++k) {
-					eddy_system_info info;
-					eddy_world_system_info(w[t], eddy_world_system_at(w[t], k), &info);
-					for (int q = 0; q < 3; ++q)
-						if (strcmp(info.name, names[q]) == 0)
-							after[q] = info.profile_ms;
-				}
+				profile_ms(w[t], names, after);
 				sum[t][r] = 0;
 				for (int q = 0; q < 3; ++q) {
 					per[t][q][r] = (after[q] - before[q]) * 1e6 / ((double)n * STEPS);
@@ -262,16 +266,21 @@ int main(int argc, char **argv)
 			qsort(sum[t], REPS, sizeof sum[t][0], cmp_double);
 			for (int q = 0; q < 3; ++q)
 				qsort(per[t][q], REPS, sizeof per[t][q][0], cmp_double);
-			fprintf(f, "%s\n {\"particles\":%zu,\"threads\":%d,\"density_pressure_viscosity_ns\":%.1f,\"systems\":{",
-			        c + (size_t)t ? "," : "", n, t + 1, sum[t][REPS / 2]);
-			printf("%7zu particles, %d thread%s: %7.1f ns/particle/step (", n, t + 1, t ? "s" : " ", sum[t][REPS / 2]);
+			/* WCSPH's rows keep the key they always had */
+			fprintf(f, "%s\n {\"solver\":\"%s\",\"particles\":%zu,\"threads\":%d,\"%s\":%.1f,\"systems\":{",
+			        *first ? "" : ",", solver, n, t + 1, dfsph ? "sph_ns" : "density_pressure_viscosity_ns",
+			        sum[t][REPS / 2]);
+			*first = false;
+			printf("%s %7zu particles, %d thread%s: %7.1f ns/particle/step (", solver, n, t + 1, t ? "s" : " ",
+			       sum[t][REPS / 2]);
 			for (int q = 0; q < 3; ++q) {
 				fprintf(f, "%s\"%s\":%.1f", q ? "," : "", names[q], per[t][q][REPS / 2]);
 				printf("%s%s %.1f", q ? ", " : "", names[q], per[t][q][REPS / 2]);
 			}
 			fprintf(f, "}}");
 			if (t == 1) {
-				fprintf(f, ",\n {\"particles\":%zu,\"speedup_2_threads\":%.2f}", n, ratio[REPS / 2]);
+				fprintf(f, ",\n {\"solver\":\"%s\",\"particles\":%zu,\"speedup_2_threads\":%.2f}", solver, n,
+				        ratio[REPS / 2]);
 				printf("; speed-up %.2fx, median of paired runs", ratio[REPS / 2]);
 			}
 			printf(")\n");
@@ -279,13 +288,36 @@ int main(int argc, char **argv)
 		eddy_destroy_world(w[0]);
 		eddy_destroy_world(w[1]);
 	}
-	if (argc > 2 && strcmp(argv[2], "--no-pour") == 0) {
+	return true;
+}
+
+int main(int argc, char **argv)
+{
+	const char *path = argc > 1 ? argv[1] : "build/bench_sph.json";
+	FILE *f = fopen(path, "w");
+	if (!f) {
+		fprintf(stderr, "bench_sph: cannot write %s\n", path);
+		return 1;
+	}
+	fprintf(f,
+	        "{\"benchmark\":\"sph\",\"unit\":\"ns per particle per step\",\"note\":\"medians of %d runs of %d steps, "
+	        "1 and 2 threads alternating; the speed-up is the median of the paired ratios; shared 2-core machine\","
+	        "\"results\":[",
+	        REPS, STEPS);
+	const char *opt = argc > 2 ? argv[2] : "";
+	const bool pour_only = strcmp(opt, "--pour-only") == 0;
+	bool first = true;
+	if (!pour_only && strcmp(opt, "--dfsph-blocks") != 0 && !block_rows(f, &first, false))
+		return 1;
+	if (!pour_only && strcmp(opt, "--wcsph-blocks") != 0 && !block_rows(f, &first, true))
+		return 1;
+	if (strcmp(opt, "--no-pour") == 0 || strcmp(opt, "--wcsph-blocks") == 0 || strcmp(opt, "--dfsph-blocks") == 0) {
 		fprintf(f, "\n]}\n");
 		fclose(f);
 		return 0;
 	}
 	/* the pour: the implicit solve (the scene's default), then WCSPH */
-	if (!pour_row(f, pour_only, "dfsph", 400, 5) || !pour_row(f, false, "wcsph", 400, 1))
+	if (!pour_row(f, first, "dfsph", 400, 5) || !pour_row(f, false, "wcsph", 400, 1))
 		return 1;
 	fprintf(f, "\n]}\n");
 	fclose(f);
