@@ -440,4 +440,9 @@ static inline void eddy__collide_rotated(float *x, float *y, float *z, float *vx
 static inline eddy_vec3 eddy__v3(float x, float y, float z) { return (eddy_vec3){x, y, z}; }
 static inline eddy_vec3 eddy__add3(eddy_vec3 a, eddy_vec3 b) { return (eddy_vec3){a.x + b.x, a.y + b.y, a.z + b.z}; }
 
+/* max and min of finite floats in one instruction: fmaxf and fminf must
+ * treat NaN specially, so without -ffinite-math-only they are calls */
+static inline float eddy__maxf(float a, float b) { return a > b ? a : b; }
+static inline float eddy__minf(float a, float b) { return a < b ? a : b; }
+
 #endif

@@ -169,10 +169,10 @@ static float distance(const eddy_system *s, eddy_vec3 q)
 		bounds(b, &lo, &hi);
 	}
 	/* distance to the box surface, negative inside the box */
-	const float dx = fmaxf(lo.x - q.x, q.x - hi.x), dy = fmaxf(lo.y - q.y, q.y - hi.y),
-				dz = fmaxf(lo.z - q.z, q.z - hi.z);
-	const float ox = fmaxf(dx, 0), oy = fmaxf(dy, 0), oz = fmaxf(dz, 0);
-	const float box_sd = sqrtf(ox * ox + oy * oy + oz * oz) + fminf(fmaxf(dx, fmaxf(dy, dz)), 0);
+	const float dx = eddy__maxf(lo.x - q.x, q.x - hi.x), dy = eddy__maxf(lo.y - q.y, q.y - hi.y),
+				dz = eddy__maxf(lo.z - q.z, q.z - hi.z);
+	const float ox = eddy__maxf(dx, 0), oy = eddy__maxf(dy, 0), oz = eddy__maxf(dz, 0);
+	const float box_sd = sqrtf(ox * ox + oy * oy + oz * oz) + eddy__minf(eddy__maxf(dx, eddy__maxf(dy, dz)), 0);
 	/* a tank's solid is everything outside the box */
 	return b->def.inside ? -box_sd : box_sd;
 }

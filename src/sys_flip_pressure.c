@@ -166,11 +166,19 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	if (!eddy__flip_solid_for(w, s, ctx->dt, &sd))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory");
 	int *row = eddy__arena_alloc(&w->arena, nc * sizeof *row);
-	if (!row)
+	int *slab_rows = eddy__arena_alloc(&w->arena, (size_t)nz * sizeof *slab_rows);
+	double *slab_vol = eddy__arena_alloc(&w->arena, (size_t)nz * sizeof *slab_vol);
+	if (!row || !slab_rows || !slab_vol)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory");
-	int n = 0;
-	double vol = 0;
-	for (int k = 0; k < nz; ++k)
+	/* The unknowns and the liquid volume, slab by slab (on all threads): row
+	 * marks an unknown with 0 here, and each slab's count and volume are
+	 * its own, summed below in slab order, so neither depends on the thread
+	 * count. */
+	const int nt = nc > 65536 ? ctx->threads : 1;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (int k = 0; k < nz; ++k) {
+		int cnt = 0;
+		double vk = 0;
 		for (int j = 0; j < ny; ++j)
 			for (int i = 0; i < nx; ++i) {
 				const size_t c = flip_cell(w, i, j, k);
@@ -199,14 +207,34 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 					}
 					unknown = wet && !dry;
 				}
-				row[c] = unknown ? n++ : -1;
+				row[c] = unknown ? 0 : -1;
+				cnt += unknown;
 				if (unknown && type[c] == EDDY_CELL_SOLID) {
-					vol += flip_solid_open(&sd, c); /* no marker there: full of liquid up to the solid */
+					vk += flip_solid_open(&sd, c); /* no marker there: full of liquid up to the solid */
 				} else if (type[c] != EDDY_CELL_SOLID) {
 					const double f = 0.5 * (1.0 - (double)phi[c]);
-					vol += (f < 0 ? 0 : f > 1 ? 1 : f) * (sd.any ? (double)flip_solid_open(&sd, c) : 1.0);
+					vk += (f < 0 ? 0 : f > 1 ? 1 : f) * (sd.any ? (double)flip_solid_open(&sd, c) : 1.0);
 				}
 			}
+		slab_rows[k] = cnt;
+		slab_vol[k] = vk;
+	}
+	int n = 0;
+	double vol = 0;
+	for (int k = 0; k < nz; ++k) {
+		const int first = n;
+		n += slab_rows[k];
+		slab_rows[k] = first;
+		vol += slab_vol[k];
+	}
+	/* rows numbered in cell order, as the solvers' orderings assume */
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (int k = 0; k < nz; ++k) {
+		int r = slab_rows[k];
+		for (size_t c = flip_cell(w, 0, 0, k), e = c + (size_t)nx * ny; c < e; ++c)
+			if (row[c] == 0)
+				row[c] = r++;
+	}
 	vol *= h * h * h;
 	flip_matrix A = {n, NULL, NULL, NULL};
 	A.diag = eddy__arena_alloc(&w->arena, (size_t)n * sizeof *A.diag + 8);
@@ -227,7 +255,6 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	 * Each row is written by one thread from read-only inputs, so this and
 	 * the loops below marked "on all threads" give the same values on any
 	 * thread count (the max reductions are order-free). */
-	const int nt = nc > 65536 ? ctx->threads : 1;
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (int k = 0; k < nz; ++k)
 		for (int j = 0; j < ny; ++j)
@@ -295,6 +322,9 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 			held = hc;
 		}
 		const double n0 = flip_rest_count(w);
+		/* each row its own source; the extremes and the count are order-free */
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(max : dens_max) \
+	reduction(min : dens_min) reduction(+ : corrected)
 		for (int r = 0; r < n; ++r) {
 			const int c = cell_of[r];
 			if (type[c] != EDDY_CELL_FLUID || (sd.any && flip_solid_open(&sd, c) < 1))

@@ -17,6 +17,10 @@
 #include <time.h>
 #include <unistd.h>
 
+/* A scan of more values than this (non-finite check, bounds) runs on all
+ * threads: below it, waking the team costs more than the pass. */
+#define SCAN_PAR 65536
+
 const char *eddy_status_name(eddy_status s)
 {
 	switch (s) {
@@ -296,24 +300,24 @@ static double step_limit(eddy_world *w, const char **reason)
 }
 
 /* First non-finite value in v[0..n), or n. An all-ones exponent marks inf and
- * NaN; OR-ing that test over a block is an integer reduction the compiler
- * vectorises, so the scan costs about a memory pass, not a branch per value. */
-static size_t first_nonfinite(const float *v, size_t n)
+ * NaN; OR-ing that test over the column is an integer reduction the compiler
+ * vectorises (on all threads for a large column), so the scan costs about a
+ * memory pass, not a branch per value; only a column that has one looks for
+ * the first. */
+static size_t first_nonfinite(const float *v, size_t n, int threads)
 {
-	enum { BLOCK = 1024 };
-	for (size_t b = 0; b < n; b += BLOCK) {
-		const size_t e = b + BLOCK < n ? b + BLOCK : n;
-		uint32_t any = 0;
-		for (size_t i = b; i < e; ++i) {
-			uint32_t bits;
-			memcpy(&bits, &v[i], sizeof bits);
-			any |= (bits & 0x7f800000u) == 0x7f800000u;
-		}
-		if (any)
-			for (size_t i = b; i < e; ++i)
-				if (!isfinite(v[i]))
-					return i;
+	const int nt = n > SCAN_PAR ? threads : 1;
+	uint32_t any = 0;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(| : any)
+	for (size_t i = 0; i < n; ++i) {
+		uint32_t bits;
+		memcpy(&bits, &v[i], sizeof bits);
+		any |= (bits & 0x7f800000u) == 0x7f800000u;
 	}
+	if (any)
+		for (size_t i = 0; i < n; ++i)
+			if (!isfinite(v[i]))
+				return i;
 	return n;
 }
 
@@ -328,14 +332,14 @@ static eddy_status check_written(eddy_world *w, const eddy_system *s)
 			continue;
 		const float *v = c->data;
 		if (c->domain == EDDY_DOMAIN_PARTICLE) {
-			const size_t bad = first_nonfinite(v, w->n);
+			const size_t bad = first_nonfinite(v, w->n, w->def.threads);
 			if (bad < w->n)
 				return eddy__fail(w, EDDY_ERR_NUMERIC,
 				                  "%s: non-finite %s = %g of particle %zu at step %lld (t = %.6g s)", s->label, c->name,
 				                  (double)v[bad], bad, (long long)w->step, w->time);
 			continue;
 		}
-		const size_t n = eddy__column_elems(w, c), bad = first_nonfinite(v, n);
+		const size_t n = eddy__column_elems(w, c), bad = first_nonfinite(v, n, w->def.threads);
 		if (bad == n)
 			continue;
 		/* x fastest; a face grid has one more layer along its axis */
@@ -357,6 +361,16 @@ static eddy_status check_bounds(eddy_world *w)
 	if (!x || !y || !z)
 		return EDDY_OK;
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
+	/* the common case, none out, on all threads; removal (which renumbers)
+	 * and the error then in one serial pass */
+	const size_t n = w->n;
+	const int nt = n > SCAN_PAR ? w->def.threads : 1;
+	int any = 0;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(| : any)
+	for (size_t i = 0; i < n; ++i)
+		any |= !(x[i] >= lo.x && x[i] <= hi.x && y[i] >= lo.y && y[i] <= hi.y && z[i] >= lo.z && z[i] <= hi.z);
+	if (!any)
+		return EDDY_OK;
 	for (size_t i = w->n; i-- > 0;) {
 		bool out = !(x[i] >= lo.x && x[i] <= hi.x && y[i] >= lo.y && y[i] <= hi.y && z[i] >= lo.z && z[i] <= hi.z);
 		if (!out)
