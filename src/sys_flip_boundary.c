@@ -30,8 +30,10 @@
  * particles it projects out pack, and the level drops (measured: 6% lowering
  * a 4 cm sphere into a 15 cm pool, 44% moving it back and forth).
  * Add the colliders after flip_advect (where they also keep particles out).
- * The solid faces are computed once a step, on all threads (each node, cell
- * and face written by one: the same on any thread count), kept compactly
+ * The solid faces are computed on all threads (each node, cell and face
+ * written by one: the same on any thread count) in a step where the grid or
+ * a collider's pose or velocity differs from the last computation (solid_key:
+ * still solids, such as a tank, are computed once), kept compactly
  * (flip.h's flip_solid: only the faces and cells that are not plainly open)
  * in this system's store, and lent to flip_surface and flip_pressure after
  * it (eddy__flip_boundary_solid).
@@ -60,7 +62,20 @@ typedef struct boundary {
 	flip_solid sd;
 	flip_solid_store store;
 	int64_t sd_step; /* the step sd belongs to, -1 for none */
+	/* what sd was computed from (solid_key); nkey 0: nothing yet */
+	struct solid_key *key;
+	int nkey, key_cap;
 } boundary;
+
+/* What the solid faces depend on besides the colliders' shapes (fixed once
+ * added): the grid and margin, then per collider its slot and generation,
+ * pose and this step's solid velocities. All 4-byte fields: no padding, so
+ * keys compare with memcmp. */
+typedef struct solid_key {
+	int32_t slot, generation;
+	float pose[9]; /* offset, rotation (degrees), pivot */
+	float vel[9];  /* velocity, angular velocity, the pivot it turns about */
+} solid_key;
 
 static const int boundary_io[] = {COL_CELL_TYPE, COL_FACE_U, COL_FACE_V, COL_FACE_W, -1};
 
@@ -534,6 +549,45 @@ static bool solid_velocities(eddy_world *w, boundary *b, const eddy_step_context
 	return true;
 }
 
+/* Writes this step's key into the first half of b->key (the second holds
+ * the one sd was computed from): entry 0 the grid and margin, then one per
+ * collider. Returns the entries, -1 when out of memory. */
+static int solid_key_of(const eddy_world *w, boundary *b)
+{
+	const int want = 2 * (w->order_count + 1);
+	if (b->key_cap < want) {
+		solid_key *k = calloc((size_t)want, sizeof *k);
+		if (!k)
+			return -1;
+		free(b->key);
+		b->key = k;
+		b->key_cap = want;
+		b->nkey = 0;
+	}
+	solid_key *key = b->key;
+	int n = 0;
+	memset(&key[n], 0, sizeof key[n]);
+	key[n].slot = w->nx, key[n].generation = w->ny;
+	key[n].pose[0] = (float)w->nz, key[n].pose[1] = (float)w->def.cell_size;
+	key[n].pose[2] = w->def.bounds_min.x, key[n].pose[3] = w->def.bounds_min.y;
+	key[n].pose[4] = w->def.bounds_min.z, key[n].pose[5] = b->def.margin;
+	n++;
+	for (int q = 0; q < w->order_count; ++q) {
+		const eddy_system *c = &w->slots[w->order[q]];
+		if (!eddy__is_collider(c))
+			continue;
+		const eddy_collider_motion *m = &((const eddy_collider_base *)c->data)->motion;
+		key[n] = (solid_key){(int32_t)w->order[q],
+		                     c->generation,
+		                     {m->offset.x, m->offset.y, m->offset.z, m->rotation.x, m->rotation.y, m->rotation.z,
+		                      m->pivot.x, m->pivot.y, m->pivot.z},
+		                     {b->vel[q].x, b->vel[q].y, b->vel[q].z, b->omega[q].x, b->omega[q].y, b->omega[q].z,
+		                      b->center[q].x, b->center[q].y, b->center[q].z}};
+		n++;
+	}
+	return n;
+}
+
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	boundary *b = s->data;
@@ -542,9 +596,20 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_boundary: out of memory");
 	uint8_t *type = (uint8_t *)w->columns[COL_CELL_TYPE].data;
 	float *face[3] = {eddy__col(w, COL_FACE_U), eddy__col(w, COL_FACE_V), eddy__col(w, COL_FACE_W)};
+	const int had = b->sd_step >= 0 ? b->nkey : 0;
 	b->sd_step = -1;
-	if (!eddy__flip_solid_faces(w, ctx->dt, b->def.margin, b->vel, &b->sd, &b->store))
+	const int nkey = solid_key_of(w, b);
+	if (nkey < 0)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_boundary: out of memory");
+	/* still solids (a tank) keep last step's faces: the same inputs give
+	 * the same faces, so reusing them changes no bit */
+	if (nkey != had || memcmp(b->key, b->key + b->key_cap / 2, (size_t)nkey * sizeof *b->key) != 0) {
+		b->nkey = 0;
+		if (!eddy__flip_solid_faces(w, ctx->dt, b->def.margin, b->vel, &b->sd, &b->store))
+			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_boundary: out of memory");
+		memcpy(b->key + b->key_cap / 2, b->key, (size_t)nkey * sizeof *b->key);
+		b->nkey = nkey;
+	}
 	b->sd_step = ctx->step;
 	const flip_solid sd = b->sd;
 	/* closed faces take the solid's normal velocity; domain sides are still
@@ -591,6 +656,7 @@ static void destroy(eddy_system *s)
 	free(b->omega);
 	free(b->center);
 	free(b->store.mem);
+	free(b->key);
 }
 
 static void *state(eddy_world *w, eddy_system *s, size_t *size)
