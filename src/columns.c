@@ -222,10 +222,19 @@ eddy_status eddy__append_particles(eddy_world *w, size_t count, size_t *first)
 
 void eddy__clear_derived(eddy_world *w)
 {
+	enum { PIECE = 1 << 18 }; /* bytes: a large column is cleared by all threads, a piece each */
 	for (int i = 0; i < w->column_count; ++i) {
 		eddy_column *c = &w->columns[i];
-		if (c->data && c->lifetime == EDDY_DERIVED)
-			memset(c->data, 0, eddy__column_bytes(w, c));
+		if (!c->data || c->lifetime != EDDY_DERIVED)
+			continue;
+		const size_t bytes = eddy__column_bytes(w, c);
+		const long pieces = (long)((bytes + PIECE - 1) / PIECE);
+		const int nt = pieces > 1 ? w->def.threads : 1;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+		for (long q = 0; q < pieces; ++q) {
+			const size_t at = (size_t)q * PIECE;
+			memset((char *)c->data + at, 0, bytes - at < PIECE ? bytes - at : PIECE);
+		}
 	}
 }
 
