@@ -19,6 +19,7 @@
 #include <time.h>
 
 #include "eddy.h"
+#include "flip_pool.h"
 #include "grid_fixture.h"
 #include "bench_util.h"
 
@@ -35,24 +36,11 @@ static double profile_ms(eddy_world *w, const char *name)
 
 static void add_pipeline(eddy_world *w, eddy_flip_solver solver, double tol)
 {
-	eddy_gravity_def g = eddy_default_gravity_def();
-	eddy_add_gravity(w, &g);
-	eddy_flip_p2g_def p = eddy_default_flip_p2g_def();
-	eddy_add_flip_p2g(w, &p);
-	eddy_flip_boundary_def b = eddy_default_flip_boundary_def();
-	eddy_add_flip_boundary(w, &b);
-	eddy_flip_surface_def sf = eddy_default_flip_surface_def();
-	eddy_add_flip_surface(w, &sf);
-	eddy_flip_pressure_def pr = eddy_default_flip_pressure_def();
-	pr.solver = solver;
-	pr.tolerance = tol;
-	eddy_add_flip_pressure(w, &pr);
-	eddy_flip_extrapolate_def ex = eddy_default_flip_extrapolate_def();
-	eddy_add_flip_extrapolate(w, &ex);
-	eddy_flip_g2p_def gp = eddy_default_flip_g2p_def();
-	eddy_add_flip_g2p(w, &gp);
-	eddy_flip_advect_def ad = eddy_default_flip_advect_def();
-	eddy_add_flip_advect(w, &ad);
+	flip_defs fd = flip_default_defs();
+	fd.pressure.solver = solver;
+	fd.pressure.tolerance = tol;
+	if (!flip_add_pipeline(w, &fd))
+		fprintf(stderr, "bench_flip: %s\n", eddy_world_error(w));
 }
 
 /* n^3 unit box, the lower half filled at 2 x 2 x 2 particles per cell, in

@@ -1,6 +1,7 @@
 /* SPDX-License-Identifier: MIT */
-/* Shared by the FLIP stress tests: water placed on the engine's seeding
- * lattice and the free-surface level as flip_pressure sees it. */
+/* Shared by the FLIP tests and benchmarks: the pipeline in eddy.fluid's
+ * order, water placed on the engine's seeding lattice, and the free-surface
+ * level as flip_pressure sees it. */
 #ifndef EDDY_FLIP_POOL_H
 #define EDDY_FLIP_POOL_H
 
@@ -9,6 +10,41 @@
 #include <stdlib.h>
 
 #include "eddy.h"
+
+/* The defs of the FLIP pipeline, gravity to flip_advect; a test sets what it
+ * varies in flip_default_defs()'s. */
+typedef struct flip_defs {
+	eddy_gravity_def gravity;
+	eddy_flip_p2g_def p2g;
+	eddy_flip_boundary_def boundary;
+	eddy_flip_surface_def surface;
+	eddy_flip_pressure_def pressure;
+	eddy_flip_extrapolate_def extrapolate;
+	eddy_flip_g2p_def g2p;
+	eddy_flip_advect_def advect;
+} flip_defs;
+
+static inline flip_defs flip_default_defs(void)
+{
+	return (flip_defs){eddy_default_gravity_def(),     eddy_default_flip_p2g_def(),
+	                   eddy_default_flip_boundary_def(), eddy_default_flip_surface_def(),
+	                   eddy_default_flip_pressure_def(), eddy_default_flip_extrapolate_def(),
+	                   eddy_default_flip_g2p_def(),      eddy_default_flip_advect_def()};
+}
+
+/* Adds the pipeline in eddy.fluid's order (colliders and flip_reseed go
+ * after it). False if the world refused a system (its error says why). */
+static inline bool flip_add_pipeline(eddy_world *w, const flip_defs *d)
+{
+	return eddy_system_valid(w, eddy_add_gravity(w, &d->gravity)) &&
+	       eddy_system_valid(w, eddy_add_flip_p2g(w, &d->p2g)) &&
+	       eddy_system_valid(w, eddy_add_flip_boundary(w, &d->boundary)) &&
+	       eddy_system_valid(w, eddy_add_flip_surface(w, &d->surface)) &&
+	       eddy_system_valid(w, eddy_add_flip_pressure(w, &d->pressure)) &&
+	       eddy_system_valid(w, eddy_add_flip_extrapolate(w, &d->extrapolate)) &&
+	       eddy_system_valid(w, eddy_add_flip_g2p(w, &d->g2p)) &&
+	       eddy_system_valid(w, eddy_add_flip_advect(w, &d->advect));
+}
 
 /* 2 x 2 x 2 particles per cell of size h over [lo, hi] (cell aligned), at
  * rest. False if the particles could not be allocated or added. */

@@ -12,6 +12,7 @@
 #include <sys/wait.h>
 
 #include "eddy.h"
+#include "flip_pool.h"
 #include "grid_fixture.h"
 
 static const double G = 9.81, RHO = 1000;
@@ -61,28 +62,14 @@ static eddy_world *flip_world(const flip_setup *s)
 	char err[256];
 	eddy_world *w = eddy_create_world(&d, err, sizeof err);
 	CHECKF(w != NULL, "create: %s", err);
-	eddy_gravity_def g = eddy_default_gravity_def();
-	g.scale = s->gravity_scale;
-	eddy_add_gravity(w, &g);
-	eddy_flip_p2g_def p = eddy_default_flip_p2g_def();
-	p.mark_radius = s->mark_radius;
-	CHECK(eddy_system_valid(w, eddy_add_flip_p2g(w, &p)));
-	eddy_flip_boundary_def b = eddy_default_flip_boundary_def();
-	CHECK(eddy_system_valid(w, eddy_add_flip_boundary(w, &b)));
-	eddy_flip_surface_def sf = eddy_default_flip_surface_def();
-	CHECK(eddy_system_valid(w, eddy_add_flip_surface(w, &sf)));
-	eddy_flip_pressure_def pr = eddy_default_flip_pressure_def();
-	pr.solver = s->solver;
-	pr.tolerance = s->tolerance;
-	CHECK(eddy_system_valid(w, eddy_add_flip_pressure(w, &pr)));
-	eddy_flip_extrapolate_def ex = eddy_default_flip_extrapolate_def();
-	CHECK(eddy_system_valid(w, eddy_add_flip_extrapolate(w, &ex)));
-	eddy_flip_g2p_def gp = eddy_default_flip_g2p_def();
-	gp.flip_ratio = s->flip_ratio;
-	gp.transfer = s->transfer;
-	CHECK(eddy_system_valid(w, eddy_add_flip_g2p(w, &gp)));
-	eddy_flip_advect_def ad = eddy_default_flip_advect_def();
-	CHECK(eddy_system_valid(w, eddy_add_flip_advect(w, &ad)));
+	flip_defs fd = flip_default_defs();
+	fd.gravity.scale = s->gravity_scale;
+	fd.p2g.mark_radius = s->mark_radius;
+	fd.pressure.solver = s->solver;
+	fd.pressure.tolerance = s->tolerance;
+	fd.g2p.flip_ratio = s->flip_ratio;
+	fd.g2p.transfer = s->transfer;
+	CHECKF(flip_add_pipeline(w, &fd), "%s", eddy_world_error(w));
 	if (s->reseed) {
 		eddy_flip_reseed_def rs = eddy_default_flip_reseed_def();
 		CHECK(eddy_system_valid(w, eddy_add_flip_reseed(w, &rs)));
@@ -906,22 +893,8 @@ static void moving_collider_pushes_fluid(void)
 		wd.fps = s.fps;
 		w = eddy_create_world(&wd, NULL, 0);
 		CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
-		eddy_gravity_def g = eddy_default_gravity_def();
-		eddy_add_gravity(w, &g);
-		eddy_flip_p2g_def p = eddy_default_flip_p2g_def();
-		eddy_add_flip_p2g(w, &p);
-		eddy_flip_boundary_def b = eddy_default_flip_boundary_def();
-		eddy_add_flip_boundary(w, &b);
-		eddy_flip_surface_def sf = eddy_default_flip_surface_def();
-		eddy_add_flip_surface(w, &sf);
-		eddy_flip_pressure_def pr = eddy_default_flip_pressure_def();
-		eddy_add_flip_pressure(w, &pr);
-		eddy_flip_extrapolate_def ex = eddy_default_flip_extrapolate_def();
-		eddy_add_flip_extrapolate(w, &ex);
-		eddy_flip_g2p_def gp = eddy_default_flip_g2p_def();
-		eddy_add_flip_g2p(w, &gp);
-		eddy_flip_advect_def ad = eddy_default_flip_advect_def();
-		eddy_add_flip_advect(w, &ad);
+		const flip_defs fd = flip_default_defs();
+		CHECK(flip_add_pipeline(w, &fd));
 		eddy_collide_box_def cb = eddy_default_collide_box_def();
 		cb.min = (eddy_vec3){0.1f, -1, -1};
 		cb.max = (eddy_vec3){0.2f, 0.45f, 1};

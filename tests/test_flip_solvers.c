@@ -15,6 +15,7 @@
 #include <string.h>
 
 #include "eddy.h"
+#include "flip_pool.h"
 #include "grid_fixture.h"
 
 static double stat(const eddy_frame_stats *fs, const char *name)
@@ -49,24 +50,10 @@ static eddy_world *pool(pool_case pc, eddy_flip_solver solver, double tol, int t
 	d.dt_max = 0.01; /* one step per frame: the first frame is one solve of a known state */
 	d.threads = threads;
 	eddy_world *w = eddy_create_world(&d, NULL, 0);
-	eddy_gravity_def g = eddy_default_gravity_def();
-	eddy_add_gravity(w, &g);
-	eddy_flip_p2g_def p = eddy_default_flip_p2g_def();
-	eddy_add_flip_p2g(w, &p);
-	eddy_flip_boundary_def b = eddy_default_flip_boundary_def();
-	eddy_add_flip_boundary(w, &b);
-	eddy_flip_surface_def sf = eddy_default_flip_surface_def();
-	eddy_add_flip_surface(w, &sf);
-	eddy_flip_pressure_def pr = eddy_default_flip_pressure_def();
-	pr.solver = solver;
-	pr.tolerance = tol;
-	CHECK(eddy_system_valid(w, eddy_add_flip_pressure(w, &pr)));
-	eddy_flip_extrapolate_def ex = eddy_default_flip_extrapolate_def();
-	eddy_add_flip_extrapolate(w, &ex);
-	eddy_flip_g2p_def gp = eddy_default_flip_g2p_def();
-	eddy_add_flip_g2p(w, &gp);
-	eddy_flip_advect_def ad = eddy_default_flip_advect_def();
-	eddy_add_flip_advect(w, &ad);
+	flip_defs fd = flip_default_defs();
+	fd.pressure.solver = solver;
+	fd.pressure.tolerance = tol;
+	CHECK(flip_add_pipeline(w, &fd));
 	if (pc == POOL_SOLIDS) {
 		eddy_collide_sphere_def sp = eddy_default_collide_sphere_def();
 		sp.center = (eddy_vec3){0.43f, 0.37f, 0.26f};

@@ -39,6 +39,7 @@
 
 #include "eddy.h"
 #include "eddy_lua.h"
+#include "flip_pool.h"
 
 #define PI 3.14159265358979
 
@@ -160,21 +161,9 @@ static eddy_world *paddle_world(const paddle_case *c, mover *mv)
 	eddy_gravity_def g = eddy_default_gravity_def();
 	if (c->m == M_FLIP) {
 		CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
-		eddy_add_gravity(w, &g);
-		eddy_flip_p2g_def p = eddy_default_flip_p2g_def();
-		eddy_add_flip_p2g(w, &p);
-		eddy_flip_boundary_def b = eddy_default_flip_boundary_def();
-		eddy_add_flip_boundary(w, &b);
-		eddy_flip_surface_def sf = eddy_default_flip_surface_def();
-		eddy_add_flip_surface(w, &sf);
-		eddy_flip_pressure_def pr = eddy_default_flip_pressure_def();
-		eddy_add_flip_pressure(w, &pr);
-		eddy_flip_extrapolate_def ex = eddy_default_flip_extrapolate_def();
-		eddy_add_flip_extrapolate(w, &ex);
-		eddy_flip_g2p_def gp = eddy_default_flip_g2p_def();
-		eddy_add_flip_g2p(w, &gp);
-		eddy_flip_advect_def ad = eddy_default_flip_advect_def();
-		eddy_add_flip_advect(w, &ad);
+		flip_defs fd = flip_default_defs();
+		fd.gravity = g;
+		CHECK(flip_add_pipeline(w, &fd));
 	} else {
 		eddy_sph_density_def de = eddy_default_sph_density_def();
 		de.spacing = (float)sp;

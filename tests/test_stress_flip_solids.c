@@ -113,23 +113,9 @@ static void run_sphere(int kind, bool reseed, eddy_flip_solver solver, double se
 	cs.user = &m;
 	if (!sphere_late)
 		CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
-	eddy_gravity_def g = eddy_default_gravity_def();
-	eddy_add_gravity(w, &g);
-	eddy_flip_p2g_def p = eddy_default_flip_p2g_def();
-	eddy_add_flip_p2g(w, &p);
-	eddy_flip_boundary_def b = eddy_default_flip_boundary_def();
-	eddy_add_flip_boundary(w, &b);
-	eddy_flip_surface_def sf = eddy_default_flip_surface_def();
-	eddy_add_flip_surface(w, &sf);
-	eddy_flip_pressure_def pr = eddy_default_flip_pressure_def();
-	pr.solver = solver;
-	eddy_add_flip_pressure(w, &pr);
-	eddy_flip_extrapolate_def ex = eddy_default_flip_extrapolate_def();
-	eddy_add_flip_extrapolate(w, &ex);
-	eddy_flip_g2p_def gp = eddy_default_flip_g2p_def();
-	eddy_add_flip_g2p(w, &gp);
-	eddy_flip_advect_def ad = eddy_default_flip_advect_def();
-	eddy_add_flip_advect(w, &ad);
+	flip_defs fd = flip_default_defs();
+	fd.pressure.solver = solver;
+	CHECK(flip_add_pipeline(w, &fd));
 	if (sphere_late)
 		CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
 	eddy_collide_sphere_def sp = eddy_default_collide_sphere_def();
@@ -306,22 +292,8 @@ static eddy_world *volume_world(double h, eddy_vec3 hi, bool reseed)
 	CHECK(w != NULL);
 	if (!w)
 		return NULL;
-	eddy_gravity_def g = eddy_default_gravity_def();
-	eddy_add_gravity(w, &g);
-	eddy_flip_p2g_def p = eddy_default_flip_p2g_def();
-	eddy_add_flip_p2g(w, &p);
-	eddy_flip_boundary_def b = eddy_default_flip_boundary_def();
-	eddy_add_flip_boundary(w, &b);
-	eddy_flip_surface_def sf = eddy_default_flip_surface_def();
-	eddy_add_flip_surface(w, &sf);
-	eddy_flip_pressure_def pr = eddy_default_flip_pressure_def();
-	eddy_add_flip_pressure(w, &pr);
-	eddy_flip_extrapolate_def ex = eddy_default_flip_extrapolate_def();
-	eddy_add_flip_extrapolate(w, &ex);
-	eddy_flip_g2p_def gp = eddy_default_flip_g2p_def();
-	eddy_add_flip_g2p(w, &gp);
-	eddy_flip_advect_def ad = eddy_default_flip_advect_def();
-	eddy_add_flip_advect(w, &ad);
+	const flip_defs fd = flip_default_defs();
+	CHECK(flip_add_pipeline(w, &fd));
 	if (reseed) {
 		eddy_flip_reseed_def rs = eddy_default_flip_reseed_def();
 		CHECK(eddy_system_valid(w, eddy_add_flip_reseed(w, &rs)));
@@ -419,18 +391,8 @@ static void still_solid_moved_is_seen_at_once(void)
 	CHECK(w != NULL);
 	if (!w)
 		return;
-	eddy_gravity_def g = eddy_default_gravity_def();
-	eddy_add_gravity(w, &g);
-	eddy_flip_p2g_def p = eddy_default_flip_p2g_def();
-	eddy_add_flip_p2g(w, &p);
-	eddy_flip_boundary_def b = eddy_default_flip_boundary_def();
-	eddy_add_flip_boundary(w, &b);
-	eddy_flip_pressure_def pr = eddy_default_flip_pressure_def();
-	eddy_add_flip_pressure(w, &pr);
-	eddy_flip_g2p_def gp = eddy_default_flip_g2p_def();
-	eddy_add_flip_g2p(w, &gp);
-	eddy_flip_advect_def ad = eddy_default_flip_advect_def();
-	eddy_add_flip_advect(w, &ad);
+	const flip_defs fd = flip_default_defs();
+	CHECK(flip_add_pipeline(w, &fd));
 	eddy_collide_sphere_def sp = eddy_default_collide_sphere_def();
 	sp.center = (eddy_vec3){0.1f, 0.22f, 0.06f};
 	sp.radius = 0.04f;

@@ -72,23 +72,9 @@ static drop_result drop_into_pool(double h, bool reseed, double seconds)
 	CHECK(w != NULL);
 	if (!w)
 		return r;
-	eddy_gravity_def g = eddy_default_gravity_def();
-	CHECK(eddy_system_valid(w, eddy_add_gravity(w, &g)));
-	eddy_flip_p2g_def p = eddy_default_flip_p2g_def();
-	CHECK(eddy_system_valid(w, eddy_add_flip_p2g(w, &p)));
-	eddy_flip_boundary_def b = eddy_default_flip_boundary_def();
-	CHECK(eddy_system_valid(w, eddy_add_flip_boundary(w, &b)));
-	eddy_flip_surface_def sf = eddy_default_flip_surface_def();
-	CHECK(eddy_system_valid(w, eddy_add_flip_surface(w, &sf)));
-	eddy_flip_pressure_def pr = eddy_default_flip_pressure_def();
-	CHECK(eddy_system_valid(w, eddy_add_flip_pressure(w, &pr)));
-	eddy_flip_extrapolate_def ex = eddy_default_flip_extrapolate_def();
-	ex.layers = 3; /* eddy.fluid's: CFL 1 + 2 */
-	CHECK(eddy_system_valid(w, eddy_add_flip_extrapolate(w, &ex)));
-	eddy_flip_g2p_def gp = eddy_default_flip_g2p_def();
-	CHECK(eddy_system_valid(w, eddy_add_flip_g2p(w, &gp)));
-	eddy_flip_advect_def ad = eddy_default_flip_advect_def();
-	CHECK(eddy_system_valid(w, eddy_add_flip_advect(w, &ad)));
+	flip_defs fd = flip_default_defs();
+	fd.extrapolate.layers = 3; /* eddy.fluid's: CFL 1 + 2 */
+	CHECK(flip_add_pipeline(w, &fd));
 	if (reseed) {
 		eddy_flip_reseed_def rs = eddy_default_flip_reseed_def();
 		CHECK(eddy_system_valid(w, eddy_add_flip_reseed(w, &rs)));
