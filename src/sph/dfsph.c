@@ -88,6 +88,7 @@ typedef struct dfsph_group {
 typedef struct dfsph_work {
 	long n;
 	float dt; /* s */
+	float pcal; /* 1, the pressure's calibration: p_i = k_i rho_i^2 / pcal (pressure_cal) */
 	int threads;
 	void (*block)(const void *pass, long i0, long cnt); /* the passes on the chosen SIMD back-end */
 	const sph_shared *sh;
@@ -178,6 +179,15 @@ static inline sf8 sum8(const float *t, long m)
 	return sf8_add(sf8_add(f0, f1), sf8_add(f2, f3));
 }
 
+/* The Wendland C2 kernel's gradient factor for support h: grad W(x) =
+ * wendland_grad(h) (h - |x|)^3 x, from W = 21 / (2 pi h^3) (1 - q)^4 (1 + 4 q),
+ * q = |x| / h (Wendland 1995; Dehnen & Aly 2012). */
+static inline float wendland_grad(float h)
+{
+	const float h2 = h * h, h4 = h2 * h2;
+	return (float)(-210.0 / M_PI) / (h4 * h4);
+}
+
 /* Particle i's wall sums: B_i (out[0..2][q]) and sum_b (g . (x_b - x_i)) m_b
  * grad W(x_i - x_b) (out[3..5][q]), each in four partial sums (neighbour q
  * onto sum q mod 4, the last four padded and masked out) ended as sph_sum4
@@ -186,7 +196,7 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 {
 	const sph_shared *sh = wk->sh;
 	const sph_neighbors *nb = &sh->nb;
-	const float *pi = sh->pq + 4 * i, eps2 = 1e-6f * sh->k.h2;
+	const float *pi = sh->pq + 4 * i, eps2 = 1e-6f * sh->k.h2, wg = wendland_grad(sh->k.h);
 	const eddy_vec3 g = wk->gravity;
 	const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap, bcnt = nb->bcount[i];
 	float s[6][4] = {{0}};
@@ -198,7 +208,7 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 			const float mb = nb->bvol[b] * sh->rho0; /* Akinci: the wall at rest density */
 			const float r = sqrtf(r2), hr = sh->k.h - r;
 			const bool ok = p + l < bcnt && r2 > eps2 && hr > 0;
-			const float c = ok ? mb * sh->k.spiky_grad * hr * hr / r : 0.0f; /* + 0 leaves a sum as it is */
+			const float c = ok ? mb * wg * hr * hr * hr : 0.0f; /* + 0 leaves a sum as it is */
 			s[0][l] += c * rx;
 			s[1][l] += c * ry;
 			s[2][l] += c * rz;
@@ -219,8 +229,8 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 {
 	const sph_shared *sh = wk->sh;
 	const sph_neighbors *nb = &sh->nb;
-	const float dref = sh->mass * sh->k.spiky_grad * sh->k.h2; /* |G|'s scale */
-	const sf8 h = sf8_set1(sh->k.h), eps2 = sf8_set1(1e-6f * sh->k.h2), mg = sf8_set1(sh->mass * sh->k.spiky_grad),
+	const float wg = wendland_grad(sh->k.h), dref = sh->mass * wg * sh->k.h2 * sh->k.h2; /* |G|'s scale */
+	const sf8 h = sf8_set1(sh->k.h), eps2 = sf8_set1(1e-6f * sh->k.h2), mg = sf8_set1(sh->mass * wg),
 			  one = sf8_set1(1.0f), two = sf8_set1(2.0f), zero = sf8_zero(), dmin = sf8_set1(1e-6f * dref * dref),
 			  minus = sf8_set1(-0.0f);
 	float t[4][SPH_BLOCK][4], w[6][SPH_BLOCK] = {{0}};
@@ -238,8 +248,7 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 			const sf8 r2 = sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz));
 			const sf8 r = sf8_sqrt(r2), hr = sf8_sub(h, r);
 			const sf8 ok = sf8_and(sf8_gt(r2, eps2), sf8_gt(hr, zero));
-			/* r is at least sqrt(eps2) where ok; elsewhere divide by 1 */
-			const sf8 f = sf8_and(ok, sf8_div(sf8_mul(sf8_mul(mg, hr), hr), sf8_select(ok, r, one)));
+			const sf8 f = sf8_and(ok, sf8_mul(sf8_mul(sf8_mul(mg, hr), hr), hr)); /* G = f (x_i - x_j) */
 			const sf8 gx = sf8_mul(f, rx), gy = sf8_mul(f, ry), gz = sf8_mul(f, rz);
 			sf8_store(g->gx, gx);
 			sf8_store(g->gy, gy);
@@ -540,6 +549,31 @@ static double depth_scale(eddy_world *w, float h)
 	return depth > ref ? ref / depth : 1;
 }
 
+/* The pressure's calibration, as sph_density's grad_cal for the spiky force
+ * (see sph_pressure): the force sums m grad W over a particle's neighbours,
+ * which on the simple cubic lattice of the fluid's spacing dx is the
+ * gradient times m M / (rho0 dx^3), M the lattice moment -sum_x dx^3 x_a^2
+ * (dW/dr) / r of the Wendland kernel; so p = k rho^2 / (rho0 dx^3 / (m M)). */
+static float pressure_cal(eddy_world *w, const sph_shared *sh)
+{
+	float dx = sh->h / 2;
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_NEIGHBORS); (o = eddy__systems_next(&it));)
+		if (o->vt->shared(o, EDDY_CAP_SPH_NEIGHBORS) == sh && eddy__sph_density_def(o))
+			dx = eddy__sph_density_def(o)->spacing;
+	const double h = sh->k.h, vol = (double)dx * dx * dx, wg = -210.0 / M_PI / pow(h, 8);
+	const int m = (int)ceil(h / dx);
+	double mom = 0;
+	for (int a = -m; a <= m; ++a)
+		for (int b = -m; b <= m; ++b)
+			for (int c = -m; c <= m; ++c) {
+				const double xa = dx * a, r = dx * sqrt((double)(a * a + b * b + c * c));
+				if (r < h) /* dW/dr / r = wg (h - r)^3 */
+					mom -= vol * xa * xa * wg * (h - r) * (h - r) * (h - r);
+			}
+	return mom > 0 ? (float)((double)sh->rho0 * vol / ((double)sh->mass * mom)) : sh->grad_cal;
+}
+
 /* The index of the largest of e[0 .. n) (the first of equals). */
 static long argmax(const float *e, long n)
 {
@@ -656,7 +690,7 @@ static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_wor
 		ax[i] += (wk->v[i].x - (vx[i] + dt * ax[i])) * inv_dt;
 		ay[i] += (wk->v[i].y - (vy[i] + dt * ay[i])) * inv_dt;
 		az[i] += (wk->v[i].z - (vz[i] + dt * az[i])) * inv_dt;
-		p[i] = wk->kp[i] * wk->h[i].w * wk->h[i].w / wk->sh->grad_cal;
+		p[i] = wk->kp[i] * wk->h[i].w * wk->h[i].w / wk->pcal;
 		if (bad < 0 && !(isfinite(ax[i]) && isfinite(ay[i]) && isfinite(az[i]) && isfinite(p[i])))
 			bad = i;
 	}
@@ -713,6 +747,7 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	dfsph_work wk;
 	if (!prepare(w, &wk, sh, n, dt, ctx->threads))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
+	wk.pcal = pressure_cal(w, sh);
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	for (long i = 0; i < n; ++i)
