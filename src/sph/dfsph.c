@@ -8,8 +8,14 @@
  * integrate). With the divergence solver it reads and writes its state
  * columns dfsph_k dfsph_kd, each solve's k of the last step.
  *
- * With G_ij = m grad W_spiky(x_i - x_j) (the poly6 gradient vanishes at r = 0
- * and lets a tank at rest cluster), S_i = sum_j G_ij, boundary particles of
+ * With G_ij = m grad W(x_i - x_j) of the Wendland C2 kernel of support h,
+ *   grad W(x) = -210 / (pi h^8) (h - |x|)^3 x   (W = 21/(2 pi h^3) (1-q)^4 (1+4q)),
+ * whose Fourier transform is nowhere negative, so a pressure force on it has
+ * no pairing instability (Dehnen & Aly): under the spiky gradient the emitted
+ * simple cubic lattice is unstable under load and a column tens of layers
+ * deep relaxes for seconds in bursts of particles moving at a few % of
+ * sqrt(g D), whatever the solves' tolerances; under this one it holds and
+ * the water comes to rest. S_i = sum_j G_ij, boundary particles of
  * mass m_b = V_b rho0 (Akinci et al.), B_i = sum_b m_b grad W(x_i - x_b),
  * k_i = p_i / rho_i^2, and bdiv_i the moving colliders' part (sph.h):
  *   Drho_i/Dt = sum_j (v_i - v_j) . G_ij + v_i . B_i - bdiv_i
@@ -21,7 +27,8 @@
  * rho_i g . (x_b - x_i): h_i, which supports the fluid beside the walls. A
  * step sets v* = v + dt (a + h), solves for k by corrections that move v* by
  * dt a^p of a change of k, adds (v* - (v + dt a)) / dt to a and writes
- * p_i = k_i rho_i^2 / grad_cal (k summed over the solves; see sph_pressure).
+ * p_i = k_i rho_i^2 / pcal (k summed over the solves; pcal is the Wendland
+ * gradient's lattice moment as sph_pressure's grad_cal is the spiky one's).
  *
  * The divergence solver (the default) runs the paper's two solves,
  *   velocity:  R_i(v*) = 0,   density:  rho_i + dt R_i(v*) = rho0,
@@ -46,6 +53,16 @@
  * max_density_error (cheaper; it holds still water some 10 layers deep):
  *   k_i += max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
  *
+ * Stopping rule (solve, with the divergence solver): each solve stops once
+ * the mean over all particles of its error / rho0 -- the velocity solve's
+ * |R_i| dt, the density change its velocities leave in a step, the density
+ * solve's predicted |rho_i - rho0| (compression only where k_i = 0) -- is
+ * at most its tolerance times depth_scale^2, after at least DFSPH_SMOOTH
+ * sweeps (velocity) or one iteration (density), or at its cap: Bender &
+ * Koschier's average density and divergence errors (2017, Alg. 2-3),
+ * tightened with the depth D because a mean residual eps leaves the
+ * column-wide mode an error of eps (D / h)^2 (depth_scale).
+ *
  * Published per frame: solver = "dfsph", iterations and divergence_iterations
  * (the solves' mean per step), residual (largest final mean density error of
  * a step), residual_max (... of one particle, / rho0), unconverged (steps in
@@ -60,7 +77,11 @@
  * linear systems", 2003 (Alg. 9.1); Ihmsen et al., "Implicit incompressible
  * SPH", TVCG 2014 (relaxed Jacobi); Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012; Adami, Hu & Adams, "A
- * generalized wall boundary condition for SPH", JCP 2012 (eq. 27). */
+ * generalized wall boundary condition for SPH", JCP 2012 (eq. 27);
+ * Wendland, "Piecewise polynomial, positive definite and compactly supported
+ * radial functions of minimal degree", Adv. Comput. Math. 1995; Dehnen &
+ * Aly, "Improving convergence in smoothed particle hydrodynamics simulations
+ * without pairing instability", MNRAS 2012. */
 #include "simd.h"
 #include "sph.h"
 
