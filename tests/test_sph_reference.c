@@ -299,8 +299,7 @@ static void check_against_reference(const ref_case *c, uint32_t seed, const char
 
 /* sph_dfsph's passes (its header's equations), run on the random block by
  * eddy__dfsph_probe (dfsph.c) after one step of sph_density, against the
- * same kind of reference: with G_ij = m grad W_wendland(x_i - x_j) (the
- * Wendland C2 kernel, grad W(x) = -210/(pi h^8) (h - |x|)^3 x) and
+ * same kind of reference: with G_ij = m grad W_spiky(x_i - x_j) and
  * S_i = sum_j G_ij, no walls (B_i = 0, so D'_i = D_i):
  *   D_i = |S_i|^2 + sum_j |G_ij|^2,   R_i(v) = sum_j (v_i - v_j) . G_ij,
  *   a_i = -sum_j (k_i + k_j) G_ij   (the correction for a given k). */
@@ -335,7 +334,7 @@ static void check_dfsph_against_reference(const ref_case *c, uint32_t seed, cons
 		k[i] = i % 5 == 0 ? 0.0f : 1e-3f * (float)(1 + i * 7 % 11);
 	CHECK(eddy__dfsph_probe(w, k, inv_d, inv_dsym, rate, acc) == EDDY_OK);
 	const double m = eddy_sph_particle_mass(w, dens), h = c->h;
-	const double wend = -210.0 / (M_PI * pow(h, 8));
+	const double spiky = -45.0 / (M_PI * pow(h, 6));
 	double worst_d = 0, worst_r = 0, worst_a = 0, mean_rmag = 0;
 	for (size_t i = 0; i < n; ++i) {
 		double S[3] = {0, 0, 0}, s2 = 0, R = 0, a[3] = {0, 0, 0};
@@ -348,10 +347,10 @@ static void check_dfsph_against_reference(const ref_case *c, uint32_t seed, cons
 			if (j == i || r >= h)
 				continue;
 			pairs++;
-			/* G has (h - r)^3, |G|^2 (h - r)^6: their conditioning (see tolerance()) */
-			const double kr = 3 * r / (h - r);
+			/* G has (h - r)^2, |G|^2 (h - r)^4: their conditioning (see tolerance()) */
+			const double kr = 2 * r / (h - r);
 			for (int e = 0; e < 3; ++e) {
-				const double g = m * wend * (h - r) * (h - r) * (h - r) * rv[e];
+				const double g = m * spiky * (h - r) * (h - r) / r * rv[e];
 				const double rt = (col[3 + e][i] - col[3 + e][j]) * g, at = -((double)k[i] + k[j]) * g;
 				S[e] += g;
 				s2 += g * g;

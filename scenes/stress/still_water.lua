@@ -24,9 +24,9 @@
 -- width (m, the column's side; 0.05 for the narrow 150-200 layer columns).
 -- At sph_dfsph's defaults (tests/test_stress_dfsph.c): 10, 20 and 40 layers
 -- come to rest (max speed under 2% of sqrt(g H) once settled), and so does a
--- narrow column 200 layers deep; 100 layers stay within 5%, where the
--- particle arrangement still relaxes from the emitted lattice (README, Stress
--- cases); the bottom pressure reads 0.99-1.02 at every depth.
+-- narrow column 200 layers deep; 100 layers stay within 5%: what moves is
+-- the particle arrangement relaxing from the emitted lattice (README, Stress
+-- cases); the bottom pressure reads 1.02-1.04 at every depth.
 
 local eddy = require "eddy"
 

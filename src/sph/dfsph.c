@@ -8,14 +8,8 @@
  * integrate). With the divergence solver it reads and writes its state
  * columns dfsph_k dfsph_kd, each solve's k of the last step.
  *
- * With G_ij = m grad W(x_i - x_j) of the Wendland C2 kernel of support h,
- *   grad W(x) = -210 / (pi h^8) (h - |x|)^3 x   (W = 21/(2 pi h^3) (1-q)^4 (1+4q)),
- * whose Fourier transform is nowhere negative, so a pressure force on it has
- * no pairing instability (Dehnen & Aly): under the spiky gradient the emitted
- * simple cubic lattice is unstable under load and a column tens of layers
- * deep relaxes for seconds in bursts of particles moving at a few % of
- * sqrt(g D), whatever the solves' tolerances; under this one it holds and
- * the water comes to rest. S_i = sum_j G_ij, boundary particles of
+ * With G_ij = m grad W_spiky(x_i - x_j) (the poly6 gradient vanishes at r = 0
+ * and lets a tank at rest cluster), S_i = sum_j G_ij, boundary particles of
  * mass m_b = V_b rho0 (Akinci et al.), B_i = sum_b m_b grad W(x_i - x_b),
  * k_i = p_i / rho_i^2, and bdiv_i the moving colliders' part (sph.h):
  *   Drho_i/Dt = sum_j (v_i - v_j) . G_ij + v_i . B_i - bdiv_i
@@ -27,8 +21,7 @@
  * rho_i g . (x_b - x_i): h_i, which supports the fluid beside the walls. A
  * step sets v* = v + dt (a + h), solves for k by corrections that move v* by
  * dt a^p of a change of k, adds (v* - (v + dt a)) / dt to a and writes
- * p_i = k_i rho_i^2 / pcal (k summed over the solves; pcal is the Wendland
- * gradient's lattice moment as sph_pressure's grad_cal is the spiky one's).
+ * p_i = k_i rho_i^2 / grad_cal (k summed over the solves; see sph_pressure).
  *
  * The divergence solver (the default) runs the paper's two solves,
  *   velocity:  R_i(v*) = 0,   density:  rho_i + dt R_i(v*) = rho0,
@@ -61,7 +54,10 @@
  * sweeps (velocity) or one iteration (density), or at its cap: Bender &
  * Koschier's average density and divergence errors (2017, Alg. 2-3),
  * tightened with the depth D because a mean residual eps leaves the
- * column-wide mode an error of eps (D / h)^2 (depth_scale).
+ * column-wide mode an error of eps (D / h)^2 (depth_scale). Tighter rules
+ * (on the maximum, or on means ten times lower) do not bring a deep column
+ * to rest sooner: what moves it once it is held is its particle arrangement
+ * relaxing under the pressure force (README, Stress cases).
  *
  * Published per frame: solver = "dfsph", iterations and divergence_iterations
  * (the solves' mean per step), residual (largest final mean density error of
@@ -77,11 +73,7 @@
  * linear systems", 2003 (Alg. 9.1); Ihmsen et al., "Implicit incompressible
  * SPH", TVCG 2014 (relaxed Jacobi); Akinci et al., "Versatile rigid-fluid
  * coupling for incompressible SPH", SIGGRAPH 2012; Adami, Hu & Adams, "A
- * generalized wall boundary condition for SPH", JCP 2012 (eq. 27);
- * Wendland, "Piecewise polynomial, positive definite and compactly supported
- * radial functions of minimal degree", Adv. Comput. Math. 1995; Dehnen &
- * Aly, "Improving convergence in smoothed particle hydrodynamics simulations
- * without pairing instability", MNRAS 2012. */
+ * generalized wall boundary condition for SPH", JCP 2012 (eq. 27). */
 #include "simd.h"
 #include "sph.h"
 
@@ -109,7 +101,6 @@ typedef struct dfsph_group {
 typedef struct dfsph_work {
 	long n;
 	float dt; /* s */
-	float pcal; /* 1, the pressure's calibration: p_i = k_i rho_i^2 / pcal (pressure_cal) */
 	int threads;
 	void (*block)(const void *pass, long i0, long cnt); /* the passes on the chosen SIMD back-end */
 	const sph_shared *sh;
@@ -200,15 +191,6 @@ static inline sf8 sum8(const float *t, long m)
 	return sf8_add(sf8_add(f0, f1), sf8_add(f2, f3));
 }
 
-/* The Wendland C2 kernel's gradient factor for support h: grad W(x) =
- * wendland_grad(h) (h - |x|)^3 x, from W = 21 / (2 pi h^3) (1 - q)^4 (1 + 4 q),
- * q = |x| / h (Wendland 1995; Dehnen & Aly 2012). */
-static inline float wendland_grad(float h)
-{
-	const float h2 = h * h, h4 = h2 * h2;
-	return (float)(-210.0 / M_PI) / (h4 * h4);
-}
-
 /* Particle i's wall sums: B_i (out[0..2][q]) and sum_b (g . (x_b - x_i)) m_b
  * grad W(x_i - x_b) (out[3..5][q]), each in four partial sums (neighbour q
  * onto sum q mod 4, the last four padded and masked out) ended as sph_sum4
@@ -217,7 +199,7 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 {
 	const sph_shared *sh = wk->sh;
 	const sph_neighbors *nb = &sh->nb;
-	const float *pi = sh->pq + 4 * i, eps2 = 1e-6f * sh->k.h2, wg = wendland_grad(sh->k.h);
+	const float *pi = sh->pq + 4 * i, eps2 = 1e-6f * sh->k.h2;
 	const eddy_vec3 g = wk->gravity;
 	const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap, bcnt = nb->bcount[i];
 	float s[6][4] = {{0}};
@@ -229,7 +211,7 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 			const float mb = nb->bvol[b] * sh->rho0; /* Akinci: the wall at rest density */
 			const float r = sqrtf(r2), hr = sh->k.h - r;
 			const bool ok = p + l < bcnt && r2 > eps2 && hr > 0;
-			const float c = ok ? mb * wg * hr * hr * hr : 0.0f; /* + 0 leaves a sum as it is */
+			const float c = ok ? mb * sh->k.spiky_grad * hr * hr / r : 0.0f; /* + 0 leaves a sum as it is */
 			s[0][l] += c * rx;
 			s[1][l] += c * ry;
 			s[2][l] += c * rz;
@@ -250,8 +232,8 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 {
 	const sph_shared *sh = wk->sh;
 	const sph_neighbors *nb = &sh->nb;
-	const float wg = wendland_grad(sh->k.h), dref = sh->mass * wg * sh->k.h2 * sh->k.h2; /* |G|'s scale */
-	const sf8 h = sf8_set1(sh->k.h), eps2 = sf8_set1(1e-6f * sh->k.h2), mg = sf8_set1(sh->mass * wg),
+	const float dref = sh->mass * sh->k.spiky_grad * sh->k.h2; /* |G|'s scale */
+	const sf8 h = sf8_set1(sh->k.h), eps2 = sf8_set1(1e-6f * sh->k.h2), mg = sf8_set1(sh->mass * sh->k.spiky_grad),
 			  one = sf8_set1(1.0f), two = sf8_set1(2.0f), zero = sf8_zero(), dmin = sf8_set1(1e-6f * dref * dref),
 			  minus = sf8_set1(-0.0f);
 	float t[4][SPH_BLOCK][4], w[6][SPH_BLOCK] = {{0}};
@@ -269,7 +251,8 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 			const sf8 r2 = sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz));
 			const sf8 r = sf8_sqrt(r2), hr = sf8_sub(h, r);
 			const sf8 ok = sf8_and(sf8_gt(r2, eps2), sf8_gt(hr, zero));
-			const sf8 f = sf8_and(ok, sf8_mul(sf8_mul(sf8_mul(mg, hr), hr), hr)); /* G = f (x_i - x_j) */
+			/* r is at least sqrt(eps2) where ok; elsewhere divide by 1 */
+			const sf8 f = sf8_and(ok, sf8_div(sf8_mul(sf8_mul(mg, hr), hr), sf8_select(ok, r, one)));
 			const sf8 gx = sf8_mul(f, rx), gy = sf8_mul(f, ry), gz = sf8_mul(f, rz);
 			sf8_store(g->gx, gx);
 			sf8_store(g->gy, gy);
@@ -570,31 +553,6 @@ static double depth_scale(eddy_world *w, float h)
 	return depth > ref ? ref / depth : 1;
 }
 
-/* The pressure's calibration, as sph_density's grad_cal for the spiky force
- * (see sph_pressure): the force sums m grad W over a particle's neighbours,
- * which on the simple cubic lattice of the fluid's spacing dx is the
- * gradient times m M / (rho0 dx^3), M the lattice moment -sum_x dx^3 x_a^2
- * (dW/dr) / r of the Wendland kernel; so p = k rho^2 / (rho0 dx^3 / (m M)). */
-static float pressure_cal(eddy_world *w, const sph_shared *sh)
-{
-	float dx = sh->h / 2;
-	const eddy_system *o;
-	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_NEIGHBORS); (o = eddy__systems_next(&it));)
-		if (o->vt->shared(o, EDDY_CAP_SPH_NEIGHBORS) == sh && eddy__sph_density_def(o))
-			dx = eddy__sph_density_def(o)->spacing;
-	const double h = sh->k.h, vol = (double)dx * dx * dx, wg = -210.0 / M_PI / pow(h, 8);
-	const int m = (int)ceil(h / dx);
-	double mom = 0;
-	for (int a = -m; a <= m; ++a)
-		for (int b = -m; b <= m; ++b)
-			for (int c = -m; c <= m; ++c) {
-				const double xa = dx * a, r = dx * sqrt((double)(a * a + b * b + c * c));
-				if (r < h) /* dW/dr / r = wg (h - r)^3 */
-					mom -= vol * xa * xa * wg * (h - r) * (h - r) * (h - r);
-			}
-	return mom > 0 ? (float)((double)sh->rho0 * vol / ((double)sh->mass * mom)) : sh->grad_cal;
-}
-
 /* The index of the largest of e[0 .. n) (the first of equals). */
 static long argmax(const float *e, long n)
 {
@@ -711,7 +669,7 @@ static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_wor
 		ax[i] += (wk->v[i].x - (vx[i] + dt * ax[i])) * inv_dt;
 		ay[i] += (wk->v[i].y - (vy[i] + dt * ay[i])) * inv_dt;
 		az[i] += (wk->v[i].z - (vz[i] + dt * az[i])) * inv_dt;
-		p[i] = wk->kp[i] * wk->h[i].w * wk->h[i].w / wk->pcal;
+		p[i] = wk->kp[i] * wk->h[i].w * wk->h[i].w / wk->sh->grad_cal;
 		if (bad < 0 && !(isfinite(ax[i]) && isfinite(ay[i]) && isfinite(az[i]) && isfinite(p[i])))
 			bad = i;
 	}
@@ -768,7 +726,6 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	dfsph_work wk;
 	if (!prepare(w, &wk, sh, n, dt, ctx->threads))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
-	wk.pcal = pressure_cal(w, sh);
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	for (long i = 0; i < n; ++i)
