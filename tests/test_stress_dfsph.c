@@ -1,6 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /* Stress tests of sph_dfsph one step beyond the validated scenes: still water
- * 10 to 100 layers deep (scenes/stress/still_water.lua), run through the
+ * 10 to 100 layers deep and a narrow column 200 layers deep
+ * (scenes/stress/still_water.lua), run through the
  * command line with per-frame stats, at the solver's defaults.
  *
  * At rest the bottom layer carries the weight of the water above it
@@ -13,10 +14,20 @@
  *
  * The speed bound: a column at rest moves at most 2% of sqrt(g H) (the speed
  * of a long wave on water H deep, the scale of any motion the column's own
- * weight drives): the issue's target. Time to settle grows with the depth
- * (the column's slowest modes have periods of order sqrt(H / g) times the
- * number of layers' worth of solver lag), so the deeper cases are judged
- * from 2 s on. */
+ * weight drives): the issue's target, judged from 2 s on.
+ *
+ * What still moves a column once the solves hold it is its particle
+ * arrangement: a uniform pressure pushes a particle by -2 k sum_j G_ij,
+ * nonzero as soon as the lattice is disturbed and growing with the depth
+ * through k, and under the spiky gradient the emitted simple cubic lattice
+ * is unstable under that load. A deep column relaxes for seconds, sinking
+ * (the SPH density staying at rho0) in bursts of 0.3-0.6 s in which bulk
+ * particles far below the surface (vmax_height) move at 1-6% of sqrt(g H),
+ * whatever the solves' tolerances, and when the bursts end depends
+ * chaotically on the step: at 40 layers the figure below read 0.046, 0.025,
+ * 0.058, 0.032, 0.011, 0.006 at cfl 0.30, 0.35, 0.40, 0.45, 0.50 (the
+ * scene's), 0.55. Each bound here holds at the scene's cfl; the cause is
+ * open (README, Stress cases). */
 #include "test.h"
 
 #include <stdlib.h>
@@ -36,13 +47,14 @@ static double field(const char *line, const char *name)
 typedef struct still_water {
 	int status, frames;
 	double vmax_ratio, bp_min, bp_max; /* from t_settle */
+	double vmax_height;                /* the fastest particle's height / H in that frame */
 	double thrown, leaked, nonfinite;  /* the whole run */
 	char out[512];                     /* the start of what the run printed */
 } still_water;
 
 static still_water run_still_water(const char *sets, double t_settle)
 {
-	still_water r = {0, 0, 0, INFINITY, -INFINITY, 0, 0, 0, ""};
+	still_water r = {0, 0, 0, INFINITY, -INFINITY, NAN, 0, 0, 0, ""};
 	enum { CAP = 1 << 20 };
 	char *out = malloc(CAP), cmd[1024];
 	if (!out) {
@@ -67,7 +79,11 @@ static still_water run_still_water(const char *sets, double t_settle)
 			r.nonfinite = fmax(r.nonfinite, field(line, "nonfinite"));
 			if (t >= t_settle - 1e-9) {
 				const double bp = field(line, "bottom_p_ratio");
-				r.vmax_ratio = fmax(r.vmax_ratio, field(line, "vmax_ratio"));
+				const double vr = field(line, "vmax_ratio");
+				if (vr > r.vmax_ratio) {
+					r.vmax_ratio = vr;
+					r.vmax_height = field(line, "vmax_height");
+				}
 				r.bp_min = fmin(r.bp_min, bp);
 				r.bp_max = fmax(r.bp_max, bp);
 			}
@@ -81,11 +97,11 @@ static still_water run_still_water(const char *sets, double t_settle)
 }
 
 /* The bottom layer's mean pressure against rho0 g (H - dx / 2), 0.95-1.05.
- * Measured 1.020 (10 layers), 1.028 (20), 1.032 (40) and 1.027 (100), steady: the
- * pressure column is M k rho^2 with the force's lattice moment M of a full
- * neighbourhood (see sph_pressure), while the bottom layer's neighbourhood
- * is half wall, whose mirrored pressure carries part of the load; so the
- * layer reads a few % high at any depth. A column that sags (the cold solve
+ * Measured 1.020 (10 layers), 1.028 (20), 1.032 (40), 1.027 (100) and 1.028
+ * (narrow 200), steady: the pressure column is M k rho^2 with the force's
+ * lattice moment M of a full neighbourhood (see sph_pressure), while the
+ * bottom layer's neighbourhood is half wall, whose mirrored pressure carries
+ * part of the load; so the layer reads a few % high at any depth. A column that sags (the cold solve
  * held 0.28-2.1 at 10 layers) or rings leaves the band at once. */
 #define BP_BAND 0.05
 
@@ -96,8 +112,8 @@ static still_water run_still_water(const char *sets, double t_settle)
 static void still_water_10_layers_comes_to_rest(void)
 {
 	const still_water r = run_still_water("--set depth=0.125 --set duration=2.5", 2.0);
-	printf("    still water 10 layers, t >= 2 s: vmax <= %.4f sqrt(g H), bottom p %.3f-%.3f x rho0 g H, thrown %g\n",
-	       r.vmax_ratio, r.bp_min, r.bp_max, r.thrown);
+	printf("    still water 10 layers, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f x rho0 g H, thrown %g\n",
+	       r.vmax_ratio, r.vmax_height, r.bp_min, r.bp_max, r.thrown);
 	CHECK(r.status == 0);
 	CHECK(r.frames == 75);
 	CHECK(r.thrown == 0);
@@ -112,8 +128,8 @@ static void still_water_10_layers_comes_to_rest(void)
 static void still_water_20_layers_comes_to_rest(void)
 {
 	const still_water r = run_still_water("--set depth=0.25 --set duration=2.5", 2.0);
-	printf("    still water 20 layers, t >= 2 s: vmax <= %.4f sqrt(g H), bottom p %.3f-%.3f x rho0 g H, thrown %g\n",
-	       r.vmax_ratio, r.bp_min, r.bp_max, r.thrown);
+	printf("    still water 20 layers, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f x rho0 g H, thrown %g\n",
+	       r.vmax_ratio, r.vmax_height, r.bp_min, r.bp_max, r.thrown);
 	CHECK(r.status == 0);
 	CHECK(r.frames == 75);
 	CHECK(r.thrown == 0);
@@ -140,13 +156,13 @@ static void still_water_solver_that_cannot_hold_fails_loudly(void)
 
 /* Long: 40 layers (0.5 m, 2560 particles), where the cold solve threw
  * water to the lid, 3 s: at rest under 2% of sqrt(g H) from 2 s on
- * (measured 0.0107), bottom pressure within BP_BAND (1.032), nothing
- * thrown. About 30 s. */
+ * (measured 0.0107, at 0.39 H: a burst of the lattice's relaxation, header),
+ * bottom pressure within BP_BAND (1.032), nothing thrown. About 15 s. */
 static void still_water_40_layers_comes_to_rest(void)
 {
 	const still_water r = run_still_water("--set depth=0.5 --set duration=3", 2.0);
-	printf("    still water 40 layers, t >= 2 s: vmax <= %.4f sqrt(g H), bottom p %.3f-%.3f x rho0 g H, thrown %g\n",
-	       r.vmax_ratio, r.bp_min, r.bp_max, r.thrown);
+	printf("    still water 40 layers, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f x rho0 g H, thrown %g\n",
+	       r.vmax_ratio, r.vmax_height, r.bp_min, r.bp_max, r.thrown);
 	CHECK(r.status == 0);
 	CHECK(r.frames == 90);
 	CHECK(r.thrown == 0);
@@ -157,21 +173,48 @@ static void still_water_40_layers_comes_to_rest(void)
 
 /* Long: 100 layers (1.25 m, 6400 particles), 3 s: the column is held, its
  * bottom pressure within BP_BAND (1.026-1.027) and nothing thrown; the
- * speed from 2 s on is bounded by 5% of sqrt(g H) (measured 0.0328: the
- * issue's 2% is not met at this depth within 3 s, a few surface particles
- * still move; 0.0195 when the velocity solve left out surface particles up
- * to 0.875 rho0, see DFSPH_SURFACE). About 150 s. */
+ * speed from 2 s on is bounded by 5% of sqrt(g H), not the issue's 2%:
+ * measured 0.0328, in one burst at 2.2 s of a particle 0.14 H above the
+ * floor (the lattice's relaxation, header), 0.003 from 2.3 s on. The solves
+ * do not set that figure: with either tolerance ten times tighter it reads
+ * 0.008-0.011, with both 0.019, with the density one a hundred times
+ * tighter 0.031, without the depth scaling of the tolerances 0.036. About
+ * 40 s. */
 static void still_water_100_layers_is_held(void)
 {
 	const still_water r = run_still_water("--set depth=1.25 --set duration=3", 2.0);
-	printf("    still water 100 layers, t >= 2 s: vmax <= %.4f sqrt(g H) (target 0.02), bottom p %.3f-%.3f x rho0 g "
+	printf("    still water 100 layers, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H; target 0.02), bottom p %.3f-%.3f x rho0 g "
 	       "H, thrown %g\n",
-	       r.vmax_ratio, r.bp_min, r.bp_max, r.thrown);
+	       r.vmax_ratio, r.vmax_height, r.bp_min, r.bp_max, r.thrown);
 	CHECK(r.status == 0);
 	CHECK(r.frames == 90);
 	CHECK(r.thrown == 0);
 	CHECK(r.leaked == 0 && r.nonfinite == 0);
 	CHECK(r.vmax_ratio < 0.05);
+	CHECK(r.bp_min > 1 - BP_BAND && r.bp_max < 1 + BP_BAND);
+}
+
+/* Long, one step beyond the 100: a narrow column (0.05 m square, 4 x 4
+ * particles a layer) 200 layers deep (2.5 m, 3200 particles), 3 s: at rest
+ * under 2% of sqrt(g H) from 2 s on (measured 0.0032), the bottom pressure
+ * within BP_BAND (1.028), nothing thrown. At cfl 0.4 the start's burst
+ * (0.15 sqrt(g H) at 0.1 s) leaves the column 1.5% expanded with 32
+ * particles more than 3 spacings over its surface: the lattice's
+ * relaxation again (header). Every particle is within two
+ * spacings of a wall, so the walls' mirrored pressure and hydrostatic push
+ * carry the column here; the solves' tolerances are 1/400 of the shallow
+ * ones (depth_scale) and the step 1/sqrt(20) of theirs. About 30 s. */
+static void still_water_200_layers_narrow_comes_to_rest(void)
+{
+	const still_water r = run_still_water("--set depth=2.5 --set width=0.05 --set duration=3", 2.0);
+	printf("    still water 200 layers, 0.05 m wide, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f "
+	       "x rho0 g H, thrown %g\n",
+	       r.vmax_ratio, r.vmax_height, r.bp_min, r.bp_max, r.thrown);
+	CHECK(r.status == 0);
+	CHECK(r.frames == 90);
+	CHECK(r.thrown == 0);
+	CHECK(r.leaked == 0 && r.nonfinite == 0);
+	CHECK(r.vmax_ratio < 0.02);
 	CHECK(r.bp_min > 1 - BP_BAND && r.bp_max < 1 + BP_BAND);
 }
 
@@ -186,4 +229,5 @@ void suite_long_dfsph(void)
 {
 	RUN(still_water_40_layers_comes_to_rest);
 	RUN(still_water_100_layers_is_held);
+	RUN(still_water_200_layers_narrow_comes_to_rest);
 }

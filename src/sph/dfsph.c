@@ -46,6 +46,19 @@
  * max_density_error (cheaper; it holds still water some 10 layers deep):
  *   k_i += max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
  *
+ * Stopping rule (solve, with the divergence solver): each solve stops once
+ * the mean over all particles of its error / rho0 -- the velocity solve's
+ * |R_i| dt, the density change its velocities leave in a step, the density
+ * solve's predicted |rho_i - rho0| (compression only where k_i = 0) -- is
+ * at most its tolerance times depth_scale^2, after at least DFSPH_SMOOTH
+ * sweeps (velocity) or one iteration (density), or at its cap: Bender &
+ * Koschier's average density and divergence errors (2017, Alg. 2-3),
+ * tightened with the depth D because a mean residual eps leaves the
+ * column-wide mode an error of eps (D / h)^2 (depth_scale). Tighter rules
+ * (on the maximum, or on means ten times lower) do not bring a deep column
+ * to rest sooner: what moves it once it is held is its particle arrangement
+ * relaxing under the pressure force (README, Stress cases).
+ *
  * Published per frame: solver = "dfsph", iterations and divergence_iterations
  * (the solves' mean per step), residual (largest final mean density error of
  * a step), residual_max (... of one particle, / rho0), unconverged (steps in
