@@ -24,16 +24,17 @@
  * rho0 g D, is 0.34 then 0.10 at 10 layers (it dies out by 5 s), 0.74 then
  * 0.45 at 20 and 0.63 then 0.57 at 40 (at 20 and 40 it beats between 0.2
  * and 0.8 to 6 s without decaying). It is printed per half second, not
- * asserted (open, README "WCSPH still water rings"). What sets it: the
- * column starts at rho0 and settles by g D / k, which excites the mode at
- * about rho0 g D, and nothing in the model damps a wave that long
- * (Monaghan's term acts like nu ~ alpha c h / 10: a damping ratio near 1e-3
- * at alpha 0.05, where decaying to 5% within 2 s needs 0.012 at 10 layers
- * and 0.023 at 40); and the walls feed it: the artificial term is one-sided
- * at a wall, and the walls' pressure force, not the gradient of an energy,
- * hands back the work it does on the layer beside the wall, so the ringing
- * grows with alpha (at 20 layers 0.46 then 0.11 by 4 s at alpha 0.02, about
- * 1.7 at 0.2). */
+ * asserted (open, README "WCSPH still water rings"). The column starts at
+ * rho0 and settles by g D / k, which excites the mode at about rho0 g D, but
+ * the mode is also fed: started hydrostatically compressed, 20 layers ring
+ * at 0.2 and grow to 0.45 by 2-3 s. The feeding grows with alpha (at 20
+ * layers 0.46 then 0.11 by 4 s at alpha 0.02, about 1.7 at 0.2): the
+ * artificial term is one-sided at a wall, and the walls' pressure force,
+ * not the gradient of an energy, need not return the work it does on the
+ * layer beside the wall as dissipation. Nothing else would damp a wave that
+ * long (Monaghan's term acts like nu ~ alpha c h / 10: a damping ratio near
+ * 1e-3 at alpha 0.05, where decaying to 5% within 2 s needs 0.012 at 10
+ * layers and 0.023 at 40). */
 #include "test.h"
 
 #include <stdlib.h>
