@@ -27,9 +27,9 @@
  * asserted (open, README "WCSPH still water rings"). The column starts at
  * rho0 and settles by g D / k, which excites the mode at about rho0 g D, but
  * the mode is also fed: started hydrostatically compressed, 20 layers ring
- * at 0.2 and grow to 0.45 by 2-3 s, 10 layers from 0.35 to 1.8. The feeding grows with alpha (at 20
- * layers 0.46 then 0.11 by 4 s at alpha 0.02, about 1.7 at 0.2): the
- * artificial term is one-sided at a wall, and the walls' pressure force,
+ * at 0.2 and grow to 0.45 by 2-3 s, 10 layers from 0.35 to 1.8. From the
+ * cold start the ringing grows with alpha (at 20 layers 0.46 then 0.11 by
+ * 4 s at alpha 0.02, about 1.7 at 0.2): the artificial term is one-sided at a wall, and the walls' pressure force,
  * not the gradient of an energy, need not return the work it does on the
  * layer beside the wall as dissipation. Nothing else would damp a wave that
  * long (Monaghan's term acts like nu ~ alpha c h / 10: a damping ratio near
