@@ -250,12 +250,12 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	if (!A.diag || !A.nb || !b || !q || !cell_of || !comp || !stack || !has_air || (sd.any && !A.off))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_pressure: out of memory for %d unknowns", n);
 
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	/* assemble: diagonal, links weighted by the open fraction w_f, and the
 	 * right-hand side -D with D = sum_f +-(w_f u_f + (1 - w_f) u_solid,f).
 	 * Each row is written by one thread from read-only inputs, so this and
 	 * the loops below marked "on all threads" give the same values on any
 	 * thread count (the max reductions are order-free). */
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (int k = 0; k < nz; ++k)
 		for (int j = 0; j < ny; ++j)
 			for (int i = 0; i < nx; ++i) {

@@ -26,7 +26,7 @@ typedef struct flip_defs {
 
 static inline flip_defs flip_default_defs(void)
 {
-	return (flip_defs){eddy_default_gravity_def(),     eddy_default_flip_p2g_def(),
+	return (flip_defs){eddy_default_gravity_def(),       eddy_default_flip_p2g_def(),
 	                   eddy_default_flip_boundary_def(), eddy_default_flip_surface_def(),
 	                   eddy_default_flip_pressure_def(), eddy_default_flip_extrapolate_def(),
 	                   eddy_default_flip_g2p_def(),      eddy_default_flip_advect_def()};

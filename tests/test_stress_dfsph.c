@@ -112,7 +112,8 @@ static still_water run_still_water(const char *sets, double t_settle)
 static void still_water_10_layers_comes_to_rest(void)
 {
 	const still_water r = run_still_water("--set depth=0.125 --set duration=2.5", 2.0);
-	printf("    still water 10 layers, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f x rho0 g H, thrown %g\n",
+	printf("    still water 10 layers, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f x rho0 g H, "
+	       "thrown %g\n",
 	       r.vmax_ratio, r.vmax_height, r.bp_min, r.bp_max, r.thrown);
 	CHECK(r.status == 0);
 	CHECK(r.frames == 75);
@@ -128,7 +129,8 @@ static void still_water_10_layers_comes_to_rest(void)
 static void still_water_20_layers_comes_to_rest(void)
 {
 	const still_water r = run_still_water("--set depth=0.25 --set duration=2.5", 2.0);
-	printf("    still water 20 layers, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f x rho0 g H, thrown %g\n",
+	printf("    still water 20 layers, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f x rho0 g H, "
+	       "thrown %g\n",
 	       r.vmax_ratio, r.vmax_height, r.bp_min, r.bp_max, r.thrown);
 	CHECK(r.status == 0);
 	CHECK(r.frames == 75);
@@ -161,7 +163,8 @@ static void still_water_solver_that_cannot_hold_fails_loudly(void)
 static void still_water_40_layers_comes_to_rest(void)
 {
 	const still_water r = run_still_water("--set depth=0.5 --set duration=3", 2.0);
-	printf("    still water 40 layers, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f x rho0 g H, thrown %g\n",
+	printf("    still water 40 layers, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f x rho0 g H, "
+	       "thrown %g\n",
 	       r.vmax_ratio, r.vmax_height, r.bp_min, r.bp_max, r.thrown);
 	CHECK(r.status == 0);
 	CHECK(r.frames == 90);
@@ -183,8 +186,8 @@ static void still_water_40_layers_comes_to_rest(void)
 static void still_water_100_layers_is_held(void)
 {
 	const still_water r = run_still_water("--set depth=1.25 --set duration=3", 2.0);
-	printf("    still water 100 layers, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H; target 0.02), bottom p %.3f-%.3f x rho0 g "
-	       "H, thrown %g\n",
+	printf("    still water 100 layers, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H; target 0.02), bottom p %.3f-%.3f "
+	       "x rho0 g H, thrown %g\n",
 	       r.vmax_ratio, r.vmax_height, r.bp_min, r.bp_max, r.thrown);
 	CHECK(r.status == 0);
 	CHECK(r.frames == 90);
