@@ -596,15 +596,16 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_boundary: out of memory");
 	uint8_t *type = (uint8_t *)w->columns[COL_CELL_TYPE].data;
 	float *face[3] = {eddy__col(w, COL_FACE_U), eddy__col(w, COL_FACE_V), eddy__col(w, COL_FACE_W)};
-	const int had = b->sd_step >= 0 ? b->nkey : 0;
-	b->sd_step = -1;
-	const int nkey = solid_key_of(w, b);
+	const int nkey = solid_key_of(w, b); /* resets b->nkey when the key array regrows */
 	if (nkey < 0)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_boundary: out of memory");
-	/* still solids (a tank) keep last step's faces: the same inputs give
-	 * the same faces, so reusing them changes no bit */
-	if (nkey != had || memcmp(b->key, b->key + b->key_cap / 2, (size_t)nkey * sizeof *b->key) != 0) {
-		b->nkey = 0;
+	/* still solids (a tank) keep the faces last computed: the same inputs
+	 * give the same faces, so reusing them changes no bit */
+	const bool same = b->sd_step >= 0 && nkey == b->nkey &&
+	                  memcmp(b->key, b->key + b->key_cap / 2, (size_t)nkey * sizeof *b->key) == 0;
+	b->sd_step = -1;
+	if (!same) {
+		b->nkey = 0; /* until the faces are whole */
 		if (!eddy__flip_solid_faces(w, ctx->dt, b->def.margin, b->vel, &b->sd, &b->store))
 			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_boundary: out of memory");
 		memcpy(b->key + b->key_cap / 2, b->key, (size_t)nkey * sizeof *b->key);
