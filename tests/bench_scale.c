@@ -129,18 +129,8 @@ static eddy_world *block(const char *method, long n, int threads, eddy_flip_solv
 		de.radius = 2 * dx;
 		de.stiffness = 400;
 		eddy_add_sph_density(w, &de);
-		eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
-		if (dfsph) {
-			eddy_add_gravity(w, &g);
-			eddy_add_sph_viscosity(w, &vi);
-			eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
-			eddy_add_sph_dfsph(w, &df);
-		} else {
-			eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
-			eddy_add_sph_pressure(w, &pr);
-			eddy_add_sph_viscosity(w, &vi);
-			eddy_add_gravity(w, &g);
-		}
+		const eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+		bench_add_sph_forces(w, dfsph ? &df : NULL);
 		eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
 		bb.max = d.bounds_max;
 		bb.spacing = dx;

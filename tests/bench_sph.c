@@ -49,19 +49,8 @@ static eddy_world *block(int n, int threads, bool dfsph)
 	de.radius = 2 * dx;
 	de.stiffness = 400;
 	eddy_add_sph_density(w, &de);
-	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
-	eddy_gravity_def g = eddy_default_gravity_def();
-	if (dfsph) {
-		eddy_add_gravity(w, &g);
-		eddy_add_sph_viscosity(w, &vi);
-		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
-		eddy_add_sph_dfsph(w, &df);
-	} else {
-		eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
-		eddy_add_sph_pressure(w, &pr);
-		eddy_add_sph_viscosity(w, &vi);
-		eddy_add_gravity(w, &g);
-	}
+	const eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+	bench_add_sph_forces(w, dfsph ? &df : NULL);
 	eddy_integrate_def it = eddy_default_integrate_def();
 	eddy_add_integrate(w, &it);
 	eddy_collide_box_def bx = eddy_default_collide_box_def();
@@ -97,21 +86,10 @@ static eddy_world *pour(const char *solver, float stiffness)
 	de.radius = 2 * dx;
 	de.stiffness = stiffness;
 	eddy_add_sph_density(w, &de);
-	eddy_gravity_def g = eddy_default_gravity_def();
-	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
-	if (dfsph) {
-		eddy_add_gravity(w, &g);
-		eddy_add_sph_viscosity(w, &vi);
-		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
-		df.max_density_error = 0.01f; /* the scene's: the mean compression stays under 2% */
-		df.divergence_solver = false;
-		eddy_add_sph_dfsph(w, &df);
-	} else {
-		eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
-		eddy_add_sph_pressure(w, &pr);
-		eddy_add_sph_viscosity(w, &vi);
-		eddy_add_gravity(w, &g);
-	}
+	eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+	df.max_density_error = 0.01f; /* the scene's: the mean compression stays under 2% */
+	df.divergence_solver = false;
+	bench_add_sph_forces(w, dfsph ? &df : NULL);
 	eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
 	bb.max = d.bounds_max;
 	bb.spacing = dx;

@@ -7,6 +7,8 @@
 #include <stdlib.h>
 #include <time.h>
 
+#include "eddy.h"
+
 static inline double now_ms(void)
 {
 	struct timespec ts;
@@ -25,6 +27,25 @@ static inline double median(double *v, int n)
 {
 	qsort(v, (size_t)n, sizeof *v, cmp_double);
 	return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+/* The SPH forces after sph_density, in the scenes' orders: with df, gravity,
+ * viscosity and sph_dfsph (df's settings); without, sph_pressure, viscosity
+ * and gravity (WCSPH). */
+static inline void bench_add_sph_forces(eddy_world *w, const eddy_sph_dfsph_def *df)
+{
+	const eddy_gravity_def g = eddy_default_gravity_def();
+	const eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
+	if (df) {
+		eddy_add_gravity(w, &g);
+		eddy_add_sph_viscosity(w, &vi);
+		eddy_add_sph_dfsph(w, df);
+	} else {
+		const eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+		eddy_add_sph_pressure(w, &pr);
+		eddy_add_sph_viscosity(w, &vi);
+		eddy_add_gravity(w, &g);
+	}
 }
 
 #endif
