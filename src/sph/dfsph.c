@@ -5,8 +5,8 @@
  *
  * Reads: x y z vx vy vz density ax ay az, sph_density's lists. Writes:
  * pressure, ax ay az (accumulated: it runs after the other forces, before
- * integrate). With the divergence solver it reads and writes its state
- * columns dfsph_k dfsph_kd, each solve's k of the last step.
+ * integrate); with the divergence solver also its state columns dfsph_k
+ * dfsph_kd, each solve's k of the last step.
  *
  * With G_ij = m grad W_spiky(x_i - x_j) (the poly6 gradient vanishes at r = 0
  * and lets a tank at rest cluster), S_i = sum_j G_ij, boundary particles of
@@ -15,49 +15,43 @@
  *   Drho_i/Dt = sum_j (v_i - v_j) . G_ij + v_i . B_i - bdiv_i
  *   a_i^p     = -sum_j (k_i + k_j) G_ij - 2 k_i B_i + h_i
  *   h_i       = -(1/rho_i) sum_b (g . (x_b - x_i)) m_b grad W(x_i - x_b)
- * The boundary particles mirror the pressure (p_b = p_i, so the wall counts
- * twice: with one k_i a wall could not hold a particle whose neighbourhood is
- * full, where S_i + B_i ~ 0), plus Adami et al.'s hydrostatic part p_b - p_i =
- * rho_i g . (x_b - x_i): h_i, which supports the fluid beside the walls. A
- * step sets v* = v + dt (a + h), solves for k by corrections that move v* by
- * dt a^p of a change of k, adds (v* - (v + dt a)) / dt to a and writes
+ * The boundary particles mirror the pressure (p_b = p_i: with one k_i a wall
+ * could not hold a particle whose neighbourhood is full, where S_i + B_i ~ 0)
+ * plus Adami et al.'s hydrostatic part p_b - p_i = rho_i g . (x_b - x_i), h_i.
+ * A step sets v* = v + dt (a + h), solves for k by corrections that move v*
+ * by dt a^p of a change of k, adds (v* - (v + dt a)) / dt to a and writes
  * p_i = k_i rho_i^2 / grad_cal (k summed over the solves; see sph_pressure).
  *
  * The divergence solver (the default) runs the paper's two solves,
  *   velocity:  R_i(v*) = 0,   density:  rho_i + dt R_i(v*) = rho0,
  *   R_i(v) = sum_j (v_i - v_j) . G_ij + 2 (v_i . B_i - bdiv_i),
  * the wall counted twice as in the force, so that a change of k moves the
- * predicted density by -(A k)_i with A = dt^2 grad^T grad symmetric positive
- * semi-definite, of diagonal dt^2 D'_i, D'_i = |S_i + 2 B_i|^2 + sum_j
+ * predicted density by -(A k)_i, A = dt^2 grad^T grad symmetric positive
+ * semi-definite with diagonal dt^2 D'_i, D'_i = |S_i + 2 B_i|^2 + sum_j
  * |G_ij|^2 (on the true rate A is not symmetric, and Jacobi sweeps can
- * diverge in a deep column). Each solve (solve) starts from its k of the last
- * step, runs conjugate gradients (divergence_cg), then projected relaxed
- * Jacobi sweeps (Ihmsen et al.) on the residual res_i (R_i where rho_i >=
- * DFSPH_SURFACE rho0, or the predicted rho_i - rho0), whose error is |res_i|
- * where k_i > 0, else max(res_i, 0):
+ * diverge in a deep column). Each solve starts from its k of the last step,
+ * runs conjugate gradients (divergence_cg), then projected relaxed Jacobi
+ * sweeps (Ihmsen et al.) on the residual res_i (R_i where rho_i >=
+ * DFSPH_SURFACE rho0, else the predicted rho_i - rho0), whose error is
+ * |res_i| where k_i > 0, else max(res_i, 0):
  *   k_i <- max(k_i + omega res_i / (dt^n D'_i), 0),   omega = DFSPH_OMEGA,
  * n = 1 for the velocity solve, 2 for the density one; k >= 0 leaves the free
  * surface unpulled. max_divergence_error must be well below
- * max_density_error, or the water compresses by it every step.
+ * max_density_error, or the water compresses by it every step. A solve stops
+ * once the mean error / rho0 (the velocity solve's |R_i| dt, the density
+ * solve's predicted compression) is at most its tolerance times
+ * depth_scale^2, after at least DFSPH_SMOOTH sweeps (velocity) or one
+ * iteration (density), or at its cap: the paper's average errors (2017, Alg.
+ * 2-3), tightened with the depth D because a mean residual eps leaves the
+ * column-wide mode an error of eps (D / h)^2. Tighter rules do not bring a
+ * deep column to rest sooner: what moves it then is its particle arrangement
+ * relaxing under the pressure force (README, Stress cases).
  *
  * Without it the density solve runs alone, cold, with the paper's sweeps that
  * only add pressure, on the true wall rate and D_i = (S_i + 2 B_i) . (S_i +
  * B_i) + sum_j |G_ij|^2, until the mean compression is at most
  * max_density_error (cheaper; it holds still water some 10 layers deep):
  *   k_i += max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
- *
- * Stopping rule (solve, with the divergence solver): each solve stops once
- * the mean over all particles of its error / rho0 -- the velocity solve's
- * |R_i| dt, the density change its velocities leave in a step, the density
- * solve's predicted |rho_i - rho0| (compression only where k_i = 0) -- is
- * at most its tolerance times depth_scale^2, after at least DFSPH_SMOOTH
- * sweeps (velocity) or one iteration (density), or at its cap: Bender &
- * Koschier's average density and divergence errors (2017, Alg. 2-3),
- * tightened with the depth D because a mean residual eps leaves the
- * column-wide mode an error of eps (D / h)^2 (depth_scale). Tighter rules
- * (on the maximum, or on means ten times lower) do not bring a deep column
- * to rest sooner: what moves it once it is held is its particle arrangement
- * relaxing under the pressure force (README, Stress cases).
  *
  * Published per frame: solver = "dfsph", iterations and divergence_iterations
  * (the solves' mean per step), residual (largest final mean density error of
@@ -67,13 +61,10 @@
  * latter with the divergence solver times sqrt(depth_scale).
  *
  * Sources: Bender & Koschier, "Divergence-free smoothed particle
- * hydrodynamics", SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and
- * "Divergence-free SPH for incompressible and viscous fluids", TVCG 2017;
- * Hestenes & Stiefel, J. Res. NBS 1952; Saad, "Iterative methods for sparse
- * linear systems", 2003 (Alg. 9.1); Ihmsen et al., "Implicit incompressible
- * SPH", TVCG 2014 (relaxed Jacobi); Akinci et al., "Versatile rigid-fluid
- * coupling for incompressible SPH", SIGGRAPH 2012; Adami, Hu & Adams, "A
- * generalized wall boundary condition for SPH", JCP 2012 (eq. 27). */
+ * hydrodynamics", SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and TVCG
+ * 2017; Hestenes & Stiefel 1952 and Saad 2003 (Alg. 9.1: CG); Ihmsen et al.,
+ * "Implicit incompressible SPH", TVCG 2014; Akinci et al., SIGGRAPH 2012;
+ * Adami, Hu & Adams, JCP 2012 (eq. 27). */
 #include "simd.h"
 #include "sph.h"
 
