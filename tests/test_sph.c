@@ -993,6 +993,8 @@ static void scenes_run_and_report(void)
 
 static void sph_dfsph_suite(void); /* dfsph helper */
 static void verlet_lists_match_brute_force(void);
+static void neighbour_lists_grow_past_their_first_size(void);
+static void neighbour_lists_span_many_rows(void);
 
 void suite_sph(void)
 {
@@ -1015,6 +1017,8 @@ void suite_sph(void)
 	RUN(resting_drop_keeps_pairs_apart);
 	RUN(scenes_run_and_report);
 	RUN(verlet_lists_match_brute_force);
+	RUN(neighbour_lists_grow_past_their_first_size);
+	RUN(neighbour_lists_span_many_rows);
 	sph_dfsph_suite(); /* dfsph helper */
 }
 
@@ -1451,5 +1455,180 @@ static void verlet_lists_match_brute_force(void)
 	CHECK(vc.steps > 100);
 	CHECK(vc.count_mismatch == 0);
 	CHECK(vc.worst_rel < 1e-5);
+	eddy_destroy_world(w);
+}
+
+/* The neighbour lists take only what they hold (src/sph/neighbors.c): their
+ * arrays start at a guess (64 candidates, 40 neighbours a particle) and are
+ * enlarged, the pass rerun, when the lists do not fit. A support of 4 and 5
+ * spacings (about 350 and 600 neighbours, far past the guess) must still
+ * give every particle exactly its all-pairs count and density, on two
+ * threads, through the expansion that moves the Verlet list's rows; and
+ * sph_pressure, which reads the lists, must still conserve momentum: its
+ * pair forces are equal and opposite, so sum_i a_i = 0 up to float
+ * rounding (a list read from the wrong place breaks the symmetry). */
+typedef struct momentum_check {
+	double worst; /* |sum a| / sum |a| */
+	int forced;   /* steps with any force */
+	float most;   /* neighbours of any particle */
+} momentum_check;
+
+static eddy_status momentum_check_step(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	(void)ctx;
+	momentum_check *mc = user;
+	size_t n;
+	const float *ax = eddy_world_channel(w, "ax", &n), *ay = eddy_world_channel(w, "ay", NULL),
+				*az = eddy_world_channel(w, "az", NULL), *nc = eddy_world_channel(w, "neighbors", NULL);
+	double s[3] = {0, 0, 0}, mag = 0;
+	for (size_t i = 0; i < n; ++i) {
+		mc->most = nc[i] > mc->most ? nc[i] : mc->most;
+		s[0] += ax[i], s[1] += ay[i], s[2] += az[i];
+		mag += sqrt((double)ax[i] * ax[i] + (double)ay[i] * ay[i] + (double)az[i] * az[i]);
+	}
+	mc->forced += mag > 0;
+	if (mag > 0)
+		mc->worst = fmax(mc->worst, sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]) / mag);
+	return EDDY_OK;
+}
+
+static void neighbour_lists_grow_past_their_first_size(void)
+{
+	const float ratios[] = {4.0f, 5.0f}; /* 5: the most sph_density takes */
+	for (int r = 0; r < 2; ++r) {
+		eddy_world_def d = eddy_default_world_def();
+		d.bounds_max = (eddy_vec3){0.3f, 0.3f, 0.3f};
+		d.threads = 2;
+		d.fps = 200;
+		d.gravity = (eddy_vec3){0, 0, 0};
+		eddy_world *w = eddy_create_world(&d, NULL, 0);
+		eddy_emit_box_def b = eddy_default_emit_box_def();
+		b.min = (eddy_vec3){0.1f, 0.1f, 0.1f};
+		b.max = (eddy_vec3){0.18f, 0.18f, 0.18f};
+		b.spacing = 0.009f; /* packed 1.37 x denser than sph_density's spacing: pressure everywhere */
+		b.jitter = 0.2f;    /* no lattice symmetry to hide a wrong pair */
+		eddy_add_emit_box(w, &b);
+		eddy_sph_density_def de = eddy_default_sph_density_def();
+		de.spacing = 0.01f;
+		de.radius = ratios[r] * de.spacing;
+		const eddy_system_id dens = eddy_add_sph_density(w, &de);
+		verlet_check vc = {de.radius, 0, 0, 0, 0};
+		momentum_check mc = {0};
+		eddy_custom_system_def cs = eddy_default_custom_system_def();
+		const char *reads[] = {"x", "y", "z", "density", "neighbors"};
+		cs.name = "verlet_check";
+		cs.reads = reads;
+		cs.read_count = 5;
+		cs.step = verlet_check_step;
+		cs.user = &vc;
+		CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
+		eddy_gravity_def g = eddy_default_gravity_def();
+		eddy_add_gravity(w, &g);
+		eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+		eddy_add_sph_pressure(w, &pr);
+		eddy_custom_system_def ms = eddy_default_custom_system_def();
+		const char *mreads[] = {"ax", "ay", "az", "neighbors"};
+		ms.name = "momentum_check";
+		ms.reads = mreads;
+		ms.read_count = 4;
+		ms.step = momentum_check_step;
+		ms.user = &mc;
+		CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &ms)));
+		eddy_integrate_def it = eddy_default_integrate_def();
+		eddy_add_integrate(w, &it);
+		vc.mass = eddy_sph_particle_mass(w, dens);
+		for (int f = 0; f < 3; ++f)
+			CHECK(eddy_world_step_frame(w) == EDDY_OK);
+		const float most = mc.most;
+		printf("    support %.0f spacings: %d steps, up to %.0f neighbours, %d counts differ from all pairs, worst "
+		       "density error %.1e, |sum a| / sum |a| up to %.1e over %d steps with forces\n",
+		       (double)ratios[r], vc.steps, (double)most, vc.count_mismatch, vc.worst_rel, mc.worst, mc.forced);
+		CHECK(most > 64); /* past the arrays' first guess */
+		CHECK(vc.steps >= 3);
+		CHECK(vc.count_mismatch == 0);
+		CHECK(vc.worst_rel < 1e-5); /* float sums in another order than the double reference */
+		CHECK(mc.forced > 0);
+		CHECK(mc.worst < 1e-4); /* float rounding of a sum over ~500 particles' forces */
+		eddy_destroy_world(w);
+	}
+}
+
+/* The Verlet candidates are stored as 16-bit offsets within groups of eight
+ * (neighbors.h), whole where a group spans more than 65535 rows. Here a
+ * particle A has one neighbour C beside it in its row of cells and one, B,
+ * in the next layer of cells, with a sheet of 300 x 300 particles in A's
+ * layer (out of reach) between them in cell order: A's group {C, B} spans
+ * over 90000 rows. A, B and C must see exactly their all-pairs neighbours,
+ * at the search and in the steps that reuse its list. */
+typedef struct span_check {
+	float h;
+	eddy_vec3 probe[3];
+	int steps, mismatch, found;
+} span_check;
+
+static eddy_status span_check_step(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	(void)ctx;
+	span_check *sc = user;
+	size_t n;
+	const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
+				*z = eddy_world_channel(w, "z", NULL), *nc = eddy_world_channel(w, "neighbors", NULL);
+	const float h2 = sc->h * sc->h;
+	for (int p = 0; p < 3; ++p)
+		for (size_t i = 0; i < n; ++i) {
+			if (x[i] != sc->probe[p].x || y[i] != sc->probe[p].y || z[i] != sc->probe[p].z)
+				continue;
+			int cnt = 0;
+			for (size_t j = 0; j < n; ++j) {
+				const float rx = x[i] - x[j], ry = y[i] - y[j], rz = z[i] - z[j];
+				cnt += j != i && h2 - (rx * rx + ry * ry + rz * rz) > 0;
+			}
+			sc->found++;
+			sc->mismatch += cnt != 2 || (float)cnt != nc[i];
+		}
+	sc->steps++;
+	return EDDY_OK;
+}
+
+static void neighbour_lists_span_many_rows(void)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.bounds_max = (eddy_vec3){3.2f, 3.4f, 0.3f};
+	d.threads = 2;
+	d.fps = 100;
+	d.gravity = (eddy_vec3){0, 0, 0};
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	const float s = 0.01f, h = 0.02f;
+	/* A, C a row apart in x, B above A by a layer of cells (h/2); the sheet
+	 * in A's layer from 3h further along y */
+	span_check sc = {h, {{0.1f, 0.1f, 0.1f}, {0.1f, 0.1f, 0.1f + 0.6f * h}, {0.1f + 0.6f * h, 0.1f, 0.1f}}, 0, 0, 0};
+	enum { SIDE = 300 };
+	eddy_vec3 *pos = malloc((SIDE * SIDE + 3) * sizeof *pos);
+	CHECK(pos != NULL);
+	for (int k = 0; k < SIDE * SIDE; ++k)
+		pos[k] = (eddy_vec3){0.1f + s * (float)(k % SIDE), 0.1f + 3 * h + s * (float)(k / SIDE), 0.1f};
+	for (int p = 0; p < 3; ++p)
+		pos[SIDE * SIDE + p] = sc.probe[p];
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	de.spacing = s;
+	de.radius = h;
+	eddy_add_sph_density(w, &de);
+	eddy_custom_system_def cs = eddy_default_custom_system_def();
+	const char *reads[] = {"x", "y", "z", "neighbors"};
+	cs.name = "span_check";
+	cs.reads = reads;
+	cs.read_count = 4;
+	cs.step = span_check_step;
+	cs.user = &sc;
+	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
+	CHECK(eddy_world_add_particles(w, SIDE * SIDE + 3, pos, NULL) == EDDY_OK);
+	free(pos);
+	for (int f = 0; f < 3; ++f)
+		CHECK(eddy_world_step_frame(w) == EDDY_OK);
+	printf("    %d steps, %d probes found, %d with other than their 2 all-pairs neighbours\n", sc.steps, sc.found,
+	       sc.mismatch);
+	CHECK(sc.steps >= 3);
+	CHECK(sc.found == 3 * sc.steps);
+	CHECK(sc.mismatch == 0);
 	eddy_destroy_world(w);
 }

@@ -305,7 +305,7 @@ eddy_status sph_boundary_divergence(eddy_world *w, sph_shared *sh, int threads)
 	const long ln = (long)n;
 #pragma omp parallel for num_threads(threads) schedule(static)
 	for (long i = 0; i < ln; ++i) {
-		const uint32_t *bl = nb->bnbr + (size_t)i * nb->bcap;
+		const uint32_t *bl = sph_bnbrs(nb, i);
 		float u = 0;
 		for (uint32_t q = 0; q < nb->bcount[i]; ++q) {
 			const uint32_t b = bl[q];

@@ -117,7 +117,7 @@ static bool walls_make(eddy_world *w, const sph_density *sd, bool iterate, walls
 	memset(wl->start, 0, (nbound + 1) * sizeof *wl->start);
 	for (size_t i = 0; i < n; ++i)
 		for (uint32_t q = 0; q < nb->bcount[i]; ++q)
-			wl->start[nb->bnbr[i * nb->bcap + q] + 1]++;
+			wl->start[sph_bnbrs(nb, i)[q] + 1]++;
 	for (size_t b = 0; b < nbound; ++b)
 		wl->start[b + 1] += wl->start[b];
 	const size_t pairs = wl->start[nbound];
@@ -138,7 +138,7 @@ static bool walls_make(eddy_world *w, const sph_density *sd, bool iterate, walls
 	memcpy(at, wl->start, nbound * sizeof *at);
 	uint32_t f = 0; /* the pair's place in the fluid's list order */
 	for (size_t i = 0; i < n; ++i) {
-		const uint32_t *bl = nb->bnbr + i * nb->bcap;
+		const uint32_t *bl = sph_bnbrs(nb, i);
 		if (iterate && nb->bcount[i]) {
 			wl->fstart[wl->nrows] = f;
 			wl->rows[wl->nrows++] = (uint32_t)i;
@@ -233,7 +233,7 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 			break;
 #pragma omp parallel for num_threads(threads) schedule(static)
 		for (long r = 0; r < wl.nrows; ++r) {
-			const uint32_t i = wl.rows[r], *bl = nb->bnbr + (size_t)i * nb->bcap;
+			const uint32_t i = wl.rows[r], *bl = sph_bnbrs(nb, i);
 			const float *wi = wl.wf + wl.fstart[r];
 			float dr = 0;
 			for (uint32_t q = 0; q < nb->bcount[i]; ++q)

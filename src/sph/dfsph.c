@@ -192,7 +192,7 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 	const sph_neighbors *nb = &sh->nb;
 	const float *pi = sh->pq + 4 * i, eps2 = 1e-6f * sh->k.h2;
 	const eddy_vec3 g = wk->gravity;
-	const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap, bcnt = nb->bcount[i];
+	const uint32_t *blist = sph_bnbrs(nb, i), bcnt = nb->bcount[i];
 	float s[6][4] = {{0}};
 	for (uint32_t p = 0; p < bcnt; p += 4)
 		for (uint32_t l = 0; l < 4; ++l) {
@@ -230,7 +230,7 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 	float t[4][SPH_BLOCK][4], w[6][SPH_BLOCK] = {{0}};
 	for (long q = 0; q < cnt; ++q) {
 		const long i = i0 + q;
-		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
+		const uint32_t *list = sph_nbrs(nb, i), c = nb->count[i];
 		const sf8 pi = sf8_load_quad2(sh->pq + 4 * i);
 		sf8 sx = zero, sy = zero, sz = zero, s2 = zero;
 		dfsph_group *g = wk->groups + wk->goff[i];

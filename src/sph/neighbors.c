@@ -22,9 +22,11 @@
  * exact list, sorted by row, and summed in that order: the same bits
  * whenever the last search ran, so a resumed run is bit-identical without
  * checkpointing the Verlet list. Each particle writes only its own lists:
- * the same for any thread count. Both lists have a fixed stride per
- * particle, a multiple of 8, widened (and the pass rerun) when one overflows
- * (compressed fluid). */
+ * the same for any thread count. Every list takes only its own length in
+ * its array (sph_lists, sph.h), so a particle away from the walls takes no
+ * room for boundary neighbours; an array too small for a pass's lists is
+ * enlarged and the pass run again (rare: the arrays only grow, and their
+ * unused end costs address space, not memory). */
 #include "neighbors.h"
 #include "simd.h"
 #include "systems.h"
@@ -39,13 +41,14 @@ typedef struct filter_ctx {
 	const uint32_t *row_of; /* the row of each build slot; NULL: the rows are the slots */
 	float h2;
 	long n;
+	uint32_t longest; /* the most candidates any slot has, fluid or boundary */
 } filter_ctx;
 
 /* ---- the kernel (also compiled as the AVX2 variant) ---- */
 
-/* Build slot b's fluid candidates with r^2 < h^2, as rows, into jl and
- * their h^2 - r^2 into dv, in candidate order; returns how many. The last
- * group is padded with copies of the last candidate, masked. */
+/* Build slot b's fluid candidates (vc of them, packed from cand) with
+ * r^2 < h^2, as rows, into jl and their h^2 - r^2 into dv, in candidate
+ * order; returns how many. The last group's padding is masked. */
 static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *cand, uint32_t vc, const float *pi,
                                     uint32_t *jl, float *dv)
 {
@@ -55,18 +58,14 @@ static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *cand, u
 	const float *p4 = f->p4; /* in locals: sf8_pack's stores may alias f */
 	uint32_t cnt = 0;
 	for (uint32_t q = 0; q < vc; q += 8) {
-		/* a whole group of unmoved rows is its candidates, read in place (a
-		 * copy just written would stall the packing's vector load) */
-		uint32_t rows[8];
-		const uint32_t *j = cand + q;
+		/* unpacked in vector-wide operations where the group is 16-bit,
+		 * so the packing's vector load of j is forwarded from them */
+		uint32_t j[8];
+		cand = sph_unpack_group(cand, j);
+		if (row_of)
+			for (uint32_t k = 0; k < 8; ++k)
+				j[k] = row_of[j[k]];
 		const bool last = q + 8 > vc;
-		if (last || row_of) {
-			for (uint32_t k = 0; k < 8; ++k) {
-				const uint32_t s = cand[q + k < vc ? q + k : vc - 1];
-				rows[k] = row_of ? row_of[s] : s;
-			}
-			j = rows;
-		}
 		sf8 px, py, pz, pw;
 		sf8_gather_quads(p4, j, &px, &py, &pz, &pw);
 		const sf8 rx = sf8_sub(vx, px), ry = sf8_sub(vy, py), rz = sf8_sub(vz, pz);
@@ -80,13 +79,20 @@ static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *cand, u
 }
 
 /* Row i's boundary list and sum from its build slot's candidates (in index
- * order: filtering keeps it). Returns the count. */
-static inline uint32_t filter_boundary(const filter_ctx *f, long i, uint32_t b)
+ * order: filtering keeps it), written to the room for all of them (to
+ * scratch once the array is full). Returns the count. */
+static inline uint32_t filter_boundary(const filter_ctx *f, long i, uint32_t b, uint32_t *scratch, sph_cursor *cur)
 {
 	sph_neighbors *nb = f->nb;
-	const uint32_t *bcand = nb->verlet.bcand + (size_t)b * nb->verlet.bstride;
 	const uint32_t vbc = nb->verlet.bcount[b];
-	uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
+	if (vbc == 0) { /* most particles, away from the walls */
+		nb->bfirst[i] = nb->bcount[i] = 0;
+		nb->bwsum[i] = 0;
+		return 0;
+	}
+	const uint32_t *bcand = nb->verlet.bcand.data + nb->verlet.bfirst[b];
+	uint32_t *hits = sph_list_claim(&nb->bnbr, cur, vbc);
+	hits = hits ? hits : scratch;
 	const float *pi = f->p4 + 4 * i;
 	uint32_t bcnt = 0;
 	float bws = 0;
@@ -95,62 +101,65 @@ static inline uint32_t filter_boundary(const filter_ctx *f, long i, uint32_t b)
 		const float rx = pi[0] - nb->bx[jb], ry = pi[1] - nb->by[jb], rz = pi[2] - nb->bz[jb];
 		const float d = f->h2 - (rx * rx + ry * ry + rz * rz);
 		if (d > 0) {
-			if (bcnt < nb->bcap)
-				blist[bcnt] = jb;
-			bcnt++;
+			hits[bcnt++] = jb;
 			bws += nb->bvol[jb] * nb->bnd.rho[jb] * d * d * d;
 		}
 	}
+	sph_list_commit(cur, bcnt, &nb->bfirst[i]);
 	nb->bcount[i] = bcnt;
 	nb->bwsum[i] = bws;
 	return bcnt;
 }
 
-SIMD_DECLARE(bool, neighbors_filter, (const filter_ctx *f, int threads, uint32_t *max_f, uint32_t *max_b));
+SIMD_DECLARE(bool, neighbors_filter, (const filter_ctx *f, int threads, sph_cursor *fluid, sph_cursor *bound));
 
 /* The exact lists and kernel sums from the Verlet list. False when out of
- * memory; *max_f, *max_b: the largest counts (as sph_search). */
-bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, uint32_t *max_f, uint32_t *max_b)
+ * memory; *fluid, *bound: the threads' cursors merged (as sph_search). */
+bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, sph_cursor *fluid, sph_cursor *bound)
 {
 	sph_neighbors *nb = f->nb;
-	const size_t stride = nb->verlet.stride, cap = nb->cap;
-	uint32_t mf = 0, mb = 0;
+	const size_t longest = f->longest;
 	bool ok = true;
-#pragma omp parallel num_threads(threads) reduction(max : mf, mb) reduction(&& : ok)
+	nb->nbr.used = nb->bnbr.used = 0;
+	*fluid = *bound = (sph_cursor){0};
+#pragma omp parallel num_threads(threads) reduction(&& : ok)
 	{
-		/* a particle's hits, sorted here, then written whole; + 8: whole groups */
-		uint32_t *jl = malloc((stride + 8) * sizeof *jl);
-		float *dv = malloc((stride + 8) * sizeof *dv);
+		/* scratch for a particle's lists once an array is full; + 8: whole groups */
+		uint32_t *jl = malloc((longest + 8) * sizeof *jl);
+		float *dv = malloc((longest + 8) * sizeof *dv);
+		sph_cursor cf = {0}, cb = {0};
 		ok = jl && dv;
 #pragma omp for schedule(static)
 		for (long i = 0; i < f->n; ++i) {
 			if (!ok)
 				continue;
-			const uint32_t b = nb->verlet.slot_of[i];
-			const uint32_t cnt =
-				filter_fluid(f, nb->verlet.cand + (size_t)b * stride, nb->verlet.count[b], f->p4 + 4 * i, jl, dv);
+			const uint32_t b = nb->verlet.slot_of[i], vc = nb->verlet.count[b];
+			/* the hits go straight to the list's room (+ 8: sf8_pack writes
+			 * whole groups), to scratch once the array is full */
+			uint32_t *list = sph_list_claim(&nb->nbr, &cf, vc + 8);
+			list = list ? list : jl;
+			const uint32_t cnt = filter_fluid(f, nb->verlet.cand.data + nb->verlet.first[b], vc, f->p4 + 4 * i, list, dv);
 			/* after a permutation since the search (else the candidates are
 			 * in ascending rows, and so are their hits), sorted by row: they
 			 * are unless a particle changed cell, and then nearly */
 			uint32_t descents = 0; /* over the whole list, no early exit: the loop vectorises */
 			for (uint32_t a = 1; f->row_of && a < cnt; ++a)
-				descents += jl[a - 1] > jl[a];
+				descents += list[a - 1] > list[a];
 			if (descents)
-				sph_sort_hits(jl, dv, cnt);
+				sph_sort_hits(list, dv, cnt);
 			nb->wsum[i] = sph_cube_sum(dv, cnt);
-			/* whole groups: cap is a multiple of 8, jl holds whole groups */
-			for (uint32_t q = 0; q < cnt && cnt <= cap; q += 8)
-				memcpy(nb->nbr + (size_t)i * cap + q, jl + q, 8 * sizeof *jl);
+			sph_list_commit(&cf, cnt, &nb->first[i]);
 			nb->count[i] = cnt;
-			const uint32_t bcnt = filter_boundary(f, i, b);
-			mf = cnt > mf ? cnt : mf;
-			mb = bcnt > mb ? bcnt : mb;
+			filter_boundary(f, i, b, jl, &cb);
 		}
 		free(jl);
 		free(dv);
+#pragma omp critical(sph_filter_merge)
+		{
+			sph_cursor_merge(fluid, &cf);
+			sph_cursor_merge(bound, &cb);
+		}
 	}
-	*max_f = mf;
-	*max_b = mb;
 	return ok;
 }
 
@@ -159,10 +168,10 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, uint32_t *max
 void eddy__sph_neighbors_free(sph_neighbors *nb)
 {
 	free(nb->rows);
-	free(nb->nbr);
-	free(nb->bnbr);
-	free(nb->verlet.cand);
-	free(nb->verlet.bcand);
+	free(nb->nbr.data);
+	free(nb->bnbr.data);
+	free(nb->verlet.cand.data);
+	free(nb->verlet.bcand.data);
 	free(nb->grid.fluid_start);
 	free(nb->grid.bound_start);
 	sph_boundary_free(nb);
@@ -240,10 +249,30 @@ static bool cell_order(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threa
 	return false;
 }
 
+/* l with room for want entries at least; what it held is not kept (no
+ * copy: a fresh block's pages stay untouched until a list is written). */
+static bool lists_reserve(sph_lists *l, size_t want)
+{
+	if (want <= l->alloc)
+		return true;
+	free(l->data);
+	l->data = malloc(want * sizeof *l->data);
+	l->alloc = l->data ? want : 0;
+	return l->data != NULL;
+}
+
+/* The room a pass that wanted total entries (and found l too small) gets
+ * next: the total with room for the chunks' unused tails, at least twice
+ * what l had (so that a rerun cannot fail the same way forever). */
+static size_t lists_regrow(const sph_lists *l, uint64_t total, int threads)
+{
+	const uint64_t want = total + total / 8 + (uint64_t)(SPH_LIST_CURSORS * threads + 1) * SPH_LIST_CHUNK;
+	return (size_t)(want > 2 * (uint64_t)l->alloc ? want : 2 * (uint64_t)l->alloc);
+}
+
 /* The Verlet candidates (candidates) or the exact lists: the search, or the
- * filter of the candidates kept, until every particle's entries fit the
- * strides; a stride too narrow is widened with room to spare, so that this
- * stays rare, and the pass runs again. */
+ * filter of the candidates kept, rerun on larger arrays until every list
+ * fits. The arrays start at an estimate of per_row entries per particle. */
 static eddy_status fill_lists(eddy_world *w, sph_shared *sh, const float *p4, bool candidates, int threads)
 {
 	sph_neighbors *nb = &sh->nb;
@@ -252,25 +281,37 @@ static eddy_status fill_lists(eddy_world *w, sph_shared *sh, const float *p4, bo
 	/* 1e-4 over: the filter's exact test (r < h, another operation order)
 	 * must find every pair it would keep among the candidates */
 	const float hs = sh->h * (1.0f + v->skin + 1e-4f), r2max = candidates ? hs * hs : sh->k.h2;
-	size_t *stride = candidates ? &v->stride : &nb->cap, *bstride = candidates ? &v->bstride : &nb->bcap;
-	size_t *alloc = candidates ? &v->alloc : &nb->list_alloc, *balloc = candidates ? &v->balloc : &nb->blist_alloc;
-	uint32_t **list = candidates ? &v->cand : &nb->nbr, **blist = candidates ? &v->bcand : &nb->bnbr;
-	uint32_t *count = candidates ? v->count : nb->count, *bcount = candidates ? v->bcount : nb->bcount;
-	const filter_ctx f = {nb, p4, v->rows_moved ? v->row_of : NULL, sh->k.h2, (long)n};
+	sph_lists *list = candidates ? &v->cand : &nb->nbr, *blist = candidates ? &v->bcand : &nb->bnbr;
+	const sph_search_out out = {!candidates,
+	                            r2max,
+	                            list,
+	                            blist,
+	                            candidates ? v->first : nb->first,
+	                            candidates ? v->count : nb->count,
+	                            candidates ? v->bfirst : nb->bfirst,
+	                            candidates ? v->bcount : nb->bcount};
+	const filter_ctx f = {nb, p4, v->rows_moved ? v->row_of : NULL, sh->k.h2, (long)n, v->longest};
+	/* a first guess (a fluid at rest has about 30 neighbours, 50 candidates) */
+	size_t want = n * (candidates ? 64 : 40), bwant = n * 8 + SPH_LIST_CHUNK * (size_t)(SPH_LIST_CURSORS * threads + 1);
 	for (;;) {
-		if (!sph_grow((void **)list, alloc, n * *stride, 4) || !sph_grow((void **)blist, balloc, n * *bstride, 4))
-			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu x %zu)", n,
-			                  *stride + *bstride);
-		const sph_search_out out = {!candidates, r2max, *stride, *bstride, *list, count, *blist, bcount};
-		uint32_t mf, mb;
-		const bool ok = !candidates && v->skin > 0 ? SIMD_PICK(neighbors_filter)(&f, threads, &mf, &mb)
-		                                           : sph_search(w, nb, &out, threads, &mf, &mb);
+		if (want > UINT32_MAX || bwant > UINT32_MAX || !lists_reserve(list, want) || !lists_reserve(blist, bwant))
+			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for neighbour lists (%zu + %zu entries)",
+			                  want, bwant);
+		sph_cursor fc, bc;
+		const bool ok = !candidates && v->skin > 0 ? SIMD_PICK(neighbors_filter)(&f, threads, &fc, &bc)
+		                                           : sph_search(w, nb, &out, threads, &fc, &bc);
 		if (!ok)
 			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for the neighbour lists");
-		if (mf <= *stride && mb <= *bstride)
+		if (candidates) { /* fc.longest counts packed words */
+			uint32_t longest = bc.longest;
+			for (size_t i = 0; i < n; ++i)
+				longest = v->count[i] > longest ? v->count[i] : longest;
+			v->longest = longest;
+		}
+		if (!fc.full && !bc.full)
 			return EDDY_OK;
-		*stride = mf > *stride ? (mf + 7) / 8 * 8 + 8 : *stride;
-		*bstride = mb > *bstride ? (mb + 7) / 8 * 8 + 8 : *bstride;
+		want = fc.full ? lists_regrow(list, fc.total, threads) : want;
+		bwant = bc.full ? lists_regrow(blist, bc.total, threads) : bwant;
 	}
 }
 
@@ -329,12 +370,6 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		v->n = 0;
 		return EDDY_OK;
 	}
-	if (!v->stride) {
-		v->stride = 80;
-		v->bstride = 32;
-		nb->cap = 32;
-		nb->bcap = 16;
-	}
 	/* one arena block: the quads first (aligned as the arena), then key, order and scratch */
 	row_pass rp = {.verlet = v->n == n && v->boundary_sig == nb->bnd.sig};
 	rp.p4 = eddy__arena_alloc(&w->arena, 7 * n * sizeof *rp.p4);
@@ -345,9 +380,10 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	rp.scratch = rp.order + n;
 	/* every per-row array to n rows; what they held is not kept: a new count
 	 * forces a search, which needs none of it */
-	void **arrays[] = {(void **)&nb->cell_of, (void **)&nb->count, (void **)&nb->bcount, (void **)&nb->wsum,
-	                   (void **)&nb->bwsum,   (void **)&v->count,  (void **)&v->bcount,  (void **)&v->x,
-	                   (void **)&v->y,        (void **)&v->z,      (void **)&v->slot_of, (void **)&v->row_of};
+	void **arrays[] = {(void **)&nb->cell_of, (void **)&nb->first,  (void **)&nb->count, (void **)&nb->bfirst,
+	                   (void **)&nb->bcount,  (void **)&nb->wsum,   (void **)&nb->bwsum, (void **)&v->first,
+	                   (void **)&v->count,    (void **)&v->bfirst,  (void **)&v->bcount, (void **)&v->x,
+	                   (void **)&v->y,        (void **)&v->z,       (void **)&v->slot_of, (void **)&v->row_of};
 	if (!sph_grow_block(&nb->rows, &nb->rows_alloc, n, arrays, (int)(sizeof arrays / sizeof arrays[0])))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
 	v->age++;

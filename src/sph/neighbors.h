@@ -7,6 +7,8 @@
 
 #include "sph.h"
 
+#include <string.h>
+
 /* Verlet skin as a fraction of h: larger means rarer searches but more
  * candidates to filter every step ((1 + skin)^3 of the exact list's). It is
  * sized from the motion per step seen at the last search, so that a list
@@ -56,19 +58,136 @@ float sph_boundary_move(const eddy_world *w, sph_neighbors *nb);
 eddy_status sph_boundary_sort(eddy_world *w, sph_neighbors *nb);
 eddy_status sph_boundary_divergence(eddy_world *w, sph_shared *sh, int threads);
 
+/* ---- sph_lists (sph.h): room for one list at a time ---- */
+#define SPH_LIST_CHUNK 4096 /* entries a cursor takes from the array at a time */
+#define SPH_LIST_CURSORS 4   /* the most cursors a thread uses on one array (search.c's SEARCH_ROWS) */
+
+/* One thread's part of a pass over a sph_lists. */
+typedef struct sph_cursor {
+	size_t at, end; /* the thread's chunk of the array: [at, end) */
+	uint64_t total;   /* entries of the lists it asked room for */
+	uint32_t longest; /* the longest of them */
+	bool full;      /* the array ran out: the pass must run again on a larger one */
+} sph_cursor;
+
+/* Room for up to most entries at the cursor, or NULL once the array is
+ * full; the list written there is then ended by sph_list_commit. A chunk
+ * is taken whole, so two threads never share one; the tail of a chunk too
+ * short for a list is left unused. */
+static inline uint32_t *sph_list_claim(sph_lists *l, sph_cursor *c, uint32_t most)
+{
+	if (c->end - c->at < most) {
+		if (c->full)
+			return NULL;
+		const size_t take = most > SPH_LIST_CHUNK ? most : SPH_LIST_CHUNK;
+		size_t at;
+#pragma omp atomic capture
+		{
+			at = l->used;
+			l->used += take;
+		}
+		if (at + take > l->alloc) {
+			c->full = true;
+			c->at = c->end = 0;
+			return NULL;
+		}
+		c->at = at;
+		c->end = at + take;
+	}
+	return c->full ? NULL : l->data + c->at;
+}
+
+/* The list of cnt entries written at the claimed room: its start in the
+ * array (*first; 0 once the array is full, when it was not written). */
+static inline void sph_list_commit(sph_cursor *c, uint32_t cnt, uint32_t *first)
+{
+	c->total += cnt;
+	c->longest = cnt > c->longest ? cnt : c->longest;
+	*first = c->full ? 0 : (uint32_t)c->at;
+	c->at += c->full ? 0 : cnt;
+}
+
+/* Room for a list of cnt entries, committed: the pointer to write it to,
+ * NULL once the array is full. */
+static inline uint32_t *sph_list_room(sph_lists *l, sph_cursor *c, uint32_t cnt, uint32_t *first)
+{
+	uint32_t *p = sph_list_claim(l, c, cnt);
+	sph_list_commit(c, cnt, first);
+	return p;
+}
+
+/* The cursors of a pass's threads, merged: total summed, longest the
+ * largest, full or-ed. */
+static inline void sph_cursor_merge(sph_cursor *into, const sph_cursor *c)
+{
+	into->total += c->total;
+	into->longest = c->longest > into->longest ? c->longest : into->longest;
+	into->full = into->full || c->full;
+}
+
+/* ---- the Verlet candidates' packed groups (search.c writes, neighbors.c reads) ---- */
+/* A slot's fluid candidates (ascending) in groups of eight, the last padded
+ * with copies of the last candidate; each group one word, its first
+ * candidate b, then either the eight as 16-bit offsets from b (four words:
+ * the span of a group is seldom more than a layer of cells' rows) or, when
+ * they do not fit, the word b | SPH_WIDE and the eight whole (eight words). */
+#define SPH_WIDE 0x80000000u
+#define SPH_GROUP_WORDS_MAX 9
+
+/* Packs cnt ascending candidates to out (room for SPH_GROUP_WORDS_MAX a
+ * group); returns the words written. */
+static inline uint32_t sph_pack_groups(const uint32_t *c, uint32_t cnt, uint32_t *out)
+{
+	uint32_t *w = out;
+	for (uint32_t q = 0; q < cnt; q += 8) {
+		uint32_t g[8];
+		for (uint32_t k = 0; k < 8; ++k)
+			g[k] = c[q + k < cnt ? q + k : cnt - 1];
+		if (g[7] - g[0] <= 0xFFFFu && g[0] < SPH_WIDE) {
+			uint16_t o[8];
+			for (uint32_t k = 0; k < 8; ++k)
+				o[k] = (uint16_t)(g[k] - g[0]);
+			*w++ = g[0];
+			memcpy(w, o, sizeof o);
+			w += 4;
+		} else {
+			*w++ = g[0] | SPH_WIDE;
+			memcpy(w, g, sizeof g);
+			w += 8;
+		}
+	}
+	return (uint32_t)(w - out);
+}
+
+/* The group at *w into g[0..8); returns the next group. */
+static inline const uint32_t *sph_unpack_group(const uint32_t *w, uint32_t g[8])
+{
+	const uint32_t b = *w++;
+	if (b & SPH_WIDE) {
+		memcpy(g, w, 8 * sizeof *g);
+		return w + 8;
+	}
+	uint16_t o[8];
+	memcpy(o, w, sizeof o);
+	for (uint32_t k = 0; k < 8; ++k)
+		g[k] = b + o[k];
+	return w + 4;
+}
+
 /* ---- search.c ---- */
-/* The lists a search writes: the Verlet candidates (r2max = (h (1 + skin))^2)
- * or, with exact, the exact lists and kernel sums (r2max = h^2). */
+/* The lists a search writes: the Verlet candidates (r2max = (h (1 + skin))^2;
+ * the fluid ones in packed groups, above) or, with exact, the exact lists
+ * and kernel sums (r2max = h^2). */
 typedef struct sph_search_out {
 	bool exact;
 	float r2max;
-	size_t stride, bstride;
-	uint32_t *list, *count, *blist, *bcount;
+	sph_lists *list, *blist;
+	uint32_t *first, *count, *bfirst, *bcount;
 } sph_search_out;
-/* Returns false when out of memory; *max_f, *max_b: the largest counts
- * seen (above the strides: widen and search again). */
-bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int threads, uint32_t *max_f,
-                uint32_t *max_b);
+/* Returns false when out of memory; *fluid, *bound: the passes' cursors
+ * merged (full: run again on larger lists). */
+bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int threads, sph_cursor *fluid,
+                sph_cursor *bound);
 
 /* ---- the kernel sums (search.c in exact mode, neighbors.c's filter) ---- */
 /* sum_k d_k^3 in one fixed order: four partial sums over the whole quads,

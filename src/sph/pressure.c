@@ -79,7 +79,7 @@ void SIMD_NAME(pressure_pair_sums)(const pressure_args *a, long i0, long cnt, fl
 	const sph_neighbors *nb = a->nb;
 	for (long b = 0; b < cnt; ++b) {
 		const long i = i0 + b;
-		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
+		const uint32_t *list = sph_nbrs(nb, i), c = nb->count[i];
 		const float *pi = a->pq + 4 * i;
 		const sf8 xi = sf8_set1(pi[0]), yi = sf8_set1(pi[1]), zi = sf8_set1(pi[2]), p_i = sf8_set1(a->p[i]);
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
@@ -122,7 +122,7 @@ static void pressure_block(const void *arg, long i0, long cnt)
 		const float xi = a.pq[4 * i], yi = a.pq[4 * i + 1], zi = a.pq[4 * i + 2];
 		const float pi_ = a.p[i];
 		float fx = sph_sum4(tb), fy = sph_sum4(tb + 4), fz = sph_sum4(tb + 8);
-		const uint32_t *list = nb->nbr + (size_t)i * nb->cap;
+		const uint32_t *list = sph_nbrs(nb, i);
 		for (uint32_t q = done[b], cnt_i = nb->count[i]; q < cnt_i; ++q) {
 			const uint32_t j = list[q];
 			float rx = xi - a.pq[4 * (size_t)j], ry = yi - a.pq[4 * (size_t)j + 1], rz = zi - a.pq[4 * (size_t)j + 2];
@@ -148,7 +148,7 @@ static void pressure_block(const void *arg, long i0, long cnt)
 			fy += c * ry;
 			fz += c * rz;
 		}
-		const uint32_t *blist = nb->bnbr + (size_t)i * nb->bcap;
+		const uint32_t *blist = sph_bnbrs(nb, i);
 		float bx = 0, by = 0, bz = 0;
 		for (uint32_t qb = 0; qb < nb->bcount[i]; ++qb) {
 			const uint32_t bj = blist[qb];

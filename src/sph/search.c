@@ -44,12 +44,19 @@ typedef struct search_ctx {
 } search_ctx;
 
 /* One thread's buffers: a block's gathered candidates (padded by eight
- * FAR points, so groups of eight need no tail) and one particle's hits. */
+ * FAR points, so groups of eight need no tail) and one particle's hits;
+ * and its cursors in the lists it writes, one per row of cells of a block
+ * (y, z; x fastest): the rows of one row of cells are consecutive in the
+ * table, and so, written through one cursor, are their lists across the
+ * blocks along x, the order in which the filter and the passes read them. */
+#define SEARCH_ROWS (SEARCH_BY * SEARCH_BZ)
+_Static_assert(SEARCH_ROWS <= SPH_LIST_CURSORS, "sph_list's room for the chunks' tails counts on it");
 typedef struct search_buf {
 	void *block; /* holds the six arrays */
 	size_t cap;
 	float *x, *y, *z, *d;
 	uint32_t *j, *hit;
+	sph_cursor out[SEARCH_ROWS];
 } search_buf;
 
 /* One row of cells along x around a block. */
@@ -58,6 +65,7 @@ typedef struct cell_run {
 	uint32_t bound_begin, bound_end; /* positions in the boundary cell order */
 	uint32_t own_begin, own_end;     /* the rows of the block's own particles in it (none: equal) */
 	uint32_t layer;                  /* the row's z layer, 0 = the lowest searched */
+	uint32_t own_row;                /* with own rows: which of the block's rows of cells, y + SEARCH_BY z */
 	uint32_t fluid_at;               /* the buffer offset of its rows */
 } cell_run;
 
@@ -114,6 +122,7 @@ static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br)
 			const bool own = ey == 0 && ez == 0;
 			r->own_begin = own ? g->fluid_start[row + (size_t)br->x0] : 0;
 			r->own_end = own ? g->fluid_start[row + (size_t)br->x1 + 1] : 0;
+			r->own_row = own ? (uint32_t)((yy - br->y0) + SEARCH_BY * (zz - br->z0)) : 0;
 			r->layer = layer;
 			r->fluid_at = br->nf;
 			br->nf += r->fluid_end - r->fluid_begin;
@@ -187,7 +196,7 @@ __attribute__((noinline)) static uint32_t hits(const search_buf *b, uint32_t q0,
 
 /* Particle i of run r: its hits into its lists (and, exact, its sums). */
 static void search_particle(const search_ctx *c, const block_runs *br, int r, uint32_t i, search_buf *fb,
-                            search_buf *bb, uint32_t *mf, uint32_t *mb)
+                            search_buf *bb)
 {
 	const sph_search_out *o = c->out;
 	const cell_run *run = &br->run[r];
@@ -201,10 +210,18 @@ static void search_particle(const search_ctx *c, const block_runs *br, int r, ui
 	fb->x[self] = xi;
 	if (c->bound_order)
 		sph_sort_hits(bb->hit, bb->d, bcnt);
-	if (cnt <= o->stride)
-		memcpy(o->list + (size_t)i * o->stride, fb->hit, cnt * sizeof *fb->hit);
-	if (bcnt <= o->bstride)
-		memcpy(o->blist + (size_t)i * o->bstride, bb->hit, bcnt * sizeof *bb->hit);
+	sph_cursor *cur = &fb->out[run->own_row];
+	if (o->exact) {
+		uint32_t *list = sph_list_room(o->list, cur, cnt, &o->first[i]);
+		if (list)
+			memcpy(list, fb->hit, cnt * sizeof *fb->hit);
+	} else {
+		uint32_t *list = sph_list_claim(o->list, cur, (cnt + 7) / 8 * SPH_GROUP_WORDS_MAX);
+		sph_list_commit(cur, list ? sph_pack_groups(fb->hit, cnt, list) : (cnt + 7) / 8 * SPH_GROUP_WORDS_MAX, &o->first[i]);
+	}
+	uint32_t *blist = sph_list_room(o->blist, &bb->out[run->own_row], bcnt, &o->bfirst[i]);
+	if (blist)
+		memcpy(blist, bb->hit, bcnt * sizeof *bb->hit);
 	o->count[i] = cnt;
 	o->bcount[i] = bcnt;
 	if (o->exact) {
@@ -214,17 +231,13 @@ static void search_particle(const search_ctx *c, const block_runs *br, int r, ui
 			bws += c->nb->bvol[bb->hit[q]] * c->nb->bnd.rho[bb->hit[q]] * bb->d[q] * bb->d[q] * bb->d[q];
 		c->nb->bwsum[i] = bws;
 	}
-	*mf = cnt > *mf ? cnt : *mf;
-	*mb = bcnt > *mb ? bcnt : *mb;
 }
 
-SIMD_DECLARE(bool, search_block,
-             (const search_ctx *c, uint32_t id, search_buf *fb, search_buf *bb, uint32_t *mf, uint32_t *mb));
+SIMD_DECLARE(bool, search_block, (const search_ctx *c, uint32_t id, search_buf *fb, search_buf *bb));
 
 /* Block id: gather its candidates, search for each of its particles.
  * False when out of memory. */
-bool SIMD_NAME(search_block)(const search_ctx *c, uint32_t id, search_buf *fb, search_buf *bb, uint32_t *mf,
-                             uint32_t *mb)
+bool SIMD_NAME(search_block)(const search_ctx *c, uint32_t id, search_buf *fb, search_buf *bb)
 {
 	block_runs br;
 	block_find_runs(c, id, &br);
@@ -233,7 +246,7 @@ bool SIMD_NAME(search_block)(const search_ctx *c, uint32_t id, search_buf *fb, s
 	block_gather(c, &br, fb, bb);
 	for (int r = 0; r < br.count; ++r)
 		for (uint32_t i = br.run[r].own_begin; i < br.run[r].own_end; ++i)
-			search_particle(c, &br, r, i, fb, bb, mf, mb);
+			search_particle(c, &br, r, i, fb, bb);
 	return true;
 }
 
@@ -245,8 +258,8 @@ static int cmp_u32(const void *a, const void *b)
 	return (x > y) - (x < y);
 }
 
-bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int threads, uint32_t *max_f,
-                uint32_t *max_b)
+bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int threads, sph_cursor *fluid,
+                sph_cursor *bound)
 {
 	search_ctx c = {
 		.nb = nb, .out = out, .bound_order = nb->bnd.order, .R = out->exact ? SPH_CELLS_PER_H : SPH_VERLET_CELLS};
@@ -284,21 +297,24 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
 	for (long k = 0; k < found; ++k)
 		if (k == 0 || ids[k] != ids[blocks - 1])
 			ids[blocks++] = ids[k];
-	bool (*const block)(const search_ctx *, uint32_t, search_buf *, search_buf *, uint32_t *, uint32_t *) =
-		SIMD_PICK(search_block);
-	uint32_t mf = 0, mb = 0;
+	bool (*const block)(const search_ctx *, uint32_t, search_buf *, search_buf *) = SIMD_PICK(search_block);
 	bool ok = true;
-#pragma omp parallel num_threads(threads) reduction(max : mf, mb) reduction(&& : ok)
+	out->list->used = out->blist->used = 0;
+	*fluid = *bound = (sph_cursor){0};
+#pragma omp parallel num_threads(threads) reduction(&& : ok)
 	{
 		search_buf fb = {0}, bb = {0};
 #pragma omp for schedule(dynamic, 8)
 		for (long k = 0; k < blocks; ++k)
-			ok = ok && block(&c, ids[k], &fb, &bb, &mf, &mb);
+			ok = ok && block(&c, ids[k], &fb, &bb);
 		free(fb.block);
 		free(bb.block);
+#pragma omp critical(sph_search_merge)
+		for (int k = 0; k < SEARCH_ROWS; ++k) {
+			sph_cursor_merge(fluid, &fb.out[k]);
+			sph_cursor_merge(bound, &bb.out[k]);
+		}
 	}
-	*max_f = mf;
-	*max_b = mb;
 	return ok;
 }
 

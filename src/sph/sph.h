@@ -33,11 +33,24 @@ typedef struct sph_kernel_consts {
 
 /* Neighbour lists, made by sph_density every step (neighbors.c): particle
  * i's fluid neighbours (itself excluded, r < h exactly, ascending index)
- * are nbr[i*cap .. i*cap + count[i]), its boundary neighbours (r < h,
- * ascending) bnbr[i*bcap .. i*bcap + bcount[i]), indexing the boundary
+ * are sph_nbrs(nb, i)[0 .. count[i]), its boundary neighbours (r < h,
+ * ascending) sph_bnbrs(nb, i)[0 .. bcount[i]), indexing the boundary
  * arrays. Valid for the step that made them (the particle table is then in
  * grid-cell order). The sub-structs are private to the search's files
  * (neighbors.h); the passes read only the lists and the boundary arrays. */
+
+/* Lists of varying length packed in one array (the exact lists, the Verlet
+ * candidates): list k is data[first[k] .. first[k] + its count), with first
+ * and the counts beside the owner's other per-row arrays. A pass hands out
+ * the array in chunks (sph_list_room in neighbors.h) from the front, so
+ * only what the lists hold (and a chunk's tail per chunk) is ever written:
+ * the pages of data beyond that stay untouched, not resident. Where each
+ * list lands depends on the threads' timing; what it holds does not. */
+typedef struct sph_lists {
+	uint32_t *data;
+	size_t alloc; /* entries of data */
+	size_t used;  /* entries handed out by the last pass */
+} sph_lists;
 
 /* The cell grid (grid.c) */
 typedef struct sph_grid {
@@ -54,10 +67,10 @@ typedef struct sph_grid {
  * exact lists are made, never what they hold. */
 typedef struct sph_verlet {
 	size_t n;                   /* particles at the last search; 0: none since the table was empty */
-	size_t stride, bstride;     /* candidates per build slot: fluid, boundary */
-	size_t alloc, balloc;       /* of cand, bcand */
-	uint32_t *cand, *bcand;     /* slot s's candidates: cand[s*stride ..), bcand[s*bstride ..) ascending */
+	sph_lists cand, bcand;      /* slot s's candidates, ascending: fluid (build slots) and boundary */
+	uint32_t *first, *bfirst;   /* per slot: where its lists start in cand, bcand */
 	uint32_t *count, *bcount;   /* per slot */
+	uint32_t longest;           /* the most candidates of any slot, fluid or boundary */
 	float *x, *y, *z;           /* m, each slot's position at the search */
 	uint32_t *slot_of, *row_of; /* build slot of each row, row of each build slot */
 	uint64_t boundary_sig;      /* the boundary systems at the search */
@@ -102,9 +115,11 @@ typedef struct sph_boundary {
 } sph_boundary;
 
 typedef struct sph_neighbors {
-	/* the exact lists */
-	size_t n, cap, bcap;
-	uint32_t *nbr, *count, *bnbr, *bcount;
+	/* the exact lists (read them with sph_nbrs and sph_bnbrs) */
+	size_t n;
+	sph_lists nbr, bnbr;
+	uint32_t *first, *bfirst; /* per row: where its lists start in nbr, bnbr */
+	uint32_t *count, *bcount; /* per row: their lengths */
 	/* sum_j (h^2 - r^2)^3 over the fluid neighbours and sum_b V_b rho_b
 	 * (h^2 - r^2)^3 over the boundary ones, made with the lists */
 	float *wsum, *bwsum;
@@ -117,9 +132,9 @@ typedef struct sph_neighbors {
 	 * from v_i . B_i); NULL while every wall is at rest */
 	float *bdiv;
 
-	/* private: the per-row arrays' block, its size in rows, the lists' sizes */
+	/* private: the per-row arrays' block, its size in rows */
 	void *rows;
-	size_t rows_alloc, list_alloc, blist_alloc;
+	size_t rows_alloc;
 	uint32_t *cell_of; /* the cell of each row */
 	sph_grid grid;
 	sph_verlet verlet;
@@ -172,6 +187,10 @@ bool eddy__sph_boundary_box_covers(const eddy_system *s, eddy_vec3 min, eddy_vec
  * sph_points), called through collider_shape.c. */
 size_t eddy__sph_collider_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
                                  float *z, float *vol, eddy_vec3 *normal);
+
+/* Row i's fluid and boundary neighbours (count[i], bcount[i] of them). */
+static inline const uint32_t *sph_nbrs(const sph_neighbors *nb, long i) { return nb->nbr.data + nb->first[i]; }
+static inline const uint32_t *sph_bnbrs(const sph_neighbors *nb, long i) { return nb->bnbr.data + nb->bfirst[i]; }
 
 /* The rows the lists cover: a system after sph_density may have added
  * particles (they have no lists this step) or removed some. */

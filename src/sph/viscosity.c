@@ -83,7 +83,7 @@ void SIMD_NAME(visc_pair_sums)(const visc_args *a, long i0, long cnt, float *t)
 	const sph_neighbors *nb = a->nb;
 	for (long b = 0; b < cnt; ++b) {
 		const long i = i0 + b;
-		const uint32_t *list = nb->nbr + (size_t)i * nb->cap, c = nb->count[i];
+		const uint32_t *list = sph_nbrs(nb, i), c = nb->count[i];
 		/* (x_i y_i z_i 0) and (v_i rho_i) from i's quads, in registers (a
 		 * quad written to memory as floats and loaded back whole would
 		 * stall on store forwarding) */
