@@ -9,7 +9,8 @@
  *    resident memory per particle (libraries' baseline included); also the
  *    process CPU time per particle per step, the steadier figure for 1-thread
  *    runs on a loaded host (for 2 threads it counts both, and OpenMP's
- *    spinning);
+ *    spinning); and the setup's two steps (emission, the first kick): their
+ *    seconds, per system, and the pressure solve's iterations;
  *  - FLIP's pressure solve on the wavy pool of tests/grid_fixture.h at 64^3,
  *    128^3 and 256^3 cells: iterations and seconds per solve for PCG,
  *    HYPRE and MG on 1 and 2 threads.
@@ -156,6 +157,7 @@ static int child_block(const char *method, long n, int threads, int steps, const
 		return 1;
 	}
 	const double t0 = now_ms();
+	double setup_iters = 0;
 	for (int s = 0; s < 2; ++s) {
 		if (getenv("EDDY_SCALE_COLUMNS")) /* where the peak is reached: emission, first step or later */
 			fprintf(stderr, "peak RSS before step %d: %.1f MB\n", s, (double)maxrss_kb() / 1e3);
@@ -163,6 +165,10 @@ static int child_block(const char *method, long n, int threads, int steps, const
 			fprintf(stderr, "bench_scale: %s %ld: %s\n", method, n, eddy_world_error(w));
 			return 1;
 		}
+		eddy_frame_stats st;
+		eddy_world_frame_stats(w, &st);
+		const double it = extra_stat(&st, "iterations");
+		setup_iters += isnan(it) ? 0 : it;
 	}
 	const double setup_s = (now_ms() - t0) / 1e3;
 	const size_t np = eddy_world_particle_count(w);
@@ -200,6 +206,14 @@ static int child_block(const char *method, long n, int threads, int steps, const
 		eddy_system_info info;
 		eddy_world_system_info(w, eddy_world_system_at(w, k), &info);
 		printf("%s\"%s\":%.2f", k ? "," : "", info.name, (info.profile_ms - before[k]) * 1e6 / ((double)np * steps));
+	}
+	/* where the setup's time went: each system's seconds over the two
+	 * steps, and the pressure solve's iterations in them */
+	printf("},\"setup_iterations\":%.2f,\"setup_systems_s\":{", setup_iters);
+	for (int k = 0; k < ns; ++k) {
+		eddy_system_info info;
+		eddy_world_system_info(w, eddy_world_system_at(w, k), &info);
+		printf("%s\"%s\":%.3f", k ? "," : "", info.name, before[k] / 1e3);
 	}
 	printf("}}\n");
 	if (getenv("EDDY_SCALE_COLUMNS")) /* where the memory is: the columns, largest first as listed */
