@@ -10,7 +10,7 @@
  *    process CPU time per particle per step, the steadier figure for 1-thread
  *    runs on a loaded host (for 2 threads it counts both, and OpenMP's
  *    spinning); and the setup's two steps (emission, the first kick): their
- *    seconds, per system, and the pressure solve's iterations;
+ *    seconds, per system, and the pressure solves' iterations;
  *  - FLIP's pressure solve on the wavy pool of tests/grid_fixture.h at 64^3,
  *    128^3 and 256^3 cells: iterations and seconds per solve for PCG,
  *    HYPRE and MG on 1 and 2 threads.
@@ -157,7 +157,7 @@ static int child_block(const char *method, long n, int threads, int steps, const
 		return 1;
 	}
 	const double t0 = now_ms();
-	double setup_iters = 0;
+	double setup_iters = 0, setup_div = 0;
 	for (int s = 0; s < 2; ++s) {
 		if (getenv("EDDY_SCALE_COLUMNS")) /* where the peak is reached: emission, first step or later */
 			fprintf(stderr, "peak RSS before step %d: %.1f MB\n", s, (double)maxrss_kb() / 1e3);
@@ -169,6 +169,8 @@ static int child_block(const char *method, long n, int threads, int steps, const
 		eddy_world_frame_stats(w, &st);
 		const double it = extra_stat(&st, "iterations");
 		setup_iters += isnan(it) ? 0 : it;
+		const double dit = extra_stat(&st, "divergence_iterations");
+		setup_div += isnan(dit) ? 0 : dit;
 	}
 	const double setup_s = (now_ms() - t0) / 1e3;
 	const size_t np = eddy_world_particle_count(w);
@@ -209,7 +211,8 @@ static int child_block(const char *method, long n, int threads, int steps, const
 	}
 	/* where the setup's time went: each system's seconds over the two
 	 * steps, and the pressure solve's iterations in them */
-	printf("},\"setup_iterations\":%.2f,\"setup_systems_s\":{", setup_iters);
+	printf("},\"setup_iterations\":%.2f,\"setup_divergence_iterations\":%.2f,\"setup_systems_s\":{", setup_iters,
+	       setup_div);
 	for (int k = 0; k < ns; ++k) {
 		eddy_system_info info;
 		eddy_world_system_info(w, eddy_world_system_at(w, k), &info);
