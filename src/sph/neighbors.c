@@ -138,7 +138,8 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, sph_cursor *f
 			 * whole groups), to scratch once the array is full */
 			uint32_t *list = sph_list_claim(&nb->nbr, &cf, vc + 8);
 			list = list ? list : jl;
-			const uint32_t cnt = filter_fluid(f, nb->verlet.cand.data + nb->verlet.first[b], vc, f->p4 + 4 * i, list, dv);
+			const uint32_t cnt =
+				filter_fluid(f, nb->verlet.cand.data + nb->verlet.first[b], vc, f->p4 + 4 * i, list, dv);
 			/* after a permutation since the search (else the candidates are
 			 * in ascending rows, and so are their hits), sorted by row: they
 			 * are unless a particle changed cell, and then nearly */
@@ -154,7 +155,7 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, sph_cursor *f
 		}
 		free(jl);
 		free(dv);
-#pragma omp critical(sph_filter_merge)
+#pragma omp critical
 		{
 			sph_cursor_merge(fluid, &cf);
 			sph_cursor_merge(bound, &cb);
@@ -380,10 +381,10 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	rp.scratch = rp.order + n;
 	/* every per-row array to n rows; what they held is not kept: a new count
 	 * forces a search, which needs none of it */
-	void **arrays[] = {(void **)&nb->cell_of, (void **)&nb->first,  (void **)&nb->count, (void **)&nb->bfirst,
-	                   (void **)&nb->bcount,  (void **)&nb->wsum,   (void **)&nb->bwsum, (void **)&v->first,
-	                   (void **)&v->count,    (void **)&v->bfirst,  (void **)&v->bcount, (void **)&v->x,
-	                   (void **)&v->y,        (void **)&v->z,       (void **)&v->slot_of, (void **)&v->row_of};
+	void **arrays[] = {(void **)&nb->cell_of, (void **)&nb->first, (void **)&nb->count,  (void **)&nb->bfirst,
+	                   (void **)&nb->bcount,  (void **)&nb->wsum,  (void **)&nb->bwsum,  (void **)&v->first,
+	                   (void **)&v->count,    (void **)&v->bfirst, (void **)&v->bcount,  (void **)&v->x,
+	                   (void **)&v->y,        (void **)&v->z,      (void **)&v->slot_of, (void **)&v->row_of};
 	if (!sph_grow_block(&nb->rows, &nb->rows_alloc, n, arrays, (int)(sizeof arrays / sizeof arrays[0])))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
 	v->age++;

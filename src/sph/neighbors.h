@@ -60,14 +60,14 @@ eddy_status sph_boundary_divergence(eddy_world *w, sph_shared *sh, int threads);
 
 /* ---- sph_lists (sph.h): room for one list at a time ---- */
 #define SPH_LIST_CHUNK 4096 /* entries a cursor takes from the array at a time */
-#define SPH_LIST_CURSORS 4   /* the most cursors a thread uses on one array (search.c's SEARCH_ROWS) */
+#define SPH_LIST_CURSORS 4  /* the most cursors a thread uses on one array (search.c's SEARCH_ROWS) */
 
 /* One thread's part of a pass over a sph_lists. */
 typedef struct sph_cursor {
-	size_t at, end; /* the thread's chunk of the array: [at, end) */
+	size_t at, end;   /* the thread's chunk of the array: [at, end) */
 	uint64_t total;   /* entries of the lists it asked room for */
 	uint32_t longest; /* the longest of them */
-	bool full;      /* the array ran out: the pass must run again on a larger one */
+	bool full;        /* the array ran out: the pass must run again on a larger one */
 } sph_cursor;
 
 /* Room for up to most entries at the cursor, or NULL once the array is

@@ -13,6 +13,10 @@
  * its boundary hits are sorted by index when collider particles make the
  * cells' boundary order differ from the index order.
  *
+ * Each particle's lists go to the room its thread's cursor for its row of
+ * cells hands out (sph_lists, sph.h), the Verlet fluid candidates packed
+ * (neighbors.h).
+ *
  * The same tests, in the same operation order, as neighbors.c's filter, and
  * the sums in sph_cube_sum's order: an exact-mode search gives the same bits
  * as a Verlet search followed by the filter. */
@@ -217,7 +221,8 @@ static void search_particle(const search_ctx *c, const block_runs *br, int r, ui
 			memcpy(list, fb->hit, cnt * sizeof *fb->hit);
 	} else {
 		uint32_t *list = sph_list_claim(o->list, cur, (cnt + 7) / 8 * SPH_GROUP_WORDS_MAX);
-		sph_list_commit(cur, list ? sph_pack_groups(fb->hit, cnt, list) : (cnt + 7) / 8 * SPH_GROUP_WORDS_MAX, &o->first[i]);
+		sph_list_commit(cur, list ? sph_pack_groups(fb->hit, cnt, list) : (cnt + 7) / 8 * SPH_GROUP_WORDS_MAX,
+		                &o->first[i]);
 	}
 	uint32_t *blist = sph_list_room(o->blist, &bb->out[run->own_row], bcnt, &o->bfirst[i]);
 	if (blist)
@@ -309,7 +314,7 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
 			ok = ok && block(&c, ids[k], &fb, &bb);
 		free(fb.block);
 		free(bb.block);
-#pragma omp critical(sph_search_merge)
+#pragma omp critical
 		for (int k = 0; k < SEARCH_ROWS; ++k) {
 			sph_cursor_merge(fluid, &fb.out[k]);
 			sph_cursor_merge(bound, &bb.out[k]);

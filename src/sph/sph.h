@@ -40,8 +40,9 @@ typedef struct sph_kernel_consts {
  * (neighbors.h); the passes read only the lists and the boundary arrays. */
 
 /* Lists of varying length packed in one array (the exact lists, the Verlet
- * candidates): list k is data[first[k] .. first[k] + its count), with first
- * and the counts beside the owner's other per-row arrays. A pass hands out
+ * candidates): list k starts at data[first[k]] and holds its count of
+ * entries (the Verlet fluid candidates packed in 16-bit groups: neighbors.h),
+ * with first and the counts beside the owner's other per-row arrays. A pass hands out
  * the array in chunks (sph_list_room in neighbors.h) from the front, so
  * only what the lists hold (and a chunk's tail per chunk) is ever written:
  * the pages of data beyond that stay untouched, not resident. Where each
