@@ -27,6 +27,8 @@
 -- peak: the run's fit so far). The peak of each half cycle between two zero
 -- crossings is refined by a parabola through its three samples; the first
 -- half cycle (from the start) is not used, since it starts at its peak.
+-- A crossing counts only once the half cycle has swung out to a third of
+-- the one before (below).
 --
 --   build/eddy run scenes/stress/slosh.lua --set method=apic --stats - --quiet
 --   build/eddy run scenes/stress/slosh.lua --set method=wcsph --set spacing=0.005
@@ -90,6 +92,9 @@ local prev_t, prev_eta           -- last frame
 local crossings = {}             -- s, zero crossings of eta
 local seg = nil                  -- samples of the current half cycle: { {t, eta}, ... }
 local peaks = {}                 -- |eta| at the peaks of complete half cycles
+local half_sign                  -- sign of eta in the current half cycle
+local half_max = 0               -- m, the largest |eta| in it so far
+local last_max                   -- m, the same of the half cycle before it
 
 -- the peak of a half cycle: its largest |eta| sample, refined by the
 -- parabola through it and its neighbours (samples are one frame apart)
@@ -123,7 +128,14 @@ world:on_frame(function(w)
 	local eta = 2 * a * bw / L
 	local t = w:time()
 	local out = { eta = eta, eta_wall = top[1] + s / 2 - d, omega_ref = omega_ref }
-	if prev_eta and ((prev_eta > 0 and eta <= 0) or (prev_eta < 0 and eta >= 0)) and eta ~= prev_eta then
+	-- a zero crossing ends the current half cycle only from its own sign and
+	-- once it has swung out to a third of the half cycle before it: a
+	-- strongly damped or coarse wave (WCSPH at 10 mm) jitters about zero by
+	-- a fraction of a layer, which would otherwise count as several crossings
+	half_sign = half_sign or (eta >= 0 and 1 or -1)
+	local swung = not last_max or half_max >= last_max / 3
+	if prev_eta and swung and prev_eta * half_sign > 0 and eta * half_sign <= 0 and eta ~= prev_eta then
+		last_max, half_max, half_sign = half_max, 0, -half_sign
 		crossings[#crossings + 1] = prev_t + (t - prev_t) * prev_eta / (prev_eta - eta)
 		if seg then -- a complete half cycle ended
 			peaks[#peaks + 1] = seg_peak(seg)
@@ -135,6 +147,7 @@ world:on_frame(function(w)
 		seg = {}
 	end
 	if seg then seg[#seg + 1] = { t, eta } end
+	half_max = math.max(half_max, math.abs(eta))
 	-- the period from the second crossing on once there are three: the
 	-- first quarter cycle starts from a staircase surface at rest and
 	-- carries the higher modes' start-up, which shifts the first crossing

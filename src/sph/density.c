@@ -35,6 +35,8 @@
 typedef struct sph_density {
 	sph_shared sh;
 	eddy_sph_density_def def;
+	uint32_t *wall_slot; /* per wall, WALL_NONE between steps (walls_make) */
+	size_t wall_slots;
 } sph_density;
 
 static const int density_reads[] = {COL_X_, COL_Y_, COL_Z_, -1};
@@ -75,26 +77,30 @@ static float eos_density(const sph_density *sd, float p)
  * WALL_PASSES_MAX times or until no wall density changes by more than
  * WALL_TOL of the first pass's change; each pass shrinks the error by the
  * walls' share of a kernel sum (1/4 at a flat wall, 1/2 at a corner). With
- * sph_dfsph iterated walls pump energy in instead: it keeps the lag. */
+ * sph_dfsph iterated walls pump energy in instead: it keeps the lag.
+ * Only the walls with fluid near them (act) and the fluid rows with walls
+ * near them take part, through the pairs in the fluid's list order; every
+ * other wall is at p = 0 and its EOS density. A wall's sums run over its
+ * fluid rows in ascending order, whichever thread adds them. */
 #define WALL_PASSES_MAX 3
 #define WALL_TOL 1e-3f
+#define WALL_NONE UINT32_MAX
 
-/* The wall-fluid pairs, boundary-major: the fluid's boundary lists turned
- * around (most wall particles have no fluid near them, and a grid walk for
- * each would cost more than the fluid), rows ascending. */
+/* The wall-fluid pairs of one step, in the fluid's list order: row
+ * rows[r]'s are [fstart[r], fstart[r + 1]). */
 typedef struct walls {
-	eddy_vec3 g;
-	uint32_t *start; /* nbound + 1: wall b's fluid rows are fluid[start[b] .. start[b + 1]) */
-	uint32_t *fluid;
-	/* when iterating, else NULL (the first pass stores the pairs' weights): */
-	uint32_t *act, *rows; /* the walls with fluid near them, the fluid rows with walls near them */
 	long nact, nrows;
-	float *wgt, *grav; /* per pair: (h^2 - r^2)^3 and g . (x_b - x_f), boundary-major */
-	float *wf;         /* per pair: its weight again, in the fluid's list order */
-	uint32_t *fstart;  /* n: row i's pairs in that order start at fstart[i] */
-	uint32_t *fpos;    /* per boundary-major pair, its place in that order */
-	float *old;        /* per act entry: the wall density the fluid sums hold */
-	float *dv;         /* per wall: V_b times the change of its density */
+	uint32_t *act;    /* the walls with fluid near them, numbered in the order the rows first name them */
+	uint32_t *rows;   /* the fluid rows with walls near them, ascending */
+	uint32_t *fstart; /* nrows + 1 */
+	uint32_t *slot;   /* per pair: its wall's place in act */
+	float *wgt;       /* per pair: (h^2 - r^2)^3 */
+	float *grav;      /* per pair: g . (x_b - x_f) */
+	/* per act entry: */
+	float *sp;     /* sum of W (p_f + rho_f g . (x_b - x_f)) */
+	float *inv_sw; /* 1 / sum of W (0: none) */
+	float *old;    /* the wall density the fluid sums hold */
+	float *dv;     /* V_b times the change of that density */
 } walls;
 
 static void *scratch(eddy_world *w, size_t count, size_t size, bool *ok)
@@ -104,90 +110,154 @@ static void *scratch(eddy_world *w, size_t count, size_t size, bool *ok)
 	return p;
 }
 
-static bool walls_make(eddy_world *w, const sph_density *sd, bool iterate, walls *wl)
+/* The pairs, their walls numbered through sd->wall_slot (WALL_NONE for
+ * every wall between steps), so nothing here is proportional to the walls
+ * without fluid near them; the weights in parallel over the rows. */
+static bool walls_make(eddy_world *w, sph_density *sd, int threads, walls *wl)
 {
 	const sph_neighbors *nb = &sd->sh.nb;
 	const size_t n = w->n, nbound = nb->nbound;
 	bool ok = true;
-	*wl = (walls){.g = w->def.gravity};
-	wl->start = scratch(w, nbound + 1, sizeof *wl->start, &ok);
-	uint32_t *at = scratch(w, nbound, sizeof *at, &ok);
-	if (!ok)
-		return false;
-	memset(wl->start, 0, (nbound + 1) * sizeof *wl->start);
-	for (size_t i = 0; i < n; ++i)
-		for (uint32_t q = 0; q < nb->bcount[i]; ++q)
-			wl->start[sph_bnbrs(nb, i)[q] + 1]++;
-	for (size_t b = 0; b < nbound; ++b)
-		wl->start[b + 1] += wl->start[b];
-	const size_t pairs = wl->start[nbound];
-	wl->fluid = scratch(w, pairs, sizeof *wl->fluid, &ok);
-	if (iterate) {
-		wl->act = scratch(w, nbound, sizeof *wl->act, &ok);
-		wl->rows = scratch(w, n, sizeof *wl->rows, &ok);
-		wl->wgt = scratch(w, pairs, sizeof *wl->wgt, &ok);
-		wl->grav = scratch(w, pairs, sizeof *wl->grav, &ok);
-		wl->wf = scratch(w, pairs, sizeof *wl->wf, &ok);
-		wl->fpos = scratch(w, pairs, sizeof *wl->fpos, &ok);
-		wl->fstart = scratch(w, n, sizeof *wl->fstart, &ok);
-		wl->old = scratch(w, nbound, sizeof *wl->old, &ok);
-		wl->dv = scratch(w, nbound, sizeof *wl->dv, &ok);
+	*wl = (walls){0};
+	if (sd->wall_slots < nbound) {
+		uint32_t *s = realloc(sd->wall_slot, nbound * sizeof *s);
+		if (!s)
+			return false;
+		for (size_t b = sd->wall_slots; b < nbound; ++b)
+			s[b] = WALL_NONE;
+		sd->wall_slot = s;
+		sd->wall_slots = nbound;
 	}
+	size_t pairs = 0;
+	for (size_t i = 0; i < n; ++i)
+		pairs += nb->bcount[i];
+	wl->act = scratch(w, nbound, sizeof *wl->act, &ok);
+	wl->rows = scratch(w, n, sizeof *wl->rows, &ok);
+	wl->fstart = scratch(w, n + 1, sizeof *wl->fstart, &ok);
+	wl->slot = scratch(w, pairs, sizeof *wl->slot, &ok);
+	wl->wgt = scratch(w, pairs, sizeof *wl->wgt, &ok);
+	wl->grav = scratch(w, pairs, sizeof *wl->grav, &ok);
 	if (!ok)
 		return false;
-	memcpy(at, wl->start, nbound * sizeof *at);
-	uint32_t f = 0; /* the pair's place in the fluid's list order */
+	uint32_t *slot = sd->wall_slot, f = 0;
+	long nact = 0, nrows = 0;
 	for (size_t i = 0; i < n; ++i) {
 		const uint32_t *bl = sph_bnbrs(nb, i);
-		if (iterate && nb->bcount[i]) {
-			wl->fstart[wl->nrows] = f;
-			wl->rows[wl->nrows++] = (uint32_t)i;
+		if (nb->bcount[i]) {
+			wl->fstart[nrows] = f;
+			wl->rows[nrows++] = (uint32_t)i;
 		}
 		for (uint32_t q = 0; q < nb->bcount[i]; ++q, ++f) {
-			if (iterate)
-				wl->fpos[at[bl[q]]] = f;
-			wl->fluid[at[bl[q]]++] = (uint32_t)i;
+			if (slot[bl[q]] == WALL_NONE) {
+				slot[bl[q]] = (uint32_t)nact;
+				wl->act[nact++] = bl[q];
+			}
+			wl->slot[f] = slot[bl[q]];
 		}
 	}
-	for (size_t b = 0; iterate && b < nbound; ++b)
-		if (wl->start[b] < wl->start[b + 1]) {
-			wl->old[wl->nact] = nb->bnd.rho[b];
-			wl->act[wl->nact++] = (uint32_t)b;
+	wl->fstart[nrows] = f;
+	wl->nact = nact;
+	wl->nrows = nrows;
+	for (long a = 0; a < nact; ++a)
+		slot[wl->act[a]] = WALL_NONE;
+	wl->sp = scratch(w, (size_t)nact, sizeof *wl->sp, &ok);
+	wl->inv_sw = scratch(w, (size_t)nact, sizeof *wl->inv_sw, &ok);
+	wl->old = scratch(w, (size_t)nact, sizeof *wl->old, &ok);
+	wl->dv = scratch(w, (size_t)nact, sizeof *wl->dv, &ok);
+	if (!ok)
+		return false;
+	const eddy_vec3 g = w->def.gravity;
+	const float h2 = sd->sh.k.h2;
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (long r = 0; r < nrows; ++r) {
+		const uint32_t i = wl->rows[r], *bl = sph_bnbrs(nb, i);
+		const float *xi = sd->sh.pq + 4 * i; /* x_f y_f z_f */
+		for (uint32_t k = wl->fstart[r], q = 0; k < wl->fstart[r + 1]; ++k, ++q) {
+			const uint32_t b = bl[q];
+			const float rx = nb->bx[b] - xi[0], ry = nb->by[b] - xi[1], rz = nb->bz[b] - xi[2];
+			const float d = h2 - (rx * rx + ry * ry + rz * rz);
+			wl->wgt[k] = d * d * d;
+			wl->grav[k] = g.x * rx + g.y * ry + g.z * rz;
 		}
+	}
+	for (long a = 0; a < nact; ++a)
+		wl->old[a] = nb->bnd.rho[wl->act[a]];
 	return true;
 }
 
-/* Wall b's pressure from the fluid near it and its EOS density. The first
- * pass takes the pair weights from the positions (storing them when
- * iterating) and divides by their sum; the later ones read them and
- * multiply by the sum's inverse (both pinned by the state hashes). */
-static void wall_extrapolate(sph_density *sd, const walls *wl, const float *rho, const float *p, uint32_t b, bool first)
+/* The sums of walls [lo, hi) of act over the pairs in the fluid's order
+ * (all: every wall is in the range), with sum W into sw when given. */
+static inline void walls_sum_range(const walls *wl, const float *rho, const float *p, uint32_t lo, uint32_t hi,
+                                   bool all, float *restrict sw)
+{
+	const uint32_t *restrict slot = wl->slot;
+	const float *restrict wgt = wl->wgt, *restrict grav = wl->grav;
+	float *restrict sp = wl->sp;
+	for (uint32_t a = lo; a < hi; ++a) {
+		sp[a] = 0;
+		if (sw)
+			sw[a] = 0;
+	}
+	for (long r = 0; r < wl->nrows; ++r) {
+		const uint32_t i = wl->rows[r];
+		const float pi = p[i], ri = rho[i];
+		for (uint32_t k = wl->fstart[r], end = wl->fstart[r + 1]; k < end; ++k) {
+			const uint32_t a = slot[k];
+			if (!all && a - lo >= hi - lo)
+				continue;
+			sp[a] += wgt[k] * (pi + ri * grav[k]);
+			if (sw)
+				sw[a] += wgt[k];
+		}
+	}
+}
+
+/* The walls' sums from the fluid, sp (and on the first pass sum W, in
+ * inv_sw): each thread takes the walls of an equal share of act, so every
+ * wall's terms are added in ascending rows. */
+static void walls_sum(const walls *wl, const float *rho, const float *p, bool first, int threads)
+{
+	if (threads == 1) {
+		if (first)
+			walls_sum_range(wl, rho, p, 0, (uint32_t)wl->nact, true, wl->inv_sw);
+		else
+			walls_sum_range(wl, rho, p, 0, (uint32_t)wl->nact, true, NULL);
+		return;
+	}
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (int th = 0; th < threads; ++th)
+		walls_sum_range(wl, rho, p, (uint32_t)(wl->nact * th / threads), (uint32_t)(wl->nact * (th + 1) / threads),
+		                false, first ? wl->inv_sw : NULL);
+}
+
+/* Each wall's pressure from its sums,
+ *   p_b = max(0, sum_f (p_f + rho_f g . (x_b - x_f)) W_bf / sum_f W_bf),
+ * and its EOS density; the first pass divides by sum W and keeps its
+ * inverse, the later ones multiply by that. Returns the largest change of
+ * a wall density since the fluid's sums took it, and stores the changes
+ * times V_b in dv (the fluid's next correction). */
+static float walls_set(sph_density *sd, const walls *wl, bool first, int threads)
 {
 	sph_neighbors *nb = &sd->sh.nb;
-	float sw = 0, sp = 0;
-	for (uint32_t q = wl->start[b]; q < wl->start[b + 1]; ++q) {
-		const uint32_t j = wl->fluid[q];
-		float wgt, gr;
+	float change = 0;
+#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : change)
+	for (long a = 0; a < wl->nact; ++a) {
+		const uint32_t b = wl->act[a];
+		float s;
 		if (first) {
-			const float *xj = sd->sh.pq + 4 * j; /* x_f y_f z_f */
-			const float rx = nb->bx[b] - xj[0], ry = nb->by[b] - xj[1], rz = nb->bz[b] - xj[2];
-			const float d = sd->sh.k.h2 - (rx * rx + ry * ry + rz * rz);
-			wgt = d * d * d;
-			gr = wl->g.x * rx + wl->g.y * ry + wl->g.z * rz;
-			if (wl->wgt) {
-				wl->wgt[q] = wl->wf[wl->fpos[q]] = wgt;
-				wl->grav[q] = gr;
-			}
-		} else {
-			wgt = wl->wgt[q];
-			gr = wl->grav[q];
-		}
-		sw += wgt;
-		sp += wgt * (p[j] + rho[j] * gr);
+			const float sw = wl->inv_sw[a];
+			s = sw > 0 ? wl->sp[a] / sw : 0.0f;
+			wl->inv_sw[a] = sw > 0 ? 1.0f / sw : 0.0f;
+		} else
+			s = wl->sp[a] * wl->inv_sw[a];
+		const float pb = s > 0 ? s : 0.0f, r = eos_density(sd, pb), d = r - wl->old[a];
+		nb->bp[b] = pb;
+		nb->bnd.rho[b] = r;
+		wl->old[a] = r;
+		wl->dv[a] = nb->bvol[b] * d;
+		change = fabsf(d) > change ? fabsf(d) : change;
 	}
-	const float pb = sw > 0 ? fmaxf(first ? sp / sw : sp * (1.0f / sw), 0.0f) : 0.0f;
-	nb->bp[b] = pb;
-	nb->bnd.rho[b] = eos_density(sd, pb);
+	return change;
 }
 
 /* Row i's density r and what follows: 1/rho (also in its quad), the pressure. */
@@ -199,9 +269,10 @@ static inline void set_density(sph_density *sd, float *rho, float *p, long i, fl
 	p[i] = eos_pressure(sd, r);
 }
 
-/* The walls' pressure and density: every wall extrapolated once; when
- * iterating, each later pass moves the fluid near the walls to the walls'
- * new densities and extrapolates those walls (act) again. */
+/* The walls' pressure and density: those with fluid near them extrapolated
+ * from it, the rest at p = 0; when iterating, each later pass moves the
+ * fluid near the walls to the walls' new densities and extrapolates those
+ * walls again. */
 static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads)
 {
 	sph_neighbors *nb = &sd->sh.nb;
@@ -210,40 +281,32 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 		return EDDY_OK;
 	const bool iterate = eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL;
 	walls wl;
-	if (!walls_make(w, sd, iterate, &wl))
+	if (!walls_make(w, sd, threads, &wl))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %ld boundary particles", nbound);
 	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
-#pragma omp parallel for num_threads(threads) schedule(static)
-	for (long b = 0; b < nbound; ++b)
-		wall_extrapolate(sd, &wl, rho, p, (uint32_t)b, true);
-	float first = 0; /* the largest change of pass 1: the lag */
+	const float rho_free = eos_density(sd, 0); /* a wall with no fluid near it */
+	for (long b = 0; b < nbound; ++b) {
+		nb->bp[b] = 0;
+		nb->bnd.rho[b] = rho_free;
+	}
+	walls_sum(&wl, rho, p, true, threads);
+	float change = walls_set(sd, &wl, true, threads);
+	const float first = change; /* the lag */
 	for (int pass = 1; iterate && pass <= WALL_PASSES_MAX; ++pass) {
-		float change = 0;
-#pragma omp parallel for num_threads(threads) schedule(static) reduction(max : change)
-		for (long a = 0; a < wl.nact; ++a) {
-			const uint32_t b = wl.act[a];
-			const float d = nb->bnd.rho[b] - wl.old[a];
-			wl.old[a] = nb->bnd.rho[b];
-			wl.dv[b] = nb->bvol[b] * d;
-			change = fabsf(d) > change ? fabsf(d) : change;
-		}
-		if (pass == 1)
-			first = change;
-		else if (!(change > WALL_TOL * first))
+		if (pass > 1 && !(change > WALL_TOL * first))
 			break;
 #pragma omp parallel for num_threads(threads) schedule(static)
 		for (long r = 0; r < wl.nrows; ++r) {
-			const uint32_t i = wl.rows[r], *bl = sph_bnbrs(nb, i);
-			const float *wi = wl.wf + wl.fstart[r];
 			float dr = 0;
-			for (uint32_t q = 0; q < nb->bcount[i]; ++q)
-				dr += wl.dv[bl[q]] * wi[q];
-			if (dr != 0)
+			for (uint32_t k = wl.fstart[r]; k < wl.fstart[r + 1]; ++k)
+				dr += wl.dv[wl.slot[k]] * wl.wgt[k];
+			if (dr != 0) {
+				const uint32_t i = wl.rows[r];
 				set_density(sd, rho, p, i, rho[i] + sd->sh.k.poly6 * dr);
+			}
 		}
-#pragma omp parallel for num_threads(threads) schedule(static)
-		for (long a = 0; a < wl.nact; ++a)
-			wall_extrapolate(sd, &wl, rho, p, wl.act[a], false);
+		walls_sum(&wl, rho, p, false, threads);
+		change = walls_set(sd, &wl, false, threads);
 	}
 	return EDDY_OK;
 }
@@ -275,8 +338,10 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 static void destroy(eddy_system *s)
 {
 	sph_density *sd = s->data;
-	if (sd)
+	if (sd) {
 		eddy__sph_neighbors_free(&sd->sh.nb);
+		free(sd->wall_slot);
+	}
 }
 
 /* Checkpointed state: the boundary particles' pressure and density, which the
