@@ -679,8 +679,8 @@ typedef struct eddy_sph_dfsph_def {
 	bool coarse_grid;              /* with divergence_solver, in water deeper than 5 kernel
 	                                  radii: precondition the conjugate gradients with a
 	                                  multigrid cycle on a grid of h-sized cells too, for
-	                                  iteration counts nearly flat in depth (default;
-	                                  off: Jacobi alone; same tolerances either way) */
+	                                  fewer iterations (off by default: Jacobi alone;
+	                                  same tolerances either way) */
 } eddy_sph_dfsph_def;
 EDDY_API eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void);
 EDDY_API eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def);

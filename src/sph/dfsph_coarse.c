@@ -1,7 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /* The coarse level of sph_dfsph's conjugate gradients: a two-level additive
- * preconditioner that makes their iteration count nearly independent of the
- * water's depth.
+ * preconditioner under which their iteration count grows far slower with
+ * the water's depth than under Jacobi's alone.
  *
  * Reads: the rows' positions (sph_shared pq), the boundary particles'
  * positions, the active set (mask) and the residual r. Writes: z.
@@ -20,8 +20,8 @@
  * so no face term). A = dt^2 grad^T grad acts on smooth pressures as a
  * Laplacian, so P^T (A/dt) P ~ s L on smooth vectors; s is A's Rayleigh
  * quotient on the correction itself, y . (A/dt) y / e . L e with e = B P^T r
- * and y = P e (the caller measures y . (A/dt) y with one operator product a
- * solve), so it includes the kernel's, the lattice's and the staircase's
+ * and y = P e (the caller measures y . (A/dt) y with one operator product
+ * at a step's first solve), so it includes the kernel's, the lattice's and the staircase's
  * factors without a formula for each.
  *
  * SPD: B = S_bar + (I - S^T L) P0 B_c P0^T (I - L S) with red-black
@@ -33,11 +33,19 @@
  * preconditioner and CG stays CG: the solve converges to the same tolerance
  * under the same stopping rule, only in fewer iterations.
  * Levels (after McAdams, Sifakis & Teran 2010 and flip_mg.c): level l+1
- * aggregates 2 x 2 x 2 cells of level l, its operator half the Galerkin
+ * aggregates 2 x 2 x 2 cells of level l (2 x 1 x 1 or 2 x 2 x 1 where an
+ * axis is down to two cells: a narrow column still coarsens along its
+ * depth), down to COARSEST_CELLS, its operator half the Galerkin
  * product with piecewise-constant P0 (links: half the sum of the child links
  * crossing between two aggregates; the Dirichlet excess: half the children's;
  * the diagonal: excess plus links), a 7-point stencil that stays SPD; the
  * halving matches the Galerkin operator of smooth transfers (flip_mg.c).
+ *
+ * Cells of side h: A's symbol falls below a Laplacian's at wavelengths of
+ * a few h (the kernel smooths the gradient), so a finer grid's Poisson
+ * operator would correct those wavelengths wrongly, and a coarser grid
+ * leaves more of the smooth error to Jacobi. That mismatch is also why the
+ * count still grows slowly with the depth (tests/test_dfsph_coarse.c).
  *
  * Everything here is serial, in row and cell order: the same bits for any
  * thread count. Its cost per iteration: one pass over the rows and one
