@@ -676,6 +676,11 @@ typedef struct eddy_sph_dfsph_def {
 	float max_divergence_error;    /* 1, mean |Drho/Dt| dt / rho0 the velocity solve
 	                                  leaves per step (default 5e-5); > 0 and <= 1 */
 	int max_divergence_iterations; /* 1, cap on divergence sweeps per step; 1 to 10000 */
+	bool coarse_grid;              /* with divergence_solver, in water deeper than 5 kernel
+	                                  radii: precondition the conjugate gradients with a
+	                                  multigrid cycle on a grid of h-sized cells too, for
+	                                  fewer iterations (off by default: Jacobi alone;
+	                                  same tolerances either way) */
 } eddy_sph_dfsph_def;
 EDDY_API eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void);
 EDDY_API eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def);

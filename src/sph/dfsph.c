@@ -65,6 +65,7 @@
  * 2017; Hestenes & Stiefel 1952 and Saad 2003 (Alg. 9.1: CG); Ihmsen et al.,
  * "Implicit incompressible SPH", TVCG 2014; Akinci et al., SIGGRAPH 2012;
  * Adami, Hu & Adams, JCP 2012 (eq. 27). */
+#include "dfsph_coarse.h"
 #include "simd.h"
 #include "sph.h"
 
@@ -115,6 +116,8 @@ typedef struct dfsph_work {
 	float *p;      /* the search direction (a change of k) */
 	float *r;      /* the residual on the active set */
 	float *mask;   /* 1 on the active set, else 0 */
+	eddy_arena *coarse;  /* non-NULL: the CG adds the coarse level (dfsph_coarse.c) in this arena */
+	double coarse_scale; /* its scale s, measured at the step's first solve */
 } dfsph_work;
 
 /* A pass over all particles: gradients, rate or correct below. */
@@ -433,7 +436,8 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	                            .max_iterations = 100,
 	                            .divergence_solver = true,
 	                            .max_divergence_error = 5e-5f,
-	                            .max_divergence_iterations = 1000};
+	                            .max_divergence_iterations = 1000,
+	                            .coarse_grid = false};
 }
 
 static void pass(dfsph_work *wk, enum dfsph_pass_kind kind, bool divergence, bool projected)
@@ -482,6 +486,19 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 		esum += fabsf(wk->r[i]);
 	}
 	*residual = esum * scale;
+	dfsph_coarse *cg = wk->coarse && *residual > tol ? eddy__dfsph_coarse_build(wk->coarse, wk->sh, n, wk->mask) : NULL;
+	if (cg && !(wk->coarse_scale > 0)) { /* s = y . (A/dt) y / e . L e on y = p (dfsph_coarse.h) */
+		const double ele = eddy__dfsph_coarse_unit(cg, wk->r, wk->p);
+		operator_product(wk);
+		double yay = 0;
+		for (long i = 0; i < n; ++i)
+			yay -= (double)wk->p[i] * (wk->mask[i] * wk->err[i]);
+		wk->coarse_scale = yay / (double)dt / ele;
+	}
+	if (cg) {
+		eddy__dfsph_coarse_set_scale(cg, wk->coarse_scale);
+		rz = eddy__dfsph_coarse_apply(cg, wk->r, wk->dsym, wk->p);
+	}
 	int it = 0;
 	while (*residual > tol && it < cap && rz > 0) {
 		operator_product(wk);
@@ -504,10 +521,13 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 		}
 		++it;
 		*residual = esum * scale;
+		const bool coarse = cg && *residual > tol && it < cap; /* z = D'^-1 r + its part, in err (free until the next product) */
+		if (coarse)
+			rz1 = eddy__dfsph_coarse_apply(cg, wk->r, wk->dsym, wk->err);
 		const float beta = (float)(rz1 / rz);
 		rz = rz1;
 		for (long i = 0; i < n; ++i)
-			wk->p[i] = wk->dsym[i] * wk->r[i] + beta * wk->p[i];
+			wk->p[i] = (coarse ? wk->err[i] : wk->dsym[i] * wk->r[i]) + beta * wk->p[i];
 	}
 	/* the projection: k_i < 0 back to 0, as one correction */
 	bool neg = false;
@@ -723,6 +743,7 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 		wk.v[i] = (dfsph_vec4){vx[i] + dt * (ax[i] + wk.h[i].x), vy[i] + dt * (ay[i] + wk.h[i].y),
 		                       vz[i] + dt * (az[i] + wk.h[i].z), 0};
 	const double scale = sd->def.divergence_solver ? depth_scale(w, sh->h) : 1;
+	wk.coarse = sd->def.coarse_grid && scale < 1 ? &w->arena : NULL;
 	int it, div_it = 0;
 	double residual, div_residual = 0;
 	if (sd->def.divergence_solver) {

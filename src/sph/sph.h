@@ -5,6 +5,7 @@
  *   boundary.c boundary_box.c    boundary particles of walls and colliders
  *   kernels.c                    the kernels and their lattice sums
  *   density.c pressure.c viscosity.c surface_tension.c dfsph.c: the systems
+ *   dfsph_coarse.c               dfsph.c's coarse level (multigrid on cells)
  * A new pair pass (XSPH, say) is one new file plus the registry:
  *   1. src/sph/xsph.c: under #ifndef EDDY_SIMD_VARIANT its def, add
  *      function and step; outside it, the pair loop once against

@@ -1,0 +1,384 @@
+/* SPDX-License-Identifier: MIT */
+/* The coarse level of sph_dfsph's conjugate gradients: a two-level additive
+ * preconditioner under which their iteration count grows far slower with
+ * the water's depth than under Jacobi's alone.
+ *
+ * Reads: the rows' positions (sph_shared pq), the boundary particles'
+ * positions, the active set (mask) and the residual r. Writes: z.
+ *
+ * Jacobi's D'^-1 alone removes the particle-scale error quickly, but the
+ * smooth, column-wide error falls by only 1 - c/N an iteration for N layers
+ * (its eigenvalue is (h/D)^2 of the diagonal). The coarse part handles it
+ * on a grid of cells of side h (8 particles each at spacing h/2):
+ *   z = D'^-1 r + P B P^T r / s
+ * P maps a cell value to the active particles in the cell (piecewise
+ * constant; P^T r sums the residuals per cell, the exact transpose), B is
+ * one multigrid V-cycle on the 7-point Poisson operator L of the cells
+ * holding an active particle: unit links between two such cells, Dirichlet 0
+ * at an empty cell (the free surface, +1 on the diagonal per face), Neumann
+ * at a cell holding boundary particles only (the walls mirror the pressure,
+ * so no face term). A = dt^2 grad^T grad acts on smooth pressures as a
+ * Laplacian, so P^T (A/dt) P ~ s L on smooth vectors; s is A's Rayleigh
+ * quotient on the correction itself, y . (A/dt) y / e . L e with e = B P^T r
+ * and y = P e (the caller measures y . (A/dt) y with one operator product
+ * at a step's first solve), so it includes the kernel's, the lattice's and the staircase's
+ * factors without a formula for each.
+ *
+ * SPD: B = S_bar + (I - S^T L) P0 B_c P0^T (I - L S) with red-black
+ * Gauss-Seidel pre-sweeps (red then black) and their adjoint post-sweeps
+ * (black then red), restriction the exact transpose of the prolongation and
+ * on the coarsest level the same sweeps without a correction: symmetric
+ * positive semi-definite (positive definite where every component of fluid
+ * cells touches an empty cell); D'^-1 is positive, so z is an SPD
+ * preconditioner and CG stays CG: the solve converges to the same tolerance
+ * under the same stopping rule, only in fewer iterations.
+ * Levels (after McAdams, Sifakis & Teran 2010 and flip_mg.c): level l+1
+ * aggregates 2 x 2 x 2 cells of level l (2 x 1 x 1 or 2 x 2 x 1 where an
+ * axis is down to two cells: a narrow column still coarsens along its
+ * depth), down to COARSEST_CELLS, its operator half the Galerkin
+ * product with piecewise-constant P0 (links: half the sum of the child links
+ * crossing between two aggregates; the Dirichlet excess: half the children's;
+ * the diagonal: excess plus links), a 7-point stencil that stays SPD; the
+ * halving matches the Galerkin operator of smooth transfers (flip_mg.c).
+ *
+ * Cells of side h: A's symbol falls below a Laplacian's at wavelengths of
+ * a few h (the kernel smooths the gradient), so a finer grid's Poisson
+ * operator would correct those wavelengths wrongly, and a coarser grid
+ * leaves more of the smooth error to Jacobi. That mismatch is also why the
+ * count still grows slowly with the depth (tests/test_dfsph_coarse.c).
+ *
+ * Everything here is serial, in row and cell order: the same bits for any
+ * thread count. Its cost per iteration: one pass over the rows and one
+ * V-cycle over n/8 cells, next to the operator product's two passes over
+ * some 30 neighbours per row.
+ *
+ * Sources: McAdams, Sifakis & Teran, SCA 2010 (the V-cycle as a CG
+ * preconditioner); Nicolaides, SINUM 1987, and Tang et al., J. Sci. Comput.
+ * 2009 (two-level deflation and additive coarse corrections); Vanek, Mandel
+ * & Brezina 1996 (aggregation); Bender & Koschier, TVCG 2017 (the solve). */
+#include "dfsph_coarse.h"
+
+#include <string.h>
+
+/* V-cycle red-black sweep pairs before and after each coarse correction,
+ * the coarsest level's sweep pairs, the coarsest level's size. */
+#define NU 2
+#define NU_COARSEST 16
+#define COARSEST_CELLS 512
+#define MAX_LEVELS 24
+
+typedef struct level {
+	int nx, ny, nz;
+	int fx, fy, fz; /* 2: the next level halves this axis; 1: keeps it */
+	size_t cells;
+	float *d;          /* the diagonal; 0: not an unknown */
+	float *e;          /* the Dirichlet excess: d minus the links */
+	float *ox, *oy, *oz; /* the link to the +x, +y, +z neighbour (0: none) */
+	float *x, *b, *r;
+} level;
+
+struct dfsph_coarse {
+	long n;
+	const float *mask;
+	uint32_t *cell; /* each row's level-0 cell, UINT32_MAX off the active set */
+	int nlev;
+	level L[MAX_LEVELS];
+	double inv_s; /* 1 / s; 0: the coarse part is off */
+};
+
+static float *zalloc(eddy_arena *a, size_t cnt)
+{
+	float *p = eddy__arena_alloc(a, (cnt ? cnt : 1) * sizeof *p);
+	if (p)
+		memset(p, 0, (cnt ? cnt : 1) * sizeof *p);
+	return p;
+}
+
+static bool level_alloc(eddy_arena *a, level *L, int nx, int ny, int nz)
+{
+	L->nx = nx, L->ny = ny, L->nz = nz;
+	L->cells = (size_t)nx * ny * nz;
+	float **arr[] = {&L->d, &L->e, &L->ox, &L->oy, &L->oz, &L->x, &L->b, &L->r};
+	for (size_t k = 0; k < sizeof arr / sizeof *arr; ++k)
+		if (!(*arr[k] = zalloc(a, L->cells)))
+			return false;
+	return true;
+}
+
+/* The sum of link x over the cell's six neighbours (the links to outside the
+ * box are 0 and never read). */
+static inline float neighbours(const level *L, const float *x, size_t c, int i, int j, int k)
+{
+	const size_t sy = (size_t)L->nx, sz = (size_t)L->nx * L->ny;
+	float s = 0;
+	if (i > 0)
+		s += L->ox[c - 1] * x[c - 1];
+	if (i + 1 < L->nx)
+		s += L->ox[c] * x[c + 1];
+	if (j > 0)
+		s += L->oy[c - sy] * x[c - sy];
+	if (j + 1 < L->ny)
+		s += L->oy[c] * x[c + sy];
+	if (k > 0)
+		s += L->oz[c - sz] * x[c - sz];
+	if (k + 1 < L->nz)
+		s += L->oz[c] * x[c + sz];
+	return s;
+}
+
+/* One Gauss-Seidel sweep over the cells of colour col ((i + j + k) % 2). */
+static void sweep(level *L, int col)
+{
+	for (int k = 0; k < L->nz; ++k)
+		for (int j = 0; j < L->ny; ++j) {
+			const size_t row = ((size_t)k * L->ny + j) * L->nx;
+			for (int i = (col + j + k) & 1; i < L->nx; i += 2) {
+				const size_t c = row + i;
+				if (L->d[c] > 0)
+					L->x[c] = (L->b[c] + neighbours(L, L->x, c, i, j, k)) / L->d[c];
+			}
+		}
+}
+
+/* r = b - L x, and e . L e-style products: returns x . (L x) when want. */
+static double residual(level *L, bool want)
+{
+	double xlx = 0;
+	for (int k = 0; k < L->nz; ++k)
+		for (int j = 0; j < L->ny; ++j)
+			for (int i = 0; i < L->nx; ++i) {
+				const size_t c = ((size_t)k * L->ny + j) * L->nx + i;
+				if (!(L->d[c] > 0)) {
+					L->r[c] = 0;
+					continue;
+				}
+				const float lx = L->d[c] * L->x[c] - neighbours(L, L->x, c, i, j, k);
+				L->r[c] = L->b[c] - lx;
+				if (want)
+					xlx += (double)L->x[c] * lx;
+			}
+	return xlx;
+}
+
+static inline size_t parent(const level *F, const level *C, size_t c)
+{
+	const size_t i = c % (size_t)F->nx, j = c / (size_t)F->nx % (size_t)F->ny, k = c / ((size_t)F->nx * F->ny);
+	return ((k / F->fz) * C->ny + j / F->fy) * C->nx + i / F->fx;
+}
+
+/* Level l + 1 from level l: half the Galerkin product with the aggregation. */
+static void build_coarse(const level *F, level *C)
+{
+	for (int k = 0; k < F->nz; ++k)
+		for (int j = 0; j < F->ny; ++j)
+			for (int i = 0; i < F->nx; ++i) {
+				const size_t c = ((size_t)k * F->ny + j) * F->nx + i;
+				if (!(F->d[c] > 0))
+					continue;
+				const size_t I = parent(F, C, c);
+				C->d[I] = 1; /* an unknown; its value below */
+				C->e[I] += 0.5f * F->e[c];
+				/* a link leaving the aggregate on the + side */
+				if (F->fx == 1 || (i & 1))
+					C->ox[I] += 0.5f * F->ox[c];
+				if (F->fy == 1 || (j & 1))
+					C->oy[I] += 0.5f * F->oy[c];
+				if (F->fz == 1 || (k & 1))
+					C->oz[I] += 0.5f * F->oz[c];
+			}
+	const size_t sy = (size_t)C->nx, sz = (size_t)C->nx * C->ny;
+	for (int k = 0; k < C->nz; ++k)
+		for (int j = 0; j < C->ny; ++j)
+			for (int i = 0; i < C->nx; ++i) {
+				const size_t c = ((size_t)k * C->ny + j) * C->nx + i;
+				if (!(C->d[c] > 0))
+					continue;
+				float s = C->e[c] + C->ox[c] + C->oy[c] + C->oz[c];
+				s += i > 0 ? C->ox[c - 1] : 0;
+				s += j > 0 ? C->oy[c - sy] : 0;
+				s += k > 0 ? C->oz[c - sz] : 0;
+				C->d[c] = s > 0 ? s : 0; /* an isolated cell with no link and no excess: not an unknown */
+			}
+}
+
+/* x = B_l b on level l (x from zero). */
+static void vcycle(dfsph_coarse *cs, int l)
+{
+	level *L = &cs->L[l];
+	memset(L->x, 0, L->cells * sizeof *L->x);
+	const bool last = l + 1 == cs->nlev;
+	const int nu = last ? NU_COARSEST : NU;
+	for (int s = 0; s < nu; ++s) {
+		sweep(L, 0);
+		sweep(L, 1);
+	}
+	if (!last) {
+		level *C = &cs->L[l + 1];
+		residual(L, false);
+		memset(C->b, 0, C->cells * sizeof *C->b);
+		for (size_t c = 0; c < L->cells; ++c)
+			if (L->d[c] > 0)
+				C->b[parent(L, C, c)] += L->r[c];
+		vcycle(cs, l + 1);
+		for (size_t c = 0; c < L->cells; ++c)
+			if (L->d[c] > 0)
+				L->x[c] += C->x[parent(L, C, c)];
+	}
+	for (int s = 0; s < nu; ++s) {
+		sweep(L, 1);
+		sweep(L, 0);
+	}
+}
+
+dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long n, const float *mask)
+{
+	const float H = sh->h, inv = 1.0f / H;
+	float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+	long active = 0;
+	for (long i = 0; i < n; ++i) {
+		if (!(mask[i] > 0))
+			continue;
+		++active;
+		for (int d = 0; d < 3; ++d) {
+			const float x = sh->pq[4 * i + d];
+			lo[d] = x < lo[d] ? x : lo[d];
+			hi[d] = x > hi[d] ? x : hi[d];
+		}
+	}
+	if (active == 0)
+		return NULL;
+	dfsph_coarse *cs = eddy__arena_alloc(a, sizeof *cs);
+	if (!cs)
+		return NULL;
+	*cs = (dfsph_coarse){.n = n, .mask = mask};
+	/* one cell of margin around the active rows: their cells' neighbours */
+	int dim[3];
+	float org[3];
+	for (int d = 0; d < 3; ++d) {
+		org[d] = lo[d] - H;
+		const double cells = floor((double)(hi[d] - org[d]) * inv) + 2;
+		if (!(cells < 1 << 20)) /* a flying particle far away: no grid that size */
+			return NULL;
+		dim[d] = (int)cells;
+	}
+	level *L0 = &cs->L[0];
+	cs->cell = eddy__arena_alloc(a, (size_t)n * sizeof *cs->cell);
+	uint8_t *solid = NULL;
+	if (!cs->cell || !level_alloc(a, L0, dim[0], dim[1], dim[2]) ||
+	    !(solid = eddy__arena_alloc(a, L0->cells)))
+		return NULL;
+	memset(solid, 0, L0->cells);
+	/* the cells of the active rows hold the unknowns (d = 1 marks them here) */
+	for (long i = 0; i < n; ++i) {
+		cs->cell[i] = UINT32_MAX;
+		if (!(mask[i] > 0))
+			continue;
+		int ix[3];
+		for (int d = 0; d < 3; ++d) {
+			const int q = (int)((sh->pq[4 * i + d] - org[d]) * inv);
+			ix[d] = q < 1 ? 1 : q > dim[d] - 2 ? dim[d] - 2 : q;
+		}
+		const size_t c = ((size_t)ix[2] * dim[1] + ix[1]) * dim[0] + ix[0];
+		cs->cell[i] = (uint32_t)c;
+		L0->d[c] = 1;
+	}
+	/* the walls: cells holding boundary particles and no active row */
+	const sph_neighbors *nb = &sh->nb;
+	for (size_t b = 0; b < nb->nbound; ++b) {
+		const float p[3] = {nb->bx[b], nb->by[b], nb->bz[b]};
+		int ix[3];
+		bool in = true;
+		for (int d = 0; d < 3; ++d) {
+			const float q = floorf((p[d] - org[d]) * inv);
+			in = in && q >= 0 && q < (float)dim[d];
+			ix[d] = in ? (int)q : 0;
+		}
+		if (in)
+			solid[((size_t)ix[2] * dim[1] + ix[1]) * dim[0] + ix[0]] = 1;
+	}
+	/* level 0: unit links between unknowns, +1 per face to an empty cell */
+	const size_t sy = (size_t)dim[0], sz = (size_t)dim[0] * dim[1];
+	for (int k = 1; k + 1 < dim[2]; ++k)
+		for (int j = 1; j + 1 < dim[1]; ++j)
+			for (int i = 1; i + 1 < dim[0]; ++i) {
+				const size_t c = ((size_t)k * dim[1] + j) * dim[0] + i;
+				if (!(L0->d[c] > 0))
+					continue;
+				const size_t nbr[6] = {c - 1, c + 1, c - sy, c + sy, c - sz, c + sz};
+				float e = 0, links = 0;
+				for (int f = 0; f < 6; ++f) {
+					const size_t q = nbr[f];
+					if (L0->d[q] > 0)
+						links += 1;
+					else if (!solid[q])
+						e += 1;
+				}
+				L0->ox[c] = L0->d[c + 1] > 0 ? 1.0f : 0.0f;
+				L0->oy[c] = L0->d[c + sy] > 0 ? 1.0f : 0.0f;
+				L0->oz[c] = L0->d[c + sz] > 0 ? 1.0f : 0.0f;
+				L0->e[c] = e;
+			}
+	/* the diagonal once every link is known (d still marks the unknowns) */
+	for (size_t c = 0; c < L0->cells; ++c)
+		if (L0->d[c] > 0) {
+			const float s = L0->e[c] + L0->ox[c] + L0->oy[c] + L0->oz[c] + L0->ox[c - 1] + L0->oy[c - sy] +
+			                L0->oz[c - sz];
+			L0->d[c] = s > 0 ? s : 0;
+		}
+	cs->nlev = 1;
+	while (cs->nlev < MAX_LEVELS) {
+		level *F = &cs->L[cs->nlev - 1];
+		/* an axis of one or two cells stays (a narrow column coarsens along its depth) */
+		F->fx = F->nx > 2 ? 2 : 1, F->fy = F->ny > 2 ? 2 : 1, F->fz = F->nz > 2 ? 2 : 1;
+		if (F->cells <= COARSEST_CELLS)
+			break;
+		level *C = &cs->L[cs->nlev];
+		if (!level_alloc(a, C, (F->nx + F->fx - 1) / F->fx, (F->ny + F->fy - 1) / F->fy, (F->nz + F->fz - 1) / F->fz))
+			return NULL;
+		build_coarse(F, C);
+		cs->nlev++;
+	}
+	return cs;
+}
+
+/* The level-0 right side P^T r and the cycle: L0.x = B P^T r. */
+/* (P x)_i: row i's cell's value, 0 off the active set */
+static inline float prolong_at(const dfsph_coarse *cs, long i, const float *x)
+{
+	return cs->cell[i] == UINT32_MAX ? 0.0f : x[cs->cell[i]];
+}
+
+static void coarse_solve(dfsph_coarse *cs, const float *r)
+{
+	level *L0 = &cs->L[0];
+	memset(L0->b, 0, L0->cells * sizeof *L0->b);
+	for (long i = 0; i < cs->n; ++i)
+		if (cs->cell[i] != UINT32_MAX)
+			L0->b[cs->cell[i]] += r[i];
+	vcycle(cs, 0);
+}
+
+double eddy__dfsph_coarse_unit(dfsph_coarse *cs, const float *r, float *y)
+{
+	coarse_solve(cs, r);
+	level *L0 = &cs->L[0];
+	for (long i = 0; i < cs->n; ++i)
+		y[i] = prolong_at(cs, i, L0->x);
+	return residual(L0, true);
+}
+
+void eddy__dfsph_coarse_set_scale(dfsph_coarse *cs, double s) { cs->inv_s = s > 0 && isfinite(s) ? 1 / s : 0; }
+
+double eddy__dfsph_coarse_apply(dfsph_coarse *cs, const float *r, const float *dsym, float *z)
+{
+	const bool on = cs->inv_s > 0;
+	if (on)
+		coarse_solve(cs, r);
+	const float *x = cs->L[0].x, inv_s = (float)cs->inv_s;
+	double rz = 0;
+	for (long i = 0; i < cs->n; ++i) {
+		z[i] = dsym[i] * r[i] + (on ? inv_s * prolong_at(cs, i, x) : 0.0f);
+		rz += (double)r[i] * z[i];
+	}
+	return rz;
+}
