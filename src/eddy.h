@@ -676,6 +676,12 @@ typedef struct eddy_sph_dfsph_def {
 	float max_divergence_error;    /* 1, mean |Drho/Dt| dt / rho0 the velocity solve
 	                                  leaves per step (default 5e-5); > 0 and <= 1 */
 	int max_divergence_iterations; /* 1, cap on divergence sweeps per step; 1 to 10000 */
+	float shift;                   /* 1, particle shifting: each step a particle away from
+	                                  the free surface and the walls moves by -shift h^2
+	                                  grad C (C the particle concentration, h the kernel
+	                                  radius), its velocity kept: what lets deep water's
+	                                  particle lattice settle without bursts; 0 off, 0 to
+	                                  0.1 (default 0.02) */
 } eddy_sph_dfsph_def;
 EDDY_API eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void);
 EDDY_API eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def);
