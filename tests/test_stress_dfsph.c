@@ -190,20 +190,11 @@ static void still_water_40_layers_at(const char *cfl)
 	CHECK(r.bp_min > 1 - BP_BAND && r.bp_max < 1 + BP_BAND);
 }
 
-static void still_water_40_layers_comes_to_rest(void)
-{
-	still_water_40_layers_at("0.5");
-}
+static void still_water_40_layers_comes_to_rest(void) { still_water_40_layers_at("0.5"); }
 
-static void still_water_40_layers_comes_to_rest_at_cfl_0_4(void)
-{
-	still_water_40_layers_at("0.4");
-}
+static void still_water_40_layers_comes_to_rest_at_cfl_0_4(void) { still_water_40_layers_at("0.4"); }
 
-static void still_water_40_layers_comes_to_rest_at_cfl_0_3(void)
-{
-	still_water_40_layers_at("0.3");
-}
+static void still_water_40_layers_comes_to_rest_at_cfl_0_3(void) { still_water_40_layers_at("0.3"); }
 
 /* Long: 100 layers (1.25 m, 6400 particles), 3 s: at rest under 2% of
  * sqrt(g H) from 2 s on, the issue's target (measured 0.0173, a particle
