@@ -279,7 +279,12 @@ static void energy_stats_wcsph(void)
  * energy) and must be positive, each within 0.003 (zeta's resolution here,
  * see slosh_flip_apic), and the 5 mm period within 3%. Measured with the
  * conjugate-gradient solves (src/sph/dfsph.c): zeta 0.0423 at 10 mm and
- * 0.0393 at 5 mm, period error -1.5% and -2.5%. */
+ * 0.0393 at 5 mm without particle shifting; with it (the default) 0.0409
+ * and 0.0394, period error -1.2% and -2.1%. Shifting is a diffusion of the
+ * particle positions and can damp the wave (shifting at the walls too read
+ * 0.050-0.057 and 0.055): each zeta is held to 1.2 times its value without
+ * shifting, the 20% that the scatter of zeta over cfl 0.36-0.44 at 10 mm
+ * (0.042-0.048 without shifting) leaves room for. */
 static void slosh_all_methods(void)
 {
 	const slosh_result flip = run_slosh("flip", "0.0025", "4", 3.0);
@@ -300,6 +305,7 @@ static void slosh_all_methods(void)
 	CHECK(fabs(dfsph.period_err) <= 0.03);
 	CHECK(dfsph10.damping > -0.003 && dfsph.damping > -0.003);
 	CHECK(dfsph.damping <= dfsph10.damping + 0.003);
+	CHECK(dfsph.damping < 1.2 * 0.0393 && dfsph10.damping < 1.2 * 0.0423);
 	CHECK(fabs(flip.period_err) <= 0.03);
 	CHECK(fabs(pic.period_err) <= 0.03);
 	CHECK(fabs(apic.period_err) <= 0.03);

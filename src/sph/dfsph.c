@@ -5,8 +5,8 @@
  *
  * Reads: x y z vx vy vz density ax ay az, sph_density's lists. Writes:
  * pressure, ax ay az (accumulated: it runs after the other forces, before
- * integrate); with the divergence solver also its state columns dfsph_k
- * dfsph_kd, each solve's k of the last step.
+ * integrate), and with shift > 0 x y z; with the divergence solver also its
+ * state columns dfsph_k dfsph_kd, each solve's k of the last step.
  *
  * With G_ij = m grad W_spiky(x_i - x_j) (the poly6 gradient vanishes at r = 0
  * and lets a tank at rest cluster), S_i = sum_j G_ij, boundary particles of
@@ -45,13 +45,36 @@
  * 2-3), tightened with the depth D because a mean residual eps leaves the
  * column-wide mode an error of eps (D / h)^2. Tighter rules do not bring a
  * deep column to rest sooner: what moves it then is its particle arrangement
- * relaxing under the pressure force (README, Stress cases).
+ * relaxing under the pressure force, which the shift takes over.
  *
  * Without it the density solve runs alone, cold, with the paper's sweeps that
  * only add pressure, on the true wall rate and D_i = (S_i + 2 B_i) . (S_i +
  * B_i) + sum_j |G_ij|^2, until the mean compression is at most
  * max_density_error (cheaper; it holds still water some 10 layers deep):
  *   k_i += max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
+ *
+ * Particle shifting (shift > 0, the default; Xu et al. 2009, Lind et al.
+ * 2012): after the solves a particle moves by dr_i = -shift h^2 grad C_i,
+ * grad C_i = sum_j (m / rho_j) grad W_ij the gradient of the particle
+ * concentration (the spiky gradient of G_ij; Lind's Fickian shift with D =
+ * shift h^2 a step), its velocity kept, so no momentum is made. A uniform
+ * pressure pushes a particle by about -2 k rho0 grad C: at depth, where k is
+ * large, the emitted simple cubic lattice is unstable under the spiky
+ * gradient and relaxed in bursts of kinetic energy; the shift moves the
+ * particles down the same gradient at no speed, and the arrangement settles
+ * before the pressure throws it. With the depth-scaled step (dt ~ 1 /
+ * sqrt(depth)) both rates scale alike, so one coefficient serves every
+ * depth. The volumes m / rho_j (Lind's) make grad C vanish to first order in
+ * a smoothly compressed fluid, so the shift does not follow the solves'
+ * residual compression. Only a particle whose kernel sum, and all its
+ * neighbours', is at least DFSPH_SHIFT_SURFACE rho0 and with no wall within
+ * h shifts: at the free surface the truncated neighbourhood reads as a
+ * gradient outwards (Lind et al. shift only tangentially there), and at a
+ * wall the force's balance (the wall counted twice, h_i) is not grad C = 0,
+ * so a shift there fights the solve every step (it damped the slosh by
+ * 20-40%). Lind's Taylor correction of the velocity is left out: it makes
+ * momentum, and did not change the slosh's damping within its resolution.
+ *
  *
  * Published per frame: solver = "dfsph", iterations and divergence_iterations
  * (the solves' mean per step), residual (largest final mean density error of
@@ -64,7 +87,8 @@
  * hydrodynamics", SCA 2015 (eqs. 8-9, 12, Alg. 1-3, warm start), and TVCG
  * 2017; Hestenes & Stiefel 1952 and Saad 2003 (Alg. 9.1: CG); Ihmsen et al.,
  * "Implicit incompressible SPH", TVCG 2014; Akinci et al., SIGGRAPH 2012;
- * Adami, Hu & Adams, JCP 2012 (eq. 27). */
+ * Adami, Hu & Adams, JCP 2012 (eq. 27); Xu, Stansby & Laurence, JCP 228,
+ * 2009, and Lind, Xu, Stansby & Rogers, JCP 231, 2012 (particle shifting). */
 #include "dfsph_coarse.h"
 #include "simd.h"
 #include "sph.h"
@@ -105,6 +129,7 @@ typedef struct dfsph_work {
 	dfsph_vec4 *b; /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
 	dfsph_vec4 *v; /* v*_i (w unused: a neighbour's velocity is one quad) */
 	dfsph_vec4 *h; /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
+	dfsph_vec4 *c; /* grad C_i = sum_j G_ij / rho_j (1/m), and w = max_j 1 / rho_j */
 	float *dsym;   /* 1 / D'_i, the symmetric operator's diagonal (0 likewise) */
 	float *k;      /* the k_i a correction applies */
 	float *ksum;   /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
@@ -230,12 +255,12 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 	const sf8 h = sf8_set1(sh->k.h), eps2 = sf8_set1(1e-6f * sh->k.h2), mg = sf8_set1(sh->mass * sh->k.spiky_grad),
 			  one = sf8_set1(1.0f), two = sf8_set1(2.0f), zero = sf8_zero(), dmin = sf8_set1(1e-6f * dref * dref),
 			  minus = sf8_set1(-0.0f);
-	float t[4][SPH_BLOCK][4], w[6][SPH_BLOCK] = {{0}};
+	float t[7][SPH_BLOCK][4], w[6][SPH_BLOCK] = {{0}}, vmax[SPH_BLOCK];
 	for (long q = 0; q < cnt; ++q) {
 		const long i = i0 + q;
 		const uint32_t *list = sph_nbrs(nb, i), c = nb->count[i];
 		const sf8 pi = sf8_load_quad2(sh->pq + 4 * i);
-		sf8 sx = zero, sy = zero, sz = zero, s2 = zero;
+		sf8 sx = zero, sy = zero, sz = zero, s2 = zero, cx = zero, cy = zero, cz = zero, mv = zero;
 		dfsph_group *g = wk->groups + wk->goff[i];
 		for (uint32_t p = 0; p < c; p += 8, ++g) {
 			for (uint32_t l = 0; l < 8; ++l)
@@ -255,11 +280,24 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 			sy = sf8_add(sy, gy);
 			sz = sf8_add(sz, gz);
 			s2 = sf8_add(s2, sf8_add(sf8_add(sf8_mul(gx, gx), sf8_mul(gy, gy)), sf8_mul(gz, gz)));
+			const sf8 vj = sf8_gather(sh->inv_rho, g->j); /* V_j / m */
+			cx = sf8_add(cx, sf8_mul(gx, vj));
+			cy = sf8_add(cy, sf8_mul(gy, vj));
+			cz = sf8_add(cz, sf8_mul(gz, vj));
+			mv = sf8_max(mv, vj);
 		}
+		float l[8];
+		sf8_store(l, mv);
+		vmax[q] = l[0];
+		for (int k = 1; k < 8; ++k)
+			vmax[q] = l[k] > vmax[q] ? l[k] : vmax[q];
 		sf8_fold4(sx, t[0][q]);
 		sf8_fold4(sy, t[1][q]);
 		sf8_fold4(sz, t[2][q]);
 		sf8_fold4(s2, t[3][q]);
+		sf8_fold4(cx, t[4][q]);
+		sf8_fold4(cy, t[5][q]);
+		sf8_fold4(cz, t[6][q]);
 		if (nb->bcount[i]) /* most particles are away from the walls */
 			wall_sums(wk, i, w, q);
 	}
@@ -279,6 +317,8 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 			sf8_add(sf8_add(sf8_mul(ex, sf8_add(sx, bx)), sf8_mul(ey, sf8_add(sy, by))), sf8_mul(ez, sf8_add(sz, bz))),
 			s2);
 		store_quads8(wk->b + i, m, bx, by, bz, sf8_and(sf8_gt(d, dmin), sf8_div(one, d)));
+		/* grad C_i over the fluid (the shift leaves particles at walls alone) */
+		store_quads8(wk->c + i, m, sum8(t[4][q], m), sum8(t[5][q], m), sum8(t[6][q], m), load8(vmax + q, m));
 		/* D'_i = |S + 2B|^2 + sum |G|^2 */
 		const sf8 ds = sf8_add(sf8_add(sf8_add(sf8_mul(ex, ex), sf8_mul(ey, ey)), sf8_mul(ez, ez)), s2);
 		store8(wk->dsym + i, sf8_and(sf8_gt(ds, dmin), sf8_div(one, ds)), m);
@@ -420,6 +460,11 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
 /* kernel radii: the depth beyond which the tolerances tighten (depth_scale) */
 #define DFSPH_DEPTH_REF 5.0
 
+/* Shifting moves only particles whose kernel sum, and their neighbours',
+ * is at least this times rho0 (header): in water at rest every particle but
+ * the free surface's outermost is within 5% of rho0 (see DFSPH_SURFACE). */
+#define DFSPH_SHIFT_SURFACE 0.95f
+
 typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
 	int kcol[2]; /* the state columns dfsph_k, dfsph_kd: the two solves' warm starts (or -1) */
@@ -437,7 +482,8 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	                            .divergence_solver = true,
 	                            .max_divergence_error = 5e-5f,
 	                            .max_divergence_iterations = 1000,
-	                            .coarse_grid = false};
+	                            .coarse_grid = false,
+	                            .shift = 0.02f};
 }
 
 static void pass(dfsph_work *wk, enum dfsph_pass_kind kind, bool divergence, bool projected)
@@ -651,7 +697,7 @@ static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n,
 	for (long i = 0; i < n; ++i)
 		wk->goff[i + 1] = wk->goff[i] + (sh->nb.count[i] + 7) / 8;
 	wk->groups = eddy__arena_alloc(&w->arena, (wk->goff[n] ? wk->goff[n] : 1) * sizeof *wk->groups);
-	dfsph_vec4 **quads[] = {&wk->b, &wk->v, &wk->h, &wk->u};
+	dfsph_vec4 **quads[] = {&wk->b, &wk->v, &wk->h, &wk->u, &wk->c};
 	float **floats[] = {&wk->dsym, &wk->k, &wk->ksum, &wk->kp, &wk->err, &wk->full, &wk->p, &wk->r, &wk->mask};
 	bool ok = wk->groups;
 	for (size_t a = 0; a < sizeof quads / sizeof *quads; ++a)
@@ -721,6 +767,25 @@ static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_wor
 	return EDDY_OK;
 }
 
+/* Particle shifting (header): x_i -= shift h^2 grad C_i where particle i and
+ * all its neighbours have a kernel sum of at least DFSPH_SHIFT_SURFACE rho0
+ * and no wall is within h, the velocities kept. Each particle moves by its
+ * own grad C, made before any moved: the same for any thread count. */
+static void shift(eddy_world *w, const sph_dfsph *sd, const dfsph_work *wk)
+{
+	const float full = DFSPH_SHIFT_SURFACE * wk->sh->rho0, d = sd->def.shift * wk->sh->h * wk->sh->h;
+	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	for (long i = 0; i < wk->n; ++i) {
+		const dfsph_vec4 c = wk->c[i];
+		/* c.w * full <= 1: no neighbour below full (c.w is 1 / the least rho_j) */
+		if (wk->rho[i] >= full && c.w * full <= 1.0f && wk->sh->nb.bcount[i] == 0) {
+			x[i] -= d * c.x;
+			y[i] -= d * c.y;
+			z[i] -= d * c.z;
+		}
+	}
+}
+
 static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context *ctx)
 {
 	sph_dfsph *sd = sys->data;
@@ -753,7 +818,10 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 			return st;
 	}
 	solve(w, sys, &wk, ctx, false, sd->def.max_density_error * scale * scale, &it, &residual);
-	return finish(w, sys, &wk, ctx, it, residual, div_it, div_residual);
+	const eddy_status st = finish(w, sys, &wk, ctx, it, residual, div_it, div_residual);
+	if (st == EDDY_OK && sd->def.shift > 0)
+		shift(w, sd, &wk);
+	return st;
 }
 
 /* For tests/test_sph_reference.c, after a step of w, on the last lists and
@@ -828,7 +896,8 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 	if (!eddy__add_args(w, def, sys) || !eddy__check_positive(w, sys, "max_density_error", def->max_density_error) ||
 	    !eddy__check_range(w, sys, "max_density_error", def->max_density_error, 0, 0.1) ||
 	    !eddy__check_positive(w, sys, "max_divergence_error", def->max_divergence_error) ||
-	    !eddy__check_range(w, sys, "max_divergence_error", def->max_divergence_error, 0, 1))
+	    !eddy__check_range(w, sys, "max_divergence_error", def->max_divergence_error, 0, 1) ||
+	    !eddy__check_range(w, sys, "shift", def->shift, 0, 0.1))
 		return EDDY_NULL_SYSTEM;
 	const bool it_bad = def->max_iterations < 2 || def->max_iterations > 10000;
 	if (it_bad || def->max_divergence_iterations < 1 || def->max_divergence_iterations > 10000)
@@ -858,7 +927,16 @@ eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def)
 	/* without the divergence solver the lists end at kcol[0] = -1 */
 	const int reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX,      COL_VY,      COL_VZ, COL_DENSITY,
 	                     COL_AX, COL_AY, COL_AZ, sd->kcol[0], sd->kcol[1], -1};
-	const int writes[] = {COL_PRESSURE, COL_AX, COL_AY, COL_AZ, sd->kcol[0], sd->kcol[1], -1};
+	/* the warm starts' columns, then with the shift the positions; the list
+	 * ends at the first -1 */
+	int writes[] = {COL_PRESSURE, COL_AX, COL_AY, COL_AZ, -1, -1, -1, -1, -1, -1}, nw = 4;
+	for (int c = 0; c < 2 && def->divergence_solver; ++c)
+		writes[nw++] = sd->kcol[c];
+	if (def->shift > 0) {
+		writes[nw++] = COL_X_;
+		writes[nw++] = COL_Y_;
+		writes[nw++] = COL_Z_;
+	}
 	return eddy__add_system(w, &eddy__kind_sph_dfsph, sd, reads, writes);
 }
 #endif /* EDDY_SIMD_VARIANT */
