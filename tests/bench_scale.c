@@ -23,7 +23,8 @@
  *               [--reps 3] [--steps 4] [--grids 64,128,256] [--no-pressure]
  *   bench_scale --child METHOD N THREADS STEPS [SOLVER]   one block run, a JSON line on stdout
  *                                     (SOLVER: FLIP's pressure solver, pcg (default), hypre or mg)
- *   bench_scale --pressure GRID SOLVER THREADS     one pressure run (pcg, hypre or mg), a JSON line */
+ *   bench_scale --pressure GRID SOLVER THREADS     one pressure run (pcg, hypre or mg), a JSON line
+ * EDDY_SCALE_COARSE=1 runs sph_dfsph with coarse_grid on. */
 #include <errno.h>
 #include <stdint.h>
 #include <math.h>
@@ -130,7 +131,8 @@ static eddy_world *block(const char *method, long n, int threads, eddy_flip_solv
 		de.radius = 2 * dx;
 		de.stiffness = 400;
 		eddy_add_sph_density(w, &de);
-		const eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+		df.coarse_grid = getenv("EDDY_SCALE_COARSE") != NULL; /* the velocity solve's coarse level */
 		bench_add_sph_forces(w, dfsph ? &df : NULL);
 		eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
 		bb.max = d.bounds_max;
