@@ -1403,6 +1403,19 @@ static eddy_status verlet_check_step(eddy_world *w, const eddy_step_context *ctx
 	return EDDY_OK;
 }
 
+/* The brute-force check as a custom system after sph_density. */
+static void add_verlet_check(eddy_world *w, verlet_check *vc)
+{
+	eddy_custom_system_def cs = eddy_default_custom_system_def();
+	const char *reads[] = {"x", "y", "z", "density", "neighbors"};
+	cs.name = "verlet_check";
+	cs.reads = reads;
+	cs.read_count = 5;
+	cs.step = verlet_check_step;
+	cs.user = vc;
+	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
+}
+
 static void verlet_lists_match_brute_force(void)
 {
 	eddy_world_def d = eddy_default_world_def();
@@ -1418,14 +1431,7 @@ static void verlet_lists_match_brute_force(void)
 	eddy_sph_density_def de = eddy_default_sph_density_def();
 	const eddy_system_id dens = eddy_add_sph_density(w, &de);
 	verlet_check vc = {de.radius, 0, 0, 0, 0};
-	eddy_custom_system_def cs = eddy_default_custom_system_def();
-	const char *reads[] = {"x", "y", "z", "density", "neighbors"};
-	cs.name = "verlet_check";
-	cs.reads = reads;
-	cs.read_count = 5;
-	cs.step = verlet_check_step;
-	cs.user = &vc;
-	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
+	add_verlet_check(w, &vc);
 	eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
 	eddy_add_sph_pressure(w, &pr);
 	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
@@ -1514,14 +1520,7 @@ static void neighbour_lists_grow_past_their_first_size(void)
 		const eddy_system_id dens = eddy_add_sph_density(w, &de);
 		verlet_check vc = {de.radius, 0, 0, 0, 0};
 		momentum_check mc = {0};
-		eddy_custom_system_def cs = eddy_default_custom_system_def();
-		const char *reads[] = {"x", "y", "z", "density", "neighbors"};
-		cs.name = "verlet_check";
-		cs.reads = reads;
-		cs.read_count = 5;
-		cs.step = verlet_check_step;
-		cs.user = &vc;
-		CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
+		add_verlet_check(w, &vc);
 		eddy_gravity_def g = eddy_default_gravity_def();
 		eddy_add_gravity(w, &g);
 		eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();

@@ -137,10 +137,10 @@ typedef struct dfsph_work {
 	float *err;    /* per particle: the error the sweep measured, or R_i(v) */
 	float *full;   /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the velocity solve's particles */
 	/* the conjugate gradients' (divergence_cg) */
-	dfsph_vec4 *u; /* the velocity change of a direction: -dt grad p */
-	float *p;      /* the search direction (a change of k) */
-	float *r;      /* the residual on the active set */
-	float *mask;   /* 1 on the active set, else 0 */
+	dfsph_vec4 *u;       /* the velocity change of a direction: -dt grad p */
+	float *p;            /* the search direction (a change of k) */
+	float *r;            /* the residual on the active set */
+	float *mask;         /* 1 on the active set, else 0 */
 	eddy_arena *coarse;  /* non-NULL: the CG adds the coarse level (dfsph_coarse.c) in this arena */
 	double coarse_scale; /* its scale s, measured at the step's first solve */
 } dfsph_work;
@@ -567,7 +567,8 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 		}
 		++it;
 		*residual = esum * scale;
-		const bool coarse = cg && *residual > tol && it < cap; /* z = D'^-1 r + its part, in err (free until the next product) */
+		const bool coarse =
+			cg && *residual > tol && it < cap; /* z = D'^-1 r + its part, in err (free until the next product) */
 		if (coarse)
 			rz1 = eddy__dfsph_coarse_apply(cg, wk->r, wk->dsym, wk->err);
 		const float beta = (float)(rz1 / rz);

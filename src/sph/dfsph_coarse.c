@@ -71,8 +71,8 @@ typedef struct level {
 	int nx, ny, nz;
 	int fx, fy, fz; /* 2: the next level halves this axis; 1: keeps it */
 	size_t cells;
-	float *d;          /* the diagonal; 0: not an unknown */
-	float *e;          /* the Dirichlet excess: d minus the links */
+	float *d;            /* the diagonal; 0: not an unknown */
+	float *e;            /* the Dirichlet excess: d minus the links */
 	float *ox, *oy, *oz; /* the link to the +x, +y, +z neighbour (0: none) */
 	float *x, *b, *r;
 } level;
@@ -264,8 +264,7 @@ dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long
 	level *L0 = &cs->L[0];
 	cs->cell = eddy__arena_alloc(a, (size_t)n * sizeof *cs->cell);
 	uint8_t *solid = NULL;
-	if (!cs->cell || !level_alloc(a, L0, dim[0], dim[1], dim[2]) ||
-	    !(solid = eddy__arena_alloc(a, L0->cells)))
+	if (!cs->cell || !level_alloc(a, L0, dim[0], dim[1], dim[2]) || !(solid = eddy__arena_alloc(a, L0->cells)))
 		return NULL;
 	memset(solid, 0, L0->cells);
 	/* the cells of the active rows hold the unknowns (d = 1 marks them here) */
@@ -321,8 +320,8 @@ dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long
 	/* the diagonal once every link is known (d still marks the unknowns) */
 	for (size_t c = 0; c < L0->cells; ++c)
 		if (L0->d[c] > 0) {
-			const float s = L0->e[c] + L0->ox[c] + L0->oy[c] + L0->oz[c] + L0->ox[c - 1] + L0->oy[c - sy] +
-			                L0->oz[c - sz];
+			const float s =
+				L0->e[c] + L0->ox[c] + L0->oy[c] + L0->oz[c] + L0->ox[c - 1] + L0->oy[c - sy] + L0->oz[c - sz];
 			L0->d[c] = s > 0 ? s : 0;
 		}
 	cs->nlev = 1;
