@@ -685,8 +685,8 @@ typedef struct eddy_sph_dfsph_def {
 	                                  the free surface and the walls moves by -shift h^2
 	                                  grad C (C the particle concentration, h the kernel
 	                                  radius), its velocity kept: what lets deep water's
-	                                  particle lattice settle without bursts; 0 off, 0 to
-	                                  0.1 (default 0.02) */
+	                                  particle lattice settle without bursts (0.02 does),
+	                                  but stirred water expands; 0 to 0.1 (default 0: off) */
 } eddy_sph_dfsph_def;
 EDDY_API eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void);
 EDDY_API eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def);
