@@ -230,6 +230,60 @@ static void vcycle(dfsph_coarse *cs, int l)
 	}
 }
 
+/* The walls: solid[c] = 1 for the cells of the grid (origin org, cells of
+ * side 1 / inv) that hold boundary particles. */
+static void mark_walls(const sph_neighbors *nb, const float org[3], const int dim[3], float inv, uint8_t *solid)
+{
+	for (size_t b = 0; b < nb->nbound; ++b) {
+		const float p[3] = {nb->bx[b], nb->by[b], nb->bz[b]};
+		int ix[3];
+		bool in = true;
+		for (int d = 0; d < 3; ++d) {
+			const float q = floorf((p[d] - org[d]) * inv);
+			in = in && q >= 0 && q < (float)dim[d];
+			ix[d] = in ? (int)q : 0;
+		}
+		if (in)
+			solid[((size_t)ix[2] * dim[1] + ix[1]) * dim[0] + ix[0]] = 1;
+	}
+}
+
+/* Level 0's operator on the cells L0->d marks (d = 1 on entry, the diagonal
+ * on return): unit links between unknowns, +1 per face to an empty cell (not
+ * a wall's). */
+static void level0_operator(level *L0, const int dim[3], const uint8_t *solid)
+{
+	/* level 0: unit links between unknowns, +1 per face to an empty cell */
+	const size_t sy = (size_t)dim[0], sz = (size_t)dim[0] * dim[1];
+	for (int k = 1; k + 1 < dim[2]; ++k)
+		for (int j = 1; j + 1 < dim[1]; ++j)
+			for (int i = 1; i + 1 < dim[0]; ++i) {
+				const size_t c = ((size_t)k * dim[1] + j) * dim[0] + i;
+				if (!(L0->d[c] > 0))
+					continue;
+				const size_t nbr[6] = {c - 1, c + 1, c - sy, c + sy, c - sz, c + sz};
+				float e = 0, links = 0;
+				for (int f = 0; f < 6; ++f) {
+					const size_t q = nbr[f];
+					if (L0->d[q] > 0)
+						links += 1;
+					else if (!solid[q])
+						e += 1;
+				}
+				L0->ox[c] = L0->d[c + 1] > 0 ? 1.0f : 0.0f;
+				L0->oy[c] = L0->d[c + sy] > 0 ? 1.0f : 0.0f;
+				L0->oz[c] = L0->d[c + sz] > 0 ? 1.0f : 0.0f;
+				L0->e[c] = e;
+			}
+	/* the diagonal once every link is known (d still marks the unknowns) */
+	for (size_t c = 0; c < L0->cells; ++c)
+		if (L0->d[c] > 0) {
+			const float s =
+				L0->e[c] + L0->ox[c] + L0->oy[c] + L0->oz[c] + L0->ox[c - 1] + L0->oy[c - sy] + L0->oz[c - sz];
+			L0->d[c] = s > 0 ? s : 0;
+		}
+}
+
 dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long n, const float *mask)
 {
 	const float H = sh->h, inv = 1.0f / H;
@@ -281,49 +335,8 @@ dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long
 		cs->cell[i] = (uint32_t)c;
 		L0->d[c] = 1;
 	}
-	/* the walls: cells holding boundary particles and no active row */
-	const sph_neighbors *nb = &sh->nb;
-	for (size_t b = 0; b < nb->nbound; ++b) {
-		const float p[3] = {nb->bx[b], nb->by[b], nb->bz[b]};
-		int ix[3];
-		bool in = true;
-		for (int d = 0; d < 3; ++d) {
-			const float q = floorf((p[d] - org[d]) * inv);
-			in = in && q >= 0 && q < (float)dim[d];
-			ix[d] = in ? (int)q : 0;
-		}
-		if (in)
-			solid[((size_t)ix[2] * dim[1] + ix[1]) * dim[0] + ix[0]] = 1;
-	}
-	/* level 0: unit links between unknowns, +1 per face to an empty cell */
-	const size_t sy = (size_t)dim[0], sz = (size_t)dim[0] * dim[1];
-	for (int k = 1; k + 1 < dim[2]; ++k)
-		for (int j = 1; j + 1 < dim[1]; ++j)
-			for (int i = 1; i + 1 < dim[0]; ++i) {
-				const size_t c = ((size_t)k * dim[1] + j) * dim[0] + i;
-				if (!(L0->d[c] > 0))
-					continue;
-				const size_t nbr[6] = {c - 1, c + 1, c - sy, c + sy, c - sz, c + sz};
-				float e = 0, links = 0;
-				for (int f = 0; f < 6; ++f) {
-					const size_t q = nbr[f];
-					if (L0->d[q] > 0)
-						links += 1;
-					else if (!solid[q])
-						e += 1;
-				}
-				L0->ox[c] = L0->d[c + 1] > 0 ? 1.0f : 0.0f;
-				L0->oy[c] = L0->d[c + sy] > 0 ? 1.0f : 0.0f;
-				L0->oz[c] = L0->d[c + sz] > 0 ? 1.0f : 0.0f;
-				L0->e[c] = e;
-			}
-	/* the diagonal once every link is known (d still marks the unknowns) */
-	for (size_t c = 0; c < L0->cells; ++c)
-		if (L0->d[c] > 0) {
-			const float s =
-				L0->e[c] + L0->ox[c] + L0->oy[c] + L0->oz[c] + L0->ox[c - 1] + L0->oy[c - sy] + L0->oz[c - sz];
-			L0->d[c] = s > 0 ? s : 0;
-		}
+	mark_walls(&sh->nb, org, dim, inv, solid);
+	level0_operator(L0, dim, solid);
 	cs->nlev = 1;
 	while (cs->nlev < MAX_LEVELS) {
 		level *F = &cs->L[cs->nlev - 1];
