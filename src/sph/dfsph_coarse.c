@@ -262,14 +262,9 @@ static void level0_operator(level *L0, const int dim[3], const uint8_t *solid)
 				if (!(L0->d[c] > 0))
 					continue;
 				const size_t nbr[6] = {c - 1, c + 1, c - sy, c + sy, c - sz, c + sz};
-				float e = 0, links = 0;
-				for (int f = 0; f < 6; ++f) {
-					const size_t q = nbr[f];
-					if (L0->d[q] > 0)
-						links += 1;
-					else if (!solid[q])
-						e += 1;
-				}
+				float e = 0; /* faces to empty cells */
+				for (int f = 0; f < 6; ++f)
+					e += !(L0->d[nbr[f]] > 0) && !solid[nbr[f]] ? 1.0f : 0.0f;
 				L0->ox[c] = L0->d[c + 1] > 0 ? 1.0f : 0.0f;
 				L0->oy[c] = L0->d[c + sy] > 0 ? 1.0f : 0.0f;
 				L0->oz[c] = L0->d[c + sz] > 0 ? 1.0f : 0.0f;
