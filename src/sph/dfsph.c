@@ -283,11 +283,13 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 			sy = sf8_add(sy, gy);
 			sz = sf8_add(sz, gz);
 			s2 = sf8_add(s2, sf8_add(sf8_add(sf8_mul(gx, gx), sf8_mul(gy, gy)), sf8_mul(gz, gz)));
-			const sf8 vj = sf8_gather(sh->inv_rho, g->j); /* V_j / m */
-			cx = sf8_add(cx, sf8_mul(gx, vj));
-			cy = sf8_add(cy, sf8_mul(gy, vj));
-			cz = sf8_add(cz, sf8_mul(gz, vj));
-			mv = sf8_max(mv, vj);
+			if (wk->c) {                                      /* the shift's grad C, only when it runs */
+				const sf8 vj = sf8_gather(sh->inv_rho, g->j); /* V_j / m */
+				cx = sf8_add(cx, sf8_mul(gx, vj));
+				cy = sf8_add(cy, sf8_mul(gy, vj));
+				cz = sf8_add(cz, sf8_mul(gz, vj));
+				mv = sf8_max(mv, vj);
+			}
 		}
 		float l[8];
 		sf8_store(l, mv);
@@ -321,7 +323,8 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 			s2);
 		store_quads8(wk->b + i, m, bx, by, bz, sf8_and(sf8_gt(d, dmin), sf8_div(one, d)));
 		/* grad C_i over the fluid (the shift leaves particles at walls alone) */
-		store_quads8(wk->c + i, m, sum8(t[4][q], m), sum8(t[5][q], m), sum8(t[6][q], m), load8(vmax + q, m));
+		if (wk->c)
+			store_quads8(wk->c + i, m, sum8(t[4][q], m), sum8(t[5][q], m), sum8(t[6][q], m), load8(vmax + q, m));
 		/* D'_i = |S + 2B|^2 + sum |G|^2 */
 		const sf8 ds = sf8_add(sf8_add(sf8_add(sf8_mul(ex, ex), sf8_mul(ey, ey)), sf8_mul(ez, ez)), s2);
 		store8(wk->dsym + i, sf8_and(sf8_gt(ds, dmin), sf8_div(one, ds)), m);
@@ -687,7 +690,7 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 
 /* The step's scratch in the world's arena for rows 0 .. n - 1 of sph_density's
  * lists, and the gradient pass on them; false when out of memory. */
-static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n, float dt, int threads)
+static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n, float dt, int threads, bool shift)
 {
 	const size_t un = (size_t)n;
 	*wk = (dfsph_work){.n = n, .dt = dt, .threads = threads, .sh = sh, .bdiv = sh->nb.bdiv};
@@ -703,8 +706,9 @@ static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n,
 	wk->groups = eddy__arena_alloc(&w->arena, (wk->goff[n] ? wk->goff[n] : 1) * sizeof *wk->groups);
 	dfsph_vec4 **quads[] = {&wk->b, &wk->v, &wk->h, &wk->u, &wk->c};
 	float **floats[] = {&wk->dsym, &wk->k, &wk->ksum, &wk->kp, &wk->err, &wk->full, &wk->p, &wk->r, &wk->mask};
+	const size_t nquads = sizeof quads / sizeof *quads - (shift ? 0 : 1); /* c (grad C) only for the shift */
 	bool ok = wk->groups;
-	for (size_t a = 0; a < sizeof quads / sizeof *quads; ++a)
+	for (size_t a = 0; a < nquads; ++a)
 		ok = ok && (*quads[a] = eddy__arena_alloc(&w->arena, un * sizeof(dfsph_vec4)));
 	for (size_t a = 0; a < sizeof floats / sizeof *floats; ++a)
 		ok = ok && (*floats[a] = eddy__arena_alloc(&w->arena, un * sizeof(float)));
@@ -804,7 +808,7 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	if ((uint64_t)n > (uint64_t)UINT32_MAX) /* the groups hold j in 32 bits */
 		return eddy__fail(w, EDDY_ERR_INVALID, "%s: too many particles (%ld)", sys->label, n);
 	dfsph_work wk;
-	if (!prepare(w, &wk, sh, n, dt, ctx->threads))
+	if (!prepare(w, &wk, sh, n, dt, ctx->threads, sd->def.shift > 0))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
@@ -840,7 +844,7 @@ eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float
 		return EDDY_ERR_ORDER;
 	const long n = sph_rows(w, sh);
 	dfsph_work wk;
-	if (!prepare(w, &wk, sh, n, 1.0f, 1))
+	if (!prepare(w, &wk, sh, n, 1.0f, 1, false))
 		return EDDY_ERR_NOMEM;
 	memcpy(wk.p, k, (size_t)n * sizeof *k);
 	operator_product(&wk); /* the conjugate gradients' A p: u = -dt (...) for k = p, dt = 1 */
