@@ -36,6 +36,10 @@
  *   sf8_fold4(a, out)        out[l] = lane l + lane l + 4
  *   sf8_sum(a)               (f0 + f1) + (f2 + f3) of the fold
  *   sf8_pack(m, a, idx, out, out_idx)  see below
+ * and one on indices, not lanes of an sf8:
+ *   simd_widen16_add(b, o, idx)  idx[k] = b + o[k] for eight 16-bit o[k]
+ *                            (16 bytes at o, unaligned): one 16-bit load,
+ *                            widened, added (the SPH lists' packed groups)
  *
  * One pass, several back-ends: a source file that includes this header
  * is compiled normally (SSE, or scalar in a SIMD=scalar build) and, on x86
@@ -139,6 +143,11 @@ static inline void sf8_fold4(sf8 a, float out[4])
 {
 	_mm_storeu_ps(out, _mm_add_ps(_mm256_castps256_ps128(a), _mm256_extractf128_ps(a, 1)));
 }
+static inline void simd_widen16_add(uint32_t b, const void *o, uint32_t idx[8])
+{
+	const __m256i w = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)o));
+	_mm256_storeu_si256((__m256i *)(void *)idx, _mm256_add_epi32(w, _mm256_set1_epi32((int32_t)b)));
+}
 static inline sf8 simd_quad_pair_(const float *base, uint32_t a, uint32_t b)
 {
 	return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(base + 4 * (size_t)a)),
@@ -196,6 +205,12 @@ static inline sf8 sf8_gather(const float *base, const uint32_t idx[8])
 	                    _mm_setr_ps(base[idx[4]], base[idx[5]], base[idx[6]], base[idx[7]]));
 }
 static inline void sf8_fold4(sf8 a, float out[4]) { _mm_storeu_ps(out, _mm_add_ps(a.lo, a.hi)); }
+static inline void simd_widen16_add(uint32_t b, const void *o, uint32_t idx[8])
+{
+	const __m128i v = _mm_loadu_si128((const __m128i *)o), zero = _mm_setzero_si128(), vb = _mm_set1_epi32((int32_t)b);
+	_mm_storeu_si128((__m128i *)(void *)idx, _mm_add_epi32(_mm_unpacklo_epi16(v, zero), vb));
+	_mm_storeu_si128((__m128i *)(void *)(idx + 4), _mm_add_epi32(_mm_unpackhi_epi16(v, zero), vb));
+}
 static inline sf8 simd_quad_pair_(const float *base, uint32_t a, uint32_t b)
 {
 	return simd_halves_(_mm_loadu_ps(base + 4 * (size_t)a), _mm_loadu_ps(base + 4 * (size_t)b));
@@ -294,6 +309,13 @@ static inline void sf8_fold4(sf8 a, float out[4])
 {
 	for (int k = 0; k < 4; ++k)
 		out[k] = a.l[k] + a.l[k + 4];
+}
+static inline void simd_widen16_add(uint32_t b, const void *o, uint32_t idx[8])
+{
+	uint16_t h[8];
+	memcpy(h, o, sizeof h);
+	for (int k = 0; k < 8; ++k)
+		idx[k] = b + h[k];
 }
 static inline sf8 simd_quad_pair_(const float *base, uint32_t a, uint32_t b)
 {

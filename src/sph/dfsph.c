@@ -261,13 +261,14 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 	float t[7][SPH_BLOCK][4], w[6][SPH_BLOCK] = {{0}}, vmax[SPH_BLOCK];
 	for (long q = 0; q < cnt; ++q) {
 		const long i = i0 + q;
-		const uint32_t *list = sph_nbrs(nb, i), c = nb->count[i];
+		const uint32_t *list = sph_nbr_groups(nb, i), c = nb->count[i];
 		const sf8 pi = sf8_load_quad2(sh->pq + 4 * i);
 		sf8 sx = zero, sy = zero, sz = zero, s2 = zero, cx = zero, cy = zero, cz = zero, mv = zero;
 		dfsph_group *g = wk->groups + wk->goff[i];
 		for (uint32_t p = 0; p < c; p += 8, ++g) {
-			for (uint32_t l = 0; l < 8; ++l)
-				g->j[l] = p + l < c ? list[p + l] : (uint32_t)i;
+			list = sph_group_next(list, g->j); /* the padding: i itself */
+			for (uint32_t l = c - p; l < 8; ++l)
+				g->j[l] = (uint32_t)i;
 			sf8 rx, ry, rz, rw; /* x_i - x_j */
 			sf8_sub_gather_quads(pi, sh->pq, g->j, &rx, &ry, &rz, &rw);
 			const sf8 r2 = sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz));

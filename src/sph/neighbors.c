@@ -61,7 +61,7 @@ static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *cand, u
 		/* unpacked in vector-wide operations where the group is 16-bit,
 		 * so the packing's vector load of j is forwarded from them */
 		uint32_t j[8];
-		cand = sph_unpack_group(cand, j);
+		cand = sph_group_next(cand, j);
 		if (row_of)
 			for (uint32_t k = 0; k < 8; ++k)
 				j[k] = row_of[j[k]];
@@ -124,7 +124,8 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, sph_cursor *f
 	*fluid = *bound = (sph_cursor){0};
 #pragma omp parallel num_threads(threads) reduction(&& : ok)
 	{
-		/* scratch for a particle's lists once an array is full; + 8: whole groups */
+		/* a particle's hits before they are packed (+ 8: sf8_pack writes
+		 * whole groups), and its boundary list once that array is full */
 		uint32_t *jl = malloc((longest + 8) * sizeof *jl);
 		float *dv = malloc((longest + 8) * sizeof *dv);
 		sph_cursor cf = {0}, cb = {0};
@@ -134,22 +135,22 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, sph_cursor *f
 			if (!ok)
 				continue;
 			const uint32_t b = nb->verlet.slot_of[i], vc = nb->verlet.count[b];
-			/* the hits go straight to the list's room (+ 8: sf8_pack writes
-			 * whole groups), to scratch once the array is full */
-			uint32_t *list = sph_list_claim(&nb->nbr, &cf, vc + 8);
-			list = list ? list : jl;
 			const uint32_t cnt =
-				filter_fluid(f, nb->verlet.cand.data + nb->verlet.first[b], vc, f->p4 + 4 * i, list, dv);
+				filter_fluid(f, nb->verlet.cand.data + nb->verlet.first[b], vc, f->p4 + 4 * i, jl, dv);
 			/* after a permutation since the search (else the candidates are
 			 * in ascending rows, and so are their hits), sorted by row: they
 			 * are unless a particle changed cell, and then nearly */
 			uint32_t descents = 0; /* over the whole list, no early exit: the loop vectorises */
 			for (uint32_t a = 1; f->row_of && a < cnt; ++a)
-				descents += list[a - 1] > list[a];
+				descents += jl[a - 1] > jl[a];
 			if (descents)
-				sph_sort_hits(list, dv, cnt);
+				sph_sort_hits(jl, dv, cnt);
 			nb->wsum[i] = sph_cube_sum(dv, cnt);
-			sph_list_commit(&cf, cnt, &nb->first[i]);
+			/* packed into the list's room (the most words it can take); only
+			 * counted once the array is full */
+			const uint32_t most = (cnt + 7) / 8 * SPH_GROUP_WORDS_MAX;
+			uint32_t *list = sph_list_claim(&nb->nbr, &cf, most);
+			sph_list_commit(&cf, list ? sph_pack_groups(jl, cnt, list) : most, &nb->first[i]);
 			nb->count[i] = cnt;
 			filter_boundary(f, i, b, jl, &cb);
 		}

@@ -125,15 +125,8 @@ static inline void sph_cursor_merge(sph_cursor *into, const sph_cursor *c)
 	into->full = into->full || c->full;
 }
 
-/* ---- the Verlet candidates' packed groups (search.c writes, neighbors.c reads) ---- */
-/* A slot's fluid candidates (ascending) in groups of eight, the last padded
- * with copies of the last candidate; each group one word, its first
- * candidate b, then either the eight as 16-bit offsets from b (four words:
- * the span of a group is seldom more than a layer of cells' rows) or, when
- * they do not fit, the word b | SPH_WIDE and the eight whole (eight words). */
-#define SPH_WIDE 0x80000000u
-#define SPH_GROUP_WORDS_MAX 9
-
+/* ---- the packed groups of the fluid lists (sph.h): search.c and the
+ * filter write them, the passes read them with sph_group_next ---- */
 /* Packs cnt ascending candidates to out (room for SPH_GROUP_WORDS_MAX a
  * group); returns the words written. */
 static inline uint32_t sph_pack_groups(const uint32_t *c, uint32_t cnt, uint32_t *out)
@@ -157,21 +150,6 @@ static inline uint32_t sph_pack_groups(const uint32_t *c, uint32_t cnt, uint32_t
 		}
 	}
 	return (uint32_t)(w - out);
-}
-
-/* The group at *w into g[0..8); returns the next group. */
-static inline const uint32_t *sph_unpack_group(const uint32_t *w, uint32_t g[8])
-{
-	const uint32_t b = *w++;
-	if (b & SPH_WIDE) {
-		memcpy(g, w, 8 * sizeof *g);
-		return w + 8;
-	}
-	uint16_t o[8];
-	memcpy(o, w, sizeof o);
-	for (uint32_t k = 0; k < 8; ++k)
-		g[k] = b + o[k];
-	return w + 4;
 }
 
 /* ---- search.c ---- */

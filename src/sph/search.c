@@ -14,8 +14,8 @@
  * cells' boundary order differ from the index order.
  *
  * Each particle's lists go to the room its thread's cursor for its row of
- * cells hands out (sph_lists, sph.h), the Verlet fluid candidates packed
- * (neighbors.h).
+ * cells hands out (sph_lists, sph.h), the fluid ones (exact or candidates)
+ * packed in groups (sph.h).
  *
  * The same tests, in the same operation order, as neighbors.c's filter, and
  * the sums in sph_cube_sum's order: an exact-mode search gives the same bits
@@ -215,15 +215,9 @@ static void search_particle(const search_ctx *c, const block_runs *br, int r, ui
 	if (c->bound_order)
 		sph_sort_hits(bb->hit, bb->d, bcnt);
 	sph_cursor *cur = &fb->out[run->own_row];
-	if (o->exact) {
-		uint32_t *list = sph_list_room(o->list, cur, cnt, &o->first[i]);
-		if (list)
-			memcpy(list, fb->hit, cnt * sizeof *fb->hit);
-	} else {
-		uint32_t *list = sph_list_claim(o->list, cur, (cnt + 7) / 8 * SPH_GROUP_WORDS_MAX);
-		sph_list_commit(cur, list ? sph_pack_groups(fb->hit, cnt, list) : (cnt + 7) / 8 * SPH_GROUP_WORDS_MAX,
-		                &o->first[i]);
-	}
+	const uint32_t most = (cnt + 7) / 8 * SPH_GROUP_WORDS_MAX; /* packed (sph.h), exact or not */
+	uint32_t *list = sph_list_claim(o->list, cur, most);
+	sph_list_commit(cur, list ? sph_pack_groups(fb->hit, cnt, list) : most, &o->first[i]);
 	uint32_t *blist = sph_list_room(o->blist, &bb->out[run->own_row], bcnt, &o->bfirst[i]);
 	if (blist)
 		memcpy(blist, bb->hit, bcnt * sizeof *bb->hit);

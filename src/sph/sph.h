@@ -18,6 +18,7 @@
 #define EDDY_SPH_H
 
 #include "core.h"
+#include "simd.h"
 
 #ifndef M_PI
 #define M_PI 3.14159265358979323846
@@ -33,17 +34,19 @@ typedef struct sph_kernel_consts {
 } sph_kernel_consts;
 
 /* Neighbour lists, made by sph_density every step (neighbors.c): particle
- * i's fluid neighbours (itself excluded, r < h exactly, ascending index)
- * are sph_nbrs(nb, i)[0 .. count[i]), its boundary neighbours (r < h,
- * ascending) sph_bnbrs(nb, i)[0 .. bcount[i]), indexing the boundary
+ * i's fluid neighbours (itself excluded, r < h exactly, ascending index),
+ * count[i] of them, are packed in groups of eight from sph_nbr_groups(nb, i)
+ * (read with sph_group_next, below); its boundary neighbours (r < h,
+ * ascending) are sph_bnbrs(nb, i)[0 .. bcount[i]), indexing the boundary
  * arrays. Valid for the step that made them (the particle table is then in
  * grid-cell order). The sub-structs are private to the search's files
  * (neighbors.h); the passes read only the lists and the boundary arrays. */
 
 /* Lists of varying length packed in one array (the exact lists, the Verlet
  * candidates): list k starts at data[first[k]] and holds its count of
- * entries (the Verlet fluid candidates packed in 16-bit groups: neighbors.h),
- * with first and the counts beside the owner's other per-row arrays. A pass hands out
+ * entries (the fluid ones packed in groups: sph_group_next, below; first
+ * and the sizes in 4-byte words), with first and the counts beside the
+ * owner's other per-row arrays. A pass hands out
  * the array in chunks (sph_list_room in neighbors.h) from the front, so
  * only what the lists hold (and a chunk's tail per chunk) is ever written:
  * the pages of data beyond that stay untouched, not resident. Where each
@@ -190,8 +193,35 @@ bool eddy__sph_boundary_box_covers(const eddy_system *s, eddy_vec3 min, eddy_vec
 size_t eddy__sph_collider_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
                                  float *z, float *vol, eddy_vec3 *normal);
 
-/* Row i's fluid and boundary neighbours (count[i], bcount[i] of them). */
-static inline const uint32_t *sph_nbrs(const sph_neighbors *nb, long i) { return nb->nbr.data + nb->first[i]; }
+/* A list of fluid rows (ascending) packed in groups of eight, the last
+ * padded with copies of its last row: each group one word, its first row b,
+ * then either the eight as 16-bit offsets from b (four words: a group seldom
+ * spans more than a few layers of cells' rows) or, when they do not fit, the
+ * word b | SPH_WIDE and the eight whole (eight words). The exact lists take
+ * 2.5 bytes a neighbour instead of 4 (sph_pack_groups in neighbors.h writes
+ * them; the Verlet candidates are stored the same way). */
+#define SPH_WIDE 0x80000000u
+#define SPH_GROUP_WORDS_MAX 9
+
+/* The group at w into l[0..8) (16-bit offsets: simd.h's widen and add);
+ * returns the next group. The wide form is rare: its branch is predicted. */
+static inline const uint32_t *sph_group_next(const uint32_t *w, uint32_t l[8])
+{
+	const uint32_t b = w[0];
+	if (__builtin_expect((b & SPH_WIDE) != 0, 0)) {
+		memcpy(l, w + 1, 8 * sizeof *l);
+		return w + 9;
+	}
+	simd_widen16_add(b, w + 1, l);
+	return w + 5;
+}
+
+/* The group after the one at w, unread. */
+static inline const uint32_t *sph_group_skip(const uint32_t *w) { return w + (w[0] & SPH_WIDE ? 9 : 5); }
+
+/* Row i's fluid neighbours' first group (count[i] neighbours, (count[i] +
+ * 7) / 8 groups) and its boundary neighbours (bcount[i] of them). */
+static inline const uint32_t *sph_nbr_groups(const sph_neighbors *nb, long i) { return nb->nbr.data + nb->first[i]; }
 static inline const uint32_t *sph_bnbrs(const sph_neighbors *nb, long i) { return nb->bnbr.data + nb->bfirst[i]; }
 
 /* The rows the lists cover: a system after sph_density may have added
@@ -221,16 +251,5 @@ static inline void sph_block_pass(long n, int threads, void (*block)(const void 
 
 /* Four partial sums stored to memory, added in sf8_sum's order (simd.h). */
 static inline float sph_sum4(const float *l) { return (l[0] + l[1]) + (l[2] + l[3]); }
-
-/* The neighbours of a particle's last group, from q, padded with copies of
- * its last neighbour (the padding's lanes are masked out by the caller). */
-static inline void sph_group_rows(const uint32_t *list, uint32_t cnt, uint32_t q, uint32_t l[8])
-{
-	const uint32_t *g = list + q, last = cnt - 1 - q;
-	/* min(k, last) in arithmetic: written as a choice, it became a branch
-	 * per lane, mispredicted for the lanes around the count */
-	for (uint32_t k = 0; k < 8; ++k)
-		l[k] = g[last + ((k - last) & (0u - (uint32_t)(k < last)))];
-}
 
 #endif
