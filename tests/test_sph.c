@@ -1552,13 +1552,17 @@ static void neighbour_lists_grow_past_their_first_size(void)
 	}
 }
 
-/* The Verlet candidates are stored as 16-bit offsets within groups of eight
- * (neighbors.h), whole where a group spans more than 65535 rows. Here a
- * particle A has one neighbour C beside it in its row of cells and one, B,
- * in the next layer of cells, with a sheet of 300 x 300 particles in A's
- * layer (out of reach) between them in cell order: A's group {C, B} spans
- * over 90000 rows. A, B and C must see exactly their all-pairs neighbours,
- * at the search and in the steps that reuse its list. */
+/* The Verlet candidates and the exact lists are stored as 16-bit offsets
+ * within groups of eight (src/sph/sph.h), whole where a group spans more
+ * than 65535 rows. Here a particle A has one neighbour C beside it in its
+ * row of cells and one, B, in the next layer of cells, with a sheet of 300 x
+ * 300 particles in A's layer (out of reach) between them in cell order: A's
+ * group {C, B}, candidates and exact list, spans over 90000 rows (C's {A, B}
+ * too). A, B and C must see exactly their all-pairs neighbours, at the
+ * search and in the steps that reuse its list; and sph_viscosity, which
+ * reads the exact lists, must give equal and opposite pair forces as B and
+ * C move towards A (the sheet at rest feels none): sum_i a_i = 0 up to float
+ * rounding, which a row read wrongly from a wide group would break. */
 typedef struct span_check {
 	float h;
 	eddy_vec3 probe[3];
@@ -1606,12 +1610,27 @@ static void neighbour_lists_span_many_rows(void)
 	CHECK(pos != NULL);
 	for (int k = 0; k < SIDE * SIDE; ++k)
 		pos[k] = (eddy_vec3){0.1f + s * (float)(k % SIDE), 0.1f + 3 * h + s * (float)(k / SIDE), 0.1f};
+	eddy_vec3 *vel = calloc(SIDE * SIDE + 3, sizeof *vel);
+	CHECK(vel != NULL);
 	for (int p = 0; p < 3; ++p)
 		pos[SIDE * SIDE + p] = sc.probe[p];
+	vel[SIDE * SIDE + 1] = (eddy_vec3){0, 0, -0.05f}; /* B down onto A */
+	vel[SIDE * SIDE + 2] = (eddy_vec3){-0.05f, 0, 0}; /* C along x onto A */
 	eddy_sph_density_def de = eddy_default_sph_density_def();
 	de.spacing = s;
 	de.radius = h;
 	eddy_add_sph_density(w, &de);
+	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
+	eddy_add_sph_viscosity(w, &vi);
+	momentum_check mc = {0};
+	eddy_custom_system_def ms = eddy_default_custom_system_def();
+	const char *mreads[] = {"ax", "ay", "az", "neighbors"};
+	ms.name = "momentum_check";
+	ms.reads = mreads;
+	ms.read_count = 4;
+	ms.step = momentum_check_step;
+	ms.user = &mc;
+	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &ms)));
 	eddy_custom_system_def cs = eddy_default_custom_system_def();
 	const char *reads[] = {"x", "y", "z", "neighbors"};
 	cs.name = "span_check";
@@ -1620,14 +1639,19 @@ static void neighbour_lists_span_many_rows(void)
 	cs.step = span_check_step;
 	cs.user = &sc;
 	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
-	CHECK(eddy_world_add_particles(w, SIDE * SIDE + 3, pos, NULL) == EDDY_OK);
+	/* no integrate: the particles stay where they are, with their velocities */
+	CHECK(eddy_world_add_particles(w, SIDE * SIDE + 3, pos, vel) == EDDY_OK);
 	free(pos);
+	free(vel);
 	for (int f = 0; f < 3; ++f)
 		CHECK(eddy_world_step_frame(w) == EDDY_OK);
-	printf("    %d steps, %d probes found, %d with other than their 2 all-pairs neighbours\n", sc.steps, sc.found,
-	       sc.mismatch);
+	printf("    %d steps, %d probes found, %d with other than their 2 all-pairs neighbours; viscous forces in %d "
+	       "steps, |sum a| / sum |a| up to %.1e\n",
+	       sc.steps, sc.found, sc.mismatch, mc.forced, mc.worst);
 	CHECK(sc.steps >= 3);
 	CHECK(sc.found == 3 * sc.steps);
 	CHECK(sc.mismatch == 0);
+	CHECK(mc.forced == sc.steps);
+	CHECK(mc.worst < 1e-6); /* three pairs' forces */
 	eddy_destroy_world(w);
 }
