@@ -40,6 +40,8 @@
  *   simd_widen16_add(b, o, idx)  idx[k] = b + o[k] for eight 16-bit o[k]
  *                            (16 bytes at o, unaligned): one 16-bit load,
  *                            widened, added (the SPH lists' packed groups)
+ *   simd_narrow16_sub(idx, b, o)  its inverse: o[k] = the low 16 bits of
+ *                            idx[k] - b
  *
  * One pass, several back-ends: a source file that includes this header
  * is compiled normally (SSE, or scalar in a SIMD=scalar build) and, on x86
@@ -148,6 +150,16 @@ static inline void simd_widen16_add(uint32_t b, const void *o, uint32_t idx[8])
 	const __m256i w = _mm256_cvtepu16_epi32(_mm_loadu_si128((const __m128i *)o));
 	_mm256_storeu_si256((__m256i *)(void *)idx, _mm256_add_epi32(w, _mm256_set1_epi32((int32_t)b)));
 }
+static inline void simd_narrow16_sub(const uint32_t idx[8], uint32_t b, void *o)
+{
+	const __m256i d = _mm256_sub_epi32(_mm256_loadu_si256((const __m256i *)(const void *)idx),
+	                                   _mm256_set1_epi32((int32_t)b));
+	/* each 32-bit lane's low half to the low 8 bytes of its 128-bit lane, then the two together */
+	const __m256i lows = _mm256_setr_epi8(0, 1, 4, 5, 8, 9, 12, 13, -1, -1, -1, -1, -1, -1, -1, -1, 0, 1, 4, 5, 8, 9,
+	                                      12, 13, -1, -1, -1, -1, -1, -1, -1, -1);
+	const __m256i p = _mm256_permute4x64_epi64(_mm256_shuffle_epi8(d, lows), _MM_SHUFFLE(3, 1, 2, 0));
+	_mm_storeu_si128((__m128i *)o, _mm256_castsi256_si128(p));
+}
 static inline sf8 simd_quad_pair_(const float *base, uint32_t a, uint32_t b)
 {
 	return _mm256_insertf128_ps(_mm256_castps128_ps256(_mm_loadu_ps(base + 4 * (size_t)a)),
@@ -210,6 +222,16 @@ static inline void simd_widen16_add(uint32_t b, const void *o, uint32_t idx[8])
 	const __m128i v = _mm_loadu_si128((const __m128i *)o), zero = _mm_setzero_si128(), vb = _mm_set1_epi32((int32_t)b);
 	_mm_storeu_si128((__m128i *)(void *)idx, _mm_add_epi32(_mm_unpacklo_epi16(v, zero), vb));
 	_mm_storeu_si128((__m128i *)(void *)(idx + 4), _mm_add_epi32(_mm_unpackhi_epi16(v, zero), vb));
+}
+static inline void simd_narrow16_sub(const uint32_t idx[8], uint32_t b, void *o)
+{
+	const __m128i vb = _mm_set1_epi32((int32_t)b);
+	__m128i lo = _mm_sub_epi32(_mm_loadu_si128((const __m128i *)(const void *)idx), vb);
+	__m128i hi = _mm_sub_epi32(_mm_loadu_si128((const __m128i *)(const void *)(idx + 4)), vb);
+	/* the low halves sign-extended, so that the saturating pack keeps them as they are */
+	lo = _mm_srai_epi32(_mm_slli_epi32(lo, 16), 16);
+	hi = _mm_srai_epi32(_mm_slli_epi32(hi, 16), 16);
+	_mm_storeu_si128((__m128i *)o, _mm_packs_epi32(lo, hi));
 }
 static inline sf8 simd_quad_pair_(const float *base, uint32_t a, uint32_t b)
 {
@@ -316,6 +338,13 @@ static inline void simd_widen16_add(uint32_t b, const void *o, uint32_t idx[8])
 	memcpy(h, o, sizeof h);
 	for (int k = 0; k < 8; ++k)
 		idx[k] = b + h[k];
+}
+static inline void simd_narrow16_sub(const uint32_t idx[8], uint32_t b, void *o)
+{
+	uint16_t h[8];
+	for (int k = 0; k < 8; ++k)
+		h[k] = (uint16_t)(idx[k] - b);
+	memcpy(o, h, sizeof h);
 }
 static inline sf8 simd_quad_pair_(const float *base, uint32_t a, uint32_t b)
 {

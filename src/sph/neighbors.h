@@ -127,26 +127,26 @@ static inline void sph_cursor_merge(sph_cursor *into, const sph_cursor *c)
 
 /* ---- the packed groups of the fluid lists (sph.h): search.c and the
  * filter write them, the passes read them with sph_group_next ---- */
-/* Packs cnt ascending candidates to out (room for SPH_GROUP_WORDS_MAX a
- * group); returns the words written. */
-static inline uint32_t sph_pack_groups(const uint32_t *c, uint32_t cnt, uint32_t *out)
+/* Packs cnt ascending rows c[0 .. cnt) to out (room for SPH_GROUP_WORDS_MAX
+ * words a group); returns the words written. The last group's padding is
+ * written to c[cnt .. cnt + 7) first: c needs room for it. */
+static inline uint32_t sph_pack_groups(uint32_t *c, uint32_t cnt, uint32_t *out)
 {
+	if (cnt == 0)
+		return 0;
+	for (uint32_t k = 0; k < 7; ++k)
+		c[cnt + k] = c[cnt - 1];
 	uint32_t *w = out;
 	for (uint32_t q = 0; q < cnt; q += 8) {
-		uint32_t g[8];
-		for (uint32_t k = 0; k < 8; ++k)
-			g[k] = c[q + k < cnt ? q + k : cnt - 1];
+		const uint32_t *g = c + q;
 		if (g[7] - g[0] <= 0xFFFFu && g[0] < SPH_WIDE) {
-			uint16_t o[8];
-			for (uint32_t k = 0; k < 8; ++k)
-				o[k] = (uint16_t)(g[k] - g[0]);
-			*w++ = g[0];
-			memcpy(w, o, sizeof o);
-			w += 4;
+			w[0] = g[0];
+			simd_narrow16_sub(g, g[0], w + 1);
+			w += 5;
 		} else {
-			*w++ = g[0] | SPH_WIDE;
-			memcpy(w, g, sizeof g);
-			w += 8;
+			w[0] = g[0] | SPH_WIDE;
+			memcpy(w + 1, g, 8 * sizeof *g);
+			w += 9;
 		}
 	}
 	return (uint32_t)(w - out);
