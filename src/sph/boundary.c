@@ -131,7 +131,8 @@ eddy_status sph_boundary_sort(eddy_world *w, sph_neighbors *nb)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", total);
 	for (size_t i = 0; i < total; ++i)
 		key[i] = sph_cell_at(&nb->grid, nb->bx[i], nb->by[i], nb->bz[i]);
-	sph_counting_sort(key, total, sph_grid_cells(&nb->grid), nb->grid.bound_start, bd->order);
+	if (!sph_counting_sort(key, total, &nb->grid, &nb->grid.bound_start, bd->order))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for the neighbour cells");
 	for (int c = 0; c < bd->ncol; ++c) {
 		bd->col[c].at_search = bd->col[c].disp;
 		bd->col[c].rot_at_search = bd->col[c].rot;
@@ -211,7 +212,8 @@ static eddy_status boundary_fill(eddy_world *w, sph_shared *sh, float spacing, s
 	}
 	for (size_t i = 0; i < nstat; ++i)
 		key[i] = sph_cell_at(&nb->grid, x[i], y[i], z[i]);
-	sph_counting_sort(key, nstat, sph_grid_cells(&nb->grid), nb->grid.bound_start, order);
+	if (!sph_counting_sort(key, nstat, &nb->grid, &nb->grid.bound_start, order))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for the neighbour cells");
 	for (size_t i = 0; i < nstat; ++i) {
 		nb->bx[i] = x[order[i]];
 		nb->by[i] = y[order[i]];

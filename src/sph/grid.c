@@ -11,9 +11,31 @@
 #include <stdlib.h>
 #include <string.h>
 
+static bool starts_alloc(sph_cell_starts *s, size_t cells, size_t rows)
+{
+	s->base = calloc(rows + 1, sizeof *s->base);
+	s->off = calloc(cells ? cells : 1, sizeof *s->off);
+	s->wide = NULL;
+	return s->base && s->off;
+}
+
+static void starts_free(sph_cell_starts *s)
+{
+	free(s->base);
+	free(s->off);
+	free(s->wide);
+	memset(s, 0, sizeof *s);
+}
+
+void sph_grid_free(sph_grid *g)
+{
+	starts_free(&g->fluid_start);
+	starts_free(&g->bound_start);
+}
+
 eddy_status sph_grid_init(eddy_world *w, sph_grid *g, float h)
 {
-	if (g->fluid_start)
+	if (g->fluid_start.base)
 		return EDDY_OK;
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
 	g->ox = lo.x - h;
@@ -32,42 +54,120 @@ eddy_status sph_grid_init(eddy_world *w, sph_grid *g, float h)
 	g->gx = (int)gx;
 	g->gy = (int)gy;
 	g->gz = (int)gz;
-	const size_t cells = sph_grid_cells(g);
-	g->fluid_start = calloc(cells + 1, sizeof *g->fluid_start);
-	g->bound_start = calloc(cells + 1, sizeof *g->bound_start);
-	if (!g->fluid_start || !g->bound_start)
+	const size_t cells = sph_grid_cells(g), rows = (size_t)g->gy * (size_t)g->gz;
+	if (!starts_alloc(&g->fluid_start, cells, rows) || !starts_alloc(&g->bound_start, cells, rows)) {
+		sph_grid_free(g);
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu neighbour cells", cells);
+	}
 	return EDDY_OK;
 }
 
-/* Stable counting sort of keys[0..n) (cells in [0, cells)): order[k] is the
- * k-th index in cell order, start[c] the position of cell c's first. */
-void sph_counting_sort(const uint32_t *keys, size_t n, size_t cells, uint32_t *start, uint32_t *order)
+/* The wide form of s, allocated if it is not. */
+static uint32_t *starts_wide(sph_cell_starts *s, size_t cells)
 {
-	memset(start, 0, (cells + 1) * sizeof *start);
-	for (size_t i = 0; i < n; ++i)
-		start[keys[i] + 1]++;
-	for (size_t c = 0; c < cells; ++c)
-		start[c + 1] += start[c];
-	/* start[c] as the running cursor of cell c, then shifted back a cell */
-	for (size_t i = 0; i < n; ++i)
-		order[start[keys[i]]++] = (uint32_t)i;
-	for (size_t c = cells; c > 0; --c)
-		start[c] = start[c - 1];
-	start[0] = 0;
+	if (!s->wide)
+		s->wide = malloc((cells + 1) * sizeof *s->wide);
+	return s->wide;
 }
 
-/* The cell offsets of keys[0..n) already in cell order (non-decreasing):
- * start[c] is the first position in cell c or after it. One pass, no
- * permutation: a table that stayed in order needs only this. */
-void sph_cell_ranges(const uint32_t *keys, size_t n, size_t cells, uint32_t *start)
+/* Back to the offsets (they held this time): the wide form's memory freed. */
+static void starts_narrow(sph_cell_starts *s)
 {
-	size_t c = 0;
+	free(s->wide);
+	s->wide = NULL;
+}
+
+bool sph_counting_sort(const uint32_t *keys, size_t n, const sph_grid *g, sph_cell_starts *start, uint32_t *order)
+{
+	const size_t gx = (size_t)g->gx, cells = sph_grid_cells(g), rows = cells / gx;
+	uint32_t *base = start->base;
+	uint16_t *off = start->off;
+	/* the counts per cell (16 bits: a cell of 65536 or more wraps, and then
+	 * the rows' totals fall short of n), then their sums from each row's start */
+	memset(off, 0, cells * sizeof *off);
+	for (size_t i = 0; i < n; ++i)
+		off[keys[i]]++;
+	bool fits = true;
+	uint32_t at = 0;
+	for (size_t r = 0, c = 0; r < rows; ++r) {
+		base[r] = at;
+		uint32_t in = 0;
+		for (size_t x = 0; x < gx; ++x, ++c) {
+			const uint32_t k = off[c];
+			off[c] = (uint16_t)in;
+			in += k;
+		}
+		fits = fits && in <= 0xFFFFu;
+		at += in;
+	}
+	base[rows] = at;
+	if (fits && at == n) {
+		/* off[c] as the running cursor of cell c, then shifted back a cell in each row */
+		for (size_t i = 0; i < n; ++i) {
+			const uint32_t c = keys[i];
+			order[base[c / gx] + off[c]++] = (uint32_t)i;
+		}
+		for (size_t r = 0; r < rows; ++r) {
+			uint16_t *o = off + r * gx;
+			for (size_t x = gx - 1; x > 0; --x)
+				o[x] = o[x - 1];
+			o[0] = 0;
+		}
+		starts_narrow(start);
+		return true;
+	}
+	uint32_t *s = starts_wide(start, cells);
+	if (!s)
+		return false;
+	memset(s, 0, (cells + 1) * sizeof *s);
+	for (size_t i = 0; i < n; ++i)
+		s[keys[i] + 1]++;
+	for (size_t c = 0; c < cells; ++c)
+		s[c + 1] += s[c];
+	/* s[c] as the running cursor of cell c, then shifted back a cell */
+	for (size_t i = 0; i < n; ++i)
+		order[s[keys[i]]++] = (uint32_t)i;
+	for (size_t c = cells; c > 0; --c)
+		s[c] = s[c - 1];
+	s[0] = 0;
+	return true;
+}
+
+bool sph_cell_ranges(const uint32_t *keys, size_t n, const sph_grid *g, sph_cell_starts *start)
+{
+	const size_t gx = (size_t)g->gx, cells = sph_grid_cells(g), rows = cells / gx;
+	uint32_t *base = start->base;
+	uint16_t *off = start->off;
+	/* cell c = r gx + x starts at the first position i with keys[i] >= c */
+	bool fits = true;
+	size_t c = 0, r = 0, x = 0;
+	for (size_t i = 0; i <= n; ++i) {
+		const size_t k = i < n ? keys[i] : cells - 1;
+		for (; c <= k && c < cells; ++c) {
+			if (x == 0)
+				base[r] = (uint32_t)i;
+			const uint32_t o = (uint32_t)i - base[r];
+			fits = fits && o <= 0xFFFFu;
+			off[c] = (uint16_t)o;
+			if (++x == gx)
+				x = 0, ++r;
+		}
+	}
+	base[rows] = (uint32_t)n; /* a row's end is the next row's start: no offset */
+	if (fits) {
+		starts_narrow(start);
+		return true;
+	}
+	uint32_t *s = starts_wide(start, cells);
+	if (!s)
+		return false;
+	c = 0;
 	for (size_t i = 0; i < n; ++i)
 		while (c <= keys[i])
-			start[c++] = (uint32_t)i;
+			s[c++] = (uint32_t)i;
 	while (c <= cells)
-		start[c++] = (uint32_t)n;
+		s[c++] = (uint32_t)n;
+	return true;
 }
 
 bool sph_grow(void **p, size_t *have, size_t want, size_t elem)

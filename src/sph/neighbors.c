@@ -174,8 +174,7 @@ void eddy__sph_neighbors_free(sph_neighbors *nb)
 	free(nb->bnbr.data);
 	free(nb->verlet.cand.data);
 	free(nb->verlet.bcand.data);
-	free(nb->grid.fluid_start);
-	free(nb->grid.bound_start);
+	sph_grid_free(&nb->grid);
 	sph_boundary_free(nb);
 	memset(nb, 0, sizeof *nb);
 }
@@ -207,11 +206,12 @@ static inline float row_quad(const float *x, const float *y, const float *z, con
 }
 
 /* The table into cell order, the Verlet slots followed through the
- * permutation, the quads and the displacements; returns whether the table
- * was in order already. Then the first pass is all (a step of a fluid at
- * rest: a parallel region costs a thread wake-up) and the counting sort,
- * which makes grid.fluid_start, is left to the caller. */
-static bool cell_order(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threads)
+ * permutation, the quads and the displacements; returns 1 if the table was
+ * in order already, 0 if it was sorted, -1 when out of memory. In order,
+ * the first pass is all (a step of a fluid at rest: a parallel region costs
+ * a thread wake-up) and grid.fluid_start, which the sort makes, is left to
+ * the caller. */
+static int cell_order(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threads)
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	sph_verlet *v = &nb->verlet;
@@ -221,15 +221,16 @@ static bool cell_order(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threa
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(&& : sorted) reduction(max : d2max)
 	for (long i = 0; i < n; ++i) {
 		const uint32_t k = sph_cell_at(&nb->grid, x[i], y[i], z[i]);
-		rp->key[i] = nb->cell_of[i] = k;
+		rp->key[i] = k;
 		sorted = sorted && (i == 0 || sph_cell_at(&nb->grid, x[i - 1], y[i - 1], z[i - 1]) <= k);
 		const float d2 = row_quad(x, y, z, rp, v, i);
 		d2max = d2 > d2max ? d2 : d2max;
 	}
 	rp->moved2 = d2max;
 	if (sorted)
-		return true;
-	sph_counting_sort(rp->key, w->n, sph_grid_cells(&nb->grid), nb->grid.fluid_start, rp->order);
+		return 1;
+	if (!sph_counting_sort(rp->key, w->n, &nb->grid, &nb->grid.fluid_start, rp->order))
+		return -1;
 	eddy__permute_particles(w, rp->order, rp->scratch);
 	if (rp->verlet) {
 		uint32_t *slot = rp->scratch;
@@ -243,12 +244,11 @@ static bool cell_order(eddy_world *w, sph_neighbors *nb, row_pass *rp, int threa
 	x = eddy__col(w, COL_X_), y = eddy__col(w, COL_Y_), z = eddy__col(w, COL_Z_);
 #pragma omp parallel for num_threads(threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
-		nb->cell_of[i] = rp->key[rp->order[i]];
 		if (rp->verlet)
 			v->row_of[v->slot_of[i]] = (uint32_t)i;
 		row_quad(x, y, z, rp, v, i);
 	}
-	return false;
+	return 0;
 }
 
 /* l with room for want entries at least; what it held is not kept (no
@@ -382,14 +382,16 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	rp.scratch = rp.order + n;
 	/* every per-row array to n rows; what they held is not kept: a new count
 	 * forces a search, which needs none of it */
-	void **arrays[] = {(void **)&nb->cell_of, (void **)&nb->first, (void **)&nb->count,  (void **)&nb->bfirst,
+	void **arrays[] = {(void **)&nb->first, (void **)&nb->count,  (void **)&nb->bfirst,
 	                   (void **)&nb->bcount,  (void **)&nb->wsum,  (void **)&nb->bwsum,  (void **)&v->first,
 	                   (void **)&v->count,    (void **)&v->bfirst, (void **)&v->bcount,  (void **)&v->x,
 	                   (void **)&v->y,        (void **)&v->z,      (void **)&v->slot_of, (void **)&v->row_of};
 	if (!sph_grow_block(&nb->rows, &nb->rows_alloc, n, arrays, (int)(sizeof arrays / sizeof arrays[0])))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
 	v->age++;
-	const bool in_order = cell_order(w, nb, &rp, threads);
+	const int in_order = cell_order(w, nb, &rp, threads);
+	if (in_order < 0)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for the neighbour cells");
 	rp.moved2 = bmove2 > rp.moved2 ? bmove2 : rp.moved2;
 	/* valid while every particle is within skin/2 of its build slot's
 	 * position (0.49: float rounding); false for NaN too */
@@ -397,7 +399,8 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	const bool valid = rp.verlet && v->skin > 0 && rp.moved2 < half * half;
 	/* the search and the boundary pressure walk cells */
 	if (in_order && (!valid || nb->nbound > 0))
-		sph_cell_ranges(rp.key, n, sph_grid_cells(&nb->grid), nb->grid.fluid_start);
+		if (!sph_cell_ranges(rp.key, n, &nb->grid, &nb->grid.fluid_start))
+			return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for the neighbour cells");
 	if (!valid && (st = verlet_rebuild(w, sh, &rp, threads)) != EDDY_OK)
 		return st;
 	sh->pq = rp.p4;

@@ -24,10 +24,26 @@
 
 /* ---- grid.c ---- */
 eddy_status sph_grid_init(eddy_world *w, sph_grid *g, float h);
-void sph_counting_sort(const uint32_t *keys, size_t n, size_t cells, uint32_t *start, uint32_t *order);
-void sph_cell_ranges(const uint32_t *keys, size_t n, size_t cells, uint32_t *start);
+void sph_grid_free(sph_grid *g);
+/* Stable counting sort of keys[0..n) (cells of g): order[k] is the k-th
+ * index in cell order, *start where each cell's begin in it. False when out
+ * of memory (for the wide form). */
+bool sph_counting_sort(const uint32_t *keys, size_t n, const sph_grid *g, sph_cell_starts *start, uint32_t *order);
+/* *start for keys[0..n) already in cell order (non-decreasing): one pass, no
+ * permutation (a table that stayed in order needs only this). False when
+ * out of memory. */
+bool sph_cell_ranges(const uint32_t *keys, size_t n, const sph_grid *g, sph_cell_starts *start);
 
 static inline size_t sph_grid_cells(const sph_grid *g) { return (size_t)g->gx * (size_t)g->gy * (size_t)g->gz; }
+
+/* The first entry of cell x (0 <= x <= gx: gx gives the row's end) of row
+ * of cells row (y + gy z). */
+static inline uint32_t sph_cell_start(const sph_grid *g, const sph_cell_starts *s, size_t row, int x)
+{
+	if (s->wide)
+		return s->wide[row * (size_t)g->gx + (size_t)x];
+	return x < g->gx ? s->base[row] + s->off[row * (size_t)g->gx + (size_t)x] : s->base[row + 1];
+}
 
 static inline int sph_clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
 

@@ -117,15 +117,15 @@ static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br)
 			if (yy < 0 || yy >= g->gy || ext < 0)
 				continue;
 			const int x0 = br->x0 >= ext ? br->x0 - ext : 0, x1 = br->x1 < g->gx - ext ? br->x1 + ext : g->gx - 1;
-			const size_t row = ((size_t)zz * (size_t)g->gy + (size_t)yy) * (size_t)g->gx;
+			const size_t row = (size_t)zz * (size_t)g->gy + (size_t)yy;
 			cell_run *r = &br->run[br->count++];
-			r->fluid_begin = g->fluid_start[row + (size_t)x0];
-			r->fluid_end = g->fluid_start[row + (size_t)x1 + 1];
-			r->bound_begin = g->bound_start[row + (size_t)x0];
-			r->bound_end = g->bound_start[row + (size_t)x1 + 1];
+			r->fluid_begin = sph_cell_start(g, &g->fluid_start, row, x0);
+			r->fluid_end = sph_cell_start(g, &g->fluid_start, row, x1 + 1);
+			r->bound_begin = sph_cell_start(g, &g->bound_start, row, x0);
+			r->bound_end = sph_cell_start(g, &g->bound_start, row, x1 + 1);
 			const bool own = ey == 0 && ez == 0;
-			r->own_begin = own ? g->fluid_start[row + (size_t)br->x0] : 0;
-			r->own_end = own ? g->fluid_start[row + (size_t)br->x1 + 1] : 0;
+			r->own_begin = own ? sph_cell_start(g, &g->fluid_start, row, br->x0) : 0;
+			r->own_end = own ? sph_cell_start(g, &g->fluid_start, row, br->x1 + 1) : 0;
 			r->own_row = own ? (uint32_t)((yy - br->y0) + SEARCH_BY * (zz - br->z0)) : 0;
 			r->layer = layer;
 			r->fluid_at = br->nf;
@@ -286,7 +286,8 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
 	const uint32_t gx = (uint32_t)nb->grid.gx, gy = (uint32_t)nb->grid.gy;
 	long found = 0, blocks = 0;
 	for (size_t i = 0; i < w->n; ++i) {
-		const uint32_t cell = nb->cell_of[i], cx = cell % gx, cy = cell / gx % gy, cz = cell / (gx * gy);
+		const uint32_t cell = sph_cell_at(&nb->grid, c.x[i], c.y[i], c.z[i]); /* as the cell order's pass found */
+		const uint32_t cx = cell % gx, cy = cell / gx % gy, cz = cell / (gx * gy);
 		const uint32_t id =
 			(cz / SEARCH_BZ * (uint32_t)c.blocks_y + cy / SEARCH_BY) * (uint32_t)c.blocks_x + cx / SEARCH_BX;
 		if (found == 0 || id != ids[found - 1])

@@ -57,13 +57,25 @@ typedef struct sph_lists {
 	size_t used;  /* entries handed out by the last pass */
 } sph_lists;
 
+/* Where each cell's entries start in a table in cell order (grid.c): for
+ * each row of cells along x its first entry, 32 bits, and each cell's as a
+ * 16-bit offset from that, 2 bytes a cell (the grid spans the world bounds:
+ * most of its cells are empty); while some row of cells holds more than
+ * 65535 entries, every cell's start whole instead (wide, 4 bytes a cell).
+ * Read with sph_cell_start (neighbors.h). */
+typedef struct sph_cell_starts {
+	uint32_t *base; /* rows of cells + 1: the first entry of each row; the last the table's size */
+	uint16_t *off;  /* cells: cell c's first entry - base[its row] */
+	uint32_t *wide; /* cells + 1: cell c's first entry; NULL while the offsets hold */
+} sph_cell_starts;
+
 /* The cell grid (grid.c) */
 typedef struct sph_grid {
-	float ox, oy, oz;      /* m, the low corner of cell 0 */
-	float inv_cell;        /* 1/m, 1 / the cell size */
-	int gx, gy, gz;        /* cells along each axis, x fastest */
-	uint32_t *fluid_start; /* cells + 1: the rows of cell c are [fluid_start[c], fluid_start[c + 1]) */
-	uint32_t *bound_start; /* cells + 1: the same over the boundary particles in cell order */
+	float ox, oy, oz;            /* m, the low corner of cell 0 */
+	float inv_cell;              /* 1/m, 1 / the cell size */
+	int gx, gy, gz;              /* cells along each axis, x fastest */
+	sph_cell_starts fluid_start; /* the rows of each cell, the table in cell order */
+	sph_cell_starts bound_start; /* the same over the boundary particles in cell order */
 } sph_grid;
 
 /* The Verlet list (neighbors.c): the pairs closer than h (1 + skin) at the
@@ -140,7 +152,6 @@ typedef struct sph_neighbors {
 	/* private: the per-row arrays' block, its size in rows */
 	void *rows;
 	size_t rows_alloc;
-	uint32_t *cell_of; /* the cell of each row */
 	sph_grid grid;
 	sph_verlet verlet;
 	sph_boundary bnd;
