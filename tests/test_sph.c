@@ -995,6 +995,7 @@ static void sph_dfsph_suite(void); /* dfsph helper */
 static void verlet_lists_match_brute_force(void);
 static void neighbour_lists_grow_past_their_first_size(void);
 static void neighbour_lists_span_many_rows(void);
+static void neighbour_cells_hold_many_rows(void);
 
 void suite_sph(void)
 {
@@ -1019,6 +1020,7 @@ void suite_sph(void)
 	RUN(verlet_lists_match_brute_force);
 	RUN(neighbour_lists_grow_past_their_first_size);
 	RUN(neighbour_lists_span_many_rows);
+	RUN(neighbour_cells_hold_many_rows);
 	sph_dfsph_suite(); /* dfsph helper */
 }
 
@@ -1654,4 +1656,113 @@ static void neighbour_lists_span_many_rows(void)
 	CHECK(mc.forced == sc.steps);
 	CHECK(mc.worst < 1e-6); /* three pairs' forces */
 	eddy_destroy_world(w);
+}
+
+/* The cell grid stores each cell's first row as a 16-bit offset from its
+ * row of cells' first (src/sph/grid.c), every cell's whole while a row of
+ * cells holds more than 65535 particles. Here 70,000 particles fill one row
+ * of cells: a bar a cell across (4 x 4 particles) and 11 m long, added in
+ * cell order (the first step finds it in order) or against it (the first
+ * step sorts it: the two ways of making the cells' starts), and falling
+ * along its length (searched again as it moves). Every particle must see
+ * exactly its all-pairs neighbours, about 240 each. */
+typedef struct bar_check {
+	float h;
+	int steps, mismatch;
+	float most;
+	const float *x; /* for the sort by x */
+} bar_check;
+
+static bar_check *bar_sorting;
+static int bar_cmp_x(const void *a, const void *b)
+{
+	const float xa = bar_sorting->x[*(const uint32_t *)a], xb = bar_sorting->x[*(const uint32_t *)b];
+	return (xa > xb) - (xa < xb);
+}
+
+/* Every particle's all-pairs count, from the particles sorted by x: only
+ * those within h along x can be closer than h. */
+static eddy_status bar_check_step(eddy_world *w, const eddy_step_context *ctx, void *user)
+{
+	(void)ctx;
+	bar_check *bc = user;
+	size_t n;
+	const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
+				*z = eddy_world_channel(w, "z", NULL), *nc = eddy_world_channel(w, "neighbors", NULL);
+	uint32_t *by_x = malloc(n * sizeof *by_x);
+	CHECK(by_x != NULL);
+	for (size_t i = 0; i < n; ++i)
+		by_x[i] = (uint32_t)i;
+	bc->x = x;
+	bar_sorting = bc;
+	qsort(by_x, n, sizeof *by_x, bar_cmp_x);
+	const float h2 = bc->h * bc->h;
+	for (size_t a = 0, lo = 0; a < n; ++a) {
+		const uint32_t i = by_x[a];
+		while (x[by_x[lo]] < x[i] - bc->h)
+			lo++;
+		int cnt = 0;
+		for (size_t k = lo; k < n && x[by_x[k]] <= x[i] + bc->h; ++k) {
+			const uint32_t j = by_x[k];
+			const float rx = x[i] - x[j], ry = y[i] - y[j], rz = z[i] - z[j];
+			cnt += j != i && h2 - (rx * rx + ry * ry + rz * rz) > 0;
+		}
+		bc->mismatch += (float)cnt != nc[i];
+		bc->most = (float)cnt > bc->most ? (float)cnt : bc->most;
+	}
+	free(by_x);
+	bc->steps++;
+	return EDDY_OK;
+}
+
+static void neighbour_cells_hold_many_rows(void)
+{
+	for (int reversed = 0; reversed < 2; ++reversed) {
+		eddy_world_def d = eddy_default_world_def();
+		d.bounds_max = (eddy_vec3){11.2f, 0.3f, 0.3f};
+		d.threads = 2;
+		d.fps = 100;
+		d.gravity = (eddy_vec3){20, 0, 0}; /* along the bar */
+		eddy_world *w = eddy_create_world(&d, NULL, 0);
+		/* cells of h/2, just under 4 spacings: 4 x 4 particles across one; h
+		 * not a lattice distance (one of 8 spacings would make the count a
+		 * coin toss of rounding) */
+		const float s = 0.0025f, h = 0.0199f;
+		enum { ALONG = 4375, N = ALONG * 16 };
+		eddy_vec3 *pos = malloc(N * sizeof *pos);
+		CHECK(pos != NULL);
+		for (int k = 0; k < N; ++k) {
+			const int q = reversed ? N - 1 - k : k, a = q / 16, b = q % 16;
+			/* the cells start at bounds_min - h: y, z in 0.10125 .. 0.10875 stay in cell 12 */
+			pos[k] = (eddy_vec3){0.05f + s * (float)a, 0.10125f + s * (float)(b % 4), 0.10125f + s * (float)(b / 4)};
+		}
+		eddy_sph_density_def de = eddy_default_sph_density_def();
+		de.spacing = 2 * s; /* radius 4 spacings (sph_density's limit is 5); the bar is packed twice as dense */
+		de.radius = h;
+		eddy_add_sph_density(w, &de);
+		bar_check bc = {h, 0, 0, 0, NULL};
+		eddy_custom_system_def cs = eddy_default_custom_system_def();
+		const char *reads[] = {"x", "y", "z", "neighbors"};
+		cs.name = "bar_check";
+		cs.reads = reads;
+		cs.read_count = 4;
+		cs.step = bar_check_step;
+		cs.user = &bc;
+		CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
+		eddy_gravity_def g = eddy_default_gravity_def();
+		eddy_add_gravity(w, &g);
+		eddy_integrate_def it = eddy_default_integrate_def();
+		eddy_add_integrate(w, &it);
+		CHECK(eddy_world_add_particles(w, N, pos, NULL) == EDDY_OK);
+		free(pos);
+		for (int f = 0; f < 3; ++f)
+			CHECK(eddy_world_step_frame(w) == EDDY_OK);
+		printf("    %d particles in one row of cells, added %s cell order: %d steps, up to %.0f neighbours, %d counts "
+		       "differ from all pairs\n",
+		       N, reversed ? "against" : "in", bc.steps, (double)bc.most, bc.mismatch);
+		CHECK(bc.steps >= 3);
+		CHECK(bc.most > 200);
+		CHECK(bc.mismatch == 0);
+		eddy_destroy_world(w);
+	}
 }
