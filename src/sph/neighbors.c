@@ -372,14 +372,10 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		v->n = 0;
 		return EDDY_OK;
 	}
-	/* one arena block: the quads first (aligned as the arena), then key, order and scratch */
 	row_pass rp = {.verlet = v->n == n && v->boundary_sig == nb->bnd.sig};
-	rp.p4 = eddy__arena_alloc(&w->arena, 7 * n * sizeof *rp.p4);
+	rp.p4 = eddy__arena_alloc(&w->arena, 4 * n * sizeof *rp.p4);
 	if (!rp.p4)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", n);
-	rp.key = (uint32_t *)(void *)(rp.p4 + 4 * n);
-	rp.order = rp.key + n;
-	rp.scratch = rp.order + n;
 	/* every per-row array to n rows; what they held is not kept: a new count
 	 * forces a search, which needs none of it */
 	void **arrays[] = {(void **)&nb->first, (void **)&nb->count,  (void **)&nb->bfirst,
@@ -388,6 +384,12 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	                   (void **)&v->y,        (void **)&v->z,      (void **)&v->slot_of, (void **)&v->row_of};
 	if (!sph_grow_block(&nb->rows, &nb->rows_alloc, n, arrays, (int)(sizeof arrays / sizeof arrays[0])))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
+	/* key, order and scratch in per-row arrays of the last step's exact
+	 * lists: this step's are written after their last use (the cell
+	 * ranges, before any search), and the arena is spared 12 bytes a row */
+	rp.key = nb->first;
+	rp.order = nb->count;
+	rp.scratch = nb->wsum;
 	v->age++;
 	const int in_order = cell_order(w, nb, &rp, threads);
 	if (in_order < 0)
