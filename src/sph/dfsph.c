@@ -261,12 +261,13 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 	float t[7][SPH_BLOCK][4], w[6][SPH_BLOCK] = {{0}}, vmax[SPH_BLOCK];
 	for (long q = 0; q < cnt; ++q) {
 		const long i = i0 + q;
-		const uint32_t *list = sph_nbr_groups(nb, i), c = nb->count[i];
+		sph_groups list = sph_nbr_groups(nb, i);
+		const uint32_t c = nb->count[i];
 		const sf8 pi = sf8_load_quad2(sh->pq + 4 * i);
 		sf8 sx = zero, sy = zero, sz = zero, s2 = zero, cx = zero, cy = zero, cz = zero, mv = zero;
 		dfsph_group *g = wk->groups + wk->goff[i];
 		for (uint32_t p = 0; p < c; p += 8, ++g) {
-			list = sph_group_next(list, g->j); /* the padding: i itself */
+			sph_group_next(&list, g->j); /* the padding: i itself */
 			for (uint32_t l = c - p; l < 8; ++l)
 				g->j[l] = (uint32_t)i;
 			sf8 rx, ry, rz, rw; /* x_i - x_j */

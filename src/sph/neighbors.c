@@ -49,9 +49,10 @@ typedef struct filter_ctx {
 /* Build slot b's fluid candidates (vc of them, packed from cand) with
  * r^2 < h^2, as rows, into jl and their h^2 - r^2 into dv, in candidate
  * order; returns how many. The last group's padding is masked. */
-static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *cand, uint32_t vc, const float *pi,
+static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *packed, uint32_t vc, const float *pi,
                                     uint32_t *jl, float *dv)
 {
+	sph_groups cand = sph_groups_at(packed);
 	const sf8 vx = sf8_set1(pi[0]), vy = sf8_set1(pi[1]), vz = sf8_set1(pi[2]), vh2 = sf8_set1(f->h2),
 			  zero = sf8_zero();
 	const uint32_t *row_of = f->row_of;
@@ -61,7 +62,7 @@ static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *cand, u
 		/* unpacked in vector-wide operations where the group is 16-bit,
 		 * so the packing's vector load of j is forwarded from them */
 		uint32_t j[8];
-		cand = sph_group_next(cand, j);
+		sph_group_next(&cand, j);
 		if (row_of)
 			for (uint32_t k = 0; k < 8; ++k)
 				j[k] = row_of[j[k]];
@@ -148,7 +149,7 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, sph_cursor *f
 			nb->wsum[i] = sph_cube_sum(dv, cnt);
 			/* packed into the list's room (the most words it can take); only
 			 * counted once the array is full */
-			const uint32_t most = (cnt + 7) / 8 * SPH_GROUP_WORDS_MAX;
+			const uint32_t most = sph_packed_words_max(cnt);
 			uint32_t *list = sph_list_claim(&nb->nbr, &cf, most);
 			sph_list_commit(&cf, list ? sph_pack_groups(jl, cnt, list) : most, &nb->first[i]);
 			nb->count[i] = cnt;
@@ -258,7 +259,9 @@ static bool lists_reserve(sph_lists *l, size_t want)
 	if (want <= l->alloc)
 		return true;
 	free(l->data);
-	l->data = malloc(want * sizeof *l->data);
+	/* + 1: an empty list at the very end may still have its first word
+	 * loaded (sph_groups_at), never used */
+	l->data = malloc((want + 1) * sizeof *l->data);
 	l->alloc = l->data ? want : 0;
 	return l->data != NULL;
 }

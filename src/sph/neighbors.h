@@ -143,27 +143,33 @@ static inline void sph_cursor_merge(sph_cursor *into, const sph_cursor *c)
 
 /* ---- the packed groups of the fluid lists (sph.h): search.c and the
  * filter write them, the passes read them with sph_group_next ---- */
-/* Packs cnt ascending rows c[0 .. cnt) to out (room for SPH_GROUP_WORDS_MAX
- * words a group); returns the words written. The last group's padding is
- * written to c[cnt .. cnt + 7) first: c needs room for it. */
+/* Packs cnt ascending rows c[0 .. cnt) to out (room for
+ * sph_packed_words_max(cnt) words); returns the words written. The last
+ * group's padding is written to c[cnt .. cnt + 7) first: c needs room for
+ * it. */
 static inline uint32_t sph_pack_groups(uint32_t *c, uint32_t cnt, uint32_t *out)
 {
 	if (cnt == 0)
 		return 0;
 	for (uint32_t k = 0; k < 7; ++k)
 		c[cnt + k] = c[cnt - 1];
-	uint32_t *w = out;
+	uint32_t *w = out, prev = c[0];
+	*w++ = prev;
 	for (uint32_t q = 0; q < cnt; q += 8) {
 		const uint32_t *g = c + q;
-		if (g[7] - g[0] <= 0xFFFFu && g[0] < SPH_WIDE) {
-			w[0] = g[0];
-			simd_narrow16_sub(g, g[0], w + 1);
-			w += 5;
+		const uint32_t step = g[0] - prev;
+		if (step < SPH_GROUP_WIDE && g[7] - g[0] <= 0xFFFFu) {
+			simd_narrow16_sub(g, g[0], w);
+			const uint16_t s16 = (uint16_t)step;
+			memcpy(w, &s16, sizeof s16); /* in place of the first's 0 */
+			w += 4;
 		} else {
-			w[0] = g[0] | SPH_WIDE;
-			memcpy(w + 1, g, 8 * sizeof *g);
-			w += 9;
+			const uint16_t mark[8] = {SPH_GROUP_WIDE, 0, 0, 0, 0, 0, 0, 0};
+			memcpy(w, mark, sizeof mark);
+			memcpy(w + 4, g, 8 * sizeof *g);
+			w += SPH_GROUP_WORDS_MAX;
 		}
+		prev = g[0];
 	}
 	return (uint32_t)(w - out);
 }

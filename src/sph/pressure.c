@@ -79,18 +79,19 @@ void SIMD_NAME(pressure_pair_sums)(const pressure_args *a, long i0, long cnt, fl
 	const sph_neighbors *nb = a->nb;
 	for (long b = 0; b < cnt; ++b) {
 		const long i = i0 + b;
-		const uint32_t *list = sph_nbr_groups(nb, i), c = nb->count[i];
+		sph_groups list = sph_nbr_groups(nb, i);
+		const uint32_t c = nb->count[i];
 		const float *pi = a->pq + 4 * i;
 		const sf8 xi = sf8_set1(pi[0]), yi = sf8_set1(pi[1]), zi = sf8_set1(pi[2]), p_i = sf8_set1(a->p[i]);
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
 		uint32_t q = 0, l[8];
 		for (; q + 8 <= c; q += 8) {
-			list = sph_group_next(list, l);
+			sph_group_next(&list, l);
 			if (!group(a, l, false, 8, xi, yi, zi, p_i, &sx, &sy, &sz))
 				break;
 		}
 		if (q + 8 > c && q < c) { /* the last group, padded with its last neighbour */
-			sph_group_next(list, l);
+			sph_group_next(&list, l);
 			if (group(a, l, true, c - q, xi, yi, zi, p_i, &sx, &sy, &sz))
 				q = c;
 		}
@@ -124,13 +125,14 @@ static void pressure_block(const void *arg, long i0, long cnt)
 		const float pi_ = a.p[i];
 		float fx = sph_sum4(tb), fy = sph_sum4(tb + 4), fz = sph_sum4(tb + 8);
 		/* from group done[b] / 8 (the sums stop at a group's start) */
-		const uint32_t *list = sph_nbr_groups(nb, i), cnt_i = nb->count[i];
+		sph_groups list = sph_nbr_groups(nb, i);
+		const uint32_t cnt_i = nb->count[i];
 		for (uint32_t q = 0; q < done[b] && done[b] < cnt_i; q += 8)
-			list = sph_group_skip(list);
+			sph_group_skip(&list);
 		uint32_t l[8];
 		for (uint32_t q = done[b]; q < cnt_i; ++q) {
 			if (q % 8 == 0)
-				list = sph_group_next(list, l);
+				sph_group_next(&list, l);
 			const uint32_t j = l[q % 8];
 			float rx = xi - a.pq[4 * (size_t)j], ry = yi - a.pq[4 * (size_t)j + 1], rz = zi - a.pq[4 * (size_t)j + 2];
 			const float r2 = rx * rx + ry * ry + rz * rz;

@@ -215,7 +215,7 @@ static void search_particle(const search_ctx *c, const block_runs *br, int r, ui
 	if (c->bound_order)
 		sph_sort_hits(bb->hit, bb->d, bcnt);
 	sph_cursor *cur = &fb->out[run->own_row];
-	const uint32_t most = (cnt + 7) / 8 * SPH_GROUP_WORDS_MAX; /* packed (sph.h), exact or not */
+	const uint32_t most = sph_packed_words_max(cnt); /* packed (sph.h), exact or not */
 	uint32_t *list = sph_list_claim(o->list, cur, most);
 	sph_list_commit(cur, list ? sph_pack_groups(fb->hit, cnt, list) : most, &o->first[i]);
 	uint32_t *blist = sph_list_room(o->blist, &bb->out[run->own_row], bcnt, &o->bfirst[i]);

@@ -205,34 +205,71 @@ size_t eddy__sph_collider_points(const eddy_world *w, const eddy_system *s, floa
                                  float *z, float *vol, eddy_vec3 *normal);
 
 /* A list of fluid rows (ascending) packed in groups of eight, the last
- * padded with copies of its last row: each group one word, its first row b,
- * then either the eight as 16-bit offsets from b (four words: a group seldom
- * spans more than a few layers of cells' rows) or, when they do not fit, the
- * word b | SPH_WIDE and the eight whole (eight words). The exact lists take
- * 2.5 bytes a neighbour instead of 4 (sph_pack_groups in neighbors.h writes
- * them; the Verlet candidates are stored the same way). */
-#define SPH_WIDE 0x80000000u
-#define SPH_GROUP_WORDS_MAX 9
+ * padded with copies of its last row: one word, the first row; then each
+ * group as eight 16-bit numbers (four words): the group's first row less the
+ * previous group's first (the list's first row for the first group), then
+ * its other seven rows less its first. A group whose numbers do not fit (a
+ * step of 65535 rows or more between two groups' firsts, a span over 65535
+ * in one: rare, the rows of a group lie within a few layers of cells) is the
+ * marker SPH_GROUP_WIDE in place of the first number, then its eight rows
+ * whole (twelve words). A neighbour takes 2 bytes and a list 4 more, where
+ * a list of 4-byte rows took 4 a neighbour. sph_pack_groups (neighbors.h)
+ * writes them, for the exact lists and the Verlet candidates. */
+#define SPH_GROUP_WIDE 0xFFFFu
+#define SPH_GROUP_WORDS_MAX 12
 
-/* The group at w into l[0..8) (16-bit offsets: simd.h's widen and add);
- * returns the next group. The wide form is rare: its branch is predicted. */
-static inline const uint32_t *sph_group_next(const uint32_t *w, uint32_t l[8])
+/* The most words a list of cnt rows takes. */
+static inline uint32_t sph_packed_words_max(uint32_t cnt) { return cnt ? 1 + (cnt + 7) / 8 * SPH_GROUP_WORDS_MAX : 0; }
+
+/* A reader of a packed list: its next group and the first row of the last. */
+typedef struct sph_groups {
+	const uint32_t *w;
+	uint32_t first;
+} sph_groups;
+
+/* The reader of the packed list at p (of at least one row; the arrays
+ * holding lists have a word to spare at their end, so p may also be an
+ * empty list's, then never read on). */
+static inline sph_groups sph_groups_at(const uint32_t *p) { return (sph_groups){p + 1, p[0]}; }
+
+/* The next group into l[0..8) (16-bit numbers: simd.h's widen and add).
+ * The wide form is rare: its branch is predicted. */
+static inline void sph_group_next(sph_groups *g, uint32_t l[8])
 {
-	const uint32_t b = w[0];
-	if (__builtin_expect((b & SPH_WIDE) != 0, 0)) {
-		memcpy(l, w + 1, 8 * sizeof *l);
-		return w + 9;
+	uint16_t step;
+	memcpy(&step, g->w, sizeof step);
+	if (__builtin_expect(step == SPH_GROUP_WIDE, 0)) {
+		memcpy(l, g->w + 4, 8 * sizeof *l);
+		g->first = l[0];
+		g->w += SPH_GROUP_WORDS_MAX;
+		return;
 	}
-	simd_widen16_add(b, w + 1, l);
-	return w + 5;
+	g->first += step;
+	simd_widen16_add(g->first, g->w, l);
+	l[0] = g->first; /* its number was the step */
+	g->w += 4;
 }
 
-/* The group after the one at w, unread. */
-static inline const uint32_t *sph_group_skip(const uint32_t *w) { return w + (w[0] & SPH_WIDE ? 9 : 5); }
+/* Past the next group, unread. */
+static inline void sph_group_skip(sph_groups *g)
+{
+	uint16_t step;
+	memcpy(&step, g->w, sizeof step);
+	if (step == SPH_GROUP_WIDE) {
+		g->first = g->w[4];
+		g->w += SPH_GROUP_WORDS_MAX;
+	} else {
+		g->first += step;
+		g->w += 4;
+	}
+}
 
-/* Row i's fluid neighbours' first group (count[i] neighbours, (count[i] +
- * 7) / 8 groups) and its boundary neighbours (bcount[i] of them). */
-static inline const uint32_t *sph_nbr_groups(const sph_neighbors *nb, long i) { return nb->nbr.data + nb->first[i]; }
+/* Row i's fluid neighbours (count[i] of them, (count[i] + 7) / 8 groups) and
+ * its boundary neighbours (bcount[i] of them). */
+static inline sph_groups sph_nbr_groups(const sph_neighbors *nb, long i)
+{
+	return sph_groups_at(nb->nbr.data + nb->first[i]);
+}
 static inline const uint32_t *sph_bnbrs(const sph_neighbors *nb, long i) { return nb->bnbr.data + nb->bfirst[i]; }
 
 /* The rows the lists cover: a system after sph_density may have added

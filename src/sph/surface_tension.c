@@ -50,13 +50,13 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		const float xi = x[i], yi = y[i], zi = z[i];
-		const uint32_t *list = sph_nbr_groups(nb, i);
+		sph_groups list = sph_nbr_groups(nb, i);
 		const uint32_t cnt = nb->count[i];
 		float gx = 0, gy = 0, gz = 0;
 		uint32_t l[8];
 		for (uint32_t q = 0; q < cnt; ++q) {
 			if (q % 8 == 0)
-				list = sph_group_next(list, l);
+				sph_group_next(&list, l);
 			const uint32_t j = l[q % 8];
 			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
 			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
@@ -80,14 +80,14 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			continue; /* interior: n is noise, and dividing by |n| would amplify it */
 		const float ux = nx[i] / li, uy = ny[i] / li, uz = nz[i] / li;
 		const float xi = x[i], yi = y[i], zi = z[i];
-		const uint32_t *list = sph_nbr_groups(nb, i);
+		sph_groups list = sph_nbr_groups(nb, i);
 		const uint32_t cnt = nb->count[i];
 		/* sum V W over all neighbours (i itself included), over those with a normal */
 		float div = 0, w_all = kc.h2 * kc.h2 * kc.h2 * inv_rho[i], w_normal = w_all;
 		uint32_t l[8];
 		for (uint32_t q = 0; q < cnt; ++q) {
 			if (q % 8 == 0)
-				list = sph_group_next(list, l);
+				sph_group_next(&list, l);
 			const uint32_t j = l[q % 8];
 			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
 			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);

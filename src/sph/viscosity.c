@@ -83,7 +83,8 @@ void SIMD_NAME(visc_pair_sums)(const visc_args *a, long i0, long cnt, float *t)
 	const sph_neighbors *nb = a->nb;
 	for (long b = 0; b < cnt; ++b) {
 		const long i = i0 + b;
-		const uint32_t *list = sph_nbr_groups(nb, i), c = nb->count[i];
+		sph_groups list = sph_nbr_groups(nb, i);
+		const uint32_t c = nb->count[i];
 		/* (x_i y_i z_i 0) and (v_i rho_i) from i's quads, in registers (a
 		 * quad written to memory as floats and loaded back whole would
 		 * stall on store forwarding) */
@@ -95,11 +96,11 @@ void SIMD_NAME(visc_pair_sums)(const visc_args *a, long i0, long cnt, float *t)
 			s[k] = sf8_zero();
 		uint32_t q = 0, l[8];
 		for (; q + 8 <= c; q += 8) {
-			list = sph_group_next(list, l);
+			sph_group_next(&list, l);
 			group(a, l, false, 8, qp, qv, s);
 		}
 		if (q < c) { /* the last group, padded with its last neighbour */
-			sph_group_next(list, l);
+			sph_group_next(&list, l);
 			group(a, l, true, c - q, qp, qv, s);
 		}
 		for (int k = 0; k < 6; ++k)
