@@ -5,7 +5,13 @@
  * rows. Cells of h/2: the 5^3 cells around a particle hold 58% of the
  * candidates of the 3^3 cells of size h, and 7^3 of them cover the Verlet
  * radius h (1 + SPH_SKIN). The cell order is a stable counting sort, so it
- * is a function of the positions alone. */
+ * is a function of the positions alone.
+ * The grid spans the world bounds, most of its cells empty: where each
+ * cell's particles start is kept per row of cells along x, the row's first
+ * as 32 bits and each cell's as a 16-bit offset from it (sph_cell_starts,
+ * sph.h), 2 bytes a cell instead of 4; all 32-bit while some row of cells
+ * holds more than 65535 (a cell's count wraps in 16 bits, and then the
+ * rows' totals fall short of n: the sort sees it and takes the wide form). */
 #include "neighbors.h"
 
 #include <stdlib.h>

@@ -46,8 +46,8 @@ typedef struct sph_kernel_consts {
  * candidates): list k starts at data[first[k]] and holds its count of
  * entries (the fluid ones packed in groups: sph_group_next, below; first
  * and the sizes in 4-byte words), with first and the counts beside the
- * owner's other per-row arrays. A pass hands out
- * the array in chunks (sph_list_room in neighbors.h) from the front, so
+ * owner's other per-row arrays. A pass hands out the array in chunks
+ * (sph_list_room in neighbors.h) from the front, so
  * only what the lists hold (and a chunk's tail per chunk) is ever written:
  * the pages of data beyond that stay untouched, not resident. Where each
  * list lands depends on the threads' timing; what it holds does not. */
