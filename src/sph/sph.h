@@ -132,7 +132,7 @@ typedef struct sph_boundary {
 } sph_boundary;
 
 typedef struct sph_neighbors {
-	/* the exact lists (read them with sph_nbrs and sph_bnbrs) */
+	/* the exact lists (read them with sph_nbr_groups and sph_bnbrs) */
 	size_t n;
 	sph_lists nbr, bnbr;
 	uint32_t *first, *bfirst; /* per row: where its lists start in nbr, bnbr */
