@@ -152,8 +152,8 @@ static inline void simd_widen16_add(uint32_t b, const void *o, uint32_t idx[8])
 }
 static inline void simd_narrow16_sub(const uint32_t idx[8], uint32_t b, void *o)
 {
-	const __m256i d = _mm256_sub_epi32(_mm256_loadu_si256((const __m256i *)(const void *)idx),
-	                                   _mm256_set1_epi32((int32_t)b));
+	const __m256i d =
+		_mm256_sub_epi32(_mm256_loadu_si256((const __m256i *)(const void *)idx), _mm256_set1_epi32((int32_t)b));
 	/* each 32-bit lane's low half to the low 8 bytes of its 128-bit lane, then the two together */
 	const __m256i lows = _mm256_setr_epi8(0, 1, 4, 5, 8, 9, 12, 13, -1, -1, -1, -1, -1, -1, -1, -1, 0, 1, 4, 5, 8, 9,
 	                                      12, 13, -1, -1, -1, -1, -1, -1, -1, -1);

@@ -1654,9 +1654,10 @@ static void neighbour_lists_span_many_rows(void)
 	free(vel);
 	for (int f = 0; f < 3; ++f)
 		CHECK(eddy_world_step_frame(w) == EDDY_OK);
-	printf("    %d steps, %d probes found (A with %d neighbours), %d counts differ from all pairs; viscous forces in %d "
-	       "steps, |sum a| / sum |a| up to %.1e\n",
-	       sc.steps, sc.found, sc.a_count, sc.mismatch, mc.forced, mc.worst);
+	printf(
+		"    %d steps, %d probes found (A with %d neighbours), %d counts differ from all pairs; viscous forces in %d "
+		"steps, |sum a| / sum |a| up to %.1e\n",
+		sc.steps, sc.found, sc.a_count, sc.mismatch, mc.forced, mc.worst);
 	CHECK(sc.steps >= 3);
 	CHECK(sc.found == SPAN_PROBES * sc.steps);
 	CHECK(sc.a_count == 9); /* two groups */

@@ -144,20 +144,27 @@ bool sph_cell_ranges(const uint32_t *keys, size_t n, const sph_grid *g, sph_cell
 	const size_t gx = (size_t)g->gx, cells = sph_grid_cells(g), rows = cells / gx;
 	uint32_t *base = start->base;
 	uint16_t *off = start->off;
-	/* cell c = r gx + x starts at the first position i with keys[i] >= c */
+	/* cell c starts at the first position i with keys[i] >= c; a row of
+	 * cells with no particle (most of them: the grid spans the bounds) is
+	 * all zeros */
 	bool fits = true;
-	size_t c = 0, r = 0, x = 0;
-	for (size_t i = 0; i <= n; ++i) {
-		const size_t k = i < n ? keys[i] : cells - 1;
-		for (; c <= k && c < cells; ++c) {
-			if (x == 0)
-				base[r] = (uint32_t)i;
-			const uint32_t o = (uint32_t)i - base[r];
-			fits = fits && o <= 0xFFFFu;
-			off[c] = (uint16_t)o;
-			if (++x == gx)
-				x = 0, ++r;
+	size_t i = 0;
+	for (size_t r = 0; r < rows; ++r) {
+		const size_t c0 = r * gx;
+		uint16_t *o = off + c0;
+		base[r] = (uint32_t)i;
+		if (i == n || keys[i] >= c0 + gx) {
+			memset(o, 0, gx * sizeof *o);
+			continue;
 		}
+		for (size_t x = 0; x < gx; ++x) {
+			while (i < n && keys[i] < c0 + x)
+				++i;
+			o[x] = (uint16_t)(i - base[r]);
+		}
+		fits = fits && i - base[r] <= 0xFFFFu; /* the row's last start, its largest */
+		while (i < n && keys[i] < c0 + gx)
+			++i;
 	}
 	base[rows] = (uint32_t)n; /* a row's end is the next row's start: no offset */
 	if (fits) {
@@ -167,10 +174,10 @@ bool sph_cell_ranges(const uint32_t *keys, size_t n, const sph_grid *g, sph_cell
 	uint32_t *s = starts_wide(start, cells);
 	if (!s)
 		return false;
-	c = 0;
-	for (size_t i = 0; i < n; ++i)
-		while (c <= keys[i])
-			s[c++] = (uint32_t)i;
+	size_t c = 0;
+	for (size_t k = 0; k < n; ++k)
+		while (c <= keys[k])
+			s[c++] = (uint32_t)k;
 	while (c <= cells)
 		s[c++] = (uint32_t)n;
 	return true;

@@ -136,8 +136,7 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, sph_cursor *f
 			if (!ok)
 				continue;
 			const uint32_t b = nb->verlet.slot_of[i], vc = nb->verlet.count[b];
-			const uint32_t cnt =
-				filter_fluid(f, nb->verlet.cand.data + nb->verlet.first[b], vc, f->p4 + 4 * i, jl, dv);
+			const uint32_t cnt = filter_fluid(f, nb->verlet.cand.data + nb->verlet.first[b], vc, f->p4 + 4 * i, jl, dv);
 			/* after a permutation since the search (else the candidates are
 			 * in ascending rows, and so are their hits), sorted by row: they
 			 * are unless a particle changed cell, and then nearly */
@@ -381,10 +380,10 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", n);
 	/* every per-row array to n rows; what they held is not kept: a new count
 	 * forces a search, which needs none of it */
-	void **arrays[] = {(void **)&nb->first, (void **)&nb->count,  (void **)&nb->bfirst,
-	                   (void **)&nb->bcount,  (void **)&nb->wsum,  (void **)&nb->bwsum,  (void **)&v->first,
-	                   (void **)&v->count,    (void **)&v->bfirst, (void **)&v->bcount,  (void **)&v->x,
-	                   (void **)&v->y,        (void **)&v->z,      (void **)&v->slot_of, (void **)&v->row_of};
+	void **arrays[] = {(void **)&nb->first, (void **)&nb->count,  (void **)&nb->bfirst, (void **)&nb->bcount,
+	                   (void **)&nb->wsum,  (void **)&nb->bwsum,  (void **)&v->first,   (void **)&v->count,
+	                   (void **)&v->bfirst, (void **)&v->bcount,  (void **)&v->x,       (void **)&v->y,
+	                   (void **)&v->z,      (void **)&v->slot_of, (void **)&v->row_of};
 	if (!sph_grow_block(&nb->rows, &nb->rows_alloc, n, arrays, (int)(sizeof arrays / sizeof arrays[0])))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
 	/* key, order and scratch in per-row arrays of the last step's exact
