@@ -267,7 +267,7 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 		sf8 sx = zero, sy = zero, sz = zero, s2 = zero, cx = zero, cy = zero, cz = zero, mv = zero;
 		dfsph_group *g = wk->groups + wk->goff[i];
 		for (uint32_t p = 0; p < c; p += 8, ++g) {
-			sph_group_next(&list, g->j); /* the padding: i itself */
+			sph_group_rows(&list, g->j); /* the padding: i itself */
 			for (uint32_t l = c - p; l < 8; ++l)
 				g->j[l] = (uint32_t)i;
 			sf8 rx, ry, rz, rw; /* x_i - x_j */

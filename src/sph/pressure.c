@@ -86,12 +86,12 @@ void SIMD_NAME(pressure_pair_sums)(const pressure_args *a, long i0, long cnt, fl
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
 		uint32_t q = 0, l[8];
 		for (; q + 8 <= c; q += 8) {
-			sph_group_next(&list, l);
+			sph_group_rows(&list, l);
 			if (!group(a, l, false, 8, xi, yi, zi, p_i, &sx, &sy, &sz))
 				break;
 		}
 		if (q + 8 > c && q < c) { /* the last group, padded with its last neighbour */
-			sph_group_next(&list, l);
+			sph_group_rows(&list, l);
 			if (group(a, l, true, c - q, xi, yi, zi, p_i, &sx, &sy, &sz))
 				q = c;
 		}
@@ -132,7 +132,7 @@ static void pressure_block(const void *arg, long i0, long cnt)
 		uint32_t l[8];
 		for (uint32_t q = done[b]; q < cnt_i; ++q) {
 			if (q % 8 == 0)
-				sph_group_next(&list, l);
+				sph_group_rows(&list, l);
 			const uint32_t j = l[q % 8];
 			float rx = xi - a.pq[4 * (size_t)j], ry = yi - a.pq[4 * (size_t)j + 1], rz = zi - a.pq[4 * (size_t)j + 2];
 			const float r2 = rx * rx + ry * ry + rz * rz;

@@ -250,6 +250,35 @@ static inline void sph_group_next(sph_groups *g, uint32_t l[8])
 	g->w += 4;
 }
 
+/* The same for a group whose rows are then used one by one (as indices of
+ * scalar loads, as the passes' gathers do): the numbers taken apart in
+ * general registers, no vector store for the loads to wait on (a vector
+ * store's lanes read back one by one cost the passes about 10% on the AMD
+ * host at hand); sph_group_next where the group is loaded as a vector. */
+static inline void sph_group_rows(sph_groups *g, uint32_t l[8])
+{
+	uint64_t lo, hi;
+	memcpy(&lo, g->w, sizeof lo);
+	memcpy(&hi, g->w + 2, sizeof hi);
+	if (__builtin_expect((lo & 0xFFFFu) == SPH_GROUP_WIDE, 0)) {
+		memcpy(l, g->w + 4, 8 * sizeof *l);
+		g->first = l[0];
+		g->w += SPH_GROUP_WORDS_MAX;
+		return;
+	}
+	const uint32_t f = g->first + (uint32_t)(lo & 0xFFFFu);
+	g->first = f;
+	l[0] = f;
+	l[1] = f + (uint32_t)(lo >> 16 & 0xFFFFu);
+	l[2] = f + (uint32_t)(lo >> 32 & 0xFFFFu);
+	l[3] = f + (uint32_t)(lo >> 48);
+	l[4] = f + (uint32_t)(hi & 0xFFFFu);
+	l[5] = f + (uint32_t)(hi >> 16 & 0xFFFFu);
+	l[6] = f + (uint32_t)(hi >> 32 & 0xFFFFu);
+	l[7] = f + (uint32_t)(hi >> 48);
+	g->w += 4;
+}
+
 /* Past the next group, unread. */
 static inline void sph_group_skip(sph_groups *g)
 {

@@ -56,7 +56,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		uint32_t l[8];
 		for (uint32_t q = 0; q < cnt; ++q) {
 			if (q % 8 == 0)
-				sph_group_next(&list, l);
+				sph_group_rows(&list, l);
 			const uint32_t j = l[q % 8];
 			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
 			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
@@ -87,7 +87,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		uint32_t l[8];
 		for (uint32_t q = 0; q < cnt; ++q) {
 			if (q % 8 == 0)
-				sph_group_next(&list, l);
+				sph_group_rows(&list, l);
 			const uint32_t j = l[q % 8];
 			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
 			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);

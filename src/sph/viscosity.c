@@ -96,11 +96,11 @@ void SIMD_NAME(visc_pair_sums)(const visc_args *a, long i0, long cnt, float *t)
 			s[k] = sf8_zero();
 		uint32_t q = 0, l[8];
 		for (; q + 8 <= c; q += 8) {
-			sph_group_next(&list, l);
+			sph_group_rows(&list, l);
 			group(a, l, false, 8, qp, qv, s);
 		}
 		if (q < c) { /* the last group, padded with its last neighbour */
-			sph_group_next(&list, l);
+			sph_group_rows(&list, l);
 			group(a, l, true, c - q, qp, qv, s);
 		}
 		for (int k = 0; k < 6; ++k)
