@@ -48,8 +48,9 @@
  * more empty ones. Along gravity, from the top down: a run's surface is its
  * top cell's highest particle and its depth H reaches its bottom cell's
  * lowest; it gets an estimate only if it rests on a wall (a particle of its
- * bottom cell has boundary neighbours: sph_boundary_box or a collider's
- * particles) and none of its particles falls faster than sqrt(|g| h) (a fall
+ * bottom cell has a boundary neighbour at least s/2 below it, within 35
+ * degrees of straight below: sph_boundary_box or a collider's particles,
+ * not the foot of a side wall) and none of its particles falls faster than sqrt(|g| h) (a fall
  * of h/2): water in free fall, or a jet, has no hydrostatic pressure, and a
  * vertical jet's run is as long as the jet. Across gravity: an end of a run
  * is walled if one of its end cell's particles has a boundary neighbour at
@@ -126,8 +127,10 @@ static int run_end(const warm_walk *ww, size_t base, int b, int l, int dl)
 }
 
 /* Whether a particle of cell c has a boundary neighbour beyond it along
- * axis b in direction dir (at least s/2 further) and not below it (the
- * floor beside a free side's bottom particle is below it by a spacing). */
+ * axis b in direction dir (at least s/2 further): along gravity (b = a) one
+ * within 35 degrees of straight below (a floor, not a side wall's foot);
+ * across gravity one not below it (the floor under a free side's bottom
+ * particle is a spacing below it, a side wall beside it). */
 static bool walled(const warm_walk *ww, size_t c, int b, float dir, int a, float up)
 {
 	const sph_neighbors *nb = ww->nb;
@@ -135,9 +138,16 @@ static bool walled(const warm_walk *ww, size_t c, int b, float dir, int a, float
 	for (uint32_t i = ww->fs[c]; i < ww->fs[c + 1] && (long)i < ww->n; ++i) {
 		const uint32_t *bl = sph_bnbrs(nb, i);
 		const float *pi = ww->pq + 4 * (size_t)i;
-		for (uint32_t q = 0; q < nb->bcount[i]; ++q)
-			if ((bp[b][bl[q]] - pi[b]) * dir >= 0.5f * ww->s && (bp[a][bl[q]] - pi[a]) * up >= -0.5f * ww->s)
+		for (uint32_t q = 0; q < nb->bcount[i]; ++q) {
+			float d[3];
+			for (int e = 0; e < 3; ++e)
+				d[e] = bp[e][bl[q]] - pi[e];
+			const float across = d[0] * d[0] + d[1] * d[1] + d[2] * d[2] - d[b] * d[b];
+			/* along gravity: more below than beside (not a side wall's foot) */
+			const bool placed = b == a ? 2 * across < d[a] * d[a] : d[a] * up >= -0.5f * ww->s;
+			if (d[b] * dir >= 0.5f * ww->s && placed)
 				return true;
+		}
 	}
 	return false;
 }
@@ -247,7 +257,7 @@ long eddy__dfsph_hydrostatic_start(eddy_world *w, const sph_shared *sh, long n, 
 					const int last = run_end(&ww, base, a, l, dl);
 					const size_t cb = base + (size_t)last * ww.stride[a];
 					float surf = -INFINITY, bottom = INFINITY;
-					bool rest = true, wall = false;
+					bool rest = true;
 					for (int m = l; m != last + dl; m += dl) {
 						const size_t c = base + (size_t)m * ww.stride[a];
 						for (uint32_t i = fs[c]; i < fs[c + 1] && (long)i < n; ++i) {
@@ -255,9 +265,9 @@ long eddy__dfsph_hydrostatic_start(eddy_world *w, const sph_shared *sh, long n, 
 							surf = m == l ? fmaxf(surf, hgt) : surf;
 							bottom = c == cb ? fminf(bottom, hgt) : bottom;
 							rest = rest && -up * vel[i] <= vrest; /* the speed along g */
-							wall = wall || (c == cb && nb->bcount[i] > 0);
 						}
 					}
+					const bool wall = walled(&ww, cb, a, -up, a, up); /* a floor under its bottom */
 					for (int m = l; wall && rest && m != last + dl; m += dl) {
 						const size_t c = base + (size_t)m * ww.stride[a];
 						for (uint32_t i = fs[c]; i < fs[c + 1] && (long)i < n; ++i) {
