@@ -33,10 +33,9 @@
  * (with hydrostatic_start, when no particle has one, the velocity solve from
  * the pressure of water released at rest: dfsph_warm.c; the density solve's
  * k is then about 0), runs conjugate gradients (divergence_cg), then
- * projected relaxed Jacobi
- * sweeps (Ihmsen et al.) on the residual res_i (R_i where rho_i >=
- * DFSPH_SURFACE rho0, else the predicted rho_i - rho0), whose error is
- * |res_i| where k_i > 0, else max(res_i, 0):
+ * projected relaxed Jacobi sweeps (Ihmsen et al.) on the residual res_i
+ * (R_i where rho_i >= DFSPH_SURFACE rho0, else the predicted rho_i - rho0),
+ * whose error is |res_i| where k_i > 0, else max(res_i, 0):
  *   k_i <- max(k_i + omega res_i / (dt^n D'_i), 0),   omega = DFSPH_OMEGA,
  * n = 1 for the velocity solve, 2 for the density one; k >= 0 leaves the free
  * surface unpulled. max_divergence_error must be well below
