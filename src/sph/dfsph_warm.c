@@ -78,9 +78,11 @@
  * in closed tanks it pays at every size measured.
  *
  * Everything is serial, in row and cell order: the same bits for any
- * thread count. Cost, once: three walks over the cells, and per particle
- * the series' terms with K (H - eta) <= 12, at most SIDE_MODES^2 (near the
- * floor), a few elsewhere.
+ * thread count. Cost, once: three walks over the cells of the particles'
+ * box, and per particle the series' terms with K (H - eta) <= 12, at most
+ * SIDE_MODES^2 (near the floor), a few elsewhere. While every k is 0 and
+ * no particle touches a wall (water in free fall) each step pays one or
+ * two passes over the rows and no walk.
  *
  * Sources: Bender & Koschier, SCA 2015 (the warm start); the initial
  * pressure of a released body of water as a Laplace problem with p = 0 on
@@ -106,7 +108,7 @@ typedef struct warm_walk {
 	const float *pq;    /* (x y z 1/rho) quads */
 	long n;
 	float s;         /* m, the particle spacing */
-	int dims[3];     /* cells along each axis */
+	int lo[3], hi[3]; /* the occupied cells' box (inclusive), per axis */
 	size_t stride[3];
 } warm_walk;
 
@@ -116,7 +118,7 @@ typedef struct warm_walk {
 static int run_end(const warm_walk *ww, size_t base, int b, int l, int dl)
 {
 	int last = l;
-	for (int m = l, gap = 0; m >= 0 && m < ww->dims[b] && gap < RUN_GAP; m += dl) {
+	for (int m = l, gap = 0; m >= ww->lo[b] && m <= ww->hi[b] && gap < RUN_GAP; m += dl) {
 		const size_t c = base + (size_t)m * ww->stride[b];
 		if (ww->fs[c] == ww->fs[c + 1])
 			++gap;
@@ -212,11 +214,22 @@ long eddy__dfsph_hydrostatic_start(eddy_world *w, const sph_shared *sh, long n, 
 	/* The rows are in cell order this step; the cells' ranges must cover
 	 * them (sph_density refreshes them whenever there are boundary
 	 * particles): if not, no estimate rather than a wrong one. */
+	int clo[3] = {gr->gx, gr->gy, gr->gz}, chi[3] = {-1, -1, -1}; /* the occupied cells' box */
+	bool touch = false; /* some particle has a boundary neighbour */
 	for (long i = 0; i < n; ++i) {
 		const uint32_t c = nb->cell_of[i];
 		if (!(gr->fluid_start[c] <= (uint32_t)i && (uint32_t)i < gr->fluid_start[c + 1]))
 			return 0;
+		const int ci[3] = {(int)(c % (uint32_t)gr->gx), (int)(c / (uint32_t)gr->gx % (uint32_t)gr->gy),
+		                   (int)(c / ((uint32_t)gr->gx * (uint32_t)gr->gy))};
+		for (int e = 0; e < 3; ++e) {
+			clo[e] = ci[e] < clo[e] ? ci[e] : clo[e];
+			chi[e] = ci[e] > chi[e] ? ci[e] : chi[e];
+		}
+		touch = touch || nb->bcount[i] > 0;
 	}
+	if (!touch) /* nothing rests on a wall: water in free fall, every step of it */
+		return 0;
 	const int vcol[3] = {COL_VX, COL_VY, COL_VZ};
 	const float *vel = eddy__col(w, vcol[a]);
 	const eddy_arena_mark mark = eddy__arena_mark(&w->arena);
@@ -232,7 +245,8 @@ long eddy__dfsph_hydrostatic_start(eddy_world *w, const sph_shared *sh, long n, 
 	                      .pq = sh->pq,
 	                      .n = n,
 	                      .s = cbrtf(sh->mass / sh->rho0),
-	                      .dims = {gr->gx, gr->gy, gr->gz},
+	                      .lo = {clo[0], clo[1], clo[2]},
+	                      .hi = {chi[0], chi[1], chi[2]},
 	                      .stride = {1, (size_t)gr->gx, (size_t)gr->gx * (size_t)gr->gy}};
 	const uint32_t *fs = ww.fs;
 	const float up = ga[a] < 0 ? 1.0f : -1.0f; /* the height is up x_a */
@@ -244,11 +258,11 @@ long eddy__dfsph_hydrostatic_start(eddy_world *w, const sph_shared *sh, long n, 
 	 * whether it rests on a wall */
 	{
 		const int u = (a + 1) % 3, v = (a + 2) % 3;
-		const int top = up > 0 ? ww.dims[a] - 1 : 0, dl = up > 0 ? -1 : 1;
-		for (int iv = 0; iv < ww.dims[v]; ++iv)
-			for (int iu = 0; iu < ww.dims[u]; ++iu) {
+		const int top = up > 0 ? chi[a] : clo[a], dl = up > 0 ? -1 : 1;
+		for (int iv = clo[v]; iv <= chi[v]; ++iv)
+			for (int iu = clo[u]; iu <= chi[u]; ++iu) {
 				const size_t base = (size_t)iu * ww.stride[u] + (size_t)iv * ww.stride[v];
-				for (int l = top; l >= 0 && l < ww.dims[a];) {
+				for (int l = top; l >= clo[a] && l <= chi[a];) {
 					const size_t c0 = base + (size_t)l * ww.stride[a];
 					if (fs[c0] == fs[c0 + 1]) {
 						l += dl;
@@ -284,10 +298,10 @@ long eddy__dfsph_hydrostatic_start(eddy_world *w, const sph_shared *sh, long n, 
 	 * and the modes' span (the run's length, twice it with one end walled) */
 	for (int sb = 0; sb < 2; ++sb) {
 		const int b = (a + 1 + sb) % 3, u = (b + 1) % 3, v = (b + 2) % 3;
-		for (int iv = 0; iv < ww.dims[v]; ++iv)
-			for (int iu = 0; iu < ww.dims[u]; ++iu) {
+		for (int iv = clo[v]; iv <= chi[v]; ++iv)
+			for (int iu = clo[u]; iu <= chi[u]; ++iu) {
 				const size_t base = (size_t)iu * ww.stride[u] + (size_t)iv * ww.stride[v];
-				for (int l = 0; l < ww.dims[b];) {
+				for (int l = clo[b]; l <= chi[b];) {
 					const size_t c0 = base + (size_t)l * ww.stride[b];
 					if (fs[c0] == fs[c0 + 1]) {
 						++l;
