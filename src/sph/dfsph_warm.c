@@ -114,7 +114,7 @@ typedef struct warm_walk {
 
 /* A run of occupied cells along axis b of the line through cell base: from
  * layer l (occupied) on, in steps dl, until RUN_GAP empty cells or the
- * grid's end; returns its last occupied layer. */
+ * occupied box's end; returns its last occupied layer. */
 static int run_end(const warm_walk *ww, size_t base, int b, int l, int dl)
 {
 	int last = l;
