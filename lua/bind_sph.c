@@ -42,6 +42,7 @@ static const eddy_lua_field sph_dfsph_fields[] = {
 	EDDY_LUA_FIELD(eddy_sph_dfsph_def, max_divergence_iterations, EDDY_LUA_INT),
 	EDDY_LUA_FIELD(eddy_sph_dfsph_def, coarse_grid, EDDY_LUA_BOOL),
 	EDDY_LUA_FIELD(eddy_sph_dfsph_def, shift, EDDY_LUA_FLOAT),
+	EDDY_LUA_FIELD(eddy_sph_dfsph_def, hydrostatic_start, EDDY_LUA_BOOL),
 	EDDY_LUA_END,
 };
 

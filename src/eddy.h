@@ -687,6 +687,12 @@ typedef struct eddy_sph_dfsph_def {
 	                                  radius), its velocity kept: what lets deep water's
 	                                  particle lattice settle without bursts (0.02 does),
 	                                  but stirred water expands; 0 to 0.1 (default 0: off) */
+	bool hydrostatic_start;        /* with divergence_solver: when no particle has a pressure
+	                                  yet (the first step), start the velocity solve of water
+	                                  resting on a wall from the hydrostatic pressure of its
+	                                  depth instead of 0 (default on: deep water then sets up
+	                                  in a few iterations; the solved pressure is the same
+	                                  to the tolerances) */
 } eddy_sph_dfsph_def;
 EDDY_API eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void);
 EDDY_API eddy_system_id eddy_add_sph_dfsph(eddy_world *w, const eddy_sph_dfsph_def *def);

@@ -100,6 +100,7 @@ int main(int argc, char **argv)
 		{"stress_dfsph", suite_stress_dfsph, false},
 		{"long_dfsph", suite_long_dfsph, true},
 		{"dfsph_coarse", suite_dfsph_coarse, false},
+		{"dfsph_warm", suite_dfsph_warm, false},
 		{"stress_energy", suite_stress_energy, false},
 		{"mesh", suite_mesh, false},
 		{"long_mesh", suite_long_mesh, true},

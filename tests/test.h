@@ -84,6 +84,7 @@ void suite_long_slosh(void); /* minutes: make test-long */
 void suite_stress_dfsph(void);
 void suite_long_dfsph(void);
 void suite_dfsph_coarse(void); /* sph_dfsph's coarse level (dfsph_coarse.c) */
+void suite_dfsph_warm(void);   /* sph_dfsph's hydrostatic cold start (dfsph_warm.c) */
 
 /* meshes and particle files (issue 16) */
 void suite_mesh(void);

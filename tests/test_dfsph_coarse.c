@@ -37,6 +37,7 @@ static eddy_world *column(int side, int layers, bool coarse)
 	eddy_add_gravity(w, &g);
 	eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
 	df.coarse_grid = coarse;
+	df.hydrostatic_start = false; /* the cold start: the whole pressure to build, the coarse level's case */
 	eddy_add_sph_dfsph(w, &df);
 	eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
 	bb.max = d.bounds_max;

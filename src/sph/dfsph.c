@@ -29,11 +29,13 @@
  * predicted density by -(A k)_i, A = dt^2 grad^T grad symmetric positive
  * semi-definite with diagonal dt^2 D'_i, D'_i = |S_i + 2 B_i|^2 + sum_j
  * |G_ij|^2 (on the true rate A is not symmetric, and Jacobi sweeps can
- * diverge in a deep column). Each solve starts from its k of the last step,
- * runs conjugate gradients (divergence_cg), then projected relaxed Jacobi
- * sweeps (Ihmsen et al.) on the residual res_i (R_i where rho_i >=
- * DFSPH_SURFACE rho0, else the predicted rho_i - rho0), whose error is
- * |res_i| where k_i > 0, else max(res_i, 0):
+ * diverge in a deep column). Each solve starts from its k of the last step
+ * (with hydrostatic_start, when no particle has one, the velocity solve from
+ * the pressure of water released at rest: dfsph_warm.c; the density solve's
+ * k is then about 0), runs conjugate gradients (divergence_cg), then
+ * projected relaxed Jacobi sweeps (Ihmsen et al.) on the residual res_i
+ * (R_i where rho_i >= DFSPH_SURFACE rho0, else the predicted rho_i - rho0),
+ * whose error is |res_i| where k_i > 0, else max(res_i, 0):
  *   k_i <- max(k_i + omega res_i / (dt^n D'_i), 0),   omega = DFSPH_OMEGA,
  * n = 1 for the velocity solve, 2 for the density one; k >= 0 leaves the free
  * surface unpulled. max_divergence_error must be well below
@@ -93,6 +95,7 @@
  * Adami, Hu & Adams, JCP 2012 (eq. 27); Xu, Stansby & Laurence, JCP 228,
  * 2009, and Lind, Xu, Stansby & Rogers, JCP 231, 2012 (particle shifting). */
 #include "dfsph_coarse.h"
+#include "dfsph_warm.h"
 #include "simd.h"
 #include "sph.h"
 
@@ -491,7 +494,8 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	                            .max_divergence_error = 5e-5f,
 	                            .max_divergence_iterations = 1000,
 	                            .coarse_grid = false,
-	                            .shift = 0.0f};
+	                            .shift = 0.0f,
+	                            .hydrostatic_start = true};
 }
 
 static void pass(dfsph_work *wk, enum dfsph_pass_kind kind, bool divergence, bool projected)
@@ -809,6 +813,10 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 		return EDDY_OK;
 	if ((uint64_t)n > (uint64_t)UINT32_MAX) /* the groups hold j in 32 bits */
 		return eddy__fail(w, EDDY_ERR_INVALID, "%s: too many particles (%ld)", sys->label, n);
+	/* the velocity solve's warm start when there is none (dfsph_warm.c), its
+	 * scratch released before the step's */
+	if (sd->def.divergence_solver && sd->def.hydrostatic_start)
+		eddy__dfsph_hydrostatic_start(w, sh, n, eddy__col(w, sd->kcol[0]));
 	dfsph_work wk;
 	if (!prepare(w, &wk, sh, n, dt, ctx->threads, sd->def.shift > 0))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
