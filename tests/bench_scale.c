@@ -24,8 +24,9 @@
  *   bench_scale --child METHOD N THREADS STEPS [SOLVER]   one block run, a JSON line on stdout
  *                                     (SOLVER: FLIP's pressure solver, pcg (default), hypre or mg)
  *   bench_scale --pressure GRID SOLVER THREADS     one pressure run (pcg, hypre or mg), a JSON line
- * EDDY_SCALE_COARSE=1 runs sph_dfsph with coarse_grid on, EDDY_SCALE_COLD=1
- * with hydrostatic_start off (the velocity solve's cold start from k = 0). */
+ * EDDY_SCALE_COARSE=1 runs sph_dfsph with coarse_grid on, EDDY_SCALE_WARM=1
+ * with hydrostatic_start on (the velocity solve's first step from the rest
+ * pressure instead of k = 0). */
 #include <errno.h>
 #include <stdint.h>
 #include <math.h>
@@ -134,7 +135,7 @@ static eddy_world *block(const char *method, long n, int threads, eddy_flip_solv
 		eddy_add_sph_density(w, &de);
 		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
 		df.coarse_grid = getenv("EDDY_SCALE_COARSE") != NULL; /* the velocity solve's coarse level */
-		df.hydrostatic_start = getenv("EDDY_SCALE_COLD") == NULL;
+		df.hydrostatic_start = getenv("EDDY_SCALE_WARM") != NULL;
 		bench_add_sph_forces(w, dfsph ? &df : NULL);
 		eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
 		bb.max = d.bounds_max;

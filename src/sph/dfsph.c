@@ -495,7 +495,7 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	                            .max_divergence_iterations = 1000,
 	                            .coarse_grid = false,
 	                            .shift = 0.0f,
-	                            .hydrostatic_start = true};
+	                            .hydrostatic_start = false};
 }
 
 static void pass(dfsph_work *wk, enum dfsph_pass_kind kind, bool divergence, bool projected)

@@ -3,7 +3,7 @@
  * water that starts at rest and has no k of its own yet.
  *
  * Reads: the rows' positions (sph_shared pq) and velocities, the neighbour
- * grid's cells (neighbors.h: cell_of, fluid_start), the boundary neighbour
+ * grid's cells (neighbors.h: fluid_start), the boundary neighbour
  * counts, gravity. Writes: the velocity solve's warm-start column k.
  *
  * Why: each solve starts from its k of the last step (Bender & Koschier's
@@ -104,13 +104,24 @@
 
 typedef struct warm_walk {
 	const sph_neighbors *nb;
-	const uint32_t *fs; /* the cells' row ranges */
-	const float *pq;    /* (x y z 1/rho) quads */
+	const sph_grid *g; /* the cells' row ranges: cell_lo, cell_hi */
+	const float *pq;   /* (x y z 1/rho) quads */
 	long n;
-	float s;         /* m, the particle spacing */
+	float s;          /* m, the particle spacing */
 	int lo[3], hi[3]; /* the occupied cells' box (inclusive), per axis */
 	size_t stride[3];
 } warm_walk;
+
+/* The first row of cell c and the row after its last (the table in cell order). */
+static inline uint32_t cell_lo(const sph_grid *g, size_t c)
+{
+	return sph_cell_start(g, &g->fluid_start, c / (size_t)g->gx, (int)(c % (size_t)g->gx));
+}
+
+static inline uint32_t cell_hi(const sph_grid *g, size_t c)
+{
+	return sph_cell_start(g, &g->fluid_start, c / (size_t)g->gx, (int)(c % (size_t)g->gx) + 1);
+}
 
 /* A run of occupied cells along axis b of the line through cell base: from
  * layer l (occupied) on, in steps dl, until RUN_GAP empty cells or the
@@ -120,7 +131,7 @@ static int run_end(const warm_walk *ww, size_t base, int b, int l, int dl)
 	int last = l;
 	for (int m = l, gap = 0; m >= ww->lo[b] && m <= ww->hi[b] && gap < RUN_GAP; m += dl) {
 		const size_t c = base + (size_t)m * ww->stride[b];
-		if (ww->fs[c] == ww->fs[c + 1])
+		if (cell_lo(ww->g, c) == cell_hi(ww->g, c))
 			++gap;
 		else
 			gap = 0, last = m;
@@ -137,7 +148,7 @@ static bool walled(const warm_walk *ww, size_t c, int b, float dir, int a, float
 {
 	const sph_neighbors *nb = ww->nb;
 	const float *bp[3] = {nb->bx, nb->by, nb->bz};
-	for (uint32_t i = ww->fs[c]; i < ww->fs[c + 1] && (long)i < ww->n; ++i) {
+	for (uint32_t i = cell_lo(ww->g, c), iend = cell_hi(ww->g, c); i < iend && (long)i < ww->n; ++i) {
 		const uint32_t *bl = sph_bnbrs(nb, i);
 		const float *pi = ww->pq + 4 * (size_t)i;
 		for (uint32_t q = 0; q < nb->bcount[i]; ++q) {
@@ -206,7 +217,7 @@ long eddy__dfsph_hydrostatic_start(eddy_world *w, const sph_shared *sh, long n, 
 	for (int c = 1; c < 3; ++c)
 		a = fabsf(ga[c]) > fabsf(ga[a]) ? c : a;
 	/* no boundary particles: nothing rests on a wall */
-	if (n <= 0 || !(fabsf(ga[a]) > 0) || nb->nbound == 0 || !sh->pq || !gr->fluid_start)
+	if (n <= 0 || !(fabsf(ga[a]) > 0) || nb->nbound == 0 || !sh->pq || !gr->fluid_start.base)
 		return 0;
 	for (long i = 0; i < n; ++i)
 		if (k[i] != 0)
@@ -215,10 +226,11 @@ long eddy__dfsph_hydrostatic_start(eddy_world *w, const sph_shared *sh, long n, 
 	 * them (sph_density refreshes them whenever there are boundary
 	 * particles): if not, no estimate rather than a wrong one. */
 	int clo[3] = {gr->gx, gr->gy, gr->gz}, chi[3] = {-1, -1, -1}; /* the occupied cells' box */
-	bool touch = false; /* some particle has a boundary neighbour */
+	bool touch = false;                                           /* some particle has a boundary neighbour */
 	for (long i = 0; i < n; ++i) {
-		const uint32_t c = nb->cell_of[i];
-		if (!(gr->fluid_start[c] <= (uint32_t)i && (uint32_t)i < gr->fluid_start[c + 1]))
+		const float *p = sh->pq + 4 * i;
+		const uint32_t c = sph_cell_at(gr, p[0], p[1], p[2]);
+		if (!(cell_lo(gr, c) <= (uint32_t)i && (uint32_t)i < cell_hi(gr, c)))
 			return 0;
 		const int ci[3] = {(int)(c % (uint32_t)gr->gx), (int)(c / (uint32_t)gr->gx % (uint32_t)gr->gy),
 		                   (int)(c / ((uint32_t)gr->gx * (uint32_t)gr->gy))};
@@ -241,14 +253,13 @@ long eddy__dfsph_hydrostatic_start(eddy_world *w, const sph_shared *sh, long n, 
 		return 0;
 	}
 	const warm_walk ww = {.nb = nb,
-	                      .fs = gr->fluid_start,
+	                      .g = gr,
 	                      .pq = sh->pq,
 	                      .n = n,
 	                      .s = cbrtf(sh->mass / sh->rho0),
 	                      .lo = {clo[0], clo[1], clo[2]},
 	                      .hi = {chi[0], chi[1], chi[2]},
 	                      .stride = {1, (size_t)gr->gx, (size_t)gr->gx * (size_t)gr->gy}};
-	const uint32_t *fs = ww.fs;
 	const float up = ga[a] < 0 ? 1.0f : -1.0f; /* the height is up x_a */
 	const float g1 = sqrtf(g.x * g.x + g.y * g.y + g.z * g.z);
 	const float vrest = sqrtf(g1 * sh->h); /* the fastest fall that still counts as rest */
@@ -264,7 +275,7 @@ long eddy__dfsph_hydrostatic_start(eddy_world *w, const sph_shared *sh, long n, 
 				const size_t base = (size_t)iu * ww.stride[u] + (size_t)iv * ww.stride[v];
 				for (int l = top; l >= clo[a] && l <= chi[a];) {
 					const size_t c0 = base + (size_t)l * ww.stride[a];
-					if (fs[c0] == fs[c0 + 1]) {
+					if (cell_lo(gr, c0) == cell_hi(gr, c0)) {
 						l += dl;
 						continue;
 					}
@@ -274,7 +285,7 @@ long eddy__dfsph_hydrostatic_start(eddy_world *w, const sph_shared *sh, long n, 
 					bool rest = true;
 					for (int m = l; m != last + dl; m += dl) {
 						const size_t c = base + (size_t)m * ww.stride[a];
-						for (uint32_t i = fs[c]; i < fs[c + 1] && (long)i < n; ++i) {
+						for (uint32_t i = cell_lo(gr, c), iend = cell_hi(gr, c); i < iend && (long)i < n; ++i) {
 							const float hgt = up * ww.pq[4 * (size_t)i + a];
 							surf = m == l ? fmaxf(surf, hgt) : surf;
 							bottom = c == cb ? fminf(bottom, hgt) : bottom;
@@ -284,7 +295,7 @@ long eddy__dfsph_hydrostatic_start(eddy_world *w, const sph_shared *sh, long n, 
 					const bool wall = walled(&ww, cb, a, -up, a, up); /* a floor under its bottom */
 					for (int m = l; wall && rest && m != last + dl; m += dl) {
 						const size_t c = base + (size_t)m * ww.stride[a];
-						for (uint32_t i = fs[c]; i < fs[c + 1] && (long)i < n; ++i) {
+						for (uint32_t i = cell_lo(gr, c), iend = cell_hi(gr, c); i < iend && (long)i < n; ++i) {
 							eta[i] = fmaxf(surf - up * ww.pq[4 * (size_t)i + a], 0.0f) + 0.5f * ww.s;
 							depth[i] = surf - bottom + ww.s;
 						}
@@ -303,23 +314,22 @@ long eddy__dfsph_hydrostatic_start(eddy_world *w, const sph_shared *sh, long n, 
 				const size_t base = (size_t)iu * ww.stride[u] + (size_t)iv * ww.stride[v];
 				for (int l = clo[b]; l <= chi[b];) {
 					const size_t c0 = base + (size_t)l * ww.stride[b];
-					if (fs[c0] == fs[c0 + 1]) {
+					if (cell_lo(gr, c0) == cell_hi(gr, c0)) {
 						++l;
 						continue;
 					}
 					const int last = run_end(&ww, base, b, l, 1);
 					const size_t cl = base + (size_t)last * ww.stride[b];
 					float lo = INFINITY, hi = -INFINITY;
-					for (uint32_t i = fs[c0]; i < fs[c0 + 1] && (long)i < n; ++i)
+					for (uint32_t i = cell_lo(gr, c0), iend = cell_hi(gr, c0); i < iend && (long)i < n; ++i)
 						lo = fminf(lo, ww.pq[4 * (size_t)i + b]);
-					for (uint32_t i = fs[cl]; i < fs[cl + 1] && (long)i < n; ++i)
+					for (uint32_t i = cell_lo(gr, cl), iend = cell_hi(gr, cl); i < iend && (long)i < n; ++i)
 						hi = fmaxf(hi, ww.pq[4 * (size_t)i + b]);
-					const bool free_lo = !walled(&ww, c0, b, -1.0f, a, up),
-							   free_hi = !walled(&ww, cl, b, 1.0f, a, up);
+					const bool free_lo = !walled(&ww, c0, b, -1.0f, a, up), free_hi = !walled(&ww, cl, b, 1.0f, a, up);
 					const float len = hi - lo + ww.s, span_b = free_lo && free_hi ? len : 2 * len;
 					for (int m = l; m <= last && (free_lo || free_hi); ++m) {
 						const size_t c = base + (size_t)m * ww.stride[b];
-						for (uint32_t i = fs[c]; i < fs[c + 1] && (long)i < n; ++i) {
+						for (uint32_t i = cell_lo(gr, c), iend = cell_hi(gr, c); i < iend && (long)i < n; ++i) {
 							const float x = ww.pq[4 * (size_t)i + b];
 							xi[2 * i + sb] = (free_lo ? x - lo : hi - x) + 0.5f * ww.s;
 							span[2 * i + sb] = span_b;
