@@ -85,10 +85,10 @@
  * neighbour) and the exact lists, read in groups of eight, the last padded
  * with the particle itself (r = 0 gives G = 0: exact zeros in every sum, no
  * scalar tail, no mask). The positions do not change during the solves, so
- * every pass gets the same bits. Storing G_ij (16 B a pair with its index,
- * some 512 B a particle) made the sweeps stream four times what the lists
- * and the gathered quads hold; the sqrt and the division a pair now costs
- * are cheaper than that traffic once it leaves the cache.
+ * every pass gets the same bits. Stored with its index, G_ij took 16 B a
+ * pair (some 512 B a particle), which every sweep streamed from memory once
+ * it outgrew the cache; recomputed, a pair costs a gather, a sqrt and a
+ * division and reads only its 4 B of list.
  *
  * Published per frame: solver = "dfsph", iterations and divergence_iterations
  * (the solves' mean per step), residual (largest final mean density error of
@@ -130,16 +130,16 @@ typedef struct dfsph_work {
 	eddy_vec3 gravity; /* m/s^2 */
 	const float *bdiv; /* the moving walls' part of the rate (sph.h); NULL while none moves
 	                    * and in the operator's product, which is linear */
-	dfsph_vec4 *b; /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
-	dfsph_vec4 *v; /* v*_i (w unused: a neighbour's velocity is one quad) */
-	dfsph_vec4 *h; /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
-	dfsph_vec4 *c; /* grad C_i = sum_j G_ij / rho_j (1/m), and w = max_j 1 / rho_j */
-	float *dsym;   /* 1 / D'_i, the symmetric operator's diagonal (0 likewise) */
-	float *k;      /* the k_i a correction applies */
-	float *ksum;   /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
-	float *kp;     /* the pressure's k_i: the sum over both solves */
-	float *err;    /* per particle: the error the sweep measured, or R_i(v) */
-	float *full;   /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the velocity solve's particles */
+	dfsph_vec4 *b;     /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
+	dfsph_vec4 *v;     /* v*_i (w unused: a neighbour's velocity is one quad) */
+	dfsph_vec4 *h;     /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
+	dfsph_vec4 *c;     /* grad C_i = sum_j G_ij / rho_j (1/m), and w = max_j 1 / rho_j */
+	float *dsym;       /* 1 / D'_i, the symmetric operator's diagonal (0 likewise) */
+	float *k;          /* the k_i a correction applies */
+	float *ksum;       /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
+	float *kp;         /* the pressure's k_i: the sum over both solves */
+	float *err;        /* per particle: the error the sweep measured, or R_i(v) */
+	float *full;       /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the velocity solve's particles */
 	/* the conjugate gradients' (divergence_cg) */
 	dfsph_vec4 *u;       /* the velocity change of a direction: -dt grad p */
 	float *p;            /* the search direction (a change of k) */
@@ -266,8 +266,9 @@ static inline const uint32_t *group_rows(const uint32_t *list, uint32_t c, uint3
 {
 	if (c - p >= 8)
 		return list + p;
-	for (uint32_t l = 0; l < 8; ++l)
-		pad[l] = p + l < c ? list[p + l] : i;
+	sph_group_rows(list, c, p, pad); /* padded with copies of the last: no load past the list */
+	for (uint32_t l = 0; l < 8; ++l) /* a blend, no branch per lane */
+		pad[l] = l < c - p ? pad[l] : i;
 	return pad;
 }
 
@@ -288,7 +289,8 @@ static inline sf8 pair_f(const dfsph_kern *kc, sf8 pi, const float *pq, const ui
 }
 
 /* G_ij by component for the group of rows j. */
-static inline void pair_grad(const dfsph_kern *kc, sf8 pi, const float *pq, const uint32_t *j, sf8 *gx, sf8 *gy, sf8 *gz)
+static inline void pair_grad(const dfsph_kern *kc, sf8 pi, const float *pq, const uint32_t *j, sf8 *gx, sf8 *gy,
+                             sf8 *gz)
 {
 	sf8 rx, ry, rz;
 	const sf8 f = pair_f(kc, pi, pq, j, &rx, &ry, &rz);
@@ -324,7 +326,7 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 			sy = sf8_add(sy, gy);
 			sz = sf8_add(sz, gz);
 			s2 = sf8_add(s2, sf8_add(sf8_add(sf8_mul(gx, gx), sf8_mul(gy, gy)), sf8_mul(gz, gz)));
-			if (wk->c) {                                  /* the shift's grad C, only when it runs */
+			if (wk->c) {                                   /* the shift's grad C, only when it runs */
 				const sf8 vj = sf8_gather(sh->inv_rho, j); /* V_j / m */
 				cx = sf8_add(cx, sf8_mul(gx, vj));
 				cy = sf8_add(cy, sf8_mul(gy, vj));
