@@ -81,6 +81,17 @@
  * oscillated in a pool leaves the level 4.3% high (mean density 0.975 rho0),
  * +2.8% (0.978) without the shift.
  *
+ * Nothing is stored per pair: each pass over the pairs (the gradient pass,
+ * every sweep, correction and operator product) recomputes G_ij from the
+ * positions sph_density saw (sph_shared's pq, one 16-byte gather per
+ * neighbour) and the exact lists, read in groups of eight, the last padded
+ * with the particle itself (r = 0 gives G = 0: exact zeros in every sum, no
+ * scalar tail, no mask). The positions do not change during the solves, so
+ * every pass gets the same bits. Stored with its index, G_ij took 16 B a
+ * pair (some 512 B a particle), which every sweep streamed from memory once
+ * it outgrew the cache; recomputed, a pair costs a gather, a sqrt and a
+ * division and reads only its 4 B of list.
+ *
  * Published per frame: solver = "dfsph", iterations and divergence_iterations
  * (the solves' mean per step), residual (largest final mean density error of
  * a step), residual_max (... of one particle, / rho0), unconverged (steps in
@@ -111,14 +122,6 @@ typedef struct dfsph_vec4 {
 	float x, y, z, w;
 } dfsph_vec4;
 
-/* Eight pairs of one particle: the neighbours and G_ij by component. Its
- * last group is padded with the particle itself and G = 0 (exact zeros in
- * every sum): the sweeps stream one array with no scalar tail and no mask. */
-typedef struct dfsph_group {
-	uint32_t j[8];
-	float gx[8], gy[8], gz[8];
-} dfsph_group;
-
 /* A step's inputs and scratch (the arrays in the world's arena, n each). */
 typedef struct dfsph_work {
 	long n;
@@ -130,18 +133,16 @@ typedef struct dfsph_work {
 	eddy_vec3 gravity; /* m/s^2 */
 	const float *bdiv; /* the moving walls' part of the rate (sph.h); NULL while none moves
 	                    * and in the operator's product, which is linear */
-	size_t *goff;      /* particle i's groups are groups[goff[i] .. goff[i + 1]) */
-	dfsph_group *groups;
-	dfsph_vec4 *b; /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
-	dfsph_vec4 *v; /* v*_i (w unused: a neighbour's velocity is one quad) */
-	dfsph_vec4 *h; /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
-	dfsph_vec4 *c; /* grad C_i = sum_j G_ij / rho_j (1/m), and w = max_j 1 / rho_j */
-	float *dsym;   /* 1 / D'_i, the symmetric operator's diagonal (0 likewise) */
-	float *k;      /* the k_i a correction applies */
-	float *ksum;   /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
-	float *kp;     /* the pressure's k_i: the sum over both solves */
-	float *err;    /* per particle: the error the sweep measured, or R_i(v) */
-	float *full;   /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the velocity solve's particles */
+	dfsph_vec4 *b;     /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
+	dfsph_vec4 *v;     /* v*_i (w unused: a neighbour's velocity is one quad) */
+	dfsph_vec4 *h;     /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
+	dfsph_vec4 *c;     /* grad C_i = sum_j G_ij / rho_j (1/m), and w = max_j 1 / rho_j */
+	float *dsym;       /* 1 / D'_i, the symmetric operator's diagonal (0 likewise) */
+	float *k;          /* the k_i a correction applies */
+	float *ksum;       /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
+	float *kp;         /* the pressure's k_i: the sum over both solves */
+	float *err;        /* per particle: the error the sweep measured, or R_i(v) */
+	float *full;       /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the velocity solve's particles */
 	/* the conjugate gradients' (divergence_cg) */
 	dfsph_vec4 *u;       /* the velocity change of a direction: -dt grad p */
 	float *p;            /* the search direction (a change of k) */
@@ -249,17 +250,68 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 		out[k][q] = sph_sum4(s[k]);
 }
 
-/* The gradient pass: the block's groups and G_ij (0 for a pair closer than
- * 1e-3 h, at r >= h, the list's margin, and for the padding); then per
- * particle S_i, sum_j |G_ij|^2, the walls' sums, h_i, 1 / D_i and 1 / D'_i
- * (0 where D is negligible, below dmin). */
+/* The spiky gradient's constants for the pair passes, in registers. */
+typedef struct dfsph_kern {
+	sf8 h, eps2, mg, one, zero;
+} dfsph_kern;
+
+static inline dfsph_kern kern(const sph_shared *sh)
+{
+	return (dfsph_kern){sf8_set1(sh->k.h), sf8_set1(1e-6f * sh->k.h2), sf8_set1(sh->mass * sh->k.spiky_grad),
+	                    sf8_set1(1.0f), sf8_zero()};
+}
+
+/* The rows of particle i's neighbours p .. p + 7 (of its c), the next group
+ * of its packed list (read in order from p = 0), into pad; the last group's
+ * padding (copies of its last row) replaced by i itself, whose r = 0 makes
+ * G = 0 (exact zeros in every sum: no scalar tail, no mask). The lists are
+ * read only here. */
+static inline const uint32_t *group_rows(sph_groups *list, uint32_t c, uint32_t p, uint32_t i, uint32_t pad[8])
+{
+	sph_group_rows(list, pad);
+	if (c - p < 8)
+		for (uint32_t l = 0; l < 8; ++l) /* a blend, no branch per lane */
+			pad[l] = l < c - p ? pad[l] : i;
+	return pad;
+}
+
+/* f_ij of G_ij = f_ij (x_i - x_j) for the eight rows j, f = m spiky_grad (h -
+ * r)^2 / r (0 for a pair closer than 1e-3 h, at r >= h: the list's margin,
+ * and the padding), and x_i - x_j in rx ry rz; pi holds x_i twice. The
+ * sweeps recompute it from the positions sph_density saw (pq), which do not
+ * change during the solves: every pass gets the same bits. */
+static inline sf8 pair_f(const dfsph_kern *kc, sf8 pi, const float *pq, const uint32_t *j, sf8 *rx, sf8 *ry, sf8 *rz)
+{
+	sf8 rw;
+	sf8_sub_gather_quads(pi, pq, j, rx, ry, rz, &rw);
+	const sf8 r2 = sf8_add(sf8_add(sf8_mul(*rx, *rx), sf8_mul(*ry, *ry)), sf8_mul(*rz, *rz));
+	const sf8 r = sf8_sqrt(r2), hr = sf8_sub(kc->h, r);
+	const sf8 ok = sf8_and(sf8_gt(r2, kc->eps2), sf8_gt(hr, kc->zero));
+	/* r is at least sqrt(eps2) where ok; elsewhere divide by 1 */
+	return sf8_and(ok, sf8_div(sf8_mul(sf8_mul(kc->mg, hr), hr), sf8_select(ok, r, kc->one)));
+}
+
+/* G_ij by component for the group of rows j. */
+static inline void pair_grad(const dfsph_kern *kc, sf8 pi, const float *pq, const uint32_t *j, sf8 *gx, sf8 *gy,
+                             sf8 *gz)
+{
+	sf8 rx, ry, rz;
+	const sf8 f = pair_f(kc, pi, pq, j, &rx, &ry, &rz);
+	*gx = sf8_mul(f, rx);
+	*gy = sf8_mul(f, ry);
+	*gz = sf8_mul(f, rz);
+}
+
+/* The gradient pass: per particle S_i, sum_j |G_ij|^2 (G_ij = 0 for a pair
+ * closer than 1e-3 h or at r >= h: pair_f), the walls' sums, h_i, 1 / D_i
+ * and 1 / D'_i (0 where D is negligible, below dmin). */
 static void gradients(const dfsph_work *wk, long i0, long cnt)
 {
 	const sph_shared *sh = wk->sh;
 	const sph_neighbors *nb = &sh->nb;
+	const dfsph_kern kc = kern(sh);
 	const float dref = sh->mass * sh->k.spiky_grad * sh->k.h2; /* |G|'s scale */
-	const sf8 h = sf8_set1(sh->k.h), eps2 = sf8_set1(1e-6f * sh->k.h2), mg = sf8_set1(sh->mass * sh->k.spiky_grad),
-			  one = sf8_set1(1.0f), two = sf8_set1(2.0f), zero = sf8_zero(), dmin = sf8_set1(1e-6f * dref * dref),
+	const sf8 one = sf8_set1(1.0f), two = sf8_set1(2.0f), zero = sf8_zero(), dmin = sf8_set1(1e-6f * dref * dref),
 			  minus = sf8_set1(-0.0f);
 	float t[7][SPH_BLOCK][4], w[6][SPH_BLOCK] = {{0}}, vmax[SPH_BLOCK];
 	for (long q = 0; q < cnt; ++q) {
@@ -268,28 +320,18 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 		const uint32_t c = nb->count[i];
 		const sf8 pi = sf8_load_quad2(sh->pq + 4 * i);
 		sf8 sx = zero, sy = zero, sz = zero, s2 = zero, cx = zero, cy = zero, cz = zero, mv = zero;
-		dfsph_group *g = wk->groups + wk->goff[i];
-		for (uint32_t p = 0; p < c; p += 8, ++g) {
-			sph_group_rows(&list, g->j); /* the padding: i itself */
-			for (uint32_t l = c - p; l < 8; ++l)
-				g->j[l] = (uint32_t)i;
-			sf8 rx, ry, rz, rw; /* x_i - x_j */
-			sf8_sub_gather_quads(pi, sh->pq, g->j, &rx, &ry, &rz, &rw);
-			const sf8 r2 = sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz));
-			const sf8 r = sf8_sqrt(r2), hr = sf8_sub(h, r);
-			const sf8 ok = sf8_and(sf8_gt(r2, eps2), sf8_gt(hr, zero));
-			/* r is at least sqrt(eps2) where ok; elsewhere divide by 1 */
-			const sf8 f = sf8_and(ok, sf8_div(sf8_mul(sf8_mul(mg, hr), hr), sf8_select(ok, r, one)));
+		uint32_t pad[8];
+		for (uint32_t p = 0; p < c; p += 8) {
+			const uint32_t *j = group_rows(&list, c, p, (uint32_t)i, pad);
+			sf8 rx, ry, rz; /* x_i - x_j */
+			const sf8 f = pair_f(&kc, pi, sh->pq, j, &rx, &ry, &rz);
 			const sf8 gx = sf8_mul(f, rx), gy = sf8_mul(f, ry), gz = sf8_mul(f, rz);
-			sf8_store(g->gx, gx);
-			sf8_store(g->gy, gy);
-			sf8_store(g->gz, gz);
 			sx = sf8_add(sx, gx);
 			sy = sf8_add(sy, gy);
 			sz = sf8_add(sz, gz);
 			s2 = sf8_add(s2, sf8_add(sf8_add(sf8_mul(gx, gx), sf8_mul(gy, gy)), sf8_mul(gz, gz)));
-			if (wk->c) {                                      /* the shift's grad C, only when it runs */
-				const sf8 vj = sf8_gather(sh->inv_rho, g->j); /* V_j / m */
+			if (wk->c) {                                   /* the shift's grad C, only when it runs */
+				const sf8 vj = sf8_gather(sh->inv_rho, j); /* V_j / m */
 				cx = sf8_add(cx, sf8_mul(gx, vj));
 				cy = sf8_add(cy, sf8_mul(gy, vj));
 				cz = sf8_add(cz, sf8_mul(gz, vj));
@@ -340,18 +382,25 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 static void rate(const dfsph_pass *ps, long i0, long cnt)
 {
 	const dfsph_work *wk = ps->wk;
+	const sph_shared *sh = wk->sh;
+	const dfsph_kern kc = kern(sh);
 	const float *v = &wk->v->x;
 	float t[SPH_BLOCK][4];
 	for (long q = 0; q < cnt; ++q) {
-		const sf8 vi = sf8_load_quad2(v + 4 * (i0 + q));
+		const long i = i0 + q;
+		sph_groups list = sph_nbr_groups(&sh->nb, i);
+		const uint32_t c = sh->nb.count[i];
+		const sf8 vi = sf8_load_quad2(v + 4 * i), pi = sf8_load_quad2(sh->pq + 4 * i);
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
-		for (const dfsph_group *g = wk->groups + wk->goff[i0 + q], *ge = wk->groups + wk->goff[i0 + q + 1]; g < ge;
-		     ++g) {
-			sf8 dx, dy, dz, dw; /* v_i - v_j */
-			sf8_sub_gather_quads(vi, v, g->j, &dx, &dy, &dz, &dw);
-			sx = sf8_add(sx, sf8_mul(dx, sf8_load(g->gx)));
-			sy = sf8_add(sy, sf8_mul(dy, sf8_load(g->gy)));
-			sz = sf8_add(sz, sf8_mul(dz, sf8_load(g->gz)));
+		uint32_t pad[8];
+		for (uint32_t p = 0; p < c; p += 8) {
+			const uint32_t *j = group_rows(&list, c, p, (uint32_t)i, pad);
+			sf8 gx, gy, gz, dx, dy, dz, dw; /* G_ij, v_i - v_j */
+			pair_grad(&kc, pi, sh->pq, j, &gx, &gy, &gz);
+			sf8_sub_gather_quads(vi, v, j, &dx, &dy, &dz, &dw);
+			sx = sf8_add(sx, sf8_mul(dx, gx));
+			sy = sf8_add(sy, sf8_mul(dy, gy));
+			sz = sf8_add(sz, sf8_mul(dz, gz));
 		}
 		sf8_fold4(sf8_add(sf8_add(sx, sy), sz), t[q]);
 	}
@@ -394,17 +443,25 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
  * added to its sum. */
 static void correct(const dfsph_work *wk, long i0, long cnt)
 {
+	const sph_shared *sh = wk->sh;
+	const dfsph_kern kc = kern(sh);
 	const float *k = wk->k;
 	float t[3][SPH_BLOCK][4];
 	for (long q = 0; q < cnt; ++q) {
-		const sf8 ki = sf8_set1(k[i0 + q]);
+		const long i = i0 + q;
+		sph_groups list = sph_nbr_groups(&sh->nb, i);
+		const uint32_t c = sh->nb.count[i];
+		const sf8 ki = sf8_set1(k[i]), pi = sf8_load_quad2(sh->pq + 4 * i);
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
-		for (const dfsph_group *g = wk->groups + wk->goff[i0 + q], *ge = wk->groups + wk->goff[i0 + q + 1]; g < ge;
-		     ++g) {
-			const sf8 c = sf8_add(ki, sf8_gather(k, g->j));
-			sx = sf8_add(sx, sf8_mul(c, sf8_load(g->gx)));
-			sy = sf8_add(sy, sf8_mul(c, sf8_load(g->gy)));
-			sz = sf8_add(sz, sf8_mul(c, sf8_load(g->gz)));
+		uint32_t pad[8];
+		for (uint32_t p = 0; p < c; p += 8) {
+			const uint32_t *j = group_rows(&list, c, p, (uint32_t)i, pad);
+			sf8 gx, gy, gz;
+			pair_grad(&kc, pi, sh->pq, j, &gx, &gy, &gz);
+			const sf8 kk = sf8_add(ki, sf8_gather(k, j));
+			sx = sf8_add(sx, sf8_mul(kk, gx));
+			sy = sf8_add(sy, sf8_mul(kk, gy));
+			sz = sf8_add(sz, sf8_mul(kk, gz));
 		}
 		sf8_fold4(sx, t[0][q]);
 		sf8_fold4(sy, t[1][q]);
@@ -703,17 +760,10 @@ static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n,
 	wk->block = SIMD_PICK(dfsph_block);
 	wk->rho = eddy__col(w, COL_DENSITY);
 	wk->gravity = w->def.gravity;
-	wk->goff = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk->goff);
-	if (!wk->goff)
-		return false;
-	wk->goff[0] = 0;
-	for (long i = 0; i < n; ++i)
-		wk->goff[i + 1] = wk->goff[i] + (sh->nb.count[i] + 7) / 8;
-	wk->groups = eddy__arena_alloc(&w->arena, (wk->goff[n] ? wk->goff[n] : 1) * sizeof *wk->groups);
 	dfsph_vec4 **quads[] = {&wk->b, &wk->v, &wk->h, &wk->u, &wk->c};
 	float **floats[] = {&wk->dsym, &wk->k, &wk->ksum, &wk->kp, &wk->err, &wk->full, &wk->p, &wk->r, &wk->mask};
 	const size_t nquads = sizeof quads / sizeof *quads - (shift ? 0 : 1); /* c (grad C) only for the shift */
-	bool ok = wk->groups;
+	bool ok = true;
 	for (size_t a = 0; a < nquads; ++a)
 		ok = ok && (*quads[a] = eddy__arena_alloc(&w->arena, un * sizeof(dfsph_vec4)));
 	for (size_t a = 0; a < sizeof floats / sizeof *floats; ++a)
@@ -811,7 +861,7 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	const float dt = (float)ctx->dt;
 	if (n == 0 || !(dt > 0))
 		return EDDY_OK;
-	if ((uint64_t)n > (uint64_t)UINT32_MAX) /* the groups hold j in 32 bits */
+	if ((uint64_t)n > (uint64_t)UINT32_MAX) /* the lists and the padding hold rows in 32 bits */
 		return eddy__fail(w, EDDY_ERR_INVALID, "%s: too many particles (%ld)", sys->label, n);
 	/* the velocity solve's warm start when there is none (dfsph_warm.c), its
 	 * scratch released before the step's */
