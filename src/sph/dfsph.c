@@ -81,16 +81,18 @@
  * oscillated in a pool leaves the level 4.3% high (mean density 0.975 rho0),
  * +2.8% (0.978) without the shift.
  *
- * Nothing is stored per pair: each pass over the pairs (the gradient pass,
- * every sweep, correction and operator product) recomputes G_ij from the
- * positions sph_density saw (sph_shared's pq, one 16-byte gather per
- * neighbour) and the exact lists, read in groups of eight, the last padded
- * with the particle itself (r = 0 gives G = 0: exact zeros in every sum, no
- * scalar tail, no mask). The positions do not change during the solves, so
- * every pass gets the same bits. Stored with its index, G_ij took 16 B a
- * pair (some 512 B a particle), which every sweep streamed from memory once
- * it outgrew the cache; recomputed, a pair costs a gather, a sqrt and a
- * division and reads only its 4 B of list.
+ * The pairs: in a small fluid the gradient pass stores each pair's row and
+ * G_ij in groups of eight (16 B a pair, some 470 B a particle), which the
+ * sweeps stream; beyond DFSPH_STORE_BYTES nothing is stored per pair and
+ * each pass over the pairs (every sweep, correction and operator product)
+ * recomputes G_ij from the positions sph_density saw (sph_shared's pq, one
+ * 16-byte gather per neighbour) and the packed exact lists, read in groups
+ * of eight. Either way the last group is padded with the particle itself
+ * (r = 0 gives G = 0: exact zeros in every sum, no scalar tail, no mask),
+ * and as the positions do not change during the solves both ways give the
+ * same bits. Stored pairs that outgrow the cache are streamed from memory
+ * by every sweep; recomputed, a pair costs a gather, a square root and a
+ * division and reads 2 B of list.
  *
  * Published per frame: solver = "dfsph", iterations and divergence_iterations
  * (the solves' mean per step), residual (largest final mean density error of
@@ -118,9 +120,24 @@
  * with omega above 0.5 can grow. */
 #define DFSPH_OMEGA 0.5f
 
+/* The most bytes of stored pairs (dfsph_group, 16 bytes a pair, about 470
+ * a particle): some 35k particles. Measured on one thread against storing
+ * every pair: recomputing G_ij in every pass takes 1.7x the step's time at
+ * 5k particles, 0.87-1.24x at 30k (loaded host) and 0.75-0.91x at 100k,
+ * where the stored pairs no longer fit the cache; at 1M it saves 510 bytes
+ * a particle. */
+#define DFSPH_STORE_BYTES (16u << 20)
+
 typedef struct dfsph_vec4 {
 	float x, y, z, w;
 } dfsph_vec4;
+
+/* Eight pairs of one particle, as the gradient pass found them: the rows
+ * (the last group's padding the particle itself) and G_ij by component. */
+typedef struct dfsph_group {
+	uint32_t j[8];
+	float gx[8], gy[8], gz[8];
+} dfsph_group;
 
 /* A step's inputs and scratch (the arrays in the world's arena, n each). */
 typedef struct dfsph_work {
@@ -144,10 +161,15 @@ typedef struct dfsph_work {
 	float *err;        /* per particle: the error the sweep measured, or R_i(v) */
 	float *full;       /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the velocity solve's particles */
 	/* the conjugate gradients' (divergence_cg) */
-	dfsph_vec4 *u;       /* the velocity change of a direction: -dt grad p */
-	float *p;            /* the search direction (a change of k) */
-	float *r;            /* the residual on the active set */
-	float *mask;         /* 1 on the active set, else 0 */
+	dfsph_vec4 *u; /* the velocity change of a direction: -dt grad p */
+	float *p;      /* the search direction (a change of k) */
+	float *r;      /* the residual on the active set */
+	float *mask;   /* 1 on the active set, else 0 */
+	/* with few pairs (DFSPH_STORE_BYTES): the pairs in groups of eight,
+	 * particle i's from gs + goff[i]; NULL: every pass reads the lists and
+	 * recomputes G_ij */
+	struct dfsph_group *gs;
+	uint32_t *goff;
 	eddy_arena *coarse;  /* non-NULL: the CG adds the coarse level (dfsph_coarse.c) in this arena */
 	double coarse_scale; /* its scale s, measured at the step's first solve */
 } dfsph_work;
@@ -326,6 +348,13 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 			sf8 rx, ry, rz; /* x_i - x_j */
 			const sf8 f = pair_f(&kc, pi, sh->pq, j, &rx, &ry, &rz);
 			const sf8 gx = sf8_mul(f, rx), gy = sf8_mul(f, ry), gz = sf8_mul(f, rz);
+			if (wk->gs) {
+				dfsph_group *g = wk->gs + wk->goff[i] + p / 8;
+				memcpy(g->j, j, sizeof g->j);
+				sf8_store(g->gx, gx);
+				sf8_store(g->gy, gy);
+				sf8_store(g->gz, gz);
+			}
 			sx = sf8_add(sx, gx);
 			sy = sf8_add(sy, gy);
 			sz = sf8_add(sz, gz);
@@ -388,19 +417,30 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 	float t[SPH_BLOCK][4];
 	for (long q = 0; q < cnt; ++q) {
 		const long i = i0 + q;
-		sph_groups list = sph_nbr_groups(&sh->nb, i);
-		const uint32_t c = sh->nb.count[i];
-		const sf8 vi = sf8_load_quad2(v + 4 * i), pi = sf8_load_quad2(sh->pq + 4 * i);
+		const sf8 vi = sf8_load_quad2(v + 4 * i);
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
-		uint32_t pad[8];
-		for (uint32_t p = 0; p < c; p += 8) {
-			const uint32_t *j = group_rows(&list, c, p, (uint32_t)i, pad);
-			sf8 gx, gy, gz, dx, dy, dz, dw; /* G_ij, v_i - v_j */
-			pair_grad(&kc, pi, sh->pq, j, &gx, &gy, &gz);
-			sf8_sub_gather_quads(vi, v, j, &dx, &dy, &dz, &dw);
-			sx = sf8_add(sx, sf8_mul(dx, gx));
-			sy = sf8_add(sy, sf8_mul(dy, gy));
-			sz = sf8_add(sz, sf8_mul(dz, gz));
+		if (wk->gs) { /* the stored pairs (one loop each way: the same sums in the same order) */
+			for (const dfsph_group *g = wk->gs + wk->goff[i], *ge = wk->gs + wk->goff[i + 1]; g < ge; ++g) {
+				sf8 dx, dy, dz, dw; /* v_i - v_j */
+				sf8_sub_gather_quads(vi, v, g->j, &dx, &dy, &dz, &dw);
+				sx = sf8_add(sx, sf8_mul(dx, sf8_load(g->gx)));
+				sy = sf8_add(sy, sf8_mul(dy, sf8_load(g->gy)));
+				sz = sf8_add(sz, sf8_mul(dz, sf8_load(g->gz)));
+			}
+		} else {
+			sph_groups list = sph_nbr_groups(&sh->nb, i);
+			const uint32_t c = sh->nb.count[i];
+			const sf8 pi = sf8_load_quad2(sh->pq + 4 * i);
+			uint32_t pad[8];
+			for (uint32_t p = 0; p < c; p += 8) {
+				const uint32_t *j = group_rows(&list, c, p, (uint32_t)i, pad);
+				sf8 gx, gy, gz, dx, dy, dz, dw; /* G_ij, v_i - v_j */
+				pair_grad(&kc, pi, sh->pq, j, &gx, &gy, &gz);
+				sf8_sub_gather_quads(vi, v, j, &dx, &dy, &dz, &dw);
+				sx = sf8_add(sx, sf8_mul(dx, gx));
+				sy = sf8_add(sy, sf8_mul(dy, gy));
+				sz = sf8_add(sz, sf8_mul(dz, gz));
+			}
 		}
 		sf8_fold4(sf8_add(sf8_add(sx, sy), sz), t[q]);
 	}
@@ -449,19 +489,29 @@ static void correct(const dfsph_work *wk, long i0, long cnt)
 	float t[3][SPH_BLOCK][4];
 	for (long q = 0; q < cnt; ++q) {
 		const long i = i0 + q;
-		sph_groups list = sph_nbr_groups(&sh->nb, i);
-		const uint32_t c = sh->nb.count[i];
-		const sf8 ki = sf8_set1(k[i]), pi = sf8_load_quad2(sh->pq + 4 * i);
+		const sf8 ki = sf8_set1(k[i]);
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
-		uint32_t pad[8];
-		for (uint32_t p = 0; p < c; p += 8) {
-			const uint32_t *j = group_rows(&list, c, p, (uint32_t)i, pad);
-			sf8 gx, gy, gz;
-			pair_grad(&kc, pi, sh->pq, j, &gx, &gy, &gz);
-			const sf8 kk = sf8_add(ki, sf8_gather(k, j));
-			sx = sf8_add(sx, sf8_mul(kk, gx));
-			sy = sf8_add(sy, sf8_mul(kk, gy));
-			sz = sf8_add(sz, sf8_mul(kk, gz));
+		if (wk->gs) { /* the stored pairs (as rate) */
+			for (const dfsph_group *g = wk->gs + wk->goff[i], *ge = wk->gs + wk->goff[i + 1]; g < ge; ++g) {
+				const sf8 kk = sf8_add(ki, sf8_gather(k, g->j));
+				sx = sf8_add(sx, sf8_mul(kk, sf8_load(g->gx)));
+				sy = sf8_add(sy, sf8_mul(kk, sf8_load(g->gy)));
+				sz = sf8_add(sz, sf8_mul(kk, sf8_load(g->gz)));
+			}
+		} else {
+			sph_groups list = sph_nbr_groups(&sh->nb, i);
+			const uint32_t c = sh->nb.count[i];
+			const sf8 pi = sf8_load_quad2(sh->pq + 4 * i);
+			uint32_t pad[8];
+			for (uint32_t p = 0; p < c; p += 8) {
+				const uint32_t *j = group_rows(&list, c, p, (uint32_t)i, pad);
+				sf8 gx, gy, gz;
+				pair_grad(&kc, pi, sh->pq, j, &gx, &gy, &gz);
+				const sf8 kk = sf8_add(ki, sf8_gather(k, j));
+				sx = sf8_add(sx, sf8_mul(kk, gx));
+				sy = sf8_add(sy, sf8_mul(kk, gy));
+				sz = sf8_add(sz, sf8_mul(kk, gz));
+			}
 		}
 		sf8_fold4(sx, t[0][q]);
 		sf8_fold4(sy, t[1][q]);
@@ -771,6 +821,21 @@ static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n,
 	if (!ok)
 		return false;
 	memset(wk->kp, 0, un * sizeof *wk->kp);
+	/* G_ij stored only while they fit DFSPH_STORE_BYTES: a sweep then streams
+	 * them; beyond, they would fall out of cache and reading them back costs
+	 * more than a square root, a division and a position gather per pair */
+	uint64_t groups = 0;
+	for (long i = 0; i < n; ++i)
+		groups += (sh->nb.count[i] + 7) / 8;
+	if (groups * sizeof(dfsph_group) <= DFSPH_STORE_BYTES) {
+		wk->goff = eddy__arena_alloc(&w->arena, (un + 1) * sizeof *wk->goff);
+		wk->gs = eddy__arena_alloc(&w->arena, (size_t)groups * sizeof *wk->gs + 1);
+		if (!wk->goff || !wk->gs)
+			return false;
+		wk->goff[0] = 0;
+		for (long i = 0; i < n; ++i)
+			wk->goff[i + 1] = wk->goff[i] + (sh->nb.count[i] + 7) / 8;
+	}
 	pass(wk, PASS_GRADIENTS, false, false);
 	return true;
 }
