@@ -351,6 +351,23 @@ const uint8_t *eddy_world_channel_u8(const eddy_world *w, const char *name, size
 
 size_t eddy_world_particle_count(const eddy_world *w) { return w ? w->n : 0; }
 
+/* Acquires the particle columns first .. last (consecutive ids) for the
+ * host, all or none. */
+_Static_assert(COL_Y_ == COL_X_ + 1 && COL_Z_ == COL_X_ + 2 && COL_VY == COL_VX + 1 && COL_VZ == COL_VX + 2,
+               "host_hold takes consecutive column ids");
+static eddy_status host_hold(eddy_world *w, int first, int last)
+{
+	for (int id = first; id <= last; ++id) {
+		eddy_status st = eddy__column_acquire(w, id);
+		if (st != EDDY_OK) {
+			while (--id >= first)
+				eddy__column_release(w, id);
+			return st;
+		}
+	}
+	return EDDY_OK;
+}
+
 eddy_status eddy_world_add_particles(eddy_world *w, size_t count, const eddy_vec3 *pos, const eddy_vec3 *vel)
 {
 	if (!w || (count && !pos))
@@ -365,26 +382,31 @@ eddy_status eddy_world_add_particles(eddy_world *w, size_t count, const eddy_vec
 		if (vel && !(isfinite(vel[i].x) && isfinite(vel[i].y) && isfinite(vel[i].z)))
 			return eddy__fail(w, EDDY_ERR_INVALID, "add_particles: velocity of particle %zu is not finite", i);
 	}
+	/* the columns first: a failure leaves the table as it was */
+	eddy_status st = EDDY_OK;
+	if (count && !w->host_positions) {
+		st = host_hold(w, COL_X_, COL_Z_);
+		w->host_positions = st == EDDY_OK;
+	}
+	if (st == EDDY_OK && count && vel && !w->host_velocities) {
+		st = host_hold(w, COL_VX, COL_VZ);
+		w->host_velocities = st == EDDY_OK;
+	}
 	size_t first;
-	eddy_status st = eddy__append_particles(w, count, &first);
+	if (st == EDDY_OK)
+		st = eddy__append_particles(w, count, &first);
 	if (st != EDDY_OK)
 		return st;
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	for (size_t i = 0; i < count; ++i) {
-		if (x)
-			x[first + i] = pos[i].x;
-		if (y)
-			y[first + i] = pos[i].y;
-		if (z)
-			z[first + i] = pos[i].z;
+		x[first + i] = pos[i].x;
+		y[first + i] = pos[i].y;
+		z[first + i] = pos[i].z;
 		if (vel) {
-			if (vx)
-				vx[first + i] = vel[i].x;
-			if (vy)
-				vy[first + i] = vel[i].y;
-			if (vz)
-				vz[first + i] = vel[i].z;
+			vx[first + i] = vel[i].x;
+			vy[first + i] = vel[i].y;
+			vz[first + i] = vel[i].z;
 		}
 	}
 	return EDDY_OK;

@@ -160,6 +160,10 @@ struct eddy_world {
 	eddy_column columns[EDDY_MAX_COLUMNS];
 	int column_count;
 	size_t n, capacity; /* particles */
+	/* eddy_world_add_particles holds x y z (and vx vy vz once it was given
+	 * velocities) as one more user, so that what the host gave is kept even
+	 * before, or without, a system that uses them */
+	bool host_positions, host_velocities;
 
 	/* MAC grid, present while some grid column is in use */
 	int nx, ny, nz;

@@ -208,8 +208,10 @@ EDDY_API const uint8_t *eddy_world_channel_u8(const eddy_world *w, const char *n
 EDDY_API size_t eddy_world_particle_count(const eddy_world *w);
 
 /* Appends count particles; each allocated particle column is zero-filled except
- * positions and velocities taken from the arrays (vel may be NULL). Positions
- * outside the bounds are rejected. */
+ * positions and velocities taken from the arrays (vel may be NULL). From the
+ * first call on the world keeps x y z (and vx vy vz once given) for the host,
+ * even before or without a system that uses them. Positions outside the bounds
+ * are rejected. */
 EDDY_API eddy_status eddy_world_add_particles(eddy_world *w, size_t count, const eddy_vec3 *pos, const eddy_vec3 *vel);
 /* Swap-remove: the last particle moves into slot i. Iterate backwards. */
 EDDY_API eddy_status eddy_world_remove_particle(eddy_world *w, size_t i);

@@ -257,6 +257,44 @@ static void swap_remove_and_growth(void)
 	eddy_destroy_world(w);
 }
 
+/* Particles a host adds before any system uses positions or velocities
+ * keep what it gave (the world holds those columns for it), and only those
+ * columns: the rest are still made by the systems that use them. */
+static void host_particles_keep_their_state(void)
+{
+	eddy_world *w = make_world();
+	const eddy_vec3 p[2] = {{0.5f, 0.5f, 0.5f}, {0.25f, 0.75f, 0.5f}}, v[2] = {{1, 2, 3}, {-1, 0, 0.5f}};
+	CHECK(eddy_world_add_particles(w, 2, p, v) == EDDY_OK);
+	size_t n = 0;
+	const float *x = eddy_world_channel(w, "x", &n), *vz = eddy_world_channel(w, "vz", NULL);
+	CHECK(x && vz && n == 2);
+	CHECK(x && x[1] == 0.25f && vz && vz[0] == 3.0f);
+	CHECK(eddy_world_channel(w, "ax", NULL) == NULL && eddy_world_channel(w, "density", NULL) == NULL);
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_system_id gid = eddy_add_gravity(w, &g);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_system_id iid = eddy_add_integrate(w, &it);
+	CHECK(eddy_world_step(w) == EDDY_OK);
+	x = eddy_world_channel(w, "x", NULL);
+	const float *y = eddy_world_channel(w, "y", NULL), *vx = eddy_world_channel(w, "vx", NULL);
+	CHECK(x && y && vx);
+	if (x && y && vx) {
+		CHECK(x[0] > 0.5f && x[1] < 0.25f);     /* moved with the velocities given */
+		CHECK(vx[0] == 1.0f && vx[1] == -1.0f); /* gravity acts along y only */
+		CHECK(y[1] < 0.75f);                    /* and pulls the resting one down */
+	}
+	/* the systems gone, the host's particles stay */
+	CHECK(eddy_world_remove_system(w, iid) == EDDY_OK && eddy_world_remove_system(w, gid) == EDDY_OK);
+	CHECK(eddy_world_channel(w, "x", NULL) != NULL && eddy_world_channel(w, "vx", NULL) != NULL);
+	CHECK(eddy_world_channel(w, "ax", NULL) == NULL);
+	eddy_destroy_world(w);
+	/* positions alone hold no velocity column */
+	w = make_world();
+	CHECK(eddy_world_add_particles(w, 1, p, NULL) == EDDY_OK);
+	CHECK(eddy_world_channel(w, "y", NULL) != NULL && eddy_world_channel(w, "vx", NULL) == NULL);
+	eddy_destroy_world(w);
+}
+
 static void defs_are_range_checked(void)
 {
 	eddy_world *w = make_world();
@@ -899,6 +937,7 @@ void suite_core(void)
 	RUN(stale_handles_are_detected);
 	RUN(grid_exists_only_for_grid_systems);
 	RUN(swap_remove_and_growth);
+	RUN(host_particles_keep_their_state);
 	RUN(defs_are_range_checked);
 	RUN(huge_emitter_is_refused);
 	RUN(ellipsoid_emitter);
