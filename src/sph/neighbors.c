@@ -170,10 +170,10 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, sph_cursor *f
 void eddy__sph_neighbors_free(sph_neighbors *nb)
 {
 	free(nb->rows);
-	free(nb->nbr.data);
-	free(nb->bnbr.data);
-	free(nb->verlet.cand.data);
-	free(nb->verlet.bcand.data);
+	eddy__pages_free(nb->nbr.data);
+	eddy__pages_free(nb->bnbr.data);
+	eddy__pages_free(nb->verlet.cand.data);
+	eddy__pages_free(nb->verlet.bcand.data);
 	sph_grid_free(&nb->grid);
 	sph_boundary_free(nb);
 	memset(nb, 0, sizeof *nb);
@@ -252,15 +252,16 @@ static int cell_order(eddy_world *w, sph_neighbors *nb, row_pass *rp, int thread
 }
 
 /* l with room for want entries at least; what it held is not kept (no
- * copy: a fresh block's pages stay untouched until a list is written). */
+ * copy: a fresh block's pages stay untouched until a list is written, and
+ * the old block's go back to the system: eddy__pages_alloc). */
 static bool lists_reserve(sph_lists *l, size_t want)
 {
 	if (want <= l->alloc)
 		return true;
-	free(l->data);
+	eddy__pages_free(l->data);
 	/* + 1: an empty list at the very end may still have its first word
 	 * loaded (sph_groups_at), never used */
-	l->data = malloc((want + 1) * sizeof *l->data);
+	l->data = eddy__pages_alloc((want + 1) * sizeof *l->data);
 	l->alloc = l->data ? want : 0;
 	return l->data != NULL;
 }
