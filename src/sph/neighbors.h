@@ -193,6 +193,7 @@ static inline uint32_t sph_pack_groups(uint32_t *c, uint32_t cnt, uint32_t *out)
 typedef struct sph_search_out {
 	bool exact;
 	float r2max;
+	float mass, self; /* exact: the kernel sum's m and h^6 (sph_kernel_sum) */
 	sph_lists *list, *blist;
 	uint32_t *first, *count, *bfirst, *bcount;
 } sph_search_out;
@@ -217,5 +218,10 @@ static inline float sph_cube_sum(const float *d, uint32_t cnt)
 		s += d[q] * d[q] * d[q];
 	return s;
 }
+
+/* The kernel sum of a particle whose fluid neighbours' (h^2 - r^2)^3 sum to
+ * ws and boundary ones' V_b rho_b (h^2 - r^2)^3 to bws (sph_neighbors'
+ * ksum): one expression, so the search and the filter give the same bits. */
+static inline float sph_kernel_sum(float mass, float self, float ws, float bws) { return mass * (self + ws) + bws; }
 
 #endif

@@ -147,9 +147,10 @@ typedef struct sph_neighbors {
 	sph_lists nbr, bnbr;
 	uint32_t *first, *bfirst; /* per row: where its lists start in nbr, bnbr */
 	uint32_t *count, *bcount; /* per row: their lengths */
-	/* sum_j (h^2 - r^2)^3 over the fluid neighbours and sum_b V_b rho_b
-	 * (h^2 - r^2)^3 over the boundary ones, made with the lists */
-	float *wsum, *bwsum;
+	/* m (h^6 + sum_j (h^2 - r^2)^3) over the particle and its fluid
+	 * neighbours, plus sum_b V_b rho_b (h^2 - r^2)^3 over the boundary ones
+	 * (m: sph_shared's mass), made with the lists: the density over poly6 */
+	float *ksum;
 	/* the boundary particles, nbound of them */
 	size_t nbound;
 	float *bx, *by, *bz, *bvol; /* m, m^3 (the volume each stands for) */
