@@ -119,6 +119,11 @@ typedef struct eddy_arena {
 } eddy_arena;
 
 void *eddy__arena_alloc(eddy_arena *a, size_t bytes);
+/* A large block of its own pages from the system (arena.c), its contents
+ * undefined; freed with eddy__pages_free, which returns the pages to the
+ * system. The pages stay unresident until written. */
+void *eddy__pages_alloc(size_t bytes);
+void eddy__pages_free(void *p);
 void eddy__arena_reset(eddy_arena *a);
 void eddy__arena_free(eddy_arena *a);
 /* A point in the arena to return to: a system whose scratch dies with its own

@@ -171,18 +171,15 @@ static bool boundary_alloc(sph_neighbors *nb, size_t total, size_t ncol)
 	return true;
 }
 
-/* The particles into the arrays: the boundary boxes' through the arena,
- * cell-sorted into [0, nstat); the colliders' after them in pipeline order,
- * each set in its collider's def pose. */
-static eddy_status boundary_fill(eddy_world *w, sph_shared *sh, float spacing, size_t nstat)
+/* The particles into the arrays: the boundary boxes' through x (6 nstat
+ * entries), cell-sorted into [0, nstat); the colliders' after them in
+ * pipeline order, each set in its collider's def pose. */
+static eddy_status boundary_place(eddy_world *w, sph_shared *sh, float spacing, size_t nstat, float *x)
 {
 	sph_neighbors *nb = &sh->nb;
 	sph_boundary *bd = &nb->bnd;
 	const size_t alloc = nstat ? nstat : 1;
 	/* x y z vol as floats, key order as indices */
-	float *x = eddy__arena_alloc(&w->arena, 6 * alloc * sizeof *x);
-	if (!x)
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu boundary particles", nstat);
 	float *y = x + alloc, *z = y + alloc, *v = z + alloc;
 	uint32_t *key = (uint32_t *)(void *)(v + alloc), *order = key + alloc;
 	size_t at_stat = 0, at = nstat;
@@ -221,6 +218,19 @@ static eddy_status boundary_fill(eddy_world *w, sph_shared *sh, float spacing, s
 		nb->bvol[i] = v[order[i]];
 	}
 	return EDDY_OK;
+}
+
+/* boundary_place with its scratch in pages of its own, not the arena: made
+ * once, in the first step, it would add its 24 bytes a boundary particle to
+ * that step's arena blocks, the peak's moment. */
+static eddy_status boundary_fill(eddy_world *w, sph_shared *sh, float spacing, size_t nstat)
+{
+	float *x = eddy__pages_alloc(6 * (nstat ? nstat : 1) * sizeof *x);
+	if (!x)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu boundary particles", nstat);
+	const eddy_status st = boundary_place(w, sh, spacing, nstat, x);
+	eddy__pages_free(x);
+	return st;
 }
 
 /* The boundary particles of the pipeline's boundary systems, made again

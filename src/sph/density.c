@@ -321,7 +321,6 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const sph_neighbors *nb = &sh->nb;
 	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE), *ncount = eddy__col(w, COL_SPH_NEIGHBORS);
 	const sph_kernel_consts kc = sh->k;
-	const float m = sh->mass, self = kc.h2 * kc.h2 * kc.h2; /* (h^2 - 0)^3: the particle itself */
 	const long n = (long)w->n;
 	sh->inv_rho = eddy__arena_alloc(&w->arena, (w->n ? w->n : 1) * sizeof *sh->inv_rho);
 	if (!sh->inv_rho)
@@ -329,7 +328,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		/* the kernel sums were made with the neighbour lists */
-		set_density(sd, rho, p, i, kc.poly6 * (m * (self + nb->wsum[i]) + nb->bwsum[i]));
+		set_density(sd, rho, p, i, kc.poly6 * nb->ksum[i]);
 		ncount[i] = (float)(nb->count[i] + nb->bcount[i]);
 	}
 	return boundary_pressure(w, sd, ctx->threads);

@@ -8,27 +8,32 @@
  * is a function of the positions alone.
  * The grid spans the world bounds, most of its cells empty: where each
  * cell's particles start is kept per row of cells along x, the row's first
- * as 32 bits and each cell's as a 16-bit offset from it (sph_cell_starts,
- * sph.h), 2 bytes a cell instead of 4; all 32-bit while some row of cells
- * holds more than 65535 (a cell's count wraps in 16 bits, and then the
- * rows' totals fall short of n: the sort sees it and takes the wide form). */
+ * as 32 bits and, over the runs of occupied cells only, each cell's as a
+ * 16-bit offset from it (sph_cell_starts, sph.h): some 2 bytes an occupied
+ * cell, where one offset per cell of the whole grid took 26 bytes a
+ * particle for a block in a tank twice its width (two grids, fluid and
+ * boundary). All 32-bit per cell while some row of cells holds more than
+ * 65535. The sort goes by rows of cells, then along each row, so it never
+ * holds a count per cell of the whole grid either. */
 #include "neighbors.h"
 
 #include <stdlib.h>
 #include <string.h>
 
-static bool starts_alloc(sph_cell_starts *s, size_t cells, size_t rows)
+static bool starts_alloc(sph_cell_starts *s, size_t rows)
 {
+	*s = (sph_cell_starts){0};
 	s->base = calloc(rows + 1, sizeof *s->base);
-	s->off = calloc(cells ? cells : 1, sizeof *s->off);
-	s->wide = NULL;
-	return s->base && s->off;
+	s->run_at = calloc(rows + 1, sizeof *s->run_at);
+	return s->base && s->run_at;
 }
 
 static void starts_free(sph_cell_starts *s)
 {
 	free(s->base);
-	free(s->off);
+	free(s->run_at);
+	eddy__pages_free(s->run);
+	eddy__pages_free(s->off);
 	free(s->wide);
 	memset(s, 0, sizeof *s);
 }
@@ -61,7 +66,7 @@ eddy_status sph_grid_init(eddy_world *w, sph_grid *g, float h)
 	g->gy = (int)gy;
 	g->gz = (int)gz;
 	const size_t cells = sph_grid_cells(g), rows = (size_t)g->gy * (size_t)g->gz;
-	if (!starts_alloc(&g->fluid_start, cells, rows) || !starts_alloc(&g->bound_start, cells, rows)) {
+	if (!starts_alloc(&g->fluid_start, rows) || !starts_alloc(&g->bound_start, rows)) {
 		sph_grid_free(g);
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu neighbour cells", cells);
 	}
@@ -83,45 +88,116 @@ static void starts_narrow(sph_cell_starts *s)
 	s->wide = NULL;
 }
 
+/* The row of cells of cell c: c / gx, by a multiplication (the sort takes
+ * it for every key) made exact by one correction either way. */
+static inline uint32_t row_of_cell(uint32_t c, uint32_t gx, double inv_gx)
+{
+	uint32_t r = (uint32_t)((double)c * inv_gx);
+	r -= r * gx > c;
+	r += (r + 1) * gx <= c;
+	return r;
+}
+
+/* Room for the runs and offsets of n entries: at most one run and
+ * 1 + SPH_CELL_GAP offsets an entry, and an offset a cell (what is not
+ * written stays unresident: eddy__pages_alloc). What they held is not kept. */
+static bool starts_room(sph_cell_starts *s, size_t n, size_t cells)
+{
+	const size_t runs = n + 1, offs = n * (1 + SPH_CELL_GAP) < cells ? n * (1 + SPH_CELL_GAP) + 1 : cells + 1;
+	if (runs > s->run_alloc) {
+		eddy__pages_free(s->run);
+		s->run = eddy__pages_alloc(runs * sizeof *s->run);
+		s->run_alloc = s->run ? runs : 0;
+	}
+	if (offs > s->off_alloc) {
+		eddy__pages_free(s->off);
+		s->off = eddy__pages_alloc(offs * sizeof *s->off);
+		s->off_alloc = s->off ? offs : 0;
+	}
+	return s->run && s->off;
+}
+
+/* Row r's runs from its cells' counts cnt[xlo .. xhi] (both occupied),
+ * appended at *nrun and *noff; cnt[x] becomes cell x's start less the
+ * row's (the sort's cursor). */
+static void row_runs(sph_cell_starts *s, uint32_t *cnt, uint32_t xlo, uint32_t xhi, size_t *nrun, size_t *noff)
+{
+	uint32_t rel = 0;
+	for (uint32_t x = xlo; x <= xhi;) {
+		sph_cell_run *run = &s->run[(*nrun)++];
+		run->x0 = x;
+		run->at = (uint32_t)*noff;
+		uint32_t last = x; /* the run's last occupied cell so far */
+		for (; x <= xhi && x - last <= SPH_CELL_GAP; ++x) {
+			const uint32_t c = cnt[x];
+			last = c ? x : last;
+			s->off[(*noff)++] = (uint16_t)rel;
+			cnt[x] = rel;
+			rel += c;
+		}
+		*noff -= x - 1 - last; /* the gap's empty cells at its end */
+		run->x1 = last + 1;
+		while (x <= xhi && cnt[x] == 0) /* to the next occupied cell (counts: not yet rewritten) */
+			++x;
+	}
+}
+
 bool sph_counting_sort(const uint32_t *keys, size_t n, const sph_grid *g, sph_cell_starts *start, uint32_t *order)
 {
 	const size_t gx = (size_t)g->gx, cells = sph_grid_cells(g), rows = cells / gx;
-	uint32_t *base = start->base;
-	uint16_t *off = start->off;
-	/* the counts per cell (16 bits: a cell of 65536 or more wraps, and then
-	 * the rows' totals fall short of n), then their sums from each row's start */
-	memset(off, 0, cells * sizeof *off);
+	const double inv_gx = 1.0 / (double)gx;
+	uint32_t *base = start->base, *cur = start->run_at; /* run_at: the rows' cursors, until the runs */
+	/* the rows' counts, then their starts */
+	memset(base, 0, (rows + 1) * sizeof *base);
 	for (size_t i = 0; i < n; ++i)
-		off[keys[i]]++;
+		base[row_of_cell(keys[i], (uint32_t)gx, inv_gx) + 1]++;
 	bool fits = true;
-	uint32_t at = 0;
-	for (size_t r = 0, c = 0; r < rows; ++r) {
-		base[r] = at;
-		uint32_t in = 0;
-		for (size_t x = 0; x < gx; ++x, ++c) {
-			const uint32_t k = off[c];
-			off[c] = (uint16_t)in;
-			in += k;
-		}
-		fits = fits && in <= 0xFFFFu;
-		at += in;
+	for (size_t r = 0; r < rows; ++r) {
+		fits = fits && base[r + 1] <= 0xFFFFu;
+		base[r + 1] += base[r];
 	}
-	base[rows] = at;
-	if (fits && at == n) {
-		/* off[c] as the running cursor of cell c, then shifted back a cell in each row */
-		for (size_t i = 0; i < n; ++i) {
-			const uint32_t c = keys[i];
-			order[base[c / gx] + off[c]++] = (uint32_t)i;
-		}
+	uint32_t *cnt = fits ? malloc(gx * sizeof *cnt) : NULL, *row = NULL;
+	if (fits && cnt && starts_room(start, n, cells)) {
+		/* by rows (stable), then each row's entries by cell (stable) */
+		memcpy(cur, base, rows * sizeof *cur);
+		for (size_t i = 0; i < n; ++i)
+			order[cur[row_of_cell(keys[i], (uint32_t)gx, inv_gx)]++] = (uint32_t)i;
+		uint32_t longest = 0;
+		for (size_t r = 0; r < rows; ++r)
+			longest = base[r + 1] - base[r] > longest ? base[r + 1] - base[r] : longest;
+		row = malloc((longest ? longest : 1) * sizeof *row);
+	}
+	if (fits && row) {
+		size_t nrun = 0, noff = 0;
 		for (size_t r = 0; r < rows; ++r) {
-			uint16_t *o = off + r * gx;
-			for (size_t x = gx - 1; x > 0; --x)
-				o[x] = o[x - 1];
-			o[0] = 0;
+			start->run_at[r] = (uint32_t)nrun;
+			const uint32_t b = base[r], len = base[r + 1] - b, c0 = (uint32_t)(r * gx);
+			if (len == 0)
+				continue;
+			memcpy(row, order + b, len * sizeof *row);
+			uint32_t xlo = (uint32_t)gx, xhi = 0;
+			for (uint32_t k = 0; k < len; ++k) {
+				const uint32_t x = keys[row[k]] - c0;
+				xlo = x < xlo ? x : xlo;
+				xhi = x > xhi ? x : xhi;
+			}
+			memset(cnt + xlo, 0, (xhi - xlo + 1) * sizeof *cnt);
+			for (uint32_t k = 0; k < len; ++k)
+				cnt[keys[row[k]] - c0]++;
+			row_runs(start, cnt, xlo, xhi, &nrun, &noff);
+			for (uint32_t k = 0; k < len; ++k)
+				order[b + cnt[keys[row[k]] - c0]++] = row[k];
 		}
+		start->run_at[rows] = (uint32_t)nrun;
+		free(cnt);
+		free(row);
 		starts_narrow(start);
 		return true;
 	}
+	free(cnt);
+	free(row);
+	if (fits) /* out of memory */
+		return false;
 	uint32_t *s = starts_wide(start, cells);
 	if (!s)
 		return false;
@@ -143,30 +219,36 @@ bool sph_cell_ranges(const uint32_t *keys, size_t n, const sph_grid *g, sph_cell
 {
 	const size_t gx = (size_t)g->gx, cells = sph_grid_cells(g), rows = cells / gx;
 	uint32_t *base = start->base;
-	uint16_t *off = start->off;
-	/* cell c starts at the first position i with keys[i] >= c; a row of
-	 * cells with no particle (most of them: the grid spans the bounds) is
-	 * all zeros */
-	bool fits = true;
-	size_t i = 0;
-	for (size_t r = 0; r < rows; ++r) {
-		const size_t c0 = r * gx;
-		uint16_t *o = off + c0;
-		base[r] = (uint32_t)i;
-		if (i == n || keys[i] >= c0 + gx) {
-			memset(o, 0, gx * sizeof *o);
-			continue;
-		}
-		for (size_t x = 0; x < gx; ++x) {
-			while (i < n && keys[i] < c0 + x)
-				++i;
-			o[x] = (uint16_t)(i - base[r]);
-		}
-		fits = fits && i - base[r] <= 0xFFFFu; /* the row's last start, its largest */
-		while (i < n && keys[i] < c0 + gx)
-			++i;
+	uint32_t *cnt = malloc(gx * sizeof *cnt);
+	bool fits = cnt && starts_room(start, n, cells);
+	if (!fits) {
+		free(cnt);
+		return false;
 	}
-	base[rows] = (uint32_t)n; /* a row's end is the next row's start: no offset */
+	/* a row of cells with no particle (most of them: the grid spans the
+	 * bounds) has no runs */
+	size_t i = 0, nrun = 0, noff = 0;
+	for (size_t r = 0; r < rows && fits; ++r) {
+		const uint32_t c0 = (uint32_t)(r * gx), c1 = (uint32_t)(c0 + gx);
+		base[r] = (uint32_t)i;
+		start->run_at[r] = (uint32_t)nrun;
+		if (i == n || keys[i] >= c1)
+			continue;
+		size_t j = i;
+		while (j < n && keys[j] < c1)
+			++j;
+		fits = j - i <= 0xFFFFu;
+		const uint32_t xlo = keys[i] - c0, xhi = keys[j - 1] - c0;
+		memset(cnt + xlo, 0, (xhi - xlo + 1) * sizeof *cnt);
+		for (size_t k = i; k < j; ++k)
+			cnt[keys[k] - c0]++;
+		if (fits)
+			row_runs(start, cnt, xlo, xhi, &nrun, &noff);
+		i = j;
+	}
+	free(cnt);
+	base[rows] = (uint32_t)n; /* a row's end is the next row's start */
+	start->run_at[rows] = (uint32_t)nrun;
 	if (fits) {
 		starts_narrow(start);
 		return true;

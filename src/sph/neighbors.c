@@ -40,6 +40,7 @@ typedef struct filter_ctx {
 	const float *p4;        /* (x y z -) per row */
 	const uint32_t *row_of; /* the row of each build slot; NULL: the rows are the slots */
 	float h2;
+	float mass, self; /* the kernel sum's (sph_kernel_sum) */
 	long n;
 	uint32_t longest; /* the most candidates any slot has, fluid or boundary */
 } filter_ctx;
@@ -79,16 +80,15 @@ static inline uint32_t filter_fluid(const filter_ctx *f, const uint32_t *packed,
 	return cnt;
 }
 
-/* Row i's boundary list and sum from its build slot's candidates (in index
- * order: filtering keeps it), written to the room for all of them (to
- * scratch once the array is full). Returns the count. */
-static inline uint32_t filter_boundary(const filter_ctx *f, long i, uint32_t b, uint32_t *scratch, sph_cursor *cur)
+/* Row i's boundary list from its build slot's candidates (in index order:
+ * filtering keeps it), written to the room for all of them (to scratch
+ * once the array is full); returns their sum (V_b rho_b (h^2 - r^2)^3). */
+static inline float filter_boundary(const filter_ctx *f, long i, uint32_t b, uint32_t *scratch, sph_cursor *cur)
 {
 	sph_neighbors *nb = f->nb;
 	const uint32_t vbc = nb->verlet.bcount[b];
 	if (vbc == 0) { /* most particles, away from the walls */
 		nb->bfirst[i] = nb->bcount[i] = 0;
-		nb->bwsum[i] = 0;
 		return 0;
 	}
 	const uint32_t *bcand = nb->verlet.bcand.data + nb->verlet.bfirst[b];
@@ -108,8 +108,7 @@ static inline uint32_t filter_boundary(const filter_ctx *f, long i, uint32_t b, 
 	}
 	sph_list_commit(cur, bcnt, &nb->bfirst[i]);
 	nb->bcount[i] = bcnt;
-	nb->bwsum[i] = bws;
-	return bcnt;
+	return bws;
 }
 
 SIMD_DECLARE(bool, neighbors_filter, (const filter_ctx *f, int threads, sph_cursor *fluid, sph_cursor *bound));
@@ -145,14 +144,14 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, sph_cursor *f
 				descents += jl[a - 1] > jl[a];
 			if (descents)
 				sph_sort_hits(jl, dv, cnt);
-			nb->wsum[i] = sph_cube_sum(dv, cnt);
+			const float ws = sph_cube_sum(dv, cnt);
 			/* packed into the list's room (the most words it can take); only
 			 * counted once the array is full */
 			const uint32_t most = sph_packed_words_max(cnt);
 			uint32_t *list = sph_list_claim(&nb->nbr, &cf, most);
 			sph_list_commit(&cf, list ? sph_pack_groups(jl, cnt, list) : most, &nb->first[i]);
 			nb->count[i] = cnt;
-			filter_boundary(f, i, b, jl, &cb);
+			nb->ksum[i] = sph_kernel_sum(f->mass, f->self, ws, filter_boundary(f, i, b, jl, &cb));
 		}
 		free(jl);
 		free(dv);
@@ -170,10 +169,10 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, sph_cursor *f
 void eddy__sph_neighbors_free(sph_neighbors *nb)
 {
 	free(nb->rows);
-	free(nb->nbr.data);
-	free(nb->bnbr.data);
-	free(nb->verlet.cand.data);
-	free(nb->verlet.bcand.data);
+	eddy__pages_free(nb->nbr.data);
+	eddy__pages_free(nb->bnbr.data);
+	eddy__pages_free(nb->verlet.cand.data);
+	eddy__pages_free(nb->verlet.bcand.data);
 	sph_grid_free(&nb->grid);
 	sph_boundary_free(nb);
 	memset(nb, 0, sizeof *nb);
@@ -252,15 +251,16 @@ static int cell_order(eddy_world *w, sph_neighbors *nb, row_pass *rp, int thread
 }
 
 /* l with room for want entries at least; what it held is not kept (no
- * copy: a fresh block's pages stay untouched until a list is written). */
+ * copy: a fresh block's pages stay untouched until a list is written, and
+ * the old block's go back to the system: eddy__pages_alloc). */
 static bool lists_reserve(sph_lists *l, size_t want)
 {
 	if (want <= l->alloc)
 		return true;
-	free(l->data);
+	eddy__pages_free(l->data);
 	/* + 1: an empty list at the very end may still have its first word
 	 * loaded (sph_groups_at), never used */
-	l->data = malloc((want + 1) * sizeof *l->data);
+	l->data = eddy__pages_alloc((want + 1) * sizeof *l->data);
 	l->alloc = l->data ? want : 0;
 	return l->data != NULL;
 }
@@ -288,13 +288,17 @@ static eddy_status fill_lists(eddy_world *w, sph_shared *sh, const float *p4, bo
 	sph_lists *list = candidates ? &v->cand : &nb->nbr, *blist = candidates ? &v->bcand : &nb->bnbr;
 	const sph_search_out out = {!candidates,
 	                            r2max,
+	                            sh->mass,
+	                            sh->k.h2 * sh->k.h2 * sh->k.h2,
 	                            list,
 	                            blist,
 	                            candidates ? v->first : nb->first,
 	                            candidates ? v->count : nb->count,
 	                            candidates ? v->bfirst : nb->bfirst,
 	                            candidates ? v->bcount : nb->bcount};
-	const filter_ctx f = {nb, p4, v->rows_moved ? v->row_of : NULL, sh->k.h2, (long)n, v->longest};
+	const filter_ctx f = {nb,       p4,        v->rows_moved ? v->row_of : NULL,
+	                      sh->k.h2, sh->mass,  sh->k.h2 * sh->k.h2 * sh->k.h2,
+	                      (long)n,  v->longest};
 	/* a first guess (a fluid at rest has about 30 neighbours, 50 candidates) */
 	size_t want = n * (candidates ? 64 : 40), bwant = n * 8 + SPH_LIST_CHUNK * (size_t)(SPH_LIST_CURSORS * threads + 1);
 	for (;;) {
@@ -380,10 +384,10 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", n);
 	/* every per-row array to n rows; what they held is not kept: a new count
 	 * forces a search, which needs none of it */
-	void **arrays[] = {(void **)&nb->first, (void **)&nb->count,  (void **)&nb->bfirst, (void **)&nb->bcount,
-	                   (void **)&nb->wsum,  (void **)&nb->bwsum,  (void **)&v->first,   (void **)&v->count,
-	                   (void **)&v->bfirst, (void **)&v->bcount,  (void **)&v->x,       (void **)&v->y,
-	                   (void **)&v->z,      (void **)&v->slot_of, (void **)&v->row_of};
+	void **arrays[] = {(void **)&nb->first,  (void **)&nb->count, (void **)&nb->bfirst, (void **)&nb->bcount,
+	                   (void **)&nb->ksum,   (void **)&v->first,  (void **)&v->count,   (void **)&v->bfirst,
+	                   (void **)&v->bcount,  (void **)&v->x,      (void **)&v->y,       (void **)&v->z,
+	                   (void **)&v->slot_of, (void **)&v->row_of};
 	if (!sph_grow_block(&nb->rows, &nb->rows_alloc, n, arrays, (int)(sizeof arrays / sizeof arrays[0])))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
 	/* key, order and scratch in per-row arrays of the last step's exact
@@ -391,7 +395,7 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	 * ranges, before any search), and the arena is spared 12 bytes a row */
 	rp.key = nb->first;
 	rp.order = nb->count;
-	rp.scratch = nb->wsum;
+	rp.scratch = nb->ksum;
 	v->age++;
 	const int in_order = cell_order(w, nb, &rp, threads);
 	if (in_order < 0)

@@ -36,13 +36,25 @@ bool sph_cell_ranges(const uint32_t *keys, size_t n, const sph_grid *g, sph_cell
 
 static inline size_t sph_grid_cells(const sph_grid *g) { return (size_t)g->gx * (size_t)g->gy * (size_t)g->gz; }
 
+/* Empty cells between two of a row's occupied ones that still share a run
+ * (sph_cell_starts, sph.h): a run's own record costs six offsets. */
+#define SPH_CELL_GAP 6
+
 /* The first entry of cell x (0 <= x <= gx: gx gives the row's end) of row
- * of cells row (y + gy z). */
+ * of cells row (y + gy z): in a run, its offset; before one (its cells are
+ * empty), the run's first cell's; after the last, the next row's start. A
+ * row holds a few runs (one across a fluid, two across a box's walls). */
 static inline uint32_t sph_cell_start(const sph_grid *g, const sph_cell_starts *s, size_t row, int x)
 {
 	if (s->wide)
 		return s->wide[row * (size_t)g->gx + (size_t)x];
-	return x < g->gx ? s->base[row] + s->off[row * (size_t)g->gx + (size_t)x] : s->base[row + 1];
+	const uint32_t ux = (uint32_t)x;
+	for (uint32_t k = s->run_at[row], e = s->run_at[row + 1]; k < e; ++k) {
+		const sph_cell_run *r = &s->run[k];
+		if (ux < r->x1)
+			return s->base[row] + s->off[r->at + (ux > r->x0 ? ux - r->x0 : 0)];
+	}
+	return s->base[row + 1];
 }
 
 static inline int sph_clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
@@ -181,6 +193,7 @@ static inline uint32_t sph_pack_groups(uint32_t *c, uint32_t cnt, uint32_t *out)
 typedef struct sph_search_out {
 	bool exact;
 	float r2max;
+	float mass, self; /* exact: the kernel sum's m and h^6 (sph_kernel_sum) */
 	sph_lists *list, *blist;
 	uint32_t *first, *count, *bfirst, *bcount;
 } sph_search_out;
@@ -205,5 +218,10 @@ static inline float sph_cube_sum(const float *d, uint32_t cnt)
 		s += d[q] * d[q] * d[q];
 	return s;
 }
+
+/* The kernel sum of a particle whose fluid neighbours' (h^2 - r^2)^3 sum to
+ * ws and boundary ones' V_b rho_b (h^2 - r^2)^3 to bws (sph_neighbors'
+ * ksum): one expression, so the search and the filter give the same bits. */
+static inline float sph_kernel_sum(float mass, float self, float ws, float bws) { return mass * (self + ws) + bws; }
 
 #endif

@@ -224,11 +224,11 @@ static void search_particle(const search_ctx *c, const block_runs *br, int r, ui
 	o->count[i] = cnt;
 	o->bcount[i] = bcnt;
 	if (o->exact) {
-		c->nb->wsum[i] = sph_cube_sum(fb->d, cnt);
+		const float ws = sph_cube_sum(fb->d, cnt);
 		float bws = 0; /* in list order, as the filter sums */
 		for (uint32_t q = 0; q < bcnt; ++q)
 			bws += c->nb->bvol[bb->hit[q]] * c->nb->bnd.rho[bb->hit[q]] * bb->d[q] * bb->d[q] * bb->d[q];
-		c->nb->bwsum[i] = bws;
+		c->nb->ksum[i] = sph_kernel_sum(o->mass, o->self, ws, bws);
 	}
 }
 

@@ -57,16 +57,26 @@ typedef struct sph_lists {
 	size_t used;  /* entries handed out by the last pass */
 } sph_lists;
 
-/* Where each cell's entries start in a table in cell order (grid.c): for
- * each row of cells along x its first entry, 32 bits, and each cell's as a
- * 16-bit offset from that, 2 bytes a cell (the grid spans the world bounds:
- * most of its cells are empty); while some row of cells holds more than
- * 65535 entries, every cell's start whole instead (wide, 4 bytes a cell).
- * Read with sph_cell_start (neighbors.h). */
+/* Where each cell's entries start in a table in cell order (grid.c). Per
+ * row of cells along x: its first entry (32 bits), and its runs of cells
+ * holding entries (two such cells at most SPH_CELL_GAP empty ones apart
+ * share a run), each cell of a run with its start as a 16-bit offset from
+ * the row's: 2 bytes an occupied cell, nothing for the empty stretches (the
+ * grid spans the world bounds: most of its cells are empty, and a row
+ * crossing a box's walls holds two short runs). While some row of cells
+ * holds more than 65535 entries, every cell's start whole instead (wide, 4
+ * bytes a cell). Read with sph_cell_start (neighbors.h). */
+typedef struct sph_cell_run {
+	uint32_t x0, x1; /* the run's cells [x0, x1) along its row; x0 and x1 - 1 hold entries */
+	uint32_t at;     /* off[at + x - x0]: cell x's start less its row's */
+} sph_cell_run;
 typedef struct sph_cell_starts {
-	uint32_t *base; /* rows of cells + 1: the first entry of each row; the last the table's size */
-	uint16_t *off;  /* cells: cell c's first entry - base[its row] */
-	uint32_t *wide; /* cells + 1: cell c's first entry; NULL while the offsets hold */
+	uint32_t *base;   /* rows of cells + 1: the first entry of each row; the last the table's size */
+	uint32_t *run_at; /* rows of cells + 1: row r's runs are run[run_at[r] .. run_at[r + 1]) */
+	sph_cell_run *run;
+	uint16_t *off;
+	size_t run_alloc, off_alloc; /* entries of run and off */
+	uint32_t *wide;              /* cells + 1: cell c's first entry; NULL while the offsets hold */
 } sph_cell_starts;
 
 /* The cell grid (grid.c) */
@@ -137,9 +147,10 @@ typedef struct sph_neighbors {
 	sph_lists nbr, bnbr;
 	uint32_t *first, *bfirst; /* per row: where its lists start in nbr, bnbr */
 	uint32_t *count, *bcount; /* per row: their lengths */
-	/* sum_j (h^2 - r^2)^3 over the fluid neighbours and sum_b V_b rho_b
-	 * (h^2 - r^2)^3 over the boundary ones, made with the lists */
-	float *wsum, *bwsum;
+	/* m (h^6 + sum_j (h^2 - r^2)^3) over the particle and its fluid
+	 * neighbours, plus sum_b V_b rho_b (h^2 - r^2)^3 over the boundary ones
+	 * (m: sph_shared's mass), made with the lists: the density over poly6 */
+	float *ksum;
 	/* the boundary particles, nbound of them */
 	size_t nbound;
 	float *bx, *by, *bz, *bvol; /* m, m^3 (the volume each stands for) */
