@@ -180,7 +180,7 @@ static int child_block(const char *method, long n, int threads, int steps, const
 	const double setup_s = (now_ms() - t0) / 1e3;
 	const size_t np = eddy_world_particle_count(w);
 	const int ns = eddy_world_system_count(w);
-	double *before = calloc((size_t)ns, sizeof *before), ms[64], cpu[64], iters = 0;
+	double *before = calloc((size_t)ns, sizeof *before), ms[64], cpu[64], iters = 0, div_iters = 0;
 	steps = steps < 1 ? 1 : steps > 64 ? 64 : steps;
 	for (int k = 0; k < ns; ++k) {
 		eddy_system_info info;
@@ -201,13 +201,15 @@ static int child_block(const char *method, long n, int threads, int steps, const
 		eddy_world_frame_stats(w, &st);
 		const double it = extra_stat(&st, "iterations");
 		iters += isnan(it) ? 0 : it;
+		const double dit = extra_stat(&st, "divergence_iterations");
+		div_iters += isnan(dit) ? 0 : dit;
 	}
 	printf("{\"method\":\"%s\",\"solver\":\"%s\",\"particles\":%zu,\"threads\":%d,\"steps\":%d,\"ns_per_particle_"
 	       "step\":%.2f,"
 	       "\"cpu_ns_per_particle_step\":%.2f,\"setup_s\":%.3f,\"peak_rss_bytes\":%ld,\"iterations_per_step\":%.2f,"
-	       "\"state_hash\":\"%016llx\",\"systems_ns\":{",
+	       "\"divergence_iterations_per_step\":%.2f,\"state_hash\":\"%016llx\",\"systems_ns\":{",
 	       method, solver, np, threads, steps, median(ms, steps) * 1e6 / (double)np,
-	       median(cpu, steps) * 1e6 / (double)np, setup_s, maxrss_kb() * 1024L, iters / steps,
+	       median(cpu, steps) * 1e6 / (double)np, setup_s, maxrss_kb() * 1024L, iters / steps, div_iters / steps,
 	       (unsigned long long)eddy_world_state_hash(w));
 	for (int k = 0; k < ns; ++k) {
 		eddy_system_info info;

@@ -651,6 +651,8 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 		esum += fabsf(wk->r[i]);
 	}
 	*residual = esum * scale;
+	/* the levels live until the call returns: each call rebuilds them for its active set */
+	const eddy_arena_mark mark = wk->coarse ? eddy__arena_mark(wk->coarse) : (eddy_arena_mark){0};
 	dfsph_coarse *cg = wk->coarse && *residual > tol ? eddy__dfsph_coarse_build(wk->coarse, wk->sh, n, wk->mask) : NULL;
 	if (cg && !(wk->coarse_scale > 0)) { /* s = y . (A/dt) y / e . L e on y = p (dfsph_coarse.h) */
 		const double ele = eddy__dfsph_coarse_unit(cg, wk->r, wk->p);
@@ -703,6 +705,8 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	}
 	if (neg)
 		pass(wk, PASS_CORRECT, true, true);
+	if (wk->coarse)
+		eddy__arena_release(wk->coarse, mark);
 	return it;
 }
 
