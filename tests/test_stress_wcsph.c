@@ -48,7 +48,25 @@
  * spread (several cfl values, depths), not by one run passing. 100 layers
  * (depth 1.25) at cfl 0.5: 14 particles thrown (from 0.23 s on), vmax 0.14
  * from 2 s, bottom p mean 1.023, ringing 0.71 then 0.73 (not run here: it
- * fails the bounds; issue 13). */
+ * fails the bounds; issue 13).
+ *
+ * Where the energy comes from (scenes/stress/wcsph_energy.lua, viscosity and
+ * alpha 0, energy_budget_* below): not the integrator (the same rise at cfl
+ * 0.5, 0.25 and 0.125), but two terms that are not the gradient of an
+ * energy. The bulk pair (poly6 density, spiky-gradient force): two free
+ * blocks meeting at +-0.2 m/s gain 104% of their energy; with the density
+ * and the force from one kernel, the force the exact gradient of
+ * sum m e(rho) (Wendland C2, p_i/rho_i^2 + p_j/rho_j^2), they keep it to
+ * 0.08%. The walls' extrapolated pressure (Adami's p_b, iterated or not):
+ * with that consistent bulk pair and the walls a fixed rho0 term in the
+ * density sum (Akinci 2012, force -p_i/rho_i^2 sum V_b rho0 grad W) the
+ * inviscid 20-layer column keeps its energy (-3e-4 J of 3.04 J over 2 s at
+ * cfl 0.25) but its bottom layer holds twice the hydrostatic pressure (the
+ * wall term's one-sided p_i/rho_i^2: bottom p 2.15 at 10 layers); with
+ * Adami's p_b in the wall pair it blows up again, from the bottom corners.
+ * (Scalar experiments on branch energy12-wendland-experiment, E12_WEND=1
+ * and 2.) What remains: a wall term that is the gradient of an energy and
+ * still carries the hydrostatic pressure at the wall. */
 #include "test.h"
 
 #include <stdlib.h>
@@ -146,10 +164,97 @@ static void still_water_20_layers_at_rest(void) { still_water_at_rest("0.25", 20
 
 static void still_water_40_layers_at_rest(void) { still_water_at_rest("0.5", 40); }
 
-void suite_stress_wcsph(void) { RUN(still_water_10_layers_at_rest); }
+/* The energy (kinetic + potential + compression, the frame stats') of a
+ * wcsph_energy.lua case, inviscid: its first frame's, the largest rise above
+ * that up to t_end and at the last frame. */
+typedef struct energy_run {
+	int status, frames;
+	double e0, rise, last, vmax;
+} energy_run;
+
+static energy_run run_energy(const char *sets, double t_end)
+{
+	energy_run r = {0, 0, NAN, -INFINITY, NAN, 0};
+	enum { CAP = 1 << 20 };
+	char *out = malloc(CAP), cmd[1024];
+	if (!out) {
+		r.status = -1;
+		return r;
+	}
+	snprintf(cmd, sizeof cmd,
+	         "%s/eddy run scenes/stress/wcsph_energy.lua %s --stats - --quiet --threads 1 --out %s/stress_wcsph_energy",
+	         test_build_dir(), sets, test_build_dir());
+	r.status = test_sh(cmd, out, CAP);
+	for (char *line = out; line && *line;) {
+		char *next = strchr(line, '\n');
+		if (next)
+			*next++ = '\0';
+		const double t = field(line, "time"), e = field(line, "energy");
+		if (isfinite(t) && t <= t_end + 1e-9) {
+			if (r.frames++ == 0)
+				r.e0 = e;
+			r.rise = fmax(r.rise, e - r.e0);
+			r.last = e;
+			r.vmax = fmax(r.vmax, field(line, "vmax"));
+		}
+		line = next;
+	}
+	if (r.status != 0)
+		printf("    eddy run %s: exit %d: %.300s\n", sets, r.status, out);
+	free(out);
+	return r;
+}
+
+/* WCSPH's energy budget with the viscosity and Monaghan's alpha at 0: a
+ * conservative force integrated by symplectic Euler keeps the energy to
+ * O(dt^2), with no secular rise. Held: the column thrown onto the floor at
+ * 0.2 m/s (case walls: it meets the floor at 0.125 s and leaves it by
+ * 0.3 s) gains nothing: the energy never rises above its first frame's by
+ * more than 1% of it (measured +0.03%; the contact loses 1.6%, through the
+ * collider). The check can fail: with the walls' pressure taken equal to
+ * the fluid's (p_b = p_i in sph_pressure's wall term) the same impact gains
+ * 0.1 J (2 x E0) by 0.2 s and 8.8 J by 0.5 s. Printed, not asserted (open, issue 13; measured at
+ * 5eb19ff, cfl 0.5): the same column meeting the lid at 0.6 s gains 90 x
+ * its energy by 1 s and the fastest particle reaches 5.8 m/s; two free
+ * blocks meeting at +-0.2 m/s (no walls) gain 104% of their energy, the
+ * same at cfl 0.25, so not the integrator; the still column (gravity,
+ * case column, E0 3.04 J) gains 9 J by 1 s at cfl 0.5 and 0.25 alike, with
+ * or without the walls' iteration. */
+static void energy_budget_floor(void)
+{
+	const energy_run fl = run_energy("--set case=walls --set duration=0.5", 0.5);
+	printf("    WCSPH inviscid column thrown onto the floor at 0.2 m/s, t <= 0.5 s: E0 %.4g J, largest rise %+.3g "
+	       "(held to 1%% of E0), last %+.3g\n",
+	       fl.e0, fl.rise / fl.e0, (fl.last - fl.e0) / fl.e0);
+	CHECK(fl.status == 0);
+	CHECK(fl.frames == 15);
+	CHECK(fl.rise < 0.01 * fl.e0);
+}
+
+/* The open part of the budget (above): slow, as the runs blow up and the
+ * force limit shortens the step. */
+static void energy_budget_open(void)
+{
+	const energy_run lid = run_energy("--set case=walls --set duration=1", 1.0);
+	const energy_run bl = run_energy("--set case=blocks --set duration=1", 1.0);
+	const energy_run col = run_energy("--set case=column --set duration=1", 1.0);
+	const energy_run col4 = run_energy("--set case=column --set duration=1 --set cfl=0.25", 1.0);
+	printf("    open (not asserted): energy rise by 1 s relative to E0: column meeting the lid %+.3g (vmax %.3g m/s), "
+	       "two free blocks %+.3g, still column with gravity %+.3g at cfl 0.5, %+.3g at 0.25 (vmax %.3g, %.3g m/s)\n",
+	       (lid.last - lid.e0) / lid.e0, lid.vmax, (bl.last - bl.e0) / bl.e0, (col.last - col.e0) / col.e0,
+	       (col4.last - col4.e0) / col4.e0, col.vmax, col4.vmax);
+	CHECK(lid.status == 0 && bl.status == 0 && col.status == 0 && col4.status == 0);
+}
+
+void suite_stress_wcsph(void)
+{
+	RUN(still_water_10_layers_at_rest);
+	RUN(energy_budget_floor);
+}
 
 void suite_long_stress_wcsph(void)
 {
 	RUN(still_water_20_layers_at_rest);
 	RUN(still_water_40_layers_at_rest);
+	RUN(energy_budget_open);
 }
