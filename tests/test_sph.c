@@ -1731,6 +1731,28 @@ static eddy_status bar_check_step(eddy_world *w, const eddy_step_context *ctx, v
  * to 12 empty cells (runs merge across gaps of up to 6), tumbling under an
  * oblique gravity so that the table is re-sorted most steps and found in
  * order on others: every count must be the all-pairs one. */
+/* sph_density (spacing, radius h), the bar_check after it, gravity and
+ * integrate: the pipeline of the neighbour-cell tests below. */
+static void add_bar_pipeline(eddy_world *w, float spacing, float h, bar_check *bc)
+{
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	de.spacing = spacing;
+	de.radius = h;
+	eddy_add_sph_density(w, &de);
+	eddy_custom_system_def cs = eddy_default_custom_system_def();
+	const char *reads[] = {"x", "y", "z", "neighbors"};
+	cs.name = "bar_check";
+	cs.reads = reads;
+	cs.read_count = 4;
+	cs.step = bar_check_step;
+	cs.user = bc;
+	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+}
+
 static void neighbour_cells_skip_empty_stretches(void)
 {
 	eddy_world_def d = eddy_default_world_def();
@@ -1760,23 +1782,8 @@ static void neighbour_cells_skip_empty_stretches(void)
 		const float *sl = slab[k % 13];
 		pos[k] = (eddy_vec3){sl[0] + r[0] * (sl[1] - sl[0]), 0.02f + 0.12f * r[1], 0.02f + 0.12f * r[2]};
 	}
-	eddy_sph_density_def de = eddy_default_sph_density_def();
-	de.spacing = 0.008f;
-	de.radius = h;
-	eddy_add_sph_density(w, &de);
 	bar_check bc = {h, 0, 0, 0, NULL};
-	eddy_custom_system_def cs = eddy_default_custom_system_def();
-	const char *reads[] = {"x", "y", "z", "neighbors"};
-	cs.name = "bar_check";
-	cs.reads = reads;
-	cs.read_count = 4;
-	cs.step = bar_check_step;
-	cs.user = &bc;
-	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
-	eddy_gravity_def g = eddy_default_gravity_def();
-	eddy_add_gravity(w, &g);
-	eddy_integrate_def it = eddy_default_integrate_def();
-	eddy_add_integrate(w, &it);
+	add_bar_pipeline(w, 0.008f, h, &bc);
 	eddy_collide_box_def bx = eddy_default_collide_box_def();
 	bx.max = d.bounds_max;
 	eddy_add_collide_box(w, &bx);
@@ -1814,23 +1821,9 @@ static void neighbour_cells_hold_many_rows(void)
 			/* the cells start at bounds_min - h: y, z in 0.10125 .. 0.10875 stay in cell 12 */
 			pos[k] = (eddy_vec3){0.05f + s * (float)a, 0.10125f + s * (float)(b % 4), 0.10125f + s * (float)(b / 4)};
 		}
-		eddy_sph_density_def de = eddy_default_sph_density_def();
-		de.spacing = 2 * s; /* radius 4 spacings (sph_density's limit is 5); the bar is packed twice as dense */
-		de.radius = h;
-		eddy_add_sph_density(w, &de);
 		bar_check bc = {h, 0, 0, 0, NULL};
-		eddy_custom_system_def cs = eddy_default_custom_system_def();
-		const char *reads[] = {"x", "y", "z", "neighbors"};
-		cs.name = "bar_check";
-		cs.reads = reads;
-		cs.read_count = 4;
-		cs.step = bar_check_step;
-		cs.user = &bc;
-		CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
-		eddy_gravity_def g = eddy_default_gravity_def();
-		eddy_add_gravity(w, &g);
-		eddy_integrate_def it = eddy_default_integrate_def();
-		eddy_add_integrate(w, &it);
+		/* radius 4 spacings (sph_density's limit is 5); the bar is packed twice as dense */
+		add_bar_pipeline(w, 2 * s, h, &bc);
 		CHECK(eddy_world_add_particles(w, N, pos, NULL) == EDDY_OK);
 		free(pos);
 		for (int f = 0; f < 3; ++f)
