@@ -55,19 +55,23 @@ OSMESA_LIBS   := $(shell pkg-config --libs osmesa 2>/dev/null || echo -lOSMesa)
 # src/flip_cholmod.c includes CHOLMOD, only render/gl_osmesa.c OSMesa, only
 # render/png.c libpng. render_points draws on a thread of its own (-pthread).
 # HYPRE (Debian's libhypre-dev) is built against Open MPI: only
-# src/flip_hypre.c includes HYPRE and MPI, and everything links both.
+# src/flip_hypre.c includes HYPRE and MPI, and it opens both libraries at
+# its first solve (dlopen) by the sonames found here: nothing links them.
 PNG_CFLAGS    := $(shell pkg-config --cflags libpng 2>/dev/null)
 PNG_LIBS      := $(shell pkg-config --libs libpng 2>/dev/null || echo -lpng16)
 MPI_CFLAGS    := $(shell pkg-config --cflags ompi-c 2>/dev/null || mpicc --showme:compile 2>/dev/null)
-MPI_LIBS      := $(shell pkg-config --libs ompi-c 2>/dev/null || mpicc --showme:link 2>/dev/null || echo -lmpi)
 # as system headers: HYPRE's are not -Wstrict-prototypes clean
 HYPRE_CFLAGS  := -isystem /usr/include/hypre $(patsubst -I%,-isystem %,$(MPI_CFLAGS))
+soname = $(or $(shell objdump -p "$$(readlink -f "$$($(CC) -print-file-name=$(1))")" 2>/dev/null | awk '/SONAME/ {print $$2}'),$(1))
+HYPRE_SONAME  := $(call soname,libHYPRE.so)
+MPI_SONAME    := $(call soname,libmpi.so)
+HYPRE_DEFS    := -DEDDY_HYPRE_SONAME='"$(HYPRE_SONAME)"' -DEDDY_MPI_SONAME='"$(MPI_SONAME)"'
 # Only src/surface_vdb.cpp includes OpenVDB (with TBB and Imath, which its
 # headers use).
 VDB_LIBS      := -lopenvdb $(shell pkg-config --libs Imath tbb 2>/dev/null || echo -lImath-3_1 -ltbb) -lstdc++
 # Meshes are read through assimp's C API; only src/mesh.c includes it.
 ASSIMP_LIBS   := $(shell pkg-config --libs assimp 2>/dev/null || echo -lassimp)
-LIBS          := -lcholmod -lHYPRE $(MPI_LIBS) $(OSMESA_LIBS) $(PNG_LIBS) $(ASSIMP_LIBS) $(VDB_LIBS) -lz -pthread -lm
+LIBS          := -lcholmod $(OSMESA_LIBS) $(PNG_LIBS) $(ASSIMP_LIBS) $(VDB_LIBS) -lz -pthread -lm
 
 # The command-line host: main.c and the files named cli_*.c are the command's
 # own and stay out of the Lua module.
@@ -138,7 +142,7 @@ $(call obj,$(SIMD_C)): BASE += $(if $(SIMD_VARIANT_O),-DEDDY_SIMD_HAVE_AVX2)
 $(BUILD)/obj/src/%.avx2.o: src/%.c
 	@mkdir -p $(dir $@)
 	$(CC) $(BASE) -mavx2 -mbmi2 -DEDDY_SIMD_VARIANT -Isrc -c $< -o $@
-$(BUILD)/obj/src/flip_hypre.o: BASE += $(HYPRE_CFLAGS)
+$(BUILD)/obj/src/flip_hypre.o: BASE += $(HYPRE_CFLAGS) $(HYPRE_DEFS)
 
 # ---- linking --------------------------------------------------------------------
 
@@ -158,7 +162,7 @@ $(BUILD)/eddy: $(CLI_O) $(LUA_O) $(BUILD)/libeddy.a
 
 $(BUILD)/eddy.pc: Makefile src/eddy.h
 	@mkdir -p $(BUILD)
-	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lassimp -lHYPRE %s -lpng16 -lz %s -lm -fopenmp -pthread\n' '$(PREFIX)' '$(VERSION)' '$(MPI_LIBS)' '$(VDB_LIBS)' > $@
+	printf 'prefix=%s\nincludedir=$${prefix}/include\nlibdir=$${prefix}/lib\n\nName: eddy\nDescription: headless fluid engine\nVersion: %s\nCflags: -I$${includedir}\nLibs: -L$${libdir} -leddy\nLibs.private: -lOSMesa -lcholmod -lassimp -lpng16 -lz %s -lm -fopenmp -pthread\n' '$(PREFIX)' '$(VERSION)' '$(VDB_LIBS)' > $@
 
 $(BUILD)/tests/run: $(TEST_O) $(LUA_O) $(BUILD)/libeddy.a
 	@mkdir -p $(dir $@)
@@ -246,7 +250,7 @@ $(BUILD)/fuzz/surface_vdb.o: $(SRC_CXX) src/surface.h src/eddy.h
 
 $(BUILD)/fuzz/fuzz_scene: $(FUZZ_SRC) $(HEADER) $(BUILD)/fuzz/surface_vdb.o
 	@mkdir -p $(dir $@)
-	clang $(FUZZ_CFLAGS) -Isrc -Ilua $(LUA_CFLAGS) $(OSMESA_CFLAGS) $(HYPRE_CFLAGS) $(FUZZ_SRC) $(BUILD)/fuzz/surface_vdb.o -o $@ \
+	clang $(FUZZ_CFLAGS) -Isrc -Ilua $(LUA_CFLAGS) $(OSMESA_CFLAGS) $(HYPRE_CFLAGS) $(HYPRE_DEFS) $(FUZZ_SRC) $(BUILD)/fuzz/surface_vdb.o -o $@ \
 		$(LUA_LIBS) $(LIBS)
 
 fuzz: deps

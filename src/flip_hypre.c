@@ -52,10 +52,22 @@
  * twice in a process: after a finalisation, by the host or by an unloaded
  * copy of eddy, a HYPRE solve is an error, not an abort. One rank: the
  * distributed solve is a later issue, and every call here takes the
- * communicator so it can grow into it. */
+ * communicator so it can grow into it.
+ *
+ * Loading: libHYPRE and libmpi are opened (dlopen) by the first HYPRE solve,
+ * not linked. Linked, they came with some 40 more shared libraries into every
+ * process that uses eddy (start-up 90 ms against 30), and libsuperlu_dist,
+ * which HYPRE needs, sets mallopt(M_MMAP_MAX, 0) when it loads: from then on
+ * malloc never returns a large block to the system, in the host's program
+ * too. Only the headers are needed to build; the libraries' sonames come
+ * from the build (EDDY_HYPRE_SONAME, EDDY_MPI_SONAME in the Makefile). libmpi
+ * is opened first and RTLD_GLOBAL, as Open MPI's plugins resolve its symbols
+ * from the global scope. Neither is ever closed (MPI cannot start twice). */
 #include "flip.h"
 
+#include <dlfcn.h>
 #include <pthread.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -82,39 +94,162 @@
 #define LSAN_ON() ((void)0)
 #endif
 
+#ifndef EDDY_HYPRE_SONAME
+#define EDDY_HYPRE_SONAME "libHYPRE.so"
+#endif
+#ifndef EDDY_MPI_SONAME
+#define EDDY_MPI_SONAME "libmpi.so"
+#endif
+
+/* The functions used here, looked up in the opened libraries; each field has
+ * the type of the header's declaration of its name. */
+#define EDDY_MPI_FUNCS(X) \
+	X(MPI_Initialized) X(MPI_Finalized) X(MPI_Init_thread) X(MPI_Finalize) X(MPI_Comm_set_errhandler)
+#define EDDY_HYPRE_FUNCS(X)                \
+	X(HYPRE_Init)                          \
+	X(HYPRE_Finalize)                      \
+	X(HYPRE_ClearAllErrors)                \
+	X(HYPRE_StructGridCreate)              \
+	X(HYPRE_StructGridSetExtents)          \
+	X(HYPRE_StructGridAssemble)            \
+	X(HYPRE_StructGridDestroy)             \
+	X(HYPRE_StructStencilCreate)           \
+	X(HYPRE_StructStencilSetElement)       \
+	X(HYPRE_StructStencilDestroy)          \
+	X(HYPRE_StructMatrixCreate)            \
+	X(HYPRE_StructMatrixSetSymmetric)      \
+	X(HYPRE_StructMatrixInitialize)        \
+	X(HYPRE_StructMatrixSetBoxValues)      \
+	X(HYPRE_StructMatrixAssemble)          \
+	X(HYPRE_StructMatrixDestroy)           \
+	X(HYPRE_StructVectorCreate)            \
+	X(HYPRE_StructVectorInitialize)        \
+	X(HYPRE_StructVectorSetConstantValues) \
+	X(HYPRE_StructVectorSetBoxValues)      \
+	X(HYPRE_StructVectorGetBoxValues)      \
+	X(HYPRE_StructVectorAssemble)          \
+	X(HYPRE_StructVectorDestroy)           \
+	X(HYPRE_StructPFMGCreate)              \
+	X(HYPRE_StructPFMGSetMaxIter)          \
+	X(HYPRE_StructPFMGSetTol)              \
+	X(HYPRE_StructPFMGSetZeroGuess)        \
+	X(HYPRE_StructPFMGSetRelaxType)        \
+	X(HYPRE_StructPFMGSetRAPType)          \
+	X(HYPRE_StructPFMGSetNumPreRelax)      \
+	X(HYPRE_StructPFMGSetNumPostRelax)     \
+	X(HYPRE_StructPFMGSetSkipRelax)        \
+	X(HYPRE_StructPFMGSetLogging)          \
+	X(HYPRE_StructPFMGSetup)               \
+	X(HYPRE_StructPFMGSolve)               \
+	X(HYPRE_StructPFMGDestroy)
+#define EDDY_FIELD(name) __typeof__(&name) name;
+typedef struct hypre_lib {
+	EDDY_MPI_FUNCS(EDDY_FIELD)
+	EDDY_HYPRE_FUNCS(EDDY_FIELD)
+	MPI_Comm comm_world;
+	MPI_Errhandler errors_return;
+} hypre_lib;
+#undef EDDY_FIELD
+
 /* MPI and HYPRE are process-wide libraries: initialising them is the one
  * process-wide step, done once whichever world asks first; HYPRE keeps a
  * process-wide error flag, so solves from worlds on different threads take
  * turns (MPI_THREAD_SERIALIZED). */
 static pthread_once_t init_once = PTHREAD_ONCE_INIT;
 static const char *init_error; /* set once inside init_once, read after it */
+static char init_message[512]; /* init_error's text when it names a library */
+static hypre_lib lib;          /* set once inside init_once, read after it */
 static pthread_mutex_t solve_lock = PTHREAD_MUTEX_INITIALIZER;
 
 static void finalize_mpi(void)
 {
 	int finalised = 0;
-	MPI_Finalized(&finalised);
+	lib.MPI_Finalized(&finalised);
 	if (!finalised) {
 		LSAN_OFF();
-		HYPRE_Finalize();
-		MPI_Finalize();
+		lib.HYPRE_Finalize();
+		lib.MPI_Finalize();
 		LSAN_ON();
 	}
 }
 
+/* Opens a library and looks up its functions; false with init_error set. */
+static bool open_library(const char *soname, int mode, void **handle)
+{
+	*handle = dlopen(soname, mode);
+	if (!*handle) {
+		const char *why = dlerror();
+		snprintf(init_message, sizeof init_message,
+		         "cannot load %s (%s); Debian's libhypre-dev and libopenmpi-dev provide it", soname,
+		         why ? why : "not found");
+		init_error = init_message;
+	}
+	return *handle != NULL;
+}
+
+static bool find_symbol(void *handle, const char *soname, const char *name, void **at)
+{
+	dlerror();
+	*at = dlsym(handle, name);
+	if (!*at) {
+		snprintf(init_message, sizeof init_message, "%s has no symbol %s", soname, name);
+		init_error = init_message;
+	}
+	return *at != NULL;
+}
+
+static bool load_libraries(void)
+{
+	void *mpi = NULL, *hypre = NULL;
+	LSAN_OFF();
+	const bool opened = open_library(EDDY_MPI_SONAME, RTLD_NOW | RTLD_GLOBAL, &mpi) &&
+	                    open_library(EDDY_HYPRE_SONAME, RTLD_NOW, &hypre);
+	LSAN_ON();
+	if (!opened)
+		return false;
+	/* a data pointer to a function pointer through memcpy: ISO C has no cast between them */
+	void *at = NULL;
+#define EDDY_FIND(lib_handle, soname, name)           \
+	if (!find_symbol(lib_handle, soname, #name, &at)) \
+		return false;                                 \
+	memcpy(&lib.name, &at, sizeof lib.name);
+#define EDDY_FIND_MPI(name) EDDY_FIND(mpi, EDDY_MPI_SONAME, name)
+#define EDDY_FIND_HYPRE(name) EDDY_FIND(hypre, EDDY_HYPRE_SONAME, name)
+	EDDY_MPI_FUNCS(EDDY_FIND_MPI)
+	EDDY_HYPRE_FUNCS(EDDY_FIND_HYPRE)
+#undef EDDY_FIND_HYPRE
+#undef EDDY_FIND_MPI
+#undef EDDY_FIND
+#ifdef OPEN_MPI
+	/* Open MPI's predefined handles are the addresses of its globals */
+	if (!find_symbol(mpi, EDDY_MPI_SONAME, "ompi_mpi_comm_world", &at))
+		return false;
+	lib.comm_world = (MPI_Comm)at;
+	if (!find_symbol(mpi, EDDY_MPI_SONAME, "ompi_mpi_errors_return", &at))
+		return false;
+	lib.errors_return = (MPI_Errhandler)at;
+#else
+	lib.comm_world = MPI_COMM_WORLD;
+	lib.errors_return = MPI_ERRORS_RETURN;
+#endif
+	return true;
+}
+
 static void init_libraries(void)
 {
+	if (!load_libraries())
+		return;
 	int initialised = 0, finalised = 0;
-	MPI_Finalized(&finalised);
+	lib.MPI_Finalized(&finalised);
 	if (finalised) {
 		init_error = "MPI was finalised by the host before the first HYPRE solve";
 		return;
 	}
-	MPI_Initialized(&initialised);
+	lib.MPI_Initialized(&initialised);
 	if (!initialised) {
 		int provided = 0;
 		LSAN_OFF();
-		const int st = MPI_Init_thread(NULL, NULL, MPI_THREAD_SERIALIZED, &provided);
+		const int st = lib.MPI_Init_thread(NULL, NULL, MPI_THREAD_SERIALIZED, &provided);
 		LSAN_ON();
 		if (st != MPI_SUCCESS) {
 			init_error = "MPI_Init_thread failed";
@@ -123,11 +258,11 @@ static void init_libraries(void)
 		/* ours: report MPI errors as codes rather than aborting the host,
 		 * and finalise at exit (or when this library is unloaded), as
 		 * mpirun expects of every rank */
-		MPI_Comm_set_errhandler(MPI_COMM_WORLD, MPI_ERRORS_RETURN);
+		lib.MPI_Comm_set_errhandler(lib.comm_world, lib.errors_return);
 		atexit(finalize_mpi);
 	}
 	LSAN_OFF();
-	if (HYPRE_Init() != 0)
+	if (lib.HYPRE_Init() != 0)
 		init_error = "HYPRE_Init failed";
 	LSAN_ON();
 }
@@ -173,18 +308,18 @@ typedef struct hyp {
 static void hyp_free(hyp *H)
 {
 	if (H->pfmg)
-		HYPRE_StructPFMGDestroy(H->pfmg);
+		lib.HYPRE_StructPFMGDestroy(H->pfmg);
 	if (H->rv)
-		HYPRE_StructVectorDestroy(H->rv);
+		lib.HYPRE_StructVectorDestroy(H->rv);
 	if (H->zv)
-		HYPRE_StructVectorDestroy(H->zv);
+		lib.HYPRE_StructVectorDestroy(H->zv);
 	if (H->mat)
-		HYPRE_StructMatrixDestroy(H->mat);
+		lib.HYPRE_StructMatrixDestroy(H->mat);
 	if (H->stencil)
-		HYPRE_StructStencilDestroy(H->stencil);
+		lib.HYPRE_StructStencilDestroy(H->stencil);
 	if (H->grid)
-		HYPRE_StructGridDestroy(H->grid);
-	HYPRE_ClearAllErrors();
+		lib.HYPRE_StructGridDestroy(H->grid);
+	lib.HYPRE_ClearAllErrors();
 }
 
 /* z = one PFMG V-cycle applied to r (box-ordered arrays rb, zb; rb is zero
@@ -193,10 +328,10 @@ static bool precondition(hyp *H, const double *r, double *z, const int *bidx, in
 {
 	for (int i = 0; i < n; ++i)
 		rb[bidx[i]] = r[i];
-	int e = HYPRE_StructVectorSetBoxValues(H->rv, H->lo, H->hi, rb);
-	e |= HYPRE_StructVectorSetConstantValues(H->zv, 0.0);
-	e |= HYPRE_StructPFMGSolve(H->pfmg, H->mat, H->rv, H->zv);
-	e |= HYPRE_StructVectorGetBoxValues(H->zv, H->lo, H->hi, zb);
+	int e = lib.HYPRE_StructVectorSetBoxValues(H->rv, H->lo, H->hi, rb);
+	e |= lib.HYPRE_StructVectorSetConstantValues(H->zv, 0.0);
+	e |= lib.HYPRE_StructPFMGSolve(H->pfmg, H->mat, H->rv, H->zv);
+	e |= lib.HYPRE_StructVectorGetBoxValues(H->zv, H->lo, H->hi, zb);
 	for (int i = 0; i < n; ++i)
 		z[i] = zb[bidx[i]];
 	return e == 0;
@@ -260,36 +395,36 @@ static eddy_status solve(eddy_world *w, const flip_matrix *A, const int *cell_of
 	}
 	int offsets[4][3] = {{0, 0, 0}, {-1, 0, 0}, {0, -1, 0}, {0, 0, -1}};
 	int entries[4] = {0, 1, 2, 3};
-	int e = HYPRE_StructGridCreate(MPI_COMM_WORLD, 3, &H.grid);
-	e |= HYPRE_StructGridSetExtents(H.grid, H.lo, H.hi);
-	e |= HYPRE_StructGridAssemble(H.grid);
-	e |= HYPRE_StructStencilCreate(3, 4, &H.stencil);
+	int e = lib.HYPRE_StructGridCreate(lib.comm_world, 3, &H.grid);
+	e |= lib.HYPRE_StructGridSetExtents(H.grid, H.lo, H.hi);
+	e |= lib.HYPRE_StructGridAssemble(H.grid);
+	e |= lib.HYPRE_StructStencilCreate(3, 4, &H.stencil);
 	for (int k = 0; k < 4; ++k)
-		e |= HYPRE_StructStencilSetElement(H.stencil, k, offsets[k]);
-	e |= HYPRE_StructMatrixCreate(MPI_COMM_WORLD, H.grid, H.stencil, &H.mat);
-	e |= HYPRE_StructMatrixSetSymmetric(H.mat, 1);
-	e |= HYPRE_StructMatrixInitialize(H.mat);
-	e |= HYPRE_StructMatrixSetBoxValues(H.mat, H.lo, H.hi, 4, entries, vals);
-	e |= HYPRE_StructMatrixAssemble(H.mat);
-	e |= HYPRE_StructVectorCreate(MPI_COMM_WORLD, H.grid, &H.rv);
-	e |= HYPRE_StructVectorCreate(MPI_COMM_WORLD, H.grid, &H.zv);
-	e |= HYPRE_StructVectorInitialize(H.rv);
-	e |= HYPRE_StructVectorInitialize(H.zv);
-	e |= HYPRE_StructVectorSetConstantValues(H.rv, 0.0);
-	e |= HYPRE_StructVectorSetConstantValues(H.zv, 0.0);
-	e |= HYPRE_StructVectorAssemble(H.rv);
-	e |= HYPRE_StructVectorAssemble(H.zv);
-	e |= HYPRE_StructPFMGCreate(MPI_COMM_WORLD, &H.pfmg);
-	e |= HYPRE_StructPFMGSetMaxIter(H.pfmg, 1);
-	e |= HYPRE_StructPFMGSetTol(H.pfmg, 0.0);
-	e |= HYPRE_StructPFMGSetZeroGuess(H.pfmg);
-	e |= HYPRE_StructPFMGSetRelaxType(H.pfmg, 2); /* symmetric red-black Gauss-Seidel */
-	e |= HYPRE_StructPFMGSetRAPType(H.pfmg, 1);   /* non-Galerkin 7-point coarse operators */
-	e |= HYPRE_StructPFMGSetNumPreRelax(H.pfmg, 2);
-	e |= HYPRE_StructPFMGSetNumPostRelax(H.pfmg, 2);
-	e |= HYPRE_StructPFMGSetSkipRelax(H.pfmg, 1);
-	e |= HYPRE_StructPFMGSetLogging(H.pfmg, 0);
-	e |= HYPRE_StructPFMGSetup(H.pfmg, H.mat, H.rv, H.zv);
+		e |= lib.HYPRE_StructStencilSetElement(H.stencil, k, offsets[k]);
+	e |= lib.HYPRE_StructMatrixCreate(lib.comm_world, H.grid, H.stencil, &H.mat);
+	e |= lib.HYPRE_StructMatrixSetSymmetric(H.mat, 1);
+	e |= lib.HYPRE_StructMatrixInitialize(H.mat);
+	e |= lib.HYPRE_StructMatrixSetBoxValues(H.mat, H.lo, H.hi, 4, entries, vals);
+	e |= lib.HYPRE_StructMatrixAssemble(H.mat);
+	e |= lib.HYPRE_StructVectorCreate(lib.comm_world, H.grid, &H.rv);
+	e |= lib.HYPRE_StructVectorCreate(lib.comm_world, H.grid, &H.zv);
+	e |= lib.HYPRE_StructVectorInitialize(H.rv);
+	e |= lib.HYPRE_StructVectorInitialize(H.zv);
+	e |= lib.HYPRE_StructVectorSetConstantValues(H.rv, 0.0);
+	e |= lib.HYPRE_StructVectorSetConstantValues(H.zv, 0.0);
+	e |= lib.HYPRE_StructVectorAssemble(H.rv);
+	e |= lib.HYPRE_StructVectorAssemble(H.zv);
+	e |= lib.HYPRE_StructPFMGCreate(lib.comm_world, &H.pfmg);
+	e |= lib.HYPRE_StructPFMGSetMaxIter(H.pfmg, 1);
+	e |= lib.HYPRE_StructPFMGSetTol(H.pfmg, 0.0);
+	e |= lib.HYPRE_StructPFMGSetZeroGuess(H.pfmg);
+	e |= lib.HYPRE_StructPFMGSetRelaxType(H.pfmg, 2); /* symmetric red-black Gauss-Seidel */
+	e |= lib.HYPRE_StructPFMGSetRAPType(H.pfmg, 1);   /* non-Galerkin 7-point coarse operators */
+	e |= lib.HYPRE_StructPFMGSetNumPreRelax(H.pfmg, 2);
+	e |= lib.HYPRE_StructPFMGSetNumPostRelax(H.pfmg, 2);
+	e |= lib.HYPRE_StructPFMGSetSkipRelax(H.pfmg, 1);
+	e |= lib.HYPRE_StructPFMGSetLogging(H.pfmg, 0);
+	e |= lib.HYPRE_StructPFMGSetup(H.pfmg, H.mat, H.rv, H.zv);
 	if (e) {
 		hyp_free(&H);
 		return eddy__fail(w, EDDY_ERR_SOLVER,

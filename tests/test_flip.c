@@ -1263,6 +1263,27 @@ static void dam_break_scene_runs_every_solver(void)
 	}
 }
 
+/* HYPRE and MPI are opened by the first HYPRE solve, not linked: a run with
+ * another solver never loads them (nor libsuperlu_dist, whose initialiser
+ * changes malloc's behaviour for the whole process), a HYPRE run does. The
+ * dynamic loader's own trace (LD_DEBUG=files) names every library it maps. */
+static void hypre_is_loaded_only_when_asked(void)
+{
+	static const char *const names[2] = {"pcg", "hypre"};
+	for (int sv = 0; sv < 2; ++sv) {
+		char cmd[768], out[256];
+		snprintf(cmd, sizeof cmd,
+		         "LD_DEBUG=files %s/eddy run scenes/dam_break.lua --set method=flip --frames 1 --set solver=%s "
+		         "--set spacing=0.025 --quiet 2>&1 >/dev/null | grep -c -e 'file=libHYPRE' -e 'file=libmpi' "
+		         "-e 'file=libsuperlu'",
+		         test_build_dir(), names[sv]);
+		CHECK(test_sh(cmd, out, sizeof out) == (sv ? 0 : 1)); /* grep: 1 when nothing matched */
+		const long loaded = strtol(out, NULL, 10);
+		CHECKF(sv ? loaded >= 3 : loaded == 0, "solver %s: %ld loader lines name HYPRE, MPI or SuperLU", names[sv],
+		       loaded);
+	}
+}
+
 /* A wrong solver name is a one-line error naming the scene line and the choices. */
 static void scene_rejects_unknown_solver(void)
 {
@@ -1309,4 +1330,5 @@ void suite_flip(void)
 	RUN(defs_and_order_are_checked);
 	RUN(dam_break_scene_runs_every_solver);
 	RUN(scene_rejects_unknown_solver);
+	RUN(hypre_is_loaded_only_when_asked);
 }
