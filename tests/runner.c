@@ -59,6 +59,19 @@ int test_sh(const char *cmd, char *out, size_t cap)
 	return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
 }
 
+double test_json_number(const char *line, const char *key)
+{
+	char pat[64];
+	snprintf(pat, sizeof pat, "\"%s\":", key);
+	const char *p = strstr(line, pat);
+	if (!p)
+		return NAN;
+	p += strlen(pat);
+	char *end;
+	const double v = strtod(p, &end);
+	return end == p ? NAN : v;
+}
+
 const char *test_build_dir(void)
 {
 	const char *b = getenv("EDDY_BUILD");

@@ -165,15 +165,6 @@ static bool has_key(const json *j, const char *k)
 	return false;
 }
 
-/* The value text after "key": in line (for simple fields). */
-static double field_num(const char *line, const char *key)
-{
-	char pat[64];
-	snprintf(pat, sizeof pat, "\"%s\":", key);
-	const char *p = strstr(line, pat);
-	return p ? strtod(p + strlen(pat), NULL) : NAN;
-}
-
 static void json_reader_rejects_bad_json(void)
 {
 	json j;
@@ -231,11 +222,11 @@ static void run_writes_stats_lines(void)
 		for (int k = 0; contract[k]; ++k)
 			CHECKF(has_key(&j, contract[k]), "line %d lacks '%s'", lines, contract[k]);
 		CHECK(has_key(&j, "top")); /* the scene's on_frame field */
-		CHECK(field_num(line, "frame") == lines);
-		CHECK_NEAR(field_num(line, "time"), lines / 30.0, 1e-8);
-		CHECK(field_num(line, "particles") == 10000);
-		CHECK(field_num(line, "leaked") == 0);
-		CHECK(field_num(line, "nonfinite") == 0);
+		CHECK(test_json_number(line, "frame") == lines);
+		CHECK_NEAR(test_json_number(line, "time"), lines / 30.0, 1e-8);
+		CHECK(test_json_number(line, "particles") == 10000);
+		CHECK(test_json_number(line, "leaked") == 0);
+		CHECK(test_json_number(line, "nonfinite") == 0);
 		CHECK(strstr(line, "\"integrate\":") != NULL);
 	}
 	CHECK(lines == 3);
@@ -265,7 +256,7 @@ static void set_changes_the_scene(void)
 	char cmd[2048], out[16384];
 	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 1 --set spacing=0.04 --stats - --quiet", eddy());
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
-	CHECK(field_num(out, "particles") == 10 * 12 * 10); /* a 0.4 x 0.5 x 0.4 block at 0.04 m */
+	CHECK(test_json_number(out, "particles") == 10 * 12 * 10); /* a 0.4 x 0.5 x 0.4 block at 0.04 m */
 	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 1 --set spcing=0.04", eddy());
 	CHECK(test_sh(cmd, out, sizeof out) == 2);
 	CHECK_HAS(out, "eddy: --set spcing: scenes/bounce.lua has no parameter 'spcing'");
@@ -566,7 +557,7 @@ static void resume_checks_frames_and_stats(void)
 	char *text = slurp(stats);
 	int line = 0;
 	for (char *l = text ? strtok(text, "\n") : NULL; l; l = strtok(NULL, "\n"))
-		CHECKF(field_num(l, "frame") == ++line, "line %d: %s", line, l); /* frames 1..12, once each */
+		CHECKF(test_json_number(l, "frame") == ++line, "line %d: %s", line, l); /* frames 1..12, once each */
 	free(text);
 }
 

@@ -903,14 +903,6 @@ static double curve_at(const curve *c, double T)
 	return NAN;
 }
 
-static double json_number(const char *line, const char *key)
-{
-	char pat[64];
-	snprintf(pat, sizeof pat, "\"%s\":", key);
-	const char *p = strstr(line, pat);
-	return p ? strtod(p + strlen(pat), NULL) : NAN;
-}
-
 /* Runs a scene with the eddy command; each stats line gives (T, Z)-like
  * pairs of the two named fields. Returns the number of lines. */
 static int run_scene(const char *scene, const char *sets, const char *kx, const char *ky, curve *out, char *last,
@@ -929,8 +921,8 @@ static int run_scene(const char *scene, const char *sets, const char *kx, const 
 		if (last)
 			snprintf(last, last_size, "%s", line);
 		if (out->n < 256 && kx) {
-			out->T[out->n] = json_number(line, kx);
-			out->Z[out->n] = json_number(line, ky);
+			out->T[out->n] = test_json_number(line, kx);
+			out->Z[out->n] = test_json_number(line, ky);
 			out->n++;
 		}
 	}
@@ -973,7 +965,7 @@ static void dam_break_matches_martin_moyce(void)
 	       "(%.3f unshifted); Z_sim(1, 2, 3) = %.3f %.3f %.3f\n",
 	       best, best_shift, noshift, curve_at(&sim, 1.0), curve_at(&sim, 2.0), curve_at(&sim, 3.0));
 	CHECK(best <= 0.10);
-	CHECK(json_number(last, "leaked") == 0 && json_number(last, "nonfinite") == 0);
+	CHECK(test_json_number(last, "leaked") == 0 && test_json_number(last, "nonfinite") == 0);
 }
 
 /* The SPH scenes run through the eddy command and report their fields. */
@@ -983,9 +975,9 @@ static void scenes_run_and_report(void)
 	char last[16384] = "";
 	run_scene("scenes/hydrostatic.lua", "--frames 2", NULL, NULL, &c, last, sizeof last);
 	CHECK_HAS(last, "\"pressure_err\":");
-	CHECK(json_number(last, "bottom_density_expected") > 1.0);
+	CHECK(test_json_number(last, "bottom_density_expected") > 1.0);
 	run_scene("scenes/pour.lua", "--frames 3", NULL, NULL, &c, last, sizeof last);
-	CHECK(json_number(last, "particles") > 0 && json_number(last, "leaked") == 0);
+	CHECK(test_json_number(last, "particles") > 0 && test_json_number(last, "leaked") == 0);
 	run_scene("scenes/droplet.lua", "--frames 1 --set spacing=0.0025", NULL, NULL, &c, last, sizeof last);
 	CHECK_HAS(last, "\"q\":");
 	CHECK_HAS(last, "sph_surface_tension");
@@ -1161,7 +1153,7 @@ static void dfsph_dam_break_matches_martin_moyce(void)
 	       "Z_sim(1, 2, 3) = %.3f %.3f %.3f\n",
 	       best, best_shift, curve_at(&sim, 1.0), curve_at(&sim, 2.0), curve_at(&sim, 3.0));
 	CHECK(best <= 0.10);
-	CHECK(json_number(last, "leaked") == 0 && json_number(last, "nonfinite") == 0);
+	CHECK(test_json_number(last, "leaked") == 0 && test_json_number(last, "nonfinite") == 0);
 	CHECK_HAS(last, "\"solver\":\"dfsph\"");
 }
 

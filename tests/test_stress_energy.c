@@ -15,15 +15,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* The number after "key": in a stats line, or NAN. */
-static double field(const char *line, const char *key)
-{
-	char pat[64];
-	snprintf(pat, sizeof pat, "\"%s\":", key);
-	const char *p = strstr(line, pat);
-	return p ? strtod(p + strlen(pat), NULL) : NAN;
-}
-
 /* Largest rise of the total energy above its start and the potential energy
  * released (start minus lowest), J, over a run of the dam break. */
 static bool energy_rise(const char *method, double spacing, double *rise, double *released)
@@ -40,7 +31,7 @@ static bool energy_rise(const char *method, double spacing, double *rise, double
 	*rise = 0;
 	int frames = 0;
 	while (fgets(line, sizeof line, f)) {
-		const double e = field(line, "energy"), p = field(line, "potential_energy");
+		const double e = test_json_number(line, "energy"), p = test_json_number(line, "potential_energy");
 		if (!isfinite(e) || !isfinite(p))
 			continue;
 		if (!frames++)

@@ -149,20 +149,6 @@ static void drop_into_pool_fine_long(void)
 
 /* ---- the dam break (scenes/dam_break.lua through the CLI) ----------------- */
 
-/* The number after "key": in a JSON line (NAN if absent or null). */
-static double json_num(const char *line, const char *key)
-{
-	char pat[64];
-	snprintf(pat, sizeof pat, "\"%s\":", key);
-	const char *p = strstr(line, pat);
-	if (!p)
-		return NAN;
-	p += strlen(pat);
-	char *end;
-	const double v = strtod(p, &end);
-	return end == p ? NAN : v;
-}
-
 typedef struct dam_result {
 	double worst, final;
 	double n0, n1;
@@ -196,7 +182,7 @@ static dam_result dam_break(const char *spacing, bool reseed, double seconds)
 	const double a = 0.1, v0 = a * 2 * a * 4 * 2 * atof(spacing);
 	static char line[65536];
 	while (fgets(line, sizeof line, f)) {
-		const double v = json_num(line, "volume"), n = json_num(line, "particles");
+		const double v = test_json_number(line, "volume"), n = test_json_number(line, "particles");
 		CHECKF(isfinite(v) && isfinite(n), "frame %d: no volume or particle count", r.frames + 1);
 		if (r.frames++ == 0)
 			r.n0 = n;

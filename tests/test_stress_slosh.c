@@ -25,20 +25,6 @@ typedef struct slosh_result {
 	bool ok;
 } slosh_result;
 
-/* The number after "key": in a JSON line (NAN if absent or null). */
-static double json_num(const char *line, const char *key)
-{
-	char pat[64];
-	snprintf(pat, sizeof pat, "\"%s\":", key);
-	const char *p = strstr(line, pat);
-	if (!p)
-		return NAN;
-	p += strlen(pat);
-	char *end;
-	const double v = strtod(p, &end);
-	return end == p ? NAN : v;
-}
-
 static slosh_result run_slosh(const char *method, const char *spacing, const char *thickness, double duration)
 {
 	slosh_result r = {NAN, NAN, NAN, NAN, false};
@@ -65,9 +51,9 @@ static slosh_result run_slosh(const char *method, const char *spacing, const cha
 	while (fgets(line, sizeof line, f))
 		memcpy(last, line, sizeof last);
 	fclose(f);
-	r.period_err = json_num(last, "period_err");
-	r.damping = json_num(last, "damping_ratio");
-	r.peaks = json_num(last, "peaks");
+	r.period_err = test_json_number(last, "period_err");
+	r.damping = test_json_number(last, "damping_ratio");
+	r.peaks = test_json_number(last, "peaks");
 	r.ok = code == 0;
 	return r;
 }
