@@ -77,9 +77,9 @@
  * 20-40%). Lind's Taylor correction of the velocity is left out: it makes
  * momentum, and did not change the slosh's damping within its resolution.
  * The volume: as grad C_i ~ S_i / rho_i and the kernel sums' total changes
- * by 2 sum_i dr_i . S_i to first order, a shift is a descent on sum_i rho_i:
- * it always lowers the kernel sums, and where the solves do not push them
- * back (k >= 0: fluid below rho0) the arrangement keeps the lower sum.
+ * by 2 sum_i dr_i . S_i to first order, a shift is close to a descent on
+ * sum_i rho_i: it lowers the kernel sums, and where the solves do not push
+ * them back (k >= 0: fluid below rho0) the arrangement keeps the lower sum.
  * Measured, that is an arrangement's sum more than a volume: a still pool
  * 15 layers deep reads 0.2% less mean density with the shift at the same
  * level, and a 5 cm sphere stirred through it and left 1.5-2 s to settle
