@@ -34,7 +34,8 @@ local fluid = eddy.fluid {
 	wcsph = { stiffness = eddy.param("stiffness", 400) },
 	-- mean predicted compression the solve stops at
 	dfsph = { tolerance = eddy.param("tolerance", 0.01), artificial = eddy.param("alpha", 0.05),
-	          divergence = eddy.param("divergence", false) },
+	          divergence = eddy.param("divergence", false),
+	          shift = tonumber(eddy.param("shift", nil)) }, -- unset: sph_dfsph's default particle shifting
 	flip = { solver = solver }, pic = { solver = solver }, apic = { solver = solver },
 }
 

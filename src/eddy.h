@@ -687,8 +687,8 @@ typedef struct eddy_sph_dfsph_def {
 	                                  the free surface and the walls moves by -shift h^2
 	                                  grad C (C the particle concentration, h the kernel
 	                                  radius), its velocity kept: what lets deep water's
-	                                  particle lattice settle without bursts (0.02 does),
-	                                  but stirred water expands; 0 to 0.1 (default 0: off) */
+	                                  particle lattice settle without bursts; 0 to 0.1
+	                                  (default 0.02; 0: off) */
 	bool hydrostatic_start;        /* with divergence_solver: when no particle has a pressure
 	                                  yet (the first step), start the velocity solve of water
 	                                  resting on a wall from the hydrostatic pressure of its

@@ -265,8 +265,8 @@ static void energy_stats_wcsph(void)
  * energy) and must be positive, each within 0.003 (zeta's resolution here,
  * see slosh_flip_apic), and the 5 mm period within 3%. Measured with the
  * conjugate-gradient solves (src/sph/dfsph.c): zeta 0.0423 at 10 mm and
- * 0.0393 at 5 mm without particle shifting (sph_dfsph's default, which
- * these runs use); with shift = 0.02 0.0409
+ * 0.0393 at 5 mm without particle shifting; with shift = 0.02 (sph_dfsph's
+ * default, which these runs use) 0.0409
  * and 0.0394, period error -1.2% and -2.1%. Shifting is a diffusion of the
  * particle positions and can damp the wave (shifting at the walls too read
  * 0.050-0.057 and 0.055): each zeta is held to 1.2 times its value without

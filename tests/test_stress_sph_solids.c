@@ -286,10 +286,17 @@ static void run_solid(const solid_case *c, solid_result *res)
 
 /* The issue's case: a 4 cm sphere lowered over 0.5 s from 0.22 m to 0.08 m
  * (fully under, its top 3 cm below the surface), moved along x with
- * amplitude 5 cm at 2 Hz (peak 0.63 m/s) for 1.5 s, then 0.5 s to settle. */
+ * amplitude 5 cm at 2 Hz (peak 0.63 m/s) for 1.5 s, then left to settle:
+ * 0.5 s with WCSPH, 1.5 s with DFSPH. 0.5 s after the sphere stops, the
+ * waves it left still read in DFSPH's level: the 5 cm case read +2.8 to
+ * +4.6% over 2.2-2.5 s at peak speeds 0.62-0.64 m/s (with or without
+ * sph_dfsph's shift, chaotically), +0.7 to +1.3% over 2.7-3.0 s and +0.2 to
+ * +0.6% over 3.2-3.5 s: the level is a volume only once they have settled.
+ * WCSPH keeps the 2.5 s reading: at 3.5 s its 4 cm sphere at 1 m/s read
+ * -2.75%, near the bound, a drift not studied here. */
 static solid_case sphere_case(bool dfsph)
 {
-	solid_case c = {SOLID_SPHERE, dfsph, 0.04, 0.22, 0.08, 0.5, 0.05, 4 * PI, 1.5, 0, 0, 2.5, 1};
+	solid_case c = {SOLID_SPHERE, dfsph, 0.04, 0.22, 0.08, 0.5, 0.05, 4 * PI, 1.5, 0, 0, dfsph ? 3.5 : 2.5, 1};
 	return c;
 }
 

@@ -51,6 +51,7 @@ local FIELDS = {
 	stiffness = { "wcsph" },                -- m^2/s^2
 	tolerance = { "dfsph", "flip", "pic", "apic" },
 	divergence = { "dfsph" },
+	shift = { "dfsph" },                    -- 1, sph_dfsph's particle shifting
 	solver = { "flip", "pic", "apic" },
 	flip_ratio = { "flip" },
 	reseed = { "flip", "pic", "apic" },
@@ -185,7 +186,8 @@ function Group:expand(world)
 			add("gravity", {})
 			add("sph_viscosity", visc)
 			if d.surface_tension then add("sph_surface_tension", { tension = d.surface_tension }) end
-			add("sph_dfsph", opt { max_density_error = d.tolerance, divergence_solver = d.divergence })
+			add("sph_dfsph", opt { max_density_error = d.tolerance, divergence_solver = d.divergence,
+			                       shift = d.shift })
 		end
 		if tank then add("sph_boundary_box", { min = tank.min, max = tank.max, spacing = h }) end
 		add("integrate", {})
