@@ -32,15 +32,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* The number after "name": in a JSON line, or NAN. */
-static double field(const char *line, const char *name)
-{
-	char key[64];
-	snprintf(key, sizeof key, "\"%s\":", name);
-	const char *p = strstr(line, key);
-	return p ? strtod(p + strlen(key), NULL) : NAN;
-}
-
 /* Figures of a still-water run from t_settle on (thrown and failures over
  * the whole run). */
 typedef struct still_water {
@@ -71,18 +62,18 @@ static still_water run_still_water(const char *sets, double t_settle)
 		char *next = strchr(line, '\n');
 		if (next)
 			*next++ = '\0';
-		const double t = field(line, "time");
+		const double t = test_json_number(line, "time");
 		if (isfinite(t)) {
 			r.frames++;
-			r.thrown = fmax(r.thrown, field(line, "thrown"));
-			r.leaked = fmax(r.leaked, field(line, "leaked"));
-			r.nonfinite = fmax(r.nonfinite, field(line, "nonfinite"));
+			r.thrown = fmax(r.thrown, test_json_number(line, "thrown"));
+			r.leaked = fmax(r.leaked, test_json_number(line, "leaked"));
+			r.nonfinite = fmax(r.nonfinite, test_json_number(line, "nonfinite"));
 			if (t >= t_settle - 1e-9) {
-				const double bp = field(line, "bottom_p_ratio");
-				const double vr = field(line, "vmax_ratio");
+				const double bp = test_json_number(line, "bottom_p_ratio");
+				const double vr = test_json_number(line, "vmax_ratio");
 				if (vr > r.vmax_ratio) {
 					r.vmax_ratio = vr;
-					r.vmax_height = field(line, "vmax_height");
+					r.vmax_height = test_json_number(line, "vmax_height");
 				}
 				r.bp_min = fmin(r.bp_min, bp);
 				r.bp_max = fmax(r.bp_max, bp);

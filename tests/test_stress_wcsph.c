@@ -107,15 +107,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* The number after "name": in a JSON line, or NAN. */
-static double field(const char *line, const char *name)
-{
-	char key[64];
-	snprintf(key, sizeof key, "\"%s\":", name);
-	const char *p = strstr(line, key);
-	return p ? strtod(p + strlen(key), NULL) : NAN;
-}
-
 /* Figures of a still-water run from t_settle on (thrown and failures over
  * the whole run). */
 typedef struct still_water {
@@ -144,15 +135,15 @@ static still_water run_still_water(const char *sets, double t_settle)
 		char *next = strchr(line, '\n');
 		if (next)
 			*next++ = '\0';
-		const double t = field(line, "time");
+		const double t = test_json_number(line, "time");
 		if (isfinite(t)) {
 			r.frames++;
-			r.thrown = fmax(r.thrown, field(line, "thrown"));
-			r.leaked = fmax(r.leaked, field(line, "leaked"));
-			r.nonfinite = fmax(r.nonfinite, field(line, "nonfinite"));
+			r.thrown = fmax(r.thrown, test_json_number(line, "thrown"));
+			r.leaked = fmax(r.leaked, test_json_number(line, "leaked"));
+			r.nonfinite = fmax(r.nonfinite, test_json_number(line, "nonfinite"));
 			if (t >= t_settle - 1e-9) {
-				const double bp = field(line, "bottom_p_ratio");
-				r.vmax_ratio = fmax(r.vmax_ratio, field(line, "vmax_ratio"));
+				const double bp = test_json_number(line, "bottom_p_ratio");
+				r.vmax_ratio = fmax(r.vmax_ratio, test_json_number(line, "vmax_ratio"));
 				r.bp_min = fmin(r.bp_min, bp);
 				r.bp_max = fmax(r.bp_max, bp);
 				r.bp_mean += bp;
@@ -224,13 +215,13 @@ static energy_run run_energy(const char *sets, double t_end)
 		char *next = strchr(line, '\n');
 		if (next)
 			*next++ = '\0';
-		const double t = field(line, "time"), e = field(line, "energy");
+		const double t = test_json_number(line, "time"), e = test_json_number(line, "energy");
 		if (isfinite(t) && t <= t_end + 1e-9) {
 			if (r.frames++ == 0)
 				r.e0 = e;
 			r.rise = fmax(r.rise, e - r.e0);
 			r.last = e;
-			r.vmax = fmax(r.vmax, field(line, "vmax"));
+			r.vmax = fmax(r.vmax, test_json_number(line, "vmax"));
 		}
 		line = next;
 	}
