@@ -182,6 +182,7 @@ typedef struct dfsph_pass {
 	bool divergence; /* the velocity (divergence-free) solve's sweep, else the density one's */
 	bool projected;  /* projected relaxed Jacobi on the symmetric operator (the divergence
 	                  * solver, and every PASS_RATE), else the paper's sweeps */
+	bool from_zero;  /* PASS_CORRECT: v* taken as 0 (not read), as the operator's product wants */
 } dfsph_pass;
 SIMD_DECLARE(void, dfsph_block, (const void *pass, long i0, long cnt));
 
@@ -481,7 +482,7 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 
 /* The correction: v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i), and k_i
  * added to its sum. */
-static void correct(const dfsph_work *wk, long i0, long cnt)
+static void correct(const dfsph_work *wk, long i0, long cnt, bool from_zero)
 {
 	const sph_shared *sh = wk->sh;
 	const dfsph_kern kc = kern(sh);
@@ -520,8 +521,9 @@ static void correct(const dfsph_work *wk, long i0, long cnt)
 	const sf8 dt = sf8_set1(wk->dt), two = sf8_set1(2.0f);
 	for (long q = 0; q < cnt; q += 8) {
 		const long i = i0 + q, m = cnt - q < 8 ? cnt - q : 8;
-		sf8 vx, vy, vz, vw, bx, by, bz, bw;
-		load_quads8(wk->v + i, m, &vx, &vy, &vz, &vw);
+		sf8 vx = sf8_zero(), vy = vx, vz = vx, vw = vx, bx, by, bz, bw;
+		if (!from_zero) /* 0 - x: the bits a zeroed v* would give */
+			load_quads8(wk->v + i, m, &vx, &vy, &vz, &vw);
 		load_quads8(wk->b + i, m, &bx, &by, &bz, &bw);
 		const sf8 ki = load8(wk->k + i, m), kb = sf8_mul(two, ki); /* the boundary particles mirror k_i */
 		vx = sf8_sub(vx, sf8_mul(dt, sf8_add(sf8_mul(kb, bx), sum8(t[0][q], m))));
@@ -538,7 +540,7 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
 	if (ps->kind == PASS_GRADIENTS)
 		gradients(ps->wk, i0, cnt);
 	else if (ps->kind == PASS_CORRECT)
-		correct(ps->wk, i0, cnt);
+		correct(ps->wk, i0, cnt, ps->from_zero);
 	else
 		rate(ps, i0, cnt);
 }
@@ -605,10 +607,47 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	                            .hydrostatic_start = false};
 }
 
+/* A pass's rows go to the threads in chunks of DFSPH_CHUNK_BLOCKS blocks or
+ * fewer, taken in turn as each thread finishes one (dynamic): sph_block_pass's
+ * equal shares finish at the pace of the slower core, and on a shared host
+ * one core can run at half the other's speed for seconds (measured on the
+ * 2-vCPU host: the same register-only loop took 0.52-0.99 s of CPU time on
+ * either core, tests/bench_scale.c's 1-thread DFSPH figure 3.3k or 5.1k ns).
+ * The chunks start at multiples of SPH_BLOCK, as one thread's blocks do, and
+ * each particle's results depend on neither: the same bits for any thread
+ * count and any order the chunks are taken in. */
+#define DFSPH_CHUNK_BLOCKS 16
+
+/* The plain loops over the rows (the conjugate gradients' vector updates,
+ * the step's set-up and finish) run on the threads above this many rows:
+ * below it, waking the team costs more than the loop. */
+#define DFSPH_LOOP_PAR 65536
+
+static int loop_threads(long n, int threads) { return n > DFSPH_LOOP_PAR ? threads : 1; }
+
+static void pass_run(dfsph_work *wk, const dfsph_pass *ps)
+{
+	const long n = wk->n, blocks = (n + SPH_BLOCK - 1) / SPH_BLOCK;
+	const int threads = wk->threads;
+	if (threads <= 1) {
+		for (long i0 = 0; i0 < n; i0 += SPH_BLOCK)
+			wk->block(ps, i0, n - i0 < SPH_BLOCK ? n - i0 : SPH_BLOCK);
+		return;
+	}
+	/* about 8 chunks a thread at least: a small fluid still splits */
+	long per = blocks / (8L * threads);
+	per = per < 1 ? 1 : per > DFSPH_CHUNK_BLOCKS ? DFSPH_CHUNK_BLOCKS : per;
+	const long chunk = per * SPH_BLOCK, chunks = (n + chunk - 1) / chunk;
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1)
+	for (long c = 0; c < chunks; ++c)
+		for (long i0 = c * chunk, hi = i0 + chunk < n ? i0 + chunk : n; i0 < hi; i0 += SPH_BLOCK)
+			wk->block(ps, i0, hi - i0 < SPH_BLOCK ? hi - i0 : SPH_BLOCK);
+}
+
 static void pass(dfsph_work *wk, enum dfsph_pass_kind kind, bool divergence, bool projected)
 {
-	const dfsph_pass ps = {wk, kind, divergence, projected};
-	sph_block_pass(wk->n, wk->threads, wk->block, &ps);
+	const dfsph_pass ps = {wk, kind, divergence, projected, false};
+	pass_run(wk, &ps);
 }
 
 /* err = R(u) of u = -dt grad p from zero, without the moving walls' part:
@@ -616,14 +655,38 @@ static void pass(dfsph_work *wk, enum dfsph_pass_kind kind, bool divergence, boo
 static void operator_product(dfsph_work *wk)
 {
 	const dfsph_work keep = *wk;
-	memset(wk->u, 0, (size_t)wk->n * sizeof *wk->u);
 	wk->v = wk->u;
 	wk->k = wk->p;
 	wk->ksum = keep.k; /* unused until the projection: the sum of p written there is not kept */
 	wk->bdiv = NULL;
-	pass(wk, PASS_CORRECT, true, true);
+	const dfsph_pass ps = {wk, PASS_CORRECT, true, true, true}; /* u = 0 - dt (...): no memset */
+	pass_run(wk, &ps);
 	pass(wk, PASS_RATE, true, true);
 	*wk = keep;
+}
+
+/* The conjugate gradients' sums, serial in row order (the same bits for any
+ * thread count; a float product is exact in double, so only the order of
+ * the additions matters): the vector updates around them run on the
+ * threads. r . D'^-1 r and sum |r_i| ... */
+static void rz_sums(const float *r, const float *dsym, long n, double *rz, double *esum)
+{
+	double a = 0, e = 0;
+	for (long i = 0; i < n; ++i) {
+		a += (double)r[i] * (dsym[i] * r[i]);
+		e += fabsf(r[i]);
+	}
+	*rz = a;
+	*esum = e;
+}
+
+/* ... and sum_i p_i (mask_i e_i) */
+static double masked_dot(const float *p, const float *mask, const float *e, long n)
+{
+	double a = 0;
+	for (long i = 0; i < n; ++i)
+		a += (double)p[i] * (mask[i] * e[i]);
+	return a;
 }
 
 /* The solves' bulk: Jacobi-preconditioned conjugate gradients on A k = R(v*)
@@ -639,17 +702,18 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	const long n = wk->n;
 	const float dt = wk->dt, rho0 = wk->sh->rho0;
 	const double scale = (double)dt / ((double)rho0 * (double)n);
+	const int nt = loop_threads(n, wk->threads);
 	pass(wk, PASS_RATE, true, true);
-	double rz = 0, esum = 0;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		const float res = density ? wk->err[i] + (wk->h[i].w - rho0) / dt : wk->err[i];
 		const bool on = (density || wk->full[i] > 0) && (wk->ksum[i] > 0 || res > 0);
 		wk->mask[i] = on ? 1.0f : 0.0f;
 		wk->r[i] = on ? res : 0.0f;
 		wk->p[i] = wk->dsym[i] * wk->r[i];
-		rz += (double)wk->r[i] * wk->p[i];
-		esum += fabsf(wk->r[i]);
 	}
+	double rz = 0, esum = 0;
+	rz_sums(wk->r, wk->dsym, n, &rz, &esum);
 	*residual = esum * scale;
 	/* the levels live until the call returns: each call rebuilds them for its active set */
 	const eddy_arena_mark mark = wk->coarse ? eddy__arena_mark(wk->coarse) : (eddy_arena_mark){0};
@@ -669,23 +733,21 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	int it = 0;
 	while (*residual > tol && it < cap && rz > 0) {
 		operator_product(wk);
-		double pq = 0;
-		for (long i = 0; i < n; ++i)
-			pq -= (double)wk->p[i] * (wk->mask[i] * wk->err[i]);
+		const double pq = -masked_dot(wk->p, wk->mask, wk->err, n);
 		if (!(pq > 0))
 			break;
 		const float alpha = (float)(rz / pq);
-		double rz1 = 0;
-		esum = 0;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 		for (long i = 0; i < n; ++i) {
 			wk->v[i].x += alpha * wk->u[i].x;
 			wk->v[i].y += alpha * wk->u[i].y;
 			wk->v[i].z += alpha * wk->u[i].z;
 			wk->ksum[i] += alpha * wk->p[i];
 			wk->r[i] += alpha * (wk->mask[i] * wk->err[i]);
-			rz1 += (double)wk->r[i] * (wk->dsym[i] * wk->r[i]);
-			esum += fabsf(wk->r[i]);
 		}
+		double rz1 = 0;
+		esum = 0;
+		rz_sums(wk->r, wk->dsym, n, &rz1, &esum);
 		++it;
 		*residual = esum * scale;
 		const bool coarse =
@@ -694,6 +756,7 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 			rz1 = eddy__dfsph_coarse_apply(cg, wk->r, wk->dsym, wk->err);
 		const float beta = (float)(rz1 / rz);
 		rz = rz1;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 		for (long i = 0; i < n; ++i)
 			wk->p[i] = (coarse ? wk->err[i] : wk->dsym[i] * wk->r[i]) + beta * wk->p[i];
 	}
@@ -717,15 +780,18 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
  * times its square hold the column to the same fraction at any depth. The
  * gravity limit takes its root (dt ~ h / sqrt(|g| H): the prediction's error
  * grows with the hydrostatic pressure it moves). */
-static double depth_scale(eddy_world *w, float h)
+static double depth_scale(eddy_world *w, float h, int threads)
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const eddy_vec3 g = w->def.gravity;
 	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
 	if (!(g1 > 0) || !x || !y || !z || w->n == 0)
 		return 1;
-	double lo = INFINITY, hi = -INFINITY;
-	for (size_t i = 0; i < w->n; ++i) {
+	double lo = INFINITY, hi = -INFINITY; /* exact: the same for any order */
+	const long n = (long)w->n;
+	const int nt = loop_threads(n, threads);
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(min : lo) reduction(max : hi)
+	for (long i = 0; i < n; ++i) {
 		const double e = ((double)g.x * x[i] + (double)g.y * y[i] + (double)g.z * z[i]) / g1;
 		lo = e < lo ? e : lo;
 		hi = e > hi ? e : hi;
@@ -759,8 +825,10 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 	const float rho0 = wk->sh->rho0;
 	const bool projected = sd->def.divergence_solver;
 	float *col = projected ? eddy__col(w, sd->kcol[divergence ? 0 : 1]) : NULL;
+	const int nt = loop_threads(n, wk->threads);
 	memset(wk->ksum, 0, (size_t)n * sizeof *wk->ksum);
 	if (projected) {
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 		for (long i = 0; i < n; ++i) {
 			if (divergence)
 				wk->full[i] = wk->rho[i] >= DFSPH_SURFACE * rho0 ? 1.0f : 0.0f;
@@ -798,6 +866,7 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 		                  sys->label, (long long)ctx->step, *residual, it, sd->capped,
 		                  (double)sd->def.max_divergence_error, wi, wk->err[wi] / rho0);
 	}
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (long i = 0; i < n; ++i)
 		wk->kp[i] += wk->ksum[i];
 	if (projected)
@@ -854,16 +923,18 @@ static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_wor
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	float *p = eddy__col(w, COL_PRESSURE);
-	long bad = -1;
+	long bad = wk->n; /* the first non-finite row, n for none */
+	const int nt = loop_threads(wk->n, wk->threads);
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(min : bad)
 	for (long i = 0; i < wk->n; ++i) {
 		ax[i] += (wk->v[i].x - (vx[i] + dt * ax[i])) * inv_dt;
 		ay[i] += (wk->v[i].y - (vy[i] + dt * ay[i])) * inv_dt;
 		az[i] += (wk->v[i].z - (vz[i] + dt * az[i])) * inv_dt;
 		p[i] = wk->kp[i] * wk->h[i].w * wk->h[i].w / wk->sh->grad_cal;
-		if (bad < 0 && !(isfinite(ax[i]) && isfinite(ay[i]) && isfinite(az[i]) && isfinite(p[i])))
+		if (i < bad && !(isfinite(ax[i]) && isfinite(ay[i]) && isfinite(az[i]) && isfinite(p[i])))
 			bad = i;
 	}
-	if (bad >= 0)
+	if (bad < wk->n)
 		return eddy__fail(
 			w, EDDY_ERR_NUMERIC,
 			"%s: non-finite pressure acceleration at step %lld, particle %ld (density %g kg/m^3, %u neighbours)",
@@ -941,10 +1012,12 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
+	const int nt = loop_threads(n, wk.threads);
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (long i = 0; i < n; ++i)
 		wk.v[i] = (dfsph_vec4){vx[i] + dt * (ax[i] + wk.h[i].x), vy[i] + dt * (ay[i] + wk.h[i].y),
 		                       vz[i] + dt * (az[i] + wk.h[i].z), 0};
-	const double scale = sd->def.divergence_solver ? depth_scale(w, sh->h) : 1;
+	const double scale = sd->def.divergence_solver ? depth_scale(w, sh->h, ctx->threads) : 1;
 	wk.coarse = sd->def.coarse_grid && scale < 1 ? &w->arena : NULL;
 	int it, div_it = 0;
 	double residual, div_residual = 0;
@@ -1009,7 +1082,7 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
 	double la = g1 > 0 ? DFSPH_GRAVITY_LIMIT * sqrt((double)sh->h / g1) : INFINITY;
 	if (((const sph_dfsph *)s->data)->def.divergence_solver)
-		la *= sqrt(depth_scale(w, sh->h));
+		la *= sqrt(depth_scale(w, sh->h, w->def.threads));
 	*reason = la < lv ? "gravity" : "velocity";
 	return la < lv ? la : lv;
 }
