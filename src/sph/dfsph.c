@@ -610,9 +610,12 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 /* A pass's rows go to the threads in chunks of DFSPH_CHUNK_BLOCKS blocks or
  * fewer, taken in turn as each thread finishes one (dynamic): sph_block_pass's
  * equal shares finish at the pace of the slower core, and on a shared host
- * one core can run at half the other's speed for seconds (measured on the
- * 2-vCPU host: the same register-only loop took 0.52-0.99 s of CPU time on
- * either core, tests/bench_scale.c's 1-thread DFSPH figure 3.3k or 5.1k ns).
+ * one core can run at half the other's speed for seconds (measured on a
+ * 2-vCPU virtual machine: a register-only AVX2 multiply-add loop took
+ * 0.52-1.26 s of CPU time on either core, 0.59 s on one while 1.23 s on the
+ * other when run on both at once, a latency-bound division loop a steady
+ * 0.46 s: likely the host's other threads on the cores' hyperthread siblings; the
+ * 1-thread DFSPH figure of tests/bench_scale.c at 1M is 3.3k or 5.1k ns).
  * The chunks start at multiples of SPH_BLOCK, as one thread's blocks do, and
  * each particle's results depend on neither: the same bits for any thread
  * count and any order the chunks are taken in. */
