@@ -621,9 +621,16 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
  * count and any order the chunks are taken in. */
 #define DFSPH_CHUNK_BLOCKS 16
 
-/* The plain loops over the rows (the conjugate gradients' vector updates,
- * the step's set-up and finish) run on the threads above this many rows:
- * below it, waking the team costs more than the loop. */
+/* The plain loops over the rows that run once a solve or a step (its set-up and
+ * finish, a solve's warm start and sum) use the threads above this many
+ * rows: below it, waking the team costs more than the loop. The conjugate
+ * gradients' vector updates stay serial, fused with their sums (serial in
+ * row order for the same bits on any thread count): they are some 7% of a
+ * 1-thread step at 1M (perf), but on threads each adds a join per
+ * iteration, and on a host whose cores are shared a join waits for the
+ * other thread to be scheduled again: with a busy loop pinned beside the
+ * second thread, bench_scale --child dfsph 97000 2 3 took 1.5x the time
+ * (median of 8 alternating pairs; 1.1x without them, 6 pairs). */
 #define DFSPH_LOOP_PAR 65536
 
 static int loop_threads(long n, int threads) { return n > DFSPH_LOOP_PAR ? threads : 1; }
@@ -668,30 +675,6 @@ static void operator_product(dfsph_work *wk)
 	*wk = keep;
 }
 
-/* The conjugate gradients' sums, serial in row order (the same bits for any
- * thread count; a float product is exact in double, so only the order of
- * the additions matters): the vector updates around them run on the
- * threads. r . D'^-1 r and sum |r_i| ... */
-static void rz_sums(const float *r, const float *dsym, long n, double *rz, double *esum)
-{
-	double a = 0, e = 0;
-	for (long i = 0; i < n; ++i) {
-		a += (double)r[i] * (dsym[i] * r[i]);
-		e += fabsf(r[i]);
-	}
-	*rz = a;
-	*esum = e;
-}
-
-/* ... and sum_i p_i (mask_i e_i) */
-static double masked_dot(const float *p, const float *mask, const float *e, long n)
-{
-	double a = 0;
-	for (long i = 0; i < n; ++i)
-		a += (double)p[i] * (mask[i] * e[i]);
-	return a;
-}
-
 /* The solves' bulk: Jacobi-preconditioned conjugate gradients on A k = R(v*)
  * over the particles that hold pressure (k_i > 0) or compress (R_i > 0),
  * where the unilateral constraint is an equality; the density solve's right
@@ -705,18 +688,17 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	const long n = wk->n;
 	const float dt = wk->dt, rho0 = wk->sh->rho0;
 	const double scale = (double)dt / ((double)rho0 * (double)n);
-	const int nt = loop_threads(n, wk->threads);
 	pass(wk, PASS_RATE, true, true);
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	double rz = 0, esum = 0;
 	for (long i = 0; i < n; ++i) {
 		const float res = density ? wk->err[i] + (wk->h[i].w - rho0) / dt : wk->err[i];
 		const bool on = (density || wk->full[i] > 0) && (wk->ksum[i] > 0 || res > 0);
 		wk->mask[i] = on ? 1.0f : 0.0f;
 		wk->r[i] = on ? res : 0.0f;
 		wk->p[i] = wk->dsym[i] * wk->r[i];
+		rz += (double)wk->r[i] * wk->p[i];
+		esum += fabsf(wk->r[i]);
 	}
-	double rz = 0, esum = 0;
-	rz_sums(wk->r, wk->dsym, n, &rz, &esum);
 	*residual = esum * scale;
 	/* the levels live until the call returns: each call rebuilds them for its active set */
 	const eddy_arena_mark mark = wk->coarse ? eddy__arena_mark(wk->coarse) : (eddy_arena_mark){0};
@@ -736,21 +718,23 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	int it = 0;
 	while (*residual > tol && it < cap && rz > 0) {
 		operator_product(wk);
-		const double pq = -masked_dot(wk->p, wk->mask, wk->err, n);
+		double pq = 0;
+		for (long i = 0; i < n; ++i)
+			pq -= (double)wk->p[i] * (wk->mask[i] * wk->err[i]);
 		if (!(pq > 0))
 			break;
 		const float alpha = (float)(rz / pq);
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+		double rz1 = 0;
+		esum = 0;
 		for (long i = 0; i < n; ++i) {
 			wk->v[i].x += alpha * wk->u[i].x;
 			wk->v[i].y += alpha * wk->u[i].y;
 			wk->v[i].z += alpha * wk->u[i].z;
 			wk->ksum[i] += alpha * wk->p[i];
 			wk->r[i] += alpha * (wk->mask[i] * wk->err[i]);
+			rz1 += (double)wk->r[i] * (wk->dsym[i] * wk->r[i]);
+			esum += fabsf(wk->r[i]);
 		}
-		double rz1 = 0;
-		esum = 0;
-		rz_sums(wk->r, wk->dsym, n, &rz1, &esum);
 		++it;
 		*residual = esum * scale;
 		const bool coarse =
@@ -759,7 +743,6 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 			rz1 = eddy__dfsph_coarse_apply(cg, wk->r, wk->dsym, wk->err);
 		const float beta = (float)(rz1 / rz);
 		rz = rz1;
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 		for (long i = 0; i < n; ++i)
 			wk->p[i] = (coarse ? wk->err[i] : wk->dsym[i] * wk->r[i]) + beta * wk->p[i];
 	}
