@@ -190,6 +190,7 @@ typedef struct dfsph_pass {
 	bool divergence; /* the velocity (divergence-free) solve's sweep, else the density one's */
 	bool projected;  /* projected relaxed Jacobi on the symmetric operator (the divergence
 	                  * solver, and every PASS_RATE), else the paper's sweeps */
+	bool from_zero;  /* PASS_CORRECT: v* taken as 0 (not read), as the operator's product wants */
 } dfsph_pass;
 SIMD_DECLARE(void, dfsph_block, (const void *pass, long i0, long cnt));
 
@@ -489,7 +490,7 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 
 /* The correction: v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i), and k_i
  * added to its sum. */
-static void correct(const dfsph_work *wk, long i0, long cnt)
+static void correct(const dfsph_work *wk, long i0, long cnt, bool from_zero)
 {
 	const sph_shared *sh = wk->sh;
 	const dfsph_kern kc = kern(sh);
@@ -528,8 +529,9 @@ static void correct(const dfsph_work *wk, long i0, long cnt)
 	const sf8 dt = sf8_set1(wk->dt), two = sf8_set1(2.0f);
 	for (long q = 0; q < cnt; q += 8) {
 		const long i = i0 + q, m = cnt - q < 8 ? cnt - q : 8;
-		sf8 vx, vy, vz, vw, bx, by, bz, bw;
-		load_quads8(wk->v + i, m, &vx, &vy, &vz, &vw);
+		sf8 vx = sf8_zero(), vy = vx, vz = vx, vw = vx, bx, by, bz, bw;
+		if (!from_zero) /* 0 - x: the bits a zeroed v* would give */
+			load_quads8(wk->v + i, m, &vx, &vy, &vz, &vw);
 		load_quads8(wk->b + i, m, &bx, &by, &bz, &bw);
 		const sf8 ki = load8(wk->k + i, m), kb = sf8_mul(two, ki); /* the boundary particles mirror k_i */
 		vx = sf8_sub(vx, sf8_mul(dt, sf8_add(sf8_mul(kb, bx), sum8(t[0][q], m))));
@@ -546,7 +548,7 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
 	if (ps->kind == PASS_GRADIENTS)
 		gradients(ps->wk, i0, cnt);
 	else if (ps->kind == PASS_CORRECT)
-		correct(ps->wk, i0, cnt);
+		correct(ps->wk, i0, cnt, ps->from_zero);
 	else
 		rate(ps, i0, cnt);
 }
@@ -613,10 +615,57 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	                            .hydrostatic_start = false};
 }
 
+/* A pass's rows go to the threads in chunks of DFSPH_CHUNK_BLOCKS blocks or
+ * fewer, taken in turn as each thread finishes one (dynamic): sph_block_pass's
+ * equal shares finish at the pace of the slower core, and on a shared host
+ * one core can run at half the other's speed for seconds (measured on a
+ * 2-vCPU virtual machine: a register-only AVX2 multiply-add loop took
+ * 0.52-1.26 s of CPU time on either core, 0.59 s on one while 1.23 s on the
+ * other when run on both at once, a latency-bound division loop a steady
+ * 0.46 s: likely the host's other threads on the cores' hyperthread siblings; the
+ * 1-thread DFSPH figure of tests/bench_scale.c at 1M is 3.3k or 5.1k ns).
+ * The chunks start at multiples of SPH_BLOCK, as one thread's blocks do, and
+ * each particle's results depend on neither: the same bits for any thread
+ * count and any order the chunks are taken in. */
+#define DFSPH_CHUNK_BLOCKS 16
+
+/* The plain loops over the rows that run once a solve or a step (its set-up and
+ * finish, a solve's warm start and sum) use the threads above this many
+ * rows: below it, waking the team costs more than the loop. The conjugate
+ * gradients' vector updates stay serial, fused with their sums (serial in
+ * row order for the same bits on any thread count): they are some 7% of a
+ * 1-thread step at 1M (perf), but on threads each adds a join per
+ * iteration, and on a host whose cores are shared a join waits for the
+ * other thread to be scheduled again: with a busy loop pinned beside the
+ * second thread, bench_scale --child dfsph 97000 2 3 took 1.5x the time
+ * (median of 8 alternating pairs; 1.1x without them, 6 pairs). */
+#define DFSPH_LOOP_PAR 65536
+
+static int loop_threads(long n, int threads) { return n > DFSPH_LOOP_PAR ? threads : 1; }
+
+static void pass_run(dfsph_work *wk, const dfsph_pass *ps)
+{
+	const long n = wk->n, blocks = (n + SPH_BLOCK - 1) / SPH_BLOCK;
+	const int threads = wk->threads;
+	if (threads <= 1) {
+		for (long i0 = 0; i0 < n; i0 += SPH_BLOCK)
+			wk->block(ps, i0, n - i0 < SPH_BLOCK ? n - i0 : SPH_BLOCK);
+		return;
+	}
+	/* about 8 chunks a thread at least: a small fluid still splits */
+	long per = blocks / (8L * threads);
+	per = per < 1 ? 1 : per > DFSPH_CHUNK_BLOCKS ? DFSPH_CHUNK_BLOCKS : per;
+	const long chunk = per * SPH_BLOCK, chunks = (n + chunk - 1) / chunk;
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1)
+	for (long c = 0; c < chunks; ++c)
+		for (long i0 = c * chunk, hi = i0 + chunk < n ? i0 + chunk : n; i0 < hi; i0 += SPH_BLOCK)
+			wk->block(ps, i0, hi - i0 < SPH_BLOCK ? hi - i0 : SPH_BLOCK);
+}
+
 static void pass(dfsph_work *wk, enum dfsph_pass_kind kind, bool divergence, bool projected)
 {
-	const dfsph_pass ps = {wk, kind, divergence, projected};
-	sph_block_pass(wk->n, wk->threads, wk->block, &ps);
+	const dfsph_pass ps = {wk, kind, divergence, projected, false};
+	pass_run(wk, &ps);
 }
 
 /* err = R(u) of u = -dt grad p from zero, without the moving walls' part:
@@ -624,12 +673,12 @@ static void pass(dfsph_work *wk, enum dfsph_pass_kind kind, bool divergence, boo
 static void operator_product(dfsph_work *wk)
 {
 	const dfsph_work keep = *wk;
-	memset(wk->u, 0, (size_t)wk->n * sizeof *wk->u);
 	wk->v = wk->u;
 	wk->k = wk->p;
 	wk->ksum = keep.k; /* unused until the projection: the sum of p written there is not kept */
 	wk->bdiv = NULL;
-	pass(wk, PASS_CORRECT, true, true);
+	const dfsph_pass ps = {wk, PASS_CORRECT, true, true, true}; /* u = 0 - dt (...): no memset */
+	pass_run(wk, &ps);
 	pass(wk, PASS_RATE, true, true);
 	*wk = keep;
 }
@@ -725,15 +774,18 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
  * times its square hold the column to the same fraction at any depth. The
  * gravity limit takes its root (dt ~ h / sqrt(|g| H): the prediction's error
  * grows with the hydrostatic pressure it moves). */
-static double depth_scale(eddy_world *w, float h)
+static double depth_scale(eddy_world *w, float h, int threads)
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const eddy_vec3 g = w->def.gravity;
 	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
 	if (!(g1 > 0) || !x || !y || !z || w->n == 0)
 		return 1;
-	double lo = INFINITY, hi = -INFINITY;
-	for (size_t i = 0; i < w->n; ++i) {
+	double lo = INFINITY, hi = -INFINITY; /* exact: the same for any order */
+	const long n = (long)w->n;
+	const int nt = loop_threads(n, threads);
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(min : lo) reduction(max : hi)
+	for (long i = 0; i < n; ++i) {
 		const double e = ((double)g.x * x[i] + (double)g.y * y[i] + (double)g.z * z[i]) / g1;
 		lo = e < lo ? e : lo;
 		hi = e > hi ? e : hi;
@@ -767,8 +819,10 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 	const float rho0 = wk->sh->rho0;
 	const bool projected = sd->def.divergence_solver;
 	float *col = projected ? eddy__col(w, sd->kcol[divergence ? 0 : 1]) : NULL;
+	const int nt = loop_threads(n, wk->threads);
 	memset(wk->ksum, 0, (size_t)n * sizeof *wk->ksum);
 	if (projected) {
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 		for (long i = 0; i < n; ++i) {
 			if (divergence)
 				wk->full[i] = wk->rho[i] >= DFSPH_SURFACE * rho0 ? 1.0f : 0.0f;
@@ -806,6 +860,7 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 		                  sys->label, (long long)ctx->step, *residual, it, sd->capped,
 		                  (double)sd->def.max_divergence_error, wi, wk->err[wi] / rho0);
 	}
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (long i = 0; i < n; ++i)
 		wk->kp[i] += wk->ksum[i];
 	if (projected)
@@ -862,16 +917,18 @@ static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_wor
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	float *p = eddy__col(w, COL_PRESSURE);
-	long bad = -1;
+	long bad = wk->n; /* the first non-finite row, n for none */
+	const int nt = loop_threads(wk->n, wk->threads);
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(min : bad)
 	for (long i = 0; i < wk->n; ++i) {
 		ax[i] += (wk->v[i].x - (vx[i] + dt * ax[i])) * inv_dt;
 		ay[i] += (wk->v[i].y - (vy[i] + dt * ay[i])) * inv_dt;
 		az[i] += (wk->v[i].z - (vz[i] + dt * az[i])) * inv_dt;
 		p[i] = wk->kp[i] * wk->h[i].w * wk->h[i].w / wk->sh->grad_cal;
-		if (bad < 0 && !(isfinite(ax[i]) && isfinite(ay[i]) && isfinite(az[i]) && isfinite(p[i])))
+		if (i < bad && !(isfinite(ax[i]) && isfinite(ay[i]) && isfinite(az[i]) && isfinite(p[i])))
 			bad = i;
 	}
-	if (bad >= 0)
+	if (bad < wk->n)
 		return eddy__fail(
 			w, EDDY_ERR_NUMERIC,
 			"%s: non-finite pressure acceleration at step %lld, particle %ld (density %g kg/m^3, %u neighbours)",
@@ -949,10 +1006,12 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
+	const int nt = loop_threads(n, wk.threads);
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (long i = 0; i < n; ++i)
 		wk.v[i] = (dfsph_vec4){vx[i] + dt * (ax[i] + wk.h[i].x), vy[i] + dt * (ay[i] + wk.h[i].y),
 		                       vz[i] + dt * (az[i] + wk.h[i].z), 0};
-	const double scale = sd->def.divergence_solver ? depth_scale(w, sh->h) : 1;
+	const double scale = sd->def.divergence_solver ? depth_scale(w, sh->h, ctx->threads) : 1;
 	wk.coarse = sd->def.coarse_grid && scale < 1 ? &w->arena : NULL;
 	int it, div_it = 0;
 	double residual, div_residual = 0;
@@ -1017,7 +1076,7 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
 	double la = g1 > 0 ? DFSPH_GRAVITY_LIMIT * sqrt((double)sh->h / g1) : INFINITY;
 	if (((const sph_dfsph *)s->data)->def.divergence_solver)
-		la *= sqrt(depth_scale(w, sh->h));
+		la *= sqrt(depth_scale(w, sh->h, w->def.threads));
 	*reason = la < lv ? "gravity" : "velocity";
 	return la < lv ? la : lv;
 }

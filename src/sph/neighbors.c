@@ -130,7 +130,11 @@ bool SIMD_NAME(neighbors_filter)(const filter_ctx *f, int threads, sph_cursor *f
 		float *dv = malloc((longest + 8) * sizeof *dv);
 		sph_cursor cf = {0}, cb = {0};
 		ok = jl && dv;
-#pragma omp for schedule(static)
+		/* in chunks taken as threads come free, not equal shares: a row's
+		 * list and sums are its own, and the lists go where each thread's
+		 * claims put them (as sph_search's), so only the layout depends on
+		 * the order; equal shares wait for the slower core (dfsph.c) */
+#pragma omp for schedule(dynamic, 512)
 		for (long i = 0; i < f->n; ++i) {
 			if (!ok)
 				continue;
