@@ -378,10 +378,10 @@ double eddy__flip_matvec_dot(const flip_matrix *A, const double *z, const double
 double eddy__flip_sum_chunks(const double *part, int nch);
 
 /* MIC(0)-PCG (flip_pcg.c). Solves A x = b to max|r| <= tol max|b|; x starts
- * at 0. Scratch comes from the world's arena. Returns false if it did not
- * converge in max_it; *it and *res (max|r| / max|b|) are always set. */
-bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double *x, double tol, int max_it, int *it,
-                    double *res);
+ * at 0; cell_of[r] is row r's cell (ascending: the rows in cell order). Scratch comes from the world's arena. Returns
+ * false if it did not converge in max_it; *it and *res (max|r| / max|b|) are always set. */
+bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const int *cell_of, const double *b, double *x, double tol,
+                    int max_it, int *it, double *res);
 
 /* PFMG-preconditioned CG (flip_hypre.c, the only file including HYPRE or
  * MPI). Solves A x = b to max|r| <= tol max|b| as eddy__flip_pcg; cell_of[r]
