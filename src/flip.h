@@ -13,6 +13,18 @@
 
 #include <string.h>
 
+/* The calling thread's place in its OpenMP team and the team's size, for the
+ * solvers' parallel regions that split work by thread (flip_pcg.c,
+ * flip_mg.c). */
+#ifdef _OPENMP
+#include <omp.h>
+#define TEAM_RANK omp_get_thread_num()
+#define TEAM_SIZE omp_get_num_threads()
+#else /* a build without OpenMP (the fuzzer's) runs the team of one */
+#define TEAM_RANK 0
+#define TEAM_SIZE 1
+#endif
+
 static inline size_t flip_cell(const eddy_world *w, int i, int j, int k)
 {
 	return (size_t)i + (size_t)w->nx * ((size_t)j + (size_t)w->ny * (size_t)k);

@@ -27,14 +27,6 @@
 
 #include <sched.h>
 #include <string.h>
-#ifdef _OPENMP
-#include <omp.h>
-#define TEAM_RANK omp_get_thread_num()
-#define TEAM_SIZE omp_get_num_threads()
-#else /* a build without OpenMP (the fuzzer's) runs the team of one */
-#define TEAM_RANK 0
-#define TEAM_SIZE 1
-#endif
 
 enum { NX_M, NX_P, NY_M, NY_P, NZ_M, NZ_P };
 
