@@ -13,6 +13,18 @@
 
 #include <string.h>
 
+/* The calling thread's place in its OpenMP team and the team's size, for the
+ * solvers' parallel regions that split work by thread (flip_pcg.c,
+ * flip_mg.c). */
+#ifdef _OPENMP
+#include <omp.h>
+#define TEAM_RANK omp_get_thread_num()
+#define TEAM_SIZE omp_get_num_threads()
+#else /* a build without OpenMP (the fuzzer's) runs the team of one */
+#define TEAM_RANK 0
+#define TEAM_SIZE 1
+#endif
+
 static inline size_t flip_cell(const eddy_world *w, int i, int j, int k)
 {
 	return (size_t)i + (size_t)w->nx * ((size_t)j + (size_t)w->ny * (size_t)k);
@@ -378,10 +390,10 @@ double eddy__flip_matvec_dot(const flip_matrix *A, const double *z, const double
 double eddy__flip_sum_chunks(const double *part, int nch);
 
 /* MIC(0)-PCG (flip_pcg.c). Solves A x = b to max|r| <= tol max|b|; x starts
- * at 0. Scratch comes from the world's arena. Returns false if it did not
- * converge in max_it; *it and *res (max|r| / max|b|) are always set. */
-bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const double *b, double *x, double tol, int max_it, int *it,
-                    double *res);
+ * at 0; cell_of[r] is row r's cell (ascending: the rows in cell order). Scratch comes from the world's arena. Returns
+ * false if it did not converge in max_it; *it and *res (max|r| / max|b|) are always set. */
+bool eddy__flip_pcg(eddy_world *w, const flip_matrix *A, const int *cell_of, const double *b, double *x, double tol,
+                    int max_it, int *it, double *res);
 
 /* PFMG-preconditioned CG (flip_hypre.c, the only file including HYPRE or
  * MPI). Solves A x = b to max|r| <= tol max|b| as eddy__flip_pcg; cell_of[r]

@@ -70,14 +70,6 @@
 
 #include <stdlib.h>
 #include <string.h>
-#ifdef _OPENMP
-#include <omp.h>
-#define TEAM_RANK omp_get_thread_num()
-#define TEAM_SIZE omp_get_num_threads()
-#else /* a build without OpenMP (the fuzzer's) runs the team of one */
-#define TEAM_RANK 0
-#define TEAM_SIZE 1
-#endif
 
 enum {
 	NU = 2,            /* red-black sweeps before and after the coarse correction */

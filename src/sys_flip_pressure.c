@@ -418,7 +418,8 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	int iterations = 0;
 	double residual = 0;
 	if (ps->def.solver == EDDY_FLIP_PCG) {
-		const bool ok = eddy__flip_pcg(w, &A, b, q, ps->def.tolerance, ps->def.max_iterations, &iterations, &residual);
+		const bool ok =
+			eddy__flip_pcg(w, &A, cell_of, b, q, ps->def.tolerance, ps->def.max_iterations, &iterations, &residual);
 		if (!ok)
 			return eddy__fail(w, EDDY_ERR_SOLVER,
 			                  "flip_pressure: PCG did not converge: relative residual %.3g after %d iterations "
