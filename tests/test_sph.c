@@ -1399,17 +1399,25 @@ static eddy_status verlet_check_step(eddy_world *w, const eddy_step_context *ctx
 	return EDDY_OK;
 }
 
+/* Adds a test's check: a custom system reading the count named columns,
+ * stepping with step on user. */
+static void add_check(eddy_world *w, const char *name, const char *const *reads, int count, eddy_step_fn step,
+                      void *user)
+{
+	eddy_custom_system_def cs = eddy_default_custom_system_def();
+	cs.name = name;
+	cs.reads = reads;
+	cs.read_count = count;
+	cs.step = step;
+	cs.user = user;
+	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
+}
+
 /* The brute-force check as a custom system after sph_density. */
 static void add_verlet_check(eddy_world *w, verlet_check *vc)
 {
-	eddy_custom_system_def cs = eddy_default_custom_system_def();
-	const char *reads[] = {"x", "y", "z", "density", "neighbors"};
-	cs.name = "verlet_check";
-	cs.reads = reads;
-	cs.read_count = 5;
-	cs.step = verlet_check_step;
-	cs.user = vc;
-	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
+	static const char *const reads[] = {"x", "y", "z", "density", "neighbors"};
+	add_check(w, "verlet_check", reads, 5, verlet_check_step, vc);
 }
 
 static void verlet_lists_match_brute_force(void)
@@ -1521,14 +1529,8 @@ static void neighbour_lists_grow_past_their_first_size(void)
 		eddy_add_gravity(w, &g);
 		eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
 		eddy_add_sph_pressure(w, &pr);
-		eddy_custom_system_def ms = eddy_default_custom_system_def();
-		const char *mreads[] = {"ax", "ay", "az", "neighbors"};
-		ms.name = "momentum_check";
-		ms.reads = mreads;
-		ms.read_count = 4;
-		ms.step = momentum_check_step;
-		ms.user = &mc;
-		CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &ms)));
+		static const char *const mreads[] = {"ax", "ay", "az", "neighbors"};
+		add_check(w, "momentum_check", mreads, 4, momentum_check_step, &mc);
 		eddy_integrate_def it = eddy_default_integrate_def();
 		eddy_add_integrate(w, &it);
 		vc.mass = eddy_sph_particle_mass(w, dens);
@@ -1626,22 +1628,10 @@ static void neighbour_lists_span_many_rows(void)
 	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
 	eddy_add_sph_viscosity(w, &vi);
 	momentum_check mc = {0};
-	eddy_custom_system_def ms = eddy_default_custom_system_def();
-	const char *mreads[] = {"ax", "ay", "az", "neighbors"};
-	ms.name = "momentum_check";
-	ms.reads = mreads;
-	ms.read_count = 4;
-	ms.step = momentum_check_step;
-	ms.user = &mc;
-	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &ms)));
-	eddy_custom_system_def cs = eddy_default_custom_system_def();
-	const char *reads[] = {"x", "y", "z", "neighbors"};
-	cs.name = "span_check";
-	cs.reads = reads;
-	cs.read_count = 4;
-	cs.step = span_check_step;
-	cs.user = &sc;
-	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
+	static const char *const mreads[] = {"ax", "ay", "az", "neighbors"};
+	add_check(w, "momentum_check", mreads, 4, momentum_check_step, &mc);
+	static const char *const reads[] = {"x", "y", "z", "neighbors"};
+	add_check(w, "span_check", reads, 4, span_check_step, &sc);
 	/* no integrate: the particles stay where they are, with their velocities */
 	CHECK(eddy_world_add_particles(w, SIDE * SIDE + SPAN_PROBES, pos, vel) == EDDY_OK);
 	free(pos);
@@ -1731,14 +1721,8 @@ static void add_bar_pipeline(eddy_world *w, float spacing, float h, bar_check *b
 	de.spacing = spacing;
 	de.radius = h;
 	eddy_add_sph_density(w, &de);
-	eddy_custom_system_def cs = eddy_default_custom_system_def();
-	const char *reads[] = {"x", "y", "z", "neighbors"};
-	cs.name = "bar_check";
-	cs.reads = reads;
-	cs.read_count = 4;
-	cs.step = bar_check_step;
-	cs.user = bc;
-	CHECK(eddy_system_valid(w, eddy_add_custom_system(w, &cs)));
+	static const char *const reads[] = {"x", "y", "z", "neighbors"};
+	add_check(w, "bar_check", reads, 4, bar_check_step, bc);
 	eddy_gravity_def g = eddy_default_gravity_def();
 	eddy_add_gravity(w, &g);
 	eddy_integrate_def it = eddy_default_integrate_def();
