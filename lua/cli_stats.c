@@ -112,11 +112,34 @@ static void json_lua(FILE *f, lua_State *L, int idx, int depth)
 }
 
 static const char *const contract_fields[] = {
-	"frame",      "time",      "steps",      "dt_min",          "dt_max",          "dt_limit",
-	"particles",  "max_speed", "cfl",        "density_err_avg", "density_err_max", "density_compression_avg",
-	"volume",     "leaked",    "nonfinite",  "solver",          "iterations",      "residual",
-	"divergence", "wall_ms",   "state_hash", "systems",         "kinetic_energy",  "potential_energy",
-	"energy",     "momentum",  NULL,
+	"frame",
+	"time",
+	"steps",
+	"dt_min",
+	"dt_max",
+	"dt_limit",
+	"particles",
+	"max_speed",
+	"cfl",
+	"density_err_avg",
+	"density_err_max",
+	"density_compression_avg",
+	"volume",
+	"leaked",
+	"nonfinite",
+	"solver",
+	"iterations",
+	"residual",
+	"divergence",
+	"wall_ms",
+	"state_hash",
+	"systems",
+	"kinetic_energy",
+	"potential_energy",
+	"compression_energy",
+	"energy",
+	"momentum",
+	NULL,
 };
 
 static bool is_contract_field(const char *name)
@@ -184,11 +207,14 @@ const char *cli_write_stats(FILE *f, const eddy_frame_stats *s, lua_State *L, in
 		json_number(f, round(s->system_ms[i] * 1e4) / 1e4);
 	}
 	fputc('}', f);
-	/* appended to the contract: J, J, J and kg m/s, null without a particle mass */
+	/* appended to the contract: J, J, J, J and kg m/s, null without a particle
+	 * mass; compression_energy null without sph_pressure's equation of state */
 	fputs(",\"kinetic_energy\":", f);
 	json_number(f, s->kinetic_energy);
 	fputs(",\"potential_energy\":", f);
 	json_number(f, s->potential_energy);
+	fputs(",\"compression_energy\":", f);
+	json_number(f, s->compression_energy);
 	fputs(",\"energy\":", f);
 	json_number(f, s->energy);
 	fputs(",\"momentum\":", f);

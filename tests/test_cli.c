@@ -233,6 +233,31 @@ static void run_writes_stats_lines(void)
 	free(text);
 }
 
+/* The energy fields of a stats line: WCSPH's sum takes its compression
+ * energy, which is its own field; a pressure solve has none (null). */
+static void stats_energy_fields(void)
+{
+	char cmd[1024], out[16384];
+	snprintf(cmd, sizeof cmd,
+	         "%s run scenes/pour.lua --set method=wcsph --set render=false --duration 0.2 --stats - --quiet | tail -1",
+	         eddy());
+	CHECK(test_sh(cmd, out, sizeof out) == 0);
+	const double ke = test_json_number(out, "kinetic_energy"), pe = test_json_number(out, "potential_energy"),
+				 ce = test_json_number(out, "compression_energy"), e = test_json_number(out, "energy");
+	CHECKF(ce > 0 && ke > 0 && pe > 0, "WCSPH energies: %s", out);
+	/* the line prints 9 significant digits */
+	CHECKF(fabs(e - (ke + pe + ce)) <= 1e-8 * (fabs(ke) + fabs(pe) + ce), "energy %g against %g + %g + %g", e, ke, pe,
+	       ce);
+	snprintf(cmd, sizeof cmd,
+	         "%s run scenes/pour.lua --set method=dfsph --set render=false --duration 0.1 --stats - --quiet | tail -1",
+	         eddy());
+	CHECK(test_sh(cmd, out, sizeof out) == 0);
+	CHECKF(strstr(out, "\"compression_energy\":null") != NULL, "DFSPH: %s", out);
+	CHECK_NEAR(test_json_number(out, "energy"),
+	           test_json_number(out, "kinetic_energy") + test_json_number(out, "potential_energy"),
+	           1e-8 * test_json_number(out, "potential_energy"));
+}
+
 /* Equal runs give equal state hashes, whatever the thread count. */
 static void run_is_deterministic(void)
 {
@@ -756,6 +781,7 @@ void suite_cli(void)
 {
 	RUN(json_reader_rejects_bad_json);
 	RUN(run_writes_stats_lines);
+	RUN(stats_energy_fields);
 	RUN(run_is_deterministic);
 	RUN(set_changes_the_scene);
 	RUN(usage_and_errors);
