@@ -13,8 +13,8 @@
  * cell, where one offset per cell of the whole grid took 26 bytes a
  * particle for a block in a tank twice its width (two grids, fluid and
  * boundary). All 32-bit per cell while some row of cells holds more than
- * 65535. The sort goes by rows of cells, then along each row, so it never
- * holds a count per cell of the whole grid either. */
+ * 65535, and in a grid of at most SPH_WIDE_CELLS cells (neighbors.h). The sort goes by rows of cells, then along each
+ * row, so it never holds a count per cell of the whole grid either. */
 #include "neighbors.h"
 
 #include <stdlib.h>
@@ -142,9 +142,31 @@ static void row_runs(sph_cell_starts *s, uint32_t *cnt, uint32_t xlo, uint32_t x
 	}
 }
 
+/* The wide form's stable counting sort: a count per cell of the grid. */
+static bool counting_sort_wide(const uint32_t *keys, size_t n, size_t cells, sph_cell_starts *start, uint32_t *order)
+{
+	uint32_t *s = starts_wide(start, cells);
+	if (!s)
+		return false;
+	memset(s, 0, (cells + 1) * sizeof *s);
+	for (size_t i = 0; i < n; ++i)
+		s[keys[i] + 1]++;
+	for (size_t c = 0; c < cells; ++c)
+		s[c + 1] += s[c];
+	/* s[c] as the running cursor of cell c, then shifted back a cell */
+	for (size_t i = 0; i < n; ++i)
+		order[s[keys[i]]++] = (uint32_t)i;
+	for (size_t c = cells; c > 0; --c)
+		s[c] = s[c - 1];
+	s[0] = 0;
+	return true;
+}
+
 bool sph_counting_sort(const uint32_t *keys, size_t n, const sph_grid *g, sph_cell_starts *start, uint32_t *order)
 {
 	const size_t gx = (size_t)g->gx, cells = sph_grid_cells(g), rows = cells / gx;
+	if (cells <= SPH_WIDE_CELLS)
+		return counting_sort_wide(keys, n, cells, start, order);
 	const double inv_gx = 1.0 / (double)gx;
 	uint32_t *base = start->base, *cur = start->run_at; /* run_at: the rows' cursors, until the runs */
 	/* the rows' counts, then their starts */
@@ -198,26 +220,29 @@ bool sph_counting_sort(const uint32_t *keys, size_t n, const sph_grid *g, sph_ce
 	free(row);
 	if (fits) /* out of memory */
 		return false;
+	return counting_sort_wide(keys, n, cells, start, order);
+}
+
+/* The wide form of keys[0..n) in cell order: each cell's first entry. */
+static bool cell_ranges_wide(const uint32_t *keys, size_t n, size_t cells, sph_cell_starts *start)
+{
 	uint32_t *s = starts_wide(start, cells);
 	if (!s)
 		return false;
-	memset(s, 0, (cells + 1) * sizeof *s);
-	for (size_t i = 0; i < n; ++i)
-		s[keys[i] + 1]++;
-	for (size_t c = 0; c < cells; ++c)
-		s[c + 1] += s[c];
-	/* s[c] as the running cursor of cell c, then shifted back a cell */
-	for (size_t i = 0; i < n; ++i)
-		order[s[keys[i]]++] = (uint32_t)i;
-	for (size_t c = cells; c > 0; --c)
-		s[c] = s[c - 1];
-	s[0] = 0;
+	size_t c = 0;
+	for (size_t k = 0; k < n; ++k)
+		while (c <= keys[k])
+			s[c++] = (uint32_t)k;
+	while (c <= cells)
+		s[c++] = (uint32_t)n;
 	return true;
 }
 
 bool sph_cell_ranges(const uint32_t *keys, size_t n, const sph_grid *g, sph_cell_starts *start)
 {
 	const size_t gx = (size_t)g->gx, cells = sph_grid_cells(g), rows = cells / gx;
+	if (cells <= SPH_WIDE_CELLS)
+		return cell_ranges_wide(keys, n, cells, start);
 	uint32_t *base = start->base;
 	uint32_t *cnt = malloc(gx * sizeof *cnt);
 	bool fits = cnt && starts_room(start, n, cells);
@@ -253,16 +278,7 @@ bool sph_cell_ranges(const uint32_t *keys, size_t n, const sph_grid *g, sph_cell
 		starts_narrow(start);
 		return true;
 	}
-	uint32_t *s = starts_wide(start, cells);
-	if (!s)
-		return false;
-	size_t c = 0;
-	for (size_t k = 0; k < n; ++k)
-		while (c <= keys[k])
-			s[c++] = (uint32_t)k;
-	while (c <= cells)
-		s[c++] = (uint32_t)n;
-	return true;
+	return cell_ranges_wide(keys, n, cells, start);
 }
 
 bool sph_grow(void **p, size_t *have, size_t want, size_t elem)

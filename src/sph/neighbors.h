@@ -36,6 +36,13 @@ bool sph_cell_ranges(const uint32_t *keys, size_t n, const sph_grid *g, sph_cell
 
 static inline size_t sph_grid_cells(const sph_grid *g) { return (size_t)g->gx * (size_t)g->gy * (size_t)g->gz; }
 
+/* A grid of at most this many cells keeps one 32-bit start per cell (the
+ * wide form, 256 KB at most a grid) rather than the runs: a lookup is then
+ * one load where the runs take a walk of the row's, and a sparse flow (a
+ * jet, a splash) has few particles in each search block, so its search is
+ * mostly such lookups (5 per row of cells around a block). */
+#define SPH_WIDE_CELLS (1u << 16)
+
 /* Empty cells between two of a row's occupied ones that still share a run
  * (sph_cell_starts, sph.h): a run's own record costs six offsets. */
 #define SPH_CELL_GAP 6

@@ -118,11 +118,17 @@ static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br)
 				continue;
 			const int x0 = br->x0 >= ext ? br->x0 - ext : 0, x1 = br->x1 < g->gx - ext ? br->x1 + ext : g->gx - 1;
 			const size_t row = (size_t)zz * (size_t)g->gy + (size_t)yy;
+			const uint32_t fb = sph_cell_start(g, &g->fluid_start, row, x0),
+						   fe = sph_cell_start(g, &g->fluid_start, row, x1 + 1),
+						   bb = sph_cell_start(g, &g->bound_start, row, x0),
+						   be = sph_cell_start(g, &g->bound_start, row, x1 + 1);
+			if (fb == fe && bb == be)
+				continue; /* nothing in it, and so none of the block's own (most rows around a jet's blocks) */
 			cell_run *r = &br->run[br->count++];
-			r->fluid_begin = sph_cell_start(g, &g->fluid_start, row, x0);
-			r->fluid_end = sph_cell_start(g, &g->fluid_start, row, x1 + 1);
-			r->bound_begin = sph_cell_start(g, &g->bound_start, row, x0);
-			r->bound_end = sph_cell_start(g, &g->bound_start, row, x1 + 1);
+			r->fluid_begin = fb;
+			r->fluid_end = fe;
+			r->bound_begin = bb;
+			r->bound_end = be;
 			const bool own = ey == 0 && ez == 0;
 			r->own_begin = own ? sph_cell_start(g, &g->fluid_start, row, br->x0) : 0;
 			r->own_end = own ? sph_cell_start(g, &g->fluid_start, row, br->x1 + 1) : 0;
@@ -140,14 +146,27 @@ static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br)
 static uint32_t gather_run(search_buf *b, uint32_t at, const float *x, const float *y, const float *z,
                            const uint32_t *order, uint32_t begin, uint32_t end)
 {
-	for (uint32_t q = begin; q < end; ++q, ++at) {
-		const uint32_t j = order ? order[q] : q;
-		b->x[at] = x[j];
-		b->y[at] = y[j];
-		b->z[at] = z[j];
-		b->j[at] = j;
-	}
-	return at;
+	/* through restrict locals: the buffers never overlap the columns, so
+	 * the copy of a run of rows (no order: the fluid's) vectorises */
+	float *restrict gx = b->x + at, *restrict gy = b->y + at, *restrict gz = b->z + at;
+	uint32_t *restrict gj = b->j + at;
+	const uint32_t m = end - begin;
+	if (order)
+		for (uint32_t q = 0; q < m; ++q) {
+			const uint32_t j = order[begin + q];
+			gx[q] = x[j];
+			gy[q] = y[j];
+			gz[q] = z[j];
+			gj[q] = j;
+		}
+	else
+		for (uint32_t q = 0; q < m; ++q) {
+			gx[q] = x[begin + q];
+			gy[q] = y[begin + q];
+			gz[q] = z[begin + q];
+			gj[q] = begin + q;
+		}
+	return at + m;
 }
 
 /* The runs' candidates into the buffers, then eight FAR points. */

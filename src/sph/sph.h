@@ -324,16 +324,30 @@ static inline long sph_rows(const eddy_world *w, const sph_shared *sh)
  * loop finishing its particles (finished right after its groups, a
  * particle's totals would wait behind the often mispredicted exit of the
  * group loop). A block that copies *args to a local keeps the constants in
- * registers: its stores cannot alias the copy. The threads take equal
- * shares in order; a particle's result depends on neither blocks nor
- * threads. */
+ * registers: its stores cannot alias the copy. On threads, the blocks go
+ * out in chunks of at most SPH_CHUNK_BLOCKS (about 8 a thread in a small
+ * pass), taken in turn as each thread finishes one: equal shares would
+ * finish at the pace of the slower core, and on a shared host one core can
+ * run at half the other's speed for seconds (dfsph.c, which hands out its
+ * passes the same way). A particle's result depends on neither blocks nor
+ * threads: the same bits on any thread count, in any order the chunks are
+ * taken in. */
 #define SPH_BLOCK 64
+#define SPH_CHUNK_BLOCKS 16
 static inline void sph_block_pass(long n, int threads, void (*block)(const void *args, long i0, long cnt),
                                   const void *args)
 {
-#pragma omp parallel for num_threads(threads) schedule(static)
-	for (int th = 0; th < threads; ++th)
-		for (long i0 = n * th / threads, hi = n * (th + 1) / threads; i0 < hi; i0 += SPH_BLOCK)
+	if (threads <= 1) { /* no team to wake */
+		for (long i0 = 0; i0 < n; i0 += SPH_BLOCK)
+			block(args, i0, n - i0 < SPH_BLOCK ? n - i0 : SPH_BLOCK);
+		return;
+	}
+	long per = (n + SPH_BLOCK - 1) / SPH_BLOCK / (8L * threads);
+	per = per < 1 ? 1 : per > SPH_CHUNK_BLOCKS ? SPH_CHUNK_BLOCKS : per;
+	const long chunk = per * SPH_BLOCK, chunks = (n + chunk - 1) / chunk;
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 1)
+	for (long c = 0; c < chunks; ++c)
+		for (long i0 = c * chunk, hi = i0 + chunk < n ? i0 + chunk : n; i0 < hi; i0 += SPH_BLOCK)
 			block(args, i0, hi - i0 < SPH_BLOCK ? hi - i0 : SPH_BLOCK);
 }
 
