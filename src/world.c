@@ -304,16 +304,30 @@ static double step_limit(eddy_world *w, const char **reason)
  * vectorises (on all threads for a large column), so the scan costs about a
  * memory pass, not a branch per value; only a column that has one looks for
  * the first. */
-static size_t first_nonfinite(const float *v, size_t n, int threads)
+/* Whether any of v[lo, hi) is Inf or NaN (its exponent bits all set): a
+ * plain loop that vectorises, where the same loop inside the parallel
+ * region's reduction stays scalar. */
+static uint32_t any_nonfinite(const float *v, size_t lo, size_t hi)
 {
-	const int nt = n > SCAN_PAR ? threads : 1;
 	uint32_t any = 0;
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(| : any)
-	for (size_t i = 0; i < n; ++i) {
+	for (size_t i = lo; i < hi; ++i) {
 		uint32_t bits;
 		memcpy(&bits, &v[i], sizeof bits);
 		any |= (bits & 0x7f800000u) == 0x7f800000u;
 	}
+	return any;
+}
+
+static size_t first_nonfinite(const float *v, size_t n, int threads)
+{
+	const int nt = n > SCAN_PAR ? threads : 1;
+	uint32_t any = 0;
+	if (nt == 1)
+		any = any_nonfinite(v, 0, n);
+	else
+#pragma omp parallel for num_threads(nt) schedule(static) reduction(| : any)
+		for (int t = 0; t < nt; ++t)
+			any |= any_nonfinite(v, n * (size_t)t / (size_t)nt, n * (size_t)(t + 1) / (size_t)nt);
 	if (any)
 		for (size_t i = 0; i < n; ++i)
 			if (!isfinite(v[i]))

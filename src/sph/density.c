@@ -101,6 +101,8 @@ typedef struct walls {
 	float *inv_sw; /* 1 / sum of W (0: none) */
 	float *old;    /* the wall density the fluid sums hold */
 	float *dv;     /* V_b times the change of that density */
+	float *vol;    /* V_b */
+	float *pb;     /* the wall pressure, stored to the wall once the passes end */
 } walls;
 
 static void *scratch(eddy_world *w, size_t count, size_t size, bool *ok)
@@ -164,6 +166,8 @@ static bool walls_make(eddy_world *w, sph_density *sd, int threads, walls *wl)
 	wl->inv_sw = scratch(w, (size_t)nact, sizeof *wl->inv_sw, &ok);
 	wl->old = scratch(w, (size_t)nact, sizeof *wl->old, &ok);
 	wl->dv = scratch(w, (size_t)nact, sizeof *wl->dv, &ok);
+	wl->vol = scratch(w, (size_t)nact, sizeof *wl->vol, &ok);
+	wl->pb = scratch(w, (size_t)nact, sizeof *wl->pb, &ok);
 	if (!ok)
 		return false;
 	const eddy_vec3 g = w->def.gravity;
@@ -180,8 +184,10 @@ static bool walls_make(eddy_world *w, sph_density *sd, int threads, walls *wl)
 			wl->grav[k] = g.x * rx + g.y * ry + g.z * rz;
 		}
 	}
-	for (long a = 0; a < nact; ++a)
+	for (long a = 0; a < nact; ++a) {
 		wl->old[a] = nb->bnd.rho[wl->act[a]];
+		wl->vol[a] = nb->bvol[wl->act[a]];
+	}
 	return true;
 }
 
@@ -232,17 +238,17 @@ static void walls_sum(const walls *wl, const float *rho, const float *p, bool fi
 
 /* Each wall's pressure from its sums,
  *   p_b = max(0, sum_f (p_f + rho_f g . (x_b - x_f)) W_bf / sum_f W_bf),
- * and its EOS density; the first pass divides by sum W and keeps its
- * inverse, the later ones multiply by that. Returns the largest change of
- * a wall density since the fluid's sums took it, and stores the changes
- * times V_b in dv (the fluid's next correction). */
-static float walls_set(sph_density *sd, const walls *wl, bool first, int threads)
+ * and its EOS density, in pb and old (boundary_pressure puts them on the walls
+ * once the passes end: a pass reads and writes act's order only); the
+ * first pass divides by sum W and keeps its inverse, the later ones
+ * multiply by that. Returns the largest change of a wall density since the
+ * fluid's sums took it, and stores the changes times V_b in dv (the
+ * fluid's next correction). */
+static float walls_set(const sph_density *sd, const walls *wl, bool first, int threads)
 {
-	sph_neighbors *nb = &sd->sh.nb;
 	float change = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : change)
 	for (long a = 0; a < wl->nact; ++a) {
-		const uint32_t b = wl->act[a];
 		float s;
 		if (first) {
 			const float sw = wl->inv_sw[a];
@@ -251,10 +257,9 @@ static float walls_set(sph_density *sd, const walls *wl, bool first, int threads
 		} else
 			s = wl->sp[a] * wl->inv_sw[a];
 		const float pb = s > 0 ? s : 0.0f, r = eos_density(sd, pb), d = r - wl->old[a];
-		nb->bp[b] = pb;
-		nb->bnd.rho[b] = r;
+		wl->pb[a] = pb;
 		wl->old[a] = r;
-		wl->dv[a] = nb->bvol[b] * d;
+		wl->dv[a] = wl->vol[a] * d;
 		change = fabsf(d) > change ? fabsf(d) : change;
 	}
 	return change;
@@ -307,6 +312,10 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 		}
 		walls_sum(&wl, rho, p, false, threads);
 		change = walls_set(sd, &wl, false, threads);
+	}
+	for (long a = 0; a < wl.nact; ++a) {
+		nb->bp[wl.act[a]] = wl.pb[a];
+		nb->bnd.rho[wl.act[a]] = wl.old[a];
 	}
 	return EDDY_OK;
 }
