@@ -146,27 +146,14 @@ static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br)
 static uint32_t gather_run(search_buf *b, uint32_t at, const float *x, const float *y, const float *z,
                            const uint32_t *order, uint32_t begin, uint32_t end)
 {
-	/* through restrict locals: the buffers never overlap the columns, so
-	 * the copy of a run of rows (no order: the fluid's) vectorises */
-	float *restrict gx = b->x + at, *restrict gy = b->y + at, *restrict gz = b->z + at;
-	uint32_t *restrict gj = b->j + at;
-	const uint32_t m = end - begin;
-	if (order)
-		for (uint32_t q = 0; q < m; ++q) {
-			const uint32_t j = order[begin + q];
-			gx[q] = x[j];
-			gy[q] = y[j];
-			gz[q] = z[j];
-			gj[q] = j;
-		}
-	else
-		for (uint32_t q = 0; q < m; ++q) {
-			gx[q] = x[begin + q];
-			gy[q] = y[begin + q];
-			gz[q] = z[begin + q];
-			gj[q] = begin + q;
-		}
-	return at + m;
+	for (uint32_t q = begin; q < end; ++q, ++at) {
+		const uint32_t j = order ? order[q] : q;
+		b->x[at] = x[j];
+		b->y[at] = y[j];
+		b->z[at] = z[j];
+		b->j[at] = j;
+	}
+	return at;
 }
 
 /* The runs' candidates into the buffers, then eight FAR points. */
@@ -270,12 +257,6 @@ bool SIMD_NAME(search_block)(const search_ctx *c, uint32_t id, search_buf *fb, s
 
 #ifndef EDDY_SIMD_VARIANT
 
-static int cmp_u32(const void *a, const void *b)
-{
-	const uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
-	return (x > y) - (x < y);
-}
-
 bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int threads, sph_cursor *fluid,
                 sph_cursor *bound)
 {
@@ -297,25 +278,28 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
 					;
 			c.reach[a][b] = k;
 		}
-	uint32_t *ids = eddy__arena_alloc(&w->arena, (w->n + 1) * sizeof *ids);
-	if (!ids)
-		return false;
-	/* the blocks that hold particles, ascending: one id per stretch of rows
-	 * in one row of cells and one block, then unique */
+	/* the blocks that hold particles, ascending: marked in a bit per block,
+	 * then read off in order (no sort) */
 	const uint32_t gx = (uint32_t)nb->grid.gx, gy = (uint32_t)nb->grid.gy;
-	long found = 0, blocks = 0;
+	const size_t nblocks =
+					 (size_t)c.blocks_x * (size_t)c.blocks_y * (size_t)((nb->grid.gz + SEARCH_BZ - 1) / SEARCH_BZ),
+				 words = (nblocks + 63) / 64;
+	uint32_t *ids = eddy__arena_alloc(&w->arena, (w->n + 1) * sizeof *ids);
+	uint64_t *mark = eddy__arena_alloc(&w->arena, words * sizeof *mark);
+	if (!ids || !mark)
+		return false;
+	memset(mark, 0, words * sizeof *mark);
 	for (size_t i = 0; i < w->n; ++i) {
 		const uint32_t cell = sph_cell_at(&nb->grid, c.x[i], c.y[i], c.z[i]); /* as the cell order's pass found */
 		const uint32_t cx = cell % gx, cy = cell / gx % gy, cz = cell / (gx * gy);
 		const uint32_t id =
 			(cz / SEARCH_BZ * (uint32_t)c.blocks_y + cy / SEARCH_BY) * (uint32_t)c.blocks_x + cx / SEARCH_BX;
-		if (found == 0 || id != ids[found - 1])
-			ids[found++] = id;
+		mark[id / 64] |= 1ull << (id % 64);
 	}
-	qsort(ids, (size_t)found, sizeof *ids, cmp_u32);
-	for (long k = 0; k < found; ++k)
-		if (k == 0 || ids[k] != ids[blocks - 1])
-			ids[blocks++] = ids[k];
+	long blocks = 0;
+	for (size_t k = 0; k < words; ++k)
+		for (uint64_t m = mark[k]; m; m &= m - 1)
+			ids[blocks++] = (uint32_t)(k * 64 + (size_t)__builtin_ctzll(m));
 	bool (*const block)(const search_ctx *, uint32_t, search_buf *, search_buf *) = SIMD_PICK(search_block);
 	bool ok = true;
 	out->list->used = out->blist->used = 0;
