@@ -13,8 +13,9 @@
  * cell, where one offset per cell of the whole grid took 26 bytes a
  * particle for a block in a tank twice its width (two grids, fluid and
  * boundary). All 32-bit per cell while some row of cells holds more than
- * 65535, and in a grid of at most SPH_WIDE_CELLS cells (neighbors.h). The sort goes by rows of cells, then along each
- * row, so it never holds a count per cell of the whole grid either. */
+ * 65535, and in a grid of at most SPH_WIDE_CELLS cells (neighbors.h: a
+ * lookup is then one load). The sort goes by rows of cells, then along
+ * each row, so it never holds a count per cell of the whole grid either. */
 #include "neighbors.h"
 
 #include <stdlib.h>

@@ -281,9 +281,8 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
 	/* the blocks that hold particles, ascending: marked in a bit per block,
 	 * then read off in order (no sort) */
 	const uint32_t gx = (uint32_t)nb->grid.gx, gy = (uint32_t)nb->grid.gy;
-	const size_t nblocks =
-					 (size_t)c.blocks_x * (size_t)c.blocks_y * (size_t)((nb->grid.gz + SEARCH_BZ - 1) / SEARCH_BZ),
-				 words = (nblocks + 63) / 64;
+	const size_t blocks_z = (size_t)(nb->grid.gz + SEARCH_BZ - 1) / SEARCH_BZ,
+				 words = ((size_t)c.blocks_x * (size_t)c.blocks_y * blocks_z + 63) / 64;
 	uint32_t *ids = eddy__arena_alloc(&w->arena, (w->n + 1) * sizeof *ids);
 	uint64_t *mark = eddy__arena_alloc(&w->arena, words * sizeof *mark);
 	if (!ids || !mark)
