@@ -61,11 +61,25 @@ static float eos_pressure(const sph_density *sd, float rho)
 	return p > 0 ? p : 0;
 }
 
-static float eos_density(const sph_density *sd, float p)
+/* The EOS's constants, copied where a loop's float stores would otherwise
+ * make the compiler reload them every iteration. */
+typedef struct eos_consts {
+	eddy_sph_eos eos;
+	float rho0, k, gamma;
+} eos_consts;
+
+static eos_consts eos_of(const sph_density *sd)
 {
-	const float rho0 = sd->sh.rho0, k = sd->def.stiffness, gamma = sd->def.tait_gamma;
-	return sd->def.eos == EDDY_SPH_EOS_TAIT ? rho0 * powf(p / (k * rho0 / gamma) + 1.0f, 1.0f / gamma) : rho0 + p / k;
+	return (eos_consts){sd->def.eos, sd->sh.rho0, sd->def.stiffness, sd->def.tait_gamma};
 }
+
+static inline float eos_rho(eos_consts e, float p)
+{
+	return e.eos == EDDY_SPH_EOS_TAIT ? e.rho0 * powf(p / (e.k * e.rho0 / e.gamma) + 1.0f, 1.0f / e.gamma)
+	                                  : e.rho0 + p / e.k;
+}
+
+static float eos_density(const sph_density *sd, float p) { return eos_rho(eos_of(sd), p); }
 
 /* The wall densities enter the fluid's density sums, which set the pressure
  * the walls copy: a loop. Closed with the previous step's wall densities (as
@@ -246,20 +260,25 @@ static void walls_sum(const walls *wl, const float *rho, const float *p, bool fi
  * fluid's next correction). */
 static float walls_set(const sph_density *sd, const walls *wl, bool first, int threads)
 {
+	const eos_consts e = eos_of(sd);
+	float *restrict sp = wl->sp, *restrict inv_sw = wl->inv_sw, *restrict old = wl->old, *restrict dv = wl->dv,
+					*restrict pbs = wl->pb;
+	const float *restrict vol = wl->vol;
+	const long nact = wl->nact;
 	float change = 0;
 #pragma omp parallel for num_threads(threads) schedule(static) reduction(max : change)
-	for (long a = 0; a < wl->nact; ++a) {
+	for (long a = 0; a < nact; ++a) {
 		float s;
 		if (first) {
-			const float sw = wl->inv_sw[a];
-			s = sw > 0 ? wl->sp[a] / sw : 0.0f;
-			wl->inv_sw[a] = sw > 0 ? 1.0f / sw : 0.0f;
+			const float sw = inv_sw[a];
+			s = sw > 0 ? sp[a] / sw : 0.0f;
+			inv_sw[a] = sw > 0 ? 1.0f / sw : 0.0f;
 		} else
-			s = wl->sp[a] * wl->inv_sw[a];
-		const float pb = s > 0 ? s : 0.0f, r = eos_density(sd, pb), d = r - wl->old[a];
-		wl->pb[a] = pb;
-		wl->old[a] = r;
-		wl->dv[a] = wl->vol[a] * d;
+			s = sp[a] * inv_sw[a];
+		const float pb = s > 0 ? s : 0.0f, r = eos_rho(e, pb), d = r - old[a];
+		pbs[a] = pb;
+		old[a] = r;
+		dv[a] = vol[a] * d;
 		change = fabsf(d) > change ? fabsf(d) : change;
 	}
 	return change;
@@ -300,13 +319,17 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 	for (int pass = 1; iterate && pass <= WALL_PASSES_MAX; ++pass) {
 		if (pass > 1 && !(change > WALL_TOL * first))
 			break;
+		/* in locals: set_density's stores would reload them from wl */
+		const uint32_t *restrict fstart = wl.fstart, *restrict slot = wl.slot, *restrict rows = wl.rows;
+		const float *restrict dv = wl.dv, *restrict wgt = wl.wgt;
+		const long nrows = wl.nrows;
 #pragma omp parallel for num_threads(threads) schedule(static)
-		for (long r = 0; r < wl.nrows; ++r) {
+		for (long r = 0; r < nrows; ++r) {
 			float dr = 0;
-			for (uint32_t k = wl.fstart[r]; k < wl.fstart[r + 1]; ++k)
-				dr += wl.dv[wl.slot[k]] * wl.wgt[k];
+			for (uint32_t k = fstart[r]; k < fstart[r + 1]; ++k)
+				dr += dv[slot[k]] * wgt[k];
 			if (dr != 0) {
-				const uint32_t i = wl.rows[r];
+				const uint32_t i = rows[r];
 				set_density(sd, rho, p, i, rho[i] + sd->sh.k.poly6 * dr);
 			}
 		}
