@@ -127,7 +127,10 @@
  * them: the ringing falls to 0.003-0.03 rho0 g D at 10 and 20 layers
  * (vmax 0.063/0.042/0.028 and 0.076/0.050/0.044, bottom p 0.95 and 0.97, the
  * floor holding the bottom layer up), but 40 layers read 0.11/0.31/0.11 (with
- * shifting D = 0.02 0.068/0.080/0.066, 100 layers 3.1) and the slosh period
+ * shifting D = 0.02 0.068/0.080/0.066, 100 layers 3.1, while 10 and 20 layers
+ * rise to 0.14-0.17 and 0.08-0.10: a shift moves particles out of the
+ * pressure's balance, which a weakly compressible fluid answers with sound,
+ * where sph_dfsph's solve absorbs it) and the slosh period
  * goes back to -3.9% at 10 mm (p_w / 2: -3.1%; as a floor max(p_i + p_b,
  * p_w): -2.0% but still water 0.10; only beyond the still lattice's wall
  * sum: 0.19-0.23). Whatever holds the fluid at the side walls near the
