@@ -197,6 +197,8 @@ typedef struct dfsph_pass {
 	bool projected;  /* projected relaxed Jacobi on the symmetric operator (the divergence
 	                  * solver, and every PASS_RATE), else the paper's sweeps */
 	bool from_zero;  /* PASS_CORRECT: v* taken as 0 (not read), as the operator's product wants */
+	bool reuse;      /* PASS_SWEEP: err holds R_i(v*) already (a PASS_RATE on this v*, which a
+	                  * projected sweep's R_i equals): the pairs are not read again */
 } dfsph_pass;
 SIMD_DECLARE(void, dfsph_block, (const void *pass, long i0, long cnt));
 
@@ -453,7 +455,7 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 	const dfsph_kern kc = kern(sh);
 	const float *v = &wk->v->x;
 	float t[SPH_BLOCK][4];
-	for (long q = 0; q < cnt; ++q) {
+	for (long q = 0; q < cnt && !ps->reuse; ++q) {
 		const long i = i0 + q;
 		const sf8 vi = sf8_load_quad2(v + 4 * i);
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
@@ -490,11 +492,16 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 		sf8 vx, vy, vz, vw, bx, by, bz, bw;
 		load_quads8(wk->v + i, m, &vx, &vy, &vz, &vw);
 		load_quads8(wk->b + i, m, &bx, &by, &bz, &bw);
-		sf8 vb = sf8_add(sf8_add(sf8_mul(vx, bx), sf8_mul(vy, by)), sf8_mul(vz, bz));
-		if (wk->bdiv)
-			vb = sf8_sub(vb, load8(wk->bdiv + i, m));
-		/* the wall counted twice, as its force, on the symmetric operator */
-		const sf8 r = sf8_add(sum8(t[q], m), ps->projected ? sf8_add(vb, vb) : vb);
+		sf8 r;
+		if (ps->reuse)
+			r = load8(wk->err + i, m);
+		else {
+			sf8 vb = sf8_add(sf8_add(sf8_mul(vx, bx), sf8_mul(vy, by)), sf8_mul(vz, bz));
+			if (wk->bdiv)
+				vb = sf8_sub(vb, load8(wk->bdiv + i, m));
+			/* the wall counted twice, as its force, on the symmetric operator */
+			r = sf8_add(sum8(t[q], m), ps->projected ? sf8_add(vb, vb) : vb);
+		}
 		if (ps->kind == PASS_RATE) {
 			store8(wk->err + i, r, m);
 			continue;
@@ -697,7 +704,7 @@ static void pass_run(dfsph_work *wk, const dfsph_pass *ps)
 
 static void pass(dfsph_work *wk, enum dfsph_pass_kind kind, bool divergence, bool projected)
 {
-	const dfsph_pass ps = {wk, kind, divergence, projected, false};
+	const dfsph_pass ps = {wk, kind, divergence, projected, false, false};
 	pass_run(wk, &ps);
 }
 
@@ -710,7 +717,7 @@ static void operator_product(dfsph_work *wk)
 	wk->k = wk->p; /* the same array (dfsph_work) */
 	wk->bdiv = NULL;
 	/* u = 0 - dt (...): no memset; ksum left as it is */
-	const dfsph_pass ps = {wk, PASS_CORRECT, true, true, true};
+	const dfsph_pass ps = {wk, PASS_CORRECT, true, true, true, false};
 	pass_run(wk, &ps);
 	pass(wk, PASS_RATE, true, true);
 	*wk = keep;
@@ -723,13 +730,16 @@ static void operator_product(dfsph_work *wk)
  * mean |r_i| dt / rho0 is at most tol or a direction has no positive
  * curvature, then projects (k_i < 0 back to 0); the sweeps after it settle
  * the particles that left or entered the set. Its sums are serial in row
- * order: the same bits for any thread count. */
-static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, double *residual)
+ * order: the same bits for any thread count. *fresh: err still holds R(v*)
+ * of its first pass (no iteration, nothing projected), which the sweep after
+ * it then reads instead of the pairs (the same bits). */
+static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, double *residual, bool *fresh)
 {
 	const long n = wk->n;
 	const float dt = wk->dt, rho0 = wk->sh->rho0;
 	const double scale = (double)dt / ((double)rho0 * (double)n);
 	pass(wk, PASS_RATE, true, true);
+	*fresh = true; /* err = R(v*) until a product or the projection */
 	double rz = 0, esum = 0;
 	for (long i = 0; i < n; ++i) {
 		const float res = density ? wk->err[i] + (wk->rho[i] - rho0) / dt : wk->err[i];
@@ -747,6 +757,7 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	if (cg && !(wk->coarse_scale > 0)) { /* s = y . (A/dt) y / e . L e on y = p (dfsph_coarse.h) */
 		const double ele = eddy__dfsph_coarse_unit(cg, wk->r, wk->p);
 		operator_product(wk);
+		*fresh = false;
 		double yay = 0;
 		for (long i = 0; i < n; ++i)
 			yay -= (double)wk->p[i] * ((float)wk->mask[i] * wk->err[i]);
@@ -759,6 +770,7 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	int it = 0;
 	while (*residual > tol && it < cap && rz > 0) {
 		operator_product(wk);
+		*fresh = false;
 		double pq = 0;
 		for (long i = 0; i < n; ++i)
 			pq -= (double)wk->p[i] * ((float)wk->mask[i] * wk->err[i]);
@@ -795,6 +807,7 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	}
 	if (neg)
 		pass(wk, PASS_CORRECT, true, true);
+	*fresh = *fresh && !neg;
 	if (wk->coarse)
 		eddy__arena_release(wk->coarse, mark);
 	return it;
@@ -866,9 +879,11 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 	const int cap = divergence ? sd->def.max_divergence_iterations : sd->def.max_iterations;
 	int it = 0, sweeps = 0;
 	for (;;) {
+		bool fresh = false;
 		if (projected)
-			it += divergence_cg(wk, cap - it, !divergence, tol, residual);
-		pass(wk, PASS_SWEEP, divergence, projected);
+			it += divergence_cg(wk, cap - it, !divergence, tol, residual, &fresh);
+		const dfsph_pass sweep = {wk, PASS_SWEEP, divergence, projected, false, fresh};
+		pass_run(wk, &sweep);
 		double sum = 0; /* serial, in row order: the same for any thread count */
 		for (long i = 0; i < n; ++i)
 			sum += wk->err[i];
