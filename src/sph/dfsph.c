@@ -6,7 +6,7 @@
  * Reads: x y z vx vy vz density ax ay az, sph_density's lists. Writes:
  * pressure, ax ay az (accumulated: it runs after the other forces, before
  * integrate), and with shift > 0 x y z; with the divergence solver also its
- * state columns dfsph_k dfsph_kd, the solves' warm starts (below).
+ * state columns dfsph_k dfsph_kd, each solve's k of the last step.
  *
  * With G_ij = m grad W_spiky(x_i - x_j) (the poly6 gradient vanishes at r = 0
  * and lets a tank at rest cluster), S_i = sum_j G_ij, boundary particles of
@@ -32,14 +32,7 @@
  * diverge in a deep column). Each solve starts from its k of the last step
  * (with hydrostatic_start, when no particle has one, the velocity solve from
  * the pressure of water released at rest: dfsph_warm.c; the density solve's
- * k is then about 0), the velocity solve's less the density solve's last
- * change of k: the density solve's correction of a step leaves the velocity
- * field a divergence -A (its change of k) that the next velocity solve, its
- * tolerance some hundred times tighter, must take back, and that change is
- * known. Started from its own k alone, most of the velocity solve's work in
- * a settling block was that (the warm start's mean error 10-15 times the
- * tolerance against about 1.6 with the density solve's change left out).
- * Then the solve runs conjugate gradients (divergence_cg), then
+ * k is then about 0), runs conjugate gradients (divergence_cg), then
  * projected relaxed Jacobi sweeps (Ihmsen et al.) on the residual res_i
  * (R_i where rho_i >= DFSPH_SURFACE rho0, else the predicted rho_i - rho0),
  * whose error is |res_i| where k_i > 0, else max(res_i, 0):
@@ -642,10 +635,8 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
 
 typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
-	/* the state columns dfsph_k, dfsph_kd: the two solves' warm starts (or -1): the
-	 * density solve's k, and the velocity solve's less the density solve's change of k */
-	int kcol[2];
-	int capped; /* steps in a row whose velocity solve ended capped (DFSPH_FAIL_CAPPED) */
+	int kcol[2]; /* the state columns dfsph_k, dfsph_kd: the two solves' warm starts (or -1) */
+	int capped;  /* steps in a row whose velocity solve ended capped (DFSPH_FAIL_CAPPED) */
 	/* statistics of the current frame */
 	int frame;
 	int64_t steps, sweeps, div_sweeps, unconverged;
@@ -917,7 +908,7 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 		                  sys->label, (long long)ctx->step, *residual, it, sd->capped,
 		                  (double)sd->def.max_divergence_error, wi, wk->err[wi] / rho0);
 	}
-	if (divergence) /* the density solve's k goes to its column in finish */
+	if (projected)
 		memcpy(col, wk->ksum, (size_t)n * sizeof *col);
 	return EDDY_OK;
 }
@@ -973,8 +964,7 @@ static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_wor
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	float *p = eddy__col(w, COL_PRESSURE);
-	float *kdiv = sd->def.divergence_solver ? eddy__col(w, sd->kcol[0]) : NULL;
-	float *kden = sd->def.divergence_solver ? eddy__col(w, sd->kcol[1]) : NULL;
+	const float *kdiv = sd->def.divergence_solver ? eddy__col(w, sd->kcol[0]) : NULL;
 	long bad = wk->n; /* the first non-finite row, n for none */
 	const int nt = loop_threads(wk->n, wk->threads);
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(min : bad)
@@ -982,12 +972,8 @@ static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_wor
 		ax[i] += (wk->v[i].x - (vx[i] + dt * ax[i])) * inv_dt;
 		ay[i] += (wk->v[i].y - (vy[i] + dt * ay[i])) * inv_dt;
 		az[i] += (wk->v[i].z - (vz[i] + dt * az[i])) * inv_dt;
-		const float kd = kdiv ? kdiv[i] : 0.0f, kp = (0.0f + kd) + wk->ksum[i];
+		const float kp = (0.0f + (kdiv ? kdiv[i] : 0.0f)) + wk->ksum[i];
 		p[i] = kp * wk->rho[i] * wk->rho[i] / wk->sh->grad_cal;
-		if (kden) { /* the warm starts (header): the velocity solve's less the density solve's change */
-			kdiv[i] = kd - (wk->ksum[i] - kden[i]);
-			kden[i] = wk->ksum[i];
-		}
 		if (i < bad && !(isfinite(ax[i]) && isfinite(ay[i]) && isfinite(az[i]) && isfinite(p[i])))
 			bad = i;
 	}
