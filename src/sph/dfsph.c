@@ -423,9 +423,18 @@ static void concentration(const dfsph_work *wk, long i0, long cnt)
 		sf8 cx = kc.zero, cy = kc.zero, cz = kc.zero, mv = kc.zero;
 		uint32_t pad[8];
 		for (uint32_t p = 0; p < c; p += 8) {
-			const uint32_t *j = group_rows(&list, c, p, (uint32_t)i, pad);
 			sf8 gx, gy, gz;
-			pair_grad(&kc, pi, sh->pq, j, &gx, &gy, &gz);
+			const uint32_t *j;
+			if (wk->gs) { /* the stored pairs (as rate: the same G_ij) */
+				const dfsph_group *g = wk->gs + wk->goff[i] + p / 8;
+				j = g->j;
+				gx = sf8_load(g->gx);
+				gy = sf8_load(g->gy);
+				gz = sf8_load(g->gz);
+			} else {
+				j = group_rows(&list, c, p, (uint32_t)i, pad);
+				pair_grad(&kc, pi, sh->pq, j, &gx, &gy, &gz);
+			}
 			const sf8 vj = sf8_gather(sh->inv_rho, j); /* V_j / m */
 			cx = sf8_add(cx, sf8_mul(gx, vj));
 			cy = sf8_add(cy, sf8_mul(gy, vj));
