@@ -101,7 +101,40 @@
  * a period 6.4% short and a damping ratio of 0.074 (now 3.9% and 0.056). What
  * remains: a wall energy whose pressure follows the fluid's pressure (as
  * Adami's average does) rather than the gap, or a time-step limit for the wall
- * mode; and a pair that keeps the drop. */
+ * mode; and a pair that keeps the drop.
+ *
+ * Free-slip walls (issue 13, branch slip14-experiment, at 01680a5; 10 layers,
+ * vmax from 2 s at cfl 0.48/0.50/0.52, against 0.075/0.029/0.163 now). The
+ * walls' force along their normals only: 2.74/0.69/0.98, and a tank 0.4 m
+ * wide reads 2.03 (0.040 with today's walls), so the hold is not a narrow
+ * column's. Nor is it the wall lattice's corrugation: the normal force from
+ * tangentially averaged wall sheets (per layer 2 pi z (h - z)^3 / 3 V_b / A)
+ * reads 3.01/0.98/0.86, walls sampled at half the spacing (corrugation of
+ * their density 5e-5) 0.71/0.46/0.66. Keeping along the wall the pressure's
+ * difference, V_b (p_b - p_i) grad_t W, and dropping 2 p_i sum V_b grad_t W
+ * (zero on a smooth wall, the wall lattice's pockets otherwise) gives the
+ * aligned still lattice today's forces and the slosh its period (10 mm:
+ * +0.03%, zeta 0.040, against -5.6% and 0.113 now; 5 mm: -2.6%, 0.031), but
+ * still water reads 0.15/0.70/0.70, 0.15 at 20 layers and throws 162
+ * particles at 40; with Monaghan's alpha 0.2 or 0.5, 0.11-0.13 at every cfl;
+ * keeping a quarter or half of the 2 p_i term, 0.48-0.57 or 0.15-1.02.
+ * Particle shifting (Lind et al. 2012, dr = -D h^2 grad C each step, D
+ * 0.002-0.1, interior only as sph_dfsph's or also along the walls) holds none
+ * of these (0.2-3). The fastest particles sit at the side walls near the free
+ * surface, 0.1-0.3 spacing from the face, or in the vertical edges: where the
+ * pressure, and with it the walls' push p_i + p_b, is near 0. A wall
+ * background pressure p_w = rho0 |g| h added to the normal term settles
+ * them: the ringing falls to 0.003-0.03 rho0 g D at 10 and 20 layers
+ * (vmax 0.063/0.042/0.028 and 0.076/0.050/0.044, bottom p 0.95 and 0.97, the
+ * floor holding the bottom layer up), but 40 layers read 0.11/0.31/0.11 (with
+ * shifting D = 0.02 0.068/0.080/0.066, 100 layers 3.1, while 10 and 20 layers
+ * rise to 0.14-0.17 and 0.08-0.10: a shift moves particles out of the
+ * pressure's balance, which a weakly compressible fluid answers with sound,
+ * where sph_dfsph's solve absorbs it) and the slosh period
+ * goes back to -3.9% at 10 mm (p_w / 2: -3.1%; as a floor max(p_i + p_b,
+ * p_w): -2.0% but still water 0.10; only beyond the still lattice's wall
+ * sum: 0.19-0.23). Whatever holds the fluid at the side walls near the
+ * surface stiffens the slosh there. */
 #include "test.h"
 
 #include <stdlib.h>

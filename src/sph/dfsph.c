@@ -158,21 +158,27 @@ typedef struct dfsph_work {
 	eddy_vec3 gravity; /* m/s^2 */
 	const float *bdiv; /* the moving walls' part of the rate (sph.h); NULL while none moves
 	                    * and in the operator's product, which is linear */
-	dfsph_vec4 *b;     /* B_i, and w = 1 / D_i (0 where D_i is negligible) */
-	dfsph_vec4 *v;     /* v*_i (w unused: a neighbour's velocity is one quad) */
-	dfsph_vec4 *h;     /* the walls' hydrostatic push h_i (m/s^2), and w = rho_i */
-	dfsph_vec4 *c;     /* grad C_i = sum_j G_ij / rho_j (1/m), and w = max_j 1 / rho_j */
-	float *dsym;       /* 1 / D'_i, the symmetric operator's diagonal (0 likewise) */
-	float *k;          /* the k_i a correction applies */
-	float *ksum;       /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
-	float *kp;         /* the pressure's k_i: the sum over both solves */
-	float *err;        /* per particle: the error the sweep measured, or R_i(v) */
-	float *full;       /* 1 where rho_i >= DFSPH_SURFACE rho0, else 0: the velocity solve's particles */
+	/* B_i, and w = 1 / D_i (0 where D_i is negligible) for the paper's
+	 * sweeps; the divergence solver, which does not use D_i, keeps there
+	 * from its velocity solve on 1 where rho_i >= DFSPH_SURFACE rho0, else 0
+	 * (the velocity solve's particles) */
+	dfsph_vec4 *b;
+	dfsph_vec4 *v; /* v*_i (w unused: a neighbour's velocity is one quad) */
+	/* One array, three lives (the peak is the solves'): from the gradient
+	 * pass until v* is set, the walls' hydrostatic push h_i (m/s^2); in the
+	 * conjugate gradients the velocity change of a direction, -dt grad p;
+	 * after the solves, with the shift, grad C_i = sum_j G_ij / rho_j (1/m)
+	 * and w = max_j 1 / rho_j */
+	dfsph_vec4 *u;
+	float *dsym; /* 1 / D'_i, the symmetric operator's diagonal (0 likewise) */
+	float *k;    /* the k_i a correction applies */
+	float *ksum; /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
+	float *err;  /* per particle: the error the sweep measured, or R_i(v) */
 	/* the conjugate gradients' (divergence_cg) */
-	dfsph_vec4 *u; /* the velocity change of a direction: -dt grad p */
-	float *p;      /* the search direction (a change of k) */
+	float *p;      /* the search direction (a change of k): k's array, which the sweeps
+	                * use only between the calls */
 	float *r;      /* the residual on the active set */
-	float *mask;   /* 1 on the active set, else 0 */
+	uint8_t *mask; /* 1 on the active set, else 0 */
 	/* with few pairs (DFSPH_STORE_BYTES): the pairs in groups of eight,
 	 * particle i's from gs + goff[i]; NULL: every pass reads the lists and
 	 * recomputes G_ij */
@@ -183,7 +189,7 @@ typedef struct dfsph_work {
 } dfsph_work;
 
 /* A pass over all particles: gradients, rate or correct below. */
-enum dfsph_pass_kind { PASS_GRADIENTS, PASS_RATE, PASS_SWEEP, PASS_CORRECT };
+enum dfsph_pass_kind { PASS_GRADIENTS, PASS_RATE, PASS_SWEEP, PASS_CORRECT, PASS_CONCENTRATION };
 typedef struct dfsph_pass {
 	dfsph_work *wk;
 	enum dfsph_pass_kind kind;
@@ -191,6 +197,8 @@ typedef struct dfsph_pass {
 	bool projected;  /* projected relaxed Jacobi on the symmetric operator (the divergence
 	                  * solver, and every PASS_RATE), else the paper's sweeps */
 	bool from_zero;  /* PASS_CORRECT: v* taken as 0 (not read), as the operator's product wants */
+	bool reuse;      /* PASS_SWEEP: err holds R_i(v*) already (a PASS_RATE on this v*, which a
+	                  * projected sweep's R_i equals): the pairs are not read again */
 } dfsph_pass;
 SIMD_DECLARE(void, dfsph_block, (const void *pass, long i0, long cnt));
 
@@ -344,13 +352,13 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 	const float dref = sh->mass * sh->k.spiky_grad * sh->k.h2; /* |G|'s scale */
 	const sf8 one = sf8_set1(1.0f), two = sf8_set1(2.0f), zero = sf8_zero(), dmin = sf8_set1(1e-6f * dref * dref),
 			  minus = sf8_set1(-0.0f);
-	float t[7][SPH_BLOCK][4], w[6][SPH_BLOCK] = {{0}}, vmax[SPH_BLOCK];
+	float t[4][SPH_BLOCK][4], w[6][SPH_BLOCK] = {{0}};
 	for (long q = 0; q < cnt; ++q) {
 		const long i = i0 + q;
 		sph_groups list = sph_nbr_groups(nb, i);
 		const uint32_t c = nb->count[i];
 		const sf8 pi = sf8_load_quad2(sh->pq + 4 * i);
-		sf8 sx = zero, sy = zero, sz = zero, s2 = zero, cx = zero, cy = zero, cz = zero, mv = zero;
+		sf8 sx = zero, sy = zero, sz = zero, s2 = zero;
 		uint32_t pad[8];
 		for (uint32_t p = 0; p < c; p += 8) {
 			const uint32_t *j = group_rows(&list, c, p, (uint32_t)i, pad);
@@ -368,26 +376,11 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 			sy = sf8_add(sy, gy);
 			sz = sf8_add(sz, gz);
 			s2 = sf8_add(s2, sf8_add(sf8_add(sf8_mul(gx, gx), sf8_mul(gy, gy)), sf8_mul(gz, gz)));
-			if (wk->c) {                                   /* the shift's grad C, only when it runs */
-				const sf8 vj = sf8_gather(sh->inv_rho, j); /* V_j / m */
-				cx = sf8_add(cx, sf8_mul(gx, vj));
-				cy = sf8_add(cy, sf8_mul(gy, vj));
-				cz = sf8_add(cz, sf8_mul(gz, vj));
-				mv = sf8_max(mv, vj);
-			}
 		}
-		float l[8];
-		sf8_store(l, mv);
-		vmax[q] = l[0];
-		for (int k = 1; k < 8; ++k)
-			vmax[q] = l[k] > vmax[q] ? l[k] : vmax[q];
 		sf8_fold4(sx, t[0][q]);
 		sf8_fold4(sy, t[1][q]);
 		sf8_fold4(sz, t[2][q]);
 		sf8_fold4(s2, t[3][q]);
-		sf8_fold4(cx, t[4][q]);
-		sf8_fold4(cy, t[5][q]);
-		sf8_fold4(cz, t[6][q]);
 		if (nb->bcount[i]) /* most particles are away from the walls */
 			wall_sums(wk, i, w, q);
 	}
@@ -397,9 +390,9 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 		const sf8 bx = load8(w[0] + q, m), by = load8(w[1] + q, m), bz = load8(w[2] + q, m);
 		sf8 x, y, z, ir; /* ir = 1 / rho_i */
 		load_quads8((const dfsph_vec4 *)sh->pq + i, m, &x, &y, &z, &ir);
-		store_quads8(wk->h + i, m, sf8_mul(sf8_xor(minus, load8(w[3] + q, m)), ir),
+		store_quads8(wk->u + i, m, sf8_mul(sf8_xor(minus, load8(w[3] + q, m)), ir), /* h_i */
 		             sf8_mul(sf8_xor(minus, load8(w[4] + q, m)), ir), sf8_mul(sf8_xor(minus, load8(w[5] + q, m)), ir),
-		             load8(wk->rho + i, m));
+		             zero);
 		const sf8 ex = sf8_add(sx, sf8_mul(two, bx)), ey = sf8_add(sy, sf8_mul(two, by)),
 				  ez = sf8_add(sz, sf8_mul(two, bz));
 		/* D_i = (S + 2B) . (S + B) + sum |G|^2 */
@@ -407,12 +400,59 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 			sf8_add(sf8_add(sf8_mul(ex, sf8_add(sx, bx)), sf8_mul(ey, sf8_add(sy, by))), sf8_mul(ez, sf8_add(sz, bz))),
 			s2);
 		store_quads8(wk->b + i, m, bx, by, bz, sf8_and(sf8_gt(d, dmin), sf8_div(one, d)));
-		/* grad C_i over the fluid (the shift leaves particles at walls alone) */
-		if (wk->c)
-			store_quads8(wk->c + i, m, sum8(t[4][q], m), sum8(t[5][q], m), sum8(t[6][q], m), load8(vmax + q, m));
 		/* D'_i = |S + 2B|^2 + sum |G|^2 */
 		const sf8 ds = sf8_add(sf8_add(sf8_add(sf8_mul(ex, ex), sf8_mul(ey, ey)), sf8_mul(ez, ez)), s2);
 		store8(wk->dsym + i, sf8_and(sf8_gt(ds, dmin), sf8_div(one, ds)), m);
+	}
+}
+
+/* The shift's pass, after the solves: grad C_i = sum_j G_ij V_j / m over the
+ * fluid (the shift leaves particles at walls alone) and max_j V_j / m, into
+ * u (free again). */
+static void concentration(const dfsph_work *wk, long i0, long cnt)
+{
+	const sph_shared *sh = wk->sh;
+	const sph_neighbors *nb = &sh->nb;
+	const dfsph_kern kc = kern(sh);
+	float t[3][SPH_BLOCK][4], vmax[SPH_BLOCK];
+	for (long q = 0; q < cnt; ++q) {
+		const long i = i0 + q;
+		sph_groups list = sph_nbr_groups(nb, i);
+		const uint32_t c = nb->count[i];
+		const sf8 pi = sf8_load_quad2(sh->pq + 4 * i);
+		sf8 cx = kc.zero, cy = kc.zero, cz = kc.zero, mv = kc.zero;
+		uint32_t pad[8];
+		for (uint32_t p = 0; p < c; p += 8) {
+			sf8 gx, gy, gz;
+			const uint32_t *j;
+			if (wk->gs) { /* the stored pairs (as rate: the same G_ij) */
+				const dfsph_group *g = wk->gs + wk->goff[i] + p / 8;
+				j = g->j;
+				gx = sf8_load(g->gx);
+				gy = sf8_load(g->gy);
+				gz = sf8_load(g->gz);
+			} else {
+				j = group_rows(&list, c, p, (uint32_t)i, pad);
+				pair_grad(&kc, pi, sh->pq, j, &gx, &gy, &gz);
+			}
+			const sf8 vj = sf8_gather(sh->inv_rho, j); /* V_j / m */
+			cx = sf8_add(cx, sf8_mul(gx, vj));
+			cy = sf8_add(cy, sf8_mul(gy, vj));
+			cz = sf8_add(cz, sf8_mul(gz, vj));
+			mv = sf8_max(mv, vj);
+		}
+		float l[8];
+		sf8_store(l, mv);
+		vmax[q] = l[0];
+		for (int k = 1; k < 8; ++k)
+			vmax[q] = l[k] > vmax[q] ? l[k] : vmax[q];
+		sf8_fold4(cx, t[0][q]);
+		sf8_fold4(cy, t[1][q]);
+		sf8_fold4(cz, t[2][q]);
+	}
+	for (long q = 0; q < cnt; q += 8) {
+		const long i = i0 + q, m = cnt - q < 8 ? cnt - q : 8;
+		store_quads8(wk->u + i, m, sum8(t[0][q], m), sum8(t[1][q], m), sum8(t[2][q], m), load8(vmax + q, m));
 	}
 }
 
@@ -424,7 +464,7 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 	const dfsph_kern kc = kern(sh);
 	const float *v = &wk->v->x;
 	float t[SPH_BLOCK][4];
-	for (long q = 0; q < cnt; ++q) {
+	for (long q = 0; q < cnt && !ps->reuse; ++q) {
 		const long i = i0 + q;
 		const sf8 vi = sf8_load_quad2(v + 4 * i);
 		sf8 sx = sf8_zero(), sy = sx, sz = sx;
@@ -461,16 +501,21 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 		sf8 vx, vy, vz, vw, bx, by, bz, bw;
 		load_quads8(wk->v + i, m, &vx, &vy, &vz, &vw);
 		load_quads8(wk->b + i, m, &bx, &by, &bz, &bw);
-		sf8 vb = sf8_add(sf8_add(sf8_mul(vx, bx), sf8_mul(vy, by)), sf8_mul(vz, bz));
-		if (wk->bdiv)
-			vb = sf8_sub(vb, load8(wk->bdiv + i, m));
-		/* the wall counted twice, as its force, on the symmetric operator */
-		const sf8 r = sf8_add(sum8(t[q], m), ps->projected ? sf8_add(vb, vb) : vb);
+		sf8 r;
+		if (ps->reuse)
+			r = load8(wk->err + i, m);
+		else {
+			sf8 vb = sf8_add(sf8_add(sf8_mul(vx, bx), sf8_mul(vy, by)), sf8_mul(vz, bz));
+			if (wk->bdiv)
+				vb = sf8_sub(vb, load8(wk->bdiv + i, m));
+			/* the wall counted twice, as its force, on the symmetric operator */
+			r = sf8_add(sum8(t[q], m), ps->projected ? sf8_add(vb, vb) : vb);
+		}
 		if (ps->kind == PASS_RATE) {
 			store8(wk->err + i, r, m);
 			continue;
 		}
-		const sf8 res = ps->divergence ? sf8_mul(r, load8(wk->full + i, m))
+		const sf8 res = ps->divergence ? sf8_mul(r, bw) /* bw: the velocity solve's particles */
 		                               : sf8_sub(sf8_add(load8(wk->rho + i, m), sf8_mul(dt, r)), rho0);
 		sf8 e = sf8_max(res, zero); /* the compression */
 		if (ps->projected) {
@@ -489,7 +534,8 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 }
 
 /* The correction: v*_i -= dt (sum_j (k_i + k_j) G_ij + 2 k_i B_i), and k_i
- * added to its sum. */
+ * added to its sum; from_zero (the operator's product): u_i = 0 - dt (...),
+ * no sum. */
 static void correct(const dfsph_work *wk, long i0, long cnt, bool from_zero)
 {
 	const sph_shared *sh = wk->sh;
@@ -538,7 +584,8 @@ static void correct(const dfsph_work *wk, long i0, long cnt, bool from_zero)
 		vy = sf8_sub(vy, sf8_mul(dt, sf8_add(sf8_mul(kb, by), sum8(t[1][q], m))));
 		vz = sf8_sub(vz, sf8_mul(dt, sf8_add(sf8_mul(kb, bz), sum8(t[2][q], m))));
 		store_quads8(wk->v + i, m, vx, vy, vz, vw);
-		store8(wk->ksum + i, sf8_add(load8(wk->ksum + i, m), ki), m);
+		if (!from_zero)
+			store8(wk->ksum + i, sf8_add(load8(wk->ksum + i, m), ki), m);
 	}
 }
 
@@ -547,6 +594,8 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
 	const dfsph_pass *ps = pass;
 	if (ps->kind == PASS_GRADIENTS)
 		gradients(ps->wk, i0, cnt);
+	else if (ps->kind == PASS_CONCENTRATION)
+		concentration(ps->wk, i0, cnt);
 	else if (ps->kind == PASS_CORRECT)
 		correct(ps->wk, i0, cnt, ps->from_zero);
 	else
@@ -664,7 +713,7 @@ static void pass_run(dfsph_work *wk, const dfsph_pass *ps)
 
 static void pass(dfsph_work *wk, enum dfsph_pass_kind kind, bool divergence, bool projected)
 {
-	const dfsph_pass ps = {wk, kind, divergence, projected, false};
+	const dfsph_pass ps = {wk, kind, divergence, projected, false, false};
 	pass_run(wk, &ps);
 }
 
@@ -674,10 +723,10 @@ static void operator_product(dfsph_work *wk)
 {
 	const dfsph_work keep = *wk;
 	wk->v = wk->u;
-	wk->k = wk->p;
-	wk->ksum = keep.k; /* unused until the projection: the sum of p written there is not kept */
+	wk->k = wk->p; /* the same array (dfsph_work) */
 	wk->bdiv = NULL;
-	const dfsph_pass ps = {wk, PASS_CORRECT, true, true, true}; /* u = 0 - dt (...): no memset */
+	/* u = 0 - dt (...): no memset; ksum left as it is */
+	const dfsph_pass ps = {wk, PASS_CORRECT, true, true, true, false};
 	pass_run(wk, &ps);
 	pass(wk, PASS_RATE, true, true);
 	*wk = keep;
@@ -690,18 +739,21 @@ static void operator_product(dfsph_work *wk)
  * mean |r_i| dt / rho0 is at most tol or a direction has no positive
  * curvature, then projects (k_i < 0 back to 0); the sweeps after it settle
  * the particles that left or entered the set. Its sums are serial in row
- * order: the same bits for any thread count. */
-static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, double *residual)
+ * order: the same bits for any thread count. *fresh: err still holds R(v*)
+ * of its first pass (no iteration, nothing projected), which the sweep after
+ * it then reads instead of the pairs (the same bits). */
+static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, double *residual, bool *fresh)
 {
 	const long n = wk->n;
 	const float dt = wk->dt, rho0 = wk->sh->rho0;
 	const double scale = (double)dt / ((double)rho0 * (double)n);
 	pass(wk, PASS_RATE, true, true);
+	*fresh = true; /* err = R(v*) until a product or the projection */
 	double rz = 0, esum = 0;
 	for (long i = 0; i < n; ++i) {
-		const float res = density ? wk->err[i] + (wk->h[i].w - rho0) / dt : wk->err[i];
-		const bool on = (density || wk->full[i] > 0) && (wk->ksum[i] > 0 || res > 0);
-		wk->mask[i] = on ? 1.0f : 0.0f;
+		const float res = density ? wk->err[i] + (wk->rho[i] - rho0) / dt : wk->err[i];
+		const bool on = (density || wk->b[i].w > 0) && (wk->ksum[i] > 0 || res > 0);
+		wk->mask[i] = on;
 		wk->r[i] = on ? res : 0.0f;
 		wk->p[i] = wk->dsym[i] * wk->r[i];
 		rz += (double)wk->r[i] * wk->p[i];
@@ -714,9 +766,10 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	if (cg && !(wk->coarse_scale > 0)) { /* s = y . (A/dt) y / e . L e on y = p (dfsph_coarse.h) */
 		const double ele = eddy__dfsph_coarse_unit(cg, wk->r, wk->p);
 		operator_product(wk);
+		*fresh = false;
 		double yay = 0;
 		for (long i = 0; i < n; ++i)
-			yay -= (double)wk->p[i] * (wk->mask[i] * wk->err[i]);
+			yay -= (double)wk->p[i] * ((float)wk->mask[i] * wk->err[i]);
 		wk->coarse_scale = yay / (double)dt / ele;
 	}
 	if (cg) {
@@ -726,9 +779,10 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	int it = 0;
 	while (*residual > tol && it < cap && rz > 0) {
 		operator_product(wk);
+		*fresh = false;
 		double pq = 0;
 		for (long i = 0; i < n; ++i)
-			pq -= (double)wk->p[i] * (wk->mask[i] * wk->err[i]);
+			pq -= (double)wk->p[i] * ((float)wk->mask[i] * wk->err[i]);
 		if (!(pq > 0))
 			break;
 		const float alpha = (float)(rz / pq);
@@ -739,7 +793,7 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 			wk->v[i].y += alpha * wk->u[i].y;
 			wk->v[i].z += alpha * wk->u[i].z;
 			wk->ksum[i] += alpha * wk->p[i];
-			wk->r[i] += alpha * (wk->mask[i] * wk->err[i]);
+			wk->r[i] += alpha * ((float)wk->mask[i] * wk->err[i]);
 			rz1 += (double)wk->r[i] * (wk->dsym[i] * wk->r[i]);
 			esum += fabsf(wk->r[i]);
 		}
@@ -762,6 +816,7 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	}
 	if (neg)
 		pass(wk, PASS_CORRECT, true, true);
+	*fresh = *fresh && !neg;
 	if (wk->coarse)
 		eddy__arena_release(wk->coarse, mark);
 	return it;
@@ -824,18 +879,20 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 	if (projected) {
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 		for (long i = 0; i < n; ++i) {
-			if (divergence)
-				wk->full[i] = wk->rho[i] >= DFSPH_SURFACE * rho0 ? 1.0f : 0.0f;
-			wk->k[i] = col[i] > 0 && (!divergence || wk->full[i] > 0) ? col[i] : 0.0f;
+			if (divergence) /* b.w: the velocity solve's particles (dfsph_work) */
+				wk->b[i].w = wk->rho[i] >= DFSPH_SURFACE * rho0 ? 1.0f : 0.0f;
+			wk->k[i] = col[i] > 0 && (!divergence || wk->b[i].w > 0) ? col[i] : 0.0f;
 		}
 		pass(wk, PASS_CORRECT, divergence, true);
 	}
 	const int cap = divergence ? sd->def.max_divergence_iterations : sd->def.max_iterations;
 	int it = 0, sweeps = 0;
 	for (;;) {
+		bool fresh = false;
 		if (projected)
-			it += divergence_cg(wk, cap - it, !divergence, tol, residual);
-		pass(wk, PASS_SWEEP, divergence, projected);
+			it += divergence_cg(wk, cap - it, !divergence, tol, residual, &fresh);
+		const dfsph_pass sweep = {wk, PASS_SWEEP, divergence, projected, false, fresh};
+		pass_run(wk, &sweep);
 		double sum = 0; /* serial, in row order: the same for any thread count */
 		for (long i = 0; i < n; ++i)
 			sum += wk->err[i];
@@ -860,9 +917,6 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 		                  sys->label, (long long)ctx->step, *residual, it, sd->capped,
 		                  (double)sd->def.max_divergence_error, wi, wk->err[wi] / rho0);
 	}
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-	for (long i = 0; i < n; ++i)
-		wk->kp[i] += wk->ksum[i];
 	if (projected)
 		memcpy(col, wk->ksum, (size_t)n * sizeof *col);
 	return EDDY_OK;
@@ -870,24 +924,24 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 
 /* The step's scratch in the world's arena for rows 0 .. n - 1 of sph_density's
  * lists, and the gradient pass on them; false when out of memory. */
-static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n, float dt, int threads, bool shift)
+static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n, float dt, int threads)
 {
 	const size_t un = (size_t)n;
 	*wk = (dfsph_work){.n = n, .dt = dt, .threads = threads, .sh = sh, .bdiv = sh->nb.bdiv};
 	wk->block = SIMD_PICK(dfsph_block);
 	wk->rho = eddy__col(w, COL_DENSITY);
 	wk->gravity = w->def.gravity;
-	dfsph_vec4 **quads[] = {&wk->b, &wk->v, &wk->h, &wk->u, &wk->c};
-	float **floats[] = {&wk->dsym, &wk->k, &wk->ksum, &wk->kp, &wk->err, &wk->full, &wk->p, &wk->r, &wk->mask};
-	const size_t nquads = sizeof quads / sizeof *quads - (shift ? 0 : 1); /* c (grad C) only for the shift */
+	dfsph_vec4 **quads[] = {&wk->b, &wk->v, &wk->u};
+	float **floats[] = {&wk->dsym, &wk->k, &wk->ksum, &wk->err, &wk->r};
 	bool ok = true;
-	for (size_t a = 0; a < nquads; ++a)
+	for (size_t a = 0; a < sizeof quads / sizeof *quads; ++a)
 		ok = ok && (*quads[a] = eddy__arena_alloc(&w->arena, un * sizeof(dfsph_vec4)));
 	for (size_t a = 0; a < sizeof floats / sizeof *floats; ++a)
 		ok = ok && (*floats[a] = eddy__arena_alloc(&w->arena, un * sizeof(float)));
+	ok = ok && (wk->mask = eddy__arena_alloc(&w->arena, un));
 	if (!ok)
 		return false;
-	memset(wk->kp, 0, un * sizeof *wk->kp);
+	wk->p = wk->k;
 	/* G_ij stored only while they fit DFSPH_STORE_BYTES: a sweep then streams
 	 * them; beyond, they would fall out of cache and reading them back costs
 	 * more than a square root, a division and a position gather per pair */
@@ -907,7 +961,9 @@ static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n,
 	return true;
 }
 
-/* a += (v* - (v + dt a)) / dt, p = M kp rho^2 and the frame's statistics;
+/* a += (v* - (v + dt a)) / dt, p = M kp rho^2 (kp the sum of the solves' k:
+ * the velocity solve's from its column, the density solve's still in ksum)
+ * and the frame's statistics;
  * fails on a non-finite result or when the density solve lost the fluid. */
 static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_work *wk, const eddy_step_context *ctx,
                           int it, double residual, int div_it, double div_residual)
@@ -917,6 +973,7 @@ static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_wor
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	float *p = eddy__col(w, COL_PRESSURE);
+	const float *kdiv = sd->def.divergence_solver ? eddy__col(w, sd->kcol[0]) : NULL;
 	long bad = wk->n; /* the first non-finite row, n for none */
 	const int nt = loop_threads(wk->n, wk->threads);
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(min : bad)
@@ -924,7 +981,8 @@ static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_wor
 		ax[i] += (wk->v[i].x - (vx[i] + dt * ax[i])) * inv_dt;
 		ay[i] += (wk->v[i].y - (vy[i] + dt * ay[i])) * inv_dt;
 		az[i] += (wk->v[i].z - (vz[i] + dt * az[i])) * inv_dt;
-		p[i] = wk->kp[i] * wk->h[i].w * wk->h[i].w / wk->sh->grad_cal;
+		const float kp = (0.0f + (kdiv ? kdiv[i] : 0.0f)) + wk->ksum[i];
+		p[i] = kp * wk->rho[i] * wk->rho[i] / wk->sh->grad_cal;
 		if (i < bad && !(isfinite(ax[i]) && isfinite(ay[i]) && isfinite(az[i]) && isfinite(p[i])))
 			bad = i;
 	}
@@ -932,7 +990,7 @@ static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_wor
 		return eddy__fail(
 			w, EDDY_ERR_NUMERIC,
 			"%s: non-finite pressure acceleration at step %lld, particle %ld (density %g kg/m^3, %u neighbours)",
-			sys->label, (long long)ctx->step, bad, (double)wk->h[bad].w, wk->sh->nb.count[bad]);
+			sys->label, (long long)ctx->step, bad, (double)wk->rho[bad], wk->sh->nb.count[bad]);
 	/* the particle the solve left furthest off (the last sweep's errors) */
 	const long worst = argmax(wk->err, wk->n);
 	const double worst_err = wk->err[worst] / wk->sh->rho0;
@@ -974,7 +1032,7 @@ static void shift(eddy_world *w, const sph_dfsph *sd, const dfsph_work *wk)
 	const float full = DFSPH_SHIFT_SURFACE * wk->sh->rho0, d = sd->def.shift * wk->sh->h * wk->sh->h;
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	for (long i = 0; i < wk->n; ++i) {
-		const dfsph_vec4 c = wk->c[i];
+		const dfsph_vec4 c = wk->u[i];
 		/* c.w * full <= 1: no neighbour below full (c.w is 1 / the least rho_j) */
 		if (wk->rho[i] >= full && c.w * full <= 1.0f && wk->sh->nb.bcount[i] == 0) {
 			x[i] -= d * c.x;
@@ -1002,15 +1060,15 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	if (sd->def.divergence_solver && sd->def.hydrostatic_start)
 		eddy__dfsph_hydrostatic_start(w, sh, n, eddy__col(w, sd->kcol[0]));
 	dfsph_work wk;
-	if (!prepare(w, &wk, sh, n, dt, ctx->threads, sd->def.shift > 0))
+	if (!prepare(w, &wk, sh, n, dt, ctx->threads))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	const int nt = loop_threads(n, wk.threads);
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (long i = 0; i < n; ++i)
-		wk.v[i] = (dfsph_vec4){vx[i] + dt * (ax[i] + wk.h[i].x), vy[i] + dt * (ay[i] + wk.h[i].y),
-		                       vz[i] + dt * (az[i] + wk.h[i].z), 0};
+		wk.v[i] = (dfsph_vec4){vx[i] + dt * (ax[i] + wk.u[i].x), vy[i] + dt * (ay[i] + wk.u[i].y),
+		                       vz[i] + dt * (az[i] + wk.u[i].z), 0}; /* u: h_i until now */
 	const double scale = sd->def.divergence_solver ? depth_scale(w, sh->h, ctx->threads) : 1;
 	wk.coarse = sd->def.coarse_grid && scale < 1 ? &w->arena : NULL;
 	int it, div_it = 0;
@@ -1023,8 +1081,10 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	}
 	solve(w, sys, &wk, ctx, false, sd->def.max_density_error * scale * scale, &it, &residual);
 	const eddy_status st = finish(w, sys, &wk, ctx, it, residual, div_it, div_residual);
-	if (st == EDDY_OK && sd->def.shift > 0)
+	if (st == EDDY_OK && sd->def.shift > 0) {
+		pass(&wk, PASS_CONCENTRATION, false, false);
 		shift(w, sd, &wk);
+	}
 	return st;
 }
 
@@ -1040,7 +1100,7 @@ eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float
 		return EDDY_ERR_ORDER;
 	const long n = sph_rows(w, sh);
 	dfsph_work wk;
-	if (!prepare(w, &wk, sh, n, 1.0f, 1, false))
+	if (!prepare(w, &wk, sh, n, 1.0f, 1))
 		return EDDY_ERR_NOMEM;
 	memcpy(wk.p, k, (size_t)n * sizeof *k);
 	operator_product(&wk); /* the conjugate gradients' A p: u = -dt (...) for k = p, dt = 1 */

@@ -79,7 +79,7 @@ typedef struct level {
 
 struct dfsph_coarse {
 	long n;
-	const float *mask;
+	const uint8_t *mask;
 	uint32_t *cell; /* each row's level-0 cell, UINT32_MAX off the active set */
 	int nlev;
 	level L[MAX_LEVELS];
@@ -279,7 +279,7 @@ static void level0_operator(level *L0, const int dim[3], const uint8_t *solid)
 		}
 }
 
-dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long n, const float *mask)
+dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long n, const uint8_t *mask)
 {
 	const float H = sh->h, inv = 1.0f / H;
 	float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};

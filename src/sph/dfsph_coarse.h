@@ -13,7 +13,7 @@ typedef struct dfsph_coarse dfsph_coarse;
 /* The levels for the active set (mask[i] = 1) of rows 0 .. n - 1 of sh's
  * lists, in the arena (per step); NULL when out of memory or no row is
  * active (then the solve runs on D'^-1 alone). */
-dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long n, const float *mask);
+dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long n, const uint8_t *mask);
 
 /* y = P B P^T r on the active rows (0 elsewhere) and its coarse vector
  * e = B P^T r; returns e . L e (L the level-0 cell operator): the
