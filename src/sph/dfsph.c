@@ -236,13 +236,14 @@ static inline void load_quads8(const dfsph_vec4 *p, long m, sf8 *c0, sf8 *c1, sf
 			l[k] = k < m ? p[k] : (dfsph_vec4){0, 0, 0, 0};
 		p = l;
 	}
-	sf8_load_quads(&p->x, c0, c1, c2, c3);
+	sf8_load_quads((const float *)p, c0, c1, c2, c3);
 }
 
 static inline void store_quads8(dfsph_vec4 *p, long m, sf8 c0, sf8 c1, sf8 c2, sf8 c3)
 {
 	dfsph_vec4 l[8];
-	sf8_store_quads(m == 8 ? &p->x : &l->x, c0, c1, c2, c3);
+	/* the whole quads, not &p->x: the stores cover eight of them (GCC checks the object) */
+	sf8_store_quads(m == 8 ? (float *)p : (float *)l, c0, c1, c2, c3);
 	if (m < 8)
 		memcpy(p, l, (size_t)m * sizeof *l);
 }
