@@ -299,11 +299,6 @@ static double step_limit(eddy_world *w, const char **reason)
 	return lim;
 }
 
-/* First non-finite value in v[0..n), or n. An all-ones exponent marks inf and
- * NaN; OR-ing that test over the column is an integer reduction the compiler
- * vectorises (on all threads for a large column), so the scan costs about a
- * memory pass, not a branch per value; only a column that has one looks for
- * the first. */
 /* Whether any of v[lo, hi) is Inf or NaN (its exponent bits all set): a
  * plain loop that vectorises, where the same loop inside the parallel
  * region's reduction stays scalar. */
@@ -318,6 +313,11 @@ static uint32_t any_nonfinite(const float *v, size_t lo, size_t hi)
 	return any;
 }
 
+/* First non-finite value in v[0..n), or n. An all-ones exponent marks inf and
+ * NaN; OR-ing that test over the column is an integer reduction the compiler
+ * vectorises (on all threads for a large column), so the scan costs about a
+ * memory pass, not a branch per value; only a column that has one looks for
+ * the first. */
 static size_t first_nonfinite(const float *v, size_t n, int threads)
 {
 	const int nt = n > SCAN_PAR ? threads : 1;
