@@ -370,6 +370,20 @@ static void larger_or_faster_sphere_keeps_level(void)
 	}
 }
 
+/* Both steps at once: the 5 cm sphere at 1 m/s. */
+static void larger_and_faster_sphere_keeps_level(void)
+{
+	for (int k = 0; k < 2; ++k) {
+		solid_case c = sphere_case(k == 1);
+		c.r = 0.05;
+		c.omega = 1.0 / c.amp;
+		solid_result r;
+		run_solid(&c, &r);
+		report("5 cm sphere lowered + oscillated (1.0 m/s)", &c, &r);
+		check_level(&r);
+	}
+}
+
 /* The calm cases are also held to the still pool: the same tank, fluid and
  * solver for the same time without a solid reads the free surface
  * L_pool - H_pool off the geometric H_pool (the settling above); the case's
@@ -503,4 +517,5 @@ void suite_long_sph_solids(void)
 	RUN(sphere_oscillated_wcsph_keeps_level);
 	RUN(piston_wcsph_keeps_level);
 	RUN(larger_or_faster_sphere_keeps_level);
+	RUN(larger_and_faster_sphere_keeps_level);
 }
