@@ -10,7 +10,13 @@
  *   linear EOS: p_i = k (rho_i - rho0)                      (Mueller 2003, eq. 12)
  *   Tait EOS:   p_i = (k rho0 / gamma) ((rho_i/rho0)^gamma - 1)
  *   p_i >= 0: negative pressure pulls particles into clumps (tensile
- *   instability, docs/validation.md C.1).
+ *   instability, docs/validation.md C.1), and a free surface's truncated
+ *   kernel sum reads low. Tension kept only where a particle has a full
+ *   neighbourhood, floored at as little as 0.03% of k rho0, with or without
+ *   Monaghan's artificial pressure or Sun et al.'s p_j - p_i form for a
+ *   particle in tension, makes an inviscid column thrown onto a wall gain
+ *   energy (stress_wcsph's budget). So fluid a solid stirs apart stays
+ *   expanded while it is stirred and closes under gravity afterwards.
  * Boundary particles carry the pressure extrapolated from the fluid near
  * them with the hydrostatic correction (Adami, Hu & Adams 2012, eq. 27),
  *   p_b = max(0, sum_f (p_f + rho_f g . (x_b - x_f)) W_bf / sum_f W_bf),
@@ -25,7 +31,9 @@
  * carries sound at c = sqrt(k); a pressure solve (sph_dfsph) has none.
  * Source: Mueller, Charypar & Gross, "Particle-Based Fluid Simulation for
  * Interactive Applications", SCA 2003; Akinci et al., "Versatile rigid-fluid
- * coupling for incompressible SPH", SIGGRAPH 2012 (boundary term). */
+ * coupling for incompressible SPH", SIGGRAPH 2012 (boundary term); tension:
+ * Monaghan, "SPH without a tensile instability", JCP 159 (2000); Sun et al.,
+ * "The delta-plus-SPH model", CMAME 315 (2017). */
 #include "sph.h"
 #include "systems.h"
 
