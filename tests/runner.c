@@ -24,6 +24,7 @@
 #include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <time.h>
@@ -104,7 +105,7 @@ typedef struct suite {
 	const char *name;
 	void (*fn)(void);
 	bool long_running; /* minutes, not seconds: make test-long, which CI also runs */
-	int seconds;       /* its wall time in a -j 1 run (its closing line) on the 2-core host: the start order */
+	int seconds;       /* its CPU time (its closing line) on the 2-core host: the start order */
 } suite;
 
 static double now_s(void)
@@ -130,8 +131,20 @@ static int make_dirs(const char *path)
 		}
 }
 
+/* CPU seconds of this process and of the commands it has run and waited for */
+static double cpu_s(void)
+{
+	struct rusage self, kids;
+	getrusage(RUSAGE_SELF, &self);
+	getrusage(RUSAGE_CHILDREN, &kids);
+	return (double)(self.ru_utime.tv_sec + self.ru_stime.tv_sec + kids.ru_utime.tv_sec + kids.ru_stime.tv_sec) +
+	       1e-6 *
+	           (double)(self.ru_utime.tv_usec + self.ru_stime.tv_usec + kids.ru_utime.tv_usec + kids.ru_stime.tv_usec);
+}
+
 /* Runs one suite in this process, between the lines "# NAME" and "# NAME: N
- * passed, N failed, S s" (the time it took, which the table's seconds are). */
+ * passed, N failed, S s, C s CPU" (wall time and the CPU time of the suite
+ * and of the commands it ran; the table's seconds are the CPU time). */
 static void run_suite(const suite *s)
 {
 	snprintf(suite_out, sizeof suite_out, "%s/t/%s", test_build_dir(), s->name);
@@ -140,9 +153,10 @@ static void run_suite(const suite *s)
 	printf("# %s\n", s->name);
 	fflush(stdout);
 	const int p0 = passed, f0 = failed;
-	const double t0 = now_s();
+	const double t0 = now_s(), c0 = cpu_s();
 	s->fn();
-	printf("# %s: %d passed, %d failed, %.1f s\n", s->name, passed - p0, failed - f0, now_s() - t0);
+	printf("# %s: %d passed, %d failed, %.1f s, %.1f s CPU\n", s->name, passed - p0, failed - f0, now_s() - t0,
+	       cpu_s() - c0);
 	fflush(stdout);
 }
 
@@ -268,35 +282,35 @@ int main(int argc, char **argv)
 		{"core", suite_core, false, 0},
 		{"physics", suite_physics, false, 1},
 		{"lua", suite_lua, false, 0},
-		{"cli", suite_cli, false, 11},
-		{"reliability", suite_reliability, false, 4},
+		{"cli", suite_cli, false, 13},
+		{"reliability", suite_reliability, false, 3},
 		{"fuzz", suite_fuzz, false, 0},
-		{"package", suite_package, false, 2},
-		{"sph", suite_sph, false, 23},
-		{"sph_reference", suite_sph_reference, false, 14},
+		{"package", suite_package, false, 1},
+		{"sph", suite_sph, false, 22},
+		{"sph_reference", suite_sph_reference, false, 23},
 		{"flip", suite_flip, false, 6},
 		{"flip_solvers", suite_flip_solvers, false, 2},
 		{"render", suite_render, false, 3},
 		{"surface", suite_surface, false, 2},
-		{"study", suite_study, false, 4},
-		{"compare", suite_compare, false, 4},
+		{"study", suite_study, false, 5},
+		{"compare", suite_compare, false, 3},
 		/* stress: scenes one step beyond the validated ones (scenes/stress/) */
-		{"stress_flip_flight", suite_stress_flip_flight, false, 6},
-		{"stress_flip_solids", suite_stress_flip_solids, false, 12},
-		{"stress_sph_solids", suite_stress_sph_solids, false, 32},
+		{"stress_flip_flight", suite_stress_flip_flight, false, 5},
+		{"stress_flip_solids", suite_stress_flip_solids, false, 10},
+		{"stress_sph_solids", suite_stress_sph_solids, false, 17},
 		{"long_sph_solids", suite_long_sph_solids, true, 0},
-		{"stress_slosh", suite_stress_slosh, false, 8},
+		{"stress_slosh", suite_stress_slosh, false, 5},
 		{"long_slosh", suite_long_slosh, true, 0},
-		{"stress_dfsph", suite_stress_dfsph, false, 3},
+		{"stress_dfsph", suite_stress_dfsph, false, 2},
 		{"long_dfsph", suite_long_dfsph, true, 0},
-		{"dfsph_coarse", suite_dfsph_coarse, false, 2},
-		{"dfsph_warm", suite_dfsph_warm, false, 1},
-		{"stress_energy", suite_stress_energy, false, 11},
-		{"mesh", suite_mesh, false, 15},
+		{"dfsph_coarse", suite_dfsph_coarse, false, 1},
+		{"dfsph_warm", suite_dfsph_warm, false, 0},
+		{"stress_energy", suite_stress_energy, false, 7},
+		{"mesh", suite_mesh, false, 10},
 		{"long_mesh", suite_long_mesh, true, 0},
-		{"rotate", suite_rotate, false, 27},
+		{"rotate", suite_rotate, false, 16},
 		{"long_rotate", suite_long_rotate, true, 0},
-		{"stress_flip_volume", suite_stress_flip_volume, false, 4},
+		{"stress_flip_volume", suite_stress_flip_volume, false, 2},
 		{"long_flip_volume", suite_long_flip_volume, true, 0},
 		{"stress_wcsph", suite_stress_wcsph, false, 2},
 		{"long_stress_wcsph", suite_long_stress_wcsph, true, 0},
