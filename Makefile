@@ -187,20 +187,22 @@ run: deps
 	@mkdir -p out/splash
 	$(BUILD)/eddy run scenes/splash.lua --stats out/splash/stats.jsonl
 
-test: deps-test
-	@$(MAKE) --no-print-directory all $(BUILD)/tests/run
-	@$(MAKE) --no-print-directory check-tests
-
 # the runner runs its suites in parallel processes, one per online CPU unless
-# JOBS=N (or EDDY_JOBS) says otherwise; JOBS=1 runs them in one process
+# JOBS=N (or EDDY_JOBS) says otherwise; JOBS=1 runs them in one process. The
+# builds before it (test, test-long, asan) use every CPU unless make got a -j.
 RUN_JOBS = $(if $(JOBS),-j $(JOBS))
+BUILD_JOBS = $(if $(filter -j%,$(MAKEFLAGS)),,-j$(shell nproc 2>/dev/null || echo 1))
+
+test: deps-test
+	@$(MAKE) --no-print-directory $(BUILD_JOBS) all $(BUILD)/tests/run
+	@$(MAKE) --no-print-directory check-tests
 
 check-tests:
 	EDDY_BUILD=$(BUILD) $(BUILD)/tests/run $(RUN_JOBS)
 
 # the stress cases that take minutes rather than seconds (CI runs them too)
 test-long: deps-test
-	@$(MAKE) --no-print-directory all $(BUILD)/tests/run
+	@$(MAKE) --no-print-directory $(BUILD_JOBS) all $(BUILD)/tests/run
 	EDDY_BUILD=$(BUILD) $(BUILD)/tests/run $(RUN_JOBS) long
 
 # ---- benchmarks: JSON into build/, never part of make test ------------------------
@@ -228,7 +230,7 @@ bench-%: deps
 # HYPRE's dlopen'd MPI libraries (which keep dynamic TLS) were used.
 
 asan: deps-test
-	@$(MAKE) --no-print-directory BUILD=build/asan OPT=-O1 \
+	@$(MAKE) --no-print-directory $(BUILD_JOBS) BUILD=build/asan OPT=-O1 \
 		SAN="-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer" \
 		all build/asan/tests/run
 	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan_mesa.supp:print_suppressions=0 \
