@@ -20,6 +20,7 @@
 #include "test.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <stdarg.h>
 #include <stdbool.h>
 #include <stdlib.h>
@@ -178,6 +179,8 @@ static bool start_child(child *c, const suite *s, const char *self, const char *
 		printf("FAIL  suite %s: no temporary file for its output: %s\n", s->name, strerror(errno));
 		return false;
 	}
+	/* only this child writes it (its dup2 copies stay open across exec) */
+	fcntl(fileno(c->log), F_SETFD, FD_CLOEXEC);
 	fflush(stdout);
 	fflush(stderr);
 	c->pid = fork();
@@ -201,18 +204,19 @@ static void finish_child(child *c, int status)
 {
 	char line[4096];
 	int p = 0, f = 0;
-	bool summed = false;
+	bool summed = false, line_start = true;
 	rewind(c->log);
 	while (fgets(line, sizeof line, c->log)) {
 		int lp, lf, end = 0;
-		if (sscanf(line, "%d passed, %d failed%n", &lp, &lf, &end) == 2 && line[end] == '\n') {
+		if (line_start && sscanf(line, "%d passed, %d failed%n", &lp, &lf, &end) == 2 && line[end] == '\n') {
 			p += lp, f += lf, summed = true;
 			continue;
 		}
 		fputs(line, stdout);
-		if (!strchr(line, '\n'))
-			fputc('\n', stdout); /* a crash mid-line */
+		line_start = strchr(line, '\n') != NULL; /* else a longer line goes on */
 	}
+	if (!line_start)
+		fputc('\n', stdout); /* the child stopped mid-line */
 	fclose(c->log);
 	passed += p;
 	failed += f;
@@ -239,6 +243,11 @@ static void run_parallel(const suite **sel, int n, int jobs, const char *self, c
 			sel[j - 1] = t;
 		}
 	child *kids = calloc((size_t)jobs, sizeof *kids);
+	if (!kids) {
+		printf("run: out of memory\n");
+		failed++;
+		return;
+	}
 	int next = 0, running = 0;
 	while (next < n || running > 0) {
 		for (int k = 0; k < jobs && next < n; ++k)
