@@ -107,9 +107,7 @@ typedef struct suite {
 	void (*fn)(void);
 	bool long_running; /* minutes, not seconds: make test-long, which CI also runs */
 	/* its CPU time on the 2-core host, the start order: the closing lines
-	 * of a -j 2 run at load 7; the long suites' from a -j 2 run at load 6-7
-	 * (before closing lines gave CPU): their wall times times that run's
-	 * CPU / summed wall, 322 / 827 s */
+	 * of a -j 2 run (make test at load 7, make test-long at load 3-7) */
 	int seconds;
 } suite;
 
@@ -311,22 +309,22 @@ int main(int argc, char **argv)
 		{"stress_flip_flight", suite_stress_flip_flight, false, 5},
 		{"stress_flip_solids", suite_stress_flip_solids, false, 10},
 		{"stress_sph_solids", suite_stress_sph_solids, false, 17},
-		{"long_sph_solids", suite_long_sph_solids, true, 49},
+		{"long_sph_solids", suite_long_sph_solids, true, 58},
 		{"stress_slosh", suite_stress_slosh, false, 5},
-		{"long_slosh", suite_long_slosh, true, 63},
+		{"long_slosh", suite_long_slosh, true, 75},
 		{"stress_dfsph", suite_stress_dfsph, false, 2},
 		{"long_dfsph", suite_long_dfsph, true, 60},
 		{"dfsph_coarse", suite_dfsph_coarse, false, 1},
 		{"dfsph_warm", suite_dfsph_warm, false, 0},
 		{"stress_energy", suite_stress_energy, false, 7},
 		{"mesh", suite_mesh, false, 10},
-		{"long_mesh", suite_long_mesh, true, 39},
+		{"long_mesh", suite_long_mesh, true, 25},
 		{"rotate", suite_rotate, false, 16},
-		{"long_rotate", suite_long_rotate, true, 25},
+		{"long_rotate", suite_long_rotate, true, 24},
 		{"stress_flip_volume", suite_stress_flip_volume, false, 2},
-		{"long_flip_volume", suite_long_flip_volume, true, 61},
+		{"long_flip_volume", suite_long_flip_volume, true, 66},
 		{"stress_wcsph", suite_stress_wcsph, false, 2},
-		{"long_stress_wcsph", suite_long_stress_wcsph, true, 26},
+		{"long_stress_wcsph", suite_long_stress_wcsph, true, 17},
 	};
 	enum { n_suites = sizeof suites / sizeof suites[0] };
 	const char *env_jobs = getenv("EDDY_JOBS");
