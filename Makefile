@@ -3,7 +3,8 @@
 #
 #   make            build everything into build/
 #   make run        install missing Debian packages, build, run the default scene
-#   make test       install missing Debian packages, build, run the tests
+#   make test       install missing Debian packages, build, run the tests (suites in
+#                   parallel, one per CPU; JOBS=N to choose, JOBS=1 one process)
 #   make test SIMD=scalar   the same on the SPH passes' scalar back-end (build/scalar)
 #   make bench      benchmarks (machine-readable JSON in build/bench*.json)
 #   make asan       the tests under AddressSanitizer + UndefinedBehaviorSanitizer
@@ -186,17 +187,23 @@ run: deps
 	@mkdir -p out/splash
 	$(BUILD)/eddy run scenes/splash.lua --stats out/splash/stats.jsonl
 
+# the runner runs its suites in parallel processes, one per online CPU unless
+# JOBS=N (or EDDY_JOBS) says otherwise; JOBS=1 runs them in one process. The
+# builds before it (test, test-long, asan) use every CPU unless make got a -j.
+RUN_JOBS = $(if $(JOBS),-j $(JOBS))
+BUILD_JOBS = $(if $(filter -j%,$(MAKEFLAGS)),,-j$(shell nproc 2>/dev/null || echo 1))
+
 test: deps-test
-	@$(MAKE) --no-print-directory all $(BUILD)/tests/run
+	@$(MAKE) --no-print-directory $(BUILD_JOBS) all $(BUILD)/tests/run
 	@$(MAKE) --no-print-directory check-tests
 
 check-tests:
-	EDDY_BUILD=$(BUILD) $(BUILD)/tests/run
+	EDDY_BUILD=$(BUILD) $(BUILD)/tests/run $(RUN_JOBS)
 
 # the stress cases that take minutes rather than seconds (CI runs them too)
 test-long: deps-test
-	@$(MAKE) --no-print-directory all $(BUILD)/tests/run
-	EDDY_BUILD=$(BUILD) $(BUILD)/tests/run long
+	@$(MAKE) --no-print-directory $(BUILD_JOBS) all $(BUILD)/tests/run
+	EDDY_BUILD=$(BUILD) $(BUILD)/tests/run $(RUN_JOBS) long
 
 # ---- benchmarks: JSON into build/, never part of make test ------------------------
 # bench: core systems; bench_flip: FLIP transfers and pressure; bench_sph: SPH
@@ -223,12 +230,12 @@ bench-%: deps
 # HYPRE's dlopen'd MPI libraries (which keep dynamic TLS) were used.
 
 asan: deps-test
-	@$(MAKE) --no-print-directory BUILD=build/asan OPT=-O1 \
+	@$(MAKE) --no-print-directory $(BUILD_JOBS) BUILD=build/asan OPT=-O1 \
 		SAN="-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer" \
 		all build/asan/tests/run
 	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan_mesa.supp:print_suppressions=0 \
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=0:intercept_tls_get_addr=0 UBSAN_OPTIONS=print_stacktrace=1 \
-		EDDY_BUILD=build/asan build/asan/tests/run
+		EDDY_BUILD=build/asan build/asan/tests/run $(RUN_JOBS)
 	@echo "asan: a full run of the default scene, leaks checked at exit"
 	LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan_mesa.supp:print_suppressions=0 \
 	ASAN_OPTIONS=detect_leaks=1:intercept_tls_get_addr=0 build/asan/eddy run scenes/bounce.lua --quiet --out build/asan/out

@@ -20,6 +20,9 @@ void test_run(const char *name, void (*fn)(void));
 int test_sh(const char *cmd, char *out, size_t cap);
 /* Directory of the build under test (build/ or build/asan/). */
 const char *test_build_dir(void);
+/* The running suite's own folder for what it writes, BUILD/t/SUITE (made
+ * before the suite starts): suites run at once never share one. */
+const char *test_out_dir(void);
 /* The number after "key": in a JSON line such as a stats line; NAN when
  * the key is absent or its value is not a number (null). */
 double test_json_number(const char *line, const char *key);

@@ -23,6 +23,15 @@ static const char *eddy(void)
 	return path;
 }
 
+/* "eddy run" with this suite's output folder: a run's default, out/SCENE,
+ * would be shared with (and locked against) other suites running at once. */
+static const char *eddy_run(void)
+{
+	static char cmd[256];
+	snprintf(cmd, sizeof cmd, "%s/eddy run --out %s/run", test_build_dir(), test_out_dir());
+	return cmd;
+}
+
 static char *slurp(const char *path)
 {
 	FILE *f = fopen(path, "rb");
@@ -204,7 +213,7 @@ static const char *const contract[] = {
 static void run_writes_stats_lines(void)
 {
 	char cmd[1024], out[8192];
-	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 3 --stats %s/t_stats.jsonl --quiet", eddy(),
+	snprintf(cmd, sizeof cmd, "%s scenes/bounce.lua --frames 3 --stats %s/t_stats.jsonl --quiet", eddy_run(),
 	         test_build_dir());
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECKF(out[0] == '\0', "--quiet printed: %s", out);
@@ -239,8 +248,8 @@ static void stats_energy_fields(void)
 {
 	char cmd[1024], out[16384];
 	snprintf(cmd, sizeof cmd,
-	         "%s run scenes/pour.lua --set method=wcsph --set render=false --duration 0.2 --stats - --quiet | tail -1",
-	         eddy());
+	         "%s scenes/pour.lua --set method=wcsph --set render=false --duration 0.2 --stats - --quiet | tail -1",
+	         eddy_run());
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	const double ke = test_json_number(out, "kinetic_energy"), pe = test_json_number(out, "potential_energy"),
 				 ce = test_json_number(out, "compression_energy"), e = test_json_number(out, "energy");
@@ -249,8 +258,8 @@ static void stats_energy_fields(void)
 	CHECKF(fabs(e - (ke + pe + ce)) <= 1e-8 * (fabs(ke) + fabs(pe) + ce), "energy %g against %g + %g + %g", e, ke, pe,
 	       ce);
 	snprintf(cmd, sizeof cmd,
-	         "%s run scenes/pour.lua --set method=dfsph --set render=false --duration 0.1 --stats - --quiet | tail -1",
-	         eddy());
+	         "%s scenes/pour.lua --set method=dfsph --set render=false --duration 0.1 --stats - --quiet | tail -1",
+	         eddy_run());
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECKF(strstr(out, "\"compression_energy\":null") != NULL, "DFSPH: %s", out);
 	CHECK_NEAR(test_json_number(out, "energy"),
@@ -263,13 +272,12 @@ static void run_is_deterministic(void)
 {
 	char cmd[1024], a[16384], b[16384], c[16384];
 	snprintf(cmd, sizeof cmd,
-	         "%s run scenes/bounce.lua --frames 4 --stats - --quiet | grep -o '\"state_hash\":\"[0-9a-f]*\"'", eddy());
+	         "%s scenes/bounce.lua --frames 4 --stats - --quiet | grep -o '\"state_hash\":\"[0-9a-f]*\"'", eddy_run());
 	CHECK(test_sh(cmd, a, sizeof a) == 0);
 	CHECK(test_sh(cmd, b, sizeof b) == 0);
-	snprintf(
-		cmd, sizeof cmd,
-		"%s run scenes/bounce.lua --frames 4 --threads 2 --stats - --quiet | grep -o '\"state_hash\":\"[0-9a-f]*\"'",
-		eddy());
+	snprintf(cmd, sizeof cmd,
+	         "%s scenes/bounce.lua --frames 4 --threads 2 --stats - --quiet | grep -o '\"state_hash\":\"[0-9a-f]*\"'",
+	         eddy_run());
 	CHECK(test_sh(cmd, c, sizeof c) == 0);
 	CHECK(strlen(a) > 40);
 	CHECK(strcmp(a, b) == 0);
@@ -279,13 +287,13 @@ static void run_is_deterministic(void)
 static void set_changes_the_scene(void)
 {
 	char cmd[2048], out[16384];
-	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 1 --set spacing=0.04 --stats - --quiet", eddy());
+	snprintf(cmd, sizeof cmd, "%s scenes/bounce.lua --frames 1 --set spacing=0.04 --stats - --quiet", eddy_run());
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK(test_json_number(out, "particles") == 10 * 12 * 10); /* a 0.4 x 0.5 x 0.4 block at 0.04 m */
-	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 1 --set spcing=0.04", eddy());
+	snprintf(cmd, sizeof cmd, "%s scenes/bounce.lua --frames 1 --set spcing=0.04", eddy_run());
 	CHECK(test_sh(cmd, out, sizeof out) == 2);
 	CHECK_HAS(out, "eddy: --set spcing: scenes/bounce.lua has no parameter 'spcing'");
-	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 1 --set spacing=-1", eddy());
+	snprintf(cmd, sizeof cmd, "%s scenes/bounce.lua --frames 1 --set spacing=-1", eddy_run());
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "eddy: scenes/bounce.lua:");
 	CHECK_HAS(out, "emit_box: 'spacing' must be > 0 (got -1)");
@@ -308,10 +316,10 @@ static void usage_and_errors(void)
 	snprintf(cmd, sizeof cmd, "%s --help", eddy());
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECK_HAS(out, "usage: eddy <command> SCENE.lua");
-	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frobnicate", eddy());
+	snprintf(cmd, sizeof cmd, "%s scenes/bounce.lua --frobnicate", eddy_run());
 	CHECK(test_sh(cmd, out, sizeof out) == 2);
 	CHECK_HAS(out, "eddy: unknown option '--frobnicate'");
-	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames many", eddy());
+	snprintf(cmd, sizeof cmd, "%s scenes/bounce.lua --frames many", eddy_run());
 	CHECK(test_sh(cmd, out, sizeof out) == 2);
 	CHECK_HAS(out, "--frames must be an integer");
 	snprintf(cmd, sizeof cmd, "%s", eddy());
@@ -320,11 +328,11 @@ static void usage_and_errors(void)
 	CHECK(one_line(out));
 	snprintf(cmd, sizeof cmd, "%s fly scenes/bounce.lua", eddy());
 	CHECK(test_sh(cmd, out, sizeof out) == 2);
-	snprintf(cmd, sizeof cmd, "%s run no/such/scene.lua", eddy());
+	snprintf(cmd, sizeof cmd, "%s no/such/scene.lua", eddy_run());
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "eddy: cannot read scene 'no/such/scene.lua'");
 	/* a folder that cannot be made (its parent is a file) */
-	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --stats /dev/null/x/s.jsonl --frames 1", eddy());
+	snprintf(cmd, sizeof cmd, "%s scenes/bounce.lua --stats /dev/null/x/s.jsonl --frames 1", eddy_run());
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "eddy: cannot write stats file '/dev/null/x/s.jsonl'");
 	CHECK(one_line(out));
@@ -350,7 +358,7 @@ static void bad_scenes_fail_with_one_line(void)
 	write_scene(
 		path,
 		"local eddy = require 'eddy'\nlocal w = eddy.world{}\n\nw:add(eddy.emit_box{ spacin = 0.01 })\nreturn w\n");
-	snprintf(cmd, sizeof cmd, "%s run %s", eddy(), path);
+	snprintf(cmd, sizeof cmd, "%s %s", eddy_run(), path);
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	char expect[600];
 	snprintf(expect, sizeof expect, "eddy: %s:4: emit_box: unknown field 'spacin' (did you mean 'spacing'?", path);
@@ -368,7 +376,7 @@ static void bad_scenes_fail_with_one_line(void)
 	write_scene(path, "local eddy = require 'eddy'\nlocal w = eddy.world{ fps = 10 }\n"
 	                  "w:add(eddy.emit_box{ min = {0.4, 0.05, 0.4}, max = {0.5, 0.15, 0.5} })\n"
 	                  "w:add(eddy.gravity{})\nw:add(eddy.integrate{})\nreturn w\n");
-	snprintf(cmd, sizeof cmd, "%s run %s --frames 10 --stats %s/t_bad.jsonl", eddy(), path, test_build_dir());
+	snprintf(cmd, sizeof cmd, "%s %s --frames 10 --stats %s/t_bad.jsonl", eddy_run(), path, test_build_dir());
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "eddy: particle ");
 	CHECK_HAS(out, "left the domain at step");
@@ -377,7 +385,7 @@ static void bad_scenes_fail_with_one_line(void)
 	/* an on_frame field may not shadow a contract field */
 	write_scene(path, "local eddy = require 'eddy'\nlocal w = eddy.world{}\n"
 	                  "w:on_frame(function() return { time = 1 } end)\nreturn w\n");
-	snprintf(cmd, sizeof cmd, "%s run %s --frames 1 --stats -", eddy(), path);
+	snprintf(cmd, sizeof cmd, "%s %s --frames 1 --stats -", eddy_run(), path);
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "on_frame returned 'time', which is a stats field of eddy");
 }
@@ -401,15 +409,15 @@ static int count_lines(const char *path)
 static void stats_write_errors_stop_the_run(void)
 {
 	char cmd[2048], out[8192];
-	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 2 --quiet --stats /dev/full", eddy());
+	snprintf(cmd, sizeof cmd, "%s scenes/bounce.lua --frames 2 --quiet --stats /dev/full", eddy_run());
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "eddy: cannot write stats file '/dev/full': No space left on device");
 	CHECK(one_line(out));
 	const char *b = test_build_dir();
 	snprintf(cmd, sizeof cmd,
-	         "(%s run scenes/bounce.lua --frames 300 --quiet --stats - 2>%s/t_pipe.err; "
+	         "(%s scenes/bounce.lua --frames 300 --quiet --stats - 2>%s/t_pipe.err; "
 	         "echo $? >%s/t_pipe.rc) | head -1 >/dev/null; cat %s/t_pipe.rc %s/t_pipe.err",
-	         eddy(), b, b, b, b);
+	         eddy_run(), b, b, b, b);
 	CHECK(test_sh(cmd, out, sizeof out) == 0);
 	CHECKF(strcmp(out, "0\n") == 0, "status and stderr of the run: %s", out);
 	/* the same for plan's stdout; a full disk is an error there too */
@@ -434,7 +442,7 @@ static void stats_creates_its_folders(void)
 static void set_is_given_once_per_key(void)
 {
 	char cmd[1024], out[4096];
-	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --frames 1 --set spacing=0.04 --set spacing=0.05", eddy());
+	snprintf(cmd, sizeof cmd, "%s scenes/bounce.lua --frames 1 --set spacing=0.04 --set spacing=0.05", eddy_run());
 	CHECK(test_sh(cmd, out, sizeof out) == 2);
 	CHECK_HAS(out, "eddy: --set spacing given twice");
 	CHECK(one_line(out));
@@ -450,14 +458,14 @@ static void options_take_values_either_way(void)
 {
 	char cmd[1024], a[16384], b[16384];
 	snprintf(cmd, sizeof cmd,
-	         "%s run scenes/bounce.lua --frames 2 --stats - --quiet --set spacing=0.04 "
+	         "%s scenes/bounce.lua --frames 2 --stats - --quiet --set spacing=0.04 "
 	         "| grep -o '\"state_hash\":\"[0-9a-f]*\"'",
-	         eddy());
+	         eddy_run());
 	CHECK(test_sh(cmd, a, sizeof a) == 0);
 	snprintf(cmd, sizeof cmd,
-	         "%s run --frames=2 --stats=- --quiet --set=spacing=0.04 scenes/bounce.lua "
+	         "%s --frames=2 --stats=- --quiet --set=spacing=0.04 scenes/bounce.lua "
 	         "| grep -o '\"state_hash\":\"[0-9a-f]*\"'",
-	         eddy());
+	         eddy_run());
 	CHECK(test_sh(cmd, b, sizeof b) == 0);
 	CHECK(strlen(a) > 40 && strcmp(a, b) == 0);
 	static const struct {
@@ -622,8 +630,8 @@ static void binary_scenes_are_refused(void)
 {
 	const char *b = test_build_dir();
 	char cmd[2048], out[8192], expect[600];
-	snprintf(cmd, sizeof cmd, "luac5.4 -o %s/t_scene.luac scenes/bounce.lua && %s run %s/t_scene.luac --frames 1", b,
-	         eddy(), b);
+	snprintf(cmd, sizeof cmd, "luac5.4 -o %s/t_scene.luac scenes/bounce.lua && %s %s/t_scene.luac --frames 1", b,
+	         eddy_run(), b);
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	snprintf(expect, sizeof expect, "eddy: %s/t_scene.luac: a precompiled (binary) chunk", b);
 	CHECK_HAS(out, expect);

@@ -1245,8 +1245,8 @@ static void dam_break_scene_runs_every_solver(void)
 		char cmd[512], out[8192];
 		snprintf(cmd, sizeof cmd,
 		         "%s/eddy run scenes/dam_break.lua --set method=flip --frames 3 --set solver=%s --set spacing=0.0125 "
-		         "--stats /dev/stdout --quiet 2>&1",
-		         test_build_dir(), names[sv]);
+		         "--stats /dev/stdout --quiet --out %s/run 2>&1",
+		         test_build_dir(), names[sv], test_out_dir());
 		FILE *f = popen(cmd, "r");
 		CHECK(f != NULL);
 		if (!f)
@@ -1274,9 +1274,9 @@ static void hypre_is_loaded_only_when_asked(void)
 		char cmd[768], out[256];
 		snprintf(cmd, sizeof cmd,
 		         "LD_DEBUG=files %s/eddy run scenes/dam_break.lua --set method=flip --frames 1 --set solver=%s "
-		         "--set spacing=0.025 --quiet 2>&1 >/dev/null | grep -c -e 'file=libHYPRE' -e 'file=libmpi' "
-		         "-e 'file=libsuperlu'",
-		         test_build_dir(), names[sv]);
+		         "--set spacing=0.025 --quiet --out %s/run 2>&1 >/dev/null | grep -c -e 'file=libHYPRE' "
+		         "-e 'file=libmpi' -e 'file=libsuperlu'",
+		         test_build_dir(), names[sv], test_out_dir());
 		CHECK(test_sh(cmd, out, sizeof out) == (sv ? 0 : 1)); /* grep: 1 when nothing matched */
 		const long loaded = strtol(out, NULL, 10);
 		CHECKF(sv ? loaded >= 3 : loaded == 0, "solver %s: %ld loader lines name HYPRE, MPI or SuperLU", names[sv],
@@ -1289,8 +1289,8 @@ static void scene_rejects_unknown_solver(void)
 {
 	char cmd[512], out[2048];
 	snprintf(cmd, sizeof cmd,
-	         "%s/eddy run scenes/dam_break.lua --set method=flip --frames 1 --set solver=lu --quiet 2>&1",
-	         test_build_dir());
+	         "%s/eddy run scenes/dam_break.lua --set method=flip --frames 1 --set solver=lu --quiet --out %s/run 2>&1",
+	         test_build_dir(), test_out_dir());
 	FILE *f = popen(cmd, "r");
 	CHECK(f != NULL);
 	if (!f)

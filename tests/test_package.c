@@ -84,14 +84,16 @@ static void shared_library_exports_only_the_public_api(void)
 
 /* make install: the stock interpreter finds the module and its helpers when
  * its default paths are taken under the prefix, and the installed command
- * runs an installed scene with its helpers. */
+ * runs an installed scene with its helpers. -o all: install what the caller
+ * built, never rebuild any of it here (the cli suite's README example
+ * installs from the same build at the same time). */
 static void install_layout_serves_stock_lua(void)
 {
 	char cmd[4096];
 	const char *b = test_build_dir();
 	snprintf(cmd, sizeof cmd,
 	         "{ set -e; stage=$(pwd)/%s/install-stage; rm -rf \"$stage\"; "
-	         "make -s --no-print-directory install BUILD=%s PREFIX=/usr/local DESTDIR=\"$stage\" >/dev/null; "
+	         "make -s --no-print-directory -o all install BUILD=%s PREFIX=/usr/local DESTDIR=\"$stage\" >/dev/null; "
 	         "p=$(lua5.4 -e 'io.write(package.path)' | sed \"s|/usr/local|$stage/usr/local|g\"); "
 	         "c=$(lua5.4 -e 'io.write(package.cpath)' | sed \"s|/usr/local|$stage/usr/local|g\"); "
 	         "LUA_PATH=\"$p\" LUA_CPATH=\"$c\" lua5.4 -e 'local e = require \"eddy\"; require \"eddy.view\"; "

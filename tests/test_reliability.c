@@ -156,9 +156,9 @@ static void cli_resume_skips_a_corrupted_checkpoint(void)
 	const char *bin = test_build_dir();
 	char cmd[2048], out[65536], a[8192], b[8192];
 	snprintf(cmd, sizeof cmd,
-	         "rm -rf %s/t_run && %s/eddy run scenes/bounce.lua --frames 16 --quiet --stats - "
+	         "rm -rf %s/t_run && %s/eddy run scenes/bounce.lua --frames 16 --quiet --out %s/run --stats - "
 	         "| tail -1 | grep -o '\"state_hash\":\"[0-9a-f]*\"'",
-	         bin, bin);
+	         bin, bin, test_out_dir());
 	CHECK(test_sh(cmd, a, sizeof a) == 0);
 	snprintf(cmd, sizeof cmd, "%s/eddy run scenes/bounce.lua --frames 11 --quiet --checkpoint-every 5 --out %s/t_run",
 	         bin, bin);
@@ -179,8 +179,10 @@ static void cli_resume_skips_a_corrupted_checkpoint(void)
 	CHECK(strlen(a) > 20);
 	CHECK(strcmp(a, b) == 0);
 	/* --set changes the scene: its checkpoints are not taken */
-	snprintf(cmd, sizeof cmd,
-	         "%s/eddy run scenes/bounce.lua --frames 16 --set restitution=0.9 --resume %s/t_run/checkpoints", bin, bin);
+	snprintf(
+		cmd, sizeof cmd,
+		"%s/eddy run scenes/bounce.lua --frames 16 --set restitution=0.9 --resume %s/t_run/checkpoints --out %s/run",
+		bin, bin, test_out_dir());
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "no valid checkpoint of this scene");
 }
@@ -292,7 +294,7 @@ static void run_refuses_what_cannot_fit(void)
 	      "w:add(eddy.gravity{})\nw:add(eddy.integrate{})\nreturn w\n",
 	      f);
 	fclose(f);
-	snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 1", test_build_dir(), path);
+	snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 1 --out %s/run", test_build_dir(), path, test_out_dir());
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "memory: the scene needs about");
 	CHECK_HAS(out, "not run: 1 problem found by the preflight check");

@@ -909,7 +909,8 @@ static int run_scene(const char *scene, const char *sets, const char *kx, const 
                      size_t last_size)
 {
 	char cmd[1024];
-	snprintf(cmd, sizeof cmd, "%s/eddy run %s %s --stats - --quiet 2>&1", test_build_dir(), scene, sets);
+	snprintf(cmd, sizeof cmd, "%s/eddy run %s %s --stats - --quiet --out %s/run 2>&1", test_build_dir(), scene, sets,
+	         test_out_dir());
 	FILE *p = popen(cmd, "r");
 	out->n = 0;
 	if (!p)

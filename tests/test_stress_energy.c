@@ -21,8 +21,9 @@ static bool energy_rise(const char *method, double spacing, double *rise, double
 {
 	char cmd[512];
 	snprintf(cmd, sizeof cmd,
-	         "%s/eddy run scenes/dam_break.lua --set method=%s --set spacing=%g --set render=false --quiet --stats -",
-	         test_build_dir(), method, spacing);
+	         "%s/eddy run scenes/dam_break.lua --set method=%s --set spacing=%g --set render=false --quiet --stats - "
+	         "--out %s/run",
+	         test_build_dir(), method, spacing, test_out_dir());
 	FILE *f = popen(cmd, "r");
 	if (!f)
 		return false;
