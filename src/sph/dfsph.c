@@ -202,10 +202,11 @@ typedef struct dfsph_work {
 	float *ksum; /* the sum of k_i over the corrections: the current solve's k (with its warm start) */
 	float *err;  /* per particle: the error the sweep measured, or R_i(v) */
 	/* the conjugate gradients' (divergence_cg) */
-	float *p;      /* the search direction (a change of k): k's array, which the sweeps
-	                * use only between the calls */
-	float *r;      /* the residual on the active set */
-	uint8_t *mask; /* 1 on the active set, else 0 */
+	float *p;                /* the search direction (a change of k): k's array, which the sweeps
+	                          * use only between the calls */
+	float *r;                /* the residual on the active set */
+	uint8_t *mask;           /* 1 on the active set, else 0 */
+	struct dfsph_sums *part; /* per DFSPH_SUM_CHUNK rows: the conjugate gradients' and sweeps' partial sums */
 	/* with few pairs (DFSPH_STORE_BYTES): the pairs in groups of eight,
 	 * particle i's from gs + goff[i]; NULL: every pass reads the lists and
 	 * recomputes G_ij */
@@ -726,15 +727,43 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 
 /* The plain loops over the rows that run once a solve or a step (its set-up and
  * finish, a solve's warm start and sum) use the threads above this many
- * rows: below it, waking the team costs more than the loop. The conjugate
- * gradients' vector updates stay serial, fused with their sums (serial in
- * row order for the same bits on any thread count): they are some 7% of a
- * 1-thread step at 1M (perf), but on threads each adds a join per
- * iteration, and on a host whose cores are shared a join waits for the
- * other thread to be scheduled again: with a busy loop pinned beside the
- * second thread, bench_scale --child dfsph 97000 2 3 took 1.5x the time
- * (median of 8 alternating pairs; 1.1x without them, 6 pairs). */
+ * rows: below it, waking the team costs more than the loop. */
 #define DFSPH_LOOP_PAR 65536
+
+/* The solves' sums over the rows (the conjugate gradients' dot products and
+ * residuals, the sweeps' mean error) are taken in chunks of DFSPH_SUM_CHUNK
+ * rows, each summed in row order, then the chunks' sums in chunk order: the
+ * same bits for any thread count (a fluid of one chunk gets the plain
+ * serial sum's). The chunks, and the vector updates fused with them, run on
+ * the threads above DFSPH_CG_PAR rows. They were serial: some 7% of a
+ * 1-thread step at 1M (perf), a bound of 1.86x on two threads, but each
+ * adds a join per iteration, and on a host whose cores are shared a join
+ * waits for the other thread to be scheduled again: with a busy loop pinned
+ * beside the second thread, bench_scale --child dfsph 97000 2 3 took 1.5x
+ * the time (median of 8 alternating pairs; 1.1x without it, 6 pairs).
+ * Above DFSPH_CG_PAR such a loop streams tens of megabytes, long enough
+ * that a join is small beside it. */
+#define DFSPH_SUM_CHUNK 16384
+#define DFSPH_CG_PAR (1L << 18)
+
+typedef struct dfsph_sums {
+	double a, b;
+} dfsph_sums;
+
+static long sum_chunks(long n) { return (n + DFSPH_SUM_CHUNK - 1) / DFSPH_SUM_CHUNK; }
+static long chunk_end(long c, long n) { return (c + 1) * DFSPH_SUM_CHUNK < n ? (c + 1) * DFSPH_SUM_CHUNK : n; }
+static int cg_threads(const dfsph_work *wk) { return wk->n > DFSPH_CG_PAR ? wk->threads : 1; }
+
+/* The chunks' partial sums part[0 .. nc), added in chunk order. */
+static dfsph_sums sums_total(const dfsph_sums *part, long nc)
+{
+	dfsph_sums t = {0, 0};
+	for (long c = 0; c < nc; ++c) {
+		t.a += part[c].a;
+		t.b += part[c].b;
+	}
+	return t;
+}
 
 static int loop_threads(long n, int threads) { return n > DFSPH_LOOP_PAR ? threads : 1; }
 
@@ -778,16 +807,22 @@ static void operator_product(dfsph_work *wk)
 	*wk = keep;
 }
 
-/* The solves' bulk: Jacobi-preconditioned conjugate gradients on A k = R(v*)
- * over the particles that hold pressure (k_i > 0) or compress (R_i > 0),
- * where the unilateral constraint is an equality; the density solve's right
- * side is the rate that brings rho_i to rho0 in a step. It stops once the
- * mean |r_i| dt / rho0 is at most tol or a direction has no positive
- * curvature, then projects (k_i < 0 back to 0); the sweeps after it settle
- * the particles that left or entered the set. Its sums are serial in row
- * order: the same bits for any thread count. *fresh: err still holds R(v*)
- * of its first pass (no iteration, nothing projected), which the sweep after
- * it then reads instead of the pairs (the same bits). */
+/* sum_i p_i mask_i err_i, err the operator's product on p (chunked as
+ * DFSPH_SUM_CHUNK says). */
+static double product_sum(dfsph_work *wk)
+{
+	const long n = wk->n, nc = sum_chunks(n);
+	const int nt = cg_threads(wk);
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(dynamic, 1)
+	for (long c = 0; c < nc; ++c) {
+		double s = 0;
+		for (long i = c * DFSPH_SUM_CHUNK, e = chunk_end(c, n); i < e; ++i)
+			s += (double)wk->p[i] * ((float)wk->mask[i] * wk->err[i]);
+		wk->part[c] = (dfsph_sums){s, 0};
+	}
+	return sums_total(wk->part, nc).a;
+}
+
 /* The column-scale error of a residual r (0 off the active set): r summed
  * over the blocks, S_c over n_c active rows each, and the root mean square
  * of the block means weighted by their rows, sqrt(sum_c S_c^2 / n_c / N),
@@ -821,6 +856,29 @@ static double block_error(const dfsph_work *wk, const float *r)
 	return cnt > 0 ? sqrt(s2 / cnt) * wk->dt / wk->sh->rho0 : 0;
 }
 
+/* The solves' bulk: Jacobi-preconditioned conjugate gradients on A k = R(v*)
+ * over the particles that hold pressure (k_i > 0) or compress (R_i > 0),
+ * where the unilateral constraint is an equality; the density solve's right
+ * side is the rate that brings rho_i to rho0 in a step. It stops once the
+ * mean |r_i| dt / rho0 is at most tol or a direction has no positive
+ * curvature, then projects (k_i < 0 back to 0); the sweeps after it settle
+ * the particles that left or entered the set. Its sums are chunked
+ * (DFSPH_SUM_CHUNK): the same bits for any thread count. *fresh: err still holds R(v*)
+ * of its first pass (no iteration, nothing projected), which the sweep after
+ * it then reads instead of the pairs (the same bits). */
+/* Whether the conjugate gradients go on: the mean error (*residual) above
+ * tol, or else the column-scale error above btol. That error (a serial pass
+ * over the rows) is measured only once the mean is within tol, as only then
+ * does it decide; *berr is NAN while not measured on the current r. */
+static bool cg_more(const dfsph_work *wk, double residual, double tol, double btol, double *berr)
+{
+	*berr = NAN;
+	if (residual > tol)
+		return true;
+	*berr = btol > 0 ? block_error(wk, wk->r) : 0;
+	return *berr > btol;
+}
+
 static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, double btol, double *residual, double *berr,
                          bool *fresh)
 {
@@ -829,74 +887,84 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	const double scale = (double)dt / ((double)rho0 * (double)n);
 	pass(wk, PASS_RATE, true, true);
 	*fresh = true; /* err = R(v*) until a product or the projection */
-	double rz = 0, esum = 0;
-	for (long i = 0; i < n; ++i) {
-		const float res = density ? wk->err[i] + (wk->rho[i] - rho0) / dt : wk->err[i];
-		const bool on = (density || wk->b[i].w > 0) && (wk->ksum[i] > 0 || res > 0);
-		wk->mask[i] = on;
-		wk->r[i] = on ? res : 0.0f;
-		wk->p[i] = wk->dsym[i] * wk->r[i];
-		rz += (double)wk->r[i] * wk->p[i];
-		esum += fabsf(wk->r[i]);
+	const long nc = sum_chunks(n);
+	const int nt = cg_threads(wk);
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(dynamic, 1)
+	for (long c = 0; c < nc; ++c) {
+		double rz = 0, esum = 0;
+		for (long i = c * DFSPH_SUM_CHUNK, e = chunk_end(c, n); i < e; ++i) {
+			const float res = density ? wk->err[i] + (wk->rho[i] - rho0) / dt : wk->err[i];
+			const bool on = (density || wk->b[i].w > 0) && (wk->ksum[i] > 0 || res > 0);
+			wk->mask[i] = on;
+			wk->r[i] = on ? res : 0.0f;
+			wk->p[i] = wk->dsym[i] * wk->r[i];
+			rz += (double)wk->r[i] * wk->p[i];
+			esum += fabsf(wk->r[i]);
+		}
+		wk->part[c] = (dfsph_sums){rz, esum};
 	}
-	*residual = esum * scale;
-	*berr = btol > 0 ? block_error(wk, wk->r) : 0;
+	const dfsph_sums s0 = sums_total(wk->part, nc);
+	double rz = s0.a;
+	*residual = s0.b * scale;
+	bool more = cg_more(wk, *residual, tol, btol, berr);
 	/* the levels live until the call returns: each call rebuilds them for its active set */
 	const eddy_arena_mark mark = wk->coarse ? eddy__arena_mark(wk->coarse) : (eddy_arena_mark){0};
-	dfsph_coarse *cg = wk->coarse && (*residual > tol || *berr > btol)
-	                       ? eddy__dfsph_coarse_build(wk->coarse, wk->sh, n, wk->mask)
-	                       : NULL;
+	dfsph_coarse *cg = wk->coarse && more ? eddy__dfsph_coarse_build(wk->coarse, wk->sh, n, wk->mask) : NULL;
 	if (cg && !(wk->coarse_scale > 0)) { /* s = y . (A/dt) y / e . L e on y = p (dfsph_coarse.h) */
 		const double ele = eddy__dfsph_coarse_unit(cg, wk->r, wk->p);
 		operator_product(wk);
 		*fresh = false;
-		double yay = 0;
-		for (long i = 0; i < n; ++i)
-			yay -= (double)wk->p[i] * ((float)wk->mask[i] * wk->err[i]);
-		wk->coarse_scale = yay / (double)dt / ele;
+		wk->coarse_scale = -product_sum(wk) / (double)dt / ele;
 	}
 	if (cg) {
 		eddy__dfsph_coarse_set_scale(cg, wk->coarse_scale);
 		rz = eddy__dfsph_coarse_apply(cg, wk->r, wk->dsym, wk->p);
 	}
 	int it = 0;
-	while ((*residual > tol || *berr > btol) && it < cap && rz > 0) {
+	while (more && it < cap && rz > 0) {
 		operator_product(wk);
 		*fresh = false;
-		double pq = 0;
-		for (long i = 0; i < n; ++i)
-			pq -= (double)wk->p[i] * ((float)wk->mask[i] * wk->err[i]);
+		const double pq = -product_sum(wk);
 		if (!(pq > 0))
 			break;
 		const float alpha = (float)(rz / pq);
-		double rz1 = 0;
-		esum = 0;
-		for (long i = 0; i < n; ++i) {
-			wk->v[i].x += alpha * wk->u[i].x;
-			wk->v[i].y += alpha * wk->u[i].y;
-			wk->v[i].z += alpha * wk->u[i].z;
-			wk->ksum[i] += alpha * wk->p[i];
-			wk->r[i] += alpha * ((float)wk->mask[i] * wk->err[i]);
-			rz1 += (double)wk->r[i] * (wk->dsym[i] * wk->r[i]);
-			esum += fabsf(wk->r[i]);
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(dynamic, 1)
+		for (long c = 0; c < nc; ++c) {
+			double rz1 = 0, esum = 0;
+			for (long i = c * DFSPH_SUM_CHUNK, e = chunk_end(c, n); i < e; ++i) {
+				wk->v[i].x += alpha * wk->u[i].x;
+				wk->v[i].y += alpha * wk->u[i].y;
+				wk->v[i].z += alpha * wk->u[i].z;
+				wk->ksum[i] += alpha * wk->p[i];
+				wk->r[i] += alpha * ((float)wk->mask[i] * wk->err[i]);
+				rz1 += (double)wk->r[i] * (wk->dsym[i] * wk->r[i]);
+				esum += fabsf(wk->r[i]);
+			}
+			wk->part[c] = (dfsph_sums){rz1, esum};
 		}
+		const dfsph_sums s1 = sums_total(wk->part, nc);
+		double rz1 = s1.a;
 		++it;
-		*residual = esum * scale;
-		*berr = btol > 0 ? block_error(wk, wk->r) : 0;
+		*residual = s1.b * scale;
+		more = cg_more(wk, *residual, tol, btol, berr);
 		/* z = D'^-1 r + its part, in err (free until the next product) */
-		const bool coarse = cg && (*residual > tol || *berr > btol) && it < cap;
+		const bool coarse = cg && more && it < cap;
 		if (coarse)
 			rz1 = eddy__dfsph_coarse_apply(cg, wk->r, wk->dsym, wk->err);
 		const float beta = (float)(rz1 / rz);
 		rz = rz1;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 		for (long i = 0; i < n; ++i)
 			wk->p[i] = (coarse ? wk->err[i] : wk->dsym[i] * wk->r[i]) + beta * wk->p[i];
 	}
+	if (isnan(*berr)) /* the caller's stopping test reads it (solve) */
+		*berr = btol > 0 ? block_error(wk, wk->r) : 0;
 	/* the projection: k_i < 0 back to 0, as one correction */
 	bool neg = false;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(|| : neg)
 	for (long i = 0; i < n; ++i) {
 		wk->k[i] = wk->ksum[i] < 0 ? -wk->ksum[i] : 0.0f;
-		neg |= wk->ksum[i] < 0;
+		neg = neg || wk->ksum[i] < 0;
 	}
 	if (neg)
 		pass(wk, PASS_CORRECT, true, true);
@@ -978,10 +1046,16 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 			it += divergence_cg(wk, cap - it, !divergence, tol, btol, residual, &berr, &fresh);
 		const dfsph_pass sweep = {wk, PASS_SWEEP, divergence, projected, false, fresh};
 		pass_run(wk, &sweep);
-		double sum = 0; /* serial, in row order: the same for any thread count */
-		for (long i = 0; i < n; ++i)
-			sum += wk->err[i];
-		*residual = sum / (double)n / rho0;
+		const long nc = sum_chunks(n);
+		const int ct = cg_threads(wk);
+#pragma omp parallel for num_threads(ct) if (ct > 1) schedule(dynamic, 1)
+		for (long c = 0; c < nc; ++c) {
+			double sum = 0;
+			for (long i = c * DFSPH_SUM_CHUNK, e = chunk_end(c, n); i < e; ++i)
+				sum += wk->err[i];
+			wk->part[c] = (dfsph_sums){sum, 0};
+		}
+		*residual = sums_total(wk->part, nc).a / (double)n / rho0;
 		const bool enough = divergence ? sweeps >= DFSPH_SMOOTH : it >= 1;
 		if ((enough && *residual <= tol && berr <= btol) || it >= cap)
 			break;
@@ -1024,6 +1098,7 @@ static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n,
 	for (size_t a = 0; a < sizeof floats / sizeof *floats; ++a)
 		ok = ok && (*floats[a] = eddy__arena_alloc(&w->arena, un * sizeof(float)));
 	ok = ok && (wk->mask = eddy__arena_alloc(&w->arena, un));
+	ok = ok && (wk->part = eddy__arena_alloc(&w->arena, (size_t)sum_chunks(n) * sizeof *wk->part));
 	if (!ok)
 		return false;
 	wk->p = wk->k;
@@ -1031,6 +1106,8 @@ static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n,
 	 * them; beyond, they would fall out of cache and reading them back costs
 	 * more than a square root, a division and a position gather per pair */
 	uint64_t groups = 0;
+	const int nt = loop_threads(n, threads);
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(+ : groups)
 	for (long i = 0; i < n; ++i)
 		groups += (sh->nb.count[i] + 7) / 8;
 	if (groups * sizeof(dfsph_group) <= DFSPH_STORE_BYTES) {
@@ -1121,6 +1198,8 @@ static void shift(eddy_world *w, const sph_dfsph *sd, const dfsph_work *wk)
 {
 	const float full = DFSPH_SHIFT_SURFACE * wk->sh->rho0, d = sd->def.shift * wk->sh->h * wk->sh->h;
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	const int nt = loop_threads(wk->n, wk->threads);
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (long i = 0; i < wk->n; ++i) {
 		const dfsph_vec4 c = wk->u[i];
 		/* c.w * full <= 1: no neighbour below full (c.w is 1 / the least rho_j) */
