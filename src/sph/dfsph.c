@@ -735,13 +735,12 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
  * rows, each summed in row order, then the chunks' sums in chunk order: the
  * same bits for any thread count (a fluid of one chunk gets the plain
  * serial sum's). The chunks, and the vector updates fused with them, run on
- * the threads above DFSPH_CG_PAR rows. They were serial: some 7% of a
- * 1-thread step at 1M (perf), a bound of 1.86x on two threads, but each
- * adds a join per iteration, and on a host whose cores are shared a join
- * waits for the other thread to be scheduled again: with a busy loop pinned
- * beside the second thread, bench_scale --child dfsph 97000 2 3 took 1.5x
- * the time (median of 8 alternating pairs; 1.1x without it, 6 pairs).
- * Above DFSPH_CG_PAR such a loop streams tens of megabytes, long enough
+ * the threads above DFSPH_CG_PAR rows: serial, they are some 7% of a
+ * 1-thread step at 1M (perf), which bounds two threads at 1.86x; but each
+ * such loop adds a join per iteration, and on a host whose cores are shared
+ * a join waits for the other thread to be scheduled again (at 97k, with a
+ * busy loop pinned beside the second thread, threading them took 1.5x the
+ * time). Above DFSPH_CG_PAR a loop streams tens of megabytes, long enough
  * that a join is small beside it. */
 #define DFSPH_SUM_CHUNK 16384
 #define DFSPH_CG_PAR (1L << 18)
@@ -856,16 +855,6 @@ static double block_error(const dfsph_work *wk, const float *r)
 	return cnt > 0 ? sqrt(s2 / cnt) * wk->dt / wk->sh->rho0 : 0;
 }
 
-/* The solves' bulk: Jacobi-preconditioned conjugate gradients on A k = R(v*)
- * over the particles that hold pressure (k_i > 0) or compress (R_i > 0),
- * where the unilateral constraint is an equality; the density solve's right
- * side is the rate that brings rho_i to rho0 in a step. It stops once the
- * mean |r_i| dt / rho0 is at most tol or a direction has no positive
- * curvature, then projects (k_i < 0 back to 0); the sweeps after it settle
- * the particles that left or entered the set. Its sums are chunked
- * (DFSPH_SUM_CHUNK): the same bits for any thread count. *fresh: err still holds R(v*)
- * of its first pass (no iteration, nothing projected), which the sweep after
- * it then reads instead of the pairs (the same bits). */
 /* Whether the conjugate gradients go on: the mean error (*residual) above
  * tol, or else the column-scale error above btol. That error (a serial pass
  * over the rows) is measured only once the mean is within tol, as only then
@@ -879,6 +868,17 @@ static bool cg_more(const dfsph_work *wk, double residual, double tol, double bt
 	return *berr > btol;
 }
 
+/* The solves' bulk: Jacobi-preconditioned conjugate gradients on A k = R(v*)
+ * over the particles that hold pressure (k_i > 0) or compress (R_i > 0),
+ * where the unilateral constraint is an equality; the density solve's right
+ * side is the rate that brings rho_i to rho0 in a step. It stops once the
+ * mean |r_i| dt / rho0 is at most tol and the column-scale error at most
+ * btol (cg_more; btol 0: the mean alone), or a direction has no positive
+ * curvature, then projects (k_i < 0 back to 0); the sweeps after it settle
+ * the particles that left or entered the set. Its sums are chunked
+ * (DFSPH_SUM_CHUNK): the same bits for any thread count. *fresh: err still
+ * holds R(v*) of its first pass (no iteration, nothing projected), which
+ * the sweep after it then reads instead of the pairs (the same bits). */
 static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, double btol, double *residual, double *berr,
                          bool *fresh)
 {
