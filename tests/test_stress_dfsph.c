@@ -96,6 +96,24 @@ static still_water run_still_water(const char *sets, double t_settle)
  * held 0.28-2.1 at 10 layers) or rings leaves the band at once. */
 #define BP_BAND 0.05
 
+/* Runs still_water.lua with sets, reads from 2 s on, prints what and the
+ * figures, and holds the column at rest: the run ends whole (frames of
+ * them), nothing thrown, leaked or non-finite, max speed under 2% of
+ * sqrt(g H), the bottom pressure within BP_BAND. */
+static void check_still_water_at_rest(const char *what, const char *sets, int frames)
+{
+	const still_water r = run_still_water(sets, 2.0);
+	printf(
+		"    still water %s, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f x rho0 g H, thrown %g\n",
+		what, r.vmax_ratio, r.vmax_height, r.bp_min, r.bp_max, r.thrown);
+	CHECK(r.status == 0);
+	CHECK(r.frames == frames);
+	CHECK(r.thrown == 0);
+	CHECK(r.leaked == 0 && r.nonfinite == 0);
+	CHECK(r.vmax_ratio < 0.02);
+	CHECK(r.bp_min > 1 - BP_BAND && r.bp_max < 1 + BP_BAND);
+}
+
 /* 10 layers (0.125 m, 640 particles), 2.5 s: from 2 s on the column is at
  * rest, max speed under 2% of sqrt(g H) (measured 0.0152, at the surface;
  * 0.0089 before the velocity solve's warm start took off the density solve's
@@ -103,16 +121,7 @@ static still_water run_still_water(const char *sets, double t_settle)
  * and nothing leaves the surface or the box. About 2 s. */
 static void still_water_10_layers_comes_to_rest(void)
 {
-	const still_water r = run_still_water("--set depth=0.125 --set duration=2.5", 2.0);
-	printf("    still water 10 layers, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f x rho0 g H, "
-	       "thrown %g\n",
-	       r.vmax_ratio, r.vmax_height, r.bp_min, r.bp_max, r.thrown);
-	CHECK(r.status == 0);
-	CHECK(r.frames == 75);
-	CHECK(r.thrown == 0);
-	CHECK(r.leaked == 0 && r.nonfinite == 0);
-	CHECK(r.vmax_ratio < 0.02);
-	CHECK(r.bp_min > 1 - BP_BAND && r.bp_max < 1 + BP_BAND);
+	check_still_water_at_rest("10 layers", "--set depth=0.125 --set duration=2.5", 75);
 }
 
 /* 20 layers (0.25 m, 1280 particles), 2.5 s, one step beyond the 10, at
@@ -125,18 +134,10 @@ static void still_water_10_layers_comes_to_rest(void)
  * 3 s each. */
 static void still_water_20_layers_at(const char *cfl)
 {
-	char sets[128];
+	char sets[128], what[64];
 	snprintf(sets, sizeof sets, "--set depth=0.25 --set duration=2.5 --set cfl=%s", cfl);
-	const still_water r = run_still_water(sets, 2.0);
-	printf("    still water 20 layers, cfl %s, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f x "
-	       "rho0 g H, thrown %g\n",
-	       cfl, r.vmax_ratio, r.vmax_height, r.bp_min, r.bp_max, r.thrown);
-	CHECK(r.status == 0);
-	CHECK(r.frames == 75);
-	CHECK(r.thrown == 0);
-	CHECK(r.leaked == 0 && r.nonfinite == 0);
-	CHECK(r.vmax_ratio < 0.02);
-	CHECK(r.bp_min > 1 - BP_BAND && r.bp_max < 1 + BP_BAND);
+	snprintf(what, sizeof what, "20 layers, cfl %s", cfl);
+	check_still_water_at_rest(what, sets, 75);
 }
 
 static void still_water_20_layers_comes_to_rest(void) { still_water_20_layers_at("0.5"); }
@@ -181,18 +182,10 @@ static void shift_out_of_range_is_refused(void)
  * About 15 s each. */
 static void still_water_40_layers_at(const char *cfl)
 {
-	char sets[128];
+	char sets[128], what[64];
 	snprintf(sets, sizeof sets, "--set depth=0.5 --set duration=3 --set cfl=%s", cfl);
-	const still_water r = run_still_water(sets, 2.0);
-	printf("    still water 40 layers, cfl %s, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f x "
-	       "rho0 g H, thrown %g\n",
-	       cfl, r.vmax_ratio, r.vmax_height, r.bp_min, r.bp_max, r.thrown);
-	CHECK(r.status == 0);
-	CHECK(r.frames == 90);
-	CHECK(r.thrown == 0);
-	CHECK(r.leaked == 0 && r.nonfinite == 0);
-	CHECK(r.vmax_ratio < 0.02);
-	CHECK(r.bp_min > 1 - BP_BAND && r.bp_max < 1 + BP_BAND);
+	snprintf(what, sizeof what, "40 layers, cfl %s", cfl);
+	check_still_water_at_rest(what, sets, 90);
 }
 
 static void still_water_40_layers_comes_to_rest(void) { still_water_40_layers_at("0.5"); }
@@ -210,16 +203,7 @@ static void still_water_40_layers_comes_to_rest_at_cfl_0_3(void) { still_water_4
  * within BP_BAND (1.028-1.029) and nothing thrown. About 40 s. */
 static void still_water_100_layers_comes_to_rest(void)
 {
-	const still_water r = run_still_water("--set depth=1.25 --set duration=3", 2.0);
-	printf("    still water 100 layers, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f x rho0 g H, "
-	       "thrown %g\n",
-	       r.vmax_ratio, r.vmax_height, r.bp_min, r.bp_max, r.thrown);
-	CHECK(r.status == 0);
-	CHECK(r.frames == 90);
-	CHECK(r.thrown == 0);
-	CHECK(r.leaked == 0 && r.nonfinite == 0);
-	CHECK(r.vmax_ratio < 0.02);
-	CHECK(r.bp_min > 1 - BP_BAND && r.bp_max < 1 + BP_BAND);
+	check_still_water_at_rest("100 layers", "--set depth=1.25 --set duration=3", 90);
 }
 
 /* Long, one step beyond the 100: a narrow column (0.05 m square, 4 x 4
@@ -236,16 +220,7 @@ static void still_water_100_layers_comes_to_rest(void)
  * ones (depth_scale) and the step 1/sqrt(20) of theirs. About 30 s. */
 static void still_water_200_layers_narrow_comes_to_rest(void)
 {
-	const still_water r = run_still_water("--set depth=2.5 --set width=0.05 --set duration=3", 2.0);
-	printf("    still water 200 layers, 0.05 m wide, t >= 2 s: vmax <= %.4f sqrt(g H) (at %.2f H), bottom p %.3f-%.3f "
-	       "x rho0 g H, thrown %g\n",
-	       r.vmax_ratio, r.vmax_height, r.bp_min, r.bp_max, r.thrown);
-	CHECK(r.status == 0);
-	CHECK(r.frames == 90);
-	CHECK(r.thrown == 0);
-	CHECK(r.leaked == 0 && r.nonfinite == 0);
-	CHECK(r.vmax_ratio < 0.02);
-	CHECK(r.bp_min > 1 - BP_BAND && r.bp_max < 1 + BP_BAND);
+	check_still_water_at_rest("200 layers, 0.05 m wide", "--set depth=2.5 --set width=0.05 --set duration=3", 90);
 }
 
 void suite_stress_dfsph(void)

@@ -808,7 +808,7 @@ static void operator_product(dfsph_work *wk)
 
 /* sum_i p_i mask_i err_i, err the operator's product on p (chunked as
  * DFSPH_SUM_CHUNK says). */
-static double product_sum(dfsph_work *wk)
+static double product_sum(const dfsph_work *wk)
 {
 	const long n = wk->n, nc = sum_chunks(n);
 	const int nt = cg_threads(wk);
