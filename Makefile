@@ -260,13 +260,18 @@ $(BUILD)/fuzz/surface_vdb.o: $(SRC_CXX) src/surface.h src/eddy.h
 	@mkdir -p $(dir $@)
 	clang++ $(FUZZ_CXXFLAGS) -Isrc -c $(SRC_CXX) -o $@
 
-$(BUILD)/fuzz/fuzz_scene: $(FUZZ_SRC) $(HEADER) $(BUILD)/fuzz/surface_vdb.o
+# one object per source, so that the build runs on every core
+FUZZ_OBJ     := $(FUZZ_SRC:%.c=$(BUILD)/fuzz/obj/%.o)
+
+$(BUILD)/fuzz/obj/%.o: %.c $(HEADER) $(wildcard src/*.h src/sph/*.h lua/*.h render/*.h tests/*.h)
 	@mkdir -p $(dir $@)
-	clang $(FUZZ_CFLAGS) -Isrc -Ilua $(LUA_CFLAGS) $(OSMESA_CFLAGS) $(HYPRE_CFLAGS) $(HYPRE_DEFS) $(FUZZ_SRC) $(BUILD)/fuzz/surface_vdb.o -o $@ \
-		$(LUA_LIBS) $(LIBS)
+	clang $(FUZZ_CFLAGS) -Isrc -Ilua $(LUA_CFLAGS) $(OSMESA_CFLAGS) $(HYPRE_CFLAGS) $(HYPRE_DEFS) -c $< -o $@
+
+$(BUILD)/fuzz/fuzz_scene: $(FUZZ_OBJ) $(BUILD)/fuzz/surface_vdb.o
+	clang $(FUZZ_CFLAGS) $(FUZZ_OBJ) $(BUILD)/fuzz/surface_vdb.o -o $@ $(LUA_LIBS) $(LIBS)
 
 fuzz: deps
-	@$(MAKE) --no-print-directory $(BUILD)/fuzz/fuzz_scene
+	@$(MAKE) --no-print-directory $(BUILD_JOBS) $(BUILD)/fuzz/fuzz_scene
 	@mkdir -p $(BUILD)/fuzz/corpus
 	$(BUILD)/fuzz/fuzz_scene -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=4096 -timeout=30 \
 		-artifact_prefix=$(BUILD)/fuzz/ -print_final_stats=1 $(BUILD)/fuzz/corpus tests/fuzz/seeds tests/fuzz/regressions
