@@ -146,7 +146,8 @@
  * 0.05 alike (10 layers 0.15-0.19, 20 layers 0.11-0.15, 40 layers 0.065-0.14),
  * 0.005 0.10-0.12 at 10 layers. The spread over the step becomes a steady
  * motion at the free surface (the fastest particle at 0.8-1.0 D; at 10
- * layers 10x the kinetic energy). 100 layers: nothing thrown (14 without)
+ * layers 10x the kinetic energy; at cfl 0.25 0.17 against 0.019, 20 layers
+ * 0.12 against 0.068). 100 layers: nothing thrown (14 without)
  * but 0.12 sqrt(g D). A gate at 0.99 rho0, a weight ramping from the gate
  * over 0.03 rho0, or shifting beside the walls (their volumes in grad C):
  * 0.10-0.63 at 10 layers. Slosh with shift 0.02: 10 mm -3.4%, zeta 0.076;
