@@ -95,7 +95,7 @@ eddy_status sph_boundary_divergence(eddy_world *w, sph_shared *sh, int threads);
 
 /* ---- sph_lists (sph.h): room for one list at a time ---- */
 #define SPH_LIST_CHUNK 4096 /* entries a cursor takes from the array at a time */
-#define SPH_LIST_CURSORS 4  /* the most cursors a thread uses on one array (search.c's SEARCH_ROWS) */
+#define SPH_LIST_CURSORS 16 /* the most cursors a thread uses on one array (search.c's SEARCH_ROWS) */
 
 /* One thread's part of a pass over a sph_lists. */
 typedef struct sph_cursor {

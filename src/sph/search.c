@@ -26,9 +26,11 @@
 #include <stdlib.h>
 #include <string.h>
 
+#ifndef SEARCH_BX
 #define SEARCH_BX 4
 #define SEARCH_BY 2
 #define SEARCH_BZ 2
+#endif
 /* the most runs around a block and the most z layers searched for it */
 #define SEARCH_RUNS ((2 * SPH_VERLET_CELLS + SEARCH_BY) * (2 * SPH_VERLET_CELLS + SEARCH_BZ))
 #define SEARCH_LAYERS (2 * SPH_VERLET_CELLS + SEARCH_BZ)
@@ -39,6 +41,7 @@ typedef struct search_ctx {
 	const sph_neighbors *nb;
 	const sph_search_out *out;
 	const float *x, *y, *z;
+	uint32_t n;                  /* fluid rows */
 	const uint32_t *bound_order; /* the boundary particles in cell order (NULL: they are stored in it) */
 	int R;                       /* cells searched beyond the block's on each side */
 	/* reach[a][b]: the cells along x a run at cell offsets (a, b) in (y, z)
@@ -156,6 +159,34 @@ static uint32_t gather_run(search_buf *b, uint32_t at, const float *x, const flo
 	return at;
 }
 
+/* Fluid rows [begin, end) (stored in cell order: one stretch of the
+ * columns) into b from at; returns the end. Eight at a time while that
+ * stays inside the table's rows (n): up to seven entries past the end are
+ * written, into room the next run or the FAR padding overwrites. */
+static uint32_t gather_fluid(search_buf *b, uint32_t at, const float *x, const float *y, const float *z, uint32_t begin,
+                             uint32_t end, uint32_t n)
+{
+	float *bx = b->x + at, *by = b->y + at, *bz = b->z + at;
+	uint32_t *bj = b->j + at;
+	static const uint16_t iota[8] = {0, 1, 2, 3, 4, 5, 6, 7};
+	const uint32_t len = end - begin, len8 = (len + 7) & ~7u;
+	if (len >= 3 && begin + len8 <= n) /* shorter: the copies cost less than a group */
+		for (uint32_t q = 0; q < len8; q += 8) {
+			sf8_store(bx + q, sf8_load(x + begin + q));
+			sf8_store(by + q, sf8_load(y + begin + q));
+			sf8_store(bz + q, sf8_load(z + begin + q));
+			simd_widen16_add(begin + q, iota, bj + q);
+		}
+	else
+		for (uint32_t q = 0; q < len; ++q) {
+			bx[q] = x[begin + q];
+			by[q] = y[begin + q];
+			bz[q] = z[begin + q];
+			bj[q] = begin + q;
+		}
+	return at + len;
+}
+
 /* The runs' candidates into the buffers, then eight FAR points. */
 static void block_gather(const search_ctx *c, const block_runs *br, search_buf *fb, search_buf *bb)
 {
@@ -163,7 +194,7 @@ static void block_gather(const search_ctx *c, const block_runs *br, search_buf *
 	uint32_t nf = 0, nbd = 0;
 	for (int r = 0; r < br->count; ++r) {
 		const cell_run *run = &br->run[r];
-		nf = gather_run(fb, nf, c->x, c->y, c->z, NULL, run->fluid_begin, run->fluid_end);
+		nf = gather_fluid(fb, nf, c->x, c->y, c->z, run->fluid_begin, run->fluid_end, c->n);
 		nbd = gather_run(bb, nbd, nb->bx, nb->by, nb->bz, c->bound_order, run->bound_begin, run->bound_end);
 	}
 	for (uint32_t q = 0; q < 8; ++q) {
@@ -262,6 +293,7 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
 {
 	search_ctx c = {
 		.nb = nb, .out = out, .bound_order = nb->bnd.order, .R = out->exact ? SPH_CELLS_PER_H : SPH_VERLET_CELLS};
+	c.n = (uint32_t)w->n;
 	c.x = eddy__col(w, COL_X_), c.y = eddy__col(w, COL_Y_), c.z = eddy__col(w, COL_Z_);
 	c.blocks_x = (nb->grid.gx + SEARCH_BX - 1) / SEARCH_BX;
 	c.blocks_y = (nb->grid.gy + SEARCH_BY - 1) / SEARCH_BY;
