@@ -3,7 +3,7 @@
  * fluid-boundary, into the Verlet list or (exact mode) straight into the
  * exact lists and kernel sums.
  *
- * It works on blocks of SEARCH_BX x SEARCH_BY x SEARCH_BZ cells (about 16
+ * It works on blocks of SEARCH_BX x SEARCH_BY x SEARCH_BZ cells (about 64
  * particles in a fluid at cells of h/2), whose particles share their
  * candidates: the runs of cells around the block (x fastest: one row of
  * cells along x is one stretch of table rows) are gathered once, in cell
@@ -26,11 +26,15 @@
 #include <stdlib.h>
 #include <string.h>
 
-#ifndef SEARCH_BX
+/* 4 x 2 x 8 cells: of the shapes tried (4x2x2 before; 2x1x8, 2x2x4, 4x1x4,
+ * 4x1x8, 8x2x2, 8x1x4, 4x2x4, 4x1x16, 4x2x16, 4x4x8), the fewest
+ * instructions in both a dense block and the sparse pour: deeper blocks
+ * share each row of cells' lookups and gather among more particles, while a
+ * particle's stretch (its own z layers) stays 5 x 6 x 8 cells (README,
+ * Measurements) */
 #define SEARCH_BX 4
 #define SEARCH_BY 2
-#define SEARCH_BZ 2
-#endif
+#define SEARCH_BZ 8
 /* the most runs around a block and the most z layers searched for it */
 #define SEARCH_RUNS ((2 * SPH_VERLET_CELLS + SEARCH_BY) * (2 * SPH_VERLET_CELLS + SEARCH_BZ))
 #define SEARCH_LAYERS (2 * SPH_VERLET_CELLS + SEARCH_BZ)
@@ -338,7 +342,7 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
 #pragma omp parallel num_threads(threads) reduction(&& : ok)
 	{
 		search_buf fb = {0}, bb = {0};
-#pragma omp for schedule(dynamic, 8)
+#pragma omp for schedule(dynamic, 2) /* 128 cells a chunk, as with blocks of 16 in chunks of 8 */
 		for (long k = 0; k < blocks; ++k)
 			ok = ok && block(&c, ids[k], &fb, &bb);
 		free(fb.block);
