@@ -125,10 +125,9 @@ static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br)
 				continue;
 			const int x0 = br->x0 >= ext ? br->x0 - ext : 0, x1 = br->x1 < g->gx - ext ? br->x1 + ext : g->gx - 1;
 			const size_t row = (size_t)zz * (size_t)g->gy + (size_t)yy;
-			const uint32_t fb = sph_cell_start(g, &g->fluid_start, row, x0),
-						   fe = sph_cell_start(g, &g->fluid_start, row, x1 + 1),
-						   bb = sph_cell_start(g, &g->bound_start, row, x0),
-						   be = sph_cell_start(g, &g->bound_start, row, x1 + 1);
+			uint32_t fb, fe, bb, be;
+			sph_cell_start2(g, &g->fluid_start, row, x0, x1 + 1, &fb, &fe);
+			sph_cell_start2(g, &g->bound_start, row, x0, x1 + 1, &bb, &be);
 			if (fb == fe && bb == be)
 				continue; /* nothing in it, and so none of the block's own (most rows around a jet's blocks) */
 			cell_run *r = &br->run[br->count++];
@@ -137,8 +136,9 @@ static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br)
 			r->bound_begin = bb;
 			r->bound_end = be;
 			const bool own = ey == 0 && ez == 0;
-			r->own_begin = own ? sph_cell_start(g, &g->fluid_start, row, br->x0) : 0;
-			r->own_end = own ? sph_cell_start(g, &g->fluid_start, row, br->x1 + 1) : 0;
+			r->own_begin = r->own_end = 0;
+			if (own)
+				sph_cell_start2(g, &g->fluid_start, row, br->x0, br->x1 + 1, &r->own_begin, &r->own_end);
 			r->own_row = own ? (uint32_t)((yy - br->y0) + SEARCH_BY * (zz - br->z0)) : 0;
 			r->layer = layer;
 			r->fluid_at = br->nf;
@@ -211,10 +211,25 @@ static void block_gather(const search_ctx *c, const block_runs *br, search_buf *
 
 /* ---- the kernel (also compiled as the AVX2 variant) ---- */
 
+/* One group of eight candidates from q: those with r2max - r^2 > 0 (and,
+ * tail, among the first left) packed to hit and dv; returns how many. */
+static inline uint32_t hit_group(const float *bx, const float *by, const float *bz, const uint32_t *bj, uint32_t q,
+                                 sf8 vx, sf8 vy, sf8 vz, sf8 vr2, bool tail, uint32_t left, float *dv, uint32_t *hit)
+{
+	const sf8 rx = sf8_sub(vx, sf8_load(bx + q)), ry = sf8_sub(vy, sf8_load(by + q)),
+			  rz = sf8_sub(vz, sf8_load(bz + q));
+	const sf8 d = sf8_sub(vr2, sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz)));
+	sf8 in = sf8_gt(d, sf8_zero());
+	if (tail)
+		in = sf8_and(in, sf8_lanes_below(left));
+	return sf8_pack(in, d, bj + q, dv, hit);
+}
+
 /* The candidates b[q0..q1) with r2max - r^2 > 0, in order, into b->hit and
- * b->d; returns how many. The last group reads past q1 (into the padding)
- * and is masked to q1. The arrays are held in locals: sf8_pack's stores
- * may alias anything, and would reload them from b every group. */
+ * b->d; returns how many. The whole groups first, then the last one, which
+ * reads past q1 (into the padding) and is masked to q1. The arrays are held
+ * in locals: sf8_pack's stores may alias anything, and would reload them
+ * from b every group. */
 __attribute__((noinline)) static uint32_t hits(const search_buf *b, uint32_t q0, uint32_t q1, float xi, float yi,
                                                float zi, float r2max)
 {
@@ -222,19 +237,19 @@ __attribute__((noinline)) static uint32_t hits(const search_buf *b, uint32_t q0,
 	const uint32_t *bj = b->j;
 	uint32_t *hit = b->hit;
 	float *dv = b->d;
-	const sf8 vx = sf8_set1(xi), vy = sf8_set1(yi), vz = sf8_set1(zi), vr2 = sf8_set1(r2max), zero = sf8_zero();
+	const sf8 vx = sf8_set1(xi), vy = sf8_set1(yi), vz = sf8_set1(zi), vr2 = sf8_set1(r2max);
 	/* the output pointers advance, no count beside them: one register
 	 * fewer, and the loop keeps every array in a register */
-	for (uint32_t q = q0; q < q1; q += 8) {
-		const sf8 rx = sf8_sub(vx, sf8_load(bx + q)), ry = sf8_sub(vy, sf8_load(by + q)),
-				  rz = sf8_sub(vz, sf8_load(bz + q));
-		const sf8 d = sf8_sub(vr2, sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz)));
-		sf8 in = sf8_gt(d, zero);
-		if (q1 - q < 8)
-			in = sf8_and(in, sf8_lanes_below(q1 - q));
-		const uint32_t k = sf8_pack(in, d, bj + q, dv, hit);
+	const uint32_t whole = q0 + ((q1 - q0) & ~7u);
+	uint32_t q = q0;
+	for (; q < whole; q += 8) {
+		const uint32_t k = hit_group(bx, by, bz, bj, q, vx, vy, vz, vr2, false, 8, dv, hit);
 		hit += k;
 		dv += k;
+	}
+	if (q < q1) {
+		const uint32_t k = hit_group(bx, by, bz, bj, q, vx, vy, vz, vr2, true, q1 - q, dv, hit);
+		hit += k;
 	}
 	return (uint32_t)(hit - b->hit);
 }
