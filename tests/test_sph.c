@@ -1421,7 +1421,8 @@ static void add_verlet_check(eddy_world *w, verlet_check *vc)
 	add_check(w, "verlet_check", reads, 5, verlet_check_step, vc);
 }
 
-static void verlet_lists_match_brute_force(void)
+/* One run of verlet_lists_match_brute_force; returns its state hash. */
+static uint64_t verlet_run_brute_force(const char *what)
 {
 	eddy_world_def d = eddy_default_world_def();
 	d.bounds_max = (eddy_vec3){0.3f, 0.3f, 0.3f};
@@ -1461,12 +1462,39 @@ static void verlet_lists_match_brute_force(void)
 			CHECK(eddy_world_add_particles(w, 2, p, NULL) == EDDY_OK);
 		}
 	}
-	printf("    %d steps: %d neighbour counts differ from all pairs, worst density error %.1e\n", vc.steps,
+	printf("    %s, %d steps: %d neighbour counts differ from all pairs, worst density error %.1e\n", what, vc.steps,
 	       vc.count_mismatch, vc.worst_rel);
 	CHECK(vc.steps > 100);
 	CHECK(vc.count_mismatch == 0);
 	CHECK(vc.worst_rel < 1e-5);
+	const uint64_t hash = eddy_world_state_hash(w);
 	eddy_destroy_world(w);
+	return hash;
+}
+
+/* The same run with the Verlet list and without it (EDDY_SPH_VERLET=0: the
+ * grid search at h every step, writing the exact lists itself): both must
+ * match all pairs, and give the same bits. */
+static void verlet_lists_match_brute_force(void)
+{
+	const char *had = getenv("EDDY_SPH_VERLET");
+	char *saved = had ? strdup(had) : NULL;
+	uint64_t hash[2];
+	for (int mode = 0; mode < 2; ++mode) {
+		if (mode == 0)
+			unsetenv("EDDY_SPH_VERLET");
+		else
+			setenv("EDDY_SPH_VERLET", "0", 1);
+		hash[mode] = verlet_run_brute_force(mode == 0 ? "Verlet list" : "search at h");
+	}
+	printf("    state hash %016llx (Verlet list), %016llx (search at h)\n", (unsigned long long)hash[0],
+	       (unsigned long long)hash[1]);
+	CHECK(hash[0] == hash[1]);
+	if (saved)
+		setenv("EDDY_SPH_VERLET", saved, 1);
+	else
+		unsetenv("EDDY_SPH_VERLET");
+	free(saved);
 }
 
 /* The neighbour lists take only what they hold (src/sph/neighbors.c): their

@@ -327,6 +327,14 @@ static eddy_status fill_lists(eddy_world *w, sph_shared *sh, const float *p4, bo
 	}
 }
 
+/* EDDY_SPH_VERLET=0, a measuring switch (README, "Scale"): no Verlet list,
+ * the search at h every step, and no Verlet per-row arrays allocated. */
+static bool verlet_off(void)
+{
+	const char *e = getenv("EDDY_SPH_VERLET");
+	return e && strcmp(e, "0") == 0;
+}
+
 /* A new Verlet list: search (with a skin) and remember the positions, to
  * size the next skin and to test the displacements against. */
 static eddy_status verlet_rebuild(eddy_world *w, sph_shared *sh, const row_pass *rp, int threads)
@@ -344,23 +352,26 @@ static eddy_status verlet_rebuild(eddy_world *w, sph_shared *sh, const row_pass 
 	 * then the search is at h until the motion per step, seen against the
 	 * last search, would let a skin last */
 	const bool count_changed = v->n != 0 && v->n != n;
+	const bool off = verlet_off();
 	const bool emitting = count_changed && v->count_changed && v->age <= 1;
 	const float step_move = rp->verlet ? sqrtf(rp->moved2) / (float)v->age : 0.0f;
 	const bool fast = rp->verlet && step_move * SPH_SKIN_MIN_LIFE > 0.5f * SPH_SKIN * sh->h;
 	const float sized = 2.0f * SPH_SKIN_LIFE * step_move / sh->h;
 	v->count_changed = count_changed;
-	v->skin = emitting || fast ? 0.0f : !rp->verlet ? SPH_SKIN : fminf(SPH_SKIN, fmaxf(SPH_SKIN_MIN, sized));
+	v->skin = off || emitting || fast ? 0.0f : !rp->verlet ? SPH_SKIN : fminf(SPH_SKIN, fmaxf(SPH_SKIN_MIN, sized));
 	if (v->skin > 0 && (st = fill_lists(w, sh, rp->p4, true, threads)) != EDDY_OK)
 		return st;
+	v->n = n;
+	v->boundary_sig = nb->bnd.sig;
+	v->rows_moved = false;
+	v->age = 0;
+	if (off) /* no Verlet per-row arrays */
+		return EDDY_OK;
 	memcpy(v->x, eddy__col(w, COL_X_), n * sizeof *v->x);
 	memcpy(v->y, eddy__col(w, COL_Y_), n * sizeof *v->y);
 	memcpy(v->z, eddy__col(w, COL_Z_), n * sizeof *v->z);
 	for (size_t i = 0; i < n; ++i)
 		v->slot_of[i] = v->row_of[i] = (uint32_t)i;
-	v->n = n;
-	v->boundary_sig = nb->bnd.sig;
-	v->rows_moved = false;
-	v->age = 0;
 	return EDDY_OK;
 }
 
@@ -382,7 +393,8 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		v->n = 0;
 		return EDDY_OK;
 	}
-	row_pass rp = {.verlet = v->n == n && v->boundary_sig == nb->bnd.sig};
+	const bool off = verlet_off();
+	row_pass rp = {.verlet = !off && v->n == n && v->boundary_sig == nb->bnd.sig};
 	rp.p4 = eddy__arena_alloc(&w->arena, 4 * n * sizeof *rp.p4);
 	if (!rp.p4)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", n);
@@ -392,7 +404,8 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 	                   (void **)&nb->ksum,   (void **)&v->first,  (void **)&v->count,   (void **)&v->bfirst,
 	                   (void **)&v->bcount,  (void **)&v->x,      (void **)&v->y,       (void **)&v->z,
 	                   (void **)&v->slot_of, (void **)&v->row_of};
-	if (!sph_grow_block(&nb->rows, &nb->rows_alloc, n, arrays, (int)(sizeof arrays / sizeof arrays[0])))
+	const int narrays = off ? 5 : (int)(sizeof arrays / sizeof arrays[0]); /* off: the exact lists' only */
+	if (!sph_grow_block(&nb->rows, &nb->rows_alloc, n, arrays, narrays))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
 	/* key, order and scratch in per-row arrays of the last step's exact
 	 * lists: this step's are written after their last use (the cell

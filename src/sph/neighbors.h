@@ -64,6 +64,26 @@ static inline uint32_t sph_cell_start(const sph_grid *g, const sph_cell_starts *
 	return s->base[row + 1];
 }
 
+/* The first entries of cells xa <= xb of row of cells row (as
+ * sph_cell_start), in one walk of the row's runs. */
+static inline void sph_cell_start2(const sph_grid *g, const sph_cell_starts *s, size_t row, int xa, int xb, uint32_t *a,
+                                   uint32_t *b)
+{
+	if (s->wide) {
+		*a = s->wide[row * (size_t)g->gx + (size_t)xa];
+		*b = s->wide[row * (size_t)g->gx + (size_t)xb];
+		return;
+	}
+	const uint32_t ua = (uint32_t)xa, ub = (uint32_t)xb, e = s->run_at[row + 1], end = s->base[row + 1];
+	uint32_t k = s->run_at[row];
+	while (k < e && ua >= s->run[k].x1)
+		++k;
+	*a = k < e ? s->base[row] + s->off[s->run[k].at + (ua > s->run[k].x0 ? ua - s->run[k].x0 : 0)] : end;
+	while (k < e && ub >= s->run[k].x1)
+		++k;
+	*b = k < e ? s->base[row] + s->off[s->run[k].at + (ub > s->run[k].x0 ? ub - s->run[k].x0 : 0)] : end;
+}
+
 static inline int sph_clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
 
 /* The cell of a point; points outside the grid go to its border cells. */
@@ -95,7 +115,7 @@ eddy_status sph_boundary_divergence(eddy_world *w, sph_shared *sh, int threads);
 
 /* ---- sph_lists (sph.h): room for one list at a time ---- */
 #define SPH_LIST_CHUNK 4096 /* entries a cursor takes from the array at a time */
-#define SPH_LIST_CURSORS 4  /* the most cursors a thread uses on one array (search.c's SEARCH_ROWS) */
+#define SPH_LIST_CURSORS 16 /* the most cursors a thread uses on one array (search.c's SEARCH_ROWS) */
 
 /* One thread's part of a pass over a sph_lists. */
 typedef struct sph_cursor {
@@ -215,11 +235,17 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
  * sums this way, so they give the same bits. */
 static inline float sph_cube_sum(const float *d, uint32_t cnt)
 {
-	float a[4] = {0, 0, 0, 0};
+	/* the four partial sums in lanes 0-3 (a quad loaded into both halves;
+	 * the upper one is not read): the same operations per lane as four
+	 * scalar sums */
+	sf8 acc = sf8_zero();
 	uint32_t q = 0;
-	for (; q + 4 <= cnt; q += 4)
-		for (int k = 0; k < 4; ++k)
-			a[k] += d[q + k] * d[q + k] * d[q + k];
+	for (; q + 4 <= cnt; q += 4) {
+		const sf8 v = sf8_load_quad2(d + q);
+		acc = sf8_add(acc, sf8_mul(sf8_mul(v, v), v));
+	}
+	float a[8];
+	sf8_store(a, acc);
 	float s = (a[0] + a[1]) + (a[2] + a[3]);
 	for (; q < cnt; ++q)
 		s += d[q] * d[q] * d[q];

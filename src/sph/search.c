@@ -3,7 +3,7 @@
  * fluid-boundary, into the Verlet list or (exact mode) straight into the
  * exact lists and kernel sums.
  *
- * It works on blocks of SEARCH_BX x SEARCH_BY x SEARCH_BZ cells (about 16
+ * It works on blocks of SEARCH_BX x SEARCH_BY x SEARCH_BZ cells (about 64
  * particles in a fluid at cells of h/2), whose particles share their
  * candidates: the runs of cells around the block (x fastest: one row of
  * cells along x is one stretch of table rows) are gathered once, in cell
@@ -26,9 +26,15 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* 4 x 2 x 8 cells: of the shapes tried (4x2x2 before; 2x1x8, 2x2x4, 4x1x4,
+ * 4x1x8, 8x2x2, 8x1x4, 4x2x4, 4x1x16, 4x2x16, 4x4x8), the fewest
+ * instructions in both a dense block and the sparse pour: deeper blocks
+ * share each row of cells' lookups and gather among more particles, while a
+ * particle's stretch (its own z layers) stays 5 x 6 x 8 cells (README,
+ * Measurements) */
 #define SEARCH_BX 4
 #define SEARCH_BY 2
-#define SEARCH_BZ 2
+#define SEARCH_BZ 8
 /* the most runs around a block and the most z layers searched for it */
 #define SEARCH_RUNS ((2 * SPH_VERLET_CELLS + SEARCH_BY) * (2 * SPH_VERLET_CELLS + SEARCH_BZ))
 #define SEARCH_LAYERS (2 * SPH_VERLET_CELLS + SEARCH_BZ)
@@ -39,6 +45,7 @@ typedef struct search_ctx {
 	const sph_neighbors *nb;
 	const sph_search_out *out;
 	const float *x, *y, *z;
+	uint32_t n;                  /* fluid rows */
 	const uint32_t *bound_order; /* the boundary particles in cell order (NULL: they are stored in it) */
 	int R;                       /* cells searched beyond the block's on each side */
 	/* reach[a][b]: the cells along x a run at cell offsets (a, b) in (y, z)
@@ -118,10 +125,9 @@ static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br)
 				continue;
 			const int x0 = br->x0 >= ext ? br->x0 - ext : 0, x1 = br->x1 < g->gx - ext ? br->x1 + ext : g->gx - 1;
 			const size_t row = (size_t)zz * (size_t)g->gy + (size_t)yy;
-			const uint32_t fb = sph_cell_start(g, &g->fluid_start, row, x0),
-						   fe = sph_cell_start(g, &g->fluid_start, row, x1 + 1),
-						   bb = sph_cell_start(g, &g->bound_start, row, x0),
-						   be = sph_cell_start(g, &g->bound_start, row, x1 + 1);
+			uint32_t fb, fe, bb, be;
+			sph_cell_start2(g, &g->fluid_start, row, x0, x1 + 1, &fb, &fe);
+			sph_cell_start2(g, &g->bound_start, row, x0, x1 + 1, &bb, &be);
 			if (fb == fe && bb == be)
 				continue; /* nothing in it, and so none of the block's own (most rows around a jet's blocks) */
 			cell_run *r = &br->run[br->count++];
@@ -130,8 +136,9 @@ static void block_find_runs(const search_ctx *c, uint32_t id, block_runs *br)
 			r->bound_begin = bb;
 			r->bound_end = be;
 			const bool own = ey == 0 && ez == 0;
-			r->own_begin = own ? sph_cell_start(g, &g->fluid_start, row, br->x0) : 0;
-			r->own_end = own ? sph_cell_start(g, &g->fluid_start, row, br->x1 + 1) : 0;
+			r->own_begin = r->own_end = 0;
+			if (own)
+				sph_cell_start2(g, &g->fluid_start, row, br->x0, br->x1 + 1, &r->own_begin, &r->own_end);
 			r->own_row = own ? (uint32_t)((yy - br->y0) + SEARCH_BY * (zz - br->z0)) : 0;
 			r->layer = layer;
 			r->fluid_at = br->nf;
@@ -156,6 +163,34 @@ static uint32_t gather_run(search_buf *b, uint32_t at, const float *x, const flo
 	return at;
 }
 
+/* Fluid rows [begin, end) (stored in cell order: one stretch of the
+ * columns) into b from at; returns the end. Eight at a time while that
+ * stays inside the table's rows (n): up to seven entries past the end are
+ * written, into room the next run or the FAR padding overwrites. */
+static uint32_t gather_fluid(search_buf *b, uint32_t at, const float *x, const float *y, const float *z, uint32_t begin,
+                             uint32_t end, uint32_t n)
+{
+	float *bx = b->x + at, *by = b->y + at, *bz = b->z + at;
+	uint32_t *bj = b->j + at;
+	static const uint16_t iota[8] = {0, 1, 2, 3, 4, 5, 6, 7};
+	const uint32_t len = end - begin, len8 = (len + 7) & ~7u;
+	if (len >= 3 && begin + len8 <= n) /* shorter: the copies cost less than a group */
+		for (uint32_t q = 0; q < len8; q += 8) {
+			sf8_store(bx + q, sf8_load(x + begin + q));
+			sf8_store(by + q, sf8_load(y + begin + q));
+			sf8_store(bz + q, sf8_load(z + begin + q));
+			simd_widen16_add(begin + q, iota, bj + q);
+		}
+	else
+		for (uint32_t q = 0; q < len; ++q) {
+			bx[q] = x[begin + q];
+			by[q] = y[begin + q];
+			bz[q] = z[begin + q];
+			bj[q] = begin + q;
+		}
+	return at + len;
+}
+
 /* The runs' candidates into the buffers, then eight FAR points. */
 static void block_gather(const search_ctx *c, const block_runs *br, search_buf *fb, search_buf *bb)
 {
@@ -163,7 +198,7 @@ static void block_gather(const search_ctx *c, const block_runs *br, search_buf *
 	uint32_t nf = 0, nbd = 0;
 	for (int r = 0; r < br->count; ++r) {
 		const cell_run *run = &br->run[r];
-		nf = gather_run(fb, nf, c->x, c->y, c->z, NULL, run->fluid_begin, run->fluid_end);
+		nf = gather_fluid(fb, nf, c->x, c->y, c->z, run->fluid_begin, run->fluid_end, c->n);
 		nbd = gather_run(bb, nbd, nb->bx, nb->by, nb->bz, c->bound_order, run->bound_begin, run->bound_end);
 	}
 	for (uint32_t q = 0; q < 8; ++q) {
@@ -176,10 +211,25 @@ static void block_gather(const search_ctx *c, const block_runs *br, search_buf *
 
 /* ---- the kernel (also compiled as the AVX2 variant) ---- */
 
+/* One group of eight candidates from q: those with r2max - r^2 > 0 (and,
+ * tail, among the first left) packed to hit and dv; returns how many. */
+static inline uint32_t hit_group(const float *bx, const float *by, const float *bz, const uint32_t *bj, uint32_t q,
+                                 sf8 vx, sf8 vy, sf8 vz, sf8 vr2, bool tail, uint32_t left, float *dv, uint32_t *hit)
+{
+	const sf8 rx = sf8_sub(vx, sf8_load(bx + q)), ry = sf8_sub(vy, sf8_load(by + q)),
+			  rz = sf8_sub(vz, sf8_load(bz + q));
+	const sf8 d = sf8_sub(vr2, sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz)));
+	sf8 in = sf8_gt(d, sf8_zero());
+	if (tail)
+		in = sf8_and(in, sf8_lanes_below(left));
+	return sf8_pack(in, d, bj + q, dv, hit);
+}
+
 /* The candidates b[q0..q1) with r2max - r^2 > 0, in order, into b->hit and
- * b->d; returns how many. The last group reads past q1 (into the padding)
- * and is masked to q1. The arrays are held in locals: sf8_pack's stores
- * may alias anything, and would reload them from b every group. */
+ * b->d; returns how many. The whole groups first, then the last one, which
+ * reads past q1 (into the padding) and is masked to q1. The arrays are held
+ * in locals: sf8_pack's stores may alias anything, and would reload them
+ * from b every group. */
 __attribute__((noinline)) static uint32_t hits(const search_buf *b, uint32_t q0, uint32_t q1, float xi, float yi,
                                                float zi, float r2max)
 {
@@ -187,19 +237,19 @@ __attribute__((noinline)) static uint32_t hits(const search_buf *b, uint32_t q0,
 	const uint32_t *bj = b->j;
 	uint32_t *hit = b->hit;
 	float *dv = b->d;
-	const sf8 vx = sf8_set1(xi), vy = sf8_set1(yi), vz = sf8_set1(zi), vr2 = sf8_set1(r2max), zero = sf8_zero();
+	const sf8 vx = sf8_set1(xi), vy = sf8_set1(yi), vz = sf8_set1(zi), vr2 = sf8_set1(r2max);
 	/* the output pointers advance, no count beside them: one register
 	 * fewer, and the loop keeps every array in a register */
-	for (uint32_t q = q0; q < q1; q += 8) {
-		const sf8 rx = sf8_sub(vx, sf8_load(bx + q)), ry = sf8_sub(vy, sf8_load(by + q)),
-				  rz = sf8_sub(vz, sf8_load(bz + q));
-		const sf8 d = sf8_sub(vr2, sf8_add(sf8_add(sf8_mul(rx, rx), sf8_mul(ry, ry)), sf8_mul(rz, rz)));
-		sf8 in = sf8_gt(d, zero);
-		if (q1 - q < 8)
-			in = sf8_and(in, sf8_lanes_below(q1 - q));
-		const uint32_t k = sf8_pack(in, d, bj + q, dv, hit);
+	const uint32_t whole = q0 + ((q1 - q0) & ~7u);
+	uint32_t q = q0;
+	for (; q < whole; q += 8) {
+		const uint32_t k = hit_group(bx, by, bz, bj, q, vx, vy, vz, vr2, false, 8, dv, hit);
 		hit += k;
 		dv += k;
+	}
+	if (q < q1) {
+		const uint32_t k = hit_group(bx, by, bz, bj, q, vx, vy, vz, vr2, true, q1 - q, dv, hit);
+		hit += k;
 	}
 	return (uint32_t)(hit - b->hit);
 }
@@ -262,6 +312,7 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
 {
 	search_ctx c = {
 		.nb = nb, .out = out, .bound_order = nb->bnd.order, .R = out->exact ? SPH_CELLS_PER_H : SPH_VERLET_CELLS};
+	c.n = (uint32_t)w->n;
 	c.x = eddy__col(w, COL_X_), c.y = eddy__col(w, COL_Y_), c.z = eddy__col(w, COL_Z_);
 	c.blocks_x = (nb->grid.gx + SEARCH_BX - 1) / SEARCH_BX;
 	c.blocks_y = (nb->grid.gy + SEARCH_BY - 1) / SEARCH_BY;
@@ -306,7 +357,7 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
 #pragma omp parallel num_threads(threads) reduction(&& : ok)
 	{
 		search_buf fb = {0}, bb = {0};
-#pragma omp for schedule(dynamic, 8)
+#pragma omp for schedule(dynamic, 2) /* 128 cells a chunk, as with blocks of 16 in chunks of 8 */
 		for (long k = 0; k < blocks; ++k)
 			ok = ok && block(&c, ids[k], &fb, &bb);
 		free(fb.block);
