@@ -706,7 +706,7 @@ eddy_sph_dfsph_def eddy_default_sph_dfsph_def(void)
 	                            .divergence_solver = true,
 	                            .max_divergence_error = 5e-5f,
 	                            .max_divergence_iterations = 1000,
-	                            .coarse_grid = true,
+	                            .coarse_grid = false,
 	                            .shift = 0.02f,
 	                            .hydrostatic_start = false};
 }
