@@ -74,8 +74,10 @@
 #define NU_COARSEST 16
 #define COARSEST_CELLS 512
 #define MAX_LEVELS 24
-/* A level's loops use the threads from this many cells: a sweep of 2^15
- * cells updates 2^14, some 0.1 ms, long enough that a join is small beside it. */
+/* A level's loops use the threads from this many cells (a sweep then
+ * updates 2^14 or more): below it, the few coarse levels' loops are short
+ * beside a join (not measured separately; at 1M only level 0, some 130k
+ * cells, and level 1 reach it). */
 #define PAR_CELLS (1 << 15)
 /* The rows' sums are taken in chunks of this many rows (sph_dfsph's
  * DFSPH_SUM_CHUNK): a fluid of one chunk gets the plain serial sum's bits. */
