@@ -681,8 +681,9 @@ typedef struct eddy_sph_dfsph_def {
 	bool coarse_grid;              /* with divergence_solver, in water deeper than 5 kernel
 	                                  radii: precondition the conjugate gradients with a
 	                                  multigrid cycle on a grid of h-sized cells too, for
-	                                  fewer iterations (off by default: Jacobi alone;
-	                                  same tolerances either way) */
+	                                  fewer iterations (same tolerances either way; off by
+	                                  default: Jacobi alone, as with it still columns of
+	                                  20-40 layers settle with faster particles, README) */
 	float shift;                   /* 1, particle shifting: each step a particle away from
 	                                  the free surface and the walls moves by -shift h^2
 	                                  grad C (C the particle concentration, h the kernel

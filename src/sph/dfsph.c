@@ -909,7 +909,7 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	bool more = cg_more(wk, *residual, tol, btol, berr);
 	/* the levels live until the call returns: each call rebuilds them for its active set */
 	const eddy_arena_mark mark = wk->coarse ? eddy__arena_mark(wk->coarse) : (eddy_arena_mark){0};
-	dfsph_coarse *cg = wk->coarse && more ? eddy__dfsph_coarse_build(wk->coarse, wk->sh, n, wk->mask) : NULL;
+	dfsph_coarse *cg = wk->coarse && more ? eddy__dfsph_coarse_build(wk->coarse, wk->sh, n, wk->mask, nt) : NULL;
 	if (cg && !(wk->coarse_scale > 0)) { /* s = y . (A/dt) y / e . L e on y = p (dfsph_coarse.h) */
 		const double ele = eddy__dfsph_coarse_unit(cg, wk->r, wk->p);
 		operator_product(wk);

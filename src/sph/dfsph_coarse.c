@@ -47,10 +47,18 @@
  * leaves more of the smooth error to Jacobi. That mismatch is also why the
  * count still grows slowly with the depth (tests/test_dfsph_coarse.c).
  *
- * Everything here is serial, in row and cell order: the same bits for any
- * thread count. Its cost per iteration: one pass over the rows and one
- * V-cycle over n/8 cells, next to the operator product's two passes over
- * some 30 neighbours per row.
+ * Threads: every cell's and every row's result is computed by one loop
+ * iteration from values no other iteration of that loop writes (a
+ * red-black sweep's cells read only the other colour; the restriction and
+ * the Galerkin product gather each aggregate's children in cell order, P^T r
+ * each cell's rows in row order, the order a serial scatter adds them in),
+ * and the sums are taken per row of cells or per SUM_CHUNK rows, then in
+ * order: the same bits for any thread count. The caller's threads run the
+ * rows' loops (it passes 1 below its own threshold) and the loops of a
+ * level of PAR_CELLS cells or more; smaller levels run serially, where a
+ * join would cost more than the sweep. Its cost per iteration: one pass
+ * over the rows and one V-cycle over n/8 cells, next to the operator
+ * product's two passes over some 30 neighbours per row.
  *
  * Sources: McAdams, Sifakis & Teran, SCA 2010 (the V-cycle as a CG
  * preconditioner); Nicolaides, SINUM 1987, and Tang et al., J. Sci. Comput.
@@ -66,6 +74,14 @@
 #define NU_COARSEST 16
 #define COARSEST_CELLS 512
 #define MAX_LEVELS 24
+/* A level's loops use the threads from this many cells (a sweep then
+ * updates 2^14 or more): below it, the few coarse levels' loops are short
+ * beside a join (not measured separately; at 1M only level 0, some 130k
+ * cells, and level 1 reach it). */
+#define PAR_CELLS (1 << 15)
+/* The rows' sums are taken in chunks of this many rows (sph_dfsph's
+ * DFSPH_SUM_CHUNK): a fluid of one chunk gets the plain serial sum's bits. */
+#define SUM_CHUNK 16384
 
 typedef struct level {
 	int nx, ny, nz;
@@ -79,8 +95,10 @@ typedef struct level {
 
 struct dfsph_coarse {
 	long n;
-	const uint8_t *mask;
-	uint32_t *cell; /* each row's level-0 cell, UINT32_MAX off the active set */
+	int threads;            /* for the rows' loops and the levels of PAR_CELLS cells or more */
+	uint32_t *cell;         /* each row's level-0 cell, UINT32_MAX off the active set */
+	uint32_t *first, *rows; /* level 0's cell c holds rows[first[c] .. first[c + 1]), in row order */
+	double *part;           /* partial sums: one per row of cells of level 0 or per SUM_CHUNK rows */
 	int nlev;
 	level L[MAX_LEVELS];
 	double inv_s; /* 1 / s; 0: the coarse part is off */
@@ -126,9 +144,16 @@ static inline float neighbours(const level *L, const float *x, size_t c, int i, 
 	return s;
 }
 
-/* One Gauss-Seidel sweep over the cells of colour col ((i + j + k) % 2). */
-static void sweep(level *L, int col)
+/* The threads for a level's loops: cs->threads (the caller's, 1 below its
+ * row threshold) on a level of PAR_CELLS cells or more, else 1. */
+static int level_threads(const dfsph_coarse *cs, const level *L) { return L->cells >= PAR_CELLS ? cs->threads : 1; }
+
+/* One Gauss-Seidel sweep over the cells of colour col ((i + j + k) % 2): a
+ * cell reads only the other colour's, so the rows of cells may run in any
+ * order, on any thread. */
+static void sweep(level *L, int col, int nt)
 {
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) collapse(2)
 	for (int k = 0; k < L->nz; ++k)
 		for (int j = 0; j < L->ny; ++j) {
 			const size_t row = ((size_t)k * L->ny + j) * L->nx;
@@ -140,12 +165,15 @@ static void sweep(level *L, int col)
 		}
 }
 
-/* r = b - L x, and e . L e-style products: returns x . (L x) when want. */
-static double residual(level *L, bool want)
+/* r = b - L x; with part (ny nz entries), returns x . (L x), summed per row
+ * of cells, then the rows' sums in order (the same bits for any thread
+ * count). */
+static double residual(level *L, double *part, int nt)
 {
-	double xlx = 0;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) collapse(2)
 	for (int k = 0; k < L->nz; ++k)
-		for (int j = 0; j < L->ny; ++j)
+		for (int j = 0; j < L->ny; ++j) {
+			double xlx = 0;
 			for (int i = 0; i < L->nx; ++i) {
 				const size_t c = ((size_t)k * L->ny + j) * L->nx + i;
 				if (!(L->d[c] > 0)) {
@@ -154,39 +182,60 @@ static double residual(level *L, bool want)
 				}
 				const float lx = L->d[c] * L->x[c] - neighbours(L, L->x, c, i, j, k);
 				L->r[c] = L->b[c] - lx;
-				if (want)
-					xlx += (double)L->x[c] * lx;
+				xlx += (double)L->x[c] * lx;
 			}
+			if (part)
+				part[(size_t)k * L->ny + j] = xlx;
+		}
+	double xlx = 0;
+	for (size_t q = 0; part && q < (size_t)L->ny * L->nz; ++q)
+		xlx += part[q];
 	return xlx;
 }
 
-static inline size_t parent(const level *F, const level *C, size_t c)
+/* The fine cell (i, j, k)'s aggregate on the next level C. */
+static inline size_t parent(const level *F, const level *C, int i, int j, int k)
 {
-	const size_t i = c % (size_t)F->nx, j = c / (size_t)F->nx % (size_t)F->ny, k = c / ((size_t)F->nx * F->ny);
-	return ((k / F->fz) * C->ny + j / F->fy) * C->nx + i / F->fx;
+	return ((size_t)(k / F->fz) * C->ny + j / F->fy) * C->nx + i / F->fx;
 }
 
-/* Level l + 1 from level l: half the Galerkin product with the aggregation. */
-static void build_coarse(const level *F, level *C)
+/* Loops over the children of C's cell (I, J, K) on level F in cell order
+ * (k, then j, then i), the order the fine cells' serial loop reaches them:
+ * a sum gathered over them has the bits of that loop's scatter. */
+#define FOR_CHILDREN(F, I, J, K, i, j, k)                                        \
+	for (int k = (K) * (F)->fz; k < ((K) + 1) * (F)->fz && k < (F)->nz; ++k)     \
+		for (int j = (J) * (F)->fy; j < ((J) + 1) * (F)->fy && j < (F)->ny; ++j) \
+			for (int i = (I) * (F)->fx; i < ((I) + 1) * (F)->fx && i < (F)->nx; ++i)
+
+/* Level l + 1 from level l: half the Galerkin product with the aggregation,
+ * gathered per aggregate. */
+static void build_coarse(const level *F, level *C, int nt)
 {
-	for (int k = 0; k < F->nz; ++k)
-		for (int j = 0; j < F->ny; ++j)
-			for (int i = 0; i < F->nx; ++i) {
-				const size_t c = ((size_t)k * F->ny + j) * F->nx + i;
-				if (!(F->d[c] > 0))
-					continue;
-				const size_t I = parent(F, C, c);
-				C->d[I] = 1; /* an unknown; its value below */
-				C->e[I] += 0.5f * F->e[c];
-				/* a link leaving the aggregate on the + side */
-				if (F->fx == 1 || (i & 1))
-					C->ox[I] += 0.5f * F->ox[c];
-				if (F->fy == 1 || (j & 1))
-					C->oy[I] += 0.5f * F->oy[c];
-				if (F->fz == 1 || (k & 1))
-					C->oz[I] += 0.5f * F->oz[c];
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) collapse(2)
+	for (int K = 0; K < C->nz; ++K)
+		for (int J = 0; J < C->ny; ++J)
+			for (int I = 0; I < C->nx; ++I) {
+				float d = 0, e = 0, ox = 0, oy = 0, oz = 0;
+				FOR_CHILDREN(F, I, J, K, i, j, k)
+				{
+					const size_t c = ((size_t)k * F->ny + j) * F->nx + i;
+					if (!(F->d[c] > 0))
+						continue;
+					d = 1; /* an unknown; its value below */
+					e += 0.5f * F->e[c];
+					/* a link leaving the aggregate on the + side */
+					if (F->fx == 1 || (i & 1))
+						ox += 0.5f * F->ox[c];
+					if (F->fy == 1 || (j & 1))
+						oy += 0.5f * F->oy[c];
+					if (F->fz == 1 || (k & 1))
+						oz += 0.5f * F->oz[c];
+				}
+				const size_t c = ((size_t)K * C->ny + J) * C->nx + I;
+				C->d[c] = d, C->e[c] = e, C->ox[c] = ox, C->oy[c] = oy, C->oz[c] = oz;
 			}
 	const size_t sy = (size_t)C->nx, sz = (size_t)C->nx * C->ny;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) collapse(2)
 	for (int k = 0; k < C->nz; ++k)
 		for (int j = 0; j < C->ny; ++j)
 			for (int i = 0; i < C->nx; ++i) {
@@ -201,32 +250,59 @@ static void build_coarse(const level *F, level *C)
 			}
 }
 
+/* C.b = the sum of F.r over each aggregate (P0^T r, gathered). */
+static void restrict_residual(const level *F, level *C, int nt)
+{
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) collapse(2)
+	for (int K = 0; K < C->nz; ++K)
+		for (int J = 0; J < C->ny; ++J)
+			for (int I = 0; I < C->nx; ++I) {
+				float s = 0;
+				FOR_CHILDREN(F, I, J, K, i, j, k)
+				{
+					const size_t c = ((size_t)k * F->ny + j) * F->nx + i;
+					if (F->d[c] > 0)
+						s += F->r[c];
+				}
+				C->b[((size_t)K * C->ny + J) * C->nx + I] = s;
+			}
+}
+
+/* F.x += P0 C.x on F's unknowns. */
+static void prolong_correction(level *F, const level *C, int nt)
+{
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) collapse(2)
+	for (int k = 0; k < F->nz; ++k)
+		for (int j = 0; j < F->ny; ++j)
+			for (int i = 0; i < F->nx; ++i) {
+				const size_t c = ((size_t)k * F->ny + j) * F->nx + i;
+				if (F->d[c] > 0)
+					F->x[c] += C->x[parent(F, C, i, j, k)];
+			}
+}
+
 /* x = B_l b on level l (x from zero). */
 static void vcycle(dfsph_coarse *cs, int l)
 {
 	level *L = &cs->L[l];
+	const int nt = level_threads(cs, L);
 	memset(L->x, 0, L->cells * sizeof *L->x);
 	const bool last = l + 1 == cs->nlev;
 	const int nu = last ? NU_COARSEST : NU;
 	for (int s = 0; s < nu; ++s) {
-		sweep(L, 0);
-		sweep(L, 1);
+		sweep(L, 0, nt);
+		sweep(L, 1, nt);
 	}
 	if (!last) {
 		level *C = &cs->L[l + 1];
-		residual(L, false);
-		memset(C->b, 0, C->cells * sizeof *C->b);
-		for (size_t c = 0; c < L->cells; ++c)
-			if (L->d[c] > 0)
-				C->b[parent(L, C, c)] += L->r[c];
+		residual(L, NULL, nt);
+		restrict_residual(L, C, nt);
 		vcycle(cs, l + 1);
-		for (size_t c = 0; c < L->cells; ++c)
-			if (L->d[c] > 0)
-				L->x[c] += C->x[parent(L, C, c)];
+		prolong_correction(L, C, nt);
 	}
 	for (int s = 0; s < nu; ++s) {
-		sweep(L, 1);
-		sweep(L, 0);
+		sweep(L, 1, nt);
+		sweep(L, 0, nt);
 	}
 }
 
@@ -251,12 +327,12 @@ static void mark_walls(const sph_neighbors *nb, const float org[3], const int di
 /* Level 0's operator on the cells L0->d marks (d = 1 on entry, the diagonal
  * on return): unit links between unknowns, +1 per face to an empty cell (not
  * a wall's). */
-static void level0_operator(level *L0, const int dim[3], const uint8_t *solid)
+static void level0_operator(level *L0, const int dim[3], const uint8_t *solid, int nt)
 {
-	/* level 0: unit links between unknowns, +1 per face to an empty cell */
 	const size_t sy = (size_t)dim[0], sz = (size_t)dim[0] * dim[1];
-	for (int k = 1; k + 1 < dim[2]; ++k)
-		for (int j = 1; j + 1 < dim[1]; ++j)
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) collapse(2)
+	for (int k = 1; k < dim[2] - 1; ++k)
+		for (int j = 1; j < dim[1] - 1; ++j)
 			for (int i = 1; i + 1 < dim[0]; ++i) {
 				const size_t c = ((size_t)k * dim[1] + j) * dim[0] + i;
 				if (!(L0->d[c] > 0))
@@ -270,8 +346,12 @@ static void level0_operator(level *L0, const int dim[3], const uint8_t *solid)
 				L0->oz[c] = L0->d[c + sz] > 0 ? 1.0f : 0.0f;
 				L0->e[c] = e;
 			}
-	/* the diagonal once every link is known (d still marks the unknowns) */
-	for (size_t c = 0; c < L0->cells; ++c)
+	/* the diagonal once every link is known (d still marks the unknowns; a
+	 * cell's d is written only by its own iteration, its neighbours' links
+	 * only read) */
+	const long cells = (long)L0->cells;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (long c = 0; c < cells; ++c)
 		if (L0->d[c] > 0) {
 			const float s =
 				L0->e[c] + L0->ox[c] + L0->oy[c] + L0->oz[c] + L0->ox[c - 1] + L0->oy[c - sy] + L0->oz[c - sz];
@@ -279,27 +359,33 @@ static void level0_operator(level *L0, const int dim[3], const uint8_t *solid)
 		}
 }
 
-dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long n, const uint8_t *mask)
+/* The rows' chunks for the sums over them. */
+static long row_chunks(long n) { return (n + SUM_CHUNK - 1) / SUM_CHUNK; }
+
+dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long n, const uint8_t *mask, int threads)
 {
 	const float H = sh->h, inv = 1.0f / H;
-	float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+	const int nt = threads > 1 ? threads : 1;
+	/* min and max are exact: the same box for any thread count */
+	float lx = INFINITY, ly = INFINITY, lz = INFINITY, hx = -INFINITY, hy = -INFINITY, hz = -INFINITY;
 	long active = 0;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(+ : active) \
+	reduction(min : lx, ly, lz) reduction(max : hx, hy, hz)
 	for (long i = 0; i < n; ++i) {
 		if (!(mask[i] > 0))
 			continue;
 		++active;
-		for (int d = 0; d < 3; ++d) {
-			const float x = sh->pq[4 * i + d];
-			lo[d] = x < lo[d] ? x : lo[d];
-			hi[d] = x > hi[d] ? x : hi[d];
-		}
+		const float *q = sh->pq + 4 * i;
+		lx = q[0] < lx ? q[0] : lx, ly = q[1] < ly ? q[1] : ly, lz = q[2] < lz ? q[2] : lz;
+		hx = q[0] > hx ? q[0] : hx, hy = q[1] > hy ? q[1] : hy, hz = q[2] > hz ? q[2] : hz;
 	}
 	if (active == 0)
 		return NULL;
+	const float lo[3] = {lx, ly, lz}, hi[3] = {hx, hy, hz};
 	dfsph_coarse *cs = eddy__arena_alloc(a, sizeof *cs);
 	if (!cs)
 		return NULL;
-	*cs = (dfsph_coarse){.n = n, .mask = mask};
+	*cs = (dfsph_coarse){.n = n, .threads = nt};
 	/* one cell of margin around the active rows: their cells' neighbours */
 	int dim[3];
 	float org[3];
@@ -311,12 +397,21 @@ dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long
 		dim[d] = (int)cells;
 	}
 	level *L0 = &cs->L[0];
+	if (!level_alloc(a, L0, dim[0], dim[1], dim[2]) || L0->cells >= UINT32_MAX)
+		return NULL;
+	const size_t nparts =
+		(size_t)dim[1] * dim[2] > (size_t)row_chunks(n) ? (size_t)dim[1] * dim[2] : (size_t)row_chunks(n);
 	cs->cell = eddy__arena_alloc(a, (size_t)n * sizeof *cs->cell);
-	uint8_t *solid = NULL;
-	if (!cs->cell || !level_alloc(a, L0, dim[0], dim[1], dim[2]) || !(solid = eddy__arena_alloc(a, L0->cells)))
+	cs->rows = eddy__arena_alloc(a, (size_t)active * sizeof *cs->rows);
+	cs->first = eddy__arena_alloc(a, (L0->cells + 1) * sizeof *cs->first);
+	cs->part = eddy__arena_alloc(a, nparts * sizeof *cs->part);
+	uint8_t *solid = eddy__arena_alloc(a, L0->cells);
+	if (!cs->cell || !cs->rows || !cs->first || !cs->part || !solid)
 		return NULL;
 	memset(solid, 0, L0->cells);
-	/* the cells of the active rows hold the unknowns (d = 1 marks them here) */
+	memset(cs->first, 0, (L0->cells + 1) * sizeof *cs->first);
+	/* each active row's cell (clamped off the margin) */
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		cs->cell[i] = UINT32_MAX;
 		if (!(mask[i] > 0))
@@ -326,12 +421,25 @@ dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long
 			const int q = (int)((sh->pq[4 * i + d] - org[d]) * inv);
 			ix[d] = q < 1 ? 1 : q > dim[d] - 2 ? dim[d] - 2 : q;
 		}
-		const size_t c = ((size_t)ix[2] * dim[1] + ix[1]) * dim[0] + ix[0];
-		cs->cell[i] = (uint32_t)c;
-		L0->d[c] = 1;
+		cs->cell[i] = (uint32_t)(((size_t)ix[2] * dim[1] + ix[1]) * dim[0] + ix[0]);
 	}
+	/* the cells' lists of rows, in row order (a counting sort); the cells
+	 * holding one hold the unknowns (d = 1 marks them here) */
+	for (long i = 0; i < n; ++i)
+		if (cs->cell[i] != UINT32_MAX)
+			cs->first[cs->cell[i] + 1]++;
+	for (size_t c = 0; c < L0->cells; ++c) {
+		L0->d[c] = cs->first[c + 1] > 0 ? 1.0f : 0.0f;
+		cs->first[c + 1] += cs->first[c];
+	}
+	for (long i = 0; i < n; ++i) /* first[c] runs over c's slots, ending at its end: c + 1's start */
+		if (cs->cell[i] != UINT32_MAX)
+			cs->rows[cs->first[cs->cell[i]]++] = (uint32_t)i;
+	for (size_t c = L0->cells; c > 0; --c)
+		cs->first[c] = cs->first[c - 1];
+	cs->first[0] = 0;
 	mark_walls(&sh->nb, org, dim, inv, solid);
-	level0_operator(L0, dim, solid);
+	level0_operator(L0, dim, solid, level_threads(cs, L0));
 	cs->nlev = 1;
 	while (cs->nlev < MAX_LEVELS) {
 		level *F = &cs->L[cs->nlev - 1];
@@ -342,26 +450,32 @@ dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long
 		level *C = &cs->L[cs->nlev];
 		if (!level_alloc(a, C, (F->nx + F->fx - 1) / F->fx, (F->ny + F->fy - 1) / F->fy, (F->nz + F->fz - 1) / F->fz))
 			return NULL;
-		build_coarse(F, C);
+		build_coarse(F, C, level_threads(cs, F));
 		cs->nlev++;
 	}
 	return cs;
 }
 
-/* The level-0 right side P^T r and the cycle: L0.x = B P^T r. */
 /* (P x)_i: row i's cell's value, 0 off the active set */
 static inline float prolong_at(const dfsph_coarse *cs, long i, const float *x)
 {
 	return cs->cell[i] == UINT32_MAX ? 0.0f : x[cs->cell[i]];
 }
 
+/* The level-0 right side P^T r, each cell's rows summed in row order, and
+ * the cycle: L0.x = B P^T r. */
 static void coarse_solve(dfsph_coarse *cs, const float *r)
 {
 	level *L0 = &cs->L[0];
-	memset(L0->b, 0, L0->cells * sizeof *L0->b);
-	for (long i = 0; i < cs->n; ++i)
-		if (cs->cell[i] != UINT32_MAX)
-			L0->b[cs->cell[i]] += r[i];
+	const long cells = (long)L0->cells;
+	const int nt = cs->threads;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (long c = 0; c < cells; ++c) {
+		float s = 0;
+		for (uint32_t q = cs->first[c]; q < cs->first[c + 1]; ++q)
+			s += r[cs->rows[q]];
+		L0->b[c] = s;
+	}
 	vcycle(cs, 0);
 }
 
@@ -369,9 +483,12 @@ double eddy__dfsph_coarse_unit(dfsph_coarse *cs, const float *r, float *y)
 {
 	coarse_solve(cs, r);
 	level *L0 = &cs->L[0];
-	for (long i = 0; i < cs->n; ++i)
+	const long n = cs->n;
+	const int nt = cs->threads;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (long i = 0; i < n; ++i)
 		y[i] = prolong_at(cs, i, L0->x);
-	return residual(L0, true);
+	return residual(L0, cs->part, level_threads(cs, L0));
 }
 
 void eddy__dfsph_coarse_set_scale(dfsph_coarse *cs, double s) { cs->inv_s = s > 0 && isfinite(s) ? 1 / s : 0; }
@@ -382,10 +499,19 @@ double eddy__dfsph_coarse_apply(dfsph_coarse *cs, const float *r, const float *d
 	if (on)
 		coarse_solve(cs, r);
 	const float *x = cs->L[0].x, inv_s = (float)cs->inv_s;
-	double rz = 0;
-	for (long i = 0; i < cs->n; ++i) {
-		z[i] = dsym[i] * r[i] + (on ? inv_s * prolong_at(cs, i, x) : 0.0f);
-		rz += (double)r[i] * z[i];
+	const long n = cs->n, nc = row_chunks(n);
+	const int nt = cs->threads;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (long c = 0; c < nc; ++c) {
+		double rz = 0;
+		for (long i = c * SUM_CHUNK, e = (c + 1) * SUM_CHUNK < n ? (c + 1) * SUM_CHUNK : n; i < e; ++i) {
+			z[i] = dsym[i] * r[i] + (on ? inv_s * prolong_at(cs, i, x) : 0.0f);
+			rz += (double)r[i] * z[i];
+		}
+		cs->part[c] = rz;
 	}
+	double rz = 0;
+	for (long c = 0; c < nc; ++c)
+		rz += cs->part[c];
 	return rz;
 }

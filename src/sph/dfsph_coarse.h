@@ -12,8 +12,10 @@ typedef struct dfsph_coarse dfsph_coarse;
 
 /* The levels for the active set (mask[i] = 1) of rows 0 .. n - 1 of sh's
  * lists, in the arena (per step); NULL when out of memory or no row is
- * active (then the solve runs on D'^-1 alone). */
-dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long n, const uint8_t *mask);
+ * active (then the solve runs on D'^-1 alone). Its loops and those of the
+ * calls below run on up to threads threads, with the same bits for any
+ * count. */
+dfsph_coarse *eddy__dfsph_coarse_build(eddy_arena *a, const sph_shared *sh, long n, const uint8_t *mask, int threads);
 
 /* y = P B P^T r on the active rows (0 elsewhere) and its coarse vector
  * e = B P^T r; returns e . L e (L the level-0 cell operator): the
@@ -25,7 +27,7 @@ double eddy__dfsph_coarse_unit(dfsph_coarse *c, const float *r, float *y);
 void eddy__dfsph_coarse_set_scale(dfsph_coarse *c, double s);
 
 /* z = dsym r + P B P^T r / s (0 off the active set); returns r . z summed
- * serially in row order. */
+ * per 16384 rows in row order, then the chunks' sums in order. */
 double eddy__dfsph_coarse_apply(dfsph_coarse *c, const float *r, const float *dsym, float *z);
 
 #endif
