@@ -102,6 +102,26 @@ const char *test_build_dir(void)
 
 const char *test_out_dir(void) { return suite_out; }
 
+char *test_env_save(const char *name)
+{
+	const char *v = getenv(name);
+	return v ? strdup(v) : NULL;
+}
+
+void test_env_set(const char *name, const char *value)
+{
+	if (value)
+		setenv(name, value, 1);
+	else
+		unsetenv(name);
+}
+
+void test_env_restore(const char *name, char *saved)
+{
+	test_env_set(name, saved);
+	free(saved);
+}
+
 typedef struct suite {
 	const char *name;
 	void (*fn)(void);

@@ -4,7 +4,6 @@
  * break vs Martin & Moyce, oscillating drop vs Rayleigh) and the hard cases
  * of docs/validation.md section C. Sizes are small so the suite runs in seconds;
  * every test prints the figure it checks. */
-#define _POSIX_C_SOURCE 200809L /* setenv, strdup */
 #include "test.h"
 
 #include <stdlib.h>
@@ -1245,8 +1244,7 @@ static void dfsph_deterministic_across_threads(void)
  * a CPU without AVX2 both runs take the SSE path and the test says so. */
 static void simd_paths_give_the_same_bits(void)
 {
-	const char *had = getenv("EDDY_NO_AVX2");
-	char *saved = had ? strdup(had) : NULL;
+	char *saved = test_env_save("EDDY_NO_AVX2");
 	const eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
 	for (int k = 0; k < 2; ++k) {
 		sph_setup s = splash_setup();
@@ -1258,10 +1256,7 @@ static void simd_paths_give_the_same_bits(void)
 		}
 		uint64_t hash[2];
 		for (int path = 0; path < 2; ++path) {
-			if (path == 0)
-				unsetenv("EDDY_NO_AVX2");
-			else
-				setenv("EDDY_NO_AVX2", "1", 1);
+			test_env_set("EDDY_NO_AVX2", path == 0 ? NULL : "1");
 			eddy_world *w = sph_world(&s, NULL);
 			for (int f = 0; f < (k == 0 ? 8 : 20); ++f)
 				CHECK(eddy_world_step_frame(w) == EDDY_OK);
@@ -1273,11 +1268,7 @@ static void simd_paths_give_the_same_bits(void)
 		       (unsigned long long)hash[1]);
 		CHECK(hash[0] == hash[1]);
 	}
-	if (saved)
-		setenv("EDDY_NO_AVX2", saved, 1);
-	else
-		unsetenv("EDDY_NO_AVX2");
-	free(saved);
+	test_env_restore("EDDY_NO_AVX2", saved);
 }
 
 /* A block dropped from 3 cm into a tank, at CFL 0.8 with no acoustic limit:
@@ -1477,24 +1468,16 @@ static uint64_t verlet_run_brute_force(const char *what)
  * match all pairs, and give the same bits. */
 static void verlet_lists_match_brute_force(void)
 {
-	const char *had = getenv("EDDY_SPH_VERLET");
-	char *saved = had ? strdup(had) : NULL;
+	char *saved = test_env_save("EDDY_SPH_VERLET");
 	uint64_t hash[2];
 	for (int mode = 0; mode < 2; ++mode) {
-		if (mode == 0)
-			unsetenv("EDDY_SPH_VERLET");
-		else
-			setenv("EDDY_SPH_VERLET", "0", 1);
+		test_env_set("EDDY_SPH_VERLET", mode == 0 ? NULL : "0");
 		hash[mode] = verlet_run_brute_force(mode == 0 ? "Verlet list" : "search at h");
 	}
 	printf("    state hash %016llx (Verlet list), %016llx (search at h)\n", (unsigned long long)hash[0],
 	       (unsigned long long)hash[1]);
 	CHECK(hash[0] == hash[1]);
-	if (saved)
-		setenv("EDDY_SPH_VERLET", saved, 1);
-	else
-		unsetenv("EDDY_SPH_VERLET");
-	free(saved);
+	test_env_restore("EDDY_SPH_VERLET", saved);
 }
 
 /* The neighbour lists take only what they hold (src/sph/neighbors.c): their

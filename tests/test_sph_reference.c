@@ -10,7 +10,6 @@
  *
  * Sources: Mueller, Charypar & Gross 2003 (poly6 density, spiky pressure
  * gradient, viscosity Laplacian); Monaghan 1992 (artificial viscosity). */
-#define _POSIX_C_SOURCE 200809L /* setenv */
 #include "test.h"
 
 #include <stdint.h>
@@ -400,13 +399,9 @@ static void passes_match_double_reference(void)
 {
 	const ref_case water = {0.01f, 0.02f, 1000.0f, 400.0f, 1e-3f, 0.05f, 1.0f};
 	const ref_case wide = {0.01f, 0.026f, 1000.0f, 2000.0f, 0.05f, 0.2f, 0.7f};
-	const char *had = getenv("EDDY_NO_AVX2");
-	char *saved = had ? strdup(had) : NULL;
+	char *saved = test_env_save("EDDY_NO_AVX2");
 	for (int path = 0; path < 2; ++path) {
-		if (path == 0)
-			unsetenv("EDDY_NO_AVX2");
-		else
-			setenv("EDDY_NO_AVX2", "1", 1);
+		test_env_set("EDDY_NO_AVX2", path == 0 ? NULL : "1");
 		char label[64];
 		snprintf(label, sizeof label, "h = 2 dx%s", path ? ", EDDY_NO_AVX2" : "");
 		check_against_reference(&water, 12345u, label);
@@ -417,11 +412,7 @@ static void passes_match_double_reference(void)
 		snprintf(label, sizeof label, "dfsph, h = 2.6 dx%s", path ? ", EDDY_NO_AVX2" : "");
 		check_dfsph_against_reference(&wide, 777u, label);
 	}
-	if (saved)
-		setenv("EDDY_NO_AVX2", saved, 1);
-	else
-		unsetenv("EDDY_NO_AVX2");
-	free(saved);
+	test_env_restore("EDDY_NO_AVX2", saved);
 }
 
 /* Every back-end gives the bits the passes gave before they were written
