@@ -11,6 +11,7 @@ static const eddy_lua_field sph_density_fields[] = {
 	EDDY_LUA_FIELD(eddy_sph_density_def, stiffness, EDDY_LUA_FLOAT),
 	EDDY_LUA_ENUM_FIELD(eddy_sph_density_def, eos, eos_choices),
 	EDDY_LUA_FIELD(eddy_sph_density_def, tait_gamma, EDDY_LUA_FLOAT),
+	EDDY_LUA_FIELD(eddy_sph_density_def, verlet_list, EDDY_LUA_BOOL),
 	EDDY_LUA_END,
 };
 static const eddy_lua_field sph_pressure_fields[] = {

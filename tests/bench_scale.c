@@ -132,6 +132,7 @@ static eddy_world *block(const char *method, long n, int threads, eddy_flip_solv
 		de.spacing = dx;
 		de.radius = 2 * dx;
 		de.stiffness = 400;
+		de.verlet_list = getenv("EDDY_SCALE_NO_VERLET") == NULL; /* the grid search at h every step */
 		eddy_add_sph_density(w, &de);
 		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
 		df.coarse_grid = getenv("EDDY_SCALE_COARSE") != NULL; /* the velocity solve's coarse level */

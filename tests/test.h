@@ -26,7 +26,7 @@ const char *test_out_dir(void);
 /* The number after "key": in a JSON line such as a stats line; NAN when
  * the key is absent or its value is not a number (null). */
 double test_json_number(const char *line, const char *key);
-/* An environment switch (EDDY_NO_AVX2, EDDY_SPH_VERLET) changed for a test
+/* An environment switch (EDDY_NO_AVX2, say) changed for a test
  * and put back after it: test_env_save copies its value (NULL: unset),
  * test_env_set sets it (value NULL: unsets), test_env_restore puts the saved
  * value back and frees the copy. */

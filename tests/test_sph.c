@@ -1413,8 +1413,9 @@ static void add_verlet_check(eddy_world *w, verlet_check *vc)
 }
 
 /* One run of verlet_lists_match_brute_force; returns its state hash. */
-static uint64_t verlet_run_brute_force(const char *what)
+static uint64_t verlet_run_brute_force(bool verlet_list)
 {
+	const char *what = verlet_list ? "Verlet list" : "search at h";
 	eddy_world_def d = eddy_default_world_def();
 	d.bounds_max = (eddy_vec3){0.3f, 0.3f, 0.3f};
 	d.threads = 2;
@@ -1426,6 +1427,7 @@ static uint64_t verlet_run_brute_force(const char *what)
 	b.spacing = 0.01f;
 	eddy_add_emit_box(w, &b);
 	eddy_sph_density_def de = eddy_default_sph_density_def();
+	de.verlet_list = verlet_list;
 	const eddy_system_id dens = eddy_add_sph_density(w, &de);
 	verlet_check vc = {de.radius, 0, 0, 0, 0};
 	add_verlet_check(w, &vc);
@@ -1463,21 +1465,15 @@ static uint64_t verlet_run_brute_force(const char *what)
 	return hash;
 }
 
-/* The same run with the Verlet list and without it (EDDY_SPH_VERLET=0: the
- * grid search at h every step, writing the exact lists itself): both must
- * match all pairs, and give the same bits. */
+/* The same run with the Verlet list and without it (verlet_list = false:
+ * the grid search at h every step, writing the exact lists itself): both
+ * must match all pairs, and give the same bits. */
 static void verlet_lists_match_brute_force(void)
 {
-	char *saved = test_env_save("EDDY_SPH_VERLET");
-	uint64_t hash[2];
-	for (int mode = 0; mode < 2; ++mode) {
-		test_env_set("EDDY_SPH_VERLET", mode == 0 ? NULL : "0");
-		hash[mode] = verlet_run_brute_force(mode == 0 ? "Verlet list" : "search at h");
-	}
-	printf("    state hash %016llx (Verlet list), %016llx (search at h)\n", (unsigned long long)hash[0],
-	       (unsigned long long)hash[1]);
-	CHECK(hash[0] == hash[1]);
-	test_env_restore("EDDY_SPH_VERLET", saved);
+	const uint64_t with = verlet_run_brute_force(true), without = verlet_run_brute_force(false);
+	printf("    state hash %016llx (Verlet list), %016llx (search at h)\n", (unsigned long long)with,
+	       (unsigned long long)without);
+	CHECK(with == without);
 }
 
 /* The neighbour lists take only what they hold (src/sph/neighbors.c): their

@@ -57,7 +57,8 @@ eddy_sph_density_def eddy_default_sph_density_def(void)
 	                              .rest_density = 1000.0f,
 	                              .stiffness = 400.0f,
 	                              .eos = EDDY_SPH_EOS_LINEAR,
-	                              .tait_gamma = 7.0f};
+	                              .tait_gamma = 7.0f,
+	                              .verlet_list = true};
 }
 
 /* The EOS: pressure of a density (clamped at 0) and density of a pressure. */
@@ -486,6 +487,7 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	sd->sh.h = def->radius;
 	sd->sh.rho0 = def->rest_density;
 	sd->sh.c = sqrtf(def->stiffness);
+	sd->sh.verlet = def->verlet_list;
 	const double h = def->radius, h6 = h * h * h * h * h * h, h9 = h6 * h * h * h;
 	sd->sh.k = (sph_kernel_consts){.h = def->radius,
 	                               .h2 = def->radius * def->radius,

@@ -327,14 +327,6 @@ static eddy_status fill_lists(eddy_world *w, sph_shared *sh, const float *p4, bo
 	}
 }
 
-/* EDDY_SPH_VERLET=0, a measuring switch (README, "Scale"): no Verlet list,
- * the search at h every step, and no Verlet per-row arrays allocated. */
-static bool verlet_off(void)
-{
-	const char *e = getenv("EDDY_SPH_VERLET");
-	return e && strcmp(e, "0") == 0;
-}
-
 /* A new Verlet list: search (with a skin) and remember the positions, to
  * size the next skin and to test the displacements against. */
 static eddy_status verlet_rebuild(eddy_world *w, sph_shared *sh, const row_pass *rp, int threads)
@@ -352,7 +344,7 @@ static eddy_status verlet_rebuild(eddy_world *w, sph_shared *sh, const row_pass 
 	 * then the search is at h until the motion per step, seen against the
 	 * last search, would let a skin last */
 	const bool count_changed = v->n != 0 && v->n != n;
-	const bool off = verlet_off();
+	const bool off = !sh->verlet;
 	const bool emitting = count_changed && v->count_changed && v->age <= 1;
 	const float step_move = rp->verlet ? sqrtf(rp->moved2) / (float)v->age : 0.0f;
 	const bool fast = rp->verlet && step_move * SPH_SKIN_MIN_LIFE > 0.5f * SPH_SKIN * sh->h;
@@ -393,7 +385,7 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		v->n = 0;
 		return EDDY_OK;
 	}
-	const bool off = verlet_off();
+	const bool off = !sh->verlet;
 	row_pass rp = {.verlet = !off && v->n == n && v->boundary_sig == nb->bnd.sig};
 	rp.p4 = eddy__arena_alloc(&w->arena, 4 * n * sizeof *rp.p4);
 	if (!rp.p4)

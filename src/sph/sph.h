@@ -173,6 +173,7 @@ typedef struct sph_shared {
 	float h, mass, rho0;
 	float grad_cal; /* 1 / the pressure force's lattice moment: see sph_pressure */
 	float c;        /* m/s, speed of sound sqrt(k) */
+	bool verlet;    /* keep a Verlet list (the def's verlet_list); false: search at h every step */
 	sph_kernel_consts k;
 	sph_neighbors nb;
 	float *inv_rho; /* 1/rho this step (arena), set by sph_density */
