@@ -266,10 +266,10 @@ static void energy_stats_wcsph(void)
  * see slosh_flip_apic), and the 5 mm period within 3%. Measured with the
  * conjugate-gradient solves (src/sph/dfsph.c): zeta 0.0423 at 10 mm and
  * 0.0393 at 5 mm without particle shifting; with shift = 0.02 (sph_dfsph's
- * default, which these runs use) 0.0409
- * and 0.0394, period error -1.2% and -2.1%. Shifting is a diffusion of the
- * particle positions and can damp the wave (shifting at the walls too read
- * 0.050-0.057 and 0.055): each zeta is held to 1.2 times its value without
+ * default, which these runs use; the walls' neighbours shifted along the
+ * walls only) 0.0456 and 0.0374, period error -2.0% and -2.5%. Shifting is
+ * a diffusion of the particle positions and can damp the wave (shifting
+ * across the walls too read 0.050-0.057 and 0.055): each zeta is held to 1.2 times its value without
  * shifting, the 20% that the scatter of zeta over cfl 0.36-0.44 at 10 mm
  * (0.042-0.048 without shifting) leaves room for. */
 static void slosh_all_methods(void)
