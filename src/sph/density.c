@@ -571,6 +571,10 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	if (!sh->inv_rho)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", w->n);
 	if (sd->def.density == EDDY_SPH_DENSITY_CONTINUITY && n > 0) {
+		if (!eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE)) /* check() says so before a run */
+			return eddy__fail(w, EDDY_ERR_INVALID,
+			                  "sph_density: 'density' = continuity needs sph_pressure; with sph_dfsph use "
+			                  "density = summation");
 		for (long i = 0; i < n; ++i)
 			ncount[i] = (float)(nb->count[i] + nb->bcount[i]);
 		st = continuity(w, sd, ctx->threads);
@@ -698,16 +702,6 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 		       EDDY_NULL_SYSTEM;
 	if (def->eos != EDDY_SPH_EOS_LINEAR && def->eos != EDDY_SPH_EOS_TAIT)
 		return eddy__fail(w, EDDY_ERR_INVALID, "%s: 'eos' must be linear or tait", sys), EDDY_NULL_SYSTEM;
-	eddy_sph_density_def d = *def;
-	{ /* TEMPORARY experiment switch (not to be committed in the final state) */
-		const char *e = getenv("EDDY_WCSPH_DENSITY");
-		if (e && strcmp(e, "continuity") == 0)
-			d.density = EDDY_SPH_DENSITY_CONTINUITY;
-		const char *dl = getenv("EDDY_WCSPH_DELTA");
-		if (dl)
-			d.diffusion = (float)atof(dl);
-	}
-	def = &d;
 	if (def->density != EDDY_SPH_DENSITY_SUMMATION && def->density != EDDY_SPH_DENSITY_CONTINUITY)
 		return eddy__fail(w, EDDY_ERR_INVALID, "%s: 'density' must be summation or continuity", sys), EDDY_NULL_SYSTEM;
 	if (!eddy__check_range(w, sys, "diffusion", def->diffusion, 0, 1))
