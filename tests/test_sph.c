@@ -1141,6 +1141,12 @@ static void continuity_rejects_bad_input(void)
 	de.density = (eddy_sph_density_mode)7;
 	CHECK(!eddy_system_valid(w, eddy_add_sph_density(w, &de)));
 	CHECK_HAS(eddy_world_error(w), "sph_density: 'density' must be summation or continuity");
+	/* the carried density's column taken by the host for something else */
+	CHECK(eddy_world_declare_column(w, "sph_rho", EDDY_DOMAIN_PARTICLE, EDDY_U8, EDDY_STATE, "") >= 0);
+	de = eddy_default_sph_density_def();
+	de.density = EDDY_SPH_DENSITY_CONTINUITY;
+	CHECK(!eddy_system_valid(w, eddy_add_sph_density(w, &de)));
+	CHECK_HAS(eddy_world_error(w), "keeps the density in the column 'sph_rho'");
 	eddy_destroy_world(w);
 
 	char path[512], cmd[1200], out[4096];

@@ -709,6 +709,14 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	int carried = -1;
 	if (def->density == EDDY_SPH_DENSITY_CONTINUITY) {
 		carried = eddy_world_find_column(w, CARRIED_NAME);
+		eddy_column_info ci;
+		if (carried >= 0 && eddy_world_column_info(w, carried, &ci) == EDDY_OK &&
+		    (ci.domain != EDDY_DOMAIN_PARTICLE || ci.type != EDDY_F32 || ci.lifetime != EDDY_STATE))
+			return eddy__fail(w, EDDY_ERR_INVALID,
+			                  "%s: density = continuity keeps the density in the column '%s', which the host "
+			                  "declared otherwise (it must be a per-particle f32 state column)",
+			                  sys, CARRIED_NAME),
+			       EDDY_NULL_SYSTEM;
 		if (carried < 0)
 			carried = eddy_world_declare_column(w, CARRIED_NAME, EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "kg/m^3");
 		if (carried < 0)
