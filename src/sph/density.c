@@ -474,22 +474,24 @@ static int newrow_cmp(const void *a, const void *b)
 	return (u->row > v->row) - (u->row < v->row);
 }
 
-static void hydrostatic_start(eddy_world *w, const sph_density *sd, float *carried, long n)
+static bool hydrostatic_start(eddy_world *w, const sph_density *sd, float *carried, long n)
 {
 	long count = 0;
 	for (long i = 0; i < n; ++i)
 		count += !(carried[i] > 0);
 	if (count == 0)
-		return;
+		return true;
 	const float rho0 = sd->sh.rho0;
 	const eddy_vec3 g = w->def.gravity;
 	const double gn = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
-	newrow *nr = gn > 0 ? eddy__arena_alloc(&w->arena, (size_t)count * sizeof *nr) : NULL;
-	if (!nr) { /* no gravity (or no scratch): rho0 */
+	if (!(gn > 0)) { /* no gravity: rho0 */
 		for (long i = 0; i < n; ++i)
 			carried[i] = carried[i] > 0 ? carried[i] : rho0;
-		return;
+		return true;
 	}
+	newrow *nr = eddy__arena_alloc(&w->arena, (size_t)count * sizeof *nr);
+	if (!nr)
+		return false;
 	/* up = -g / |g|; e1, e2 across it */
 	const double ux = -g.x / gn, uy = -g.y / gn, uz = -g.z / gn;
 	double ax = fabs(ux) < 0.9 ? 1 : 0, ay = fabs(ux) < 0.9 ? 0 : 1, az = 0; /* not along up */
@@ -504,8 +506,9 @@ static void hydrostatic_start(eddy_world *w, const sph_density *sd, float *carri
 	long k = 0;
 	for (long i = 0; i < n; ++i)
 		if (!(carried[i] > 0)) {
-			const double a = floor((e1x * x[i] + e1y * y[i] + e1z * z[i]) * inv),
-						 b = floor((e2x * x[i] + e2y * y[i] + e2z * z[i]) * inv);
+			/* clamped (a far or non-finite position shares an end column) so the key's casts are defined */
+			const double a = fmax(-1e6, fmin(1e6, floor((e1x * x[i] + e1y * y[i] + e1z * z[i]) * inv))),
+						 b = fmax(-1e6, fmin(1e6, floor((e2x * x[i] + e2y * y[i] + e2z * z[i]) * inv)));
 			nr[k++] =
 				(newrow){(int64_t)a * 4194304 + (int64_t)b, (uint32_t)i, (float)(ux * x[i] + uy * y[i] + uz * z[i])};
 		}
@@ -521,6 +524,7 @@ static void hydrostatic_start(eddy_world *w, const sph_density *sd, float *carri
 		}
 		a = b;
 	}
+	return true;
 }
 
 /* The continuity density: each row's carried density (hydrostatic_start's
@@ -536,8 +540,9 @@ static eddy_status continuity(eddy_world *w, sph_density *sd, int threads)
 	if (!rate)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", w->n);
 	const float dt = (float)w->last_dt;
-	const float floor = sd->sh.mass * sd->sh.k.poly6 * sd->sh.k.h2 * sd->sh.k.h2 * sd->sh.k.h2;
-	hydrostatic_start(w, sd, carried, n);
+	const float least = sd->sh.mass * sd->sh.k.poly6 * sd->sh.k.h2 * sd->sh.k.h2 * sd->sh.k.h2;
+	if (!hydrostatic_start(w, sd, carried, n))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", w->n);
 #pragma omp parallel for num_threads(threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		const float r = carried[i];
@@ -549,7 +554,7 @@ static eddy_status continuity(eddy_world *w, sph_density *sd, int threads)
 	for (long i = 0; i < n; ++i) {
 		float r = rho[i] + dt * rate[i];
 		/* kept above m W(0), the summation's least (a lone particle's): 1/rho stays finite */
-		r = r > floor ? r : floor;
+		r = r > least ? r : least;
 		carried[i] = r;
 		set_density(sd, rho, p, i, r);
 	}
