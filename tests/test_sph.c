@@ -1174,6 +1174,29 @@ static void continuity_rejects_bad_input(void)
 		CHECK(test_sh(cmd, out, sizeof out) != 0);
 		CHECK_HAS(out, "'density' = continuity needs sph_pressure");
 	}
+	/* the explicit diffusion's stability: cfl x diffusion x 22.8 <= 2 at
+	 * h = 2 spacings (sph_density's diffusion_eigenvalue), so at cfl 1
+	 * delta 0.1 is refused and 0.08 runs */
+	for (int k = 0; k < 2; ++k) {
+		f = fopen(path, "w");
+		CHECK(f != NULL);
+		if (!f)
+			break;
+		fprintf(f,
+		        "local eddy = require 'eddy'\nlocal world = eddy.world{ cfl = 1 }\n"
+		        "world:add(eddy.emit_box{ min = {0, 0, 0}, max = {0.1, 0.1, 0.1}, spacing = 0.01 })\n"
+		        "world:add(eddy.sph_density{ density = 'continuity', diffusion = %s })\n"
+		        "world:add(eddy.sph_pressure{})\nworld:add(eddy.integrate{})\nreturn world\n",
+		        k == 0 ? "0.1" : "0.08");
+		fclose(f);
+		const int code = test_sh(cmd, out, sizeof out);
+		if (k == 0) {
+			CHECK(code != 0);
+			CHECK_HAS(out, "'diffusion' 0.1 at the world's cfl 1 makes the explicit density diffusion unstable");
+			CHECK_HAS(out, "use diffusion <= 0.0876 or cfl <= 0.876");
+		} else
+			CHECKF(code == 0, "%s", out);
+	}
 	remove(path);
 }
 

@@ -27,7 +27,9 @@
  * particle keeps its density (no truncated kernel sum reading low); the walls
  * enter through their volumes only (their densities are not iterated, see
  * below). New particles start hydrostatic (hydrostatic_start, below). The
- * explicit diffusion is stable well within the acoustic step (delta < 1).
+ * explicit diffusion is stable while cfl delta h^2 lambda <= 2 (lambda its
+ * largest eigenvalue on the lattice, diffusion_eigenvalue below): delta 0.1
+ * at h = 2 spacings up to cfl 0.88; check() and step refuse beyond.
  * Source: Molteni & Colagrossi, "A simple procedure to improve the pressure
  * evaluation in hydrodynamic context using the SPH", CPC 180 (2009);
  * Antuono, Colagrossi, Marrone & Molteni, "Free-surface flows solved by
@@ -73,7 +75,8 @@ typedef struct sph_density {
 	eddy_sph_density_def def;
 	uint32_t *wall_slot; /* per wall, WALL_NONE between steps (walls_make) */
 	size_t wall_slots;
-	int carried; /* continuity: the state column holding each particle's density between steps */
+	int carried;         /* continuity: the state column holding each particle's density between steps */
+	float diffusion_eig; /* continuity: 1/m^2, the diffusion's largest eigenvalue on the lattice over delta h c */
 } sph_density;
 
 static const int density_reads[] = {COL_X_, COL_Y_, COL_Z_, -1};
@@ -527,6 +530,36 @@ static bool hydrostatic_start(eddy_world *w, const sph_density *sd, float *carri
 	return true;
 }
 
+/* The explicit diffusion's stability. On the lattice the diffusion's
+ * operator, sum_j V_j 2 (f_j - f_i) F_ij (F_ij = |W'| r / (r^2 + 0.01 h^2)
+ * calibrated), has its largest eigenvalue on the checkerboard mode,
+ *   lambda = V grad_cal sum_j 2 F_ij (1 - (-1)^(a+b+c))   (lattice offsets a b c),
+ * 5.71 / spacing^2 at h = 2 spacings; Euler steps of the diffusion alone
+ * stay bounded while dt delta h c lambda <= 2, and the acoustic step is at
+ * most cfl h / c: so while cfl delta h^2 lambda <= 2 (delta 0.1, h = 2
+ * spacings: cfl up to 0.88). Measured (10 layers of still water, cfl 0.5):
+ * delta 0.17 (1.94) holds, 0.19 (2.17) blows up. */
+static double diffusion_eigenvalue(double dx, double h, double vol, double grad_cal)
+{
+	const int reach = (int)ceil(h / dx);
+	const double k = 45.0 / (M_PI * pow(h, 6)), eta2 = 0.01 * h * h;
+	double sum = 0;
+	for (int a = -reach; a <= reach; ++a)
+		for (int b = -reach; b <= reach; ++b)
+			for (int c = -reach; c <= reach; ++c) {
+				const double r = dx * sqrt((double)(a * a + b * b + c * c));
+				if (r > 0 && r < h && (a + b + c) % 2 != 0) /* 1 - (-1)^(a+b+c): 2 or 0 */
+					sum += 2 * 2 * k * (h - r) * (h - r) * r / (r * r + eta2);
+			}
+	return vol * grad_cal * sum;
+}
+
+/* cfl delta h^2 lambda (above): the continuity's diffusion is stable while <= 2. */
+static double diffusion_number(const eddy_world *w, const sph_density *sd)
+{
+	return w->def.cfl * sd->def.diffusion * sd->sh.k.h2 * sd->diffusion_eig;
+}
+
 /* The continuity density: each row's carried density (hydrostatic_start's
  * for a new particle, whose carried value is 0) advanced over the last step by the
  * rate at the positions and velocities that step ended with (as the
@@ -580,6 +613,12 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			return eddy__fail(w, EDDY_ERR_INVALID,
 			                  "sph_density: 'density' = continuity needs sph_pressure; with sph_dfsph use "
 			                  "density = summation");
+		if (diffusion_number(w, sd) > 2)
+			return eddy__fail(w, EDDY_ERR_INVALID,
+			                  "sph_density: 'diffusion' %g at the world's cfl %g is unstable (cfl x diffusion x "
+			                  "%.3g = %.3g, must be <= 2)",
+			                  (double)sd->def.diffusion, w->def.cfl, sd->sh.k.h2 * sd->diffusion_eig,
+			                  diffusion_number(w, sd));
 		for (long i = 0; i < n; ++i)
 			ncount[i] = (float)(nb->count[i] + nb->bcount[i]);
 		st = continuity(w, sd, ctx->threads);
@@ -646,6 +685,15 @@ static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void
 		             "%s: 'density' = continuity needs sph_pressure (weakly compressible SPH); a pressure solve "
 		             "(sph_dfsph) corrects the summation density itself: use density = summation",
 		             s->label);
+		errors++;
+	}
+	if (sd->def.density == EDDY_SPH_DENSITY_CONTINUITY && diffusion_number(w, sd) > 2) {
+		const double per = sd->sh.k.h2 * sd->diffusion_eig;
+		eddy__report(report, user, EDDY_CHECK_ERROR,
+		             "%s: 'diffusion' %g at the world's cfl %g makes the explicit density diffusion unstable "
+		             "(cfl x diffusion x %.3g = %.3g, must be <= 2); use diffusion <= %.3g or cfl <= %.3g",
+		             s->label, (double)sd->def.diffusion, w->def.cfl, per, diffusion_number(w, sd),
+		             2 / (w->def.cfl * per), 2 / (sd->def.diffusion * per));
 		errors++;
 	}
 	if (h / dx < 1.2) {
@@ -750,6 +798,8 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	const double vol = (double)def->spacing * def->spacing * def->spacing;
 	sd->sh.grad_cal =
 		(float)(lattice * vol / eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, def->spacing, def->radius));
+	sd->diffusion_eig =
+		(float)diffusion_eigenvalue(def->spacing, def->radius, sd->sh.mass / def->rest_density, sd->sh.grad_cal);
 	const int cont_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, carried, -1};
 	const int cont_writes[] = {COL_DENSITY, COL_PRESSURE, COL_SPH_NEIGHBORS, carried, -1};
 	const bool cont = carried >= 0;
