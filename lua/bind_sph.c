@@ -3,6 +3,7 @@
 #include "bind.h"
 
 static const char *const eos_choices[] = {"linear", "tait", NULL};
+static const char *const density_choices[] = {"summation", "continuity", NULL};
 
 static const eddy_lua_field sph_density_fields[] = {
 	EDDY_LUA_FIELD(eddy_sph_density_def, radius, EDDY_LUA_FLOAT),
@@ -11,6 +12,8 @@ static const eddy_lua_field sph_density_fields[] = {
 	EDDY_LUA_FIELD(eddy_sph_density_def, stiffness, EDDY_LUA_FLOAT),
 	EDDY_LUA_ENUM_FIELD(eddy_sph_density_def, eos, eos_choices),
 	EDDY_LUA_FIELD(eddy_sph_density_def, tait_gamma, EDDY_LUA_FLOAT),
+	EDDY_LUA_ENUM_FIELD(eddy_sph_density_def, density, density_choices),
+	EDDY_LUA_FIELD(eddy_sph_density_def, diffusion, EDDY_LUA_FLOAT),
 	EDDY_LUA_FIELD(eddy_sph_density_def, verlet_list, EDDY_LUA_BOOL),
 	EDDY_LUA_END,
 };

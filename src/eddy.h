@@ -602,14 +602,22 @@ typedef enum eddy_sph_eos {
 	EDDY_SPH_EOS_TAIT        /* p = (k rho0 / gamma) ((rho/rho0)^gamma - 1) */
 } eddy_sph_eos;
 
+/* How sph_density makes the density. */
+typedef enum eddy_sph_density_mode {
+	EDDY_SPH_DENSITY_SUMMATION = 0, /* rho_i = sum_j m W_ij each step (Mueller 2003) */
+	EDDY_SPH_DENSITY_CONTINUITY     /* d rho_i / dt from the velocities, with delta-SPH diffusion (sph_pressure only) */
+} eddy_sph_density_mode;
+
 /* sph_density: neighbour search, poly6 density, equation of state. */
 typedef struct eddy_sph_density_def {
-	float radius;       /* m, kernel support h; > spacing */
-	float spacing;      /* m, particle spacing the mass is calibrated on; > 0 */
-	float rest_density; /* kg/m^3, rho0; > 0 */
-	float stiffness;    /* m^2/s^2, k = c^2 (speed of sound squared); > 0 */
-	eddy_sph_eos eos;   /* equation of state: linear (the paper's) or Tait */
-	float tait_gamma;   /* 1, exponent of the Tait EOS; >= 1 */
+	float radius;                  /* m, kernel support h; > spacing */
+	float spacing;                 /* m, particle spacing the mass is calibrated on; > 0 */
+	float rest_density;            /* kg/m^3, rho0; > 0 */
+	float stiffness;               /* m^2/s^2, k = c^2 (speed of sound squared); > 0 */
+	eddy_sph_eos eos;              /* equation of state: linear (the paper's) or Tait */
+	float tait_gamma;              /* 1, exponent of the Tait EOS; >= 1 */
+	eddy_sph_density_mode density; /* summation (default) or continuity */
+	float diffusion;               /* 1, delta-SPH's delta for continuity; [0, 1], 0.1 usual */
 	/* keep a Verlet list (default true): the pairs within 1.2 h, reused
 	 * while no particle has moved half that margin, so a step searches
 	 * about 50 candidates a particle instead of the cell grid's 240; false:

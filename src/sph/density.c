@@ -1,12 +1,42 @@
 /* SPDX-License-Identifier: MIT */
 /* sph_density: neighbour search, density and equation of state.
  *
- * Reads: x y z. Writes: density pressure neighbors, and reorders the
+ * Reads: x y z (density = continuity: also vx vy vz sph_rho). Writes:
+ * density pressure neighbors (continuity: also sph_rho), and reorders the
  * particle table into grid-cell order (neighbors.c, which also makes the
  * kernel sums below with the lists). Shares sph_shared (sph.h) with the
  * later SPH systems.
+ * density = summation (the default):
  *   rho_i = m sum_j W_poly6(x_i - x_j) + sum_b V_b rho_b W_poly6(x_i - x_b)
  *   (j over fluid particles including i itself, b over boundary particles)
+ * density = continuity (weakly compressible SPH with sph_pressure only): the
+ * density is state, the column sph_rho, advanced each step by
+ *   d rho_i/dt = rho_i sum_j V_j (v_i - v_j) . grad W_ij
+ *              + rho_i sum_b V_b (v_i - v_b) . grad W_ib
+ *              + delta h c sum_j V_j psi_ij . grad W_ij,
+ *   psi_ij = 2 (rho_j - rho_i - rho0 g . (x_j - x_i) / c^2) (x_j - x_i) / (r^2 + 0.01 h^2)
+ * (V_j = m / rho_j, W the spiky kernel, the sums calibrated by its lattice
+ * moment as sph_pressure's force; v_b a moving collider's). The last term
+ * is delta-SPH's density diffusion (Molteni & Colagrossi 2009; Antuono,
+ * Colagrossi & Marrone 2010), less its hydrostatic part (Fourtakas et al.
+ * 2019, linearised: rho0 g dz / c^2 is the EOS's density step of a
+ * hydrostatic pressure step): it damps the acoustic noise and leaves a
+ * column at rest with its hydrostatic densities. h is the support radius
+ * (2 spacings, the smoothing length of the delta-SPH papers' Wendland kernels
+ * of support 2h at h/dx = 1-2), so delta = 0.1 is theirs. A free-surface
+ * particle keeps its density (no truncated kernel sum reading low); the walls
+ * enter through their volumes only (their densities are not iterated, see
+ * below). New particles start hydrostatic (hydrostatic_start, below). The
+ * explicit diffusion is stable while cfl delta h^2 lambda <= 2 (lambda its
+ * largest eigenvalue on the lattice, diffusion_eigenvalue below): delta 0.1
+ * at h = 2 spacings up to cfl 0.88; check() and step refuse beyond.
+ * Source: Molteni & Colagrossi, "A simple procedure to improve the pressure
+ * evaluation in hydrodynamic context using the SPH", CPC 180 (2009);
+ * Antuono, Colagrossi, Marrone & Molteni, "Free-surface flows solved by
+ * means of SPH schemes with numerical diffusive terms", CPC 181 (2010);
+ * Fourtakas, Dominguez, Vacondio & Rogers, "Local uniform stencil (LUST)
+ * boundary condition for arbitrary 3-D boundaries in parallel smoothed
+ * particle hydrodynamics (SPH) models", Computers & Fluids 190 (2019).
  *   linear EOS: p_i = k (rho_i - rho0)                      (Mueller 2003, eq. 12)
  *   Tait EOS:   p_i = (k rho0 / gamma) ((rho_i/rho0)^gamma - 1)
  *   p_i >= 0: negative pressure pulls particles into clumps (tensile
@@ -45,10 +75,13 @@ typedef struct sph_density {
 	eddy_sph_density_def def;
 	uint32_t *wall_slot; /* per wall, WALL_NONE between steps (walls_make) */
 	size_t wall_slots;
+	int carried;         /* continuity: the state column holding each particle's density between steps */
+	float diffusion_eig; /* continuity: 1/m^2, the diffusion's largest eigenvalue on the lattice over delta h c */
 } sph_density;
 
 static const int density_reads[] = {COL_X_, COL_Y_, COL_Z_, -1};
 static const int density_writes[] = {COL_DENSITY, COL_PRESSURE, COL_SPH_NEIGHBORS, -1};
+#define CARRIED_NAME "sph_rho" /* the continuity density's state column */
 
 eddy_sph_density_def eddy_default_sph_density_def(void)
 {
@@ -58,6 +91,8 @@ eddy_sph_density_def eddy_default_sph_density_def(void)
 	                              .stiffness = 400.0f,
 	                              .eos = EDDY_SPH_EOS_LINEAR,
 	                              .tait_gamma = 7.0f,
+	                              .density = EDDY_SPH_DENSITY_SUMMATION,
+	                              .diffusion = 0.1f,
 	                              .verlet_list = true};
 }
 
@@ -312,7 +347,9 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 	const long nbound = (long)nb->nbound;
 	if (w->n == 0 || nbound == 0)
 		return EDDY_OK;
-	const bool iterate = eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL;
+	/* continuity: the walls' densities are not in the fluid's */
+	const bool iterate =
+		eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL && sd->def.density != EDDY_SPH_DENSITY_CONTINUITY;
 	walls wl;
 	if (!walls_make(w, sd, threads, &wl))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %ld boundary particles", nbound);
@@ -352,6 +389,212 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 	return EDDY_OK;
 }
 
+/* The continuity density's rate for rows [0, n), from the carried
+ * densities rho (1/rho in pq) and the velocities:
+ *   d rho_i/dt = rho_i [sum_j V_j (v_i - v_j) + sum_b V_b (v_i - v_b)] . grad W_ib
+ *              + delta h c sum_j V_j psi_ij . grad W_ij,
+ *   psi_ij . grad W_ij = 2 (rho_j - rho_i - rho0 g . (x_j - x_i) / c^2) r |W'(r)| / (r^2 + 0.01 h^2)
+ * V_j = m / rho_j, W' the spiky kernel's, the sums calibrated by grad_cal
+ * as sph_pressure's force. */
+static void continuity_rate(eddy_world *w, const sph_density *sd, const float *rho, float *rate, long n, int threads)
+{
+	const sph_shared *sh = &sd->sh;
+	const sph_neighbors *nb = &sh->nb;
+	const sph_boundary *bd = &nb->bnd;
+	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	const float *pq = sh->pq;
+	const float h = sh->k.h, eps2 = 1e-6f * sh->k.h2, eta2 = 0.01f * sh->k.h2;
+	/* |W'(r)| = -spiky_grad (h - r)^2; the sums' constant factors */
+	const float dw = -sh->k.spiky_grad * sh->grad_cal, m = sh->mass;
+	const float diff = sd->def.diffusion * h * sh->c * 2.0f;
+	const eddy_vec3 g = w->def.gravity;
+	const float gc = sh->rho0 / (sh->c * sh->c); /* rho0 g . dx / c^2: the hydrostatic density difference */
+	const float gx = g.x * gc, gy = g.y * gc, gz = g.z * gc;
+	const bool moving = bd->vx != NULL;
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		const float xi = pq[4 * i], yi = pq[4 * i + 1], zi = pq[4 * i + 2], ri = rho[i];
+		const float ui = vx[i], vi = vy[i], wi = vz[i];
+		float div = 0, dif = 0; /* sum V_j (v_i - v_j) . grad W; sum V_j psi . grad W */
+		sph_groups list = sph_nbr_groups(nb, i);
+		uint32_t l[8];
+		for (uint32_t q = 0; q < nb->count[i]; ++q) {
+			if (q % 8 == 0)
+				sph_group_rows(&list, l);
+			const uint32_t j = l[q % 8];
+			const float rx = xi - pq[4 * (size_t)j], ry = yi - pq[4 * (size_t)j + 1], rz = zi - pq[4 * (size_t)j + 2];
+			const float r2 = rx * rx + ry * ry + rz * rz;
+			if (!(r2 > eps2))
+				continue;                                                      /* no direction */
+			const float r = sqrtf(r2), hr = h - r, vj = pq[4 * (size_t)j + 3]; /* 1/rho_j */
+			/* grad_i W = -|W'| r_vec / r: (v_i - v_j) . grad_i W = -|W'| (v_i - v_j) . r_vec / r */
+			const float a = hr * hr * vj;
+			div -= a * ((ui - vx[j]) * rx + (vi - vy[j]) * ry + (wi - vz[j]) * rz) / r;
+			/* x_j - x_i = -r_vec */
+			const float hyd = -(gx * rx + gy * ry + gz * rz);
+			dif += a * (rho[j] - ri - hyd) * r / (r2 + eta2);
+		}
+		float bdiv = 0;
+		const uint32_t *bl = sph_bnbrs(nb, i);
+		for (uint32_t q = 0; q < nb->bcount[i]; ++q) {
+			const uint32_t b = bl[q];
+			const float rx = xi - nb->bx[b], ry = yi - nb->by[b], rz = zi - nb->bz[b];
+			const float r2 = rx * rx + ry * ry + rz * rz;
+			if (!(r2 > eps2))
+				continue;
+			const float r = sqrtf(r2), hr = h - r;
+			float ux = ui, uy = vi, uz = wi;
+			if (moving && b >= bd->n_static) {
+				ux -= bd->vx[b];
+				uy -= bd->vy[b];
+				uz -= bd->vz[b];
+			}
+			bdiv -= nb->bvol[b] * hr * hr * (ux * rx + uy * ry + uz * rz) / r;
+		}
+		rate[i] = dw * (ri * (m * div + bdiv) + diff * m * dif);
+	}
+}
+
+/* The starting densities of the rows new this step (carried value 0):
+ * hydrostatic below the highest new particle of their vertical column,
+ *   rho = rho_EOS(m / spacing^3 |g| (top - height + spacing / 2)),
+ * columns h wide across gravity, so a block emitted at rest starts in
+ * equilibrium rather than falling by g D / c^2 and ringing in its acoustic
+ * mode; a new particle with none above it (a nozzle's front, no gravity)
+ * starts at rho0. Particles emitted under older fluid take no account of
+ * it. The new rows are few after the first step: sorted by column, ties by
+ * row, for the same result on any thread count. */
+typedef struct newrow {
+	int64_t key;
+	uint32_t row;
+	float height;
+} newrow;
+
+static int newrow_cmp(const void *a, const void *b)
+{
+	const newrow *u = a, *v = b;
+	if (u->key != v->key)
+		return u->key < v->key ? -1 : 1;
+	return (u->row > v->row) - (u->row < v->row);
+}
+
+static bool hydrostatic_start(eddy_world *w, const sph_density *sd, float *carried, long n)
+{
+	long count = 0;
+	for (long i = 0; i < n; ++i)
+		count += !(carried[i] > 0);
+	if (count == 0)
+		return true;
+	const float rho0 = sd->sh.rho0;
+	const eddy_vec3 g = w->def.gravity;
+	const double gn = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
+	if (!(gn > 0)) { /* no gravity: rho0 */
+		for (long i = 0; i < n; ++i)
+			carried[i] = carried[i] > 0 ? carried[i] : rho0;
+		return true;
+	}
+	newrow *nr = eddy__arena_alloc(&w->arena, (size_t)count * sizeof *nr);
+	if (!nr)
+		return false;
+	/* up = -g / |g|; e1, e2 across it */
+	const double ux = -g.x / gn, uy = -g.y / gn, uz = -g.z / gn;
+	double ax = fabs(ux) < 0.9 ? 1 : 0, ay = fabs(ux) < 0.9 ? 0 : 1, az = 0; /* not along up */
+	double e1x = ay * uz - az * uy, e1y = az * ux - ax * uz, e1z = ax * uy - ay * ux;
+	const double l1 = sqrt(e1x * e1x + e1y * e1y + e1z * e1z);
+	e1x /= l1, e1y /= l1, e1z /= l1;
+	const double e2x = uy * e1z - uz * e1y, e2y = uz * e1x - ux * e1z, e2z = ux * e1y - uy * e1x;
+	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	const double inv = 1.0 / sd->sh.h;
+	/* the weight above per unit area and depth: the lattice's m / spacing^3, 1% under rho0 at h = 2 spacings */
+	const float sp = sd->def.spacing, lattice_rho = sd->sh.mass / (sp * sp * sp);
+	long k = 0;
+	for (long i = 0; i < n; ++i)
+		if (!(carried[i] > 0)) {
+			/* clamped (a far or non-finite position shares an end column) so the key's casts are defined */
+			const double a = fmax(-1e6, fmin(1e6, floor((e1x * x[i] + e1y * y[i] + e1z * z[i]) * inv))),
+						 b = fmax(-1e6, fmin(1e6, floor((e2x * x[i] + e2y * y[i] + e2z * z[i]) * inv)));
+			nr[k++] =
+				(newrow){(int64_t)a * 4194304 + (int64_t)b, (uint32_t)i, (float)(ux * x[i] + uy * y[i] + uz * z[i])};
+		}
+	qsort(nr, (size_t)count, sizeof *nr, newrow_cmp);
+	for (long a = 0; a < count;) {
+		long b = a;
+		float top = nr[a].height;
+		for (; b < count && nr[b].key == nr[a].key; ++b)
+			top = nr[b].height > top ? nr[b].height : top;
+		for (long q = a; q < b; ++q) {
+			const float depth = top - nr[q].height + 0.5f * sd->def.spacing;
+			carried[nr[q].row] = eos_density(sd, lattice_rho * (float)gn * depth);
+		}
+		a = b;
+	}
+	return true;
+}
+
+/* The explicit diffusion's stability. On the lattice the diffusion's
+ * operator, sum_j V_j 2 (f_j - f_i) F_ij (F_ij = |W'| r / (r^2 + 0.01 h^2)
+ * calibrated), has its largest eigenvalue on the checkerboard mode,
+ *   lambda = V grad_cal sum_j 2 F_ij (1 - (-1)^(a+b+c))   (lattice offsets a b c),
+ * 5.71 / spacing^2 at h = 2 spacings; Euler steps of the diffusion alone
+ * stay bounded while dt delta h c lambda <= 2, and the acoustic step is at
+ * most cfl h / c: so while cfl delta h^2 lambda <= 2 (delta 0.1, h = 2
+ * spacings: cfl up to 0.88). Measured (10 layers of still water, cfl 0.5):
+ * delta 0.17 (1.94) holds, 0.19 (2.17) blows up. */
+static double diffusion_eigenvalue(double dx, double h, double vol, double grad_cal)
+{
+	const int reach = (int)ceil(h / dx);
+	const double k = 45.0 / (M_PI * pow(h, 6)), eta2 = 0.01 * h * h;
+	double sum = 0;
+	for (int a = -reach; a <= reach; ++a)
+		for (int b = -reach; b <= reach; ++b)
+			for (int c = -reach; c <= reach; ++c) {
+				const double r = dx * sqrt((double)(a * a + b * b + c * c));
+				if (r > 0 && r < h && (a + b + c) % 2 != 0) /* 1 - (-1)^(a+b+c): 2 or 0 */
+					sum += 2 * 2 * k * (h - r) * (h - r) * r / (r * r + eta2);
+			}
+	return vol * grad_cal * sum;
+}
+
+/* cfl delta h^2 lambda (above): the continuity's diffusion is stable while <= 2. */
+static double diffusion_number(const eddy_world *w, const sph_density *sd)
+{
+	return w->def.cfl * sd->def.diffusion * sd->sh.k.h2 * sd->diffusion_eig;
+}
+
+/* The continuity density: each row's carried density (hydrostatic_start's
+ * for a new particle, whose carried value is 0) advanced over the last step by the
+ * rate at the positions and velocities that step ended with (as the
+ * integrator moved x with the new v), then stored back and in the density
+ * column. */
+static eddy_status continuity(eddy_world *w, sph_density *sd, int threads)
+{
+	const long n = (long)w->n;
+	float *carried = eddy__col(w, sd->carried), *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
+	float *rate = eddy__arena_alloc(&w->arena, (w->n ? w->n : 1) * sizeof *rate);
+	if (!rate)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", w->n);
+	const float dt = (float)w->last_dt;
+	const float least = sd->sh.mass * sd->sh.k.poly6 * sd->sh.k.h2 * sd->sh.k.h2 * sd->sh.k.h2;
+	if (!hydrostatic_start(w, sd, carried, n))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", w->n);
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		const float r = carried[i];
+		rho[i] = r;
+		sd->sh.pq[4 * i + 3] = 1.0f / r;
+	}
+	continuity_rate(w, sd, rho, rate, n, threads);
+#pragma omp parallel for num_threads(threads) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		float r = rho[i] + dt * rate[i];
+		/* kept above m W(0), the summation's least (a lone particle's): 1/rho stays finite */
+		r = r > least ? r : least;
+		carried[i] = r;
+		set_density(sd, rho, p, i, r);
+	}
+	return EDDY_OK;
+}
+
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	sph_density *sd = s->data;
@@ -366,6 +609,22 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	sh->inv_rho = eddy__arena_alloc(&w->arena, (w->n ? w->n : 1) * sizeof *sh->inv_rho);
 	if (!sh->inv_rho)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", w->n);
+	if (sd->def.density == EDDY_SPH_DENSITY_CONTINUITY && n > 0) {
+		if (!eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE)) /* check() says so before a run */
+			return eddy__fail(w, EDDY_ERR_INVALID,
+			                  "sph_density: 'density' = continuity needs sph_pressure; with sph_dfsph use "
+			                  "density = summation");
+		if (diffusion_number(w, sd) > 2)
+			return eddy__fail(w, EDDY_ERR_INVALID,
+			                  "sph_density: 'diffusion' %g at the world's cfl %g is unstable (cfl x diffusion x "
+			                  "%.3g = %.3g, must be <= 2)",
+			                  (double)sd->def.diffusion, w->def.cfl, sd->sh.k.h2 * sd->diffusion_eig,
+			                  diffusion_number(w, sd));
+		for (long i = 0; i < n; ++i)
+			ncount[i] = (float)(nb->count[i] + nb->bcount[i]);
+		st = continuity(w, sd, ctx->threads);
+		return st == EDDY_OK ? boundary_pressure(w, sd, ctx->threads) : st;
+	}
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		/* the kernel sums were made with the neighbour lists */
@@ -387,7 +646,8 @@ static void destroy(eddy_system *s)
 /* Checkpointed state: the boundary particles' pressure and density, which the
  * next step's density sum reads before this step's extrapolation replaces
  * them (a lag of one step), and the collider offsets the moving boundary
- * particles' velocities are taken against. */
+ * particles' velocities are taken against. The continuity density is a
+ * state column (sph_rho), which the checkpoint carries with the others. */
 static void *state(eddy_world *w, eddy_system *s, size_t *size)
 {
 	sph_density *sd = s->data;
@@ -419,6 +679,22 @@ static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void
 		             "so the fluid starts at %.2f x rest density and %s; set %s's spacing = %g (and radius = %g)",
 		             s->label, dx, e->label, de, dx, start, start < 1 ? "collapses" : "blows apart", s->label, de,
 		             2 * de);
+		errors++;
+	}
+	if (sd->def.density == EDDY_SPH_DENSITY_CONTINUITY && !eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE)) {
+		eddy__report(report, user, EDDY_CHECK_ERROR,
+		             "%s: 'density' = continuity needs sph_pressure (weakly compressible SPH); a pressure solve "
+		             "(sph_dfsph) corrects the summation density itself: use density = summation",
+		             s->label);
+		errors++;
+	}
+	if (sd->def.density == EDDY_SPH_DENSITY_CONTINUITY && diffusion_number(w, sd) > 2) {
+		const double per = sd->sh.k.h2 * sd->diffusion_eig;
+		eddy__report(report, user, EDDY_CHECK_ERROR,
+		             "%s: 'diffusion' %g at the world's cfl %g makes the explicit density diffusion unstable "
+		             "(cfl x diffusion x %.3g = %.3g, must be <= 2); use diffusion <= %.3g or cfl <= %.3g",
+		             s->label, (double)sd->def.diffusion, w->def.cfl, per, diffusion_number(w, sd),
+		             2 / (w->def.cfl * per), 2 / (sd->def.diffusion * per));
 		errors++;
 	}
 	if (h / dx < 1.2) {
@@ -480,10 +756,31 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 		       EDDY_NULL_SYSTEM;
 	if (def->eos != EDDY_SPH_EOS_LINEAR && def->eos != EDDY_SPH_EOS_TAIT)
 		return eddy__fail(w, EDDY_ERR_INVALID, "%s: 'eos' must be linear or tait", sys), EDDY_NULL_SYSTEM;
+	if (def->density != EDDY_SPH_DENSITY_SUMMATION && def->density != EDDY_SPH_DENSITY_CONTINUITY)
+		return eddy__fail(w, EDDY_ERR_INVALID, "%s: 'density' must be summation or continuity", sys), EDDY_NULL_SYSTEM;
+	if (!eddy__check_range(w, sys, "diffusion", def->diffusion, 0, 1))
+		return EDDY_NULL_SYSTEM;
+	int carried = -1;
+	if (def->density == EDDY_SPH_DENSITY_CONTINUITY) {
+		carried = eddy_world_find_column(w, CARRIED_NAME);
+		eddy_column_info ci;
+		if (carried >= 0 && eddy_world_column_info(w, carried, &ci) == EDDY_OK &&
+		    (ci.domain != EDDY_DOMAIN_PARTICLE || ci.type != EDDY_F32 || ci.lifetime != EDDY_STATE))
+			return eddy__fail(w, EDDY_ERR_INVALID,
+			                  "%s: density = continuity keeps the density in the column '%s', which the host "
+			                  "declared otherwise (it must be a per-particle f32 state column)",
+			                  sys, CARRIED_NAME),
+			       EDDY_NULL_SYSTEM;
+		if (carried < 0)
+			carried = eddy_world_declare_column(w, CARRIED_NAME, EDDY_DOMAIN_PARTICLE, EDDY_F32, EDDY_STATE, "kg/m^3");
+		if (carried < 0)
+			return EDDY_NULL_SYSTEM;
+	}
 	sph_density *sd = calloc(1, sizeof *sd);
 	if (!sd)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
 	sd->def = *def;
+	sd->carried = carried;
 	sd->sh.h = def->radius;
 	sd->sh.rho0 = def->rest_density;
 	sd->sh.c = sqrtf(def->stiffness);
@@ -503,7 +800,13 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	const double vol = (double)def->spacing * def->spacing * def->spacing;
 	sd->sh.grad_cal =
 		(float)(lattice * vol / eddy_sph_lattice_gradient_moment(EDDY_SPH_SPIKY, def->spacing, def->radius));
-	eddy_system_id id = eddy__add_system(w, &eddy__kind_sph_density, sd, density_reads, density_writes);
+	sd->diffusion_eig =
+		(float)diffusion_eigenvalue(def->spacing, def->radius, sd->sh.mass / def->rest_density, sd->sh.grad_cal);
+	const int cont_reads[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, carried, -1};
+	const int cont_writes[] = {COL_DENSITY, COL_PRESSURE, COL_SPH_NEIGHBORS, carried, -1};
+	const bool cont = carried >= 0;
+	eddy_system_id id = eddy__add_system(w, &eddy__kind_sph_density, sd, cont ? cont_reads : density_reads,
+	                                     cont ? cont_writes : density_writes);
 	if (eddy_system_valid(w, id))
 		eddy_world_set_rest_density(w, def->rest_density);
 	return id;
