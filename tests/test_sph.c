@@ -229,6 +229,27 @@ static void hashes_on_one_and_two_threads(sph_setup s, int frames, uint64_t hash
 	}
 }
 
+/* Writes the scene text to name in the suite's folder and runs `eddy check`
+ * on it, its output (stderr included) in out: the exit status. The file is
+ * removed after. */
+static int check_scene(const char *name, const char *text, char *out, size_t cap)
+{
+	char path[512], cmd[1200];
+	snprintf(path, sizeof path, "%s/%s", test_out_dir(), name);
+	FILE *f = fopen(path, "w");
+	CHECK(f != NULL);
+	if (!f) {
+		snprintf(out, cap, "cannot write %s", path);
+		return -1;
+	}
+	fputs(text, f);
+	fclose(f);
+	snprintf(cmd, sizeof cmd, "%s/eddy check %s", test_build_dir(), path);
+	const int code = test_sh(cmd, out, cap);
+	remove(path);
+	return code;
+}
+
 static int cmp_float(const void *a, const void *b)
 {
 	const float u = *(const float *)a, v = *(const float *)b;
@@ -1148,47 +1169,31 @@ static void continuity_rejects_bad_input(void)
 	CHECK_HAS(eddy_world_error(w), "keeps the density in the column 'sph_rho'");
 	eddy_destroy_world(w);
 
-	char path[512], cmd[1200], out[4096];
-	snprintf(path, sizeof path, "%s/continuity_bad.lua", test_build_dir());
-	FILE *f = fopen(path, "w");
-	CHECK(f != NULL);
-	if (!f)
-		return;
-	fputs("local eddy = require 'eddy'\nlocal world = eddy.world{}\n"
-	      "world:add(eddy.sph_density{ density = 'continuity', diffusion = -0.1 })\nreturn world\n",
-	      f);
-	fclose(f);
-	snprintf(cmd, sizeof cmd, "%s/eddy check %s 2>&1", test_build_dir(), path);
-	CHECK(test_sh(cmd, out, sizeof out) != 0);
+	char out[4096];
+	CHECK(check_scene("continuity_bad.lua",
+	                  "local eddy = require 'eddy'\nlocal world = eddy.world{}\n"
+	                  "world:add(eddy.sph_density{ density = 'continuity', diffusion = -0.1 })\nreturn world\n",
+	                  out, sizeof out) != 0);
 	CHECK_HAS(out, "continuity_bad.lua:3: sph_density: 'diffusion'");
-	f = fopen(path, "w");
-	CHECK(f != NULL);
-	if (f) {
-		fputs("local eddy = require 'eddy'\nlocal world = eddy.world{}\n"
-		      "world:add(eddy.emit_box{ min = {0, 0, 0}, max = {0.1, 0.1, 0.1}, spacing = 0.01 })\n"
-		      "world:add(eddy.sph_density{ density = 'continuity' })\nworld:add(eddy.gravity{})\n"
-		      "world:add(eddy.sph_dfsph{})\nworld:add(eddy.integrate{})\nreturn world\n",
-		      f);
-		fclose(f);
-		CHECK(test_sh(cmd, out, sizeof out) != 0);
-		CHECK_HAS(out, "'density' = continuity needs sph_pressure");
-	}
+	CHECK(check_scene("continuity_bad.lua",
+	                  "local eddy = require 'eddy'\nlocal world = eddy.world{}\n"
+	                  "world:add(eddy.emit_box{ min = {0, 0, 0}, max = {0.1, 0.1, 0.1}, spacing = 0.01 })\n"
+	                  "world:add(eddy.sph_density{ density = 'continuity' })\nworld:add(eddy.gravity{})\n"
+	                  "world:add(eddy.sph_dfsph{})\nworld:add(eddy.integrate{})\nreturn world\n",
+	                  out, sizeof out) != 0);
+	CHECK_HAS(out, "'density' = continuity needs sph_pressure");
 	/* the explicit diffusion's stability: cfl x diffusion x 22.8 <= 2 at
 	 * h = 2 spacings (sph_density's diffusion_eigenvalue), so at cfl 1
 	 * delta 0.1 is refused and 0.08 runs */
 	for (int k = 0; k < 2; ++k) {
-		f = fopen(path, "w");
-		CHECK(f != NULL);
-		if (!f)
-			break;
-		fprintf(f,
-		        "local eddy = require 'eddy'\nlocal world = eddy.world{ cfl = 1 }\n"
-		        "world:add(eddy.emit_box{ min = {0, 0, 0}, max = {0.1, 0.1, 0.1}, spacing = 0.01 })\n"
-		        "world:add(eddy.sph_density{ density = 'continuity', diffusion = %s })\n"
-		        "world:add(eddy.sph_pressure{})\nworld:add(eddy.integrate{})\nreturn world\n",
-		        k == 0 ? "0.1" : "0.08");
-		fclose(f);
-		const int code = test_sh(cmd, out, sizeof out);
+		char text[512];
+		snprintf(text, sizeof text,
+		         "local eddy = require 'eddy'\nlocal world = eddy.world{ cfl = 1 }\n"
+		         "world:add(eddy.emit_box{ min = {0, 0, 0}, max = {0.1, 0.1, 0.1}, spacing = 0.01 })\n"
+		         "world:add(eddy.sph_density{ density = 'continuity', diffusion = %s })\n"
+		         "world:add(eddy.sph_pressure{})\nworld:add(eddy.integrate{})\nreturn world\n",
+		         k == 0 ? "0.1" : "0.08");
+		const int code = check_scene("continuity_bad.lua", text, out, sizeof out);
 		if (k == 0) {
 			CHECK(code != 0);
 			CHECK_HAS(out, "'diffusion' 0.1 at the world's cfl 1 makes the explicit density diffusion unstable");
@@ -1196,7 +1201,6 @@ static void continuity_rejects_bad_input(void)
 		} else
 			CHECKF(code == 0, "%s", out);
 	}
-	remove(path);
 }
 
 /* With the continuity density: the same state on 1 and 2 threads (the
@@ -1445,30 +1449,17 @@ static void dfsph_rejects_bad_input(void)
 	CHECK(eddy_world_step(w) == EDDY_OK);
 	eddy_destroy_world(w);
 
-	char path[512], cmd[1200], out[4096];
-	snprintf(path, sizeof path, "%s/dfsph_bad.lua", test_build_dir());
-	FILE *f = fopen(path, "w");
-	CHECK(f != NULL);
-	if (!f)
-		return;
-	fputs("local eddy = require 'eddy'\nlocal world = eddy.world{}\n"
-	      "world:add(eddy.sph_dfsph{ max_density_error = -0.01 })\nreturn world\n",
-	      f);
-	fclose(f);
-	snprintf(cmd, sizeof cmd, "%s/eddy check %s", test_build_dir(), path);
-	CHECK(test_sh(cmd, out, sizeof out) != 0);
+	char out[4096];
+	CHECK(check_scene("dfsph_bad.lua",
+	                  "local eddy = require 'eddy'\nlocal world = eddy.world{}\n"
+	                  "world:add(eddy.sph_dfsph{ max_density_error = -0.01 })\nreturn world\n",
+	                  out, sizeof out) != 0);
 	CHECK_HAS(out, "dfsph_bad.lua:3: sph_dfsph: 'max_density_error' must be > 0 (got -0.01)");
-	f = fopen(path, "w");
-	CHECK(f != NULL);
-	if (f) {
-		fputs("local eddy = require 'eddy'\nlocal world = eddy.world{}\n"
-		      "world:add(eddy.sph_dfsph{ max_density_eror = 0.01 })\nreturn world\n",
-		      f);
-		fclose(f);
-		CHECK(test_sh(cmd, out, sizeof out) != 0);
-		CHECK_HAS(out, "dfsph_bad.lua:3: sph_dfsph: unknown field 'max_density_eror'");
-	}
-	remove(path);
+	CHECK(check_scene("dfsph_bad.lua",
+	                  "local eddy = require 'eddy'\nlocal world = eddy.world{}\n"
+	                  "world:add(eddy.sph_dfsph{ max_density_eror = 0.01 })\nreturn world\n",
+	                  out, sizeof out) != 0);
+	CHECK_HAS(out, "dfsph_bad.lua:3: sph_dfsph: unknown field 'max_density_eror'");
 }
 
 /* Same state hash on 1 and 2 threads: every particle writes only its own
