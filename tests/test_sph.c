@@ -250,6 +250,28 @@ static int check_scene(const char *name, const char *text, char *out, size_t cap
 	return code;
 }
 
+/* Runs a 8 frames and b 4, saves b to name in the suite's folder, loads
+ * that into c and runs it 4 more: c must end bit-identical to a. Destroys
+ * the three. */
+static void check_resume_bit_identical(eddy_world *a, eddy_world *b, eddy_world *c, const char *name)
+{
+	for (int f = 0; f < 8; ++f)
+		CHECK(eddy_world_step_frame(a) == EDDY_OK);
+	for (int f = 0; f < 4; ++f)
+		CHECK(eddy_world_step_frame(b) == EDDY_OK);
+	char path[512];
+	snprintf(path, sizeof path, "%s/%s", test_out_dir(), name);
+	CHECK(eddy_world_save(b, path, 3) == EDDY_OK);
+	CHECKF(eddy_world_load(c, path, 3) == EDDY_OK, "%s", eddy_world_error(c));
+	for (int f = 0; f < 4; ++f)
+		CHECK(eddy_world_step_frame(c) == EDDY_OK);
+	CHECK(eddy_world_state_hash(c) == eddy_world_state_hash(a));
+	remove(path);
+	eddy_destroy_world(a);
+	eddy_destroy_world(b);
+	eddy_destroy_world(c);
+}
+
 static int cmp_float(const void *a, const void *b)
 {
 	const float u = *(const float *)a, v = *(const float *)b;
@@ -1217,25 +1239,7 @@ static void continuity_deterministic_and_resumable(void)
 	CHECK(hash[0] == hash[1]);
 
 	s.fps = 50;
-	eddy_world *a = sph_world(&s, NULL);
-	for (int f = 0; f < 8; ++f)
-		CHECK(eddy_world_step_frame(a) == EDDY_OK);
-	const uint64_t straight = eddy_world_state_hash(a);
-	eddy_world *b = sph_world(&s, NULL);
-	for (int f = 0; f < 4; ++f)
-		CHECK(eddy_world_step_frame(b) == EDDY_OK);
-	char path[512];
-	snprintf(path, sizeof path, "%s/continuity_ckpt.eddy", test_build_dir());
-	CHECK(eddy_world_save(b, path, 3) == EDDY_OK);
-	eddy_destroy_world(b);
-	eddy_world *c = sph_world(&s, NULL);
-	CHECKF(eddy_world_load(c, path, 3) == EDDY_OK, "%s", eddy_world_error(c));
-	for (int f = 0; f < 4; ++f)
-		CHECK(eddy_world_step_frame(c) == EDDY_OK);
-	CHECK(eddy_world_state_hash(c) == straight);
-	remove(path);
-	eddy_destroy_world(c);
-	eddy_destroy_world(a);
+	check_resume_bit_identical(sph_world(&s, NULL), sph_world(&s, NULL), sph_world(&s, NULL), "continuity_ckpt.eddy");
 }
 
 void suite_sph(void)
@@ -1548,8 +1552,9 @@ static void dfsph_drop_converges(void)
 	eddy_destroy_world(w);
 }
 
-/* sph_dfsph keeps no state across steps (no warm start), so a run resumed
- * from a checkpoint is bit-identical to one that never stopped. */
+/* sph_dfsph's state across steps (its warm starts' columns) is in the
+ * checkpoint, so a run resumed from one is bit-identical to one that never
+ * stopped. */
 static void dfsph_resume_is_bit_identical(void)
 {
 	sph_setup s = default_setup();
@@ -1557,25 +1562,8 @@ static void dfsph_resume_is_bit_identical(void)
 	s.fmax = (eddy_vec3){0.06f, 0.09f, 0.1f};
 	s.cfl = 1.0;
 	eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
-	eddy_world *a = dfsph_world(s, &df, 30);
-	for (int f = 0; f < 8; ++f)
-		CHECK(eddy_world_step_frame(a) == EDDY_OK);
-	const uint64_t straight = eddy_world_state_hash(a);
-	eddy_world *b = dfsph_world(s, &df, 30);
-	for (int f = 0; f < 4; ++f)
-		CHECK(eddy_world_step_frame(b) == EDDY_OK);
-	char path[512];
-	snprintf(path, sizeof path, "%s/dfsph_ckpt.eddy", test_build_dir());
-	CHECK(eddy_world_save(b, path, 3) == EDDY_OK);
-	eddy_destroy_world(b);
-	eddy_world *c = dfsph_world(s, &df, 30);
-	CHECKF(eddy_world_load(c, path, 3) == EDDY_OK, "%s", eddy_world_error(c));
-	for (int f = 0; f < 4; ++f)
-		CHECK(eddy_world_step_frame(c) == EDDY_OK);
-	CHECK(eddy_world_state_hash(c) == straight);
-	remove(path);
-	eddy_destroy_world(c);
-	eddy_destroy_world(a);
+	check_resume_bit_identical(dfsph_world(s, &df, 30), dfsph_world(s, &df, 30), dfsph_world(s, &df, 30),
+	                           "dfsph_ckpt.eddy");
 }
 
 static void sph_dfsph_suite(void)
