@@ -308,6 +308,28 @@ static const char *run_group(const char *src, char *buf, size_t cap)
 	return buf;
 }
 
+/* eddy.fluid passes sph_density's density, diffusion and verlet_list on:
+ * the continuity density shows in the plan as its state column sph_rho,
+ * for WCSPH only (the wcsph table is not applied to DFSPH), and a bad
+ * verlet_list reaches sph_density's own check. */
+static void fluid_group_passes_sph_density_fields(void)
+{
+	static const char *const fmt = "local eddy = require 'eddy'\n"
+								   "local fluid = eddy.fluid { method = '%s', resolution = 0.02, verlet_list = %s,\n"
+								   "  wcsph = { density = 'continuity', diffusion = 0.08 } }\n"
+								   "local world = fluid:world { bounds = { {0, 0, 0}, {0.3, 0.3, 0.1} } }\n"
+								   "world:add(fluid)\n"
+								   "return world:plan()\n";
+	char src[1024], buf[4096];
+	snprintf(src, sizeof src, fmt, "wcsph", "false");
+	CHECK_HAS(run_group(src, buf, sizeof buf), "sph_rho");
+	snprintf(src, sizeof src, fmt, "dfsph", "false");
+	const char *out = run_group(src, buf, sizeof buf);
+	CHECKF(strstr(out, "sph_density") && !strstr(out, "sph_rho"), "%s", out);
+	snprintf(src, sizeof src, fmt, "wcsph", "3");
+	CHECK_HAS(run_group(src, buf, sizeof buf), "sph_density: 'verlet_list' must be true or false");
+}
+
 static void fluid_group_expands_per_method(void)
 {
 	static const struct {
@@ -656,6 +678,7 @@ void suite_lua(void)
 	RUN(animated_collider);
 	RUN(every_field_rejects_nan_and_inf);
 	RUN(fluid_group_expands_per_method);
+	RUN(fluid_group_passes_sph_density_fields);
 	RUN(safe_mode_refuses_escapes);
 	RUN(safe_mode_keeps_what_scenes_use);
 	RUN(load_scene_runs_a_scene_sandboxed);

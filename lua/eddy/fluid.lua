@@ -49,6 +49,9 @@ local FIELDS = {
 	artificial = { "wcsph", "dfsph" },      -- 1, Monaghan's alpha
 	surface_tension = { "wcsph", "dfsph" }, -- N/m
 	stiffness = { "wcsph" },                -- m^2/s^2
+	density = { "wcsph" },                  -- sph_density's "summation" (default) or "continuity"
+	diffusion = { "wcsph" },                -- 1, delta-SPH's delta with density = "continuity"
+	verlet_list = { "wcsph", "dfsph" },     -- false: a search every step, less memory, more time
 	tolerance = { "dfsph", "flip", "pic", "apic" },
 	divergence = { "dfsph" },
 	shift = { "dfsph" },                    -- 1, sph_dfsph's particle shifting
@@ -174,7 +177,8 @@ function Group:expand(world)
 			     .. "max = ...}, or tank = false for none")
 		end
 		add("sph_density", { radius = 2 * h, spacing = h, rest_density = d.rest_density or 1000,
-		                     stiffness = d.stiffness })
+		                     stiffness = d.stiffness, density = d.density, diffusion = d.diffusion,
+		                     verlet_list = d.verlet_list })
 		local visc = opt { viscosity = d.viscosity or 1e-3, artificial = d.artificial or 0.05 }
 		if m == "wcsph" then
 			add("sph_pressure", {})
