@@ -100,7 +100,8 @@
  * shifts along the wall only: grad C_i takes the walls' volumes too
  * (sum_b V_b grad W(x_i - x_b) = B_i / rho0), and its part along each
  * wall normal is removed (the normals: wall_normals, one beside a face,
- * two at an edge, three at a corner). Along the wall the force is -2 k_i
+ * two at an edge, three at a corner; a box's walls only: beside a
+ * collider's particles nothing shifts, see shift). Along the wall the force is -2 k_i
  * (S_i + B_i) for a uniform k, the gradient of that concentration, so the
  * shift again moves the particle where the pressure would push it, at no
  * speed; without the walls' volumes the along-wall part fought the wall
@@ -1285,7 +1286,18 @@ static void shift(eddy_world *w, const sph_dfsph *sd, const dfsph_work *wk)
 		if (!(wk->rho[i] >= full && c.w * full <= 1.0f))
 			continue;
 		float s[3] = {c.x, c.y, c.z};
-		if (wk->sh->nb.bcount[i]) {
+		const sph_neighbors *nb = &wk->sh->nb;
+		if (nb->bcount[i]) {
+			/* beside a collider's particles (after the boxes' n_static) no
+			 * shift at all: their sampling of a mesh or a sphere gives the
+			 * tensor no clean normals, and a shift pushed water into a mesh
+			 * cup's wall (test_mesh's cup at 3 mm) */
+			const uint32_t *bl = sph_bnbrs(nb, i);
+			bool collider = false;
+			for (uint32_t q = 0; q < nb->bcount[i] && !collider; ++q)
+				collider = bl[q] >= nb->bnd.n_static;
+			if (collider)
+				continue;
 			/* the walls' volumes too, as the force counts them (B_i / rho0 =
 			 * sum_b V_b grad W(x_i - x_b)), then only the part along the walls */
 			s[0] += wk->b[i].x * irho0;
