@@ -49,6 +49,31 @@ static long maxrss_kb(void)
 	return ru.ru_maxrss;
 }
 
+/* With EDDY_SCALE_COLUMNS: the peak RSS within the next stretch of work
+ * alone (Linux: writing 5 to clear_refs resets VmHWM to the current RSS),
+ * so a later step's peak shows apart from the first step's. */
+static void hwm_reset(void)
+{
+	FILE *f = fopen("/proc/self/clear_refs", "w");
+	if (f) {
+		fputs("5", f);
+		fclose(f);
+	}
+}
+
+static long hwm_kb(void)
+{
+	FILE *f = fopen("/proc/self/status", "r");
+	char line[256];
+	long kb = -1;
+	while (f && fgets(line, sizeof line, f))
+		if (sscanf(line, "VmHWM: %ld", &kb) == 1)
+			break;
+	if (f)
+		fclose(f);
+	return kb;
+}
+
 /* Process CPU ms (all threads): on a loaded host a 1-thread run's CPU time
  * moves far less than its wall time. */
 static double cpu_ms(void)
@@ -189,6 +214,8 @@ static int child_block(const char *method, long n, int threads, int steps, const
 		before[k] = info.profile_ms;
 	}
 	for (int s = 0; s < steps; ++s) {
+		if (getenv("EDDY_SCALE_COLUMNS"))
+			hwm_reset();
 		const double a = now_ms(), c = cpu_ms();
 		if (eddy_world_step(w) != EDDY_OK) {
 			fprintf(stderr, "bench_scale: %s %ld: %s\n", method, n, eddy_world_error(w));
@@ -197,7 +224,8 @@ static int child_block(const char *method, long n, int threads, int steps, const
 		ms[s] = now_ms() - a;
 		cpu[s] = cpu_ms() - c;
 		if (getenv("EDDY_SCALE_COLUMNS"))
-			fprintf(stderr, "peak RSS after timed step %d: %.1f MB\n", s, (double)maxrss_kb() / 1e3);
+			fprintf(stderr, "peak RSS after timed step %d: %.1f MB (within the step: %.1f MB)\n", s,
+			        (double)maxrss_kb() / 1e3, (double)hwm_kb() / 1e3);
 		eddy_frame_stats st;
 		eddy_world_frame_stats(w, &st);
 		const double it = extra_stat(&st, "iterations");

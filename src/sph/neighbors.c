@@ -392,19 +392,21 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", n);
 	/* every per-row array to n rows; what they held is not kept: a new count
 	 * forces a search, which needs none of it */
-	void **arrays[] = {(void **)&nb->first,  (void **)&nb->count, (void **)&nb->bfirst, (void **)&nb->bcount,
-	                   (void **)&nb->ksum,   (void **)&v->first,  (void **)&v->count,   (void **)&v->bfirst,
-	                   (void **)&v->bcount,  (void **)&v->x,      (void **)&v->y,       (void **)&v->z,
-	                   (void **)&v->slot_of, (void **)&v->row_of};
-	const int narrays = off ? 5 : (int)(sizeof arrays / sizeof arrays[0]); /* off: the exact lists' only */
+	void **arrays[] = {(void **)&nb->first,   (void **)&nb->count, (void **)&nb->bfirst, (void **)&nb->bcount,
+	                   (void **)&v->first,    (void **)&v->count,  (void **)&v->bfirst,  (void **)&v->bcount,
+	                   (void **)&v->x,        (void **)&v->y,      (void **)&v->z,       (void **)&v->slot_of,
+	                   (void **)&v->row_of};
+	const int narrays = off ? 4 : (int)(sizeof arrays / sizeof arrays[0]); /* off: the exact lists' only */
 	if (!sph_grow_block(&nb->rows, &nb->rows_alloc, n, arrays, narrays))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for %zu particles", n);
-	/* key, order and scratch in per-row arrays of the last step's exact
-	 * lists: this step's are written after their last use (the cell
-	 * ranges, before any search), and the arena is spared 12 bytes a row */
+	/* key and order in per-row arrays of the last step's exact lists: this
+	 * step's are written after their last use (the cell ranges, before any
+	 * search); the permutation's scratch in p4, whose quads are rewritten
+	 * after it (cell_order): the arena is spared 12 bytes a row */
 	rp.key = nb->first;
 	rp.order = nb->count;
-	rp.scratch = nb->ksum;
+	rp.scratch = rp.p4;
+	nb->ksum = eddy__col(w, COL_DENSITY);
 	v->age++;
 	const int in_order = cell_order(w, nb, &rp, threads);
 	if (in_order < 0)

@@ -334,6 +334,7 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
 	const uint32_t gx = (uint32_t)nb->grid.gx, gy = (uint32_t)nb->grid.gy;
 	const size_t blocks_z = (size_t)(nb->grid.gz + SEARCH_BZ - 1) / SEARCH_BZ,
 				 words = ((size_t)c.blocks_x * (size_t)c.blocks_y * blocks_z + 63) / 64;
+	const eddy_arena_mark am = eddy__arena_mark(&w->arena); /* ids and mark: the search's own */
 	uint32_t *ids = eddy__arena_alloc(&w->arena, (w->n + 1) * sizeof *ids);
 	uint64_t *mark = eddy__arena_alloc(&w->arena, words * sizeof *mark);
 	if (!ids || !mark)
@@ -368,6 +369,7 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
 			sph_cursor_merge(bound, &bb.out[k]);
 		}
 	}
+	eddy__arena_release(&w->arena, am);
 	return ok;
 }
 

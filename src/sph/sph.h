@@ -149,7 +149,9 @@ typedef struct sph_neighbors {
 	uint32_t *count, *bcount; /* per row: their lengths */
 	/* m (h^6 + sum_j (h^2 - r^2)^3) over the particle and its fluid
 	 * neighbours, plus sum_b V_b rho_b (h^2 - r^2)^3 over the boundary ones
-	 * (m: sph_shared's mass), made with the lists: the density over poly6 */
+	 * (m: sph_shared's mass), made with the lists: the density over poly6.
+	 * Not an array of its own: the density column (derived, so free until
+	 * sph_density writes it), which sph_density then scales in place */
 	float *ksum;
 	/* the boundary particles, nbound of them */
 	size_t nbound;

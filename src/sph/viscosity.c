@@ -145,6 +145,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	 * sph_density and (vx vy vz -rho) made here: a group of neighbours then
 	 * costs two loads each and two transposes instead of eight scattered
 	 * loads each */
+	const eddy_arena_mark mark = eddy__arena_mark(&w->arena); /* pv lives for this pass only */
 	float *pv = eddy__arena_alloc(&w->arena, (size_t)(n ? n : 1) * 4 * sizeof *pv);
 	if (!pv)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", s->label, n);
@@ -171,6 +172,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	                     .acoef = 2.0f * sh->mass * def->artificial * sh->c * kc.h * -kc.spiky_grad,
 	                     .pair_sums = SIMD_PICK(visc_pair_sums)};
 	sph_block_pass(n, ctx->threads, visc_block, &a);
+	eddy__arena_release(&w->arena, mark);
 	return EDDY_OK;
 }
 
