@@ -126,12 +126,15 @@ eddy_status sph_boundary_sort(eddy_world *w, sph_neighbors *nb)
 	if (!bd->order)
 		return EDDY_OK;
 	const size_t total = nb->nbound;
+	const eddy_arena_mark mark = eddy__arena_mark(&w->arena); /* key: the sort's own */
 	uint32_t *key = eddy__arena_alloc(&w->arena, (total ? total : 1) * sizeof *key);
 	if (!key)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu boundary particles", total);
 	for (size_t i = 0; i < total; ++i)
 		key[i] = sph_cell_at(&nb->grid, nb->bx[i], nb->by[i], nb->bz[i]);
-	if (!sph_counting_sort(key, total, &nb->grid, &nb->grid.bound_start, bd->order))
+	const bool sorted = sph_counting_sort(key, total, &nb->grid, &nb->grid.bound_start, bd->order);
+	eddy__arena_release(&w->arena, mark);
+	if (!sorted)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of memory for the neighbour cells");
 	for (int c = 0; c < bd->ncol; ++c) {
 		bd->col[c].at_search = bd->col[c].disp;

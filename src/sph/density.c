@@ -351,6 +351,7 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 	const bool iterate =
 		eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL && sd->def.density != EDDY_SPH_DENSITY_CONTINUITY;
 	walls wl;
+	const eddy_arena_mark mark = eddy__arena_mark(&w->arena); /* wl's arrays: this pass's own */
 	if (!walls_make(w, sd, threads, &wl))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %ld boundary particles", nbound);
 	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
@@ -386,6 +387,7 @@ static eddy_status boundary_pressure(eddy_world *w, sph_density *sd, int threads
 		nb->bp[wl.act[a]] = wl.pb[a];
 		nb->bnd.rho[wl.act[a]] = wl.old[a];
 	}
+	eddy__arena_release(&w->arena, mark);
 	return EDDY_OK;
 }
 
@@ -570,6 +572,7 @@ static eddy_status continuity(eddy_world *w, sph_density *sd, int threads)
 {
 	const long n = (long)w->n;
 	float *carried = eddy__col(w, sd->carried), *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE);
+	const eddy_arena_mark mark = eddy__arena_mark(&w->arena); /* rate and the new rows': this pass's own */
 	float *rate = eddy__arena_alloc(&w->arena, (w->n ? w->n : 1) * sizeof *rate);
 	if (!rate)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", w->n);
@@ -592,6 +595,7 @@ static eddy_status continuity(eddy_world *w, sph_density *sd, int threads)
 		carried[i] = r;
 		set_density(sd, rho, p, i, r);
 	}
+	eddy__arena_release(&w->arena, mark);
 	return EDDY_OK;
 }
 
