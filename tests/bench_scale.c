@@ -112,14 +112,18 @@ static eddy_flip_solver solver_of(const char *name)
 /* A cube of about n particles at spacing dx = 1 cm on the floor of a tank
  * twice as wide and 1.5 times as tall, as bench_sph's block, for method
  * "wcsph", "dfsph" or "flip" (cells 2 dx wide, 8 particles each, the
- * defaults of eddy.fluid). */
+ * defaults of eddy.fluid). EDDY_SCALE_LAYERS=L makes it a square slab L
+ * particles deep instead: the cost of size at a fixed depth, apart from
+ * DFSPH's tolerance, which tightens with the depth. */
 static eddy_world *block(const char *method, long n, int threads, eddy_flip_solver solver)
 {
 	const bool flip = strcmp(method, "flip") == 0, dfsph = strcmp(method, "dfsph") == 0;
-	const float dx = 0.01f,
-				side = dx * (roundf(cbrtf((float)n)) + 0.5f); /* + 0.5: a whole number of spacings after floor */
+	const char *layers = getenv("EDDY_SCALE_LAYERS");
+	const float dx = 0.01f, depth_n = layers ? (float)atoi(layers) : roundf(cbrtf((float)n)),
+				/* + 0.5: a whole number of spacings after floor */
+		side = dx * (roundf(sqrtf((float)n / (depth_n > 1 ? depth_n : 1))) + 0.5f), height = dx * (depth_n + 0.5f);
 	eddy_world_def d = eddy_default_world_def();
-	d.bounds_max = (eddy_vec3){2 * side, 1.5f * side, 2 * side};
+	d.bounds_max = (eddy_vec3){2 * side, 1.5f * height, 2 * side};
 	d.threads = threads;
 	d.fps = 1000;
 	d.cfl = flip || dfsph ? 1.0 : 0.4;
@@ -130,7 +134,7 @@ static eddy_world *block(const char *method, long n, int threads, eddy_flip_solv
 		return NULL;
 	eddy_emit_box_def b = eddy_default_emit_box_def();
 	b.min = (eddy_vec3){0.5f * side, 0, 0.5f * side};
-	b.max = (eddy_vec3){1.5f * side, side, 1.5f * side};
+	b.max = (eddy_vec3){1.5f * side, height, 1.5f * side};
 	b.spacing = dx;
 	eddy_add_emit_box(w, &b);
 	eddy_gravity_def g = eddy_default_gravity_def();
