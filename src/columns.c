@@ -240,7 +240,8 @@ void eddy__clear_derived(eddy_world *w)
 
 void eddy__permute_particles(eddy_world *w, const uint32_t *perm, void *scratch)
 {
-	const size_t n = w->n;
+	const long n = (long)w->n;
+	const int nt = n > EDDY_PAR_ROWS ? w->def.threads : 1;
 	for (int c = 0; c < w->column_count; ++c) {
 		eddy_column *col = &w->columns[c];
 		if (!col->data || col->domain != EDDY_DOMAIN_PARTICLE)
@@ -248,15 +249,29 @@ void eddy__permute_particles(eddy_world *w, const uint32_t *perm, void *scratch)
 		if (col->type == EDDY_U8) {
 			const uint8_t *src = col->data;
 			uint8_t *tmp = scratch;
-			for (size_t i = 0; i < n; ++i)
-				tmp[i] = src[perm[i]];
-			memcpy(col->data, tmp, n);
+			uint8_t *dst = col->data;
+#pragma omp parallel num_threads(nt) if (nt > 1)
+			{
+#pragma omp for schedule(static)
+				for (long i = 0; i < n; ++i)
+					tmp[i] = src[perm[i]];
+#pragma omp for schedule(static)
+				for (long i = 0; i < n; ++i)
+					dst[i] = tmp[i];
+			}
 		} else {
 			const float *src = col->data;
 			float *tmp = scratch;
-			for (size_t i = 0; i < n; ++i)
-				tmp[i] = src[perm[i]];
-			memcpy(col->data, tmp, n * sizeof(float));
+			float *dst = col->data;
+#pragma omp parallel num_threads(nt) if (nt > 1)
+			{
+#pragma omp for schedule(static)
+				for (long i = 0; i < n; ++i)
+					tmp[i] = src[perm[i]];
+#pragma omp for schedule(static)
+				for (long i = 0; i < n; ++i)
+					dst[i] = tmp[i];
+			}
 		}
 	}
 }

@@ -218,8 +218,12 @@ bool eddy__add_args(eddy_world *w, const void *def, const char *sys);
 /* columns (columns.c) */
 void eddy__columns_init(eddy_world *w);
 void eddy__columns_free(eddy_world *w);
-/* Reorders every allocated particle column so row i takes old row perm[i];
- * scratch holds n floats. SPH keeps the table in grid-cell order with it. */
+/* A per-row loop over more rows than this runs on the world's threads:
+ * below it, waking the team costs more than the loop. */
+#define EDDY_PAR_ROWS 65536
+/* Reorders every allocated particle column so row i takes old row perm[i]
+ * (on the world's threads: a gather, the same bits); scratch holds n
+ * floats. SPH keeps the table in grid-cell order with it. */
 void eddy__permute_particles(eddy_world *w, const uint32_t *perm, void *scratch);
 size_t eddy__column_elems(const eddy_world *w, const eddy_column *c);
 size_t eddy__column_bytes(const eddy_world *w, const eddy_column *c);

@@ -22,13 +22,14 @@ eddy_gravity_def eddy_default_gravity_def(void)
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
-	(void)ctx;
 	const gravity *g = s->data;
 	const float gx = w->def.gravity.x * g->def.scale, gy = w->def.gravity.y * g->def.scale,
 				gz = w->def.gravity.z * g->def.scale;
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
-	const size_t n = w->n;
-	for (size_t i = 0; i < n; ++i) {
+	const long n = (long)w->n;
+	const int nt = n > EDDY_PAR_ROWS ? ctx->threads : 1;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (long i = 0; i < n; ++i) {
 		ax[i] += gx;
 		ay[i] += gy;
 		az[i] += gz;

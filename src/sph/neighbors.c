@@ -392,9 +392,9 @@ eddy_status eddy__sph_neighbors_build(eddy_world *w, sph_shared *sh, int threads
 		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", n);
 	/* every per-row array to n rows; what they held is not kept: a new count
 	 * forces a search, which needs none of it */
-	void **arrays[] = {(void **)&nb->first,   (void **)&nb->count, (void **)&nb->bfirst, (void **)&nb->bcount,
-	                   (void **)&v->first,    (void **)&v->count,  (void **)&v->bfirst,  (void **)&v->bcount,
-	                   (void **)&v->x,        (void **)&v->y,      (void **)&v->z,       (void **)&v->slot_of,
+	void **arrays[] = {(void **)&nb->first, (void **)&nb->count, (void **)&nb->bfirst, (void **)&nb->bcount,
+	                   (void **)&v->first,  (void **)&v->count,  (void **)&v->bfirst,  (void **)&v->bcount,
+	                   (void **)&v->x,      (void **)&v->y,      (void **)&v->z,       (void **)&v->slot_of,
 	                   (void **)&v->row_of};
 	const int narrays = off ? 4 : (int)(sizeof arrays / sizeof arrays[0]); /* off: the exact lists' only */
 	if (!sph_grow_block(&nb->rows, &nb->rows_alloc, n, arrays, narrays))
