@@ -340,12 +340,24 @@ bool sph_search(eddy_world *w, sph_neighbors *nb, const sph_search_out *out, int
 	if (!ids || !mark)
 		return false;
 	memset(mark, 0, words * sizeof *mark);
-	for (size_t i = 0; i < w->n; ++i) {
-		const uint32_t cell = sph_cell_at(&nb->grid, c.x[i], c.y[i], c.z[i]); /* as the cell order's pass found */
-		const uint32_t cx = cell % gx, cy = cell / gx % gy, cz = cell / (gx * gy);
-		const uint32_t id =
-			(cz / SEARCH_BZ * (uint32_t)c.blocks_y + cy / SEARCH_BY) * (uint32_t)c.blocks_x + cx / SEARCH_BX;
-		mark[id / 64] |= 1ull << (id % 64);
+	/* on the threads: a bit set is the same whoever sets it; the rows are in
+	 * cell order, so a thread's next row is mostly in the block it marked last */
+	const long n = (long)w->n;
+#pragma omp parallel num_threads(n > EDDY_PAR_ROWS ? threads : 1) if (n > EDDY_PAR_ROWS && threads > 1)
+	{
+		uint32_t last = UINT32_MAX;
+#pragma omp for schedule(static)
+		for (long i = 0; i < n; ++i) {
+			const uint32_t cell = sph_cell_at(&nb->grid, c.x[i], c.y[i], c.z[i]); /* as the cell order's pass found */
+			const uint32_t cx = cell % gx, cy = cell / gx % gy, cz = cell / (gx * gy);
+			const uint32_t id =
+				(cz / SEARCH_BZ * (uint32_t)c.blocks_y + cy / SEARCH_BY) * (uint32_t)c.blocks_x + cx / SEARCH_BX;
+			if (id != last) {
+#pragma omp atomic update
+				mark[id / 64] |= 1ull << (id % 64);
+				last = id;
+			}
+		}
 	}
 	long blocks = 0;
 	for (size_t k = 0; k < words; ++k)
