@@ -689,6 +689,13 @@ static double particle_mass(const eddy_world *w)
  * It is the energy WCSPH's pressure force exchanges with the motion, so the
  * total is the one a conservative WCSPH would keep; sph_dfsph solves for the
  * pressure instead and has no such store (NAN there). */
+/* The stats' sums run on all threads in fixed chunks whose sums are added in
+ * chunk order: the same figures on any number of threads. At most
+ * STAT_CHUNKS chunks of at least STAT_CHUNK particles (the chunking depends
+ * on the particle count only). */
+enum { STAT_CHUNK = 16384, STAT_CHUNKS = 256 };
+static size_t stat_chunk_size(size_t n) { return n / STAT_CHUNKS + 1 > STAT_CHUNK ? n / STAT_CHUNKS + 1 : STAT_CHUNK; }
+
 static void energy_stats(const eddy_world *w, eddy_frame_stats *out)
 {
 	const double m = particle_mass(w);
@@ -714,12 +721,7 @@ static void energy_stats(const eddy_world *w, eddy_frame_stats *out)
 	}
 	wcsph = eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL;
 	const eddy_vec3 lo = w->def.bounds_min;
-	/* On all threads, summed in fixed chunks whose sums are added in chunk
-	 * order: the same figures on any number of threads. At most STAT_CHUNKS
-	 * chunks of at least STAT_CHUNK particles (the chunking depends on the
-	 * particle count only). */
-	enum { STAT_CHUNK = 16384, STAT_CHUNKS = 256 };
-	const size_t n = w->n, csize = n / STAT_CHUNKS + 1 > STAT_CHUNK ? n / STAT_CHUNKS + 1 : STAT_CHUNK;
+	const size_t n = w->n, csize = stat_chunk_size(n);
 	const int nch = (int)((n + csize - 1) / csize), nt = nch > 1 ? w->def.threads : 1;
 	double part[STAT_CHUNKS][5];
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
@@ -785,7 +787,11 @@ eddy_status eddy_world_frame_stats(eddy_world *w, eddy_frame_stats *out)
 	double vmax2 = 0;
 	size_t leaked = 0, nonfinite = 0;
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
-	for (size_t i = 0; i < w->n; ++i) {
+	/* a largest value and counts: the same on any number of threads */
+	const long n = (long)w->n;
+	const int nt = n > EDDY_PAR_ROWS ? w->def.threads : 1;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(max : vmax2) reduction(+ : leaked)
+	for (long i = 0; i < n; ++i) {
 		if (vx && vy && vz) {
 			double v2 = (double)vx[i] * vx[i] + (double)vy[i] * vy[i] + (double)vz[i] * vz[i];
 			if (v2 > vmax2)
@@ -804,7 +810,8 @@ eddy_status eddy_world_frame_stats(eddy_world *w, eddy_frame_stats *out)
 		if (!col->data || col->domain != EDDY_DOMAIN_PARTICLE || col->type != EDDY_F32 || col->lifetime != EDDY_STATE)
 			continue;
 		const float *v = col->data;
-		for (size_t i = 0; i < w->n; ++i)
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(+ : nonfinite)
+		for (long i = 0; i < n; ++i)
 			nonfinite += !isfinite(v[i]);
 	}
 	out->max_speed = sqrt(vmax2);
@@ -814,14 +821,24 @@ eddy_status eddy_world_frame_stats(eddy_world *w, eddy_frame_stats *out)
 
 	const float *rho = eddy__col(w, COL_DENSITY);
 	if (rho && w->rest_density > 0 && w->n > 0) {
-		double sum = 0, mx = 0, comp = 0;
-		for (size_t i = 0; i < w->n; ++i) {
-			const double d = ((double)rho[i] - w->rest_density) / w->rest_density, e = fabs(d);
-			sum += e;
-			comp += d > 0 ? d : 0;
-			if (e > mx)
-				mx = e;
+		const size_t csize = stat_chunk_size(w->n);
+		const int nch = (int)((w->n + csize - 1) / csize), cnt = nch > 1 ? w->def.threads : 1;
+		double part[STAT_CHUNKS][2], mx = 0;
+#pragma omp parallel for num_threads(cnt) if (cnt > 1) schedule(static) reduction(max : mx)
+		for (int c = 0; c < nch; ++c) {
+			const size_t i0 = (size_t)c * csize, i1 = i0 + csize < w->n ? i0 + csize : w->n;
+			double csum = 0, ccomp = 0;
+			for (size_t i = i0; i < i1; ++i) {
+				const double d = ((double)rho[i] - w->rest_density) / w->rest_density, e = fabs(d);
+				csum += e;
+				ccomp += d > 0 ? d : 0;
+				mx = e > mx ? e : mx;
+			}
+			part[c][0] = csum, part[c][1] = ccomp;
 		}
+		double sum = 0, comp = 0;
+		for (int c = 0; c < nch; ++c)
+			sum += part[c][0], comp += part[c][1];
 		out->density_err_avg = sum / (double)w->n;
 		out->density_err_max = mx;
 		out->density_compression_avg = comp / (double)w->n;
