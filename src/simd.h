@@ -20,7 +20,7 @@
  *   sf8_lanes_below(n)       mask of the lanes k < n (n may be >= 8)
  *   sf8_quad_lanes_below(n)  mask of the lanes k with k mod 4 < n
  *   sf8_mask_bits(m)         bit k = lane k's sign bit (movemask)
- *   sf8_gather(base, idx)    lane k = base[idx[k]]
+ *   sf8_gather(base, idx)    lane k = base[idx[k]]; sf8_gather4 lane k = base[4 idx[k]]
  *   sf8_load_quad2(p)        the quad p[0..3] in lanes 0-3 and again in 4-7
  *   sf8_gather_quads(base, idx, c0..c3)
  *                            the quads at base + 4 idx[k] (such as sph_shared's
@@ -386,6 +386,15 @@ static inline sf8 sf8_quad_lanes_below(int n)
 		bits[k] = k < n ? ~0u : 0u;
 	memcpy(quad, bits, sizeof quad);
 	return sf8_load_quad2(quad);
+}
+
+/* lane k = base[4 idx[k]] (idx[k] < 2^30): one member of each quad, such as pq's 1/rho (base = pq + 3) */
+static inline sf8 sf8_gather4(const float *base, const uint32_t idx[8])
+{
+	uint32_t q[8];
+	for (int k = 0; k < 8; ++k)
+		q[k] = 4 * idx[k];
+	return sf8_gather(base, q);
 }
 
 static inline void sf8_gather_quads(const float *base, const uint32_t idx[8], sf8 *c0, sf8 *c1, sf8 *c2, sf8 *c3)

@@ -328,12 +328,11 @@ static float walls_set(const sph_density *sd, const walls *wl, bool first, int t
 	return change;
 }
 
-/* Row i's density r and what follows: 1/rho (also in its quad), the pressure. */
+/* Row i's density r and what follows: 1/rho in its quad, the pressure. */
 static inline void set_density(sph_density *sd, float *rho, float *p, long i, float r)
 {
 	rho[i] = r;
-	sd->sh.inv_rho[i] = 1.0f / r;
-	sd->sh.pq[4 * i + 3] = sd->sh.inv_rho[i];
+	sd->sh.pq[4 * i + 3] = 1.0f / r;
 	p[i] = eos_pressure(sd, r);
 }
 
@@ -610,9 +609,6 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	float *rho = eddy__col(w, COL_DENSITY), *p = eddy__col(w, COL_PRESSURE), *ncount = eddy__col(w, COL_SPH_NEIGHBORS);
 	const sph_kernel_consts kc = sh->k;
 	const long n = (long)w->n;
-	sh->inv_rho = eddy__arena_alloc(&w->arena, (w->n ? w->n : 1) * sizeof *sh->inv_rho);
-	if (!sh->inv_rho)
-		return eddy__fail(w, EDDY_ERR_NOMEM, "sph_density: out of scratch memory for %zu particles", w->n);
 	if (sd->def.density == EDDY_SPH_DENSITY_CONTINUITY && n > 0) {
 		if (!eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE)) /* check() says so before a run */
 			return eddy__fail(w, EDDY_ERR_INVALID,

@@ -484,7 +484,7 @@ static void concentration(const dfsph_work *wk, long i0, long cnt)
 				j = group_rows(&list, c, p, (uint32_t)i, pad);
 				pair_grad(&kc, pi, sh->pq, j, &gx, &gy, &gz);
 			}
-			const sf8 vj = sf8_gather(sh->inv_rho, j); /* V_j / m */
+			const sf8 vj = sf8_gather4(sh->pq + 3, j); /* V_j / m = 1 / rho_j */
 			cx = sf8_add(cx, sf8_mul(gx, vj));
 			cy = sf8_add(cy, sf8_mul(gy, vj));
 			cz = sf8_add(cz, sf8_mul(gz, vj));

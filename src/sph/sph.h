@@ -178,7 +178,6 @@ typedef struct sph_shared {
 	bool verlet;    /* keep a Verlet list (the def's verlet_list); false: search at h every step */
 	sph_kernel_consts k;
 	sph_neighbors nb;
-	float *inv_rho; /* 1/rho this step (arena), set by sph_density */
 	/* (x, y, z, 1/rho) per particle this step (arena), as sph_density saw
 	 * them: the force passes load a neighbour's four with one 16-byte load */
 	float *pq;

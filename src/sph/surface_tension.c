@@ -39,7 +39,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const sph_shared *sh = eddy__sph_find(w, s); /* never NULL: the pipeline checks .requires */
 	const sph_neighbors *nb = &sh->nb;
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
-	const float *inv_rho = sh->inv_rho;
+	const float *pq = sh->pq; /* (x y z 1/rho) per row: 1/rho_j is pq[4 j + 3] */
 	float *nx = eddy__col(w, COL_SPH_NX), *ny = eddy__col(w, COL_SPH_NY), *nz = eddy__col(w, COL_SPH_NZ);
 	float *curv = eddy__col(w, COL_SPH_CURVATURE);
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
@@ -60,7 +60,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			const uint32_t j = l[q % 8];
 			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
 			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
-			const float g = d * d * inv_rho[j];
+			const float g = d * d * pq[4 * (size_t)j + 3];
 			gx += g * rx;
 			gy += g * ry;
 			gz += g * rz;
@@ -83,7 +83,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		sph_groups list = sph_nbr_groups(nb, i);
 		const uint32_t cnt = nb->count[i];
 		/* sum V W over all neighbours (i itself included), over those with a normal */
-		float div = 0, w_all = kc.h2 * kc.h2 * kc.h2 * inv_rho[i], w_normal = w_all;
+		float div = 0, w_all = kc.h2 * kc.h2 * kc.h2 * pq[4 * (size_t)i + 3], w_normal = w_all;
 		uint32_t l[8];
 		for (uint32_t q = 0; q < cnt; ++q) {
 			if (q % 8 == 0)
@@ -91,7 +91,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			const uint32_t j = l[q % 8];
 			const float rx = xi - x[j], ry = yi - y[j], rz = zi - z[j];
 			const float d = kc.h2 - (rx * rx + ry * ry + rz * rz);
-			const float vw = d * d * d * inv_rho[j];
+			const float vw = d * d * d * pq[4 * (size_t)j + 3];
 			w_all += vw;
 			const float lj = sqrtf(nx[j] * nx[j] + ny[j] * ny[j] + nz[j] * nz[j]);
 			if (!(lj > thr))
@@ -99,11 +99,11 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			w_normal += vw;
 			/* (n_j/|n_j| - n_i/|n_i|) . grad_i W, grad_i W = poly6_grad d^2 r_vec */
 			const float dot = (nx[j] / lj - ux) * rx + (ny[j] / lj - uy) * ry + (nz[j] / lj - uz) * rz;
-			div += dot * d * d * inv_rho[j];
+			div += dot * d * d * pq[4 * (size_t)j + 3];
 		}
 		const float kappa = -m * kc.poly6_grad * div * (w_all / w_normal);
 		curv[i] = kappa;
-		const float c = sigma * kappa * inv_rho[i];
+		const float c = sigma * kappa * pq[4 * (size_t)i + 3];
 		ax[i] += c * nx[i];
 		ay[i] += c * ny[i];
 		az[i] += c * nz[i];
