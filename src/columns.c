@@ -240,37 +240,31 @@ void eddy__clear_derived(eddy_world *w)
 
 void eddy__permute_particles(eddy_world *w, const uint32_t *perm, void *scratch)
 {
+	enum { PIECE = 1 << 16 }; /* bytes: the copy back is handed out in pieces */
 	const long n = (long)w->n;
 	const int nt = n > EDDY_PAR_ROWS ? w->def.threads : 1;
+	unsigned char *tmp = scratch;
 	for (int c = 0; c < w->column_count; ++c) {
 		eddy_column *col = &w->columns[c];
 		if (!col->data || col->domain != EDDY_DOMAIN_PARTICLE)
 			continue;
-		if (col->type == EDDY_U8) {
-			const uint8_t *src = col->data;
-			uint8_t *tmp = scratch;
-			uint8_t *dst = col->data;
+		const bool u8 = col->type == EDDY_U8; /* else 4-byte values */
+		unsigned char *data = col->data;
+		const size_t bytes = (size_t)n * (u8 ? 1 : 4);
+		const long pieces = (long)((bytes + PIECE - 1) / PIECE);
 #pragma omp parallel num_threads(nt) if (nt > 1)
-			{
+		{
 #pragma omp for schedule(static)
-				for (long i = 0; i < n; ++i)
-					tmp[i] = src[perm[i]];
-#pragma omp for schedule(static)
-				for (long i = 0; i < n; ++i)
-					dst[i] = tmp[i];
+			for (long i = 0; i < n; ++i) {
+				if (u8)
+					tmp[i] = data[perm[i]];
+				else
+					memcpy(tmp + 4 * (size_t)i, data + 4 * (size_t)perm[i], 4);
 			}
-		} else {
-			const float *src = col->data;
-			float *tmp = scratch;
-			float *dst = col->data;
-#pragma omp parallel num_threads(nt) if (nt > 1)
-			{
 #pragma omp for schedule(static)
-				for (long i = 0; i < n; ++i)
-					tmp[i] = src[perm[i]];
-#pragma omp for schedule(static)
-				for (long i = 0; i < n; ++i)
-					dst[i] = tmp[i];
+			for (long q = 0; q < pieces; ++q) {
+				const size_t at = (size_t)q * PIECE;
+				memcpy(data + at, tmp + at, bytes - at < PIECE ? bytes - at : PIECE);
 			}
 		}
 	}
