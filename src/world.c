@@ -678,6 +678,13 @@ static double particle_mass(const eddy_world *w)
 	return rho * s * s * s; /* NAN if either is missing */
 }
 
+/* The stats' sums run on all threads in fixed chunks whose sums are added in
+ * chunk order: the same figures on any number of threads. At most
+ * STAT_CHUNKS chunks of at least STAT_CHUNK particles (the chunking depends
+ * on the particle count only). */
+enum { STAT_CHUNK = 16384, STAT_CHUNKS = 256 };
+static size_t stat_chunk_size(size_t n) { return n / STAT_CHUNKS + 1 > STAT_CHUNK ? n / STAT_CHUNKS + 1 : STAT_CHUNK; }
+
 /* Energy and momentum of the particles into out (see eddy_frame_stats).
  * The compression energy is the work done compressing each particle from
  * rho0 along sph_density's equation of state, e = m int_rho0^rho p / r^2 dr
@@ -689,13 +696,6 @@ static double particle_mass(const eddy_world *w)
  * It is the energy WCSPH's pressure force exchanges with the motion, so the
  * total is the one a conservative WCSPH would keep; sph_dfsph solves for the
  * pressure instead and has no such store (NAN there). */
-/* The stats' sums run on all threads in fixed chunks whose sums are added in
- * chunk order: the same figures on any number of threads. At most
- * STAT_CHUNKS chunks of at least STAT_CHUNK particles (the chunking depends
- * on the particle count only). */
-enum { STAT_CHUNK = 16384, STAT_CHUNKS = 256 };
-static size_t stat_chunk_size(size_t n) { return n / STAT_CHUNKS + 1 > STAT_CHUNK ? n / STAT_CHUNKS + 1 : STAT_CHUNK; }
-
 static void energy_stats(const eddy_world *w, eddy_frame_stats *out)
 {
 	const double m = particle_mass(w);
