@@ -119,9 +119,12 @@ static eddy_world *block(const char *method, long n, int threads, eddy_flip_solv
 {
 	const bool flip = strcmp(method, "flip") == 0, dfsph = strcmp(method, "dfsph") == 0;
 	const char *layers = getenv("EDDY_SCALE_LAYERS");
-	const float dx = 0.01f, depth_n = layers ? (float)atoi(layers) : roundf(cbrtf((float)n)),
+	const float dx = 0.01f,
+				depth_n = layers && atoi(layers) > 1 ? (float)atoi(layers)
+	                      : layers                   ? 1.0f
+	                                                 : roundf(cbrtf((float)n)),
 				/* + 0.5: a whole number of spacings after floor */
-		side = dx * (roundf(sqrtf((float)n / (depth_n > 1 ? depth_n : 1))) + 0.5f), height = dx * (depth_n + 0.5f);
+		side = dx * (roundf(sqrtf((float)n / depth_n)) + 0.5f), height = dx * (depth_n + 0.5f);
 	eddy_world_def d = eddy_default_world_def();
 	d.bounds_max = (eddy_vec3){2 * side, 1.5f * height, 2 * side};
 	d.threads = threads;

@@ -1291,12 +1291,9 @@ static void shift(eddy_world *w, const sph_dfsph *sd, const dfsph_work *wk)
 			/* beside a collider's particles (after the boxes' n_static) no
 			 * shift at all: their sampling of a mesh or a sphere gives the
 			 * tensor no clean normals, and a shift pushed water into a mesh
-			 * cup's wall (test_mesh's cup at 3 mm) */
-			const uint32_t *bl = sph_bnbrs(nb, i);
-			bool collider = false;
-			for (uint32_t q = 0; q < nb->bcount[i] && !collider; ++q)
-				collider = bl[q] >= nb->bnd.n_static;
-			if (collider)
+			 * cup's wall (test_mesh's cup at 3 mm). The boundary list is
+			 * ascending, so its last entry says whether it holds one. */
+			if (sph_bnbrs(nb, i)[nb->bcount[i] - 1] >= nb->bnd.n_static)
 				continue;
 			/* the walls' volumes too, as the force counts them (B_i / rho0 =
 			 * sum_b V_b grad W(x_i - x_b)), then only the part along the walls */
