@@ -39,13 +39,23 @@
  * known. Started from its own k alone, most of the velocity solve's work in
  * a settling block was that (the warm start's mean error 10-15 times the
  * tolerance against about 1.6 with the density solve's change left out).
- * Then the solve runs conjugate gradients (divergence_cg), then
- * projected relaxed Jacobi sweeps (Ihmsen et al.) on the residual res_i
- * (R_i where rho_i >= DFSPH_SURFACE rho0, else the predicted rho_i - rho0),
- * whose error is |res_i| where k_i > 0, else max(res_i, 0):
- *   k_i <- max(k_i + omega res_i / (dt^n D'_i), 0),   omega = DFSPH_OMEGA,
- * n = 1 for the velocity solve, 2 for the density one; k >= 0 leaves the free
- * surface unpulled. max_divergence_error must be well below
+ * Then the solve runs conjugate gradients (divergence_cg), then relaxed
+ * Jacobi sweeps (Ihmsen et al.) on the residual res_i (the velocity solve's
+ * R_i where rho_i >= DFSPH_SURFACE rho0, else 0; the density solve's
+ * predicted rho_i - rho0),
+ *   k_i <- k_i + omega res_i / (dt^n D'_i),   omega = DFSPH_OMEGA,
+ * n = 1 for the velocity solve, 2 for the density one. The density solve is
+ * projected (k_i >= 0, its error |res_i| where k_i > 0, else max(res_i,
+ * 0)): it removes compression and never pulls. The velocity solve is an
+ * equality on its particles, k of either sign, its error |res_i|: a
+ * particle below DFSPH_SURFACE rho0 (the free surface's outermost) takes
+ * no part, so the surface is not pulled apart from the bulk's side. With
+ * k >= 0 there too, a deep column's solve stalled: near the floor its k has
+ * a particle-scale roughness as large as k itself, each projection of the
+ * negatives (thousands a step) raised the mean error 5-35x, and the
+ * conjugate gradients began again (a 215-layer column: 97.5 velocity
+ * iterations a step against 29 as an equality; a 1M block's first two
+ * steps 387 against 66; README, Measurements). max_divergence_error must be well below
  * max_density_error, or the water compresses by it every step. A solve stops
  * once the mean error / rho0 (the velocity solve's |R_i| dt, the density
  * solve's predicted compression) is at most its tolerance times
@@ -568,13 +578,17 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 		                               : sf8_sub(sf8_add(load8(wk->rho + i, m), sf8_mul(dt, r)), rho0);
 		sf8 e = sf8_max(res, zero); /* the compression */
 		if (ps->projected) {
-			/* k_i = max(k_i + omega res_i / (dt^n D'_i), 0); correct applies the change */
+			/* k_i += omega res_i / (dt^n D'_i), the density solve's then at
+			 * least 0 (header); correct applies the change */
 			const sf8 ks = load8(wk->ksum + i, m);
-			const sf8 kn =
-				sf8_max(sf8_add(ks, sf8_mul(sf8_mul(sf8_mul(res, omega), inv), load8(wk->dsym + i, m))), zero);
+			sf8 kn = sf8_add(ks, sf8_mul(sf8_mul(sf8_mul(res, omega), inv), load8(wk->dsym + i, m)));
+			if (!ps->divergence)
+				kn = sf8_max(kn, zero);
 			store8(wk->k + i, sf8_sub(kn, ks), m);
-			/* |res| under pressure: too much pressure counts as too little */
-			e = sf8_select(sf8_gt(kn, zero), sf8_andnot(minus, res), e);
+			/* |res| under pressure (the density solve) or anywhere (the velocity
+			 * solve, where res is 0 off its particles): too much pressure counts
+			 * as too little */
+			e = ps->divergence ? sf8_andnot(minus, res) : sf8_select(sf8_gt(kn, zero), sf8_andnot(minus, res), e);
 		} else { /* the paper's sweeps: only compression adds pressure */
 			store8(wk->k + i, sf8_mul(sf8_mul(e, inv), bw), m);
 		}
@@ -883,13 +897,14 @@ static bool cg_more(const dfsph_work *wk, double residual, double tol, double bt
 }
 
 /* The solves' bulk: Jacobi-preconditioned conjugate gradients on A k = R(v*)
+ * over the velocity solve's particles (b.w > 0), or for the density solve
  * over the particles that hold pressure (k_i > 0) or compress (R_i > 0),
- * where the unilateral constraint is an equality; the density solve's right
+ * where its unilateral constraint is an equality; the density solve's right
  * side is the rate that brings rho_i to rho0 in a step. It stops once the
  * mean |r_i| dt / rho0 is at most tol and the column-scale error at most
  * btol (cg_more; btol 0: the mean alone), or a direction has no positive
- * curvature, then projects (k_i < 0 back to 0); the sweeps after it settle
- * the particles that left or entered the set. Its sums are chunked
+ * curvature; the density solve then projects (k_i < 0 back to 0), and the
+ * sweeps after it settle the particles that left or entered its set. Its sums are chunked
  * (DFSPH_SUM_CHUNK): the same bits for any thread count. *fresh: err still
  * holds R(v*) of its first pass (no iteration, nothing projected), which
  * the sweep after it then reads instead of the pairs (the same bits). */
@@ -908,7 +923,7 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 		double rz = 0, esum = 0;
 		for (long i = c * DFSPH_SUM_CHUNK, e = chunk_end(c, n); i < e; ++i) {
 			const float res = density ? wk->err[i] + (wk->rho[i] - rho0) / dt : wk->err[i];
-			const bool on = (density || wk->b[i].w > 0) && (wk->ksum[i] > 0 || res > 0);
+			const bool on = density ? wk->ksum[i] > 0 || res > 0 : wk->b[i].w > 0;
 			wk->mask[i] = on;
 			wk->r[i] = on ? res : 0.0f;
 			wk->p[i] = wk->dsym[i] * wk->r[i];
@@ -973,12 +988,14 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 	}
 	if (isnan(*berr)) /* the caller's stopping test reads it (solve) */
 		*berr = btol > 0 ? block_error(wk, wk->r) : 0;
-	/* the projection: k_i < 0 back to 0, as one correction */
+	/* the density solve's projection: k_i < 0 back to 0, as one correction */
 	bool neg = false;
+	if (density) {
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(|| : neg)
-	for (long i = 0; i < n; ++i) {
-		wk->k[i] = wk->ksum[i] < 0 ? -wk->ksum[i] : 0.0f;
-		neg = neg || wk->ksum[i] < 0;
+		for (long i = 0; i < n; ++i) {
+			wk->k[i] = wk->ksum[i] < 0 ? -wk->ksum[i] : 0.0f;
+			neg = neg || wk->ksum[i] < 0;
+		}
 	}
 	if (neg)
 		pass(wk, PASS_CORRECT, true, true);
@@ -1047,7 +1064,8 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 		for (long i = 0; i < n; ++i) {
 			if (divergence) /* b.w: the velocity solve's particles (dfsph_work) */
 				wk->b[i].w = wk->rho[i] >= DFSPH_SURFACE * rho0 ? 1.0f : 0.0f;
-			wk->k[i] = col[i] > 0 && (!divergence || wk->b[i].w > 0) ? col[i] : 0.0f;
+			/* the velocity solve's k of either sign on its particles, the density solve's k >= 0 */
+			wk->k[i] = divergence ? (wk->b[i].w > 0 ? col[i] : 0.0f) : (col[i] > 0 ? col[i] : 0.0f);
 		}
 		pass(wk, PASS_CORRECT, divergence, true);
 	}
