@@ -127,7 +127,8 @@
  * The volume: as grad C_i ~ S_i / rho_i and the kernel sums' total changes
  * by 2 sum_i dr_i . S_i to first order, a shift is close to a descent on
  * sum_i rho_i: it lowers the kernel sums, and where the solves do not push
- * them back (k >= 0: fluid below rho0) the arrangement keeps the lower sum.
+ * them back (the density solve's k >= 0: fluid below rho0) the arrangement
+ * keeps the lower sum.
  * Measured, that is an arrangement's sum more than a volume: a still pool
  * 15 layers deep reads 0.2% less mean density with the shift at the same
  * level, and a 5 cm sphere stirred through it and left 1.5-2 s to settle
@@ -174,7 +175,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* The relaxation of the projected Jacobi sweeps: the largest eigenvalue of
+/* The relaxation of the symmetric operator's Jacobi sweeps: the largest eigenvalue of
  * D'^-1 A is near 4 (full neighbourhoods plus the doubled wall), so sweeps
  * with omega above 0.5 can grow. */
 #define DFSPH_OMEGA 0.5f
@@ -252,8 +253,9 @@ typedef struct dfsph_pass {
 	dfsph_work *wk;
 	enum dfsph_pass_kind kind;
 	bool divergence; /* the velocity (divergence-free) solve's sweep, else the density one's */
-	bool projected;  /* projected relaxed Jacobi on the symmetric operator (the divergence
-	                  * solver, and every PASS_RATE), else the paper's sweeps */
+	bool projected;  /* relaxed Jacobi on the symmetric operator, the density solve's
+	                  * projected to k >= 0 (the divergence solver, and every
+	                  * PASS_RATE), else the paper's sweeps */
 	bool from_zero;  /* PASS_CORRECT: v* taken as 0 (not read), as the operator's product wants */
 	bool reuse;      /* PASS_SWEEP: err holds R_i(v*) already (a PASS_RATE on this v*, which a
 	                  * projected sweep's R_i equals): the pairs are not read again */
