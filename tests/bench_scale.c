@@ -103,6 +103,14 @@ static double extra_stat(const eddy_frame_stats *st, const char *name)
 	return NAN;
 }
 
+/* A switch in the environment: set, and neither empty nor "0" (so that
+ * EDDY_SCALE_COARSE= or =0 turns it off, as a user would expect). */
+static bool env_on(const char *name)
+{
+	const char *v = getenv(name);
+	return v && *v && strcmp(v, "0") != 0;
+}
+
 /* FLIP pressure solver by name: "hypre", "mg", otherwise PCG */
 static eddy_flip_solver solver_of(const char *name)
 {
@@ -164,11 +172,11 @@ static eddy_world *block(const char *method, long n, int threads, eddy_flip_solv
 		de.spacing = dx;
 		de.radius = 2 * dx;
 		de.stiffness = 400;
-		de.verlet_list = getenv("EDDY_SCALE_NO_VERLET") == NULL; /* the grid search at h every step */
+		de.verlet_list = !env_on("EDDY_SCALE_NO_VERLET"); /* the grid search at h every step */
 		eddy_add_sph_density(w, &de);
 		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
-		df.coarse_grid = getenv("EDDY_SCALE_COARSE") != NULL; /* the velocity solve's coarse level */
-		df.hydrostatic_start = getenv("EDDY_SCALE_WARM") != NULL;
+		df.coarse_grid = env_on("EDDY_SCALE_COARSE"); /* the velocity solve's coarse level */
+		df.hydrostatic_start = env_on("EDDY_SCALE_WARM");
 		bench_add_sph_forces(w, dfsph ? &df : NULL);
 		eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
 		bb.max = d.bounds_max;
@@ -187,7 +195,7 @@ static eddy_world *block(const char *method, long n, int threads, eddy_flip_solv
  * timed steps. Prints one JSON object. */
 static int child_block(const char *method, long n, int threads, int steps, const char *solver)
 {
-	if (getenv("EDDY_SCALE_COLUMNS"))
+	if (env_on("EDDY_SCALE_COLUMNS"))
 		fprintf(stderr, "peak RSS before the world: %.1f MB\n", (double)maxrss_kb() / 1e3);
 	eddy_world *w = block(method, n, threads, solver_of(solver));
 	if (!w) {
@@ -197,7 +205,7 @@ static int child_block(const char *method, long n, int threads, int steps, const
 	const double t0 = now_ms();
 	double setup_iters = 0, setup_div = 0;
 	for (int s = 0; s < 2; ++s) {
-		if (getenv("EDDY_SCALE_COLUMNS")) /* where the peak is reached: emission, first step or later */
+		if (env_on("EDDY_SCALE_COLUMNS")) /* where the peak is reached: emission, first step or later */
 			fprintf(stderr, "peak RSS before step %d: %.1f MB\n", s, (double)maxrss_kb() / 1e3);
 		if (eddy_world_step(w) != EDDY_OK) {
 			fprintf(stderr, "bench_scale: %s %ld: %s\n", method, n, eddy_world_error(w));
@@ -221,7 +229,7 @@ static int child_block(const char *method, long n, int threads, int steps, const
 		before[k] = info.profile_ms;
 	}
 	for (int s = 0; s < steps; ++s) {
-		if (getenv("EDDY_SCALE_COLUMNS"))
+		if (env_on("EDDY_SCALE_COLUMNS"))
 			hwm_reset();
 		const double a = now_ms(), c = cpu_ms();
 		if (eddy_world_step(w) != EDDY_OK) {
@@ -230,7 +238,7 @@ static int child_block(const char *method, long n, int threads, int steps, const
 		}
 		ms[s] = now_ms() - a;
 		cpu[s] = cpu_ms() - c;
-		if (getenv("EDDY_SCALE_COLUMNS"))
+		if (env_on("EDDY_SCALE_COLUMNS"))
 			fprintf(stderr, "peak RSS after timed step %d: %.1f MB (within the step: %.1f MB)\n", s,
 			        (double)maxrss_kb() / 1e3, (double)hwm_kb() / 1e3);
 		eddy_frame_stats st;
@@ -262,7 +270,7 @@ static int child_block(const char *method, long n, int threads, int steps, const
 		printf("%s\"%s\":%.3f", k ? "," : "", info.name, before[k] / 1e3);
 	}
 	printf("}}\n");
-	if (getenv("EDDY_SCALE_COLUMNS")) /* where the memory is: the columns, largest first as listed */
+	if (env_on("EDDY_SCALE_COLUMNS")) /* where the memory is: the columns, largest first as listed */
 		for (int c = 0; c < eddy_world_column_count(w); ++c) {
 			eddy_column_info ci;
 			if (eddy_world_column_info(w, c, &ci) == EDDY_OK && ci.bytes > 0)
