@@ -126,11 +126,11 @@ static eddy_flip_solver solver_of(const char *name)
 static eddy_world *block(const char *method, long n, int threads, eddy_flip_solver solver)
 {
 	const bool flip = strcmp(method, "flip") == 0, dfsph = strcmp(method, "dfsph") == 0;
-	const char *layers = getenv("EDDY_SCALE_LAYERS");
+	const int layers = env_on("EDDY_SCALE_LAYERS") ? atoi(getenv("EDDY_SCALE_LAYERS")) : 0;
 	const float dx = 0.01f,
-				depth_n = layers && atoi(layers) > 1 ? (float)atoi(layers)
-	                      : layers                   ? 1.0f
-	                                                 : roundf(cbrtf((float)n)),
+				depth_n = layers > 1 ? (float)layers
+	                      : layers   ? 1.0f
+	                                 : roundf(cbrtf((float)n)),
 				/* + 0.5: a whole number of spacings after floor */
 		side = dx * (roundf(sqrtf((float)n / depth_n)) + 0.5f), height = dx * (depth_n + 0.5f);
 	eddy_world_def d = eddy_default_world_def();
