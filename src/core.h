@@ -221,6 +221,12 @@ void eddy__columns_free(eddy_world *w);
 /* A per-row loop over more rows than this runs on the world's threads:
  * below it, waking the team costs more than the loop. */
 #define EDDY_PAR_ROWS 65536
+/* The largest u^2 + v^2 + w^2 over the particle rows of columns cu cv cw
+ * (0 when one is not allocated; a row with a non-finite value is passed
+ * over), on the world's threads above EDDY_PAR_ROWS rows: the step limits'
+ * largest speed or acceleration. A maximum, so the same on any thread
+ * count. */
+float eddy__max_norm2(eddy_world *w, int cu, int cv, int cw);
 /* Reorders every allocated particle column so row i takes old row perm[i]
  * (on the world's threads: a gather, the same bits); scratch holds n
  * floats. SPH keeps the table in grid-cell order with it. */

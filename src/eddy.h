@@ -225,8 +225,12 @@ typedef struct eddy_grid_info {
 
 EDDY_API eddy_grid_info eddy_world_grid(const eddy_world *w);
 
-/* 64-bit FNV-1a over the state columns, particle count and clock: equal states
- * give equal hashes, so determinism and resume can be checked. */
+/* A 64-bit hash of the state columns, particle count and clock: equal states
+ * give equal hashes, so determinism and resume can be checked. Not a
+ * checksum of a file: FNV-1a over the count, clock and column names, each
+ * column's bytes hashed in 64 KB chunks on the world's threads (8-byte
+ * words, multiply and xor-shift) and folded in order, so the value does not
+ * depend on the thread count. */
 EDDY_API uint64_t eddy_world_state_hash(const eddy_world *w);
 
 /* ---- pipeline ---------------------------------------------------------- */

@@ -86,12 +86,7 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
 	(void)s;
 	*reason = "CFL";
-	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
-	float v2 = 0;
-	for (size_t i = 0; vx && vy && vz && i < w->n; ++i) {
-		const float q = vx[i] * vx[i] + vy[i] * vy[i] + vz[i] * vz[i];
-		v2 = q > v2 ? q : v2;
-	}
+	const float v2 = eddy__max_norm2(w, COL_VX, COL_VY, COL_VZ);
 	const eddy_vec3 g = w->def.gravity;
 	const double h = w->def.cell_size;
 	const double vmax = sqrt((double)v2) + sqrt(sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z) * h);

@@ -61,14 +61,9 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
 	(void)s;
 	*reason = "advection";
-	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
-	if (w->length_scale <= 0 || !vx)
+	if (w->length_scale <= 0)
 		return INFINITY;
-	float v2 = 0;
-	for (size_t i = 0; i < w->n; ++i) {
-		const float q = vx[i] * vx[i] + vy[i] * vy[i] + vz[i] * vz[i];
-		v2 = q > v2 ? q : v2;
-	}
+	const float v2 = eddy__max_norm2(w, COL_VX, COL_VY, COL_VZ);
 	return v2 > 0 ? w->length_scale / sqrt((double)v2) : INFINITY;
 }
 

@@ -334,6 +334,57 @@ static uint64_t run_hash(int threads)
 	return h;
 }
 
+/* The state hash of a table of 300k particles (19 chunks of 64 KB a
+ * column) on 1 and 2 threads, and that it sees one bit anywhere: a float's
+ * sign (the top bit of an 8-byte word: a word's high bits must reach the
+ * whole hash, not only its top), its lowest mantissa bit, in the first, a
+ * middle and the last chunk, and two sign flips at once (a hash moving bits
+ * only upwards would cancel them: both in one chunk). */
+static uint64_t table_hash(int threads, size_t n)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.threads = threads;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_vec3 *p = malloc(n * sizeof *p);
+	for (size_t i = 0; i < n; ++i)
+		p[i] = (eddy_vec3){(float)(i % 97) / 97.0f, (float)(i % 89) / 89.0f, (float)(i % 83) / 83.0f};
+	CHECK(eddy_world_add_particles(w, n, p, NULL) == EDDY_OK);
+	free(p);
+	const uint64_t h = eddy_world_state_hash(w);
+	float *x = eddy_world_channel_mut(w, "x", NULL);
+	const size_t at[] = {1, n / 2 + 1, n - 1};
+	for (int k = 0; k < 3; ++k) {
+		const float keep = x[at[k]];
+		x[at[k]] = -keep - 1.0f; /* the sign and more */
+		CHECK(eddy_world_state_hash(w) != h);
+		x[at[k]] = keep;
+		CHECK(eddy_world_state_hash(w) == h);
+		uint32_t b;
+		memcpy(&b, &x[at[k]], sizeof b);
+		b ^= 1u;
+		memcpy(&x[at[k]], &b, sizeof b);
+		CHECK(eddy_world_state_hash(w) != h);
+		b ^= 1u;
+		memcpy(&x[at[k]], &b, sizeof b);
+	}
+	uint32_t b[2];
+	memcpy(&b[0], &x[3], sizeof b[0]);
+	memcpy(&b[1], &x[1001], sizeof b[1]);
+	b[0] ^= 0x80000000u, b[1] ^= 0x80000000u;
+	memcpy(&x[3], &b[0], sizeof b[0]);
+	memcpy(&x[1001], &b[1], sizeof b[1]);
+	CHECK(eddy_world_state_hash(w) != h);
+	eddy_destroy_world(w);
+	return h;
+}
+
+static void state_hash_sees_every_bit_on_any_thread_count(void)
+{
+	const size_t n = 300000;
+	CHECK(table_hash(1, n) == table_hash(2, n));
+	CHECK(table_hash(1, n) != table_hash(1, n - 1));
+}
+
 static void runs_are_deterministic(void)
 {
 	uint64_t a = run_hash(1), b = run_hash(1), c = run_hash(2);
@@ -361,4 +412,5 @@ void suite_physics(void)
 	RUN(escape_policy);
 	RUN(nozzle_pours_at_its_rate);
 	RUN(runs_are_deterministic);
+	RUN(state_hash_sees_every_bit_on_any_thread_count);
 }

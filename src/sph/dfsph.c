@@ -1453,14 +1453,9 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
 	const sph_shared *sh = eddy__sph_find(w, s);
 	*reason = "velocity";
-	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
-	if (!sh || !vx || !vy || !vz)
+	if (!sh)
 		return INFINITY;
-	float v2 = 0;
-	for (size_t i = 0; i < w->n; ++i) {
-		const float q = vx[i] * vx[i] + vy[i] * vy[i] + vz[i] * vz[i];
-		v2 = q > v2 ? q : v2;
-	}
+	const float v2 = eddy__max_norm2(w, COL_VX, COL_VY, COL_VZ);
 	const double lv = v2 > 0 ? (double)sh->h / sqrt((double)v2) : INFINITY;
 	const eddy_vec3 g = w->def.gravity;
 	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);

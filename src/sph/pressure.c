@@ -201,24 +201,12 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	return EDDY_OK;
 }
 
-/* The largest |(u, v, w)| over the particles, 0 without the columns. */
-static double max_norm(eddy_world *w, int cu, int cv, int cw)
-{
-	const float *u = eddy__col(w, cu), *v = eddy__col(w, cv), *q = eddy__col(w, cw);
-	float m2 = 0;
-	if (u && v && q)
-		for (size_t i = 0; i < w->n; ++i) {
-			const float s2 = u[i] * u[i] + v[i] * v[i] + q[i] * q[i];
-			m2 = s2 > m2 ? s2 : m2;
-		}
-	return sqrt((double)m2);
-}
-
 static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
 	const sph_shared *sh = eddy__sph_find(w, s);
-	const double acoustic = sh->h / (sh->c + max_norm(w, COL_VX, COL_VY, COL_VZ));
-	const double a = max_norm(w, COL_AX, COL_AY, COL_AZ), force = a > 0 ? 0.625 * sqrt(sh->h / a) : INFINITY;
+	const double acoustic = sh->h / (sh->c + sqrt((double)eddy__max_norm2(w, COL_VX, COL_VY, COL_VZ)));
+	const double a = sqrt((double)eddy__max_norm2(w, COL_AX, COL_AY, COL_AZ)),
+				 force = a > 0 ? 0.625 * sqrt(sh->h / a) : INFINITY;
 	*reason = force < acoustic ? "force" : "acoustic";
 	return force < acoustic ? force : acoustic;
 }
