@@ -243,6 +243,46 @@ void eddy__clear_derived(eddy_world *w);
 void eddy__frame_reset(eddy_world *w);
 
 static inline float *eddy__col(eddy_world *w, int id) { return (float *)w->columns[id].data; }
+/* The world's box is solid outside: a collider's push out of its own solid
+ * must not leave it. Where a collider stands on the box's floor or cuts a
+ * wall (a cup on the floor), the push along the collider's own normal can
+ * cross the box's wall in the crease between them, and the run would stop
+ * with the particle outside the domain. Each collider checks its pushes
+ * with eddy__outside_box, takes another way out where it has one (the
+ * mesh: where the particle's path entered it; the box: its nearest face
+ * inside the world) and clamps with eddy__into_box last. */
+static inline bool eddy__outside_box(const eddy_world *w, eddy_vec3 p)
+{
+	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
+	return !(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z && p.z <= hi.z);
+}
+/* p with each coordinate within e of one of the world's walls moved e
+ * inside: where a collider stands on the floor, a particle on the floor
+ * (where a tank leaves it) under the collider's edge reads its distance
+ * there, not the 0 of the face it shares with the floor, so it is pushed
+ * out rather than left in the gap between them. */
+static inline eddy_vec3 eddy__off_walls(const eddy_world *w, eddy_vec3 p, float e)
+{
+	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
+	const float q[3] = {p.x, p.y, p.z}, l[3] = {lo.x, lo.y, lo.z}, h[3] = {hi.x, hi.y, hi.z};
+	float r[3];
+	for (int a = 0; a < 3; ++a)
+		r[a] = q[a] < l[a] + e ? l[a] + e : q[a] > h[a] - e ? h[a] - e : q[a];
+	return (eddy_vec3){r[0], r[1], r[2]};
+}
+static inline eddy_vec3 eddy__into_box(const eddy_world *w, eddy_vec3 p)
+{
+	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
+	return (eddy_vec3){p.x < lo.x   ? lo.x
+	                   : p.x > hi.x ? hi.x
+	                                : p.x,
+	                   p.y < lo.y   ? lo.y
+	                   : p.y > hi.y ? hi.y
+	                                : p.y,
+	                   p.z < lo.z   ? lo.z
+	                   : p.z > hi.z ? hi.z
+	                                : p.z};
+}
 
 /* systems (pipeline.c) */
 eddy_system *eddy__system_get(eddy_world *w, eddy_system_id id);

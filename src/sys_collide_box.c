@@ -89,7 +89,11 @@ static void step_rotated(eddy_world *w, collide_box *b, const eddy_collider_velo
 		float *c = best == 0 ? &nrm.x : best == 1 ? &nrm.y : &nrm.z;
 		*c = sign;
 		q[best] = sign > 0 ? h[best] : l[best];
-		eddy__collide_rotated(x, y, z, vx, vy, vz, (size_t)i, &pose, mv, eddy__v3(q[0], q[1], q[2]), nrm, r);
+		eddy_vec3 qb2 = eddy__v3(q[0], q[1], q[2]);
+		const eddy_vec3 qw = eddy__pose_to_world(&pose, qb2);
+		if (eddy__outside_box(w, qw)) /* not out through the world's wall (core.h) */
+			qb2 = eddy__pose_to_body(&pose, eddy__into_box(w, qw));
+		eddy__collide_rotated(x, y, z, vx, vy, vz, (size_t)i, &pose, mv, qb2, nrm, r);
 	}
 }
 
@@ -125,22 +129,30 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		}
 		return EDDY_OK;
 	}
+	/* a face on or beyond the world's wall is no way out (core.h: it would
+	 * leave the particle in the crease between them, or outside), unless no
+	 * face is one */
+	const eddy_vec3 wl = w->def.bounds_min, wh = w->def.bounds_max;
+	const bool lo_ok[3] = {l[0] > wl.x, l[1] > wl.y, l[2] > wl.z}, hi_ok[3] = {h[0] < wh.x, h[1] < wh.y, h[2] < wh.z};
+	const bool any_ok = lo_ok[0] || lo_ok[1] || lo_ok[2] || hi_ok[0] || hi_ok[1] || hi_ok[2];
 #pragma omp parallel for num_threads(ctx->threads) if (n > 32768) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		int best = -1;
 		float depth = INFINITY, sign = 0;
 		for (int a = 0; a < 3; ++a) {
 			const float q = p[a][i];
-			if (!(q > l[a] && q < h[a])) {
+			/* a face on the world's wall is closed: a particle on the
+			 * floor under a block is in it, not in a gap under it */
+			if (!((lo_ok[a] ? q > l[a] : q >= l[a]) && (hi_ok[a] ? q < h[a] : q <= h[a]))) {
 				best = -1;
 				break;
 			}
-			if (q - l[a] < depth) {
+			if (q - l[a] < depth && (lo_ok[a] || !any_ok)) {
 				depth = q - l[a];
 				best = a;
 				sign = -1;
 			}
-			if (h[a] - q < depth) {
+			if (h[a] - q < depth && (hi_ok[a] || !any_ok)) {
 				depth = h[a] - q;
 				best = a;
 				sign = 1;

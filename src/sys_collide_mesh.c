@@ -144,9 +144,10 @@ static void step_rotated(eddy_world *w, collide_mesh *b, const eddy_collider_mot
 	const long n = (long)w->n;
 #pragma omp parallel for num_threads(threads) if (n > 8192) schedule(static)
 	for (long i = 0; i < n; ++i) {
-		const eddy_vec3 c = eddy__pose_to_body(&pose, eddy__v3(x[i], y[i], z[i]));
+		const eddy_vec3 pw = eddy__off_walls(w, eddy__v3(x[i], y[i], z[i]), hair); /* core.h */
+		const eddy_vec3 c = eddy__pose_to_body(&pose, pw);
 		const eddy_vec3 c0 =
-			eddy__pose_to_body(&pose0, eddy__v3(x[i] - vx[i] * dt, y[i] - vy[i] * dt, z[i] - vz[i] * dt));
+			eddy__pose_to_body(&pose0, eddy__v3(pw.x - vx[i] * dt, pw.y - vy[i] * dt, pw.z - vz[i] * dt));
 		const eddy_vec3 dp = {c.x - c0.x, c.y - c0.y, c.z - c0.z};
 		float d = body_distance(b, c);
 		const float len2 = dp.x * dp.x + dp.y * dp.y + dp.z * dp.z;
@@ -168,6 +169,12 @@ static void step_rotated(eddy_world *w, collide_mesh *b, const eddy_collider_mot
 		}
 		if (d < 0 && first_entry(b, c0, c, &hit))
 			q = hit; /* in a crease the steps did not get out: where the path entered */
+		if (eddy__outside_box(w, eddy__pose_to_world(&pose, q))) { /* core.h: the world's box */
+			if (first_entry(b, c0, c, &hit) && !eddy__outside_box(w, eddy__pose_to_world(&pose, hit)))
+				q = hit, nrm = body_normal(b, q);
+			else
+				q = eddy__pose_to_body(&pose, eddy__into_box(w, eddy__pose_to_world(&pose, q)));
+		}
 		eddy__collide_rotated(x, y, z, vx, vy, vz, (size_t)i, &pose, mv, q, nrm, r);
 	}
 }
@@ -193,7 +200,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	for (long i = 0; i < n; ++i) {
 		/* this step's path in the collider's frame: from where the particle
 		 * was (x - v dt, the collider then at off - vw dt) to where it is */
-		const eddy_vec3 c = {x[i] - off.x, y[i] - off.y, z[i] - off.z};
+		const eddy_vec3 pw = eddy__off_walls(w, eddy__v3(x[i], y[i], z[i]), hair); /* core.h */
+		const eddy_vec3 c = {pw.x - off.x, pw.y - off.y, pw.z - off.z};
 		const eddy_vec3 dp = {(vx[i] - vw.x) * dt, (vy[i] - vw.y) * dt, (vz[i] - vw.z) * dt};
 		float d = body_distance(b, c);
 		const float len2 = dp.x * dp.x + dp.y * dp.y + dp.z * dp.z;
@@ -218,9 +226,19 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			q = eddy__v3(q.x + nrm.x * k, q.y + nrm.y * k, q.z + nrm.z * k);
 			d = body_distance(b, q);
 		}
-		if (d < 0 && first_entry(b, eddy__v3(c.x - dp.x, c.y - dp.y, c.z - dp.z), c, &hit))
+		const eddy_vec3 c0 = {c.x - dp.x, c.y - dp.y, c.z - dp.z};
+		if (d < 0 && first_entry(b, c0, c, &hit))
 			q = hit; /* in a crease the steps did not get out: where the path entered */
-		x[i] = q.x + off.x, y[i] = q.y + off.y, z[i] = q.z + off.z;
+		eddy_vec3 p = eddy__add3(q, off);
+		if (eddy__outside_box(w, p)) {
+			/* out of the mesh through the world's wall (core.h): where the
+			 * path entered the mesh instead, else the nearest point inside */
+			if (first_entry(b, c0, c, &hit) && !eddy__outside_box(w, eddy__add3(hit, off)))
+				p = eddy__add3(hit, off), nrm = normal(b, p);
+			else
+				p = eddy__into_box(w, p);
+		}
+		x[i] = p.x, y[i] = p.y, z[i] = p.z;
 		eddy__collide_response(vx, vy, vz, (size_t)i, nrm, vw, r);
 	}
 	return EDDY_OK;

@@ -70,9 +70,19 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		const float d = (x[i] - o.x) * nrm.x + (y[i] - o.y) * nrm.y + (z[i] - o.z) * nrm.z;
 		if (d >= 0)
 			continue;
-		x[i] -= d * nrm.x;
-		y[i] -= d * nrm.y;
-		z[i] -= d * nrm.z;
+		eddy_vec3 q = eddy__v3(x[i] - d * nrm.x, y[i] - d * nrm.y, z[i] - d * nrm.z);
+		/* not out through the world's wall (core.h) but to the crease
+		 * between them, by alternate projections (each round closes the
+		 * gap by cos^2 of the crease's angle), clamped */
+		for (int it = 0; it < 8 && eddy__outside_box(w, q); ++it) {
+			q = eddy__into_box(w, q);
+			const float e = (q.x - o.x) * nrm.x + (q.y - o.y) * nrm.y + (q.z - o.z) * nrm.z;
+			if (e >= 0)
+				break;
+			q = eddy__v3(q.x - e * nrm.x, q.y - e * nrm.y, q.z - e * nrm.z);
+		}
+		q = eddy__into_box(w, q);
+		x[i] = q.x, y[i] = q.y, z[i] = q.z;
 		eddy__collide_response(vx, vy, vz, (size_t)i, nrm,
 		                       rot ? eddy__rigid_velocity(&mv, eddy__v3(x[i], y[i], z[i])) : vw, r);
 	}

@@ -70,9 +70,20 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			continue;
 		const float d = sqrtf(d2);
 		eddy_vec3 u = d > 0 ? eddy__v3(dx / d, dy / d, dz / d) : eddy__v3(0, 1, 0);
-		x[i] = c.x + u.x * rad;
-		y[i] = c.y + u.y * rad;
-		z[i] = c.z + u.z * rad;
+		eddy_vec3 q = eddy__v3(c.x + u.x * rad, c.y + u.y * rad, c.z + u.z * rad);
+		/* a sphere cutting the world's wall: not out through it (core.h),
+		 * but to the crease between them, by alternate projections (each
+		 * round closes the gap by cos^2 of the crease's angle), clamped */
+		for (int it = 0; it < 8 && eddy__outside_box(w, q); ++it) {
+			q = eddy__into_box(w, q);
+			const eddy_vec3 e = {q.x - c.x, q.y - c.y, q.z - c.z};
+			const float de = sqrtf(e.x * e.x + e.y * e.y + e.z * e.z);
+			if (bowl ? de <= rad : de >= rad)
+				break;
+			q = eddy__v3(c.x + e.x / de * rad, c.y + e.y / de * rad, c.z + e.z / de * rad);
+		}
+		q = eddy__into_box(w, q);
+		x[i] = q.x, y[i] = q.y, z[i] = q.z;
 		const eddy_vec3 nrm = bowl ? eddy__v3(-u.x, -u.y, -u.z) : u;
 		eddy__collide_response(vx, vy, vz, (size_t)i, nrm,
 		                       rot ? eddy__rigid_velocity(&mv, eddy__v3(x[i], y[i], z[i])) : vw, r);

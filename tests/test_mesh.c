@@ -515,6 +515,125 @@ static void falling_block_on_mesh_sphere(const char *method)
 static void falling_block_flip(void) { falling_block_on_mesh_sphere("flip"); }
 static void falling_block_dfsph(void) { falling_block_on_mesh_sphere("dfsph"); }
 
+/* ---- colliders standing on the world's floor ----------------------------------------
+ * A collider that stands on the world's floor (a cup, a block; here sunk
+ * 0.1 mm into it, as placed by eye) or cuts it (a sphere, a sloping plane)
+ * makes a crease with it. A particle on the
+ * floor (where a tank's collide_box leaves it, at y = 0) that moves a
+ * little into the collider's foot is nearer the collider's bottom face than
+ * its side, and the push along the collider's own normal went out through
+ * the floor: the run stopped, "left the domain" (scenes/cup.lua with
+ * WCSPH, APIC and DFSPH, once the splash ran down the cup's outside), or
+ * under a block, into the gap between it and the floor. Each collider here
+ * takes particles on the floor moving 0.5 mm a step into its foot (the
+ * mesh and the box head on into a side, the sphere all round, the plane
+ * along its 45 degree crease); after the step every particle must be in
+ * the world, none inside the collider by more than 1e-6 m, and none under
+ * the box, nor under the mesh by more than its distance field's cell (its
+ * trilinear field rounds the edge over one). One step beyond: the collider
+ * moving towards them. */
+static void collider_on_floor(const char *kind, bool moving)
+{
+	eddy_world_def wd = eddy_default_world_def();
+	wd.bounds_min = (eddy_vec3){0, 0, 0};
+	wd.bounds_max = (eddy_vec3){1, 1, 1};
+	wd.gravity = (eddy_vec3){0, 0, 0};
+	wd.fps = 100; /* one step of 0.01 s a frame */
+	wd.dt_max = 0.01;
+	eddy_world *w = eddy_create_world(&wd, NULL, 0);
+	eddy_gravity_def g = eddy_default_gravity_def(); /* the world's, 0: integrate reads its ax ay az */
+	eddy_add_gravity(w, &g);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	eddy_system_id c = EDDY_NULL_SYSTEM;
+	const float speed = 0.05f; /* 0.5 mm a step */
+	/* particles: on the floor at 24 angles around (0.5, 0.5) at radius r0,
+	 * each moving 2 mm towards the centre */
+	float r0 = 0;
+	bool side_test = false; /* the mesh and box: particles must stay out of the footprint */
+	if (strcmp(kind, "mesh") == 0 || strcmp(kind, "box") == 0) {
+		if (kind[0] == 'm') {
+			eddy_collide_mesh_def d = eddy_default_collide_mesh_def();
+			snprintf(d.path, sizeof d.path, "%s", "scenes/meshes/cube.obj");
+			d.scale = (eddy_vec3){0.2f, 0.2f, 0.2f};
+			d.translate = (eddy_vec3){0.4f, -1e-4f, 0.4f}; /* sunk 0.1 mm into the floor, as placed by eye */
+			d.cell_size = 0.0027f; /* nodes off the floor; 0.5 mm is under a quarter cell: no path walk */
+			c = eddy_add_collide_mesh(w, &d);
+		} else {
+			eddy_collide_box_def d = eddy_default_collide_box_def();
+			d.min = (eddy_vec3){0.4f, -1e-4f, 0.4f};
+			d.max = (eddy_vec3){0.6f, 0.2f, 0.6f};
+			d.inside = false; /* a block, not a tank */
+			c = eddy_add_collide_box(w, &d);
+		}
+		r0 = 0.1002f; /* 0.2 mm out from the sides, head on (angles 0, 90, 180, 270) */
+		side_test = true;
+	} else if (strcmp(kind, "sphere") == 0) {
+		eddy_collide_sphere_def d = eddy_default_collide_sphere_def();
+		d.center = (eddy_vec3){0.5f, 0.05f, 0.5f};
+		d.radius = 0.1f;
+		c = eddy_add_collide_sphere(w, &d);
+		r0 = sqrtf(0.1f * 0.1f - 0.05f * 0.05f) + 0.0002f; /* the sphere meets the floor on a circle */
+	} else {
+		eddy_collide_plane_def d = eddy_default_collide_plane_def();
+		d.point = (eddy_vec3){0.5f, 0, 0.5f};
+		d.normal = (eddy_vec3){0.70710678f, -0.70710678f, 0}; /* solid above x - 0.5 = y: a 45 degree crease */
+		c = eddy_add_collide_plane(w, &d);
+		r0 = 0.0002f; /* particles at x = 0.5002 moving in -x */
+	}
+	CHECK(eddy_system_valid(w, c));
+	CHECK(eddy_world_step_frame(w) == EDDY_OK); /* a first step: an offset set after it moves the collider */
+	if (moving)                                 /* 0.5 mm in -x over the next step (0.05 m/s) */
+		CHECK(eddy_collider_set_offset(w, c, (eddy_vec3){-0.0005f, 0, 0}) == EDDY_OK);
+	enum { N = 24 };
+	eddy_vec3 p[N], v[N];
+	int n = 0;
+	for (int k = 0; k < N; ++k) {
+		const float a = (float)k * 6.2831853f / N, cx = cosf(a), cz = sinf(a);
+		if (kind[0] == 'p') { /* the plane: along its crease, all moving in -x */
+			p[n] = (eddy_vec3){0.5f + r0, 0, 0.1f + 0.8f * (float)k / N};
+			v[n++] = (eddy_vec3){-speed, 0, 0};
+			continue;
+		}
+		if (side_test && k % 6) /* head on into the box's sides only */
+			continue;
+		p[n] = (eddy_vec3){0.5f + r0 * cx, 0, 0.5f + r0 * cz};
+		v[n++] = (eddy_vec3){-speed * cx, 0, -speed * cz};
+	}
+	CHECK(eddy_world_add_particles(w, (size_t)n, p, v) == EDDY_OK);
+	const eddy_status st = eddy_world_step_frame(w);
+	CHECKF(st == EDDY_OK, "%s%s: %s", kind, moving ? ", moving" : "", eddy_world_error(w));
+	size_t cnt = 0;
+	const float *x = eddy_world_channel(w, "x", &cnt), *y = eddy_world_channel(w, "y", NULL),
+				*z = eddy_world_channel(w, "z", NULL);
+	int out = 0, inside = 0, under = 0;
+	float deepest = 0;
+	for (size_t i = 0; x && i < cnt; ++i) {
+		out += !(x[i] >= 0 && x[i] <= 1 && y[i] >= 0 && y[i] <= 1 && z[i] >= 0 && z[i] <= 1);
+		float d = 0;
+		CHECK(eddy_collider_distance(w, c, (eddy_vec3){x[i], y[i], z[i]}, &d) == EDDY_OK);
+		inside += d < -1e-6f;
+		deepest = fminf(deepest, d);
+		if (side_test) { /* the mesh's field rounds its edges over a cell */
+			const float e = kind[0] == 'm' ? 0.0027f : 1e-6f, lo = (moving ? 0.3995f : 0.4f) + e,
+						hi = (moving ? 0.5995f : 0.6f) - e;
+			under += x[i] > lo && x[i] < hi && z[i] > 0.4f + e && z[i] < 0.6f - e;
+		}
+	}
+	printf("    %s%s: %zu particles, %d outside the world, %d inside the collider (deepest %.2g m), %d under it\n",
+	       kind, moving ? " moving" : "", cnt, out, inside, (double)deepest, under);
+	CHECK(cnt == (size_t)n && out == 0 && inside == 0 && under == 0);
+	eddy_destroy_world(w);
+}
+
+static void colliders_on_the_floor_keep_particles_in_the_world(void)
+{
+	const char *const kinds[] = {"mesh", "box", "sphere", "plane"};
+	for (int k = 0; k < 4; ++k)
+		for (int m = 0; m < 2; ++m)
+			collider_on_floor(kinds[k], m == 1);
+}
+
 /* ---- the cup ------------------------------------------------------------------------
  * scenes/meshes/cup.obj (cavity radius 4 cm as a 64-gon, floor 1 cm thick,
  * walls 1 cm) stands on a block 1 cm high; emit_mesh fills the cavity with a
@@ -823,6 +942,7 @@ void suite_mesh(void)
 	RUN(closed_and_open_meshes);
 	RUN(flip_wall_warning);
 	RUN(emit_mesh_counts);
+	RUN(colliders_on_the_floor_keep_particles_in_the_world);
 	RUN(falling_block_flip);
 	RUN(falling_block_dfsph);
 	RUN(cup_holds_water_at_rest);

@@ -1217,10 +1217,11 @@ static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_wor
 	if (!(residual <= DFSPH_FAIL_ERROR) || !(worst_err <= DFSPH_FAIL_PARTICLE))
 		return eddy__fail(w, EDDY_ERR_NUMERIC,
 		                  "%s: did not converge at step %lld: mean density error %.3g after %d iterations "
-		                  "(max_density_error %g), particle %ld off by %.3g; lower the world's cfl or raise "
-		                  "max_iterations",
+		                  "(max_density_error %g), particle %ld at (%g, %g, %g) m off by %.3g; lower the "
+		                  "world's cfl or raise max_iterations",
 		                  sys->label, (long long)ctx->step, residual, it, (double)sd->def.max_density_error, worst,
-		                  worst_err);
+		                  (double)eddy__col(w, COL_X_)[worst], (double)eddy__col(w, COL_Y_)[worst],
+		                  (double)eddy__col(w, COL_Z_)[worst], worst_err);
 	return EDDY_OK;
 }
 
