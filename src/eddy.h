@@ -689,7 +689,9 @@ EDDY_API eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_
 typedef struct eddy_sph_dfsph_def {
 	float max_density_error;       /* 1, mean density error rho/rho0 - 1 the solve
 	                                  stops at (compression only without the divergence
-	                                  solver); > 0 and <= 0.1 (0.001-0.01 usual) */
+	                                  solver), and not before no particle is predicted
+	                                  over 10% compressed; > 0 and <= 0.1 (0.001-0.01
+	                                  usual) */
 	int max_iterations;            /* 1, cap on constant-density sweeps per step; 2 to 10000 */
 	bool divergence_solver;        /* also make the velocity divergence-free each step
 	                                  (default; off: a cheaper cold solve that holds
