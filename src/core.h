@@ -243,6 +243,7 @@ void eddy__clear_derived(eddy_world *w);
 void eddy__frame_reset(eddy_world *w);
 
 static inline float *eddy__col(eddy_world *w, int id) { return (float *)w->columns[id].data; }
+static inline float eddy__clamp_to(float v, float lo, float hi) { return v < lo ? lo : v > hi ? hi : v; }
 /* The world's box is solid outside: a collider's push out of its own solid
  * must not leave it. Where a collider stands on the box's floor or cuts a
  * wall (a cup on the floor), the push along the collider's own normal can
@@ -267,21 +268,15 @@ static inline eddy_vec3 eddy__off_walls(const eddy_world *w, eddy_vec3 p, float 
 	const float q[3] = {p.x, p.y, p.z}, l[3] = {lo.x, lo.y, lo.z}, h[3] = {hi.x, hi.y, hi.z};
 	float r[3];
 	for (int a = 0; a < 3; ++a)
-		r[a] = q[a] < l[a] + e ? l[a] + e : q[a] > h[a] - e ? h[a] - e : q[a];
+		r[a] = eddy__clamp_to(q[a], l[a] + e, h[a] - e);
 	return (eddy_vec3){r[0], r[1], r[2]};
 }
+/* The nearest point of the world's box to p. */
 static inline eddy_vec3 eddy__into_box(const eddy_world *w, eddy_vec3 p)
 {
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
-	return (eddy_vec3){p.x < lo.x   ? lo.x
-	                   : p.x > hi.x ? hi.x
-	                                : p.x,
-	                   p.y < lo.y   ? lo.y
-	                   : p.y > hi.y ? hi.y
-	                                : p.y,
-	                   p.z < lo.z   ? lo.z
-	                   : p.z > hi.z ? hi.z
-	                                : p.z};
+	return (eddy_vec3){eddy__clamp_to(p.x, lo.x, hi.x), eddy__clamp_to(p.y, lo.y, hi.y),
+	                   eddy__clamp_to(p.z, lo.z, hi.z)};
 }
 
 /* systems (pipeline.c) */

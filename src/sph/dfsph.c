@@ -680,7 +680,9 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
 #define DFSPH_GRAVITY_LIMIT 0.18
 
 /* The density solve stops only once, besides its mean, no particle's
- * predicted compression is above this. The mean alone is diluted in a
+ * predicted density error (its compression; with the divergence solver
+ * also the expansion of a particle under pressure) is above this. The
+ * mean alone is diluted in a
  * free-surface flow: in a jet most particles are under-dense, their error
  * 0, so a tolerance of 1% on the mean let the few particles where the jet
  * lands end a step predicted 30-90% compressed (the pour at 3.5 mm, 100k
