@@ -565,6 +565,9 @@ static void time_step_limits_are_reported(void)
 		eddy_world *w = sph_world(&s, NULL);
 		CHECK(eddy_world_step(w) == EDDY_OK); /* emits at rest */
 		CHECK(eddy_world_step(w) == EDDY_OK);
+		/* the frame of the emitting step: sph_viscosity bounds the
+		 * particles present, none before the emitter adds them */
+		CHECK(eddy_world_step_frame(w) == EDDY_OK);
 		CHECK(eddy_world_step_frame(w) == EDDY_OK);
 		eddy_frame_stats st;
 		eddy_world_frame_stats(w, &st);
@@ -1552,6 +1555,80 @@ static void dfsph_drop_converges(void)
 	eddy_destroy_world(w);
 }
 
+/* A drop at rest in zero gravity with sph_dfsph (alpha 0.1, c 20 m/s: the
+ * droplet scene's DFSPH), with and without surface tension, at CFL 1 (the
+ * method's default in eddy.fluid) and at 0.4: nothing moves it but round-off
+ * and, with tension, its own rounding-off, so after 0.3 s every particle
+ * must be within 1.5 R of the centre of mass and slower than 0.1 m/s (the
+ * capillary speed sqrt(sigma / (rho R)) is 0.085 m/s). Monaghan's viscosity
+ * stepped past its explicit limit (about h / (alpha c)) blew it apart from
+ * round-off: at rest nothing else bounded DFSPH's step (sph_viscosity's
+ * limit now does): 2116 of 2120 particles beyond 1.5 R at 0.6 s, 8 m/s. */
+static void dfsph_drop_at_rest_holds_together(void)
+{
+	const double R = 0.01, dx = R / 8;
+	for (int c = 0; c < 4; ++c) {
+		const bool tension = c & 1;
+		const double cfl = c & 2 ? 0.4 : 1.0;
+		eddy_world_def d = eddy_default_world_def();
+		d.bounds_min = (eddy_vec3){-0.03f, -0.03f, -0.03f};
+		d.bounds_max = (eddy_vec3){0.03f, 0.03f, 0.03f};
+		d.gravity = (eddy_vec3){0, 0, 0};
+		d.fps = 200;
+		d.cfl = cfl;
+		eddy_world *w = eddy_create_world(&d, NULL, 0);
+		eddy_emit_box_def drop = eddy_default_emit_box_def();
+		drop.min = (eddy_vec3){(float)-R, (float)-R, (float)-R};
+		drop.max = (eddy_vec3){(float)R, (float)R, (float)R};
+		drop.spacing = (float)dx;
+		drop.shape = EDDY_EMIT_ELLIPSOID;
+		eddy_add_emit_box(w, &drop);
+		eddy_sph_density_def de = eddy_default_sph_density_def();
+		de.spacing = (float)dx;
+		de.radius = (float)(2 * dx);
+		eddy_add_sph_density(w, &de);
+		eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
+		vi.artificial = 0.1f;
+		eddy_add_sph_viscosity(w, &vi);
+		if (tension) {
+			eddy_sph_surface_tension_def st = eddy_default_sph_surface_tension_def();
+			st.tension = 0.0728f;
+			eddy_add_sph_surface_tension(w, &st);
+		}
+		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+		eddy_add_sph_dfsph(w, &df);
+		eddy_integrate_def it = eddy_default_integrate_def();
+		eddy_add_integrate(w, &it);
+		eddy_collide_box_def bx = eddy_default_collide_box_def();
+		bx.min = d.bounds_min;
+		bx.max = d.bounds_max;
+		eddy_add_collide_box(w, &bx);
+		bool ok = true;
+		for (int f = 0; f < 60 && ok; ++f)
+			ok = eddy_world_step_frame(w) == EDDY_OK;
+		CHECKF(ok, "%s", eddy_world_error(w));
+		size_t n = 0;
+		const float *x = eddy_world_channel(w, "x", &n), *y = eddy_world_channel(w, "y", NULL),
+					*z = eddy_world_channel(w, "z", NULL), *vx = eddy_world_channel(w, "vx", NULL),
+					*vy = eddy_world_channel(w, "vy", NULL), *vz = eddy_world_channel(w, "vz", NULL);
+		double cx = 0, cy = 0, cz = 0, rmax = 0, vmax = 0;
+		for (size_t i = 0; i < n; ++i)
+			cx += x[i], cy += y[i], cz += z[i];
+		cx /= (double)n, cy /= (double)n, cz /= (double)n;
+		for (size_t i = 0; i < n; ++i) {
+			rmax = fmax(rmax, sqrt((x[i] - cx) * (x[i] - cx) + (y[i] - cy) * (y[i] - cy) + (z[i] - cz) * (z[i] - cz)));
+			vmax = fmax(vmax, sqrt((double)vx[i] * vx[i] + (double)vy[i] * vy[i] + (double)vz[i] * vz[i]));
+		}
+		eddy_frame_stats st;
+		eddy_world_frame_stats(w, &st);
+		printf("    dfsph drop at rest, %s tension, CFL %.1f: %zu particles, farthest %.2f R, fastest %.4f m/s, "
+		       "%d steps in the last frame (%s)\n",
+		       tension ? "with" : "no", cfl, n, rmax / R, vmax, (int)st.steps, st.dt_limit);
+		CHECK(n > 2000 && rmax <= 1.5 * R && vmax <= 0.1);
+		eddy_destroy_world(w);
+	}
+}
+
 /* sph_dfsph's state across steps (its warm starts' columns) is in the
  * checkpoint, so a run resumed from one is bit-identical to one that never
  * stopped. */
@@ -1574,6 +1651,7 @@ static void sph_dfsph_suite(void)
 	RUN(dfsph_deterministic_across_threads);
 	RUN(simd_paths_give_the_same_bits);
 	RUN(dfsph_drop_converges);
+	RUN(dfsph_drop_at_rest_holds_together);
 	RUN(dfsph_resume_is_bit_identical);
 }
 
