@@ -121,6 +121,8 @@ typedef struct sph_setup {
 	double fps;                      /* frames per second */
 	const eddy_sph_dfsph_def *dfsph; /* the implicit solve in place of sph_pressure, or NULL */
 	eddy_sph_density_mode density;   /* sph_density's: summation or continuity */
+	eddy_emit_shape shape;           /* the fluid block, or the ellipsoid inscribed in it */
+	float artificial;                /* 1, sph_viscosity's Monaghan alpha */
 } sph_setup;
 
 static sph_setup default_setup(void)
@@ -141,6 +143,8 @@ static sph_setup default_setup(void)
 	s.fps = 100;
 	s.dfsph = NULL;
 	s.density = EDDY_SPH_DENSITY_SUMMATION;
+	s.shape = EDDY_EMIT_BLOCK;
+	s.artificial = eddy_default_sph_viscosity_def().artificial;
 	return s;
 }
 
@@ -161,6 +165,7 @@ static eddy_world *sph_world(const sph_setup *s, eddy_system_id *density)
 	b.min = s->fmin;
 	b.max = s->fmax;
 	b.spacing = s->dx;
+	b.shape = s->shape;
 	CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &b)));
 	eddy_sph_density_def de = eddy_default_sph_density_def();
 	de.spacing = s->dx;
@@ -180,6 +185,7 @@ static eddy_world *sph_world(const sph_setup *s, eddy_system_id *density)
 	}
 	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
 	vi.viscosity = s->mu;
+	vi.artificial = s->artificial;
 	CHECK(eddy_system_valid(w, eddy_add_sph_viscosity(w, &vi)));
 	if (s->sigma >= 0) {
 		eddy_sph_surface_tension_def st = eddy_default_sph_surface_tension_def();
@@ -1568,43 +1574,24 @@ static void dfsph_drop_converges(void)
  * 0.005 m/s. */
 static void dfsph_drop_at_rest_holds_together(void)
 {
-	const double R = 0.01, dx = R / 8;
+	const double R = 0.01;
+	const eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
 	for (int c = 0; c < 4; ++c) {
-		const bool tension = c & 1;
-		const double cfl = c & 2 ? 0.4 : 1.0;
-		eddy_world_def d = eddy_default_world_def();
-		d.bounds_min = (eddy_vec3){-0.03f, -0.03f, -0.03f};
-		d.bounds_max = (eddy_vec3){0.03f, 0.03f, 0.03f};
-		d.gravity = (eddy_vec3){0, 0, 0};
-		d.fps = 200;
-		d.cfl = cfl;
-		eddy_world *w = eddy_create_world(&d, NULL, 0);
-		eddy_emit_box_def drop = eddy_default_emit_box_def();
-		drop.min = (eddy_vec3){(float)-R, (float)-R, (float)-R};
-		drop.max = (eddy_vec3){(float)R, (float)R, (float)R};
-		drop.spacing = (float)dx;
-		drop.shape = EDDY_EMIT_ELLIPSOID;
-		eddy_add_emit_box(w, &drop);
-		eddy_sph_density_def de = eddy_default_sph_density_def();
-		de.spacing = (float)dx;
-		de.radius = (float)(2 * dx);
-		eddy_add_sph_density(w, &de);
-		eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
-		vi.artificial = 0.1f;
-		eddy_add_sph_viscosity(w, &vi);
-		if (tension) {
-			eddy_sph_surface_tension_def st = eddy_default_sph_surface_tension_def();
-			st.tension = 0.0728f;
-			eddy_add_sph_surface_tension(w, &st);
-		}
-		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
-		eddy_add_sph_dfsph(w, &df);
-		eddy_integrate_def it = eddy_default_integrate_def();
-		eddy_add_integrate(w, &it);
-		eddy_collide_box_def bx = eddy_default_collide_box_def();
-		bx.min = d.bounds_min;
-		bx.max = d.bounds_max;
-		eddy_add_collide_box(w, &bx);
+		sph_setup s = default_setup();
+		s.dx = (float)(R / 8);
+		s.lo = (eddy_vec3){-0.03f, -0.03f, -0.03f};
+		s.hi = (eddy_vec3){0.03f, 0.03f, 0.03f};
+		s.fmin = (eddy_vec3){(float)-R, (float)-R, (float)-R};
+		s.fmax = (eddy_vec3){(float)R, (float)R, (float)R};
+		s.shape = EDDY_EMIT_ELLIPSOID;
+		s.k = 400; /* c = 20 m/s */
+		s.mu = 1e-3f;
+		s.artificial = 0.1f;
+		s.sigma = c & 1 ? 0.0728f : -1;
+		s.gravity = 0;
+		s.walls = false;
+		s.cfl = c & 2 ? 0.4 : 1.0;
+		eddy_world *w = dfsph_world(s, &df, 200);
 		bool ok = true;
 		for (int f = 0; f < 60 && ok; ++f)
 			ok = eddy_world_step_frame(w) == EDDY_OK;
@@ -1625,7 +1612,7 @@ static void dfsph_drop_at_rest_holds_together(void)
 		eddy_world_frame_stats(w, &st);
 		printf("    dfsph drop at rest, %s tension, CFL %.1f: %zu particles, farthest %.2f R, fastest %.4f m/s, "
 		       "%d steps in the last frame (%s)\n",
-		       tension ? "with" : "no", cfl, n, rmax / R, vmax, (int)st.steps, st.dt_limit);
+		       s.sigma >= 0 ? "with" : "no", s.cfl, n, rmax / R, vmax, (int)st.steps, st.dt_limit);
 		CHECK(n > 2000 && rmax <= 1.5 * R && vmax <= 0.1);
 		eddy_destroy_world(w);
 	}
