@@ -490,6 +490,18 @@ static inline void eddy__collide_rotated(float *x, float *y, float *z, float *vx
 	x[i] = xw.x, y[i] = xw.y, z[i] = xw.z;
 	eddy__collide_response(vx, vy, vz, i, eddy__mat_mul(p->r, n_body), eddy__rigid_velocity(mv, xw), r);
 }
+/* The same, the point clamped into the world's box (eddy__into_box, above)
+ * in world coordinates and written as clamped: a clamp in the body frame
+ * comes back a rounding outside. */
+static inline void eddy__collide_rotated_in(const eddy_world *w, float *x, float *y, float *z, float *vx, float *vy,
+                                            float *vz, size_t i, const eddy_collider_pose *p,
+                                            const eddy_collider_velocity *mv, eddy_vec3 q_body, eddy_vec3 n_body,
+                                            eddy_collider_response r)
+{
+	const eddy_vec3 xw = eddy__into_box(w, eddy__pose_to_world(p, q_body));
+	x[i] = xw.x, y[i] = xw.y, z[i] = xw.z;
+	eddy__collide_response(vx, vy, vz, i, eddy__mat_mul(p->r, n_body), eddy__rigid_velocity(mv, xw), r);
+}
 
 static inline eddy_vec3 eddy__v3(float x, float y, float z) { return (eddy_vec3){x, y, z}; }
 static inline eddy_vec3 eddy__add3(eddy_vec3 a, eddy_vec3 b) { return (eddy_vec3){a.x + b.x, a.y + b.y, a.z + b.z}; }

@@ -89,11 +89,8 @@ static void step_rotated(eddy_world *w, collide_box *b, const eddy_collider_velo
 		float *c = best == 0 ? &nrm.x : best == 1 ? &nrm.y : &nrm.z;
 		*c = sign;
 		q[best] = sign > 0 ? h[best] : l[best];
-		eddy_vec3 qb2 = eddy__v3(q[0], q[1], q[2]);
-		const eddy_vec3 qw = eddy__pose_to_world(&pose, qb2);
-		if (eddy__outside_box(w, qw)) /* not out through the world's wall (core.h) */
-			qb2 = eddy__pose_to_body(&pose, eddy__into_box(w, qw));
-		eddy__collide_rotated(x, y, z, vx, vy, vz, (size_t)i, &pose, mv, qb2, nrm, r);
+		/* not out through the world's wall (core.h) */
+		eddy__collide_rotated_in(w, x, y, z, vx, vy, vz, (size_t)i, &pose, mv, eddy__v3(q[0], q[1], q[2]), nrm, r);
 	}
 }
 

@@ -169,13 +169,12 @@ static void step_rotated(eddy_world *w, collide_mesh *b, const eddy_collider_mot
 		}
 		if (d < 0 && first_entry(b, c0, c, &hit))
 			q = hit; /* in a crease the steps did not get out: where the path entered */
-		if (eddy__outside_box(w, eddy__pose_to_world(&pose, q))) { /* core.h: the world's box */
-			if (first_entry(b, c0, c, &hit) && !eddy__outside_box(w, eddy__pose_to_world(&pose, hit)))
-				q = hit, nrm = body_normal(b, q);
-			else
-				q = eddy__pose_to_body(&pose, eddy__into_box(w, eddy__pose_to_world(&pose, q)));
-		}
-		eddy__collide_rotated(x, y, z, vx, vy, vz, (size_t)i, &pose, mv, q, nrm, r);
+		/* out of the mesh through the world's wall (core.h): where the path
+		 * entered the mesh instead, else the nearest point inside */
+		if (eddy__outside_box(w, eddy__pose_to_world(&pose, q)) && first_entry(b, c0, c, &hit) &&
+		    !eddy__outside_box(w, eddy__pose_to_world(&pose, hit)))
+			q = hit, nrm = body_normal(b, q);
+		eddy__collide_rotated_in(w, x, y, z, vx, vy, vz, (size_t)i, &pose, mv, q, nrm, r);
 	}
 }
 
