@@ -685,7 +685,8 @@ EDDY_API eddy_system_id eddy_add_sph_boundary_box(eddy_world *w, const eddy_sph_
  * and run conjugate gradients, their tolerances and the gravity limit
  * tightened in water deeper than 5 kernel radii: what holds deep water
  * still. Publishes solver, iterations, residual,
- * residual_max, divergence_iterations and unconverged in the frame stats. */
+ * residual_max, divergence_iterations and unconverged (steps whose solve
+ * reached its cap short of a stopping rule) in the frame stats. */
 typedef struct eddy_sph_dfsph_def {
 	float max_density_error;       /* 1, mean density error rho/rho0 - 1 the solve
 	                                  stops at (compression only without the divergence

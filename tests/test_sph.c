@@ -1561,6 +1561,44 @@ static void dfsph_drop_converges(void)
 	eddy_destroy_world(w);
 }
 
+/* The same drop with the density solve held to 2 iterations and a mean
+ * tolerance of 0.05: the impact leaves particles predicted over 10%
+ * compressed (DFSPH_MAX_COMPRESSION, the solve's other stopping rule) while
+ * the mean stays within its tolerance. Such a step is short of converging
+ * and must count in unconverged, frame by frame, exactly when the frame's
+ * residual_max is over the bound (a step ends over it only at the cap).
+ * Counting only the mean, unconverged read 0 through the impact (2 of the
+ * 12 frames over the bound, at CFL 1, the method's default in eddy.fluid). */
+static void dfsph_capped_compression_counts_as_unconverged(void)
+{
+	sph_setup s = default_setup();
+	s.fmin = (eddy_vec3){0.0f, 0.03f, 0.0f};
+	s.fmax = (eddy_vec3){0.06f, 0.09f, 0.1f};
+	s.mu = 1e-3f;
+	s.cfl = 1.0;
+	eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+	df.max_density_error = 0.05f;
+	df.max_iterations = 2;
+	eddy_world *w = dfsph_world(s, &df, 30);
+	int over = 0, counted = 0, agree = 0;
+	const int frames = 12;
+	for (int f = 0; f < frames; ++f) {
+		CHECKF(eddy_world_step_frame(w) == EDDY_OK, "%s", eddy_world_error(w));
+		eddy_frame_stats st;
+		eddy_world_frame_stats(w, &st);
+		const bool short_of = dfsph_stat(&st, "residual_max") > 0.1 || dfsph_stat(&st, "residual") > 0.05;
+		const bool unconverged = dfsph_stat(&st, "unconverged") > 0;
+		over += short_of;
+		counted += unconverged;
+		agree += short_of == unconverged;
+	}
+	printf("    dfsph drop, density solve capped at 2: %d of %d frames over a stopping rule, %d counted unconverged\n",
+	       over, frames, counted);
+	CHECK(over > 0);
+	CHECK(agree == frames);
+	eddy_destroy_world(w);
+}
+
 /* A drop at rest in zero gravity with sph_dfsph (alpha 0.1, c 20 m/s: the
  * droplet scene's DFSPH), with and without surface tension, at CFL 1 (the
  * method's default in eddy.fluid) and at 0.4: nothing moves it but round-off
@@ -1640,6 +1678,7 @@ static void sph_dfsph_suite(void)
 	RUN(dfsph_deterministic_across_threads);
 	RUN(simd_paths_give_the_same_bits);
 	RUN(dfsph_drop_converges);
+	RUN(dfsph_capped_compression_counts_as_unconverged);
 	RUN(dfsph_drop_at_rest_holds_together);
 	RUN(dfsph_resume_is_bit_identical);
 }

@@ -1226,7 +1226,10 @@ static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_wor
 	sd->steps++;
 	sd->sweeps += it;
 	sd->div_sweeps += div_it;
-	sd->unconverged += (it >= sd->def.max_iterations && residual > sd->def.max_density_error) ||
+	/* a step whose density solve hit its cap short of either stopping rule
+	 * (the mean, or one particle's compression: DFSPH_MAX_COMPRESSION) */
+	const bool density_short = residual > sd->def.max_density_error || worst_err > DFSPH_MAX_COMPRESSION;
+	sd->unconverged += (it >= sd->def.max_iterations && density_short) ||
 	                   (div_it >= sd->def.max_divergence_iterations && div_residual > sd->def.max_divergence_error);
 	sd->residual = residual > sd->residual ? residual : sd->residual;
 	sd->worst = worst_err > sd->worst ? worst_err : sd->worst;
