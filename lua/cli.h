@@ -17,6 +17,9 @@
 /* Exit status: 0 success, 1 the scene or the run failed, 2 bad usage. */
 enum { CLI_EXIT_RUN = 1, CLI_EXIT_USAGE = 2 };
 
+/* The most frames one run may ask for, by --frames or a duration. */
+enum { CLI_MAX_FRAMES = 100000000 };
+
 typedef struct cli_options {
 	const char *command; /* run, plan or check */
 	const char *scene;

@@ -251,8 +251,8 @@ static int parse_option(int opt, const char *v, cli_options *o)
 	char *end;
 	switch (opt) {
 	case OPT_FRAMES:
-		if (!parse_int(v, 0, 100000000, &o->frames))
-			return cli_fail(CLI_EXIT_USAGE, "--frames must be an integer >= 0 (got '%s')", v);
+		if (!parse_int(v, 0, CLI_MAX_FRAMES, &o->frames))
+			return cli_fail(CLI_EXIT_USAGE, "--frames must be an integer in [0, %d] (got '%s')", CLI_MAX_FRAMES, v);
 		return 0;
 	case OPT_DURATION:
 		o->duration = strtod(v, &end);

@@ -439,7 +439,17 @@ static int prepare(run *r)
 	const char *sync = getenv("EDDY_SYNC_FRAMES");
 	eddy_world_set_background_output(r->w, !(sync && sync[0] && strcmp(sync, "0") != 0));
 	double duration = o->duration >= 0 ? o->duration : def->duration;
-	r->frames = o->frames >= 0 ? o->frames : (int)ceil(duration * def->fps - 1e-9);
+	/* in double first: a duration of many frames overflows an int */
+	const double frames = o->frames >= 0 ? o->frames : ceil(duration * def->fps - 1e-9);
+	if (!(frames <= CLI_MAX_FRAMES))
+		return o->duration >= 0 ? cli_fail(CLI_EXIT_USAGE,
+		                                   "--duration %g s is %.3g frames at %g fps: a run may have at most %d frames",
+		                                   duration, frames, def->fps, CLI_MAX_FRAMES)
+		                        : cli_fail(CLI_EXIT_RUN,
+		                                   "%s: world 'duration' %g s is %.3g frames at %g fps: a run may have at "
+		                                   "most %d frames",
+		                                   o->scene, duration, frames, def->fps, CLI_MAX_FRAMES);
+	r->frames = (int)frames;
 	/* a run is whole frames: --duration below one frame would run a whole
 	 * frame, many times what was asked (the scene's own duration is checked
 	 * by the preflight) */

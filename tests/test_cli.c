@@ -342,6 +342,16 @@ static void usage_and_errors(void)
 	CHECK(test_sh(cmd, out, sizeof out) == 2);
 	CHECK_HAS(out, "eddy: --duration 0.001 s is shorter than one frame");
 	CHECK(one_line(out));
+	/* a duration of more frames than an int holds: refused, where it ran 0
+	 * frames and exited 0 (the frame count overflowed) */
+	snprintf(cmd, sizeof cmd, "%s run scenes/bounce.lua --duration 1e30 --quiet --out %s/t_dur", eddy(),
+	         test_build_dir());
+	CHECK(test_sh(cmd, out, sizeof out) == 2);
+	CHECK_HAS(out, "eddy: --duration 1e+30 s is 3e+31 frames at 30 fps: a run may have at most 100000000 frames");
+	CHECK(one_line(out));
+	snprintf(cmd, sizeof cmd, "%s scenes/bounce.lua --frames 100000001", eddy_run());
+	CHECK(test_sh(cmd, out, sizeof out) == 2);
+	CHECK_HAS(out, "--frames must be an integer in [0, 100000000] (got '100000001')");
 }
 
 static void write_scene(const char *path, const char *src)
@@ -371,6 +381,13 @@ static void bad_scenes_fail_with_one_line(void)
 	write_scene(path, "local eddy = require 'eddy'\nlocal w = eddy.world{\n");
 	CHECK(test_sh(cmd, out, sizeof out) == 1);
 	CHECK_HAS(out, "t_bad.lua:");
+
+	/* a scene's duration of more frames than a run may have */
+	write_scene(path, "local eddy = require 'eddy'\nreturn eddy.world{ duration = 1e30 }\n");
+	snprintf(cmd, sizeof cmd, "%s %s --quiet --out %s/t_dur", eddy_run(), path, test_build_dir());
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
+	CHECK_HAS(out, "t_bad.lua: world 'duration' 1e+30 s is 3e+31 frames at 30 fps");
+	CHECK(one_line(out));
 
 	/* no tank: the block falls out of the domain and the run says where */
 	write_scene(path, "local eddy = require 'eddy'\nlocal w = eddy.world{ fps = 10 }\n"

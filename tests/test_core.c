@@ -853,8 +853,26 @@ static void check_catches_scene_mistakes(void)
 	CHECK_HAS(f.text, "a run simulates 7 frames = 0.233333 s");
 	eddy_destroy_world(w);
 
-	/* FLIP cells smaller than the particle spacing */
+	/* a box thinner than the spacing, and a nozzle whose opening holds
+	 * only its centre (a single file of particles) */
 	eddy_world_def d = eddy_default_world_def();
+	d.bounds_max = (eddy_vec3){1, 1, 0.005f};
+	w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_nozzle_def thin = eddy_default_emit_nozzle_def();
+	thin.center = (eddy_vec3){0.5f, 0.8f, 0.0025f};
+	thin.radius = 0.002f;
+	thin.spacing = 0.01f;
+	thin.max_particles = 100;
+	CHECKF(eddy_system_valid(w, eddy_add_emit_nozzle(w, &thin)), "%s", eddy_world_error(w));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 1);
+	CHECK_HAS(f.text, "world: 'bounds' are 0.005 m along z, less than the emitters' spacing 0.01 m: no layer of "
+	                  "particles fits; use spacing <= 0.005 m");
+	CHECK_HAS(f.text, "emit_nozzle: the opening (radius 0.002 m) holds one particle at spacing 0.01 m");
+	eddy_destroy_world(w);
+
+	/* FLIP cells smaller than the particle spacing */
+	d = eddy_default_world_def();
 	d.cell_size = 0.01;
 	w = eddy_create_world(&d, NULL, 0);
 	eddy_emit_box_def b = eddy_default_emit_box_def();
