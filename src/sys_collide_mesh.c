@@ -13,8 +13,9 @@
  * if it entered the solid it goes back to where it entered (bisection).
  * Otherwise, a particle with distance d < 0 stays where it is. It then
  * moves along n = grad d / |grad d| (central differences half a cell wide)
- * to d = 2e-3 cells (so rounding cannot leave it inside), repeated up to
- * four times where the field bends (still inside after that, in a crease
+ * by (2e-3 cells - d) / |grad d|, a Newton step to d = 2e-3 cells (so
+ * rounding cannot leave it inside; |grad d| is under 1 in a crease),
+ * repeated up to four times where the field bends (still inside after that, in a crease
  * where the steps bounce between two faces, it goes back to where its path
  * entered the solid, when the path started outside), and gets the contact response (core.h)
  * with normal n and the collider's velocity. x - v dt is exactly the last
@@ -30,6 +31,11 @@
 
 #include <stdlib.h>
 #include <string.h>
+
+/* The least slope a push divides by: where the field is nearly flat (a
+ * ridge of the distance, between two faces) a step is at most 4x the
+ * distance. */
+#define MESH_MIN_SLOPE 0.25f
 
 typedef struct collide_mesh {
 	eddy_collider_base base; /* first: shared offset handling */
@@ -67,14 +73,18 @@ static float sdistance(const collide_mesh *b, eddy_vec3 q)
 
 static float distance(const eddy_system *s, eddy_vec3 q) { return sdistance(s->data, q); }
 
-/* Unit normal out of the solid at q, (0, 1, 0) where the field is flat. */
-static eddy_vec3 normal(const collide_mesh *b, eddy_vec3 q)
+/* Unit normal out of the solid at q, (0, 1, 0) where the field is flat;
+ * with slope, also the field's slope along it (1 on a face, under 1 in a
+ * crease: 0.71 in a right-angled one). */
+static eddy_vec3 normal(const collide_mesh *b, eddy_vec3 q, float *slope)
 {
 	const float e = 0.5f * (float)b->sdf.h;
 	eddy_vec3 g = {sdistance(b, eddy__v3(q.x + e, q.y, q.z)) - sdistance(b, eddy__v3(q.x - e, q.y, q.z)),
 	               sdistance(b, eddy__v3(q.x, q.y + e, q.z)) - sdistance(b, eddy__v3(q.x, q.y - e, q.z)),
 	               sdistance(b, eddy__v3(q.x, q.y, q.z + e)) - sdistance(b, eddy__v3(q.x, q.y, q.z - e))};
 	const float len = sqrtf(g.x * g.x + g.y * g.y + g.z * g.z);
+	if (slope)
+		*slope = len / (2 * e);
 	if (!(len > 0))
 		return eddy__v3(0, 1, 0);
 	return eddy__v3(g.x / len, g.y / len, g.z / len);
@@ -116,14 +126,17 @@ static bool first_entry(const collide_mesh *b, eddy_vec3 a, eddy_vec3 c, eddy_ve
 	return false;
 }
 
-/* Unit normal out of the solid at body-frame q, (0, 1, 0) where flat. */
-static eddy_vec3 body_normal(const collide_mesh *b, eddy_vec3 q)
+/* Unit normal out of the solid at body-frame q, (0, 1, 0) where flat; with
+ * slope, as normal. */
+static eddy_vec3 body_normal(const collide_mesh *b, eddy_vec3 q, float *slope)
 {
 	const float e = 0.5f * (float)b->sdf.h;
 	eddy_vec3 g = {body_distance(b, eddy__v3(q.x + e, q.y, q.z)) - body_distance(b, eddy__v3(q.x - e, q.y, q.z)),
 	               body_distance(b, eddy__v3(q.x, q.y + e, q.z)) - body_distance(b, eddy__v3(q.x, q.y - e, q.z)),
 	               body_distance(b, eddy__v3(q.x, q.y, q.z + e)) - body_distance(b, eddy__v3(q.x, q.y, q.z - e))};
 	const float len = sqrtf(g.x * g.x + g.y * g.y + g.z * g.z);
+	if (slope)
+		*slope = len / (2 * e);
 	if (!(len > 0))
 		return eddy__v3(0, 1, 0);
 	return eddy__v3(g.x / len, g.y / len, g.z / len);
@@ -159,11 +172,16 @@ static void step_rotated(eddy_world *w, collide_mesh *b, const eddy_collider_mot
 			q = hit, d = body_distance(b, q);
 		else if (!(d < 0))
 			continue;
-		eddy_vec3 nrm = body_normal(b, q);
+		float slope;
+		eddy_vec3 nrm = body_normal(b, q, &slope);
 		for (int it = 0; it < 4 && d < hair; ++it) {
 			if (it > 0)
-				nrm = body_normal(b, q);
-			const float k = 2 * hair - d;
+				nrm = body_normal(b, q, &slope);
+			const float k = (2 * hair - d) / eddy__maxf(slope, MESH_MIN_SLOPE); /* as step's */
+			q = eddy__v3(q.x + nrm.x * k, q.y + nrm.y * k, q.z + nrm.z * k);
+			d = body_distance(b, q);
+		}
+		for (float k = 2 * hair - d; d < hair && k <= (float)b->sdf.h; k *= 2) { /* as step's */
 			q = eddy__v3(q.x + nrm.x * k, q.y + nrm.y * k, q.z + nrm.z * k);
 			d = body_distance(b, q);
 		}
@@ -173,7 +191,7 @@ static void step_rotated(eddy_world *w, collide_mesh *b, const eddy_collider_mot
 		 * entered the mesh instead, else the nearest point inside */
 		if (eddy__outside_box(w, eddy__pose_to_world(&pose, q)) && first_entry(b, c0, c, &hit) &&
 		    !eddy__outside_box(w, eddy__pose_to_world(&pose, hit)))
-			q = hit, nrm = body_normal(b, q);
+			q = hit, nrm = body_normal(b, q, NULL);
 		eddy__collide_rotated_in(w, x, y, z, vx, vy, vz, (size_t)i, &pose, mv, q, nrm, r);
 	}
 }
@@ -217,11 +235,26 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			q = hit, d = body_distance(b, q);
 		else if (!(d < 0))
 			continue;
-		eddy_vec3 nrm = normal(b, eddy__add3(q, off));
+		float slope;
+		eddy_vec3 nrm = normal(b, eddy__add3(q, off), &slope);
 		for (int it = 0; it < 4 && d < hair; ++it) {
 			if (it > 0)
-				nrm = normal(b, eddy__add3(q, off));
-			const float k = 2 * hair - d;
+				nrm = normal(b, eddy__add3(q, off), &slope);
+			/* a Newton step on d along n: in a crease the field rises
+			 * slower than the distance moved, and steps of the distance
+			 * alone left a particle in the cup's inner corner 1e-6 m in
+			 * the solid after four (its path began inside, so no entry
+			 * point to go back to) */
+			const float k = (2 * hair - d) / eddy__maxf(slope, MESH_MIN_SLOPE);
+			q = eddy__v3(q.x + nrm.x * k, q.y + nrm.y * k, q.z + nrm.z * k);
+			d = body_distance(b, q);
+		}
+		/* where the field is flat along n Newton's steps stall: trilinear
+		 * values of a crease have no slope along its bisector at a node near
+		 * it (the node and its neighbours across the crease read the same
+		 * depth), and the cube's edge held particles 0.2 mm in after four
+		 * steps; on along n, each step twice the last, up to a field cell */
+		for (float k = 2 * hair - d; d < hair && k <= (float)b->sdf.h; k *= 2) {
 			q = eddy__v3(q.x + nrm.x * k, q.y + nrm.y * k, q.z + nrm.z * k);
 			d = body_distance(b, q);
 		}
@@ -233,7 +266,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			/* out of the mesh through the world's wall (core.h): where the
 			 * path entered the mesh instead, else the nearest point inside */
 			if (first_entry(b, c0, c, &hit) && !eddy__outside_box(w, eddy__add3(hit, off)))
-				p = eddy__add3(hit, off), nrm = normal(b, p);
+				p = eddy__add3(hit, off), nrm = normal(b, p, NULL);
 			else
 				p = eddy__into_box(w, p);
 		}
@@ -399,8 +432,9 @@ static void shape(const eddy_system *s, eddy_collider_shape *out)
  * Akinci et al. 2012 on the mesh, laid out as a block box lays out its own:
  * the points of a cubic lattice of the fluid's spacing s (over the distance
  * grid's box grown by the shell, at min + (i + 1/2) s) that lie on the solid
- * side of the surface within L = ceil(h / s) spacings of it, -L s <= d < 0
- * with d the collider's signed distance in its def pose: a shell as thick as
+ * side of the surface within L = ceil(h / s) spacings of it, depth -d in
+ * [0, L s) (a hair deeper: below) with d the collider's signed distance in
+ * its def pose: a shell as thick as
  * the kernel support (a wall thinner than that is sampled whole), so a fluid
  * particle at the surface sees a full neighbourhood. Each stands for the
  * lattice cell, V_b = 1 / sum_lattice W, the volume sph_boundary_box gives
@@ -429,20 +463,27 @@ static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacin
 		n[a] = (long)ceil(ext / sp);
 	}
 	const float v = (float)(1.0 / eddy_sph_lattice_sum(EDDY_SPH_POLY6, spacing, h)), shell = (float)(L * sp);
+	/* depths are taken a hair deeper, so that a lattice plane lying on a
+	 * face (a mesh at multiples of the spacing: the lattice and the
+	 * distance grid both start from its box) falls in the first layer
+	 * whatever the rounding of d: taken as outside, it emptied the first
+	 * layer and pushed the others a spacing deeper (the cup's floor held
+	 * its water a spacing low, where the collider caught it) */
+	const float tau = 1e-3f * (float)sp;
 	size_t k = 0;
 	for (long iz = 0; iz < n[2]; ++iz)
 		for (long iy = 0; iy < n[1]; ++iy)
 			for (long ix = 0; ix < n[0]; ++ix) {
 				const eddy_vec3 q = {(float)(lo[0] + (ix + 0.5) * sp), (float)(lo[1] + (iy + 0.5) * sp),
 				                     (float)(lo[2] + (iz + 0.5) * sp)};
-				const float d = body_distance(b, q);
-				if (!(d < 0 && d >= -shell))
+				const float d = body_distance(b, q), depth = tau - d;
+				if (!(depth > 0 && depth < shell))
 					continue;
 				if (x) {
 					/* onto the layer at depth (j + 1/2) s it falls in (one
 					 * step along the field's normal) */
-					const float target = -((float)floor(-d / sp) + 0.5f) * (float)sp;
-					const eddy_vec3 nrm = body_normal(b, q);
+					const float target = -((float)floor(depth / sp) + 0.5f) * (float)sp;
+					const eddy_vec3 nrm = body_normal(b, q, NULL);
 					x[k] = q.x + nrm.x * (target - d), y[k] = q.y + nrm.y * (target - d),
 					z[k] = q.z + nrm.z * (target - d);
 					vol[k] = v;
