@@ -4,9 +4,7 @@
 -- walls and floor 1 cm thick, 10 cm tall), with any fluid method.
 --
 --   build/eddy run scenes/cup.lua                        (FLIP)
---   build/eddy run scenes/cup.lua --set method=dfsph --set spacing=0.003
---                                                         (DFSPH; at 2.5 mm it stops at 0.1 s,
---                                                          the jet piling up on the floor: README, Meshes)
+--   build/eddy run scenes/cup.lua --set method=dfsph     (DFSPH; --set spacing=0.003 for a quicker run)
 --   build/eddy run scenes/cup.lua --set mesh=my_cup.stl  (any mesh assimp reads, closed)
 --
 -- Output in out/cup/ (or --out): frame_NNNN.png (sprites coloured by speed)
