@@ -67,7 +67,9 @@ static void step_rotated(eddy_world *w, collide_box *b, const eddy_collider_velo
 				float *c = a == 0 ? &nrm.x : a == 1 ? &nrm.y : &nrm.z;
 				*c = q[a] < l[a] ? 1.0f : -1.0f;
 				q[a] = q[a] < l[a] ? l[a] : h[a];
-				eddy__collide_rotated(x, y, z, vx, vy, vz, (size_t)i, &pose, mv, eddy__v3(q[0], q[1], q[2]), nrm, r);
+				/* a turned tank's wall can lie past the world's: in the box (core.h) */
+				eddy__collide_rotated_in(w, x, y, z, vx, vy, vz, (size_t)i, &pose, mv, eddy__v3(q[0], q[1], q[2]), nrm,
+				                         r);
 			}
 			continue;
 		}
@@ -236,16 +238,16 @@ static void shape(const eddy_system *s, eddy_collider_shape *out)
  * one), keeping the points within L = ceil(h / s) layers of a face: a shell
  * as thick as the kernel support, each point standing for the lattice cell
  * V_b = 1 / sum_lattice W, as sph_boundary_box does (Akinci et al. 2012).
- * A tank (inside = true) gets none: an sph_boundary_box is its walls; nor
- * does a block an sph_boundary_box already samples (the same min and max:
- * a thin plate is made that way). */
+ * A tank (inside = true): the lattice continued L layers out through its
+ * walls, the points outside it (sph_boundary_box's layout), so a tank that
+ * moves or turns carries its walls with it. Neither gets any where an
+ * sph_boundary_box already samples the box (the same min and max: eddy.fluid's
+ * tank, a thin plate). */
 static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
                          float *z, float *vol, eddy_vec3 *normal)
 {
 	(void)normal;
 	const collide_box *b = s->data;
-	if (b->def.inside)
-		return 0;
 	const eddy_system *o;
 	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS); (o = eddy__systems_next(&it));)
 		if (eddy__sph_boundary_box_covers(o, b->def.min, b->def.max))
@@ -260,6 +262,27 @@ static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacin
 	const long L = (long)ceil(h / spacing - 1e-4);
 	const float v = (float)(1.0 / eddy_sph_lattice_sum(EDDY_SPH_POLY6, spacing, h));
 	size_t k = 0;
+	if (b->def.inside) {
+		/* the lattice continued L layers out through the walls, the points
+		 * outside the box: sph_boundary_box's layout, carried by the tank
+		 * as it moves and turns */
+		for (long iz = -L; iz < n[2] + L; ++iz)
+			for (long iy = -L; iy < n[1] + L; ++iy) {
+				const bool through = iy >= 0 && iy < n[1] && iz >= 0 && iz < n[2]; /* the row crosses the inside */
+				for (long ix = -L; ix < n[0] + L; ++ix) {
+					if (through && ix == 0)
+						ix = n[0];
+					if (x) {
+						x[k] = (float)(lo[0] + (ix + 0.5) * sp[0]);
+						y[k] = (float)(lo[1] + (iy + 0.5) * sp[1]);
+						z[k] = (float)(lo[2] + (iz + 0.5) * sp[2]);
+						vol[k] = v;
+					}
+					k++;
+				}
+			}
+		return k;
+	}
 	for (long iz = 0; iz < n[2]; ++iz)
 		for (long iy = 0; iy < n[1]; ++iy) {
 			/* a row through the inside keeps only its ends */

@@ -393,12 +393,29 @@ static eddy_status check_bounds(eddy_world *w)
 			eddy_world_remove_particle(w, i);
 			continue;
 		}
-		return eddy__fail(
-			w, EDDY_ERR_NUMERIC,
-			"particle %zu left the domain at step %lld (t = %.6g s): (%g, %g, %g) outside [%g, %g]x[%g, %g]x[%g, %g]; "
-			"add collide_box{min = bounds min, max = bounds max, inside = true} or set escape = \"remove\"",
-			i, (long long)w->step, w->time, (double)x[i], (double)y[i], (double)z[i], (double)lo.x, (double)hi.x,
-			(double)lo.y, (double)hi.y, (double)lo.z, (double)hi.z);
+		/* with a collider moved or turned from its def pose, the likely
+		 * cause is a tank carried past the bounds: the bounds are the last
+		 * wall, and a tank's inside beyond them lets particles through */
+		const eddy_system *moved = NULL;
+		for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_COLLIDER); !moved && (moved = eddy__systems_next(&it));) {
+			const eddy_collider_motion *m = &((const eddy_collider_base *)moved->data)->motion;
+			if (!(m->offset.x || m->offset.y || m->offset.z || m->rotation.x || m->rotation.y || m->rotation.z))
+				moved = NULL;
+		}
+		char hint[256];
+		if (moved)
+			snprintf(hint, sizeof hint,
+			         "%s is moved or turned: the bounds must hold its whole motion (a tank's inside past them lets "
+			         "particles out), or set escape = \"remove\"",
+			         moved->label);
+		else
+			snprintf(hint, sizeof hint,
+			         "add collide_box{min = bounds min, max = bounds max, inside = true} or set escape = \"remove\"");
+		return eddy__fail(w, EDDY_ERR_NUMERIC,
+		                  "particle %zu left the domain at step %lld (t = %.6g s): (%g, %g, %g) outside "
+		                  "[%g, %g]x[%g, %g]x[%g, %g]; %s",
+		                  i, (long long)w->step, w->time, (double)x[i], (double)y[i], (double)z[i], (double)lo.x,
+		                  (double)hi.x, (double)lo.y, (double)hi.y, (double)lo.z, (double)hi.z, hint);
 	}
 	return EDDY_OK;
 }

@@ -399,6 +399,20 @@ static void bad_scenes_fail_with_one_line(void)
 	CHECK_HAS(out, "left the domain at step");
 	CHECK(strchr(out, '\n') == out + strlen(out) - 1);
 
+	/* a tank the size of the world, rocked: its floor turns past the
+	 * world's, the water follows it out, and the hint names the tank */
+	write_scene(path, "local eddy = require 'eddy'\n"
+	                  "local w = eddy.world{ bounds = {{0, 0, 0}, {0.4, 0.3, 0.2}}, fps = 30 }\n"
+	                  "w:add(eddy.emit_box{ min = {0, 0, 0}, max = {0.4, 0.1, 0.2}, spacing = 0.01 })\n"
+	                  "w:add(eddy.gravity{})\nw:add(eddy.integrate{})\n"
+	                  "local tank = w:add(eddy.collide_box{ min = {0, 0, 0}, max = {0.4, 0.3, 0.2}, inside = true })\n"
+	                  "w:on_frame(function() tank:set_rotation({0, 0, 8}) end)\nreturn w\n");
+	snprintf(cmd, sizeof cmd, "%s %s --frames 3 --quiet --out %s/t_bad", eddy_run(), path, test_build_dir());
+	CHECK(test_sh(cmd, out, sizeof out) == 1);
+	CHECK_HAS(out, "left the domain at step");
+	CHECK_HAS(out, "collide_box is moved or turned: the bounds must hold its whole motion");
+	CHECK(one_line(out));
+
 	/* an on_frame field may not shadow a contract field */
 	write_scene(path, "local eddy = require 'eddy'\nlocal w = eddy.world{}\n"
 	                  "w:on_frame(function() return { time = 1 } end)\nreturn w\n");
