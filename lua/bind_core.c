@@ -57,6 +57,7 @@ static const eddy_lua_field collide_box_fields[] = {
 	EDDY_LUA_FIELD(eddy_collide_box_def, min, EDDY_LUA_VEC3),
 	EDDY_LUA_FIELD(eddy_collide_box_def, max, EDDY_LUA_VEC3),
 	EDDY_LUA_FIELD(eddy_collide_box_def, inside, EDDY_LUA_BOOL),
+	EDDY_LUA_FIELD(eddy_collide_box_def, sph_walls, EDDY_LUA_BOOL),
 	RESPONSE_FIELDS(eddy_collide_box_def),
 	EDDY_LUA_END,
 };

@@ -376,6 +376,10 @@ typedef struct eddy_collide_box_def {
 	eddy_vec3 max; /* m */
 	bool inside;   /* particles are kept inside (true) or outside (false) */
 	eddy_collider_response response;
+	bool sph_walls; /* with SPH, boundary particles that move with the box: a block's
+	                   inside its faces, a tank's outside its walls (default true);
+	                   none where an sph_boundary_box samples the same box; false:
+	                   the box only clamps */
 } eddy_collide_box_def;
 EDDY_API eddy_collide_box_def eddy_default_collide_box_def(void);
 EDDY_API eddy_system_id eddy_add_collide_box(eddy_world *w, const eddy_collide_box_def *def);

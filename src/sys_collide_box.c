@@ -34,6 +34,7 @@ eddy_collide_box_def eddy_default_collide_box_def(void)
 	d.inside = true;
 	d.response.restitution = 0.0f;
 	d.response.friction = 0.0f;
+	d.sph_walls = true;
 	return d;
 }
 
@@ -242,12 +243,14 @@ static void shape(const eddy_system *s, eddy_collider_shape *out)
  * walls, the points outside it (sph_boundary_box's layout), so a tank that
  * moves or turns carries its walls with it. Neither gets any where an
  * sph_boundary_box already samples the box (the same min and max: eddy.fluid's
- * tank, a thin plate). */
+ * tank, a thin plate), nor with sph_walls = false. */
 static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacing, float h, float *x, float *y,
                          float *z, float *vol, eddy_vec3 *normal)
 {
 	(void)normal;
 	const collide_box *b = s->data;
+	if (!b->def.sph_walls)
+		return 0;
 	const eddy_system *o;
 	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_WALLS); (o = eddy__systems_next(&it));)
 		if (eddy__sph_boundary_box_covers(o, b->def.min, b->def.max))
