@@ -264,35 +264,24 @@ static size_t sph_points(const eddy_world *w, const eddy_system *s, float spacin
 	}
 	const long L = (long)ceil(h / spacing - 1e-4);
 	const float v = (float)(1.0 / eddy_sph_lattice_sum(EDDY_SPH_POLY6, spacing, h));
-	size_t k = 0;
-	if (b->def.inside) {
-		/* the lattice continued L layers out through the walls, the points
-		 * outside the box: sph_boundary_box's layout, carried by the tank
-		 * as it moves and turns */
-		for (long iz = -L; iz < n[2] + L; ++iz)
-			for (long iy = -L; iy < n[1] + L; ++iy) {
-				const bool through = iy >= 0 && iy < n[1] && iz >= 0 && iz < n[2]; /* the row crosses the inside */
-				for (long ix = -L; ix < n[0] + L; ++ix) {
-					if (through && ix == 0)
-						ix = n[0];
-					if (x) {
-						x[k] = (float)(lo[0] + (ix + 0.5) * sp[0]);
-						y[k] = (float)(lo[1] + (iy + 0.5) * sp[1]);
-						z[k] = (float)(lo[2] + (iz + 0.5) * sp[2]);
-						vol[k] = v;
-					}
-					k++;
-				}
-			}
-		return k;
+	/* the lattice over [a, e) on each axis, less the rows' middles [c, f):
+	 * a block's points within L layers inside its faces, a tank's the
+	 * lattice continued L layers out through its walls (sph_boundary_box's
+	 * layout), carried by the tank as it moves and turns */
+	const bool tank = b->def.inside;
+	long a[3], e[3], c[3], f[3];
+	for (int ax = 0; ax < 3; ++ax) {
+		a[ax] = tank ? -L : 0, e[ax] = tank ? n[ax] + L : n[ax];
+		c[ax] = tank ? 0 : L, f[ax] = tank ? n[ax] : n[ax] - L;
 	}
-	for (long iz = 0; iz < n[2]; ++iz)
-		for (long iy = 0; iy < n[1]; ++iy) {
-			/* a row through the inside keeps only its ends */
-			const bool edge = iy < L || iz < L || iy >= n[1] - L || iz >= n[2] - L;
-			for (long ix = 0; ix < n[0]; ++ix) {
-				if (!edge && ix == L && n[0] - L > L)
-					ix = n[0] - L;
+	size_t k = 0;
+	for (long iz = a[2]; iz < e[2]; ++iz)
+		for (long iy = a[1]; iy < e[1]; ++iy) {
+			/* a row through the middle keeps only its ends */
+			const bool through = iy >= c[1] && iy < f[1] && iz >= c[2] && iz < f[2];
+			for (long ix = a[0]; ix < e[0]; ++ix) {
+				if (through && ix == c[0] && f[0] > c[0])
+					ix = f[0];
 				if (x) {
 					x[k] = (float)(lo[0] + (ix + 0.5) * sp[0]);
 					y[k] = (float)(lo[1] + (iy + 0.5) * sp[1]);
