@@ -15,7 +15,8 @@
  * moves along n = grad d / |grad d| (central differences half a cell wide)
  * by (2e-3 cells - d) / |grad d|, a Newton step to d = 2e-3 cells (so
  * rounding cannot leave it inside; |grad d| is under 1 in a crease),
- * repeated up to four times where the field bends (still inside after that, in a crease
+ * repeated up to four times where the field bends, then on along n in steps
+ * doubling up to a cell where the field is flat along it (still inside after that, in a crease
  * where the steps bounce between two faces, it goes back to where its path
  * entered the solid, when the path started outside), and gets the contact response (core.h)
  * with normal n and the collider's velocity. x - v dt is exactly the last

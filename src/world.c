@@ -396,11 +396,11 @@ static eddy_status check_bounds(eddy_world *w)
 		/* with a collider moved or turned from its def pose, the likely
 		 * cause is a tank carried past the bounds: the bounds are the last
 		 * wall, and a tank's inside beyond them lets particles through */
-		const eddy_system *moved = NULL;
-		for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_COLLIDER); !moved && (moved = eddy__systems_next(&it));) {
-			const eddy_collider_motion *m = &((const eddy_collider_base *)moved->data)->motion;
-			if (!(m->offset.x || m->offset.y || m->offset.z || m->rotation.x || m->rotation.y || m->rotation.z))
-				moved = NULL;
+		const eddy_system *moved = NULL, *o;
+		for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_COLLIDER); !moved && (o = eddy__systems_next(&it));) {
+			const eddy_collider_motion *m = &((const eddy_collider_base *)o->data)->motion;
+			if (m->offset.x || m->offset.y || m->offset.z || m->rotation.x || m->rotation.y || m->rotation.z)
+				moved = o;
 		}
 		char hint[256];
 		if (moved)
