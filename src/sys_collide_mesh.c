@@ -143,6 +143,35 @@ static eddy_vec3 body_normal(const collide_mesh *b, eddy_vec3 q, float *slope)
 	return eddy__v3(g.x / len, g.y / len, g.z / len);
 }
 
+/* Pushes body-frame point q, at field value *d, out of the solid along the
+ * field's normal to *d >= hair where it can; returns the last normal (q's
+ * own when it needs no push). Up to four Newton steps on d (in a crease the
+ * field rises slower than the distance moved: the distance alone left a particle that began
+ * the step in the cup's inner corner, with no entry point to go back to,
+ * 1e-6 m in the solid after four), then, where the field is flat along n
+ * (trilinear values of a crease have no slope along its bisector at a node
+ * near it: the cube's edge held particles 0.2 mm in after the four), on
+ * along n in steps doubling up to a field cell. off: the normal taken at q
+ * + off in the world (a collider that only translates), else in the body
+ * frame; the same field either way, the world's as step has always read it. */
+static eddy_vec3 push_out(const collide_mesh *b, eddy_vec3 *q, float *d, float hair, const eddy_vec3 *off)
+{
+	float slope;
+	eddy_vec3 nrm = off ? normal(b, eddy__add3(*q, *off), &slope) : body_normal(b, *q, &slope);
+	for (int it = 0; it < 4 && *d < hair; ++it) {
+		if (it > 0)
+			nrm = off ? normal(b, eddy__add3(*q, *off), &slope) : body_normal(b, *q, &slope);
+		const float k = (2 * hair - *d) / eddy__maxf(slope, MESH_MIN_SLOPE);
+		*q = eddy__v3(q->x + nrm.x * k, q->y + nrm.y * k, q->z + nrm.z * k);
+		*d = body_distance(b, *q);
+	}
+	for (float k = 2 * hair - *d; *d < hair && k <= (float)b->sdf.h; k *= 2) {
+		*q = eddy__v3(q->x + nrm.x * k, q->y + nrm.y * k, q->z + nrm.z * k);
+		*d = body_distance(b, *q);
+	}
+	return nrm;
+}
+
 /* A rotating mesh: as step below, in the mesh's own frame. The path starts
  * at x - v dt seen in the pose of the collider's last step and ends at x in
  * the current pose, so a wall sweeping over a particle is caught as a
@@ -173,19 +202,7 @@ static void step_rotated(eddy_world *w, collide_mesh *b, const eddy_collider_mot
 			q = hit, d = body_distance(b, q);
 		else if (!(d < 0))
 			continue;
-		float slope;
-		eddy_vec3 nrm = body_normal(b, q, &slope);
-		for (int it = 0; it < 4 && d < hair; ++it) {
-			if (it > 0)
-				nrm = body_normal(b, q, &slope);
-			const float k = (2 * hair - d) / eddy__maxf(slope, MESH_MIN_SLOPE); /* as step's */
-			q = eddy__v3(q.x + nrm.x * k, q.y + nrm.y * k, q.z + nrm.z * k);
-			d = body_distance(b, q);
-		}
-		for (float k = 2 * hair - d; d < hair && k <= (float)b->sdf.h; k *= 2) { /* as step's */
-			q = eddy__v3(q.x + nrm.x * k, q.y + nrm.y * k, q.z + nrm.z * k);
-			d = body_distance(b, q);
-		}
+		eddy_vec3 nrm = push_out(b, &q, &d, hair, NULL);
 		if (d < 0 && first_entry(b, c0, c, &hit))
 			q = hit; /* in a crease the steps did not get out: where the path entered */
 		/* out of the mesh through the world's wall (core.h): where the path
@@ -236,29 +253,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			q = hit, d = body_distance(b, q);
 		else if (!(d < 0))
 			continue;
-		float slope;
-		eddy_vec3 nrm = normal(b, eddy__add3(q, off), &slope);
-		for (int it = 0; it < 4 && d < hair; ++it) {
-			if (it > 0)
-				nrm = normal(b, eddy__add3(q, off), &slope);
-			/* a Newton step on d along n: in a crease the field rises
-			 * slower than the distance moved, and steps of the distance
-			 * alone left a particle in the cup's inner corner 1e-6 m in
-			 * the solid after four (its path began inside, so no entry
-			 * point to go back to) */
-			const float k = (2 * hair - d) / eddy__maxf(slope, MESH_MIN_SLOPE);
-			q = eddy__v3(q.x + nrm.x * k, q.y + nrm.y * k, q.z + nrm.z * k);
-			d = body_distance(b, q);
-		}
-		/* where the field is flat along n Newton's steps stall: trilinear
-		 * values of a crease have no slope along its bisector at a node near
-		 * it (the node and its neighbours across the crease read the same
-		 * depth), and the cube's edge held particles 0.2 mm in after four
-		 * steps; on along n, each step twice the last, up to a field cell */
-		for (float k = 2 * hair - d; d < hair && k <= (float)b->sdf.h; k *= 2) {
-			q = eddy__v3(q.x + nrm.x * k, q.y + nrm.y * k, q.z + nrm.z * k);
-			d = body_distance(b, q);
-		}
+		eddy_vec3 nrm = push_out(b, &q, &d, hair, &off);
 		const eddy_vec3 c0 = {c.x - dp.x, c.y - dp.y, c.z - dp.z};
 		if (d < 0 && first_entry(b, c0, c, &hit))
 			q = hit; /* in a crease the steps did not get out: where the path entered */

@@ -448,6 +448,25 @@ static bool run_frames(eddy_world *w, int frames)
 	return true;
 }
 
+/* The unit box without gravity, one step of 0.01 s a frame, particles moved
+ * by integrate (gravity's 0 fills the ax ay az it reads): the colliders'
+ * one-step tests below. */
+static eddy_world *one_step_world(void)
+{
+	eddy_world_def wd = eddy_default_world_def();
+	wd.bounds_min = (eddy_vec3){0, 0, 0};
+	wd.bounds_max = (eddy_vec3){1, 1, 1};
+	wd.gravity = (eddy_vec3){0, 0, 0};
+	wd.fps = 100;
+	wd.dt_max = 0.01;
+	eddy_world *w = eddy_create_world(&wd, NULL, 0);
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_add_gravity(w, &g);
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	return w;
+}
+
 /* Rotated colliders cutting the floor: a solid box and a cube mesh sunk
  * 5 cm into it, turned 10 to 60 degrees about z and about x (pivot their
  * centre), and a 40 x 40 grid of particles at rest on the floor across
@@ -466,15 +485,7 @@ static void rotated_colliders_on_the_floor_keep_particles_in_the_world(void)
 	for (int kind = 0; kind < 2; ++kind)
 		for (int ax = 0; ax < 2; ++ax)
 			for (int an = 0; an < 4; ++an) {
-				eddy_world_def wd = eddy_default_world_def();
-				wd.gravity = (eddy_vec3){0, 0, 0};
-				wd.fps = 100;
-				wd.dt_max = 0.01;
-				eddy_world *w = eddy_create_world(&wd, NULL, 0);
-				eddy_gravity_def g = eddy_default_gravity_def();
-				eddy_add_gravity(w, &g);
-				eddy_integrate_def it = eddy_default_integrate_def();
-				eddy_add_integrate(w, &it);
+				eddy_world *w = one_step_world();
 				eddy_system_id c;
 				if (kind == 0) {
 					eddy_collide_box_def d = eddy_default_collide_box_def();
@@ -594,15 +605,7 @@ static void tank_box_carries_sph_walls(void)
  * them none, 0.12 mm in the cube. */
 static void mesh_crease_pushes_particles_out(void)
 {
-	eddy_world_def wd = eddy_default_world_def();
-	wd.gravity = (eddy_vec3){0, 0, 0};
-	wd.fps = 100;
-	wd.dt_max = 0.01;
-	eddy_world *w = eddy_create_world(&wd, NULL, 0);
-	eddy_gravity_def g = eddy_default_gravity_def();
-	eddy_add_gravity(w, &g);
-	eddy_integrate_def it = eddy_default_integrate_def();
-	eddy_add_integrate(w, &it);
+	eddy_world *w = one_step_world();
 	eddy_collide_mesh_def d = eddy_default_collide_mesh_def();
 	snprintf(d.path, sizeof d.path, "%s", "scenes/meshes/cube.obj");
 	d.scale = (eddy_vec3){0.2f, 0.2f, 0.2f};
@@ -792,17 +795,7 @@ static void falling_block_dfsph(void) { falling_block_on_mesh_sphere("dfsph"); }
  * moving towards them. */
 static void collider_on_floor(const char *kind, bool moving)
 {
-	eddy_world_def wd = eddy_default_world_def();
-	wd.bounds_min = (eddy_vec3){0, 0, 0};
-	wd.bounds_max = (eddy_vec3){1, 1, 1};
-	wd.gravity = (eddy_vec3){0, 0, 0};
-	wd.fps = 100; /* one step of 0.01 s a frame */
-	wd.dt_max = 0.01;
-	eddy_world *w = eddy_create_world(&wd, NULL, 0);
-	eddy_gravity_def g = eddy_default_gravity_def(); /* the world's, 0: integrate reads its ax ay az */
-	eddy_add_gravity(w, &g);
-	eddy_integrate_def it = eddy_default_integrate_def();
-	eddy_add_integrate(w, &it);
+	eddy_world *w = one_step_world();
 	eddy_system_id c = EDDY_NULL_SYSTEM;
 	const float speed = 0.05f; /* 0.5 mm a step */
 	/* particles: on the floor at 24 angles around (0.5, 0.5) at radius r0,
