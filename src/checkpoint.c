@@ -27,7 +27,7 @@
 #include <unistd.h>
 
 #define CKPT_MAGIC "EDDYCKPT"
-#define CKPT_VERSION 1u
+#define CKPT_VERSION 2u
 #define HEADER_BYTES 40
 
 /* The pipeline's own fingerprint: what must match for a state to make sense.

@@ -1,5 +1,6 @@
 /* SPDX-License-Identifier: MIT */
-/* What the colliders share: moving and rotating them, their wall velocity
+/* What the colliders share: moving and rotating them (a pose set in a frame
+ * hook reached over the frame's steps), their wall velocity
  * (v + omega x (x - pivot), omega from consecutive orientations over the
  * step), and the restitution/friction check. The contact response itself is inline in core.h. */
 #include "systems.h"
@@ -113,6 +114,37 @@ eddy_collider_velocity eddy__collider_step_motion(eddy_collider_base *b, double 
 	return v;
 }
 
+static float lerpf(float a, float b, double t) { return (float)(a + (b - (double)a) * t); }
+
+void eddy__collider_glide(eddy_collider_motion *m, double t, double dt, double end, double call_end, double eps)
+{
+	if (m->goal_time == 0)
+		return;
+	if (isnan(m->goal_time))
+		m->goal_time = call_end;
+	if (m->goal_time <= end + eps) {
+		m->offset = m->goal_offset;
+		m->rotation = m->goal_rotation;
+		m->goal_time = 0;
+		return;
+	}
+	const double frac = dt / (m->goal_time - t);
+	const eddy_vec3 o = m->offset, go = m->goal_offset, r = m->rotation, gr = m->goal_rotation;
+	m->offset = (eddy_vec3){lerpf(o.x, go.x, frac), lerpf(o.y, go.y, frac), lerpf(o.z, go.z, frac)};
+	m->rotation = (eddy_vec3){lerpf(r.x, gr.x, frac), lerpf(r.y, gr.y, frac), lerpf(r.z, gr.z, frac)};
+}
+
+/* A pose set now: placed before the collider's first step and by a step's
+ * own callbacks (the animated offset: the pose at this step's end), else
+ * the goal of a glide. */
+static bool set_as_goal(eddy_world *w, eddy_collider_motion *m)
+{
+	if (!m->stepped || w->in_step)
+		return false;
+	m->goal_time = w->in_frame_hooks ? eddy__next_frame_time(w) : NAN;
+	return true;
+}
+
 /* The collider behind id, or NULL; errors go to err (NULL for const callers). */
 static const eddy_system *collider(const eddy_world *w, eddy_system_id id, const char *what, eddy_world *err)
 {
@@ -138,6 +170,9 @@ eddy_status eddy_collider_set_offset(eddy_world *w, eddy_system_id id, eddy_vec3
 	if (!eddy__check_vec3(w, s->label, "offset", offset))
 		return EDDY_ERR_INVALID;
 	eddy_collider_motion *m = &((eddy_collider_base *)s->data)->motion;
+	m->goal_offset = offset;
+	if (set_as_goal(w, m))
+		return EDDY_OK;
 	m->offset = offset;
 	if (!m->stepped)
 		m->last_offset = offset; /* placing it before it ever ran is not motion */
@@ -172,6 +207,9 @@ eddy_status eddy_collider_set_rotation(eddy_world *w, eddy_system_id id, eddy_ve
 		           eddy__system_get(w, id)->label, (double)axis_angle.x, (double)axis_angle.y, (double)axis_angle.z);
 		return EDDY_ERR_INVALID;
 	}
+	m->goal_rotation = axis_angle;
+	if (set_as_goal(w, m))
+		return EDDY_OK;
 	m->rotation = axis_angle;
 	if (!m->stepped)
 		m->last_rotation = axis_angle; /* placing it before it ever ran is not motion */
@@ -185,7 +223,7 @@ eddy_status eddy_collider_get_rotation(const eddy_world *w, eddy_system_id id, e
 	const eddy_system *s = collider(w, id, "collider_get_rotation", NULL);
 	if (!s)
 		return eddy_system_valid(w, id) ? EDDY_ERR_INVALID : EDDY_ERR_STALE;
-	*axis_angle = ((const eddy_collider_base *)s->data)->motion.rotation;
+	*axis_angle = ((const eddy_collider_base *)s->data)->motion.goal_rotation;
 	return EDDY_OK;
 }
 
@@ -216,7 +254,7 @@ eddy_status eddy_collider_get_offset(const eddy_world *w, eddy_system_id id, edd
 	const eddy_system *s = collider(w, id, "collider_get_offset", NULL);
 	if (!s)
 		return eddy_system_valid(w, id) ? EDDY_ERR_INVALID : EDDY_ERR_STALE;
-	*offset = ((const eddy_collider_base *)s->data)->motion.offset;
+	*offset = ((const eddy_collider_base *)s->data)->motion.goal_offset;
 	return EDDY_OK;
 }
 

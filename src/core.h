@@ -151,6 +151,9 @@ struct eddy_world {
 	 * names what runs ("a step callback", "a frame callback", ...). Calls that
 	 * would change the clock or the pipeline under that code are refused. */
 	const char *busy;
+	bool in_frame_hooks;    /* the frame hooks run: a collider pose set now is the next frame time's */
+	bool in_step;           /* the systems of a step run: a collider pose set now is this step's */
+	double call_end;        /* s, the end of the stepping call that runs (-INFINITY: eddy_world_step's one step) */
 	bool background_output; /* eddy_world_set_background_output */
 
 	/* clock */
@@ -243,6 +246,8 @@ void eddy__clear_derived(eddy_world *w);
 void eddy__frame_reset(eddy_world *w);
 
 static inline float *eddy__col(eddy_world *w, int id) { return (float *)w->columns[id].data; }
+/* s, the time of the frame the world steps toward */
+static inline double eddy__next_frame_time(const eddy_world *w) { return (double)(w->frame + 1) / w->def.fps; }
 static inline float eddy__clamp_to(float v, float lo, float hi) { return v < lo ? lo : v > hi ? hi : v; }
 /* The world's box is solid outside: a collider's push out of its own solid
  * must not leave it. Where a collider stands on the box's floor or cuts a
@@ -372,7 +377,15 @@ typedef struct eddy_collider_motion {
 	eddy_vec3 rotation;      /* degrees, axis-angle about the pivot, now */
 	eddy_vec3 last_rotation; /* degrees, ... at the collider's last step */
 	eddy_vec3 pivot;         /* m, the centre of rotation in the def pose */
-	float stepped; /* 1 once it has run: from now on offsets are motion (a float: no padding in a checkpoint) */
+	/* The pose last set (eddy_collider_set_offset, set_rotation): a pose set
+	 * between the world's stepping calls is reached at the end of the next
+	 * call, one set in a frame hook at the next frame time, each step moving
+	 * offset and rotation toward it by its dt over the time left
+	 * (eddy__collider_glide). Equal to offset and rotation when not gliding. */
+	eddy_vec3 goal_offset;   /* m */
+	eddy_vec3 goal_rotation; /* degrees */
+	float stepped;    /* 1 once it has run: from now on offsets are motion (a float: no padding in a checkpoint) */
+	double goal_time; /* s, when the goal is reached; 0 not gliding; NaN the end of the next stepping call */
 } eddy_collider_motion;
 
 /* A rotation as a row-major 3x3 matrix, and the rigid transform of a pose. */
@@ -397,6 +410,13 @@ void eddy__rotation_matrix(eddy_vec3 rotvec_deg, float r[9]);
  * the shorter way round; 0 for dt <= 0. */
 eddy_vec3 eddy__rotation_rate(eddy_vec3 from_deg, eddy_vec3 to_deg, double dt);
 eddy_collider_pose eddy__collider_pose(const eddy_collider_motion *m);
+/* Before a step from time t of dt ending at end (the stepping call's end
+ * time call_end, -INFINITY for eddy_world_step's one step): moves a gliding
+ * collider dt / (goal_time - t) of the way to its goal pose, linearly in
+ * offset and in the rotation vector (for a fixed axis a uniform rotation,
+ * half a turn and more between two poses included), landing on the goal's
+ * exact values in the step that reaches goal_time. */
+void eddy__collider_glide(eddy_collider_motion *m, double t, double dt, double end, double call_end, double eps);
 static inline bool eddy__motion_rotates(const eddy_collider_motion *m)
 {
 	return m->rotation.x != 0 || m->rotation.y != 0 || m->rotation.z != 0 || m->last_rotation.x != 0 ||

@@ -464,21 +464,33 @@ typedef struct eddy_emit_particles_def {
 EDDY_API eddy_emit_particles_def eddy_default_emit_particles_def(void);
 EDDY_API eddy_system_id eddy_add_emit_particles(eddy_world *w, const eddy_emit_particles_def *def);
 
-/* Moves a collider by an offset from its def pose. The collider's velocity over
- * the next step is (new offset - offset at the last step) / dt, so animating the
- * offset every step gives moving walls that push particles. Before the
- * collider's first step this only places it. */
+/* Moves a collider by an offset from its def pose. The collider moves there
+ * at a constant velocity over the steps up to when the pose is due, and
+ * particles meet that velocity:
+ *   - set in a frame hook (a scene's on_frame): the pose at the next frame
+ *     time;
+ *   - set between the world's stepping calls: at the end of the next call
+ *     (eddy_world_step: its one step, as setting it before every step
+ *     does; eddy_world_step_frame: the frame; eddy_world_advance: its
+ *     seconds);
+ *   - set by a step callback (a custom system's step, Lua's animated
+ *     `offset = function(t)`): at the end of that step.
+ * Before the collider's first step this only places it. The getter returns the
+ * pose last set; eddy_collider_shape_of and eddy_collider_distance the
+ * collider where it is. */
 EDDY_API eddy_status eddy_collider_set_offset(eddy_world *w, eddy_system_id id, eddy_vec3 offset);
 EDDY_API eddy_status eddy_collider_get_offset(const eddy_world *w, eddy_system_id id, eddy_vec3 *offset);
 /* Rotates a collider about its pivot: axis_angle is a rotation vector in
  * degrees (|axis_angle| degrees about axis_angle / |axis_angle|, the unit of
  * collide_mesh's `rotate`), the orientation relative to the def pose, finite
  * and at most 1e6 degrees long. The pose is x = pivot + offset + R (q - pivot)
- * for a point q of the def pose. As with the offset, the collider's angular
- * velocity over the next step is the rotation from the orientation at its
- * last step to this one over dt, and particles meet the surface's velocity
- * v + omega x (x - pivot - offset). Before the collider's first step this
- * only places it. */
+ * for a point q of the def pose. It is reached when the offset would be
+ * (above), the rotation vector moving linearly to it over the steps between:
+ * about a fixed axis a uniform turn, half a turn or more between two poses
+ * included. The angular velocity of a step is the rotation from the
+ * orientation at the collider's last step to this one over dt, and particles
+ * meet the surface's velocity v + omega x (x - pivot - offset). Before the
+ * collider's first step this only places it. */
 EDDY_API eddy_status eddy_collider_set_rotation(eddy_world *w, eddy_system_id id, eddy_vec3 axis_angle);
 EDDY_API eddy_status eddy_collider_get_rotation(const eddy_world *w, eddy_system_id id, eddy_vec3 *axis_angle);
 /* The point the collider rotates about, in its def pose (m): by default the

@@ -445,8 +445,16 @@ static eddy_status step_toward(eddy_world *w, double stop, bool *reached)
 	const double t0 = eddy__now_ms();
 	eddy__arena_reset(&w->arena);
 	eddy__clear_derived(w);
+	/* colliders given a pose move toward it at the pace that lands them on
+	 * it when it is due */
+	const double end = nsteps <= 1.0 ? stop : w->time + dt;
+	const eddy_system *c;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_COLLIDER); (c = eddy__systems_next(&it));)
+		eddy__collider_glide(&((eddy_collider_base *)c->data)->motion, w->time, dt, end, w->call_end,
+		                     1e-9 / w->def.fps);
 	const eddy_step_context ctx = {dt, w->time, w->step, w->def.threads};
 	w->busy = "a step callback";
+	w->in_step = true;
 	for (int k = 0; k < w->order_count; ++k) {
 		eddy_system *s = &w->slots[w->order[k]];
 		if (!s->vt->step)
@@ -458,6 +466,7 @@ static eddy_status step_toward(eddy_world *w, double stop, bool *reached)
 		s->ms_frame += ms;
 		s->calls++;
 		if (st != EDDY_OK) {
+			w->in_step = false;
 			if (strncmp(w->error, s->label, strlen(s->label)) != 0) {
 				char msg[EDDY_ERROR_MAX];
 				snprintf(msg, sizeof msg, "%s", w->error);
@@ -467,10 +476,13 @@ static eddy_status step_toward(eddy_world *w, double stop, bool *reached)
 		}
 		if (w->def.check_finite) {
 			st = check_written(w, s);
-			if (st != EDDY_OK)
+			if (st != EDDY_OK) {
+				w->in_step = false;
 				return st;
+			}
 		}
 	}
+	w->in_step = false;
 	if (nsteps <= 1.0) {
 		w->time = stop; /* land exactly, so frame times do not drift */
 		*reached = true;
@@ -489,8 +501,6 @@ static eddy_status step_toward(eddy_world *w, double stop, bool *reached)
 	w->frame_wall_ms += eddy__now_ms() - t0;
 	return st;
 }
-
-static double next_frame_time(const eddy_world *w) { return (double)(w->frame + 1) / w->def.fps; }
 
 void eddy__frame_reset(eddy_world *w)
 {
@@ -514,7 +524,9 @@ static eddy_status finish_frame(eddy_world *w)
 		if (!s->vt->frame)
 			continue;
 		const double a = eddy__now_ms();
+		w->in_frame_hooks = true;
 		eddy_status st = s->vt->frame(w, s, w->frame);
+		w->in_frame_hooks = false;
 		const double ms = eddy__now_ms() - a;
 		s->ms_total += ms;
 		s->ms_frame += ms;
@@ -544,7 +556,7 @@ static eddy_status finish_frame(eddy_world *w)
 static eddy_status step_once(eddy_world *w)
 {
 	bool reached;
-	eddy_status st = step_toward(w, next_frame_time(w), &reached);
+	eddy_status st = step_toward(w, eddy__next_frame_time(w), &reached);
 	if (st == EDDY_OK && reached)
 		st = finish_frame(w);
 	return st;
@@ -558,6 +570,7 @@ eddy_status eddy_world_step(eddy_world *w)
 		return EDDY_ERR_INVALID;
 	if (eddy__refuse_busy(w, "eddy_world_step"))
 		return EDDY_ERR_INVALID;
+	w->call_end = -INFINITY;
 	eddy_status st = step_once(w);
 	w->busy = NULL;
 	return st;
@@ -570,6 +583,7 @@ eddy_status eddy_world_step_frame(eddy_world *w)
 	if (eddy__refuse_busy(w, "eddy_world_step_frame"))
 		return EDDY_ERR_INVALID;
 	const int target = w->frame + 1;
+	w->call_end = eddy__next_frame_time(w);
 	eddy_status st = EDDY_OK;
 	while (st == EDDY_OK && w->frame < target)
 		st = step_once(w);
@@ -596,8 +610,9 @@ static eddy_status advance(eddy_world *w, double seconds)
 		return eddy__fail(w, EDDY_ERR_INVALID, "advance: 'seconds' must be >= 0 and finite (got %g)", seconds);
 	const double end = w->time + seconds;
 	const double eps = 1e-9 / w->def.fps;
+	w->call_end = end;
 	while (w->time < end - eps) {
-		double frame_end = next_frame_time(w);
+		double frame_end = eddy__next_frame_time(w);
 		bool reached;
 		eddy_status st;
 		if (frame_end <= end + eps) {

@@ -533,6 +533,47 @@ static void rotated_colliders_on_the_floor_keep_particles_in_the_world(void)
 	CHECK(bad == 0);
 }
 
+/* A turned tank whose walls lie on the world's: a tank as deep as the world
+ * along z, turned 5 to 60 degrees about z (its pivot the world's centre), so
+ * that its z walls stay on the world's. A particle on such a wall moving
+ * out at 1e-7 m/s ends a step 1e-9 m past both; its round trip through the
+ * tank's frame (z - 0.5 + 0.5) reads 0, inside the tank, and without a
+ * clamp within that rounding the world stopped the run ("left the domain").
+ * Found by a tank rocked about the axis along its walls in a world of its
+ * depth. Every step must succeed with every particle in the world. */
+static void turned_tank_on_the_world_walls_keeps_particles_in(void)
+{
+	const float angles[] = {5, 20, 45, 60};
+	int bad = 0;
+	for (int an = 0; an < 4; ++an) {
+		eddy_world *w = one_step_world();
+		eddy_collide_box_def d = eddy_default_collide_box_def();
+		d.min = (eddy_vec3){0.2f, 0.2f, 0};
+		d.max = (eddy_vec3){0.8f, 0.8f, 1};
+		d.inside = true;
+		d.sph_walls = false;
+		const eddy_system_id c = eddy_add_collide_box(w, &d);
+		CHECK(eddy_collider_set_rotation(w, c, (eddy_vec3){0, 0, angles[an]}) == EDDY_OK);
+		enum { G = 10 };
+		eddy_vec3 p[2 * G * G], v[2 * G * G];
+		for (int k = 0; k < 2 * G * G; ++k) {
+			const int i = k % G, j = (k / G) % G, top = k / (G * G);
+			p[k] = (eddy_vec3){0.4f + 0.2f * (float)i / G, 0.4f + 0.2f * (float)j / G, top ? 1.0f : 0.0f};
+			v[k] = (eddy_vec3){0, 0, top ? 1e-7f : -1e-7f};
+		}
+		CHECK(eddy_world_add_particles(w, 2 * G * G, p, v) == EDDY_OK);
+		eddy_status st = EDDY_OK;
+		for (int f = 0; f < 3 && st == EDDY_OK; ++f)
+			st = eddy_world_step_frame(w);
+		if (st != EDDY_OK) {
+			bad++;
+			printf("    tank turned %g deg: %s\n", angles[an], eddy_world_error(w));
+		}
+		eddy_destroy_world(w);
+	}
+	CHECK(bad == 0);
+}
+
 /* A collide_box tank (inside = true) built by hand, without the
  * sph_boundary_box eddy.fluid's tank adds, carries SPH boundary particles of
  * its own that move and turn with it: water at rest on its floor reads its
@@ -1198,6 +1239,7 @@ void suite_mesh(void)
 	RUN(mesh_faces_hold_a_flush_lattice_at_rest_density);
 	RUN(mesh_crease_pushes_particles_out);
 	RUN(tank_box_carries_sph_walls);
+	RUN(turned_tank_on_the_world_walls_keeps_particles_in);
 	RUN(falling_block_flip);
 	RUN(falling_block_dfsph);
 	RUN(cup_holds_water_at_rest);
