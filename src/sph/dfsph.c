@@ -91,7 +91,19 @@
  * only add pressure, on the true wall rate and D_i = (S_i + 2 B_i) . (S_i +
  * B_i) + sum_j |G_ij|^2, until the mean compression is at most
  * max_density_error (cheaper; it holds still water some 10 layers deep):
- *   k_i += max(rho_i + dt Drho_i/Dt - rho0, 0) / (dt^2 D_i)
+ *   k_i += max(beta (rho_i - rho0) + dt Drho_i/Dt, 0) / (dt^2 D_i)
+ * The paper's beta = 1 removes in one step the compression a particle
+ * already has, which leaves it moving at about (rho_i / rho0 - 1) h / dt:
+ * the smaller the step, the faster the particles it throws where a jet
+ * lands or a lattice settles. Here that part is a soft constraint (Catto,
+ * "Soft constraints", 2011; Box2D's soft step): beta = dt / (dt + tau), the
+ * error reduction of a spring and damper whose damping over stiffness is
+ * tau, so the velocity is about (rho_i / rho0 - 1) h / (dt + tau), bounded
+ * as dt shrinks, while the flow into the particle (dt Drho_i/Dt) is still
+ * removed whole. tau = DFSPH_SOFT_TIME sqrt(h / |g|), gravity's time over
+ * the kernel radius (0 without gravity: the paper's rule). The sweeps'
+ * error is the residual over beta, so the compression carried from step to
+ * step settles at about the tolerance, as with beta = 1.
  *
  * Particle shifting (shift > 0, 0.02 by default; Xu et al. 2009, Lind et
  * al. 2012): after the solves a particle moves by dr_i = -shift h^2 grad C_i,
@@ -205,7 +217,8 @@ typedef struct dfsph_group {
 /* A step's inputs and scratch (the arrays in the world's arena, n each). */
 typedef struct dfsph_work {
 	long n;
-	float dt; /* s */
+	float dt;   /* s */
+	float beta; /* the cold density solve's share of the compression already there it removes (header) */
 	int threads;
 	void (*block)(const void *pass, long i0, long cnt); /* the passes on the chosen SIMD back-end */
 	const sph_shared *sh;
@@ -559,7 +572,8 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 	}
 	const float inv1 = ps->divergence ? 1.0f / wk->dt : 1.0f / (wk->dt * wk->dt);
 	const sf8 zero = sf8_zero(), dt = sf8_set1(wk->dt), inv = sf8_set1(inv1), rho0 = sf8_set1(wk->sh->rho0),
-			  omega = sf8_set1(DFSPH_OMEGA), minus = sf8_set1(-0.0f);
+			  omega = sf8_set1(DFSPH_OMEGA), minus = sf8_set1(-0.0f), beta = sf8_set1(wk->beta),
+			  ibeta = sf8_set1(1.0f / wk->beta);
 	for (long q = 0; q < cnt; q += 8) {
 		const long i = i0 + q, m = cnt - q < 8 ? cnt - q : 8;
 		sf8 vx, vy, vz, vw, bx, by, bz, bw;
@@ -580,6 +594,7 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 			continue;
 		}
 		const sf8 res = ps->divergence ? sf8_mul(r, bw) /* bw: the velocity solve's particles */
+		                : wk->beta < 1 ? sf8_add(sf8_mul(beta, sf8_sub(load8(wk->rho + i, m), rho0)), sf8_mul(dt, r))
 		                               : sf8_sub(sf8_add(load8(wk->rho + i, m), sf8_mul(dt, r)), rho0);
 		sf8 e = sf8_max(res, zero); /* the compression */
 		if (ps->projected) {
@@ -597,7 +612,7 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 		} else { /* the paper's sweeps: only compression adds pressure */
 			store8(wk->k + i, sf8_mul(sf8_mul(e, inv), bw), m);
 		}
-		store8(wk->err + i, ps->divergence ? sf8_mul(e, dt) : e, m);
+		store8(wk->err + i, ps->divergence ? sf8_mul(e, dt) : sf8_mul(e, ibeta), m);
 	}
 }
 
@@ -691,6 +706,10 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
  * m/s); at 1 cm the pour's density sweeps go from 3.97 to 4.37 a step,
  * its CPU time unchanged (fewer steps). */
 #define DFSPH_MAX_COMPRESSION 0.1
+/* The cold density solve removes the compression the particles already
+ * have over a time of about tau = DFSPH_SOFT_TIME sqrt(h / |g|) (header):
+ * measured on the pour (README, Stress cases) */
+#define DFSPH_SOFT_TIME 0.03
 
 /* A step fails above this final mean density error, or above this
  * predicted density error at one particle (the particles overlap). */
@@ -1144,6 +1163,7 @@ static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n,
 {
 	const size_t un = (size_t)n;
 	*wk = (dfsph_work){.n = n, .dt = dt, .threads = threads, .sh = sh, .bdiv = sh->nb.bdiv};
+	wk->beta = 1;
 	wk->block = SIMD_PICK(dfsph_block);
 	wk->rho = eddy__col(w, COL_DENSITY);
 	wk->gravity = w->def.gravity;
@@ -1415,6 +1435,14 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	dfsph_work wk;
 	if (!prepare(w, &wk, sh, n, dt, ctx->threads))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
+	if (!sd->def.divergence_solver) { /* the cold solve's soft correction (header) */
+		const eddy_vec3 g = w->def.gravity;
+		const double g2 = (double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z;
+		if (g2 > 0) {
+			const double tau = DFSPH_SOFT_TIME * sqrt(sh->h / sqrt(g2));
+			wk.beta = (float)(dt / (dt + tau));
+		}
+	}
 	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	const int nt = loop_threads(n, wk.threads);
