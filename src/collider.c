@@ -21,6 +21,8 @@ void *eddy__collider_state(eddy_world *w, eddy_system *s, size_t *size)
 	return &b->motion;
 }
 
+static float norm3(eddy_vec3 v) { return sqrtf(v.x * v.x + v.y * v.y + v.z * v.z); }
+
 eddy_vec3 eddy__collider_step_velocity(eddy_collider_base *b, double dt)
 {
 	const eddy_collider_motion m = b->motion;
@@ -28,8 +30,11 @@ eddy_vec3 eddy__collider_step_velocity(eddy_collider_base *b, double dt)
 	b->motion.last_offset = m.offset;
 	b->motion.last_rotation = m.rotation;
 	b->motion.stepped = 1;
-	return (eddy_vec3){(m.offset.x - m.last_offset.x) * inv, (m.offset.y - m.last_offset.y) * inv,
-	                   (m.offset.z - m.last_offset.z) * inv};
+	const eddy_vec3 v = {(m.offset.x - m.last_offset.x) * inv, (m.offset.y - m.last_offset.y) * inv,
+	                     (m.offset.z - m.last_offset.z) * inv};
+	b->motion.speed = norm3(v);
+	b->motion.spin = 0;
+	return v;
 }
 
 /* ---- rotation ----
@@ -111,7 +116,60 @@ eddy_collider_velocity eddy__collider_step_motion(eddy_collider_base *b, double 
 	b->motion.last_offset = b->motion.offset;
 	b->motion.last_rotation = b->motion.rotation;
 	b->motion.stepped = 1;
+	b->motion.speed = norm3(v.v);
+	b->motion.spin = norm3(v.omega);
 	return v;
+}
+
+/* The farthest the collider's surface where particles can be lies from its
+ * pivot: its shape's farthest point, within the world's box. */
+static double reach(const eddy_world *w, const eddy_system *s, eddy_vec3 pivot)
+{
+	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
+	double box = 0;
+	for (int c = 0; c < 8; ++c) {
+		const double dx = (c & 1 ? hi.x : lo.x) - pivot.x, dy = (c & 2 ? hi.y : lo.y) - pivot.y,
+					 dz = (c & 4 ? hi.z : lo.z) - pivot.z;
+		box = fmax(box, sqrt(dx * dx + dy * dy + dz * dz));
+	}
+	if (!s->vt->shape)
+		return box;
+	eddy_collider_shape sh = {0};
+	s->vt->shape(s, &sh);
+	double r = box;
+	if (sh.kind == EDDY_COLLIDER_SPHERE)
+		r = norm3((eddy_vec3){sh.a.x - pivot.x, sh.a.y - pivot.y, sh.a.z - pivot.z}) + (double)sh.radius;
+	else if (sh.kind == EDDY_COLLIDER_BOX || sh.kind == EDDY_COLLIDER_MESH) {
+		r = 0;
+		for (int c = 0; c < 8; ++c)
+			r = fmax(r, norm3((eddy_vec3){(c & 1 ? sh.b.x : sh.a.x) - pivot.x, (c & 2 ? sh.b.y : sh.a.y) - pivot.y,
+			                              (c & 4 ? sh.b.z : sh.a.z) - pivot.z}));
+	}
+	return fmin(r, box);
+}
+
+double eddy__collider_limit(eddy_world *w, eddy_system *s, const char **reason)
+{
+	*reason = "moving wall";
+	const eddy_collider_motion *m = &((const eddy_collider_base *)s->data)->motion;
+	if (w->length_scale <= 0 || !m->stepped)
+		return INFINITY;
+	double v = m->speed, om = m->spin;
+	const double due = isnan(m->goal_time) ? w->call_end : m->goal_time;
+	if (m->goal_time != 0 && due > w->time) { /* the glide's pace over the time left */
+		const double left = due - w->time;
+		const eddy_vec3 dof = {m->goal_offset.x - m->offset.x, m->goal_offset.y - m->offset.y,
+		                       m->goal_offset.z - m->offset.z},
+						dr = {m->goal_rotation.x - m->rotation.x, m->goal_rotation.y - m->rotation.y,
+		                      m->goal_rotation.z - m->rotation.z};
+		v = fmax(v, norm3(dof) / left);
+		om = fmax(om, norm3(dr) * (M_PI / 180.0) / left);
+	}
+	if (!(v > 0) && !(om > 0))
+		return INFINITY;
+	const eddy_vec3 pivot = eddy__add3(m->pivot, m->offset);
+	const double surface = v + (om > 0 ? om * reach(w, s, pivot) : 0);
+	return surface > 0 ? w->length_scale / surface : INFINITY;
 }
 
 static float lerpf(float a, float b, double t) { return (float)(a + (b - (double)a) * t); }

@@ -385,6 +385,8 @@ typedef struct eddy_collider_motion {
 	eddy_vec3 goal_offset;   /* m */
 	eddy_vec3 goal_rotation; /* degrees */
 	float stepped;    /* 1 once it has run: from now on offsets are motion (a float: no padding in a checkpoint) */
+	float speed;      /* m/s, |v| of the pivot over the collider's last step */
+	float spin;       /* rad/s, |omega| over that step */
 	double goal_time; /* s, when the goal is reached; 0 not gliding; NaN the end of the next stepping call */
 } eddy_collider_motion;
 
@@ -417,6 +419,10 @@ eddy_collider_pose eddy__collider_pose(const eddy_collider_motion *m);
  * half a turn and more between two poses included), landing on the goal's
  * exact values in the step that reaches goal_time. */
 void eddy__collider_glide(eddy_collider_motion *m, double t, double dt, double end, double call_end, double eps);
+/* Every collider's time-step limit (vtable limit): its surface moves at
+ * most the world's length scale a step (the advection limit's rule for
+ * the fluid), at the speed of its last step or of the glide ahead. */
+double eddy__collider_limit(eddy_world *w, eddy_system *s, const char **reason);
 static inline bool eddy__motion_rotates(const eddy_collider_motion *m)
 {
 	return m->rotation.x != 0 || m->rotation.y != 0 || m->rotation.z != 0 || m->last_rotation.x != 0 ||

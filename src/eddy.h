@@ -477,7 +477,12 @@ EDDY_API eddy_system_id eddy_add_emit_particles(eddy_world *w, const eddy_emit_p
  *     `offset = function(t)`): at the end of that step.
  * Before the collider's first step this only places it. The getter returns the
  * pose last set; eddy_collider_shape_of and eddy_collider_distance the
- * collider where it is. */
+ * collider where it is. A moving collider limits the time step as the
+ * fluid's advection does: its surface moves at most cfl times the world's
+ * length scale (the smallest emitter spacing) a step, at |v| + |omega| r
+ * (r the farthest its surface reaches from the pivot within the world's
+ * box), v and omega those of its last step or of the glide ahead, so that
+ * a thin solid moving fast does not step over the water it meets. */
 EDDY_API eddy_status eddy_collider_set_offset(eddy_world *w, eddy_system_id id, eddy_vec3 offset);
 EDDY_API eddy_status eddy_collider_get_offset(const eddy_world *w, eddy_system_id id, eddy_vec3 *offset);
 /* Rotates a collider about its pivot: axis_angle is a rotation vector in

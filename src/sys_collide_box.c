@@ -217,6 +217,7 @@ const eddy_system_vtable eddy__kind_collide_box = {
 	.name = "collide_box",
 	.step = step,
 	.state = eddy__collider_state,
+	.limit = eddy__collider_limit,
 	.provides = EDDY_CAP_COLLIDER,
 	.distance = distance,
 	.shape = shape,

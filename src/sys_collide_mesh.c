@@ -296,6 +296,7 @@ const eddy_system_vtable eddy__kind_collide_mesh = {
 	.check = check,
 	.step = step,
 	.state = eddy__collider_state,
+	.limit = eddy__collider_limit,
 	.provides = EDDY_CAP_COLLIDER,
 	.distance = distance,
 	.shape = shape,
