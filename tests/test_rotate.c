@@ -640,9 +640,9 @@ static void poses_glide_to_their_time(void)
  * by the SPH boundary particles and by flip_boundary is theirs). */
 static void paddle_threads_and_resume(void)
 {
-	for (int mi = 0; mi < 2; ++mi) {
-		const method m = mi ? M_FLIP : M_DFSPH;
-		paddle_case c1 = {m, 1.0, 30, 0.2, 1, false, false}, c2 = c1;
+	for (int mi = 0; mi < 3; ++mi) { /* DFSPH, FLIP, DFSPH keyed in a frame hook (its glide checkpointed) */
+		const method m = mi == 1 ? M_FLIP : M_DFSPH;
+		paddle_case c1 = {m, 1.0, 30, 0.2, 1, false, mi == 2}, c2 = c1;
 		c2.threads = 2;
 		paddle_result r1, r2;
 		run_paddle(&c1, &r1);
