@@ -21,8 +21,6 @@ void *eddy__collider_state(eddy_world *w, eddy_system *s, size_t *size)
 	return &b->motion;
 }
 
-static float norm3(eddy_vec3 v) { return sqrtf(v.x * v.x + v.y * v.y + v.z * v.z); }
-
 eddy_vec3 eddy__collider_step_velocity(eddy_collider_base *b, double dt)
 {
 	const eddy_collider_motion m = b->motion;
@@ -32,7 +30,7 @@ eddy_vec3 eddy__collider_step_velocity(eddy_collider_base *b, double dt)
 	b->motion.stepped = 1;
 	const eddy_vec3 v = {(m.offset.x - m.last_offset.x) * inv, (m.offset.y - m.last_offset.y) * inv,
 	                     (m.offset.z - m.last_offset.z) * inv};
-	b->motion.speed = norm3(v);
+	b->motion.speed = eddy__norm3(v);
 	b->motion.spin = 0;
 	return v;
 }
@@ -116,8 +114,8 @@ eddy_collider_velocity eddy__collider_step_motion(eddy_collider_base *b, double 
 	b->motion.last_offset = b->motion.offset;
 	b->motion.last_rotation = b->motion.rotation;
 	b->motion.stepped = 1;
-	b->motion.speed = norm3(v.v);
-	b->motion.spin = norm3(v.omega);
+	b->motion.speed = eddy__norm3(v.v);
+	b->motion.spin = eddy__norm3(v.omega);
 	return v;
 }
 
@@ -138,12 +136,13 @@ static double reach(const eddy_world *w, const eddy_system *s, eddy_vec3 pivot)
 	s->vt->shape(s, &sh);
 	double r = box;
 	if (sh.kind == EDDY_COLLIDER_SPHERE)
-		r = norm3((eddy_vec3){sh.a.x - pivot.x, sh.a.y - pivot.y, sh.a.z - pivot.z}) + (double)sh.radius;
+		r = eddy__norm3((eddy_vec3){sh.a.x - pivot.x, sh.a.y - pivot.y, sh.a.z - pivot.z}) + (double)sh.radius;
 	else if (sh.kind == EDDY_COLLIDER_BOX || sh.kind == EDDY_COLLIDER_MESH) {
 		r = 0;
 		for (int c = 0; c < 8; ++c)
-			r = fmax(r, norm3((eddy_vec3){(c & 1 ? sh.b.x : sh.a.x) - pivot.x, (c & 2 ? sh.b.y : sh.a.y) - pivot.y,
-			                              (c & 4 ? sh.b.z : sh.a.z) - pivot.z}));
+			r = fmax(r,
+			         eddy__norm3((eddy_vec3){(c & 1 ? sh.b.x : sh.a.x) - pivot.x, (c & 2 ? sh.b.y : sh.a.y) - pivot.y,
+			                                 (c & 4 ? sh.b.z : sh.a.z) - pivot.z}));
 	}
 	return fmin(r, box);
 }
@@ -162,8 +161,8 @@ double eddy__collider_limit(eddy_world *w, eddy_system *s, const char **reason)
 		                       m->goal_offset.z - m->offset.z},
 						dr = {m->goal_rotation.x - m->rotation.x, m->goal_rotation.y - m->rotation.y,
 		                      m->goal_rotation.z - m->rotation.z};
-		v = fmax(v, norm3(dof) / left);
-		om = fmax(om, norm3(dr) * (M_PI / 180.0) / left);
+		v = fmax(v, eddy__norm3(dof) / left);
+		om = fmax(om, eddy__norm3(dr) * (M_PI / 180.0) / left);
 	}
 	if (!(v > 0) && !(om > 0))
 		return INFINITY;

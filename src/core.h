@@ -361,6 +361,13 @@ double eddy__now_ms(void);
  * A warning, as eddy run --duration may run longer than the scene's duration. */
 void eddy__check_emitter_start(const eddy_world *w, const eddy_system *s, double start, eddy_check_fn report,
                                void *user);
+/* The time-step limit of a one-shot emitter whose particles leave at up to
+ * speed (m/s): the limits are taken before the step's systems add their
+ * particles, so the step that emits them must move them at most spacing
+ * (times the CFL number), as the advection limit does from the next step
+ * on; otherwise infinite. */
+double eddy__emission_limit(const eddy_world *w, bool done, double start, double spacing, double speed,
+                            const char **reason);
 
 /* collider helpers (collider.c) */
 /* The collider's pose: a point q of the def pose is at
@@ -531,6 +538,7 @@ static inline void eddy__collide_rotated_in(const eddy_world *w, float *x, float
 
 static inline eddy_vec3 eddy__v3(float x, float y, float z) { return (eddy_vec3){x, y, z}; }
 static inline eddy_vec3 eddy__add3(eddy_vec3 a, eddy_vec3 b) { return (eddy_vec3){a.x + b.x, a.y + b.y, a.z + b.z}; }
+static inline float eddy__norm3(eddy_vec3 v) { return sqrtf(v.x * v.x + v.y * v.y + v.z * v.z); }
 
 /* max and min of finite floats in one instruction: fmaxf and fminf must
  * treat NaN specially, so without -ffinite-math-only they are calls */

@@ -316,7 +316,10 @@ EDDY_API void *eddy_world_custom_user(const eddy_world *w, eddy_system_id id, ed
 typedef enum eddy_emit_shape { EDDY_EMIT_BLOCK = 0, EDDY_EMIT_ELLIPSOID } eddy_emit_shape;
 
 /* emit_box: a block (or the ellipsoid inscribed in it) of particles on a
- * cubic lattice, once, at time `start`. */
+ * cubic lattice, once, at time `start`. The one-shot emitters (emit_box,
+ * emit_mesh, emit_particles) limit the step that emits moving particles to
+ * cfl spacing / speed, as the advection limit does from the next step on:
+ * the limits are taken before a step's systems add their particles. */
 typedef struct eddy_emit_box_def {
 	eddy_vec3 min;         /* m, lower corner of the block */
 	eddy_vec3 max;         /* m, upper corner of the block */

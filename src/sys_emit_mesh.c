@@ -117,10 +117,17 @@ static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void
 
 static float spacing(const eddy_system *s) { return ((const emit_mesh *)s->data)->def.spacing; }
 
+static double limit(eddy_world *w, eddy_system *s, const char **reason)
+{
+	const emit_mesh *e = s->data;
+	return eddy__emission_limit(w, e->done, e->def.start, e->def.spacing, eddy__norm3(e->def.velocity), reason);
+}
+
 const eddy_system_vtable eddy__kind_emit_mesh = {
 	.name = "emit_mesh",
 	.state = state,
 	.step = step,
+	.limit = limit,
 	.expected_particles = expected,
 	.sample = sample,
 	.spacing = spacing,

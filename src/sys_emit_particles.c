@@ -24,6 +24,7 @@ typedef struct emit_particles {
 	eddy_emit_particles_def def;
 	bool done;
 	size_t count;
+	float speed;  /* m/s, the fastest particle's */
 	float data[]; /* x y z vx vy vz, count each */
 } emit_particles;
 
@@ -88,10 +89,17 @@ static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void
 
 static float spacing(const eddy_system *s) { return ((const emit_particles *)s->data)->def.spacing; }
 
+static double limit(eddy_world *w, eddy_system *s, const char **reason)
+{
+	const emit_particles *e = s->data;
+	return eddy__emission_limit(w, e->done, e->def.start, e->def.spacing, e->speed, reason);
+}
+
 const eddy_system_vtable eddy__kind_emit_particles = {
 	.name = "emit_particles",
 	.state = state,
 	.step = step,
+	.limit = limit,
 	.expected_particles = expected,
 	.sample = sample,
 	.spacing = spacing,
@@ -445,8 +453,11 @@ eddy_system_id eddy_add_emit_particles(eddy_world *w, const eddy_emit_particles_
 	e->def = *def;
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
 	const size_t n = e->count;
+	e->speed = 0;
 	for (size_t i = 0; i < n; ++i) {
 		const float x = e->data[i], y = e->data[n + i], z = e->data[2 * n + i];
+		const float s = eddy__norm3((eddy_vec3){e->data[3 * n + i], e->data[4 * n + i], e->data[5 * n + i]});
+		e->speed = s > e->speed ? s : e->speed;
 		if (x < lo.x || y < lo.y || z < lo.z || x > hi.x || y > hi.y || z > hi.z) {
 			eddy__fail(w, EDDY_ERR_INVALID, "%s: %s: vertex %zu at {%g, %g, %g} lies outside the world bounds", sys,
 			           def->path, i, (double)x, (double)y, (double)z);

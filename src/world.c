@@ -990,6 +990,15 @@ void eddy__report(eddy_check_fn report, void *user, eddy_check_level level, cons
 	report(level, msg, user);
 }
 
+double eddy__emission_limit(const eddy_world *w, bool done, double start, double spacing, double speed,
+                            const char **reason)
+{
+	*reason = "emission";
+	if (done || w->time + 1e-12 < start || !(speed > 0))
+		return INFINITY;
+	return spacing / speed;
+}
+
 void eddy__check_emitter_start(const eddy_world *w, const eddy_system *s, double start, eddy_check_fn report,
                                void *user)
 {
