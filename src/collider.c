@@ -196,9 +196,9 @@ void eddy__collider_glide(eddy_collider_motion *m, double t, double dt, double e
  * the goal of a glide. */
 static bool set_as_goal(eddy_world *w, eddy_collider_motion *m)
 {
-	if (!m->stepped || w->in_step)
+	if (!m->stepped || w->busy == eddy__busy_step)
 		return false;
-	m->goal_time = w->in_frame_hooks ? eddy__next_frame_time(w) : NAN;
+	m->goal_time = w->busy == eddy__busy_frame ? eddy__next_frame_time(w) : NAN;
 	return true;
 }
 

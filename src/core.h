@@ -148,11 +148,11 @@ struct eddy_world {
 	eddy_world_def def;
 	char error[EDDY_ERROR_MAX];
 	/* Non-NULL while a step, advance or check runs systems' or hosts' code:
-	 * names what runs ("a step callback", "a frame callback", ...). Calls that
-	 * would change the clock or the pipeline under that code are refused. */
+	 * names what runs (eddy__busy_step, eddy__busy_frame, ...). Calls that
+	 * would change the clock or the pipeline under that code are refused;
+	 * a collider pose set under a step is that step's, under the frame
+	 * hooks the next frame time's (collider.c). */
 	const char *busy;
-	bool in_frame_hooks;    /* the frame hooks run: a collider pose set now is the next frame time's */
-	bool in_step;           /* the systems of a step run: a collider pose set now is this step's */
 	double call_end;        /* s, the end of the stepping call that runs (-INFINITY: eddy_world_step's one step) */
 	bool background_output; /* eddy_world_set_background_output */
 
@@ -245,6 +245,8 @@ void eddy__clear_derived(eddy_world *w);
 /* Starts a fresh frame's statistics. */
 void eddy__frame_reset(eddy_world *w);
 
+/* w->busy while the systems of a step run, and while the frame hooks run */
+extern const char eddy__busy_step[], eddy__busy_frame[];
 static inline float *eddy__col(eddy_world *w, int id) { return (float *)w->columns[id].data; }
 /* s, the time of the frame the world steps toward */
 static inline double eddy__next_frame_time(const eddy_world *w) { return (double)(w->frame + 1) / w->def.fps; }

@@ -420,6 +420,8 @@ static eddy_status check_bounds(eddy_world *w)
 	return EDDY_OK;
 }
 
+const char eddy__busy_step[] = "a step callback", eddy__busy_frame[] = "a frame callback";
+
 /* One step toward time stop (never past it). *reached says whether it got there. */
 static eddy_status step_toward(eddy_world *w, double stop, bool *reached)
 {
@@ -453,8 +455,7 @@ static eddy_status step_toward(eddy_world *w, double stop, bool *reached)
 		eddy__collider_glide(&((eddy_collider_base *)c->data)->motion, w->time, dt, end, w->call_end,
 		                     1e-9 / w->def.fps);
 	const eddy_step_context ctx = {dt, w->time, w->step, w->def.threads};
-	w->busy = "a step callback";
-	w->in_step = true;
+	w->busy = eddy__busy_step;
 	for (int k = 0; k < w->order_count; ++k) {
 		eddy_system *s = &w->slots[w->order[k]];
 		if (!s->vt->step)
@@ -466,7 +467,6 @@ static eddy_status step_toward(eddy_world *w, double stop, bool *reached)
 		s->ms_frame += ms;
 		s->calls++;
 		if (st != EDDY_OK) {
-			w->in_step = false;
 			if (strncmp(w->error, s->label, strlen(s->label)) != 0) {
 				char msg[EDDY_ERROR_MAX];
 				snprintf(msg, sizeof msg, "%s", w->error);
@@ -476,13 +476,10 @@ static eddy_status step_toward(eddy_world *w, double stop, bool *reached)
 		}
 		if (w->def.check_finite) {
 			st = check_written(w, s);
-			if (st != EDDY_OK) {
-				w->in_step = false;
+			if (st != EDDY_OK)
 				return st;
-			}
 		}
 	}
-	w->in_step = false;
 	if (nsteps <= 1.0) {
 		w->time = stop; /* land exactly, so frame times do not drift */
 		*reached = true;
@@ -518,15 +515,13 @@ void eddy__frame_reset(eddy_world *w)
 static eddy_status finish_frame(eddy_world *w)
 {
 	w->frame++;
-	w->busy = "a frame callback";
+	w->busy = eddy__busy_frame;
 	for (int k = 0; k < w->order_count; ++k) {
 		eddy_system *s = &w->slots[w->order[k]];
 		if (!s->vt->frame)
 			continue;
 		const double a = eddy__now_ms();
-		w->in_frame_hooks = true;
 		eddy_status st = s->vt->frame(w, s, w->frame);
-		w->in_frame_hooks = false;
 		const double ms = eddy__now_ms() - a;
 		s->ms_total += ms;
 		s->ms_frame += ms;

@@ -654,28 +654,39 @@ static const char *const PLATE =
 	"if keyed then world:on_frame(function(w) plate:set_offset(off(w:time() + 1 / 30)) end) end\n"
 	"return world\n";
 
+/* Runs 3 frames of w and returns the most particles in a frame on the far
+ * side of a plate at x = x0 + min(v (t - lag), cap) (side -1: below it,
+ * +1: above it); *frames gets the frames that ran. */
+static int most_past_plate(eddy_world *w, double x0, double v, double lag, double cap, int side, int *frames)
+{
+	int worst = 0;
+	*frames = 0;
+	for (int f = 0; w && f < 3; ++f) {
+		if (eddy_world_step_frame(w) != EDDY_OK) {
+			test_fail(__FILE__, __LINE__, "step: %s", eddy_world_error(w));
+			break;
+		}
+		(*frames)++;
+		const double plate = x0 + fmin(v * (eddy_world_time(w) - lag), cap);
+		size_t n;
+		const float *x = eddy_world_channel(w, "x", &n);
+		int k = 0;
+		for (size_t i = 0; i < n; ++i)
+			k += side * (x[i] - plate) > 0;
+		worst = k > worst ? k : worst;
+	}
+	return worst;
+}
+
 static void thin_plate_swept_fast_leaves_nothing_behind(void)
 {
 	for (int keyed = 0; keyed < 2; ++keyed) {
 		lua_State *L = new_state();
 		eddy_lua_set_param(L, "keyed", keyed ? "true" : "false");
 		eddy_world *w = load(L, PLATE);
-		int worst = 0, frames = 0;
-		for (int f = 0; w && f < 3; ++f) {
-			if (eddy_world_step_frame(w) != EDDY_OK) {
-				test_fail(__FILE__, __LINE__, "step: %s", eddy_world_error(w));
-				break;
-			}
-			frames++;
-			/* the plate's back face now; keyed, the motion lags a frame */
-			const double back = 0.02 + fmin(8 * (eddy_world_time(w) - (keyed ? 1.0 / 30 : 0)), 0.3);
-			size_t n;
-			const float *x = eddy_world_channel(w, "x", &n);
-			int behind = 0;
-			for (size_t i = 0; i < n; ++i)
-				behind += x[i] < back;
-			worst = behind > worst ? behind : worst;
-		}
+		int frames;
+		/* the plate's back face; keyed, the motion lags a frame */
+		const int worst = most_past_plate(w, 0.02, 8, keyed ? 1.0 / 30 : 0, 0.3, -1, &frames);
 		printf("    plate 5 mm thick at 8 m/s into water at rest%s: %d frames, at most %d particles behind it\n",
 		       keyed ? " (keyed in on_frame)" : "", frames, worst);
 		CHECK(frames == 3 && worst == 0);
@@ -703,20 +714,8 @@ static void block_thrown_at_a_thin_plate_stays_before_it(void)
 {
 	lua_State *L = new_state();
 	eddy_world *w = load(L, THROW);
-	int past = -1, frames = 0;
-	for (int f = 0; w && f < 3; ++f) {
-		if (eddy_world_step_frame(w) != EDDY_OK) {
-			test_fail(__FILE__, __LINE__, "step: %s", eddy_world_error(w));
-			break;
-		}
-		frames++;
-		size_t n;
-		const float *x = eddy_world_channel(w, "x", &n);
-		int k = 0;
-		for (size_t i = 0; i < n; ++i)
-			k += x[i] > 0.505f;
-		past = k > past ? k : past;
-	}
+	int frames;
+	const int past = most_past_plate(w, 0.505, 0, 0, 0, 1, &frames);
 	printf("    block thrown at 5 m/s 1 cm short of a 5 mm plate: %d frames, at most %d particles past it\n", frames,
 	       past);
 	CHECK(frames == 3 && past == 0);

@@ -574,6 +574,7 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 	const sf8 zero = sf8_zero(), dt = sf8_set1(wk->dt), inv = sf8_set1(inv1), rho0 = sf8_set1(wk->sh->rho0),
 			  omega = sf8_set1(DFSPH_OMEGA), minus = sf8_set1(-0.0f), beta = sf8_set1(wk->beta),
 			  ibeta = sf8_set1(1.0f / wk->beta);
+	const bool soft = wk->beta < 1; /* else the paper's expression, bit for bit */
 	for (long q = 0; q < cnt; q += 8) {
 		const long i = i0 + q, m = cnt - q < 8 ? cnt - q : 8;
 		sf8 vx, vy, vz, vw, bx, by, bz, bw;
@@ -594,7 +595,7 @@ static void rate(const dfsph_pass *ps, long i0, long cnt)
 			continue;
 		}
 		const sf8 res = ps->divergence ? sf8_mul(r, bw) /* bw: the velocity solve's particles */
-		                : wk->beta < 1 ? sf8_add(sf8_mul(beta, sf8_sub(load8(wk->rho + i, m), rho0)), sf8_mul(dt, r))
+		                : soft         ? sf8_add(sf8_mul(beta, sf8_sub(load8(wk->rho + i, m), rho0)), sf8_mul(dt, r))
 		                               : sf8_sub(sf8_add(load8(wk->rho + i, m), sf8_mul(dt, r)), rho0);
 		sf8 e = sf8_max(res, zero); /* the compression */
 		if (ps->projected) {
