@@ -18,6 +18,18 @@
  * The boundary particles mirror the pressure (p_b = p_i: with one k_i a wall
  * could not hold a particle whose neighbourhood is full, where S_i + B_i ~ 0)
  * plus Adami et al.'s hydrostatic part p_b - p_i = rho_i g . (x_b - x_i), h_i.
+ * Walls do not pull. With the divergence solver, a particle whose k of the
+ * last step (its warm starts' sum) is <= 0 and whose v + dt a points away
+ * from its walls (cosine with -B_i above DFSPH_LEAVE) is leaving them: its
+ * walls' p_b is held at >= 0 (h_i from the walls below its level only:
+ * p_i = 0) and it takes no part in the velocity solve, whose equality would
+ * otherwise hold it to the wall with a k < 0 mirrored onto the wall. Before,
+ * water released under a lid fell at 0.75 of free fall over 0.1 s, in
+ * zero gravity a block leaving a lid at 0.5 m/s was pulled back to 0.58 of
+ * it, and a dam break's splash hung from its tank's lid for seconds
+ * (tests/test_stress_sph_solids.c). Along a wall (cosine under DFSPH_LEAVE)
+ * or under pressure a particle stays held as before: the still columns
+ * start with k = 0 everywhere, and their side walls must carry them.
  * A step sets v* = v + dt (a + h), solves for k by corrections that move v*
  * by dt a^p of a change of k, adds (v* - (v + dt a)) / dt to a and writes
  * p_i = k_i rho_i^2 / grad_cal (k summed over the solves; see sph_pressure).
@@ -195,6 +207,11 @@
  * with omega above 0.5 can grow. */
 #define DFSPH_OMEGA 0.5f
 
+/* A particle leaves its walls (wall_sums) when v + dt a points away from
+ * them, its cosine with -B_i above this: along a wall (a side wall under
+ * gravity, at rest) it stays held. */
+#define DFSPH_LEAVE 0.1f
+
 /* The most bytes of stored pairs (dfsph_group, 16 bytes a pair, about 470
  * a particle): some 35k particles. Measured on one thread against storing
  * every pair: recomputing G_ij in every pass takes 1.7x the step's time at
@@ -222,10 +239,13 @@ typedef struct dfsph_work {
 	int threads;
 	void (*block)(const void *pass, long i0, long cnt); /* the passes on the chosen SIMD back-end */
 	const sph_shared *sh;
-	const float *rho;  /* kg/m^3, the density column */
-	eddy_vec3 gravity; /* m/s^2 */
-	const float *bdiv; /* the moving walls' part of the rate (sph.h); NULL while none moves
-	                    * and in the operator's product, which is linear */
+	const float *rho;             /* kg/m^3, the density column */
+	eddy_vec3 gravity;            /* m/s^2 */
+	const float *bdiv;            /* the moving walls' part of the rate (sph.h); NULL while none moves
+	                               * and in the operator's product, which is linear */
+	const float *kprev[2];        /* the divergence solver's warm starts (their sum about the last
+	                               * step's k); NULL without them */
+	const float *vel[3], *acc[3]; /* v and a before the solve (wall_sums) */
 	/* B_i, and w = 1 / D_i (0 where D_i is negligible) for the paper's
 	 * sweeps; the divergence solver, which does not use D_i, keeps there
 	 * from its velocity solve on 1 where rho_i >= DFSPH_SURFACE rho0, else 0
@@ -336,7 +356,11 @@ static inline sf8 sum8(const float *t, long m)
 /* Particle i's wall sums: B_i (out[0..2][q]) and sum_b (g . (x_b - x_i)) m_b
  * grad W(x_i - x_b) (out[3..5][q]), each in four partial sums (neighbour q
  * onto sum q mod 4, the last four padded and masked out) ended as sph_sum4
- * ends them: a particle at a wall has too few boundary neighbours for eight. */
+ * ends them: a particle at a wall has too few boundary neighbours for eight.
+ * With the warm starts, a particle leaving its walls with no pressure (the
+ * last step's k <= 0, v + dt a moving away from them: DFSPH_LEAVE) is
+ * marked in wk->mask for the velocity solve, and its walls' pressure
+ * p_b = p_i + rho_i g . (x_b - x_i) held at >= 0 (header). */
 static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], long q)
 {
 	const sph_shared *sh = wk->sh;
@@ -344,7 +368,8 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 	const float *pi = sh->pq + 4 * i, eps2 = 1e-6f * sh->k.h2;
 	const eddy_vec3 g = wk->gravity;
 	const uint32_t *blist = sph_bnbrs(nb, i), bcnt = nb->bcount[i];
-	float s[6][4] = {{0}};
+	const bool warm = wk->kprev[0] != NULL;
+	float s[9][4] = {{0}};
 	for (uint32_t p = 0; p < bcnt; p += 4)
 		for (uint32_t l = 0; l < 4; ++l) {
 			const uint32_t b = blist[p + l < bcnt ? p + l : bcnt - 1];
@@ -357,13 +382,32 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 			s[0][l] += c * rx;
 			s[1][l] += c * ry;
 			s[2][l] += c * rz;
-			const float gh = -(g.x * rx + g.y * ry + g.z * rz) * c; /* g . (x_b - x_i) */
+			const float gd = -(g.x * rx + g.y * ry + g.z * rz), gh = gd * c; /* g . (x_b - x_i) */
 			s[3][l] += gh * rx;
 			s[4][l] += gh * ry;
 			s[5][l] += gh * rz;
+			if (warm) { /* the walls above p_i's level left out (p_i = 0 here) */
+				const float gp = (gd > 0 ? gd : 0.0f) * c;
+				s[6][l] += gp * rx;
+				s[7][l] += gp * ry;
+				s[8][l] += gp * rz;
+			}
 		}
 	for (int k = 0; k < 6; ++k)
 		out[k][q] = sph_sum4(s[k]);
+	if (!warm)
+		return;
+	const float bx = out[0][q], by = out[1][q], bz = out[2][q];
+	const float ux = wk->vel[0][i] + wk->dt * wk->acc[0][i], uy = wk->vel[1][i] + wk->dt * wk->acc[1][i],
+				uz = wk->vel[2][i] + wk->dt * wk->acc[2][i];
+	const float rate = ux * bx + uy * by + uz * bz - (wk->bdiv ? wk->bdiv[i] : 0.0f); /* > 0: towards them */
+	const float b2 = bx * bx + by * by + bz * bz, u2 = ux * ux + uy * uy + uz * uz;
+	const bool leaving =
+		wk->kprev[0][i] + wk->kprev[1][i] <= 0 && rate < 0 && rate * rate > DFSPH_LEAVE * DFSPH_LEAVE * b2 * u2;
+	wk->mask[i] = leaving;
+	if (leaving)
+		for (int k = 3; k < 6; ++k)
+			out[k][q] = sph_sum4(s[k + 3]);
 }
 
 /* The spiky gradient's constants for the pair passes, in registers. */
@@ -458,7 +502,9 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 		sf8_fold4(sy, t[1][q]);
 		sf8_fold4(sz, t[2][q]);
 		sf8_fold4(s2, t[3][q]);
-		if (nb->bcount[i]) /* most particles are away from the walls */
+		if (wk->kprev[0])
+			wk->mask[i] = 0; /* wall_sums marks those leaving their walls */
+		if (nb->bcount[i])   /* most particles are away from the walls */
 			wall_sums(wk, i, w, q);
 	}
 	for (long q = 0; q < cnt; q += 8) {
@@ -1100,8 +1146,11 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 	if (projected) {
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 		for (long i = 0; i < n; ++i) {
-			if (divergence) /* b.w: the velocity solve's particles (dfsph_work) */
-				wk->b[i].w = wk->rho[i] >= DFSPH_SURFACE * rho0 ? 1.0f : 0.0f;
+			if (divergence) { /* b.w: the velocity solve's particles (dfsph_work) */
+				/* not one leaving its walls with no pressure (wall_sums' mark):
+				 * held to them it would hang from a lid (header) */
+				wk->b[i].w = wk->rho[i] >= DFSPH_SURFACE * rho0 && !wk->mask[i] ? 1.0f : 0.0f;
+			}
 			/* the velocity solve's k of either sign on its particles, the density solve's k >= 0 */
 			wk->k[i] = divergence ? (wk->b[i].w > 0 ? col[i] : 0.0f) : (col[i] > 0 ? col[i] : 0.0f);
 		}
@@ -1160,14 +1209,19 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 
 /* The step's scratch in the world's arena for rows 0 .. n - 1 of sph_density's
  * lists, and the gradient pass on them; false when out of memory. */
-static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n, float dt, int threads)
+static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n, float dt, int threads, const float *kv,
+                    const float *kd)
 {
 	const size_t un = (size_t)n;
-	*wk = (dfsph_work){.n = n, .dt = dt, .threads = threads, .sh = sh, .bdiv = sh->nb.bdiv};
+	*wk = (dfsph_work){.n = n, .dt = dt, .threads = threads, .sh = sh, .bdiv = sh->nb.bdiv, .kprev = {kv, kd}};
 	wk->beta = 1;
 	wk->block = SIMD_PICK(dfsph_block);
 	wk->rho = eddy__col(w, COL_DENSITY);
 	wk->gravity = w->def.gravity;
+	for (int d = 0; d < 3; ++d) {
+		wk->vel[d] = eddy__col(w, COL_VX + d);
+		wk->acc[d] = eddy__col(w, COL_AX + d);
+	}
 	dfsph_vec4 **quads[] = {&wk->b, &wk->v, &wk->u};
 	float **floats[] = {&wk->dsym, &wk->k, &wk->ksum, &wk->err, &wk->r};
 	bool ok = true;
@@ -1434,7 +1488,9 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	if (sd->def.divergence_solver && sd->def.hydrostatic_start)
 		eddy__dfsph_hydrostatic_start(w, sh, n, eddy__col(w, sd->kcol[0]));
 	dfsph_work wk;
-	if (!prepare(w, &wk, sh, n, dt, ctx->threads))
+	const bool warm = sd->def.divergence_solver;
+	if (!prepare(w, &wk, sh, n, dt, ctx->threads, warm ? eddy__col(w, sd->kcol[0]) : NULL,
+	             warm ? eddy__col(w, sd->kcol[1]) : NULL))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
 	if (!sd->def.divergence_solver) { /* the cold solve's soft correction (header) */
 		const eddy_vec3 g = w->def.gravity;
@@ -1486,7 +1542,7 @@ eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float
 		return EDDY_ERR_ORDER;
 	const long n = sph_rows(w, sh);
 	dfsph_work wk;
-	if (!prepare(w, &wk, sh, n, 1.0f, 1))
+	if (!prepare(w, &wk, sh, n, 1.0f, 1, NULL, NULL))
 		return EDDY_ERR_NOMEM;
 	memcpy(wk.p, k, (size_t)n * sizeof *k);
 	operator_product(&wk); /* the conjugate gradients' A p: u = -dt (...) for k = p, dt = 1 */
