@@ -3,14 +3,17 @@
  * ch. 4.6; without it particles near the surface interpolate the zeros of
  * faces no particle reached and stall: docs/validation.md hard case 12).
  *
- * Reads: cell_type u v w. Writes: u v w.
+ * Reads: cell_type u v w, the solids' velocities (flip_boundary's, lent). Writes: u v w.
  *   Known faces: a fluid or solid cell on a side, or on the domain's sides.
  *   Layer l = 1..layers: every unknown face with known neighbours (6-connected
  *   in its own face grid) takes their average and becomes known. A layer is
  *   a vectorised sweep of the grid's flag bytes on all threads (see
  *   extrapolate_grid): the same result on any thread count.
  * Solid faces are never rewritten, so the solid velocities flip_boundary set
- * stay imposed. RK2 advection at CFL number C samples up to C + 1 cells
+ * stay imposed. A domain side beside an air cell is extrapolated too, then
+ * kept only where it carries water away from the side (else 0): a particle
+ * beside a fluid cell that left the side (flip_pressure) interpolates it,
+ * and held at 0 it would hold the particle back. RK2 advection at CFL number C samples up to C + 1 cells
  * beyond the fluid: layers should be at least that. */
 #include "flip.h"
 
@@ -284,6 +287,11 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	size_t nfmax = 0;
 	const size_t ncell = (size_t)n[0] * n[1] * n[2];
 	const int nt = ncell > 32768 ? ctx->threads : 1;
+	/* the solid velocities of this step (flip_boundary's, lent) */
+	flip_solid sd;
+	if (!eddy__flip_solid_for(w, s, ctx->dt, &sd))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_extrapolate: out of memory");
+	const bool solids = sd.any;
 	for (int a = 0; a < 3; ++a) {
 		for (int d = 0; d < 3; ++d)
 			m[a][d] = n[d] + (d == a);
@@ -304,12 +312,19 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 				for (int i = 0; i < ma[0]; ++i) {
 					const int c[3] = {i, j, k};
 					const size_t f = (size_t)i + sa[1] * (size_t)j + sa[2] * (size_t)k;
-					bool known = c[a] == 0 || c[a] == n[a];
-					if (!known) {
+					/* a domain side is known beside fluid, extrapolated beside
+					 * air and then held (below) */
+					bool known = (c[a] == 0 || c[a] == n[a]) &&
+					             type[flip_cell(w, c[0] - (c[a] == n[a] && a == 0), c[1] - (c[a] == n[a] && a == 1),
+					                            c[2] - (c[a] == n[a] && a == 2))] != EDDY_CELL_AIR;
+					if (!known && c[a] > 0 && c[a] < n[a]) {
 						int lo[3] = {i, j, k};
 						lo[a]--;
-						known = type[flip_cell(w, lo[0], lo[1], lo[2])] != EDDY_CELL_AIR ||
-						        type[flip_cell(w, i, j, k)] != EDDY_CELL_AIR;
+						const uint8_t tl = type[flip_cell(w, lo[0], lo[1], lo[2])], th = type[flip_cell(w, i, j, k)];
+						/* a solid cell's face to air: extrapolated, then held (below) */
+						known = (tl != EDDY_CELL_AIR || th != EDDY_CELL_AIR) &&
+						        !(solids && ((tl == EDDY_CELL_SOLID && th == EDDY_CELL_AIR) ||
+						                     (th == EDDY_CELL_SOLID && tl == EDDY_CELL_AIR)));
 					}
 					la[f] = known ? 0 : UNKNOWN;
 				}
@@ -317,8 +332,49 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	hit = eddy__arena_alloc(&w->arena, nfmax);
 	if (!hit)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_extrapolate: out of memory");
-	for (int a = 0; a < 3; ++a)
+	for (int a = 0; a < 3; ++a) {
 		extrapolate_grid(face[a], layer[a], hit, m[a], st[a], ex->def.layers, nt);
+		/* the domain's sides beside air: the water's velocity where it
+		 * leaves the side, the side's 0 where it would go through (header) */
+		float *u = face[a];
+		const uint8_t *la = layer[a];
+		const int ma[3] = {m[a][0], m[a][1], m[a][2]};
+		const size_t sa[3] = {st[a][0], st[a][1], st[a][2]};
+		const int b1 = (a + 1) % 3, b2 = (a + 2) % 3;
+		if (solids) /* a solid cell's faces to air likewise, against the solid's velocity */
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+			for (int k = 0; k < ma[2]; ++k)
+				for (int j = 0; j < ma[1]; ++j)
+					for (int i = 0; i < ma[0]; ++i) {
+						const int c[3] = {i, j, k};
+						if (c[a] == 0 || c[a] == n[a])
+							continue;
+						int lo[3] = {i, j, k};
+						lo[a]--;
+						const uint8_t tl = type[flip_cell(w, lo[0], lo[1], lo[2])], th = type[flip_cell(w, i, j, k)];
+						const bool solid_lo = tl == EDDY_CELL_SOLID && th == EDDY_CELL_AIR,
+								   solid_hi = th == EDDY_CELL_SOLID && tl == EDDY_CELL_AIR;
+						if (!solid_lo && !solid_hi)
+							continue;
+						const size_t f = (size_t)i + sa[1] * (size_t)j + sa[2] * (size_t)k;
+						const float vs = flip_solid_vel(&sd, a, f);
+						if (la[f] == UNKNOWN || (solid_lo ? u[f] < vs : u[f] > vs))
+							u[f] = vs;
+					}
+		for (int side = 0; side < 2; ++side)
+			for (int q2 = 0; q2 < ma[b2]; ++q2)
+				for (int q1 = 0; q1 < ma[b1]; ++q1) {
+					int c[3];
+					c[a] = side ? n[a] : 0;
+					c[b1] = q1;
+					c[b2] = q2;
+					const size_t f = (size_t)c[0] + sa[1] * (size_t)c[1] + sa[2] * (size_t)c[2];
+					if (la[f] == 0)
+						continue; /* beside fluid or solid: flip_boundary's, flip_pressure's */
+					if (la[f] == UNKNOWN || (side ? u[f] > 0 : u[f] < 0))
+						u[f] = 0;
+				}
+	}
 	return EDDY_OK;
 }
 
