@@ -18,15 +18,17 @@
  * The boundary particles mirror the pressure (p_b = p_i: with one k_i a wall
  * could not hold a particle whose neighbourhood is full, where S_i + B_i ~ 0)
  * plus Adami et al.'s hydrostatic part p_b - p_i = rho_i g . (x_b - x_i), h_i.
- * Walls do not pull. With the divergence solver, a particle whose k of the
- * last step (its warm starts' sum) is <= 0 and whose v + dt a points away
- * from its walls (cosine with -B_i above DFSPH_LEAVE) is leaving them: its
- * walls' p_b is held at >= 0 (h_i from the walls below its level only:
- * p_i = 0) and it takes no part in the velocity solve, whose equality would
- * otherwise hold it to the wall with a k < 0 mirrored onto the wall. Before,
- * water released under a lid fell at 0.75 of free fall over 0.1 s, in
- * zero gravity a block leaving a lid at 0.5 m/s was pulled back to 0.58 of
- * it, and a dam break's splash hung from its tank's lid for seconds
+ * Walls do not pull. A particle with no pressure (with the divergence
+ * solver: its k of the last step, the warm starts' sum, <= 0; without it:
+ * rho_i <= rho0, as the cold solve makes pressure only from compression)
+ * whose v + dt a points away from its walls (cosine with -B_i above
+ * DFSPH_LEAVE) is leaving them: its walls' p_b is held at >= 0 (h_i from
+ * the walls below its level only: p_i = 0) and it takes no part in the
+ * velocity solve, whose equality would otherwise hold it to the wall with a
+ * k < 0 mirrored onto the wall. Before, water released under a lid fell at
+ * 0.75 of free fall over 0.1 s (the cold solve 0.92), in zero gravity a
+ * block leaving a lid at 0.5 m/s was pulled back to 0.58 of it, and a dam
+ * break's splash hung from its tank's lid for seconds
  * (tests/test_stress_sph_solids.c). Along a wall (cosine under DFSPH_LEAVE)
  * or under pressure a particle stays held as before: the still columns
  * start with k = 0 everywhere, and their side walls must carry them.
@@ -368,7 +370,7 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 	const float *pi = sh->pq + 4 * i, eps2 = 1e-6f * sh->k.h2;
 	const eddy_vec3 g = wk->gravity;
 	const uint32_t *blist = sph_bnbrs(nb, i), bcnt = nb->bcount[i];
-	const bool warm = wk->kprev[0] != NULL;
+	const bool warm = wk->kprev[0] != NULL, free_walls = wk->vel[0] != NULL;
 	float s[9][4] = {{0}};
 	for (uint32_t p = 0; p < bcnt; p += 4)
 		for (uint32_t l = 0; l < 4; ++l) {
@@ -386,7 +388,7 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 			s[3][l] += gh * rx;
 			s[4][l] += gh * ry;
 			s[5][l] += gh * rz;
-			if (warm) { /* the walls above p_i's level left out (p_i = 0 here) */
+			if (free_walls) { /* the walls above p_i's level left out (p_i = 0 here) */
 				const float gp = (gd > 0 ? gd : 0.0f) * c;
 				s[6][l] += gp * rx;
 				s[7][l] += gp * ry;
@@ -395,15 +397,17 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 		}
 	for (int k = 0; k < 6; ++k)
 		out[k][q] = sph_sum4(s[k]);
-	if (!warm)
+	if (!free_walls)
 		return;
 	const float bx = out[0][q], by = out[1][q], bz = out[2][q];
 	const float ux = wk->vel[0][i] + wk->dt * wk->acc[0][i], uy = wk->vel[1][i] + wk->dt * wk->acc[1][i],
 				uz = wk->vel[2][i] + wk->dt * wk->acc[2][i];
 	const float rate = ux * bx + uy * by + uz * bz - (wk->bdiv ? wk->bdiv[i] : 0.0f); /* > 0: towards them */
 	const float b2 = bx * bx + by * by + bz * bz, u2 = ux * ux + uy * uy + uz * uz;
-	const bool leaving =
-		wk->kprev[0][i] + wk->kprev[1][i] <= 0 && rate < 0 && rate * rate > DFSPH_LEAVE * DFSPH_LEAVE * b2 * u2;
+	/* no pressure: the last step's k (warm), else no compression for the cold
+	 * solve, which makes pressure only from it */
+	const bool unpressed = warm ? wk->kprev[0][i] + wk->kprev[1][i] <= 0 : wk->rho[i] <= sh->rho0;
+	const bool leaving = unpressed && rate < 0 && rate * rate > DFSPH_LEAVE * DFSPH_LEAVE * b2 * u2;
 	wk->mask[i] = leaving;
 	if (leaving)
 		for (int k = 3; k < 6; ++k)
@@ -502,9 +506,8 @@ static void gradients(const dfsph_work *wk, long i0, long cnt)
 		sf8_fold4(sy, t[1][q]);
 		sf8_fold4(sz, t[2][q]);
 		sf8_fold4(s2, t[3][q]);
-		if (wk->kprev[0])
-			wk->mask[i] = 0; /* wall_sums marks those leaving their walls */
-		if (nb->bcount[i])   /* most particles are away from the walls */
+		wk->mask[i] = 0;   /* wall_sums marks those leaving their walls */
+		if (nb->bcount[i]) /* most particles are away from the walls */
 			wall_sums(wk, i, w, q);
 	}
 	for (long q = 0; q < cnt; q += 8) {
@@ -1209,8 +1212,8 @@ static eddy_status solve(eddy_world *w, eddy_system *sys, dfsph_work *wk, const 
 
 /* The step's scratch in the world's arena for rows 0 .. n - 1 of sph_density's
  * lists, and the gradient pass on them; false when out of memory. */
-static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n, float dt, int threads, const float *kv,
-                    const float *kd)
+static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n, float dt, int threads, bool free_walls,
+                    const float *kv, const float *kd)
 {
 	const size_t un = (size_t)n;
 	*wk = (dfsph_work){.n = n, .dt = dt, .threads = threads, .sh = sh, .bdiv = sh->nb.bdiv, .kprev = {kv, kd}};
@@ -1218,9 +1221,9 @@ static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n,
 	wk->block = SIMD_PICK(dfsph_block);
 	wk->rho = eddy__col(w, COL_DENSITY);
 	wk->gravity = w->def.gravity;
-	for (int d = 0; d < 3; ++d) {
-		wk->vel[d] = eddy__col(w, COL_VX + d);
-		wk->acc[d] = eddy__col(w, COL_AX + d);
+	for (int d = 0; d < 3; ++d) { /* the step's (free walls), not the probe's */
+		wk->vel[d] = free_walls ? eddy__col(w, COL_VX + d) : NULL;
+		wk->acc[d] = free_walls ? eddy__col(w, COL_AX + d) : NULL;
 	}
 	dfsph_vec4 **quads[] = {&wk->b, &wk->v, &wk->u};
 	float **floats[] = {&wk->dsym, &wk->k, &wk->ksum, &wk->err, &wk->r};
@@ -1489,7 +1492,7 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 		eddy__dfsph_hydrostatic_start(w, sh, n, eddy__col(w, sd->kcol[0]));
 	dfsph_work wk;
 	const bool warm = sd->def.divergence_solver;
-	if (!prepare(w, &wk, sh, n, dt, ctx->threads, warm ? eddy__col(w, sd->kcol[0]) : NULL,
+	if (!prepare(w, &wk, sh, n, dt, ctx->threads, true, warm ? eddy__col(w, sd->kcol[0]) : NULL,
 	             warm ? eddy__col(w, sd->kcol[1]) : NULL))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
 	if (!sd->def.divergence_solver) { /* the cold solve's soft correction (header) */
@@ -1542,7 +1545,7 @@ eddy_status eddy__dfsph_probe(eddy_world *w, const float *k, float *inv_d, float
 		return EDDY_ERR_ORDER;
 	const long n = sph_rows(w, sh);
 	dfsph_work wk;
-	if (!prepare(w, &wk, sh, n, 1.0f, 1, NULL, NULL))
+	if (!prepare(w, &wk, sh, n, 1.0f, 1, false, NULL, NULL))
 		return EDDY_ERR_NOMEM;
 	memcpy(wk.p, k, (size_t)n * sizeof *k);
 	operator_product(&wk); /* the conjugate gradients' A p: u = -dt (...) for k = p, dt = 1 */
