@@ -319,7 +319,11 @@ typedef enum eddy_emit_shape { EDDY_EMIT_BLOCK = 0, EDDY_EMIT_ELLIPSOID } eddy_e
  * cubic lattice, once, at time `start`. The one-shot emitters (emit_box,
  * emit_mesh, emit_particles) limit the step that emits moving particles to
  * cfl spacing / speed, as the advection limit does from the next step on:
- * the limits are taken before a step's systems add their particles. */
+ * the limits are taken before a step's systems add their particles.
+ * emit_box and emit_mesh add water only where there is none: a lattice point
+ * within spacing / 2 of a particle already in the world on every axis is
+ * left out, so boxes that overlap each other or a pool make one body of
+ * water (emit_particles places every particle it reads). */
 typedef struct eddy_emit_box_def {
 	eddy_vec3 min;         /* m, lower corner of the block */
 	eddy_vec3 max;         /* m, upper corner of the block */

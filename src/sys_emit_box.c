@@ -12,6 +12,9 @@
  * at the centre, (min + max) / 2 + (i + 1/2) * spacing: the drop is then
  * mirror-symmetric about its centre on every axis, and it stands on the
  * simple cubic lattice the SPH mass calibration assumes.
+ * A point water already fills (a particle within spacing / 2 of it on every
+ * axis: eddy__emit_occupied) is left out, so that boxes which overlap each
+ * other or a pool make one body of water.
  * The spacing becomes the world's length scale for the advection limit. */
 #include "systems.h"
 
@@ -90,17 +93,39 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		return EDDY_OK;
 	e->done = true;
 	const size_t count = e->count, lattice = (size_t)e->nx * (size_t)e->ny * (size_t)e->nz;
+	/* the points, and which of them water already fills (core.h; none in an
+	 * empty world, which needs neither array) */
+	const bool check = w->n > 0;
+	eddy_vec3 *pts = check ? malloc(count * sizeof *pts + 1) : NULL;
+	uint8_t *occupied = check ? malloc(count + 1) : NULL;
+	bool ok = !check || (pts && occupied);
+	size_t kept = check ? 0 : count;
+	if (check && ok) {
+		size_t k = 0;
+		for (size_t q = 0; q < lattice && k < count; ++q) {
+			const eddy_vec3 l = lattice_point(e, q);
+			if (emitted(&e->def, l))
+				pts[k++] = l;
+		}
+		ok = eddy__emit_occupied(w, pts, count, e->def.spacing, occupied);
+		for (size_t q = 0; q < count; ++q)
+			kept += !occupied[q];
+	}
 	size_t first;
-	eddy_status st = eddy__append_particles(w, count, &first);
-	if (st != EDDY_OK)
+	eddy_status st = ok ? eddy__append_particles(w, kept, &first)
+	                    : eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory for %zu particles", s->label, count);
+	if (st != EDDY_OK) {
+		free(pts);
+		free(occupied);
 		return st;
+	}
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
 	size_t k = 0;
-	for (size_t q = 0; q < lattice && k < count; ++q) {
+	for (size_t q = 0, r = 0; q < lattice && r < count; ++q) {
 		const eddy_vec3 l = lattice_point(e, q);
-		if (!emitted(&e->def, l))
+		if (!emitted(&e->def, l) || (check && occupied[r++]))
 			continue;
 		const eddy_vec3 p = jittered(e, l, &w->rng);
 		/* jitter must not push a particle out of the world */
@@ -112,6 +137,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		vz[first + k] = e->def.velocity.z;
 		k++;
 	}
+	free(pts);
+	free(occupied);
 	return EDDY_OK;
 }
 

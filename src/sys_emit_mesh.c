@@ -9,8 +9,9 @@
  * lattice rows (mesh.c): exact for a closed mesh, points on a face counted
  * once between the two triangles of an edge, so a mesh cube gives exactly
  * emit_box's count. The flags are found once, when added (one byte per
- * lattice point of the box); jitter as emit_box's, after the test. The
- * spacing becomes the world's length scale. */
+ * lattice point of the box); jitter as emit_box's, after the test. Points
+ * water already fills are left out, as emit_box's. The spacing becomes the
+ * world's length scale. */
 #include "mesh.h"
 #include "systems.h"
 
@@ -54,17 +55,37 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	if (e->done || ctx->time + 1e-12 < e->def.start)
 		return EDDY_OK;
 	e->done = true;
+	/* the points water already fills are left out (core.h: eddy__emit_occupied;
+	 * none in an empty world, which needs neither array) */
+	const bool check = w->n > 0;
+	eddy_vec3 *pts = check ? malloc(e->count * sizeof *pts + 1) : NULL;
+	uint8_t *occupied = check ? malloc(e->count + 1) : NULL;
+	bool ok = !check || (pts && occupied);
+	size_t kept = check ? 0 : e->count;
+	if (check && ok) {
+		size_t r = 0;
+		for (size_t q = 0, all = lattice(e); q < all && r < e->count; ++q)
+			if (e->inside[q])
+				pts[r++] = point(e, q);
+		ok = eddy__emit_occupied(w, pts, e->count, e->def.spacing, occupied);
+		for (size_t q = 0; q < e->count; ++q)
+			kept += !occupied[q];
+	}
+	free(pts);
 	size_t first;
-	eddy_status st = eddy__append_particles(w, e->count, &first);
-	if (st != EDDY_OK)
+	eddy_status st = ok ? eddy__append_particles(w, kept, &first)
+	                    : eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory for %zu particles", s->label, e->count);
+	if (st != EDDY_OK) {
+		free(occupied);
 		return st;
+	}
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
 	const float jit = e->def.jitter * e->def.spacing;
 	size_t k = first;
-	for (size_t q = 0, all = lattice(e); q < all; ++q) {
-		if (!e->inside[q])
+	for (size_t q = 0, r = 0, all = lattice(e); q < all; ++q) {
+		if (!e->inside[q] || (check && occupied[r++]))
 			continue;
 		eddy_vec3 p = point(e, q);
 		if (jit > 0) {
@@ -78,6 +99,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		vx[k] = e->def.velocity.x, vy[k] = e->def.velocity.y, vz[k] = e->def.velocity.z;
 		k++;
 	}
+	free(occupied);
 	return EDDY_OK;
 }
 

@@ -994,6 +994,100 @@ double eddy__emission_limit(const eddy_world *w, bool done, double start, double
 	return spacing / speed;
 }
 
+bool eddy__emit_occupied(eddy_world *w, const eddy_vec3 *pts, size_t np, float spacing, uint8_t *occupied)
+{
+	memset(occupied, 0, np);
+	if (w->n == 0 || np == 0 || !(spacing > 0))
+		return true;
+	/* the existing particles in the points' box (one spacing wider) bucketed
+	 * in cells of one spacing: a point's particles lie in its 27 cells */
+	double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+	for (size_t k = 0; k < np; ++k) {
+		const double p[3] = {pts[k].x, pts[k].y, pts[k].z};
+		for (int d = 0; d < 3; ++d) {
+			lo[d] = p[d] < lo[d] ? p[d] : lo[d];
+			hi[d] = p[d] > hi[d] ? p[d] : hi[d];
+		}
+	}
+	size_t dim[3], cells = 1;
+	for (int d = 0; d < 3; ++d) {
+		lo[d] -= spacing;
+		hi[d] += spacing;
+		dim[d] = (size_t)((hi[d] - lo[d]) / spacing) + 1;
+		cells *= dim[d];
+	}
+	if (cells >= UINT32_MAX || w->n >= UINT32_MAX) /* the buckets count in 32 bits */
+		return false;
+	const eddy_arena_mark am = eddy__arena_mark(&w->arena);
+	uint32_t *start = eddy__arena_alloc(&w->arena, (cells + 1) * sizeof *start);
+	uint32_t *cell_of = eddy__arena_alloc(&w->arena, w->n * sizeof *cell_of);
+	if (!start || !cell_of) {
+		eddy__arena_release(&w->arena, am);
+		return false;
+	}
+	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	memset(start, 0, (cells + 1) * sizeof *start);
+	size_t inside = 0;
+	for (size_t i = 0; i < w->n; ++i) {
+		const double p[3] = {x[i], y[i], z[i]};
+		size_t c = 0;
+		bool in = true;
+		for (int d = 2; d >= 0 && in; --d) {
+			const double u = (p[d] - lo[d]) / spacing;
+			in = u >= 0 && u < (double)dim[d];
+			c = c * dim[d] + (in ? (size_t)u : 0);
+		}
+		cell_of[i] = in ? (uint32_t)c : UINT32_MAX;
+		if (in) {
+			start[c + 1]++;
+			inside++;
+		}
+	}
+	if (inside == 0) {
+		eddy__arena_release(&w->arena, am);
+		return true;
+	}
+	for (size_t c = 0; c < cells; ++c)
+		start[c + 1] += start[c];
+	uint32_t *fill = eddy__arena_alloc(&w->arena, cells * sizeof *fill);
+	uint32_t *idx = eddy__arena_alloc(&w->arena, inside * sizeof *idx);
+	if (!fill || !idx) {
+		eddy__arena_release(&w->arena, am);
+		return false;
+	}
+	memcpy(fill, start, cells * sizeof *fill);
+	for (size_t i = 0; i < w->n; ++i)
+		if (cell_of[i] != UINT32_MAX)
+			idx[fill[cell_of[i]]++] = (uint32_t)i;
+	/* the cube's faces included, with a hair for rounding: a point on the
+	 * face two particles' cubes share (the lattices half a spacing apart)
+	 * is filled */
+	const double half = 0.5 * spacing * (1 + 1e-4);
+	for (size_t k = 0; k < np; ++k) {
+		const double p[3] = {pts[k].x, pts[k].y, pts[k].z};
+		size_t cc[3];
+		for (int d = 0; d < 3; ++d)
+			cc[d] = (size_t)((p[d] - lo[d]) / spacing); /* at least 1: the box is a spacing wider */
+		for (size_t cz = cc[2] - 1; cz <= cc[2] + 1 && !occupied[k]; ++cz)
+			for (size_t cy = cc[1] - 1; cy <= cc[1] + 1 && !occupied[k]; ++cy)
+				for (size_t cx = cc[0] - 1; cx <= cc[0] + 1 && !occupied[k]; ++cx) {
+					if (cx >= dim[0] || cy >= dim[1] || cz >= dim[2])
+						continue;
+					const size_t c = (cz * dim[1] + cy) * dim[0] + cx;
+					for (uint32_t q = start[c]; q < start[c + 1]; ++q) {
+						const uint32_t i = idx[q];
+						if (fabs((double)x[i] - p[0]) <= half && fabs((double)y[i] - p[1]) <= half &&
+						    fabs((double)z[i] - p[2]) <= half) {
+							occupied[k] = 1;
+							break;
+						}
+					}
+				}
+	}
+	eddy__arena_release(&w->arena, am);
+	return true;
+}
+
 void eddy__check_emitter_start(const eddy_world *w, const eddy_system *s, double start, eddy_check_fn report,
                                void *user)
 {
