@@ -1065,15 +1065,16 @@ bool eddy__emit_occupied(eddy_world *w, const eddy_vec3 *pts, size_t np, float s
 	const double half = 0.5 * spacing * (1 + 1e-4);
 	for (size_t k = 0; k < np; ++k) {
 		const double p[3] = {pts[k].x, pts[k].y, pts[k].z};
-		size_t cc[3];
+		long cc[3]; /* about 1 and up: the box is a spacing wider than the points */
 		for (int d = 0; d < 3; ++d)
-			cc[d] = (size_t)((p[d] - lo[d]) / spacing); /* at least 1: the box is a spacing wider */
-		for (size_t cz = cc[2] - 1; cz <= cc[2] + 1 && !occupied[k]; ++cz)
-			for (size_t cy = cc[1] - 1; cy <= cc[1] + 1 && !occupied[k]; ++cy)
-				for (size_t cx = cc[0] - 1; cx <= cc[0] + 1 && !occupied[k]; ++cx) {
-					if (cx >= dim[0] || cy >= dim[1] || cz >= dim[2])
+			cc[d] = (long)((p[d] - lo[d]) / spacing);
+		for (long cz = cc[2] - 1; cz <= cc[2] + 1 && !occupied[k]; ++cz)
+			for (long cy = cc[1] - 1; cy <= cc[1] + 1 && !occupied[k]; ++cy)
+				for (long cx = cc[0] - 1; cx <= cc[0] + 1 && !occupied[k]; ++cx) {
+					if (cx < 0 || cy < 0 || cz < 0 || (size_t)cx >= dim[0] || (size_t)cy >= dim[1] ||
+					    (size_t)cz >= dim[2])
 						continue;
-					const size_t c = (cz * dim[1] + cy) * dim[0] + cx;
+					const size_t c = ((size_t)cz * dim[1] + (size_t)cy) * dim[0] + (size_t)cx;
 					for (uint32_t q = start[c]; q < start[c + 1]; ++q) {
 						const uint32_t i = idx[q];
 						if (fabs((double)x[i] - p[0]) <= half && fabs((double)y[i] - p[1]) <= half &&
