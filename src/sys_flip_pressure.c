@@ -205,6 +205,17 @@ static bool at_wall(const eddy_world *w, const flip_solid *sd, const uint8_t *ty
 	return wall && air;
 }
 
+/* (b - A q)_r */
+static inline double row_residual(const flip_matrix *A, const double *b, const double *q, int r)
+{
+	const int *nb = &A->nb[6 * r];
+	double t = b[r] - A->diag[r] * q[r];
+	for (int d = 0; d < 6; ++d)
+		if (nb[d] >= 0)
+			t += flip_off(A, r, d) * q[nb[d]];
+	return t;
+}
+
 /* A q = b to max|r| <= tol max|b| by the chosen solver (*iterations,
  * *residual: its own account; the caller measures the residual). */
 static eddy_status solve_system(eddy_world *w, pressure *ps, const eddy_step_context *ctx, const flip_matrix *pA,
@@ -578,11 +589,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 		double rmax = 0, bmax = 0;
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(max : rmax, bmax)
 		for (int r = 0; r < n; ++r) {
-			const int *nb = &A.nb[6 * r];
-			double t = b[r] - A.diag[r] * q[r];
-			for (int d = 0; d < 6; ++d)
-				if (nb[d] >= 0)
-					t += flip_off(&A, r, d) * q[nb[d]];
+			const double t = row_residual(&A, b, q, r);
 			res[r] = t;
 			rmax = fabs(t) > rmax ? fabs(t) : rmax;
 			bmax = fabs(b[r]) > bmax ? fabs(b[r]) : bmax;
@@ -608,11 +615,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	bool finite = true;
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(max : rmax, bmax) reduction(&& : finite)
 	for (int r = 0; r < n; ++r) {
-		const int *nb = &A.nb[6 * r];
-		double t = b[r] - A.diag[r] * q[r];
-		for (int d = 0; d < 6; ++d)
-			if (nb[d] >= 0)
-				t += flip_off(&A, r, d) * q[nb[d]];
+		const double t = row_residual(&A, b, q, r);
 		finite = finite && isfinite(q[r]);
 		rmax = fabs(t) > rmax ? fabs(t) : rmax;
 		bmax = fabs(b[r]) > bmax ? fabs(b[r]) : bmax;

@@ -148,6 +148,46 @@ static double mean_level(eddy_world *w, double x0)
 	return cols ? sum / cols : NAN;
 }
 
+/* The SPH pipeline after the emitters, as eddy.fluid builds it: density
+ * (h = 2 spacings; stiffness for WCSPH), DFSPH (cold: without its
+ * divergence solver) or WCSPH, viscosity 1e-3 Pa s and alpha 0.05, gravity,
+ * the world box's wall particles, integrate and the tank. */
+static void add_sph_fluid(eddy_world *w, const eddy_world_def *wd, bool dfsph, bool cold, float stiffness)
+{
+	eddy_sph_density_def de = eddy_default_sph_density_def();
+	de.spacing = (float)SP;
+	de.radius = (float)(2 * SP);
+	de.stiffness = stiffness;
+	CHECK(eddy_system_valid(w, eddy_add_sph_density(w, &de)));
+	eddy_gravity_def g = eddy_default_gravity_def();
+	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
+	vi.viscosity = 1e-3f;
+	vi.artificial = 0.05f;
+	if (dfsph) {
+		eddy_add_gravity(w, &g);
+		CHECK(eddy_system_valid(w, eddy_add_sph_viscosity(w, &vi)));
+		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
+		df.divergence_solver = !cold;
+		CHECK(eddy_system_valid(w, eddy_add_sph_dfsph(w, &df)));
+	} else {
+		eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
+		CHECK(eddy_system_valid(w, eddy_add_sph_pressure(w, &pr)));
+		CHECK(eddy_system_valid(w, eddy_add_sph_viscosity(w, &vi)));
+		eddy_add_gravity(w, &g);
+	}
+	eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
+	bb.min = wd->bounds_min;
+	bb.max = wd->bounds_max;
+	bb.spacing = (float)SP;
+	CHECK(eddy_system_valid(w, eddy_add_sph_boundary_box(w, &bb)));
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	eddy_collide_box_def tank = eddy_default_collide_box_def();
+	tank.min = wd->bounds_min;
+	tank.max = wd->bounds_max;
+	eddy_add_collide_box(w, &tank);
+}
+
 /* The world of case c; m (kept alive by the caller) moves its solid. */
 static eddy_world *solid_world(const solid_case *c, mover *mp)
 {
@@ -168,39 +208,9 @@ static eddy_world *solid_world(const solid_case *c, mover *mp)
 	eb.max = (eddy_vec3){(float)TW, (float)DEPTH, (float)TD};
 	eb.spacing = (float)SP;
 	CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &eb)));
-	eddy_sph_density_def de = eddy_default_sph_density_def();
-	de.spacing = (float)SP;
-	de.radius = (float)(2 * SP);
 	/* WCSPH: k = 100 g D, a column compressed by g D / k = 1% at the floor
 	 * (0.5% on the mean), c = 12 m/s, 20 x the solid's top speed */
-	de.stiffness = (float)(100 * 9.81 * DEPTH);
-	CHECK(eddy_system_valid(w, eddy_add_sph_density(w, &de)));
-	eddy_gravity_def g = eddy_default_gravity_def();
-	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
-	vi.viscosity = 1e-3f;
-	vi.artificial = 0.05f;
-	if (c->dfsph) {
-		eddy_add_gravity(w, &g);
-		CHECK(eddy_system_valid(w, eddy_add_sph_viscosity(w, &vi)));
-		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
-		CHECK(eddy_system_valid(w, eddy_add_sph_dfsph(w, &df)));
-	} else {
-		eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
-		CHECK(eddy_system_valid(w, eddy_add_sph_pressure(w, &pr)));
-		CHECK(eddy_system_valid(w, eddy_add_sph_viscosity(w, &vi)));
-		eddy_add_gravity(w, &g);
-	}
-	eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
-	bb.min = wd.bounds_min;
-	bb.max = wd.bounds_max;
-	bb.spacing = (float)SP;
-	CHECK(eddy_system_valid(w, eddy_add_sph_boundary_box(w, &bb)));
-	eddy_integrate_def it = eddy_default_integrate_def();
-	eddy_add_integrate(w, &it);
-	eddy_collide_box_def tank = eddy_default_collide_box_def();
-	tank.min = wd.bounds_min;
-	tank.max = wd.bounds_max;
-	eddy_add_collide_box(w, &tank);
+	add_sph_fluid(w, &wd, c->dfsph, false, (float)(100 * 9.81 * DEPTH));
 	eddy_custom_system_def cs = eddy_default_custom_system_def();
 	cs.name = "mover";
 	cs.step = move_solid;
@@ -545,36 +555,7 @@ static double lid_fall_ratio(const lid_case *c)
 	eb.spacing = (float)SP;
 	eb.velocity = (eddy_vec3){0, (float)-c->v0, 0};
 	CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &eb)));
-	eddy_sph_density_def de = eddy_default_sph_density_def();
-	de.spacing = (float)SP;
-	de.radius = (float)(2 * SP);
-	de.stiffness = 400; /* c = 20 m/s, as scenes/pour.lua */
-	CHECK(eddy_system_valid(w, eddy_add_sph_density(w, &de)));
-	eddy_gravity_def g = eddy_default_gravity_def();
-	eddy_sph_viscosity_def vi = eddy_default_sph_viscosity_def();
-	vi.viscosity = 1e-3f;
-	vi.artificial = 0.05f;
-	eddy_add_gravity(w, &g);
-	CHECK(eddy_system_valid(w, eddy_add_sph_viscosity(w, &vi)));
-	if (c->dfsph) {
-		eddy_sph_dfsph_def df = eddy_default_sph_dfsph_def();
-		df.divergence_solver = !c->cold;
-		CHECK(eddy_system_valid(w, eddy_add_sph_dfsph(w, &df)));
-	} else {
-		eddy_sph_pressure_def pr = eddy_default_sph_pressure_def();
-		CHECK(eddy_system_valid(w, eddy_add_sph_pressure(w, &pr)));
-	}
-	eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
-	bb.min = wd.bounds_min;
-	bb.max = wd.bounds_max;
-	bb.spacing = (float)SP;
-	CHECK(eddy_system_valid(w, eddy_add_sph_boundary_box(w, &bb)));
-	eddy_integrate_def it = eddy_default_integrate_def();
-	eddy_add_integrate(w, &it);
-	eddy_collide_box_def tank = eddy_default_collide_box_def();
-	tank.min = wd.bounds_min;
-	tank.max = wd.bounds_max;
-	eddy_add_collide_box(w, &tank);
+	add_sph_fluid(w, &wd, c->dfsph, c->cold, 400); /* WCSPH: c = 20 m/s, as scenes/pour.lua */
 	if (c->shelf) {
 		eddy_collide_box_def sh = eddy_default_collide_box_def();
 		sh.min = (eddy_vec3){0, (float)top, 0};
