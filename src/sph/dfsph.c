@@ -247,7 +247,7 @@ typedef struct dfsph_work {
 	                               * and in the operator's product, which is linear */
 	const float *kprev[2];        /* the divergence solver's warm starts (their sum about the last
 	                               * step's k); NULL without them */
-	const float *vel[3], *acc[3]; /* v and a before the solve (wall_sums) */
+	const float *vel[3], *acc[3]; /* v and a before the solve (wall_sums); NULL in the probe */
 	/* B_i, and w = 1 / D_i (0 where D_i is negligible) for the paper's
 	 * sweeps; the divergence solver, which does not use D_i, keeps there
 	 * from its velocity solve on 1 where rho_i >= DFSPH_SURFACE rho0, else 0
@@ -359,10 +359,11 @@ static inline sf8 sum8(const float *t, long m)
  * grad W(x_i - x_b) (out[3..5][q]), each in four partial sums (neighbour q
  * onto sum q mod 4, the last four padded and masked out) ended as sph_sum4
  * ends them: a particle at a wall has too few boundary neighbours for eight.
- * With the warm starts, a particle leaving its walls with no pressure (the
- * last step's k <= 0, v + dt a moving away from them: DFSPH_LEAVE) is
- * marked in wk->mask for the velocity solve, and its walls' pressure
- * p_b = p_i + rho_i g . (x_b - x_i) held at >= 0 (header). */
+ * In a step (not the probe), a particle leaving its walls with no pressure
+ * (header: the last step's k <= 0, or rho_i <= rho0 for the cold solve; v +
+ * dt a moving away from them: DFSPH_LEAVE) is marked in wk->mask for the
+ * velocity solve, and its walls' pressure p_b = p_i + rho_i g . (x_b - x_i)
+ * held at >= 0. */
 static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], long q)
 {
 	const sph_shared *sh = wk->sh;
