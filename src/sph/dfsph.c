@@ -372,6 +372,10 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 	const eddy_vec3 g = wk->gravity;
 	const uint32_t *blist = sph_bnbrs(nb, i), bcnt = nb->bcount[i];
 	const bool warm = wk->kprev[0] != NULL, free_walls = wk->vel[0] != NULL;
+	/* no pressure: the last step's k (warm), else no compression for the cold
+	 * solve, which makes pressure only from it; only such a particle can
+	 * leave its walls, so only its sums of the walls below are kept */
+	const bool unpressed = free_walls && (warm ? wk->kprev[0][i] + wk->kprev[1][i] <= 0 : wk->rho[i] <= sh->rho0);
 	float s[9][4] = {{0}};
 	for (uint32_t p = 0; p < bcnt; p += 4)
 		for (uint32_t l = 0; l < 4; ++l) {
@@ -389,7 +393,7 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 			s[3][l] += gh * rx;
 			s[4][l] += gh * ry;
 			s[5][l] += gh * rz;
-			if (free_walls) { /* the walls above p_i's level left out (p_i = 0 here) */
+			if (unpressed) { /* the walls above p_i's level left out (p_i = 0 here) */
 				const float gp = (gd > 0 ? gd : 0.0f) * c;
 				s[6][l] += gp * rx;
 				s[7][l] += gp * ry;
@@ -398,17 +402,14 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 		}
 	for (int k = 0; k < 6; ++k)
 		out[k][q] = sph_sum4(s[k]);
-	if (!free_walls)
-		return;
+	if (!unpressed)
+		return; /* gradients set its mask 0 */
 	const float bx = out[0][q], by = out[1][q], bz = out[2][q];
 	const float ux = wk->vel[0][i] + wk->dt * wk->acc[0][i], uy = wk->vel[1][i] + wk->dt * wk->acc[1][i],
 				uz = wk->vel[2][i] + wk->dt * wk->acc[2][i];
 	const float rate = ux * bx + uy * by + uz * bz - (wk->bdiv ? wk->bdiv[i] : 0.0f); /* > 0: towards them */
 	const float b2 = bx * bx + by * by + bz * bz, u2 = ux * ux + uy * uy + uz * uz;
-	/* no pressure: the last step's k (warm), else no compression for the cold
-	 * solve, which makes pressure only from it */
-	const bool unpressed = warm ? wk->kprev[0][i] + wk->kprev[1][i] <= 0 : wk->rho[i] <= sh->rho0;
-	const bool leaving = unpressed && rate < 0 && rate * rate > DFSPH_LEAVE * DFSPH_LEAVE * b2 * u2;
+	const bool leaving = rate < 0 && rate * rate > DFSPH_LEAVE * DFSPH_LEAVE * b2 * u2;
 	wk->mask[i] = leaving;
 	if (leaving)
 		for (int k = 3; k < 6; ++k)
