@@ -371,12 +371,19 @@ void eddy__check_emitter_start(const eddy_world *w, const eddy_system *s, double
 double eddy__emission_limit(const eddy_world *w, bool done, double start, double spacing, double speed,
                             const char **reason);
 /* The points pts[0 .. np) a one-shot emitter of the given spacing would add
- * where water already is: occupied[k] = 1 when a particle of the world lies
- * within spacing / 2 of pts[k] on every axis (its lattice cell, faces
- * included, holds the point), else 0. An emitter adds water only where there is none: two boxes
- * that overlap make one pool, not a doubly dense block that bursts. Serial,
- * in the world's arena (released on return); false when out of memory. */
+ * where water or a solid already is: occupied[k] = 1 when a particle of the
+ * world lies within spacing / 2 of pts[k] on every axis (its lattice cell,
+ * faces included, holds the point) or pts[k] lies inside a collider's solid
+ * (its signed distance < 0), else 0. An emitter adds water only where there
+ * is none: two boxes that overlap make one pool, not a doubly dense block
+ * that bursts, and a box around an obstacle fills around it rather than
+ * leaving the collider to push the water inside it out in one step (a pool
+ * around a 4 cm sphere burst at 15 m/s, WCSPH). Serial, in the world's arena
+ * (released on return); false when out of memory. */
 bool eddy__emit_occupied(eddy_world *w, const eddy_vec3 *pts, size_t np, float spacing, uint8_t *occupied);
+/* Whether an emitter must ask eddy__emit_occupied: the world has particles
+ * or colliders. */
+bool eddy__emit_needs_check(const eddy_world *w);
 
 /* collider helpers (collider.c) */
 /* The collider's pose: a point q of the def pose is at

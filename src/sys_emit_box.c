@@ -1,7 +1,7 @@
 /* SPDX-License-Identifier: MIT */
 /* emit_box: a block of particles on a simple cubic lattice, emitted once.
  *
- * Reads: nothing. Writes: x y z vx vy vz.
+ * Reads: x y z (the water already there), the colliders' solids. Writes: x y z vx vy vz.
  * Lattice points sit at min + (i + 1/2) * spacing on each axis, so a block
  * fills [min, max] with cells of size spacing; the count per axis is
  * floor((max - min) / spacing). Jitter moves each point by a uniform offset in
@@ -13,8 +13,9 @@
  * mirror-symmetric about its centre on every axis, and it stands on the
  * simple cubic lattice the SPH mass calibration assumes.
  * A point water already fills (a particle within spacing / 2 of it on every
- * axis: eddy__emit_occupied) is left out, so that boxes which overlap each
- * other or a pool make one body of water.
+ * axis) or a collider's solid holds is left out (eddy__emit_occupied), so
+ * that boxes which overlap each other or a pool make one body of water, and
+ * a box around an obstacle fills around it.
  * The spacing becomes the world's length scale for the advection limit. */
 #include "systems.h"
 
@@ -93,9 +94,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		return EDDY_OK;
 	e->done = true;
 	const size_t count = e->count, lattice = (size_t)e->nx * (size_t)e->ny * (size_t)e->nz;
-	/* the points, and which of them water already fills (core.h; none in an
-	 * empty world, which needs neither array) */
-	const bool check = w->n > 0;
+	/* the points, and which of them water or a solid already fills (core.h;
+	 * a world with neither needs neither array) */
+	const bool check = eddy__emit_needs_check(w);
 	eddy_vec3 *pts = check ? malloc(count * sizeof *pts + 1) : NULL;
 	uint8_t *occupied = check ? malloc(count + 1) : NULL;
 	bool ok = !check || (pts && occupied);

@@ -2,7 +2,7 @@
 /* emit_mesh: a closed mesh from a file filled with particles on a simple
  * cubic lattice, emitted once.
  *
- * Reads: nothing. Writes: x y z vx vy vz.
+ * Reads: x y z (the water already there), the colliders' solids. Writes: x y z vx vy vz.
  * Lattice points sit at min + (i + 1/2) spacing on each axis, min the
  * mesh's box corner, as emit_box places them in a box; those inside the
  * mesh are emitted. Inside is the winding number along +x rays through the
@@ -10,8 +10,8 @@
  * once between the two triangles of an edge, so a mesh cube gives exactly
  * emit_box's count. The flags are found once, when added (one byte per
  * lattice point of the box); jitter as emit_box's, after the test. Points
- * water already fills are left out, as emit_box's. The spacing becomes the
- * world's length scale. */
+ * water already fills or a collider's solid holds are left out, as
+ * emit_box's. The spacing becomes the world's length scale. */
 #include "mesh.h"
 #include "systems.h"
 
@@ -55,9 +55,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	if (e->done || ctx->time + 1e-12 < e->def.start)
 		return EDDY_OK;
 	e->done = true;
-	/* the points water already fills are left out (core.h: eddy__emit_occupied;
-	 * none in an empty world, which needs neither array) */
-	const bool check = w->n > 0;
+	/* the points water or a solid already fills are left out (core.h:
+	 * eddy__emit_occupied; a world with neither needs neither array) */
+	const bool check = eddy__emit_needs_check(w);
 	eddy_vec3 *pts = check ? malloc(e->count * sizeof *pts + 1) : NULL;
 	uint8_t *occupied = check ? malloc(e->count + 1) : NULL;
 	bool ok = !check || (pts && occupied);
