@@ -280,15 +280,21 @@ static void slosh_all_methods(void)
 	const slosh_result wcsph = run_slosh("wcsph", "0.005", "4", 3.0);
 	const slosh_result dfsph = run_slosh("dfsph", "0.005", "4", 3.0);
 	const slosh_result dfsph10 = run_slosh("dfsph", "0.01", "4", 3.0);
+	const slosh_result wcsph_thick = run_slosh("wcsph", "0.01", "16", 3.0);
 	const struct {
 		const char *name;
 		const slosh_result *r;
-	} rows[] = {{"FLIP 0.95 2.5 mm", &flip}, {"PIC 2.5 mm", &pic},   {"APIC 2.5 mm", &apic},
-	            {"WCSPH 5 mm", &wcsph},      {"DFSPH 5 mm", &dfsph}, {"DFSPH 10 mm", &dfsph10}};
+	} rows[] = {{"FLIP 0.95 2.5 mm", &flip},
+	            {"PIC 2.5 mm", &pic},
+	            {"APIC 2.5 mm", &apic},
+	            {"WCSPH 5 mm", &wcsph},
+	            {"DFSPH 5 mm", &dfsph},
+	            {"DFSPH 10 mm", &dfsph10},
+	            {"WCSPH 10 mm, 16 thick", &wcsph_thick}};
 	for (size_t i = 0; i < sizeof rows / sizeof rows[0]; ++i)
-		printf("    slosh %-17s period error %+6.2f%%, damping ratio %.4f, %.0f peaks, wall %.1f s\n", rows[i].name,
+		printf("    slosh %-22s period error %+6.2f%%, damping ratio %.4f, %.0f peaks, wall %.1f s\n", rows[i].name,
 		       100 * rows[i].r->period_err, rows[i].r->damping, rows[i].r->peaks, rows[i].r->wall_s);
-	CHECK(flip.ok && pic.ok && apic.ok && wcsph.ok && dfsph.ok && dfsph10.ok);
+	CHECK(flip.ok && pic.ok && apic.ok && wcsph.ok && dfsph.ok && dfsph10.ok && wcsph_thick.ok);
 	CHECK(fabs(dfsph.period_err) <= 0.03);
 	CHECK(dfsph10.damping > -0.003 && dfsph.damping > -0.003);
 	CHECK(dfsph.damping <= dfsph10.damping + 0.003);
@@ -309,8 +315,16 @@ static void slosh_all_methods(void)
 	 * only, the period is +0.4% at 5 mm (+0.6% at 10 mm) and zeta 0.010
 	 * (0.024), but still water loses the hold the walls gave its lattice:
 	 * 10 layers ring up to 0.69 sqrt(g D). 5% holds the period where it is,
-	 * so a change that moves the wave further from linear theory fails. */
+	 * so a change that moves the wave further from linear theory fails.
+	 * Linear theory's wave is two-dimensional (no side walls): in a tank
+	 * thick enough that the side walls do not reach every particle the
+	 * WCSPH wave has the period, as the grid methods': 16 spacings thick,
+	 * -1.63% at 10 mm (10 particles per depth, held to the 3% here) and
+	 * -0.46% at 5 mm; 8 thick, -2.37% at 5 mm. So the thin tank's -3.9%
+	 * is the side walls' stiffness (README, Stress cases), a limit for
+	 * water in a channel a few spacings wide, not the wave's. */
 	CHECK(fabs(wcsph.period_err) <= 0.05);
+	CHECK(fabs(wcsph_thick.period_err) <= 0.03);
 	/* The grid methods conserve the wave's volume since the fill-fraction
 	 * marker (flip_p2g): all three measure a damping ratio within a few
 	 * resolutions (about 0.003, the fast test's) of water's 0.001, PIC no
