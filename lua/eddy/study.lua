@@ -15,8 +15,8 @@
 --     metric = { kind = "mean_abs", x = "T", y = "Z", from = 1, to = 3 },
 --              -- kinds: "mean_abs" (y against the reference's y(x), x in [from, to]),
 --              -- "mean" / "max" (of a stats field the scene computes, time >= from),
---              -- "frequency" (omega of a stats field from its zero crossings, relative
---              -- error against reference.analytic(params))
+--              -- "frequency" (omega of a stats field from its zero crossings over
+--              -- whole periods, relative error against reference.analytic(params))
 --     extra = { density_err_avg = "mean", divergence = "max" },   -- more CSV columns
 --     set = { a = 0.1 },                         -- --set for every run
 --     duration = 0.2, quick_duration = 0.1,      -- s, optional (default: the scene's)
@@ -393,7 +393,10 @@ local function field_reduce(frames, field, how, from)
 end
 
 -- omega (rad/s) of a stats field from its zero crossings (linearly
--- interpolated), which are half a period apart; NaN with fewer than 2.
+-- interpolated), which are half a period apart, over whole periods once
+-- there are any (an even number of half periods: a field riding on a small
+-- offset has half periods alternating short and long, and an odd count
+-- keeps one more of one kind); NaN with fewer than 2.
 local function omega_of(frames, field, from)
 	local crossings, prev, prev_t = {}, nil, nil
 	for _, f in ipairs(frames) do
@@ -406,7 +409,9 @@ local function omega_of(frames, field, from)
 		end
 	end
 	if #crossings < 2 then return 0 / 0 end
-	return math.pi * (#crossings - 1) / (crossings[#crossings] - crossings[1])
+	local last = #crossings
+	if (last - 1) % 2 == 1 and last > 2 then last = last - 1 end
+	return math.pi * (last - 1) / (crossings[last] - crossings[1])
 end
 
 -- ---- the sweep -------------------------------------------------------------
