@@ -378,8 +378,9 @@ double eddy__emission_limit(const eddy_world *w, bool done, double start, double
  * is none: two boxes that overlap make one pool, not a doubly dense block
  * that bursts, and a box around an obstacle fills around it rather than
  * leaving the collider to push the water inside it out in one step (a pool
- * around a 4 cm sphere burst at 15 m/s, WCSPH). Serial, in the world's arena
- * (released on return); false when out of memory. */
+ * around a 4 cm sphere burst at 15 m/s, WCSPH). The solids' test on the
+ * world's threads, the water's serially, in the world's arena (released on
+ * return); false when out of memory. */
 bool eddy__emit_occupied(eddy_world *w, const eddy_vec3 *pts, size_t np, float spacing, uint8_t *occupied);
 /* Whether an emitter must ask eddy__emit_occupied: the world has particles
  * or colliders. */

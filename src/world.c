@@ -1012,11 +1012,16 @@ bool eddy__emit_needs_check(const eddy_world *w)
  * no margin, 0.34 and 0.71 with half a spacing). */
 static void emit_solids(const eddy_world *w, const eddy_vec3 *pts, size_t np, uint8_t *occupied)
 {
+	/* each point's flag is written by one thread (the distances are
+	 * read-only queries): the same flags on any thread count */
+	const long n = (long)np;
+	const int nt = n > EDDY_PAR_ROWS ? w->def.threads : 1;
 	for (int k = 0; k < w->order_count; ++k) {
 		const eddy_system *c = &w->slots[w->order[k]];
 		if (!c->vt->distance)
 			continue;
-		for (size_t q = 0; q < np; ++q)
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+		for (long q = 0; q < n; ++q)
 			if (!occupied[q] && c->vt->distance(c, pts[q]) < 0)
 				occupied[q] = 1;
 	}

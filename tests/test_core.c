@@ -446,11 +446,16 @@ static void emitters_add_water_only_where_there_is_none(void)
  * the pools). */
 static void emitters_fill_around_solids(void)
 {
-	eddy_emit_box_def b = eddy_default_emit_box_def(); /* spacing 0.01 */
-	b.max = (eddy_vec3){0.2f, 0.1f, 0.1f};             /* 2000 points at (i + 1/2) cm */
-	for (int k = 0; k < 4; ++k) {
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.max = (eddy_vec3){0.2f, 0.1f, 0.1f}; /* 2000 points at (i + 1/2) cm, 128,000 at 2.5 mm */
+	/* cases 0-3 at 1 cm; 4 and 5 (the sphere and the box) at 2.5 mm on two
+	 * threads, where the solids' test runs on the threads */
+	for (int kk = 0; kk < 6; ++kk) {
+		const int k = kk % 4, m = kk < 4 ? 1 : 4; /* lattice points per cm */
+		b.spacing = 0.01f / (float)m;
 		eddy_world_def d = eddy_default_world_def();
 		d.bounds_max = (eddy_vec3){0.2f, 0.2f, 0.1f};
+		d.threads = kk < 4 ? 1 : 2;
 		eddy_world *w = eddy_create_world(&d, NULL, 0);
 		CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &b)));
 		const eddy_vec3 c = {0.083f, 0.047f, 0.052f};
@@ -477,10 +482,11 @@ static void emitters_fill_around_solids(void)
 		CHECKF(eddy_world_step(w) == EDDY_OK, "%s", eddy_world_error(w));
 		/* the lattice points outside the solid, counted here */
 		size_t want = 0;
-		for (int i = 0; i < 20; ++i)
-			for (int j = 0; j < 10; ++j)
-				for (int l = 0; l < 10; ++l) {
-					const double x = 0.005 + 0.01 * i, y = 0.005 + 0.01 * j, z = 0.005 + 0.01 * l;
+		const double sp = 0.01 / m;
+		for (int i = 0; i < 20 * m; ++i)
+			for (int j = 0; j < 10 * m; ++j)
+				for (int l = 0; l < 10 * m; ++l) {
+					const double x = sp * (i + 0.5), y = sp * (j + 0.5), z = sp * (l + 0.5);
 					bool in = false;
 					if (k == 0)
 						in = (x - c.x) * (x - c.x) + (y - c.y) * (y - c.y) + (z - c.z) * (z - c.z) < (double)r * r;
@@ -500,8 +506,9 @@ static void emitters_fill_around_solids(void)
 				inside += px > lo.x && px < hi.x && py > lo.y && py < hi.y && pz > lo.z && pz < hi.z;
 		}
 		static const char *const solid[] = {"a sphere", "a box", "a mesh cube", "a tank"};
-		printf("    a box around %s: %zu particles (%zu lattice points outside the solid), %zu inside it\n", solid[k],
-		       n, want, inside);
+		printf(
+			"    a box around %s, spacing %g m: %zu particles (%zu lattice points outside the solid), %zu inside it\n",
+			solid[k], sp, n, want, inside);
 		CHECK(n == want);
 		CHECK(inside == 0);
 		CHECK(k != 3 || n == 2000);
