@@ -450,6 +450,7 @@ static void emitters_fill_around_solids(void)
 	b.max = (eddy_vec3){0.2f, 0.1f, 0.1f}; /* 2000 points at (i + 1/2) cm, 128,000 at 2.5 mm */
 	/* cases 0-3 at 1 cm; 4 and 5 (the sphere and the box) at 2.5 mm on two
 	 * threads, where the solids' test runs on the threads */
+	size_t want_sphere = 0;
 	for (int kk = 0; kk < 6; ++kk) {
 		const int k = kk % 4, m = kk < 4 ? 1 : 4; /* lattice points per cm */
 		b.spacing = 0.01f / (float)m;
@@ -512,8 +513,29 @@ static void emitters_fill_around_solids(void)
 		CHECK(n == want);
 		CHECK(inside == 0);
 		CHECK(k != 3 || n == 2000);
+		if (kk == 0)
+			want_sphere = want;
 		eddy_destroy_world(w);
 	}
+	/* emit_mesh likewise: a mesh cube on the box's lattice around the sphere */
+	eddy_world_def d = eddy_default_world_def();
+	d.bounds_max = (eddy_vec3){0.2f, 0.2f, 0.1f};
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_mesh_def em = eddy_default_emit_mesh_def();
+	strcpy(em.path, "scenes/meshes/cube.obj");
+	em.scale = (eddy_vec3){0.2f, 0.1f, 0.1f};
+	em.spacing = 0.01f;
+	CHECKF(eddy_system_valid(w, eddy_add_emit_mesh(w, &em)), "%s", eddy_world_error(w));
+	eddy_collide_sphere_def sph = eddy_default_collide_sphere_def();
+	sph.center = (eddy_vec3){0.083f, 0.047f, 0.052f};
+	sph.radius = 0.031f;
+	CHECK(eddy_system_valid(w, eddy_add_collide_sphere(w, &sph)));
+	CHECKF(eddy_world_step(w) == EDDY_OK, "%s", eddy_world_error(w));
+	size_t n;
+	eddy_world_channel(w, "x", &n);
+	printf("    a mesh cube around the sphere: %zu particles (the box's %zu)\n", n, want_sphere);
+	CHECK(n == want_sphere);
+	eddy_destroy_world(w);
 }
 
 static void ellipsoid_emitter(void)
