@@ -17,6 +17,7 @@
  * beyond the fluid: layers should be at least that. */
 #include "flip.h"
 
+#include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -104,8 +105,9 @@ static void extrapolate_grid(float *u, uint8_t *restrict layer, uint8_t *restric
 				const uint8_t *L = layer + row;
 				const bool inner = j > 0 && j + 1 < m[1] && k > 0 && k + 1 < m[2] && m[0] > 2;
 				if (inner) {
-					/* interior of the row: all six neighbours exist */
-					const size_t sy = st[1], sz = st[2];
+					/* interior of the row: all six neighbours exist; signed
+					 * strides, as L[i - sy] lies before the row's start */
+					const ptrdiff_t sy = (ptrdiff_t)st[1], sz = (ptrdiff_t)st[2];
 					for (int i = 1; i < m[0] - 1; ++i)
 						h[i] = (uint8_t)((L[i] == UNKNOWN) & ((L[i - 1] < lb) | (L[i + 1] < lb) | (L[i - sy] < lb) |
 						                                      (L[i + sy] < lb) | (L[i - sz] < lb) | (L[i + sz] < lb)));
