@@ -10,8 +10,10 @@
  * particle can cross, or pass more than half through, in one step; so a
  * particle that moved more than a quarter cell this step (relative to the
  * collider) has its path x - v dt -> x walked half a cell at a time, and
- * if it entered the solid it goes back to where it entered (bisection).
- * Otherwise, a particle with distance d < 0 stays where it is. It then
+ * if it entered the solid it goes back to where it entered (bisection) and
+ * on along the surface there by the rest of the path less its part into the
+ * solid (slide, below). Otherwise, a particle with distance d < 0 stays
+ * where it is. It then
  * moves along n = grad d / |grad d| (central differences half a cell wide)
  * by (2e-3 cells - d) / |grad d|, a Newton step to d = 2e-3 cells (so
  * rounding cannot leave it inside; |grad d| is under 1 in a crease),
@@ -172,6 +174,29 @@ static eddy_vec3 push_out(const collide_mesh *b, eddy_vec3 *q, float *d, float h
 	return nrm;
 }
 
+/* Where a path that entered the solid at hit (body frame, the path ending
+ * at c) goes: on from hit along the surface by the rest of its length less
+ * the rest's part into the solid (the normal at hit), as a particle pressed
+ * against a face slides along it. Stopping at hit instead held such a
+ * particle still while its speed along the face grew (a particle on a mesh
+ * ramp under gravity: every step's path starts on the face and dips in).
+ * A slide that ends inside by at most walk (the field's bend over it) is
+ * left to push_out, as a slow particle is; deeper (a corner, where it runs
+ * into a second face) it ends where it enters, or at hit. */
+static eddy_vec3 slide(const collide_mesh *b, eddy_vec3 hit, eddy_vec3 c, float walk)
+{
+	const eddy_vec3 n = body_normal(b, hit, NULL);
+	eddy_vec3 r = {c.x - hit.x, c.y - hit.y, c.z - hit.z};
+	const float rn = r.x * n.x + r.y * n.y + r.z * n.z;
+	if (rn < 0)
+		r = eddy__v3(r.x - rn * n.x, r.y - rn * n.y, r.z - rn * n.z);
+	const eddy_vec3 q = eddy__add3(hit, r);
+	if (!(body_distance(b, q) < -walk))
+		return q;
+	eddy_vec3 hit2;
+	return first_entry(b, hit, q, &hit2) ? hit2 : hit;
+}
+
 /* A rotating mesh: as step below, in the mesh's own frame. The path starts
  * at x - v dt seen in the pose of the collider's last step and ends at x in
  * the current pose, so a wall sweeping over a particle is caught as a
@@ -199,7 +224,7 @@ static void step_rotated(eddy_world *w, collide_mesh *b, const eddy_collider_mot
 			continue;
 		eddy_vec3 q = c, hit;
 		if (fast && first_entry(b, c0, c, &hit))
-			q = hit, d = body_distance(b, q);
+			q = slide(b, hit, c, walk), d = body_distance(b, q);
 		else if (!(d < 0))
 			continue;
 		eddy_vec3 nrm = push_out(b, &q, &d, hair, NULL);
@@ -250,7 +275,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		 * ends where it entered: projection to the nearest surface would put
 		 * a particle that went more than half through on the far side */
 		if (fast && first_entry(b, eddy__v3(c.x - dp.x, c.y - dp.y, c.z - dp.z), c, &hit))
-			q = hit, d = body_distance(b, q);
+			q = slide(b, hit, c, walk), d = body_distance(b, q);
 		else if (!(d < 0))
 			continue;
 		eddy_vec3 nrm = push_out(b, &q, &d, hair, &off);

@@ -1,8 +1,8 @@
 -- SPDX-License-Identifier: MIT
 -- obstacle_pool (tests/test_physics.c): a pool 0.4 x 0.15 x 0.2 m emitted as
 -- one emit_box around an obstacle standing in it, with any method: solid =
--- "sphere" (4 cm, off the lattice), "box" (turned 30 degrees about y),
--- "none". The emitter leaves out the points inside the solid, so the pool
+-- "sphere" (4 cm, off the lattice), "mesh" (the same sphere as the
+-- icosphere mesh), "box" (turned 30 degrees about y), "none". The emitter leaves out the points inside the solid, so the pool
 -- starts still around it. Per frame: vmax (m/s), n (particles), inside
 -- (particles inside the obstacle).
 local eddy = require "eddy"
@@ -17,6 +17,8 @@ local half = {0.03, 0.05, 0.04}
 local cos30, sin30 = math.cos(math.rad(30)), math.sin(math.rad(30))
 if solid == "sphere" then
 	world:add(eddy.collide_sphere { center = c, radius = r })
+elseif solid == "mesh" then
+	world:add(eddy.collide_mesh { path = "scenes/meshes/icosphere.obj", scale = {r, r, r}, translate = c })
 elseif solid == "box" then
 	world:add(eddy.collide_box { min = {c[1] - half[1], c[2] - half[2], c[3] - half[3]},
 	                             max = {c[1] + half[1], c[2] + half[2], c[3] + half[3]},
@@ -26,6 +28,8 @@ end
 local function inside(x, y, z)
 	local dx, dy, dz = x - c[1], y - c[2], z - c[3]
 	if solid == "sphere" then return dx * dx + dy * dy + dz * dz < r * r end
+	-- the icosphere's faces lie up to 0.0045 r inside the sphere
+	if solid == "mesh" then return dx * dx + dy * dy + dz * dz < (0.995 * r) ^ 2 end
 	if solid == "box" then
 		-- into the box's frame: the inverse of the 30 degree turn about y
 		local bx, bz = cos30 * dx - sin30 * dz, sin30 * dx + cos30 * dz
