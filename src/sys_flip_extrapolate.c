@@ -327,6 +327,9 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 						known = (tl != EDDY_CELL_AIR || th != EDDY_CELL_AIR) &&
 						        !(solids && ((tl == EDDY_CELL_SOLID && th == EDDY_CELL_AIR) ||
 						                     (th == EDDY_CELL_SOLID && tl == EDDY_CELL_AIR)));
+						/* a closed face (all in the solid): the water's velocity beside it */
+						if (known && solids && flip_solid_wt(&sd, a, f) == 0)
+							known = false;
 					}
 					la[f] = known ? 0 : UNKNOWN;
 				}
