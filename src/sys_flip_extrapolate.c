@@ -17,6 +17,7 @@
  * beyond the fluid: layers should be at least that. */
 #include "flip.h"
 
+#include <math.h>
 #include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
@@ -277,6 +278,98 @@ eddy_status eddy__flip_fill_fluid_faces(eddy_world *w, float *const face[3], con
 	return EDDY_OK;
 }
 
+/* m, the solids' signed distance at p: the least over the colliders */
+static float solid_distance(const eddy_world *w, eddy_vec3 p)
+{
+	float best = INFINITY;
+	for (int q = 0; q < w->order_count; ++q) {
+		const eddy_system *c = &w->slots[w->order[q]];
+		if (eddy__is_collider(c)) {
+			const float d = c->vt->distance(c, p);
+			best = d < best ? d : best;
+		}
+	}
+	return best;
+}
+
+/* A closed face (all in a solid) that this step filled from the water
+ * beside it keeps the water's velocity along the solid's surface and takes
+ * the solid's across it: with e the face's velocity vector (its own
+ * component, the other two averaged from the four faces of each other grid
+ * around it), V the solid's (flip_boundary's normal velocities, likewise)
+ * and n the solids' distance gradient at the face, its component becomes
+ * e_a - ((e - V) . n) n_a: free slip along a wall, the wall's velocity
+ * across it. The water's velocity alone there (n ignored) let a stirring
+ * paddle's faces push less; the solid's alone made every wall drag. A
+ * closed face flip_pressure gave the water's velocity (water leaving a wall
+ * with air in reach) is not filled: it keeps that. Values
+ * are computed from the filled fields into out[a] and written after, so
+ * the result does not depend on the order. */
+static void closed_faces(const eddy_world *w, const flip_solid *sd, float *const face[3], uint8_t *const layer[3],
+                         size_t st[3][3], int m[3][3], int layers, float *const out[3], int nt)
+{
+	const int n[3] = {w->nx, w->ny, w->nz};
+	const double h = w->def.cell_size;
+	const eddy_vec3 o = w->def.bounds_min;
+	for (int a = 0; a < 3; ++a) {
+		const uint8_t *la = layer[a];
+		float *oa = out[a];
+		const int ma[3] = {m[a][0], m[a][1], m[a][2]};
+		const size_t sa[3] = {st[a][0], st[a][1], st[a][2]};
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+		for (int k = 0; k < ma[2]; ++k)
+			for (int j = 0; j < ma[1]; ++j)
+				for (int i = 0; i < ma[0]; ++i) {
+					const size_t f = (size_t)i + sa[1] * (size_t)j + sa[2] * (size_t)k;
+					const int c[3] = {i, j, k};
+					oa[f] = face[a][f];
+					if (la[f] == 0 || la[f] > layers || c[a] == 0 || c[a] == n[a] || flip_solid_wt(sd, a, f) != 0)
+						continue;
+					double e[3], v[3];
+					e[a] = face[a][f];
+					v[a] = flip_solid_vel(sd, a, f);
+					for (int b = 0; b < 3; ++b) {
+						if (b == a)
+							continue;
+						double se = 0, sv = 0;
+						for (int da = -1; da <= 0; ++da)
+							for (int db = 0; db <= 1; ++db) {
+								int g[3] = {i, j, k};
+								g[a] += da;
+								g[b] += db;
+								const size_t fb = (size_t)g[0] + st[b][1] * (size_t)g[1] + st[b][2] * (size_t)g[2];
+								se += face[b][fb];
+								sv += flip_solid_vel(sd, b, fb);
+							}
+						e[b] = 0.25 * se, v[b] = 0.25 * sv;
+					}
+					/* the face's centre and the distance's gradient there */
+					double p[3];
+					for (int d = 0; d < 3; ++d)
+						p[d] = (&o.x)[d] + ((double)c[d] + (d == a ? 0.0 : 0.5)) * h;
+					double g[3], len2 = 0;
+					for (int d = 0; d < 3; ++d) {
+						double q1[3] = {p[0], p[1], p[2]}, q0[3] = {p[0], p[1], p[2]};
+						q1[d] += 0.5 * h, q0[d] -= 0.5 * h;
+						g[d] = (double)solid_distance(w, (eddy_vec3){(float)q1[0], (float)q1[1], (float)q1[2]}) -
+						       (double)solid_distance(w, (eddy_vec3){(float)q0[0], (float)q0[1], (float)q0[2]});
+						len2 += g[d] * g[d];
+					}
+					if (!(len2 > 0) || !isfinite(len2))
+						continue;
+					const double inv = 1.0 / sqrt(len2);
+					double dn = 0;
+					for (int d = 0; d < 3; ++d)
+						dn += (e[d] - v[d]) * g[d] * inv;
+					oa[f] = (float)(e[a] - dn * g[a] * inv);
+				}
+	}
+	for (int a = 0; a < 3; ++a) {
+		const size_t nf = st[a][2] * (size_t)m[a][2];
+		memcpy(face[a], out[a], nf * sizeof *face[a]);
+	}
+}
+
 static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
 	const extrapolate *ex = s->data;
@@ -327,8 +420,9 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 						known = (tl != EDDY_CELL_AIR || th != EDDY_CELL_AIR) &&
 						        !(solids && ((tl == EDDY_CELL_SOLID && th == EDDY_CELL_AIR) ||
 						                     (th == EDDY_CELL_SOLID && tl == EDDY_CELL_AIR)));
-						/* a closed face (all in the solid): the water's velocity beside it */
-						if (known && solids && flip_solid_wt(&sd, a, f) == 0)
+						/* a closed face (all in the solid) holding the solid's
+						 * velocity: filled from the water beside it (closed_faces) */
+						if (known && solids && flip_solid_wt(&sd, a, f) == 0 && face[a][f] == flip_solid_vel(&sd, a, f))
 							known = false;
 					}
 					la[f] = known ? 0 : UNKNOWN;
@@ -337,8 +431,18 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	hit = eddy__arena_alloc(&w->arena, nfmax);
 	if (!hit)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_extrapolate: out of memory");
-	for (int a = 0; a < 3; ++a) {
+	for (int a = 0; a < 3; ++a)
 		extrapolate_grid(face[a], layer[a], hit, m[a], st[a], ex->def.layers, nt);
+	if (solids) {
+		float *out[3];
+		for (int a = 0; a < 3; ++a) {
+			out[a] = eddy__arena_alloc(&w->arena, st[a][2] * (size_t)m[a][2] * sizeof *out[a]);
+			if (!out[a])
+				return eddy__fail(w, EDDY_ERR_NOMEM, "flip_extrapolate: out of memory");
+		}
+		closed_faces(w, &sd, face, layer, st, m, ex->def.layers, out, nt);
+	}
+	for (int a = 0; a < 3; ++a) {
 		/* the domain's sides beside air: the water's velocity where it
 		 * leaves the side, the side's 0 where it would go through (header) */
 		float *u = face[a];
