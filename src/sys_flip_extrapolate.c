@@ -278,6 +278,40 @@ eddy_status eddy__flip_fill_fluid_faces(eddy_world *w, float *const face[3], con
 	return EDDY_OK;
 }
 
+/* Layers of closed faces closed_faces corrects: a particle's stencil (G2P,
+ * RK2 advection at CFL up to 1) reaches faces a cell into a solid, so the
+ * second layer and on are the water's velocity as filled. Each corrected
+ * face queries the colliders' distances six times. */
+#define CLOSED_REACH 2
+
+/* near[c] = 1 where a fluid cell lies within NEAR_CELLS cells of cell c
+ * along every axis (a box dilation, one axis at a time): the faces a
+ * particle's stencil can read, a particle in a cut cell typed solid
+ * included. tmp: scratch of the same size. */
+#define NEAR_CELLS 2
+static void near_fluid_cells(const eddy_world *w, const uint8_t *type, uint8_t *near, uint8_t *tmp, int nt)
+{
+	const int n[3] = {w->nx, w->ny, w->nz};
+	const size_t st[3] = {1, (size_t)n[0], (size_t)n[0] * (size_t)n[1]};
+	const long nc = (long)n[0] * n[1] * n[2];
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (long c = 0; c < nc; ++c)
+		near[c] = type[c] == EDDY_CELL_FLUID;
+	for (int a = 0; a < 3; ++a) {
+		uint8_t *src = a % 2 ? tmp : near, *dst = a % 2 ? near : tmp;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+		for (long c = 0; c < nc; ++c) {
+			const int i = (int)((size_t)c / st[a] % (size_t)n[a]);
+			uint8_t v = 0;
+			for (int d = -NEAR_CELLS; d <= NEAR_CELLS && !v; ++d)
+				if (i + d >= 0 && i + d < n[a])
+					v = src[(size_t)((long)c + (long)d * (long)st[a])];
+			dst[c] = v;
+		}
+	}
+	memcpy(near, tmp, (size_t)nc); /* three passes ended in tmp */
+}
+
 /* m, the solids' signed distance at p: the least over the colliders */
 static float solid_distance(const eddy_world *w, eddy_vec3 p)
 {
@@ -305,12 +339,13 @@ static float solid_distance(const eddy_world *w, eddy_vec3 p)
  * with air in reach) is not filled: it keeps that. Values
  * are computed from the filled fields into out[a] and written after, so
  * the result does not depend on the order. */
-static void closed_faces(const eddy_world *w, const flip_solid *sd, float *const face[3], uint8_t *const layer[3],
-                         size_t st[3][3], int m[3][3], int layers, float *const out[3], int nt)
+static void closed_faces(const eddy_world *w, const uint8_t *near, const flip_solid *sd, float *const face[3],
+                         uint8_t *const layer[3], size_t st[3][3], int m[3][3], int layers, float *const out[3], int nt)
 {
 	const int n[3] = {w->nx, w->ny, w->nz};
 	const double h = w->def.cell_size;
 	const eddy_vec3 o = w->def.bounds_min;
+	const int reach = layers < CLOSED_REACH ? layers : CLOSED_REACH;
 	for (int a = 0; a < 3; ++a) {
 		const uint8_t *la = layer[a];
 		float *oa = out[a];
@@ -323,7 +358,9 @@ static void closed_faces(const eddy_world *w, const flip_solid *sd, float *const
 					const size_t f = (size_t)i + sa[1] * (size_t)j + sa[2] * (size_t)k;
 					const int c[3] = {i, j, k};
 					oa[f] = face[a][f];
-					if (la[f] == 0 || la[f] > layers || c[a] == 0 || c[a] == n[a] || flip_solid_wt(sd, a, f) != 0)
+					if (la[f] == 0 || la[f] > reach || c[a] == 0 || c[a] == n[a] || flip_solid_wt(sd, a, f) != 0 ||
+					    !(near[flip_cell(w, c[0] - (a == 0), c[1] - (a == 1), c[2] - (a == 2))] |
+					      (c[a] < n[a] ? near[flip_cell(w, c[0], c[1], c[2])] : 0)))
 						continue;
 					double e[3], v[3];
 					e[a] = face[a][f];
@@ -440,7 +477,12 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 			if (!out[a])
 				return eddy__fail(w, EDDY_ERR_NOMEM, "flip_extrapolate: out of memory");
 		}
-		closed_faces(w, &sd, face, layer, st, m, ex->def.layers, out, nt);
+		const size_t ncell3 = (size_t)n[0] * n[1] * n[2];
+		uint8_t *near = eddy__arena_alloc(&w->arena, ncell3), *tmp = eddy__arena_alloc(&w->arena, ncell3);
+		if (!near || !tmp)
+			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_extrapolate: out of memory");
+		near_fluid_cells(w, type, near, tmp, nt);
+		closed_faces(w, near, &sd, face, layer, st, m, ex->def.layers, out, nt);
 	}
 	for (int a = 0; a < 3; ++a) {
 		/* the domain's sides beside air: the water's velocity where it
