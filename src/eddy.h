@@ -813,7 +813,8 @@ EDDY_API eddy_flip_pressure_def eddy_default_flip_pressure_def(void);
 EDDY_API eddy_system_id eddy_add_flip_pressure(eddy_world *w, const eddy_flip_pressure_def *def);
 
 /* flip_extrapolate: face velocities copied outward from faces next to fluid
- * into the air, layer by layer; solid faces keep their velocity. */
+ * into the air, layer by layer; faces inside a solid likewise, then with the
+ * solid's velocity across its surface (free slip along it). */
 typedef struct eddy_flip_extrapolate_def {
 	int layers; /* 1, layers of faces filled; at least the CFL number + 1; [1, 64] */
 } eddy_flip_extrapolate_def;

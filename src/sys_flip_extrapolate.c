@@ -3,14 +3,18 @@
  * ch. 4.6; without it particles near the surface interpolate the zeros of
  * faces no particle reached and stall: docs/validation.md hard case 12).
  *
- * Reads: cell_type u v w, the solids' velocities (flip_boundary's, lent). Writes: u v w.
- *   Known faces: a fluid or solid cell on a side, or on the domain's sides.
+ * Reads: cell_type u v w, the solids' velocities (flip_boundary's, lent) and
+ * their distances (the colliders'). Writes: u v w.
+ *   Known faces: a fluid or solid cell on a side, or on the domain's sides,
+ *   except a face wholly inside a solid that holds its velocity.
  *   Layer l = 1..layers: every unknown face with known neighbours (6-connected
  *   in its own face grid) takes their average and becomes known. A layer is
  *   a vectorised sweep of the grid's flag bytes on all threads (see
  *   extrapolate_grid): the same result on any thread count.
- * Solid faces are never rewritten, so the solid velocities flip_boundary set
- * stay imposed. A domain side beside an air cell is extrapolated too, then
+ * Faces wholly inside a solid are filled as air is, then take the solid's
+ * normal velocity (closed_faces: free slip along solids, Bridson's book,
+ * ch. 5: "extrapolate, then replace the normal component"); cut faces keep
+ * flip_pressure's values. A domain side beside an air cell is extrapolated too, then
  * kept only where it carries water away from the side (else 0): a particle
  * beside a fluid cell that left the side (flip_pressure) interpolates it,
  * and held at 0 it would hold the particle back. RK2 advection at CFL number C samples up to C + 1 cells
