@@ -536,7 +536,9 @@ static void pool_fills_around_an_obstacle(void)
  * layer stopped (0.089 m/s after 0.3 s over the box); and a cut cell at
  * the water's edge was a wall to the pressure (flip_pressure), which
  * braked the row of cut cells under the water when the floor's top lay in
- * a cell's upper half (0.35 m/s). */
+ * a cell's upper half (0.35 m/s). One step beyond: from rest with gravity
+ * tilted 30 degrees towards +x the layer accelerates at g sin 30 (1.47 m/s
+ * at 0.3 s; before 0.28 and 0.81). */
 static void flip_glides_over_a_collider_floor(void)
 {
 	static const char *const cases[] = {"--set floor=box",
@@ -544,7 +546,9 @@ static void flip_glides_over_a_collider_floor(void)
 	                                    "--set floor=box --set y0=0.093",
 	                                    "--set floor=mesh --set y0=0.093",
 	                                    "--set floor=box --set spacing=0.005 --set y0=0.0915",
-	                                    "--set floor=box --set spacing=0.005 --set y0=0.0985"};
+	                                    "--set floor=box --set spacing=0.005 --set y0=0.0985",
+	                                    "--set floor=box --set tilt=30 --set speed=0",
+	                                    "--set floor=box --set tilt=30 --set speed=0 --set y0=0.093"};
 	enum { CAP = 1 << 14 };
 	char cmd[512], *out = malloc(CAP);
 	if (!out)
@@ -562,14 +566,14 @@ static void flip_glides_over_a_collider_floor(void)
 				*next++ = '\0';
 			const double vx = test_json_number(line, "vx");
 			if (isfinite(test_json_number(line, "time"))) {
-				worst = fmax(worst, fabs(vx - 1.5));
+				worst = fmax(worst, fabs(vx - test_json_number(line, "want")));
 				last = vx;
 				frames++;
 			}
 			line = next;
 		}
-		printf("    FLIP glide %s: %d frames, mean vx after 0.3 s %.3f m/s, furthest from 1.5 %.3f\n", cases[k], frames,
-		       last, worst);
+		printf("    FLIP glide %s: %d frames, mean vx after 0.3 s %.3f m/s, furthest from the free-slip value %.3f\n",
+		       cases[k], frames, last, worst);
 		CHECK(st == 0 && frames == 9);
 		CHECK(worst <= 0.03);
 	}
