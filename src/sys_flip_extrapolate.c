@@ -348,7 +348,7 @@ static void closed_faces(const eddy_world *w, const uint8_t *near, const flip_so
 {
 	const int n[3] = {w->nx, w->ny, w->nz};
 	const double h = w->def.cell_size;
-	const eddy_vec3 o = w->def.bounds_min;
+	const double org[3] = {w->def.bounds_min.x, w->def.bounds_min.y, w->def.bounds_min.z};
 	const int reach = layers < CLOSED_REACH ? layers : CLOSED_REACH;
 	for (int a = 0; a < 3; ++a) {
 		const uint8_t *la = layer[a];
@@ -387,7 +387,7 @@ static void closed_faces(const eddy_world *w, const uint8_t *near, const flip_so
 					/* the face's centre and the distance's gradient there */
 					double p[3];
 					for (int d = 0; d < 3; ++d)
-						p[d] = (&o.x)[d] + ((double)c[d] + (d == a ? 0.0 : 0.5)) * h;
+						p[d] = org[d] + ((double)c[d] + (d == a ? 0.0 : 0.5)) * h;
 					double g[3], len2 = 0;
 					for (int d = 0; d < 3; ++d) {
 						double q1[3] = {p[0], p[1], p[2]}, q0[3] = {p[0], p[1], p[2]};

@@ -733,9 +733,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 			if (sd.any) {
 				int fc[3] = {i, j, k};
 				fc[ax] += d & 1;
-				const long o = across(w, i, j, k, d, &f);
-				double wf = flip_face_weight(w, &sd, ax, f, fc[0], fc[1], fc[2]);
-				(void)o;
+				const double wf = flip_face_weight(w, &sd, ax, f, fc[0], fc[1], fc[2]);
 				flux = wf * flux + (1.0 - wf) * (double)flip_solid_vel(&sd, ax, f);
 			}
 			div += (d & 1) ? flux : -flux;

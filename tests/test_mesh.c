@@ -756,6 +756,7 @@ static void slide_case(double phi, bool set_rotation, double v0, float mu)
 	const double a[3] = {cos(phi), 0, sin(phi)};
 	const eddy_vec3 rv = {(float)(a[0] * 30), 0, (float)(a[2] * 30)};
 	const eddy_vec3 T = {0.6f, 0.8f, 0.7f};
+	const double Tv[3] = {T.x, T.y, T.z};
 	eddy_collide_mesh_def d = eddy_default_collide_mesh_def();
 	snprintf(d.path, sizeof d.path, "%s", "scenes/meshes/cube.obj");
 	d.scale = (eddy_vec3){0.5f, 0.06f, 0.4f};
@@ -792,7 +793,7 @@ static void slide_case(double phi, bool set_rotation, double v0, float mu)
 		const double q[3] = {d.scale.x * body[k][0], d.scale.y, d.scale.z * body[k][1]};
 		double x[3];
 		for (int i = 0; i < 3; ++i)
-			x[i] = (&T.x)[i] + R[i][0] * q[0] + R[i][1] * q[1] + R[i][2] * q[2] + 1e-4 * n[i];
+			x[i] = Tv[i] + R[i][0] * q[0] + R[i][1] * q[1] + R[i][2] * q[2] + 1e-4 * n[i];
 		p[k] = (eddy_vec3){(float)x[0], (float)x[1], (float)x[2]};
 		v[k] = (eddy_vec3){(float)(v0 * dir[0]), (float)(v0 * dir[1]), (float)(v0 * dir[2])};
 	}
