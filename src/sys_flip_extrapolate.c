@@ -316,16 +316,13 @@ static void near_fluid_cells(const eddy_world *w, const uint8_t *type, uint8_t *
 	memcpy(near, tmp, (size_t)nc); /* three passes ended in tmp */
 }
 
-/* m, the solids' signed distance at p: the least over the colliders */
-static float solid_distance(const eddy_world *w, eddy_vec3 p)
+/* m, the solids' signed distance at p: the least over the colliders col[0 .. nc - 1] */
+static float solid_distance(const eddy_system *const *col, int nc, eddy_vec3 p)
 {
 	float best = INFINITY;
-	for (int q = 0; q < w->order_count; ++q) {
-		const eddy_system *c = &w->slots[w->order[q]];
-		if (eddy__is_collider(c)) {
-			const float d = c->vt->distance(c, p);
-			best = d < best ? d : best;
-		}
+	for (int q = 0; q < nc; ++q) {
+		const float d = col[q]->vt->distance(col[q], p);
+		best = d < best ? d : best;
 	}
 	return best;
 }
@@ -348,6 +345,11 @@ static void closed_faces(const eddy_world *w, const uint8_t *near, const flip_so
 {
 	const int n[3] = {w->nx, w->ny, w->nz};
 	const double h = w->def.cell_size;
+	const eddy_system *col[EDDY_MAX_SYSTEMS];
+	int nc = 0;
+	eddy_system_iter it = eddy__systems(w, EDDY_CAP_COLLIDER);
+	for (const eddy_system *c; (c = eddy__systems_next(&it));)
+		col[nc++] = c;
 	const double org[3] = {w->def.bounds_min.x, w->def.bounds_min.y, w->def.bounds_min.z};
 	const int reach = layers < CLOSED_REACH ? layers : CLOSED_REACH;
 	for (int a = 0; a < 3; ++a) {
@@ -392,8 +394,8 @@ static void closed_faces(const eddy_world *w, const uint8_t *near, const flip_so
 					for (int d = 0; d < 3; ++d) {
 						double q1[3] = {p[0], p[1], p[2]}, q0[3] = {p[0], p[1], p[2]};
 						q1[d] += 0.5 * h, q0[d] -= 0.5 * h;
-						g[d] = (double)solid_distance(w, (eddy_vec3){(float)q1[0], (float)q1[1], (float)q1[2]}) -
-						       (double)solid_distance(w, (eddy_vec3){(float)q0[0], (float)q0[1], (float)q0[2]});
+						g[d] = (double)solid_distance(col, nc, (eddy_vec3){(float)q1[0], (float)q1[1], (float)q1[2]}) -
+						       (double)solid_distance(col, nc, (eddy_vec3){(float)q0[0], (float)q0[1], (float)q0[2]});
 						len2 += g[d] * g[d];
 					}
 					if (!(len2 > 0) || !isfinite(len2))
