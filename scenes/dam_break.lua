@@ -21,8 +21,9 @@ local solver = eddy.param("solver", "pcg")      -- FLIP's pressure solve: "pcg",
 local fluid = eddy.fluid {
 	method = eddy.param("method", "wcsph"),     -- wcsph, dfsph, flip, pic or apic
 	resolution = eddy.param("spacing", a / 20), -- m
-	-- c = 20 m/s, 10 x the front speed
-	wcsph = { stiffness = eddy.param("stiffness", 400), artificial = eddy.param("alpha", 0.05) },
+	-- stiffness 0: sph_density chooses c = 10 x the column's fall speed sqrt(2 g 2a), at least 20 m/s (20 at
+	-- a = 0.1), so the flow is the same at every a (Froude-similar)
+	wcsph = { stiffness = eddy.param("stiffness", 0), artificial = eddy.param("alpha", 0.05) },
 	dfsph = { tolerance = eddy.param("tolerance", 0.001), artificial = eddy.param("alpha", 0.05) },
 	flip = { solver = solver, tolerance = eddy.param("tolerance", 1e-6), flip_ratio = eddy.param("flip_ratio", 0.95),
 	         reseed = eddy.param("reseed", false) },

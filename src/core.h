@@ -58,6 +58,15 @@ typedef struct eddy_system_vtable {
 	size_t (*sample)(const eddy_world *w, const eddy_system *s, eddy_vec3 *out, size_t cap);
 	/* emitters: the lattice spacing they emit at (m), for the preflight */
 	float (*spacing)(const eddy_system *s);
+	/* emitters: the highest point along the unit vector up of what they
+	 * emit (m; a bound: a block's corner) and the fastest speed they give a
+	 * particle (m/s), for sph_density's automatic speed of sound */
+	void (*reach)(const eddy_system *s, eddy_vec3 up, double *top, double *speed);
+	/* derives settings from the rest of the pipeline (sph_density's
+	 * automatic speed of sound); called on every live system after each
+	 * add and remove until the world's first step, so the order systems are
+	 * added in does not matter and the settings are fixed while it runs */
+	void (*rederive)(eddy_world *w, eddy_system *s);
 	/* the kind's own preflight findings (eddy_world_check), one line each;
 	 * returns the number of EDDY_CHECK_ERROR findings it reported */
 	int (*check)(eddy_world *w, const eddy_system *s, eddy_check_fn report, void *user);

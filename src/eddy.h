@@ -645,7 +645,10 @@ typedef struct eddy_sph_density_def {
 	float radius;                  /* m, kernel support h; > spacing */
 	float spacing;                 /* m, particle spacing the mass is calibrated on; > 0 */
 	float rest_density;            /* kg/m^3, rho0; > 0 */
-	float stiffness;               /* m^2/s^2, k = c^2 (speed of sound squared); > 0 */
+	float stiffness;               /* m^2/s^2, k = c^2 (speed of sound squared); >= 0. 0 (the default):
+	                                  from the scene, c = 10 x the fastest speed its water reaches by
+	                                  itself (emitters' speed and their fall to the world's floor) and at
+	                                  least 20 m/s; fixed at the first step (eddy_sph_sound_speed) */
 	eddy_sph_eos eos;              /* equation of state: linear (the paper's) or Tait */
 	float tait_gamma;              /* 1, exponent of the Tait EOS; >= 1 */
 	eddy_sph_density_mode density; /* summation (default) or continuity */
@@ -662,6 +665,9 @@ EDDY_API eddy_sph_density_def eddy_default_sph_density_def(void);
 EDDY_API eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *def);
 /* The particle mass sph_density calibrated (kg), 0 if id is not one. */
 EDDY_API float eddy_sph_particle_mass(const eddy_world *w, eddy_system_id id);
+/* The speed of sound sqrt(stiffness) sph_density uses (m/s; the one chosen
+ * from the scene when the def's stiffness is 0), 0 if id is not one. */
+EDDY_API float eddy_sph_sound_speed(const eddy_world *w, eddy_system_id id);
 
 /* sph_pressure: symmetric spiky-gradient pressure force. */
 typedef struct eddy_sph_pressure_def {

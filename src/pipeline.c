@@ -209,6 +209,19 @@ static void make_label(eddy_world *w, eddy_system *s)
 		snprintf(s->label, sizeof s->label, "%s#%d", name, same + 1);
 }
 
+/* Settings derived from the pipeline (vtable rederive) follow it until the
+ * world has stepped, and then stay as they were. */
+static void rederive(eddy_world *w)
+{
+	if (w->step != 0)
+		return;
+	for (int k = 0; k < w->order_count; ++k) {
+		eddy_system *s = &w->slots[w->order[k]];
+		if (s->vt->rederive)
+			s->vt->rederive(w, s);
+	}
+}
+
 static eddy_system_id add_system_named(eddy_world *w, const eddy_system_vtable *vt, const char *name, void *data,
                                        const int *reads, int read_count, const int *writes, int write_count)
 {
@@ -278,6 +291,7 @@ static eddy_system_id add_system_named(eddy_world *w, const eddy_system_vtable *
 	}
 	s->live = true;
 	w->order_count++;
+	rederive(w);
 	return (eddy_system_id){(uint16_t)slot, gen};
 }
 
@@ -326,6 +340,7 @@ eddy_status eddy_world_remove_system(eddy_world *w, eddy_system_id id)
 	for (int i = 0; i < s->write_count; ++i)
 		eddy__column_release(w, s->writes[i]);
 	eddy__system_free(w, s);
+	rederive(w);
 	return EDDY_OK;
 }
 

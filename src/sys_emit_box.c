@@ -188,6 +188,16 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	return eddy__emission_limit(w, e->done, e->def.start, e->def.spacing, eddy__norm3(e->def.velocity), reason);
 }
 
+/* The block's highest corner: the ellipsoid's top is no higher. */
+static void reach(const eddy_system *s, eddy_vec3 up, double *top, double *speed)
+{
+	const emit_box *e = s->data;
+	const eddy_vec3 lo = e->def.min, hi = e->def.max;
+	*top = (up.x > 0 ? hi.x : lo.x) * (double)up.x + (up.y > 0 ? hi.y : lo.y) * (double)up.y +
+	       (up.z > 0 ? hi.z : lo.z) * (double)up.z;
+	*speed = eddy__norm3(e->def.velocity);
+}
+
 const eddy_system_vtable eddy__kind_emit_box = {
 	.name = "emit_box",
 	.state = state,
@@ -196,6 +206,7 @@ const eddy_system_vtable eddy__kind_emit_box = {
 	.expected_particles = expected,
 	.sample = sample,
 	.spacing = spacing,
+	.reach = reach,
 	.check = check,
 	.default_writes = box_writes,
 };

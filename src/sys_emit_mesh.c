@@ -145,6 +145,17 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	return eddy__emission_limit(w, e->done, e->def.start, e->def.spacing, eddy__norm3(e->def.velocity), reason);
 }
 
+/* The lattice box's highest corner. */
+static void reach(const eddy_system *s, eddy_vec3 up, double *top, double *speed)
+{
+	const emit_mesh *e = s->data;
+	const double u[3] = {up.x, up.y, up.z};
+	*top = 0;
+	for (int d = 0; d < 3; ++d)
+		*top += (e->origin[d] + (u[d] > 0 ? (double)(e->n[d] - 1) * e->def.spacing : 0)) * u[d];
+	*speed = eddy__norm3(e->def.velocity);
+}
+
 const eddy_system_vtable eddy__kind_emit_mesh = {
 	.name = "emit_mesh",
 	.state = state,
@@ -153,6 +164,7 @@ const eddy_system_vtable eddy__kind_emit_mesh = {
 	.expected_particles = expected,
 	.sample = sample,
 	.spacing = spacing,
+	.reach = reach,
 	.check = check,
 	.default_writes = mesh_writes,
 };

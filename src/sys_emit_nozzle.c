@@ -186,6 +186,15 @@ static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void
 
 static float spacing(const eddy_system *s) { return ((const emit_nozzle *)s->data)->def.spacing; }
 
+/* The opening's highest point, and the jet's speed. */
+static void reach(const eddy_system *s, eddy_vec3 up, double *top, double *speed)
+{
+	const emit_nozzle *e = s->data;
+	const eddy_vec3 c = e->def.center;
+	*top = (double)c.x * up.x + (double)c.y * up.y + (double)c.z * up.z + e->def.radius;
+	*speed = e->def.speed;
+}
+
 const eddy_system_vtable eddy__kind_emit_nozzle = {
 	.name = "emit_nozzle",
 	.state = state,
@@ -194,6 +203,7 @@ const eddy_system_vtable eddy__kind_emit_nozzle = {
 	.expected_particles = expected,
 	.sample = sample,
 	.spacing = spacing,
+	.reach = reach,
 	.check = check,
 	.default_writes = nozzle_writes,
 };

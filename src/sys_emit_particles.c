@@ -95,6 +95,19 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	return eddy__emission_limit(w, e->done, e->def.start, e->def.spacing, e->speed, reason);
 }
 
+/* The file's highest particle and its fastest. */
+static void reach(const eddy_system *s, eddy_vec3 up, double *top, double *speed)
+{
+	const emit_particles *e = s->data;
+	*top = -INFINITY;
+	for (size_t k = 0; k < e->count; ++k) {
+		const double t =
+			(double)e->data[k] * up.x + (double)e->data[e->count + k] * up.y + (double)e->data[2 * e->count + k] * up.z;
+		*top = t > *top ? t : *top;
+	}
+	*speed = e->speed;
+}
+
 const eddy_system_vtable eddy__kind_emit_particles = {
 	.name = "emit_particles",
 	.state = state,
@@ -103,6 +116,7 @@ const eddy_system_vtable eddy__kind_emit_particles = {
 	.expected_particles = expected,
 	.sample = sample,
 	.spacing = spacing,
+	.reach = reach,
 	.check = check,
 	.default_writes = ep_writes,
 };

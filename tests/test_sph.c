@@ -1044,6 +1044,140 @@ static void dam_break_matches_martin_moyce(void)
 	CHECK(test_json_number(last, "leaked") == 0 && test_json_number(last, "nonfinite") == 0);
 }
 
+/* One step beyond the a = 0.1 m dam break: the same scene at a = 5 m, as a
+ * user scales it up. Under Froude scaling (lengths x L, times and speeds x
+ * sqrt(L)) Z(T) is the same at every a when the speed of sound grows as
+ * sqrt(a) too, as the scene's unset stiffness does (c = 10 x the column's
+ * fall speed, at least 20 m/s). Bound: 2% of Z, twice the largest gap of
+ * the run (the small column's c is the 20 m/s floor, 1% above the rule);
+ * the mean density error under 3% (at Mach 0.1 about 1% plus the free
+ * surface's kernel deficiency, 2% at a = 0.1). With c fixed at 20 m/s the
+ * 5 m column ran at Mach 0.8: its mean density error reached 12% and its
+ * front 3% behind. */
+static void dam_break_is_the_same_at_every_scale(void)
+{
+	static curve small, big, rho;
+	char last[16384] = "";
+	run_scene("scenes/dam_break.lua", "--set a=0.1 --set spacing=0.005 --set fps=100 --set render=false", "T", "Z",
+	          &small, last, sizeof last);
+	/* fps 100 / sqrt(50): the frames fall on the same T */
+	run_scene("scenes/dam_break.lua", "--set a=5 --set spacing=0.25 --set fps=14.1421356 --set render=false", "T", "Z",
+	          &big, last, sizeof last);
+	run_scene("scenes/dam_break.lua", "--set a=5 --set spacing=0.25 --set fps=14.1421356 --set render=false", "T",
+	          "density_err_avg", &rho, NULL, 0);
+	CHECK(small.n > 20 && big.n == small.n && rho.n == big.n);
+	double worst = 0, worst_T = 0, rho_max = 0;
+	for (int i = 0; i < big.n && i < small.n; ++i) {
+		const double d = fabs(big.Z[i] - small.Z[i]) / small.Z[i];
+		if (!(d <= worst)) /* NaN too */
+			worst = d, worst_T = small.T[i];
+		CHECK(fabs(big.T[i] - small.T[i]) < 1e-3);
+		rho_max = isfinite(rho.Z[i]) ? fmax(rho_max, rho.Z[i]) : INFINITY;
+	}
+	printf("    dam break a = 5 m against 0.1 m (a/20, WCSPH): worst |dZ| / Z %.4f at T = %.2f, Z(3) %.3f and "
+	       "%.3f; largest mean density error at 5 m %.4f\n",
+	       worst, worst_T, curve_at(&big, 3.0), curve_at(&small, 3.0), rho_max);
+	CHECK(worst <= 0.02);
+	CHECK(rho_max <= 0.03);
+	CHECK(test_json_number(last, "leaked") == 0 && test_json_number(last, "nonfinite") == 0);
+}
+
+/* The speed of sound sph_density chooses when stiffness is unset: 10 x
+ * sqrt(v0^2 + 2 |g| H) over the emitters (H from the highest point each
+ * emits to the world's lowest corner along gravity), at least 20 m/s, in
+ * whatever order the systems are added, fixed once the world steps; an
+ * explicit stiffness is kept and, when too soft for WCSPH, warned about. */
+static void collect_text(eddy_check_level level, const char *message, void *user)
+{
+	(void)level;
+	char *t = user;
+	const size_t n = strlen(t);
+	snprintf(t + n, 4096 - n, "%s\n", message);
+}
+
+static void sound_speed_follows_the_scene(void)
+{
+	const double g = 9.81;
+	for (int order = 0; order < 2; ++order) {
+		eddy_world_def d = eddy_default_world_def();
+		d.bounds_min = (eddy_vec3){0, -1, 0};
+		d.bounds_max = (eddy_vec3){1, 9, 1};
+		d.gravity = (eddy_vec3){0, (float)-g, 0};
+		eddy_world *w = eddy_create_world(&d, NULL, 0);
+		eddy_sph_density_def sd = eddy_default_sph_density_def();
+		sd.spacing = 0.05f, sd.radius = 0.1f;
+		eddy_emit_box_def b = eddy_default_emit_box_def();
+		b.spacing = 0.05f;
+		b.min = (eddy_vec3){0.1f, 7, 0.1f};
+		b.max = (eddy_vec3){0.3f, 8, 0.3f};
+		b.velocity = (eddy_vec3){3, 0, 4};
+		eddy_system_id dens = EDDY_NULL_SYSTEM;
+		if (order == 0)
+			dens = eddy_add_sph_density(w, &sd);
+		eddy_system_id box = eddy_add_emit_box(w, &b);
+		const double before_gravity = eddy_sph_sound_speed(w, dens);
+		eddy_add_gravity(w, &(eddy_gravity_def){.scale = 1});
+		if (order == 1)
+			dens = eddy_add_sph_density(w, &sd);
+		const double want = 10 * sqrt(25 + 2 * g * 9);
+		const double c = eddy_sph_sound_speed(w, dens);
+		printf("    order %d: c %.4f m/s, want %.4f (before gravity %.4f)\n", order, c, want, before_gravity);
+		CHECK(fabs(c - want) <= 1e-4 * want);
+		if (order == 0)
+			CHECK(fabs(before_gravity - 50) <= 1e-4); /* 10 x the start speed alone */
+		/* a nozzle jetting faster from higher up takes over */
+		eddy_emit_nozzle_def nz = eddy_default_emit_nozzle_def();
+		nz.center = (eddy_vec3){0.5f, 8.5f, 0.5f};
+		nz.radius = 0.05f;
+		nz.speed = 20;
+		nz.spacing = 0.05f;
+		nz.duration = 0.1;
+		eddy_system_id noz = eddy_add_emit_nozzle(w, &nz);
+		const double want2 = 10 * sqrt(400 + 2 * g * 9.55);
+		CHECK(fabs(eddy_sph_sound_speed(w, dens) - want2) <= 1e-4 * want2);
+		/* removing both emitters leaves the floor */
+		CHECK(eddy_world_remove_system(w, noz) == EDDY_OK && eddy_world_remove_system(w, box) == EDDY_OK);
+		CHECK(fabs(eddy_sph_sound_speed(w, dens) - 20) <= 1e-5);
+		eddy_add_emit_box(w, &b);
+		CHECK(fabs(eddy_sph_sound_speed(w, dens) - want) <= 1e-4 * want);
+		/* fixed once the world steps: a later emitter changes nothing */
+		const eddy_integrate_def id = eddy_default_integrate_def();
+		eddy_add_integrate(w, &id);
+		CHECK(eddy_world_step(w) == EDDY_OK);
+		eddy_add_emit_nozzle(w, &nz);
+		CHECK(fabs(eddy_sph_sound_speed(w, dens) - want) <= 1e-4 * want);
+		eddy_destroy_world(w);
+	}
+	/* an explicit stiffness stays, and too soft for a weakly compressible
+	 * run the preflight says so, with the stiffness that would do */
+	for (int soft = 0; soft < 2; ++soft) {
+		eddy_world_def d = eddy_default_world_def();
+		d.bounds_min = (eddy_vec3){0, 0, 0};
+		d.bounds_max = (eddy_vec3){1, 2, 1};
+		d.gravity = (eddy_vec3){0, (float)-g, 0};
+		eddy_world *w = eddy_create_world(&d, NULL, 0);
+		eddy_emit_box_def b = eddy_default_emit_box_def();
+		b.spacing = 0.05f;
+		b.min = (eddy_vec3){0, 0, 0};
+		b.max = (eddy_vec3){0.2f, 1.8f, 0.2f};
+		eddy_add_emit_box(w, &b);
+		eddy_sph_density_def sd = eddy_default_sph_density_def();
+		sd.spacing = 0.05f, sd.radius = 0.1f;
+		sd.stiffness = soft ? 400 : 1e4f;
+		eddy_system_id dens = eddy_add_sph_density(w, &sd);
+		eddy_add_sph_pressure(w, &(eddy_sph_pressure_def){.scale = 1});
+		eddy_add_gravity(w, &(eddy_gravity_def){.scale = 1});
+		CHECK(fabs(eddy_sph_sound_speed(w, dens) - sqrt(sd.stiffness)) <= 1e-3);
+		char text[4096] = "";
+		eddy_world_check(w, collect_text, text);
+		const bool warned = strstr(text, "makes the speed of sound 20 m/s") != NULL;
+		printf("    stiffness %g over a 1.8 m fall: %s\n", (double)sd.stiffness, warned ? "warned" : "no warning");
+		CHECK(warned == (soft == 1));
+		CHECK(!soft || strstr(text, "stiffness >= 3532") != NULL); /* 100 x 2 g 1.8 */
+		eddy_destroy_world(w);
+	}
+}
+
 /* The SPH scenes run through the eddy command and report their fields. */
 static void scenes_run_and_report(void)
 {
@@ -1273,6 +1407,8 @@ void suite_sph(void)
 	RUN(surface_tension_columns_only_when_added);
 	RUN(empty_and_emptying_scenes);
 	RUN(dam_break_matches_martin_moyce);
+	RUN(dam_break_is_the_same_at_every_scale);
+	RUN(sound_speed_follows_the_scene);
 	RUN(droplet_oscillates_at_rayleigh_frequency);
 	RUN(resting_drop_keeps_pairs_apart);
 	RUN(scenes_run_and_report);

@@ -238,7 +238,8 @@ static void energy_stats_wcsph(void)
 	size_t n;
 	const float *rho = eddy_world_channel(w, "density", &n);
 	double ce = 0;
-	const double r0 = sd.rest_density, k = sd.stiffness;
+	const double c = eddy_sph_sound_speed(w, dens), k = c * c; /* the stiffness chosen from the scene */
+	const double r0 = sd.rest_density;
 	for (size_t i = 0; i < n; ++i) {
 		const double r = rho[i];
 		if (r > r0)

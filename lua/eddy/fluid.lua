@@ -48,7 +48,7 @@ local FIELDS = {
 	viscosity = { "wcsph", "dfsph" },       -- Pa s, dynamic
 	artificial = { "wcsph", "dfsph" },      -- 1, Monaghan's alpha
 	surface_tension = { "wcsph", "dfsph" }, -- N/m
-	stiffness = { "wcsph" },                -- m^2/s^2
+	stiffness = { "wcsph" },                -- m^2/s^2, c^2; unset or 0: from the scene (10 x its fall speed)
 	density = { "wcsph" },                  -- sph_density's "summation" (default) or "continuity"
 	diffusion = { "wcsph" },                -- 1, delta-SPH's delta with density = "continuity"
 	verlet_list = { "wcsph", "dfsph" },     -- false: a search every step, less memory, more time

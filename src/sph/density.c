@@ -77,6 +77,9 @@ typedef struct sph_density {
 	size_t wall_slots;
 	int carried;         /* continuity: the state column holding each particle's density between steps */
 	float diffusion_eig; /* continuity: 1/m^2, the diffusion's largest eigenvalue on the lattice over delta h c */
+	bool auto_sound;     /* the def's stiffness was 0: c from the scene (rederive) */
+	double reach_speed;  /* m/s, the fastest the scene's water can get by itself (rederive) */
+	double reach_fall;   /* m, the fall in that speed */
 } sph_density;
 
 static const int density_reads[] = {COL_X_, COL_Y_, COL_Z_, -1};
@@ -88,7 +91,7 @@ eddy_sph_density_def eddy_default_sph_density_def(void)
 	return (eddy_sph_density_def){.radius = 0.02f,
 	                              .spacing = 0.01f,
 	                              .rest_density = 1000.0f,
-	                              .stiffness = 400.0f,
+	                              .stiffness = 0.0f, /* from the scene */
 	                              .eos = EDDY_SPH_EOS_LINEAR,
 	                              .tait_gamma = 7.0f,
 	                              .density = EDDY_SPH_DENSITY_SUMMATION,
@@ -658,6 +661,62 @@ static void *state(eddy_world *w, eddy_system *s, size_t *size)
 	return sd->sh.nb.bp;
 }
 
+/* The automatic speed of sound (stiffness 0): ten times the fastest speed
+ * the water can reach by the scene's own means, so the Mach number stays
+ * under 0.1 and the density within about 1% of rho0 (Monaghan 1994: the
+ * density error goes as M^2). That speed is an emitter's start speed and
+ * its fall from the highest point it emits to the world's lowest corner
+ * along gravity, v = sqrt(v0^2 + 2 |g| H): in a pool that is the top of the
+ * water to the floor, an overestimate by about sqrt(2) of the wave speed
+ * sqrt(g D), which costs time, never accuracy. A collider the host moves
+ * and particles it adds itself are not foreseen: such a scene sets
+ * stiffness. c is never under SOUND_MIN, the fixed default before (right
+ * for the 0.1-0.2 m scenes of the examples), so a small scene keeps its
+ * step. With c proportional to sqrt(length) and h to the length, WCSPH's
+ * flow is Froude-similar across scales: the same dam break at 0.1 m and at
+ * 5 m, and Monaghan's alpha c h the same Reynolds number. */
+#define SOUND_MIN 20.0 /* m/s */
+#define SOUND_MACH 10.0
+
+static double scene_reach(const eddy_world *w, double *fall)
+{
+	double g[3] = {0, 0, 0};
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_GRAVITY); (o = eddy__systems_next(&it));) {
+		const double sc = ((const eddy_gravity_def *)o->vt->shared(o, EDDY_CAP_GRAVITY))->scale;
+		g[0] += sc * w->def.gravity.x, g[1] += sc * w->def.gravity.y, g[2] += sc * w->def.gravity.z;
+	}
+	const double gn = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+	const eddy_vec3 up =
+		gn > 0 ? eddy__v3((float)(-g[0] / gn), (float)(-g[1] / gn), (float)(-g[2] / gn)) : eddy__v3(0, 1, 0);
+	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
+	const double low = (up.x > 0 ? lo.x : hi.x) * (double)up.x + (up.y > 0 ? lo.y : hi.y) * (double)up.y +
+	                   (up.z > 0 ? lo.z : hi.z) * (double)up.z;
+	double v2 = 0;
+	*fall = 0;
+	for (eddy_system_iter it = eddy__systems(w, 0); (o = eddy__systems_next(&it));) {
+		if (!o->vt->reach)
+			continue;
+		double top, speed;
+		o->vt->reach(o, up, &top, &speed);
+		const double H = top > low ? top - low : 0, e = speed * speed + 2 * gn * H;
+		if (e > v2)
+			v2 = e, *fall = H;
+	}
+	return sqrt(v2);
+}
+
+static void rederive(eddy_world *w, eddy_system *s)
+{
+	sph_density *sd = s->data;
+	sd->reach_speed = scene_reach(w, &sd->reach_fall);
+	if (!sd->auto_sound)
+		return;
+	const double c = fmax(SOUND_MIN, SOUND_MACH * sd->reach_speed);
+	sd->def.stiffness = (float)(c * c);
+	sd->sh.c = sqrtf(sd->def.stiffness);
+}
+
 /* Preflight: every emitter on the lattice the mass is calibrated on, and
  * h / spacing in [1.2, 4] (an error below, a warning above; the messages
  * give the reasons). */
@@ -697,6 +756,19 @@ static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void
 		             2 / (w->def.cfl * per), 2 / (sd->def.diffusion * per));
 		errors++;
 	}
+	const double c = sd->sh.c, v = sd->reach_speed;
+	if (sd->auto_sound)
+		eddy__report(report, user, EDDY_CHECK_INFO,
+		             "%s: speed of sound %.3g m/s (stiffness %.4g m^2/s^2): %s%.3g m/s, the fastest the water gets "
+		             "by itself (its start speed and a fall of %.3g m)",
+		             s->label, c, c * c, c > SOUND_MIN ? "10 x " : "at least 20 m/s, above 10 x ", v, sd->reach_fall);
+	else if (c < 0.5 * SOUND_MACH * v && eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE))
+		eddy__report(report, user, EDDY_CHECK_WARNING,
+		             "%s: 'stiffness' %g m^2/s^2 makes the speed of sound %.3g m/s, but the water reaches about "
+		             "%.3g m/s by itself (its start speed and a fall of %.3g m): at Mach %.2f it compresses (the "
+		             "density error grows as Mach squared, about 1%% at 0.1); use stiffness >= %.4g (10 x that "
+		             "speed), or leave it unset to have it chosen",
+		             s->label, (double)sd->def.stiffness, c, v, sd->reach_fall, v / c, SOUND_MACH * SOUND_MACH * v * v);
 	if (h / dx < 1.2) {
 		eddy__report(report, user, EDDY_CHECK_ERROR,
 		             "%s: 'radius' %g m is %.2f x 'spacing' %g m, below 1.2: the nearest neighbours barely reach "
@@ -726,7 +798,14 @@ const eddy_system_vtable eddy__kind_sph_density = {
 	.destroy = destroy,
 	.default_writes = density_writes,
 	.check = check,
+	.rederive = rederive,
 };
+
+float eddy_sph_sound_speed(const eddy_world *w, eddy_system_id id)
+{
+	const eddy_system *s = eddy__system_peek(w, id);
+	return eddy__sph_density_def(s) ? ((const sph_density *)s->data)->sh.c : 0;
+}
 
 float eddy_sph_particle_mass(const eddy_world *w, eddy_system_id id)
 {
@@ -745,7 +824,7 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	if (!eddy__add_args(w, def, sys) || !eddy__check_positive(w, sys, "spacing", def->spacing) ||
 	    !eddy__check_positive(w, sys, "radius", def->radius) ||
 	    !eddy__check_positive(w, sys, "rest_density", def->rest_density) ||
-	    !eddy__check_positive(w, sys, "stiffness", def->stiffness) ||
+	    !eddy__check_nonneg(w, sys, "stiffness", def->stiffness) ||
 	    !eddy__check_range(w, sys, "tait_gamma", def->tait_gamma, 1, 20))
 		return EDDY_NULL_SYSTEM;
 	if (!(def->radius > def->spacing && def->radius <= 5 * def->spacing))
@@ -780,10 +859,13 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	if (!sd)
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of memory", sys), EDDY_NULL_SYSTEM;
 	sd->def = *def;
+	sd->auto_sound = def->stiffness == 0;
+	if (sd->auto_sound) /* until rederive sees the scene, which the add below calls */
+		sd->def.stiffness = (float)(SOUND_MIN * SOUND_MIN);
 	sd->carried = carried;
 	sd->sh.h = def->radius;
 	sd->sh.rho0 = def->rest_density;
-	sd->sh.c = sqrtf(def->stiffness);
+	sd->sh.c = sqrtf(sd->def.stiffness);
 	sd->sh.verlet = def->verlet_list;
 	const double h = def->radius, h6 = h * h * h * h * h * h, h9 = h6 * h * h * h;
 	sd->sh.k = (sph_kernel_consts){.h = def->radius,
