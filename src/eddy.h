@@ -646,9 +646,10 @@ typedef struct eddy_sph_density_def {
 	float spacing;                 /* m, particle spacing the mass is calibrated on; > 0 */
 	float rest_density;            /* kg/m^3, rho0; > 0 */
 	float stiffness;               /* m^2/s^2, k = c^2 (speed of sound squared); >= 0. 0 (the default):
-	                                  from the scene, c = 10 x the fastest speed its water reaches by
-	                                  itself (emitters' speed and their fall to the world's floor) and at
-	                                  least 20 m/s; fixed at the first step (eddy_sph_sound_speed) */
+	                                  with sph_pressure from the scene, c = 10 x the fastest speed its
+	                                  water reaches by itself (emitters' speed and their fall to the
+	                                  world's floor), fixed at the first step; otherwise, or with no such
+	                                  speed, 20 m/s (eddy_sph_sound_speed) */
 	eddy_sph_eos eos;              /* equation of state: linear (the paper's) or Tait */
 	float tait_gamma;              /* 1, exponent of the Tait EOS; >= 1 */
 	eddy_sph_density_mode density; /* summation (default) or continuity */

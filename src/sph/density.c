@@ -67,6 +67,7 @@
 #include "sph.h"
 #include "systems.h"
 
+#include <float.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -317,9 +318,15 @@ static float walls_set(const sph_density *sd, const walls *wl, bool first, int t
 	for (long a = 0; a < nact; ++a) {
 		float s;
 		if (first) {
-			const float sw = inv_sw[a];
-			s = sw > 0 ? sp[a] / sw : 0.0f;
-			inv_sw[a] = sw > 0 ? 1.0f / sw : 0.0f;
+			/* sum W is of order h^6 (1e-18 at h = 1 mm): a wall the fluid
+			 * reaches only at the kernel's very edge can sum below
+			 * 1 / FLT_MAX, and its inverse was infinite (a dam break at
+			 * 0.5 mm spacing stopped with an infinite density). Its weight
+			 * in every fluid sum is as small: it is left at p = 0. */
+			const float sw = inv_sw[a], inv = sw > 0 ? 1.0f / sw : 0.0f;
+			const bool held = inv <= FLT_MAX;
+			s = held && sw > 0 ? sp[a] / sw : 0.0f;
+			inv_sw[a] = held ? inv : 0.0f;
 		} else
 			s = sp[a] * inv_sw[a];
 		const float pb = s > 0 ? s : 0.0f, r = eos_rho(e, pb), d = r - old[a];
@@ -670,12 +677,17 @@ static void *state(eddy_world *w, eddy_system *s, size_t *size)
  * water to the floor, an overestimate by about sqrt(2) of the wave speed
  * sqrt(g D), which costs time, never accuracy. A collider the host moves
  * and particles it adds itself are not foreseen: such a scene sets
- * stiffness. c is never under SOUND_MIN, the fixed default before (right
- * for the 0.1-0.2 m scenes of the examples), so a small scene keeps its
- * step. With c proportional to sqrt(length) and h to the length, WCSPH's
- * flow is Froude-similar across scales: the same dam break at 0.1 m and at
- * 5 m, and Monaghan's alpha c h the same Reynolds number. */
-#define SOUND_MIN 20.0 /* m/s */
+ * stiffness. With c proportional to sqrt(length) and h to the length,
+ * WCSPH's flow is Froude-similar: the same dam break at 1 cm, 0.1 m and
+ * 5 m. A fixed c is not: 20 m/s, the old default, left the 5 m column at
+ * Mach 0.8 and made a 1 mm one take 9x the steps with a 14% density error.
+ * A scene with no speed of its own (no gravity, emitters at rest) takes
+ * SOUND_IDLE, and so does one without sph_pressure: the rule is about
+ * compression, and sph_dfsph's solve has none; there c only scales
+ * Monaghan's alpha c h, whose alpha its stress cases were measured with
+ * at 20 m/s (a c from the scene made DFSPH's dam break Froude-similar too,
+ * but moved its slosh's damping: README, Measurements). */
+#define SOUND_IDLE 20.0 /* m/s */
 #define SOUND_MACH 10.0
 
 static double scene_reach(const eddy_world *w, double *fall)
@@ -712,7 +724,8 @@ static void rederive(eddy_world *w, eddy_system *s)
 	sd->reach_speed = scene_reach(w, &sd->reach_fall);
 	if (!sd->auto_sound)
 		return;
-	const double c = fmax(SOUND_MIN, SOUND_MACH * sd->reach_speed);
+	const bool eos = eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL;
+	const double c = eos && sd->reach_speed > 0 ? SOUND_MACH * sd->reach_speed : SOUND_IDLE;
 	sd->def.stiffness = (float)(c * c);
 	sd->sh.c = sqrtf(sd->def.stiffness);
 }
@@ -757,12 +770,16 @@ static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void
 		errors++;
 	}
 	const double c = sd->sh.c, v = sd->reach_speed;
-	if (sd->auto_sound)
+	const bool eos = eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE) != NULL;
+	if (sd->auto_sound && eos)
 		eddy__report(report, user, EDDY_CHECK_INFO,
-		             "%s: speed of sound %.3g m/s (stiffness %.4g m^2/s^2): %s%.3g m/s, the fastest the water gets "
-		             "by itself (its start speed and a fall of %.3g m)",
-		             s->label, c, c * c, c > SOUND_MIN ? "10 x " : "at least 20 m/s, above 10 x ", v, sd->reach_fall);
-	else if (c < 0.5 * SOUND_MACH * v && eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE))
+		             v > 0 ? "%s: speed of sound %.3g m/s (stiffness %.4g m^2/s^2): 10 x %.3g m/s, the fastest the "
+		                     "water gets by itself (its start speed and a fall of %.3g m)"
+		                   : "%s: speed of sound %.3g m/s (stiffness %.4g m^2/s^2): the scene gives its water no "
+		                     "speed (%.3g m/s: no gravity, emitters at rest; fall %.3g m), so the fixed default; set "
+		                     "stiffness = (10 x the speed you expect)^2",
+		             s->label, c, c * c, v, sd->reach_fall);
+	else if (!sd->auto_sound && c < 0.5 * SOUND_MACH * v && eos)
 		eddy__report(report, user, EDDY_CHECK_WARNING,
 		             "%s: 'stiffness' %g m^2/s^2 makes the speed of sound %.3g m/s, but the water reaches about "
 		             "%.3g m/s by itself (its start speed and a fall of %.3g m): at Mach %.2f it compresses (the "
@@ -833,6 +850,15 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 		                  "2 x spacing is usual)",
 		                  sys, (double)def->radius, (double)def->spacing),
 		       EDDY_NULL_SYSTEM;
+	/* the kernel constants in float: poly6's gradient, 6 x 315 / (64 pi h^9),
+	 * is the largest and overflows below about 67 um */
+	const double h_min = pow(6 * 315.0 / (64.0 * M_PI * FLT_MAX), 1.0 / 9);
+	if (def->radius < h_min)
+		return eddy__fail(w, EDDY_ERR_INVALID,
+		                  "%s: 'radius' %g m is below %.2g m, the smallest kernel whose constants (of order 1/h^9) "
+		                  "fit in single precision; use spacing >= %.2g m, or FLIP, which has no such limit",
+		                  sys, (double)def->radius, h_min, h_min / 2),
+		       EDDY_NULL_SYSTEM;
 	if (def->eos != EDDY_SPH_EOS_LINEAR && def->eos != EDDY_SPH_EOS_TAIT)
 		return eddy__fail(w, EDDY_ERR_INVALID, "%s: 'eos' must be linear or tait", sys), EDDY_NULL_SYSTEM;
 	if (def->density != EDDY_SPH_DENSITY_SUMMATION && def->density != EDDY_SPH_DENSITY_CONTINUITY)
@@ -861,7 +887,7 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	sd->def = *def;
 	sd->auto_sound = def->stiffness == 0;
 	if (sd->auto_sound) /* until rederive sees the scene, which the add below calls */
-		sd->def.stiffness = (float)(SOUND_MIN * SOUND_MIN);
+		sd->def.stiffness = (float)(SOUND_IDLE * SOUND_IDLE);
 	sd->carried = carried;
 	sd->sh.h = def->radius;
 	sd->sh.rho0 = def->rest_density;
