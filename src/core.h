@@ -66,7 +66,8 @@ typedef struct eddy_system_vtable {
 	/* derives settings from the rest of the pipeline (sph_density's
 	 * automatic speed of sound); called on every live system after each
 	 * add and remove until the world's first step, so the order systems are
-	 * added in does not matter and the settings are fixed while it runs */
+	 * added in does not matter and the settings are fixed while it runs
+	 * (a system added after that derives its own once, when added) */
 	void (*rederive)(eddy_world *w, eddy_system *s);
 	/* the kind's own preflight findings (eddy_world_check), one line each;
 	 * returns the number of EDDY_CHECK_ERROR findings it reported */

@@ -210,11 +210,15 @@ static void make_label(eddy_world *w, eddy_system *s)
 }
 
 /* Settings derived from the pipeline (vtable rederive) follow it until the
- * world has stepped, and then stay as they were. */
-static void rederive(eddy_world *w)
+ * world has stepped, and then stay as they were; a system added later
+ * derives its own once, from the pipeline it joins (added, non-NULL). */
+static void rederive(eddy_world *w, eddy_system *added)
 {
-	if (w->step != 0)
+	if (w->step != 0) {
+		if (added && added->vt->rederive)
+			added->vt->rederive(w, added);
 		return;
+	}
 	for (int k = 0; k < w->order_count; ++k) {
 		eddy_system *s = &w->slots[w->order[k]];
 		if (s->vt->rederive)
@@ -291,7 +295,7 @@ static eddy_system_id add_system_named(eddy_world *w, const eddy_system_vtable *
 	}
 	s->live = true;
 	w->order_count++;
-	rederive(w);
+	rederive(w, s);
 	return (eddy_system_id){(uint16_t)slot, gen};
 }
 
@@ -340,7 +344,7 @@ eddy_status eddy_world_remove_system(eddy_world *w, eddy_system_id id)
 	for (int i = 0; i < s->write_count; ++i)
 		eddy__column_release(w, s->writes[i]);
 	eddy__system_free(w, s);
-	rederive(w);
+	rederive(w, NULL);
 	return EDDY_OK;
 }
 

@@ -1202,6 +1202,11 @@ static void sound_speed_follows_the_scene(void)
 		CHECK(eddy_world_step(w) == EDDY_OK);
 		eddy_add_emit_nozzle(w, &nz);
 		CHECK(fabs(eddy_sph_sound_speed(w, dens) - want) <= 1e-4 * want);
+		/* an sph_density added now takes its c from the pipeline it joins */
+		if (order == 0) {
+			const eddy_system_id late = eddy_add_sph_density(w, &sd);
+			CHECK(fabs(eddy_sph_sound_speed(w, late) - want2) <= 1e-4 * want2);
+		}
 		eddy_destroy_world(w);
 	}
 	/* a resumed run of a scene whose c came from it (the splash: a 8 cm
