@@ -62,7 +62,7 @@ typedef struct eddy_system_vtable {
 	/* emitters: the highest point along the unit vector up of what they
 	 * emit (m; a bound: a block's corner) and the fastest speed they give a
 	 * particle (m/s), for sph_density's automatic speed of sound */
-	void (*reach)(const eddy_system *s, eddy_vec3 up, double *top, double *speed);
+	void (*reach)(const eddy_system *s, eddy_vec3 up, eddy_vec3 *top, double *speed);
 	/* derives settings from the rest of the pipeline (sph_density's
 	 * automatic speed of sound); called on every live system after each
 	 * add and remove until the world's first step, so the order systems are

@@ -648,8 +648,8 @@ typedef struct eddy_sph_density_def {
 	float stiffness;               /* m^2/s^2, k = c^2 (speed of sound squared); >= 0. 0 (the default):
 	                                  with sph_pressure from the scene, c = 10 x the fastest speed its
 	                                  water reaches by itself (emitters' speed and their fall to the
-	                                  world's floor), fixed at the first step; otherwise, or with no such
-	                                  speed, 20 m/s (eddy_sph_sound_speed) */
+	                                  world's floor, or their sph_boundary_box's), fixed at the first step;
+	                                  otherwise, or with no such speed, 20 m/s (eddy_sph_sound_speed) */
 	eddy_sph_eos eos;              /* equation of state: linear (the paper's) or Tait */
 	float tait_gamma;              /* 1, exponent of the Tait EOS; >= 1 */
 	eddy_sph_density_mode density; /* summation (default) or continuity */

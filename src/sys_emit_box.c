@@ -189,12 +189,11 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 }
 
 /* The block's highest corner: the ellipsoid's top is no higher. */
-static void reach(const eddy_system *s, eddy_vec3 up, double *top, double *speed)
+static void reach(const eddy_system *s, eddy_vec3 up, eddy_vec3 *top, double *speed)
 {
 	const emit_box *e = s->data;
 	const eddy_vec3 lo = e->def.min, hi = e->def.max;
-	*top = (up.x > 0 ? hi.x : lo.x) * (double)up.x + (up.y > 0 ? hi.y : lo.y) * (double)up.y +
-	       (up.z > 0 ? hi.z : lo.z) * (double)up.z;
+	*top = eddy__v3(up.x > 0 ? hi.x : lo.x, up.y > 0 ? hi.y : lo.y, up.z > 0 ? hi.z : lo.z);
 	*speed = eddy__norm3(e->def.velocity);
 }
 

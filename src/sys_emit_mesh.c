@@ -146,13 +146,14 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 }
 
 /* The lattice box's highest corner. */
-static void reach(const eddy_system *s, eddy_vec3 up, double *top, double *speed)
+static void reach(const eddy_system *s, eddy_vec3 up, eddy_vec3 *top, double *speed)
 {
 	const emit_mesh *e = s->data;
 	const double u[3] = {up.x, up.y, up.z};
-	*top = 0;
+	float t[3];
 	for (int d = 0; d < 3; ++d)
-		*top += (e->origin[d] + (u[d] > 0 ? (double)(e->n[d] - 1) * e->def.spacing : 0)) * u[d];
+		t[d] = (float)(e->origin[d] + (u[d] > 0 ? (double)(e->n[d] - 1) * e->def.spacing : 0));
+	*top = eddy__v3(t[0], t[1], t[2]);
 	*speed = eddy__norm3(e->def.velocity);
 }
 

@@ -187,11 +187,12 @@ static int check(eddy_world *w, const eddy_system *s, eddy_check_fn report, void
 static float spacing(const eddy_system *s) { return ((const emit_nozzle *)s->data)->def.spacing; }
 
 /* The opening's highest point, and the jet's speed. */
-static void reach(const eddy_system *s, eddy_vec3 up, double *top, double *speed)
+static void reach(const eddy_system *s, eddy_vec3 up, eddy_vec3 *top, double *speed)
 {
 	const emit_nozzle *e = s->data;
 	const eddy_vec3 c = e->def.center;
-	*top = (double)c.x * up.x + (double)c.y * up.y + (double)c.z * up.z + e->def.radius;
+	const float r = e->def.radius;
+	*top = eddy__v3(c.x + r * up.x, c.y + r * up.y, c.z + r * up.z);
 	*speed = e->def.speed;
 }
 

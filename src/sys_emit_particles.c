@@ -96,14 +96,16 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 }
 
 /* The file's highest particle and its fastest. */
-static void reach(const eddy_system *s, eddy_vec3 up, double *top, double *speed)
+static void reach(const eddy_system *s, eddy_vec3 up, eddy_vec3 *top, double *speed)
 {
 	const emit_particles *e = s->data;
-	*top = -INFINITY;
+	double best = -INFINITY;
+	*top = eddy__v3(0, 0, 0);
 	for (size_t k = 0; k < e->count; ++k) {
-		const double t =
-			(double)e->data[k] * up.x + (double)e->data[e->count + k] * up.y + (double)e->data[2 * e->count + k] * up.z;
-		*top = t > *top ? t : *top;
+		const eddy_vec3 p = eddy__v3(e->data[k], e->data[e->count + k], e->data[2 * e->count + k]);
+		const double t = (double)p.x * up.x + (double)p.y * up.y + (double)p.z * up.z;
+		if (t > best)
+			best = t, *top = p;
 	}
 	*speed = e->speed;
 }

@@ -1209,6 +1209,32 @@ static void sound_speed_follows_the_scene(void)
 		}
 		eddy_destroy_world(w);
 	}
+	/* water in a closed tank falls to the tank's floor, not the world's:
+	 * a tank [0, 1]^3 in a world from -5 m, water up to 0.5 m in it, c from
+	 * a 0.5 m fall; a block above the tank, outside it, from the world's */
+	for (int above = 0; above < 2; ++above) {
+		eddy_world_def d = eddy_default_world_def();
+		d.bounds_min = (eddy_vec3){-1, -5, -1};
+		d.bounds_max = (eddy_vec3){2, 5, 2};
+		eddy_world *w = eddy_create_world(&d, NULL, 0);
+		eddy_sph_density_def sd = eddy_default_sph_density_def();
+		sd.spacing = 0.05f, sd.radius = 0.1f;
+		const eddy_system_id dens = eddy_add_sph_density(w, &sd);
+		eddy_add_sph_pressure(w, &(eddy_sph_pressure_def){.scale = 1});
+		eddy_add_gravity(w, &(eddy_gravity_def){.scale = 1});
+		eddy_sph_boundary_box_def bb = eddy_default_sph_boundary_box_def();
+		bb.spacing = 0.05f; /* [0, 1]^3 */
+		eddy_add_sph_boundary_box(w, &bb);
+		eddy_emit_box_def b = eddy_default_emit_box_def();
+		b.spacing = 0.05f;
+		b.min = (eddy_vec3){0, above ? 2.0f : 0.0f, 0};
+		b.max = (eddy_vec3){1, above ? 2.5f : 0.5f, 1};
+		eddy_add_emit_box(w, &b);
+		const double want = above ? 10 * sqrt(2 * g * 7.5) : 10 * sqrt(2 * g * 0.5);
+		CHECKF(fabs(eddy_sph_sound_speed(w, dens) - want) <= 1e-4 * want, "above %d: c %g, want %g", above,
+		       (double)eddy_sph_sound_speed(w, dens), want);
+		eddy_destroy_world(w);
+	}
 	/* a resumed run of a scene whose c came from it (the splash: a 8 cm
 	 * fall, c = 12.5 m/s) continues bit-identically: the scene is built
 	 * before the state is loaded, so c is chosen the same way */

@@ -62,6 +62,11 @@ size_t eddy__sph_boundary_box_points(const eddy_system *s, float h, float *x, fl
 	return k;
 }
 
+const eddy_sph_boundary_box_def *eddy__sph_boundary_box_def(const eddy_system *s)
+{
+	return s && s->vt == &eddy__kind_sph_boundary_box ? &((const sph_boundary_box *)s->data)->def : NULL;
+}
+
 bool eddy__sph_boundary_box_covers(const eddy_system *s, eddy_vec3 min, eddy_vec3 max)
 {
 	if (!s || s->vt != &eddy__kind_sph_boundary_box)

@@ -673,7 +673,8 @@ static void *state(eddy_world *w, eddy_system *s, size_t *size)
  * under 0.1 and the density within about 1% of rho0 (Monaghan 1994: the
  * density error goes as M^2). That speed is an emitter's start speed and
  * its fall from the highest point it emits to the world's lowest corner
- * along gravity, v = sqrt(v0^2 + 2 |g| H): in a pool that is the top of the
+ * along gravity (or the floor of a closed sph_boundary_box holding that
+ * point), v = sqrt(v0^2 + 2 |g| H): in a pool that is the top of the
  * water to the floor, an overestimate by about sqrt(2) of the wave speed
  * sqrt(g D), which costs time, never accuracy. A collider the host moves
  * and particles it adds itself are not foreseen: such a scene sets
@@ -690,6 +691,22 @@ static void *state(eddy_world *w, eddy_system *s, size_t *size)
 #define SOUND_IDLE 20.0 /* m/s */
 #define SOUND_MACH 10.0
 
+/* The lowest point of a box along up, as a height along up. */
+static double lowest(eddy_vec3 lo, eddy_vec3 hi, eddy_vec3 up)
+{
+	return (up.x > 0 ? lo.x : hi.x) * (double)up.x + (up.y > 0 ? lo.y : hi.y) * (double)up.y +
+	       (up.z > 0 ? lo.z : hi.z) * (double)up.z;
+}
+
+/* p in the box [lo, hi], its faces included to a part in 1e5 of the box's
+ * size (an emitter's corner sits on the tank's walls). */
+static bool inside(eddy_vec3 lo, eddy_vec3 hi, eddy_vec3 p)
+{
+	const float tol = 1e-5f * fmaxf(hi.x - lo.x, fmaxf(hi.y - lo.y, hi.z - lo.z));
+	return p.x >= lo.x - tol && p.x <= hi.x + tol && p.y >= lo.y - tol && p.y <= hi.y + tol && p.z >= lo.z - tol &&
+	       p.z <= hi.z + tol;
+}
+
 static double scene_reach(const eddy_world *w, double *fall)
 {
 	double g[3] = {0, 0, 0};
@@ -701,16 +718,25 @@ static double scene_reach(const eddy_world *w, double *fall)
 	const double gn = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
 	const eddy_vec3 up =
 		gn > 0 ? eddy__v3((float)(-g[0] / gn), (float)(-g[1] / gn), (float)(-g[2] / gn)) : eddy__v3(0, 1, 0);
-	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
-	const double low = (up.x > 0 ? lo.x : hi.x) * (double)up.x + (up.y > 0 ? lo.y : hi.y) * (double)up.y +
-	                   (up.z > 0 ? lo.z : hi.z) * (double)up.z;
+	const double world_low = lowest(w->def.bounds_min, w->def.bounds_max, up);
 	double v2 = 0;
 	*fall = 0;
 	for (eddy_system_iter it = eddy__systems(w, 0); (o = eddy__systems_next(&it));) {
 		if (!o->vt->reach)
 			continue;
-		double top, speed;
-		o->vt->reach(o, up, &top, &speed);
+		eddy_vec3 p;
+		double speed;
+		o->vt->reach(o, up, &p, &speed);
+		/* the world's floor, or the floor of a closed sph_boundary_box
+		 * holding the point (the water cannot leave it) */
+		double low = world_low;
+		const eddy_system *b;
+		for (eddy_system_iter jt = eddy__systems(w, EDDY_CAP_SPH_WALLS); (b = eddy__systems_next(&jt));) {
+			const eddy_sph_boundary_box_def *bd = eddy__sph_boundary_box_def(b);
+			if (bd && inside(bd->min, bd->max, p))
+				low = fmax(low, lowest(bd->min, bd->max, up));
+		}
+		const double top = (double)p.x * up.x + (double)p.y * up.y + (double)p.z * up.z;
 		const double H = top > low ? top - low : 0, e = speed * speed + 2 * gn * H;
 		if (e > v2)
 			v2 = e, *fall = H;

@@ -200,6 +200,8 @@ void eddy__sph_neighbors_free(sph_neighbors *nb);
 /* An sph_boundary_box's particles (boundary.c gathers them); with x == NULL
  * only counts. h sets how many layers the shell has. */
 size_t eddy__sph_boundary_box_points(const eddy_system *s, float h, float *x, float *y, float *z, float *vol);
+/* The def of sph_boundary_box s, or NULL if s is not one. */
+const eddy_sph_boundary_box_def *eddy__sph_boundary_box_def(const eddy_system *s);
 /* s is an sph_boundary_box over exactly [min, max]. */
 bool eddy__sph_boundary_box_covers(const eddy_system *s, eddy_vec3 min, eddy_vec3 max);
 
