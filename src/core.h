@@ -567,9 +567,10 @@ static inline void eddy__collide_rotated_in(const eddy_world *w, float *x, float
 /* floor and ceil of a count of spacings from lengths given as floats (a
  * box's side over its spacing): each float is rounded by up to
  * FLT_EPSILON / 2 of itself, so a side of exactly k spacings comes out
- * k (1 +- 2 FLT_EPSILON), and a count a hair off an integer is that
- * integer (a 0.04 m side at 1 mm read 39.99999725, and a fixed 1e-6 of
- * tolerance lost a layer: 5% of a dam break's water). */
+ * within k (1 +- FLT_EPSILON), and a count that close to an integer is
+ * that integer (the tolerance, 4 FLT_EPSILON, has room for a side made
+ * as a difference of two corners). A 0.04 m side at 1 mm read 39.99999725,
+ * and a fixed 1e-6 of tolerance lost a layer: 5% of a dam break's water. */
 static inline double eddy__count_tolerance(double r) { return 1e-6 + 4 * FLT_EPSILON * fabs(r); }
 static inline double eddy__count_floor(double r) { return floor(r + eddy__count_tolerance(r)); }
 static inline double eddy__count_ceil(double r) { return ceil(r - eddy__count_tolerance(r)); }
