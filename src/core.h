@@ -564,16 +564,25 @@ static inline void eddy__collide_rotated_in(const eddy_world *w, float *x, float
 	eddy__collide_response(vx, vy, vz, i, eddy__mat_mul(p->r, n_body), eddy__rigid_velocity(mv, xw), r);
 }
 
-/* floor and ceil of a count of spacings from lengths given as floats (a
- * box's side over its spacing): each float is rounded by up to
- * FLT_EPSILON / 2 of itself, so a side of exactly k spacings comes out
- * within k (1 +- FLT_EPSILON), and a count that close to an integer is
- * that integer (the tolerance, 4 FLT_EPSILON, has room for a side made
- * as a difference of two corners). A 0.04 m side at 1 mm read 39.99999725,
- * and a fixed 1e-6 of tolerance lost a layer: 5% of a dam break's water. */
-static inline double eddy__count_tolerance(double r) { return 1e-6 + 4 * FLT_EPSILON * fabs(r); }
-static inline double eddy__count_floor(double r) { return floor(r + eddy__count_tolerance(r)); }
-static inline double eddy__count_ceil(double r) { return ceil(r - eddy__count_tolerance(r)); }
+/* floor and ceil of the spacings h in the side [lo, hi], all three given
+ * as floats: each float is rounded by up to FLT_EPSILON / 2 of itself, so
+ * a side of exactly k spacings comes out k off by up to
+ * (|lo| + |hi| + k h) FLT_EPSILON / (2 h), and a count that close to an
+ * integer is that integer (twice that, for room). A 0.04 m side at 1 mm
+ * read 39.99999725 spacings, and one from 10 m to 10.04 m 39.99996: a
+ * fixed 1e-6 of tolerance lost a layer, 5% of a dam break's water. */
+static inline double eddy__count_tolerance(double lo, double hi, double h)
+{
+	return 1e-6 + FLT_EPSILON * (fabs(lo) + fabs(hi) + fabs(hi - lo)) / h;
+}
+static inline double eddy__count_floor(double lo, double hi, double h)
+{
+	return floor((hi - lo) / h + eddy__count_tolerance(lo, hi, h));
+}
+static inline double eddy__count_ceil(double lo, double hi, double h)
+{
+	return ceil((hi - lo) / h - eddy__count_tolerance(lo, hi, h));
+}
 
 static inline eddy_vec3 eddy__v3(float x, float y, float z) { return (eddy_vec3){x, y, z}; }
 static inline eddy_vec3 eddy__add3(eddy_vec3 a, eddy_vec3 b) { return (eddy_vec3){a.x + b.x, a.y + b.y, a.z + b.z}; }

@@ -49,7 +49,7 @@ eddy_emit_box_def eddy_default_emit_box_def(void)
 static double axis_count(float lo, float hi, float h)
 {
 	/* a box of exactly k spacings gives k, not k - 1 */
-	double n = eddy__count_floor(((double)hi - lo) / h);
+	double n = eddy__count_floor(lo, hi, h);
 	return n > 0 ? n : 0;
 }
 
@@ -259,8 +259,9 @@ eddy_system_id eddy_add_emit_box(eddy_world *w, const eddy_emit_box_def *def)
 		 * two more per axis than the block's; about pi/6 of them are inside) */
 		const double hx = 0.5 * ((double)def->max.x - def->min.x), hy = 0.5 * ((double)def->max.y - def->min.y),
 					 hz = 0.5 * ((double)def->max.z - def->min.z);
-		const double cx = eddy__count_ceil(hx / def->spacing), cy = eddy__count_ceil(hy / def->spacing),
-					 cz = eddy__count_ceil(hz / def->spacing);
+		const double cx = eddy__count_ceil(def->min.x, def->max.x, 2.0 * def->spacing),
+					 cy = eddy__count_ceil(def->min.y, def->max.y, 2.0 * def->spacing),
+					 cz = eddy__count_ceil(def->min.z, def->max.z, 2.0 * def->spacing);
 		e->nx = 2 * (int)cx;
 		e->ny = 2 * (int)cy;
 		e->nz = 2 * (int)cz;

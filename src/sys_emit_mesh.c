@@ -205,7 +205,7 @@ eddy_system_id eddy_add_emit_mesh(eddy_world *w, const eddy_emit_mesh_def *def)
 	double origin[3], N = 1;
 	for (int a = 0; a < 3; ++a) {
 		/* as emit_box: a side of exactly k spacings gives k */
-		const double c = eddy__count_ceil((m.hi[a] - m.lo[a]) / def->spacing);
+		const double c = eddy__count_ceil(m.lo[a], m.hi[a], def->spacing);
 		n[a] = c > 0 ? (int)fmin(c, 1 << 30) : 0;
 		origin[a] = m.lo[a] + 0.5 * def->spacing;
 		N *= c;

@@ -254,7 +254,7 @@ eddy_system_id eddy_add_emit_nozzle(eddy_world *w, const eddy_emit_nozzle_def *d
 	eddy__check_unit(w, sys, "direction", &u);
 	e->u = u;
 	e->v = (eddy_vec3){dir.y * u.z - dir.z * u.y, dir.z * u.x - dir.x * u.z, dir.x * u.y - dir.y * u.x};
-	e->half = (int)eddy__count_floor((double)def->radius / def->spacing);
+	e->half = (int)eddy__count_floor(0, def->radius, def->spacing);
 	e->disc = disc_points(e, 0, NULL, 0);
 	eddy_system_id id = eddy__add_system(w, &eddy__kind_emit_nozzle, e, NULL, nozzle_writes);
 	if (eddy_system_valid(w, id))

@@ -539,36 +539,39 @@ static void emitters_fill_around_solids(void)
 }
 
 /* A block exactly k spacings long holds k layers, for the sides and
- * spacings a user writes in decimals (taken to float as the API does): a
- * fixed tolerance of 1e-6 spacings lost a layer wherever the two floats'
- * rounding left the ratio further below k (0.04 m at 1 mm read 39.99999725:
- * a dam break at 1 cm lost 5% of its water). Also a nozzle exactly k
+ * spacings a user writes in decimals (taken to float as the API does),
+ * from the origin and away from it: a fixed tolerance of 1e-6 spacings
+ * lost a layer wherever the floats' rounding left the ratio further below
+ * k (0.04 m at 1 mm read 39.99999725: a dam break at 1 cm lost 5% of its
+ * water; from 10 m, 39.99996). Also a nozzle exactly k
  * spacings in radius reaches k spacings out. */
 static void emitters_count_whole_spacings(void)
 {
 	static const double spacings[] = {0.001, 0.0005, 0.003, 0.007, 0.01, 0.025, 0.1, 0.00025};
+	static const double offsets[] = {0, 10, -3.7}; /* m: far from the origin the corners round more */
 	int cases = 0, wrong = 0;
-	for (size_t s = 0; s < sizeof spacings / sizeof spacings[0]; ++s)
-		for (int k = 1; k <= 120; ++k) {
-			const double h = spacings[s];
-			eddy_world_def d = eddy_default_world_def();
-			d.bounds_min = (eddy_vec3){0, 0, 0};
-			d.bounds_max = (eddy_vec3){(float)(130 * h), (float)(2 * h), (float)(2 * h)};
-			eddy_world *w = eddy_create_world(&d, NULL, 0);
-			eddy_emit_box_def b = eddy_default_emit_box_def();
-			b.min = (eddy_vec3){0, 0, 0};
-			b.max = (eddy_vec3){(float)(k * h), (float)h, (float)h};
-			b.spacing = (float)h;
-			eddy_add_emit_box(w, &b);
-			CHECK(eddy_world_step(w) == EDDY_OK);
-			const size_t n = eddy_world_particle_count(w);
-			if (n != (size_t)k && wrong++ < 5)
-				printf("    %d spacings of %g m: %zu particles\n", k, h, n);
-			cases++;
-			eddy_destroy_world(w);
-		}
-	printf("    blocks of 1-120 whole spacings at %zu spacings: %d of %d counts wrong\n",
-	       sizeof spacings / sizeof spacings[0], wrong, cases);
+	for (size_t o = 0; o < sizeof offsets / sizeof offsets[0]; ++o)
+		for (size_t s = 0; s < sizeof spacings / sizeof spacings[0]; ++s)
+			for (int k = 1; k <= 120; ++k) {
+				const double h = spacings[s], x0 = offsets[o];
+				eddy_world_def d = eddy_default_world_def();
+				d.bounds_min = (eddy_vec3){(float)(x0 - h), 0, 0};
+				d.bounds_max = (eddy_vec3){(float)(x0 + 130 * h), (float)(2 * h), (float)(2 * h)};
+				eddy_world *w = eddy_create_world(&d, NULL, 0);
+				eddy_emit_box_def b = eddy_default_emit_box_def();
+				b.min = (eddy_vec3){(float)x0, 0, 0};
+				b.max = (eddy_vec3){(float)(x0 + k * h), (float)h, (float)h};
+				b.spacing = (float)h;
+				eddy_add_emit_box(w, &b);
+				CHECK(eddy_world_step(w) == EDDY_OK);
+				const size_t n = eddy_world_particle_count(w);
+				if (n != (size_t)k && wrong++ < 5)
+					printf("    %d spacings of %g m from x = %g: %zu particles\n", k, h, x0, n);
+				cases++;
+				eddy_destroy_world(w);
+			}
+	printf("    blocks of 1-120 whole spacings at %zu spacings and %zu offsets: %d of %d counts wrong\n",
+	       sizeof spacings / sizeof spacings[0], sizeof offsets / sizeof offsets[0], wrong, cases);
 	CHECK(wrong == 0);
 	for (int k = 1; k <= 40; ++k) {
 		eddy_world_def d = eddy_default_world_def();
