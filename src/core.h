@@ -260,6 +260,10 @@ void eddy__frame_reset(eddy_world *w);
 extern const char eddy__busy_step[], eddy__busy_frame[];
 static inline float *eddy__col(eddy_world *w, int id) { return (float *)w->columns[id].data; }
 /* s, the time of the frame the world steps toward */
+/* m/s^2, the acceleration the pipeline's gravity systems add up to (each
+ * the world's gravity times its scale; 0 without any): sys_gravity.c */
+void eddy__gravity_sum(const eddy_world *w, double g[3]);
+
 static inline double eddy__next_frame_time(const eddy_world *w) { return (double)(w->frame + 1) / w->def.fps; }
 static inline float eddy__clamp_to(float v, float lo, float hi) { return v < lo ? lo : v > hi ? hi : v; }
 /* The world's box is solid outside: a collider's push out of its own solid

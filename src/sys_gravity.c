@@ -37,6 +37,16 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	return EDDY_OK;
 }
 
+void eddy__gravity_sum(const eddy_world *w, double g[3])
+{
+	g[0] = g[1] = g[2] = 0;
+	const eddy_system *o;
+	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_GRAVITY); (o = eddy__systems_next(&it));) {
+		const double sc = ((const gravity *)o->data)->def.scale;
+		g[0] += sc * w->def.gravity.x, g[1] += sc * w->def.gravity.y, g[2] += sc * w->def.gravity.z;
+	}
+}
+
 static void *shared(const eddy_system *s, uint32_t cap)
 {
 	return cap == EDDY_CAP_GRAVITY ? &((gravity *)s->data)->def : NULL;

@@ -733,15 +733,13 @@ static void energy_stats(const eddy_world *w, eddy_frame_stats *out)
 	const float *vx = w->columns[COL_VX].data, *vy = w->columns[COL_VY].data, *vz = w->columns[COL_VZ].data;
 	if (!(m > 0) || !x || !vx)
 		return;
-	double gx = 0, gy = 0, gz = 0; /* m/s^2, what the gravity systems add up to */
+	double gv[3]; /* m/s^2, what the gravity systems add up to */
+	eddy__gravity_sum(w, gv);
+	const double gx = gv[0], gy = gv[1], gz = gv[2];
 	const eddy_sph_density_def *eos = NULL;
 	float rho0 = 0;
 	bool wcsph = false;
 	const eddy_system *o;
-	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_GRAVITY); (o = eddy__systems_next(&it));) {
-		const double sc = ((const eddy_gravity_def *)o->vt->shared(o, EDDY_CAP_GRAVITY))->scale;
-		gx += sc * w->def.gravity.x, gy += sc * w->def.gravity.y, gz += sc * w->def.gravity.z;
-	}
 	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_SPH_NEIGHBORS); !eos && (o = eddy__systems_next(&it));) {
 		eos = eddy__sph_density_def(o);
 		rho0 = ((const sph_shared *)o->vt->shared(o, EDDY_CAP_SPH_NEIGHBORS))->rho0;

@@ -1163,7 +1163,7 @@ static void sound_speed_follows_the_scene(void)
 			dens = eddy_add_sph_density(w, &sd);
 			eddy_add_emit_box(w, &b);
 			no_eos = eddy_sph_sound_speed(w, dens); /* a pressure solve's c: the fixed 20 m/s */
-			eddy_world_remove_system(w, eddy_world_system_at(w, 1));
+			CHECK(eddy_world_remove_system(w, eddy_world_system_at(w, 1)) == EDDY_OK);
 			eddy_add_sph_pressure(w, &sp);
 		}
 		eddy_system_id box = eddy_add_emit_box(w, &b);

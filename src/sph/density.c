@@ -323,10 +323,10 @@ static float walls_set(const sph_density *sd, const walls *wl, bool first, int t
 			 * 1 / FLT_MAX, and its inverse was infinite (a dam break at
 			 * 0.5 mm spacing stopped with an infinite density). Its weight
 			 * in every fluid sum is as small: it is left at p = 0. */
-			const float sw = inv_sw[a], inv = sw > 0 ? 1.0f / sw : 0.0f;
-			const bool held = inv <= FLT_MAX;
-			s = held && sw > 0 ? sp[a] / sw : 0.0f;
-			inv_sw[a] = held ? inv : 0.0f;
+			const float sw = inv_sw[a];
+			const bool held = sw > 0 && 1.0f / sw <= FLT_MAX;
+			s = held ? sp[a] / sw : 0.0f;
+			inv_sw[a] = held ? 1.0f / sw : 0.0f;
 		} else
 			s = sp[a] * inv_sw[a];
 		const float pb = s > 0 ? s : 0.0f, r = eos_rho(e, pb), d = r - old[a];
@@ -709,12 +709,9 @@ static bool inside(eddy_vec3 lo, eddy_vec3 hi, eddy_vec3 p)
 
 static double scene_reach(const eddy_world *w, double *fall)
 {
-	double g[3] = {0, 0, 0};
+	double g[3];
+	eddy__gravity_sum(w, g);
 	const eddy_system *o;
-	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_GRAVITY); (o = eddy__systems_next(&it));) {
-		const double sc = ((const eddy_gravity_def *)o->vt->shared(o, EDDY_CAP_GRAVITY))->scale;
-		g[0] += sc * w->def.gravity.x, g[1] += sc * w->def.gravity.y, g[2] += sc * w->def.gravity.z;
-	}
 	const double gn = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
 	const eddy_vec3 up =
 		gn > 0 ? eddy__v3((float)(-g[0] / gn), (float)(-g[1] / gn), (float)(-g[2] / gn)) : eddy__v3(0, 1, 0);
