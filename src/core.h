@@ -395,8 +395,11 @@ double eddy__emission_limit(const eddy_world *w, bool done, double start, double
  * leaving the collider to push the water inside it out in one step (a pool
  * around a 4 cm sphere burst at 15 m/s, WCSPH). The solids' test on the
  * world's threads, the water's serially, in the world's arena (released on
- * return); false when out of memory. */
-bool eddy__emit_occupied(eddy_world *w, const eddy_vec3 *pts, size_t np, float spacing, uint8_t *occupied);
+ * return); false when out of memory. clearance > 0 (at most spacing) tests
+ * the distance instead: occupied when a particle lies closer than
+ * clearance (emit_nozzle, whose discs meet moving water off any lattice). */
+bool eddy__emit_occupied(eddy_world *w, const eddy_vec3 *pts, size_t np, float spacing, float clearance,
+                         uint8_t *occupied);
 /* Whether an emitter must ask eddy__emit_occupied: the world has particles
  * or colliders. */
 bool eddy__emit_needs_check(const eddy_world *w);

@@ -108,7 +108,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			if (emitted(&e->def, l))
 				pts[k++] = l;
 		}
-		ok = eddy__emit_occupied(w, pts, count, e->def.spacing, occupied);
+		ok = eddy__emit_occupied(w, pts, count, e->def.spacing, 0, occupied);
 		for (size_t q = 0; q < count; ++q)
 			kept += !occupied[q];
 	}

@@ -67,7 +67,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		for (size_t q = 0, all = lattice(e); q < all && r < e->count; ++q)
 			if (e->inside[q])
 				pts[r++] = point(e, q);
-		ok = eddy__emit_occupied(w, pts, e->count, e->def.spacing, occupied);
+		ok = eddy__emit_occupied(w, pts, e->count, e->def.spacing, 0, occupied);
 		for (size_t q = 0; q < e->count; ++q)
 			kept += !occupied[q];
 	}

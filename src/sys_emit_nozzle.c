@@ -9,10 +9,27 @@
  * integrator moved it; so the jet has the lattice density and the rate is speed * pi r^2 / h^3.
  * The pour runs over [start, start + duration] and stops early at
  * max_particles (the last disc is cut to hit the total exactly).
+ * A disc's point that water or a collider's solid already fills (a particle
+ * closer than 0.8 spacings, NOZZLE_CLEARANCE) is held back, not emitted: a
+ * closed tank filled up to the opening stops taking water instead of having
+ * particles stacked into it (a 0.1 m tank filled past its nozzle: DFSPH
+ * burst at 26 km/s, FLIP packed 3x the particles a cell holds, WCSPH
+ * compressed 2.3% and rising). So an opening under the water line adds only
+ * what the flow in front of it makes room for: the nozzle is a spout, not a
+ * pump (a submerged inlet that pushes its rate into still water needs a
+ * pipe wall behind the opening, which the nozzle does not model). The
+ * points held back in a frame are published as "<label>_held".
  * Time-step limit (emission): dt <= spacing / speed. */
 #include "systems.h"
 
+#include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
+
+/* A disc's point is held back when a particle lies closer than this many
+ * spacings: a free jet's last disc is a spacing downstream, water at rest
+ * around the opening leaves no hole that wide. */
+#define NOZZLE_CLEARANCE 0.8f
 
 typedef struct emit_nozzle {
 	eddy_emit_nozzle_def def;
@@ -24,6 +41,8 @@ typedef struct emit_nozzle {
 		int64_t emitted;
 		bool started;
 	} run;
+	int held_frame; /* the frame `held` counts in */
+	int64_t held;   /* points held back this frame (occupied) */
 } emit_nozzle;
 
 static const int nozzle_writes[] = {COL_X_, COL_Y_, COL_Z_, COL_VX, COL_VY, COL_VZ, -1};
@@ -68,7 +87,7 @@ static int disc_points(const emit_nozzle *e, double downstream, eddy_vec3 *out, 
 	return k;
 }
 
-static eddy_status emit_disc(eddy_world *w, emit_nozzle *e, double downstream)
+static eddy_status emit_disc(eddy_world *w, eddy_system *s, emit_nozzle *e, double downstream)
 {
 	int count = e->disc;
 	if (e->def.max_particles > 0 && e->run.emitted + count > e->def.max_particles)
@@ -76,11 +95,34 @@ static eddy_status emit_disc(eddy_world *w, emit_nozzle *e, double downstream)
 	if (count <= 0)
 		return EDDY_OK;
 	eddy_vec3 *pts = eddy__arena_alloc(&w->arena, (size_t)e->disc * sizeof *pts);
-	if (!pts)
-		return eddy__fail(w, EDDY_ERR_NOMEM, "emit_nozzle: out of scratch memory");
+	uint8_t *occupied = eddy__arena_alloc(&w->arena, (size_t)e->disc);
+	if (!pts || !occupied)
+		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory", s->label);
 	disc_points(e, downstream, pts, e->disc);
+	if (!eddy__emit_needs_check(w))
+		memset(occupied, 0, (size_t)e->disc);
+	else if (!eddy__emit_occupied(w, pts, (size_t)e->disc, e->def.spacing, NOZZLE_CLEARANCE * e->def.spacing, occupied))
+		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory", s->label);
+	/* the first `count` free points, in the disc's order */
+	int kept = 0, held = 0;
+	for (int k = 0; k < e->disc && kept < count; ++k) {
+		if (occupied[k])
+			held++;
+		else
+			pts[kept++] = pts[k];
+	}
+	if (eddy_world_frame(w) != e->held_frame) {
+		e->held_frame = eddy_world_frame(w);
+		e->held = 0;
+	}
+	e->held += held;
+	char name[sizeof s->label + 8];
+	snprintf(name, sizeof name, "%s_held", s->label);
+	eddy_world_publish(w, name, (double)e->held);
+	if (kept == 0)
+		return EDDY_OK;
 	size_t first;
-	eddy_status st = eddy__append_particles(w, (size_t)count, &first);
+	eddy_status st = eddy__append_particles(w, (size_t)kept, &first);
 	if (st != EDDY_OK)
 		return st;
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
@@ -88,7 +130,7 @@ static eddy_status emit_disc(eddy_world *w, emit_nozzle *e, double downstream)
 	const eddy_vec3 lo = w->def.bounds_min, hi = w->def.bounds_max;
 	const eddy_vec3 vel = {e->def.direction.x * e->def.speed, e->def.direction.y * e->def.speed,
 	                       e->def.direction.z * e->def.speed};
-	for (int k = 0; k < count; ++k) {
+	for (int k = 0; k < kept; ++k) {
 		const size_t i = first + (size_t)k;
 		x[i] = fminf(fmaxf(pts[k].x, lo.x), hi.x);
 		y[i] = fminf(fmaxf(pts[k].y, lo.y), hi.y);
@@ -97,7 +139,7 @@ static eddy_status emit_disc(eddy_world *w, emit_nozzle *e, double downstream)
 		vy[i] = vel.y;
 		vz[i] = vel.z;
 	}
-	e->run.emitted += count;
+	e->run.emitted += kept;
 	return EDDY_OK;
 }
 
@@ -119,7 +161,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	const double lead = e->def.speed * (t1 - ctx->time);
 	while (e->run.travelled >= e->def.spacing) {
 		e->run.travelled -= e->def.spacing;
-		eddy_status st = emit_disc(w, e, e->run.travelled - lead);
+		eddy_status st = emit_disc(w, s, e, e->run.travelled - lead);
 		if (st != EDDY_OK)
 			return st;
 	}

@@ -1025,7 +1025,8 @@ static void emit_solids(const eddy_world *w, const eddy_vec3 *pts, size_t np, ui
 	}
 }
 
-bool eddy__emit_occupied(eddy_world *w, const eddy_vec3 *pts, size_t np, float spacing, uint8_t *occupied)
+bool eddy__emit_occupied(eddy_world *w, const eddy_vec3 *pts, size_t np, float spacing, float clearance,
+                         uint8_t *occupied)
 {
 	memset(occupied, 0, np);
 	if (np == 0 || !(spacing > 0))
@@ -1096,7 +1097,7 @@ bool eddy__emit_occupied(eddy_world *w, const eddy_vec3 *pts, size_t np, float s
 	/* the cube's faces included, with a hair for rounding: a point on the
 	 * face two particles' cubes share (the lattices half a spacing apart)
 	 * is filled */
-	const double half = 0.5 * spacing * (1 + 1e-4);
+	const double half = 0.5 * spacing * (1 + 1e-4), clear2 = (double)clearance * clearance;
 	for (size_t k = 0; k < np; ++k) {
 		const double p[3] = {pts[k].x, pts[k].y, pts[k].z};
 		long cc[3]; /* about 1 and up: the box is a spacing wider than the points */
@@ -1111,8 +1112,9 @@ bool eddy__emit_occupied(eddy_world *w, const eddy_vec3 *pts, size_t np, float s
 					const size_t c = ((size_t)cz * dim[1] + (size_t)cy) * dim[0] + (size_t)cx;
 					for (uint32_t q = start[c]; q < start[c + 1]; ++q) {
 						const uint32_t i = idx[q];
-						if (fabs((double)x[i] - p[0]) <= half && fabs((double)y[i] - p[1]) <= half &&
-						    fabs((double)z[i] - p[2]) <= half) {
+						const double dx = (double)x[i] - p[0], dy = (double)y[i] - p[1], dz = (double)z[i] - p[2];
+						if (clearance > 0 ? dx * dx + dy * dy + dz * dz < clear2
+						                  : fabs(dx) <= half && fabs(dy) <= half && fabs(dz) <= half) {
 							occupied[k] = 1;
 							break;
 						}
