@@ -41,6 +41,7 @@ typedef struct run {
 	char video_log[64]; /* ffmpeg's messages */
 	bool bar;           /* a progress bar on stderr */
 	bool reader_gone;   /* the stats reader closed its pipe: stop quietly */
+	int warned;         /* run-time warnings printed so far */
 	double t0;
 } run;
 
@@ -515,7 +516,16 @@ static int stats_line(run *r)
 static int frame(run *r, int i)
 {
 	char buf[1024];
-	if (eddy_world_step_frame(r->w) != EDDY_OK) {
+	const eddy_status st = eddy_world_step_frame(r->w);
+	/* the frame's new run-time warnings, one line each (a warning does not
+	 * stop the run; they come before an error that does) */
+	for (; r->warned < eddy_world_warning_count(r->w); r->warned++)
+		if (!r->o->quiet) {
+			if (r->bar)
+				fputc('\n', stderr);
+			fprintf(stderr, "eddy: warning: %s\n", eddy_world_warning(r->w, r->warned));
+		}
+	if (st != EDDY_OK) {
 		if (r->bar)
 			fputc('\n', stderr);
 		return cli_fail(CLI_EXIT_RUN, "%s", cli_first_line(eddy_world_error(r->w), buf, sizeof buf));

@@ -139,6 +139,7 @@ static const char *const contract_fields[] = {
 	"compression_energy",
 	"energy",
 	"momentum",
+	"warnings",
 	NULL,
 };
 
@@ -229,6 +230,7 @@ const char *cli_write_stats(FILE *f, const eddy_frame_stats *s, lua_State *L, in
 	} else {
 		fputs("null", f);
 	}
+	fprintf(f, ",\"warnings\":%d", s->warnings); /* appended: run-time warnings so far */
 	for (int i = 0; i < s->extra_count; ++i) {
 		if (is_contract_field(s->extra[i].name))
 			continue;

@@ -837,6 +837,8 @@ static int l_world_stats(lua_State *L)
 	lua_setfield(L, -2, "leaked");
 	lua_pushinteger(L, (lua_Integer)s.nonfinite);
 	lua_setfield(L, -2, "nonfinite");
+	lua_pushinteger(L, s.warnings);
+	lua_setfield(L, -2, "warnings");
 	char hash[24];
 	snprintf(hash, sizeof hash, "%016llx", (unsigned long long)s.state_hash);
 	lua_pushstring(L, hash);
@@ -862,6 +864,19 @@ static int l_world_stats(lua_State *L)
 			lua_rawseti(L, -2, a + 1);
 		}
 		lua_setfield(L, -2, "momentum");
+	}
+	return 1;
+}
+
+/* world:warnings(): the run-time warnings raised so far, oldest first. */
+static int l_world_warnings(lua_State *L)
+{
+	lua_world *lw = check_world(L, 1);
+	const int n = eddy_world_warning_count(lw->w);
+	lua_createtable(L, n, 0);
+	for (int k = 0; k < n; ++k) {
+		lua_pushstring(L, eddy_world_warning(lw->w, k));
+		lua_rawseti(L, -2, k + 1);
 	}
 	return 1;
 }
@@ -1746,11 +1761,14 @@ static int l_out_dir(lua_State *L)
 }
 
 static const luaL_Reg world_methods[] = {
-	{"add", l_world_add},           {"advance", l_world_advance}, {"step", l_world_step},
-	{"time", l_world_time},         {"frame", l_world_frame},     {"steps", l_world_steps},
-	{"count", l_world_count},       {"channel", l_world_channel}, {"plan", l_world_plan},
-	{"on_frame", l_world_on_frame}, {"remove", l_world_remove},   {"stats", l_world_stats},
-	{"gravity", l_world_gravity},   {"close", l_world_close},     {NULL, NULL},
+	{"add", l_world_add},           {"advance", l_world_advance},
+	{"step", l_world_step},         {"time", l_world_time},
+	{"frame", l_world_frame},       {"steps", l_world_steps},
+	{"count", l_world_count},       {"channel", l_world_channel},
+	{"plan", l_world_plan},         {"on_frame", l_world_on_frame},
+	{"remove", l_world_remove},     {"stats", l_world_stats},
+	{"gravity", l_world_gravity},   {"close", l_world_close},
+	{"warnings", l_world_warnings}, {NULL, NULL},
 };
 
 static const luaL_Reg system_methods[] = {

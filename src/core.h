@@ -199,6 +199,14 @@ struct eddy_world {
 	float length_scale; /* m, smallest emitter spacing; 0 if none */
 	float rest_density; /* kg/m^3, 0 if no density system */
 
+	/* run-time warnings (eddy__warn): once per key, the first EDDY_MAX_WARNINGS - 1
+	 * kept and then one saying so */
+	struct eddy_warning {
+		char key[EDDY_NAME_MAX + 24];
+		char text[512];
+	} warnings[EDDY_MAX_WARNINGS];
+	int warning_count;
+
 	/* per-frame accumulators, and the snapshot of the last completed frame */
 	int64_t frame_steps;
 	double frame_dt_min, frame_dt_max;
@@ -217,6 +225,16 @@ struct eddy_world {
 
 /* errors */
 eddy_status eddy__fail(eddy_world *w, eddy_status s, const char *fmt, ...)
+#if defined(__GNUC__)
+	__attribute__((format(printf, 3, 4)))
+#endif
+	;
+
+/* Raises a run-time warning (eddy_world_warning) once per key: a second
+ * call with a key already raised does nothing. The key names the system
+ * and the cause ("<label>:held"). Called from a system's step or frame,
+ * never from inside a parallel loop. */
+void eddy__warn(eddy_world *w, const char *key, const char *fmt, ...)
 #if defined(__GNUC__)
 	__attribute__((format(printf, 3, 4)))
 #endif

@@ -558,10 +558,23 @@ typedef struct eddy_frame_stats {
 	double compression_energy; /* J, WCSPH's stored elastic energy (sph_pressure in the pipeline); else NAN */
 	double energy;             /* J, kinetic + potential (+ compression where it applies) */
 	double momentum[3];        /* kg m/s, sum m v */
+	int warnings;              /* run-time warnings raised so far (eddy_world_warning_count) */
 } eddy_frame_stats;
 
 /* Statistics of the frame completed last (call after eddy_world_step_frame). */
 EDDY_API eddy_status eddy_world_frame_stats(eddy_world *w, eddy_frame_stats *out);
+
+/* Run-time warnings. A system that cannot do all a scene asks of it but can
+ * go on (a nozzle whose opening water fills, a solve stopped at its cap, a
+ * speed clamped, a particle removed at the bounds) says so once per cause,
+ * naming the step and, where one is to blame, the particle; the run goes
+ * on. Kept in the order raised: the first EDDY_MAX_WARNINGS - 1, then one
+ * saying later ones are not kept. Not saved in checkpoints (a resumed run
+ * raises a cause again). */
+#define EDDY_MAX_WARNINGS 32
+EDDY_API int eddy_world_warning_count(const eddy_world *w);
+/* The index-th warning kept, or NULL outside [0, eddy_world_warning_count). */
+EDDY_API const char *eddy_world_warning(const eddy_world *w, int index);
 
 /* Systems publish a frame value (solver iterations, residual, ...); a name
  * published twice in a frame keeps the last value. */

@@ -18,7 +18,8 @@
  * what the flow in front of it makes room for: the nozzle is a spout, not a
  * pump (a submerged inlet that pushes its rate into still water needs a
  * pipe wall behind the opening, which the nozzle does not model). The
- * points held back in a frame are published as "<label>_held".
+ * points held back in a frame are published as "<label>_held", and the
+ * first hold-back raises a run-time warning.
  * Time-step limit (emission): dt <= spacing / speed. */
 #include "systems.h"
 
@@ -116,6 +117,15 @@ static eddy_status emit_disc(eddy_world *w, eddy_system *s, emit_nozzle *e, doub
 		e->held = 0;
 	}
 	e->held += held;
+	if (held > 0) {
+		char key[sizeof s->label + 8];
+		snprintf(key, sizeof key, "%s:held", s->label);
+		eddy__warn(w, key,
+		           "%s: water at its opening at step %lld (t = %.6g s): %d of %d points held back; the nozzle adds "
+		           "only what the flow in front of it makes room for (a splash back, a tank full up to the opening, "
+		           "an opening under the water line); the stats' %s_held counts them per frame",
+		           s->label, (long long)w->step, w->time, held, e->disc, s->label);
+	}
 	char name[sizeof s->label + 8];
 	snprintf(name, sizeof name, "%s_held", s->label);
 	eddy_world_publish(w, name, (double)e->held);

@@ -10,6 +10,8 @@
  * spacing; the world multiplies it by the CFL number. */
 #include "systems.h"
 
+#include <stdio.h>
+
 #include <stdlib.h>
 
 typedef struct integrate {
@@ -35,12 +37,14 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const long n = (long)w->n;
 	const bool clamp = isfinite(vmax);
-#pragma omp parallel for num_threads(ctx->threads) if (n > 32768) schedule(static)
+	long first = n; /* the first particle clamped */
+#pragma omp parallel for num_threads(ctx->threads) if (n > 32768) schedule(static) reduction(min : first)
 	for (long i = 0; i < n; ++i) {
 		float ux = vx[i] + ax[i] * dt, uy = vy[i] + ay[i] * dt, uz = vz[i] + az[i] * dt;
 		if (clamp) {
 			const float sp = sqrtf(ux * ux + uy * uy + uz * uz);
 			if (sp > vmax) {
+				first = i < first ? i : first;
 				const float k = vmax / sp;
 				ux *= k;
 				uy *= k;
@@ -53,6 +57,14 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		x[i] += ux * dt;
 		y[i] += uy * dt;
 		z[i] += uz * dt;
+	}
+	if (first < n) {
+		char key[sizeof s->label + 8];
+		snprintf(key, sizeof key, "%s:clamp", s->label);
+		eddy__warn(w, key,
+		           "%s: particle %ld reached more than max_speed = %g m/s at step %lld (t = %.6g s) and was slowed to "
+		           "it; later clamps are silent: the run is no longer the scene's physics where it clamps",
+		           s->label, first, (double)vmax, (long long)ctx->step, ctx->time);
 	}
 	return EDDY_OK;
 }

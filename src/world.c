@@ -11,6 +11,7 @@
 #include "systems.h"
 
 #include <float.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -390,6 +391,11 @@ static eddy_status check_bounds(eddy_world *w)
 		if (!out)
 			continue;
 		if (w->def.escape == EDDY_ESCAPE_REMOVE) {
+			eddy__warn(w, "world:escape",
+			           "particle %zu left the domain at step %lld (t = %.6g s) at (%g, %g, %g) and was removed (escape "
+			           "= \"remove\"); later ones are removed without a warning (the stats' particles counts what is "
+			           "left)",
+			           i, (long long)w->step, w->time, (double)x[i], (double)y[i], (double)z[i]);
 			eddy_world_remove_particle(w, i);
 			continue;
 		}
@@ -656,6 +662,33 @@ void eddy_world_publish_text(eddy_world *w, const char *name, const char *text)
 	}
 }
 
+void eddy__warn(eddy_world *w, const char *key, const char *fmt, ...)
+{
+	for (int k = 0; k < w->warning_count; ++k)
+		if (strcmp(w->warnings[k].key, key) == 0)
+			return;
+	if (w->warning_count == EDDY_MAX_WARNINGS)
+		return;
+	struct eddy_warning *wn = &w->warnings[w->warning_count++];
+	if (w->warning_count == EDDY_MAX_WARNINGS) { /* the last place says the list is full */
+		snprintf(wn->key, sizeof wn->key, "%s", "");
+		snprintf(wn->text, sizeof wn->text, "%d warnings: later ones are not kept", EDDY_MAX_WARNINGS - 1);
+		return;
+	}
+	snprintf(wn->key, sizeof wn->key, "%s", key);
+	va_list ap;
+	va_start(ap, fmt);
+	vsnprintf(wn->text, sizeof wn->text, fmt, ap);
+	va_end(ap);
+}
+
+int eddy_world_warning_count(const eddy_world *w) { return w ? w->warning_count : 0; }
+
+const char *eddy_world_warning(const eddy_world *w, int index)
+{
+	return w && index >= 0 && index < w->warning_count ? w->warnings[index].text : NULL;
+}
+
 static bool inside_any_collider(const eddy_world *w, eddy_vec3 p)
 {
 	for (int k = 0; k < w->order_count; ++k) {
@@ -842,6 +875,7 @@ eddy_status eddy_world_frame_stats(eddy_world *w, eddy_frame_stats *out)
 	out->max_speed = sqrt(vmax2);
 	out->leaked = leaked;
 	out->nonfinite = nonfinite;
+	out->warnings = w->warning_count;
 	out->cfl = w->length_scale > 0 ? out->max_speed * w->last_dt / w->length_scale : NAN;
 
 	const float *rho = eddy__col(w, COL_DENSITY);

@@ -123,6 +123,7 @@ static void world_api_and_channels(void)
 	                            "assert(world:plan{dot = true}:find('digraph', 1, true))\n"
 	                            "local ok, err = pcall(world.channel, world, 'density')\n"
 	                            "assert(not ok and err:find('not allocated', 1, true), err)\n"
+	                            "assert(#world:warnings() == 0 and world:stats().warnings == 0)\n"
 	                            "return world:stats()\n");
 	CHECKF(e == NULL, "%s", e);
 	if (!e) {
@@ -131,6 +132,22 @@ static void world_api_and_channels(void)
 		lua_getfield(L, -2, "state_hash");
 		CHECK(lua_tostring(L, -1) && strlen(lua_tostring(L, -1)) == 16);
 	}
+	lua_close(L);
+}
+
+/* world:warnings() lists the run-time warnings, and world:stats() counts them. */
+static void warnings_from_lua(void)
+{
+	lua_State *L = new_state();
+	const char *e = run(L, HEAD "world:add(eddy.emit_box{ min = {0.1,0.5,0.1}, max = {0.2,0.6,0.2}, spacing = 0.05 })\n"
+	                            "world:add(eddy.gravity{})\n"
+	                            "world:add(eddy.integrate{ max_speed = 0.5 })\n"
+	                            "world:advance(0.2)\n"
+	                            "local ws = world:warnings()\n"
+	                            "assert(#ws == 1 and world:stats().warnings == 1, #ws)\n"
+	                            "assert(ws[1]:find('max_speed = 0.5 m/s at step', 1, true), ws[1])\n"
+	                            "return world\n");
+	CHECKF(e == NULL, "%s", e);
 	lua_close(L);
 }
 
@@ -671,6 +688,7 @@ void suite_lua(void)
 	RUN(stale_handle_in_lua);
 	RUN(sph_mass_from_the_handle);
 	RUN(world_api_and_channels);
+	RUN(warnings_from_lua);
 	RUN(on_frame_fields_merge);
 	RUN(callbacks_cannot_reenter_their_world);
 	RUN(arguments_that_once_crashed);

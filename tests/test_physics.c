@@ -273,6 +273,11 @@ static void escape_policy(void)
 		if (remove) {
 			CHECK(st == EDDY_OK);
 			CHECK(eddy_world_particle_count(w) == 0); /* hard case 16: all left, no crash */
+			/* said once, at run time, naming the step and the particle */
+			CHECK(eddy_world_warning_count(w) == 1);
+			CHECK_HAS(eddy_world_warning(w, 0), "left the domain at step");
+			CHECK_HAS(eddy_world_warning(w, 0), "was removed (escape = \"remove\")");
+			CHECK(eddy_world_warning(w, 1) == NULL && eddy_world_warning(w, -1) == NULL);
 			eddy_frame_stats s;
 			CHECK(eddy_world_frame_stats(w, &s) == EDDY_OK && s.particles == 0 && s.max_speed == 0);
 		} else {
@@ -282,6 +287,69 @@ static void escape_policy(void)
 		}
 		eddy_destroy_world(w);
 	}
+}
+
+/* integrate's max_speed, a safety valve, clamps a falling block: the first
+ * clamp raises one run-time warning naming the particle and the step (the
+ * run is no longer the scene's physics there); a world with no clamp raises
+ * none. */
+static void speed_clamp_is_said_at_run_time(void)
+{
+	for (int cap = 0; cap < 2; ++cap) {
+		eddy_world_def d = eddy_default_world_def();
+		eddy_world *w = eddy_create_world(&d, NULL, 0);
+		eddy_emit_box_def b = eddy_default_emit_box_def();
+		b.min = (eddy_vec3){0.4f, 0.6f, 0.4f};
+		b.max = (eddy_vec3){0.5f, 0.7f, 0.5f};
+		eddy_add_emit_box(w, &b);
+		eddy_gravity_def g = eddy_default_gravity_def();
+		eddy_add_gravity(w, &g);
+		eddy_integrate_def it = eddy_default_integrate_def();
+		if (cap)
+			it.max_speed = 1.0f; /* reached after 0.1 s of fall */
+		eddy_add_integrate(w, &it);
+		CHECK(eddy_world_advance(w, 0.3) == EDDY_OK);
+		eddy_frame_stats s;
+		CHECK(eddy_world_frame_stats(w, &s) == EDDY_OK);
+		CHECK(s.warnings == cap);
+		CHECK(eddy_world_warning_count(w) == cap);
+		if (cap) {
+			CHECK_HAS(eddy_world_warning(w, 0), "integrate: particle 0 reached more than max_speed = 1 m/s at step");
+			CHECK(s.max_speed <= 1.0 + 1e-6);
+		}
+		eddy_destroy_world(w);
+	}
+}
+
+/* Forty nozzles under the water line each raise their warning: the world
+ * keeps the first EDDY_MAX_WARNINGS - 1, each once however many steps hold
+ * points back, and one last saying later ones are not kept. */
+static void warnings_are_kept_once_and_capped(void)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.gravity = (eddy_vec3){0, 0, 0};
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.min = (eddy_vec3){0, 0, 0};
+	b.max = (eddy_vec3){1, 0.2f, 1};
+	b.spacing = 0.02f;
+	eddy_add_emit_box(w, &b);
+	for (int k = 0; k < 40; ++k) {
+		eddy_emit_nozzle_def nz = eddy_default_emit_nozzle_def();
+		nz.center = (eddy_vec3){0.1f + 0.02f * (float)k, 0.1f, 0.5f};
+		nz.radius = 0.01f;
+		nz.spacing = 0.02f;
+		nz.start = 0.01; /* after the box */
+		CHECK(eddy_system_valid(w, eddy_add_emit_nozzle(w, &nz)));
+	}
+	eddy_integrate_def it = eddy_default_integrate_def();
+	eddy_add_integrate(w, &it);
+	CHECKF(eddy_world_advance(w, 0.2) == EDDY_OK, "%s", eddy_world_error(w));
+	CHECK(eddy_world_warning_count(w) == EDDY_MAX_WARNINGS);
+	CHECK_HAS(eddy_world_warning(w, 0), "emit_nozzle: water at its opening at step");
+	CHECK_HAS(eddy_world_warning(w, 1), "emit_nozzle#2: water at its opening at step");
+	CHECK_HAS(eddy_world_warning(w, EDDY_MAX_WARNINGS - 1), "31 warnings: later ones are not kept");
+	eddy_destroy_world(w);
 }
 
 static void nozzle_pours_at_its_rate(void)
@@ -333,7 +401,7 @@ static void nozzle_pours_at_its_rate(void)
  * packing), the water moves no faster than twice what the jet and its fall
  * give it, sqrt(v0^2 + 2 g H) (H = the opening's height; splashes where the
  * jet lands reach 1.2-1.8x), SPH's mean compression stays under 1%, and
- * the held points are published. Measured: 1,332-1,546 particles, at most
+ * the held points are published and raise one run-time warning. Measured: 1,332-1,546 particles, at most
  * 1.83x (WCSPH, sideways). Before, the nozzle emitted into the water: DFSPH's step collapsed
  * at 0.63 s, FLIP packed 3,913 particles in (2.5x), WCSPH compressed 148%
  * at 8.5 m/s. */
@@ -352,10 +420,11 @@ static void nozzle_stops_when_the_tank_is_full(void)
 	for (size_t k = 0; k < sizeof cases / sizeof cases[0]; ++k) {
 		snprintf(cmd, sizeof cmd,
 		         "%s/eddy run tests/scenes/fill_tank.lua --set method=%s --set dir=%s --set speed=%g --stats - "
-		         "--quiet --threads 1 --out %s/fill_tank 2>&1",
+		         "--threads 1 --out %s/fill_tank 2>&1",
 		         test_build_dir(), cases[k].method, cases[k].dir, cases[k].speed, test_out_dir());
 		const int st = test_sh(cmd, out, CAP);
-		double vmax = 0, n = -1, held = NAN, comp = NAN;
+		const bool said = strstr(out, "eddy: warning: emit_nozzle: water at its opening at step") != NULL;
+		double vmax = 0, n = -1, held = NAN, comp = NAN, warnings = NAN;
 		for (char *line = out; line && *line;) {
 			char *next = strchr(line, '\n');
 			if (next)
@@ -365,6 +434,7 @@ static void nozzle_stops_when_the_tank_is_full(void)
 				n = test_json_number(line, "particles");
 				held = test_json_number(line, "emit_nozzle_held");
 				comp = test_json_number(line, "density_compression_avg");
+				warnings = test_json_number(line, "warnings");
 			}
 			line = next;
 		}
@@ -379,6 +449,7 @@ static void nozzle_stops_when_the_tank_is_full(void)
 		CHECK(vmax <= 2 * v);
 		CHECK(held > 0);
 		CHECK(!isfinite(comp) || comp < 0.01);
+		CHECK(warnings == 1 && said); /* the nozzle's, once */
 	}
 	free(out);
 }
@@ -650,6 +721,8 @@ void suite_physics(void)
 	RUN(clock_lands_on_frames);
 	RUN(advection_limit_sets_dt);
 	RUN(escape_policy);
+	RUN(speed_clamp_is_said_at_run_time);
+	RUN(warnings_are_kept_once_and_capped);
 	RUN(nozzle_pours_at_its_rate);
 	RUN(nozzle_stops_when_the_tank_is_full);
 	RUN(overlapping_boxes_make_one_still_pool);

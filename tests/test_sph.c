@@ -1814,7 +1814,8 @@ static void dfsph_drop_converges(void)
  * and must count in unconverged, frame by frame, exactly when the frame's
  * residual_max is over the bound (a step ends over it only at the cap).
  * Counting only the mean, unconverged read 0 through the impact (2 of the
- * 12 frames over the bound, at CFL 1, the pour's). */
+ * 12 frames over the bound, at CFL 1, the pour's). The first such step
+ * raises one run-time warning naming the step and the particle. */
 static void dfsph_capped_compression_counts_as_unconverged(void)
 {
 	sph_setup s = default_setup();
@@ -1837,11 +1838,16 @@ static void dfsph_capped_compression_counts_as_unconverged(void)
 		over += short_of;
 		counted += unconverged;
 		agree += short_of == unconverged;
+		/* and says so at run time, once: a warning from the first such step on */
+		CHECKF(eddy_world_warning_count(w) == (counted > 0), "frame %d: %d warnings after %d unconverged frames", f + 1,
+		       eddy_world_warning_count(w), counted);
 	}
 	printf("    dfsph drop, density solve capped at 2: %d of %d frames over a stopping rule, %d counted unconverged\n",
 	       over, frames, counted);
 	CHECK(over > 0);
 	CHECK(agree == frames);
+	CHECK_HAS(eddy_world_warning(w, 0), "sph_dfsph: the density solve stopped at its cap (max_iterations = 2) at step");
+	CHECK_HAS(eddy_world_warning(w, 0), "particle");
 	eddy_destroy_world(w);
 }
 

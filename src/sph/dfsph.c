@@ -201,6 +201,7 @@
 #include "simd.h"
 #include "sph.h"
 
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -1309,8 +1310,29 @@ static eddy_status finish(eddy_world *w, const eddy_system *sys, const dfsph_wor
 	/* a step whose density solve hit its cap short of either stopping rule
 	 * (the mean, or one particle's compression: DFSPH_MAX_COMPRESSION) */
 	const bool density_short = residual > sd->def.max_density_error || worst_err > DFSPH_MAX_COMPRESSION;
-	sd->unconverged += (it >= sd->def.max_iterations && density_short) ||
-	                   (div_it >= sd->def.max_divergence_iterations && div_residual > sd->def.max_divergence_error);
+	const bool density_capped = it >= sd->def.max_iterations && density_short;
+	const bool divergence_capped =
+		div_it >= sd->def.max_divergence_iterations && div_residual > sd->def.max_divergence_error;
+	sd->unconverged += density_capped || divergence_capped;
+	if (density_capped || divergence_capped) {
+		char key[sizeof sys->label + 16];
+		snprintf(key, sizeof key, "%s:%s", sys->label, density_capped ? "density" : "divergence");
+		if (density_capped)
+			eddy__warn(w, key,
+			           "%s: the density solve stopped at its cap (max_iterations = %d) at step %lld: mean density "
+			           "error %.3g (max_density_error %g), particle %ld off by %.3g; the run goes on less "
+			           "incompressible (the stats' unconverged counts such steps): lower the world's cfl or raise "
+			           "max_iterations",
+			           sys->label, sd->def.max_iterations, (long long)ctx->step, residual,
+			           (double)sd->def.max_density_error, worst, worst_err);
+		else
+			eddy__warn(w, key,
+			           "%s: the divergence solve stopped at its cap (max_divergence_iterations = %d) at step %lld: "
+			           "mean divergence error %.3g (max_divergence_error %g); the run goes on (the stats' "
+			           "unconverged counts such steps): lower the world's cfl or raise max_divergence_iterations",
+			           sys->label, sd->def.max_divergence_iterations, (long long)ctx->step, div_residual,
+			           (double)sd->def.max_divergence_error);
+	}
 	sd->residual = residual > sd->residual ? residual : sd->residual;
 	sd->worst = worst_err > sd->worst ? worst_err : sd->worst;
 	eddy_world_publish_text(w, "solver", "dfsph");
