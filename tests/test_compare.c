@@ -306,6 +306,27 @@ static void compare_all_ok_with_video(void)
 	CHECKF(!file_has(path, "failed"), "%s: a method failed", path);
 }
 
+/* A run's warnings reach compare.md: DFSPH's nozzle pouring into the small
+ * closed tank holds points back by 0.15 s (tests/scenes/fill_tank.lua), and
+ * the scene's endless nozzle draws the preflight's memory warning. Before,
+ * the children ran --quiet and their warnings were lost. */
+static void compare_lists_warnings(void)
+{
+	const char *b = test_build_dir();
+	char out[256], cmd[1024], buf[8192], path[512];
+	snprintf(out, sizeof out, "%s/compare_warnings", test_out_dir());
+	snprintf(cmd, sizeof cmd,
+	         "rm -rf %s && %s/eddy compare tests/scenes/fill_tank.lua --methods dfsph --quick --out %s 2>&1", out, b,
+	         out);
+	int code = test_sh(cmd, buf, sizeof buf);
+	CHECKF(code == 0, "exit %d, expected 0:\n%s", code, buf);
+	snprintf(path, sizeof path, "%s/compare.md", out);
+	CHECKF(file_has(path, "## Warnings"), "%s: no warnings section", path);
+	CHECKF(file_has(path, "- dfsph: emit_nozzle: water at its opening at step"), "%s: no nozzle warning", path);
+	CHECKF(file_has(path, "- dfsph: memory: an emitter has no end"), "%s: no preflight warning", path);
+	CHECKF(file_has(path, "| warnings | 1 / 1 |"), "%s: no warnings count", path);
+}
+
 /* Usage errors: one line, status 2, before anything runs; --help: status 0. */
 static void compare_usage_errors(void)
 {
@@ -349,4 +370,5 @@ void suite_compare(void)
 	RUN(compare_usage_errors);
 	RUN(compare_three_methods);
 	RUN(compare_all_ok_with_video);
+	RUN(compare_lists_warnings);
 }

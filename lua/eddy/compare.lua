@@ -4,7 +4,7 @@
 --
 -- The scene is run once per method, one after another, each as a child
 --   eddy run SCENE --set method=M [--set K=V ...] --out DIR/runs/M
---            --stats DIR/runs/M/stats.jsonl --quiet [--frames 6] [--safe]
+--            --stats DIR/runs/M/stats.jsonl [--frames 6] [--safe]
 -- (spawn, lua/compare.c: wall time and peak memory through wait4, as for
 -- eddy study), so no run disturbs another's time or memory. From the stats
 -- lines and the frames each run rendered, it writes into DIR:
@@ -13,7 +13,9 @@
 --                      a failed method's panel says why)
 --   compare.mp4        the same frames, when ffmpeg is on PATH
 --   compare.csv        one row per method
---   compare.md         the same as Markdown tables
+--   compare.md         the same as Markdown tables, and each method's warnings
+--                      (the preflight's and the run's: a solve at its cap, a
+--                      nozzle held back, ...) from its run.log
 --   compare_FIELD.png  a stats field against simulated time, one line per method
 --   compare_cost.png   wall time per simulated second, per method
 -- A failed method is a row with its reason; the others still run. Returns
@@ -101,14 +103,28 @@ local function read_stats(path)
 	return frames, order
 end
 
--- The child's one-line error: its first "eddy: " line (its --quiet run prints
--- nothing else), else its first line, else the exit status.
+-- The child's warnings: its "eddy: warning: " lines, in order.
+local function warnings_of(log)
+	local list = {}
+	local f = io.open(log, "r")
+	if f then
+		for line in f:lines() do
+			local text = line:match("^eddy: warning: (.*)")
+			if text then list[#list + 1] = text end
+		end
+		f:close()
+	end
+	return list
+end
+
+-- The child's one-line error: its first "eddy: " line that is not a warning,
+-- else its first line, else the exit status.
 local function failure_reason(log, code)
 	local first
 	local f = io.open(log, "r")
 	if f then
 		for line in f:lines() do
-			if line:match("^eddy: ") then first = line:sub(7) break end
+			if line:match("^eddy: ") and not line:match("^eddy: warning: ") then first = line:sub(7) break end
 			if not first and line:match("%S") then first = line end
 		end
 		f:close()
@@ -144,7 +160,9 @@ local function run_method(ctx, method)
 		argv[#argv + 1] = "--set"
 		argv[#argv + 1] = kv
 	end
-	for _, a in ipairs({ "--out", dir, "--stats", stats, "--quiet" }) do argv[#argv + 1] = a end
+	-- not --quiet: the child's warnings go to its run.log (its stderr is no
+	-- terminal, so no progress bar) and into compare.md
+	for _, a in ipairs({ "--out", dir, "--stats", stats }) do argv[#argv + 1] = a end
 	if ctx.quick then
 		argv[#argv + 1] = "--frames"
 		argv[#argv + 1] = "6"
@@ -161,6 +179,7 @@ local function run_method(ctx, method)
 	local r = { method = method, dir = dir, code = code, wall_s = wall, peak_mb = rss / 1024, frames = frames,
 	            nframes = #frames, sys_order = order, systems = {}, steps = 0, images = {}, measure = {} }
 	if code ~= 0 then r.reason = failure_reason(log, code) end
+	r.warnings = warnings_of(log)
 	-- Ctrl-C or SIGTERM: the child stopped after its frame (status 128 + the
 	-- signal); no further method runs
 	if (signal or 0) ~= 0 or code == 130 or code == 143 then
@@ -323,6 +342,14 @@ local function write_md(path, ctx, runs, sys, fields)
 				w(" | ", m and (md_cell(m.final, "%.4g") .. " / " .. md_cell(m.worst, "%.4g")) or "")
 			end
 			w(" |\n")
+		end
+	end
+	local any = false
+	for _, r in ipairs(runs) do any = any or #r.warnings > 0 end
+	if any then
+		w("\n## Warnings (each run's, from its run.log)\n\n")
+		for _, r in ipairs(runs) do
+			for _, text in ipairs(r.warnings) do w("- ", md_cell(r.method), ": ", md_cell(text), "\n") end
 		end
 	end
 	f:write(table.concat(out))
