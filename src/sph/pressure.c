@@ -24,12 +24,15 @@
  * (the world's CFL number is the Courant factor, 0.25-0.4); force,
  * dt <= 0.625 sqrt(h / max|a|), max|a| from the last step (with the default
  * CFL 0.4 the usual 0.25 sqrt(h/|a|)).
+ * A mean compression over 3% at a frame raises a run-time warning (frame).
  * Source: Mueller, Charypar & Gross 2003; Adami, Hu & Adams, "A generalized
  * wall boundary condition for SPH", JCP 2012. */
 #include "simd.h"
 #include "sph.h"
 #include "systems.h"
 
+#include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 
 #define PRESSURE_T 12 /* floats of the pair sums per particle: 4 lanes of x, y, z */
@@ -211,6 +214,49 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	return force < acoustic ? force : acoustic;
 }
 
+/* Once a frame, the water's mean compression (mean of max(rho - rho0, 0) /
+ * rho0, the stats' density_compression_avg). The speed of sound is chosen
+ * for about 1% (Mach 0.1: compression goes as Mach^2); a mean over 3% means
+ * the flow outruns it (a collider the host moves faster than the scene's
+ * own speeds, particles the host adds, a stiffness set too low), and a
+ * run-time warning says so, naming the fastest particle and the stiffness
+ * its speed wants. The state is not touched. */
+#define PRESSURE_WARN_COMPRESSION 0.03
+static eddy_status frame(eddy_world *w, eddy_system *s, int f)
+{
+	const sph_shared *sh = eddy__sph_find(w, s);
+	const float *rho = eddy__col(w, COL_DENSITY);
+	const long n = (long)w->n;
+	if (!sh || !rho || n == 0 || !(sh->rho0 > 0))
+		return EDDY_OK;
+	const float rho0 = sh->rho0;
+	double over = 0;
+#pragma omp parallel for num_threads(w->def.threads) if (n > 65536) schedule(static) reduction(+ : over)
+	for (long i = 0; i < n; ++i)
+		over += rho[i] > rho0 ? (double)(rho[i] - rho0) : 0.0;
+	const double mean = over / ((double)n * rho0);
+	if (!(mean > PRESSURE_WARN_COMPRESSION))
+		return EDDY_OK;
+	const float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
+	long fast = 0;
+	double v2 = -1;
+	for (long i = 0; i < n; ++i) {
+		const double e = (double)vx[i] * vx[i] + (double)vy[i] * vy[i] + (double)vz[i] * vz[i];
+		if (e > v2)
+			v2 = e, fast = i;
+	}
+	const double v = sqrt(v2), c = sh->c;
+	char key[sizeof s->label + 12];
+	snprintf(key, sizeof key, "%s:compressed", s->label);
+	eddy__warn(w, key,
+	           "%s: the water is compressed %.1f%% on average at frame %d (t = %.6g s), over %g%%: the speed of sound "
+	           "c = %.3g m/s (sph_density's stiffness %.4g m^2/s^2) is too low for this flow, whose fastest particle "
+	           "(%ld) moves at %.3g m/s; the compression grows as (speed / c)^2: set stiffness to about (10 x %.3g)^2 "
+	           "= %.4g m^2/s^2",
+	           s->label, 100 * mean, f, w->time, 100 * PRESSURE_WARN_COMPRESSION, c, c * c, fast, v, v, 100 * v * v);
+	return EDDY_OK;
+}
+
 /* ax ay az are every force's: no default_writes, so order hints for them
  * name gravity alone */
 const eddy_system_vtable eddy__kind_sph_pressure = {
@@ -218,6 +264,7 @@ const eddy_system_vtable eddy__kind_sph_pressure = {
 	.provides = EDDY_CAP_SPH_EOS_FORCE,
 	.requires = EDDY_CAP_SPH_NEIGHBORS,
 	.step = step,
+	.frame = frame,
 	.limit = limit,
 };
 
