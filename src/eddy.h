@@ -135,6 +135,9 @@ EDDY_API double eddy_world_frame_time(const eddy_world *w); /* s, 1/fps */
 EDDY_API int eddy_world_frame(const eddy_world *w);         /* frames completed */
 EDDY_API int64_t eddy_world_steps(const eddy_world *w);     /* steps taken */
 EDDY_API double eddy_world_last_dt(const eddy_world *w);    /* s, 0 before the first step */
+/* m, the length the CFL limits use: the smallest emitter spacing (0 before
+ * any emitter); a moving collider's surface moves at most cfl times it a step */
+EDDY_API double eddy_world_length_scale(const eddy_world *w);
 
 /* One adaptive step, never past the next frame time. */
 EDDY_API eddy_status eddy_world_step(eddy_world *w);

@@ -260,6 +260,7 @@ eddy_status eddy_world_sync(eddy_world *w)
 double eddy_world_time(const eddy_world *w) { return w ? w->time : NAN; }
 double eddy_world_frame_time(const eddy_world *w) { return w ? 1.0 / w->def.fps : NAN; }
 int eddy_world_frame(const eddy_world *w) { return w ? w->frame : 0; }
+double eddy_world_length_scale(const eddy_world *w) { return w ? w->length_scale : 0; }
 int64_t eddy_world_steps(const eddy_world *w) { return w ? w->step : 0; }
 double eddy_world_last_dt(const eddy_world *w) { return w ? w->last_dt : NAN; }
 
