@@ -519,7 +519,7 @@ static eddy_status on_frame_hook(eddy_world *w, int frame, void *user)
 }
 
 /* animate: the pose fn(t) gives, as doubles (false: not three numbers). */
-static bool animate_eval(callback *cb, eddy_world *w, double t, double v[3])
+static bool animate_eval(callback *cb, double t, double v[3])
 {
 	lua_State *L = cb->L;
 	const int top = lua_gettop(L);
@@ -537,7 +537,6 @@ static bool animate_eval(callback *cb, eddy_world *w, double t, double v[3])
 		lua_pop(L, 1);
 	}
 	lua_settop(L, top);
-	(void)w;
 	return ok;
 }
 
@@ -601,11 +600,11 @@ static double animate_limit(eddy_world *w, void *user, const char **reason)
 		span = frame;
 	const double dt = span / ANIMATE_SAMPLES;
 	double now[3], before[3] = {0, 0, 0};
-	if (!animate_eval(cb, w, t, now))
+	if (!animate_eval(cb, t, now))
 		return INFINITY;        /* the step's own call reports it */
 	if (t - dt >= cb->placed) { /* the motion over the interval before now */
 		double b[3];
-		if (!animate_eval(cb, w, t - dt, b))
+		if (!animate_eval(cb, t - dt, b))
 			return INFINITY;
 		for (int i = 0; i < 3; ++i)
 			before[i] = now[i] - b[i];
@@ -613,7 +612,7 @@ static double animate_limit(eddy_world *w, void *user, const char **reason)
 	double prev[3] = {now[0], now[1], now[2]}, speed = 0, jerk = 0;
 	for (int k = 1; k <= ANIMATE_SAMPLES; ++k) {
 		double v[3];
-		if (!animate_eval(cb, w, t + k * dt, v))
+		if (!animate_eval(cb, t + k * dt, v))
 			return INFINITY;
 		const double d[3] = {v[0] - prev[0], v[1] - prev[1], v[2] - prev[2]};
 		const double change[3] = {d[0] - before[0], d[1] - before[1], d[2] - before[2]};
