@@ -572,9 +572,8 @@ static double animate_speed(callback *cb, eddy_world *w, const double d[3], doub
  * step's speed, which a motion that starts or speeds up suddenly outruns:
  * a paddle whose offset is v t from t = 0 took a first step of 2.9 ms
  * (DFSPH) or 6.7 ms (FLIP) at 3 m/s, jumping 2-4 particle spacings into the
- * water, which burst at 25-30 m/s. So the function is sampled over the
- * rest of the frame (ANIMATE_SAMPLES intervals from now), and the step is
- * held
+ * water, which burst at 25-30 m/s. So the function is sampled a frame
+ * ahead (ANIMATE_SAMPLES intervals from now), and the step is held
  * - to the length scale L over the fastest the surface moves there (times
  *   the world's cfl), as the collider's own limit does with its last
  *   step's speed;
@@ -595,10 +594,9 @@ static double animate_limit(eddy_world *w, void *user, const char **reason)
 	const double cfl = eddy_world_get_def(w)->cfl;
 	if (!(L > 0) || !(frame > 0) || !(cfl > 0))
 		return INFINITY;
-	double span = (eddy_world_frame(w) + 1) * frame - t;
-	if (!(span > 1e-9 * frame))
-		span = frame;
-	const double dt = span / ANIMATE_SAMPLES;
+	/* a frame ahead in fixed intervals: intervals shrinking toward the frame's
+	 * end would chase a jump there (a pose that teleports) down to dt_min */
+	const double dt = frame / ANIMATE_SAMPLES;
 	double now[3], before[3] = {0, 0, 0};
 	if (!animate_eval(cb, t, now))
 		return INFINITY;        /* the step's own call reports it */

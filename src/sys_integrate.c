@@ -11,7 +11,6 @@
 #include "systems.h"
 
 #include <stdio.h>
-
 #include <stdlib.h>
 
 typedef struct integrate {
