@@ -540,15 +540,12 @@ static bool animate_eval(callback *cb, double t, double v[3])
 	return ok;
 }
 
-/* The speed a pose change d over dt gives the collider's surface: |d| / dt
- * for an offset; for a rotation (degrees) its angular speed times the
- * farthest the collider reaches from its pivot (a box's corners, a sphere's
- * far side; a plane or mesh: the world's box). */
-static double animate_speed(callback *cb, eddy_world *w, const double d[3], double dt)
+/* How far a rotating collider's surface reaches from its pivot: a box's
+ * farthest corner, a sphere's far side; a plane or mesh: the world's box.
+ * A pose change d over dt then moves the surface at |d| / dt for an offset,
+ * |d| (degrees) / dt times that reach for a rotation. */
+static double animate_reach(callback *cb, eddy_world *w)
 {
-	const double len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / dt;
-	if (!cb->rotation)
-		return len;
 	eddy_collider_shape sh;
 	const eddy_world_def *wd = eddy_world_get_def(w);
 	eddy_vec3 lo = wd->bounds_min, hi = wd->bounds_max, c = {0, 0, 0};
@@ -565,8 +562,10 @@ static double animate_speed(callback *cb, eddy_world *w, const double d[3], doub
 		const double x = (k & 1 ? hi.x : lo.x) - c.x, y = (k & 2 ? hi.y : lo.y) - c.y, z = (k & 4 ? hi.z : lo.z) - c.z;
 		r = fmax(r, sqrt(x * x + y * y + z * z));
 	}
-	return len * (M_PI / 180.0) * (r + extra);
+	return r + extra;
 }
+
+static double norm3d(const double d[3]) { return sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]); }
 
 /* animate's time-step limit. The collider limits the step by its last
  * step's speed, which a motion that starts or speeds up suddenly outruns:
@@ -607,6 +606,9 @@ static double animate_limit(eddy_world *w, void *user, const char **reason)
 		for (int i = 0; i < 3; ++i)
 			before[i] = now[i] - b[i];
 	}
+	/* m per unit of pose change and second: 1 for an offset, the reach in
+	 * radians for a rotation */
+	const double scale = (cb->rotation ? animate_reach(cb, w) * (M_PI / 180.0) : 1.0) / dt;
 	double prev[3] = {now[0], now[1], now[2]}, speed = 0, jerk = 0;
 	for (int k = 1; k <= ANIMATE_SAMPLES; ++k) {
 		double v[3];
@@ -614,8 +616,8 @@ static double animate_limit(eddy_world *w, void *user, const char **reason)
 			return INFINITY;
 		const double d[3] = {v[0] - prev[0], v[1] - prev[1], v[2] - prev[2]};
 		const double change[3] = {d[0] - before[0], d[1] - before[1], d[2] - before[2]};
-		speed = fmax(speed, animate_speed(cb, w, d, dt));
-		jerk = fmax(jerk, animate_speed(cb, w, change, dt));
+		speed = fmax(speed, norm3d(d) * scale);
+		jerk = fmax(jerk, norm3d(change) * scale);
 		memcpy(prev, v, sizeof prev);
 	}
 	const double by_speed = speed > 0 ? L / speed : INFINITY;
