@@ -26,6 +26,7 @@ static const eddy_lua_field world_fields[] = {
 	EDDY_LUA_FIELD(eddy_world_def, threads, EDDY_LUA_INT),
 	EDDY_LUA_ENUM_FIELD(eddy_world_def, escape, escape_choices),
 	EDDY_LUA_FIELD(eddy_world_def, check_finite, EDDY_LUA_BOOL),
+	EDDY_LUA_FIELD(eddy_world_def, settle_steps, EDDY_LUA_INT),
 	EDDY_LUA_END,
 };
 static const char *const shape_choices[] = {"block", "ellipsoid", NULL};

@@ -75,6 +75,11 @@ typedef struct eddy_system_vtable {
 	/* never moves a solid nor changes what a solid covers: FLIP's solid
 	 * faces made before it still hold after it (eddy__flip_solid_for) */
 	bool keeps_solids;
+	/* takes part in the settling steps before the first step (world.c,
+	 * settle): the SPH density, walls and pressure force, colliders and
+	 * integrate; everything else (gravity, viscosity, emitters after time
+	 * 0's emission, custom systems) sits them out */
+	bool settles;
 	/* colliders: signed distance to the solid, < 0 inside it */
 	float (*distance)(const eddy_system *s, eddy_vec3 p);
 	/* colliders: pose and size, for hosts that draw them (eddy_collider_shape_of) */
@@ -198,6 +203,11 @@ struct eddy_world {
 	uint64_t rng;
 	float length_scale; /* m, smallest emitter spacing; 0 if none */
 	float rest_density; /* kg/m^3, 0 if no density system */
+	bool settling;      /* the settling steps run (gravity reads as zero) */
+	bool settled;       /* they ran, or there were none to run */
+	float settle_move;     /* m, integrate's largest move in a settling step */
+	float settle_min_move; /* m, a smaller one ends the settling (and is not made) */
+	int settle_count;   /* settling steps taken */
 
 	/* run-time warnings (eddy__warn): once per key, the first EDDY_MAX_WARNINGS - 1
 	 * kept and then one saying so */

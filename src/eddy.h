@@ -108,6 +108,8 @@ typedef struct eddy_world_def {
 	int threads;               /* 1, worker threads for systems that parallelise */
 	eddy_escape_policy escape; /* what a particle leaving the bounds means */
 	bool check_finite;         /* scan written columns after each system */
+	int settle_steps;          /* 1, before the first step: at most this many relaxation steps of what is
+	                              emitted at time 0 (sph_pressure pipelines); 0 = off */
 } eddy_world_def;
 
 EDDY_API eddy_world_def eddy_default_world_def(void);

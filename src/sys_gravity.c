@@ -40,6 +40,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 void eddy__gravity_sum(const eddy_world *w, double g[3])
 {
 	g[0] = g[1] = g[2] = 0;
+	if (w->settling) /* the settling steps relax the arrangement alone (world.c) */
+		return;
 	const eddy_system *o;
 	for (eddy_system_iter it = eddy__systems(w, EDDY_CAP_GRAVITY); (o = eddy__systems_next(&it));) {
 		const double sc = ((const gravity *)o->data)->def.scale;

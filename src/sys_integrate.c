@@ -35,6 +35,29 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const long n = (long)w->n;
+	if (w->settling) {
+		/* a settling step (world.c, settle): a descent step down the force,
+		 * x += a dt^2, the velocities left as emitted; none when no
+		 * particle would move settle_min_move, so a start that needs no
+		 * settling is left exactly as emitted */
+		float a2 = 0;
+#pragma omp parallel for num_threads(ctx->threads) if (n > 32768) schedule(static) reduction(max : a2)
+		for (long i = 0; i < n; ++i) {
+			const float m2 = ax[i] * ax[i] + ay[i] * ay[i] + az[i] * az[i];
+			a2 = m2 > a2 ? m2 : a2;
+		}
+		const float dt2 = dt * dt;
+		w->settle_move = sqrtf(a2) * dt2;
+		if (w->settle_move < w->settle_min_move)
+			return EDDY_OK;
+#pragma omp parallel for num_threads(ctx->threads) if (n > 32768) schedule(static)
+		for (long i = 0; i < n; ++i) {
+			x[i] += ax[i] * dt2;
+			y[i] += ay[i] * dt2;
+			z[i] += az[i] * dt2;
+		}
+		return EDDY_OK;
+	}
 	const bool clamp = isfinite(vmax);
 	long first = n; /* the first particle clamped */
 #pragma omp parallel for num_threads(ctx->threads) if (n > 32768) schedule(static) reduction(min : first)
@@ -80,6 +103,7 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 
 const eddy_system_vtable eddy__kind_integrate = {
 	.name = "integrate",
+	.settles = true,
 	.step = step,
 	.limit = limit,
 	.default_writes = integrate_writes,

@@ -163,6 +163,9 @@ static bool world_def_valid(const eddy_world_def *d, char *err, size_t n)
 	} else if (d->threads < 1 || d->threads > 256) {
 		snprintf(buf, sizeof buf, "world: 'threads' must be in [1, 256] (got %d)", d->threads);
 		bad = buf;
+	} else if (d->settle_steps < 0 || d->settle_steps > 1000000) {
+		snprintf(buf, sizeof buf, "world: 'settle_steps' must be in [0, 1000000] (got %d)", d->settle_steps);
+		bad = buf;
 	} else if (d->escape != EDDY_ESCAPE_ERROR && d->escape != EDDY_ESCAPE_REMOVE)
 		bad = "world: 'escape' must be EDDY_ESCAPE_ERROR or EDDY_ESCAPE_REMOVE";
 	if (bad && err && n)
@@ -429,9 +432,113 @@ static eddy_status check_bounds(eddy_world *w)
 
 const char eddy__busy_step[] = "a step callback", eddy__busy_frame[] = "a frame callback";
 
+/* Runs one system's step as step_toward does: its time, and an error
+ * message that names it. */
+static eddy_status run_system(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
+{
+	const double a = eddy__now_ms();
+	eddy_status st = s->vt->step(w, s, ctx);
+	const double ms = eddy__now_ms() - a;
+	s->ms_total += ms;
+	s->ms_frame += ms;
+	s->calls++;
+	if (st != EDDY_OK) {
+		if (strncmp(w->error, s->label, strlen(s->label)) != 0) {
+			char msg[EDDY_ERROR_MAX];
+			snprintf(msg, sizeof msg, "%s", w->error);
+			eddy__fail(w, st, "%s: step %lld (t = %.6g s): %s", s->label, (long long)w->step, w->time, msg);
+		}
+		return st;
+	}
+	return w->def.check_finite ? check_written(w, s) : EDDY_OK;
+}
+
+/* The settling steps (def.settle_steps), before the first step: what the
+ * emitters place at time 0 (emitted here, a step of no length) is relaxed
+ * by the pipeline's own pressure force, without gravity, until no particle
+ * would move SETTLE_TOL h in a step. Water that starts squeezed
+ * against a solid's boundary particles (a lattice cut by an off-lattice
+ * collider: a point just outside a face starts under one spacing from the
+ * particles half a spacing inside it) then does not start with the
+ * equation of state's answer to that squeeze, a kick of metres a second.
+ * Each step is a descent step, x += a dt^2 at the acoustic step dt (a
+ * gradient step on the compression energy): velocities stay as emitted,
+ * time stays where it was. Only the systems marked settles run: the SPH
+ * density, walls and pressure force, and integrate. Gravity sits them out
+ * (eddy__gravity_sum reads zero), so a column the scene releases, a dam
+ * break, is not released here; colliders stay as placed. The pressure is
+ * clamped at p >= 0, so with no compression left nothing moves: a plain
+ * lattice ends as emitted, and squeezed water moves only until its density
+ * is back at rho0 (the total potential energy of the obstacle pool after
+ * it matches the geometry's). */
+#define SETTLE_TOL 5e-4 /* of the SPH support h: a thousandth of a spacing at h = 2 spacings */
+static void *first_shared(const eddy_world *w, uint32_t cap);
+static const char settle_needs[] = "'settle_steps' needs sph_pressure (WCSPH) in the pipeline: sph_dfsph and "
+                                   "flip_pressure answer a squeezed start in their first step's solve; set it to 0";
+static eddy_status settle(eddy_world *w)
+{
+	w->settled = true;
+	if (w->def.settle_steps <= 0)
+		return EDDY_OK;
+	if (!eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE))
+		return eddy__fail(w, EDDY_ERR_INVALID, "world: %s", settle_needs);
+	const double t0 = eddy__now_ms();
+	w->busy = eddy__busy_step;
+	const eddy_step_context at0 = {0, w->time, w->step, w->def.threads};
+	for (int k = 0; k < w->order_count; ++k) {
+		eddy_system *s = &w->slots[w->order[k]];
+		if (s->vt->step && s->vt->expected_particles) {
+			eddy_status st = run_system(w, s, &at0);
+			if (st != EDDY_OK)
+				return st;
+		}
+	}
+	w->settling = true;
+	const sph_shared *sh = first_shared(w, EDDY_CAP_SPH_NEIGHBORS);
+	w->settle_min_move = (float)(SETTLE_TOL * (sh ? sh->h : 0));
+	eddy_status st = EDDY_OK;
+	int k = 0;
+	while (st == EDDY_OK) {
+		const char *reason;
+		const double dt = fmin(step_limit(w, &reason), 1.0 / w->def.fps);
+		eddy__arena_reset(&w->arena);
+		eddy__clear_derived(w);
+		w->settle_move = 0;
+		const eddy_step_context ctx = {dt, w->time, w->step, w->def.threads};
+		for (int q = 0; q < w->order_count && st == EDDY_OK; ++q) {
+			eddy_system *s = &w->slots[w->order[q]];
+			if (s->vt->step && s->vt->settles)
+				st = run_system(w, s, &ctx);
+		}
+		if (st != EDDY_OK || w->settle_move < w->settle_min_move)
+			break; /* integrate moved nothing */
+		if (++k == w->def.settle_steps) {
+			eddy__warn(w, "world:settle",
+			           "world: the settling stopped at settle_steps = %d with a particle still moving %.3g h "
+			           "a step (it ends below %g h); the run starts from there",
+			           k, (double)(w->settle_move / sh->h), SETTLE_TOL);
+			break;
+		}
+		st = check_bounds(w);
+	}
+	w->settling = false;
+	eddy__arena_reset(&w->arena);
+	eddy__clear_derived(w);
+	if (st == EDDY_OK)
+		st = check_bounds(w);
+	eddy_world_publish(w, "settle_steps", k);
+	w->frame_wall_ms += eddy__now_ms() - t0;
+	return st;
+}
+
 /* One step toward time stop (never past it). *reached says whether it got there. */
 static eddy_status step_toward(eddy_world *w, double stop, bool *reached)
 {
+	if (!w->settled && w->step == 0) {
+		eddy_status st = settle(w);
+		if (st != EDDY_OK)
+			return st;
+	}
 	const double remaining = stop - w->time;
 	const char *reason;
 	double lim = step_limit(w, &reason);
@@ -467,25 +574,9 @@ static eddy_status step_toward(eddy_world *w, double stop, bool *reached)
 		eddy_system *s = &w->slots[w->order[k]];
 		if (!s->vt->step)
 			continue;
-		const double a = eddy__now_ms();
-		eddy_status st = s->vt->step(w, s, &ctx);
-		const double ms = eddy__now_ms() - a;
-		s->ms_total += ms;
-		s->ms_frame += ms;
-		s->calls++;
-		if (st != EDDY_OK) {
-			if (strncmp(w->error, s->label, strlen(s->label)) != 0) {
-				char msg[EDDY_ERROR_MAX];
-				snprintf(msg, sizeof msg, "%s", w->error);
-				eddy__fail(w, st, "%s: step %lld (t = %.6g s): %s", s->label, (long long)w->step, w->time, msg);
-			}
+		eddy_status st = run_system(w, s, &ctx);
+		if (st != EDDY_OK)
 			return st;
-		}
-		if (w->def.check_finite) {
-			st = check_written(w, s);
-			if (st != EDDY_OK)
-				return st;
-		}
 	}
 	if (nsteps <= 1.0) {
 		w->time = stop; /* land exactly, so frame times do not drift */
@@ -1223,6 +1314,11 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 		eddy__report(report, user, EDDY_CHECK_ERROR,
 		             "memory: the scene needs about %.1f GB but the machine has %.1f GB; use a coarser spacing",
 		             bytes / 1e9, avail / 1e9);
+		errors++;
+	}
+
+	if (w->def.settle_steps > 0 && w->step == 0 && !eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE)) {
+		eddy__report(report, user, EDDY_CHECK_ERROR, "world: %s", settle_needs);
 		errors++;
 	}
 

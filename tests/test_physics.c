@@ -586,15 +586,17 @@ static void runs_are_deterministic(void)
 /* A pool made of two boxes that overlap (tests/scenes/two_boxes.lua, 0.4 x
  * 0.1 m, 0.1 m deep, the boxes overlapping by 0.1 m) is one pool: the
  * emitters add water only where there is none (test_core's count test).
- * On one lattice it is the one-box pool (4000 particles; its largest speed
- * within 1.5x the one box's + 1 cm/s over 0.3 s); a second box 0.3 of a
+ * On one lattice it is the one-box pool (4000 particles; its first frame's
+ * largest speed the one box's to 1%: the same start, which WCSPH's chaotic
+ * still pool need not keep to the bit over 0.3 s, 0.28 against 0.45 m/s
+ * at most since the settling changed its bits); a second box 0.3 of a
  * spacing off the first's lattice leaves a seam a column thinner or
  * thicker, and the pool settles it without moving faster than a long wave
  * on it, sqrt(g D) = 0.99 m/s (measured 0.83 WCSPH, 0.39 DFSPH, 0.22 FLIP).
  * Before, the overlap held twice the particles and burst: 21-24 m/s
  * (WCSPH, DFSPH; DFSPH's solve could also give up) and 0.8 m/s (FLIP; 3.1
  * within 1 s). */
-static int two_boxes(const char *method, const char *sets, double *vmax)
+static int two_boxes(const char *method, const char *sets, double *vmax, double *first)
 {
 	enum { CAP = 1 << 16 };
 	char cmd[512], *out = malloc(CAP);
@@ -613,6 +615,8 @@ static int two_boxes(const char *method, const char *sets, double *vmax)
 		if (next)
 			*next++ = '\0';
 		if (isfinite(test_json_number(line, "time"))) {
+			if (n < 0)
+				*first = test_json_number(line, "vmax");
 			*vmax = fmax(*vmax, test_json_number(line, "vmax"));
 			n = (int)test_json_number(line, "n");
 		}
@@ -629,17 +633,17 @@ static void overlapping_boxes_make_one_still_pool(void)
 {
 	static const char *const methods[] = {"wcsph", "dfsph", "flip"};
 	for (int m = 0; m < 3; ++m) {
-		double one, same, off;
-		const int n1 = two_boxes(methods[m], "--set one=true", &one);
-		const int n2 = two_boxes(methods[m], "--set off=0", &same);
-		const int n3 = two_boxes(methods[m], "--set off=0.003", &off);
-		printf("    %s: one box %d particles, largest speed %.3f m/s; two on one lattice %d, %.3f; two 0.3 "
-		       "spacing apart %d, %.3f\n",
-		       methods[m], n1, one, n2, same, n3, off);
+		double one, same, off, one1, same1, off1;
+		const int n1 = two_boxes(methods[m], "--set one=true", &one, &one1);
+		const int n2 = two_boxes(methods[m], "--set off=0", &same, &same1);
+		const int n3 = two_boxes(methods[m], "--set off=0.003", &off, &off1);
+		printf("    %s: one box %d particles, largest speed %.3f m/s (first frame %.4f); two on one lattice %d, "
+		       "%.3f (%.4f); two 0.3 spacing apart %d, %.3f (%.4f)\n",
+		       methods[m], n1, one, one1, n2, same, same1, n3, off, off1);
 		CHECK(n1 == 4000 && n2 == 4000);
 		CHECK(n3 >= 3900 && n3 <= 4100);
-		CHECK(same <= 1.5 * one + 0.01);
-		CHECK(off <= sqrt(9.81 * 0.1));
+		CHECK(fabs(same1 - one1) <= 0.01 * one1 + 1e-4);
+		CHECK(same <= sqrt(9.81 * 0.1) && off <= sqrt(9.81 * 0.1));
 	}
 }
 
@@ -653,23 +657,30 @@ static void overlapping_boxes_make_one_still_pool(void)
  * acoustic start around the sphere within sqrt(g D) (0.86 in its first
  * frame, 0.23 after). Before, the box emitted into the solid and the
  * collider pushed that water out in one step: 12 and 15 m/s (WCSPH), 7.9
- * and 18 (DFSPH). WCSPH around the box is not held here: it reaches 2.3 m/s
- * and lets 6 particles into the box however the pool is emitted (README,
- * Stress cases: open). One step beyond, the sphere as the icosphere mesh,
+ * and 18 (DFSPH). One step beyond, the sphere as the icosphere mesh,
  * over 0.6 s: DFSPH 0.161 m/s, FLIP 0.021. There DFSPH held a
  * particle still on the mesh's face at 0.6-1.8 m/s (0.49 by 0.17 s, 0.7 by
  * 0.4 s): a path into a mesh stopped where it entered, instead of sliding
- * on along the face (test_mesh's ramp). WCSPH around the mesh is not held:
- * 1.56 m/s in its first frame, 0.09 by 0.6 s, the box's cause. */
+ * on along the face (test_mesh's ramp).
+ * WCSPH's first frame is held to 0.3 sqrt(g D) besides: a lattice point
+ * just outside a face starts under a spacing from the solid's boundary
+ * particles, and the equation of state answered that squeeze with a kick
+ * (first frame 0.61, 1.03 and 0.93 m/s around the sphere, box and mesh;
+ * the box then 2.47 m/s with 2 particles let into it). fluid:world now
+ * settles WCSPH's start (world.c, settle; 23, 81 and 26 descent steps):
+ * 0.22, 0.19 and 0.28 m/s in the first frame, at most 0.70, 0.89 and
+ * about 0.3 over the runs, none inside. What stays is the summation's
+ * still pool, chaotic at a few tenths of a m/s (README, Stress cases). */
 static void pool_fills_around_an_obstacle(void)
 {
 	static const struct {
 		const char *method, *solid;
 		double bound;    /* in sqrt(g D) */
 		double duration; /* s */
-	} cases[] = {{"dfsph", "sphere", 0.5, 0.3}, {"dfsph", "box", 0.5, 0.3}, {"dfsph", "mesh", 0.5, 0.6},
-	             {"flip", "sphere", 0.5, 0.3},  {"flip", "box", 0.5, 0.3},  {"flip", "mesh", 0.5, 0.6},
-	             {"wcsph", "sphere", 1.0, 0.3}};
+		double first;    /* in sqrt(g D), the first frame's bound; 0: none */
+	} cases[] = {{"dfsph", "sphere", 0.5, 0.3, 0}, {"dfsph", "box", 0.5, 0.3, 0},  {"dfsph", "mesh", 0.5, 0.6, 0},
+	             {"flip", "sphere", 0.5, 0.3, 0},  {"flip", "box", 0.5, 0.3, 0},   {"flip", "mesh", 0.5, 0.6, 0},
+	             {"wcsph", "sphere", 1.0, 0.3, 0.3}, {"wcsph", "box", 1.0, 0.3, 0.3}, {"wcsph", "mesh", 1.0, 0.6, 0.3}};
 	const double wave = sqrt(9.81 * 0.15);
 	enum { CAP = 1 << 16 };
 	char cmd[512], *out = malloc(CAP);
@@ -682,27 +693,30 @@ static void pool_fills_around_an_obstacle(void)
 			"--quiet --threads 1 --out %s/obstacle_pool 2>&1",
 			test_build_dir(), cases[k].method, cases[k].solid, cases[k].duration, test_build_dir());
 		const int st = test_sh(cmd, out, CAP);
-		double vmax = 0, inside = 0, n = -1;
+		double vmax = 0, inside = 0, n = -1, first = NAN;
 		for (char *line = out; line && *line;) {
 			char *next = strchr(line, '\n');
 			if (next)
 				*next++ = '\0';
 			if (isfinite(test_json_number(line, "time"))) {
+				if (isnan(first))
+					first = test_json_number(line, "vmax");
 				vmax = fmax(vmax, test_json_number(line, "vmax"));
 				inside = fmax(inside, test_json_number(line, "inside"));
 				n = test_json_number(line, "n");
 			}
 			line = next;
 		}
-		printf("    %s around a %s, %.1f s: %.0f particles, largest speed %.3f m/s (%.3f sqrt(g D)), at most %.0f "
-		       "inside it\n",
-		       cases[k].method, cases[k].solid, cases[k].duration, n, vmax, vmax / wave, inside);
+		printf("    %s around a %s, %.1f s: %.0f particles, largest speed %.3f m/s (%.3f sqrt(g D); first frame "
+		       "%.3f), at most %.0f inside it\n",
+		       cases[k].method, cases[k].solid, cases[k].duration, n, vmax, vmax / wave, first / wave, inside);
 		if (st != 0)
 			printf("    exit %d: %.300s\n", st, out);
 		CHECK(st == 0);
 		CHECK(n > 11000 && n < 11800); /* 12000 less the solid's 270-480 points */
 		CHECK(inside == 0);
 		CHECK(vmax <= cases[k].bound * wave);
+		CHECK(cases[k].first == 0 || first <= cases[k].first * wave);
 	}
 	free(out);
 }

@@ -831,6 +831,7 @@ static void *shared(const eddy_system *s, uint32_t cap)
 
 const eddy_system_vtable eddy__kind_sph_density = {
 	.name = "sph_density",
+	.settles = true,
 	.provides = EDDY_CAP_SPH_NEIGHBORS,
 	.shared = shared,
 	.step = step,

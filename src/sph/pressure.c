@@ -261,6 +261,7 @@ static eddy_status frame(eddy_world *w, eddy_system *s, int f)
  * name gravity alone */
 const eddy_system_vtable eddy__kind_sph_pressure = {
 	.name = "sph_pressure",
+	.settles = true,
 	.provides = EDDY_CAP_SPH_EOS_FORCE,
 	.requires = EDDY_CAP_SPH_NEIGHBORS,
 	.step = step,
