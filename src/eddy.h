@@ -108,8 +108,10 @@ typedef struct eddy_world_def {
 	int threads;               /* 1, worker threads for systems that parallelise */
 	eddy_escape_policy escape; /* what a particle leaving the bounds means */
 	bool check_finite;         /* scan written columns after each system */
-	int settle_steps;          /* 1, before the first step: at most this many relaxation steps of what is
-	                              emitted at time 0 (sph_pressure pipelines); 0 = off */
+	int settle_steps;          /* 1, 0 (off) to 1e6: before the first step, at most this many descent steps
+	                              of the SPH pressure force (no gravity, no time) on what is there at time 0,
+	                              until no particle would move 5e-4 h; needs sph_pressure. Published as the
+	                              first frame's stat settle_steps */
 } eddy_world_def;
 
 EDDY_API eddy_world_def eddy_default_world_def(void);
