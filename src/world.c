@@ -477,9 +477,10 @@ static const char settle_needs[] = "'settle_steps' needs sph_pressure (WCSPH) in
                                    "flip_pressure answer a squeezed start in their first step's solve; set it to 0";
 static eddy_status settle(eddy_world *w)
 {
-	w->settled = true;
-	if (w->def.settle_steps <= 0)
+	if (w->def.settle_steps <= 0) {
+		w->settled = true;
 		return EDDY_OK;
+	}
 	if (!eddy__provider(w, NULL, EDDY_CAP_SPH_EOS_FORCE))
 		return eddy__fail(w, EDDY_ERR_INVALID, "world: %s", settle_needs);
 	const double t0 = eddy__now_ms();
@@ -526,6 +527,9 @@ static eddy_status settle(eddy_world *w)
 	eddy__clear_derived(w);
 	if (st == EDDY_OK)
 		st = check_bounds(w);
+	/* a failed settling stops the run; a step asked for after it runs the
+	 * emitters' time 0 again (each emits once) and the settling anew */
+	w->settled = st == EDDY_OK;
 	eddy_world_publish(w, "settle_steps", k);
 	w->frame_wall_ms += eddy__now_ms() - t0;
 	return st;

@@ -69,6 +69,8 @@ static void wrong_type_and_range(void)
 	CHECK_HAS(e, "scenes/t.lua:2: world: 'escape' must be \"error\" or \"remove\" (got bounce)");
 	e = run_fresh("local eddy = require 'eddy'\nlocal w = eddy.world{ cfl = 0 }\n", buf, sizeof buf);
 	CHECK_HAS(e, "scenes/t.lua:2: world: 'cfl' must be in (0, 10] (got 0)");
+	e = run_fresh("local eddy = require 'eddy'\nlocal w = eddy.world{ settle_steps = -1 }\n", buf, sizeof buf);
+	CHECK_HAS(e, "scenes/t.lua:2: world: 'settle_steps' must be in [0, 1000000] (got -1)");
 	e = run_fresh(HEAD "world:add(eddy.emit_nozzle{ max_particles = 1.5 })\n", buf, sizeof buf);
 	CHECK_HAS(e, "emit_nozzle: 'max_particles' must be an integer");
 	e = run_fresh(HEAD "world:add({})\n", buf, sizeof buf);

@@ -1605,6 +1605,8 @@ static void settling_relaxes_a_squeezed_start(void)
 	CHECK(eddy_world_step(w) == EDDY_ERR_INVALID);
 	CHECK_HAS(eddy_world_error(w), "world: 'settle_steps' needs sph_pressure (WCSPH)");
 	CHECK(eddy_world_particle_count(w) == 0);
+	CHECK(eddy_world_step(w) == EDDY_ERR_INVALID); /* not skipped when asked again */
+	CHECK(eddy_world_steps(w) == 0);
 	eddy_destroy_world(w);
 }
 
