@@ -5,7 +5,9 @@
  *   v(n+1) = v(n) + a dt,   x(n+1) = x(n) + v(n+1) dt
  * From rest under constant g this gives y_n = y_0 - g dt^2 n(n+1)/2 exactly.
  * Speeds above max_speed are scaled down to it (a safety valve, off at the
- * default of infinity).
+ * default of infinity). In the world's settling steps before the first step
+ * (world.c, settle) it takes a descent step instead, x += a dt^2, and
+ * leaves the velocities as emitted.
  * Time-step limit (advection): dt <= L / max|v|, L the smallest emitter
  * spacing; the world multiplies it by the CFL number. */
 #include "systems.h"
