@@ -155,8 +155,9 @@ static void quick_dam_break_study(void)
 		/* against the experiment every error is finite and the finer SPH run is
 		 * closer once the experiment's clock is shifted for the gate's opening
 		 * (error_shifted: 0.018 at a/5, 0.010 at a/10; unshifted 0.099 and
-		 * 0.193, where a/5's column started 15% compressed and ran ahead,
-		 * 0.43, before WCSPH settled its start); FLIP's front leads the
+		 * 0.193, where a/5's column started squeezed and ran ahead, 0.43,
+		 * its mean compression over the run 0.149, before WCSPH settled its
+		 * start); FLIP's front leads the
 		 * experiment at every resolution (see README), so its two errors are
 		 * only bounded */
 		int err = column(c, "error"), shifted = column(c, "error_shifted");
