@@ -76,9 +76,9 @@ typedef struct eddy_system_vtable {
 	 * faces made before it still hold after it (eddy__flip_solid_for) */
 	bool keeps_solids;
 	/* takes part in the settling steps before the first step (world.c,
-	 * settle): the SPH density, walls and pressure force, and integrate;
-	 * everything else (gravity, viscosity, colliders, emitters after time
-	 * 0's emission, custom systems) sits them out */
+	 * settle): the SPH density (with the walls' particles) and pressure
+	 * force; everything else (gravity, viscosity, colliders, integrate,
+	 * emitters after time 0's emission, custom systems) sits them out */
 	bool settles;
 	/* colliders: signed distance to the solid, < 0 inside it */
 	float (*distance)(const eddy_system *s, eddy_vec3 p);
@@ -205,8 +205,6 @@ struct eddy_world {
 	float rest_density; /* kg/m^3, 0 if no density system */
 	bool settling;      /* the settling steps run (gravity reads as zero) */
 	bool settled;       /* they ran to the end, or there were none to run */
-	float settle_move;     /* m, integrate's largest move in a settling step */
-	float settle_min_move; /* m, a smaller one ends the settling (and is not made) */
 
 	/* run-time warnings (eddy__warn): once per key, the first EDDY_MAX_WARNINGS - 1
 	 * kept and then one saying so */

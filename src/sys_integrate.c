@@ -5,9 +5,7 @@
  *   v(n+1) = v(n) + a dt,   x(n+1) = x(n) + v(n+1) dt
  * From rest under constant g this gives y_n = y_0 - g dt^2 n(n+1)/2 exactly.
  * Speeds above max_speed are scaled down to it (a safety valve, off at the
- * default of infinity). In the world's settling steps before the first step
- * (world.c, settle) it takes a descent step instead, x += a dt^2, and
- * leaves the velocities as emitted.
+ * default of infinity).
  * Time-step limit (advection): dt <= L / max|v|, L the smallest emitter
  * spacing; the world multiplies it by the CFL number. */
 #include "systems.h"
@@ -37,29 +35,6 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);
 	const long n = (long)w->n;
-	if (w->settling) {
-		/* a settling step (world.c, settle): a descent step down the force,
-		 * x += a dt^2, the velocities left as emitted; none when no
-		 * particle would move settle_min_move, so a start that needs no
-		 * settling is left exactly as emitted */
-		float a2 = 0;
-#pragma omp parallel for num_threads(ctx->threads) if (n > 32768) schedule(static) reduction(max : a2)
-		for (long i = 0; i < n; ++i) {
-			const float m2 = ax[i] * ax[i] + ay[i] * ay[i] + az[i] * az[i];
-			a2 = m2 > a2 ? m2 : a2;
-		}
-		const float dt2 = dt * dt;
-		w->settle_move = sqrtf(a2) * dt2;
-		if (w->settle_move < w->settle_min_move)
-			return EDDY_OK;
-#pragma omp parallel for num_threads(ctx->threads) if (n > 32768) schedule(static)
-		for (long i = 0; i < n; ++i) {
-			x[i] += ax[i] * dt2;
-			y[i] += ay[i] * dt2;
-			z[i] += az[i] * dt2;
-		}
-		return EDDY_OK;
-	}
 	const bool clamp = isfinite(vmax);
 	long first = n; /* the first particle clamped */
 #pragma omp parallel for num_threads(ctx->threads) if (n > 32768) schedule(static) reduction(min : first)
@@ -105,7 +80,6 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 
 const eddy_system_vtable eddy__kind_integrate = {
 	.name = "integrate",
-	.settles = true,
 	.step = step,
 	.limit = limit,
 	.default_writes = integrate_writes,

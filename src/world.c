@@ -463,8 +463,9 @@ static eddy_status run_system(eddy_world *w, eddy_system *s, const eddy_step_con
  * equation of state's answer to that squeeze, a kick of metres a second.
  * Each step is a descent step, x += a dt^2 at the acoustic step dt (a
  * gradient step on the compression energy): velocities stay as emitted,
- * time stays where it was. Only the systems marked settles run: the SPH
- * density, walls and pressure force, and integrate. Gravity sits them out
+ * time stays where it was. Only the systems marked settles run, the SPH
+ * density and pressure force, and then the world moves the particles
+ * (settle_move); integrate does not run. Gravity sits them out
  * (eddy__gravity_sum reads zero), so a column the scene releases, a dam
  * break, is not released here; colliders stay as placed. The pressure is
  * clamped at p >= 0, so with no compression left nothing moves: a plain
@@ -475,6 +476,33 @@ static eddy_status run_system(eddy_world *w, eddy_system *s, const eddy_step_con
 static void *first_shared(const eddy_world *w, uint32_t cap);
 static const char settle_needs[] = "'settle_steps' needs sph_pressure (WCSPH) in the pipeline: sph_dfsph and "
                                    "flip_pressure answer a squeezed start in their first step's solve; set it to 0";
+/* One settling step's move, x += a dt^2, unless the largest is under
+ * min_move: then nothing moves, so a start that needs no settling stays
+ * exactly as emitted. Returns whether it moved. */
+static bool settle_move(eddy_world *w, float dt, float min_move)
+{
+	const float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
+	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
+	const long n = (long)w->n;
+	const int nt = n > EDDY_PAR_ROWS ? w->def.threads : 1;
+	float a2 = 0;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(max : a2)
+	for (long i = 0; i < n; ++i) {
+		const float m2 = ax[i] * ax[i] + ay[i] * ay[i] + az[i] * az[i];
+		a2 = m2 > a2 ? m2 : a2;
+	}
+	const float dt2 = dt * dt;
+	if (!(sqrtf(a2) * dt2 >= min_move))
+		return false;
+#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
+	for (long i = 0; i < n; ++i) {
+		x[i] += ax[i] * dt2;
+		y[i] += ay[i] * dt2;
+		z[i] += az[i] * dt2;
+	}
+	return true;
+}
+
 static eddy_status settle(eddy_world *w)
 {
 	if (w->def.settle_steps <= 0) {
@@ -496,7 +524,7 @@ static eddy_status settle(eddy_world *w)
 	}
 	w->settling = true;
 	const sph_shared *sh = first_shared(w, EDDY_CAP_SPH_NEIGHBORS);
-	w->settle_min_move = (float)(SETTLE_TOL * (sh ? sh->h : 0));
+	const float min_move = (float)(SETTLE_TOL * (sh ? sh->h : 0));
 	eddy_status st = EDDY_OK;
 	int k = 0;
 	while (st == EDDY_OK) {
@@ -504,20 +532,19 @@ static eddy_status settle(eddy_world *w)
 		const double dt = fmin(step_limit(w, &reason), 1.0 / w->def.fps);
 		eddy__arena_reset(&w->arena);
 		eddy__clear_derived(w);
-		w->settle_move = 0;
 		const eddy_step_context ctx = {dt, w->time, w->step, w->def.threads};
 		for (int q = 0; q < w->order_count && st == EDDY_OK; ++q) {
 			eddy_system *s = &w->slots[w->order[q]];
 			if (s->vt->step && s->vt->settles)
 				st = run_system(w, s, &ctx);
 		}
-		if (st != EDDY_OK || w->settle_move < w->settle_min_move)
-			break; /* integrate moved nothing */
+		if (st != EDDY_OK || !settle_move(w, (float)dt, min_move))
+			break;
 		if (++k == w->def.settle_steps) {
 			eddy__warn(w, "world:settle",
-			           "world: the settling stopped at settle_steps = %d with a particle still moving %.3g h "
-			           "a step (it ends below %g h); the run starts from there",
-			           k, (double)(w->settle_move / sh->h), SETTLE_TOL);
+			           "world: the settling stopped at settle_steps = %d with particles still moving; it ends "
+			           "once none would move %g h a step; the run starts from there",
+			           k, SETTLE_TOL);
 			break;
 		}
 		st = check_bounds(w);

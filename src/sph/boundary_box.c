@@ -78,7 +78,6 @@ bool eddy__sph_boundary_box_covers(const eddy_system *s, eddy_vec3 min, eddy_vec
 
 const eddy_system_vtable eddy__kind_sph_boundary_box = {
 	.name = "sph_boundary_box",
-	.settles = true,
 	.provides = EDDY_CAP_SPH_WALLS,
 };
 
