@@ -1478,16 +1478,27 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 			size_t inside = 0;
 			for (size_t i = 0; i < np; ++i)
 				inside += c->vt->distance(c, pts[i]) < 0;
+			/* a tank's solid is all that lies outside it: points far off in
+			 * opposite directions are both in it */
+			const eddy_vec3 blo = w->def.bounds_min, bhi = w->def.bounds_max;
+			const float far = 1e3f * (1 + (bhi.x - blo.x) + (bhi.y - blo.y) + (bhi.z - blo.z));
+			const bool tank = inside && c->vt->distance(c, (eddy_vec3){bhi.x + far, bhi.y + far, bhi.z + far}) < 0 &&
+			                  c->vt->distance(c, (eddy_vec3){blo.x - far, blo.y - far, blo.z - far}) < 0;
 			if (inside && inside == np) {
 				eddy__report(report, user, EDDY_CHECK_ERROR,
-				             "%s: all %zu particles start inside the solid of %s; move the emitter or the collider "
-				             "(for a tank, set the collider's inside = true)",
+				             tank ? "%s: all %zu particles start outside %s, a tank (inside = true: particles stay "
+				                    "in it); move the emitter into it, or set the collider's inside = false for a "
+				                    "solid obstacle"
+				                  : "%s: all %zu particles start inside the solid of %s; move the emitter or the "
+				                    "collider (for a tank, set the collider's inside = true)",
 				             e->label, np, c->label);
 				errors++;
 			} else if (inside && (e->vt == &eddy__kind_emit_box || e->vt == &eddy__kind_emit_mesh)) {
 				eddy__report(report, user, EDDY_CHECK_WARNING,
-				             "%s: %zu of %zu particles start inside %s; they are left out (the water fills around "
-				             "the solid)",
+				             tank ? "%s: %zu of %zu particles start outside %s, a tank (inside = true); they are "
+				                    "left out (for a solid obstacle set its inside = false)"
+				                  : "%s: %zu of %zu particles start inside %s; they are left out (the water fills "
+				                    "around the solid)",
 				             e->label, inside, np, c->label);
 			} else if (inside) {
 				eddy__report(report, user, EDDY_CHECK_WARNING,

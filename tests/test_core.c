@@ -1142,6 +1142,28 @@ static void check_catches_scene_mistakes(void)
 	CHECK(eddy_world_check(w, collect, &f) == 1);
 	CHECK_HAS(f.text, "emit_box: all 1000 particles start inside the solid of collide_box");
 	eddy_destroy_world(w);
+	/* wholly outside a tank (collide_box's default, inside = true: a plate
+	 * written without inside = false): the message says which it is */
+	w = spacing_world(0.02f, 30, 2);
+	cb.min = (eddy_vec3){0.32f, 0.32f, 0.32f};
+	cb.max = (eddy_vec3){0.38f, 0.33f, 0.38f};
+	cb.inside = true;
+	CHECK(eddy_system_valid(w, eddy_add_collide_box(w, &cb)));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 1);
+	CHECK_HAS(f.text, "emit_box: all 1000 particles start outside collide_box, a tank (inside = true");
+	CHECK_HAS(f.text, "set the collider's inside = false for a solid obstacle");
+	eddy_destroy_world(w);
+	/* half outside a tank: left out, and said so as a tank's */
+	w = spacing_world(0.02f, 30, 2);
+	cb.min = (eddy_vec3){0.0f, 0.0f, 0.0f};
+	cb.max = (eddy_vec3){0.2f, 0.4f, 0.4f};
+	CHECK(eddy_system_valid(w, eddy_add_collide_box(w, &cb)));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 0);
+	CHECK_HAS(f.text, "emit_box: 500 of 1000 particles start outside collide_box, a tank (inside = true); they are "
+	                  "left out (for a solid obstacle set its inside = false)");
+	eddy_destroy_world(w);
 	/* and a collider box with min > max never gets that far */
 	w = make_world();
 	cb.min.x = 0.5f;
