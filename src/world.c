@@ -1454,6 +1454,32 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 		errors++;
 	}
 
+	/* a collider before the last system that moves the particles (integrate,
+	 * flip_advect, sph_dfsph's shift): its push comes before they move, so
+	 * they can end a step inside its solid (the stats' leaked; a DFSPH pool
+	 * in a collide_sphere bowl added before the fluid: 10-56 of 1,818
+	 * particles a frame, none with the bowl added after it) */
+	int last_mover = -1;
+	for (int k = 0; k < w->order_count; ++k) {
+		const eddy_system *m = &w->slots[w->order[k]];
+		/* emitters place particles, colliders are what is checked, and
+		 * flip_reseed moves particles only into cells no collider cuts: it
+		 * runs after the colliders by design */
+		if (m->vt->sample || m->vt->distance || m->vt == &eddy__kind_flip_reseed)
+			continue;
+		for (int j = 0; j < m->write_count; ++j)
+			if (m->writes[j] == COL_X_)
+				last_mover = k;
+	}
+	for (int k = 0; k < last_mover; ++k) {
+		const eddy_system *c = &w->slots[w->order[k]];
+		if (c->vt->distance)
+			eddy__report(report, user, EDDY_CHECK_WARNING,
+			             "%s runs before %s, which moves the particles after its push: they can end a step inside "
+			             "its solid (the stats' leaked); add it after the fluid (world:add it later)",
+			             c->label, w->slots[w->order[last_mover]].label);
+	}
+
 	/* emitters whose first particles start inside a collider or outside the bounds */
 	for (int k = 0; k < w->order_count; ++k) {
 		const eddy_system *e = &w->slots[w->order[k]];

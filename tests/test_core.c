@@ -1154,6 +1154,29 @@ static void check_catches_scene_mistakes(void)
 	CHECK_HAS(f.text, "emit_box: all 1000 particles start outside collide_box, a tank (inside = true");
 	CHECK_HAS(f.text, "set the collider's inside = false for a solid obstacle");
 	eddy_destroy_world(w);
+	/* a collider before the integrator: its push comes before the step
+	 * moves the particles (they end steps inside it); after it, no word */
+	for (int after = 0; after < 2; ++after) {
+		w = spacing_world(0.02f, 30, 2);
+		eddy_collide_sphere_def cs = eddy_default_collide_sphere_def();
+		cs.center = (eddy_vec3){0.5f, 0.5f, 0.5f};
+		cs.radius = 0.05f;
+		eddy_gravity_def gd = eddy_default_gravity_def();
+		CHECK(eddy_system_valid(w, eddy_add_gravity(w, &gd)));
+		eddy_integrate_def id = eddy_default_integrate_def();
+		if (after)
+			CHECK(eddy_system_valid(w, eddy_add_integrate(w, &id)));
+		CHECK(eddy_system_valid(w, eddy_add_collide_sphere(w, &cs)));
+		if (!after)
+			CHECK(eddy_system_valid(w, eddy_add_integrate(w, &id)));
+		memset(&f, 0, sizeof f);
+		CHECK(eddy_world_check(w, collect, &f) == 0);
+		if (after)
+			CHECK(strstr(f.text, "runs before") == NULL);
+		else
+			CHECK_HAS(f.text, "collide_sphere runs before integrate, which moves the particles after its push");
+		eddy_destroy_world(w);
+	}
 	/* half outside a tank: left out, and said so as a tank's */
 	w = spacing_world(0.02f, 30, 2);
 	cb.min = (eddy_vec3){0.0f, 0.0f, 0.0f};
