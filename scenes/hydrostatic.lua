@@ -27,7 +27,9 @@ local solver = eddy.param("solver", "pcg")      -- grid methods: "pcg", "mg", "c
 local tolerance = eddy.param("tolerance", 0)
 if tolerance <= 0 then tolerance = nil end
 local rho0, g = 1000, 9.81
-local stiffness = eddy.param("stiffness", 200)  -- m^2/s^2 (wcsph): g H / k = 0.5%
+-- m^2/s^2 (wcsph): g H / k = 0.49% at any depth (200 at the default 0.1 m;
+-- a fixed 200 compressed a 2 m column by 10%)
+local stiffness = eddy.param("stiffness", 2000 * H)
 local grid = { solver = solver, tolerance = tolerance or 1e-6 }
 local fluid = eddy.fluid {
 	method = eddy.param("method", "wcsph"),     -- wcsph, dfsph, flip, pic or apic
