@@ -66,9 +66,9 @@
  * m/s against its 28 m/s fall and gained 54% energy, the 100 m one 1,120
  * m/s and 10x (0.1 m: none). So the error is removed over the step the
  * flow's own CFL limit allows (the same as flip_advect's limit, with the
- * world's cfl), dt where that binds: 20 m 28.7 m/s, 100 m 59.5 m/s, no
- * energy gained. Without gravity and at rest T is infinite: nothing is
- * corrected (nothing packs).
+ * world's cfl), dt where that binds: 20 m 28.9 m/s, 100 m 59.0 m/s, no
+ * energy gained (tests/test_flip.c). Without gravity and at rest T is
+ * infinite: nothing is corrected (nothing packs).
  * A fluid component with no air side (closed box, sealed pocket, one walled-in
  * cell) makes A singular: its right-hand side is made zero-mean and its first
  * cell pinned (q = 0, links to it dropped), which solves the singular system
