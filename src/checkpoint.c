@@ -27,7 +27,7 @@
 #include <unistd.h>
 
 #define CKPT_MAGIC "EDDYCKPT"
-#define CKPT_VERSION 2u
+#define CKPT_VERSION 3u
 #define HEADER_BYTES 40
 
 /* The pipeline's own fingerprint: what must match for a state to make sense.
@@ -405,9 +405,14 @@ eddy_status eddy_world_load(eddy_world *w, const char *path, uint64_t fingerprin
 		size_t have = 0;
 		if (s->vt->state)
 			s->vt->state(w, s, &have);
-		if (!r.short_read && (strcmp(label, s->label) != 0 || sz != have))
+		if (!r.short_read && strcmp(label, s->label) != 0)
 			st = eddy__fail(w, EDDY_ERR_IO, "checkpoint '%s': system %u is %s, the scene has %s", path, k + 1, label,
 			                s->label);
+		else if (!r.short_read && sz != have)
+			st = eddy__fail(w, EDDY_ERR_IO,
+			                "checkpoint '%s': system %u (%s) holds %llu bytes of state, this build's %zu: written by "
+			                "another version of eddy",
+			                path, k + 1, label, (unsigned long long)sz, have);
 	}
 	if (st == EDDY_OK && (r.short_read || r.p != r.end))
 		st = eddy__fail(w, EDDY_ERR_IO, "checkpoint '%s': malformed payload", path);

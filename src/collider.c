@@ -13,6 +13,21 @@ bool eddy__check_response(eddy_world *w, const char *sys, eddy_collider_response
 	       eddy__check_nonneg(w, sys, "friction", r.friction);
 }
 
+/* A glide that starts, stops or changes its pace moves the surface at most
+ * COLLIDER_JERK length scales a step beyond the speed it was driven at,
+ * whatever the cfl: SPH's walls see a step's motion one step late, so a wall
+ * that starts at 3 m/s compresses the water in front by that speed times the
+ * step before any pressure answers it. "Driven at" is the speed eased over
+ * COLLIDER_EASE of a frame, the interval over which the Lua animate system
+ * measures a function's change of speed (lua/eddy_lua.c: ANIMATE_JERK,
+ * ANIMATE_SAMPLES): against the last step's speed alone, one short step
+ * would do and the next would jump to the full pace. A paddle the host keyed
+ * from rest to 3 m/s at a frame (set_offset in on_frame,
+ * tests/scenes/piston.lua with keyed = true): DFSPH threw a quarter of a 0.1
+ * m pool past 6 m/s, up to 28 m/s; with the last step's speed 14 m/s. */
+#define COLLIDER_JERK 0.25
+#define COLLIDER_EASE 0.125
+
 void *eddy__collider_state(eddy_world *w, eddy_system *s, size_t *size)
 {
 	(void)w;
@@ -21,7 +36,15 @@ void *eddy__collider_state(eddy_world *w, eddy_system *s, size_t *size)
 	return &b->motion;
 }
 
-eddy_vec3 eddy__collider_step_velocity(eddy_collider_base *b, double dt)
+/* The eased speed and spin after a step of dt (eddy_collider_motion). */
+static void ease(eddy_collider_motion *m, double dt, double frame)
+{
+	const double k = frame > 0 ? fmin(1.0, dt / (COLLIDER_EASE * frame)) : 1.0;
+	m->speed_eased = (float)(m->speed_eased + (m->speed - (double)m->speed_eased) * k);
+	m->spin_eased = (float)(m->spin_eased + (m->spin - (double)m->spin_eased) * k);
+}
+
+eddy_vec3 eddy__collider_step_velocity(eddy_collider_base *b, double dt, double frame)
 {
 	const eddy_collider_motion m = b->motion;
 	const float inv = dt > 0 ? (float)(1.0 / dt) : 0.0f;
@@ -32,6 +55,7 @@ eddy_vec3 eddy__collider_step_velocity(eddy_collider_base *b, double dt)
 	                     (m.offset.z - m.last_offset.z) * inv};
 	b->motion.speed = eddy__norm3(v);
 	b->motion.spin = 0;
+	ease(&b->motion, dt, frame);
 	return v;
 }
 
@@ -107,7 +131,7 @@ eddy_collider_velocity eddy__collider_motion_since(const eddy_collider_motion *m
 	return v;
 }
 
-eddy_collider_velocity eddy__collider_step_motion(eddy_collider_base *b, double dt)
+eddy_collider_velocity eddy__collider_step_motion(eddy_collider_base *b, double dt, double frame)
 {
 	const eddy_collider_velocity v =
 		eddy__collider_motion_since(&b->motion, b->motion.last_offset, b->motion.last_rotation, dt);
@@ -116,6 +140,7 @@ eddy_collider_velocity eddy__collider_step_motion(eddy_collider_base *b, double 
 	b->motion.stepped = 1;
 	b->motion.speed = eddy__norm3(v.v);
 	b->motion.spin = eddy__norm3(v.omega);
+	ease(&b->motion, dt, frame);
 	return v;
 }
 
@@ -153,22 +178,33 @@ double eddy__collider_limit(eddy_world *w, eddy_system *s, const char **reason)
 	const eddy_collider_motion *m = &((const eddy_collider_base *)s->data)->motion;
 	if (w->length_scale <= 0 || !m->stepped)
 		return INFINITY;
-	double v = m->speed, om = m->spin;
+	double v = m->speed, om = m->spin, pace = 0, spin = 0;
 	const double due = isnan(m->goal_time) ? w->call_end : m->goal_time;
-	if (m->goal_time != 0 && due > w->time) { /* the glide's pace over the time left */
+	const bool gliding = m->goal_time != 0 && due > w->time;
+	if (gliding) { /* the glide's pace over the time left */
 		const double left = due - w->time;
 		const eddy_vec3 dof = {m->goal_offset.x - m->offset.x, m->goal_offset.y - m->offset.y,
 		                       m->goal_offset.z - m->offset.z},
 						dr = {m->goal_rotation.x - m->rotation.x, m->goal_rotation.y - m->rotation.y,
 		                      m->goal_rotation.z - m->rotation.z};
-		v = fmax(v, eddy__norm3(dof) / left);
-		om = fmax(om, eddy__norm3(dr) * (M_PI / 180.0) / left);
+		pace = eddy__norm3(dof) / left;
+		spin = eddy__norm3(dr) * (M_PI / 180.0) / left;
+		v = fmax(v, pace);
+		om = fmax(om, spin);
 	}
 	if (!(v > 0) && !(om > 0))
 		return INFINITY;
 	const eddy_vec3 pivot = eddy__add3(m->pivot, m->offset);
-	const double surface = v + (om > 0 ? om * reach(w, s, pivot) : 0);
-	return surface > 0 ? w->length_scale / surface : INFINITY;
+	const double r = om > 0 ? reach(w, s, pivot) : 0;
+	const double surface = v + om * r;
+	double l = surface > 0 ? w->length_scale / surface : INFINITY;
+	/* the glide's surface speed against the one it was driven at (a start, a stop) */
+	const double jerk = gliding ? fabs((pace + spin * r) - ((double)m->speed_eased + (double)m->spin_eased * r)) : 0;
+	if (jerk > 0 && COLLIDER_JERK * w->length_scale / jerk / w->def.cfl < l) {
+		l = COLLIDER_JERK * w->length_scale / jerk / w->def.cfl;
+		*reason = "moving wall starting";
+	}
+	return l;
 }
 
 static float lerpf(float a, float b, double t) { return (float)(a + (b - (double)a) * t); }

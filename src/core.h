@@ -454,7 +454,14 @@ typedef struct eddy_collider_motion {
 	float stepped;    /* 1 once it has run: from now on offsets are motion (a float: no padding in a checkpoint) */
 	float speed;      /* m/s, |v| of the pivot over the collider's last step */
 	float spin;       /* rad/s, |omega| over that step */
-	double goal_time; /* s, when the goal is reached; 0 not gliding; NaN the end of the next stepping call */
+	/* speed and spin eased over about an eighth of a frame (each step moves
+	 * them toward the step's by min(1, dt / that time)): what the water
+	 * beside the collider has been driven at, for the limit on a glide's
+	 * start (eddy__collider_limit) */
+	float speed_eased; /* m/s */
+	float spin_eased;  /* rad/s */
+	float unused;      /* 0: the struct without padding in a checkpoint */
+	double goal_time;  /* s, when the goal is reached; 0 not gliding; NaN the end of the next stepping call */
 } eddy_collider_motion;
 
 /* A rotation as a row-major 3x3 matrix, and the rigid transform of a pose. */
@@ -559,11 +566,12 @@ static inline void eddy__collide_response(float *vx, float *vy, float *vz, size_
 /* A collider's checkpointed state: its motion. */
 void *eddy__collider_state(eddy_world *w, eddy_system *s, size_t *size);
 
-/* Wall velocity of a collider over a step of dt, then marks the offset as used. */
-eddy_vec3 eddy__collider_step_velocity(eddy_collider_base *b, double dt);
+/* Wall velocity of a collider over a step of dt, then marks the offset as
+ * used (frame: the world's frame time, s, which sets the easing). */
+eddy_vec3 eddy__collider_step_velocity(eddy_collider_base *b, double dt, double frame);
 /* The rigid motion over a step of dt (offset and rotation against those of
  * the last step), then marks both as used. */
-eddy_collider_velocity eddy__collider_step_motion(eddy_collider_base *b, double dt);
+eddy_collider_velocity eddy__collider_step_motion(eddy_collider_base *b, double dt, double frame);
 /* The motion between a remembered pose (offset, rotation) and the current
  * one over dt, for systems that keep their own memory (flip_boundary, SPH's
  * boundary particles). */

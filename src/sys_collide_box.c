@@ -121,11 +121,11 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 {
 	collide_box *b = s->data;
 	if (eddy__motion_rotates(&b->base.motion)) {
-		const eddy_collider_velocity mv = eddy__collider_step_motion(&b->base, ctx->dt);
+		const eddy_collider_velocity mv = eddy__collider_step_motion(&b->base, ctx->dt, 1.0 / w->def.fps);
 		step_rotated(w, b, &mv, ctx->threads);
 		return EDDY_OK;
 	}
-	const eddy_vec3 vw = eddy__collider_step_velocity(&b->base, ctx->dt);
+	const eddy_vec3 vw = eddy__collider_step_velocity(&b->base, ctx->dt, 1.0 / w->def.fps);
 	eddy_vec3 lo, hi;
 	bounds(b, &lo, &hi);
 	const float l[3] = {lo.x, lo.y, lo.z}, h[3] = {hi.x, hi.y, hi.z};

@@ -245,11 +245,11 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	if (eddy__motion_rotates(&b->base.motion)) {
 		eddy_collider_motion then = b->base.motion;
 		then.offset = then.last_offset, then.rotation = then.last_rotation;
-		const eddy_collider_velocity mv = eddy__collider_step_motion(&b->base, ctx->dt);
+		const eddy_collider_velocity mv = eddy__collider_step_motion(&b->base, ctx->dt, 1.0 / w->def.fps);
 		step_rotated(w, b, &then, &mv, ctx->dt, ctx->threads);
 		return EDDY_OK;
 	}
-	const eddy_vec3 vw = eddy__collider_step_velocity(&b->base, ctx->dt);
+	const eddy_vec3 vw = eddy__collider_step_velocity(&b->base, ctx->dt, 1.0 / w->def.fps);
 	const eddy_vec3 off = b->base.motion.offset;
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	float *vx = eddy__col(w, COL_VX), *vy = eddy__col(w, COL_VY), *vz = eddy__col(w, COL_VZ);

@@ -56,9 +56,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	eddy_collider_velocity mv = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
 	eddy_vec3 vw = {0, 0, 0};
 	if (rot)
-		mv = eddy__collider_step_motion(&b->base, ctx->dt);
+		mv = eddy__collider_step_motion(&b->base, ctx->dt, 1.0 / w->def.fps);
 	else
-		vw = eddy__collider_step_velocity(&b->base, ctx->dt);
+		vw = eddy__collider_step_velocity(&b->base, ctx->dt, 1.0 / w->def.fps);
 	eddy_vec3 o, nrm;
 	plane_now(b, &o, &nrm);
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);

@@ -51,9 +51,9 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	eddy_collider_velocity mv = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
 	eddy_vec3 vw = {0, 0, 0};
 	if (rot)
-		mv = eddy__collider_step_motion(&b->base, ctx->dt);
+		mv = eddy__collider_step_motion(&b->base, ctx->dt, 1.0 / w->def.fps);
 	else
-		vw = eddy__collider_step_velocity(&b->base, ctx->dt);
+		vw = eddy__collider_step_velocity(&b->base, ctx->dt, 1.0 / w->def.fps);
 	const eddy_vec3 c =
 		rot ? eddy__pose_to_world(&pose, b->def.center) : eddy__add3(b->def.center, b->base.motion.offset);
 	const float rad = b->def.radius;

@@ -128,7 +128,7 @@ static void bad_checkpoints_are_rejected(void)
 	CHECK(system(cmd) == 0);
 	corrupt_byte(copy, 8); /* the version */
 	CHECK(eddy_world_load(w, copy, 1) == EDDY_ERR_IO);
-	CHECK_HAS(eddy_world_error(w), "this eddy reads version 2");
+	CHECK_HAS(eddy_world_error(w), "this eddy reads version 3");
 
 	snprintf(cmd, sizeof cmd, "printf 'hello' > %s", copy);
 	CHECK(system(cmd) == 0);
