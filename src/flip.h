@@ -289,6 +289,11 @@ bool eddy__flip_solid_for(eddy_world *w, const eddy_system *self, double dt, fli
  * them declares a write of x, y or z. */
 bool eddy__flip_p2g_density(const eddy_world *w, const eddy_system *self, const float **dens, const uint8_t **held);
 
+/* s, flip_advect's step limit before the world's cfl: dx / (max |v_p| +
+ * sqrt(|g| dx)), infinite for particles at rest without gravity
+ * (sys_flip_advect.c; flip_pressure's volume correction takes it too). */
+double eddy__flip_advect_time(eddy_world *w);
+
 /* Open fraction of face `axis` (i, j, k): 1 without colliders, 0 on the sides. */
 static inline float flip_face_weight(const eddy_world *w, const flip_solid *s, int axis, size_t f, int i, int j, int k)
 {

@@ -82,15 +82,20 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	return EDDY_OK;
 }
 
-static double limit(eddy_world *w, eddy_system *s, const char **reason)
+double eddy__flip_advect_time(eddy_world *w)
 {
-	(void)s;
-	*reason = "CFL";
 	const float v2 = eddy__max_norm2(w, COL_VX, COL_VY, COL_VZ);
 	const eddy_vec3 g = w->def.gravity;
 	const double h = w->def.cell_size;
 	const double vmax = sqrt((double)v2) + sqrt(sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z) * h);
 	return vmax > 0 ? h / vmax : INFINITY;
+}
+
+static double limit(eddy_world *w, eddy_system *s, const char **reason)
+{
+	(void)s;
+	*reason = "CFL";
+	return eddy__flip_advect_time(w);
 }
 
 const eddy_system_vtable eddy__kind_flip_advect = {

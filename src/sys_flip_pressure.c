@@ -450,10 +450,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	int corrected = 0;
 	/* the time the correction takes (header): the step, or the flow's own
 	 * step, flip_advect's CFL limit, where that is longer */
-	const eddy_vec3 gv = w->def.gravity;
-	const double gmag = sqrt((double)gv.x * gv.x + (double)gv.y * gv.y + (double)gv.z * gv.z);
-	const double vref = sqrt((double)eddy__max_norm2(w, COL_VX, COL_VY, COL_VZ)) + sqrt(gmag * h);
-	const double vc_time = fmax(ctx->dt, vref > 0 ? w->def.cfl * h / vref : INFINITY);
+	const double vc_time = fmax(ctx->dt, w->def.cfl * eddy__flip_advect_time(w));
 	{
 		const float *dens;
 		const uint8_t *held;

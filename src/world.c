@@ -485,14 +485,8 @@ static bool settle_move(eddy_world *w, float dt, float min_move)
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const long n = (long)w->n;
 	const int nt = n > EDDY_PAR_ROWS ? w->def.threads : 1;
-	float a2 = 0;
-#pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(max : a2)
-	for (long i = 0; i < n; ++i) {
-		const float m2 = ax[i] * ax[i] + ay[i] * ay[i] + az[i] * az[i];
-		a2 = m2 > a2 ? m2 : a2;
-	}
 	const float dt2 = dt * dt;
-	if (!(sqrtf(a2) * dt2 >= min_move))
+	if (!(sqrtf(eddy__max_norm2(w, COL_AX, COL_AY, COL_AZ)) * dt2 >= min_move))
 		return false;
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
 	for (long i = 0; i < n; ++i) {
