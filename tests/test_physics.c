@@ -468,12 +468,14 @@ static void nozzle_stops_when_the_tank_is_full(void)
  * 19.8 m/s; at 50 frames a second (first steps of 2.9 and 6.7 ms, a jump of
  * 2-4 spacings into the water) 16-19% of the pool passed 6 m/s, the
  * fastest 25-30 m/s. The same motion keyed by the host each frame
- * (set_offset in on_frame, the pose for the next frame time; keyed = true,
- * starting after the first frame) holds to the same: DFSPH 9.4 m/s and
- * 1.3%, FLIP 8.0 and 0.9%, WCSPH 8.6 and 1.6%; before its start was held
- * to a quarter spacing beyond the speed the paddle had been driven at
- * (collider.c, COLLIDER_JERK), DFSPH reached 28 m/s with 25% of the pool
- * over 6 m/s. */
+ * (set_offset in on_frame, the pose for the next frame time; keyed = true),
+ * started at 50 ms in a pool settled that long, holds to the same; before
+ * its start was held to a quarter spacing beyond the speed the paddle had
+ * been driven at (collider.c, COLLIDER_JERK), DFSPH threw 9.2% of the pool
+ * past 6 m/s (started at 20 ms: 25% and 28 m/s, at 40 ms 9.5% and 16.8
+ * m/s). DFSPH's largest speed swings with the pool's state at the start
+ * (keyed at 10-50 ms 9.4-12.2 m/s, a function's 9.3-12.6): the share over
+ * 6 m/s is the steadier figure. */
 static void paddle_started_at_full_speed(void)
 {
 	static const char *const methods[] = {"dfsph", "flip", "wcsph"};
@@ -486,7 +488,7 @@ static void paddle_started_at_full_speed(void)
 		snprintf(cmd, sizeof cmd,
 		         "%s/eddy run tests/scenes/piston.lua --set method=%s %s--stats - --quiet --threads 1 --out %s/piston "
 		         "2>&1",
-		         test_build_dir(), methods[k % 3], keyed ? "--set keyed=true --set duration=0.04 " : "",
+		         test_build_dir(), methods[k % 3], keyed ? "--set keyed=true --set start=0.05 --set duration=0.09 " : "",
 		         test_out_dir());
 		const int st = test_sh(cmd, out, CAP);
 		double vmax = 0, fast = 0, n = 0;
@@ -508,7 +510,7 @@ static void paddle_started_at_full_speed(void)
 		       methods[k % 3], keyed ? ", keyed each frame" : "", vmax, vmax / 3, fast, n, 100 * fast / n);
 		if (st != 0)
 			printf("    exit %d: %.300s\n", st, out);
-		CHECK(st == 0 && frames == (keyed ? 4 : 3) && n == 18800);
+		CHECK(st == 0 && frames == (keyed ? 9 : 3) && n == 18800);
 		CHECK(vmax <= 4 * 3.0);
 		CHECK(fast <= 0.05 * n);
 	}
