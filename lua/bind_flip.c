@@ -11,6 +11,7 @@ static const eddy_lua_field flip_p2g_fields[] = {
 };
 static const eddy_lua_field flip_boundary_fields[] = {
 	EDDY_LUA_FIELD(eddy_flip_boundary_def, margin, EDDY_LUA_FLOAT),
+	EDDY_LUA_FIELD(eddy_flip_boundary_def, open_sides, EDDY_LUA_BOOL),
 	EDDY_LUA_END,
 };
 static const eddy_lua_field flip_surface_fields[] = {

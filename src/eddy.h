@@ -803,7 +803,10 @@ EDDY_API eddy_system_id eddy_add_flip_p2g(eddy_world *w, const eddy_flip_p2g_def
 /* flip_boundary: the domain's sides and every collider in the pipeline become
  * solid; faces touching a solid cell carry the solid's normal velocity. */
 typedef struct eddy_flip_boundary_def {
-	float margin; /* m, cells whose centre is closer than this to a collider's solid are solid; >= 0 */
+	float margin;    /* m, cells whose centre is closer than this to a collider's solid are solid; >= 0 */
+	bool open_sides; /* false: the domain's sides are still walls; true: outflow (air beyond them, p = 0),
+	                  * closed only where a collider covers them, and water crossing them leaves the world
+	                  * (removed with escape = EDDY_ESCAPE_REMOVE, else an error) */
 } eddy_flip_boundary_def;
 EDDY_API eddy_flip_boundary_def eddy_default_flip_boundary_def(void);
 EDDY_API eddy_system_id eddy_add_flip_boundary(eddy_world *w, const eddy_flip_boundary_def *def);

@@ -211,10 +211,11 @@ eddy_status eddy__flip_fill_fluid_faces(eddy_world *w, float *const face[3], con
  * tank whose walls are a collider. Unmarked: weight 1, velocity 0, open 1. */
 typedef struct flip_solid {
 	bool any;                /* a collider is in the pipeline; if not, the arrays are NULL */
+	bool open_sides;         /* the domain's sides are open (flip_boundary's def; eddy__flip_open_sides) */
 	const uint64_t *mark[3]; /* per face grid: bit f % 64 of word f / 64, face f is marked */
 	const uint32_t *rank[3]; /* per word: marked faces before it */
-	const float *wt[3];      /* per marked face, in face order: open fraction in [0, 1]; 0 on the domain's sides */
-	const float *vel[3];     /* per marked face: m/s, normal velocity of the covering collider (0 on the sides) */
+	const float *wt[3];      /* per marked face, in face order: open fraction in [0, 1]; 0 on the domain's closed sides */
+	const float *vel[3];     /* per marked face: m/s, normal velocity of the covering collider (0 on closed sides) */
 	const uint64_t *cmark;   /* cells, as the faces */
 	const uint32_t *crank;
 	const float *open; /* per marked cell: open volume fraction, clamp(1/2 + phi_s(centre) / dx, 0, 1) */
@@ -264,6 +265,13 @@ static inline float flip_solid_open(const flip_solid *s, size_t c)
  * the same result on any thread count. Returns false when out of memory. */
 bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_vec3 *velocities, flip_solid *s,
                             flip_solid_store *store);
+/* The pipeline's flip_boundary opens the domain's sides (its def's
+ * open_sides): outflow boundaries, air beyond them at p = 0, closed only
+ * where a collider covers them; particles cross them and leave the world
+ * (removed, or an error, as the world's escape says). false without a
+ * flip_boundary: the sides are still walls. */
+bool eddy__flip_open_sides(const eddy_world *w);
+
 /* The margin of the pipeline's flip_boundary and the solid velocities it used
  * this step (NULL if it has not run this step); false if it has none (then
  * flip_pressure sees no solids, as flip_boundary marks none). */
@@ -294,11 +302,19 @@ bool eddy__flip_p2g_density(const eddy_world *w, const eddy_system *self, const 
  * (sys_flip_advect.c; flip_pressure's volume correction takes it too). */
 double eddy__flip_advect_time(eddy_world *w);
 
-/* Open fraction of face `axis` (i, j, k): 1 without colliders, 0 on the sides. */
-static inline float flip_face_weight(const eddy_world *w, const flip_solid *s, int axis, size_t f, int i, int j, int k)
+/* Face `axis` (i, j, k) lies on a side of the domain. */
+static inline bool flip_side_face(const eddy_world *w, int axis, int i, int j, int k)
 {
 	const int c[3] = {i, j, k}, n[3] = {w->nx, w->ny, w->nz};
-	if (c[axis] == 0 || c[axis] == n[axis])
+	return c[axis] == 0 || c[axis] == n[axis];
+}
+
+/* Open fraction of face `axis` (i, j, k): 1 without colliders; on the
+ * domain's sides 0, or as inside where they are open (flip_solid's
+ * open_sides). */
+static inline float flip_face_weight(const eddy_world *w, const flip_solid *s, int axis, size_t f, int i, int j, int k)
+{
+	if (flip_side_face(w, axis, i, j, k) && !s->open_sides)
 		return 0.0f;
 	return s->any ? flip_solid_wt(s, axis, f) : 1.0f;
 }

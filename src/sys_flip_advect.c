@@ -5,7 +5,9 @@
  * Reads: x y z u v w. Writes: x y z.
  *   x_mid = x + dt/2 U(x),  x <- x + dt U(x_mid)   (U trilinear on the MAC grid)
  * Projection out of solids: coordinates are clamped to the domain shrunk by
- * wall_gap cells; a particle closer than that to a collider's solid (signed
+ * wall_gap cells (not where flip_boundary opens them, open_sides: a particle
+ * that flows out leaves the bounds, and the world removes it or stops, as
+ * its escape says); a particle closer than that to a collider's solid (signed
  * distance phi < gap) moves along the distance gradient n (central
  * differences) by gap - phi, twice at most, so thin colliders cannot be
  * tunnelled through at the end of a step.
@@ -66,6 +68,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		col[nc++] = c;
 	const long n = (long)w->n;
 	const flip_grid grid = flip_grid_of(w);
+	const bool open_sides = eddy__flip_open_sides(w);
 #pragma omp parallel for num_threads(ctx->threads) if (n > 16384) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		eddy_vec3 p = {x[i], y[i], z[i]};
@@ -75,6 +78,10 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 		p = eddy__v3(p.x + dt * v1.x, p.y + dt * v1.y, p.z + dt * v1.z);
 		for (int c = 0; c < nc; ++c)
 			p = push_out(col[c], p, gap, 0.01f * h);
+		if (open_sides) { /* beyond the bounds the world removes it */
+			x[i] = p.x, y[i] = p.y, z[i] = p.z;
+			continue;
+		}
 		x[i] = clampf(p.x, lo.x + gap, hi.x - gap);
 		y[i] = clampf(p.y, lo.y + gap, hi.y - gap);
 		z[i] = clampf(p.z, lo.z + gap, hi.z - gap);

@@ -15,7 +15,9 @@
  *   unknowns: flip_pressure solves in every cut cell with an open face and
  *   weights the faces by w_f, so nothing jumps when a centre crosses the
  *   solid's surface.
- *   Faces on the domain's sides: u.n = 0 (fixed walls, w_f = 0).
+ *   Faces on the domain's sides: u.n = 0 (fixed walls, w_f = 0), unless the
+ *   def opens them (open_sides: outflow, air beyond at p = 0): then they
+ *   are faces like any other, closed only where a collider covers them.
  *   Closed faces (w_f = 0): u.n = V_s.n, V_s = (offset - offset this system
  *   saw at its last step) / dt of the collider most inside at the face's
  *   corners (solid_velocities says why not the collider's own record);
@@ -83,6 +85,7 @@ eddy_flip_boundary_def eddy_default_flip_boundary_def(void)
 {
 	eddy_flip_boundary_def d;
 	d.margin = 0.0f;
+	d.open_sides = false;
 	return d;
 }
 
@@ -173,6 +176,7 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
                             flip_solid_store *store)
 {
 	memset(s, 0, sizeof *s);
+	s->open_sides = eddy__flip_open_sides(w);
 	int ncol = 0;
 	int colq[EDDY_MAX_SYSTEMS]; /* the colliders' pipeline positions, in order */
 	eddy_system_iter it = eddy__systems(w, EDDY_CAP_COLLIDER);
@@ -374,6 +378,7 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 	}
 	/* the marked faces' values: corners in cyclic order in the face's plane;
 	 * the covering collider is the one nearest (most inside) at a corner */
+	const bool open_sides = s->open_sides;
 	for (int a = 0; a < 3; ++a) {
 		const size_t fx = (size_t)nx + (a == 0), fy = (size_t)ny + (a == 1);
 		const size_t s1 = a == 0 ? sy : 1, s2 = a == 2 ? sy : sz;
@@ -394,7 +399,7 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 				const int i = c[0], j = c[1], k = c[2];
 				const size_t g0 = (size_t)i + sy * (size_t)j + sz * (size_t)k;
 				const size_t g[4] = {g0, g0 + s1, g0 + s1 + s2, g0 + s2};
-				if (c[a] == 0 || c[a] == n[a]) { /* the domain's sides: still, closed */
+				if ((c[a] == 0 || c[a] == n[a]) && !open_sides) { /* the domain's sides: still, closed */
 					wt[slot] = 0.0f;
 					fv[slot++] = 0.0f;
 					continue;
@@ -440,6 +445,13 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 	if (store)
 		eddy__arena_release(&w->arena, am);
 	return true;
+}
+
+bool eddy__flip_open_sides(const eddy_world *w)
+{
+	eddy_system_iter it = eddy__systems(w, EDDY_CAP_SOLID_FACES);
+	const eddy_system *c = eddy__systems_next(&it);
+	return c && ((const boundary *)c->data)->def.open_sides;
 }
 
 bool eddy__flip_boundary_info(const eddy_world *w, float *margin, const eddy_vec3 **vel)
@@ -614,7 +626,8 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	b->sd_step = ctx->step;
 	const flip_solid sd = b->sd;
 	/* closed faces take the solid's normal velocity; domain sides are still
-	 * (each face written once: on all threads) */
+	 * unless open (each face written once: on all threads) */
+	const bool open_sides = b->def.open_sides;
 	const int nt = (size_t)nx * ny * nz > 32768 ? ctx->threads : 1;
 	for (int a = 0; a < 3; ++a) {
 		const int fx = nx + (a == 0), fy = ny + (a == 1), fz = nz + (a == 2);
@@ -624,7 +637,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 				for (int i = 0; i < fx; ++i) {
 					const size_t f = (size_t)i + (size_t)fx * ((size_t)j + (size_t)fy * (size_t)k);
 					const int c[3] = {i, j, k}, n[3] = {nx, ny, nz};
-					if (c[a] == 0 || c[a] == n[a])
+					if ((c[a] == 0 || c[a] == n[a]) && !open_sides)
 						face[a][f] = 0;
 					else if (sd.any) {
 						size_t q;

@@ -17,7 +17,9 @@
  * flip_pressure's values. A domain side beside an air cell is extrapolated too, then
  * kept only where it carries water away from the side (else 0): a particle
  * beside a fluid cell that left the side (flip_pressure) interpolates it,
- * and held at 0 it would hold the particle back. RK2 advection at CFL number C samples up to C + 1 cells
+ * and held at 0 it would hold the particle back. Open sides
+ * (flip_boundary's open_sides) keep the extrapolated velocity either way,
+ * except where a collider closes them. RK2 advection at CFL number C samples up to C + 1 cells
  * beyond the fluid: layers should be at least that. */
 #include "flip.h"
 
@@ -429,7 +431,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 	flip_solid sd;
 	if (!eddy__flip_solid_for(w, s, ctx->dt, &sd))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "flip_extrapolate: out of memory");
-	const bool solids = sd.any;
+	const bool solids = sd.any, open_sides = sd.open_sides;
 	for (int a = 0; a < 3; ++a) {
 		for (int d = 0; d < 3; ++d)
 			m[a][d] = n[d] + (d == a);
@@ -528,6 +530,8 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 					const size_t f = (size_t)c[0] + sa[1] * (size_t)c[1] + sa[2] * (size_t)c[2];
 					if (la[f] == 0)
 						continue; /* beside fluid or solid: flip_boundary's, flip_pressure's */
+					if (open_sides && flip_solid_wt(&sd, a, f) > 0)
+						continue; /* an open side: no wall, the extrapolated velocity */
 					if (la[f] == UNKNOWN || (side ? u[f] > 0 : u[f] < 0))
 						u[f] = 0;
 				}

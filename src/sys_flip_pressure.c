@@ -207,13 +207,15 @@ static bool at_wall(const eddy_world *w, const flip_solid *sd, const uint8_t *ty
 	for (int d = 0; d < 6; ++d) {
 		size_t f;
 		const long o = across(w, i, j, k, d, &f);
-		if (o < 0) {
-			wall = true;
-			continue;
-		}
 		const int ax = d >> 1;
 		int fc[3] = {i, j, k};
 		fc[ax] += d & 1;
+		if (o < 0) { /* a domain side: a wall, or air where open and uncovered */
+			const float wf = flip_face_weight(w, sd, ax, f, fc[0], fc[1], fc[2]);
+			wall = wall || wf < 1;
+			air = air || wf > 0;
+			continue;
+		}
 		wall = wall || flip_face_weight(w, sd, ax, f, fc[0], fc[1], fc[2]) < 1 ||
 		       (row[o] < 0 && type[o] == EDDY_CELL_SOLID);
 		air = air || (row[o] >= 0 && free_row[row[o]]) || (row[o] < 0 && type[o] == EDDY_CELL_AIR && phi[o] > 0);
@@ -343,8 +345,12 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 						const int ax = d >> 1;
 						int fc[3] = {i, j, k};
 						fc[ax] += d & 1;
-						if (o < 0 || flip_face_weight(w, &sd, ax, f, fc[0], fc[1], fc[2]) == 0)
+						if (flip_face_weight(w, &sd, ax, f, fc[0], fc[1], fc[2]) == 0)
 							continue;
+						if (o < 0) { /* an open domain side: air beyond */
+							dry = true;
+							continue;
+						}
 						wet |= type[o] == EDDY_CELL_FLUID;
 						dry |= type[o] == EDDY_CELL_AIR && flip_solid_open(&sd, o) >= 1;
 					}
@@ -427,7 +433,12 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 						flux = wf * flux + (1.0 - wf) * (double)flip_solid_vel(&sd, ax, f);
 					div += (d & 1) ? flux : -flux;
 					int link = -1;
-					if (o >= 0 && wf > 0) {
+					if (o < 0 && wf > 0) {
+						/* an open domain side: air beyond, p = 0 at the
+						 * centre of the cell past it (theta 1) */
+						diag += wf;
+						has_air[r] = 1;
+					} else if (o >= 0 && wf > 0) {
 						if (row[o] >= 0) {
 							diag += wf;
 							link = row[o];
@@ -667,14 +678,21 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 					int lo[3] = {i, j, k};
 					lo[a]--;
 					const int na = a == 0 ? nx : a == 1 ? ny : nz;
-					if (lo[a] < 0 || hi[a] >= na)
-						continue; /* domain side */
-					const size_t cl = flip_cell(w, lo[0], lo[1], lo[2]), ch = flip_cell(w, hi[0], hi[1], hi[2]);
 					const size_t fi = a == 0 ? flip_fu(w, i, j, k) : a == 1 ? flip_fv(w, i, j, k) : flip_fw(w, i, j, k);
 					/* closed faces keep the solid velocity flip_boundary set;
-					 * a solid cell has only closed faces */
+					 * a solid cell has only closed faces; a domain side is
+					 * closed unless open (flip_boundary's open_sides) */
 					if (flip_face_weight(w, &sd, a, fi, i, j, k) == 0)
 						continue;
+					if (lo[a] < 0 || hi[a] >= na) {
+						/* an open side: the ghost pressure of air at theta 1 is 0 */
+						const int r = lo[a] < 0 ? row[flip_cell(w, hi[0], hi[1], hi[2])]
+						                        : row[flip_cell(w, lo[0], lo[1], lo[2])];
+						if (r >= 0)
+							f[fi] = (float)((double)f[fi] - (lo[a] < 0 ? q[r] : -q[r]));
+						continue;
+					}
+					const size_t cl = flip_cell(w, lo[0], lo[1], lo[2]), ch = flip_cell(w, hi[0], hi[1], hi[2]);
 					const int rl = row[cl], rh = row[ch];
 					if (rl < 0 && rh < 0)
 						continue;
@@ -713,15 +731,15 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 			const int ax = d >> 1;
 			int fc[3] = {ci[0], ci[1], ci[2]};
 			fc[ax] += d & 1;
-			const bool wall = o < 0 || flip_face_weight(w, &sd, ax, f, fc[0], fc[1], fc[2]) == 0 ||
-			                  (row[o] < 0 && type[o] == EDDY_CELL_SOLID);
+			const bool wall = flip_face_weight(w, &sd, ax, f, fc[0], fc[1], fc[2]) == 0 ||
+			                  (o >= 0 && row[o] < 0 && type[o] == EDDY_CELL_SOLID);
 			if (!wall)
 				continue;
 			const long oo = across(w, ci[0], ci[1], ci[2], d ^ 1, &fo);
 			int gc[3] = {ci[0], ci[1], ci[2]};
 			gc[ax] += (d ^ 1) & 1;
-			if (oo < 0 || flip_face_weight(w, &sd, ax, fo, gc[0], gc[1], gc[2]) < 1 ||
-			    (row[oo] < 0 && type[oo] == EDDY_CELL_SOLID))
+			if (flip_face_weight(w, &sd, ax, fo, gc[0], gc[1], gc[2]) < 1 ||
+			    (oo >= 0 && row[oo] < 0 && type[oo] == EDDY_CELL_SOLID))
 				continue; /* walled on both sides along this axis */
 			const float vw = o < 0 ? 0.0f : flip_solid_vel(&sd, ax, f), vo = face[ax][fo];
 			/* away from the wall: against the wall's outward side d */

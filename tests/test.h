@@ -78,6 +78,7 @@ void suite_sph_reference(void); /* the SPH passes against a double-precision O(n
 void suite_flip(void);
 void suite_flip_solvers(void);
 void suite_stress_flip_flight(void);
+void suite_outflow(void); /* open sides: water leaving the world, every method */
 void suite_stress_flip_solids(void);
 void suite_stress_sph_solids(void);
 void suite_long_sph_solids(void);

@@ -26,6 +26,8 @@
 -- through fluid:world{}.
 -- tank = {min, max} (default: the world's box, when made by fluid:world{})
 -- gives SPH its boundary particles and collider; tank = false gives none.
+-- FLIP's grid sides are walls with the default tank only: with tank = false
+-- or a tank of its own, water reaching a side leaves the world (outflow).
 -- A field that does not apply to the chosen method is an error naming it:
 -- a FLIP run ignoring 'stiffness' would silently be another experiment.
 -- Settings for one method only go in a table named after it, so one scene
@@ -211,7 +213,10 @@ function Group:expand(world)
 	else
 		add("gravity", {})
 		add("flip_p2g", {})
-		add("flip_boundary", {})
+		-- the domain's sides are the tank's walls only for the default tank
+		-- (the world's box, as SPH's): with tank = false, or a tank of its
+		-- own, water reaching a side leaves the world there
+		add("flip_boundary", { open_sides = d.tank ~= nil })
 		add("flip_surface", {})
 		add("flip_pressure", opt { solver = d.solver, tolerance = d.tolerance, density = d.rest_density })
 		-- RK2 at CFL C samples up to C + 1 cells beyond the surface
