@@ -12,7 +12,8 @@
  * +-(w_f u_f + (1 - w_f) V_f), the net outflow of fluid and solid together.
  *   (A q)_i = sum over the 6 sides of i:  unknown j: w_f (q_i - q_j)
  *                                         air j:     w_f q_i / theta_ij
- *                                         solid / domain side: nothing
+ *                                         open domain side:  w_f q_i (air at theta 1)
+ *                                         solid / closed domain side: nothing
  *   A q = -D + dx s_i   (s_i: the volume correction below, 0 elsewhere)
  *   u_f -= q_right - q_left on every open face (w_f > 0) with an unknown on
  *   a side, an air side taking the ghost value q_i (1 - 1/theta_ij), so the
