@@ -1406,6 +1406,55 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 		}
 	}
 
+	/* one fluid, one method: the fluid systems act on every particle, so a
+	 * second of a kind applies its step twice (a second eddy.fluid group in
+	 * the world: two FLIP pipelines ran, gravity and the transfers twice a
+	 * step, and nothing said so), and SPH's and FLIP's systems together
+	 * move the same particles two ways */
+	{
+		static const eddy_system_vtable *const once[] = {
+			&eddy__kind_sph_density,         &eddy__kind_sph_pressure,    &eddy__kind_sph_viscosity,
+			&eddy__kind_sph_surface_tension, &eddy__kind_sph_dfsph,       &eddy__kind_integrate,
+			&eddy__kind_flip_p2g,            &eddy__kind_flip_boundary,   &eddy__kind_flip_surface,
+			&eddy__kind_flip_pressure,       &eddy__kind_flip_extrapolate, &eddy__kind_flip_g2p,
+			&eddy__kind_flip_advect,         &eddy__kind_flip_reseed};
+		const eddy_system *dup_first = NULL, *dup = NULL;
+		int dups = 0;
+		for (size_t q = 0; q < sizeof once / sizeof once[0]; ++q) {
+			const eddy_system *first = NULL;
+			for (int k = 0; k < w->order_count; ++k) {
+				const eddy_system *s = &w->slots[w->order[k]];
+				if (s->vt != once[q])
+					continue;
+				if (first) {
+					dup_first = dups++ ? dup_first : first;
+					dup = dups > 1 ? dup : s;
+					break;
+				}
+				first = s;
+			}
+		}
+		if (dups) {
+			char more[64] = "";
+			if (dups > 1)
+				snprintf(more, sizeof more, " (and %d more systems repeat)", dups - 1);
+			eddy__report(report, user, EDDY_CHECK_ERROR,
+			             "pipeline: %s repeats %s%s: each would run twice a step on the same particles; a world holds "
+			             "one fluid (one eddy.fluid group, one method)",
+			             dup->label, dup_first->label, more);
+			errors++;
+		}
+		const eddy_system *sph = eddy__provider(w, NULL, EDDY_CAP_SPH_NEIGHBORS);
+		const eddy_system *grid = eddy__provider(w, NULL, EDDY_CAP_MAC_GRID);
+		if (sph && grid) {
+			eddy__report(report, user, EDDY_CHECK_ERROR,
+			             "pipeline: %s (SPH) and %s (FLIP) in one world would move the same particles two ways; "
+			             "a world runs one method",
+			             sph->label, grid->label);
+			errors++;
+		}
+	}
+
 	/* emitted particles that nothing moves: a scene without integrate (or
 	 * flip_advect) runs, and its fluid hangs in the air */
 	bool emits = false, moves = false;

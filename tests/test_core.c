@@ -1078,6 +1078,14 @@ static void check_catches_scene_mistakes(void)
 	memset(&f, 0, sizeof f);
 	eddy_world_check(w, collect, &f);
 	CHECK(strstr(f.text, "no system moves") == NULL);
+	/* a second integrate (a second fluid group, say) steps every particle
+	 * twice: an error, once however many systems repeat */
+	CHECK(eddy_system_valid(w, eddy_add_integrate(w, &it)));
+	CHECK(eddy_system_valid(w, eddy_add_gravity(w, &gr)));
+	memset(&f, 0, sizeof f);
+	CHECK(eddy_world_check(w, collect, &f) == 1);
+	CHECK_HAS(f.text, "pipeline: integrate#2 repeats integrate: each would run twice a step on the same particles; a "
+	                  "world holds one fluid (one eddy.fluid group, one method)");
 	eddy_destroy_world(w);
 
 	/* fps 0.5 for a 0.2 s run: one 2 s frame, 10 times the run */

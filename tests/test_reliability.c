@@ -420,8 +420,44 @@ static void run_refuses_mismatched_sph_spacing(void)
 	CHECK_HAS(out, "set sph_density's spacing = 0.02");
 }
 
+/* Two eddy.fluid groups in one world (water and oil, say) ran FLIP's whole
+ * pipeline twice a step on the same particles, silently; SPH beside FLIP
+ * moved them two ways. eddy run refuses both, in one line each. */
+static void run_refuses_two_fluids(void)
+{
+	static const struct {
+		const char *first, *second, *want;
+	} cases[] = {
+		{"flip", "flip",
+	     "pipeline: flip_p2g#2 repeats flip_p2g (and 6 more systems repeat): each would run twice a step on the same "
+	     "particles; a world holds one fluid (one eddy.fluid group, one method)"},
+		{"dfsph", "flip", "pipeline: sph_density (SPH) and flip_p2g (FLIP) in one world would move the same particles "
+	                      "two ways; a world runs one method"},
+	};
+	for (size_t c = 0; c < sizeof cases / sizeof cases[0]; ++c) {
+		char path[512], cmd[1200], out[4096];
+		snprintf(path, sizeof path, "%s/t_two_fluids.lua", test_build_dir());
+		FILE *f = fopen(path, "w");
+		fprintf(f,
+		        "local eddy = require 'eddy'\n"
+		        "local a = eddy.fluid { method = '%s', resolution = 0.01 }\n"
+		        "local b = eddy.fluid { method = '%s', resolution = 0.01, rest_density = 800, tank = false }\n"
+		        "local w = a:world { bounds = { {0, 0, 0}, {0.2, 0.3, 0.1} }, duration = 0.1, cell_size = 0.02 }\n"
+		        "w:add(eddy.emit_box { min = {0, 0, 0}, max = {0.2, 0.1, 0.1}, spacing = 0.01 })\n"
+		        "w:add(a)\nw:add(b)\nreturn w\n",
+		        cases[c].first, cases[c].second);
+		fclose(f);
+		snprintf(cmd, sizeof cmd, "%s/eddy run %s --frames 1 --out %s/t_two_fluids_out", test_build_dir(), path,
+		         test_out_dir());
+		CHECK(test_sh(cmd, out, sizeof out) == 1);
+		CHECK_HAS(out, cases[c].want);
+		CHECK_HAS(out, "not run: 1 problem found by the preflight check");
+	}
+}
+
 void suite_reliability(void)
 {
+	RUN(run_refuses_two_fluids);
 	RUN(run_refuses_mismatched_sph_spacing);
 	RUN(run_refuses_what_cannot_fit);
 	RUN(checkpoint_resume_is_bit_identical);
