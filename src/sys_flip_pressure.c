@@ -590,21 +590,30 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 		return st;
 	for (int round = 0; round < SEPARATE_ROUNDS; ++round) {
 		int more = 0;
-		for (int r = 0; r < n; ++r) {
-			if (!(q[r] < 0) || !open_of[comp[r]] || free_row[r] ||
-			    !at_wall(w, &sd, type, phi, row, free_row, cell_of[r]))
-				continue;
-			/* q_r = 0: as the pinning, the neighbours keep their diagonal */
-			for (int d = 0; d < 6; ++d) {
-				const int o = A.nb[6 * r + d];
-				if (o >= 0)
-					A.nb[6 * o + (d ^ 1)] = -1;
-				A.nb[6 * r + d] = -1;
+		/* swept until no cell is added: a cell let go opens the suction
+		 * cells along the wall beside it whatever the sweep's order (rows
+		 * run up from the floor, so one sweep opened a wall leaving water
+		 * one cell a step down from the surface, and a paddle pulled back
+		 * dragged the column below with it meanwhile) */
+		for (int added = 1; added;) {
+			added = 0;
+			for (int r = 0; r < n; ++r) {
+				if (!(q[r] < 0) || !open_of[comp[r]] || free_row[r] ||
+				    !at_wall(w, &sd, type, phi, row, free_row, cell_of[r]))
+					continue;
+				/* q_r = 0: as the pinning, the neighbours keep their diagonal */
+				for (int d = 0; d < 6; ++d) {
+					const int o = A.nb[6 * r + d];
+					if (o >= 0)
+						A.nb[6 * o + (d ^ 1)] = -1;
+					A.nb[6 * r + d] = -1;
+				}
+				free_row[r] = 1;
+				A.diag[r] = 1;
+				b[r] = 0;
+				added++;
 			}
-			free_row[r] = 1;
-			A.diag[r] = 1;
-			b[r] = 0;
-			more++;
+			more += added;
 		}
 		if (more == 0)
 			break;

@@ -31,7 +31,13 @@
  * break's splash hung from its tank's lid for seconds
  * (tests/test_stress_sph_solids.c). Along a wall (cosine under DFSPH_LEAVE)
  * or under pressure a particle stays held as before: the still columns
- * start with k = 0 everywhere, and their side walls must carry them.
+ * start with k = 0 everywhere, and their side walls must carry them. A
+ * particle whose walls move away from it (bdiv_i > 0: colliders) leaves them
+ * whenever its rate towards them is negative, whatever its pressure: a wall
+ * cannot pull water after it, and its own pressure, not the wall, must make
+ * it follow (a paddle pulled back at 3 m/s from a pool dragged its face
+ * along: the front 0.06 m out at 50 ms where the released column's reaches
+ * 0.19; tests/test_physics.c).
  * A step sets v* = v + dt (a + h), solves for k by corrections that move v*
  * by dt a^p of a change of k, adds (v* - (v + dt a)) / dt to a and writes
  * p_i = k_i rho_i^2 / grad_cal (k summed over the solves; see sph_pressure).
@@ -377,6 +383,12 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 	 * solve, which makes pressure only from it; only such a particle can
 	 * leave its walls, so only its sums of the walls below are kept */
 	const bool unpressed = free_walls && (warm ? wk->kprev[0][i] + wk->kprev[1][i] <= 0 : wk->rho[i] <= sh->rho0);
+	/* walls moving away from it (their part of the rate, -bdiv_i, < 0): it
+	 * leaves them whatever its pressure once its own motion does not keep
+	 * up, since they cannot pull it after them (a paddle pulled back at 3
+	 * m/s from a pool dragged the water at its face along, the front
+	 * following it instead of falling) */
+	const bool retreat = free_walls && wk->bdiv && wk->bdiv[i] > 0;
 	float s[9][4] = {{0}};
 	for (uint32_t p = 0; p < bcnt; p += 4)
 		for (uint32_t l = 0; l < 4; ++l) {
@@ -394,7 +406,7 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 			s[3][l] += gh * rx;
 			s[4][l] += gh * ry;
 			s[5][l] += gh * rz;
-			if (unpressed) { /* the walls above p_i's level left out (p_i = 0 here) */
+			if (unpressed || retreat) { /* the walls above p_i's level left out (p_i = 0 here) */
 				const float gp = (gd > 0 ? gd : 0.0f) * c;
 				s[6][l] += gp * rx;
 				s[7][l] += gp * ry;
@@ -403,14 +415,14 @@ static void wall_sums(const dfsph_work *wk, long i, float out[6][SPH_BLOCK], lon
 		}
 	for (int k = 0; k < 6; ++k)
 		out[k][q] = sph_sum4(s[k]);
-	if (!unpressed)
+	if (!unpressed && !retreat)
 		return; /* gradients set its mask 0 */
 	const float bx = out[0][q], by = out[1][q], bz = out[2][q];
 	const float ux = wk->vel[0][i] + wk->dt * wk->acc[0][i], uy = wk->vel[1][i] + wk->dt * wk->acc[1][i],
 				uz = wk->vel[2][i] + wk->dt * wk->acc[2][i];
 	const float rate = ux * bx + uy * by + uz * bz - (wk->bdiv ? wk->bdiv[i] : 0.0f); /* > 0: towards them */
 	const float b2 = bx * bx + by * by + bz * bz, u2 = ux * ux + uy * uy + uz * uz;
-	const bool leaving = rate < 0 && rate * rate > DFSPH_LEAVE * DFSPH_LEAVE * b2 * u2;
+	const bool leaving = rate < 0 && (retreat || rate * rate > DFSPH_LEAVE * DFSPH_LEAVE * b2 * u2);
 	wk->mask[i] = leaving;
 	if (leaving)
 		for (int k = 3; k < 6; ++k)
