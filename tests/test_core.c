@@ -1022,6 +1022,35 @@ static eddy_world *spacing_world(float spacing, double fps, double duration)
 	return w;
 }
 
+/* A collider added where the water already is (between steps) pushes the
+ * particles inside its solid out in its first step, a burst in SPH: a
+ * run-time warning names it, the count and a particle; one added clear of
+ * the water, or before any, says nothing. */
+static void collider_added_into_water_warns(void)
+{
+	eddy_world *w = spacing_world(0.01f, 30, 2);
+	eddy_gravity_def gr = eddy_default_gravity_def();
+	CHECK(eddy_system_valid(w, eddy_add_gravity(w, &gr)));
+	eddy_integrate_def it = eddy_default_integrate_def();
+	CHECKF(eddy_system_valid(w, eddy_add_integrate(w, &it)), "%s", eddy_world_error(w));
+	eddy_collide_sphere_def away = eddy_default_collide_sphere_def();
+	away.center = (eddy_vec3){0.7f, 0.7f, 0.7f};
+	away.radius = 0.1f;
+	CHECK(eddy_system_valid(w, eddy_add_collide_sphere(w, &away)));
+	CHECK(eddy_world_step_frame(w) == EDDY_OK);
+	CHECK(eddy_world_particle_count(w) == 8000);
+	CHECK(eddy_world_warning_count(w) == 0);
+	eddy_collide_sphere_def in = eddy_default_collide_sphere_def();
+	in.center = (eddy_vec3){0.2f, 0.2f, 0.2f};
+	in.radius = 0.05f;
+	CHECK(eddy_system_valid(w, eddy_add_collide_sphere(w, &in)));
+	CHECK(eddy_world_warning_count(w) == 1);
+	const char *msg = eddy_world_warning(w, 0);
+	CHECK_HAS(msg, "collide_sphere#2: added at step 4 (t = 0.0333333 s) with 524 particles inside its solid");
+	CHECK_HAS(msg, "add it before the water");
+	eddy_destroy_world(w);
+}
+
 /* Scene mistakes that run without an error but give a wrong answer are
  * errors of the check (and so refused by eddy run). */
 static void check_catches_scene_mistakes(void)
@@ -1239,6 +1268,7 @@ void suite_core(void)
 {
 	RUN(nonfinite_on_the_grid_names_the_face);
 	RUN(check_catches_scene_mistakes);
+	RUN(collider_added_into_water_warns);
 	RUN(null_arguments_are_refused);
 	RUN(callbacks_cannot_reenter);
 	RUN(preflight_findings);
