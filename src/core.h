@@ -288,6 +288,10 @@ static inline float *eddy__col(eddy_world *w, int id) { return (float *)w->colum
 /* m/s^2, the acceleration the pipeline's gravity systems add up to (each
  * the world's gravity times its scale; 0 without any): sys_gravity.c */
 void eddy__gravity_sum(const eddy_world *w, double g[3]);
+/* The same as a vector (m/s^2): what the SPH passes' hydrostatic terms take
+ * as g, so a pipeline without gravity (or with it scaled, or settling its
+ * start) has walls that hold no weight the water does not have. */
+eddy_vec3 eddy__gravity(const eddy_world *w);
 
 static inline double eddy__next_frame_time(const eddy_world *w) { return (double)(w->frame + 1) / w->def.fps; }
 static inline float eddy__clamp_to(float v, float lo, float hi) { return v < lo ? lo : v > hi ? hi : v; }

@@ -49,6 +49,13 @@ void eddy__gravity_sum(const eddy_world *w, double g[3])
 	}
 }
 
+eddy_vec3 eddy__gravity(const eddy_world *w)
+{
+	double g[3];
+	eddy__gravity_sum(w, g);
+	return eddy__v3((float)g[0], (float)g[1], (float)g[2]);
+}
+
 static void *shared(const eddy_system *s, uint32_t cap)
 {
 	return cap == EDDY_CAP_GRAVITY ? &((gravity *)s->data)->def : NULL;

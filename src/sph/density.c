@@ -232,7 +232,7 @@ static bool walls_make(eddy_world *w, sph_density *sd, int threads, walls *wl)
 	wl->pb = scratch(w, (size_t)nact, sizeof *wl->pb, &ok);
 	if (!ok)
 		return false;
-	const eddy_vec3 g = w->def.gravity;
+	const eddy_vec3 g = eddy__gravity(w); /* the gravity systems' (none while the world settles its start) */
 	const float h2 = sd->sh.k.h2;
 #pragma omp parallel for num_threads(threads) schedule(static)
 	for (long r = 0; r < nrows; ++r) {
@@ -418,7 +418,7 @@ static void continuity_rate(eddy_world *w, const sph_density *sd, const float *r
 	/* |W'(r)| = -spiky_grad (h - r)^2; the sums' constant factors */
 	const float dw = -sh->k.spiky_grad * sh->grad_cal, m = sh->mass;
 	const float diff = sd->def.diffusion * h * sh->c * 2.0f;
-	const eddy_vec3 g = w->def.gravity;
+	const eddy_vec3 g = eddy__gravity(w);
 	const float gc = sh->rho0 / (sh->c * sh->c); /* rho0 g . dx / c^2: the hydrostatic density difference */
 	const float gx = g.x * gc, gy = g.y * gc, gz = g.z * gc;
 	const bool moving = bd->vx != NULL;
@@ -497,7 +497,7 @@ static bool hydrostatic_start(eddy_world *w, const sph_density *sd, float *carri
 	if (count == 0)
 		return true;
 	const float rho0 = sd->sh.rho0;
-	const eddy_vec3 g = w->def.gravity;
+	const eddy_vec3 g = eddy__gravity(w);
 	const double gn = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
 	if (!(gn > 0)) { /* no gravity: rho0 */
 		for (long i = 0; i < n; ++i)

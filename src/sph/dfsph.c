@@ -1117,7 +1117,7 @@ static int divergence_cg(dfsph_work *wk, int cap, bool density, double tol, doub
 static double depth_scale(eddy_world *w, float h, int threads)
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
-	const eddy_vec3 g = w->def.gravity;
+	const eddy_vec3 g = eddy__gravity(w);
 	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
 	if (!(g1 > 0) || !x || !y || !z || w->n == 0)
 		return 1;
@@ -1235,7 +1235,7 @@ static bool prepare(eddy_world *w, dfsph_work *wk, const sph_shared *sh, long n,
 	wk->beta = 1;
 	wk->block = SIMD_PICK(dfsph_block);
 	wk->rho = eddy__col(w, COL_DENSITY);
-	wk->gravity = w->def.gravity;
+	wk->gravity = eddy__gravity(w);
 	for (int d = 0; d < 3; ++d) { /* the step's (free walls), not the probe's */
 		wk->vel[d] = free_walls ? eddy__col(w, COL_VX + d) : NULL;
 		wk->acc[d] = free_walls ? eddy__col(w, COL_AX + d) : NULL;
@@ -1532,7 +1532,7 @@ static eddy_status step(eddy_world *w, eddy_system *sys, const eddy_step_context
 	             warm ? eddy__col(w, sd->kcol[1]) : NULL))
 		return eddy__fail(w, EDDY_ERR_NOMEM, "%s: out of scratch memory for %ld particles", sys->label, n);
 	if (!sd->def.divergence_solver) { /* the cold solve's soft correction (header) */
-		const eddy_vec3 g = w->def.gravity;
+		const eddy_vec3 g = eddy__gravity(w);
 		const double g2 = (double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z;
 		if (g2 > 0) {
 			const double tau = DFSPH_SOFT_TIME * sqrt(sh->h / sqrt(g2));
@@ -1608,7 +1608,7 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 		return INFINITY;
 	const float v2 = eddy__max_norm2(w, COL_VX, COL_VY, COL_VZ);
 	const double lv = v2 > 0 ? (double)sh->h / sqrt((double)v2) : INFINITY;
-	const eddy_vec3 g = w->def.gravity;
+	const eddy_vec3 g = eddy__gravity(w);
 	const double g1 = sqrt((double)g.x * g.x + (double)g.y * g.y + (double)g.z * g.z);
 	double la = g1 > 0 ? DFSPH_GRAVITY_LIMIT * sqrt((double)sh->h / g1) : INFINITY;
 	if (((const sph_dfsph *)s->data)->def.divergence_solver)

@@ -211,7 +211,7 @@ long eddy__dfsph_hydrostatic_start(eddy_world *w, const sph_shared *sh, long n, 
 {
 	const sph_neighbors *nb = &sh->nb;
 	const sph_grid *gr = &nb->grid;
-	const eddy_vec3 g = w->def.gravity;
+	const eddy_vec3 g = eddy__gravity(w);
 	const float ga[3] = {g.x, g.y, g.z};
 	int a = 0;
 	for (int c = 1; c < 3; ++c)
