@@ -1426,12 +1426,13 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 				const eddy_system *s = &w->slots[w->order[k]];
 				if (s->vt != once[q])
 					continue;
-				if (first) {
-					dup_first = dups++ ? dup_first : first;
-					dup = dups > 1 ? dup : s;
-					break;
+				if (!first) {
+					first = s;
+					continue;
 				}
-				first = s;
+				if (dups++ == 0) /* the message names the first pair */
+					dup_first = first, dup = s;
+				break;
 			}
 		}
 		if (dups) {

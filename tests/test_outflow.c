@@ -22,8 +22,10 @@ typedef struct outflow_run {
 	char hash[MAX_FRAMES][24];
 } outflow_run;
 
-/* Runs the scene with the given --set arguments; false if it failed. */
-static bool run_outflow(const char *sets, const char *extra, outflow_run *r)
+/* Runs the scene with the given --set arguments (and eddy run options
+ * extra); false, with the failure recorded, if it failed or did not give
+ * frames frames. */
+static bool run_outflow(const char *sets, const char *extra, int frames, outflow_run *r)
 {
 	char cmd[1024];
 	snprintf(cmd, sizeof cmd, "%s/eddy run tests/scenes/outflow.lua %s --stats - --quiet --out %s/run %s 2>&1",
@@ -48,7 +50,9 @@ static bool run_outflow(const char *sets, const char *extra, outflow_run *r)
 		const char *h = strstr(line, "\"state_hash\":\"");
 		snprintf(r->hash[k], sizeof r->hash[k], "%.16s", h ? h + 14 : "");
 	}
-	return pclose(f) == 0 && r->frames > 0;
+	const bool ok = pclose(f) == 0 && r->frames == frames;
+	CHECKF(ok, "%s %s: the run failed or gave %d frames, not %d", sets, extra ? extra : "", r->frames, frames);
+	return ok;
 }
 
 static const char *const METHODS[] = {"flip", "pic", "apic", "dfsph", "wcsph"};
@@ -69,9 +73,7 @@ static void block_flies_out_through_open_sides(void)
 			snprintf(sets, sizeof sets, "--set case=flight --set method=%s --set vx=%g --set vy=%g --set vz=%g",
 			         METHODS[m], V[v][0], V[v][1], V[v][2]);
 			outflow_run r;
-			const bool ran = run_outflow(sets, NULL, &r);
-			CHECKF(ran, "%s: the run failed", sets);
-			if (!ran)
+			if (!run_outflow(sets, NULL, 15, &r))
 				continue;
 			const double s = sqrt(V[v][0] * V[v][0] + V[v][1] * V[v][1] + V[v][2] * V[v][2]);
 			double dev = 0, piled = 0;
@@ -101,9 +103,7 @@ static void jet_leaves_through_open_side(void)
 		char sets[128];
 		snprintf(sets, sizeof sets, "--set case=jet --set method=%s", methods[m]);
 		outflow_run r;
-		const bool ran = run_outflow(sets, NULL, &r);
-		CHECKF(ran && r.frames >= 30, "%s: the run failed", sets);
-		if (!ran || r.frames < 30)
+		if (!run_outflow(sets, NULL, 30, &r))
 			continue;
 		double lo = INFINITY, hi = 0, piled = 0;
 		for (int k = 0; k < r.frames; ++k) {
@@ -127,18 +127,14 @@ static void jet_leaves_through_open_side(void)
 static void channel_spills_over_open_end(void)
 {
 	outflow_run ref;
-	const bool ran_ref = run_outflow("--set case=spill --set method=dfsph", NULL, &ref);
-	CHECKF(ran_ref, "dfsph spill: the run failed");
-	if (!ran_ref)
+	if (!run_outflow("--set case=spill --set method=dfsph", NULL, 30, &ref))
 		return;
 	static const char *const methods[] = {"flip", "apic"};
 	for (size_t m = 0; m < sizeof methods / sizeof methods[0]; ++m) {
 		char sets[128];
 		snprintf(sets, sizeof sets, "--set case=spill --set method=%s", methods[m]);
 		outflow_run r;
-		const bool ran = run_outflow(sets, NULL, &r);
-		CHECKF(ran && r.frames == ref.frames, "%s: the run failed", sets);
-		if (!ran || r.frames != ref.frames)
+		if (!run_outflow(sets, NULL, 30, &r))
 			continue;
 		double off = 0;
 		for (int k = 0; k < r.frames; ++k)
@@ -150,25 +146,19 @@ static void channel_spills_over_open_end(void)
 		       r.n[r.frames - 1], r.n[0]);
 	}
 	outflow_run base;
-	if (!run_outflow("--set case=spill --set method=flip", "--threads 1", &base)) {
-		CHECKF(false, "flip spill on one thread: the run failed");
+	if (!run_outflow("--set case=spill --set method=flip", "--threads 1", 30, &base))
 		return;
-	}
 	static const char *const solvers[] = {"mg", "hypre", "cholmod"};
 	for (size_t s = 0; s < sizeof solvers / sizeof solvers[0]; ++s) {
 		char sets[128];
 		snprintf(sets, sizeof sets, "--set case=spill --set method=flip --set solver=%s", solvers[s]);
 		outflow_run r;
-		const bool ran = run_outflow(sets, NULL, &r);
-		CHECKF(ran && r.frames == base.frames, "%s: the run failed", sets);
-		if (ran && r.frames == base.frames)
+		if (run_outflow(sets, NULL, 30, &r))
 			CHECKF(fabs(r.n[r.frames - 1] - base.n[r.frames - 1]) <= 0.01 * base.n[0],
 			       "%s: %g particles left against PCG's %g", sets, r.n[r.frames - 1], base.n[r.frames - 1]);
 	}
 	outflow_run two;
-	const bool ran2 = run_outflow("--set case=spill --set method=flip", "--threads 2", &two);
-	CHECKF(ran2 && two.frames == base.frames, "flip spill on two threads: the run failed");
-	if (ran2 && two.frames == base.frames)
+	if (run_outflow("--set case=spill --set method=flip", "--threads 2", 30, &two))
 		CHECKF(strcmp(two.hash[two.frames - 1], base.hash[base.frames - 1]) == 0,
 		       "flip spill: state %s on two threads against %s on one", two.hash[two.frames - 1],
 		       base.hash[base.frames - 1]);
@@ -184,9 +174,7 @@ static void closed_tank_keeps_its_water(void)
 		snprintf(a, sizeof a, "--set case=closed --set method=%s --set escape=remove --set duration=0.5", methods[m]);
 		snprintf(b, sizeof b, "--set case=closed --set method=%s --set escape=error --set duration=0.5", methods[m]);
 		outflow_run ra, rb;
-		const bool ok = run_outflow(a, NULL, &ra) && run_outflow(b, NULL, &rb);
-		CHECKF(ok && ra.frames == rb.frames, "%s: a closed-tank run failed", methods[m]);
-		if (!ok || ra.frames != rb.frames)
+		if (!run_outflow(a, NULL, 15, &ra) || !run_outflow(b, NULL, 15, &rb))
 			continue;
 		CHECKF(ra.n[ra.frames - 1] == ra.n[0], "%s: %g of %g particles left a closed tank", methods[m],
 		       ra.n[ra.frames - 1], ra.n[0]);
