@@ -129,6 +129,32 @@ static inline float flip_trilinear(const float *f, size_t sy, size_t sz, flip_ax
 	return c0 + az.w1 * (c1 - c0);
 }
 
+/* The grid rounds the world's box up to whole cells (columns.c), so on an
+ * axis whose extent is not a whole number of cells the last cells stick out
+ * past the box. There the box's face, not the grid's side, is the wall the
+ * scene asked for: flip_boundary cuts those cells as a still solid beyond
+ * it (fractional faces, as a collider's). hi[a] gets the box's face on each
+ * such axis and INFINITY on the others (the grid's side is the box's, to
+ * within a thousandth of a cell, where openings count as closed); returns
+ * whether any axis sticks out. Open sides have none: water past the box
+ * leaves the world there. */
+static inline bool flip_box_cut(const eddy_world *w, float hi[3])
+{
+	const double h = w->def.cell_size;
+	const double lo[3] = {w->def.bounds_min.x, w->def.bounds_min.y, w->def.bounds_min.z};
+	const double top[3] = {w->def.bounds_max.x, w->def.bounds_max.y, w->def.bounds_max.z};
+	const int n[3] = {w->nx, w->ny, w->nz};
+	bool any = false;
+	for (int a = 0; a < 3; ++a) {
+		const bool cut = h > 0 && lo[a] + n[a] * h - top[a] > 1e-3 * h;
+		hi[a] = cut ? (float)top[a] : INFINITY;
+		any |= cut;
+	}
+	return any;
+}
+
+bool eddy__flip_open_sides(const eddy_world *w);
+
 /* The grid's shape copied into locals: particle loops store floats, which
  * could alias the world's float fields, so reading them through the world
  * pointer would reload them for every particle. */
@@ -136,12 +162,74 @@ typedef struct flip_grid {
 	int nx, ny, nz;
 	float inv;   /* 1/m, 1 / cell_size */
 	eddy_vec3 o; /* m, grid origin */
+	/* in cells from o: the box's face on each axis flip_box_cut cuts, the
+	 * grid's side (n) on the others */
+	float top[3];
 } flip_grid;
 
 static inline flip_grid flip_grid_of(const eddy_world *w)
 {
-	flip_grid g = {w->nx, w->ny, w->nz, (float)(1.0 / w->def.cell_size), w->def.bounds_min};
+	flip_grid g = {w->nx, w->ny, w->nz, (float)(1.0 / w->def.cell_size), w->def.bounds_min, {0, 0, 0}};
+	float hi[3];
+	const bool cut = flip_box_cut(w, hi) && !eddy__flip_open_sides(w);
+	const float lo[3] = {g.o.x, g.o.y, g.o.z};
+	const int n[3] = {g.nx, g.ny, g.nz};
+	for (int a = 0; a < 3; ++a)
+		g.top[a] = cut && hi[a] < INFINITY ? (hi[a] - lo[a]) * g.inv : (float)n[a];
 	return g;
+}
+
+/* The part of cell span c on axis a ([c, c + 1] in cells) inside the box:
+ * 1 on the axes the box does not cut. */
+static inline float flip_box_span(const flip_grid *g, int a, int c)
+{
+	const float t = g->top[a] - (float)c;
+	return t <= 0.0f ? 0.0f : t >= 1.0f ? 1.0f : t;
+}
+
+/* The open volume fraction the box leaves cell (i, j, k) (1 where it does not cut it). */
+static inline float flip_box_open(const flip_grid *g, int i, int j, int k)
+{
+	return flip_box_span(g, 0, i) * flip_box_span(g, 1, j) * flip_box_span(g, 2, k);
+}
+
+/* The trilinear particle count at the centre of cell (i, j, k) for water
+ * at rest filling the box (flip_particle_density, constantly extended past
+ * the last centre), as a fraction of the rest count: 1 away from the box's
+ * cut. On an axis it cuts, with d = top - c cells from the cell's low face
+ * to the box's face: (d + 1/2)^2 / 2 below d = 1/2 and d up to 1 (the cut
+ * cell), 1 - (3/2 - d)^2 / 2 up to 3/2 (its neighbour, whose kernel reaches
+ * past a face less than half a cell into the cut cell). */
+static inline float flip_box_rest(const flip_grid *g, int i, int j, int k)
+{
+	const int c[3] = {i, j, k}, n[3] = {g->nx, g->ny, g->nz};
+	float r = 1.0f;
+	for (int a = 0; a < 3; ++a) {
+		if (!(g->top[a] < (float)n[a]))
+			continue;
+		const float d = g->top[a] - (float)c[a];
+		r *= d <= 0.0f   ? 0.0f
+		     : d < 0.5f  ? 0.5f * (d + 0.5f) * (d + 0.5f)
+		     : d < 1.0f  ? d
+		     : d < 1.5f  ? 1.0f - 0.5f * (1.5f - d) * (1.5f - d)
+		                 : 1.0f;
+	}
+	return r;
+}
+
+/* A face-grid coordinate t (in cells) on an axis the box cuts at top (in
+ * (n - 1, n)): the stretch of [n - 1, top] over the last cell, so the
+ * normal velocity goes to the closed side's 0 at the box's face, where the
+ * particles stop, not a fraction of a cell past it (water against a cut
+ * face was carried on into it and packed there: a collapse in a tank 7.5
+ * cells thick ended 5% under its volume). The identity elsewhere. */
+static inline float flip_face_coord(float t, float top, int n)
+{
+	const float last = (float)(n - 1);
+	if (!(top < (float)n) || !(t > last))
+		return t;
+	const float s = last + (t - last) / (top - last);
+	return s < (float)n ? s : (float)n;
 }
 
 /* The six axis lookups of a world position (m): per axis, faces at i (f*)
@@ -154,11 +242,11 @@ static inline flip_axes flip_axes_at(const flip_grid *g, eddy_vec3 p)
 {
 	const float gx = (p.x - g->o.x) * g->inv, gy = (p.y - g->o.y) * g->inv, gz = (p.z - g->o.z) * g->inv;
 	flip_axes a;
-	a.fx = flip_axis_at(gx, 0.0f, g->nx + 1);
+	a.fx = flip_axis_at(flip_face_coord(gx, g->top[0], g->nx), 0.0f, g->nx + 1);
 	a.cx = flip_axis_at(gx, 0.5f, g->nx);
-	a.fy = flip_axis_at(gy, 0.0f, g->ny + 1);
+	a.fy = flip_axis_at(flip_face_coord(gy, g->top[1], g->ny), 0.0f, g->ny + 1);
 	a.cy = flip_axis_at(gy, 0.5f, g->ny);
-	a.fz = flip_axis_at(gz, 0.0f, g->nz + 1);
+	a.fz = flip_axis_at(flip_face_coord(gz, g->top[2], g->nz), 0.0f, g->nz + 1);
 	a.cz = flip_axis_at(gz, 0.5f, g->nz);
 	return a;
 }
@@ -210,7 +298,7 @@ eddy_status eddy__flip_fill_fluid_faces(eddy_world *w, float *const face[3], con
  * for every face (cell) stored plainly: 60 MB at a million particles in a
  * tank whose walls are a collider. Unmarked: weight 1, velocity 0, open 1. */
 typedef struct flip_solid {
-	bool any;                /* a collider is in the pipeline; if not, the arrays are NULL */
+	bool any;                /* a collider is in the pipeline or the box cuts the grid (flip_box_cut); if not, the arrays are NULL */
 	bool open_sides;         /* the domain's sides are open (flip_boundary's def; eddy__flip_open_sides) */
 	const uint64_t *mark[3]; /* per face grid: bit f % 64 of word f / 64, face f is marked */
 	const uint32_t *rank[3]; /* per word: marked faces before it */

@@ -18,6 +18,13 @@
  *   Faces on the domain's sides: u.n = 0 (fixed walls, w_f = 0), unless the
  *   def opens them (open_sides: outflow, air beyond at p = 0): then they
  *   are faces like any other, closed only where a collider covers them.
+ *   Where the world's box ends inside the grid's last cells (an extent that
+ *   is not a whole number of cells, flip_box_cut), the box's face is the
+ *   wall, a still solid: a face's open fraction is the part of it inside the
+ *   box, a cell's open volume likewise (exact for the box's axis-aligned
+ *   planes, where the bilinear rule gives a corner column's faces 1/8 open
+ *   for 1/4), each the smaller of the box's and the colliders'. So the tank
+ *   is the box the scene gave, as SPH's walls are.
  *   Closed faces (w_f = 0): u.n = V_s.n, V_s = (offset - offset this system
  *   saw at its last step) / dt of the collider most inside at the face's
  *   corners (solid_velocities says why not the collider's own record);
@@ -152,6 +159,22 @@ static inline float open_of(float cphi, float h)
 	return cphi < 0 ? (op < 0 ? 0 : op > 0.5f ? 0.4999f : op) : (op > 1 ? 1 : op);
 }
 
+/* Open area fraction the box leaves face c of grid a (flip_box_cut): closed
+ * on or past the box's face, else its two spans' product. Exact for the
+ * box's axis-aligned planes. */
+static inline float box_face_open(const flip_grid *g, int a, const int c[3])
+{
+	if (!((float)c[a] < g->top[a]))
+		return 0.0f;
+	float f = 1.0f;
+	for (int e = 0; e < 3; ++e)
+		if (e != a)
+			f *= flip_box_span(g, e, c[e]);
+	return f;
+}
+
+static inline float box_cell_open(const flip_grid *g, const int c[3]) { return flip_box_open(g, c[0], c[1], c[2]); }
+
 /* (i, j, k) of item f of a grid with rows of m0 and planes of m0 m1 items. */
 static inline void grid_coords(size_t f, size_t m0, size_t m1, int c[3])
 {
@@ -182,12 +205,15 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 	eddy_system_iter it = eddy__systems(w, EDDY_CAP_COLLIDER);
 	while (eddy__systems_next(&it))
 		colq[ncol++] = eddy__systems_position(&it);
-	if (ncol == 0)
-		return true;
 	const int nx = w->nx, ny = w->ny, nz = w->nz, nt = w->def.threads;
 	const double h = w->def.cell_size;
 	const float hf = (float)h;
 	const eddy_vec3 o = w->def.bounds_min;
+	/* the box's faces inside the grid's last cells (flip_box_cut) */
+	const flip_grid bc = flip_grid_of(w);
+	const bool box_on = bc.top[0] < (float)nx || bc.top[1] < (float)ny || bc.top[2] < (float)nz;
+	if (ncol == 0 && !box_on)
+		return true;
 	const size_t mx = (size_t)nx + 1, my = (size_t)ny + 1, mz = (size_t)nz + 1, nn = mx * my * mz;
 	const size_t nf[3] = {mx * ny * nz, (size_t)nx * my * nz, (size_t)nx * ny * mz}, nc = (size_t)nx * ny * nz;
 	size_t nwf[3], nwc = (nc + 63) / 64, fixed = 0;
@@ -322,6 +348,12 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 					const size_t ch = (size_t)c[0] + (size_t)nx * ((size_t)c[1] + (size_t)ny * (size_t)c[2]);
 					m = (c[a] < n[a] && cphi[ch] < 0) || (c[a] > 0 && cphi[ch - cst] < 0);
 				}
+				if (!m && box_on) { /* the box cuts it or a cell beside it */
+					int cb[3] = {c[0], c[1], c[2]};
+					m = box_face_open(&bc, a, c) < 1 || (c[a] < n[a] && box_cell_open(&bc, c) < 1);
+					cb[a] -= 1;
+					m = m || (c[a] > 0 && box_cell_open(&bc, cb) < 1);
+				}
 				word |= (uint64_t)m << (f - f0);
 			}
 			mk[q] = word;
@@ -333,8 +365,11 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 		for (long q = 0; q < nw; ++q) {
 			uint64_t word = 0;
 			const size_t c0 = (size_t)q * 64, c1 = c0 + 64 < nc ? c0 + 64 : nc;
-			for (size_t c = c0; c < c1; ++c)
-				word |= (uint64_t)(open_of(cphi[c], hf) < 1) << (c - c0);
+			for (size_t c = c0; c < c1; ++c) {
+				int cc[3];
+				grid_coords(c, (size_t)nx, (size_t)ny, cc);
+				word |= (uint64_t)(open_of(cphi[c], hf) < 1 || box_cell_open(&bc, cc) < 1) << (c - c0);
+			}
 			cmark[q] = word;
 		}
 	}
@@ -409,6 +444,13 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 				float wf = 1.0f - fin;
 				if (wf < 1e-3f)
 					wf = 0.0f;
+				float wb = box_on ? box_face_open(&bc, a, c) : 1.0f;
+				wb = wb < 1e-3f ? 0.0f : wb;
+				if (wb < wf) { /* the box closes more of it than the colliders: still */
+					wt[slot] = wb;
+					fv[slot++] = 0.0f;
+					continue;
+				}
 				wt[slot] = wf;
 				int best = 0;
 				for (int e = 1; e < 4; ++e)
@@ -438,7 +480,10 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 			while (word) {
 				const size_t c = (size_t)q * 64 + (size_t)__builtin_ctzll(word);
 				word &= word - 1;
-				op[slot++] = open_of(cphi[c], hf);
+				int cc[3];
+				grid_coords(c, (size_t)nx, (size_t)ny, cc);
+				const float oc = open_of(cphi[c], hf), ob = box_cell_open(&bc, cc);
+				op[slot++] = ob < oc ? ob : oc;
 			}
 		}
 	}
@@ -652,11 +697,22 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	 * solid, as before: flip_extrapolate keeps their faces and flip_surface
 	 * stops its blur there; flip_pressure still solves for the cut ones with
 	 * an open face (the type no longer means "no fluid") */
+	/* not where the box's cut makes it so (flip_box_cut): a cell of the
+	 * box's last row holds water or air as any cell, only smaller, and as
+	 * a solid-typed cell out of the system its face to the water below it
+	 * would be a given flux, so water against the box's face fell freely */
 	const long nc = (long)nx * ny * nz;
+	const flip_grid bc = flip_grid_of(w);
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static)
-	for (long c = 0; c < nc; ++c)
-		if (flip_solid_open(&sd, (size_t)c) < 0.5f)
+	for (long c = 0; c < nc; ++c) {
+		const float op = flip_solid_open(&sd, (size_t)c);
+		if (!(op < 0.5f))
+			continue;
+		int cc[3];
+		grid_coords((size_t)c, (size_t)nx, (size_t)ny, cc);
+		if (!(box_cell_open(&bc, cc) <= op))
 			type[c] = EDDY_CELL_SOLID;
+	}
 	return EDDY_OK;
 }
 

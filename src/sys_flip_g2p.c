@@ -75,6 +75,16 @@ static inline float axis_slope(float t, float off, int n, float inv)
 	return s >= 0.0f && s < (float)(n - 1) ? inv : 0.0f;
 }
 
+/* The same for a face grid's axis (n + 1 faces), through flip_face_coord's
+ * stretch of the last cell where the box cuts it (its slope 1 / (top - last)). */
+static inline float face_slope(float t, float top, int n, float inv)
+{
+	const float last = (float)(n - 1);
+	if (top < (float)n && t > last)
+		return t < top ? inv / (top - last) : 0.0f;
+	return axis_slope(t, 0.0f, n + 1, inv);
+}
+
 static void apic_step(eddy_world *w, int threads)
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
@@ -91,9 +101,9 @@ static void apic_step(eddy_world *w, int threads)
 		const flip_axes a = flip_axes_at(&grid, (eddy_vec3){x[i], y[i], z[i]});
 		const float tx = (x[i] - grid.o.x) * grid.inv, ty = (y[i] - grid.o.y) * grid.inv,
 					tz = (z[i] - grid.o.z) * grid.inv;
-		const float sfx = axis_slope(tx, 0.0f, grid.nx + 1, grid.inv), scx = axis_slope(tx, 0.5f, grid.nx, grid.inv);
-		const float sfy = axis_slope(ty, 0.0f, grid.ny + 1, grid.inv), scy = axis_slope(ty, 0.5f, grid.ny, grid.inv);
-		const float sfz = axis_slope(tz, 0.0f, grid.nz + 1, grid.inv), scz = axis_slope(tz, 0.5f, grid.nz, grid.inv);
+		const float sfx = face_slope(tx, grid.top[0], grid.nx, grid.inv), scx = axis_slope(tx, 0.5f, grid.nx, grid.inv);
+		const float sfy = face_slope(ty, grid.top[1], grid.ny, grid.inv), scy = axis_slope(ty, 0.5f, grid.ny, grid.inv);
+		const float sfz = face_slope(tz, grid.top[2], grid.nz, grid.inv), scz = axis_slope(tz, 0.5f, grid.nz, grid.inv);
 		float g[3];
 		vel[0][i] = sample_grad(now[0], nx + 1, (nx + 1) * ny, a.fx, a.cy, a.cz, sfx, scy, scz, g);
 		c[0][i] = g[0], c[1][i] = g[1], c[2][i] = g[2];

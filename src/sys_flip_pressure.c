@@ -353,7 +353,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 							continue;
 						}
 						wet |= type[o] == EDDY_CELL_FLUID;
-						dry |= type[o] == EDDY_CELL_AIR && flip_solid_open(&sd, o) >= 1;
+						dry |= type[o] == EDDY_CELL_AIR && (flip_solid_open(&sd, o) >= 1 || phi[o] > 0);
 					}
 					unknown = wet && !dry;
 				}
@@ -484,26 +484,35 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 			held = hc;
 		}
 		const double n0 = flip_rest_count(w);
+		const flip_grid bg = flip_grid_of(w);
 		/* each row its own source; the extremes and the count are order-free */
 #pragma omp parallel for num_threads(nt) if (nt > 1) schedule(static) reduction(max : dens_max) \
 	reduction(min : dens_min) reduction(+ : corrected)
 		for (int r = 0; r < n; ++r) {
 			const int c = cell_of[r];
-			if (type[c] != EDDY_CELL_FLUID || (sd.any && flip_solid_open(&sd, c) < 1))
+			const int i = c % nx, j = (c / nx) % ny, k = c / (nx * ny);
+			if (type[c] != EDDY_CELL_FLUID)
 				continue;
-			double e = (double)dens[c] / n0 - 1.0;
+			/* near the box's cut (flip_box_cut) the count at rest is known
+			 * (flip_box_rest); a collider's cut cells, and slices of the
+			 * box's under a quarter cell (a particle or two), are left */
+			const float op = sd.any ? flip_solid_open(&sd, c) : 1.0f;
+			if (op < 1 && !(flip_box_open(&bg, i, j, k) <= op && op >= 0.25f))
+				continue;
+			double e = (double)dens[c] / (n0 * (double)flip_box_rest(&bg, i, j, k)) - 1.0;
 			if (has_air[r] && e <= VC_PACKED)
 				continue; /* not deep, not packed: no source, whatever the neighbours */
 			/* next to a solid the kernel reaches into it; deep: no air side
 			 * on the cell or a face neighbour, a particle in all 27 cells of
 			 * the kernel's reach (see the header) */
-			const int i = c % nx, j = (c / nx) % ny, k = c / (nx * ny);
 			bool deep = !has_air[r], walled = false;
 			for (int d = 0; d < 6; ++d) {
 				const int o = A.nb[6 * r + d];
 				size_t f;
 				if (o >= 0) {
-					walled |= sd.any && flip_solid_open(&sd, (size_t)cell_of[o]) < 1;
+					const int co = cell_of[o];
+					const float oo = sd.any ? flip_solid_open(&sd, (size_t)co) : 1.0f;
+					walled |= oo < 1 && !(flip_box_open(&bg, co % nx, (co / nx) % ny, co / (nx * ny)) <= oo);
 					deep &= !has_air[o];
 				} else if (across(w, i, j, k, d, &f) >= 0) {
 					walled |= type[across(w, i, j, k, d, &f)] == EDDY_CELL_SOLID;

@@ -84,13 +84,28 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 						phi[nb[q]] -= f * (1.0f - tmp[nb[q]]) / sum; /* fill + f f_q / sum */
 					phi[c] = 1.0f;
 				}
-		for (size_t c = 0; c < nc; ++c)
-			if (type[c] != EDDY_CELL_SOLID && flip_solid_open(&sd, c) < 1) {
-				const float open = flip_solid_open(&sd, c) > 0.05f ? flip_solid_open(&sd, c) : 0.05f;
-				float f = 0.5f * (1.0f - phi[c]) / open;
-				f = f < 2.0f ? f : 2.0f;
-				phi[c] = 1.0f - 2.0f * f;
+		/* near the box's cut (flip_box_cut) the count of a full cell is
+		 * known exactly (flip_box_rest), in its cut cells and in the cells
+		 * beside them whose kernel reaches past the box */
+		const flip_grid g = flip_grid_of(w);
+		const bool box = g.top[0] < (float)n[0] || g.top[1] < (float)n[1] || g.top[2] < (float)n[2];
+		for (size_t c = 0; c < nc; ++c) {
+			if (type[c] == EDDY_CELL_SOLID)
+				continue;
+			const float op = flip_solid_open(&sd, c);
+			float full = op;
+			if (box) {
+				const int i = (int)(c % (size_t)n[0]), j = (int)(c / (size_t)n[0] % (size_t)n[1]),
+						  k = (int)(c / ((size_t)n[0] * n[1]));
+				if (flip_box_open(&g, i, j, k) <= op)
+					full = flip_box_rest(&g, i, j, k);
 			}
+			if (!(full < 1))
+				continue;
+			float f = 0.5f * (1.0f - phi[c]) / (full > 0.05f ? full : 0.05f);
+			f = f < 2.0f ? f : 2.0f;
+			phi[c] = 1.0f - 2.0f * f;
+		}
 	}
 	int r = (int)ceilf(2.0f * sf->def.sigma);
 	r = r > MAX_R ? MAX_R : r;

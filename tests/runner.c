@@ -328,6 +328,7 @@ int main(int argc, char **argv)
 		/* stress: scenes one step beyond the validated ones (scenes/stress/) */
 		{"stress_flip_flight", suite_stress_flip_flight, false, 5},
 		{"outflow", suite_outflow, false, 5},
+		{"box_cut", suite_box_cut, false, 4},
 		{"stress_flip_solids", suite_stress_flip_solids, false, 10},
 		{"stress_sph_solids", suite_stress_sph_solids, false, 17},
 		{"long_sph_solids", suite_long_sph_solids, true, 58},

@@ -79,6 +79,7 @@ void suite_flip(void);
 void suite_flip_solvers(void);
 void suite_stress_flip_flight(void);
 void suite_outflow(void); /* open sides: water leaving the world, every method */
+void suite_box_cut(void); /* FLIP's walls at the world's box when it is not a whole number of cells */
 void suite_stress_flip_solids(void);
 void suite_stress_sph_solids(void);
 void suite_long_sph_solids(void);

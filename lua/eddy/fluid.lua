@@ -24,7 +24,8 @@
 --          otherwise (then a collide_box keeps the fluid in it)
 -- The world's CFL number, grid and (wcsph) settle_steps come from the group
 -- through fluid:world{}.
--- tank = {min, max} (default: the world's box, when made by fluid:world{})
+-- tank = {min = {x, y, z}, max = {x, y, z}}, or the two corners as bounds
+-- takes them (default: the world's box, when made by fluid:world{})
 -- gives SPH its boundary particles and collider; tank = false gives none.
 -- FLIP's grid sides are walls with the default tank only: with tank = false
 -- or a tank of its own, water reaching a side leaves the world (outflow).
@@ -138,6 +139,35 @@ function M.new(def)
 	local h = def.resolution
 	if type(h) ~= "number" or not (h > 0) then
 		fail(string.format("'resolution' (m, the particle spacing) must be a number > 0 (got %s)", tostring(h)))
+	end
+	-- tank: {min = {x, y, z}, max = {x, y, z}}, or two corners as the
+	-- world's bounds take them; a table of any other shape would otherwise
+	-- reach collide_box without min and max, a unit box of its defaults
+	local tank = def.tank
+	if tank ~= nil and tank ~= false then
+		local function corner(c)
+			return type(c) == "table" and #c == 3 and type(c[1]) == "number" and type(c[2]) == "number"
+				and type(c[3]) == "number"
+		end
+		if type(tank) == "table" and tank.min == nil and tank.max == nil and #tank == 2 then
+			tank = { min = tank[1], max = tank[2] }
+		end
+		local extra = false
+		if type(tank) == "table" then
+			for k in pairs(tank) do extra = extra or (k ~= "min" and k ~= "max") end
+		end
+		if type(tank) ~= "table" or extra or not corner(tank.min) or not corner(tank.max) then
+			fail("'tank' must be {min = {x, y, z}, max = {x, y, z}} (m; or the two corners, as bounds takes them), "
+			     .. "false for no walls, or left out for the world's box (got "
+			     .. (type(tank) == "table" and "a table of another shape" or tostring(tank)) .. ")")
+		end
+		for a = 1, 3 do
+			if not (tank.min[a] < tank.max[a]) then
+				fail(string.format("'tank' must have min < max on every axis (axis %d: %g, %g)", a, tank.min[a],
+				                   tank.max[a]))
+			end
+		end
+		def.tank = tank
 	end
 	local g = setmetatable({ def = def, method = method, spacing = h, radius = 2 * h, cfl = CFL[method] }, Group)
 	if not SPH[method] then g.cell_size = def.cell_size or 2 * h end
