@@ -164,14 +164,19 @@
  * sum_i rho_i: it lowers the kernel sums, and where the solves do not push
  * them back (the density solve's k >= 0: fluid below rho0) the arrangement
  * keeps the lower sum.
- * Measured, that is an arrangement's sum more than a volume: a still pool
- * 15 layers deep reads 0.2% less mean density with the shift at the same
- * level, and a 5 cm sphere stirred through it and left 1.5-2 s to settle
- * leaves the level +0.07-0.26% with the shift, -0.13-+0.05% without (three
- * speeds each). Holding the shift to fluid within max_density_error of rho0
- * removes that, but the bulk of still water sits 0.2-0.3% under rho0: at 40
- * layers it shifted 9% of the particles a step instead of 48%, and the
- * column's last speed rose from 0.010 to 0.018 sqrt(gD) (cfl 0.4).
+ * Over seconds that is an arrangement's sum more than a volume (a still
+ * pool 15 layers deep read 0.2% less mean density at the same level), but
+ * it never stops: a pool at rest 10 layers deep rose 1.8% in 40 s and 3.9%
+ * in 150 s, still rising, its energy with it, and faster per second at
+ * finer spacing (the shift is per step). So a particle shifts only while
+ * its kernel sum is at least DFSPH_SHIFT_FLOOR rho0: the thinning stops
+ * there (that pool +0.9% at 40 s, then level: +0.91% at 60 s; 5 mm, 10
+ * and 20 layers, +0.89% and +0.69%). A floor of 0.995 held it to +0.3%
+ * but the 5 mm slosh's period read -3.24%, past its 3% (-2.88% at 0.99,
+ * -2.85% without a floor). Held at max_density_error (1e-3), the bulk of still
+ * water, which sits 0.2-0.3% under rho0, hardly shifted: at 40 layers 9%
+ * of the particles a step instead of 48%, and the column's last speed rose
+ * from 0.010 to 0.018 sqrt(gD) (cfl 0.4).
  *
  * The pairs: in a small fluid the gradient pass stores each pair's row and
  * G_ij in groups of eight (16 B a pair, some 470 B a particle), which the
@@ -816,6 +821,9 @@ void SIMD_NAME(dfsph_block)(const void *pass, long i0, long cnt)
  * is at least this times rho0 (header): in water at rest every particle but
  * the free surface's outermost is within 5% of rho0 (see DFSPH_SURFACE). */
 #define DFSPH_SHIFT_SURFACE 0.95f
+/* nor one thinned below this fraction of rho0 (header: the shift's descent
+ * on the kernel sums, which the density solve does not push back) */
+#define DFSPH_SHIFT_FLOOR 0.99f
 
 typedef struct sph_dfsph {
 	eddy_sph_dfsph_def def;
@@ -1430,13 +1438,15 @@ static int wall_normals(const sph_shared *sh, long i, float n[3][3])
 }
 
 /* Particle shifting (header): x_i -= shift h^2 grad C_i where particle i and
- * all its neighbours have a kernel sum of at least DFSPH_SHIFT_SURFACE rho0;
+ * all its neighbours have a kernel sum of at least DFSPH_SHIFT_SURFACE rho0,
+ * its own at least DFSPH_SHIFT_FLOOR rho0;
  * beside a wall only the part of it along the wall (wall_normals' normals
  * projected out), the velocities kept. Each particle moves by its own grad
  * C, made before any moved: the same for any thread count. */
 static void shift(eddy_world *w, const sph_dfsph *sd, const dfsph_work *wk)
 {
 	const float full = DFSPH_SHIFT_SURFACE * wk->sh->rho0, d = sd->def.shift * wk->sh->h * wk->sh->h;
+	const float floor_rho = DFSPH_SHIFT_FLOOR * wk->sh->rho0;
 	const float irho0 = 1.0f / wk->sh->rho0;
 	float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
 	const int nt = loop_threads(wk->n, wk->threads);
@@ -1444,7 +1454,7 @@ static void shift(eddy_world *w, const sph_dfsph *sd, const dfsph_work *wk)
 	for (long i = 0; i < wk->n; ++i) {
 		const dfsph_vec4 c = wk->u[i];
 		/* c.w * full <= 1: no neighbour below full (c.w is 1 / the least rho_j) */
-		if (!(wk->rho[i] >= full && c.w * full <= 1.0f))
+		if (!(wk->rho[i] >= full && c.w * full <= 1.0f) || !(wk->rho[i] >= floor_rho))
 			continue;
 		float s[3] = {c.x, c.y, c.z};
 		const sph_neighbors *nb = &wk->sh->nb;
