@@ -365,8 +365,37 @@ static void compare_usage_errors(void)
 	CHECK_HAS(buf, "eddy: compare: cannot read scene 'tests/scenes/no_such_scene.lua'");
 }
 
+/* A method that fails before its first frame writes no data block, and the
+ * next method's points keep their own title: gnuplot's index counts only
+ * blocks holding data, so an empty first block once gave flip's index 1 to
+ * a file with one block (gnuplot failed, no max_speed chart), and in eddy
+ * study's charts a method whose runs all failed would have handed its
+ * title to the next method's points. */
+static void compare_chart_skips_a_method_with_no_frame(void)
+{
+	const char *b = test_build_dir();
+	char out[256], cmd[1024], buf[16384], path[512];
+	snprintf(out, sizeof out, "%s/t_compare_skip", b);
+	snprintf(cmd, sizeof cmd,
+	         "rm -rf %s && %s/eddy compare tests/scenes/compare_tiny.lua --methods broken,flip --quick --out %s", out, b,
+	         out);
+	const int code = test_sh(cmd, buf, sizeof buf);
+	CHECKF(code == 1, "exit %d, expected 1 (a method failed):\n%s", code, buf);
+	CHECKF(strstr(buf, "gnuplot failed") == NULL, "%s", buf);
+	snprintf(path, sizeof path, "%s/compare_max_speed.gp", out);
+	CHECKF(file_has(path, "index 0 using 1:2 with linespoints lw 2 pt 7 title \"flip\""),
+	       "%s: flip's points are not index 0", path);
+	CHECKF(!file_has(path, "index 1"), "%s: a second block plotted", path);
+	if (have("gnuplot")) {
+		snprintf(path, sizeof path, "%s/compare_max_speed.png", out);
+		struct stat st;
+		CHECKF(stat(path, &st) == 0 && st.st_size > 1000, "%s: no chart", path);
+	}
+}
+
 void suite_compare(void)
 {
+	RUN(compare_chart_skips_a_method_with_no_frame);
 	RUN(compare_usage_errors);
 	RUN(compare_three_methods);
 	RUN(compare_all_ok_with_video);

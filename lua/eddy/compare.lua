@@ -435,8 +435,10 @@ local function gnuplot(ctx, gp_text, name)
 	local f = assert(io.open(gp, "w"))
 	f:write(gp_text)
 	f:close()
-	local ok = os.execute("gnuplot " .. shell_quote(gp) .. " 2>" .. shell_quote(ctx.out .. "/gnuplot.log"))
-	return ok == true or ok == 0
+	-- each chart its own log: a later chart's run would empty a shared one
+	local log = ctx.out .. "/" .. name .. ".log"
+	local ok = os.execute("gnuplot " .. shell_quote(gp) .. " 2>" .. shell_quote(log))
+	return ok == true or ok == 0, log
 end
 
 local function chart_field(ctx, runs)
@@ -444,30 +446,24 @@ local function chart_field(ctx, runs)
 	local png = ctx.out .. "/compare_" .. field .. ".png"
 	local dat = ctx.out .. "/compare_" .. field .. ".dat"
 	local f = assert(io.open(dat, "w"))
-	local plots = {}
-	for _, r in ipairs(runs) do
-		local n = 0
-		f:write("# ", r.method, "\n")
+	-- one block per method with points: gnuplot's index counts only blocks
+	-- holding data, so an empty one (a method that failed before its first
+	-- frame) would hand its index to the next method's points
+	local used = {}
+	for i, r in ipairs(runs) do
+		local rows = {}
 		for _, s in ipairs(r.frames) do
 			if type(s.time) == "number" and type(s[field]) == "number" then
-				f:write(string.format("%.9g %.9g\n", s.time, s[field]))
-				n = n + 1
+				rows[#rows + 1] = string.format("%.9g %.9g\n", s.time, s[field])
 			end
 		end
-		f:write("\n\n")
-		if n > 0 then
-			plots[#plots + 1] = string.format("%q index %d using 1:2 with linespoints lw 2 pt %d title %q", dat,
-				#plots, 5 + 2 * #plots, r.method .. (r.code ~= 0 and " (failed)" or ""))
-		else
-			-- an empty block would shift the indices: keep one per method
-			plots[#plots + 1] = false
+		if #rows > 0 then
+			f:write("# ", r.method, "\n", table.concat(rows), "\n\n")
+			used[#used + 1] = string.format("%q index %d using 1:2 with linespoints lw 2 pt %d title %q", dat,
+				#used, 5 + 2 * (i - 1), r.method .. (r.code ~= 0 and " (failed)" or ""))
 		end
 	end
 	f:close()
-	local used = {}
-	for i, p in ipairs(plots) do
-		if p then used[#used + 1] = p:gsub("index %d+", "index " .. (i - 1), 1) end
-	end
 	if #used == 0 then
 		return nil, "no method's stats carry a number for '" .. field .. "', no chart of it"
 	end
@@ -479,9 +475,8 @@ local function chart_field(ctx, runs)
 		"set xlabel 'simulated time (s)'",
 		"set ylabel " .. string.format("%q", field),
 		"plot " .. table.concat(used, ", \\\n     "), "" }, "\n")
-	if not gnuplot(ctx, gp, "compare_" .. field) then
-		return nil, "gnuplot failed (see " .. ctx.out .. "/gnuplot.log)", true
-	end
+	local ok, log = gnuplot(ctx, gp, "compare_" .. field)
+	if not ok then return nil, "gnuplot failed (see " .. log .. ")", true end
 	return png
 end
 
@@ -510,9 +505,8 @@ local function chart_cost(ctx, runs)
 		"set boxwidth 0.9",
 		string.format("plot %q using 2:xtic(1) title 'whole run (process wall time)', '' using 3 title 'systems, without rendering'", dat),
 		"" }, "\n")
-	if not gnuplot(ctx, gp, "compare_cost") then
-		return nil, "gnuplot failed (see " .. ctx.out .. "/gnuplot.log)", true
-	end
+	local ok, log = gnuplot(ctx, gp, "compare_cost")
+	if not ok then return nil, "gnuplot failed (see " .. log .. ")", true end
 	return png
 end
 

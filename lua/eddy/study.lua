@@ -619,15 +619,22 @@ local function write_chart(ctx, s, rows, label)
 	end
 	local dat = ctx.out .. "/" .. s.name .. ".dat"
 	local f = assert(io.open(dat, "w"))
-	-- one gnuplot data block per method, then the front
-	for _, name in ipairs(methods) do
-		f:write("# ", name, "\n")
+	-- one gnuplot data block per method with points, then the front:
+	-- gnuplot's index counts only blocks holding data, so an empty one (a
+	-- method whose runs all failed) would hand its index, and its title,
+	-- to the next method's points
+	local blocks = {} -- {name, pt} per block written, in index order
+	for i, name in ipairs(methods) do
+		local lines = {}
 		for _, r in ipairs(rows) do
 			if r.method == name and r.error == r.error and r.error > 0 and r.status == 0 then
-				f:write(string.format("%.6g %.6g\n", r.wall_s, r.error))
+				lines[#lines + 1] = string.format("%.6g %.6g\n", r.wall_s, r.error)
 			end
 		end
-		f:write("\n\n")
+		if #lines > 0 then
+			f:write("# ", name, "\n", table.concat(lines), "\n\n")
+			blocks[#blocks + 1] = { name = name, pt = 4 + 2 * (i - 1) }
+		end
 	end
 	f:write("# Pareto front\n")
 	local front = {}
@@ -644,19 +651,20 @@ local function write_chart(ctx, s, rows, label)
 	f:write("set xlabel 'wall time per run (s)'\n")
 	f:write("set ylabel ", string.format("%q", label), "\n")
 	local plots = {}
-	for i, name in ipairs(methods) do
+	for i, b in ipairs(blocks) do
 		plots[#plots + 1] = string.format("%q index %d using 1:2 with linespoints pt %d ps 1.5 lw 2 title %q",
-			dat, i - 1, 4 + 2 * (i - 1), name)
+			dat, i - 1, b.pt, b.name)
 	end
 	if #front > 0 then
 		plots[#plots + 1] = string.format("%q index %d using 1:2 with steps dt 2 lw 1.5 lc rgb 'black' title 'Pareto front', '' index %d using 1:2 with points pt 6 ps 3 lc rgb 'black' notitle",
-			dat, #methods, #methods)
+			dat, #blocks, #blocks)
 	end
 	f:write("plot ", table.concat(plots, ", \\\n     "), "\n")
 	f:close()
-	local ok = os.execute("gnuplot " .. shell_quote(gp) .. " 2>" .. shell_quote(ctx.out .. "/gnuplot.log"))
+	local log = ctx.out .. "/" .. s.name .. ".log"
+	local ok = os.execute("gnuplot " .. shell_quote(gp) .. " 2>" .. shell_quote(log))
 	if not (ok == true or ok == 0) then
-		io.stderr:write("eddy: study: gnuplot failed (see " .. ctx.out .. "/gnuplot.log)\n")
+		io.stderr:write("eddy: study: gnuplot failed (see " .. log .. ")\n")
 		return nil
 	end
 	return png
