@@ -366,9 +366,13 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 			uint64_t word = 0;
 			const size_t c0 = (size_t)q * 64, c1 = c0 + 64 < nc ? c0 + 64 : nc;
 			for (size_t c = c0; c < c1; ++c) {
-				int cc[3];
-				grid_coords(c, (size_t)nx, (size_t)ny, cc);
-				word |= (uint64_t)(open_of(cphi[c], hf) < 1 || box_cell_open(&bc, cc) < 1) << (c - c0);
+				bool m = open_of(cphi[c], hf) < 1;
+				if (!m && box_on) {
+					int cc[3];
+					grid_coords(c, (size_t)nx, (size_t)ny, cc);
+					m = box_cell_open(&bc, cc) < 1;
+				}
+				word |= (uint64_t)m << (c - c0);
 			}
 			cmark[q] = word;
 		}
