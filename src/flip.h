@@ -137,7 +137,7 @@ static inline float flip_trilinear(const float *f, size_t sy, size_t sz, flip_ax
  * such axis and INFINITY on the others (the grid's side is the box's, to
  * within a thousandth of a cell, where openings count as closed); returns
  * whether any axis sticks out. Open sides have none: water past the box
- * leaves the world there. */
+ * leaves the world there (flip_grid_of asks eddy__flip_box_walls). */
 static inline bool flip_box_cut(const eddy_world *w, float hi[3])
 {
 	const double h = w->def.cell_size;
@@ -153,7 +153,11 @@ static inline bool flip_box_cut(const eddy_world *w, float hi[3])
 	return any;
 }
 
-bool eddy__flip_open_sides(const eddy_world *w);
+/* The pipeline has a flip_boundary with closed sides: only then are the
+ * box's faces walls where the grid sticks out past them (flip_box_cut);
+ * without one there are no solid faces, and the grid's sides are the walls
+ * for every FLIP system alike. */
+bool eddy__flip_box_walls(const eddy_world *w);
 
 /* The grid's shape copied into locals: particle loops store floats, which
  * could alias the world's float fields, so reading them through the world
@@ -171,7 +175,7 @@ static inline flip_grid flip_grid_of(const eddy_world *w)
 {
 	flip_grid g = {w->nx, w->ny, w->nz, (float)(1.0 / w->def.cell_size), w->def.bounds_min, {0, 0, 0}};
 	float hi[3];
-	const bool cut = flip_box_cut(w, hi) && !eddy__flip_open_sides(w);
+	const bool cut = flip_box_cut(w, hi) && eddy__flip_box_walls(w);
 	const float lo[3] = {g.o.x, g.o.y, g.o.z};
 	const int n[3] = {g.nx, g.ny, g.nz};
 	for (int a = 0; a < 3; ++a)

@@ -496,6 +496,13 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 	return true;
 }
 
+bool eddy__flip_box_walls(const eddy_world *w)
+{
+	eddy_system_iter it = eddy__systems(w, EDDY_CAP_SOLID_FACES);
+	const eddy_system *c = eddy__systems_next(&it);
+	return c && !((const boundary *)c->data)->def.open_sides;
+}
+
 bool eddy__flip_open_sides(const eddy_world *w)
 {
 	eddy_system_iter it = eddy__systems(w, EDDY_CAP_SOLID_FACES);
