@@ -7,6 +7,7 @@
  * then check that no particle left the bounds. */
 #define _POSIX_C_SOURCE 200809L
 #include "core.h"
+#include "flip.h"
 #include "sph/sph.h"
 #include "systems.h"
 
@@ -1404,6 +1405,23 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 		} else {
 			eddy__report(report, user, EDDY_CHECK_INFO, "particles per cell: %.1f", ppc);
 		}
+	}
+	/* the box's faces inside the grid's last cells (flip.h, flip_box_cut):
+	 * said, since cut cells are walls of a lower order than the grid's sides */
+	if (flip && w->grid_allocated) {
+		const flip_grid g = flip_grid_of(w);
+		const int n[3] = {w->nx, w->ny, w->nz};
+		char cut[160] = "";
+		size_t len = 0;
+		for (int a = 0; a < 3; ++a)
+			if (g.top[a] < (float)n[a] && len < sizeof cut)
+				len += (size_t)snprintf(cut + len, sizeof cut - len, "%s%c at %.2f of a cell", len ? ", " : "",
+				                        "xyz"[a], (double)(g.top[a] - (float)(n[a] - 1)));
+		if (len)
+			eddy__report(report, user, EDDY_CHECK_INFO,
+			             "grid: %d x %d x %d cells of %g m; the box is not a whole number of cells, so its faces cut "
+			             "the last cells (%s): walls there are cut cells",
+			             n[0], n[1], n[2], w->def.cell_size, cut);
 	}
 
 	/* FLIP counts every particle as the same volume, cell_size^3 / n0 with

@@ -135,8 +135,24 @@ static void fluid_tank_takes_two_corners(void)
 	CHECK_HAS(text, "tank_bad.lua:2: eddy.fluid: 'tank' must be {min = {x, y, z}, max = {x, y, z}}");
 }
 
+/* eddy check says where the box cuts the grid, and says nothing when it
+ * does not. */
+static void check_names_the_cut(void)
+{
+	char cmd[1024];
+	static char text[8192];
+	snprintf(cmd, sizeof cmd, "%s/eddy check tests/scenes/box_cut.lua", test_build_dir());
+	CHECK(test_sh(cmd, text, sizeof text) == 0);
+	CHECK_HAS(text, "grid: 21 x 15 x 4 cells of 0.02 m; the box is not a whole number of cells, so its faces cut the "
+	                "last cells (x at 0.50 of a cell, z at 0.50 of a cell)");
+	snprintf(cmd, sizeof cmd, "%s/eddy check tests/scenes/box_cut.lua --set L=0.4 --set W=0.08", test_build_dir());
+	CHECK(test_sh(cmd, text, sizeof text) == 0);
+	CHECKF(strstr(text, "faces cut") == NULL, "%s", text);
+}
+
 void suite_box_cut(void)
 {
+	RUN(check_names_the_cut);
 	RUN(still_pool_in_a_box_of_part_cells);
 	RUN(fluid_tank_takes_two_corners);
 }
