@@ -129,32 +129,8 @@ static inline float flip_trilinear(const float *f, size_t sy, size_t sz, flip_ax
 	return c0 + az.w1 * (c1 - c0);
 }
 
-/* The grid rounds the world's box up to whole cells (columns.c), so on an
- * axis whose extent is not a whole number of cells the last cells stick out
- * past the box. There the box's face, not the grid's side, is the wall the
- * scene asked for: flip_boundary cuts those cells as a still solid beyond
- * it (fractional faces, as a collider's). hi[a] gets the box's face on each
- * such axis and INFINITY on the others (the grid's side is the box's, to
- * within a thousandth of a cell, where openings count as closed); returns
- * whether any axis sticks out. Open sides have none: water past the box
- * leaves the world there (flip_grid_of asks eddy__flip_box_walls). */
-static inline bool flip_box_cut(const eddy_world *w, float hi[3])
-{
-	const double h = w->def.cell_size;
-	const double lo[3] = {w->def.bounds_min.x, w->def.bounds_min.y, w->def.bounds_min.z};
-	const double top[3] = {w->def.bounds_max.x, w->def.bounds_max.y, w->def.bounds_max.z};
-	const int n[3] = {w->nx, w->ny, w->nz};
-	bool any = false;
-	for (int a = 0; a < 3; ++a) {
-		const bool cut = h > 0 && lo[a] + n[a] * h - top[a] > 1e-3 * h;
-		hi[a] = cut ? (float)top[a] : INFINITY;
-		any |= cut;
-	}
-	return any;
-}
-
 /* The pipeline has a flip_boundary with closed sides: only then are the
- * box's faces walls where the grid sticks out past them (flip_box_cut);
+ * box's faces walls where the grid sticks out past them (flip_grid's top);
  * without one there are no solid faces, and the grid's sides are the walls
  * for every FLIP system alike. */
 bool eddy__flip_box_walls(const eddy_world *w);
@@ -166,21 +142,42 @@ typedef struct flip_grid {
 	int nx, ny, nz;
 	float inv;   /* 1/m, 1 / cell_size */
 	eddy_vec3 o; /* m, grid origin */
-	/* in cells from o: the box's face on each axis flip_box_cut cuts, the
-	 * grid's side (n) on the others */
+	/* in cells from o, per axis: where the wall is. The grid rounds the
+	 * world's box up to whole cells (columns.c), so on an axis whose extent
+	 * is not a whole number of cells the last cells stick out past the box,
+	 * and there the box's face, not the grid's side, is the wall the scene
+	 * asked for: flip_boundary cuts those cells as a still solid beyond it.
+	 * The grid's side (n) on the other axes (the box's to within a
+	 * thousandth of a cell, where openings count as closed), with open sides
+	 * (water past the box leaves the world there) and without a
+	 * flip_boundary (eddy__flip_box_walls). */
 	float top[3];
 } flip_grid;
 
 static inline flip_grid flip_grid_of(const eddy_world *w)
 {
 	flip_grid g = {w->nx, w->ny, w->nz, (float)(1.0 / w->def.cell_size), w->def.bounds_min, {0, 0, 0}};
-	float hi[3];
-	const bool cut = flip_box_cut(w, hi) && eddy__flip_box_walls(w);
-	const float lo[3] = {g.o.x, g.o.y, g.o.z};
+	const double h = w->def.cell_size;
+	const double lo[3] = {g.o.x, g.o.y, g.o.z};
+	const double hi[3] = {w->def.bounds_max.x, w->def.bounds_max.y, w->def.bounds_max.z};
 	const int n[3] = {g.nx, g.ny, g.nz};
-	for (int a = 0; a < 3; ++a)
-		g.top[a] = cut && hi[a] < INFINITY ? (hi[a] - lo[a]) * g.inv : (float)n[a];
+	bool walls = false, asked = false; /* eddy__flip_box_walls, asked once an axis sticks out */
+	for (int a = 0; a < 3; ++a) {
+		g.top[a] = (float)n[a];
+		if (!(h > 0 && lo[a] + n[a] * h - hi[a] > 1e-3 * h))
+			continue;
+		if (!asked)
+			walls = eddy__flip_box_walls(w), asked = true;
+		if (walls)
+			g.top[a] = (float)((hi[a] - lo[a]) / h);
+	}
 	return g;
+}
+
+/* Whether the box's faces cut the grid's last cells on any axis. */
+static inline bool flip_grid_cut(const flip_grid *g)
+{
+	return g->top[0] < (float)g->nx || g->top[1] < (float)g->ny || g->top[2] < (float)g->nz;
 }
 
 /* The part of cell span c on axis a ([c, c + 1] in cells) inside the box:
@@ -302,7 +299,7 @@ eddy_status eddy__flip_fill_fluid_faces(eddy_world *w, float *const face[3], con
  * for every face (cell) stored plainly: 60 MB at a million particles in a
  * tank whose walls are a collider. Unmarked: weight 1, velocity 0, open 1. */
 typedef struct flip_solid {
-	bool any;                /* a collider is in the pipeline or the box cuts the grid (flip_box_cut); if not, the arrays are NULL */
+	bool any;                /* a collider is in the pipeline or the box cuts the grid (flip_grid's top); if not, the arrays are NULL */
 	bool open_sides;         /* the domain's sides are open (flip_boundary's def; eddy__flip_open_sides) */
 	const uint64_t *mark[3]; /* per face grid: bit f % 64 of word f / 64, face f is marked */
 	const uint32_t *rank[3]; /* per word: marked faces before it */

@@ -19,7 +19,7 @@
  *   def opens them (open_sides: outflow, air beyond at p = 0): then they
  *   are faces like any other, closed only where a collider covers them.
  *   Where the world's box ends inside the grid's last cells (an extent that
- *   is not a whole number of cells, flip_box_cut), the box's face is the
+ *   is not a whole number of cells, flip_grid's top), the box's face is the
  *   wall, a still solid: a face's open fraction is the part of it inside the
  *   box, a cell's open volume likewise (exact for the box's axis-aligned
  *   planes, where the bilinear rule gives a corner column's faces 1/8 open
@@ -159,7 +159,7 @@ static inline float open_of(float cphi, float h)
 	return cphi < 0 ? (op < 0 ? 0 : op > 0.5f ? 0.4999f : op) : (op > 1 ? 1 : op);
 }
 
-/* Open area fraction the box leaves face c of grid a (flip_box_cut): closed
+/* Open area fraction the box leaves face c of grid a (flip_grid's top): closed
  * on or past the box's face, else its two spans' product. Exact for the
  * box's axis-aligned planes. */
 static inline float box_face_open(const flip_grid *g, int a, const int c[3])
@@ -209,9 +209,9 @@ bool eddy__flip_solid_faces(eddy_world *w, double dt, float margin, const eddy_v
 	const double h = w->def.cell_size;
 	const float hf = (float)h;
 	const eddy_vec3 o = w->def.bounds_min;
-	/* the box's faces inside the grid's last cells (flip_box_cut) */
+	/* the box's faces inside the grid's last cells (flip_grid's top) */
 	const flip_grid bc = flip_grid_of(w);
-	const bool box_on = bc.top[0] < (float)nx || bc.top[1] < (float)ny || bc.top[2] < (float)nz;
+	const bool box_on = flip_grid_cut(&bc);
 	if (ncol == 0 && !box_on)
 		return true;
 	const size_t mx = (size_t)nx + 1, my = (size_t)ny + 1, mz = (size_t)nz + 1, nn = mx * my * mz;
@@ -708,7 +708,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	 * solid, as before: flip_extrapolate keeps their faces and flip_surface
 	 * stops its blur there; flip_pressure still solves for the cut ones with
 	 * an open face (the type no longer means "no fluid") */
-	/* not where the box's cut makes it so (flip_box_cut): a cell of the
+	/* not where the box's cut makes it so (flip_grid's top): a cell of the
 	 * box's last row holds water or air as any cell, only smaller, and as
 	 * a solid-typed cell out of the system its face to the water below it
 	 * would be a given flux, so water against the box's face fell freely */

@@ -54,7 +54,7 @@
  * liquid at rest density either. Cells a solid cuts, and cells with a face
  * to a cut or solid-typed cell, get no source either way: their open part is
  * known to a cell only and the kernel reaches into the solid. The world's
- * box cutting the grid's last cells (flip_box_cut) is the exception: there
+ * box cutting the grid's last cells (flip_grid's top) is the exception: there
  * the count of water at rest is known exactly (flip_box_rest), and e_i is
  * taken against it in the cut cells (a quarter cell open or more) and in
  * the cells beside them; left out, the water packed there (a collapse in a
@@ -501,7 +501,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 			const int i = c % nx, j = (c / nx) % ny, k = c / (nx * ny);
 			if (type[c] != EDDY_CELL_FLUID)
 				continue;
-			/* near the box's cut (flip_box_cut) the count at rest is known
+			/* near the box's cut (flip_grid's top) the count at rest is known
 			 * (flip_box_rest); a collider's cut cells, and slices of the
 			 * box's under a quarter cell (a particle or two), are left */
 			const float op = sd.any ? flip_solid_open(&sd, c) : 1.0f;

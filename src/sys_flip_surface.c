@@ -84,11 +84,11 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 						phi[nb[q]] -= f * (1.0f - tmp[nb[q]]) / sum; /* fill + f f_q / sum */
 					phi[c] = 1.0f;
 				}
-		/* near the box's cut (flip_box_cut) the count of a full cell is
+		/* near the box's cut (flip_grid's top) the count of a full cell is
 		 * known exactly (flip_box_rest), in its cut cells and in the cells
 		 * beside them whose kernel reaches past the box */
 		const flip_grid g = flip_grid_of(w);
-		const bool box = g.top[0] < (float)n[0] || g.top[1] < (float)n[1] || g.top[2] < (float)n[2];
+		const bool box = flip_grid_cut(&g);
 		for (size_t c = 0; c < nc; ++c) {
 			if (type[c] == EDDY_CELL_SOLID)
 				continue;

@@ -1406,7 +1406,7 @@ int eddy_world_check(eddy_world *w, eddy_check_fn report, void *user)
 			eddy__report(report, user, EDDY_CHECK_INFO, "particles per cell: %.1f", ppc);
 		}
 	}
-	/* the box's faces inside the grid's last cells (flip.h, flip_box_cut):
+	/* the box's faces inside the grid's last cells (flip.h, flip_grid's top):
 	 * said, since cut cells are walls of a lower order than the grid's sides */
 	if (flip && w->grid_allocated) {
 		const flip_grid g = flip_grid_of(w);

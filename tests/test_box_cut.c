@@ -6,7 +6,7 @@
  * 2 cm cells was held at 0.42 x 0.08 m while the particles were clamped to
  * the box, so a pool at rest packed against the box's faces, its mean
  * height fell 11-14% and it moved at 0.44 m/s. Now flip_boundary cuts the
- * grid's last cells at the box's faces (flip_box_cut), exactly, and the
+ * grid's last cells at the box's faces (flip_grid's top), exactly, and the
  * volume bookkeeping knows what a full cut cell holds. Also the fluid
  * group's tank: the two-corner form the world's bounds take, which made a
  * unit box of collide_box's defaults. */

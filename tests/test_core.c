@@ -1022,6 +1022,31 @@ static eddy_world *spacing_world(float spacing, double fps, double duration)
 	return w;
 }
 
+/* A FLIP world (cells of cell_size) with spacing_world's block at spacing,
+ * a second block beside it at spacing2 unless that is 0, then gravity and
+ * flip_p2g: what the preflight's FLIP checks look at. */
+static eddy_world *flip_world(double cell_size, float spacing, float spacing2)
+{
+	eddy_world_def d = eddy_default_world_def();
+	d.cell_size = cell_size;
+	eddy_world *w = eddy_create_world(&d, NULL, 0);
+	eddy_emit_box_def b = eddy_default_emit_box_def();
+	b.min = (eddy_vec3){0.1f, 0.1f, 0.1f};
+	b.max = (eddy_vec3){0.3f, 0.3f, 0.3f};
+	b.spacing = spacing;
+	CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &b)));
+	if (spacing2 > 0) {
+		b.min.x += 0.4f, b.max.x += 0.4f;
+		b.spacing = spacing2;
+		CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &b)));
+	}
+	eddy_gravity_def g = eddy_default_gravity_def();
+	CHECK(eddy_system_valid(w, eddy_add_gravity(w, &g)));
+	eddy_flip_p2g_def pg = eddy_default_flip_p2g_def();
+	CHECKF(eddy_system_valid(w, eddy_add_flip_p2g(w, &pg)), "%s", eddy_world_error(w));
+	return w;
+}
+
 /* A collider added where the water already is (between steps) pushes the
  * particles inside its solid out in its first step, a burst in SPH: a
  * run-time warning names it, the count and a particle; one added clear of
@@ -1086,22 +1111,7 @@ static void check_catches_scene_mistakes(void)
 	 * the same volume, from the finest spacing (a block at 1 cm beside one
 	 * at 5 mm read 1/8 full and the two settled at 0.52 and 0.69 of the height they should have) */
 	for (int same = 0; same < 2; ++same) {
-		eddy_world_def wd = eddy_default_world_def();
-		wd.cell_size = 0.02;
-		wd.duration = 1;
-		w = eddy_create_world(&wd, NULL, 0);
-		eddy_emit_box_def b = eddy_default_emit_box_def();
-		b.min = (eddy_vec3){0.1f, 0.1f, 0.1f};
-		b.max = (eddy_vec3){0.3f, 0.3f, 0.3f};
-		b.spacing = 0.01f;
-		CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &b)));
-		b.min.x += 0.4f, b.max.x += 0.4f;
-		b.spacing = same ? 0.01f : 0.005f;
-		CHECK(eddy_system_valid(w, eddy_add_emit_box(w, &b)));
-		eddy_gravity_def gg = eddy_default_gravity_def();
-		CHECK(eddy_system_valid(w, eddy_add_gravity(w, &gg)));
-		eddy_flip_p2g_def p2g = eddy_default_flip_p2g_def();
-		CHECKF(eddy_system_valid(w, eddy_add_flip_p2g(w, &p2g)), "%s", eddy_world_error(w));
+		w = flip_world(0.02, 0.01f, same ? 0.01f : 0.005f);
 		memset(&f, 0, sizeof f);
 		eddy_world_check(w, collect, &f);
 		if (same) {
@@ -1182,18 +1192,7 @@ static void check_catches_scene_mistakes(void)
 	eddy_destroy_world(w);
 
 	/* FLIP cells smaller than the particle spacing */
-	d = eddy_default_world_def();
-	d.cell_size = 0.01;
-	w = eddy_create_world(&d, NULL, 0);
-	eddy_emit_box_def b = eddy_default_emit_box_def();
-	b.min = (eddy_vec3){0.1f, 0.1f, 0.1f};
-	b.max = (eddy_vec3){0.3f, 0.3f, 0.3f};
-	b.spacing = 0.02f;
-	eddy_add_emit_box(w, &b);
-	eddy_gravity_def g = eddy_default_gravity_def();
-	eddy_add_gravity(w, &g);
-	eddy_flip_p2g_def pg = eddy_default_flip_p2g_def();
-	CHECKF(eddy_system_valid(w, eddy_add_flip_p2g(w, &pg)), "%s", eddy_world_error(w));
+	w = flip_world(0.01, 0.02f, 0);
 	memset(&f, 0, sizeof f);
 	CHECK(eddy_world_check(w, collect, &f) == 1);
 	CHECK_HAS(f.text, "flip_p2g: 0.1");
