@@ -81,6 +81,23 @@ int test_sh(const char *cmd, char *out, size_t cap)
 	return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
 }
 
+bool test_file_has(const char *path, const char *needle)
+{
+	FILE *f = fopen(path, "rb");
+	if (!f)
+		return false;
+	enum { CAP = 1 << 20 };
+	char *text = malloc(CAP);
+	const size_t n = text ? fread(text, 1, CAP - 1, f) : 0;
+	fclose(f);
+	if (!text)
+		return false;
+	text[n] = '\0';
+	const bool found = strstr(text, needle) != NULL;
+	free(text);
+	return found;
+}
+
 double test_json_number(const char *line, const char *key)
 {
 	char pat[64];

@@ -23,6 +23,9 @@ const char *test_build_dir(void);
 /* The running suite's own folder for what it writes, BUILD/t/SUITE (made
  * before the suite starts): suites run at once never share one. */
 const char *test_out_dir(void);
+/* True when the file's first megabyte holds needle (false when it cannot be
+ * read). */
+bool test_file_has(const char *path, const char *needle);
 /* The number after "key": in a JSON line such as a stats line; NAN when
  * the key is absent or its value is not a number (null). */
 double test_json_number(const char *line, const char *key);

@@ -115,18 +115,6 @@ static bool is_png(const char *path)
 	return n == 8 && memcmp(sig, "\x89PNG\r\n\x1a\n", 8) == 0;
 }
 
-static bool file_has(const char *path, const char *needle)
-{
-	static char text[65536];
-	FILE *f = fopen(path, "r");
-	if (!f)
-		return false;
-	size_t n = fread(text, 1, sizeof text - 1, f);
-	fclose(f);
-	text[n] = '\0';
-	return strstr(text, needle) != NULL;
-}
-
 static bool have(const char *tool)
 {
 	char cmd[128], buf[256];
@@ -254,10 +242,10 @@ static void compare_three_methods(void)
 	free(c);
 
 	snprintf(path, sizeof path, "%s/compare.md", out);
-	CHECKF(file_has(path, "| wcsph | ok |"), "%s: no ok row for wcsph", path);
-	CHECKF(file_has(path, "| broken | failed: "), "%s: no failed row for broken", path);
-	CHECKF(file_has(path, "| sph_density |"), "%s: no time of sph_density", path);
-	CHECKF(file_has(path, "| top |"), "%s: no measurement of the scene's own field", path);
+	CHECKF(test_file_has(path, "| wcsph | ok |"), "%s: no ok row for wcsph", path);
+	CHECKF(test_file_has(path, "| broken | failed: "), "%s: no failed row for broken", path);
+	CHECKF(test_file_has(path, "| sph_density |"), "%s: no time of sph_density", path);
+	CHECKF(test_file_has(path, "| top |"), "%s: no measurement of the scene's own field", path);
 	if (have("gnuplot")) {
 		snprintf(path, sizeof path, "%s/compare_max_speed.png", out);
 		CHECKF(is_png(path), "%s is not a PNG", path);
@@ -294,8 +282,8 @@ static void compare_all_ok_with_video(void)
 		CHECKF(is_png(path), "%s is not a PNG", path);
 	}
 	snprintf(path, sizeof path, "%s/runs/flip/stats.jsonl", out);
-	CHECKF(file_has(path, "\"frame\":6,"), "%s: no sixth frame", path);
-	CHECKF(!file_has(path, "frame_0001.png"), "%s: the image path was not cut short; make the folder name longer",
+	CHECKF(test_file_has(path, "\"frame\":6,"), "%s: no sixth frame", path);
+	CHECKF(!test_file_has(path, "frame_0001.png"), "%s: the image path was not cut short; make the folder name longer",
 	       path);
 	for (int frame = 1; frame <= 6; ++frame) {
 		snprintf(path, sizeof path, "%s/frame_%04d.png", out, frame);
@@ -303,7 +291,7 @@ static void compare_all_ok_with_video(void)
 		CHECKF(stbi_info(path, &w, &h, &comp) && w == 320 && h == 120, "%s: %d x %d, expected 320 x 120", path, w, h);
 	}
 	snprintf(path, sizeof path, "%s/compare.md", out);
-	CHECKF(!file_has(path, "failed"), "%s: a method failed", path);
+	CHECKF(!test_file_has(path, "failed"), "%s: a method failed", path);
 }
 
 /* A run's warnings reach compare.md: DFSPH's nozzle pouring into the small
@@ -321,10 +309,10 @@ static void compare_lists_warnings(void)
 	int code = test_sh(cmd, buf, sizeof buf);
 	CHECKF(code == 0, "exit %d, expected 0:\n%s", code, buf);
 	snprintf(path, sizeof path, "%s/compare.md", out);
-	CHECKF(file_has(path, "## Warnings"), "%s: no warnings section", path);
-	CHECKF(file_has(path, "- dfsph: emit_nozzle: water at its opening at step"), "%s: no nozzle warning", path);
-	CHECKF(file_has(path, "- dfsph: memory: an emitter has no end"), "%s: no preflight warning", path);
-	CHECKF(file_has(path, "| warnings | 1 / 1 |"), "%s: no warnings count", path);
+	CHECKF(test_file_has(path, "## Warnings"), "%s: no warnings section", path);
+	CHECKF(test_file_has(path, "- dfsph: emit_nozzle: water at its opening at step"), "%s: no nozzle warning", path);
+	CHECKF(test_file_has(path, "- dfsph: memory: an emitter has no end"), "%s: no preflight warning", path);
+	CHECKF(test_file_has(path, "| warnings | 1 / 1 |"), "%s: no warnings count", path);
 }
 
 /* Usage errors: one line, status 2, before anything runs; --help: status 0. */
@@ -383,9 +371,9 @@ static void compare_chart_skips_a_method_with_no_frame(void)
 	CHECKF(code == 1, "exit %d, expected 1 (a method failed):\n%s", code, buf);
 	CHECKF(strstr(buf, "gnuplot failed") == NULL, "%s", buf);
 	snprintf(path, sizeof path, "%s/compare_max_speed.gp", out);
-	CHECKF(file_has(path, "index 0 using 1:2 with linespoints lw 2 pt 7 title \"flip\""),
+	CHECKF(test_file_has(path, "index 0 using 1:2 with linespoints lw 2 pt 7 title \"flip\""),
 	       "%s: flip's points are not index 0", path);
-	CHECKF(!file_has(path, "index 1"), "%s: a second block plotted", path);
+	CHECKF(!test_file_has(path, "index 1"), "%s: a second block plotted", path);
 	if (have("gnuplot")) {
 		snprintf(path, sizeof path, "%s/compare_max_speed.png", out);
 		struct stat st;

@@ -256,6 +256,48 @@ static void frequency_metric_counts_whole_periods(void)
 	free(c);
 }
 
+/* A method whose every run fails has no points: its chart block is not
+ * written, so the next method's points are gnuplot's index 0 under their own
+ * title. An empty block is not counted by gnuplot's index, so writing one
+ * handed the failed method's title to the next method's points. */
+static void study_chart_skips_a_method_with_no_run(void)
+{
+	char dir[256], scene[320], file[320], out[320], cmd[1200], buf[4096];
+	snprintf(dir, sizeof dir, "%s/study_test/skip", test_build_dir());
+	snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", dir, dir);
+	test_sh(cmd, buf, sizeof buf);
+	snprintf(scene, sizeof scene, "%s/wave.lua", dir);
+	write_file(scene, "local eddy = require 'eddy'\n"
+	                  "local omega = tonumber(eddy.param('omega', 7))\n"
+	                  "eddy.param('render', 'false') -- the study sets it\n"
+	                  "if eddy.param('broken', 0) == 1 then error('wave: broken on purpose') end\n"
+	                  "local w = eddy.world { fps = 100, duration = 1.7 }\n"
+	                  "w:on_frame(function(w) return { q = 0.4 + math.cos(omega * w:time()) } end)\n"
+	                  "return w\n");
+	snprintf(file, sizeof file, "%s/skip.lua", dir);
+	snprintf(buf, sizeof buf,
+	         "return study {\n name = 'skip', title = 'q',\n"
+	         " reference = { analytic = function(p) return tonumber(p.omega) end },\n"
+	         " metric = { kind = 'frequency', field = 'q', label = 'e' },\n duration = 1.7,\n"
+	         " methods = {\n"
+	         "  method { name = 'Broken', scene = '%s', resolution = 'omega', set = { broken = 1 },\n"
+	         "   sweep = { omega = { 7, 7.5 } } },\n"
+	         "  method { name = 'A', scene = '%s', resolution = 'omega', sweep = { omega = { 7, 7.5 } } },\n"
+	         " },\n}\n",
+	         scene, scene);
+	write_file(file, buf);
+	snprintf(out, sizeof out, "%s/out", dir);
+	snprintf(cmd, sizeof cmd, "%s/eddy study %s --out %s", test_build_dir(), file, out);
+	const int code = test_sh(cmd, buf, sizeof buf);
+	CHECKF(code == 1, "exit %d, expected 1 (a method's runs failed):\n%s", code, buf);
+	CHECK_HAS(buf, "4 runs, 2 failed");
+	char path[400];
+	snprintf(path, sizeof path, "%s/skip.gp", out);
+	CHECKF(test_file_has(path, "index 0 using 1:2 with linespoints pt 6 ps 1.5 lw 2 title \"A\""),
+	       "%s: A's points are not index 0", path);
+	CHECKF(!test_file_has(path, "title \"Broken\""), "%s: the failed method has a series", path);
+}
+
 /* Mistakes in a study file: one line, the file and the line of the mistake. */
 static void bad_study_files(void)
 {
@@ -330,6 +372,7 @@ static void missing_driver_is_one_line(void)
 void suite_study(void)
 {
 	RUN(frequency_metric_counts_whole_periods);
+	RUN(study_chart_skips_a_method_with_no_run);
 	RUN(bad_study_files);
 	RUN(missing_driver_is_one_line);
 	RUN(quick_dam_break_study);
