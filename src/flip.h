@@ -233,6 +233,22 @@ static inline float flip_face_coord(float t, float top, int n)
 	return s < (float)n ? s : (float)n;
 }
 
+/* A cell-centre coordinate t (in cells) for sampling a velocity on an axis
+ * the box cuts at top: where the cut leaves less than half of the last
+ * cell, that cell's centre, where the tangential faces are sampled, lies
+ * past the box's face, outside the water, and the faces' velocity is that
+ * of a sliver (the pressure that stops the water entering it turns the
+ * sliver's little mass along the wall fast: a dam break's sheet along a
+ * lid cut at 0.09 of a cell ran at 9.3 m/s, 4.6 with the lid on a face).
+ * A point past the last centre inside the box takes that centre's value
+ * (constant extension: a free-slip wall's zero tangential gradient). The
+ * identity elsewhere. The particle density keeps the plain centres. */
+static inline float flip_centre_coord(float t, float top, int n)
+{
+	const float inside = (float)n - 1.5f;
+	return top < (float)n - 0.5f && n >= 2 && t > inside ? inside : t;
+}
+
 /* The six axis lookups of a world position (m): per axis, faces at i (f*)
  * and centres at i + 1/2 (c*); they serve all three face grids. */
 typedef struct flip_axes {
@@ -252,6 +268,21 @@ static inline flip_axes flip_axes_at(const flip_grid *g, eddy_vec3 p)
 	return a;
 }
 
+/* flip_axes_at for sampling velocities: the centres through
+ * flip_centre_coord (the particle density keeps flip_axes_at's). */
+static inline flip_axes flip_vel_axes_at(const flip_grid *g, eddy_vec3 p)
+{
+	const float gx = (p.x - g->o.x) * g->inv, gy = (p.y - g->o.y) * g->inv, gz = (p.z - g->o.z) * g->inv;
+	flip_axes a;
+	a.fx = flip_axis_at(flip_face_coord(gx, g->top[0], g->nx), 0.0f, g->nx + 1);
+	a.cx = flip_axis_at(flip_centre_coord(gx, g->top[0], g->nx), 0.5f, g->nx);
+	a.fy = flip_axis_at(flip_face_coord(gy, g->top[1], g->ny), 0.0f, g->ny + 1);
+	a.cy = flip_axis_at(flip_centre_coord(gy, g->top[1], g->ny), 0.5f, g->ny);
+	a.fz = flip_axis_at(flip_face_coord(gz, g->top[2], g->nz), 0.0f, g->nz + 1);
+	a.cz = flip_axis_at(flip_centre_coord(gz, g->top[2], g->nz), 0.5f, g->nz);
+	return a;
+}
+
 /* Velocity of the face grids u, v, wv at the position behind a. */
 static inline eddy_vec3 flip_velocity_axes(const flip_grid *g, const float *u, const float *v, const float *wv,
                                            const flip_axes *a)
@@ -268,7 +299,7 @@ static inline eddy_vec3 flip_velocity_axes(const flip_grid *g, const float *u, c
 static inline eddy_vec3 flip_velocity_at(const flip_grid *g, const float *u, const float *v, const float *wv,
                                          eddy_vec3 p)
 {
-	const flip_axes a = flip_axes_at(g, p);
+	const flip_axes a = flip_vel_axes_at(g, p);
 	return flip_velocity_axes(g, u, v, wv, &a);
 }
 

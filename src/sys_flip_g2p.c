@@ -85,6 +85,13 @@ static inline float face_slope(float t, float top, int n, float inv)
 	return axis_slope(t, 0.0f, n + 1, inv);
 }
 
+/* The same for a centre axis, through flip_centre_coord (0 where it holds
+ * the coordinate at the last centre inside the box). */
+static inline float centre_slope(float t, float top, int n, float inv)
+{
+	return flip_centre_coord(t, top, n) != t ? 0.0f : axis_slope(t, 0.5f, n, inv);
+}
+
 static void apic_step(eddy_world *w, int threads)
 {
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
@@ -98,12 +105,12 @@ static void apic_step(eddy_world *w, int threads)
 	const size_t nx = (size_t)grid.nx, ny = (size_t)grid.ny;
 #pragma omp parallel for num_threads(threads) if (n > 16384) schedule(static)
 	for (long i = 0; i < n; ++i) {
-		const flip_axes a = flip_axes_at(&grid, (eddy_vec3){x[i], y[i], z[i]});
+		const flip_axes a = flip_vel_axes_at(&grid, (eddy_vec3){x[i], y[i], z[i]});
 		const float tx = (x[i] - grid.o.x) * grid.inv, ty = (y[i] - grid.o.y) * grid.inv,
 					tz = (z[i] - grid.o.z) * grid.inv;
-		const float sfx = face_slope(tx, grid.top[0], grid.nx, grid.inv), scx = axis_slope(tx, 0.5f, grid.nx, grid.inv);
-		const float sfy = face_slope(ty, grid.top[1], grid.ny, grid.inv), scy = axis_slope(ty, 0.5f, grid.ny, grid.inv);
-		const float sfz = face_slope(tz, grid.top[2], grid.nz, grid.inv), scz = axis_slope(tz, 0.5f, grid.nz, grid.inv);
+		const float sfx = face_slope(tx, grid.top[0], grid.nx, grid.inv), scx = centre_slope(tx, grid.top[0], grid.nx, grid.inv);
+		const float sfy = face_slope(ty, grid.top[1], grid.ny, grid.inv), scy = centre_slope(ty, grid.top[1], grid.ny, grid.inv);
+		const float sfz = face_slope(tz, grid.top[2], grid.nz, grid.inv), scz = centre_slope(tz, grid.top[2], grid.nz, grid.inv);
 		float g[3];
 		vel[0][i] = sample_grad(now[0], nx + 1, (nx + 1) * ny, a.fx, a.cy, a.cz, sfx, scy, scz, g);
 		c[0][i] = g[0], c[1][i] = g[1], c[2][i] = g[2];
@@ -134,7 +141,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 #pragma omp parallel for num_threads(ctx->threads) if (n > 16384) schedule(static)
 	for (long i = 0; i < n; ++i) {
 		/* interpolation is linear: I(u - u_old) = I(u) - I(u_old) */
-		const flip_axes ax = flip_axes_at(&grid, (eddy_vec3){x[i], y[i], z[i]});
+		const flip_axes ax = flip_vel_axes_at(&grid, (eddy_vec3){x[i], y[i], z[i]});
 		const eddy_vec3 pic = flip_velocity_axes(&grid, now[0], now[1], now[2], &ax);
 		const eddy_vec3 before = flip_velocity_axes(&grid, old[0], old[1], old[2], &ax);
 		vel[0][i] = r * (vel[0][i] + pic.x - before.x) + (1.0f - r) * pic.x;
