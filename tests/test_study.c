@@ -209,6 +209,25 @@ static void write_file(const char *path, const char *src)
 	}
 }
 
+/* A fresh folder study_test/<name> (its path in dir) holding wave.lua (its
+ * path in scene): q = 0.4 + cos(omega t) every frame for 1.7 s; with
+ * --set broken=1 the scene fails, as a scene error. */
+static void wave_scene(const char *name, char *dir, size_t dcap, char *scene, size_t scap)
+{
+	char cmd[1024], buf[4096];
+	snprintf(dir, dcap, "%s/study_test/%s", test_build_dir(), name);
+	snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", dir, dir);
+	test_sh(cmd, buf, sizeof buf);
+	snprintf(scene, scap, "%s/wave.lua", dir);
+	write_file(scene, "local eddy = require 'eddy'\n"
+	                  "local omega = tonumber(eddy.param('omega', 7))\n"
+	                  "eddy.param('render', 'false') -- the study sets it\n"
+	                  "if eddy.param('broken', 0) == 1 then error('wave: broken on purpose') end\n"
+	                  "local w = eddy.world { fps = 100, duration = 1.7 }\n"
+	                  "w:on_frame(function(w) return { q = 0.4 + math.cos(omega * w:time()) } end)\n"
+	                  "return w\n");
+}
+
 /* The frequency metric counts whole periods: a field riding on an offset,
  * q = 0.4 + cos(omega t), has half periods alternating 0.74 and 1.26 of
  * pi / omega, and over 1.7 s at omega 7 and 7.5 rad/s it crosses zero 4
@@ -216,18 +235,8 @@ static void write_file(const char *path, const char *src)
  * all were counted. Whole periods give omega to the sampling's rounding. */
 static void frequency_metric_counts_whole_periods(void)
 {
-	char dir[256], scene[320], file[320], out[320], cmd[1200];
-	snprintf(dir, sizeof dir, "%s/study_test/freq", test_build_dir());
-	snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", dir, dir);
-	char buf[4096];
-	test_sh(cmd, buf, sizeof buf);
-	snprintf(scene, sizeof scene, "%s/wave.lua", dir);
-	write_file(scene, "local eddy = require 'eddy'\n"
-	                  "local omega = tonumber(eddy.param('omega', 7))\n"
-	                  "eddy.param('render', 'false') -- the study sets it\n"
-	                  "local w = eddy.world { fps = 100, duration = 1.7 }\n"
-	                  "w:on_frame(function(w) return { q = 0.4 + math.cos(omega * w:time()) } end)\n"
-	                  "return w\n");
+	char dir[256], scene[320], file[320], out[320], cmd[1200], buf[4096];
+	wave_scene("freq", dir, sizeof dir, scene, sizeof scene);
 	snprintf(file, sizeof file, "%s/freq.lua", dir);
 	snprintf(buf, sizeof buf,
 	         "return study {\n name = 'freq', title = 'q',\n"
@@ -263,17 +272,7 @@ static void frequency_metric_counts_whole_periods(void)
 static void study_chart_skips_a_method_with_no_run(void)
 {
 	char dir[256], scene[320], file[320], out[320], cmd[1200], buf[4096];
-	snprintf(dir, sizeof dir, "%s/study_test/skip", test_build_dir());
-	snprintf(cmd, sizeof cmd, "rm -rf %s && mkdir -p %s", dir, dir);
-	test_sh(cmd, buf, sizeof buf);
-	snprintf(scene, sizeof scene, "%s/wave.lua", dir);
-	write_file(scene, "local eddy = require 'eddy'\n"
-	                  "local omega = tonumber(eddy.param('omega', 7))\n"
-	                  "eddy.param('render', 'false') -- the study sets it\n"
-	                  "if eddy.param('broken', 0) == 1 then error('wave: broken on purpose') end\n"
-	                  "local w = eddy.world { fps = 100, duration = 1.7 }\n"
-	                  "w:on_frame(function(w) return { q = 0.4 + math.cos(omega * w:time()) } end)\n"
-	                  "return w\n");
+	wave_scene("skip", dir, sizeof dir, scene, sizeof scene);
 	snprintf(file, sizeof file, "%s/skip.lua", dir);
 	snprintf(buf, sizeof buf,
 	         "return study {\n name = 'skip', title = 'q',\n"
