@@ -61,10 +61,10 @@
  * the cells beside them; left out, the water packed there (a collapse in a
  * tank 7.5 cells thick lost 5.7% of its marker volume). A cut cell
  * expects a few particles (2.25 in a quarter cell), so one holding none is
- * sampling, not the liquid's edge: held to hold one, a quarter cell that
- * emptied stayed empty and its neighbours' deficits went uncorrected (the
- * collapse in a tank 7.25 cells thick settled 4.1% high; now 0.4%, as in
- * one of whole cells). A packed cell
+ * sampling, not the liquid's edge, and does not keep its neighbours from
+ * being deep: held to hold one, a quarter cell that emptied stayed empty and
+ * its neighbours' deficits went uncorrected (a collapse in a tank 7.25 cells
+ * thick settled 4.1% high). A packed cell
  * expands and a thinned one contracts by their whole error per step
  * (VC_RATE 1, the implicit density projection's target), moving particles
  * rather than creating or deleting them, so with flip_reseed relocating
@@ -134,6 +134,9 @@
  * and expanding the positive half of it with no contraction of the negative
  * half would inflate a shallow layer */
 #define VC_PACKED 0.2
+/* the least open part of a cell the box's cut leaves that the correction
+ * takes: a slice under it holds a particle or two */
+#define VC_CUT_MIN 0.25f
 /* rounds of letting go of walls in a step (header), each a solve more: the
  * FLIP pour took 1.07x the CPU time with one, 1.14x with three (medians of
  * 7 pairs), and every lid and shelf case let go in the first */
@@ -511,7 +514,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 			 * (flip_box_rest); a collider's cut cells, and slices of the
 			 * box's under a quarter cell (a particle or two), are left */
 			const float op = sd.any ? flip_solid_open(&sd, c) : 1.0f;
-			if (op < 1 && !(flip_box_open(&bg, i, j, k) <= op && op >= 0.25f))
+			if (op < 1 && !(flip_box_open(&bg, i, j, k) <= op && op >= VC_CUT_MIN))
 				continue;
 			double e = (double)dens[c] / (n0 * (double)flip_box_rest(&bg, i, j, k)) - 1.0;
 			if (has_air[r] && e <= VC_PACKED)
@@ -536,10 +539,8 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 			if (walled || (!deep && e <= VC_PACKED))
 				continue;
 			/* the kernel's reach: all 27 cells around hold particles (those
-			 * beyond the domain's sides excepted, and the box's cut cells,
-			 * whose few particles at rest (flip_box_rest) leave one empty
-			 * by chance: held to it, a quarter cell emptied once stayed
-			 * empty, as did its neighbours' deficits) */
+			 * beyond the domain's sides and the box's cut cells excepted:
+			 * see the header) */
 			if (deep && e <= 0) {
 				const int i0 = i > 0 ? -1 : 0, i1 = i + 1 < nx ? 1 : 0, j0 = j > 0 ? -1 : 0, j1 = j + 1 < ny ? 1 : 0,
 						  k0 = k > 0 ? -1 : 0, k1 = k + 1 < nz ? 1 : 0;
@@ -548,7 +549,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 					for (int dj = j0; dj <= j1 && deep; ++dj)
 						for (int di = i0; di <= i1 && deep; ++di) {
 							const float cut = flip_box_open(&bg, i + di, j + dj, k + dk);
-							deep = held[c + di + dj * sy + dk * sz] != 0 || (cut < 1.0f && cut >= 0.25f);
+							deep = held[c + di + dj * sy + dk * sz] != 0 || (cut < 1.0f && cut >= VC_CUT_MIN);
 						}
 			}
 			if (walled || (!deep && e <= VC_PACKED))
