@@ -67,7 +67,7 @@ static bool run_pool(const char *sets, pool_run *r) { return run_pool_for(sets, 
  * open); one step beyond, 3 cm cells cut them at 2/3 and 1/3 (27
  * particles a cell). Bounds: the aligned pool's largest speed is 0; the
  * discrete balance of cut cells leaves a few mm/s at 2/3 and 1/3 (measured
- * 0.015 m/s FLIP, 0.005 PIC and APIC), held to 0.03, 6% of sqrt(g dx);
+ * 0.018 m/s FLIP, 0.006 PIC and APIC), held to 0.03, 6% of sqrt(g dx);
  * before, 0.34-0.44 m/s. The mean height holds to 0.5% (before: 11-24%
  * low). */
 static void still_pool_in_a_box_of_part_cells(void)
