@@ -13,8 +13,9 @@
  *   extrapolate_grid): the same result on any thread count.
  * Faces wholly inside a solid are filled as air is, then take the solid's
  * normal velocity (closed_faces: free slip along solids, Bridson's book,
- * ch. 5: "extrapolate, then replace the normal component"); cut faces keep
- * flip_pressure's values. A domain side beside an air cell is extrapolated too, then
+ * ch. 5: "extrapolate, then replace the normal component") where the water
+ * moves into the solid, and keep the water's where it moves away from it
+ * (a solid cannot pull); cut faces keep flip_pressure's values. A domain side beside an air cell is extrapolated too, then
  * kept only where it carries water away from the side (else 0): a particle
  * beside a fluid cell that left the side (flip_pressure) interpolates it,
  * and held at 0 it would hold the particle back. Open sides
@@ -337,13 +338,21 @@ static float solid_distance(const eddy_system *const *col, int nc, eddy_vec3 p)
  * and n the solids' distance gradient at the face, its component becomes
  * e_a - ((e - V) . n) n_a: free slip along a wall, the wall's velocity
  * across it. The water's velocity alone there (n ignored) let a stirring
- * paddle's faces push less; the solid's alone made every wall drag. A
+ * paddle's faces push less; the solid's alone made every wall drag. Where
+ * (e - V) . n > 0 the water leaves the solid faster than its surface
+ * follows, and a solid cannot pull: the face keeps e. Taking V there, the
+ * faces inside a gate lifted along a pool's face held, beside its lower
+ * edge (where n is that edge's), the gate's speed upward, and the water
+ * within half a cell of the gate, interpolating them, was carried up. A
+ * face of a fluid cell is the exception: the pressure solve held it at V
+ * (and gave the water's velocity to those air could follow). A
  * closed face flip_pressure gave the water's velocity (water leaving a wall
  * with air in reach) is not filled: it keeps that. Values
  * are computed from the filled fields into out[a] and written after, so
  * the result does not depend on the order. */
-static void closed_faces(const eddy_world *w, const uint8_t *near, const flip_solid *sd, float *const face[3],
-                         uint8_t *const layer[3], size_t st[3][3], int m[3][3], int layers, float *const out[3], int nt)
+static void closed_faces(const eddy_world *w, const uint8_t *type, const uint8_t *near, const flip_solid *sd,
+                         float *const face[3], uint8_t *const layer[3], size_t st[3][3], int m[3][3], int layers,
+                         float *const out[3], int nt)
 {
 	const int n[3] = {w->nx, w->ny, w->nz};
 	const double h = w->def.cell_size;
@@ -370,6 +379,9 @@ static void closed_faces(const eddy_world *w, const uint8_t *near, const flip_so
 					    !(near[flip_cell(w, c[0] - (a == 0), c[1] - (a == 1), c[2] - (a == 2))] |
 					      (c[a] < n[a] ? near[flip_cell(w, c[0], c[1], c[2])] : 0)))
 						continue;
+					const bool fluid_side =
+						type[flip_cell(w, c[0] - (a == 0), c[1] - (a == 1), c[2] - (a == 2))] == EDDY_CELL_FLUID ||
+						type[flip_cell(w, c[0], c[1], c[2])] == EDDY_CELL_FLUID;
 					double e[3], v[3];
 					e[a] = face[a][f];
 					v[a] = flip_solid_vel(sd, a, f);
@@ -406,6 +418,8 @@ static void closed_faces(const eddy_world *w, const uint8_t *near, const flip_so
 					double dn = 0;
 					for (int d = 0; d < 3; ++d)
 						dn += (e[d] - v[d]) * g[d] * inv;
+					if (dn > 0 && !fluid_side)
+						continue; /* separating: the water's own velocity */
 					oa[f] = (float)(e[a] - dn * g[a] * inv);
 				}
 	}
@@ -490,7 +504,7 @@ static eddy_status step_body(eddy_world *w, eddy_system *s, const eddy_step_cont
 		if (!near || !tmp)
 			return eddy__fail(w, EDDY_ERR_NOMEM, "flip_extrapolate: out of memory");
 		near_fluid_cells(w, type, near, tmp, nt);
-		closed_faces(w, near, &sd, face, layer, st, m, ex->def.layers, out, nt);
+		closed_faces(w, type, near, &sd, face, layer, st, m, ex->def.layers, out, nt);
 	}
 	for (int a = 0; a < 3; ++a) {
 		/* the domain's sides beside air: the water's velocity where it

@@ -111,6 +111,25 @@ double test_json_number(const char *line, const char *key)
 	return end == p ? NAN : v;
 }
 
+double test_json_array_number(const char *line, const char *key, int index)
+{
+	char pat[64];
+	snprintf(pat, sizeof pat, "\"%s\":[", key);
+	const char *p = strstr(line, pat);
+	if (!p)
+		return NAN;
+	p += strlen(pat);
+	for (int k = 0; k < index; ++k) {
+		p = strpbrk(p, ",]");
+		if (!p || *p == ']')
+			return NAN;
+		p++;
+	}
+	char *end;
+	const double v = strtod(p, &end);
+	return end == p ? NAN : v;
+}
+
 const char *test_build_dir(void)
 {
 	const char *b = getenv("EDDY_BUILD");

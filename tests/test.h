@@ -29,6 +29,8 @@ bool test_file_has(const char *path, const char *needle);
 /* The number after "key": in a JSON line such as a stats line; NAN when
  * the key is absent or its value is not a number (null). */
 double test_json_number(const char *line, const char *key);
+/* element index (from 0) of the number array at key; NAN if absent */
+double test_json_array_number(const char *line, const char *key, int index);
 /* An environment switch (EDDY_NO_AVX2, say) changed for a test
  * and put back after it: test_env_save copies its value (NULL: unset),
  * test_env_set sets it (value NULL: unsets), test_env_restore puts the saved
