@@ -4,7 +4,9 @@
 -- of the round drop of radius R), rounds off and rings in its l = 2 mode,
 -- whose frequency Rayleigh gives as omega^2 = 8 sigma / (rho R^3) (24 rad/s
 -- for R = 1 cm). Reports the quadrupole moment q = <x^2> - <y^2> (m^2) about
--- the centre of mass each frame; tests/test_sph.c measures omega from it.
+-- the centre of mass each frame, tests/test_sph.c measures omega from it, and
+-- p_inside (Pa), the mean pressure within R / 2 of the centre: at rest
+-- (stretch = 0) Laplace's 2 sigma / R, 14.6 Pa.
 --
 --   build/eddy run scenes/droplet.lua --stats out/drop/stats.jsonl
 
@@ -43,7 +45,16 @@ world:on_frame(function(w)
 	cx, cy = cx / n, cy / n
 	local q = 0
 	for i = 1, n do q = q + (x[i] - cx) ^ 2 - (y[i] - cy) ^ 2 end
-	return { q = q / n }
+	-- the mean pressure within R / 2 of the centre: Laplace's 2 sigma / R at rest
+	local z, p = w:channel("z"), w:channel("pressure")
+	local cz = 0
+	for i = 1, n do cz = cz + z[i] end
+	cz = cz / n
+	local sp, np = 0, 0
+	for i = 1, n do
+		if (x[i] - cx) ^ 2 + (y[i] - cy) ^ 2 + (z[i] - cz) ^ 2 < 0.25 * R * R then sp, np = sp + p[i], np + 1 end
+	end
+	return { q = q / n, p_inside = np > 0 and sp / np or 0 }
 end)
 
 require("eddy.view").render(eddy, world, "droplet")

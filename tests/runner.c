@@ -354,6 +354,7 @@ int main(int argc, char **argv)
 		{"fuzz", suite_fuzz, false, 0},
 		{"package", suite_package, false, 1},
 		{"sph", suite_sph, false, 22},
+		{"long_sph", suite_long_sph, true, 40},
 		{"sph_reference", suite_sph_reference, false, 23},
 		{"flip", suite_flip, false, 6},
 		{"flip_solvers", suite_flip_solvers, false, 2},

@@ -77,6 +77,7 @@ void suite_fuzz(void);
 void suite_package(void);
 /* SPH suites */
 void suite_sph(void);
+void suite_long_sph(void); /* the drop's frequency at two resolutions */
 void suite_sph_reference(void); /* the SPH passes against a double-precision O(n^2) reference */
 
 /* FLIP suites */

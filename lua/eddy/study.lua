@@ -396,15 +396,24 @@ end
 -- interpolated), which are half a period apart, over whole periods once
 -- there are any (an even number of half periods: a field riding on a small
 -- offset has half periods alternating short and long, and an odd count
--- keeps one more of one kind); NaN with fewer than 2.
+-- keeps one more of one kind); NaN with fewer than 2. The count stops at
+-- the first half period whose peak |field| is under DECAYED of the largest
+-- before it: a damped mode that has rung down crosses zero with its noise
+-- (a drop at 6 spacings per radius, rung down by 0.6 s, read 56% off).
+local DECAYED = 0.1
 local function omega_of(frames, field, from)
 	local crossings, prev, prev_t = {}, nil, nil
+	local peak, largest = 0, 0 -- this half period's peak |v|, the largest of the whole ones before
 	for _, f in ipairs(frames) do
 		local v, t = f[field], f.time
 		if type(v) == "number" and type(t) == "number" and t >= (from or 0) then
 			if prev and ((prev > 0 and v <= 0) or (prev < 0 and v >= 0)) and v ~= prev then
+				if #crossings > 0 and peak < DECAYED * largest then break end
+				if #crossings > 0 then largest = math.max(largest, peak) end
 				crossings[#crossings + 1] = prev_t + (t - prev_t) * prev / (prev - v)
+				peak = 0
 			end
+			peak = math.max(peak, math.abs(v))
 			prev, prev_t = v, t
 		end
 	end

@@ -926,6 +926,7 @@ eddy_system_id eddy_add_sph_density(eddy_world *w, const eddy_sph_density_def *d
 	                               .visc_lap = (float)(45.0 / (M_PI * h6))};
 	const double lattice = eddy_sph_lattice_sum(EDDY_SPH_POLY6, def->spacing, def->radius);
 	sd->sh.mass = (float)(def->rest_density / lattice);
+	sd->sh.spacing = def->spacing;
 	/* the force sums m grad W, and m = rho0 / sum_lattice W is not rho0
 	 * spacing^3: the moment the force sees is the lattice moment times
 	 * m / (rho0 spacing^3) (0.956 / 1.010 = 0.947 at h = 2 spacings) */

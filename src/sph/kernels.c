@@ -76,3 +76,48 @@ double eddy_sph_lattice_gradient_moment(eddy_sph_kernel k, double spacing, doubl
 {
 	return lattice(k, spacing, h, true);
 }
+
+/* The colour field's part of a free surface's jump (sph_surface_tension):
+ * over the half-space z < 0 filled with the simple cubic lattice, layers at
+ * z = -(k + 1/2) spacing, with the summation density rho_k = m sum W (m =
+ * 1 / the full lattice's sum, rho0 = 1) and n_k = sum_j (m / rho_j) grad W
+ * (poly6), sum_k (m / rho_k) / spacing^2 n_k . (-z) over the layers with
+ * |n_k| > threshold / h: the force a column of the surface's particles
+ * carries per unit area over sigma kappa. A two-sided interface's colour
+ * jump would give 1; the air side holds no particles. */
+double eddy__sph_surface_share(double spacing, double h, double threshold)
+{
+	if (!(spacing > 0) || !(h > 0) || !(h / spacing <= 100))
+		return NAN;
+	/* layers 0 .. 2r + 1 can have a normal (a layer deeper than r has the
+	 * whole lattice within h but its neighbours' densities vary up to 2r);
+	 * their neighbours' densities reach layer 3r + 1, each over its own h */
+	const int r = (int)ceil(h / spacing), normals = 2 * r + 2, layers = 3 * r + 2;
+	const double m = 1.0 / lattice(EDDY_SPH_POLY6, spacing, h, false);
+	double rho[3 * 100 + 2];
+	for (int k = 0; k < layers; ++k) {
+		double sum = 0;
+		for (int l = k > r ? k - r : 0; l <= k + r; ++l)
+			for (int i = -r; i <= r; ++i)
+				for (int j = -r; j <= r; ++j) {
+					const double dz = spacing * (l - k);
+					sum += kernel(EDDY_SPH_POLY6, 0, sqrt(spacing * spacing * (i * i + j * j) + dz * dz), h);
+				}
+		rho[k] = m * sum;
+	}
+	double share = 0;
+	for (int k = 0; k < normals; ++k) {
+		double n = 0; /* along -z, into the water */
+		for (int l = k > r ? k - r : 0; l <= k + r; ++l)
+			for (int i = -r; i <= r; ++i)
+				for (int j = -r; j <= r; ++j) {
+					/* x_k - x_l along z is spacing (l - k); grad W = W'(d) (x_k - x_l) / d */
+					const double dz = spacing * (l - k), d = sqrt(spacing * spacing * (i * i + j * j) + dz * dz);
+					if (d > 0)
+						n -= m / rho[l] * kernel(EDDY_SPH_POLY6, 1, d, h) * dz / d;
+				}
+		if (fabs(n) > threshold / h)
+			share += m / rho[k] / (spacing * spacing) * n;
+	}
+	return share;
+}

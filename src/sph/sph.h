@@ -170,9 +170,14 @@ typedef struct sph_neighbors {
 	sph_boundary bnd;
 } sph_neighbors;
 
+/* The part of sigma kappa the colour field's force carries across a free
+ * surface, from the lattice (kernels.c; sph_surface_tension divides by it). */
+double eddy__sph_surface_share(double spacing, double h, double threshold);
+
 /* What sph_density shares with the SPH systems after it. */
 typedef struct sph_shared {
 	float h, mass, rho0;
+	float spacing;  /* m, the lattice the mass is calibrated on */
 	float grad_cal; /* 1 / the pressure force's lattice moment: see sph_pressure */
 	float c;        /* m/s, speed of sound sqrt(k) */
 	bool verlet;    /* keep a Verlet list (the def's verlet_list); false: search at h every step */

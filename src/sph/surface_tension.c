@@ -7,8 +7,19 @@
  *              field c = 1 in the fluid; points into the fluid)
  *   kappa_i  = -div(n / |n|)_i = -sum_j m / rho_j (n^_j - n^_i) . grad W_poly6(r_ij)
  *              over the neighbours with a normal, times sum_all V W / sum_those V W
- *   a_i     += sigma kappa_i n_i / rho_i   only where |n_i| > threshold / h:
+ *   a_i     += (sigma / s) kappa_i n_i / rho_i   only where |n_i| > threshold / h:
  *   inside the fluid n is noise and dividing by |n| would amplify it (C.15).
+ *   s = the colour field's share of a free surface's jump: CSF's force
+ *   integrates sigma kappa |grad c| across an interface, and |grad c| to the
+ *   jump of c, 1 where both sides hold particles (Morris' two fluids), but a
+ *   free surface's air holds none: its particles see c fall from 1 to about
+ *   1/2 at the outermost layer, and the force they carry per unit area is s
+ *   sigma kappa, s = 0.645 at h = 2 spacings and threshold 0.5 (kernels.c,
+ *   from the lattice, the threshold and the summation density). Without the
+ *   division a drop at rest held 0.62-0.68 of Laplace's 2 sigma / R inside
+ *   at 8 and 16 spacings per radius, and its l = 2 frequency stayed 12-16%
+ *   under Rayleigh's at every resolution (with it: Laplace within a few %,
+ *   the frequency converging as the spacing shrinks: tests/test_sph.c).
  * Why not the paper's kappa = -lap c / |n|: lap c of a particle colour field
  * is of order 1/h^2 across a flat surface too, with a sign change inside the
  * surface layer, so the paper's force squeezes the surface layer into clumps
@@ -33,9 +44,23 @@ eddy_sph_surface_tension_def eddy_default_sph_surface_tension_def(void)
 	return (eddy_sph_surface_tension_def){.tension = 0.0728f /* water-air at 20 C */, .threshold = 0.5f};
 }
 
+typedef struct tension {
+	eddy_sph_surface_tension_def def;
+	double share; /* eddy__sph_surface_share for the SPH it follows; 0 until its first step */
+} tension;
+
+/* sigma / s (header), N/m */
+static float effective_tension(tension *t, const sph_shared *sh)
+{
+	if (!(t->share > 0))
+		t->share = eddy__sph_surface_share(sh->spacing, sh->h, t->def.threshold);
+	return (float)(t->def.tension / t->share);
+}
+
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
 {
-	const eddy_sph_surface_tension_def *def = s->data;
+	tension *t = s->data;
+	const eddy_sph_surface_tension_def *def = &t->def;
 	const sph_shared *sh = eddy__sph_find(w, s); /* never NULL: the pipeline checks .requires */
 	const sph_neighbors *nb = &sh->nb;
 	const float *x = eddy__col(w, COL_X_), *y = eddy__col(w, COL_Y_), *z = eddy__col(w, COL_Z_);
@@ -44,7 +69,7 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	float *curv = eddy__col(w, COL_SPH_CURVATURE);
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	const sph_kernel_consts kc = sh->k;
-	const float m = sh->mass, sigma = def->tension, thr = def->threshold / sh->h;
+	const float m = sh->mass, sigma = effective_tension(t, sh), thr = def->threshold / sh->h;
 	const long n = sph_rows(w, sh);
 	/* pass 1: the colour-field gradient n */
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
@@ -113,13 +138,13 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 
 static double limit(eddy_world *w, eddy_system *s, const char **reason)
 {
-	const eddy_sph_surface_tension_def *def = s->data;
+	tension *t = s->data;
 	const sph_shared *sh = eddy__sph_find(w, s);
 	*reason = "capillary";
-	if (!(def->tension > 0))
+	if (!(t->def.tension > 0))
 		return INFINITY;
 	const double dx = 0.5 * sh->h;
-	return 2.5 * sqrt(sh->rho0 * dx * dx * dx / (2 * M_PI * def->tension));
+	return 2.5 * sqrt(sh->rho0 * dx * dx * dx / (2 * M_PI * effective_tension(t, sh)));
 }
 
 const eddy_system_vtable eddy__kind_sph_surface_tension = {
@@ -137,8 +162,8 @@ eddy_system_id eddy_add_sph_surface_tension(eddy_world *w, const eddy_sph_surfac
 	if (!eddy__add_args(w, def, sys) || !eddy__check_nonneg(w, sys, "tension", def->tension) ||
 	    !eddy__check_nonneg(w, sys, "threshold", def->threshold))
 		return EDDY_NULL_SYSTEM;
-	eddy_sph_surface_tension_def *copy = malloc(sizeof *copy);
-	if (copy)
-		*copy = *def;
-	return eddy__add_system(w, &eddy__kind_sph_surface_tension, copy, st_reads, st_writes);
+	tension *t = malloc(sizeof *t);
+	if (t)
+		*t = (tension){.def = *def, .share = 0};
+	return eddy__add_system(w, &eddy__kind_sph_surface_tension, t, st_reads, st_writes);
 }
