@@ -81,10 +81,15 @@ double eddy_sph_lattice_gradient_moment(eddy_sph_kernel k, double spacing, doubl
  * over the half-space z < 0 filled with the simple cubic lattice, layers at
  * z = -(k + 1/2) spacing, with the summation density rho_k = m sum W (m =
  * 1 / the full lattice's sum, rho0 = 1) and n_k = sum_j (m / rho_j) grad W
- * (poly6), sum_k (m / rho_k) / spacing^2 n_k . (-z) over the layers with
+ * (poly6), sum_k (m / rho_k) / spacing^2 |n_k| over the layers with
  * |n_k| > threshold / h: the force a column of the surface's particles
  * carries per unit area over sigma kappa. A two-sided interface's colour
- * jump would give 1; the air side holds no particles. */
+ * jump would give 1; the air side holds no particles. Unsigned: the
+ * second layer's n points out of the water (the outermost layer's low
+ * summation density makes its volume m / rho large, so c overshoots 1
+ * just inside), and there kappa, the divergence of that layer's own unit
+ * normals, changes sign with it, so kappa n points in as the outer
+ * layer's does. 0 when no layer reaches the threshold. */
 double eddy__sph_surface_share(double spacing, double h, double threshold)
 {
 	if (!(spacing > 0) || !(h > 0) || !(h / spacing <= 100))
@@ -117,7 +122,7 @@ double eddy__sph_surface_share(double spacing, double h, double threshold)
 						n -= m / rho[l] * kernel(EDDY_SPH_POLY6, 1, d, h) * dz / d;
 				}
 		if (fabs(n) > threshold / h)
-			share += m / rho[k] / (spacing * spacing) * n;
+			share += m / rho[k] / (spacing * spacing) * fabs(n);
 	}
 	return share;
 }

@@ -49,12 +49,13 @@ typedef struct tension {
 	double share; /* eddy__sph_surface_share for the SPH it follows; 0 until its first step */
 } tension;
 
-/* sigma / s (header), N/m */
+/* sigma / s (header), N/m; 0 when the threshold leaves a flat surface no
+ * particle with a normal (s = 0: step reports it) */
 static float effective_tension(tension *t, const sph_shared *sh)
 {
 	if (!(t->share > 0))
 		t->share = eddy__sph_surface_share(sh->spacing, sh->h, t->def.threshold);
-	return (float)(t->def.tension / t->share);
+	return t->share > 0 ? (float)(t->def.tension / t->share) : 0.0f;
 }
 
 static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *ctx)
@@ -70,6 +71,11 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 	float *ax = eddy__col(w, COL_AX), *ay = eddy__col(w, COL_AY), *az = eddy__col(w, COL_AZ);
 	const sph_kernel_consts kc = sh->k;
 	const float m = sh->mass, sigma = effective_tension(t, sh), thr = def->threshold / sh->h;
+	if (!(t->share > 0))
+		return eddy__fail(w, EDDY_ERR_INVALID,
+		                  "sph_surface_tension: 'threshold' %g leaves the particles of a flat surface no normal (|n| "
+		                  "h of its outermost layer is under it at h = %g spacings): lower it",
+		                  (double)def->threshold, (double)(sh->h / sh->spacing));
 	const long n = sph_rows(w, sh);
 	/* pass 1: the colour-field gradient n */
 #pragma omp parallel for num_threads(ctx->threads) schedule(static)
@@ -119,7 +125,10 @@ static eddy_status step(eddy_world *w, eddy_system *s, const eddy_step_context *
 			const float vw = d * d * d * pq[4 * (size_t)j + 3];
 			w_all += vw;
 			const float lj = sqrtf(nx[j] * nx[j] + ny[j] * ny[j] + nz[j] * nz[j]);
-			if (!(lj > thr))
+			/* a neighbour whose normal faces away from i's is another sheet
+			 * of the colour field (below) or the far side of a thin film:
+			 * its difference would read as curvature on a flat surface */
+			if (!(lj > thr) || nx[j] * ux + ny[j] * uy + nz[j] * uz <= 0)
 				continue;
 			w_normal += vw;
 			/* (n_j/|n_j| - n_i/|n_i|) . grad_i W, grad_i W = poly6_grad d^2 r_vec */
@@ -141,7 +150,7 @@ static double limit(eddy_world *w, eddy_system *s, const char **reason)
 	tension *t = s->data;
 	const sph_shared *sh = eddy__sph_find(w, s);
 	*reason = "capillary";
-	if (!(t->def.tension > 0))
+	if (!(t->def.tension > 0) || !(effective_tension(t, sh) > 0))
 		return INFINITY;
 	const double dx = 0.5 * sh->h;
 	return 2.5 * sqrt(sh->rho0 * dx * dx * dx / (2 * M_PI * effective_tension(t, sh)));
