@@ -708,10 +708,14 @@ typedef struct eddy_sph_viscosity_def {
 EDDY_API eddy_sph_viscosity_def eddy_default_sph_viscosity_def(void);
 EDDY_API eddy_system_id eddy_add_sph_viscosity(eddy_world *w, const eddy_sph_viscosity_def *def);
 
-/* sph_surface_tension: colour-field (CSF) surface tension where |n| > threshold. */
+/* sph_surface_tension: colour-field (CSF) surface tension where |n| h >
+ * threshold (n = grad c, h the kernel radius), scaled so that a free
+ * surface carries the whole sigma kappa (a drop at rest holds Laplace's
+ * 2 sigma / R). */
 typedef struct eddy_sph_surface_tension_def {
 	float tension;   /* N/m, sigma; >= 0 */
-	float threshold; /* 1/m, |grad c| below this gets no force; >= 0 */
+	float threshold; /* 1, |grad c| h below this gets no force; >= 0, and under a flat surface's outermost
+	                    layer's (1.06 at h = 2 spacings; the first step says so), well under on a curved one */
 } eddy_sph_surface_tension_def;
 EDDY_API eddy_sph_surface_tension_def eddy_default_sph_surface_tension_def(void);
 EDDY_API eddy_system_id eddy_add_sph_surface_tension(eddy_world *w, const eddy_sph_surface_tension_def *def);
