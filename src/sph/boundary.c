@@ -298,7 +298,15 @@ eddy_status eddy__sph_boundary_ready(eddy_world *w, sph_shared *sh)
 }
 
 /* nb->bdiv: sum_b V_b rho0 v_b . grad W_spiky(x_i - x_b) per row, with
- * sph_dfsph's kernel gradient and cut-offs; NULL while no wall moves. */
+ * sph_dfsph's kernel gradient and cut-offs; NULL while no wall moves.
+ * Only the walls' velocity along their normal counts: v_b is replaced by
+ * (v_b . n_i) n_i, n_i the gradient of b's collider's signed distance at
+ * x_i (its normal there; the direction of the boundary particles' own sum
+ * carries the same lattice error). Over a continuous wall the sum is the surface
+ * integral of W (v . n) (a rigid motion has no divergence), so a wall
+ * sliding along itself changes no density; its lattice, passing under a
+ * particle, gave the sum a tangential part, and a floor sliding at 5 m/s
+ * under a pool lifted it (its energy +2.8% in 0.2 s, 0.32 m/s: README). */
 eddy_status sph_boundary_divergence(eddy_world *w, sph_shared *sh, int threads)
 {
 	sph_neighbors *nb = &sh->nb;
@@ -321,17 +329,41 @@ eddy_status sph_boundary_divergence(eddy_world *w, sph_shared *sh, int threads)
 #pragma omp parallel for num_threads(threads) schedule(static)
 	for (long i = 0; i < ln; ++i) {
 		const uint32_t *bl = sph_bnbrs(nb, i);
+		const eddy_vec3 pi = {p4[4 * i], p4[4 * i + 1], p4[4 * i + 2]};
 		float u = 0;
+		int cur = -1; /* the collider whose normal n holds */
+		float nx = 0, ny = 0, nz = 0;
 		for (uint32_t q = 0; q < nb->bcount[i]; ++q) {
 			const uint32_t b = bl[q];
 			if (b < bd->n_static)
 				continue; /* at rest */
-			const float rx = p4[4 * i] - nb->bx[b], ry = p4[4 * i + 1] - nb->by[b], rz = p4[4 * i + 2] - nb->bz[b];
+			const float rx = pi.x - nb->bx[b], ry = pi.y - nb->by[b], rz = pi.z - nb->bz[b];
 			const float r2 = rx * rx + ry * ry + rz * rz, r = sqrtf(r2), hr = h - r;
 			if (!(r2 > eps2 && hr > 0))
 				continue;
-			const float c = nb->bvol[b] * c0 * hr * hr / r;
-			u += c * (rx * bd->vx[b] + ry * bd->vy[b] + rz * bd->vz[b]);
+			int c = cur;
+			if (c < 0 || b < bd->col[c].first || b >= bd->col[c].first + bd->col[c].count)
+				for (c = 0; c < bd->ncol; ++c)
+					if (b >= bd->col[c].first && b < bd->col[c].first + bd->col[c].count)
+						break;
+			if (c >= bd->ncol)
+				continue;
+			if (c != cur) { /* the collider's distance gradient at i: its normal there */
+				const eddy_system *col = &w->slots[bd->col[c].slot];
+				const float e = 0.25f * h;
+				float g[3];
+				for (int a = 0; a < 3; ++a) {
+					eddy_vec3 hi = pi, lo = pi;
+					(&hi.x)[a] += e, (&lo.x)[a] -= e;
+					g[a] = col->vt->distance(col, hi) - col->vt->distance(col, lo);
+				}
+				const float len = sqrtf(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+				nx = len > 0 ? g[0] / len : 0, ny = len > 0 ? g[1] / len : 0, nz = len > 0 ? g[2] / len : 0;
+				cur = c;
+			}
+			const float vn = nx * bd->vx[b] + ny * bd->vy[b] + nz * bd->vz[b];
+			const float c0r = nb->bvol[b] * c0 * hr * hr / r;
+			u += c0r * vn * (rx * nx + ry * ny + rz * nz);
 		}
 		nb->bdiv[i] = u;
 	}

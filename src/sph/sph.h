@@ -157,9 +157,10 @@ typedef struct sph_neighbors {
 	size_t nbound;
 	float *bx, *by, *bz, *bvol; /* m, m^3 (the volume each stands for) */
 	float *bp;                  /* Pa, extrapolated from the fluid each step */
-	/* 1/s, sum_b V_b rho0 v_b . grad W_spiky(x_i - x_b) per fluid row: the
-	 * rate of density change the moving walls add (sph_dfsph subtracts it
-	 * from v_i . B_i); NULL while every wall is at rest */
+	/* 1/s, sum_b V_b rho0 (v_b . n) n . grad W_spiky(x_i - x_b) per fluid
+	 * row, n b's collider's normal at x_i (boundary.c): the rate of density
+	 * change the moving walls add (sph_dfsph subtracts it from v_i . B_i);
+	 * NULL while every wall is at rest */
 	float *bdiv;
 
 	/* private: the per-row arrays' block, its size in rows */
