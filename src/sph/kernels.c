@@ -84,12 +84,9 @@ double eddy_sph_lattice_gradient_moment(eddy_sph_kernel k, double spacing, doubl
  * (poly6), sum_k (m / rho_k) / spacing^2 |n_k| over the layers with
  * |n_k| > threshold / h: the force a column of the surface's particles
  * carries per unit area over sigma kappa. A two-sided interface's colour
- * jump would give 1; the air side holds no particles. Unsigned: the
- * second layer's n points out of the water (the outermost layer's low
- * summation density makes its volume m / rho large, so c overshoots 1
- * just inside), and there kappa, the divergence of that layer's own unit
- * normals, changes sign with it, so kappa n points in as the outer
- * layer's does. 0 when no layer reaches the threshold. */
+ * jump would give 1; the air side holds no particles. |n_k|, not its
+ * component: where n_k points out of the water kappa n_k still points in
+ * (surface_tension.c). 0 when no layer reaches the threshold. */
 double eddy__sph_surface_share(double spacing, double h, double threshold)
 {
 	if (!(spacing > 0) || !(h > 0) || !(h / spacing <= 100))

@@ -6,7 +6,8 @@
  *   n_i      = sum_j m / rho_j grad W_poly6(r_ij)   (gradient of the colour
  *              field c = 1 in the fluid; points into the fluid)
  *   kappa_i  = -div(n / |n|)_i = -sum_j m / rho_j (n^_j - n^_i) . grad W_poly6(r_ij)
- *              over the neighbours with a normal, times sum_all V W / sum_those V W
+ *              over the neighbours with a normal on i's side (n_j . n_i > 0),
+ *              times sum_all V W / sum_those V W
  *   a_i     += (sigma / s) kappa_i n_i / rho_i   only where |n_i| > threshold / h:
  *   inside the fluid n is noise and dividing by |n| would amplify it (C.15).
  *   s = the colour field's share of a free surface's jump: CSF's force
@@ -17,16 +18,23 @@
  *   sigma kappa, s = 0.645 at h = 2 spacings and threshold 0.5 (kernels.c,
  *   from the lattice, the threshold and the summation density). Without the
  *   division a drop at rest held 0.62-0.68 of Laplace's 2 sigma / R inside
- *   at 8 and 16 spacings per radius, and its l = 2 frequency stayed 12-16%
- *   under Rayleigh's at every resolution (with it: Laplace within a few %,
- *   the frequency converging as the spacing shrinks: tests/test_sph.c).
+ *   at 8 and 16 spacings per radius, and its l = 2 frequency stayed 9-16%
+ *   under Rayleigh's at every resolution; with it both converge, at first
+ *   order in the spacing (WCSPH's Laplace +15%, +8%, +1% at 8, 12, 16
+ *   spacings per radius: tests/test_sph.c). s sums |n|: below the
+ *   default threshold the colour field's second layer has a normal pointing
+ *   out of the water (the outer layer's low summation density makes c
+ *   overshoot 1 just inside), and there kappa, the divergence of that
+ *   layer's own unit normals (hence the side test above: across the sheets
+ *   the flip of n^ read as curvature on a flat surface, a drop at
+ *   threshold 0.2 held +114% of Laplace), flips with n, so kappa n points in.
  * Why not the paper's kappa = -lap c / |n|: lap c of a particle colour field
  * is of order 1/h^2 across a flat surface too, with a sign change inside the
  * surface layer, so the paper's force squeezes the surface layer into clumps
  * and overestimates the curvature by about R/h (the drop test showed both);
  * the divergence of the unit normal is zero on a flat surface.
  * The columns exist only while this system is in the pipeline.
- * Time-step limit (capillary): dt <= 2.5 sqrt(rho0 dx^3 / (2 pi sigma)) with
+ * Time-step limit (capillary): dt <= 2.5 sqrt(rho0 dx^3 / (2 pi sigma / s)) with
  * dx = h/2; with the default CFL 0.4 that is the usual sqrt(rho dx^3/(2 pi sigma)).
  * Source: Mueller, Charypar & Gross 2003; Brackbill, Kothe & Zemach 1992;
  * Morris, "Simulating surface tension with SPH", IJNMF 2000. */
