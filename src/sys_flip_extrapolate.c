@@ -15,7 +15,8 @@
  * normal velocity (closed_faces: free slip along solids, Bridson's book,
  * ch. 5: "extrapolate, then replace the normal component") where the water
  * moves into the solid, and keep the water's where it moves away from it
- * (a solid cannot pull); cut faces keep flip_pressure's values. A domain side beside an air cell is extrapolated too, then
+ * (a solid cannot pull); cut faces keep flip_pressure's values. A domain
+ * side beside an air cell is extrapolated too, then
  * kept only where it carries water away from the side (else 0): a particle
  * beside a fluid cell that left the side (flip_pressure) interpolates it,
  * and held at 0 it would hold the particle back. Open sides
