@@ -98,36 +98,37 @@ bool test_file_has(const char *path, const char *needle)
 	return found;
 }
 
-double test_json_number(const char *line, const char *key)
+/* the number at p (NAN if none) */
+static double number_at(const char *p)
 {
-	char pat[64];
-	snprintf(pat, sizeof pat, "\"%s\":", key);
-	const char *p = strstr(line, pat);
-	if (!p)
-		return NAN;
-	p += strlen(pat);
 	char *end;
 	const double v = strtod(p, &end);
 	return end == p ? NAN : v;
 }
 
-double test_json_array_number(const char *line, const char *key, int index)
+/* where "key": followed by open starts in line, past both; NULL if absent */
+static const char *after_key(const char *line, const char *key, const char *open)
 {
 	char pat[64];
-	snprintf(pat, sizeof pat, "\"%s\":[", key);
+	snprintf(pat, sizeof pat, "\"%s\":%s", key, open);
 	const char *p = strstr(line, pat);
-	if (!p)
-		return NAN;
-	p += strlen(pat);
-	for (int k = 0; k < index; ++k) {
+	return p ? p + strlen(pat) : NULL;
+}
+
+double test_json_number(const char *line, const char *key)
+{
+	const char *p = after_key(line, key, "");
+	return p ? number_at(p) : NAN;
+}
+
+double test_json_array_number(const char *line, const char *key, int index)
+{
+	const char *p = after_key(line, key, "[");
+	for (int k = 0; p && k < index; ++k) {
 		p = strpbrk(p, ",]");
-		if (!p || *p == ']')
-			return NAN;
-		p++;
+		p = p && *p == ',' ? p + 1 : NULL;
 	}
-	char *end;
-	const double v = strtod(p, &end);
-	return end == p ? NAN : v;
+	return p ? number_at(p) : NAN;
 }
 
 const char *test_build_dir(void)
